@@ -1,0 +1,35 @@
+# Two entry points, both self-installing on a fresh machine (see README):
+#   make demo   set up, then build the built-in synthetic scenes and summarise them
+#   make test   set up, then run the test suite (what CI runs through .ci/run)
+PYTHON ?= python3
+VENV ?= .venv
+# torch goes in first and pinned: on a CPU-only machine a loose torch requirement
+# would pull several GB of CUDA wheels. Override for a CUDA box, e.g.
+#   make demo TORCH_SPEC="torch==2.13.0 --index-url https://download.pytorch.org/whl/cu128"
+TORCH_SPEC ?= torch==2.13.0
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.spacedg-installed
+DEMO_DIR ?= runs/demo
+
+.PHONY: setup demo test clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -c "import torch" 2>/dev/null || $(BIN)/python -m pip install --quiet $(TORCH_SPEC)
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/spacedg scenes synth --n 4 --out $(DEMO_DIR)/scenes
+	$(BIN)/spacedg scenes info $(DEMO_DIR)/scenes
+	$(BIN)/spacedg scenes preview $(DEMO_DIR)/scenes --out $(DEMO_DIR)/floorplans.png
+	$(BIN)/spacedg plugins
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

@@ -1,0 +1,5 @@
+import sys
+
+from spacedg.cli import main
+
+sys.exit(main())

@@ -1,0 +1,93 @@
+"""Small validation helpers that produce the project's uniform error messages.
+
+Messages follow one pattern: ``"<source>: field '<name>': <what> (<count> of <total>,
+first at index <i>: <value>). <fix>"`` so a user can find the record and knows what to do.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from spacedg.errors import InvalidDataError
+
+
+def _where(source: str, field: str) -> str:
+    return f"{source}: field {field!r}"
+
+
+def first_bad(mask: np.ndarray) -> tuple[int, int]:
+    """Return ``(count, first_row)`` of True entries of ``mask`` (rows for 2-D masks)."""
+    rows = mask.reshape(mask.shape[0], -1).any(axis=1) if mask.ndim > 1 else mask
+    idx = np.flatnonzero(rows)
+    return int(idx.size), int(idx[0]) if idx.size else -1
+
+
+def as_array(value: object, field: str, source: str, dtype: np.dtype | type) -> np.ndarray:
+    """Convert ``value`` to a C-contiguous array of ``dtype`` or fail naming the field."""
+    try:
+        return np.ascontiguousarray(np.asarray(value), dtype=dtype)
+    except (TypeError, ValueError) as err:
+        raise InvalidDataError(f"{_where(source, field)}: cannot convert to {np.dtype(dtype).name} ({err})") from err
+
+
+def require_shape(array: np.ndarray, shape: tuple[int | None, ...], field: str, source: str) -> None:
+    """Require ``array.shape`` to match ``shape`` (``None`` matches any size)."""
+    ok = array.ndim == len(shape) and all(want is None or got == want for got, want in zip(array.shape, shape))
+    if not ok:
+        pretty = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise InvalidDataError(f"{_where(source, field)}: expected shape {pretty}, got {tuple(array.shape)}")
+
+
+def require_finite(array: np.ndarray, field: str, source: str) -> None:
+    """Reject NaN and +/-Inf entries."""
+    bad = ~np.isfinite(array)
+    if bad.any():
+        count, row = first_bad(bad)
+        raise InvalidDataError(
+            f"{_where(source, field)}: {count} of {array.shape[0]} entries hold NaN or Inf "
+            f"(first at index {row}: {array[row].tolist()}). Remove or repair those entries."
+        )
+
+
+def require_range(
+    array: np.ndarray,
+    low: float | None,
+    high: float | None,
+    field: str,
+    source: str,
+    hint: str = "",
+) -> None:
+    """Require ``low <= array <= high`` elementwise (either bound may be ``None``)."""
+    bad = np.zeros(array.shape, dtype=bool)
+    if low is not None:
+        bad |= array < low
+    if high is not None:
+        bad |= array > high
+    if bad.any():
+        count, row = first_bad(bad)
+        lo = "-inf" if low is None else f"{low:g}"
+        hi = "inf" if high is None else f"{high:g}"
+        raise InvalidDataError(
+            f"{_where(source, field)}: {count} of {array.shape[0]} entries outside [{lo}, {hi}] "
+            f"(first at index {row}: {array[row].tolist()}).{(' ' + hint) if hint else ''}"
+        )
+
+
+def require_same_length(lengths: dict[str, int], source: str) -> None:
+    """Require all named arrays to have the same first dimension."""
+    if len(set(lengths.values())) > 1:
+        listing = ", ".join(f"{k}={v}" for k, v in lengths.items())
+        raise InvalidDataError(f"{source}: mismatched lengths ({listing}); every per-Gaussian field needs one row per Gaussian")
+
+
+def require_rotation(matrix: np.ndarray, field: str, source: str, tol: float = 1e-5) -> None:
+    """Require a proper rotation matrix (orthonormal, determinant +1) within ``tol``."""
+    require_shape(matrix, (3, 3), field, source)
+    if not np.isfinite(matrix).all():
+        raise InvalidDataError(f"{_where(source, field)}: holds NaN or Inf: {matrix.tolist()}")
+    err = float(np.abs(matrix.T @ matrix - np.eye(3)).max())
+    if err > tol:
+        raise InvalidDataError(f"{_where(source, field)}: not orthonormal (max |RᵀR − I| = {err:.3g} > {tol:g})")
+    det = float(np.linalg.det(matrix))
+    if det < 0:
+        raise InvalidDataError(f"{_where(source, field)}: is a reflection (det = {det:.3g}); flip one axis to get a right-handed rotation")

@@ -1,0 +1,262 @@
+"""Cameras: intrinsics, pose and lens.
+
+Conventions:
+
+- Camera axes are **OpenCV**: x right, y down, z forward (viewing direction).
+- ``cam_to_world`` (4, 4) float64 maps camera coordinates to world coordinates (metres);
+  its first three columns are the camera's right, down and forward axes in the world.
+- Pixel coordinates: ``u`` along the image width, ``v`` along the height; the centre of
+  pixel (row i, column j) is at ``(j + 0.5, i + 0.5)``.
+- Lens: pinhole, or equidistant fisheye (OpenCV ``cv2.fisheye`` / Kannala–Brandt) with
+  ``θ_d = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)`` where θ is the angle between the ray and
+  the optical axis, and ``pixel = (fx θ_d x/r + cx, fy θ_d y/r + cy)`` with r = √(x² + y²).
+  Rays beyond ``max_theta`` (radians) are invalid, never NaN.
+
+Conversions from other conventions (OpenGL/nerfstudio, COLMAP world-to-camera) happen in
+``spacedg.data.io``, once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from spacedg._checks import require_rotation
+from spacedg.errors import InvalidDataError
+
+_SOURCE = "Camera"
+
+
+@dataclass(frozen=True)
+class FisheyeLens:
+    """Equidistant fisheye distortion (OpenCV fisheye model).
+
+    Attributes:
+        k1..k4: radial polynomial coefficients (dimensionless, θ in radians).
+        max_theta: largest ray angle from the optical axis that the lens images, radians,
+            in (0, π). Rays beyond it map to no pixel.
+    """
+
+    k1: float = 0.0
+    k2: float = 0.0
+    k3: float = 0.0
+    k4: float = 0.0
+    max_theta: float = math.pi / 2
+
+    def __post_init__(self) -> None:
+        for name in ("k1", "k2", "k3", "k4", "max_theta"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise InvalidDataError(f"{_SOURCE}: fisheye {name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        if not 0.0 < self.max_theta < math.pi:
+            raise InvalidDataError(f"{_SOURCE}: fisheye max_theta must be in (0, π) radians, got {self.max_theta}")
+
+    @property
+    def coeffs(self) -> tuple[float, float, float, float]:
+        return (self.k1, self.k2, self.k3, self.k4)
+
+    def distort_theta(self, theta: np.ndarray) -> np.ndarray:
+        """``θ_d(θ)`` for ray angles θ (radians)."""
+        t2 = theta * theta
+        return theta * (1.0 + t2 * (self.k1 + t2 * (self.k2 + t2 * (self.k3 + t2 * self.k4))))
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A calibrated camera: intrinsics in pixels, pose as cam-to-world, optional fisheye lens.
+
+    Attributes:
+        fx, fy: focal lengths, pixels (> 0).
+        cx, cy: principal point, pixels (pixel centres at +0.5).
+        width, height: image size, pixels.
+        cam_to_world: (4, 4) rigid transform, OpenCV camera axes, metres.
+        fisheye: ``None`` for a pinhole camera, else the equidistant lens.
+    """
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+    cam_to_world: np.ndarray = field(repr=False)
+    fisheye: FisheyeLens | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("fx", "fy", "cx", "cy"):
+            value = getattr(self, name)
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise InvalidDataError(f"{_SOURCE}: {name} must be a number, got {value!r}") from None
+            if not math.isfinite(value):
+                raise InvalidDataError(f"{_SOURCE}: {name} must be finite, got {value}")
+            object.__setattr__(self, name, value)
+        if self.fx <= 0 or self.fy <= 0:
+            raise InvalidDataError(f"{_SOURCE}: focal lengths must be > 0 pixels (got fx={self.fx}, fy={self.fy})")
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or int(value) < 1:
+                raise InvalidDataError(f"{_SOURCE}: {name} must be a positive integer number of pixels, got {value!r}")
+            object.__setattr__(self, name, int(value))
+        pose = np.array(self.cam_to_world, dtype=np.float64)
+        if pose.shape != (4, 4):
+            raise InvalidDataError(f"{_SOURCE}: cam_to_world must be 4×4, got shape {pose.shape}")
+        if not np.isfinite(pose).all():
+            raise InvalidDataError(f"{_SOURCE}: cam_to_world holds NaN or Inf")
+        if not np.allclose(pose[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+            raise InvalidDataError(f"{_SOURCE}: cam_to_world last row must be [0, 0, 0, 1], got {pose[3].tolist()}")
+        require_rotation(pose[:3, :3], "cam_to_world rotation", _SOURCE, tol=1e-5)
+        pose.flags.writeable = False
+        object.__setattr__(self, "cam_to_world", pose)
+
+    # ------------------------------------------------------------------ pose
+    @property
+    def rotation(self) -> np.ndarray:
+        """(3, 3) camera-to-world rotation; columns are the camera's x (right), y (down), z (forward)."""
+        return self.cam_to_world[:3, :3]
+
+    @property
+    def center(self) -> np.ndarray:
+        """(3,) camera centre in world coordinates, metres."""
+        return self.cam_to_world[:3, 3]
+
+    @property
+    def forward(self) -> np.ndarray:
+        """(3,) unit viewing direction (camera +z) in world coordinates."""
+        return self.cam_to_world[:3, 2]
+
+    @property
+    def world_to_cam(self) -> np.ndarray:
+        """(4, 4) inverse of :attr:`cam_to_world`."""
+        out = np.eye(4)
+        rot_t = self.rotation.T
+        out[:3, :3] = rot_t
+        out[:3, 3] = -rot_t @ self.center
+        return out
+
+    @property
+    def is_fisheye(self) -> bool:
+        return self.fisheye is not None
+
+    @property
+    def K(self) -> np.ndarray:  # noqa: N802 - the usual name of the intrinsics matrix
+        """(3, 3) intrinsics matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def with_pose(self, cam_to_world: np.ndarray) -> Camera:
+        """Same intrinsics and lens at another pose."""
+        return replace(self, cam_to_world=cam_to_world)
+
+    def resized(self, width: int, height: int) -> Camera:
+        """The same camera imaging at another resolution (intrinsics scaled per axis)."""
+        sx, sy = width / self.width, height / self.height
+        return replace(self, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy, width=width, height=height)
+
+    # ------------------------------------------------------------ projection
+    def to_camera(self, points_world: np.ndarray) -> np.ndarray:
+        """(N, 3) world points → (N, 3) camera coordinates (float64)."""
+        pts = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+        return (pts - self.center) @ self.rotation
+
+    def project(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Project world points to pixels.
+
+        Returns:
+            ``(uv, depth, valid)``: (N, 2) pixel coordinates (float64, 0 where invalid),
+            (N,) camera-space z in metres, and (N,) bool: in front of the camera for a
+            pinhole (z > 0), within ``max_theta`` for a fisheye. ``valid`` does not test the
+            image bounds; see :meth:`in_image`.
+        """
+        cam = self.to_camera(points_world)
+        x, y, z = cam[:, 0], cam[:, 1], cam[:, 2]
+        uv = np.zeros((cam.shape[0], 2))
+        if self.fisheye is None:
+            valid = z > 0
+            zs = np.where(valid, z, 1.0)
+            uv[:, 0] = self.fx * x / zs + self.cx
+            uv[:, 1] = self.fy * y / zs + self.cy
+        else:
+            r = np.hypot(x, y)
+            theta = np.arctan2(r, z)
+            valid = theta <= self.fisheye.max_theta
+            theta_d = self.fisheye.distort_theta(theta)
+            # θ_d / r → 1/z as r → 0 (on-axis rays): use that limit to avoid 0/0.
+            tiny = r <= 1e-12 * np.maximum(np.abs(z), 1e-300)
+            scale = np.where(tiny, 1.0 / np.where(z > 0, z, 1.0), theta_d / np.where(tiny, 1.0, r))
+            uv[:, 0] = self.fx * scale * x + self.cx
+            uv[:, 1] = self.fy * scale * y + self.cy
+        uv[~valid] = 0.0
+        return uv, z, valid
+
+    def in_image(self, uv: np.ndarray) -> np.ndarray:
+        """(N,) bool: pixel coordinates inside ``[0, width) × [0, height)``."""
+        return (uv[:, 0] >= 0) & (uv[:, 0] < self.width) & (uv[:, 1] >= 0) & (uv[:, 1] < self.height)
+
+    # ----------------------------------------------------------- (de)serialise
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly dict (the native scene format's camera record)."""
+        out: dict[str, Any] = {
+            "model": "fisheye" if self.fisheye else "pinhole",
+            "fx": self.fx,
+            "fy": self.fy,
+            "cx": self.cx,
+            "cy": self.cy,
+            "width": self.width,
+            "height": self.height,
+            "cam_to_world": self.cam_to_world.tolist(),
+        }
+        if self.fisheye is not None:
+            out.update(
+                k1=self.fisheye.k1, k2=self.fisheye.k2, k3=self.fisheye.k3, k4=self.fisheye.k4,
+                max_theta=self.fisheye.max_theta,
+            )
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Camera:
+        """Inverse of :meth:`to_dict`; raises :class:`InvalidDataError` naming a missing key."""
+        required = ("fx", "fy", "cx", "cy", "width", "height", "cam_to_world")
+        missing = [k for k in required if k not in data]
+        if missing:
+            raise InvalidDataError(f"{_SOURCE}: missing key(s) {missing}; a camera needs {list(required)}")
+        model = data.get("model", "pinhole")
+        if model not in ("pinhole", "fisheye"):
+            raise InvalidDataError(f"{_SOURCE}: unknown model {model!r}; use 'pinhole' or 'fisheye'")
+        lens = None
+        if model == "fisheye":
+            lens = FisheyeLens(
+                data.get("k1", 0.0), data.get("k2", 0.0), data.get("k3", 0.0), data.get("k4", 0.0),
+                data.get("max_theta", math.pi / 2),
+            )
+        return cls(
+            data["fx"], data["fy"], data["cx"], data["cy"], data["width"], data["height"],
+            np.asarray(data["cam_to_world"], dtype=np.float64), lens,
+        )
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(4, 4) OpenCV cam-to-world placing the camera at ``eye`` looking at ``target``.
+
+    ``up`` is the world's up direction; the image's "down" axis is aligned with ``-up``
+    projected onto the image plane (no roll). Raises if ``target - eye`` is parallel to ``up``.
+    """
+    eye = np.asarray(eye, dtype=np.float64)
+    forward = np.asarray(target, dtype=np.float64) - eye
+    norm = np.linalg.norm(forward)
+    if norm < 1e-12:
+        raise InvalidDataError("look_at: eye and target coincide")
+    forward /= norm
+    right = np.cross(forward, np.asarray(up, dtype=np.float64))
+    rn = np.linalg.norm(right)
+    if rn < 1e-9:
+        raise InvalidDataError("look_at: viewing direction is parallel to up; roll is undefined")
+    right /= rn
+    down = np.cross(forward, right)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = right, down, forward, eye
+    return pose
