@@ -1,0 +1,77 @@
+"""spacedg plugins: degradations and question families, registered through pluggy hooks.
+
+Public API::
+
+    from spacedg.plugins import (
+        hookimpl,                                     # decorator for plugin authors
+        DegradationSpec, ParamSpec, ParamRange, Category, Stage,
+        QuestionFamily, AnswerType, TaskGroup,
+        get_registry, reset_registry,
+        list_degradations, get_degradation,
+        list_question_families, get_question_family,
+    )
+
+See :mod:`spacedg.plugins.specs` for the stage contracts, :mod:`spacedg.plugins.registry`
+for loading rules and environment variables, and ``spacedg plugins`` for what is installed.
+"""
+
+from spacedg.plugins.hookspecs import ENTRY_POINT_GROUP, hookimpl
+from spacedg.plugins.registry import (
+    AUTOLOAD_ENV,
+    PLUGINS_ENV,
+    BrokenPlugin,
+    PluginOrigin,
+    PluginRecord,
+    Registry,
+    get_degradation,
+    get_question_family,
+    get_registry,
+    list_degradations,
+    list_question_families,
+    reset_registry,
+)
+from spacedg.plugins.specs import (
+    REQUIRED_PRESETS,
+    SEVERITY_PRESETS,
+    AnswerType,
+    Category,
+    DegradationSpec,
+    DisplayApply,
+    LinearApply,
+    ParamRange,
+    ParamSpec,
+    QuestionFamily,
+    RasterApply,
+    Stage,
+    TaskGroup,
+)
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "AUTOLOAD_ENV",
+    "PLUGINS_ENV",
+    "REQUIRED_PRESETS",
+    "SEVERITY_PRESETS",
+    "hookimpl",
+    "AnswerType",
+    "BrokenPlugin",
+    "Category",
+    "DegradationSpec",
+    "DisplayApply",
+    "LinearApply",
+    "ParamRange",
+    "ParamSpec",
+    "PluginOrigin",
+    "PluginRecord",
+    "QuestionFamily",
+    "RasterApply",
+    "Registry",
+    "Stage",
+    "TaskGroup",
+    "get_degradation",
+    "get_question_family",
+    "get_registry",
+    "list_degradations",
+    "list_question_families",
+    "reset_registry",
+]

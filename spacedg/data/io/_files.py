@@ -1,0 +1,141 @@
+"""Shared helpers of the readers and writers: atomic writes, bounded reads, JSON loading.
+
+- :func:`atomic_write`: write a file through a temporary sibling and ``os.replace``, so a
+  reader never sees a half-written file (the old file stays until the new one is complete).
+- :func:`read_json`: parse a JSON file and turn a syntax error into a
+  :class:`~spacedg.errors.FileFormatError` naming the line and column.
+- :class:`FileValueError`: the error raised when a file parses but holds values that break a
+  convention (NaN positions, zero quaternions, ...). It is both a
+  :class:`~spacedg.errors.FileFormatError` (the file is bad) and an
+  :class:`~spacedg.errors.InvalidDataError` (its values are bad), so callers catching either
+  see it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import IO, Any
+
+from spacedg.errors import FileFormatError, InvalidDataError
+
+#: JSON files larger than this are refused (a scene/instance/transforms file is kilobytes).
+MAX_JSON_BYTES = 256 * 1024 * 1024
+
+
+class FileValueError(FileFormatError, InvalidDataError):
+    """A file whose structure parses but whose values break a convention."""
+
+
+PathLike = str | os.PathLike[str]
+
+
+def as_path(path: PathLike, what: str) -> Path:
+    """``path`` as a :class:`Path`, or a :class:`FileFormatError` for non-path arguments."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise FileFormatError(f"{what}: expected a file path, got {type(path).__name__}")
+    return Path(path)
+
+
+def require_file(path: Path, what: str) -> int:
+    """Size in bytes of the regular file ``path``, or a clear error if it is missing."""
+    if not path.exists():
+        raise FileFormatError(f"{path}: {what} not found; check the path")
+    if not path.is_file():
+        raise FileFormatError(f"{path}: expected a {what} file, found a directory or special file")
+    return path.stat().st_size
+
+
+@contextmanager
+def atomic_write(path: PathLike, mode: str = "wb") -> Iterator[IO[Any]]:
+    """Open a temporary file beside ``path``; on success flush, fsync and ``os.replace`` it.
+
+    On any exception inside the block the temporary file is removed and ``path`` is left
+    untouched (it keeps its previous content, or stays absent).
+    """
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+    tmp = Path(tmp_name)
+    try:
+        with os.fdopen(fd, mode) as handle:
+            yield handle
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_bytes(path: PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_write`)."""
+    with atomic_write(path, "wb") as handle:
+        handle.write(data)
+
+
+def write_temp_sibling(path: PathLike, writer: Callable[[Path], None]) -> Path:
+    """Run ``writer(tmp)`` on a fresh temporary path beside ``path`` and return that path.
+
+    The caller renames it into place (``os.replace``) when it is ready to commit; on error the
+    temporary file is removed.
+    """
+    target = Path(path)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        writer(tmp)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return tmp
+
+
+def sha256_of(path: PathLike, chunk: int = 1 << 20) -> str:
+    """Hex SHA-256 of a file, read in chunks."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        while block := handle.read(chunk):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def read_json(path: PathLike, what: str) -> Any:
+    """Parse the JSON file ``path``; errors name the file, line and column.
+
+    Raises:
+        FileFormatError: missing file, file over :data:`MAX_JSON_BYTES`, not UTF-8, or not JSON.
+    """
+    p = as_path(path, what)
+    size = require_file(p, what)
+    if size > MAX_JSON_BYTES:
+        raise FileFormatError(f"{p}: {what} is {size} bytes, over the {MAX_JSON_BYTES} byte limit for a JSON file")
+    raw = p.read_bytes()
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise FileFormatError(f"{p}: {what} is not UTF-8 text (byte {err.start}); save it as UTF-8 JSON") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as err:
+        raise FileFormatError(
+            f"{p}: {what} is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}"
+        ) from None
+    except RecursionError:
+        raise FileFormatError(f"{p}: {what} is nested too deeply to be a {what}") from None
+
+
+def dump_json(data: Any) -> str:
+    """Deterministic, human-readable JSON (``allow_nan=False``: NaN is not JSON)."""
+    try:
+        return json.dumps(data, indent=2, ensure_ascii=False, allow_nan=False) + "\n"
+    except ValueError as err:
+        raise InvalidDataError(f"cannot write JSON: {err} (NaN/Inf values are not valid JSON)") from err
+    except TypeError as err:
+        raise InvalidDataError(f"cannot write JSON: {err}; metadata and attributes must be JSON-serialisable") from err

@@ -1,0 +1,678 @@
+"""What a plugin declares: degradation specs and question families, defined once.
+
+A **degradation** is described by a :class:`DegradationSpec`: its name, :class:`Category`,
+:class:`Stage`, parameters (:class:`ParamSpec`, with units and hard limits), presets
+(``"bench"`` = the paper's parameter table, ``"1"`` … ``"5"`` = severity, mild → harsh),
+what it needs from the render, and its ``apply`` callable. A **question family** is
+described by a :class:`QuestionFamily`: its name (= ``question_type``), :class:`TaskGroup`,
+:class:`AnswerType` (s), sub types, number of views, what it needs from the scene, and
+``generate(scene, rng)``.
+
+Stage contracts (what ``apply`` receives and returns)
+-----------------------------------------------------
+
+The pipeline runs one physical camera: raster-stage degradations change the render itself →
+linear HDR light (unclamped) → linear-stage degradations → clip → sRGB encode → display-stage
+degradations. Within a stage, degradations run in increasing :attr:`DegradationSpec.order`
+(the physical position of the effect, see :data:`ORDER_GUIDE`), whatever order a user lists
+them in. Every ``apply`` is deterministic given ``(input, params, rng)``: it draws randomness
+only from ``rng`` (a :class:`numpy.random.Generator`), never from global state.
+
+``Stage.RASTER`` — :class:`RasterApply`
+    ``apply(options, params, rng) -> options``: receives the render options of the view
+    (camera, lens, sub-steps, defocus settings, …) and returns changed options; it never
+    sees pixels. The concrete render-request type arrives with the renderer, so it is typed
+    loosely (``Any``) here; an ``apply`` must return a new object, not mutate its input.
+``Stage.LINEAR`` — :class:`LinearApply`
+    ``apply(rgb, aux, params, rng) -> rgb``: ``rgb`` is linear-light HDR float32 (H, W, 3),
+    **unclamped** (values above 1 are real light); ``aux`` maps the render outputs the spec
+    declared in ``needs`` (e.g. ``"depth"``: (H, W) float32 metres, expected z along the optical
+    axis; ``"alpha"``: (H, W) float32; ``"instance_ids"``: (H, W) int32, -1 = none) to arrays.
+    Returns float32 (H, W, 3); the input must not be modified in place.
+``Stage.DISPLAY`` — :class:`DisplayApply`
+    ``apply(image, params, rng) -> image``: ``image`` is the encoded 8-bit sRGB picture,
+    uint8 (H, W, 3), RGB channel order. Returns uint8 of the same shape. A display stage
+    receives no render outputs, so its ``needs`` must be empty.
+
+Parameters and presets
+----------------------
+
+``params`` given to ``apply`` is the dict returned by :meth:`DegradationSpec.validate_params`
+(every declared parameter present, integers as ``int``, others as ``float``). A preset maps
+every parameter to a :class:`ParamRange`; ``low == high`` fixes the value. Severity presets
+``"1"`` … ``"5"`` must be monotone (mild → harsh) in each parameter that declares
+``harsher="higher"`` or ``harsher="lower"``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import re
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import TYPE_CHECKING, Any, Literal, Protocol
+
+import numpy as np
+
+from spacedg.errors import InvalidDataError, ParameterError, PluginError
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from spacedg.data.qa import QARecord
+    from spacedg.data.scene import Scene
+    from spacedg.plugins.registry import PluginOrigin
+
+__all__ = [
+    "NAME_PATTERN",
+    "SEVERITY_PRESETS",
+    "REQUIRED_PRESETS",
+    "RENDER_OUTPUTS",
+    "SCENE_NEEDS",
+    "ORDER_GUIDE",
+    "ParamSpec",
+    "ParamRange",
+    "Category",
+    "Stage",
+    "AnswerType",
+    "TaskGroup",
+    "RasterApply",
+    "LinearApply",
+    "DisplayApply",
+    "QuestionGenerator",
+    "DegradationSpec",
+    "QuestionFamily",
+    "suggest",
+]
+
+#: Names of degradations, question families, parameters and sub question types.
+NAME_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
+_PRESET_PATTERN = re.compile(r"^[a-z0-9][a-z0-9_]*$")
+
+#: Severity presets, mild → harsh.
+SEVERITY_PRESETS: tuple[str, ...] = ("1", "2", "3", "4", "5")
+#: Presets every degradation declares: the paper's table (or, for degradations the paper does
+#: not cover, a representative harsh setting) and the five severities.
+REQUIRED_PRESETS: tuple[str, ...] = ("bench", *SEVERITY_PRESETS)
+
+#: Render outputs a degradation may ask for in ``needs`` (anything else is computed only
+#: when some degradation asks for it).
+RENDER_OUTPUTS: frozenset[str] = frozenset({"depth", "median_depth", "alpha", "instance_ids"})
+
+#: What a question family may need from the scene beyond its instances and views.
+SCENE_NEEDS: frozenset[str] = frozenset({"visibility", "covisibility", "gaussians", "depth", "instance_ids"})
+
+#: Conventional :attr:`DegradationSpec.order` values (the physical position within a stage);
+#: third-party degradations pick a value between these.
+ORDER_GUIDE: Mapping[str, float] = {
+    # raster
+    "distortion": 10.0,
+    "defocus": 20.0,
+    "motion_blur": 30.0,
+    # linear: atmosphere → front glass → lens → sensor gain → sensor noise
+    "haze": 10.0,
+    "water_droplets": 20.0,
+    "vignetting": 25.0,
+    "low_light": 30.0,
+    "over_exposure": 30.0,
+    # display
+    "low_res": 10.0,
+    "jpeg_compression": 20.0,
+}
+
+
+def suggest(name: str, choices: Iterable[str], n: int = 3) -> list[str]:
+    """Up to ``n`` names from ``choices`` close to ``name`` (difflib, cutoff 0.6)."""
+    return difflib.get_close_matches(str(name), list(choices), n=n, cutoff=0.6)
+
+
+def _did_you_mean(name: str, choices: Iterable[str]) -> str:
+    close = suggest(name, choices)
+    return f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+
+
+def _check_name(value: object, what: str) -> str:
+    if not isinstance(value, str) or not NAME_PATTERN.match(value):
+        raise PluginError(
+            f"{what} {value!r} is not a valid name: use lower-case letters, digits and '_', "
+            "starting with a letter (pattern ^[a-z][a-z0-9_]*$)"
+        )
+    return value
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+# ------------------------------------------------------------------ enums
+class Category(StrEnum):
+    """The paper's four degradation categories."""
+
+    OPTICAL_DYNAMIC = "optical_dynamic"
+    METEOROLOGICAL = "meteorological"
+    PHOTOMETRIC = "photometric"
+    DIGITAL = "digital"
+
+
+class Stage(StrEnum):
+    """Where in the image formation a degradation acts (see the module docstring)."""
+
+    RASTER = "raster"
+    LINEAR = "linear"
+    DISPLAY = "display"
+
+    @property
+    def rank(self) -> int:
+        """Pipeline position: raster 0, linear 1, display 2."""
+        return {"raster": 0, "linear": 1, "display": 2}[self.value]
+
+
+class AnswerType(StrEnum):
+    """How an answer is represented and scored (see ``spacedg.data.qa``)."""
+
+    MCQ = "MCQ"
+    YN = "YN"
+    NA = "NA"
+    COUNT = "COUNT"
+    SIZE_LIST = "SIZE_LIST"
+
+
+class TaskGroup(StrEnum):
+    """The paper's three task groups."""
+
+    CAMERA_CENTRIC = "camera_centric"
+    CAMERA_OBJECT = "camera_object"
+    OBJECT_CENTRIC = "object_centric"
+
+
+def _enum(enum_cls: type[StrEnum], value: object, what: str) -> Any:
+    if isinstance(value, enum_cls):
+        return value
+    try:
+        return enum_cls(value)
+    except ValueError:
+        allowed = ", ".join(m.value for m in enum_cls)
+        raise PluginError(f"{what} {value!r} is not one of: {allowed}.{_did_you_mean(str(value), [m.value for m in enum_cls])}") from None
+
+
+# ------------------------------------------------------------- protocols
+class RasterApply(Protocol):
+    """``apply(options, params, rng) -> options`` for raster-stage degradations."""
+
+    def __call__(self, options: Any, params: Mapping[str, Any], rng: np.random.Generator) -> Any: ...
+
+
+class LinearApply(Protocol):
+    """``apply(rgb_linear_f32_HxWx3, aux, params, rng) -> rgb_linear_f32_HxWx3`` for linear-stage degradations."""
+
+    def __call__(
+        self,
+        rgb: np.ndarray,
+        aux: Mapping[str, np.ndarray],
+        params: Mapping[str, Any],
+        rng: np.random.Generator,
+    ) -> np.ndarray: ...
+
+
+class DisplayApply(Protocol):
+    """``apply(image_uint8_HxWx3_RGB, params, rng) -> uint8 image of the same shape`` for display-stage degradations."""
+
+    def __call__(self, image: np.ndarray, params: Mapping[str, Any], rng: np.random.Generator) -> np.ndarray: ...
+
+
+class QuestionGenerator(Protocol):
+    """``generate(scene, rng) -> Iterator[QARecord]``: every valid candidate, in a seeded random order."""
+
+    def __call__(self, scene: Scene, rng: np.random.Generator) -> Iterator[QARecord]: ...
+
+
+# ------------------------------------------------------------ parameters
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter of a degradation.
+
+    Attributes:
+        name: parameter name (the paper's name where it has one).
+        unit: unit string: ``"px"`` (pixels at the rendered resolution), ``"m"``, ``"1/m"``,
+            ``"rad"``, ``"s"``, ``"1"`` (dimensionless), …
+        description: what the parameter does, in one or two sentences.
+        low, high: hard limits, inclusive; ``None`` = unbounded on that side. Values outside
+            are rejected, never clamped.
+        integer: the parameter takes integer values only.
+        harsher: ``"higher"`` if larger values degrade more, ``"lower"`` if smaller values do,
+            ``None`` if neither (structural parameters such as a sub-step count). Used to check
+            that the severity presets are monotone.
+    """
+
+    name: str
+    unit: str
+    description: str
+    low: float | None = None
+    high: float | None = None
+    integer: bool = False
+    harsher: Literal["higher", "lower"] | None = None
+
+    def __post_init__(self) -> None:
+        _check_name(self.name, "parameter name")
+        if not isinstance(self.unit, str) or not self.unit.strip():
+            raise PluginError(f"parameter {self.name!r}: unit must be a non-empty string such as 'px', 'm', 'rad' or '1'")
+        if not isinstance(self.description, str):
+            raise PluginError(f"parameter {self.name!r}: description must be a string")
+        for side in ("low", "high"):
+            value = getattr(self, side)
+            if value is None:
+                continue
+            if not _is_number(value) or not math.isfinite(float(value)):
+                raise PluginError(f"parameter {self.name!r}: hard limit {side} must be a finite number or None, got {value!r}")
+            if self.integer and float(value) != int(value):
+                raise PluginError(f"parameter {self.name!r} is integer, but its hard limit {side} is {value!r}")
+            object.__setattr__(self, side, int(value) if self.integer else float(value))
+        if self.low is not None and self.high is not None and self.low > self.high:
+            raise PluginError(f"parameter {self.name!r}: hard limits low={self.low} > high={self.high}")
+        if self.harsher not in (None, "higher", "lower"):
+            raise PluginError(f"parameter {self.name!r}: harsher must be 'higher', 'lower' or None, got {self.harsher!r}")
+
+    def limits_text(self) -> str:
+        lo = "-inf" if self.low is None else f"{self.low:g}"
+        hi = "inf" if self.high is None else f"{self.high:g}"
+        return f"[{lo}, {hi}]"
+
+    def check(self, value: object, where: str) -> int | float:
+        """Return ``value`` as ``int`` / ``float`` or raise :class:`ParameterError`."""
+        if not _is_number(value) or not math.isfinite(float(value)):  # type: ignore[arg-type]
+            raise ParameterError(f"{where}: parameter {self.name!r} must be a finite number ({self.unit}), got {value!r}")
+        number = float(value)  # type: ignore[arg-type]
+        if self.integer:
+            if number != int(number):
+                raise ParameterError(f"{where}: parameter {self.name!r} must be an integer, got {value!r}")
+            number = int(number)
+        if (self.low is not None and number < self.low) or (self.high is not None and number > self.high):
+            raise ParameterError(
+                f"{where}: parameter {self.name!r} = {value!r} is outside its hard limits {self.limits_text()} "
+                f"({self.unit}); pick a value inside them"
+            )
+        return number
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "unit": self.unit,
+            "description": self.description,
+            "low": self.low,
+            "high": self.high,
+            "integer": self.integer,
+            "harsher": self.harsher,
+        }
+
+
+@dataclass(frozen=True)
+class ParamRange:
+    """A closed interval ``[low, high]`` a preset samples a parameter from (``low == high``: fixed)."""
+
+    low: float
+    high: float
+
+    def __post_init__(self) -> None:
+        for side in ("low", "high"):
+            value = getattr(self, side)
+            if not _is_number(value) or not math.isfinite(float(value)):
+                raise PluginError(f"ParamRange: {side} must be a finite number, got {value!r}")
+            object.__setattr__(self, side, int(value) if isinstance(value, (int, np.integer)) else float(value))
+        if self.low > self.high:
+            raise PluginError(f"ParamRange: low={self.low} > high={self.high}; write the smaller bound first")
+
+    @classmethod
+    def of(cls, value: ParamRange | tuple[float, float] | list[float] | float) -> ParamRange:
+        """Coerce ``(low, high)``, ``[low, high]`` or a single number (fixed) to a range."""
+        if isinstance(value, ParamRange):
+            return value
+        if isinstance(value, (tuple, list)):
+            if len(value) != 2:
+                raise PluginError(f"ParamRange: expected (low, high), got {value!r}")
+            return cls(value[0], value[1])
+        if _is_number(value):
+            return cls(value, value)  # type: ignore[arg-type]
+        raise PluginError(f"ParamRange: expected a ParamRange, (low, high) or a number, got {value!r}")
+
+    @property
+    def fixed(self) -> bool:
+        return self.low == self.high
+
+    def sample(self, rng: np.random.Generator, integer: bool = False) -> int | float:
+        """One uniform draw from ``[low, high]``; integers uniform over ``low..high`` inclusive.
+
+        Always consumes exactly one ``rng.random()`` draw (also when fixed), so the stream of a
+        preset does not shift when one of its ranges is fixed.
+        """
+        u = float(rng.random())
+        if integer:
+            lo, hi = math.ceil(self.low), math.floor(self.high)
+            return int(min(hi, lo + math.floor(u * (hi - lo + 1))))
+        if self.fixed:
+            return float(self.low)
+        return float(self.low + u * (self.high - self.low))
+
+    def to_list(self) -> list[float]:
+        return [self.low, self.high]
+
+
+# --------------------------------------------------------- degradations
+@dataclass(frozen=True, eq=False)
+class DegradationSpec:
+    """Everything the engine needs to know about one degradation (see the module docstring).
+
+    Attributes:
+        name: unique name (``^[a-z][a-z0-9_]*$``), the paper's where it has one.
+        category: one of :class:`Category`.
+        stage: one of :class:`Stage`; fixes the ``apply`` contract.
+        params: the parameters, in a fixed order.
+        presets: preset name → {parameter name → :class:`ParamRange` (or ``(low, high)``, or a
+            number)}; must contain :data:`REQUIRED_PRESETS`, name every parameter, stay within
+            the hard limits, and be monotone over the severities.
+        apply: the stage's callable (:class:`RasterApply`, :class:`LinearApply` or
+            :class:`DisplayApply`).
+        needs: render outputs ``apply`` reads (subset of :data:`RENDER_OUTPUTS`).
+        description: the model in a few sentences, with units.
+        order: physical position within the stage (see :data:`ORDER_GUIDE`); lower runs first.
+        origin: set by the registry: which plugin registered the spec.
+    """
+
+    name: str
+    category: Category
+    stage: Stage
+    params: tuple[ParamSpec, ...]
+    presets: Mapping[str, Mapping[str, ParamRange]]
+    apply: Callable[..., Any]
+    needs: frozenset[str] = frozenset()
+    description: str = ""
+    order: float = 50.0
+    origin: PluginOrigin | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _check_name(self.name, "degradation name")
+        where = f"degradation {self.name!r}"
+        object.__setattr__(self, "category", _enum(Category, self.category, f"{where}: category"))
+        object.__setattr__(self, "stage", _enum(Stage, self.stage, f"{where}: stage"))
+        params = tuple(self.params)
+        for p in params:
+            if not isinstance(p, ParamSpec):
+                raise PluginError(f"{where}: params must be ParamSpec objects, got {type(p).__name__}")
+        names = [p.name for p in params]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise PluginError(f"{where}: parameter(s) {dup} declared more than once")
+        object.__setattr__(self, "params", params)
+        if not callable(self.apply):
+            raise PluginError(f"{where}: apply must be callable, got {type(self.apply).__name__}")
+        needs = frozenset(self.needs)
+        unknown = sorted(needs - RENDER_OUTPUTS)
+        if unknown:
+            raise PluginError(
+                f"{where}: needs {unknown} are not render outputs; choose from {sorted(RENDER_OUTPUTS)}"
+            )
+        if self.stage is Stage.DISPLAY and needs:
+            raise PluginError(f"{where}: a display-stage degradation receives no render outputs, so needs must be empty (got {sorted(needs)})")
+        object.__setattr__(self, "needs", needs)
+        if not isinstance(self.description, str):
+            raise PluginError(f"{where}: description must be a string")
+        if not _is_number(self.order) or not math.isfinite(float(self.order)):
+            raise PluginError(f"{where}: order must be a finite number, got {self.order!r}")
+        object.__setattr__(self, "order", float(self.order))
+        object.__setattr__(self, "presets", self._check_presets(where))
+
+    def _check_presets(self, where: str) -> dict[str, dict[str, ParamRange]]:
+        if not isinstance(self.presets, Mapping):
+            raise PluginError(f"{where}: presets must be a mapping preset name → {{param: (low, high)}}")
+        by_name = self.param_map
+        out: dict[str, dict[str, ParamRange]] = {}
+        for preset, ranges in self.presets.items():
+            if not isinstance(preset, str) or not _PRESET_PATTERN.match(preset):
+                raise PluginError(f"{where}: preset name {preset!r} must be lower-case letters, digits and '_'")
+            if not isinstance(ranges, Mapping):
+                raise PluginError(f"{where}: preset {preset!r} must map parameter names to ranges")
+            unknown = [k for k in ranges if k not in by_name]
+            if unknown:
+                hint = _did_you_mean(unknown[0], by_name)
+                raise PluginError(f"{where}: preset {preset!r} names unknown parameter(s) {unknown}; parameters are {list(by_name)}.{hint}")
+            missing = [k for k in by_name if k not in ranges]
+            if missing:
+                raise PluginError(f"{where}: preset {preset!r} does not give a range for {missing}; every preset must name every parameter")
+            converted: dict[str, ParamRange] = {}
+            for pname, value in ranges.items():
+                rng_ = ParamRange.of(value)
+                spec = by_name[pname]
+                for bound in (rng_.low, rng_.high):
+                    try:
+                        spec.check(bound, f"{where}: preset {preset!r}")
+                    except ParameterError as err:
+                        raise PluginError(str(err)) from None
+                converted[pname] = ParamRange(int(rng_.low), int(rng_.high)) if spec.integer else ParamRange(float(rng_.low), float(rng_.high))
+            out[preset] = converted
+        missing_presets = [p for p in REQUIRED_PRESETS if p not in out]
+        if missing_presets:
+            raise PluginError(
+                f"{where}: missing preset(s) {missing_presets}; declare 'bench' (the paper's table, or a representative "
+                "harsh setting) and the severities '1' (mild) … '5' (harsh)"
+            )
+        for p in self.params:
+            if p.harsher is None:
+                continue
+            sign = 1.0 if p.harsher == "higher" else -1.0
+            for a, b in zip(SEVERITY_PRESETS, SEVERITY_PRESETS[1:]):
+                ra, rb = out[a][p.name], out[b][p.name]
+                if sign * (rb.low - ra.low) < 0 or sign * (rb.high - ra.high) < 0:
+                    raise PluginError(
+                        f"{where}: severity presets must get harsher from '1' to '5', but parameter {p.name!r} "
+                        f"(harsher = {p.harsher}) goes from {ra.to_list()} at '{a}' to {rb.to_list()} at '{b}'"
+                    )
+        return out
+
+    # ------------------------------------------------------------ queries
+    @property
+    def param_map(self) -> dict[str, ParamSpec]:
+        """Parameter name → :class:`ParamSpec`, in declaration order."""
+        return {p.name: p for p in self.params}
+
+    @property
+    def preset_names(self) -> list[str]:
+        """Preset names: ``"bench"``, ``"1"`` … ``"5"``, then any others in declaration order."""
+        rest = [p for p in self.presets if p not in REQUIRED_PRESETS]
+        return [*REQUIRED_PRESETS, *rest]
+
+    @property
+    def sort_key(self) -> tuple[int, float, str]:
+        """Pipeline order: (stage rank, order, name)."""
+        return (self.stage.rank, self.order, self.name)
+
+    def validate_params(self, params: Mapping[str, Any], *, partial: bool = False) -> dict[str, int | float]:
+        """Check names and hard limits; return a new dict with ``int`` / ``float`` values.
+
+        Raises :class:`ParameterError` for an unknown name (with close names suggested), a
+        value that is not a finite number, a non-integer value for an integer parameter, a
+        value outside the hard limits, or (unless ``partial``) a missing parameter.
+        """
+        where = f"degradation {self.name!r}"
+        if not isinstance(params, Mapping):
+            raise ParameterError(f"{where}: params must be a mapping name → value, got {type(params).__name__}")
+        by_name = self.param_map
+        out: dict[str, int | float] = {}
+        for key, value in params.items():
+            if key not in by_name:
+                raise ParameterError(
+                    f"{where}: unknown parameter {key!r}.{_did_you_mean(str(key), by_name)} "
+                    f"Parameters: {', '.join(f'{p.name} ({p.unit}, {p.limits_text()})' for p in self.params) or 'none'}"
+                )
+            out[key] = by_name[key].check(value, where)
+        if not partial:
+            missing = [k for k in by_name if k not in out]
+            if missing:
+                raise ParameterError(
+                    f"{where}: missing parameter(s) {missing}; give every parameter, or start from "
+                    f"sample_params(preset, rng) with a preset in {self.preset_names}"
+                )
+        return {p.name: out[p.name] for p in self.params if p.name in out}
+
+    def sample_params(self, preset: str, rng: np.random.Generator) -> dict[str, int | float]:
+        """Draw one value per parameter from ``preset``, in declaration order, one draw each."""
+        preset = str(preset)  # severities may be given as int
+        if preset not in self.presets:
+            raise ParameterError(
+                f"degradation {self.name!r}: unknown preset {preset!r}.{_did_you_mean(preset, self.presets)} "
+                f"Presets: {', '.join(self.preset_names)}"
+            )
+        if not isinstance(rng, np.random.Generator):
+            raise ParameterError(f"degradation {self.name!r}: rng must be a numpy.random.Generator, got {type(rng).__name__}; use np.random.default_rng(seed)")
+        ranges = self.presets[preset]
+        return {p.name: ranges[p.name].sample(rng, integer=p.integer) for p in self.params}
+
+    def describe(self) -> dict[str, Any]:
+        """A JSON-serialisable description (what ``spacedg plugins --json`` prints)."""
+        return {
+            "name": self.name,
+            "category": self.category.value,
+            "stage": self.stage.value,
+            "order": self.order,
+            "needs": sorted(self.needs),
+            "params": [p.to_dict() for p in self.params],
+            "presets": {name: {k: r.to_list() for k, r in self.presets[name].items()} for name in self.preset_names},
+            "description": self.description,
+        }
+
+
+# ---------------------------------------------------- question families
+@dataclass(frozen=True, eq=False)
+class QuestionFamily:
+    """One ``question_type`` (see ``/SPEC-QA`` and the module docstring).
+
+    Attributes:
+        name: the ``question_type`` (``^[a-z][a-z0-9_]*$``).
+        task_group: one of :class:`TaskGroup`.
+        answer_types: the answer types its records use.
+        sub_question_types: every ``sub_question_type`` its records may carry.
+        num_views: the numbers of views its records may use, e.g. ``(1,)`` or ``(1, 2)``.
+        generate: ``generate(scene, rng) -> Iterator[QARecord]`` yielding **every** valid
+            candidate in a seeded random order, lazily, so a caller takes as many as it wants.
+            The stored callable is wrapped so that each record is checked against this
+            declaration (the raw one is ``generate.__wrapped__``).
+        needs: what it reads from the scene (subset of :data:`SCENE_NEEDS`), e.g.
+            ``{"visibility"}``: per-view instance visibility must have been computed.
+        description: what it asks, in a sentence.
+        origin: set by the registry: which plugin registered the family.
+    """
+
+    name: str
+    task_group: TaskGroup
+    answer_types: frozenset[AnswerType]
+    sub_question_types: tuple[str, ...]
+    num_views: tuple[int, ...]
+    generate: QuestionGenerator
+    needs: frozenset[str] = frozenset()
+    description: str = ""
+    origin: PluginOrigin | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _check_name(self.name, "question family name")
+        where = f"question family {self.name!r}"
+        object.__setattr__(self, "task_group", _enum(TaskGroup, self.task_group, f"{where}: task_group"))
+        answer_types = self.answer_types
+        if isinstance(answer_types, (str, AnswerType)):
+            answer_types = (answer_types,)
+        answer_types = frozenset(_enum(AnswerType, a, f"{where}: answer type") for a in answer_types)
+        if not answer_types:
+            raise PluginError(f"{where}: declare at least one answer type ({', '.join(a.value for a in AnswerType)})")
+        object.__setattr__(self, "answer_types", answer_types)
+        subs = (self.sub_question_types,) if isinstance(self.sub_question_types, str) else tuple(self.sub_question_types)
+        if not subs:
+            raise PluginError(f"{where}: declare at least one sub_question_type")
+        for s in subs:
+            _check_name(s, f"{where}: sub_question_type")
+        object.__setattr__(self, "sub_question_types", subs)
+        views = (self.num_views,) if isinstance(self.num_views, int) else tuple(self.num_views)
+        if not views or any(isinstance(v, bool) or not isinstance(v, int) or v < 1 for v in views):
+            raise PluginError(f"{where}: num_views must be positive integers such as (1,) or (1, 2), got {self.num_views!r}")
+        object.__setattr__(self, "num_views", tuple(sorted(set(views))))
+        needs = frozenset(self.needs)
+        unknown = sorted(needs - SCENE_NEEDS)
+        if unknown:
+            raise PluginError(f"{where}: needs {unknown} unknown; choose from {sorted(SCENE_NEEDS)}")
+        object.__setattr__(self, "needs", needs)
+        if not isinstance(self.description, str):
+            raise PluginError(f"{where}: description must be a string")
+        if not callable(self.generate):
+            raise PluginError(f"{where}: generate must be callable as generate(scene, rng), got {type(self.generate).__name__}")
+        if not isinstance(self.generate, _CheckedGenerator):
+            object.__setattr__(self, "generate", _CheckedGenerator(self.generate, self))
+
+    def check_record(self, record: QARecord, scene_id: str | None = None) -> None:
+        """Raise :class:`PluginError` if ``record`` contradicts this declaration."""
+        where = f"question family {self.name!r}: record {record.id!r}"
+        problems = []
+        if record.question_type != self.name:
+            problems.append(f"question_type is {record.question_type!r}, expected {self.name!r}")
+        if record.task_group is not self.task_group:
+            problems.append(f"task_group is {record.task_group.value!r}, expected {self.task_group.value!r}")
+        if record.answer_type not in self.answer_types:
+            problems.append(f"answer_type {record.answer_type.value!r} is not declared ({sorted(a.value for a in self.answer_types)})")
+        if record.sub_question_type not in self.sub_question_types:
+            problems.append(f"sub_question_type {record.sub_question_type!r} is not declared {list(self.sub_question_types)}")
+        if len(record.views) not in self.num_views:
+            problems.append(f"uses {len(record.views)} view(s), declared {list(self.num_views)}")
+        if scene_id is not None and record.scene_id != scene_id:
+            problems.append(f"scene_id is {record.scene_id!r}, expected {scene_id!r}")
+        if problems:
+            raise PluginError(f"{where}: " + "; ".join(problems))
+
+    def describe(self) -> dict[str, Any]:
+        """A JSON-serialisable description (what ``spacedg plugins --json`` prints)."""
+        return {
+            "name": self.name,
+            "task_group": self.task_group.value,
+            "answer_types": sorted(a.value for a in self.answer_types),
+            "sub_question_types": list(self.sub_question_types),
+            "num_views": list(self.num_views),
+            "needs": sorted(self.needs),
+            "description": self.description,
+        }
+
+
+class _CheckedGenerator:
+    """``generate(scene, rng)`` of a :class:`QuestionFamily`, checking every record it yields.
+
+    A class rather than a closure so that families pickle (DataLoader workers). The raw
+    generator is :attr:`__wrapped__`.
+    """
+
+    __spacedg_checked__ = True
+
+    def __init__(self, raw: QuestionGenerator, family: QuestionFamily) -> None:
+        self.__wrapped__ = raw
+        self.family = family
+        self.__name__ = getattr(raw, "__name__", "generate")
+        self.__doc__ = getattr(raw, "__doc__", None)
+
+    def __repr__(self) -> str:
+        return f"<generate of question family {self.family.name!r}: {self.__wrapped__!r}>"
+
+    def __call__(self, scene: Scene, rng: np.random.Generator) -> Iterator[QARecord]:
+        family = self.family
+        if not isinstance(rng, np.random.Generator):
+            raise ParameterError(
+                f"question family {family.name!r}: rng must be a numpy.random.Generator, got {type(rng).__name__}; "
+                "use np.random.default_rng(seed)"
+            )
+        if "visibility" in family.needs and scene.instances and not any(inst.visibility for inst in scene.instances):
+            raise InvalidDataError(
+                f"question family {family.name!r} needs per-view instance visibility, but no instance of scene "
+                f"{scene.id!r} has any; compute it first (spacedg.data.visibility)"
+            )
+        return self._records(scene, rng)
+
+    def _records(self, scene: Scene, rng: np.random.Generator) -> Iterator[QARecord]:
+        from spacedg.data.qa import QARecord  # local: spacedg.data.qa imports this module
+
+        family = self.family
+        for record in self.__wrapped__(scene, rng):
+            if not isinstance(record, QARecord):
+                raise PluginError(f"question family {family.name!r} yielded a {type(record).__name__}, not a QARecord")
+            family.check_record(record, scene.id)
+            yield record
