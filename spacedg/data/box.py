@@ -45,6 +45,14 @@ class OrientedBox:
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
 
+    def __eq__(self, other: object) -> bool:
+        """Exact equality of centre, extents and rotation."""
+        if not isinstance(other, OrientedBox):
+            return NotImplemented
+        return all(np.array_equal(getattr(self, f), getattr(other, f)) for f in ("center", "extents", "rotation"))
+
+    __hash__ = None  # type: ignore[assignment]  # mutable-looking arrays: not hashable
+
     # ------------------------------------------------------------- factories
     @classmethod
     def from_transform(cls, transform: np.ndarray, extents: np.ndarray) -> OrientedBox:

@@ -390,8 +390,9 @@ def _normalise_quats(path: Path, raw: np.ndarray) -> np.ndarray:
 
 def _stack(records: np.ndarray, names: tuple[str, ...] | list[str], dtype: type) -> np.ndarray:
     out = np.empty((records.shape[0], len(names)), dtype=dtype)
-    for j, name in enumerate(names):
-        out[:, j] = records[name]
+    with np.errstate(over="ignore", invalid="ignore"):  # out-of-range doubles become inf, rejected later
+        for j, name in enumerate(names):
+            out[:, j] = records[name]
     return out
 
 

@@ -69,7 +69,7 @@ def read_splat(path: PathLike, *, zero_quaternions: Literal["error", "identity"]
     count = size // RECORD_BYTES
     records = np.fromfile(p, dtype=_DTYPE, count=count)
     if records.shape[0] != count:
-        raise _size_error(p, records.shape[0] * RECORD_BYTES)
+        raise FileFormatError(f"{p}: file shrank while reading ({records.shape[0]} of {count} records); is another process writing it?")
     rgba = records["rgba"].astype(np.float64)
     sh = np.empty((count, 1, 3), dtype=np.float32)
     sh[:, 0, :] = (rgba[:, :3] / 255.0 - 0.5) / SH_C0

@@ -75,7 +75,7 @@ class ExternalObject:
     @classmethod
     def from_splat(cls, path: str | Path, *, label: str | None = None, description: str | None = None,
                    size_m: float = 0.3, placement: str = "support") -> ExternalObject:
-        """Load a ``.splat`` object; label, up axis and credits come from a ``meta.json`` beside it if present."""
+        """Load a ``.splat`` object; label (meta ``id``), up axis and credits come from a ``meta.json`` beside it if present."""
         from spacedg.data.io.splat import read_splat
 
         path = Path(path)
@@ -91,7 +91,7 @@ class ExternalObject:
         for key in ("license", "author", "title"):
             if key in meta:
                 attrs[key] = meta[key]
-        name = label or str(meta.get("title", path.stem.split("_")[0])).lower()
+        name = label or str(meta.get("id", path.stem.split("_")[0])).lower()
         return cls(read_splat(path), name, description, up_axis, size_m, placement, attrs)
 
     def model(self) -> ObjectModel:

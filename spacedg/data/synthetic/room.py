@@ -22,8 +22,8 @@ import numpy as np
 
 from spacedg.data.box import OrientedBox
 from spacedg.data.scene import Instance, Scene
-from spacedg.data.synthetic.appearance import MATERIALS, Appearance, all_appearances
-from spacedg.data.synthetic.catalogue import VOCABULARY, ObjectModel
+from spacedg.data.synthetic.appearance import Appearance, all_appearances
+from spacedg.data.synthetic.catalogue import VOCABULARY
 from spacedg.data.synthetic.external import ExternalObject
 from spacedg.data.synthetic.layout import Layout, Placement, RoomShape, choose_room_shape, fill_room
 from spacedg.data.synthetic.primitives import Surfels, frames_to_quats, rectangle, surfel_scales
@@ -156,7 +156,7 @@ class _Batch:
 
 
 def _texture(appearance: Appearance, s: Surfels, rng: np.random.Generator) -> np.ndarray:
-    return TEXTURES[appearance.spec.texture](appearance.rgb, s.uv, s.normals, rng)
+    return TEXTURES[appearance.spec.texture](appearance.rgb, s.uv, float(s.spacing[0]) if len(s) else 0.0, rng)
 
 
 def _object_surfels(p: Placement, slots: dict[str, Appearance], spacing: float, rng: np.random.Generator, batch: _Batch, iid: int) -> None:
@@ -177,9 +177,9 @@ def _shell(shape: RoomShape, spacing: float, rng: np.random.Generator, batch: _B
     wall_tex = "wallpaper" if rng.uniform() < 0.35 else "paint"
     ex, ey, ez = np.eye(3)
     floor = rectangle(np.array([-W / 2, -D / 2, 0.0]), ex, ey, W, D, spacing, rng)
-    batch.add(floor, TEXTURES[floor_tex](floor_app.rgb, floor.uv, floor.normals, rng), 0.15, -1)
+    batch.add(floor, TEXTURES[floor_tex](floor_app.rgb, floor.uv, spacing, rng), 0.15, -1)
     ceiling = rectangle(np.array([-W / 2, D / 2, H]), ex, -ey, W, D, spacing, rng)
-    batch.add(ceiling, TEXTURES["paint"](np.array([0.93, 0.93, 0.92]), ceiling.uv, ceiling.normals, rng), 0.0, -1)
+    batch.add(ceiling, TEXTURES["paint"](np.array([0.93, 0.93, 0.92]), ceiling.uv, spacing, rng), 0.0, -1)
     # walls: (origin, along-wall axis); u runs along the wall, v up; normal = u × v points inward
     walls = [
         (np.array([W / 2, -D / 2, 0.0]), -ex, W),  # south wall y = -D/2 (normal +y)
@@ -192,14 +192,14 @@ def _shell(shape: RoomShape, spacing: float, rng: np.random.Generator, batch: _B
     features = {}
     for w, (origin, axis_u, length) in enumerate(walls):
         s = rectangle(origin, axis_u, ez, length, H, spacing, rng)
-        col = TEXTURES[wall_tex](base, s.uv, s.normals, rng)
+        col = TEXTURES[wall_tex](base, s.uv, spacing, rng)
         u, v = s.uv[:, 0], s.uv[:, 1]
         col[v < 0.09] = base * 0.55  # skirting board
         if w == door_wall:
             u0 = float(rng.uniform(0.4, length - 1.3))
             door = (u > u0) & (u < u0 + 0.9) & (v < 2.05)
             frame = door & ((u < u0 + 0.05) | (u > u0 + 0.85) | (v > 2.0))
-            col[door] = TEXTURES["wood"](np.array([0.45, 0.3, 0.18]), s.uv[door], s.normals[door], rng)
+            col[door] = TEXTURES["wood"](np.array([0.45, 0.3, 0.18]), s.uv[door], spacing, rng)
             col[frame] = np.array([0.85, 0.85, 0.82])
             knob = door & (np.hypot(u - (u0 + 0.78), v - 1.0) < 0.035)
             col[knob] = np.array([0.75, 0.65, 0.3])

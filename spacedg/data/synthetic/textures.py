@@ -1,7 +1,8 @@
 """Procedural surface textures for the synthetic rooms.
 
 Every texture is a function of surface coordinates ``uv`` in **metres** (so a pattern has
-the same physical size on every object) returning linear RGB in [0, 1]-ish. Patterns are
+the same physical size on every object) and of the sampling spacing, returning RGB in
+[0, 1]-ish (display-referred, as a 3DGS capture stores colour). Patterns are
 chosen so that blur, noise and compression visibly change them: wood grain, fabric weave,
 floor planks, tiles, brushed metal, speckle, cardboard fibres, marble veins.
 
@@ -15,7 +16,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-TextureFn = Callable[[np.ndarray, np.ndarray, np.random.Generator], np.ndarray]
+#: ``texture(base_rgb (3,), uv (N, 2) metres, spacing metres, rng) -> (N, 3) rgb``. ``spacing`` is
+#: the surface sampling step: thin features (seams, grout) are drawn at least that wide so
+#: they stay lines instead of aliasing into scattered dots.
+TextureFn = Callable[[np.ndarray, np.ndarray, float, np.random.Generator], np.ndarray]
 
 
 def _hash2(ix: np.ndarray, iy: np.ndarray, seed: int) -> np.ndarray:
@@ -57,7 +61,7 @@ def _seed(rng: np.random.Generator) -> int:
     return int(rng.integers(0, 2**31 - 1))
 
 
-def wood(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def wood(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Wood grain: stretched rings along u with noisy distortion, dark late-wood lines."""
     seed = _seed(rng)
     u, v = uv[:, 0], uv[:, 1]
@@ -69,17 +73,18 @@ def wood(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.
     return _mix(color * 1.12, color * 0.62, t)
 
 
-def fabric(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def fabric(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Woven fabric: fine crossing threads (period ~6 mm) plus a mottled low frequency."""
     seed = _seed(rng)
     u, v = uv[:, 0], uv[:, 1]
-    weave = 0.5 + 0.25 * np.sin(u * 2 * np.pi / 0.006) + 0.25 * np.sin(v * 2 * np.pi / 0.006)
+    period = max(0.006, 2.5 * spacing)
+    weave = 0.5 + 0.25 * np.sin(u * 2 * np.pi / period) + 0.25 * np.sin(v * 2 * np.pi / period)
     mottle = fbm(u * 6.0, v * 6.0, seed)
     t = 0.25 * weave + 0.45 * mottle
     return _mix(color * 1.1, color * 0.7, t)
 
 
-def leather(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def leather(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Leather: cellular-looking grain and soft creases."""
     seed = _seed(rng)
     u, v = uv[:, 0], uv[:, 1]
@@ -88,7 +93,7 @@ def leather(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.rand
     return _mix(color * 1.15, color * 0.65, 0.5 * grain + 0.5 * (1 - crease))
 
 
-def metal(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def metal(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Brushed metal: fine streaks along u."""
     seed = _seed(rng)
     u, v = uv[:, 0], uv[:, 1]
@@ -96,14 +101,14 @@ def metal(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random
     return _mix(color * 1.15, color * 0.8, streak)
 
 
-def plastic(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def plastic(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Moulded plastic: nearly flat with a fine speckle."""
     seed = _seed(rng)
     speck = fbm(uv[:, 0] * 60.0, uv[:, 1] * 60.0, seed, 2)
     return _mix(color * 1.06, color * 0.86, speck)
 
 
-def ceramic(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def ceramic(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Glazed ceramic: bands of glaze thickness plus speckle."""
     seed = _seed(rng)
     u, v = uv[:, 0], uv[:, 1]
@@ -112,16 +117,16 @@ def ceramic(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.rand
     return _mix(color * 1.08, color * 0.78, 0.4 * band + 0.35 * speck)
 
 
-def cardboard(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def cardboard(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Corrugated cardboard: faint flutes every 8 mm and fibre noise."""
     seed = _seed(rng)
     u, v = uv[:, 0], uv[:, 1]
-    flute = 0.5 + 0.5 * np.sin(u * 2 * np.pi / 0.008)
+    flute = 0.5 + 0.5 * np.sin(u * 2 * np.pi / max(0.008, 2.5 * spacing))
     fibre = fbm(u * 50.0, v * 50.0, seed, 3)
     return _mix(color * 1.08, color * 0.72, 0.3 * flute + 0.5 * fibre)
 
 
-def planks(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def planks(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Floor planks 0.15–0.2 m wide with staggered joints, each plank a tone of its own."""
     seed = _seed(rng)
     width = 0.18
@@ -131,16 +136,17 @@ def planks(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.rando
     col = np.floor((u + offset) / 1.2)
     tone = _hash2(row, col, seed + 5)
     base = _mix(color * 0.85, color * 1.15, tone)
-    grain = wood(np.ones(3), np.stack([v * 0.2, u], axis=1), normals, rng)[:, 0]
-    seam = (np.minimum(np.mod(v, width), width - np.mod(v, width)) < 0.004) | (
-        np.minimum(np.mod(u + offset, 1.2), 1.2 - np.mod(u + offset, 1.2)) < 0.004
+    grain = wood(np.ones(3), np.stack([v * 0.2, u], axis=1), spacing, rng)[:, 0]
+    half_line = max(0.004, 0.5 * spacing)
+    seam = (np.minimum(np.mod(v, width), width - np.mod(v, width)) < half_line) | (
+        np.minimum(np.mod(u + offset, 1.2), 1.2 - np.mod(u + offset, 1.2)) < half_line
     )
     out = base * grain[:, None]
     out[seam] *= 0.45
     return out
 
 
-def tiles(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def tiles(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Square tiles 0.3 m with grout lines and a slight tone per tile."""
     seed = _seed(rng)
     size = 0.3
@@ -148,14 +154,15 @@ def tiles(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random
     tone = _hash2(np.floor(u / size), np.floor(v / size), seed)
     out = _mix(color * 0.92, color * 1.06, tone)
     out *= (0.9 + 0.1 * fbm(u * 30, v * 30, seed + 1, 2))[:, None]
-    grout = (np.minimum(np.mod(u, size), size - np.mod(u, size)) < 0.005) | (
-        np.minimum(np.mod(v, size), size - np.mod(v, size)) < 0.005
+    half_line = max(0.005, 0.5 * spacing)
+    grout = (np.minimum(np.mod(u, size), size - np.mod(u, size)) < half_line) | (
+        np.minimum(np.mod(v, size), size - np.mod(v, size)) < half_line
     )
     out[grout] = color * 0.45
     return out
 
 
-def paint(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def paint(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Painted wall: roller texture and a faint large-scale blotch."""
     seed = _seed(rng)
     u, v = uv[:, 0], uv[:, 1]
@@ -163,18 +170,18 @@ def paint(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random
     return _mix(color * 1.05, color * 0.85, t)
 
 
-def wallpaper(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def wallpaper(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Striped wallpaper: vertical stripes 0.08 m with a darker thin pinstripe."""
     seed = _seed(rng)
     u, v = uv[:, 0], uv[:, 1]
     phase = np.mod(u, 0.16) / 0.16
     stripe = (phase < 0.5).astype(np.float64)
-    pin = (np.abs(phase - 0.75) < 0.03).astype(np.float64)
+    pin = (np.abs(phase - 0.75) < max(0.03, 0.5 * spacing / 0.16)).astype(np.float64)
     t = 0.25 * stripe + 0.5 * pin + 0.15 * fbm(u * 20, v * 20, seed, 2)
     return _mix(color * 1.05, color * 0.7, t)
 
 
-def marble(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def marble(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Marble: thin dark veins from a turbulence-warped sine."""
     seed = _seed(rng)
     u, v = uv[:, 0], uv[:, 1]
@@ -184,7 +191,7 @@ def marble(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.rando
     return _mix(color, color * 0.45, t * 0.8 + 0.1 * turb)
 
 
-def foliage(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def foliage(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Leaves: high-contrast blotches of light and dark green."""
     seed = _seed(rng)
     u, v = uv[:, 0], uv[:, 1]
@@ -192,14 +199,14 @@ def foliage(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.rand
     return _mix(color * 1.35, color * 0.5, t)
 
 
-def screen(color: np.ndarray, uv: np.ndarray, normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def screen(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """A dark screen with a faint reflection gradient."""
     u, v = uv[:, 0], uv[:, 1]
     t = np.clip(0.5 + 0.5 * np.sin(u * 2.0 + v * 3.0), 0, 1)
     return _mix(color, color * 1.8 + 0.03, 0.25 * t)
 
 
-TEXTURES: dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray, np.random.Generator], np.ndarray]] = {
+TEXTURES: dict[str, TextureFn] = {
     "wood": wood,
     "fabric": fabric,
     "leather": leather,

@@ -2,7 +2,7 @@
 
 In the room's canonical frame (z up): the camera centre follows the layout's loop at eye
 height with smooth lateral sway and a walking bob; it looks towards the room's middle,
-swinging left and right across the room (so every wall and the central group are filmed
+swinging 50–80° left and right (so every wall and the central group are filmed
 from several sides), tilted down 8–22° with a little roll. Consecutive views are 6–20 cm
 apart with small rotations, so their fields of view overlap strongly, as in a real scan.
 
@@ -77,8 +77,11 @@ def handheld_trajectory(shape: RoomShape, config: CaptureConfig, rng: np.random.
     centers = np.column_stack([pos2, z])
     # heading: towards the middle, swinging across the room
     to_middle = np.arctan2(-pos2[:, 1], -pos2[:, 0])
-    swing_amp = math.radians(float(rng.uniform(70, 105)))
-    cycles = int(rng.integers(2, 5))
+    swing_deg = float(rng.uniform(50, 80))
+    swing_amp = math.radians(swing_deg)
+    # keep the swing's turn per view under ~12° so neighbouring views overlap
+    max_cycles = max(1, min(4, int(12.0 * n / (2 * math.pi * swing_deg))))
+    cycles = int(rng.integers(1, max_cycles + 1))
     phase = rng.uniform(0, 2 * math.pi)
     yaw = to_middle + swing_amp * np.sin(2 * math.pi * cycles * t + phase) + math.radians(10) * _smooth(t, int(seeds[2]), 5.0)
     pitch = -math.radians(float(rng.uniform(8, 22))) + math.radians(6) * _smooth(t, int(seeds[3]), 6.0)

@@ -1,0 +1,90 @@
+"""``spacedg plugins [--json]``: list plugins, what they provide, and the broken ones.
+
+Exit status 0 even when some plugins are broken (they are listed with their error); a name
+clash between two plugins is an error (exit 2, message naming both and the fix).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from spacedg.plugins.registry import AUTOLOAD_ENV, PLUGINS_ENV, Registry, get_registry
+
+
+def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Register the ``plugins`` subcommand on ``subparsers``."""
+    parser = subparsers.add_parser(
+        "plugins",
+        help="list installed plugins (degradations, question families) and broken ones",
+        description=(
+            "List every plugin found through the 'spacedg' entry-point group, with its distribution, version and "
+            f"what it provides, and the plugins that failed to load. Environment: {AUTOLOAD_ENV}=1 loads only the "
+            f"built-ins; {PLUGINS_ENV}=pkg.mod,... loads extra modules."
+        ),
+    )
+    parser.add_argument("--json", action="store_true", help="print a machine-readable JSON document instead of text")
+    parser.set_defaults(func=run)
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    registry = get_registry()
+    if args.json:
+        json.dump(registry.describe(), sys.stdout, indent=2, sort_keys=False)
+        sys.stdout.write("\n")
+    else:
+        sys.stdout.write(format_text(registry))
+    return 0
+
+
+def format_text(registry: Registry) -> str:
+    """The human-readable listing."""
+    doc = registry.describe()
+    lines: list[str] = []
+    n_ok, n_broken = len(doc["plugins"]), len(doc["broken"])
+    state = "on" if doc["autoload"] else f"off ({AUTOLOAD_ENV}=1: built-ins only)"
+    lines.append(f"spacedg plugins: {n_ok} loaded, {n_broken} broken; autoload {state}")
+    if doc["explicit_modules"]:
+        lines.append(f"  {PLUGINS_ENV}: {', '.join(doc['explicit_modules'])}")
+    for plugin in doc["plugins"]:
+        lines.append("")
+        lines.append(f"{plugin['name']}  [{_dist(plugin)}, {'built-in' if plugin['builtin'] else 'third-party'}]  {plugin['value']}")
+        for deg in plugin["degradations"]:
+            params = ", ".join(
+                f"{p['name']} ({p['unit']}) {_limits(p)}" for p in deg["params"]
+            ) or "no parameters"
+            lines.append(f"  degradation      {deg['name']:<22} stage={deg['stage']:<8} category={deg['category']:<16} {params}")
+        for fam in plugin["question_families"]:
+            views = "/".join(str(v) for v in fam["num_views"])
+            lines.append(
+                f"  question family  {fam['name']:<22} task_group={fam['task_group']:<15} "
+                f"answers={','.join(fam['answer_types'])} views={views}"
+            )
+        if not plugin["degradations"] and not plugin["question_families"]:
+            lines.append("  (registers nothing)")
+    if doc["broken"]:
+        lines.append("")
+        lines.append("Broken plugins (not loaded):")
+        for b in doc["broken"]:
+            lines.append(f"  {b['name']}  [{_dist(b)}, {b['value']}] failed at {b['phase']}: {b['error_type']}: {b['message']}")
+    if doc["skipped"]:
+        lines.append("")
+        lines.append(f"Skipped (autoload disabled; add to {PLUGINS_ENV} to load):")
+        for s in doc["skipped"]:
+            lines.append(f"  {s['name']}  [{_dist(s)}]  {s['value']}")
+    return "\n".join(lines) + "\n"
+
+
+def _dist(entry: dict[str, Any]) -> str:
+    if not entry.get("distribution"):
+        return "no distribution"
+    return f"{entry['distribution']} {entry.get('version') or '?'}"
+
+
+def _limits(param: dict[str, Any]) -> str:
+    lo = "-inf" if param["low"] is None else f"{param['low']:g}"
+    hi = "inf" if param["high"] is None else f"{param['high']:g}"
+    return f"[{lo}, {hi}]"

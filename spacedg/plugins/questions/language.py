@@ -1,0 +1,175 @@
+"""Shared wording helpers for question families (English).
+
+- :func:`label_text`: an instance label as it appears in a question (``"coffee_table"`` →
+  ``"coffee table"``).
+- :func:`plural`: proper English plural of a label (``box`` → ``boxes``, ``shelf`` →
+  ``shelves``, ``person`` → ``people``, ``coffee table`` → ``coffee tables``, ``pair of
+  shoes`` → ``pairs of shoes``); labels that are already plural or plural-only (``stairs``,
+  ``scissors``, ``books``) are returned unchanged.
+- :func:`count_phrase`: ``"1 chair"``, ``"3 chairs"``.
+
+Option lettering and seeded option shuffles for MCQ families belong here too when those
+families arrive.
+"""
+
+from __future__ import annotations
+
+import re
+
+__all__ = ["label_text", "plural", "count_phrase"]
+
+# Irregular singular → plural (lower case).
+_IRREGULAR: dict[str, str] = {
+    "person": "people",
+    "man": "men",
+    "woman": "women",
+    "child": "children",
+    "foot": "feet",
+    "tooth": "teeth",
+    "goose": "geese",
+    "mouse": "mice",
+    "ox": "oxen",
+    "quiz": "quizzes",
+    "cactus": "cacti",
+    "fungus": "fungi",
+    "die": "dice",
+    "axis": "axes",
+    "basis": "bases",
+    "crisis": "crises",
+    "analysis": "analyses",
+    "thesis": "theses",
+    "ellipsis": "ellipses",
+    "index": "indices",
+    "matrix": "matrices",
+    "vertex": "vertices",
+    "appendix": "appendices",
+    "criterion": "criteria",
+    "phenomenon": "phenomena",
+    "medium": "media",
+    "datum": "data",
+    "bacterium": "bacteria",
+    "curriculum": "curricula",
+    "stimulus": "stimuli",
+    # -f / -fe → -ves (the others take -s: roofs, chiefs, cliffs, safes)
+    "shelf": "shelves",
+    "bookshelf": "bookshelves",
+    "knife": "knives",
+    "leaf": "leaves",
+    "half": "halves",
+    "loaf": "loaves",
+    "wolf": "wolves",
+    "calf": "calves",
+    "scarf": "scarves",
+    "wife": "wives",
+    "life": "lives",
+    "thief": "thieves",
+    "elf": "elves",
+    "self": "selves",
+    "sheaf": "sheaves",
+    "hoof": "hooves",
+    "wharf": "wharves",
+    # -o → -oes
+    "potato": "potatoes",
+    "tomato": "tomatoes",
+    "hero": "heroes",
+    "echo": "echoes",
+    "torpedo": "torpedoes",
+    "veto": "vetoes",
+    "volcano": "volcanoes",
+    "mosquito": "mosquitoes",
+    "domino": "dominoes",
+    # -ch pronounced /k/ → -s
+    "stomach": "stomachs",
+    "monarch": "monarchs",
+    "epoch": "epochs",
+    "patriarch": "patriarchs",
+}
+
+# Same in singular and plural, or used only in the plural: returned unchanged.
+_INVARIANT: frozenset[str] = frozenset(
+    {
+        "sheep", "fish", "deer", "moose", "series", "species", "aircraft", "spacecraft", "furniture",
+        "equipment", "luggage", "baggage", "clothing", "laundry", "software", "hardware", "information",
+        "scissors", "glasses", "eyeglasses", "sunglasses", "binoculars", "pliers", "tongs", "tweezers",
+        "trousers", "pants", "jeans", "shorts", "pajamas", "pyjamas", "clothes", "headphones", "earphones",
+        "earbuds", "stairs", "blinds", "curtains", "drapes", "goggles", "news", "chassis", "means",
+    }
+)
+
+# Singular nouns that end in a single "s" (not "ss", "us", "is"): they take "-es".
+_SINGULAR_S: frozenset[str] = frozenset({"lens", "gas", "canvas", "atlas", "bias", "alias", "iris", "chaos", "bus", "plus"})
+
+# Irregular words that keep their plural at the end of a compound ("salesperson").
+_COMPOUND_HEADS: tuple[str, ...] = (
+    "person", "woman", "child", "tooth", "mouse", "goose", "shelf", "knife", "leaf", "loaf", "wife", "hero",
+)
+
+_SIBILANT = re.compile(r"(s|x|z|ch|sh)$")
+
+
+def label_text(label: str) -> str:
+    """A label as written in a question: underscores to spaces, whitespace collapsed, trimmed."""
+    return " ".join(str(label).replace("_", " ").split())
+
+
+def _plural_word(word: str) -> str:
+    if not word:
+        return word
+    if len(word) > 1 and word.isupper():  # acronyms: TV → TVs, PC → PCs
+        return word + "s"
+    lower = word.lower()
+    if lower in _INVARIANT:
+        return word
+    if lower in _IRREGULAR:
+        out = _IRREGULAR[lower]
+    else:
+        for singular in _COMPOUND_HEADS:
+            # compounds ending in an irregular word: "bookshelf", "salesperson", "penknife"
+            if lower.endswith(singular) and lower != singular:
+                out = lower[: -len(singular)] + _IRREGULAR[singular]
+                break
+        else:
+            out = _regular_plural(lower)
+    return _match_case(word, out)
+
+
+def _regular_plural(lower: str) -> str:
+    if lower.endswith("s") and not lower.endswith(("ss", "us", "is")) and lower not in _SINGULAR_S:
+        return lower  # already plural ("books", "papers")
+    if _SIBILANT.search(lower):
+        return lower + "es"  # box → boxes, glass → glasses, bench → benches, bus → buses
+    if lower.endswith("y") and len(lower) > 1 and lower[-2] not in "aeiou":
+        return lower[:-1] + "ies"  # battery → batteries (but toy → toys)
+    return lower + "s"
+
+
+def _match_case(original: str, plural_form: str) -> str:
+    if original.islower():
+        return plural_form
+    if original[0].isupper() and original[1:].islower():
+        return plural_form[0].upper() + plural_form[1:]
+    # mixed case ("iPad"): keep the original and add the suffix it would get in lower case
+    lower = original.lower()
+    if plural_form.startswith(lower):
+        return original + plural_form[len(lower):]
+    return plural_form
+
+
+def plural(label: str) -> str:
+    """English plural of a (possibly multi-word) label.
+
+    The head noun is pluralised: the last word, or the word before ``" of "`` (``"bottle of
+    water"`` → ``"bottles of water"``). Underscores are read as spaces.
+    """
+    text = label_text(label)
+    if not text:
+        return text
+    head, sep, tail = text.partition(" of ")
+    words = head.split(" ")
+    words[-1] = _plural_word(words[-1])
+    return " ".join(words) + (sep + tail if sep else "")
+
+
+def count_phrase(count: int, label: str) -> str:
+    """``"1 chair"``, ``"0 chairs"``, ``"3 boxes"``."""
+    return f"{count} {label_text(label) if count == 1 else plural(label)}"

@@ -1,0 +1,174 @@
+"""Object counting (``question_type = "object_counting"``; object-centric, single view, COUNT).
+
+Rule (SPEC-QA, type 11): for one view and one label, the answer is the number of instances of
+that label that are **clearly visible** in the view (:func:`spacedg.data.visibility.classify`
+→ ``VISIBLE``). The (view, label) pair is skipped when any instance of the label is in the
+grey zone (``PARTIAL``) there, since a viewer could reasonably count it or not; instances with
+no visible pixel (``HIDDEN``) are simply not counted. Only counts ≥ 1 are asked (a count of 0
+would be an existence question about an absent label).
+
+Labels are grouped case- and underscore-insensitively (``"Chair"``, ``"chair"`` and
+``"chair "`` are one label); the question uses the first spelling in id order.
+
+Templates (the paper's appendix "Question Templates", object counting), chosen per record by
+the seeded ``rng``:
+
+0. ``How many <label>s are visible in this image?``
+1. ``Count the number of <label> objects in this image.`` — **deviation**: the paper says "in
+   the scene", but the answer counts what this one image shows, not the whole scene.
+2. ``What is the total count of <label>s shown?``
+3. ``Tell me how many <label>s exist in the current view.``
+
+``<label>s`` is a proper English plural (:func:`~spacedg.plugins.questions.language.plural`:
+boxes, shelves, people). The answer is an ``int`` (``QARecord.answer``, JSON integer);
+``sub_question_type`` is ``"count"``.
+
+Geometry block: ``view``, ``label``, ``image_size`` ``[width, height]`` px, ``counted`` (one
+entry per counted instance: ``id``, ``visible_pixels``, ``visible_fraction``), ``not_counted``
+(the label's other instances with their ``class``, ``"hidden"``, and their visibility or
+``null`` when the view has no record), ``thresholds`` (``min_pixels`` scaled to this image,
+``min_fraction``) and ``template`` (index into :data:`TEMPLATES`).
+
+Order: every (view, label) candidate is built first, then shuffled with ``rng``
+(``rng.permutation``) and each candidate draws its template (``rng.integers``), so the same
+seed gives the same records in the same order, and a caller may stop after any number.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.scene import Instance, Scene
+from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
+from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.questions.language import label_text, plural
+from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+
+__all__ = ["NAME", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
+
+NAME = "object_counting"
+SUB_QUESTION_TYPE = "count"
+
+#: ``{plural}``: the label's plural; ``{label}``: the label as written.
+TEMPLATES: tuple[str, ...] = (
+    "How many {plural} are visible in this image?",
+    "Count the number of {label} objects in this image.",
+    "What is the total count of {plural} shown?",
+    "Tell me how many {plural} exist in the current view.",
+)
+
+
+def render_question(template: int, label: str) -> str:
+    """The question text of template index ``template`` for ``label``."""
+    return TEMPLATES[template].format(label=label_text(label), plural=plural(label))
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    view: str
+    label: str
+    counted: tuple[Instance, ...]
+    hidden: tuple[Instance, ...]
+    image_size: tuple[int, int]
+    min_pixels: float
+
+
+def _label_key(label: str) -> str:
+    return label_text(label).lower()
+
+
+def _candidates(scene: Scene, thresholds: VisibilityThresholds) -> list[_Candidate]:
+    groups: dict[str, list[Instance]] = {}
+    for inst in sorted(scene.instances, key=lambda i: i.id):
+        groups.setdefault(_label_key(inst.label), []).append(inst)
+    out: list[_Candidate] = []
+    for view, cam in scene.views.items():
+        area = cam.width * cam.height
+        for key in sorted(groups):
+            members = groups[key]
+            classes = [classify(inst.visibility.get(view), thresholds, area) for inst in members]
+            if VisibilityClass.PARTIAL in classes:
+                continue  # grey zone: the count is ambiguous
+            counted = tuple(inst for inst, c in zip(members, classes) if c is VisibilityClass.VISIBLE)
+            if not counted:
+                continue
+            hidden = tuple(inst for inst, c in zip(members, classes) if c is VisibilityClass.HIDDEN)
+            out.append(_Candidate(view, members[0].label, counted, hidden, (cam.width, cam.height), thresholds.pixels_for(area)))
+    return out
+
+
+def _vis_entry(inst: Instance, view: str) -> dict[str, Any]:
+    vis = inst.visibility.get(view)
+    return {
+        "id": inst.id,
+        "visible_pixels": None if vis is None else vis.visible_pixels,
+        "visible_fraction": None if vis is None else vis.visible_fraction,
+    }
+
+
+def _record(scene: Scene, cand: _Candidate, template: int, thresholds: VisibilityThresholds) -> QARecord:
+    counted_ids = [inst.id for inst in cand.counted]
+    geometry = {
+        "view": cand.view,
+        "label": cand.label,
+        "image_size": list(cand.image_size),
+        "counted": [_vis_entry(inst, cand.view) for inst in cand.counted],
+        "not_counted": [{**_vis_entry(inst, cand.view), "class": VisibilityClass.HIDDEN.value} for inst in cand.hidden],
+        "thresholds": {"min_pixels": cand.min_pixels, "min_fraction": float(thresholds.min_fraction)},
+        "template": template,
+    }
+    views = (cand.view,)
+    return QARecord(
+        id=make_record_id(scene.id, NAME, SUB_QUESTION_TYPE, views, {"label": _label_key(cand.label), "counted": counted_ids, "template": template}),
+        scene_id=scene.id,
+        question_type=NAME,
+        sub_question_type=SUB_QUESTION_TYPE,
+        task_group=TaskGroup.OBJECT_CENTRIC,
+        answer_type=AnswerType.COUNT,
+        views=views,
+        question=render_question(template, cand.label),
+        options=(),
+        answer=len(cand.counted),
+        geometry=geometry,
+    )
+
+
+def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> Iterator[QARecord]:
+    """Every valid counting question of ``scene``, in an order shuffled by ``rng``.
+
+    Reads ``Instance.visibility[view]``; see the module docstring for the rule.
+    """
+    candidates = _candidates(scene, thresholds)
+    order = rng.permutation(len(candidates))
+    templates = rng.integers(0, len(TEMPLATES), size=len(candidates))
+    for idx in order:
+        yield _record(scene, candidates[idx], int(templates[idx]), thresholds)
+
+
+def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> QuestionFamily:
+    """The object-counting family with custom visibility thresholds (the registered one uses the defaults)."""
+    return QuestionFamily(
+        name=NAME,
+        task_group=TaskGroup.OBJECT_CENTRIC,
+        answer_types=frozenset({AnswerType.COUNT}),
+        sub_question_types=(SUB_QUESTION_TYPE,),
+        num_views=(1,),
+        generate=functools.partial(generate, thresholds=thresholds),
+        needs=frozenset({"visibility"}),
+        description="How many clearly visible instances of a label one image shows (grey-zone views skipped).",
+    )
+
+
+FAMILY = make_family()
+
+
+@hookimpl
+def spacedg_register_question_families(register: Any) -> None:
+    """Register :data:`FAMILY`."""
+    register(FAMILY)
