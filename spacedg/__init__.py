@@ -1,0 +1,62 @@
+"""spacedg: degradation-aware spatial QA data rendered online from 3D Gaussian Splatting scenes.
+
+The front door. Core types and conventions (metres; OpenCV camera axes; activated Gaussian
+parameters) are documented in :mod:`spacedg.render.gaussians`, :mod:`spacedg.render.camera`
+and :mod:`spacedg.data.scene`.
+
+    import spacedg
+    scene = spacedg.load_scene("runs/demo/scenes/room-000000")
+    room = spacedg.generate_room(seed=3)
+    spacedg.list_degradations(), spacedg.get_question_family("object_counting")
+"""
+
+from spacedg.data.box import OrientedBox
+from spacedg.data.io import load_scene, save_scene, scene_from_files
+from spacedg.data.scene import Instance, InstanceVisibility, Scene
+from spacedg.data.synthetic import ExternalObject, RoomConfig, generate_room
+from spacedg.errors import (
+    DuplicatePluginError,
+    FileFormatError,
+    InvalidDataError,
+    ParameterError,
+    PluginError,
+    SpaceDGError,
+    UnknownPluginError,
+)
+from spacedg.plugins import (
+    get_degradation,
+    get_question_family,
+    list_degradations,
+    list_question_families,
+)
+from spacedg.render.camera import Camera, FisheyeLens
+from spacedg.render.gaussians import Gaussians
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Camera",
+    "DuplicatePluginError",
+    "ExternalObject",
+    "FileFormatError",
+    "FisheyeLens",
+    "Gaussians",
+    "Instance",
+    "InstanceVisibility",
+    "InvalidDataError",
+    "OrientedBox",
+    "ParameterError",
+    "PluginError",
+    "RoomConfig",
+    "Scene",
+    "SpaceDGError",
+    "UnknownPluginError",
+    "generate_room",
+    "get_degradation",
+    "get_question_family",
+    "list_degradations",
+    "list_question_families",
+    "load_scene",
+    "save_scene",
+    "scene_from_files",
+]

@@ -73,8 +73,7 @@ class Placement:
 
 def loop_path(shape: RoomShape, samples: int = 480) -> np.ndarray:
     """(samples, 2) points of the closed camera loop, evenly spaced by arc length."""
-    ax, ay = shape.width / 2 - shape.inset, shape.depth / 2 - shape.inset
-    rc = min(0.7, 0.8 * min(ax, ay))
+    ax, ay, rc = _loop_geometry(shape)
     straight_x, straight_y = 2 * (ax - rc), 2 * (ay - rc)
     perimeter = 2 * straight_x + 2 * straight_y + 2 * math.pi * rc
     s = np.linspace(0.0, perimeter, samples, endpoint=False)
@@ -103,15 +102,19 @@ def loop_path(shape: RoomShape, samples: int = 480) -> np.ndarray:
     return pts
 
 
-def _segment_distance(points: np.ndarray, path: np.ndarray) -> np.ndarray:
-    """Distance of each 2D point to the closed polyline ``path``."""
-    a = path
-    b = np.roll(path, -1, axis=0)
-    ab = b - a
-    ap = points[:, None, :] - a[None, :, :]
-    t = np.clip((ap * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0, 1)
-    closest = a[None] + t[..., None] * ab[None]
-    return np.linalg.norm(points[:, None, :] - closest, axis=-1).min(axis=1)
+def _loop_geometry(shape: RoomShape) -> tuple[float, float, float]:
+    """Half sizes and corner radius of the camera loop (a rounded rectangle)."""
+    ax, ay = shape.width / 2 - shape.inset, shape.depth / 2 - shape.inset
+    return ax, ay, min(0.7, 0.8 * min(ax, ay))
+
+
+def loop_distance(points: np.ndarray, shape: RoomShape) -> np.ndarray:
+    """Exact distance of 2D points to the camera loop (|signed distance| of a rounded rectangle)."""
+    ax, ay, rc = _loop_geometry(shape)
+    q = np.abs(points) - [ax - rc, ay - rc]
+    outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
+    inside = np.minimum(np.maximum(q[:, 0], q[:, 1]), 0.0)
+    return np.abs(outside + inside - rc)
 
 
 def _rect_samples(corners: np.ndarray, step: float = 0.08) -> np.ndarray:
@@ -141,7 +144,6 @@ class Layout:
     def __init__(self, shape: RoomShape, rng: np.random.Generator) -> None:
         self.shape = shape
         self.rng = rng
-        self.path = loop_path(shape)
         self.placements: list[Placement] = []
 
     # ---------------------------------------------------------------- tests
@@ -150,7 +152,7 @@ class Layout:
         return bool((np.abs(fp[:, 0]) <= hx).all() and (np.abs(fp[:, 1]) <= hy).all())
 
     def _clear_of_corridor(self, fp: np.ndarray) -> bool:
-        return bool(_segment_distance(_rect_samples(fp), self.path).min() >= CORRIDOR_HALF_WIDTH)
+        return bool(loop_distance(_rect_samples(fp), self.shape).min() >= CORRIDOR_HALF_WIDTH)
 
     def _clear_of_floor_objects(self, fp: np.ndarray) -> bool:
         return not any(
