@@ -194,6 +194,7 @@ def test_missing_and_garbage_models(tmp_path: Path) -> None:
 
 
 def _binary_model(folder: Path) -> Path:
+    folder.mkdir()
     build_reconstruction({"PINHOLE": MODELS["PINHOLE"]}, image_ids=[1, 2]).write_binary(str(folder))
     return folder
 
