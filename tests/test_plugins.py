@@ -524,6 +524,7 @@ def test_question_family_validation() -> None:
                                 sub_question_types=("count",), num_views=(1,), generate=gen)
     family = QuestionFamily(**base)
     assert family.generate.__wrapped__ is gen and family.num_views == (1,)
+    assert QuestionFamily(**{**base, "sub_question_types": ("yaw+pitch_dual",)}).sub_question_types == ("yaw+pitch_dual",)
     for changes, pattern in [
         ({"task_group": "objects"}, "task_group 'objects' is not one of"),
         ({"answer_types": {"COUNTS"}}, r"answer type 'COUNTS'.*Did you mean 'COUNT'"),
@@ -535,3 +536,33 @@ def test_question_family_validation() -> None:
     ]:
         with pytest.raises(PluginError, match=pattern):
             QuestionFamily(**{**base, **changes})
+
+
+def test_generated_records_are_checked_against_the_declaration() -> None:
+    from spacedg.data.qa import QARecord
+    from spacedg.data.scene import Scene
+    from spacedg.render.gaussians import Gaussians
+
+    def record(**changes: Any) -> QARecord:
+        kwargs: dict[str, Any] = dict(id="s/demo_family/count/x", scene_id="s", question_type="demo_family", sub_question_type="count",
+                                      task_group="object_centric", answer_type="COUNT", views=("v0",), question="How many?", answer=1)
+        kwargs.update(changes)
+        return QARecord(**kwargs)
+
+    def family_yielding(*records: Any) -> QuestionFamily:
+        return QuestionFamily("demo_family", "object_centric", {"COUNT"}, ("count",), (1,), lambda scene, rng: iter(records))
+
+    scene = Scene("s", Gaussians.empty(), {})
+    rng = np.random.default_rng(0)
+    assert list(family_yielding(record()).generate(scene, rng)) == [record()]
+    for bad, pattern in [
+        (record(question_type="other"), "question_type is 'other'"),
+        (record(task_group="camera_centric"), "task_group is 'camera_centric'"),
+        (record(answer_type="NA", answer=1.0), "answer_type 'NA' is not declared"),
+        (record(sub_question_type="total"), "sub_question_type 'total' is not declared"),
+        (record(views=("v0", "v1")), r"uses 2 view\(s\), declared \[1\]"),
+        (record(scene_id="elsewhere"), "scene_id is 'elsewhere'"),
+        ({"not": "a record"}, "yielded a dict, not a QARecord"),
+    ]:
+        with pytest.raises(PluginError, match=pattern):
+            list(family_yielding(bad).generate(scene, rng))

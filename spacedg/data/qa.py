@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.errors import InvalidDataError
-from spacedg.plugins.specs import NAME_PATTERN, AnswerType, TaskGroup
+from spacedg.plugins.specs import NAME_PATTERN, SUB_TYPE_PATTERN, AnswerType, TaskGroup
 
 __all__ = ["QARecord", "MCQ_LETTERS", "make_record_id", "json_ready"]
 
@@ -152,7 +152,7 @@ class QARecord:
                 raise InvalidDataError(f"{where}: {name} must be a non-empty string, got {value!r}")
         if not isinstance(self.question_type, str) or not NAME_PATTERN.match(self.question_type):
             raise InvalidDataError(f"{where}: question_type {self.question_type!r} must match ^[a-z][a-z0-9_]*$ (the family name)")
-        if not isinstance(self.sub_question_type, str) or not re.match(r"^[a-z][a-z0-9_+]*$", self.sub_question_type):
+        if not isinstance(self.sub_question_type, str) or not SUB_TYPE_PATTERN.match(self.sub_question_type):
             raise InvalidDataError(f"{where}: sub_question_type {self.sub_question_type!r} must be lower-case letters, digits, '_' or '+'")
         object.__setattr__(self, "task_group", _coerce(TaskGroup, self.task_group, where, "task_group"))
         object.__setattr__(self, "answer_type", _coerce(AnswerType, self.answer_type, where, "answer_type"))

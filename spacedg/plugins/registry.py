@@ -36,6 +36,7 @@ import os
 import re
 import threading
 import traceback
+import types
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -304,7 +305,8 @@ class Registry:
         """
         if not isinstance(name, str) or not name:
             raise PluginError(f"register_plugin: name must be a non-empty string, got {name!r}")
-        origin = PluginOrigin(name, repr(obj) if not hasattr(obj, "__name__") else str(obj.__name__), distribution, version, builtin, "programmatic")
+        value = str(obj.__name__) if isinstance(obj, types.ModuleType) else f"{type(obj).__module__}.{type(obj).__qualname__} instance"
+        origin = PluginOrigin(name, value, distribution, version, builtin, "programmatic")
         with self._lock:
             try:
                 return self._add(obj, origin)
@@ -457,13 +459,14 @@ class Registry:
             parts.append(f"Did you mean {', '.join(repr(c) for c in close)}?")
         parts.append(f"Available {plural}: {', '.join(names) if names else 'none'}.")
         key = str(name)
-        suspects = [b for b in self._broken if b.origin.name == key or key in suggest(b.origin.name, [key]) or b.origin.name.endswith(key)]
+        suspects = [b for b in self._broken if b.origin.name == key or key in suggest(b.origin.name, [key])]
         for b in suspects:
             parts.append(f"The plugin {b.origin.describe()} may provide it but failed to load ({b.error}).")
         others = [b for b in self._broken if b not in suspects]
         if others:
             listing = ", ".join(repr(b.origin.name) for b in others)
-            parts.append(f"{len(others)} other plugin(s) failed to load ({listing}); run `spacedg plugins` to see their errors.")
+            other = " other" if suspects else ""
+            parts.append(f"{len(others)}{other} plugin(s) failed to load ({listing}); run `spacedg plugins` to see their errors.")
         if not self.autoload:
             parts.append(
                 f"Plugin autoloading is disabled ({AUTOLOAD_ENV}=1): only built-in plugins and modules named in "
@@ -471,7 +474,7 @@ class Registry:
             )
             for origin in self._skipped:
                 if origin.name == key or key in suggest(origin.name, [key]):
-                    parts.append(f"The installed {origin.describe()} was skipped; unset {AUTOLOAD_ENV} or add its module to {PLUGINS_ENV}.")
+                    parts.append(f"The installed {origin.describe()} was skipped; unset {AUTOLOAD_ENV} or set {PLUGINS_ENV}={origin.value}.")
         return " ".join(parts)
 
     def describe(self) -> dict[str, Any]:

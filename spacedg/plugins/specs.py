@@ -65,6 +65,7 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
 
 __all__ = [
     "NAME_PATTERN",
+    "SUB_TYPE_PATTERN",
     "SEVERITY_PRESETS",
     "REQUIRED_PRESETS",
     "RENDER_OUTPUTS",
@@ -87,6 +88,8 @@ __all__ = [
 
 #: Names of degradations, question families, parameters and sub question types.
 NAME_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
+#: ``sub_question_type`` values: like names, plus ``+`` (camera rotation's ``"yaw+pitch_dual"``).
+SUB_TYPE_PATTERN = re.compile(r"^[a-z][a-z0-9_+]*$")
 _PRESET_PATTERN = re.compile(r"^[a-z0-9][a-z0-9_]*$")
 
 #: Severity presets, mild → harsh.
@@ -542,7 +545,7 @@ class DegradationSpec:
 # ---------------------------------------------------- question families
 @dataclass(frozen=True, eq=False)
 class QuestionFamily:
-    """One ``question_type`` (see ``/SPEC-QA`` and the module docstring).
+    """One ``question_type``: its declaration and its generator (see the module docstring).
 
     Attributes:
         name: the ``question_type`` (``^[a-z][a-z0-9_]*$``).
@@ -585,7 +588,11 @@ class QuestionFamily:
         if not subs:
             raise PluginError(f"{where}: declare at least one sub_question_type")
         for s in subs:
-            _check_name(s, f"{where}: sub_question_type")
+            if not isinstance(s, str) or not SUB_TYPE_PATTERN.match(s):
+                raise PluginError(
+                    f"{where}: sub_question_type {s!r} is not valid: use lower-case letters, digits, '_' and '+', "
+                    "starting with a letter"
+                )
         object.__setattr__(self, "sub_question_types", subs)
         views = (self.num_views,) if isinstance(self.num_views, int) else tuple(self.num_views)
         if not views or any(isinstance(v, bool) or not isinstance(v, int) or v < 1 for v in views):

@@ -44,11 +44,15 @@ def load_scaled_gaussians(path: str, scale: float) -> Gaussians:
 
 
 def read_views(source: PathLike | Mapping[str, Camera], opencv_distortion: Literal["error", "drop"] = "error") -> dict[str, Camera]:
-    """Cameras from a COLMAP model folder, a ``transforms.json``, or a ready mapping."""
+    """Cameras from a COLMAP model folder, a ``transforms.json`` (or a folder holding one and
+    no COLMAP model), or a ready mapping name → Camera."""
     if isinstance(source, Mapping):
         return dict(source)
     p = as_path(source, "views")
     if p.is_dir():
+        has_colmap = any((p / f"cameras.{ext}").is_file() for ext in ("bin", "txt"))
+        if not has_colmap and (p / "transforms.json").is_file():
+            return read_transforms(p / "transforms.json", opencv_distortion=opencv_distortion)
         return read_colmap(p, opencv_distortion=opencv_distortion)
     if p.suffix.lower() == ".json":
         return read_transforms(p, opencv_distortion=opencv_distortion)
@@ -105,7 +109,8 @@ def scene_from_files(
     Args:
         id: scene id.
         gaussians_path: ``.ply`` (INRIA 3DGS) or ``.splat``; loaded lazily on first use.
-        views: a COLMAP model folder, a ``transforms.json``, or a mapping name → Camera.
+        views: a COLMAP model folder, a ``transforms.json`` (or its folder), or a mapping
+            name → Camera (see :func:`read_views`).
         instances_path: instance JSON (:func:`read_instances`); image names must be views.
         up: unit vector against gravity, in the **files'** world frame; ``None`` estimates it
             with :func:`estimate_up` (recorded in ``metadata["up_source"]``).
