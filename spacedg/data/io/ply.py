@@ -370,20 +370,23 @@ def _encode_scales(scales: np.ndarray, file_dtype: np.dtype) -> np.ndarray:
 # ------------------------------------------------------------------------ conversion
 def _normalise_quats(path: Path, raw: np.ndarray) -> np.ndarray:
     """(N, 4) float32 unit quaternions; near-unit rows kept bit-for-bit (see module docs)."""
-    q32 = raw.astype(np.float32)
-    q64 = raw.astype(np.float64)
-    norms = np.linalg.norm(q64, axis=1)
-    zero = norms < 1e-12
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # huge doubles become inf, rejected later
+        q32 = raw.astype(np.float32)
+        peak = np.abs(raw).max(axis=1)
+        q64 = raw / np.where(peak > 0, peak, 1.0)[:, None]  # scaled so the norm cannot overflow
+        norms = np.linalg.norm(q64, axis=1)
+    zero = peak * norms < 1e-12
     if zero.any():
         rows = np.flatnonzero(zero)
         raise FileValueError(
             f"{path}: {rows.size} of {len(norms)} Gaussians have a zero rotation quaternion (rot_0..3 all 0; first at vertex {rows[0]}); "
             "a zero quaternion has no rotation: remove those Gaussians or set rot_0 to 1 in the source file"
         )
-    unit = np.abs(np.linalg.norm(q32.astype(np.float64), axis=1) - 1.0) <= QUAT_UNIT_TOL
+    with np.errstate(over="ignore", invalid="ignore"):
+        unit = np.abs(np.linalg.norm(q32.astype(np.float64), axis=1) - 1.0) <= QUAT_UNIT_TOL
     if unit.all():
         return q32
-    with np.errstate(invalid="ignore"):
+    with np.errstate(over="ignore", invalid="ignore"):
         normalised = (q64 / norms[:, None]).astype(np.float32)
     return np.where(unit[:, None], q32, normalised)
 
