@@ -17,6 +17,7 @@ from spacedg.data.synthetic import ExternalObject, RoomConfig, generate_room
 from spacedg.errors import (
     DuplicatePluginError,
     FileFormatError,
+    FileValueError,
     InvalidDataError,
     ParameterError,
     PluginError,
@@ -39,6 +40,7 @@ __all__ = [
     "DuplicatePluginError",
     "ExternalObject",
     "FileFormatError",
+    "FileValueError",
     "FisheyeLens",
     "Gaussians",
     "Instance",

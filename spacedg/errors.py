@@ -22,6 +22,10 @@ class FileFormatError(SpaceDGError, ValueError):
     """A file that is malformed, truncated, hostile or of an unsupported variant."""
 
 
+class FileValueError(FileFormatError, InvalidDataError):
+    """A file whose structure parses but whose values break a convention (NaN, zero quaternions)."""
+
+
 class ParameterError(SpaceDGError, ValueError):
     """An unknown parameter name or a value outside its hard limits."""
 

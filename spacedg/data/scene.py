@@ -111,7 +111,14 @@ class Instance:
         missing = [k for k in ("id", "label", "box") if k not in data]
         if missing:
             raise InvalidDataError(f"Instance: missing key(s) {missing}")
-        vis = {view: InstanceVisibility(**v) for view, v in dict(data.get("visibility", {})).items()}
+        vis = {}
+        for view, v in dict(data.get("visibility", {})).items():
+            try:
+                vis[view] = InstanceVisibility(int(v["visible_pixels"]), float(v["visible_fraction"]))
+            except (KeyError, TypeError, ValueError) as err:
+                raise InvalidDataError(
+                    f"Instance {data.get('id')!r}: visibility of view {view!r} needs visible_pixels and visible_fraction, got {v!r}"
+                ) from err
         return cls(
             id=data["id"],
             label=data["label"],

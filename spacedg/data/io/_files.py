@@ -22,14 +22,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
-from spacedg.errors import FileFormatError, InvalidDataError
+from spacedg.errors import FileFormatError, FileValueError, InvalidDataError  # noqa: F401  (re-exported)
 
 #: JSON files larger than this are refused (a scene/instance/transforms file is kilobytes).
 MAX_JSON_BYTES = 256 * 1024 * 1024
-
-
-class FileValueError(FileFormatError, InvalidDataError):
-    """A file whose structure parses but whose values break a convention."""
 
 
 PathLike = str | os.PathLike[str]
