@@ -109,6 +109,19 @@ def _pose(where: str, value: Any) -> np.ndarray:
     return matrix @ _GL_TO_CV
 
 
+
+def _focal(where: str, params: dict[str, Any], axis: str, size: int) -> float | None:
+    """Focal length in pixels along ``axis`` from ``fl_<axis>`` or ``camera_angle_<axis>`` (radians), else None."""
+    if f"fl_{axis}" in params:
+        return _number(where, f"fl_{axis}", params[f"fl_{axis}"])
+    key = f"camera_angle_{axis}"
+    if key not in params:
+        return None
+    angle = _number(where, key, params[key])
+    if not 0.0 < angle < math.pi:
+        raise FileValueError(f"{where}: {key} must be in (0, π) radians, got {angle}")
+    return 0.5 * size / math.tan(0.5 * angle)
+
 def _camera(
     where: str, params: dict[str, Any], pose: np.ndarray, size: tuple[int, int], max_theta: float
 ) -> tuple[Camera, bool]:
@@ -117,23 +130,11 @@ def _camera(
     model = params.get("camera_model", "OPENCV")
     if model not in _MODELS:
         raise FileFormatError(f"{where}: camera_model {model!r} is not supported (supported: {', '.join(_MODELS)})")
-    if "fl_x" in params:
-        fx = _number(where, "fl_x", params["fl_x"])
-    elif "camera_angle_x" in params:
-        angle = _number(where, "camera_angle_x", params["camera_angle_x"])
-        if not 0.0 < angle < math.pi:
-            raise FileValueError(f"{where}: camera_angle_x must be in (0, π) radians, got {angle}")
-        fx = 0.5 * w / math.tan(0.5 * angle)
-    else:
+    fx = _focal(where, params, "x", w)
+    if fx is None:
         raise FileFormatError(f"{where}: no focal length: give 'fl_x' (pixels) or 'camera_angle_x' (radians)")
-    if "fl_y" in params:
-        fy = _number(where, "fl_y", params["fl_y"])
-    elif "camera_angle_y" in params:
-        angle = _number(where, "camera_angle_y", params["camera_angle_y"])
-        if not 0.0 < angle < math.pi:
-            raise FileValueError(f"{where}: camera_angle_y must be in (0, π) radians, got {angle}")
-        fy = 0.5 * h / math.tan(0.5 * angle)
-    else:
+    fy = _focal(where, params, "y", h)
+    if fy is None:
         fy = fx
     cx = _number(where, "cx", params["cx"]) if "cx" in params else w / 2.0
     cy = _number(where, "cy", params["cy"]) if "cy" in params else h / 2.0

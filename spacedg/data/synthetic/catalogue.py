@@ -271,30 +271,26 @@ def cabinet(rng: np.random.Generator) -> ObjectModel:
     return ObjectModel("cabinet", parts, {"main": ("wood",), "handles": ("metal",)}, [Support(-w / 2, w / 2, -d / 2, d / 2, h)])
 
 
-def tv(rng: np.random.Generator) -> ObjectModel:
-    w = _u(rng, 0.8, 1.3)
-    sh = w * 9 / 16
+def _screen(label: str, width: float, stand: tuple[float, float, float], bezel: float, depth: float) -> ObjectModel:
+    """A 16:9 screen on a foot: ``stand`` = (foot width, foot depth, neck height)."""
+    sh = width * 9 / 16
+    foot_w, foot_d, neck = stand
     parts = [
-        _box(0, 0, 0.0, 0.3, 0.2, 0.02, "frame"),
-        _box(0, 0.02, 0.02, 0.06, 0.04, 0.12, "frame"),
-        _box(0, 0, 0.1, w, 0.05, sh, "frame", ("-x", "+x", "+y", "+z", "-z")),
-        _box(0, -0.026, 0.1 + 0.02, w - 0.04, 0.002, sh - 0.04, "screen", ("-y",)),
+        _box(0, 0.03 if label == "monitor" else 0.0, 0.0, foot_w, foot_d, 0.015, "frame"),
+        _box(0, depth + 0.02, 0.015, 0.05, 0.03, neck, "frame"),
+        _box(0, 0, 0.1, width, depth, sh, "frame", ("-x", "+x", "+y", "+z", "-z")),
+        _box(0, -depth / 2 - 0.001, 0.1 + bezel, width - 2 * bezel, 0.002, sh - 2 * bezel, "screen", ("-y",)),
     ]
-    return ObjectModel("tv", parts, {"frame": ("plastic",), "screen": ("plastic",)}, describe_slot="frame",
+    return ObjectModel(label, parts, {"frame": ("plastic",), "screen": ("plastic",)}, describe_slot="frame",
                        fixed={"screen": ("black", "screen")})
+
+
+def tv(rng: np.random.Generator) -> ObjectModel:
+    return _screen("tv", _u(rng, 0.8, 1.3), (0.3, 0.2, 0.12), 0.02, 0.05)
 
 
 def monitor(rng: np.random.Generator) -> ObjectModel:
-    w = _u(rng, 0.5, 0.7)
-    sh = w * 9 / 16
-    parts = [
-        _box(0, 0.03, 0.0, 0.22, 0.16, 0.015, "frame"),
-        _box(0, 0.06, 0.015, 0.04, 0.03, 0.12, "frame"),
-        _box(0, 0.0, 0.1, w, 0.04, sh, "frame", ("-x", "+x", "+y", "+z", "-z")),
-        _box(0, -0.021, 0.11, w - 0.03, 0.002, sh - 0.03, "screen", ("-y",)),
-    ]
-    return ObjectModel("monitor", parts, {"frame": ("plastic",), "screen": ("plastic",)}, describe_slot="frame",
-                       fixed={"screen": ("black", "screen")})
+    return _screen("monitor", _u(rng, 0.5, 0.7), (0.22, 0.16, 0.12), 0.015, 0.04)
 
 
 def floor_lamp(rng: np.random.Generator) -> ObjectModel:
