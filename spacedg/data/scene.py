@@ -249,10 +249,6 @@ class Scene:
         return state
 
     # -------------------------------------------------------------- queries
-    @property
-    def view_names(self) -> list[str]:
-        return list(self.views)
-
     def instance(self, instance_id: int) -> Instance:
         """The instance with ``instance_id``; raises ``KeyError`` naming the known ids."""
         for inst in self.instances:

@@ -162,25 +162,37 @@ def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
+def quats_from_matrices(rotations: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) proper rotation matrices → (N, 4) wxyz unit quaternions, float64, w >= 0.
+
+    Vectorised Shepperd's method: each row divides by the largest of 4w², 4x², 4y², 4z², so
+    no branch loses precision.
+    """
+    m = np.asarray(rotations, dtype=np.float64).reshape(-1, 3, 3)
+    trace = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
+    cand = np.stack([trace, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], axis=1)
+    k = cand.argmax(axis=1)
+    s = np.sqrt(np.maximum(1.0 + 2.0 * cand[np.arange(len(m)), k] - trace, 1e-300)) * 2.0
+    # 4·(wx, wy, wz, xy, xz, yz) products read off the matrix
+    wx, wy, wz = m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]
+    xy, xz, yz = m[:, 0, 1] + m[:, 1, 0], m[:, 0, 2] + m[:, 2, 0], m[:, 1, 2] + m[:, 2, 1]
+    quarter = 0.25 * s
+    q = np.select(
+        [k[:, None] == 0, k[:, None] == 1, k[:, None] == 2, k[:, None] == 3],
+        [
+            np.stack([quarter, wx / s, wy / s, wz / s], 1),
+            np.stack([wx / s, quarter, xy / s, xz / s], 1),
+            np.stack([wy / s, xy / s, quarter, yz / s], 1),
+            np.stack([wz / s, xz / s, yz / s, quarter], 1),
+        ],
+    )
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return np.where(q[:, :1] < 0, -q, q)
+
+
 def quat_from_matrix(rotation: np.ndarray) -> np.ndarray:
-    """wxyz unit quaternion of a proper rotation matrix (Shepperd's method, w >= 0)."""
-    m = np.asarray(rotation, dtype=np.float64)
-    trace = m[0, 0] + m[1, 1] + m[2, 2]
-    if trace > 0:
-        s = math.sqrt(trace + 1.0) * 2.0
-        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2.0
-        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2.0
-        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-    else:
-        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2.0
-        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-    out = np.asarray(q)
-    out /= np.linalg.norm(out)
-    return out if out[0] >= 0 else -out
+    """wxyz unit quaternion (w >= 0) of one proper rotation matrix."""
+    return quats_from_matrices(np.asarray(rotation)[None])[0]
 
 
 def quat_to_matrix(quats: np.ndarray) -> np.ndarray:

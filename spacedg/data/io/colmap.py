@@ -43,6 +43,7 @@ import numpy as np
 from spacedg.data.io._files import FileValueError, PathLike, as_path
 from spacedg.errors import FileFormatError, InvalidDataError, error_context
 from spacedg.render.camera import Camera, FisheyeLens
+from spacedg.render.gaussians import quat_to_matrix
 
 #: Field of view limit of COLMAP fisheye cameras, radians from the optical axis.
 DEFAULT_FISHEYE_MAX_THETA = math.pi / 2
@@ -257,12 +258,7 @@ def _cam_to_world(image: Any) -> np.ndarray:
             f"cam_from_world has quaternion (w, x, y, z) = {q.tolist()} and translation {t.tolist()}; "
             "the quaternion must be finite and non-zero"
         )
-    w, x, y, z = q / norm
-    rot = np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    rot = quat_to_matrix((q / norm)[None])[0]
     out = np.eye(4)
     out[:3, :3] = rot.T
     out[:3, 3] = -rot.T @ t

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from spacedg.data.synthetic.textures import fbm
+from spacedg.render.gaussians import quats_from_matrices
 
 TANGENT_SIGMA = 0.6  # × spacing
 NORMAL_SIGMA = 0.1  # × spacing, capped at MAX_NORMAL_SIGMA
@@ -182,36 +183,7 @@ def frames_to_quats(tangents: np.ndarray, normals: np.ndarray) -> np.ndarray:
         t[bad] = np.cross(alt, n[bad])
     t /= np.linalg.norm(t, axis=1, keepdims=True)
     b = np.cross(n, t)
-    m = np.stack([t, b, n], axis=2)  # columns
-    # vectorised Shepperd: choose the largest of w, x, y, z
-    tr = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
-    cand = np.stack([tr, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], 1)
-    k = cand.argmax(1)
-    q = np.empty((len(m), 4))
-    s = np.sqrt(np.maximum(1.0 + 2.0 * cand[np.arange(len(m)), k] - tr, 1e-12)) * 2
-    # w largest
-    i0 = k == 0
-    q[i0, 0] = 0.25 * s[i0]
-    q[i0, 1] = (m[i0, 2, 1] - m[i0, 1, 2]) / s[i0]
-    q[i0, 2] = (m[i0, 0, 2] - m[i0, 2, 0]) / s[i0]
-    q[i0, 3] = (m[i0, 1, 0] - m[i0, 0, 1]) / s[i0]
-    i1 = k == 1
-    q[i1, 0] = (m[i1, 2, 1] - m[i1, 1, 2]) / s[i1]
-    q[i1, 1] = 0.25 * s[i1]
-    q[i1, 2] = (m[i1, 0, 1] + m[i1, 1, 0]) / s[i1]
-    q[i1, 3] = (m[i1, 0, 2] + m[i1, 2, 0]) / s[i1]
-    i2 = k == 2
-    q[i2, 0] = (m[i2, 0, 2] - m[i2, 2, 0]) / s[i2]
-    q[i2, 1] = (m[i2, 0, 1] + m[i2, 1, 0]) / s[i2]
-    q[i2, 2] = 0.25 * s[i2]
-    q[i2, 3] = (m[i2, 1, 2] + m[i2, 2, 1]) / s[i2]
-    i3 = k == 3
-    q[i3, 0] = (m[i3, 1, 0] - m[i3, 0, 1]) / s[i3]
-    q[i3, 1] = (m[i3, 0, 2] + m[i3, 2, 0]) / s[i3]
-    q[i3, 2] = (m[i3, 1, 2] + m[i3, 2, 1]) / s[i3]
-    q[i3, 3] = 0.25 * s[i3]
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return q
+    return quats_from_matrices(np.stack([t, b, n], axis=2))  # columns = (t, b, n)
 
 
 def surfel_scales(spacing: np.ndarray) -> np.ndarray:

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from spacedg.data.box import OrientedBox
+from spacedg.data.io.ply import quantize_for_ply
 from spacedg.data.scene import Instance, Scene
 from spacedg.data.synthetic.appearance import Appearance, all_appearances
 from spacedg.data.synthetic.catalogue import VOCABULARY
@@ -295,11 +296,10 @@ def generate_room(seed: int, config: RoomConfig | None = None, scene_id: str | N
             app = slots[p.model.describe_slot]
             desc = app.describe(p.model.label, p.model.description_template)
         attrs: dict[str, object] = {"kind": p.kind, "support": None if p.on is None else int(p.on)}
-        if not p.external:
-            app = slots[p.model.describe_slot]
-            attrs.update(colour=app.colour, material=app.material)
-        else:
+        if p.external:
             attrs.update(external=True, **p.model.attributes)
+        else:
+            attrs.update(colour=app.colour, material=app.material)
         if twin_of is not None:
             attrs["twin_of"] = int(twin_of)
         instances_raw.append((iid, p.model.label, desc, OrientedBox.fit_points(centres, p.rotation), attrs))
@@ -317,8 +317,6 @@ def generate_room(seed: int, config: RoomConfig | None = None, scene_id: str | N
         Instance(iid, label, desc, box.transformed(rot, np.zeros(3)), attributes=attrs)
         for iid, label, desc, box, attrs in instances_raw
     ]
-    from spacedg.data.io.ply import quantize_for_ply
-
     metadata = {
         "generator": "spacedg.data.synthetic",
         "seed": int(seed),
