@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -63,6 +64,34 @@ class FisheyeLens:
         """``θ_d(θ)`` for ray angles θ (radians)."""
         t2 = theta * theta
         return theta * (1.0 + t2 * (self.k1 + t2 * (self.k2 + t2 * (self.k3 + t2 * self.k4))))
+
+    def distort_theta_derivative(self, theta: np.ndarray) -> np.ndarray:
+        """``dθ_d/dθ = 1 + 3 k1 θ² + 5 k2 θ⁴ + 7 k3 θ⁶ + 9 k4 θ⁸``."""
+        t2 = theta * theta
+        return 1.0 + t2 * (3.0 * self.k1 + t2 * (5.0 * self.k2 + t2 * (7.0 * self.k3 + t2 * 9.0 * self.k4)))
+
+    @cached_property
+    def effective_max_theta(self) -> float:
+        """Largest ray angle (radians) the lens maps one-to-one: ``min(max_theta, fold)``.
+
+        Strong barrel coefficients make ``θ_d(θ)`` turn back (the bench preset k1 = −0.24
+        folds near θ ≈ 1.18 rad): beyond the fold two rays land on one pixel and the
+        Jacobian changes sign. The renderer treats the fold as the edge of the image circle.
+        The fold is found on a dense grid and refined by bisection to ~1e-12 rad.
+        """
+        grid = np.linspace(0.0, self.max_theta, 4097)
+        slope = self.distort_theta_derivative(grid)
+        bad = np.flatnonzero(slope <= 0.0)
+        if bad.size == 0:
+            return self.max_theta
+        lo, hi = float(grid[bad[0] - 1]), float(grid[bad[0]])
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            if self.distort_theta_derivative(np.float64(mid)) > 0.0:
+                lo = mid
+            else:
+                hi = mid
+        return lo
 
 
 @dataclass(frozen=True, eq=False)
@@ -260,3 +289,70 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
     pose = np.eye(4)
     pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = right, down, forward, eye
     return pose
+
+
+# ------------------------------------------------------------------ pose interpolation
+def rotvec_to_matrix(rotvec: np.ndarray) -> np.ndarray:
+    """(3,) axis-angle vector (radians, right-handed) → (3, 3) rotation (Rodrigues, float64)."""
+    vec = np.asarray(rotvec, dtype=np.float64).reshape(3)
+    angle = float(np.linalg.norm(vec))
+    if angle < 1e-12:
+        return np.eye(3)
+    axis = vec / angle
+    kx = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * kx + (1.0 - math.cos(angle)) * (kx @ kx)
+
+
+def matrix_to_rotvec(rotation: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation → (3,) axis-angle vector with angle in [0, π] (float64)."""
+    from spacedg.render.gaussians import quat_from_matrix
+
+    w, x, y, z = quat_from_matrix(rotation)
+    sin_half = math.sqrt(x * x + y * y + z * z)
+    if sin_half < 1e-15:
+        return np.zeros(3)
+    angle = 2.0 * math.atan2(sin_half, w)
+    return np.array([x, y, z]) * (angle / sin_half)
+
+
+def interpolate_pose(pose_a: np.ndarray, pose_b: np.ndarray, u: float) -> np.ndarray:
+    """Cam-to-world pose a fraction ``u`` of the way from ``pose_a`` to ``pose_b``.
+
+    Rotation: slerp (constant angular speed about the fixed relative axis); centre: lerp.
+    ``u = 0`` returns ``pose_a`` and ``u = 1`` returns ``pose_b`` exactly.
+    """
+    a = np.asarray(pose_a, dtype=np.float64)
+    b = np.asarray(pose_b, dtype=np.float64)
+    if u == 0.0:
+        return a.copy()
+    if u == 1.0:
+        return b.copy()
+    relative = a[:3, :3].T @ b[:3, :3]
+    out = np.eye(4)
+    out[:3, :3] = a[:3, :3] @ rotvec_to_matrix(u * matrix_to_rotvec(relative))
+    out[:3, 3] = (1.0 - u) * a[:3, 3] + u * b[:3, 3]
+    return out
+
+
+def exposure_poses(
+    camera: Camera, translation: np.ndarray, rotation: np.ndarray, times: np.ndarray
+) -> list[np.ndarray]:
+    """Cam-to-world poses of a camera moving during one exposure.
+
+    The camera's own pose is the **mid-exposure** pose. Over the exposure the centre moves
+    by ``translation`` (3,) metres and the camera turns by ``rotation`` (3,) (axis-angle,
+    radians), both given in the mid-exposure *camera* frame (x right, y down, z forward).
+    ``times`` are in [-0.5, 0.5] (fraction of the exposure, 0 = mid): the pose at time s is
+    the centre moved by ``s·translation`` and the orientation turned by ``s·rotation``,
+    which is exactly the slerp/lerp between the start (s = -½) and end (s = ½) poses.
+    """
+    rot = camera.rotation
+    move_world = rot @ np.asarray(translation, dtype=np.float64).reshape(3)
+    turn = np.asarray(rotation, dtype=np.float64).reshape(3)
+    poses = []
+    for s in np.asarray(times, dtype=np.float64).reshape(-1):
+        pose = np.eye(4)
+        pose[:3, :3] = rot @ rotvec_to_matrix(s * turn)
+        pose[:3, 3] = camera.center + s * move_world
+        poses.append(pose)
+    return poses

@@ -70,13 +70,14 @@ def sh_basis(degree: int, dirs: np.ndarray) -> np.ndarray:
 
     Args:
         degree: highest band, 0–3; only the bands up to it are computed.
-        dirs: (M, 3) unit vectors (x, y, z).
+        dirs: (M, 3) unit vectors (x, y, z): a numpy array or a torch tensor (any device).
 
     Returns:
-        (M, (degree+1)²) basis values, same float dtype as ``dirs``.
+        (M, (degree+1)²) basis values, same float dtype (and array type) as ``dirs``.
     """
+    xp = _array_namespace(dirs)
     x, y, z = dirs[:, 0], dirs[:, 1], dirs[:, 2]
-    cols = [np.full_like(x, SH_C0)]
+    cols = [xp.full_like(x, SH_C0)]
     if degree >= 1:
         cols += [-_SH_C1 * y, _SH_C1 * z, -_SH_C1 * x]
     if degree >= 2:
@@ -98,7 +99,16 @@ def sh_basis(degree: int, dirs: np.ndarray) -> np.ndarray:
             _SH_C3[5] * z * (xx - yy),
             _SH_C3[6] * x * (xx - 3.0 * yy),
         ]
-    return np.stack(cols, axis=-1)
+    return xp.stack(cols, -1)
+
+
+def _array_namespace(array: object) -> object:
+    """``numpy`` for arrays, ``torch`` for tensors (so one SH basis serves both paths)."""
+    if type(array).__module__.startswith("torch"):
+        import torch
+
+        return torch
+    return np
 
 
 def eval_sh(sh: np.ndarray, dirs: np.ndarray) -> np.ndarray:

@@ -1,0 +1,215 @@
+"""Renderer speed and error: compiled CPU path vs torch path, and motion-blur sub-steps vs quality.
+
+Prints tables only (never part of the test run). All renders are 640×480.
+
+    .venv/bin/python benchmarks/render.py            # full run (a few minutes)
+    .venv/bin/python benchmarks/render.py --quick    # 10k/100k scenes only (about a minute)
+    .venv/bin/python benchmarks/render.py --torch-device cuda   # torch path on a GPU
+
+Timings are wall-clock (``time.perf_counter``) on whatever else the machine is doing: the
+machine line prints the load average, run on an idle machine for numbers worth quoting.
+
+1. Renderer: random scenes (10k / 100k / 300k Gaussians, seeded) and the real plant capture
+   (``../shared/data/splats/plant``, skipped with a note when absent), each rendered by the
+   compiled CPU path (median of 5 runs after a warm-up) and the torch path (median of 2
+   runs after a warm-up; one run for 300k and under ``--quick``), with the largest and mean
+   |Δ| between the two.
+2. Motion blur on a built-in synthetic room (and on the plant): N = 80 reference, then fixed
+   N sub-steps and the fast path, timed and scored by PSNR against the reference on the
+   sRGB-encoded image clipped to [0, 1].
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from spacedg.data.synthetic import generate_room
+from spacedg.render.camera import Camera, look_at
+from spacedg.render.colour import linear_to_srgb
+from spacedg.render.frame import Frame
+from spacedg.render.gaussians import Gaussians
+from spacedg.render.renderer import render
+from spacedg.render.settings import MotionBlur
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "splats"
+PLANT = SHARED / "plant" / "plant.splat"
+WIDTH, HEIGHT, FOCAL = 640, 480, 500.0
+TILE_PIXELS = 256
+#: Camera motion over one exposure in the room (metres / radians, camera frame).
+ROOM_MOTION = ((0.25, 0.05, 0.10), (0.02, 0.08, 0.01))
+#: The plant is ~1 COLMAP unit tall and seen from ~1.5 units: a quarter of the room's
+#: translation (same rotation) gives a comparable on-screen sweep.
+PLANT_MOTION = ((0.0625, 0.0125, 0.025), (0.02, 0.08, 0.01))
+
+
+# ------------------------------------------------------------------ scenes and cameras
+def intrinsics(pose: np.ndarray) -> Camera:
+    return Camera(FOCAL, FOCAL, WIDTH / 2, HEIGHT / 2, WIDTH, HEIGHT, pose)
+
+
+def random_scene(n: int, degree: int, seed: int) -> tuple[Gaussians, Camera]:
+    """``n`` Gaussians in a box 2–6 m in front of an identity camera, sized to fill its view."""
+    rng = np.random.default_rng(seed)
+    half_w, half_h = 4.0 * (WIDTH / 2) / FOCAL, 4.0 * (HEIGHT / 2) / FOCAL  # frustum at the mid depth 4 m
+    means = np.column_stack([rng.uniform(-half_w, half_w, n), rng.uniform(-half_h, half_h, n), rng.uniform(2.0, 6.0, n)])
+    quats = rng.normal(size=(n, 4))
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+    scales = np.exp(rng.uniform(math.log(0.005), math.log(0.05), (n, 3)))
+    opacities = rng.uniform(0.05, 1.0, n)
+    sh = rng.normal(0.0, 0.3, (n, (degree + 1) ** 2, 3))
+    pose = look_at(np.zeros(3), np.array([0.0, 0.0, 1.0]), np.array([0.0, -1.0, 0.0]))
+    return Gaussians(means, quats, scales, opacities, sh), intrinsics(pose)
+
+
+def plant_scene() -> tuple[Gaussians, Camera]:
+    """The plant capture, seen slightly from above (its up axis is -y) so it fills most of the frame."""
+    from spacedg.data.io import read_splat
+
+    g = read_splat(PLANT)
+    lo, hi = np.percentile(g.means, 0.5, axis=0), np.percentile(g.means, 99.5, axis=0)
+    centre, extent = 0.5 * (lo + hi), hi - lo
+    up = np.array([0.0, -1.0, 0.0])
+    direction = np.array([0.0, -0.25, 1.0])
+    direction /= np.linalg.norm(direction)
+    # Object height spans ~90 % of the image height at the near face of its box.
+    distance = 0.5 * extent[1] * FOCAL / (0.45 * HEIGHT) + 0.5 * extent[2]
+    return g, intrinsics(look_at(centre + distance * direction, centre, up))
+
+
+# ------------------------------------------------------------------ measuring
+def timed(fn: Callable[[], Frame], runs: int, warmup: int = 1) -> tuple[float, Frame]:
+    """Median wall time (s) of ``runs`` calls after ``warmup`` untimed ones, and the last frame."""
+    frame = None
+    for _ in range(warmup):
+        frame = fn()
+    times = []
+    for _ in range(runs):
+        start = time.perf_counter()
+        frame = fn()
+        times.append(time.perf_counter() - start)
+    assert frame is not None
+    return float(np.median(times)), frame
+
+
+def encoded(rgb: np.ndarray) -> np.ndarray:
+    return np.clip(linear_to_srgb(rgb.astype(np.float64)), 0.0, 1.0)
+
+
+def psnr(image: np.ndarray, reference: np.ndarray) -> float:
+    mse = float(np.mean((encoded(image) - encoded(reference)) ** 2))
+    return math.inf if mse == 0.0 else 10.0 * math.log10(1.0 / mse)
+
+
+def fmt_db(value: float) -> str:
+    return "inf" if math.isinf(value) else f"{value:.2f}"
+
+
+def machine_line(torch_device: str) -> str:
+    import numba
+    import torch
+
+    return (
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"numba threads {numba.get_num_threads()}, torch {torch.__version__} "
+        f"({torch.get_num_threads()} threads), torch path on {torch_device}, numpy {np.__version__}, "
+        f"load average {os.getloadavg()[0]:.2f}"
+    )
+
+
+# ------------------------------------------------------------------ tables
+def renderer_table(sizes: list[int], degree: int, with_plant: bool, torch_device: str, torch_runs: int) -> None:
+    print(f"\n1. Renderer, {WIDTH}x{HEIGHT}: compiled CPU path (median of 5 after 1 warm-up) vs torch path "
+          f"({f'median of {torch_runs}' if torch_runs > 1 else '1 run'} after 1 warm-up; 1 run for >= 300k)")
+    print("   speed-up = torch ms / cpu ms (how many times faster the compiled path is).")
+    print("   Gpix/s = Gaussian-pixel evaluations per second of the compiled path, counted as 256 pixels per "
+          "composited Gaussian-tile pair: pairs * 256 / seconds.")
+    print("   |Δ| = absolute difference between the two paths' linear rgb / alpha, max and mean over pixels.")
+    header = (f"{'scene':<22} {'visible':>8} {'pairs':>9} {'cpu ms':>8} {'torch ms':>9} {'speed-up':>8} {'Gpix/s':>7} "
+              f"{'rgb max|Δ|':>10} {'rgb mean|Δ|':>11} {'a max|Δ|':>9} {'a mean|Δ|':>9}")
+    print(header)
+    print("-" * len(header))
+    cases: list[tuple[str, Callable[[], tuple[Gaussians, Camera]]]] = [
+        (f"random {n // 1000}k, SH {degree}", lambda n=n: random_scene(n, degree, seed=n)) for n in sizes
+    ]
+    if with_plant:
+        if PLANT.is_file():
+            cases.append(("plant capture 114k", plant_scene))
+        else:
+            print(f"(plant capture skipped: {PLANT} not found)")
+    for name, make in cases:
+        g, cam = make()
+        t_cpu, f_cpu = timed(lambda: render(g, cam, outputs="rgb,alpha", backend="cpu"), runs=5)
+        pairs = int(f_cpu.stats["pairs"])
+        runs = 1 if len(g) >= 300_000 else torch_runs
+        t_torch, f_torch = timed(lambda: render(g, cam, outputs="rgb,alpha", backend="torch", device=torch_device), runs=runs)
+        d_rgb = np.abs(f_cpu.rgb.astype(np.float64) - f_torch.rgb)
+        d_a = np.abs(f_cpu.alpha.astype(np.float64) - f_torch.alpha)
+        print(f"{name:<22} {int(f_cpu.stats['visible']):>8} {pairs:>9} {t_cpu * 1e3:>8.1f} "
+              f"{t_torch * 1e3:>9.1f} {t_torch / t_cpu:>7.1f}x {pairs * TILE_PIXELS / t_cpu / 1e9:>7.2f} "
+              f"{d_rgb.max():>10.2e} {d_rgb.mean():>11.2e} {d_a.max():>9.2e} {d_a.mean():>9.2e}", flush=True)
+
+
+def motion_table(title: str, g: Gaussians, cam: Camera, motion: tuple, counts: list[int]) -> None:
+    translation, rotation = motion
+    t_clean, clean = timed(lambda: render(g, cam, backend="cpu"), runs=5)
+    t0 = time.perf_counter()
+    reference = render(g, cam, motion=MotionBlur(translation, rotation, sub_steps=80), backend="cpu")
+    t_ref = time.perf_counter() - t0
+    print(f"\n{title}")
+    print(f"   motion: translation {translation} , rotation {rotation} rad (camera frame); compiled CPU path")
+    print(f"   clean render {t_clean * 1e3:.1f} ms (median of 5), {int(clean.stats['visible'])} visible, "
+          f"{int(clean.stats['pairs'])} pairs; N = 80 reference took {t_ref * 1e3:.0f} ms")
+    print("   time: median of 3 runs for N <= 8 and the fast path, else 1 run; "
+          "PSNR vs N = 80 on clip(linear_to_srgb(rgb), 0, 1)")
+    header = f"{'sub-steps':<14} {'chosen N':>8} {'ms':>9} {'x clean':>8} {'PSNR dB':>8} {'max disp px':>11}"
+    print(header)
+    print("-" * len(header))
+    rows: list[tuple[str, MotionBlur]] = [(f"N = {n}", MotionBlur(translation, rotation, sub_steps=n)) for n in counts]
+    rows.append(("fast (<= 80)", MotionBlur(translation, rotation, sub_steps=80, fast=True)))
+    for label, blur in rows:
+        runs = 3 if blur.fast or blur.sub_steps <= 8 else 1
+        t, frame = timed(lambda blur=blur: render(g, cam, motion=blur, backend="cpu"), runs=runs, warmup=0)
+        disp = frame.stats.get("displacement_px", math.nan)
+        disp_s = "-" if math.isnan(disp) else f"{disp:.1f}"
+        print(f"{label:<14} {int(frame.stats['sub_steps']):>8} {t * 1e3:>9.1f} {t / t_clean:>8.1f} "
+              f"{fmt_db(psnr(frame.rgb, reference.rgb)):>8} {disp_s:>11}", flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true",
+                        help="10k/100k scenes only (no 300k), one timed torch run, fewer plant motion rows (about a minute)")
+    parser.add_argument("--torch-device", default="cpu", help="torch device for the torch path (default cpu)")
+    parser.add_argument("--room-seed", type=int, default=0, help="seed of the synthetic room (default 0)")
+    args = parser.parse_args()
+
+    print(machine_line(args.torch_device))
+    start = time.perf_counter()
+    sizes = [10_000, 100_000] if args.quick else [10_000, 100_000, 300_000]
+    renderer_table(sizes, degree=1, with_plant=True, torch_device=args.torch_device, torch_runs=1 if args.quick else 2)
+
+    room = generate_room(args.room_seed)
+    names = sorted(room.views)
+    view = names[len(names) // 2]
+    counts = [1, 4, 8, 16, 32, 80]
+    motion_table(f"2. Motion blur, synthetic room seed {args.room_seed} ({len(room.gaussians)} Gaussians), view {view}, "
+                 f"{WIDTH}x{HEIGHT}", room.gaussians, room.views[view].resized(WIDTH, HEIGHT), ROOM_MOTION, counts)
+    if PLANT.is_file():
+        g, cam = plant_scene()
+        motion_table(f"3. Motion blur, plant capture ({len(g)} Gaussians), {WIDTH}x{HEIGHT}", g, cam, PLANT_MOTION,
+                     [1, 4, 16, 80] if args.quick else counts)
+    else:
+        print(f"\n(plant motion blur skipped: {PLANT} not found)")
+    print(f"\ntotal {time.perf_counter() - start:.0f} s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,229 @@
+"""``spacedg render``: render one view of a native scene folder to an sRGB PNG (and a depth PNG)."""
+
+from __future__ import annotations
+
+import argparse
+import difflib
+import math
+import os
+import re
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from spacedg.errors import InvalidDataError, ParameterError
+
+#: Largest image side accepted by --width / --height, pixels.
+MAX_SIDE = 16384
+#: Depth PNG unit: millimetres, so uint16 covers 0–65.535 m.
+DEPTH_SCALE = 1000.0
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    from spacedg.render.renderer import BACKENDS
+
+    render = subparsers.add_parser(
+        "render",
+        help="render one view of a scene to a PNG",
+        description="Render one named view of a native scene folder (from `spacedg scenes synth`) to an "
+        "8-bit sRGB PNG, optionally with defocus, a fisheye lens and camera motion blur.",
+    )
+    # Let comma lists that start with a minus ("--fisheye -0.2,0,0,0") be values, not options:
+    # argparse before 3.13 only recognises plain negative numbers ("-0.2") as values.
+    if hasattr(render, "_negative_number_matcher"):
+        render._negative_number_matcher = re.compile(r"^-\.?\d")
+    render.add_argument("scene", type=Path, metavar="SCENE", help="native scene folder (holds scene.json)")
+    render.add_argument("--view", help="name of the view to render (see --list-views)")
+    render.add_argument("--list-views", action="store_true", help="print the scene's view names and exit")
+    render.add_argument("--out", type=Path, help="PNG file to write (8-bit sRGB)")
+    render.add_argument("--depth-out", type=Path, default=None,
+                        help="also write expected depth as a 16-bit PNG in millimetres (0 = no coverage)")
+    render.add_argument("--width", type=int, default=None, help="render width, pixels (default: the view's)")
+    render.add_argument("--height", type=int, default=None,
+                        help="render height, pixels (default: the view's; one of the two keeps the aspect ratio)")
+    render.add_argument("--defocus", metavar="APERTURE_PX,FOCUS_M", default=None,
+                        help="thin-lens defocus: CoC radius in pixels at infinity, focus distance in metres")
+    render.add_argument("--fisheye", metavar="K1,K2,K3,K4[,MAX_THETA]", default=None,
+                        help="replace the lens with an equidistant fisheye (OpenCV model; MAX_THETA in radians)")
+    render.add_argument("--motion", metavar="TX,TY,TZ,RX,RY,RZ", default=None,
+                        help="camera motion over the exposure: translation in metres then axis-angle rotation "
+                        "in radians, both in the camera frame (x right, y down, z forward)")
+    render.add_argument("--sub-steps", type=int, default=None,
+                        help="motion blur sub-exposures (default 80; with --fast-motion the upper bound)")
+    render.add_argument("--fast-motion", action="store_true",
+                        help="choose fewer sub-steps from the on-screen motion and stretch Gaussians along it")
+    render.add_argument("--backend", choices=BACKENDS, default="auto",
+                        help="auto (default), cpu (compiled tiles) or torch")
+    render.add_argument("--device", default=None, help="torch device for the torch backend, e.g. cuda (default cpu)")
+    render.set_defaults(func=_render)
+
+
+def parse_numbers(flag: str, text: str, names: tuple[str, ...], optional: int = 0) -> list[float]:
+    """Strictly parse ``text`` as comma-separated finite numbers for ``flag``.
+
+    ``names`` are the fields in order; the last ``optional`` of them may be left out.
+    Raises :class:`ParameterError` naming the flag and the expected format.
+    """
+    required = names[: len(names) - optional]
+    shape = ",".join(required) + "".join(f"[,{n}]" for n in names[len(required):])
+    items = [item.strip() for item in text.split(",")]
+    if not len(required) <= len(items) <= len(names):
+        count = f"{len(names)}" if not optional else f"{len(required)} to {len(names)}"
+        raise ParameterError(f"{flag} expects {count} comma-separated numbers {shape}, got {len(items)} in {text!r}")
+    values = []
+    for name, item in zip(names, items):
+        try:
+            value = float(item)
+        except ValueError:
+            raise ParameterError(f"{flag} expects numbers {shape}; {name} is {item!r} in {text!r}") from None
+        if not math.isfinite(value):
+            raise ParameterError(f"{flag} expects finite numbers {shape}; {name} is {item!r}")
+        values.append(value)
+    return values
+
+
+def _size(camera_w: int, camera_h: int, width: int | None, height: int | None) -> tuple[int, int]:
+    """Render size from --width/--height; one alone keeps the view's aspect ratio."""
+    for flag, value in (("--width", width), ("--height", height)):
+        if value is not None and not 1 <= value <= MAX_SIDE:
+            raise ParameterError(f"{flag} must be in [1, {MAX_SIDE}] pixels, got {value}")
+    if width is None and height is None:
+        return camera_w, camera_h
+    if width is None:
+        width = max(1, round(camera_w * height / camera_h))
+    if height is None:
+        height = max(1, round(camera_h * width / camera_w))
+    return int(width), int(height)
+
+
+def _pick_view(scene, name: str):  # type: ignore[no-untyped-def]
+    if name in scene.views:
+        return scene.views[name]
+    names = list(scene.views)
+    if not names:
+        raise ParameterError(f"scene {scene.id} has no views to render")
+    close = difflib.get_close_matches(name, names, n=3)
+    hint = f"did you mean {', '.join(close)}? " if close else ""
+    shown = ", ".join(names[:5]) + (", …" if len(names) > 5 else "")
+    raise ParameterError(
+        f"--view {name!r}: no such view in scene {scene.id}; {hint}it has {len(names)} views ({shown}); see --list-views"
+    )
+
+
+def _check_png(flag: str, path: Path) -> None:
+    if path.suffix.lower() != ".png":
+        raise ParameterError(f"{flag} {path}: write a .png file")
+
+
+def write_png_atomic(path: Path, image: np.ndarray, flag: str) -> None:
+    """Write ``image`` (BGR or single channel) as PNG: a temp file in the same folder, then rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
+    os.close(fd)
+    try:
+        if not cv2.imwrite(tmp, image):
+            raise ParameterError(f"{flag} {path}: could not write the PNG")
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def encode_srgb8(rgb_linear: np.ndarray) -> np.ndarray:
+    """Linear HDR light → 8-bit sRGB (clipped to [0, 1], rounded)."""
+    from spacedg.render.colour import linear_to_srgb
+
+    return np.round(np.clip(linear_to_srgb(rgb_linear), 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+def encode_depth_mm(depth_m: np.ndarray) -> np.ndarray:
+    """Depth in metres → uint16 millimetres (clipped to 65535; 0 stays 0 = no coverage)."""
+    mm = np.round(np.nan_to_num(depth_m, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float64) * DEPTH_SCALE)
+    return np.clip(mm, 0, 65535).astype(np.uint16)
+
+
+def _render(args: argparse.Namespace) -> int:
+    from spacedg.data.io import load_scene
+    from spacedg.render import Defocus, FisheyeLens, MotionBlur, render
+    from spacedg.render.renderer import resolve_backend
+
+    # Check every flag before the (lazy, possibly large) Gaussians are read.
+    if not args.list_views:
+        if args.view is None:
+            raise ParameterError("--view NAME is required (or pass --list-views to see the names)")
+        if args.out is None:
+            raise ParameterError("--out FILE.png is required")
+        _check_png("--out", args.out)
+        if args.depth_out is not None:
+            _check_png("--depth-out", args.depth_out)
+            if args.depth_out.resolve() == args.out.resolve():
+                raise ParameterError("--depth-out must be another file than --out")
+    defocus = None
+    if args.defocus is not None:
+        aperture, focus = parse_numbers("--defocus", args.defocus, ("APERTURE_PX", "FOCUS_M"))
+        defocus = Defocus(aperture, focus)
+    lens = None
+    if args.fisheye is not None:
+        values = parse_numbers("--fisheye", args.fisheye, ("K1", "K2", "K3", "K4", "MAX_THETA"), optional=1)
+        try:
+            lens = FisheyeLens(*values)
+        except InvalidDataError as err:  # from the lens (e.g. MAX_THETA outside (0, π)): name the flag
+            raise ParameterError(f"--fisheye {args.fisheye}: {err}") from None
+    motion = None
+    if args.motion is not None:
+        v = parse_numbers("--motion", args.motion, ("TX", "TY", "TZ", "RX", "RY", "RZ"))
+        sub_steps = 80 if args.sub_steps is None else args.sub_steps
+        try:
+            motion = MotionBlur(tuple(v[:3]), tuple(v[3:]), sub_steps=sub_steps, fast=args.fast_motion)
+        except ParameterError as err:
+            raise ParameterError(f"--motion/--sub-steps: {err}") from None
+    elif args.sub_steps is not None or args.fast_motion:
+        raise ParameterError("--sub-steps and --fast-motion apply to motion blur; pass --motion TX,TY,TZ,RX,RY,RZ too")
+    backend, _ = resolve_backend(args.backend, args.device)
+
+    scene = load_scene(args.scene)
+    if args.list_views:
+        for name, cam in scene.views.items():
+            model = "fisheye" if cam.fisheye is not None else "pinhole"
+            print(f"{name}  {cam.width}x{cam.height}  {model}")
+        return 0
+    camera = _pick_view(scene, args.view)
+    width, height = _size(camera.width, camera.height, args.width, args.height)
+    if (width, height) != (camera.width, camera.height):
+        camera = camera.resized(width, height)
+    if lens is not None:
+        camera = replace(camera, fisheye=lens)
+
+    want_depth = args.depth_out is not None
+    frame = render(
+        scene.gaussians, camera, defocus=defocus, motion=motion,
+        outputs="rgb,depth" if want_depth else "rgb", backend=backend, device=args.device,
+    )
+    write_png_atomic(args.out, encode_srgb8(frame.rgb)[:, :, ::-1], "--out")
+    stats = frame.stats
+    visible = f"{stats['visible']:,}" if "visible" in stats else "n/a"
+    print(
+        f"view {args.view}  {frame.width}x{frame.height}  backend {backend}  visible {visible} Gaussians  "
+        f"{stats.get('ms', float('nan')):.1f} ms  sub-steps {stats.get('sub_steps', 1)}  -> {args.out}"
+    )
+    if want_depth:
+        depth_mm = encode_depth_mm(frame.depth)
+        write_png_atomic(args.depth_out, depth_mm, "--depth-out")
+        covered = frame.depth > 0
+        if covered.any():
+            d = frame.depth[covered]
+            clipped = int((depth_mm == 65535).sum())
+            note = f", {clipped} pixel(s) clipped at 65.535 m" if clipped else ""
+            print(
+                f"depth {float(d.min()):.3f}–{float(d.max()):.3f} m over {covered.mean():.1%} of pixels "
+                f"(uint16 mm{note}) -> {args.depth_out}"
+            )
+        else:
+            print(f"depth: no coverage (all 0) -> {args.depth_out}")
+    return 0

@@ -1,0 +1,274 @@
+"""Compiled (numba) projection: one fused pass per Gaussian, parallel over Gaussians.
+
+Same physics as the readable torch twin :mod:`spacedg.render.project` (tested against it,
+against gsplat's torch reference and against float64 finite differences):
+
+1. world → camera (OpenCV axes); cull ``z <= near`` or ``z >= far``.
+2. 3D covariance ``Σ = R S Sᵀ Rᵀ`` from the wxyz quaternion and scales, rotated into the camera.
+3. 2D covariance ``J Σ Jᵀ`` with the exact Jacobian ``J`` of the lens map at the mean:
+   pinhole (x/z, y/z clamped to the frustum widened by 0.3·tan(fov/2), as gsplat), or
+   equidistant fisheye with k1..k4 (rays beyond the lens's effective max θ are culled).
+4. ``+ eps2d·I`` dilation; optional antialiasing compensation; optional defocus
+   (``+ r_CoC²·I`` with the sqrt-det opacity compensation taken after the dilation).
+5. cull ``opacity < 1/255``; footprint radius ``ceil(extent·sqrt(Σ_ii))`` per axis with
+   ``extent = min(3.33, sqrt(2 ln(255 o)))``; cull footprints outside the image.
+6. colour from SH along the camera-centre → mean direction, ``max(0, 0.5 + Σ sh·Y)``.
+
+Everything is computed in float64 and stored in float32. The result is a packed
+``(N, PACKED)`` float32 array (one cache line per Gaussian for the compositor) and an
+``(N, 4)`` int32 tile rectangle ``[x0, x1) × [y0, y1)``, all zero for a culled Gaussian.
+"""
+
+from __future__ import annotations
+
+import math
+
+from typing import TYPE_CHECKING
+
+import numba
+import numpy as np
+
+from spacedg.render.gaussians import _SH_C1, _SH_C2, _SH_C3, SH_C0
+
+if TYPE_CHECKING:
+    from spacedg.render.camera import Camera
+    from spacedg.render.gaussians import Gaussians
+    from spacedg.render.settings import Defocus, RasterSettings
+
+#: Columns of the packed per-Gaussian record.
+PX, PY, CA, CB, CC, OPA, CR, CG, CBL, DEPTH, RADX, RADY = range(12)
+PACKED = 12
+
+_C1 = _SH_C1
+_C20, _C21, _C22, _C23, _C24 = _SH_C2
+_C30, _C31, _C32, _C33, _C34, _C35, _C36 = _SH_C3
+_LN255 = math.log(255.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _sh_channel(sh, i, ch, degree, x, y, z):
+    """``Σ_k sh[i, k, ch] Y_k(x, y, z)`` for bands up to ``degree`` (3DGS ordering)."""
+    value = SH_C0 * sh[i, 0, ch]
+    if degree >= 1:
+        value += _C1 * (-y * sh[i, 1, ch] + z * sh[i, 2, ch] - x * sh[i, 3, ch])
+    if degree >= 2:
+        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
+        value += (
+            _C20 * xy * sh[i, 4, ch]
+            + _C21 * yz * sh[i, 5, ch]
+            + _C22 * (2.0 * zz - xx - yy) * sh[i, 6, ch]
+            + _C23 * xz * sh[i, 7, ch]
+            + _C24 * (xx - yy) * sh[i, 8, ch]
+        )
+        if degree >= 3:
+            value += (
+                _C30 * y * (3.0 * xx - yy) * sh[i, 9, ch]
+                + _C31 * xy * z * sh[i, 10, ch]
+                + _C32 * y * (4.0 * zz - xx - yy) * sh[i, 11, ch]
+                + _C33 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * sh[i, 12, ch]
+                + _C34 * x * (4.0 * zz - xx - yy) * sh[i, 13, ch]
+                + _C35 * z * (xx - yy) * sh[i, 14, ch]
+                + _C36 * x * (xx - 3.0 * yy) * sh[i, 15, ch]
+            )
+    return value
+
+
+@numba.njit(cache=True, inline="always")
+def _fisheye_terms(x, y, z, k1, k2, k3, k4):
+    """Equidistant lens at camera point (x, y, z), z > 0.
+
+    Returns ``(theta, rho, g, drho_dz)`` with ``rho = θ_d / r`` (so u = fx·rho·x + cx),
+    ``g = (∂rho/∂x) / x = (∂rho/∂y) / y`` and ``∂rho/∂z``. Near the axis (r ≪ z) the
+    series limits are used, so nothing divides by zero.
+    """
+    r2 = x * x + y * y
+    r = math.sqrt(r2)
+    rz2 = r2 + z * z
+    theta = math.atan2(r, z)
+    t2 = theta * theta
+    theta_d = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+    dtheta_d = 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))
+    drho_dz = -dtheta_d / rz2
+    if r < 1e-4 * z:
+        # θ = t − t³/3 + …, θ_d = θ + k1 θ³ + …  with t = r/z  ⇒  rho = (1 + (k1 − 1/3) t²)/z
+        rho = (1.0 + (k1 - 1.0 / 3.0) * r2 / (z * z)) / z
+        g = 2.0 * (k1 - 1.0 / 3.0) / (z * z * z)
+    else:
+        rho = theta_d / r
+        g = (dtheta_d * z / rz2 - rho) / r2
+    return theta, rho, g, drho_dz
+
+
+@numba.njit(parallel=True, cache=True)
+def project_gaussians(
+    means, quats, scales, opacities, sh, degree, want_color,
+    view_rot, view_trans, cam_center,
+    fx, fy, cx, cy, width, height,
+    fisheye, k1, k2, k3, k4, theta_max,
+    near, far, eps2d, antialiased, opacity_extent,
+    aperture, focus, max_coc,
+    packed, rects,
+):  # pragma: no cover - compiled; covered through render() and the oracle tests
+    """Fill ``packed`` (N, PACKED) and ``rects`` (N, 4) in place; see the module docstring."""
+    n = means.shape[0]
+    tiles_x = (width + 15) // 16
+    tiles_y = (height + 15) // 16
+    lim_x_pos = (width - cx) / fx + 0.3 * (0.5 * width / fx)
+    lim_x_neg = cx / fx + 0.3 * (0.5 * width / fx)
+    lim_y_pos = (height - cy) / fy + 0.3 * (0.5 * height / fy)
+    lim_y_neg = cy / fy + 0.3 * (0.5 * height / fy)
+    for i in numba.prange(n):
+        for c in range(PACKED):
+            packed[i, c] = 0.0
+        for c in range(4):
+            rects[i, c] = 0
+        wx, wy, wz = means[i, 0], means[i, 1], means[i, 2]
+        x = view_rot[0, 0] * wx + view_rot[0, 1] * wy + view_rot[0, 2] * wz + view_trans[0]
+        y = view_rot[1, 0] * wx + view_rot[1, 1] * wy + view_rot[1, 2] * wz + view_trans[1]
+        z = view_rot[2, 0] * wx + view_rot[2, 1] * wy + view_rot[2, 2] * wz + view_trans[2]
+        if not (z > near and z < far):
+            continue
+        # ---- 3D covariance in the camera frame: Σc = (W R S)(W R S)ᵀ
+        qw, qx, qy, qz = quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3]
+        qn = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        qw, qx, qy, qz = qw / qn, qx / qn, qy / qn, qz / qn
+        r00 = 1.0 - 2.0 * (qy * qy + qz * qz)
+        r01 = 2.0 * (qx * qy - qw * qz)
+        r02 = 2.0 * (qx * qz + qw * qy)
+        r10 = 2.0 * (qx * qy + qw * qz)
+        r11 = 1.0 - 2.0 * (qx * qx + qz * qz)
+        r12 = 2.0 * (qy * qz - qw * qx)
+        r20 = 2.0 * (qx * qz - qw * qy)
+        r21 = 2.0 * (qy * qz + qw * qx)
+        r22 = 1.0 - 2.0 * (qx * qx + qy * qy)
+        s0, s1, s2 = float(scales[i, 0]), float(scales[i, 1]), float(scales[i, 2])
+        # M = W R S (3×3); columns scaled by s
+        m00 = (view_rot[0, 0] * r00 + view_rot[0, 1] * r10 + view_rot[0, 2] * r20) * s0
+        m01 = (view_rot[0, 0] * r01 + view_rot[0, 1] * r11 + view_rot[0, 2] * r21) * s1
+        m02 = (view_rot[0, 0] * r02 + view_rot[0, 1] * r12 + view_rot[0, 2] * r22) * s2
+        m10 = (view_rot[1, 0] * r00 + view_rot[1, 1] * r10 + view_rot[1, 2] * r20) * s0
+        m11 = (view_rot[1, 0] * r01 + view_rot[1, 1] * r11 + view_rot[1, 2] * r21) * s1
+        m12 = (view_rot[1, 0] * r02 + view_rot[1, 1] * r12 + view_rot[1, 2] * r22) * s2
+        m20 = (view_rot[2, 0] * r00 + view_rot[2, 1] * r10 + view_rot[2, 2] * r20) * s0
+        m21 = (view_rot[2, 0] * r01 + view_rot[2, 1] * r11 + view_rot[2, 2] * r21) * s1
+        m22 = (view_rot[2, 0] * r02 + view_rot[2, 1] * r12 + view_rot[2, 2] * r22) * s2
+        # ---- lens: mean and Jacobian rows (j0·, j1·)
+        if fisheye:
+            theta, rho, g, drho_dz = _fisheye_terms(x, y, z, k1, k2, k3, k4)
+            if theta > theta_max:
+                continue
+            u = fx * rho * x + cx
+            v = fy * rho * y + cy
+            j00 = fx * (rho + x * x * g)
+            j01 = fx * x * y * g
+            j02 = fx * x * drho_dz
+            j10 = fy * x * y * g
+            j11 = fy * (rho + y * y * g)
+            j12 = fy * y * drho_dz
+        else:
+            u = fx * x / z + cx
+            v = fy * y / z + cy
+            tx = z * min(max(x / z, -lim_x_neg), lim_x_pos)
+            ty = z * min(max(y / z, -lim_y_neg), lim_y_pos)
+            j00 = fx / z
+            j01 = 0.0
+            j02 = -fx * tx / (z * z)
+            j10 = 0.0
+            j11 = fy / z
+            j12 = -fy * ty / (z * z)
+        # T = J M (2×3); Σ2D = T Tᵀ
+        t00 = j00 * m00 + j01 * m10 + j02 * m20
+        t01 = j00 * m01 + j01 * m11 + j02 * m21
+        t02 = j00 * m02 + j01 * m12 + j02 * m22
+        t10 = j10 * m00 + j11 * m10 + j12 * m20
+        t11 = j10 * m01 + j11 * m11 + j12 * m21
+        t12 = j10 * m02 + j11 * m12 + j12 * m22
+        sxx = t00 * t00 + t01 * t01 + t02 * t02
+        sxy = t00 * t10 + t01 * t11 + t02 * t12
+        syy = t10 * t10 + t11 * t11 + t12 * t12
+        det_raw = sxx * syy - sxy * sxy
+        sxx += eps2d
+        syy += eps2d
+        det = sxx * syy - sxy * sxy
+        opacity = float(opacities[i])
+        if antialiased:
+            opacity *= math.sqrt(max(det_raw / max(det, 1e-300), 0.0))
+        if aperture > 0.0:
+            coc = min(aperture * abs(z - focus) / z, max_coc)
+            coc2 = coc * coc
+            sxx += coc2
+            syy += coc2
+            det_blur = sxx * syy - sxy * sxy
+            opacity *= math.sqrt(max(det / max(det_blur, 1e-300), 0.0))
+            det = det_blur
+        det = max(det, 1e-10)
+        if opacity_extent:
+            if not opacity * 255.0 >= 1.0:
+                continue
+            extent = min(3.33, math.sqrt(2.0 * math.log(255.0 * opacity)))
+        else:
+            extent = 3.33
+        rad_x = math.ceil(extent * math.sqrt(sxx))
+        rad_y = math.ceil(extent * math.sqrt(syy))
+        ok = (
+            math.isfinite(u) and math.isfinite(v) and math.isfinite(det)
+            and math.isfinite(rad_x) and math.isfinite(rad_y) and rad_x > 0 and rad_y > 0
+        )
+        if not ok:
+            continue
+        if u + rad_x <= 0 or u - rad_x >= width or v + rad_y <= 0 or v - rad_y >= height:
+            continue
+        # tile rectangle as gsplat's isect: [floor((u-r)/16), ceil((u+r)/16)) clamped
+        x0 = min(max(math.floor((u - rad_x) / 16.0), 0.0), tiles_x)
+        x1 = min(max(math.ceil((u + rad_x) / 16.0), 0.0), tiles_x)
+        y0 = min(max(math.floor((v - rad_y) / 16.0), 0.0), tiles_y)
+        y1 = min(max(math.ceil((v + rad_y) / 16.0), 0.0), tiles_y)
+        if x1 <= x0 or y1 <= y0:
+            continue
+        rects[i, 0], rects[i, 1], rects[i, 2], rects[i, 3] = int(x0), int(x1), int(y0), int(y1)
+        packed[i, PX] = u
+        packed[i, PY] = v
+        packed[i, CA] = syy / det
+        packed[i, CB] = -sxy / det
+        packed[i, CC] = sxx / det
+        packed[i, OPA] = opacity
+        packed[i, DEPTH] = z
+        packed[i, RADX] = rad_x
+        packed[i, RADY] = rad_y
+        if want_color:
+            dx = wx - cam_center[0]
+            dy = wy - cam_center[1]
+            dz = wz - cam_center[2]
+            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+            dn = dn if dn > 0.0 else 1.0
+            dx, dy, dz = dx / dn, dy / dn, dz / dn
+            packed[i, CR] = max(_sh_channel(sh, i, 0, degree, dx, dy, dz) + 0.5, 0.0)
+            packed[i, CG] = max(_sh_channel(sh, i, 1, degree, dx, dy, dz) + 0.5, 0.0)
+            packed[i, CBL] = max(_sh_channel(sh, i, 2, degree, dx, dy, dz) + 0.5, 0.0)
+
+
+def project_view(
+    gaussians: Gaussians,
+    camera: Camera,
+    settings: RasterSettings,
+    defocus: Defocus | None = None,
+    want_color: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Project ``gaussians`` into ``camera``: ``(packed (N, PACKED) float32, rects (N, 4) int32)``."""
+    n = len(gaussians)
+    packed = np.empty((n, PACKED), np.float32)
+    rects = np.empty((n, 4), np.int32)
+    lens = camera.fisheye
+    view = camera.world_to_cam
+    project_gaussians(
+        gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities, gaussians.sh,
+        gaussians.sh_degree, want_color,
+        np.ascontiguousarray(view[:3, :3]), np.ascontiguousarray(view[:3, 3]), np.array(camera.center),
+        camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height,
+        lens is not None, *(lens.coeffs if lens else (0.0, 0.0, 0.0, 0.0)),
+        lens.effective_max_theta if lens else math.pi,
+        settings.near, settings.far, settings.eps2d, settings.antialiased, settings.opacity_extent,
+        defocus.aperture if defocus else 0.0, defocus.focus if defocus else 1.0, defocus.max_radius if defocus else 0.0,
+        packed, rects,
+    )
+    return packed, rects
