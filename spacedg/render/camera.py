@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from spacedg._checks import require_rotation
+from spacedg.render.gaussians import quat_from_matrix
 from spacedg.errors import InvalidDataError
 
 _SOURCE = "Camera"
@@ -305,8 +306,6 @@ def rotvec_to_matrix(rotvec: np.ndarray) -> np.ndarray:
 
 def matrix_to_rotvec(rotation: np.ndarray) -> np.ndarray:
     """(3, 3) rotation → (3,) axis-angle vector with angle in [0, π] (float64)."""
-    from spacedg.render.gaussians import quat_from_matrix
-
     w, x, y, z = quat_from_matrix(rotation)
     sin_half = math.sqrt(x * x + y * y + z * z)
     if sin_half < 1e-15:

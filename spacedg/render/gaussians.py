@@ -206,19 +206,18 @@ def quat_from_matrix(rotation: np.ndarray) -> np.ndarray:
 
 
 def quat_to_matrix(quats: np.ndarray) -> np.ndarray:
-    """(N, 4) wxyz unit quaternions → (N, 3, 3) rotation matrices (same dtype)."""
+    """(N, 4) wxyz unit quaternions → (N, 3, 3) rotation matrices (same dtype).
+
+    Works on numpy arrays and torch tensors (any device) alike.
+    """
+    xp = _array_namespace(quats)
     w, x, y, z = quats[:, 0], quats[:, 1], quats[:, 2], quats[:, 3]
-    out = np.empty((quats.shape[0], 3, 3), dtype=quats.dtype)
-    out[:, 0, 0] = 1 - 2 * (y * y + z * z)
-    out[:, 0, 1] = 2 * (x * y - w * z)
-    out[:, 0, 2] = 2 * (x * z + w * y)
-    out[:, 1, 0] = 2 * (x * y + w * z)
-    out[:, 1, 1] = 1 - 2 * (x * x + z * z)
-    out[:, 1, 2] = 2 * (y * z - w * x)
-    out[:, 2, 0] = 2 * (x * z - w * y)
-    out[:, 2, 1] = 2 * (y * z + w * x)
-    out[:, 2, 2] = 1 - 2 * (x * x + y * y)
-    return out
+    rows = [
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    ]
+    return xp.stack(rows, -1).reshape(-1, 3, 3)
 
 
 def _readonly(array: np.ndarray) -> np.ndarray:

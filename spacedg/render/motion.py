@@ -100,7 +100,7 @@ def render_motion(
     motion: MotionBlur,
     wanted: frozenset[str],
     backend: str,
-    device: torch.device,
+    device: torch.device | None,
     settings: RasterSettings,
     defocus: Defocus | None,
 ) -> Frame:

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from spacedg.render.camera import Camera
-from spacedg.render.gaussians import Gaussians, sh_basis
+from spacedg.render.gaussians import Gaussians, quat_to_matrix, sh_basis
 from spacedg.render.settings import TILE_SIZE, Defocus, RasterSettings
 
 _TENSOR_CACHE: "weakref.WeakKeyDictionary[Gaussians, dict]" = weakref.WeakKeyDictionary()
@@ -78,17 +78,7 @@ class Projected:
 
 def quat_scale_to_covariance(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
     """(N, 3, 3) covariance ``R S Sᵀ Rᵀ`` from wxyz quaternions (normalised here) and scales (m)."""
-    q = quats / quats.norm(dim=-1, keepdim=True)
-    w, x, y, z = q.unbind(-1)
-    rot = torch.stack(
-        [
-            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-        ],
-        dim=-1,
-    ).reshape(-1, 3, 3)
-    m = rot * scales[:, None, :]
+    m = quat_to_matrix(quats / quats.norm(dim=-1, keepdim=True)) * scales[:, None, :]
     return m @ m.transpose(-1, -2)
 
 

@@ -42,7 +42,6 @@ PACKED = 12
 _C1 = _SH_C1
 _C20, _C21, _C22, _C23, _C24 = _SH_C2
 _C30, _C31, _C32, _C33, _C34, _C35, _C36 = _SH_C3
-_LN255 = math.log(255.0)
 
 
 @numba.njit(cache=True, inline="always")

@@ -272,4 +272,5 @@ def rasterize(packed: np.ndarray, rects: np.ndarray, instance_ids: np.ndarray, w
         out["rgb"], out["alpha"], out["depth"], out["median_depth"], out["instance_ids"],
     )
     out["n_pairs"] = np.int64(gauss.shape[0])
+    out["n_visible"] = np.int64(visible.shape[0])
     return out

@@ -22,13 +22,15 @@ BACKENDS = ("auto", "cpu", "torch")
 _DEFAULT_SETTINGS = RasterSettings()
 
 
-def resolve_backend(backend: str, device: str | torch.device | None) -> tuple[str, torch.device]:
+def resolve_backend(backend: str, device: str | torch.device | None) -> tuple[str, torch.device | None]:
     """``auto`` → the compiled CPU path unless a non-CPU torch device is asked for.
 
     torch is imported here, not at module import, so ``import spacedg`` stays light.
     """
     if backend not in BACKENDS:
         raise ParameterError(f"unknown render backend {backend!r}; choose from {list(BACKENDS)}")
+    if device is None and backend in ("auto", "cpu"):
+        return "cpu", None  # the compiled path never touches torch
     import torch
 
     try:
@@ -66,7 +68,7 @@ def composite_view(
     camera: Camera,
     outputs: frozenset[str],
     backend: str,
-    device: torch.device,
+    device: torch.device | None,
     settings: RasterSettings,
     defocus: Defocus | None,
 ) -> tuple[dict[str, np.ndarray], dict[str, float]]:
@@ -79,15 +81,14 @@ def composite_view(
     if backend == "cpu":
         from spacedg.render import project_cpu, raster_cpu
 
-        n = len(gaussians)
         packed, rects = project_cpu.project_view(gaussians, camera, settings, defocus, want_color)
         t1 = time.perf_counter()
-        ids = gaussians.instance_ids if gaussians.instance_ids is not None else np.full(n, -1, np.int32)
+        ids = gaussians.instance_ids if gaussians.instance_ids is not None else np.full(len(gaussians), -1, np.int32)
         images = raster_cpu.rasterize(
             packed, rects, ids, camera.width, camera.height, settings.alpha_max,
             want_color, want_depth, want_ids, settings.tight_tiles and settings.opacity_extent,
         )
-        stats["visible"] = int((rects[:, 1] > rects[:, 0]).sum())
+        stats["visible"] = int(images.pop("n_visible"))
         stats["pairs"] = int(images.pop("n_pairs"))
     else:
         import torch
