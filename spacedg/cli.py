@@ -12,7 +12,7 @@ from spacedg.errors import SpaceDGError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from spacedg.commands import plugins, render, scenes
+    from spacedg.commands import gallery, plugins, render, scenes
 
     parser = argparse.ArgumentParser(
         prog="spacedg",
@@ -21,6 +21,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     scenes.add_parser(sub)
     render.add_parser(sub)
+    gallery.add_parser(sub)
     plugins.add_parser(sub)
     return parser
 

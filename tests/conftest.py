@@ -2,13 +2,22 @@
 
 from __future__ import annotations
 
+import importlib
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from spacedg.plugins import AUTOLOAD_ENV, PLUGINS_ENV, reset_registry
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_SPLATS = REPO_ROOT.parent / "shared" / "data" / "splats"
+#: Example third-party plugin packages (pip-installed into temporary folders by ``installed``).
+EXAMPLES = Path(__file__).resolve().parent / "plugins"
 
 
 @pytest.fixture(scope="session")
@@ -30,3 +39,52 @@ def small_room():
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
+
+
+# ------------------------------------------------------ third-party plugins
+@dataclass(frozen=True)
+class Installed:
+    main: Path  # spacedg-vignetting + spacedg-broken
+    clash: Path  # spacedg-clash
+
+
+def _pip_install(target: Path, sources: list[Path]) -> None:
+    cmd = [sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "--no-index", "--quiet",
+           "--disable-pip-version-check", "--target", str(target), *map(str, sources)]
+    result = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    if result.returncode != 0:
+        raise RuntimeError(f"pip install failed ({result.returncode}):\n{result.stdout}\n{result.stderr}")
+
+
+@pytest.fixture(scope="session")
+def installed(tmp_path_factory: pytest.TempPathFactory) -> Installed:
+    """Build and install the example plugins (copies, so the source tree stays clean)."""
+    root = tmp_path_factory.mktemp("plugin_examples")
+    copies = {}
+    for name in ("spacedg-vignetting", "spacedg-broken", "spacedg-clash"):
+        copies[name] = root / "src" / name
+        shutil.copytree(EXAMPLES / name, copies[name], ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
+    main, clash = root / "site_main", root / "site_clash"
+    _pip_install(main, [copies["spacedg-vignetting"], copies["spacedg-broken"]])
+    _pip_install(clash, [copies["spacedg-clash"]])
+    return Installed(main, clash)
+
+
+@pytest.fixture
+def clean_env(monkeypatch: pytest.MonkeyPatch):
+    """No plugin environment variables; a fresh registry before and after."""
+    monkeypatch.delenv(AUTOLOAD_ENV, raising=False)
+    monkeypatch.delenv(PLUGINS_ENV, raising=False)
+    reset_registry()
+    yield monkeypatch
+    reset_registry()
+
+
+@pytest.fixture
+def third_party(installed: Installed, clean_env: pytest.MonkeyPatch):
+    """The vignetting and broken examples on sys.path (discoverable through their metadata)."""
+    clean_env.syspath_prepend(str(installed.main))
+    importlib.invalidate_caches()
+    reset_registry()
+    yield clean_env
+    reset_registry()

@@ -46,57 +46,12 @@ from spacedg.plugins import (
     reset_registry,
 )
 
-EXAMPLES = Path(__file__).resolve().parent / "plugins"
+from conftest import EXAMPLES, Installed
 SPACEDG_SCRIPT = Path(sys.executable).parent / "spacedg"
-BUILTINS = {"jpeg_compression", "object_counting"}
-
-
-@dataclass(frozen=True)
-class Installed:
-    main: Path  # spacedg-vignetting + spacedg-broken
-    clash: Path  # spacedg-clash
-
-
-def _pip_install(target: Path, sources: list[Path]) -> None:
-    cmd = [sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "--no-index", "--quiet",
-           "--disable-pip-version-check", "--target", str(target), *map(str, sources)]
-    result = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    if result.returncode != 0:
-        raise RuntimeError(f"pip install failed ({result.returncode}):\n{result.stdout}\n{result.stderr}")
-
-
-@pytest.fixture(scope="session")
-def installed(tmp_path_factory: pytest.TempPathFactory) -> Installed:
-    """Build and install the example plugins (copies, so the source tree stays clean)."""
-    root = tmp_path_factory.mktemp("plugin_examples")
-    copies = {}
-    for name in ("spacedg-vignetting", "spacedg-broken", "spacedg-clash"):
-        copies[name] = root / "src" / name
-        shutil.copytree(EXAMPLES / name, copies[name], ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
-    main, clash = root / "site_main", root / "site_clash"
-    _pip_install(main, [copies["spacedg-vignetting"], copies["spacedg-broken"]])
-    _pip_install(clash, [copies["spacedg-clash"]])
-    return Installed(main, clash)
-
-
-@pytest.fixture
-def clean_env(monkeypatch: pytest.MonkeyPatch):
-    """No plugin environment variables; a fresh registry before and after."""
-    monkeypatch.delenv(AUTOLOAD_ENV, raising=False)
-    monkeypatch.delenv(PLUGINS_ENV, raising=False)
-    reset_registry()
-    yield monkeypatch
-    reset_registry()
-
-
-@pytest.fixture
-def third_party(installed: Installed, clean_env: pytest.MonkeyPatch):
-    """The vignetting and broken examples on sys.path (discoverable through their metadata)."""
-    clean_env.syspath_prepend(str(installed.main))
-    importlib.invalidate_caches()
-    reset_registry()
-    yield clean_env
-    reset_registry()
+BUILTIN_DEGRADATIONS = {
+    "defocus", "distortion", "motion_blur", "haze", "water_droplets", "low_light", "over_exposure", "jpeg_compression", "low_res",
+}
+BUILTINS = BUILTIN_DEGRADATIONS | {"object_counting"}
 
 
 def _subprocess_env(**extra: str) -> dict[str, str]:
@@ -241,7 +196,7 @@ def test_autoload_disabled_hides_third_party(third_party) -> None:
     third_party.setenv(AUTOLOAD_ENV, "1")
     reset_registry()
     registry = get_registry()
-    assert {d.name for d in registry.list_degradations()} == {"jpeg_compression"}
+    assert {d.name for d in registry.list_degradations()} == BUILTIN_DEGRADATIONS
     assert {r.origin.name for r in registry.plugins} == BUILTINS
     assert registry.broken == []
     with pytest.raises(UnknownPluginError) as info:
@@ -283,7 +238,7 @@ def test_explicit_modules_load_with_autoload_disabled(third_party, tmp_path: Pat
     reset_registry()
     registry = get_registry()
     names = {d.name for d in registry.list_degradations()}
-    assert names == {"jpeg_compression", "vignetting", "invert"}
+    assert names == BUILTIN_DEGRADATIONS | {"vignetting", "invert"}
     assert get_degradation("invert").origin.source == "env"
     assert get_degradation("invert").origin.distribution is None
     broken = {b.origin.name: b for b in registry.broken}
@@ -314,7 +269,8 @@ def test_unknown_names_suggest(clean_env) -> None:
     with pytest.raises(UnknownPluginError) as info:
         get_degradation("jpeg_compresion")
     message = str(info.value)
-    assert "Did you mean 'jpeg_compression'" in message and "Available degradations: jpeg_compression" in message
+    assert "Did you mean 'jpeg_compression'" in message
+    assert "Available degradations: " + ", ".join(sorted(BUILTIN_DEGRADATIONS)) in message
     with pytest.raises(UnknownPluginError, match="Did you mean 'object_counting'.*Available question families: object_counting"):
         get_question_family("object_count")
     with pytest.raises(UnknownPluginError, match="unknown degradation 'zzz'"):

@@ -54,7 +54,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--sub-steps", type=int, default=None,
                         help="motion blur sub-exposures (default 80; with --fast-motion the upper bound)")
     render.add_argument("--fast-motion", action="store_true",
-                        help="choose fewer sub-steps from the on-screen motion and stretch Gaussians along it")
+                        help="choose fewer sub-steps from the on-screen motion (the renderer's fast path)")
     render.add_argument("--backend", choices=BACKENDS, default="auto",
                         help="auto (default), cpu (compiled tiles) or torch")
     render.add_argument("--device", default=None, help="torch device for the torch backend, e.g. cuda (default cpu)")
@@ -135,13 +135,6 @@ def write_png_atomic(path: Path, image: np.ndarray, flag: str) -> None:
         raise
 
 
-def encode_srgb8(rgb_linear: np.ndarray) -> np.ndarray:
-    """Linear HDR light → 8-bit sRGB (clipped to [0, 1], rounded)."""
-    from spacedg.render.colour import linear_to_srgb
-
-    return np.round(np.clip(linear_to_srgb(rgb_linear), 0.0, 1.0) * 255.0).astype(np.uint8)
-
-
 def encode_depth_mm(depth_m: np.ndarray) -> np.ndarray:
     """Depth in metres → uint16 millimetres (clipped to 65535; 0 stays 0 = no coverage)."""
     mm = np.round(np.nan_to_num(depth_m, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float64) * DEPTH_SCALE)
@@ -200,12 +193,14 @@ def _render(args: argparse.Namespace) -> int:
     if lens is not None:
         camera = replace(camera, fisheye=lens)
 
+    from spacedg.render.colour_cpu import encode_srgb_u8
+
     want_depth = args.depth_out is not None
     frame = render(
         scene.gaussians, camera, defocus=defocus, motion=motion,
         outputs="rgb,depth" if want_depth else "rgb", backend=backend, device=args.device,
     )
-    write_png_atomic(args.out, encode_srgb8(frame.rgb)[:, :, ::-1], "--out")
+    write_png_atomic(args.out, encode_srgb_u8(frame.rgb)[:, :, ::-1], "--out")
     stats = frame.stats
     visible = f"{stats['visible']:,}" if "visible" in stats else "n/a"
     print(

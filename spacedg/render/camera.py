@@ -71,6 +71,22 @@ class FisheyeLens:
         t2 = theta * theta
         return 1.0 + t2 * (3.0 * self.k1 + t2 * (5.0 * self.k2 + t2 * (7.0 * self.k3 + t2 * 9.0 * self.k4)))
 
+    def undistort_theta(self, theta_d: np.ndarray) -> np.ndarray:
+        """Ray angles θ (radians) with ``θ_d(θ) = theta_d``, on the one-to-one range [0, effective max θ].
+
+        ``theta_d`` beyond the image circle (``> θ_d(effective max θ)``) gives the effective
+        maximum. Bisection, 60 halvings (float64 resolution); vectorised.
+        """
+        target = np.asarray(theta_d, dtype=np.float64)
+        lo = np.zeros_like(target)
+        hi = np.full_like(target, self.effective_max_theta)
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            below = self.distort_theta(mid) < target
+            lo = np.where(below, mid, lo)
+            hi = np.where(below, hi, mid)
+        return 0.5 * (lo + hi)
+
     @cached_property
     def effective_max_theta(self) -> float:
         """Largest ray angle (radians) the lens maps one-to-one: ``min(max_theta, fold)``.

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from spacedg.render.camera import Camera, exposure_poses
-from spacedg.render.colour import srgb_to_linear
+from spacedg.render.colour_cpu import decode_srgb
 from spacedg.render.frame import Frame
 from spacedg.render.gaussians import Gaussians
 from spacedg.render.settings import Defocus, MotionBlur, RasterSettings
@@ -128,7 +128,7 @@ def render_motion(
         pairs += stats["pairs"]
         alpha += images["alpha"]
         if rgb is not None:
-            rgb += srgb_to_linear(images["rgb"])
+            rgb += decode_srgb(images["rgb"])
         if depth_sum is not None:
             depth_sum += images["depth"] * images["alpha"]
     images = {"alpha": (alpha / count).astype(np.float32)}

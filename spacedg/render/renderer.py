@@ -10,7 +10,6 @@ import numpy as np
 
 from spacedg.errors import ParameterError
 from spacedg.render.camera import Camera
-from spacedg.render.colour import srgb_to_linear
 from spacedg.render.frame import Frame
 from spacedg.render.gaussians import Gaussians
 from spacedg.render.settings import Defocus, MotionBlur, RasterSettings, parse_outputs
@@ -171,7 +170,9 @@ def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: fro
     valid = lens_valid_mask(camera)
     rgb = images.get("rgb") if "rgb" in wanted else None
     if rgb is not None and not linear_rgb:
-        rgb = srgb_to_linear(rgb).astype(np.float32, copy=False)
+        from spacedg.render.colour_cpu import decode_srgb  # numba: imported on first render, not with spacedg
+
+        rgb = decode_srgb(rgb)
     frame = Frame(
         rgb=rgb,
         alpha=images["alpha"],

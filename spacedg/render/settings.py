@@ -132,9 +132,8 @@ class MotionBlur:
             (x right, y down, z forward).
         rotation: (3,) total rotation over the exposure, axis-angle in radians, camera frame.
         sub_steps: number of sub-exposure renders averaged in linear light (80 = the reference).
-        fast: choose fewer sub-steps from the largest on-screen displacement and stretch each
-            Gaussian along its motion inside each sub-step (see ``spacedg.render.motion``);
-            ``sub_steps`` is then the upper bound.
+        fast: choose fewer sub-steps from the largest on-screen displacement of the visible
+            Gaussians (see ``spacedg.render.motion``); ``sub_steps`` is then the upper bound.
     """
 
     translation: tuple[float, float, float] = (0.0, 0.0, 0.0)

@@ -38,6 +38,7 @@ import cv2
 import numpy as np
 
 from spacedg.errors import InvalidDataError
+from spacedg.plugins.degradations._common import check_display_image
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 
@@ -54,19 +55,6 @@ QUALITY = ParamSpec(
 )
 
 
-def _check_image(image: object) -> np.ndarray:
-    if not isinstance(image, np.ndarray):
-        raise InvalidDataError(f"jpeg_compression: image must be a numpy array (uint8, H×W×3 RGB), got {type(image).__name__}")
-    if image.dtype != np.uint8:
-        raise InvalidDataError(
-            f"jpeg_compression: image must be uint8 sRGB (H×W×3), got dtype {image.dtype}; encode linear light to sRGB and "
-            "quantise to 8 bits first (OpenCV would silently cast floats, turning a [0, 1] image black)"
-        )
-    if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
-        raise InvalidDataError(f"jpeg_compression: image must have shape (H, W, 3) RGB, got {image.shape}")
-    return image
-
-
 def jpeg_compress(image: np.ndarray, quality: int) -> np.ndarray:
     """JPEG-encode and decode an 8-bit RGB image at libjpeg ``quality`` (1–100).
 
@@ -77,7 +65,7 @@ def jpeg_compress(image: np.ndarray, quality: int) -> np.ndarray:
     Returns:
         A new uint8 (H, W, 3) RGB array.
     """
-    image = _check_image(image)
+    image = check_display_image(image, "jpeg_compression")
     q = SPEC.validate_params({"quality": quality})["quality"]
     bgr = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2BGR)
     ok, buffer = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(q)])

@@ -1,0 +1,108 @@
+"""Input checks shared by the built-in degradations (not a plugin: no entry point).
+
+Every stage contract of :mod:`spacedg.plugins.specs` starts by checking its input the same
+way, so the messages are the same everywhere:
+
+- linear stage: ``rgb`` float32 (H, W, 3), linear light, unclamped (values are not scanned:
+  a model that would turn a non-finite input into NaN checks for it itself);
+- display stage: ``image`` uint8 (H, W, 3), sRGB-encoded RGB;
+- render outputs from ``aux``: present when the spec declared them in ``needs``, float32
+  (H, W) matching the image.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from spacedg.errors import InvalidDataError
+
+__all__ = ["FAR_PERCENTILE", "check_linear_rgb", "check_display_image", "aux_image", "stream_key", "surface_far_depth"]
+
+
+def _describe(value: object) -> str:
+    if isinstance(value, np.ndarray):
+        return f"{value.dtype} array of shape {value.shape}"
+    return type(value).__name__
+
+
+def check_linear_rgb(rgb: object, name: str) -> np.ndarray:
+    """Return ``rgb`` if it is linear-light float32 (H, W, 3), else raise.
+
+    Args:
+        rgb: the linear-stage input.
+        name: the degradation's name, for the message.
+    """
+    if not isinstance(rgb, np.ndarray) or rgb.dtype != np.float32 or rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise InvalidDataError(
+            f"{name}: expected linear-light float32 RGB of shape (H, W, 3), got {_describe(rgb)}; "
+            "decode sRGB with spacedg.render.colour.srgb_to_linear and cast to float32"
+        )
+    if rgb.shape[0] < 1 or rgb.shape[1] < 1:
+        raise InvalidDataError(f"{name}: the image is empty (shape {rgb.shape})")
+    return rgb
+
+
+def check_display_image(image: object, name: str) -> np.ndarray:
+    """Return ``image`` if it is an 8-bit sRGB RGB picture (uint8 (H, W, 3)), else raise.
+
+    Float input is refused: OpenCV would silently cast a [0, 1] float image to 8 bits (black).
+    """
+    if not isinstance(image, np.ndarray):
+        raise InvalidDataError(f"{name}: image must be a numpy array (uint8, H×W×3 RGB), got {type(image).__name__}")
+    if image.dtype != np.uint8:
+        raise InvalidDataError(
+            f"{name}: image must be uint8 sRGB (H×W×3 RGB), got dtype {image.dtype}; encode linear light to sRGB and "
+            "quantise to 8 bits first (spacedg.render.colour_cpu.encode_srgb_u8): OpenCV would silently cast floats, "
+            "turning a [0, 1] image black"
+        )
+    if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
+        raise InvalidDataError(f"{name}: image must have shape (H, W, 3) RGB, got {image.shape}")
+    return image
+
+
+def aux_image(aux: Mapping[str, np.ndarray], key: str, shape: tuple[int, int], name: str) -> np.ndarray:
+    """The render output ``aux[key]`` as float32 (H, W), or a clear error if it is missing or mis-shaped."""
+    if not isinstance(aux, Mapping) or key not in aux or aux[key] is None:
+        have = sorted(aux) if isinstance(aux, Mapping) else []
+        raise InvalidDataError(
+            f"{name} needs the rendered {key!r} of the view, but it was not provided (aux has {have}); "
+            f"render the view with outputs including {key!r} (the pipeline does this when the spec declares it in needs)"
+        )
+    value = np.asarray(aux[key])
+    if value.shape != tuple(shape):
+        raise InvalidDataError(f"{name}: rendered {key!r} has shape {value.shape}, but the image is {tuple(shape)}")
+    return value.astype(np.float32, copy=False)
+
+
+def stream_key(rng: np.random.Generator) -> int:
+    """One 63-bit key drawn from ``rng``, for counter-based per-pixel random numbers.
+
+    Per-pixel noise is generated in parallel compiled kernels from ``hash(key, pixel, draw)``,
+    so the result is the same whatever the number of threads, and one call consumes exactly
+    one draw of ``rng``.
+    """
+    if not isinstance(rng, np.random.Generator):
+        raise InvalidDataError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}; use np.random.default_rng(seed)")
+    return int(rng.integers(0, 2**63 - 1, dtype=np.int64))
+
+
+#: Percentile of the surface depths taken as a view's far depth (robust to a few stray far splats).
+FAR_PERCENTILE = 99.0
+#: Subsampling stride (both axes) for :func:`surface_far_depth`; 1/16 of the pixels is plenty for a percentile.
+_FAR_STRIDE = 4
+
+
+def surface_far_depth(depth: np.ndarray, alpha: np.ndarray) -> float:
+    """A view's far surface depth in metres: the 99th percentile of the depths of covered pixels.
+
+    Covered = ``alpha > 0.5`` with a finite positive depth; pixels are subsampled with stride 4.
+    Returns 0.0 when no pixel is covered.
+    """
+    d = np.asarray(depth)[::_FAR_STRIDE, ::_FAR_STRIDE]
+    a = np.asarray(alpha)[::_FAR_STRIDE, ::_FAR_STRIDE]
+    covered = d[(a > 0.5) & np.isfinite(d) & (d > 0)]
+    if covered.size == 0:
+        return 0.0
+    return float(np.percentile(covered, FAR_PERCENTILE))

@@ -1,0 +1,422 @@
+"""Water droplets on the lens (meteorological, linear stage): refraction, blur and highlights.
+
+Model: the paper's "Water Droplets" — a procedural multi-layer height map ``h(x, y)`` of drops
+gives surface normals ``n = normalize(-∂h/∂x, -∂h/∂y, 1)``; the content seen through a drop is
+sampled at a refraction offset ``Δu ∝ n_x``, ``Δv ∝ n_y``, blurred (Gaussian), lit by a Phong
+specular highlight and blended in with a soft drop edge. Outside the drops the image is
+untouched, bit for bit.
+
+Drop field (all randomness from ``rng``, a :class:`numpy.random.Generator`)
+--------------------------------------------------------------------------
+
+- Image coordinates: x right, y down, in pixels, pixel centres at ``(j + 0.5, i + 0.5)``;
+  ``S = min(H, W)`` is the shorter side.
+- :data:`N_LAYERS` = 3 layers ``l = 0, 1, 2`` of square cells of side ``c_l = S / (scale · 2^l)``
+  px, anchored at the image's top-left corner: ``scale`` cells of the largest layer span the
+  shorter side. Each cell holds at most one drop, present with probability
+  :data:`PRESENCE` ``[l]`` (0.9, 0.7, 0.5): finer layers have more, smaller, sparser drops.
+- Drop radius ``r = radius · (c_l / 2) · f`` px with a size factor ``f ~ U[`` :data:`MIN_SIZE` ``, 1]``:
+  ``radius`` is the largest drop radius as a fraction of its cell's half-size. The centre is
+  jittered uniformly but the drop stays inside its cell, so a pixel only examines its own cell
+  in each layer.
+- Height: a hemisphere, ``h = sqrt(r² − d²)`` px at distance ``d`` from the centre. Where drops
+  of several layers overlap, the highest one wins (its normal, edge and highlight are used).
+  Its normal is ``n = ((x − c_x) / r, (y − c_y) / r, h / r)``, finite up to the rim.
+- Soft edge: coverage ``α = smoothstep`` from ``d = r`` (0) to ``d = (1 −`` :data:`EDGE_WIDTH` ``) r`` (1).
+  The drop mask is ``α > 0``, i.e. ``d < r``.
+
+Optics (in linear light, HDR values above 1 kept, nothing clipped)
+------------------------------------------------------------------
+
+- Refraction: the pixel at ``p`` shows the scene at ``p − strength · r · n_xy``, i.e. at
+  ``c + (1 − strength)(p − c)``: a drop is a small magnifier of power ``1 / (1 − strength)``
+  (bench 0.3–0.5: 1.4–2×); ``strength = 1`` shows the centre's colour, ``strength > 1`` an
+  inverted image. Sampling: :func:`cv2.remap` (bilinear, ``BORDER_REFLECT``; coordinates are
+  always finite).
+- In-drop optical blur: :func:`cv2.GaussianBlur` of the refracted image, ``blur_sigma`` px (in
+  image pixels, after magnification) with an odd ``blur_kernel`` px square kernel (OpenCV
+  ``ksize``; a kernel narrower than ``±2σ`` truncates the Gaussian, as in OpenCV). No blur when
+  ``blur_sigma = 0`` or ``blur_kernel = 1`` (OpenCV would otherwise derive σ from the kernel).
+- Phong specular highlight, white, added in linear light: ``α · k_s · max(0, R·V)^shininess``
+  with ``R = 2(n·L)n − L``, view ``V = (0, 0, 1)`` (towards the camera), light from the upper
+  left ``L = normalize(−1, −1, 2)`` (:data:`LIGHT_DIRECTION`), ``k_s`` = :data:`SPECULAR_INTENSITY`
+  = 0.5 (linear units, 1 = diffuse white), shininess :data:`SHININESS` = 64.
+- Composite inside drops: ``out = (1 − α) · I + α · blur(refract(I)) + α · highlight``.
+
+Identity, limits and errors
+---------------------------
+
+- ``radius = 0`` or ``scale = 0`` means no drops: the output is a bit-exact copy (``rng`` is
+  not used). ``strength = 0`` still blurs and lights the drops.
+- Input: float32 (H, W, 3), finite. NaN or ±inf is rejected with :class:`InvalidDataError`
+  (blur and interpolation would turn ``inf · 0`` into NaN inside drops); finite values of any
+  size (tested up to 1e30) give finite output.
+- ``blur_kernel`` must be odd: an even value raises :class:`ParameterError` (never rounded).
+- Deterministic for a given ``rng`` state; the compiled kernels are per-pixel, so the bytes do
+  not depend on the number of numba threads.
+
+Parameters (hard limits): ``scale`` 1/image [0, 100]; ``radius`` 1 [0, 1]; ``strength`` 1
+[0, 5]; ``blur_sigma`` px [0, 20]; ``blur_kernel`` px, odd integer [1, 51].
+
+Presets: ``bench`` = the paper's table (scale [2.5, 4], radius [0.25, 0.75], strength
+[0.3, 0.5], blur_sigma [2, 2.5], blur_kernel 9). Severities ``1`` … ``5`` keep scale in
+[2.5, 4] and raise radius, strength, blur_sigma and blur_kernel (5, 7, 9, 9, 11); ``4`` is
+close to bench.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numba
+import numpy as np
+
+from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.plugins.degradations._common import check_linear_rgb
+from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
+
+__all__ = [
+    "SPEC",
+    "DropletField",
+    "droplet_field",
+    "water_droplets",
+    "N_LAYERS",
+    "PRESENCE",
+    "MIN_SIZE",
+    "EDGE_WIDTH",
+    "LIGHT_DIRECTION",
+    "SPECULAR_INTENSITY",
+    "SHININESS",
+]
+
+NAME = "water_droplets"
+#: Number of drop layers; layer ``l`` has cells of side ``min(H, W) / (scale · 2^l)`` px.
+N_LAYERS = 3
+#: Probability that a cell of layer ``l`` holds a drop.
+PRESENCE: tuple[float, ...] = (0.9, 0.7, 0.5)
+#: Smallest drop size factor: drop radii are ``U[MIN_SIZE, 1] · radius · cell / 2``.
+MIN_SIZE = 0.5
+#: Soft edge: coverage rises from 0 at the rim to 1 over this fraction of the radius.
+EDGE_WIDTH = 0.15
+#: Unit vector towards the light (x right, y down, z towards the camera): upper left, in front.
+LIGHT_DIRECTION: tuple[float, float, float] = (-1.0 / math.sqrt(6.0), -1.0 / math.sqrt(6.0), 2.0 / math.sqrt(6.0))
+#: Phong specular coefficient ``k_s`` in linear light (1 = diffuse white).
+SPECULAR_INTENSITY = 0.5
+#: Phong shininess exponent, ``2 ** SHININESS_LOG2`` (evaluated by repeated squaring).
+SHININESS_LOG2 = 6
+SHININESS = 2**SHININESS_LOG2
+#: Most drop cells of the finest layer (guards extreme aspect ratios at high ``scale``).
+MAX_CELLS = 10_000_000
+
+SCALE = ParamSpec(
+    name="scale",
+    unit="1/image",
+    description="Drop-field frequency: cells of the largest drop layer across the image's shorter side (0 = no drops).",
+    low=0.0,
+    high=100.0,
+)
+RADIUS = ParamSpec(
+    name="radius",
+    unit="1",
+    description="Largest drop radius as a fraction of its cell's half-size (0 = no drops).",
+    low=0.0,
+    high=1.0,
+    harsher="higher",
+)
+STRENGTH = ParamSpec(
+    name="strength",
+    unit="1",
+    description="Refraction: a pixel shows the scene at p - strength * r * n_xy (magnifier of power 1/(1 - strength); > 1 inverts).",
+    low=0.0,
+    high=5.0,
+    harsher="higher",
+)
+BLUR_SIGMA = ParamSpec(
+    name="blur_sigma",
+    unit="px",
+    description="Standard deviation of the Gaussian blur inside drops (0 = no blur).",
+    low=0.0,
+    high=20.0,
+    harsher="higher",
+)
+BLUR_KERNEL = ParamSpec(
+    name="blur_kernel",
+    unit="px",
+    description="Odd side of the square Gaussian kernel inside drops (OpenCV ksize; 1 = no blur).",
+    low=1,
+    high=51,
+    integer=True,
+    harsher="higher",
+)
+
+
+@dataclass(frozen=True)
+class DropletField:
+    """One drawn drop field on an (H, W) image (all arrays float32 (H, W)).
+
+    Attributes:
+        alpha: soft drop coverage in [0, 1]; 0 exactly outside every drop.
+        height: height of the top drop in px (0 outside drops).
+        highlight: ``alpha · max(0, R·V)^SHININESS``, the Phong term at unit ``k_s``.
+        map_x, map_y: :func:`cv2.remap` source coordinates (pixel index units, centre at
+            integer) of the refracted view; the identity outside drops.
+    """
+
+    alpha: np.ndarray
+    height: np.ndarray
+    highlight: np.ndarray
+    map_x: np.ndarray
+    map_y: np.ndarray
+
+
+# ------------------------------------------------------------------ compiled kernels
+@numba.njit(parallel=True, cache=True)
+def _field_kernel(
+    height: int,
+    width: int,
+    cell: np.ndarray,
+    n_cols: np.ndarray,
+    n_rows: np.ndarray,
+    offset: np.ndarray,
+    centre_x: np.ndarray,
+    centre_y: np.ndarray,
+    drop_r: np.ndarray,
+    strength: float,
+    light: np.ndarray,
+    shininess_log2: int,
+    edge: float,
+    alpha: np.ndarray,
+    height_map: np.ndarray,
+    highlight: np.ndarray,
+    map_x: np.ndarray,
+    map_y: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """Per pixel: the highest drop over all layers, its coverage, highlight and remap coordinates."""
+    n_layers = cell.shape[0]
+    lx, ly, lz = light[0], light[1], light[2]
+    inv_cell = 1.0 / cell
+    for i in numba.prange(height):
+        y = i + 0.5
+        row_start = np.empty(n_layers, np.int64)  # first drop index of this pixel row's cells, per layer
+        for layer in range(n_layers):
+            row = min(int(y * inv_cell[layer]), n_rows[layer] - 1)
+            row_start[layer] = offset[layer] + row * n_cols[layer]
+        for j in range(width):
+            x = j + 0.5
+            best_h = -1.0
+            best_dx = 0.0
+            best_dy = 0.0
+            best_r = 1.0
+            for layer in range(n_layers):
+                k = row_start[layer] + min(int(x * inv_cell[layer]), n_cols[layer] - 1)
+                r = drop_r[k]
+                dx = x - centre_x[k]
+                dy = y - centre_y[k]
+                d2 = dx * dx + dy * dy
+                if d2 >= r * r:  # also every pixel of an empty cell (r = 0)
+                    continue
+                h = np.sqrt(r * r - d2)
+                if h > best_h:
+                    best_h, best_dx, best_dy, best_r = h, dx, dy, r
+            if best_h < 0.0:
+                alpha[i, j] = 0.0
+                height_map[i, j] = 0.0
+                highlight[i, j] = 0.0
+                map_x[i, j] = j
+                map_y[i, j] = i
+                continue
+            nx = best_dx / best_r
+            ny = best_dy / best_r
+            nz = best_h / best_r
+            t = min((1.0 - np.sqrt(nx * nx + ny * ny)) / edge, 1.0)
+            a = t * t * (3.0 - 2.0 * t)
+            spec = max(2.0 * (nx * lx + ny * ly + nz * lz) * nz - lz, 0.0)  # R·V, R = 2(n·L)n − L, V = +z
+            for _ in range(shininess_log2):
+                spec *= spec
+            alpha[i, j] = a
+            height_map[i, j] = best_h
+            highlight[i, j] = a * spec
+            map_x[i, j] = x - strength * best_dx - 0.5
+            map_y[i, j] = y - strength * best_dy - 0.5
+
+
+@numba.njit(parallel=True, cache=True)
+def _composite_kernel(
+    rgb: np.ndarray, seen: np.ndarray, alpha: np.ndarray, highlight: np.ndarray, k_s: float, out: np.ndarray
+) -> None:  # pragma: no cover - compiled
+    """``out = (1 − α) rgb + α seen + k_s highlight`` where ``α > 0``; other pixels left as they are."""
+    for i in numba.prange(rgb.shape[0]):
+        for j in range(rgb.shape[1]):
+            a = alpha[i, j]
+            if a <= 0.0:
+                continue
+            spec = k_s * highlight[i, j]
+            for ch in range(3):
+                out[i, j, ch] = (1.0 - a) * rgb[i, j, ch] + a * seen[i, j, ch] + spec
+
+
+# ------------------------------------------------------------------ python side
+def _check_params(scale: float, radius: float, strength: float, blur_sigma: float, blur_kernel: int) -> dict[str, Any]:
+    params = SPEC.validate_params(
+        {"scale": scale, "radius": radius, "strength": strength, "blur_sigma": blur_sigma, "blur_kernel": blur_kernel}
+    )
+    k = params["blur_kernel"]
+    if k % 2 == 0:
+        raise ParameterError(
+            f"degradation {NAME!r}: parameter 'blur_kernel' = {k} must be odd (OpenCV GaussianBlur ksize); "
+            f"use {k - 1} or {k + 1}"
+        )
+    return params
+
+
+def _draw_drops(shape: tuple[int, int], scale: float, radius: float, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+    """Per-layer grids and per-cell drops (centre x, y and radius in px; radius 0 = no drop)."""
+    height, width = shape
+    finest = min(height, width) / (scale * 2.0 ** (N_LAYERS - 1))
+    if np.ceil(width / finest) * np.ceil(height / finest) > MAX_CELLS:
+        raise ParameterError(
+            f"degradation {NAME!r}: scale {scale:g} on a {height}×{width} image needs more than {MAX_CELLS:.0e} drop "
+            "cells (the frequency counts cells across the shorter side); lower scale or use a less elongated image"
+        )
+    cells, cols, rows, offsets, cx, cy, rr = [], [], [], [], [], [], []
+    total = 0
+    for layer in range(N_LAYERS):
+        c = min(height, width) / (scale * 2.0**layer)
+        n_cols, n_rows = max(1, int(np.ceil(width / c))), max(1, int(np.ceil(height / c)))
+        u = rng.random((4, n_rows, n_cols))
+        r = np.where(u[0] < PRESENCE[layer], radius * 0.5 * c * (MIN_SIZE + (1.0 - MIN_SIZE) * u[1]), 0.0)
+        room = 0.5 * c - r  # the centre may move this far from the cell centre, keeping the drop inside
+        cx.append(((np.arange(n_cols) + 0.5) * c + room * (2.0 * u[2] - 1.0)).ravel())
+        cy.append(((np.arange(n_rows)[:, None] + 0.5) * c + room * (2.0 * u[3] - 1.0)).ravel())
+        rr.append(r.ravel())
+        cells.append(c)
+        cols.append(n_cols)
+        rows.append(n_rows)
+        offsets.append(total)
+        total += n_cols * n_rows
+    return (
+        np.asarray(cells, np.float64),
+        np.asarray(cols, np.int64),
+        np.asarray(rows, np.int64),
+        np.asarray(offsets, np.int64),
+        np.concatenate(cx),
+        np.concatenate(cy),
+        np.concatenate(rr),
+    )
+
+
+def droplet_field(
+    shape: tuple[int, int], scale: float, radius: float, strength: float, rng: np.random.Generator
+) -> DropletField:
+    """Draw a drop field on an image of ``shape = (H, W)`` (see the module docstring for units).
+
+    :func:`water_droplets` calls this first with its ``rng``, so the same seed gives the same
+    field here and there. ``scale = 0`` or ``radius = 0`` gives an empty field without using ``rng``.
+    """
+    height, width = (int(v) for v in shape)
+    p = SPEC.validate_params({"scale": scale, "radius": radius, "strength": strength}, partial=True)
+    scale, radius, strength = p["scale"], p["radius"], p["strength"]
+    if not isinstance(rng, np.random.Generator):
+        raise InvalidDataError(f"{NAME}: rng must be a numpy.random.Generator, got {type(rng).__name__}; use np.random.default_rng(seed)")
+    field = DropletField(*(np.empty((height, width), np.float32) for _ in range(5)))
+    if scale == 0.0 or radius == 0.0:
+        for array in (field.alpha, field.height, field.highlight):
+            array.fill(0.0)
+        field.map_x[:] = np.arange(width, dtype=np.float32)
+        field.map_y[:] = np.arange(height, dtype=np.float32)[:, None]
+        return field
+    drops = _draw_drops((height, width), scale, radius, rng)
+    _field_kernel(
+        height, width, *drops, strength, np.asarray(LIGHT_DIRECTION, np.float64), SHININESS_LOG2, EDGE_WIDTH,
+        field.alpha, field.height, field.highlight, field.map_x, field.map_y,
+    )
+    return field
+
+
+def water_droplets(
+    rgb: np.ndarray,
+    scale: float,
+    radius: float,
+    strength: float,
+    blur_sigma: float,
+    blur_kernel: int,
+    rng: np.random.Generator,
+    *,
+    specular: float = SPECULAR_INTENSITY,
+) -> np.ndarray:
+    """Water drops on the lens over linear-light ``rgb`` (see the module docstring for the model).
+
+    Args:
+        rgb: float32 (H, W, 3) linear light, unclamped, finite; not modified.
+        scale: largest-layer cells across the shorter side (1/image), [0, 100].
+        radius: largest drop radius / cell half-size, [0, 1].
+        strength: refraction strength (dimensionless), [0, 5].
+        blur_sigma: in-drop Gaussian σ in px, [0, 20].
+        blur_kernel: odd in-drop kernel side in px, [1, 51].
+        rng: source of the drop placement.
+        specular: Phong ``k_s`` in linear light (0 disables the highlights).
+
+    Returns:
+        A new float32 (H, W, 3) array, equal to ``rgb`` bit for bit outside the drops.
+    """
+    rgb = check_linear_rgb(rgb, NAME)
+    params = _check_params(scale, radius, strength, blur_sigma, blur_kernel)
+    if not (math.isfinite(specular) and specular >= 0.0):
+        raise ParameterError(f"{NAME}: specular must be a finite number >= 0 (linear light), got {specular!r}")
+    if not np.isfinite(rgb).all():
+        bad = np.argwhere(~np.isfinite(rgb))
+        raise InvalidDataError(
+            f"{NAME}: rgb has {len(bad)} non-finite value(s) (NaN or inf), first at (row, col, channel) "
+            f"{tuple(int(v) for v in bad[0])}; fix the render (linear light must be finite)"
+        )
+    out = rgb.copy()
+    if params["scale"] == 0.0 or params["radius"] == 0.0:
+        return out
+    field = droplet_field(rgb.shape[:2], params["scale"], params["radius"], params["strength"], rng)
+    seen = cv2.remap(rgb, field.map_x, field.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    k, sigma = params["blur_kernel"], params["blur_sigma"]
+    if k > 1 and sigma > 0.0:
+        seen = cv2.GaussianBlur(seen, (k, k), sigma, borderType=cv2.BORDER_REFLECT)
+    _composite_kernel(rgb, seen, field.alpha, field.highlight, float(specular), out)
+    return out
+
+
+def apply(rgb: np.ndarray, aux: Mapping[str, np.ndarray], params: Mapping[str, Any], rng: np.random.Generator) -> np.ndarray:
+    """Linear-stage ``apply``: ``params`` = scale, radius, strength, blur_sigma, blur_kernel; ``aux`` unused."""
+    p = SPEC.validate_params(params)
+    return water_droplets(rgb, p["scale"], p["radius"], p["strength"], p["blur_sigma"], p["blur_kernel"], rng)
+
+
+SPEC = DegradationSpec(
+    name=NAME,
+    category=Category.METEOROLOGICAL,
+    stage=Stage.LINEAR,
+    params=(SCALE, RADIUS, STRENGTH, BLUR_SIGMA, BLUR_KERNEL),
+    presets={
+        "bench": {"scale": (2.5, 4.0), "radius": (0.25, 0.75), "strength": (0.3, 0.5), "blur_sigma": (2.0, 2.5), "blur_kernel": 9},
+        "1": {"scale": (2.5, 4.0), "radius": (0.15, 0.25), "strength": (0.1, 0.2), "blur_sigma": (0.5, 1.0), "blur_kernel": 5},
+        "2": {"scale": (2.5, 4.0), "radius": (0.25, 0.4), "strength": (0.2, 0.3), "blur_sigma": (1.0, 1.5), "blur_kernel": 7},
+        "3": {"scale": (2.5, 4.0), "radius": (0.35, 0.55), "strength": (0.3, 0.4), "blur_sigma": (1.5, 2.0), "blur_kernel": 9},
+        "4": {"scale": (2.5, 4.0), "radius": (0.5, 0.75), "strength": (0.4, 0.5), "blur_sigma": (2.0, 2.5), "blur_kernel": 9},
+        "5": {"scale": (2.5, 4.0), "radius": (0.7, 0.9), "strength": (0.5, 0.7), "blur_sigma": (2.5, 3.0), "blur_kernel": 11},
+    },
+    apply=apply,
+    needs=frozenset(),
+    description=(
+        "Drops on the lens: 3-layer hemispherical height map (scale = cells across the shorter side, radius = "
+        "fraction of the half-cell); refraction p - strength*r*n_xy via cv2.remap, in-drop Gaussian blur "
+        "(blur_sigma px, odd blur_kernel px), Phong highlight, soft edges; untouched outside drops."
+    ),
+    order=20.0,
+)
+
+
+@hookimpl
+def spacedg_register_degradations(register: Any) -> None:
+    """Register :data:`SPEC`."""
+    register(SPEC)

@@ -1,0 +1,217 @@
+"""Built-in ``water_droplets`` degradation (linear stage, lens drops)."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+
+from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.plugins import Category, Stage
+from spacedg.plugins.degradations.water_droplets import SPEC, SPECULAR_INTENSITY, droplet_field, water_droplets
+from spacedg.render.colour import linear_to_srgb
+
+BENCH = {"scale": 3.0, "radius": 0.6, "strength": 0.4, "blur_sigma": 2.2, "blur_kernel": 9}
+
+
+def _textured(height: int = 96, width: int = 128) -> np.ndarray:
+    """Linear-light test image: gradients, a checkerboard, a sinusoid and an HDR 'window' (4.0)."""
+    y, x = np.mgrid[0:height, 0:width].astype(np.float32)
+    base = np.stack([x / width, y / height, 0.5 + 0.4 * np.sin(x / 5.0) * np.cos(y / 7.0)], axis=-1)
+    image = 0.6 * base * np.where(((x // 12 + y // 12) % 2 == 0)[..., None], 0.3, 1.0)
+    image[5:20, 70:100] = 4.0
+    return image.astype(np.float32)
+
+
+def _apply(image: np.ndarray, seed: int = 0, **changes: float) -> np.ndarray:
+    return SPEC.apply(image, {}, {**BENCH, **changes}, np.random.default_rng(seed))
+
+
+def _encode(linear: np.ndarray) -> np.ndarray:
+    return np.round(255.0 * linear_to_srgb(np.clip(linear.astype(np.float64), 0.0, 1.0)))
+
+
+def test_spec_declaration() -> None:
+    assert SPEC.name == "water_droplets" and SPEC.stage is Stage.LINEAR and SPEC.category is Category.METEOROLOGICAL
+    assert SPEC.order == 20.0 and SPEC.needs == frozenset()
+    params = SPEC.param_map
+    assert list(params) == ["scale", "radius", "strength", "blur_sigma", "blur_kernel"]
+    assert {n: (p.unit, p.low, p.high) for n, p in params.items()} == {
+        "scale": ("1/image", 0.0, 100.0),
+        "radius": ("1", 0.0, 1.0),
+        "strength": ("1", 0.0, 5.0),
+        "blur_sigma": ("px", 0.0, 20.0),
+        "blur_kernel": ("px", 1, 51),
+    }
+    assert params["blur_kernel"].integer
+    bench = {k: r.to_list() for k, r in SPEC.presets["bench"].items()}
+    assert bench == {"scale": [2.5, 4.0], "radius": [0.25, 0.75], "strength": [0.3, 0.5], "blur_sigma": [2.0, 2.5], "blur_kernel": [9, 9]}
+    for preset in SPEC.preset_names:  # an integer range would draw even kernels
+        kernel = SPEC.presets[preset]["blur_kernel"]
+        assert kernel.fixed and kernel.low % 2 == 1, preset
+
+
+@pytest.mark.parametrize("changes", [{"radius": 0.0}, {"scale": 0.0}, {"radius": 0.0, "strength": 5.0, "blur_sigma": 20.0}])
+def test_no_drops_is_bit_exact_identity(changes: dict[str, float]) -> None:
+    image = _textured()
+    out = _apply(image, **changes)
+    assert out.tobytes() == image.tobytes() and out is not image
+
+
+def test_outside_drops_untouched_inside_changed() -> None:
+    image = _textured()
+    out = _apply(image, seed=4)
+    alpha = droplet_field(image.shape[:2], BENCH["scale"], BENCH["radius"], BENCH["strength"], np.random.default_rng(4)).alpha
+    outside = alpha == 0.0
+    assert 0.05 < 1.0 - outside.mean() < 0.8, "the bench field should cover part of the image"
+    assert out[outside].tobytes() == image[outside].tobytes()
+    assert np.abs(out - image).max(axis=-1)[alpha > 0.5].mean() > 0.01
+
+
+def test_same_seed_same_bytes_different_seed_differs() -> None:
+    image = _textured()
+    assert _apply(image, seed=7).tobytes() == _apply(image.copy(), seed=7).tobytes()
+    assert _apply(image, seed=7).tobytes() != _apply(image, seed=8).tobytes()
+
+
+def test_thread_count_does_not_change_bytes() -> None:
+    image = _textured(120, 160)
+    before = numba.get_num_threads()
+    try:
+        results = []
+        for threads in (1, numba.config.NUMBA_NUM_THREADS):
+            numba.set_num_threads(threads)
+            results.append(_apply(image, seed=3, scale=6.0).tobytes())
+    finally:
+        numba.set_num_threads(before)
+    assert results[0] == results[1]
+
+
+@pytest.mark.parametrize("value", [0.0, 0.37, 1.0, 5.0])
+def test_constant_image_stays_constant_plus_highlight(value: float) -> None:
+    # Refraction and blur of a constant field are constant; only the Phong highlight adds light.
+    image = np.full((80, 112, 3), value, np.float32)
+    params = {**BENCH, "radius": 0.9, "strength": 1.7}
+    plain = water_droplets(image, **params, rng=np.random.default_rng(2), specular=0.0)
+    np.testing.assert_allclose(plain, value, rtol=1e-6, atol=1e-7)
+    lit = water_droplets(image, **params, rng=np.random.default_rng(2))
+    field = droplet_field(image.shape[:2], params["scale"], params["radius"], params["strength"], np.random.default_rng(2))
+    assert field.highlight.max() > 0.5, "some highlight should be near its peak"
+    expected = np.broadcast_to(value + SPECULAR_INTENSITY * field.highlight[..., None], image.shape)
+    np.testing.assert_allclose(lit, expected, rtol=1e-6, atol=1e-6)
+
+
+def test_refraction_magnifies_and_inverts() -> None:
+    # A drop shows the scene at c + (1 - strength)(p - c): over a horizontal ramp of slope 1/64
+    # per px, the ramp inside a drop has slope (1 - strength)/64 (1.5x magnifier at 0.5, flat at
+    # 1, mirrored at 2). Blur and highlight off; pairs of neighbours inside the same drop.
+    y, x = np.mgrid[0:64, 0:96].astype(np.float32)
+    image = np.repeat((x / 64.0)[..., None], 3, axis=-1)
+
+    def run(strength: float) -> np.ndarray:
+        return water_droplets(image, 1.5, 1.0, strength, 0.0, 1, np.random.default_rng(0), specular=0.0)[..., 0]
+
+    core = droplet_field((64, 96), 1.5, 1.0, 1.0, np.random.default_rng(0)).alpha == 1.0
+    centre_value = run(1.0)  # strength 1: every pixel of a drop shows its centre, a drop id
+    assert core.sum() > 1000 and len(np.unique(centre_value[core])) <= 6 + 15 + 54  # at most one per cell (3 layers)
+    same_drop = core[:, 1:] & core[:, :-1] & (centre_value[:, 1:] == centre_value[:, :-1])
+    for strength in (0.5, 2.0):
+        slope = np.diff(run(strength), axis=1)[same_drop] * 64.0
+        assert np.mean(np.abs(slope - (1.0 - strength)) < 1e-3) > 0.9, strength
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {"scale": 0.0},
+        {"scale": 100.0},
+        {"scale": 0.01, "strength": 5.0},
+        {"radius": 1.0, "strength": 5.0},
+        {"strength": 0.0},
+        {"blur_kernel": 1},
+        {"blur_kernel": 51, "blur_sigma": 20.0},
+        {"blur_kernel": 51, "blur_sigma": 0.01},
+        {"blur_sigma": 0.0},
+    ],
+)
+@pytest.mark.parametrize("fill", [None, 0.0, 1e30])
+def test_extremes_finite_shape_dtype(changes: dict[str, float], fill: float | None) -> None:
+    image = _textured(48, 64) if fill is None else np.full((48, 64, 3), fill, np.float32)
+    out = _apply(image, seed=1, **changes)
+    assert out.dtype == np.float32 and out.shape == image.shape and np.isfinite(out).all()
+    encoded = _encode(out)
+    assert encoded.min() >= 0 and encoded.max() <= 255
+
+
+def test_hdr_survives_and_tiny_images() -> None:
+    image = np.full((40, 40, 3), 50.0, np.float32)
+    out = water_droplets(image, 2.0, 1.0, 0.5, 2.0, 9, np.random.default_rng(0), specular=0.0)
+    np.testing.assert_allclose(out, 50.0, rtol=1e-6)  # no clipping of real light above 1
+    for shape in ((1, 1, 3), (1, 7, 3), (5, 1, 3)):
+        tiny = _apply(np.full(shape, 0.5, np.float32), scale=100.0, radius=1.0)
+        assert tiny.shape == shape and np.isfinite(tiny).all()
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_input_rejected(bad: float) -> None:
+    image = _textured(16, 16)
+    image[3, 5, 1] = bad
+    with pytest.raises(InvalidDataError, match=r"1 non-finite value\(s\).*\(3, 5, 1\)"):
+        _apply(image)
+
+
+def test_distance_rises_with_severity() -> None:
+    image = _textured(120, 160)
+    clean = _encode(image)
+    distances = []
+    for level in ("1", "2", "3", "4", "5"):
+        per_seed = []
+        for seed in range(4):
+            params = SPEC.sample_params(level, np.random.default_rng(seed))
+            per_seed.append(np.mean(np.abs(_encode(SPEC.apply(image, {}, params, np.random.default_rng(seed))) - clean)))
+        distances.append(float(np.mean(per_seed)))
+    assert all(a < b for a, b in zip(distances, distances[1:])), distances
+
+
+@pytest.mark.parametrize(
+    ("changes", "pattern"),
+    [
+        ({"blur_kernel": 8}, r"'blur_kernel' = 8 must be odd.*use 7 or 9"),
+        ({"blur_kernel": 52}, r"outside its hard limits \[1, 51\]"),
+        ({"blur_kernel": 7.5}, "must be an integer"),
+        ({"scale": -1.0}, r"outside its hard limits \[0, 100\]"),
+        ({"radius": 1.5}, r"outside its hard limits \[0, 1\]"),
+        ({"strength": 6.0}, r"outside its hard limits \[0, 5\]"),
+        ({"blur_sigma": 21.0}, r"outside its hard limits \[0, 20\]"),
+        ({"blur_sigma": float("nan")}, "must be a finite number"),
+        ({"radiu": 0.5}, "Did you mean 'radius'"),
+    ],
+)
+def test_bad_params_rejected(changes: dict[str, float], pattern: str) -> None:
+    with pytest.raises(ParameterError, match=pattern):
+        _apply(_textured(16, 16), **changes)
+
+
+def test_extreme_aspect_ratio_at_high_scale_rejected() -> None:
+    with pytest.raises(ParameterError, match="lower scale or use a less elongated image"):
+        _apply(np.zeros((1, 30000, 3), np.float32), scale=100.0)
+    with pytest.raises(ParameterError, match="specular must be a finite number >= 0"):
+        water_droplets(_textured(16, 16), **BENCH, rng=np.random.default_rng(0), specular=-1.0)
+
+
+def test_missing_param_and_bad_inputs_rejected() -> None:
+    with pytest.raises(ParameterError, match=r"missing parameter\(s\) \['blur_kernel'\]"):
+        SPEC.apply(_textured(16, 16), {}, {k: v for k, v in BENCH.items() if k != "blur_kernel"}, np.random.default_rng(0))
+    with pytest.raises(InvalidDataError, match="float32"):
+        _apply(_textured(16, 16).astype(np.float64))
+    with pytest.raises(InvalidDataError, match="numpy.random.Generator"):
+        SPEC.apply(_textured(16, 16), {}, BENCH, 0)  # type: ignore[arg-type]
+
+
+def test_input_not_modified() -> None:
+    image = _textured()
+    before = image.copy()
+    _apply(image, seed=2, strength=3.0)
+    assert image.tobytes() == before.tobytes()
+    strided = _textured(96, 256)[:, ::2]  # non-contiguous view
+    assert _apply(strided).shape == strided.shape
