@@ -26,6 +26,7 @@ demo: $(STAMP)
 	$(BIN)/spacedg scenes synth --n 4 --out $(DEMO_DIR)/scenes
 	$(BIN)/spacedg scenes info $(DEMO_DIR)/scenes
 	$(BIN)/spacedg scenes preview $(DEMO_DIR)/scenes --out $(DEMO_DIR)/floorplans.png
+	$(BIN)/spacedg gallery $(DEMO_DIR)/scenes/room-000000 --view frame_0000 --out $(DEMO_DIR)/gallery.png
 	$(BIN)/spacedg plugins
 
 test: $(STAMP)

@@ -44,7 +44,7 @@ def brute_force_composite(packed: np.ndarray, rects: np.ndarray, ids: np.ndarray
     Implements the compositing rules literally (no tiles, no vectorisation): the oracle for
     both compositors.
     """
-    from spacedg.render.project_cpu import CA, CB, CBL, CC, CG, CR, DEPTH, OPA, PX, PY
+    from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, CR, DEPTH, OPA, PX, PY
 
     visible = np.flatnonzero(rects[:, 1] > rects[:, 0])
     order = visible[np.argsort(packed[visible, DEPTH], kind="stable")]
@@ -66,7 +66,7 @@ def brute_force_composite(packed: np.ndarray, rects: np.ndarray, ids: np.ndarray
                 if sigma < 0:
                     continue
                 a = min(alpha_max, rec[OPA] * np.exp(-sigma))
-                if a < 1.0 / 255.0:
+                if a < rec[AMIN]:
                     continue
                 t_next = t * (1.0 - a)
                 if t_next <= 1e-4:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 import pytest
@@ -11,7 +13,8 @@ from spacedg.plugins import Category, Stage
 from spacedg.plugins.degradations import low_light as low_light_module
 from spacedg.plugins.degradations import over_exposure as over_exposure_module
 from spacedg.plugins.degradations._common import stream_key
-from spacedg.plugins.degradations._sensor import READ_TUKEY, SIGNAL_CAP, tukey_lambda_std
+from spacedg.plugins.degradations import _sensor
+from spacedg.plugins.degradations._sensor import READ_TUKEY, SIGNAL_CAP, sensor_capture, tukey_lambda_std
 from spacedg.plugins.degradations.low_light import SPEC as LOW_LIGHT
 from spacedg.plugins.degradations.low_light import low_light
 from spacedg.plugins.degradations.over_exposure import SPEC as OVER_EXPOSURE
@@ -132,14 +135,84 @@ def test_photon_transfer_variance(exposure: float) -> None:
     assert out.var() == pytest.approx(expected_var, rel=0.02)
 
 
-@pytest.mark.parametrize("rate", [0.3, 3.0, 9.99, 10.0, 47.0, 999.0, 1e3, 2.5e4, 1e7])
+@pytest.mark.parametrize("rate", [0.3, 0.0625, 3.0, 9.99, 10.0, 47.0, 63.99, 64.0, 999.0, 1e3, 2.5e4, 1e7])
 def test_poisson_mean_and_variance_equal_the_rate(rate: float) -> None:
-    # k = 1, exposure 1: y = Poisson(x); inversion, PTRS and (from 1e3) the normal approximation
+    # k = 1, exposure 1: y = Poisson(x); table (< 64), PTRS and (from 1e3) the normal approximation
     out = _apply(LOW_LIGHT, _flat(rate), seed=2, exposure=1.0, k=1.0, sigma_read=0.0).astype(np.float64)
     assert abs(out.mean() - rate) < 5.0 * np.sqrt(rate / out.size)
     assert out.var() == pytest.approx(rate, rel=0.02)
     if rate < 1e3:
         assert np.array_equal(out, np.round(out)) and out.min() >= 0.0
+
+
+@pytest.mark.parametrize("rate", [0.0301, 0.0625, 3.7, 17.93, 63.99])
+def test_table_sampler_matches_the_poisson_pmf(rate: float) -> None:
+    # 1.2e6 draws of Poisson(rate) (k = 1, exposure 1, no read noise) against the exact pmf
+    draws = sensor_capture(np.full(1_200_000, rate, np.float32), exposure=1.0, k=1.0, sigma_read=0.0, key=77)
+    counts = np.bincount(draws.astype(np.int64))
+    n = np.arange(counts.size + 20, dtype=np.float64)
+    lam = float(np.float32(rate))
+    log_factorial = np.array([math.lgamma(v + 1.0) for v in n])
+    pmf = np.exp(n * math.log(lam) - lam - log_factorial)
+    expected = draws.size * pmf
+    observed = np.concatenate([counts, np.zeros(20)])
+    # every count within 5 standard deviations (+1 for the tiniest cells) of its expectation
+    assert (np.abs(observed - expected) <= 5.0 * np.sqrt(expected) + 1.0).all()
+    # chi-square over the cells with ≥ 5 expected, the rest pooled
+    big = expected >= 5.0
+    obs = np.append(observed[big], observed[~big].sum())
+    exp = np.append(expected[big], expected[~big].sum())
+    keep = exp > 0
+    chi2, dof = float((((obs - exp) ** 2)[keep] / exp[keep]).sum()), int(keep.sum()) - 1
+    assert chi2 < dof + 5.0 * math.sqrt(2.0 * max(dof, 1)), (chi2, dof)
+
+
+def test_poisson_tables_are_the_exact_cdf() -> None:
+    thresholds, row_start, guide = _sensor._POISSON_THRESHOLDS, _sensor._POISSON_ROW_START, _sensor._POISSON_GUIDE
+    for g in (0, 1, 37, 512, 1023):
+        row = thresholds[row_start[g] : row_start[g + 1]].astype(np.float64)
+        lam = g / 16.0
+        n = np.arange(row.size, dtype=np.float64)
+        cdf = np.cumsum(np.exp(n * math.log(lam) - lam - np.array([math.lgamma(v + 1.0) for v in n]))) if g else np.ones(1)
+        assert row[-1] == 2.0**32 - 1 and np.all(np.diff(row) >= 0)
+        if row.size > 1:  # T_n = ceil(F(n)·2³²) − 1
+            assert np.abs((row[:-1] + 1.0) / 2.0**32 - cdf[:-1]).max() <= 2.0**-32
+        assert cdf[-1] > 1.0 - 2.0**-32
+        for j in range(_sensor._TABLE_GUIDE):  # guide: first n with T_n ≥ j·2²⁴
+            first = int(np.argmax(row >= j * 2.0**24))
+            assert guide[g, j] == first
+
+
+def test_normal_quantile_table_is_accurate_in_the_centre_and_the_tails() -> None:
+    @numba.njit
+    def worst(bits, table):
+        out = 0.0
+        for b in bits:
+            u = (np.float64(np.int64(b >> np.uint64(12))) + 0.5) * 2.0**-52
+            out = max(out, abs(_sensor._normal(b, table) - _sensor._normal_quantile(u)))
+        return out
+
+    rng = np.random.default_rng(3)
+    uniform_bits = rng.integers(0, 2**63, size=500_000, dtype=np.uint64) * np.uint64(2)
+    octave = rng.integers(0, 51, 500_000)
+    m = np.minimum(np.floor(2.0**octave * (1.0 + rng.random(500_000))), 2.0**52 - 1).astype(np.uint64)
+    tails = np.concatenate([m, np.uint64(2**52 - 1) - m, np.array([0, 1, 63, 64, 2**51 - 1, 2**51, 2**52 - 1], np.uint64)])
+    assert worst(uniform_bits, _sensor._NORMAL_COEFFICIENTS) < 1e-9
+    assert worst(tails << np.uint64(12), _sensor._NORMAL_COEFFICIENTS) < 1e-9
+
+
+@pytest.mark.parametrize(("k", "sigma_read", "read_model"), [(1e-4, 2.5e-4, 0), (1e-4, 0.0, 0), (0.0, 2.5e-4, 0), (1e-2, 0.1, READ_TUKEY)])
+def test_saturation_shortcut_gives_the_same_bytes(k: float, sigma_read: float, read_model: int) -> None:
+    image = np.ascontiguousarray(_textured(97, 131).reshape(-1) * np.float32(3.0))
+    shortcut = sensor_capture(image, exposure=8.5, k=k, sigma_read=sigma_read, key=5, read_model=read_model, read_lambda=-0.2, clip=True)
+    read_scale = sigma_read / (tukey_lambda_std(-0.2) if read_model == READ_TUKEY else 1.0)
+    full = np.empty_like(image)
+    _sensor._sensor_kernel(
+        image, full, 8.5, k, read_scale, read_model, -0.2, True, math.inf, np.uint64(5), _sensor._POISSON_THRESHOLDS,
+        _sensor._POISSON_ROW_START, _sensor._POISSON_GUIDE, _sensor._NORMAL_COEFFICIENTS,
+    )
+    assert shortcut.tobytes() == full.tobytes()
+    assert (full == 1.0).mean() > 0.3
 
 
 @pytest.mark.parametrize("lam", [-0.2, -1e-7, 0.0, 1e-7, 0.14, 0.5, 1.0])

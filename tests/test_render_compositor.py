@@ -10,7 +10,7 @@ from render_helpers import brute_force_composite, camera, random_gaussians
 from spacedg.render import Defocus, RasterSettings, render
 from spacedg.render import project_cpu, raster_cpu, raster_torch
 from spacedg.render.project import Projected
-from spacedg.render.project_cpu import CA, CB, CBL, CC, CR, DEPTH, OPA, PX, PY, RADX, RADY
+from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 
 SETTINGS = RasterSettings()
 
@@ -21,7 +21,8 @@ def as_projected(packed: np.ndarray, rects: np.ndarray) -> Projected:
     visible = torch.from_numpy(rects[:, 1] > rects[:, 0])
     radii = torch.stack([t[:, RADX], t[:, RADY]], 1).to(torch.int32) * visible[:, None]
     return Projected(
-        t[:, [PX, PY]], t[:, [CA, CB, CC]], t[:, OPA], t[:, CR : CBL + 1], t[:, DEPTH], radii, torch.from_numpy(rects.copy())
+        t[:, [PX, PY]], t[:, [CA, CB, CC]], t[:, OPA], t[:, CR : CBL + 1], t[:, DEPTH], radii, torch.from_numpy(rects.copy()),
+        t[:, AMIN],
     )
 
 

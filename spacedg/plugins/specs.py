@@ -19,15 +19,18 @@ them in. Every ``apply`` is deterministic given ``(input, params, rng)``: it dra
 only from ``rng`` (a :class:`numpy.random.Generator`), never from global state.
 
 ``Stage.RASTER`` — :class:`RasterApply`
-    ``apply(options, params, rng) -> options``: receives the render options of the view
-    (camera, lens, sub-steps, defocus settings, …) and returns changed options; it never
-    sees pixels. The concrete render-request type arrives with the renderer, so it is typed
-    loosely (``Any``) here; an ``apply`` must return a new object, not mutate its input.
+    ``apply(request, params, rng) -> request``: receives the view's
+    :class:`spacedg.render.request.RenderRequest` (camera and lens, defocus, motion, outputs)
+    and returns an edited copy (``dataclasses.replace``); it never sees pixels. It is typed
+    loosely (``Any``) here so this module does not import the renderer.
 ``Stage.LINEAR`` — :class:`LinearApply`
     ``apply(rgb, aux, params, rng) -> rgb``: ``rgb`` is linear-light HDR float32 (H, W, 3),
     **unclamped** (values above 1 are real light); ``aux`` maps the render outputs the spec
     declared in ``needs`` (e.g. ``"depth"``: (H, W) float32 metres, expected z along the optical
     axis; ``"alpha"``: (H, W) float32; ``"instance_ids"``: (H, W) int32, -1 = none) to arrays.
+    When some degradation of the sample needs depth, the pipeline also passes
+    ``aux["far_depth"]``: the sample's far surface depth in metres (99th percentile of covered
+    depths, maximum over the sample's views), for models normalised by depth.
     Returns float32 (H, W, 3); the input must not be modified in place.
 ``Stage.DISPLAY`` — :class:`DisplayApply`
     ``apply(image, params, rng) -> image``: ``image`` is the encoded 8-bit sRGB picture,

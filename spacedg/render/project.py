@@ -16,7 +16,7 @@ import torch
 
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians, quat_to_matrix, sh_basis
-from spacedg.render.settings import TILE_SIZE, Defocus, RasterSettings
+from spacedg.render.settings import ALPHA_MIN, TILE_SIZE, Defocus, RasterSettings
 
 _TENSOR_CACHE: "weakref.WeakKeyDictionary[Gaussians, dict]" = weakref.WeakKeyDictionary()
 
@@ -57,6 +57,8 @@ class Projected:
         means2d: (N, 2) pixel coordinates of the projected mean.
         conics: (N, 3) inverse 2D covariance ``(a, b, c)``: ``σ = ½(a dx² + c dy²) + b dx dy``.
         opacities: (N,) opacity after antialiasing/defocus compensation.
+        alpha_floor: (N,) smallest alpha composited: 1/255, times the defocus compensation
+            (a blurred Gaussian keeps the same fraction of its energy as the sharp one).
         colors: (N, 3) sRGB-encoded colour along the view direction (``None`` if not requested).
         depths: (N,) camera z, metres.
         radii: (N, 2) int32 footprint half-extent in pixels; (0, 0) = culled.
@@ -70,6 +72,7 @@ class Projected:
     depths: torch.Tensor
     radii: torch.Tensor
     rects: torch.Tensor
+    alpha_floor: torch.Tensor
 
     @property
     def visible(self) -> torch.Tensor:
@@ -168,19 +171,23 @@ def project(
     sxx, syy = sxx + settings.eps2d, syy + settings.eps2d
     det = sxx * syy - sxy * sxy
     opacity = gs.opacities
+    alpha_floor = torch.full_like(opacity, ALPHA_MIN)
     if settings.antialiased:
         opacity = opacity * torch.sqrt(torch.clamp(det_raw / det, min=0.0))
     if defocus is not None and defocus.aperture > 0:
         coc = torch.clamp(defocus.aperture * torch.abs(cam_safe[:, 2] - defocus.focus) / cam_safe[:, 2], max=defocus.max_radius)
         sxx, syy = sxx + coc * coc, syy + coc * coc
         det_blur = sxx * syy - sxy * sxy
-        opacity = opacity * torch.sqrt(torch.clamp(det / det_blur, min=0.0))
+        compensation = torch.sqrt(torch.clamp(det / det_blur, min=0.0))
+        opacity = opacity * compensation
+        alpha_floor = alpha_floor * compensation
         det = det_blur
     det = torch.clamp(det, min=1e-10)
     conics = torch.stack([syy / det, -sxy / det, sxx / det], dim=-1)
     if settings.opacity_extent:
-        opaque_enough = opacity * 255.0 >= 1.0
-        extent = torch.clamp(torch.sqrt(2.0 * torch.log(torch.clamp(255.0 * opacity, min=1.0))), max=3.33)
+        opaque_enough = opacity >= alpha_floor
+        ratio = torch.clamp(opacity / torch.clamp(alpha_floor, min=1e-30), min=1.0)
+        extent = torch.clamp(torch.sqrt(2.0 * torch.log(ratio)), max=3.33)
     else:
         opaque_enough = torch.ones_like(in_range)
         extent = torch.full_like(opacity, 3.33)
@@ -209,4 +216,4 @@ def project(
         degree = int(round(math.sqrt(gs.sh.shape[1]))) - 1
         basis = sh_basis(degree, dirs)
         colors = torch.clamp(torch.einsum("nk,nkc->nc", basis, gs.sh) + 0.5, min=0.0)
-    return Projected(means2d, conics, opacity, colors, z, radii, rects)
+    return Projected(means2d, conics, opacity, colors, z, radii, rects, alpha_floor)

@@ -10,8 +10,11 @@ against gsplat's torch reference and against float64 finite differences):
    equidistant fisheye with k1..k4 (rays beyond the lens's effective max θ are culled).
 4. ``+ eps2d·I`` dilation; optional antialiasing compensation; optional defocus
    (``+ r_CoC²·I`` with the sqrt-det opacity compensation taken after the dilation).
-5. cull ``opacity < 1/255``; footprint radius ``ceil(extent·sqrt(Σ_ii))`` per axis with
-   ``extent = min(3.33, sqrt(2 ln(255 o)))``; cull footprints outside the image.
+5. alpha floor ``f = 1/255``, times the defocus compensation under defocus (a blurred
+   Gaussian then keeps the same fraction of its energy as the sharp one; with a fixed 1/255
+   a small Gaussian spread over a large CoC would lose its tails or vanish); cull
+   ``opacity < f``; footprint radius ``ceil(extent·sqrt(Σ_ii))`` per axis with
+   ``extent = min(3.33, sqrt(2 ln(o / f)))``; cull footprints outside the image.
 6. colour from SH along the camera-centre → mean direction, ``max(0, 0.5 + Σ sh·Y)``.
 
 Everything is computed in float64 and stored in float32. The result is a packed
@@ -36,8 +39,8 @@ if TYPE_CHECKING:
     from spacedg.render.settings import Defocus, RasterSettings
 
 #: Columns of the packed per-Gaussian record.
-PX, PY, CA, CB, CC, OPA, CR, CG, CBL, DEPTH, RADX, RADY = range(12)
-PACKED = 12
+PX, PY, CA, CB, CC, OPA, CR, CG, CBL, DEPTH, RADX, RADY, AMIN = range(13)
+PACKED = 13
 
 _C1 = _SH_C1
 _C20, _C21, _C22, _C23, _C24 = _SH_C2
@@ -190,6 +193,7 @@ def project_gaussians(
         syy += eps2d
         det = sxx * syy - sxy * sxy
         opacity = float(opacities[i])
+        alpha_floor = 1.0 / 255.0
         if antialiased:
             opacity *= math.sqrt(max(det_raw / max(det, 1e-300), 0.0))
         if aperture > 0.0:
@@ -198,13 +202,17 @@ def project_gaussians(
             sxx += coc2
             syy += coc2
             det_blur = sxx * syy - sxy * sxy
-            opacity *= math.sqrt(max(det / max(det_blur, 1e-300), 0.0))
+            compensation = math.sqrt(max(det / max(det_blur, 1e-300), 0.0))
+            opacity *= compensation
+            alpha_floor *= compensation
             det = det_blur
+            if not alpha_floor > 0.0:  # compensation underflowed: the Gaussian is spread over ~∞ pixels
+                continue
         det = max(det, 1e-10)
         if opacity_extent:
-            if not opacity * 255.0 >= 1.0:
+            if not opacity >= alpha_floor:
                 continue
-            extent = min(3.33, math.sqrt(2.0 * math.log(255.0 * opacity)))
+            extent = min(3.33, math.sqrt(2.0 * math.log(opacity / alpha_floor)))
         else:
             extent = 3.33
         rad_x = math.ceil(extent * math.sqrt(sxx))
@@ -231,6 +239,7 @@ def project_gaussians(
         packed[i, CB] = -sxy / det
         packed[i, CC] = sxx / det
         packed[i, OPA] = opacity
+        packed[i, AMIN] = alpha_floor
         packed[i, DEPTH] = z
         packed[i, RADX] = rad_x
         packed[i, RADY] = rad_y

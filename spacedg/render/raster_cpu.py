@@ -5,7 +5,7 @@ Pipeline (see :func:`rasterize`):
 1. one ``argsort`` of the visible Gaussians by camera depth;
 2. counting-sort binning into 16×16 tiles in that order, so every tile's list comes out
    already depth-sorted (no 64-bit keys, no per-tile sort). With ``tight`` binning a tile is
-   kept only if the Gaussian's ``alpha >= 1/255`` ellipse reaches one of its pixel centres;
+   kept only if the Gaussian's ``alpha >= f`` ellipse (its alpha floor, 1/255 when sharp) reaches one of its pixel centres;
 3. compositing, parallel over tiles: each tile keeps one flat state buffer (transmittance,
    live flag, accumulators) for its 256 pixels, walks its depth-ordered list front to back,
    and for every Gaussian updates only the tile rows its footprint covers, 16 pixels at a
@@ -13,7 +13,7 @@ Pipeline (see :func:`rasterize`):
    stops when all its pixels are saturated.
 
 Compositing rules (3DGS / gsplat): pixel centres at (j + ½, i + ½); ``σ = ½(a dx² + c dy²)
-+ b dx dy``; ``α = min(alpha_max, o·e^(−σ))``; skip ``σ < 0`` or ``α < 1/255``; stop before the
++ b dx dy``; ``α = min(alpha_max, o·e^(−σ))``; skip ``σ < 0`` or ``α < f`` (the Gaussian's alpha floor); stop before the
 Gaussian that would take transmittance ``T`` to ``<= 1e-4``. Depth outputs: expected depth
 ``Σ wᵢ zᵢ / Σ wᵢ`` and median depth = z of the last Gaussian added while ``T > ½`` before it;
 the instance id is that Gaussian's id where the pixel's ``T`` ends ``<= ½``, else -1.
@@ -26,14 +26,14 @@ import math
 import numba
 import numpy as np
 
-from spacedg.render.project_cpu import CA, CB, CBL, CC, CG, CR, DEPTH, OPA, PX, PY, RADY
+from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, CR, DEPTH, OPA, PX, PY, RADY
 
 @numba.njit(cache=True, inline="always")
 def _exp_neg(s):
     """``e^(−s)`` for s in [0, 8] as a polynomial (vectorisable; relative error < 3e-6).
 
     ``e^(−s) = (e^(−s/16))^16`` with a degree-6 Taylor polynomial on [0, ½]; inputs are
-    clamped to [0, 8] by the caller (beyond 8, any alpha is below 1/255 and skipped anyway).
+    clamped to [0, 8] by the caller (beyond 8, ``o e^(−σ) < f`` for every ``o / f <= 255``: skipped anyway).
     """
     x = s * np.float32(0.0625)
     p = np.float32(1.0) - x * (
@@ -66,8 +66,8 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
     """Counting-sort (Gaussian, tile) pairs by tile, keeping depth order inside each tile.
 
     With ``tight``, a tile of a footprint's bounding rectangle (when that rectangle spans at
-    least 2×2 tiles; smaller ones are kept whole) is dropped unless the ``α >= 1/255``
-    ellipse ``σ <= ln(255 o)`` reaches the rectangle of the tile's pixel centres: the minimum
+    least 2×2 tiles; smaller ones are kept whole) is dropped unless the ``α >= f``
+    ellipse ``σ <= ln(o / f)`` reaches the rectangle of the tile's pixel centres: the minimum
     of ``σ`` over that rectangle is 0 if the mean is inside, else the smallest clamped 1-D
     minimum along its four edges. Dropped tiles would have composited nothing.
 
@@ -90,7 +90,7 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
         test = tight and tx1 - tx0 >= 2 and ty1 - ty0 >= 2
         u, v = float(packed[g, PX]), float(packed[g, PY])
         a, b, c = float(packed[g, CA]), float(packed[g, CB]), float(packed[g, CC])
-        limit = math.log(255.0 * max(float(packed[g, OPA]), 1e-30)) + 1e-3
+        limit = math.log(max(float(packed[g, OPA]), 1e-30) / float(packed[g, AMIN])) + 1e-3
         for ty in range(ty0, ty1):
             y_lo = ty * 16 + 0.5 - v
             y_hi = min(ty * 16 + 16, height) - 0.5 - v
@@ -139,7 +139,6 @@ def composite(
     """
     n_tiles = offsets.shape[0] - 1
     amax = np.float32(alpha_max)
-    amin = np.float32(1.0 / 255.0)
     t_min = np.float32(1e-4)
     half = np.float32(0.5)
     zero = np.float32(0.0)
@@ -161,6 +160,7 @@ def composite(
             cb = packed[g, CB]
             cc = np.float32(0.5) * packed[g, CC]
             opa = packed[g, OPA]
+            amin = packed[g, AMIN]
             cr, cg, cbl = packed[g, CR], packed[g, CG], packed[g, CBL]
             z = packed[g, DEPTH]
             gid = np.float32(instance_ids[g])

@@ -14,14 +14,14 @@ import math
 import torch
 
 from spacedg.render.project import Projected
-from spacedg.render.settings import ALPHA_MIN, TILE_SIZE, TRANSMITTANCE_MIN
+from spacedg.render.settings import TILE_SIZE, TRANSMITTANCE_MIN
 
 
 def tile_reaches(
-    means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
+    means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, alpha_floor: torch.Tensor,
     tx: torch.Tensor, ty: torch.Tensor, width: int, height: int,
 ) -> torch.Tensor:
-    """Per pair: does the Gaussian's ``alpha >= 1/255`` ellipse reach a pixel centre of tile (tx, ty)?
+    """Per pair: does the Gaussian's ``alpha >= alpha_floor`` (1/255 when sharp) ellipse reach a pixel centre of tile (tx, ty)?
 
     Minimum of ``σ`` over the rectangle spanned by the tile's pixel centres (0 if the mean is
     inside it, else the smallest clamped 1-D minimum along its four edges).
@@ -46,7 +46,7 @@ def tile_reaches(
         dx = torch.minimum(torch.maximum(-b * dy / a_safe, x_lo), x_hi)
         best = torch.minimum(best, sigma(dx, dy))
     inside = (x_lo <= 0) & (x_hi >= 0) & (y_lo <= 0) & (y_hi >= 0)
-    limit = torch.log(torch.clamp(255.0 * opacities, min=1e-30)) + 1e-3
+    limit = torch.log(torch.clamp(opacities, min=1e-30) / alpha_floor) + 1e-3
     return inside | (best <= limit) | (a <= 0) | (c <= 0)
 
 
@@ -70,7 +70,7 @@ def bin_tiles(proj: Projected, width: int, height: int, tight: bool) -> tuple[to
         # as the compiled binning: only rectangles of at least 2×2 tiles are tested
         heights = rects[:, 3] - rects[:, 2]
         tested = torch.repeat_interleave((widths >= 2) & (heights >= 2), counts)
-        reaches = tile_reaches(proj.means2d[g], proj.conics[g], proj.opacities[g], tx.to(proj.means2d.dtype), ty.to(proj.means2d.dtype), width, height)
+        reaches = tile_reaches(proj.means2d[g], proj.conics[g], proj.opacities[g], proj.alpha_floor[g], tx.to(proj.means2d.dtype), ty.to(proj.means2d.dtype), width, height)
         keep = ~tested | reaches
         g, tx, ty = g[keep], tx[keep], ty[keep]
     tile = ty * tiles_x + tx
@@ -135,7 +135,7 @@ def composite(
             a, bb, c = (proj.conics[g, k][:, None, :] for k in range(3))
             sigma = 0.5 * (a * dx * dx + c * dy * dy) + bb * dx * dy
             alpha = torch.clamp(proj.opacities[g][:, None, :] * torch.exp(-sigma), max=alpha_max)
-            ok = (sigma >= 0) & (alpha >= ALPHA_MIN) & in_list[:, None, :] & alive[:, :, None]
+            ok = (sigma >= 0) & (alpha >= proj.alpha_floor[g][:, None, :]) & in_list[:, None, :] & alive[:, :, None]
             alpha = torch.where(ok, alpha, torch.zeros_like(alpha))
             kept = torch.cumprod(1.0 - alpha, dim=-1)
             t_after = trans[:, :, None] * kept

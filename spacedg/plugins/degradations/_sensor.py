@@ -17,20 +17,39 @@ equivalent ≈ 10⁴ e⁻ → ``k = 1e-4``; read noise ≈ 2.5 e⁻ → ``σ_rea
 defaults to 0.14, the value whose distribution is closest to a normal; λ < 0 gives the
 heavy tails ELD measured on dark frames.
 
-Sampling (compiled numba kernel, parallel over values):
+Sampling (compiled numba kernel, parallel over values), by the expected electron count
+``λ = s / k`` (computed as ``s·(1/k)``):
 
-- Poisson, exact below 10³ electrons: inversion for λ < 10, Hörmann's transformed rejection
-  with squeeze (PTRS, 1993) for 10 ≤ λ < 10³; normal approximation ``s + √(k·s)·Z`` above
-  (relative error of the approximation < 10⁻³ there; numpy raises on NaN rates and
-  ``torch.poisson`` returns garbage at 1e19, hence the own sampler).
+- ``λ < 64``: **exact** Poisson by table. ``Poisson(λ) = Poisson(λ_g) + Poisson(δ)`` (independent
+  draws), ``λ_g = ⌊16·λ⌋/16``, ``δ < 1/16``. One 64-bit draw: its high 32 bits ``U`` give
+  ``Poisson(λ_g)`` as ``min{n : U ≤ T_n}`` with ``T_n = ⌈F(n)·2³²⌉ − 1`` tabulated at import for the
+  1024 grid rates (``F`` the float64 CDF), started from a 256-bin guide table (≈ 1 comparison);
+  its low 32 bits give ``Poisson(δ)`` by inversion from 0 (``u < 1 − δ ≤ e^{−δ}`` decides 0
+  without an ``exp``, > 99.8 % of draws). Each pmf value is reproduced to within 2⁻³² ≈ 2.3e-10
+  (the resolution of the uniforms; the tail beyond ``F > 1 − 2⁻³²`` is folded into the last
+  table entry); no approximation otherwise.
+- ``64 ≤ λ < 10³``: exact Poisson by Hörmann's transformed rejection with squeeze (PTRS, 1993),
+  52-bit uniforms.
+- ``λ ≥ 10³``: normal approximation ``s + √(k·s)·Z`` (relative error of the approximation
+  < 10⁻³ there; numpy raises on NaN rates and ``torch.poisson`` returns garbage at 1e19, hence
+  the own sampler).
+- ``Z`` (that approximation and the Gaussian read noise): Φ⁻¹ of a 52-bit uniform through a
+  branch-free table of 3008 cubic pieces (octave and 6 mantissa bits of ``min(u, 1 − u)``;
+  Hermite interpolation of AS241 and its derivative). Its largest deviation from Φ⁻¹
+  (AS241) is 3.8e-10 over 7e6 test inputs covering both tails down to ``u = 2⁻⁵³``
+  (``|Z| ≤ 8.21``); tests check < 1e-9. Tukey-lambda read noise: its inverse CDF in float64.
+- With ``clip`` (over-exposure), a signal so large that the output is 1.0 for every possible
+  draw (``s − 8.5·√(k·s) − max|σ·R| > 1`` in the normal regime) is written as 1.0 without
+  drawing: the same bytes, less work.
 - Rates: a negative signal gives 0 electrons (a sensor counts no negative photons).
 - Non-finite input: NaN is treated as 0 (documented choice: ``check_linear_rgb`` does not scan
   for NaN, and a NaN would spread through every later stage); ±inf and values beyond
   ±:data:`SIGNAL_CAP` (after the gain) are clamped to ±:data:`SIGNAL_CAP`, so the output is
   always finite.
-- Randomness is counter-based: value ``i`` (flat index into the C-ordered (H, W, 3) array)
-  seeds a splitmix64 stream from ``(key, i)``; draw 0 is the read noise, draws 1, 2, … the
-  shot noise. The output bytes depend only on ``(input, parameters, key)``, not on the
+- Randomness is counter-based: draw ``d`` of value ``i`` (flat index into the C-ordered
+  (H, W, 3) array) is ``mix(K_d + i·γ)`` (splitmix64 finaliser ``mix``, golden gamma ``γ``,
+  ``K_d = mix(mix(key) + (d + 1)·γ)``); draw 0 is the read noise, draws 1, 2, … the shot noise
+  (the table sampler uses draw 1 only, PTRS draws 1, 2, …). The output bytes depend only on ``(input, parameters, key)``, not on the
   number of threads, and the read noise of a pixel is the same at every exposure (common
   random numbers: severity levels differ only by the model).
 
@@ -41,12 +60,25 @@ the cap, NaN → 0); ``k = 0`` disables shot noise (``y = e·x``), ``σ_read = 0
 from __future__ import annotations
 
 import math
+from statistics import NormalDist
 
 import numba
 import numpy as np
 
+try:  # LLVM ctlz: used to find the octave of a uniform in the normal-quantile table
+    from numba.cpython.unsafe.numbers import leading_zeros as _leading_zeros
+except ImportError:  # pragma: no cover - older/newer numba without the intrinsic
+
+    @numba.njit(cache=True, inline="always")
+    def _leading_zeros(v):  # type: ignore[no-redef]
+        n = 0
+        while n < 64 and not (v >> np.uint64(63 - n)) & np.uint64(1):
+            n += 1
+        return n
+
 from spacedg.errors import InvalidDataError
-from spacedg.plugins.specs import ParamRange, ParamSpec
+from spacedg.plugins.degradations._common import check_linear_rgb
+from spacedg.plugins.specs import DegradationSpec, ParamRange, ParamSpec
 
 __all__ = [
     "K_DEFAULT",
@@ -59,6 +91,7 @@ __all__ = [
     "SENSOR_PRESET",
     "tukey_lambda_std",
     "sensor_capture",
+    "capture_for",
 ]
 
 #: System gain: normalised full scale per photo-electron (full well ≈ 10⁴ e⁻).
@@ -73,10 +106,13 @@ READ_TUKEY = 1
 #: Largest |e·x| (normalised linear units) the sensor sees; beyond, and ±inf, is clamped.
 SIGNAL_CAP = 1e12
 
-_INVERSION_MAX_RATE = 10.0  # below: Poisson by inversion
-_INVERSION_MAX_COUNT = 100  # P(Poisson(10) > 100) < 1e-60: the inversion search stops there
-_RECIPROCALS = 1.0 / np.maximum(np.arange(_INVERSION_MAX_COUNT + 1, dtype=np.float64), 1.0)
+_TABLE_MAX_RATE = 64.0  # below: Poisson from the table (grid step 1/16) plus a small remainder
+_TABLE_STEPS = 16  # grid points per electron: λ_g = floor(16·λ) / 16
+_TABLE_GUIDE = 256  # guide-table bins per row (indexed by the top 8 bits of a 32-bit uniform)
+_REMAINDER_MAX_COUNT = 30  # P(Poisson(1/16) > 30) < 1e-70: the remainder search stops there
+_REMAINDER_RECIPROCALS = 1.0 / np.maximum(np.arange(_REMAINDER_MAX_COUNT + 1, dtype=np.float64), 1.0)
 _NORMAL_MIN_RATE = 1e3  # from here: normal approximation
+_NORMAL_BOUND = 8.5  # |Z| < 8.3 for every 52-bit uniform (Φ⁻¹(2⁻⁵³) = −8.21)
 _TUKEY_P_MIN = 1e-12  # p clamp of the Tukey-lambda inverse CDF (infinite at 0 and 1 for λ < 0)
 _TUKEY_LOGISTIC = 1e-6  # |λ| below: the logistic limit log(p / (1 - p))
 _TUKEY_SERIES = 1e-3  # |λ| below: Taylor series of the Tukey-lambda variance
@@ -85,8 +121,68 @@ _TUKEY_VAR_SERIES = (math.pi**2 / 3.0, -11.387963880031283, 27.646382311762686, 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
-_S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
-_TWO_M53 = 2.0**-53
+_S30, _S27, _S31, _S12, _S32, _S24 = (np.uint64(n) for n in (30, 27, 31, 12, 32, 24))
+_LOW32 = np.uint64(0xFFFFFFFF)
+_TWO_M52 = 2.0**-52
+_TWO_M32 = 2.0**-32
+_HALF52 = np.uint64(1 << 51)
+_TOP52 = np.uint64((1 << 52) - 1)
+_POW2_NEG = 2.0 ** -np.arange(64, dtype=np.float64)
+_DRAW_KEYS = 64  # stream seeds of draws 0 … 63 computed once per call (later PTRS draws: on the fly)
+
+
+def _poisson_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inversion tables of Poisson(λ_g), λ_g = g/16 for g = 0 … 1023 (see the module docstring).
+
+    Returns ``(thresholds, row_start, guide)``: row ``g`` is ``thresholds[row_start[g]:row_start[g + 1]]``
+    with ``T_n = ⌈F_g(n)·2³²⌉ − 1`` (``F_g`` the CDF of Poisson(λ_g), float64 sums of the pmf from
+    ``exp(n·log λ − λ − lgamma(n + 1))``), its last entry forced to 2³² − 1 where ``F_g > 1 − 2⁻³²``;
+    ``guide[g, j]`` is the first ``n`` with ``T_n ≥ j·2²⁴``. A 32-bit uniform integer ``U`` maps to
+    ``min{n : U ≤ T_n}``, which has probability ``(T_n − T_{n−1}) / 2³²``: the pmf to within 2⁻³².
+    """
+    rows = int(_TABLE_MAX_RATE) * _TABLE_STEPS
+    width = 160  # > 121, the longest row (λ_g = 63.9375)
+    n = np.arange(width, dtype=np.float64)
+    log_factorial = np.array([math.lgamma(v + 1.0) for v in n])
+    lam = np.arange(1, rows, dtype=np.float64)[:, None] / _TABLE_STEPS
+    pmf = np.exp(n * np.log(lam) - lam - log_factorial)
+    cdf = np.vstack([np.ones((1, width)), np.cumsum(pmf, axis=1)])  # row 0: Poisson(0) = 0
+    scaled = np.minimum(np.ceil(cdf * 2.0**32) - 1.0, 2.0**32 - 1.0)
+    lengths = np.argmax(scaled >= 2.0**32 - 1.0, axis=1) + 1
+    assert (scaled[np.arange(rows), lengths - 1] == 2.0**32 - 1.0).all() and lengths.max() < min(width, 256)
+    row_start = np.zeros(rows + 1, dtype=np.int64)
+    row_start[1:] = np.cumsum(lengths)
+    thresholds = np.concatenate([scaled[g, : lengths[g]] for g in range(rows)]).astype(np.uint32)
+    bins = np.arange(_TABLE_GUIDE, dtype=np.float64) * (2.0**32 / _TABLE_GUIDE)
+    guide = np.stack([np.searchsorted(scaled[g, : lengths[g]], bins, side="left") for g in range(rows)]).astype(np.uint8)
+    return thresholds, row_start, guide
+
+
+def _normal_table() -> np.ndarray:
+    """Per-bin cubic coefficients ``(c0, c1, c2, c3)`` of Φ⁻¹ on ``p = v·2⁻⁵³``, ``v`` odd in [1, 2⁵²).
+
+    Rows 0 … 63: ``v < 64`` exactly (``c0 = Φ⁻¹(v·2⁻⁵³)``, the other coefficients 0). Rows
+    ``64·(e − 5) + s`` for octaves ``e = 6 … 51`` (``2^e ≤ v < 2^(e+1)``) and sub-bins ``s = 0 … 63``
+    (the next 6 bits of ``v``): the cubic Hermite interpolant, in the position ``t ∈ [0, 1)``
+    within the sub-bin, of Φ⁻¹ and its derivative ``1/φ(z)`` at the two ends
+    (``statistics.NormalDist.inv_cdf``, Wichura's AS241, relative error ~1e-16).
+    """
+    nd = NormalDist()
+    rows = np.zeros((64 + 64 * 46, 4), dtype=np.float64)
+    rows[1:64, 0] = [nd.inv_cdf(v * 2.0**-53) for v in range(1, 64)]
+    for e in range(6, 52):
+        width = 2.0 ** (e - 6 - 53)
+        p = (64.0 + np.arange(65)) * width
+        z = np.array([nd.inv_cdf(float(v)) if v < 0.5 else 0.0 for v in p])
+        slope = np.sqrt(2.0 * math.pi) * np.exp(0.5 * z * z) * width  # dz/dt
+        z0, z1, d0, d1 = z[:-1], z[1:], slope[:-1], slope[1:]
+        block = slice(64 * (e - 5), 64 * (e - 4))
+        rows[block] = np.stack([z0, d0, 3.0 * (z1 - z0) - 2.0 * d0 - d1, 2.0 * (z0 - z1) + d0 + d1], axis=1)
+    return rows
+
+
+_POISSON_THRESHOLDS, _POISSON_ROW_START, _POISSON_GUIDE = _poisson_tables()
+_NORMAL_COEFFICIENTS = _normal_table()
 
 SENSOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("k", "1/e-", "System gain: normalised full-scale signal per photo-electron (1/k electrons fill the full scale); 0 disables shot noise.", low=0.0, high=1.0, harsher="higher"),
@@ -114,10 +210,26 @@ def _mix(z: np.uint64) -> np.uint64:
 
 
 @numba.njit(cache=True, inline="always")
-def _uniform(base: np.uint64, draw: int) -> float:
-    """Draw number ``draw`` of the stream seeded by ``base``: uniform in the open interval (0, 1)."""
-    z = _mix(base + np.uint64(draw + 1) * _GOLDEN)
-    return (np.float64(np.int64(z >> _S11)) + 0.5) * _TWO_M53
+def _draw_key(key_mix: np.uint64, draw: int) -> np.uint64:
+    """Seed of the splitmix64 stream that gives draw ``draw`` of every value."""
+    return _mix(key_mix + np.uint64(draw + 1) * _GOLDEN)
+
+
+@numba.njit(cache=True, inline="always")
+def _bits(keys: np.ndarray, key_mix: np.uint64, offset: np.uint64, draw: int) -> np.uint64:
+    """Draw ``draw`` of the value at ``offset = i·golden`` as 64 random bits: ``mix(K_draw + offset)``."""
+    seed = keys[draw] if draw < _DRAW_KEYS else _draw_key(key_mix, draw)
+    return _mix(seed + offset)
+
+
+@numba.njit(cache=True, inline="always")
+def _uniform(keys: np.ndarray, key_mix: np.uint64, offset: np.uint64, draw: int) -> float:
+    """Draw ``draw`` of a value as a uniform on the 2⁵² points ``(m + ½)·2⁻⁵²``.
+
+    The values lie in the open interval (0, 1) and are exact doubles (53 bits would round the
+    top point to 1.0, where the quantiles are infinite).
+    """
+    return (np.float64(np.int64(_bits(keys, key_mix, offset, draw) >> _S12)) + 0.5) * _TWO_M52
 
 
 @numba.njit(cache=True, inline="always")
@@ -166,27 +278,65 @@ def _tukey_quantile(p: float, lam: float) -> float:
 
 
 @numba.njit(cache=True, inline="always")
-def _poisson(rate: float, base: np.uint64) -> float:
-    """Exact Poisson(rate) for 0 ≤ rate < 10³ from draws 1, 2, … of the stream ``base``."""
-    if rate < _INVERSION_MAX_RATE:
-        u = _uniform(base, 1)
-        p = math.exp(-rate)
+def _normal(bits: np.uint64, coefficients: np.ndarray) -> float:
+    """Standard normal Φ⁻¹(u) of the 52-bit uniform ``u = (m + ½)·2⁻⁵²``, ``m = bits >> 12``, without branches.
+
+    By symmetry ``u' = min(u, 1 − u) = v·2⁻⁵³`` with ``v`` odd; the octave of ``v`` and its next 6
+    bits select a cubic of :func:`_normal_table` (3008 pieces, exact values for ``v < 64``). Its
+    largest deviation from Φ⁻¹ over all 2⁵² inputs is below 1e-9 (see the module docstring).
+    """
+    m = bits >> _S12
+    upper = m >= _HALF52
+    m = (_TOP52 - m) if upper else m
+    v = m + m + np.uint64(1)
+    octave = 63 - np.int64(_leading_zeros(v))
+    shift = max(octave - 6, 0)
+    row = np.int64(v >> np.uint64(shift)) + 64 * shift  # = 64·(octave − 5) + s, or v below 64
+    t = np.float64(np.int64(v & ((np.uint64(1) << np.uint64(shift)) - np.uint64(1)))) * _POW2_NEG[shift]
+    z = coefficients[row, 0] + t * (coefficients[row, 1] + t * (coefficients[row, 2] + t * coefficients[row, 3]))
+    return -z if upper else z
+
+
+@numba.njit(cache=True, inline="always")
+def _poisson_small(rate: float, bits: np.uint64, thresholds: np.ndarray, row_start: np.ndarray, guide: np.ndarray) -> float:
+    """Exact Poisson(rate), 0 ≤ rate < 64, as Poisson(λ_g) + Poisson(δ) from one 64-bit draw.
+
+    ``λ_g = ⌊16·rate⌋ / 16`` (exact), ``δ = rate − λ_g ∈ [0, 1/16)``. The high 32 bits pick
+    Poisson(λ_g) from its table row through the guide table (≈ 1 comparison); the low 32 bits
+    give Poisson(δ) by inversion from 0, skipped without an ``exp`` when ``u < 1 − δ ≤ e^{−δ}``.
+    """
+    g = int(rate * _TABLE_STEPS)
+    delta = rate - g * (1.0 / _TABLE_STEPS)
+    high = bits >> _S32
+    start = row_start[g]
+    n = np.int64(guide[g, np.int64(high >> _S24)])
+    n += np.int64(np.uint64(thresholds[start + n]) < high)  # the usual single step, without a branch
+    while np.uint64(thresholds[start + n]) < high:
+        n += 1
+    u = (np.float64(np.int64(bits & _LOW32)) + 0.5) * _TWO_M32
+    if u >= 1.0 - delta:  # rare (probability < δ²/2 ≤ 0.2 %): the exact inversion of Poisson(δ)
+        p = math.exp(-delta)
         cdf = p
-        n = 0
-        while u > cdf and n < _INVERSION_MAX_COUNT:
-            n += 1
-            p *= rate * _RECIPROCALS[n]
+        m = 0
+        while u > cdf and m < _REMAINDER_MAX_COUNT:
+            m += 1
+            p *= delta * _REMAINDER_RECIPROCALS[m]
             cdf += p
-        return float(n)
-    # Hörmann (1993), PTRS: transformed rejection with squeeze
+        n += m
+    return float(n)
+
+
+@numba.njit(cache=True, inline="always")
+def _poisson_ptrs(rate: float, keys: np.ndarray, key_mix: np.uint64, offset: np.uint64) -> float:
+    """Exact Poisson(rate) for rate ≥ 10 by Hörmann's PTRS (1993), from draws 1, 2, … of the value at ``offset``."""
     b = 0.931 + 2.53 * math.sqrt(rate)
     a = -0.059 + 0.02483 * b
     inv_alpha = 1.1239 + 1.1328 / (b - 3.4)
     v_r = 0.9277 - 3.6224 / (b - 2.0)
     draw = 1
     while True:
-        u = _uniform(base, draw) - 0.5
-        v = _uniform(base, draw + 1)
+        u = _uniform(keys, key_mix, offset, draw) - 0.5
+        v = _uniform(keys, key_mix, offset, draw + 1)
         draw += 2
         us = 0.5 - abs(u)
         n = math.floor((2.0 * a / us + b) * u + rate + 0.43)
@@ -208,26 +358,48 @@ def _sensor_kernel(
     read_model: int,
     read_lambda: float,
     clip: bool,
+    saturated: float,
     key: np.uint64,
+    thresholds: np.ndarray,
+    row_start: np.ndarray,
+    guide: np.ndarray,
+    coefficients: np.ndarray,
 ) -> None:
-    """``out[i] = k·Poisson(e·x[i]/k) + read_scale·R`` over flat float32 arrays (see the module docstring)."""
+    """``out[i] = k·Poisson(e·x[i]/k) + read_scale·R`` over flat float32 arrays (see the module docstring).
+
+    ``saturated`` (with ``clip``): a signal ``s`` at or above it gives 1.0 whatever the draws
+    (``∞`` without ``clip``; see :func:`_saturation_signal`).
+    """
     key_mix = _mix(key)
+    keys = np.empty(_DRAW_KEYS, dtype=np.uint64)
+    for draw in range(_DRAW_KEYS):
+        keys[draw] = _draw_key(key_mix, draw)
+    inv_k = 1.0 / k if k > 0.0 else 0.0
     for i in numba.prange(x.size):
         s = exposure * np.float64(x[i])
         if s != s:
             s = 0.0
         s = min(max(s, -SIGNAL_CAP), SIGNAL_CAP)
-        base = _mix(key_mix + np.uint64(i) * _GOLDEN)
+        if s >= saturated:
+            out[i] = 1.0  # k·Poisson + read noise ≥ 1 for every possible draw: clip gives 1.0
+            continue
+        offset = np.uint64(i) * _GOLDEN
         if k > 0.0:
+            rate = s * inv_k  # expected photo-electrons
             if s <= 0.0:
                 s = 0.0
-            elif s < _NORMAL_MIN_RATE * k:
-                s = k * _poisson(s / k, base)
+            elif rate < _TABLE_MAX_RATE:
+                s = k * _poisson_small(rate, _bits(keys, key_mix, offset, 1), thresholds, row_start, guide)
+            elif rate < _NORMAL_MIN_RATE:
+                s = k * _poisson_ptrs(rate, keys, key_mix, offset)
             else:
-                s = max(s + math.sqrt(k * s) * _normal_quantile(_uniform(base, 1)), 0.0)
+                s = max(s + math.sqrt(k * s) * _normal(_bits(keys, key_mix, offset, 1), coefficients), 0.0)
         if read_scale > 0.0:
-            u = _uniform(base, 0)
-            r = _normal_quantile(u) if read_model == READ_GAUSSIAN else _tukey_quantile(u, read_lambda)
+            bits = _bits(keys, key_mix, offset, 0)
+            if read_model == READ_GAUSSIAN:
+                r = _normal(bits, coefficients)
+            else:
+                r = _tukey_quantile((np.float64(np.int64(bits >> _S12)) + 0.5) * _TWO_M52, read_lambda)
             s += read_scale * r
         if clip:
             s = min(max(s, 0.0), 1.0)
@@ -286,11 +458,73 @@ def sensor_capture(
     if not 0 <= key < 2**64:
         raise InvalidDataError(f"sensor model: key must be an integer in [0, 2**64), got {key!r}; draw it with stream_key(rng)")
     read_scale = float(sigma_read)
+    read_bound = _NORMAL_BOUND
     if read_model == READ_TUKEY and sigma_read > 0.0:
         read_scale /= tukey_lambda_std(float(read_lambda))
+        read_bound = _tukey_bound(float(read_lambda))
+    saturated = _saturation_signal(float(k), read_scale * read_bound) if clip else math.inf
     flat = np.ascontiguousarray(rgb, dtype=np.float32).reshape(-1)
     out = np.empty(flat.size, dtype=np.float32)
     _sensor_kernel(
-        flat, out, float(exposure), float(k), read_scale, int(read_model), float(read_lambda), bool(clip), np.uint64(key)
+        flat,
+        out,
+        float(exposure),
+        float(k),
+        read_scale,
+        int(read_model),
+        float(read_lambda),
+        bool(clip),
+        saturated,
+        np.uint64(key),
+        _POISSON_THRESHOLDS,
+        _POISSON_ROW_START,
+        _POISSON_GUIDE,
+        _NORMAL_COEFFICIENTS,
     )
     return out.reshape(rgb.shape)
+
+
+def _saturation_signal(k: float, read_bound: float) -> float:
+    """Smallest signal ``s`` from which the clipped output is 1.0 for every possible draw.
+
+    The read noise is at most ``read_bound``; with shot noise, ``s`` must be in the normal
+    regime (``s ≥ 10³·k``; the Poisson samplers can return 0), where ``s + √(k·s)·Z ≥
+    s − 8.5·√(k·s)`` (|Z| < 8.3 for every 52-bit uniform). So ``s − 8.5·√(k·s) − read_bound > 1``,
+    with margins (10⁻⁹ absolute, 10⁻⁹ relative, 0.1 % on the read bound) far above rounding.
+    """
+    floor = 1.0 + 1e-9 + 1.001 * read_bound
+    if k == 0.0:
+        return floor
+    root = 0.5 * (_NORMAL_BOUND * math.sqrt(k) + math.sqrt(_NORMAL_BOUND**2 * k + 4.0 * floor))  # √s at equality
+    return max(_NORMAL_MIN_RATE * k * (1.0 + 1e-9), root * root * (1.0 + 1e-9) + 1e-9)
+
+
+def _tukey_bound(lam: float) -> float:
+    """Largest |R| of the Tukey-lambda read noise: |Q(p)| at the clamp p = 1e-12 (Q is odd about ½)."""
+    p = _TUKEY_P_MIN
+    if abs(lam) < _TUKEY_LOGISTIC:
+        return abs(math.log(p / (1.0 - p)))
+    return abs((math.expm1(lam * math.log(p)) - math.expm1(lam * math.log1p(-p))) / lam)
+
+
+def capture_for(
+    spec: DegradationSpec,
+    rgb: np.ndarray,
+    exposure: float,
+    key: int,
+    k: float,
+    sigma_read: float,
+    read_model: int,
+    read_lambda: float,
+    *,
+    clip: bool,
+) -> np.ndarray:
+    """Check ``rgb`` and the parameters against ``spec`` (low_light / over_exposure), then :func:`sensor_capture`."""
+    rgb = check_linear_rgb(rgb, spec.name)
+    p = spec.validate_params(
+        {"exposure": exposure, "k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": read_lambda}
+    )
+    return sensor_capture(
+        rgb, exposure=p["exposure"], k=p["k"], sigma_read=p["sigma_read"], key=key,
+        read_model=int(p["read_model"]), read_lambda=p["read_lambda"], clip=clip,
+    )

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.degradations._common import check_linear_rgb, stream_key
+from spacedg.plugins.degradations._common import stream_key
 from spacedg.plugins.degradations._sensor import (
     K_DEFAULT,
     READ_GAUSSIAN,
@@ -46,7 +46,7 @@ from spacedg.plugins.degradations._sensor import (
     SENSOR_PARAMS,
     SENSOR_PRESET,
     SIGMA_READ_DEFAULT,
-    sensor_capture,
+    capture_for,
 )
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
@@ -80,19 +80,7 @@ def low_light(
         key: 63-bit noise key (``stream_key(rng)``).
         k, sigma_read, read_model, read_lambda: the sensor (module docstring).
     """
-    rgb = check_linear_rgb(rgb, SPEC.name)
-    p = SPEC.validate_params(
-        {"exposure": exposure, "k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": read_lambda}
-    )
-    return sensor_capture(
-        rgb,
-        exposure=p["exposure"],
-        k=p["k"],
-        sigma_read=p["sigma_read"],
-        key=key,
-        read_model=int(p["read_model"]),
-        read_lambda=p["read_lambda"],
-    )
+    return capture_for(SPEC, rgb, exposure, key, k, sigma_read, read_model, read_lambda, clip=False)
 
 
 def apply(rgb: np.ndarray, aux: Mapping[str, np.ndarray], params: Mapping[str, Any], rng: np.random.Generator) -> np.ndarray:
