@@ -247,3 +247,17 @@ def test_scene_from_files_errors(tmp_path: Path) -> None:
             "b": Camera(100, 100, 50, 50, 100, 100, np.diag([1.0, -1.0, -1.0, 1.0]))}
     with pytest.raises(InvalidDataError, match="disagree"):
         scene_from_files("s", tmp_path / "g.ply", down)
+
+
+def test_written_files_get_the_usual_permissions(tmp_path) -> None:
+    """Atomic writes go through mkstemp (0600); the result must be readable like a plain open()."""
+    import os
+
+    from spacedg.data.io._files import atomic_write_bytes
+
+    umask = os.umask(0o022)
+    try:
+        atomic_write_bytes(tmp_path / "a.bin", b"x")
+    finally:
+        os.umask(umask)
+    assert (tmp_path / "a.bin").stat().st_mode & 0o777 == 0o644

@@ -5,9 +5,7 @@ from __future__ import annotations
 import argparse
 import difflib
 import math
-import os
 import re
-import tempfile
 from dataclasses import replace
 from pathlib import Path
 
@@ -119,20 +117,14 @@ def _check_png(flag: str, path: Path) -> None:
 
 
 def write_png_atomic(path: Path, image: np.ndarray, flag: str) -> None:
-    """Write ``image`` (BGR or single channel) as PNG: a temp file in the same folder, then rename."""
+    """Write ``image`` (BGR or single channel) as PNG atomically (encoded in memory, then one rename)."""
+    from spacedg.data.io._files import atomic_write_bytes
+
+    ok, data = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    if not ok:
+        raise ParameterError(f"{flag} {path}: could not encode the image as PNG")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
-        if not cv2.imwrite(tmp, image):
-            raise ParameterError(f"{flag} {path}: could not write the PNG")
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    atomic_write_bytes(path, data.tobytes())
 
 
 def encode_depth_mm(depth_m: np.ndarray) -> np.ndarray:

@@ -47,6 +47,13 @@ def require_file(path: Path, what: str) -> int:
     return path.stat().st_size
 
 
+def _usual_permissions(fd: int) -> None:
+    """Give a ``mkstemp`` file (created 0600) the permissions a plain ``open`` would: 0666 minus the umask."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.fchmod(fd, 0o666 & ~umask)
+
+
 @contextmanager
 def atomic_write(path: PathLike, mode: str = "wb") -> Iterator[IO[Any]]:
     """Open a temporary file beside ``path``; on success flush, fsync and ``os.replace`` it.
@@ -57,6 +64,7 @@ def atomic_write(path: PathLike, mode: str = "wb") -> Iterator[IO[Any]]:
     target = Path(path)
     folder = target.parent if str(target.parent) else Path(".")
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+    _usual_permissions(fd)
     tmp = Path(tmp_name)
     try:
         with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as handle:
@@ -83,6 +91,7 @@ def write_temp_sibling(path: PathLike, writer: Callable[[Path], None]) -> Path:
     """
     target = Path(path)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    _usual_permissions(fd)
     os.close(fd)
     tmp = Path(tmp_name)
     try:
