@@ -48,12 +48,16 @@ def _single_gaussian(depth: float, sigma_m: float, opacity: float = 0.5) -> Gaus
     return Gaussians(np.array([[0.02, -0.01, depth]]), np.array([[1.0, 0, 0, 0]]), np.full((1, 3), sigma_m), np.array([opacity]), sh)
 
 
+@pytest.mark.parametrize("extent", [2.5, None])
 @pytest.mark.parametrize(("aperture", "focus"), [(3.0, 1.0), (6.0, 8.0), (12.0, 0.5)])
-def test_defocus_conserves_energy(aperture: float, focus: float) -> None:
+def test_defocus_conserves_energy(aperture: float, focus: float, extent: float | None) -> None:
+    from spacedg.render import RasterSettings
+
     cam = camera(160, 120, focal=200.0)
     gauss = _single_gaussian(depth=2.0, sigma_m=0.01)  # σ = 1 px on screen
     sharp = render(gauss, cam, outputs="rgb")
-    blurred = RenderRequest(cam).__class__(cam, defocus=defocus.defocus(RenderRequest(cam), aperture, focus).defocus).render(gauss)
+    request = defocus.defocus(RenderRequest(cam), aperture, focus)
+    blurred = request.render(gauss, settings=RasterSettings(defocus_extent=extent))
     radius = aperture * abs(2.0 - focus) / 2.0
     assert blurred.alpha.max() < sharp.alpha.max()  # spread out …
     assert np.count_nonzero(blurred.alpha > 1e-3) > np.count_nonzero(sharp.alpha > 1e-3)

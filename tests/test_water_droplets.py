@@ -8,7 +8,7 @@ import pytest
 
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins import Category, Stage
-from spacedg.plugins.degradations.water_droplets import SPEC, SPECULAR_INTENSITY, droplet_field, water_droplets
+from spacedg.plugins.degradations.water_droplets import RIM_DARKENING, SPEC, SPECULAR_INTENSITY, droplet_field, water_droplets
 from spacedg.render.colour import linear_to_srgb
 
 BENCH = {"scale": 3.0, "radius": 0.6, "strength": 0.4, "blur_sigma": 2.2, "blur_kernel": 9}
@@ -92,13 +92,15 @@ def test_constant_image_stays_constant_plus_highlight(value: float) -> None:
     # Refraction and blur of a constant field are constant; only the Phong highlight adds light.
     image = np.full((80, 112, 3), value, np.float32)
     params = {**BENCH, "radius": 0.9, "strength": 1.7}
-    plain = water_droplets(image, **params, rng=np.random.default_rng(2), specular=0.0)
+    plain = water_droplets(image, **params, rng=np.random.default_rng(2), specular=0.0, rim=0.0)
     np.testing.assert_allclose(plain, value, rtol=1e-6, atol=1e-7)
     lit = water_droplets(image, **params, rng=np.random.default_rng(2))
     field = droplet_field(image.shape[:2], params["scale"], params["radius"], params["strength"], np.random.default_rng(2))
     assert field.highlight.max() > 0.5, "some highlight should be near its peak"
-    expected = np.broadcast_to(value + SPECULAR_INTENSITY * field.highlight[..., None], image.shape)
-    np.testing.assert_allclose(lit, expected, rtol=1e-6, atol=1e-6)
+    through = 1.0 - field.alpha * RIM_DARKENING * (1.0 - field.transmission)  # dark rims, nothing lost outside drops
+    assert through.min() < 0.8 and np.all(through[field.alpha == 0] == 1.0)
+    expected = value * through[..., None] + SPECULAR_INTENSITY * field.highlight[..., None]
+    np.testing.assert_allclose(lit, np.broadcast_to(expected, image.shape), rtol=1e-5, atol=1e-6)
 
 
 def test_refraction_magnifies_and_inverts() -> None:
@@ -109,7 +111,7 @@ def test_refraction_magnifies_and_inverts() -> None:
     image = np.repeat((x / 64.0)[..., None], 3, axis=-1)
 
     def run(strength: float) -> np.ndarray:
-        return water_droplets(image, 1.5, 1.0, strength, 0.0, 1, np.random.default_rng(0), specular=0.0)[..., 0]
+        return water_droplets(image, 1.5, 1.0, strength, 0.0, 1, np.random.default_rng(0), specular=0.0, rim=0.0)[..., 0]
 
     core = droplet_field((64, 96), 1.5, 1.0, 1.0, np.random.default_rng(0)).alpha == 1.0
     centre_value = run(1.0)  # strength 1: every pixel of a drop shows its centre, a drop id
@@ -145,7 +147,7 @@ def test_extremes_finite_shape_dtype(changes: dict[str, float], fill: float | No
 
 def test_hdr_survives_and_tiny_images() -> None:
     image = np.full((40, 40, 3), 50.0, np.float32)
-    out = water_droplets(image, 2.0, 1.0, 0.5, 2.0, 9, np.random.default_rng(0), specular=0.0)
+    out = water_droplets(image, 2.0, 1.0, 0.5, 2.0, 9, np.random.default_rng(0), specular=0.0, rim=0.0)
     np.testing.assert_allclose(out, 50.0, rtol=1e-6)  # no clipping of real light above 1
     for shape in ((1, 1, 3), (1, 7, 3), (5, 1, 3)):
         tiny = _apply(np.full(shape, 0.5, np.float32), scale=100.0, radius=1.0)

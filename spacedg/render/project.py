@@ -182,6 +182,11 @@ def project(
         opacity = opacity * compensation
         alpha_floor = alpha_floor * compensation
         det = det_blur
+        if settings.defocus_extent is not None:  # truncate blurred footprints, keeping their energy
+            tail = math.exp(-0.5 * settings.defocus_extent**2)
+            truncated = coc > 1.0
+            opacity = torch.where(truncated, opacity / (1.0 - tail), opacity)
+            alpha_floor = torch.where(truncated, torch.maximum(alpha_floor, opacity * tail), alpha_floor)
     det = torch.clamp(det, min=1e-10)
     conics = torch.stack([syy / det, -sxy / det, sxx / det], dim=-1)
     if settings.opacity_extent:

@@ -14,7 +14,9 @@ against gsplat's torch reference and against float64 finite differences):
    Gaussian then keeps the same fraction of its energy as the sharp one; with a fixed 1/255
    a small Gaussian spread over a large CoC would lose its tails or vanish); cull
    ``opacity < f``; footprint radius ``ceil(extent·sqrt(Σ_ii))`` per axis with
-   ``extent = min(3.33, sqrt(2 ln(o / f)))``; cull footprints outside the image.
+   ``extent = min(3.33, sqrt(2 ln(o / f)))``; cull footprints outside the image. A defocused
+   Gaussian (CoC > 1 px) is truncated at ``settings.defocus_extent`` σ instead, its opacity
+   divided by the mass kept (``f = max(f, o e^(−E²/2))``), so its energy is unchanged.
 6. colour from SH along the camera-centre → mean direction, ``max(0, 0.5 + Σ sh·Y)``.
 
 Everything is computed in float64 and stored in float32. The result is a packed
@@ -108,7 +110,7 @@ def project_gaussians(
     fx, fy, cx, cy, width, height,
     fisheye, k1, k2, k3, k4, theta_max,
     near, far, eps2d, antialiased, opacity_extent,
-    aperture, focus, max_coc,
+    aperture, focus, max_coc, defocus_extent,
     packed, rects,
 ):  # pragma: no cover - compiled; covered through render() and the oracle tests
     """Fill ``packed`` (N, PACKED) and ``rects`` (N, 4) in place; see the module docstring."""
@@ -119,6 +121,9 @@ def project_gaussians(
     lim_x_neg = cx / fx + 0.3 * (0.5 * width / fx)
     lim_y_pos = (height - cy) / fy + 0.3 * (0.5 * height / fy)
     lim_y_neg = cy / fy + 0.3 * (0.5 * height / fy)
+    # alpha at the truncation per unit opacity, and 1 / the mass kept inside defocus_extent σ
+    defocus_tail = math.exp(-0.5 * defocus_extent * defocus_extent) if defocus_extent > 0.0 else 0.0
+    defocus_boost = 1.0 / (1.0 - defocus_tail)
     for i in numba.prange(n):
         for c in range(PACKED):
             packed[i, c] = 0.0
@@ -208,6 +213,9 @@ def project_gaussians(
             det = det_blur
             if not alpha_floor > 0.0:  # compensation underflowed: the Gaussian is spread over ~∞ pixels
                 continue
+            if coc > 1.0 and defocus_extent > 0.0:  # truncate the blurred footprint, keeping its energy
+                opacity *= defocus_boost
+                alpha_floor = max(alpha_floor, opacity * defocus_tail)
         det = max(det, 1e-10)
         if opacity_extent:
             if not opacity >= alpha_floor:
@@ -277,6 +285,7 @@ def project_view(
         lens.effective_max_theta if lens else math.pi,
         settings.near, settings.far, settings.eps2d, settings.antialiased, settings.opacity_extent,
         defocus.aperture if defocus else 0.0, defocus.focus if defocus else 1.0, defocus.max_radius if defocus else 0.0,
+        settings.defocus_extent or 0.0,
         packed, rects,
     )
     return packed, rects

@@ -69,6 +69,11 @@ class RasterSettings:
             gsplat's torch reference (used by the parity tests).
         tight_tiles: drop tiles that a footprint's bounding box touches but its
             ``alpha >= 1/255`` ellipse does not (exact: the image is unchanged, work is not).
+        defocus_extent: footprint of a defocused Gaussian (CoC > 1 px) in standard deviations
+            of its blurred covariance; its opacity is divided by the mass kept,
+            ``1 − e^(−E²/2)``, so its energy is unchanged. 2.5 (95.6 % of the mass) is 1.6×
+            faster than the full 3.33 σ at 43–46 dB PSNR (``benchmarks/degradations.py``
+            prints the comparison); ``None`` keeps the full footprint.
     """
 
     near: float = 0.01
@@ -78,8 +83,11 @@ class RasterSettings:
     antialiased: bool = False
     opacity_extent: bool = True
     tight_tiles: bool = True
+    defocus_extent: float | None = 2.5
 
     def __post_init__(self) -> None:
+        if self.defocus_extent is not None:
+            _finite("defocus_extent", self.defocus_extent, 1.0, 3.33)
         _finite("near", self.near, 0.0, open_low=True)
         _finite("far", self.far, self.near, open_low=True)
         _finite("eps2d", self.eps2d, 0.0)

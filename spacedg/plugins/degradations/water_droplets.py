@@ -40,8 +40,12 @@ Optics (in linear light, HDR values above 1 kept, nothing clipped)
 - Phong specular highlight, white, added in linear light: ``α · k_s · max(0, R·V)^shininess``
   with ``R = 2(n·L)n − L``, view ``V = (0, 0, 1)`` (towards the camera), light from the upper
   left ``L = normalize(−1, −1, 2)`` (:data:`LIGHT_DIRECTION`), ``k_s`` = :data:`SPECULAR_INTENSITY`
-  = 0.5 (linear units, 1 = diffuse white), shininess :data:`SHININESS` = 64.
-- Composite inside drops: ``out = (1 − α) · I + α · blur(refract(I)) + α · highlight``.
+  = 0.5 (linear units, 1 = diffuse white), shininess :data:`SHININESS` = 16.
+- Rim loss: towards the rim the surface turns to grazing, where Fresnel reflection rises and
+  rays refract in from far outside the view, so drops show a dark outline. Transmission
+  ``τ = 1 − rim · (1 − n_z)`` with ``rim`` = :data:`RIM_DARKENING` = 0.7 (1 at the centre,
+  0.67 where the soft edge reaches full coverage, 0.3 at the rim).
+- Composite inside drops: ``out = (1 − α) · I + α · τ · blur(refract(I)) + highlight``.
 
 Identity, limits and errors
 ---------------------------
@@ -92,6 +96,7 @@ __all__ = [
     "LIGHT_DIRECTION",
     "SPECULAR_INTENSITY",
     "SHININESS",
+    "RIM_DARKENING",
 ]
 
 NAME = "water_droplets"
@@ -108,7 +113,9 @@ LIGHT_DIRECTION: tuple[float, float, float] = (-1.0 / math.sqrt(6.0), -1.0 / mat
 #: Phong specular coefficient ``k_s`` in linear light (1 = diffuse white).
 SPECULAR_INTENSITY = 0.5
 #: Phong shininess exponent, ``2 ** SHININESS_LOG2`` (evaluated by repeated squaring).
-SHININESS_LOG2 = 6
+SHININESS_LOG2 = 4
+#: Light lost towards a drop's rim: transmission ``τ = 1 − RIM_DARKENING · (1 − n_z)``.
+RIM_DARKENING = 0.7
 SHININESS = 2**SHININESS_LOG2
 #: Most drop cells of the finest layer (guards extreme aspect ratios at high ``scale``).
 MAX_CELLS = 10_000_000
@@ -163,6 +170,8 @@ class DropletField:
         alpha: soft drop coverage in [0, 1]; 0 exactly outside every drop.
         height: height of the top drop in px (0 outside drops).
         highlight: ``alpha · max(0, R·V)^SHININESS``, the Phong term at unit ``k_s``.
+        transmission: ``n_z`` of the top drop's surface (1 at its centre, 0 at its rim; 1
+            outside drops): the transmission at unit :data:`RIM_DARKENING`.
         map_x, map_y: :func:`cv2.remap` source coordinates (pixel index units, centre at
             integer) of the refracted view; the identity outside drops.
     """
@@ -172,6 +181,7 @@ class DropletField:
     highlight: np.ndarray
     map_x: np.ndarray
     map_y: np.ndarray
+    transmission: np.ndarray
 
 
 # ------------------------------------------------------------------ compiled kernels
@@ -195,8 +205,9 @@ def _field_kernel(
     highlight: np.ndarray,
     map_x: np.ndarray,
     map_y: np.ndarray,
+    transmission: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """Per pixel: the highest drop over all layers, its coverage, highlight and remap coordinates."""
+    """Per pixel: the highest drop over all layers, its coverage, highlight, rim loss and remap coordinates."""
     n_layers = cell.shape[0]
     lx, ly, lz = light[0], light[1], light[2]
     inv_cell = 1.0 / cell
@@ -229,6 +240,7 @@ def _field_kernel(
                 highlight[i, j] = 0.0
                 map_x[i, j] = j
                 map_y[i, j] = i
+                transmission[i, j] = 1.0
                 continue
             nx = best_dx / best_r
             ny = best_dy / best_r
@@ -243,21 +255,24 @@ def _field_kernel(
             highlight[i, j] = a * spec
             map_x[i, j] = x - strength * best_dx - 0.5
             map_y[i, j] = y - strength * best_dy - 0.5
+            transmission[i, j] = nz
 
 
 @numba.njit(parallel=True, cache=True)
 def _composite_kernel(
-    rgb: np.ndarray, seen: np.ndarray, alpha: np.ndarray, highlight: np.ndarray, k_s: float, out: np.ndarray
+    rgb: np.ndarray, seen: np.ndarray, alpha: np.ndarray, highlight: np.ndarray, k_s: float,
+    transmission: np.ndarray, rim: float, out: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """``out = (1 − α) rgb + α seen + k_s highlight`` where ``α > 0``; other pixels left as they are."""
+    """``out = (1 − α) rgb + α τ seen + k_s highlight``, ``τ = 1 − rim (1 − t)``, where ``α > 0``; others untouched."""
     for i in numba.prange(rgb.shape[0]):
         for j in range(rgb.shape[1]):
             a = alpha[i, j]
             if a <= 0.0:
                 continue
             spec = k_s * highlight[i, j]
+            through = a * (1.0 - rim * (1.0 - transmission[i, j]))
             for ch in range(3):
-                out[i, j, ch] = (1.0 - a) * rgb[i, j, ch] + a * seen[i, j, ch] + spec
+                out[i, j, ch] = (1.0 - a) * rgb[i, j, ch] + through * seen[i, j, ch] + spec
 
 
 # ------------------------------------------------------------------ python side
@@ -323,17 +338,18 @@ def droplet_field(
     scale, radius, strength = p["scale"], p["radius"], p["strength"]
     if not isinstance(rng, np.random.Generator):
         raise InvalidDataError(f"{NAME}: rng must be a numpy.random.Generator, got {type(rng).__name__}; use np.random.default_rng(seed)")
-    field = DropletField(*(np.empty((height, width), np.float32) for _ in range(5)))
+    field = DropletField(*(np.empty((height, width), np.float32) for _ in range(6)))
     if scale == 0.0 or radius == 0.0:
         for array in (field.alpha, field.height, field.highlight):
             array.fill(0.0)
         field.map_x[:] = np.arange(width, dtype=np.float32)
         field.map_y[:] = np.arange(height, dtype=np.float32)[:, None]
+        field.transmission.fill(1.0)
         return field
     drops = _draw_drops((height, width), scale, radius, rng)
     _field_kernel(
         height, width, *drops, strength, np.asarray(LIGHT_DIRECTION, np.float64), SHININESS_LOG2, EDGE_WIDTH,
-        field.alpha, field.height, field.highlight, field.map_x, field.map_y,
+        field.alpha, field.height, field.highlight, field.map_x, field.map_y, field.transmission,
     )
     return field
 
@@ -348,6 +364,7 @@ def water_droplets(
     rng: np.random.Generator,
     *,
     specular: float = SPECULAR_INTENSITY,
+    rim: float = RIM_DARKENING,
 ) -> np.ndarray:
     """Water drops on the lens over linear-light ``rgb`` (see the module docstring for the model).
 
@@ -360,6 +377,7 @@ def water_droplets(
         blur_kernel: odd in-drop kernel side in px, [1, 51].
         rng: source of the drop placement.
         specular: Phong ``k_s`` in linear light (0 disables the highlights).
+        rim: light lost at the rim, in [0, 1] (0 disables the rim darkening).
 
     Returns:
         A new float32 (H, W, 3) array, equal to ``rgb`` bit for bit outside the drops.
@@ -368,6 +386,8 @@ def water_droplets(
     params = _check_params(scale, radius, strength, blur_sigma, blur_kernel)
     if not (math.isfinite(specular) and specular >= 0.0):
         raise ParameterError(f"{NAME}: specular must be a finite number >= 0 (linear light), got {specular!r}")
+    if not (math.isfinite(rim) and 0.0 <= rim <= 1.0):
+        raise ParameterError(f"{NAME}: rim must be a number in [0, 1] (fraction of light lost at the rim), got {rim!r}")
     if not np.isfinite(rgb).all():
         bad = np.argwhere(~np.isfinite(rgb))
         raise InvalidDataError(
@@ -382,7 +402,7 @@ def water_droplets(
     k, sigma = params["blur_kernel"], params["blur_sigma"]
     if k > 1 and sigma > 0.0:
         seen = cv2.GaussianBlur(seen, (k, k), sigma, borderType=cv2.BORDER_REFLECT)
-    _composite_kernel(rgb, seen, field.alpha, field.highlight, float(specular), out)
+    _composite_kernel(rgb, seen, field.alpha, field.highlight, float(specular), field.transmission, float(rim), out)
     return out
 
 
