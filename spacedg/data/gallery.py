@@ -38,9 +38,9 @@ def _caption(thumb: np.ndarray, lines: Sequence[str]) -> np.ndarray:
     width = thumb.shape[1]
     strip = np.full((_CAPTION_LINE * len(lines) + 4, width, 3), 255, np.uint8)
     for k, text in enumerate(lines):
-        while text and cv2.getTextSize(text, _FONT, 0.36, 1)[0][0] > width - 4:
-            text = text[:-2] + "…" if len(text) > 2 else ""
-        cv2.putText(strip, text.replace("…", "~"), (2, _CAPTION_LINE * (k + 1) - 3), _FONT, 0.36, _INK, 1, cv2.LINE_AA)
+        while text and cv2.getTextSize(text, _FONT, 0.36, 1)[0][0] > width - 4:  # Hershey fonts are ASCII: '~' marks a cut
+            text = text[:-2] + "~" if len(text) > 2 else ""
+        cv2.putText(strip, text, (2, _CAPTION_LINE * (k + 1) - 3), _FONT, 0.36, _INK, 1, cv2.LINE_AA)
     return np.concatenate([thumb, strip], axis=0)
 
 

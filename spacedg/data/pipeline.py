@@ -44,7 +44,7 @@ import numpy as np
 
 from spacedg.errors import ParameterError, PluginError, UnknownPluginError
 from spacedg.plugins.degradations._common import surface_far_depth
-from spacedg.plugins.registry import get_degradation, list_degradations
+from spacedg.plugins.registry import get_degradation
 from spacedg.plugins.specs import DegradationSpec, Stage, suggest
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import RasterSettings
@@ -287,8 +287,6 @@ class DegradedViews:
 
 
 def _cameras(scene: Scene, views: Sequence[str], options: PipelineOptions) -> list[Any]:
-    if isinstance(views, str):
-        views = [views]
     if not views:
         raise ParameterError("degrade: give at least one view name")
     cameras = []
@@ -400,6 +398,7 @@ def degrade_variants(
         One :class:`DegradedViews` per chain, in order.
     """
     options = options or PipelineOptions()
+    views = (views,) if isinstance(views, str) else tuple(views)
     cameras = _cameras(scene, views, options)
     resolved = [resolve_chain(c, seed, options.default_preset, options.mixture_preset) for c in chains]
     groups: dict[tuple[Any, ...], list[int]] = {}
@@ -425,7 +424,7 @@ def degrade_variants(
             images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
             results[i] = DegradedViews(
                 images=np.stack(images),
-                views=tuple(views) if not isinstance(views, str) else (views,),
+                views=views,
                 degradations=[step.provenance() for step in chain],
                 sub_steps=[int(f.stats.get("sub_steps", 1)) for f in frames],
                 stats=timer,
@@ -484,7 +483,3 @@ def degrade_image(
         image = encode_srgb_u8(_run_linear(rgb, aux, linear, 0))
     return _run_display(image, display, 0), [step.provenance() for step in chain]
 
-
-def list_chain_names() -> list[str]:
-    """Every name a chain may contain: registered degradations, then mixture recipes."""
-    return [*(spec.name for spec in list_degradations()), *MIXTURES]
