@@ -224,3 +224,10 @@ def test_third_party_degradation_runs_through_the_pipeline(third_party, small_ro
     assert abs(int(out.images[0][centre].mean()) - int(clean[0][centre].mean())) <= 12  # … not centre
     mixed = degrade(small_room, views, ["vignetting", "haze"], seed=13, options=SMALL)
     assert [d["name"] for d in mixed.degradations] == ["haze", "vignetting"]  # order 10 before 25
+
+
+def test_scene_camera_lookup_suggests_close_names(small_room) -> None:
+    name = next(iter(small_room.views))
+    assert small_room.camera(name) is small_room.views[name]
+    with pytest.raises(ParameterError, match=rf"no view '{name[:-1]}x'; did you mean"):
+        small_room.camera(name[:-1] + "x")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import difflib
 import math
 import re
 from dataclasses import replace
@@ -98,17 +97,10 @@ def _size(camera_w: int, camera_h: int, width: int | None, height: int | None) -
 
 
 def _pick_view(scene, name: str):  # type: ignore[no-untyped-def]
-    if name in scene.views:
-        return scene.views[name]
-    names = list(scene.views)
-    if not names:
-        raise ParameterError(f"scene {scene.id} has no views to render")
-    close = difflib.get_close_matches(name, names, n=3)
-    hint = f"did you mean {', '.join(close)}? " if close else ""
-    shown = ", ".join(names[:5]) + (", …" if len(names) > 5 else "")
-    raise ParameterError(
-        f"--view {name!r}: no such view in scene {scene.id}; {hint}it has {len(names)} views ({shown}); see --list-views"
-    )
+    try:
+        return scene.camera(name)
+    except ParameterError as err:
+        raise ParameterError(f"--view {name!r}: no such view ({err}); see --list-views") from None
 
 
 def _check_png(flag: str, path: Path) -> None:

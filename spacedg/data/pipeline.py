@@ -291,11 +291,7 @@ def _cameras(scene: Scene, views: Sequence[str], options: PipelineOptions) -> li
         raise ParameterError("degrade: give at least one view name")
     cameras = []
     for name in views:
-        if name not in scene.views:
-            close = suggest(name, scene.views)
-            hint = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else f" Views: {', '.join(list(scene.views)[:8])}…"
-            raise ParameterError(f"scene {scene.id!r} has no view {name!r}.{hint}")
-        camera = scene.views[name]
+        camera = scene.camera(name)
         if options.image_size is not None:
             camera = camera.resized(*options.image_size)
         cameras.append(camera)

@@ -14,6 +14,7 @@ DataLoader workers receive a few kilobytes and load what they need themselves.
 
 from __future__ import annotations
 
+import difflib
 import re
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping
@@ -23,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.data.box import OrientedBox
-from spacedg.errors import InvalidDataError
+from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
 
@@ -249,6 +250,16 @@ class Scene:
         return state
 
     # -------------------------------------------------------------- queries
+    def camera(self, view: str) -> Camera:
+        """The camera of ``view``; :class:`ParameterError` with close names (or some views) otherwise."""
+        camera = self.views.get(view) if isinstance(view, str) else None
+        if camera is not None:
+            return camera
+        names = list(self.views)
+        close = difflib.get_close_matches(str(view), names, n=3, cutoff=0.6)
+        hint = f"did you mean {', '.join(map(repr, close))}?" if close else f"it has {len(names)} views ({', '.join(names[:5])}{', …' if len(names) > 5 else ''})"
+        raise ParameterError(f"scene {self.id} has no view {view!r}; {hint}")
+
     def instance(self, instance_id: int) -> Instance:
         """The instance with ``instance_id``; raises ``KeyError`` naming the known ids."""
         for inst in self.instances:

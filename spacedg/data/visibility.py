@@ -127,13 +127,11 @@ def _view_names(scene: Scene, views: Iterable[str] | None, caller: str) -> list[
         names = [views]
     else:
         names = list(views)
-    unknown = [n for n in names if n not in scene.views]
-    if unknown:
-        known = list(scene.views)
-        raise ParameterError(
-            f"{caller}: scene {scene.id} has no view(s) {unknown[:5]!r}; pass names from scene.views "
-            f"({len(known)} views, e.g. {known[:3]!r})"
-        )
+    for name in names:
+        try:
+            scene.camera(name)
+        except ParameterError as err:
+            raise ParameterError(f"{caller}: {err}") from None
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise ParameterError(f"{caller}: view name(s) {dup[:5]!r} are listed more than once; list each view once")
