@@ -1,0 +1,343 @@
+"""Scoring model outputs against SpaceDG answers (SPEC-QA "Scoring"; the paper's evaluation).
+
+The parsers live in :mod:`spacedg.eval.parsing`; this module routes, scores and summarises.
+
+Pipeline for one prediction
+---------------------------
+
+1. :func:`extract_answer_text`: the content of the first ``<answer>…</answer>`` (tags
+   case-insensitive, content may span lines), else the whole text; stripped. ``None`` → ``""``.
+2. The answer type: the record's ``answer_type``, or :func:`route` from
+   ``(question_type, sub_question_type)`` when a plain mapping has none.
+3. A type-specific parser (each one runs step 1 itself, so raw model text may be passed):
+   :func:`parse_mcq`, :func:`parse_yes_no`, :func:`parse_number`, :func:`parse_count`,
+   :func:`parse_size_list`. A parser returns ``None`` when it cannot find an unambiguous answer.
+4. The score in ``[0, 1]``: MCQ / YN / COUNT exact match (1 or 0); NA
+   :func:`mean_relative_accuracy`; SIZE_LIST the mean of the per-edge MRA.
+   **An unparseable prediction always scores 0** (the public evaluator scored an unparseable
+   MCQ prediction against an unparseable ground truth as a hit; fixed here).
+
+:func:`summarize` averages :class:`ScoreResult` s over **every** answer type (the public
+evaluator's overall figure left NA and SIZE_LIST out; fixed here) and per answer type.
+
+Deliberate deviations from the public evaluator (all on inputs it mishandled)
+----------------------------------------------------------------------------
+
+* Length units written after a number are converted to metres (``"30 cm"`` → 0.3; mm, cm,
+  m, km, ft, inches); the reference would read ``"30 cm"`` as 30 m.
+* ``"1,234"`` is one thousand two hundred and thirty-four, number words are read
+  (``"twenty-one"`` → 21).
+* MRA thresholds are exact: a relative error of exactly 0.05 counts at θ = 0.95 (see
+  :func:`mean_relative_accuracy`); ground truth 0 has a defined score.
+* SIZE_LIST predictions are sorted before comparing (see :func:`score`).
+* An MCQ answer that gives no letter but exactly repeats one option's text is mapped to that
+  option's letter (see :func:`parse_mcq`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from decimal import Decimal, localcontext
+from typing import Any
+
+from spacedg.data.qa import MCQ_LETTERS
+from spacedg.eval.parsing import (
+    extract_answer_text,
+    parse_count,
+    parse_mcq,
+    parse_number,
+    parse_size_list,
+    parse_yes_no,
+)
+from spacedg.plugins.specs import AnswerType
+
+__all__ = [
+    "ANSWER_PROMPT",
+    "MRA_THRESHOLDS",
+    "ScoreResult",
+    "route",
+    "mean_relative_accuracy",
+    "score",
+    "summarize",
+]
+
+#: System text given to the model: answer only, wrapped in ``<answer>…</answer>``.
+ANSWER_PROMPT: str = (
+    "Answer the question about the image(s). Output only the final answer, wrapped in "
+    "<answer></answer> tags, with no other text: for a multiple-choice question the option "
+    "letter (e.g. <answer>B</answer>); for a yes/no question yes or no (e.g. "
+    "<answer>no</answer>); for a count an integer (e.g. <answer>3</answer>); for a distance "
+    "or size one number in meters (e.g. <answer>1.25</answer>); for object dimensions a list "
+    "[shortest edge, middle edge, longest edge] in meters (e.g. <answer>[0.10, 0.20, 0.30]</answer>)."
+)
+
+#: MRA confidence thresholds θ in hundredths: 0.50, 0.55, …, 0.95 (10 values, as in the paper).
+MRA_THRESHOLDS: tuple[Decimal, ...] = tuple(Decimal(50 + 5 * k) / 100 for k in range(10))
+
+
+# ------------------------------------------------------------------ result type
+@dataclass(frozen=True)
+class ScoreResult:
+    """The score of one prediction.
+
+    Attributes:
+        score: in ``[0, 1]``; 1/0 for MCQ, YN and COUNT, MRA for NA and SIZE_LIST.
+        parsed: what the parser read: an option letter, ``"yes"``/``"no"``, an ``int``, a
+            ``float``, a tuple of 3 floats (as compared, i.e. sorted), or ``None``.
+        answer_type: the answer type the prediction was scored as.
+        parse_ok: whether the parser found an answer (``parsed is not None``).
+    """
+
+    score: float
+    parsed: str | int | float | tuple[float, ...] | None
+    answer_type: AnswerType
+    parse_ok: bool
+
+
+# ------------------------------------------------------------------ routing
+_YN_SUBTYPES = frozenset({"distance_threshold"})
+_YN_TYPES = frozenset({"object_existence_estimation"})
+_NA_SUBTYPES = frozenset({"distance_exact", "bbox_center_distance", "inter_object_distance"})
+_NA_TYPES = frozenset({"camera_object_distance_estimation", "inter_object_distance"})
+_COUNT_TYPES = frozenset({"object_counting"})
+_SIZE_TYPES = frozenset({"object_bounding_size_estimation"})
+
+
+def route(question_type: str | None, sub_question_type: str | None = None) -> AnswerType:
+    """The answer type of a question, by the SpaceDG routing rule.
+
+    Names are compared lower-cased and stripped; the sub type is checked before the type.
+
+    ========================================================  ===========
+    ``sub_question_type == "distance_threshold"``             YN
+    ``question_type == "object_existence_estimation"``        YN
+    ``sub_question_type`` in ``distance_exact``,
+    ``bbox_center_distance``, ``inter_object_distance``       NA
+    ``question_type`` in ``camera_object_distance_estimation``
+    (single-view distance and ``bbox_center_distance``),
+    ``inter_object_distance``                                 NA
+    ``object_counting`` (type or sub type)                    COUNT
+    ``object_bounding_size_estimation`` (type or sub type)    SIZE_LIST
+    anything else (``camera_translation/main_dir``,
+    ``camera_rotation``, relative / cardinal direction, size
+    comparison, unknown names)                                MCQ
+    ========================================================  ===========
+    """
+    qtype = (question_type or "").strip().lower()
+    sub = (sub_question_type or "").strip().lower()
+    names = {qtype, sub}
+    if sub in _YN_SUBTYPES or names & _YN_TYPES:
+        return AnswerType.YN
+    if sub in _NA_SUBTYPES or qtype in _NA_TYPES:
+        return AnswerType.NA
+    if names & _COUNT_TYPES:
+        return AnswerType.COUNT
+    if names & _SIZE_TYPES:
+        return AnswerType.SIZE_LIST
+    return AnswerType.MCQ
+
+
+# ------------------------------------------------------------------ MRA
+def _exact(value: float) -> Decimal:
+    """The shortest decimal that round-trips to ``value`` (what was written: 2.1 → 2.1)."""
+    return Decimal(repr(float(value)))
+
+
+def mean_relative_accuracy(pred: float | None, truth: float) -> float:
+    """Mean Relative Accuracy (VSI-Bench / SpaceDG) of one numeric prediction.
+
+    ``e = |pred − truth| / |truth|`` and ``MRA = mean over θ ∈ {0.50, 0.55, …, 0.95} of
+    [e ≤ 1 − θ]`` — 10 thresholds, so MRA is a multiple of 0.1: 1.0 for e ≤ 0.05, 0.6 for
+    e = 0.25, 0 for e > 0.5.
+
+    Exactness: both numbers are taken as their shortest round-trip decimal strings (``2.1``
+    is 2.1, not the binary 2.1000000000000000888…) and compared in exact decimal arithmetic as
+    ``|p − t| ≤ (1 − θ)·|t|``, so boundary cases count (truth 2.0, pred 2.1: e = 0.05 exactly
+    → counts at θ = 0.95 → MRA 1.0). The public code's floating-point division drops such
+    boundary hits (and VSI-Bench's ``linspace(0.5, 0.95, 11)`` uses 11 thresholds spaced 0.045);
+    the paper's definition, followed here, has the 10 thresholds above.
+
+    Edge cases: ``pred`` ``None`` or non-finite → 0.0. ``truth == 0``: relative error is
+    undefined, so MRA is 1.0 when ``pred == 0`` and 0.0 otherwise. A non-finite ``truth``
+    raises ``ValueError``. A negative truth uses ``|truth|``.
+    """
+    try:
+        truth_f = float(truth)
+    except (TypeError, ValueError):
+        raise ValueError(f"mean_relative_accuracy: truth must be a finite number, got {truth!r}") from None
+    if not math.isfinite(truth_f):
+        raise ValueError(f"mean_relative_accuracy: truth must be a finite number, got {truth!r}")
+    if pred is None or isinstance(pred, bool):
+        return 0.0
+    try:
+        pred_f = float(pred)
+    except (TypeError, ValueError):
+        return 0.0
+    if not math.isfinite(pred_f):
+        return 0.0
+    p, t = _exact(pred_f), _exact(truth_f)
+    if t == 0:
+        return 1.0 if p == 0 else 0.0
+    with localcontext() as ctx:
+        ctx.prec = 80
+        diff = abs(p - t)
+        hits = sum(1 for theta in MRA_THRESHOLDS if diff <= (1 - theta) * abs(t))
+    return hits / len(MRA_THRESHOLDS)
+
+
+# ------------------------------------------------------------------ score
+def _field(source: Any, name: str, default: Any = None) -> Any:
+    if isinstance(source, Mapping):
+        return source.get(name, default)
+    return getattr(source, name, default)
+
+
+def _answer_type_of(source: Any) -> AnswerType:
+    kind = _field(source, "answer_type")
+    if kind is not None and str(kind).strip():
+        try:
+            return AnswerType(kind if isinstance(kind, AnswerType) else str(kind).strip().upper())
+        except ValueError:
+            raise ValueError(
+                f"score: answer_type {kind!r} is not one of {', '.join(a.value for a in AnswerType)}"
+            ) from None
+    qtype, sub = _field(source, "question_type"), _field(source, "sub_question_type")
+    if qtype is None and sub is None:
+        raise ValueError("score: give answer_type, or question_type (+ sub_question_type) to route by")
+    return route(qtype, sub)
+
+
+def _options_of(source: Any) -> Sequence[str] | Mapping[str, Any] | None:
+    options = _field(source, "options")
+    if isinstance(options, str):
+        try:
+            options = json.loads(options)
+        except json.JSONDecodeError:
+            options = [line for line in options.splitlines() if line.strip()]
+    if options:
+        return options
+    if isinstance(source, Mapping):  # VLMEvalKit TSV rows carry options as columns A…D
+        columns = {k: source[k] for k in MCQ_LETTERS if k in source and source[k] is not None}
+        return columns or None
+    return None
+
+
+def _truth_number(answer: Any) -> float:
+    if isinstance(answer, (int, float)) and not isinstance(answer, bool):
+        return float(answer)
+    value = parse_number(str(answer), convert_units=False)
+    if value is None:
+        raise ValueError(f"score: cannot read a numeric ground truth from {answer!r}")
+    return value
+
+
+def _truth_sizes(answer: Any) -> list[float]:
+    if isinstance(answer, str):
+        values = parse_size_list(answer, convert_units=False)
+        if values is None:
+            raise ValueError(f"score: cannot read a [shortest, middle, longest] ground truth from {answer!r}")
+        return values
+    values = [float(v) for v in answer]
+    if len(values) != 3:
+        raise ValueError(f"score: a SIZE_LIST ground truth has 3 values, got {answer!r}")
+    return values
+
+
+def score(prediction: str | None, record_or_fields: Any, *, sort_sizes: bool = True) -> ScoreResult:
+    """Score one model output against a :class:`~spacedg.data.qa.QARecord` or a mapping.
+
+    ``record_or_fields`` is a ``QARecord`` or any mapping / object with ``answer`` and either
+    ``answer_type`` or ``question_type`` (+ ``sub_question_type``) for :func:`route`; MCQ may
+    carry ``options`` (``["A. text", …]``, ``{"A": text}``, a JSON string) or, as VLMEvalKit
+    TSV rows do, columns ``A``…``D``. Ground truths given as text (TSV) are read leniently:
+    ``" b "`` → ``"B"``, ``"Yes"`` → ``"yes"``, ``"2.5"``, ``"[0.1, 0.2, 0.3]"``.
+
+    Rules by answer type:
+
+    * MCQ: :func:`parse_mcq` (with the options); 1 iff the letter equals the truth letter.
+      Unparseable → 0 (fixes the reference's unparseable-vs-unparseable hit).
+    * YN: :func:`parse_yes_no`; exact match.
+    * COUNT: :func:`parse_count`; exact integer match.
+    * NA: :func:`parse_number`; :func:`mean_relative_accuracy`.
+    * SIZE_LIST: :func:`parse_size_list`; with ``sort_sizes`` (default) the three predicted
+      edges are **sorted ascending** before comparison, since the truth is
+      ``[shortest, middle, longest]`` and the three edge lengths, not their listing order, are
+      what is estimated (the paper asks for ascending order; pass ``sort_sizes=False`` to
+      compare positionally and penalise out-of-order lists). Score = mean of the 3 MRAs.
+    """
+    kind = _answer_type_of(record_or_fields)
+    truth = _field(record_or_fields, "answer")
+    if truth is None:
+        raise ValueError("score: the record has no answer")
+    parsed: Any
+    value = 0.0
+    if kind is AnswerType.MCQ:
+        parsed = parse_mcq(prediction, _options_of(record_or_fields))
+        value = float(parsed is not None and parsed == str(truth).strip().strip(".").upper())
+    elif kind is AnswerType.YN:
+        parsed = parse_yes_no(prediction)
+        value = float(parsed is not None and parsed == str(truth).strip().lower())
+    elif kind is AnswerType.COUNT:
+        parsed = parse_count(prediction)
+        value = float(parsed is not None and parsed == _truth_number(truth))
+    elif kind is AnswerType.NA:
+        parsed = parse_number(prediction)
+        value = mean_relative_accuracy(parsed, _truth_number(truth))
+    else:
+        sizes = parse_size_list(prediction)
+        truth_sizes = _truth_sizes(truth)
+        parsed = None
+        if sizes is not None:
+            parsed = tuple(sorted(sizes)) if sort_sizes else tuple(sizes)
+            value = sum(mean_relative_accuracy(p, t) for p, t in zip(parsed, truth_sizes)) / 3
+    return ScoreResult(score=value, parsed=parsed, answer_type=kind, parse_ok=parsed is not None)
+
+
+# ------------------------------------------------------------------ summary
+def _group_stats(results: Sequence[ScoreResult]) -> dict[str, Any]:
+    n = len(results)
+    return {
+        "n": n,
+        "score": (sum(r.score for r in results) / n) if n else None,
+        "parse_rate": (sum(r.parse_ok for r in results) / n) if n else None,
+    }
+
+
+def summarize(
+    results: Iterable[ScoreResult],
+    groups: Mapping[str, Sequence[Any]] | None = None,
+) -> dict[str, Any]:
+    """Mean scores of ``results``: overall over **every** answer type, and per answer type.
+
+    Returns a JSON-ready dict::
+
+        {"overall": {"n", "score", "parse_rate"},
+         "by_answer_type": {"MCQ": {...}, "YN": {...}, "NA": {...}, ...},   # types present
+         "by_<name>": {label: {...}}}                                      # for each group
+
+    ``score`` is the mean of the per-question scores (accuracy for MCQ/YN/COUNT, mean MRA for
+    NA/SIZE_LIST); ``overall`` weights every question equally whatever its type (the public
+    evaluator left NA and SIZE_LIST out of its overall figure; fixed). ``parse_rate`` is the
+    share of predictions the parser could read. ``score`` and ``parse_rate`` are ``None`` for
+    an empty set. ``groups`` maps a name (e.g. ``"degradation_type"``, ``"question_type"``)
+    to one label per result, in the same order.
+    """
+    items = list(results)
+    summary: dict[str, Any] = {"overall": _group_stats(items)}
+    by_type: dict[str, list[ScoreResult]] = {}
+    for r in items:
+        by_type.setdefault(AnswerType(r.answer_type).value, []).append(r)
+    order = [a.value for a in AnswerType if a.value in by_type]
+    summary["by_answer_type"] = {k: _group_stats(by_type[k]) for k in order}
+    for name, labels in (groups or {}).items():
+        labels = list(labels)
+        if len(labels) != len(items):
+            raise ValueError(f"summarize: group {name!r} has {len(labels)} labels for {len(items)} results")
+        buckets: dict[str, list[ScoreResult]] = {}
+        for label, r in zip(labels, items):
+            buckets.setdefault(str(label), []).append(r)
+        summary[f"by_{name}"] = {k: _group_stats(v) for k, v in sorted(buckets.items())}
+    return summary
