@@ -18,6 +18,7 @@ from spacedg.render.colour import linear_to_srgb, srgb_to_linear
 from spacedg.render.frame import Frame
 from spacedg.render.gaussians import Gaussians
 from spacedg.render.renderer import BACKENDS, render
+from spacedg.render.request import RenderRequest
 from spacedg.render.settings import OUTPUT_NAMES, Defocus, MotionBlur, RasterSettings
 
 __all__ = [
@@ -30,6 +31,7 @@ __all__ = [
     "Gaussians",
     "MotionBlur",
     "RasterSettings",
+    "RenderRequest",
     "exposure_poses",
     "interpolate_pose",
     "linear_to_srgb",
