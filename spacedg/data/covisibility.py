@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from spacedg.data.scene import Scene
+from spacedg.data.scene import Scene, ViewCovisibility
 from spacedg.errors import ParameterError
 from spacedg.render.camera import Camera
 from spacedg.data.visibility import _check_size, _reduced, _view_names
@@ -31,7 +31,7 @@ from spacedg.render.gaussians import Gaussians
 
 __all__ = [
     "COVISIBILITY_IMAGE_SIZE", "COVISIBILITY_VERSION", "covisibility_matrix", "symmetrize", "covisibility_key",
-    "covisibility_cache_path", "load_or_compute_covisibility",
+    "covisibility_cache_path", "load_or_compute_covisibility", "with_covisibility",
 ]
 
 #: Default reduced render size (width, height) of :func:`covisibility_matrix`, pixels.
@@ -330,3 +330,21 @@ def load_or_compute_covisibility(
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(path, buffer.getvalue())
     return names, matrix
+
+
+def with_covisibility(
+    scene: Scene,
+    cache_dir: str | os.PathLike[str] | None = None,
+    **kwargs: object,
+) -> Scene:
+    """``scene`` with :attr:`Scene.covisibility` attached (all views; raw asymmetric matrix).
+
+    With ``cache_dir`` the matrix goes through :func:`load_or_compute_covisibility`, else it
+    is computed. ``kwargs`` go to the computation (``image_size``, ``rel_threshold``,
+    ``stride``, ``backend``, ``progress``).
+    """
+    if cache_dir is not None:
+        names, matrix = load_or_compute_covisibility(scene, cache_dir, **kwargs)  # type: ignore[arg-type]
+    else:
+        names, matrix = covisibility_matrix(scene, **kwargs)  # type: ignore[arg-type]
+    return scene.with_covisibility(ViewCovisibility(tuple(names), matrix))

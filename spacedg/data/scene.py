@@ -15,6 +15,7 @@ DataLoader workers receive a few kilobytes and load what they need themselves.
 from __future__ import annotations
 
 import difflib
+import functools
 import re
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping
@@ -23,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from spacedg._checks import require_rotation
 from spacedg.data.box import OrientedBox
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
@@ -134,6 +136,51 @@ class Instance:
 GaussiansSource = Gaussians | Callable[[], Gaussians]
 
 
+def _load_transformed(loader: Callable[[], Gaussians], rotation: np.ndarray, translation: np.ndarray) -> Gaussians:
+    return loader().transformed(rotation, translation)
+
+
+@dataclass(frozen=True, eq=False)
+class ViewCovisibility:
+    """Pairwise view covisibility of a scene (computed by ``spacedg.data.covisibility``).
+
+    Attributes:
+        names: view names, the order of the matrix rows and columns.
+        matrix: (V, V) float32, **raw and asymmetric**: ``matrix[i, j]`` is the fraction of
+            view i's valid depth pixels that reproject into view j with agreeing depth
+            (MapAnything-style); diagonal 1.
+    """
+
+    names: tuple[str, ...]
+    matrix: np.ndarray = field(repr=False)
+
+    def __post_init__(self) -> None:
+        names = tuple(self.names)
+        matrix = np.array(self.matrix, dtype=np.float32)
+        if matrix.shape != (len(names), len(names)):
+            raise InvalidDataError(f"ViewCovisibility: matrix shape {matrix.shape} does not match {len(names)} view names")
+        if len(set(names)) != len(names):
+            raise InvalidDataError("ViewCovisibility: view names repeat")
+        if not np.isfinite(matrix).all() or (matrix < 0).any() or (matrix > 1).any():
+            raise InvalidDataError("ViewCovisibility: scores must be finite and in [0, 1]")
+        matrix.flags.writeable = False
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "matrix", matrix)
+        object.__setattr__(self, "_index", {n: i for i, n in enumerate(names)})
+
+    def index(self, view: str) -> int:
+        """Row of ``view``; :class:`ParameterError` if the matrix does not cover it."""
+        try:
+            return self._index[view]  # type: ignore[attr-defined]
+        except KeyError:
+            raise ParameterError(f"covisibility has no view {view!r}; recompute it for the scene's current views") from None
+
+    def between(self, a: str, b: str) -> float:
+        """Symmetrised score of views ``a`` and ``b``: ``min(M[a, b], M[b, a])`` (both must see it)."""
+        i, j = self.index(a), self.index(b)
+        return float(min(self.matrix[i, j], self.matrix[j, i]))
+
+
 class Scene:
     """Gaussians, named views and annotated instances of one place, in metres.
 
@@ -148,6 +195,8 @@ class Scene:
         vocabulary: category words that may appear in this kind of scene (used for negative
             existence questions); defaults to the instance labels.
         metadata: JSON-serialisable facts (source, licence, attribution, generator seed).
+        covisibility: pairwise view covisibility (:class:`ViewCovisibility`), or ``None``
+            until computed (``spacedg.data.covisibility``); two-view question families read it.
     """
 
     units = "m"
@@ -161,6 +210,7 @@ class Scene:
         up: Iterable[float] = (0.0, 0.0, 1.0),
         vocabulary: Iterable[str] | None = None,
         metadata: Mapping[str, Any] | None = None,
+        covisibility: ViewCovisibility | None = None,
     ) -> None:
         if not isinstance(id, str) or not _ID_PATTERN.match(id):
             raise InvalidDataError(f"Scene: id {id!r} must be letters, digits, '_', '.', '-' (and start with a letter or digit)")
@@ -179,6 +229,13 @@ class Scene:
             sorted({inst.label for inst in self.instances})
         )
         self.metadata: dict[str, Any] = dict(metadata or {})
+        if covisibility is not None:
+            if not isinstance(covisibility, ViewCovisibility):
+                raise InvalidDataError(f"Scene {id}: covisibility must be a ViewCovisibility, got {type(covisibility).__name__}")
+            missing = sorted(set(self.views) - set(covisibility.names))
+            if missing:
+                raise InvalidDataError(f"Scene {id}: covisibility lacks view(s) {missing[:5]}; recompute it for these views")
+        self.covisibility = covisibility
         if isinstance(gaussians, Gaussians):
             self._gaussians: Gaussians | None = gaussians
             self._loader: Callable[[], Gaussians] | None = None
@@ -279,9 +336,37 @@ class Scene:
         return np.asarray(points, dtype=np.float64).reshape(-1, 3) @ self.up
 
     def with_instances(self, instances: Iterable[Instance]) -> Scene:
-        """A scene sharing Gaussians and views, with other instances (e.g. visibility filled)."""
-        source: GaussiansSource = self._gaussians if self._gaussians is not None else self._loader  # type: ignore[assignment]
-        return Scene(self.id, source, self.views, instances, self.up, self.vocabulary, self.metadata)
+        """A scene sharing Gaussians, views and covisibility, with other instances (e.g. visibility filled)."""
+        return Scene(self.id, self._source(), self.views, instances, self.up, self.vocabulary, self.metadata, self.covisibility)
+
+    def with_covisibility(self, covisibility: ViewCovisibility | None) -> Scene:
+        """A scene sharing everything else, with ``covisibility`` attached."""
+        return Scene(self.id, self._source(), self.views, self.instances, self.up, self.vocabulary, self.metadata, covisibility)
+
+    def transformed(self, rotation: np.ndarray, translation: np.ndarray) -> Scene:
+        """The same scene moved rigidly by ``x ↦ R x + t`` (Gaussians, camera poses, boxes, ``up``).
+
+        Visibility and covisibility are kept: they do not change under a rigid motion of
+        everything. Lazily loaded Gaussians stay lazy (transformed when loaded).
+        """
+        from dataclasses import replace
+
+        rot = np.asarray(rotation, dtype=np.float64)
+        require_rotation(rot, "rotation", f"Scene {self.id}.transformed")
+        t = np.asarray(translation, dtype=np.float64).reshape(3)
+        move = np.eye(4)
+        move[:3, :3], move[:3, 3] = rot, t
+        views = {name: cam.with_pose(move @ np.asarray(cam.cam_to_world, dtype=np.float64)) for name, cam in self.views.items()}
+        instances = [replace(inst, box=inst.box.transformed(rot, t)) for inst in self.instances]
+        source: GaussiansSource
+        if self._gaussians is not None:
+            source = self._gaussians.transformed(rot, t)
+        else:
+            source = functools.partial(_load_transformed, self._loader, rot, t)
+        return Scene(self.id, source, views, instances, rot @ self.up, self.vocabulary, self.metadata, self.covisibility)
+
+    def _source(self) -> GaussiansSource:
+        return self._gaussians if self._gaussians is not None else self._loader  # type: ignore[return-value]
 
     def summary(self) -> dict[str, Any]:
         """Counts, bounds and instances per label (what ``spacedg scenes info`` prints)."""

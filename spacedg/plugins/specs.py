@@ -675,6 +675,11 @@ class _CheckedGenerator:
                 f"question family {family.name!r} needs per-view instance visibility, but no instance of scene "
                 f"{scene.id!r} has any; compute it first (spacedg.data.visibility)"
             )
+        if "covisibility" in family.needs and getattr(scene, "covisibility", None) is None:
+            raise InvalidDataError(
+                f"question family {family.name!r} needs view covisibility, but scene {scene.id!r} has none; "
+                "attach it first (spacedg.data.covisibility.with_covisibility)"
+            )
         return self._records(scene, rng)
 
     def _records(self, scene: Scene, rng: np.random.Generator) -> Iterator[QARecord]:

@@ -16,7 +16,10 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["label_text", "plural", "count_phrase"]
+__all__ = ["label_text", "plural", "count_phrase", "object_phrase", "find_in_image", "IMAGE_NAMES"]
+
+#: How questions name the images of a record, in ``QARecord.views`` order.
+IMAGE_NAMES: tuple[str, ...] = ("A", "B", "C", "D")
 
 # Irregular singular → plural (lower case).
 _IRREGULAR: dict[str, str] = {
@@ -173,3 +176,24 @@ def plural(label: str) -> str:
 def count_phrase(count: int, label: str) -> str:
     """``"1 chair"``, ``"0 chairs"``, ``"3 boxes"``."""
     return f"{count} {label_text(label) if count == 1 else plural(label)}"
+
+
+def object_phrase(label: str, description: str = "") -> str:
+    """How a question names an object: its view-invariant description, else its label.
+
+    ``("chair", "black plastic chair")`` → ``"black plastic chair"``; ``("chair", "")`` →
+    ``"chair"``. A description that does not mention the label gets it appended in
+    parentheses (``"red hardcover (book)"``) so the category is always stated.
+    """
+    text = " ".join(str(description).split()).rstrip(".")
+    name = label_text(label)
+    if not text:
+        return name
+    if name.lower() not in text.lower():
+        return f"{text} ({name})"
+    return text
+
+
+def find_in_image(phrase: str, image: int) -> str:
+    """The marker sentence that tells where an object is seen: ``"In image A, find the red cup."``."""
+    return f"In image {IMAGE_NAMES[image]}, find the {phrase}."

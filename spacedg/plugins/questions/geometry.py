@@ -1,0 +1,264 @@
+"""Geometry shared by every question family: relative poses, direction words, sectors, options.
+
+No family re-implements these; the independent recomputation test re-derives answers with its
+own code from the stored ``geometry`` blocks.
+
+Conventions (SPEC-QA):
+
+- Cameras are OpenCV: x right, y down, z forward; ``Camera.cam_to_world`` maps camera to world.
+  The relative pose of view B seen from view A is ``R_rel = R_a^T R_b`` and the translation
+  ``d = R_a^T (t_b - t_a)`` (metres, in A's camera frame).
+- "Up" is always ``Scene.up``; the *ground plane* is the plane orthogonal to it.
+- **Dominant-part labels** (:func:`dominant_parts`): the axis with the largest |component| is the
+  first part; the second-largest is added only when ``|c2| >= TAN30 * |c1|`` (0.5774, a 30°
+  angular ratio), and at most :data:`MAX_PARTS` = 2 parts are used (3-part labels invite
+  partially-correct distractors).
+- **Ground angles** (:func:`ground_angle`): the angle of a vector on the ground plane measured
+  from a reference direction ``forward`` towards ``right = forward x up``, in degrees [0, 360):
+  0 = ahead, 90 = right, seen from above. Compass labels use north as ``forward`` and east =
+  north x up.
+- **Sectors**: relative-position questions split the ground plane into eight 45° sectors
+  centred on front, front-right, ... (:data:`RELPOS_SECTORS`); compass questions use the
+  0.5774 rule on the (north, east) components, so a cardinal label covers ±30° around its axis
+  and a diagonal label the 30° between (:data:`COMPASS_SECTORS`). When the angle lies within
+  :data:`BOUNDARY_GUARD_DEG` = 3° of a sector boundary, the neighbouring label on that side is
+  never used as a distractor (:meth:`Sectors.classify`).
+- **Options** (:func:`build_mcq`): the truth and three distinct distractors, shuffled by the
+  family's seeded ``rng`` so the correct letter is uniform over A–D.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from spacedg.data.qa import MCQ_LETTERS
+from spacedg.errors import InvalidDataError
+from spacedg.render.camera import Camera
+
+__all__ = [
+    "TAN30", "MAX_PARTS", "BOUNDARY_GUARD_DEG", "CAMERA_MOTION_WORDS", "BODY_DIRECTION_WORDS",
+    "relative_rotation", "relative_translation", "camera_center", "point_in_camera",
+    "dominant_parts", "parts_label", "flipped_labels", "single_word_pool", "build_mcq",
+    "horizontal", "ground_angle", "vertical_dominates",
+    "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS",
+    "euler_yaw_pitch_roll", "ROTATION_WORDS",
+]
+
+#: Secondary-axis ratio: a second part is named only when |c2| >= TAN30 * |c1| (30°).
+TAN30 = 0.5774
+#: At most this many parts in a direction label ("right-up", never "right-up-forward").
+MAX_PARTS = 2
+#: Within this many degrees of a sector boundary, the neighbour across it is no distractor.
+BOUNDARY_GUARD_DEG = 3.0
+
+#: Camera-frame words per axis (x, y, z): (positive, negative). Camera translation questions.
+CAMERA_MOTION_WORDS: tuple[tuple[str, str], ...] = (("right", "left"), ("down", "up"), ("forward", "backward"))
+#: Camera-frame words for where an object is relative to the camera (x, y, z).
+BODY_DIRECTION_WORDS: tuple[tuple[str, str], ...] = (("Right", "Left"), ("Down", "Up"), ("Front", "Back"))
+
+#: Rotation words per axis name: (positive, negative); see :func:`euler_yaw_pitch_roll`.
+ROTATION_WORDS: dict[str, tuple[str, str]] = {
+    "yaw": ("turn right", "turn left"),
+    "pitch": ("tilt up", "tilt down"),
+    "roll": ("clockwise roll", "counterclockwise roll"),
+}
+
+
+# ------------------------------------------------------------------ poses
+def camera_center(camera: Camera) -> np.ndarray:
+    """Camera centre in world metres."""
+    return np.asarray(camera.cam_to_world, dtype=np.float64)[:3, 3].copy()
+
+
+def relative_rotation(cam_a: Camera, cam_b: Camera) -> np.ndarray:
+    """``R_a^T R_b``: B's camera axes expressed in A's camera frame (3, 3)."""
+    ra = np.asarray(cam_a.cam_to_world, dtype=np.float64)[:3, :3]
+    rb = np.asarray(cam_b.cam_to_world, dtype=np.float64)[:3, :3]
+    return ra.T @ rb
+
+
+def relative_translation(cam_a: Camera, cam_b: Camera) -> np.ndarray:
+    """``R_a^T (t_b - t_a)``: B's centre in A's camera frame, metres (x right, y down, z forward)."""
+    ra = np.asarray(cam_a.cam_to_world, dtype=np.float64)[:3, :3]
+    return ra.T @ (camera_center(cam_b) - camera_center(cam_a))
+
+
+def point_in_camera(camera: Camera, point: np.ndarray) -> np.ndarray:
+    """World ``point`` in ``camera``'s frame (OpenCV axes), metres."""
+    pose = np.asarray(camera.cam_to_world, dtype=np.float64)
+    return pose[:3, :3].T @ (np.asarray(point, dtype=np.float64) - pose[:3, 3])
+
+
+def euler_yaw_pitch_roll(rotation: np.ndarray) -> tuple[float, float, float]:
+    """``(yaw, pitch, roll)`` in degrees with ``rotation = R_y(yaw) @ R_x(pitch) @ R_z(roll)``.
+
+    Camera-frame convention (OpenCV axes, intrinsic y–x–z): **yaw** about the camera's y (down)
+    axis, positive = the forward axis turns towards +x ("turn right"); **pitch** about x,
+    positive = the forward axis rises towards −y ("tilt up"); **roll** about z (forward),
+    positive = the camera's right axis turns towards +y, i.e. the camera rolls clockwise as
+    seen from behind it ("clockwise roll"). ``|pitch| <= 90``; near ±90 yaw and roll are
+    ill-defined (gimbal lock), so callers skip ``|pitch| >`` a limit.
+    """
+    r = np.asarray(rotation, dtype=np.float64)
+    # R_y(a) R_x(b) R_z(c): third column (sa cb, -sb, ca cb), second row (cb sc, cb cc, -sb).
+    b = math.asin(float(np.clip(-r[1, 2], -1.0, 1.0)))
+    a = math.atan2(r[0, 2], r[2, 2])
+    c = math.atan2(r[1, 0], r[1, 1])
+    # a positive rotation about +x sends forward (z) towards -y, which is up: pitch up.
+    return math.degrees(a), math.degrees(b), math.degrees(c)
+
+
+# ------------------------------------------------------ dominant-part words
+def dominant_parts(components: Sequence[float], ratio: float = TAN30, max_parts: int = MAX_PARTS) -> list[tuple[int, int]]:
+    """``[(axis, sign), ...]`` of the components that name a direction, largest first.
+
+    The largest |component| always names the first part; each further one joins only when
+    ``|c| >= ratio * max|c|``, up to ``max_parts``. ``sign`` is +1 or -1. Empty for a zero vector.
+    """
+    values = np.asarray(components, dtype=np.float64)
+    mags = np.abs(values)
+    top = float(mags.max()) if mags.size else 0.0
+    if not math.isfinite(top) or top <= 0.0:
+        return []
+    order = sorted(range(len(values)), key=lambda i: (-mags[i], i))
+    parts = [(i, 1 if values[i] > 0 else -1) for i in order if mags[i] >= ratio * top]
+    return parts[:max_parts]
+
+
+def parts_label(parts: Sequence[tuple[int, int]], words: Sequence[tuple[str, str]], sep: str = "-") -> str:
+    """``"right-up"`` from ``[(0, +1), (1, -1)]`` with :data:`CAMERA_MOTION_WORDS`."""
+    return sep.join(words[axis][0 if sign > 0 else 1] for axis, sign in parts)
+
+
+def flipped_labels(parts: Sequence[tuple[int, int]], words: Sequence[tuple[str, str]], sep: str = "-") -> list[str]:
+    """Labels with one or both parts flipped (never partially correct): 1 label for 1 part, 3 for 2."""
+    parts = list(parts)
+    out: list[str] = []
+    for mask in range(1, 2 ** len(parts)):
+        flipped = [(axis, -sign if mask >> k & 1 else sign) for k, (axis, sign) in enumerate(parts)]
+        out.append(parts_label(flipped, words, sep))
+    return out
+
+
+def single_word_pool(words: Sequence[tuple[str, str]], exclude_axes: Sequence[int] = ()) -> list[str]:
+    """Every one-word label of axes not in ``exclude_axes`` (positive then negative)."""
+    return [w for axis, pair in enumerate(words) if axis not in exclude_axes for w in pair]
+
+
+def build_mcq(truth: str, distractors: Sequence[str], rng: np.random.Generator) -> tuple[tuple[str, ...], str]:
+    """Four ``"A. text"`` option lines and the correct letter.
+
+    ``distractors`` are the candidates in preference order; the first three distinct ones
+    that differ from ``truth`` are used. The four texts are shuffled by ``rng.permutation(4)``.
+    Raises :class:`InvalidDataError` if fewer than three usable distractors exist.
+    """
+    chosen: list[str] = []
+    for text in distractors:
+        if text != truth and text not in chosen:
+            chosen.append(text)
+        if len(chosen) == 3:
+            break
+    if len(chosen) < 3:
+        raise InvalidDataError(f"build_mcq: need 3 distractors different from {truth!r}, got {list(distractors)}")
+    texts = [truth, *chosen]
+    order = rng.permutation(4)
+    shuffled = [texts[i] for i in order]
+    letter = MCQ_LETTERS[int(np.flatnonzero(order == 0)[0])]
+    return tuple(f"{MCQ_LETTERS[k]}. {t}" for k, t in enumerate(shuffled)), letter
+
+
+# ---------------------------------------------------------------- ground plane
+def horizontal(vector: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """``vector`` with its component along ``up`` removed (the ground-plane projection)."""
+    v = np.asarray(vector, dtype=np.float64)
+    u = np.asarray(up, dtype=np.float64)
+    return v - float(v @ u) * u
+
+
+def vertical_dominates(vector: np.ndarray, up: np.ndarray, factor: float = 1.2) -> bool:
+    """True when ``|vertical part| >= factor * |horizontal part|`` (direction on the ground ill-defined)."""
+    v = np.asarray(vector, dtype=np.float64)
+    vertical = abs(float(v @ np.asarray(up, dtype=np.float64)))
+    return vertical >= factor * float(np.linalg.norm(horizontal(v, up)))
+
+
+def ground_angle(forward: np.ndarray, vector: np.ndarray, up: np.ndarray) -> float:
+    """Angle of ``vector`` on the ground plane from ``forward`` towards ``forward x up``, degrees in [0, 360).
+
+    Both vectors are flattened on the ground plane first; 90 means "to the right" of
+    ``forward`` seen from above (right-handed world, ``up`` against gravity).
+    """
+    u = np.asarray(up, dtype=np.float64)
+    f = horizontal(forward, u)
+    norm = float(np.linalg.norm(f))
+    if norm <= 1e-12:
+        raise InvalidDataError("ground_angle: the reference direction is vertical; it has no direction on the ground")
+    f = f / norm
+    right = np.cross(f, u)
+    v = horizontal(vector, u)
+    angle = math.degrees(math.atan2(float(v @ right), float(v @ f)))
+    return angle % 360.0
+
+
+# ---------------------------------------------------------------- sectors
+@dataclass(frozen=True)
+class SectorHit:
+    """Where an angle falls: its label index, the distance to the nearest sector boundary (°),
+    and the label index across that boundary (the near-boundary neighbour)."""
+
+    index: int
+    boundary_distance_deg: float
+    neighbour: int
+
+
+@dataclass(frozen=True)
+class Sectors:
+    """Eight labels around the ground plane; sector ``k`` spans ``[starts[k], starts[k+1])`` degrees.
+
+    Angles are measured as in :func:`ground_angle` (clockwise seen from above from label 0's
+    centre direction).
+    """
+
+    labels: tuple[str, ...]
+    starts: tuple[float, ...]
+
+    def classify(self, angle_deg: float) -> SectorHit:
+        a = float(angle_deg) % 360.0
+        n = len(self.labels)
+        for k in range(n):
+            lo = self.starts[k] % 360.0
+            hi = self.starts[(k + 1) % n] % 360.0
+            inside = lo <= a < hi if lo < hi else (a >= lo or a < hi)
+            if inside:
+                to_lo = (a - lo) % 360.0
+                to_hi = (hi - a) % 360.0
+                if to_lo <= to_hi:
+                    return SectorHit(k, to_lo, (k - 1) % n)
+                return SectorHit(k, to_hi, (k + 1) % n)
+        raise AssertionError("sectors do not cover the circle")  # pragma: no cover
+
+    def distractors(self, hit: SectorHit, rng: np.random.Generator, guard_deg: float = BOUNDARY_GUARD_DEG) -> list[str]:
+        """The other labels in a seeded order, without the near-boundary neighbour when within ``guard_deg``."""
+        banned = {hit.index}
+        if hit.boundary_distance_deg < guard_deg:
+            banned.add(hit.neighbour)
+        pool = [k for k in range(len(self.labels)) if k not in banned]
+        return [self.labels[pool[i]] for i in rng.permutation(len(pool))]
+
+
+#: Relative position around a person: eight 45° sectors centred on front, front-right, …
+RELPOS_SECTORS = Sectors(
+    ("front", "front-right", "right", "back-right", "back", "back-left", "left", "front-left"),
+    tuple((-22.5 + 45.0 * k) % 360.0 for k in range(8)),
+)
+#: Compass labels by the 0.5774 rule on (north, east): cardinals ±30°, diagonals the 30° between.
+COMPASS_SECTORS = Sectors(
+    ("north", "northeast", "east", "southeast", "south", "southwest", "west", "northwest"),
+    (330.0, 30.0, 60.0, 120.0, 150.0, 210.0, 240.0, 300.0),
+)
+#: The four cardinal labels (the assumed direction of compass questions is one of them).
+CARDINALS: tuple[str, ...] = ("north", "east", "south", "west")
