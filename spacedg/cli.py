@@ -12,7 +12,7 @@ from spacedg.errors import SpaceDGError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from spacedg.commands import gallery, plugins, render, scenes
+    from spacedg.commands import gallery, plugins, qa, render, scenes
 
     parser = argparse.ArgumentParser(
         prog="spacedg",
@@ -22,6 +22,7 @@ def build_parser() -> argparse.ArgumentParser:
     scenes.add_parser(sub)
     render.add_parser(sub)
     gallery.add_parser(sub)
+    qa.add_parser(sub)
     plugins.add_parser(sub)
     return parser
 

@@ -36,6 +36,23 @@ def small_room():
     return generate_room(7, RoomConfig(gaussians=30_000))
 
 
+@pytest.fixture(scope="session")
+def qa_room_dirs(tmp_path_factory) -> list[Path]:
+    """Four small synthetic rooms (30k Gaussians, 24–32 views at 320×240, random world frames)
+    saved as native scene folders, for question-index tests."""
+    from spacedg.data.io import save_scene
+    from spacedg.data.synthetic import CaptureConfig, RoomConfig, generate_room
+
+    root = tmp_path_factory.mktemp("qa_rooms")
+    dirs = []
+    for seed in (11, 12, 13, 14):
+        config = RoomConfig(gaussians=30_000, capture=CaptureConfig(320, 240, 24, 32))
+        folder = root / f"room-{seed:06d}"
+        save_scene(generate_room(seed, config, scene_id=folder.name), folder)
+        dirs.append(folder)
+    return dirs
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(1234)

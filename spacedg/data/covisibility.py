@@ -11,18 +11,16 @@
 
 from __future__ import annotations
 
-import hashlib
-import io
 import json
 import os
 import time
-import zipfile
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from spacedg.data.derived_cache import read_npz_entry, views_key, write_npz_entry
 from spacedg.data.scene import Scene, ViewCovisibility
 from spacedg.errors import ParameterError
 from spacedg.render.camera import Camera
@@ -244,51 +242,15 @@ def covisibility_key(
     rel_threshold: float,
     stride: int,
 ) -> str:
-    """SHA-256 over the method version, the parameters, the Gaussian count and every camera.
-
-    Cameras contribute their name, intrinsics, size, lens and cam-to-world (float64 bytes),
-    so moving one view changes the key. Gaussian *values* are not hashed (only the count):
-    rewriting a scene's splats in place with the same count needs an explicit recompute.
-    """
-    digest = hashlib.sha256()
-    params = {
-        "version": COVISIBILITY_VERSION,
-        "image_size": list(image_size),
-        "rel_threshold": float(rel_threshold),
-        "stride": int(stride),
-        "gaussians": len(scene.gaussians),
-        "scene": scene.id,
-    }
-    digest.update(json.dumps(params, sort_keys=True).encode())
-    for name in names:
-        cam = scene.views[name]
-        lens = cam.fisheye.coeffs + (cam.fisheye.max_theta,) if cam.fisheye is not None else ()
-        digest.update(name.encode() + b"\0")
-        digest.update(np.array([cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height, *lens], np.float64).tobytes())
-        digest.update(np.ascontiguousarray(cam.cam_to_world, np.float64).tobytes())
-    return digest.hexdigest()
+    """Cache key: :func:`~spacedg.data.derived_cache.views_key` over the method version,
+    the parameters, the Gaussian count and every camera (moving one view changes it)."""
+    params = {"version": COVISIBILITY_VERSION, "image_size": list(image_size), "rel_threshold": float(rel_threshold), "stride": int(stride)}
+    return views_key(scene, names, params)
 
 
 def covisibility_cache_path(scene: Scene, cache_dir: str | os.PathLike[str]) -> Path:
     """``<cache_dir>/<scene.id>.covisibility.npz``."""
     return Path(cache_dir) / f"{scene.id}.covisibility.npz"
-
-
-def _read_cache(path: Path, key: str) -> tuple[list[str], np.ndarray] | None:
-    """The cached ``(names, matrix)`` if ``path`` holds a readable entry with ``key``, else ``None``."""
-    if not path.is_file():
-        return None
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if str(data["key"]) != key:
-                return None
-            names = [str(n) for n in data["names"]]
-            matrix = np.asarray(data["matrix"], dtype=np.float32)
-    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
-        return None  # unreadable or foreign: recompute and overwrite
-    if matrix.shape != (len(names), len(names)):
-        return None
-    return names, matrix
 
 
 def load_or_compute_covisibility(
@@ -311,24 +273,22 @@ def load_or_compute_covisibility(
     recomputed and replaced atomically (temporary file + ``os.replace``). The backend is not
     part of the key (backends agree to float precision).
     """
-    from spacedg.data.io._files import atomic_write_bytes
-
     names = _view_names(scene, views, "load_or_compute_covisibility")
     size = _check_size(image_size, "load_or_compute_covisibility")
     key = covisibility_key(scene, names, image_size=size, rel_threshold=rel_threshold, stride=stride)
     path = covisibility_cache_path(scene, cache_dir)
-    cached = _read_cache(path, key)
-    if cached is not None:
-        return cached
+    cached = read_npz_entry(path, key)
+    if cached is not None and "names" in cached and "matrix" in cached:
+        names = [str(n) for n in cached["names"]]
+        matrix = cached["matrix"].astype(np.float32)
+        if matrix.shape == (len(names), len(names)):
+            return names, matrix
     names, matrix = covisibility_matrix(
         scene, names, image_size=size, rel_threshold=rel_threshold, stride=stride, backend=backend, progress=progress
     )
     params = {"image_size": list(size), "rel_threshold": float(rel_threshold), "stride": int(stride),
               "version": COVISIBILITY_VERSION, "symmetrised": False}
-    buffer = io.BytesIO()
-    np.savez(buffer, names=np.array(names, dtype=str), matrix=matrix, params=np.array(json.dumps(params)), key=np.array(key))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(path, buffer.getvalue())
+    write_npz_entry(path, key, {"names": np.array(names, dtype=str), "matrix": matrix, "params": np.array(json.dumps(params))})
     return names, matrix
 
 

@@ -25,8 +25,10 @@ half of the object's unoccluded, untruncated projection is visible).
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
+from pathlib import Path
 from enum import StrEnum
 from typing import Any
 
@@ -39,7 +41,7 @@ from spacedg.render.gaussians import Gaussians
 
 __all__ = [
     "VisibilityClass", "VisibilityThresholds", "DEFAULT_THRESHOLDS", "REFERENCE_AREA", "classify",
-    "compute_visibility", "with_visibility", "unbounded_canvas", "VISIBILITY_IMAGE_SIZE",
+    "compute_visibility", "with_visibility", "unbounded_canvas", "VISIBILITY_IMAGE_SIZE", "load_or_compute_visibility",
 ]
 
 #: Pixels of the reference image size 640×480 at which ``min_pixels`` is stated.
@@ -298,3 +300,44 @@ def with_visibility(
                 merged[view] = row[inst.id]
         instances.append(replace(inst, visibility=merged))
     return scene.with_instances(instances)
+
+
+#: Version of the visibility computation; part of its cache key (bump on a change of method).
+VISIBILITY_VERSION = 1
+
+
+def load_or_compute_visibility(
+    scene: Scene,
+    cache_dir: str | os.PathLike[str],
+    *,
+    image_size: tuple[int, int] = VISIBILITY_IMAGE_SIZE,
+    canvas_scale: int = 3,
+    backend: str = "auto",
+    progress: bool = True,
+) -> dict[str, dict[int, InstanceVisibility]]:
+    """:func:`compute_visibility` of every view, cached as ``<cache_dir>/<scene id>.visibility.npz``.
+
+    The entry holds ``views``, ``ids``, ``pixels`` (V, I) and ``fractions`` (V, I); its key
+    (:func:`~spacedg.data.derived_cache.views_key`) covers the method version, parameters,
+    cameras, Gaussian count and the instance ids, so it is reused only for the same scene.
+    """
+    from spacedg.data.derived_cache import read_npz_entry, views_key, write_npz_entry
+
+    names = list(scene.views)
+    size = _check_size(image_size, "load_or_compute_visibility")
+    ids = [inst.id for inst in scene.instances]
+    params = {"version": VISIBILITY_VERSION, "image_size": list(size), "canvas_scale": int(canvas_scale), "instances": ids}
+    key = views_key(scene, names, params)
+    path = Path(cache_dir) / f"{scene.id}.visibility.npz"
+    cached = read_npz_entry(path, key)
+    if cached is not None and cached.get("pixels", np.zeros(0)).shape == (len(names), len(ids)):
+        pixels, fractions = cached["pixels"], cached["fractions"]
+        return {
+            view: {iid: InstanceVisibility(int(pixels[v, k]), float(fractions[v, k])) for k, iid in enumerate(ids)}
+            for v, view in enumerate(names)
+        }
+    table = compute_visibility(scene, names, image_size=size, canvas_scale=canvas_scale, backend=backend, progress=progress)
+    pixels = np.array([[table[v][i].visible_pixels for i in ids] for v in names], dtype=np.int64).reshape(len(names), len(ids))
+    fractions = np.array([[table[v][i].visible_fraction for i in ids] for v in names], dtype=np.float64).reshape(len(names), len(ids))
+    write_npz_entry(path, key, {"views": np.array(names, dtype=str), "ids": np.array(ids, dtype=np.int64), "pixels": pixels, "fractions": fractions})
+    return table

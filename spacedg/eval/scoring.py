@@ -45,7 +45,6 @@ from typing import Any
 
 from spacedg.data.qa import MCQ_LETTERS
 from spacedg.eval.parsing import (
-    extract_answer_text,
     parse_count,
     parse_mcq,
     parse_number,

@@ -82,7 +82,7 @@ import numpy as np
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins.degradations._common import check_linear_rgb
 from spacedg.plugins.hookspecs import hookimpl
-from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
+from spacedg.plugins.specs import Category, DegradationSpec, ParamSpec, Stage
 
 __all__ = [
     "SPEC",

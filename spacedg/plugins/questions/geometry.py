@@ -23,13 +23,15 @@ Conventions (SPEC-QA):
   and a diagonal label the 30° between (:data:`COMPASS_SECTORS`). When the angle lies within
   :data:`BOUNDARY_GUARD_DEG` = 3° of a sector boundary, the neighbouring label on that side is
   never used as a distractor (:meth:`Sectors.classify`).
-- **Options** (:func:`build_mcq`): the truth and three distinct distractors, shuffled by the
-  family's seeded ``rng`` so the correct letter is uniform over A–D.
+- **Options** (:func:`build_mcq`): the truth and three distinct distractors; the correct letter
+  is dealt from shuffled A–D blocks drawn from the family's seeded ``rng``, so it is uniform
+  over A–D exactly (within one block of 4) across a family's generation.
 """
 
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -149,11 +151,35 @@ def single_word_pool(words: Sequence[tuple[str, str]], exclude_axes: Sequence[in
     return [w for axis, pair in enumerate(words) if axis not in exclude_axes for w in pair]
 
 
+#: Letter decks of recently used generators: id(rng) → (rng kept alive, remaining letters).
+_DECKS: OrderedDict[int, tuple[np.random.Generator, list[int]]] = OrderedDict()
+_MAX_DECKS = 256
+
+
+def _next_letter(rng: np.random.Generator) -> int:
+    """Index of the next correct letter for ``rng``: shuffled blocks of A–D, so over any
+    generation the correct letter is uniform to within one block (exact balance)."""
+    entry = _DECKS.get(id(rng))
+    if entry is None or entry[0] is not rng:
+        entry = (rng, [])
+        _DECKS[id(rng)] = entry
+        while len(_DECKS) > _MAX_DECKS:
+            _DECKS.popitem(last=False)
+    _DECKS.move_to_end(id(rng))
+    deck = entry[1]
+    if not deck:
+        deck.extend(int(k) for k in rng.permutation(4))
+    return deck.pop()
+
+
 def build_mcq(truth: str, distractors: Sequence[str], rng: np.random.Generator) -> tuple[tuple[str, ...], str]:
     """Four ``"A. text"`` option lines and the correct letter.
 
     ``distractors`` are the candidates in preference order; the first three distinct ones
-    that differ from ``truth`` are used. The four texts are shuffled by ``rng.permutation(4)``.
+    that differ from ``truth`` are used, in an order shuffled by ``rng``. The correct letter
+    comes from a deck of shuffled A–D blocks drawn from the same ``rng`` (one deck per
+    generator), so the letters of one family's generation are balanced exactly, not only in
+    expectation; the sequence is still a pure function of the seed.
     Raises :class:`InvalidDataError` if fewer than three usable distractors exist.
     """
     chosen: list[str] = []
@@ -164,11 +190,10 @@ def build_mcq(truth: str, distractors: Sequence[str], rng: np.random.Generator) 
             break
     if len(chosen) < 3:
         raise InvalidDataError(f"build_mcq: need 3 distractors different from {truth!r}, got {list(distractors)}")
-    texts = [truth, *chosen]
-    order = rng.permutation(4)
-    shuffled = [texts[i] for i in order]
-    letter = MCQ_LETTERS[int(np.flatnonzero(order == 0)[0])]
-    return tuple(f"{MCQ_LETTERS[k]}. {t}" for k, t in enumerate(shuffled)), letter
+    others = [chosen[i] for i in rng.permutation(3)]
+    slot = _next_letter(rng)
+    texts = others[:slot] + [truth] + others[slot:]
+    return tuple(f"{MCQ_LETTERS[k]}. {t}" for k, t in enumerate(texts)), MCQ_LETTERS[slot]
 
 
 # ---------------------------------------------------------------- ground plane

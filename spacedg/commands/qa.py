@@ -1,0 +1,98 @@
+"""``spacedg qa build`` / ``spacedg qa stats``: per-scene question indexes and their balance."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from tqdm import tqdm
+
+from spacedg.errors import InvalidDataError
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    qa = subparsers.add_parser("qa", help="build question indexes of scenes and summarise them")
+    sub = qa.add_subparsers(dest="qa_command", required=True, metavar="ACTION")
+
+    build = sub.add_parser("build", help="generate every family's questions for scenes (JSONL per scene)")
+    build.add_argument("scenes", type=Path, nargs="+", help="native scene folders, or folders of them")
+    build.add_argument("--out", type=Path, default=None, help="folder for <scene>.qa.jsonl (default: next to each scene)")
+    build.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
+    build.add_argument("--families", default="", help="comma-separated family names (default: all registered)")
+    build.add_argument("--per-sub-type", type=int, default=25, help="records per sub_question_type and family per scene (default 25)")
+    build.add_argument("--force", action="store_true", help="rebuild even when the index is up to date")
+    build.add_argument("--backend", default="auto", choices=("auto", "cpu", "torch"), help="renderer for visibility/covisibility")
+    build.set_defaults(func=_build)
+
+    stats = sub.add_parser("stats", help="counts per question type, answer balance, blind baseline")
+    stats.add_argument("paths", type=Path, nargs="+", help="*.qa.jsonl files, or folders holding them (scene folders work)")
+    stats.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    stats.set_defaults(func=_stats)
+
+
+def _build(args: argparse.Namespace) -> int:
+    from spacedg.commands.scenes import _scene_dirs
+    from spacedg.data.qa_index import QABuildConfig, build_scene_index
+
+    families = tuple(f.strip() for f in args.families.split(",") if f.strip())
+    config = QABuildConfig(seed=args.seed, families=families, per_sub_type=args.per_sub_type)
+    print(f"{'scene':<16} {'records':>8} {'visibility s':>12} {'covis s':>8} {'generate s':>10} {'q/s':>8}  index")
+    total = 0
+    start = time.perf_counter()
+    for folder in tqdm(_scene_dirs(args.scenes), desc="qa build", unit="scene"):
+        result = build_scene_index(folder, config, out_dir=args.out, force=args.force, backend=args.backend)
+        s = result.seconds
+        gen = s.get("generate_s", 0.0)
+        rate = f"{len(result.records) / gen:,.0f}" if gen > 0 and not result.reused else "-"
+        note = "reused" if result.reused else ""
+        print(f"{result.scene_id:<16} {len(result.records):>8} {s.get('visibility_s', 0):>12.2f} {s.get('covisibility_s', 0):>8.2f} "
+              f"{gen:>10.3f} {rate:>8}  {result.path} {note}")
+        total += len(result.records)
+    print(f"{total} records in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def _index_files(paths: list[Path]) -> list[Path]:
+    found: list[Path] = []
+    for path in paths:
+        if path.is_file():
+            found.append(path)
+        elif path.is_dir():
+            files = sorted(path.glob("*.qa.jsonl")) or sorted(path.glob("*/*.qa.jsonl"))
+            if not files:
+                raise InvalidDataError(f"{path}: no *.qa.jsonl in it or its sub-folders; build them with `spacedg qa build`")
+            found.extend(files)
+        else:
+            raise InvalidDataError(f"{path}: no such file or folder")
+    return found
+
+
+def _stats(args: argparse.Namespace) -> int:
+    from spacedg.data.qa_index import read_index
+    from spacedg.data.qa_stats import answer_balance, blind_baseline, count_table, format_table
+
+    by_scene = {}
+    for file in _index_files(args.paths):
+        records = read_index(file)
+        if records:
+            by_scene.setdefault(records[0].scene_id, []).extend(records)
+    every = [r for rs in by_scene.values() for r in rs]
+    report = {
+        "scenes": len(by_scene), "records": len(every), "counts": count_table(every),
+        "balance": answer_balance(every), "blind_baseline": blind_baseline(by_scene) if len(by_scene) > 1 else [],
+    }
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    print(f"{report['records']} records from {report['scenes']} scene(s)\n")
+    print(format_table(report["counts"]))
+    bal = report["balance"]
+    letters = "  ".join(f"{k} {v:.1f}%" for k, v in bal["letters"].items())
+    print(f"\nMCQ correct letter over {bal['mcq_n']} records: {letters}")
+    print(f"YN over {bal['yn_n']} records: yes {bal['yes_pct']:.1f}%")
+    if report["blind_baseline"]:
+        print("\nBlind baseline (leave-one-scene-out majority, accuracy %):")
+        print(format_table(report["blind_baseline"]))
+    return 0

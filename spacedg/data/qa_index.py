@@ -1,0 +1,262 @@
+"""Per-scene question index: every family's records for a scene, built from a seed, stored as JSONL.
+
+Building one scene (:func:`build_scene_index`):
+
+1. load the scene folder; attach per-view instance visibility and the view covisibility
+   matrix, both cached in ``<scene>/cache/`` (``*.visibility.npz``, ``*.covisibility.npz``);
+2. for every selected family (sorted by name), run ``family.generate(scene, rng)`` with
+   ``rng = default_rng(derive_seed(seed, scene_id, family))``: the records are seeded per
+   (scene, family), so adding a family never changes another family's records;
+3. keep records in generation order up to ``per_sub_type`` per ``sub_question_type``, looking
+   at no more than ``max_scan`` candidates per family; an optional judge
+   (:class:`~spacedg.data.judge.DescriptionJudge`) drops records whose descriptions it finds
+   ambiguous;
+4. write ``<out>/<scene id>.qa.jsonl`` (one :class:`QARecord` per line, families in name
+   order) and ``<out>/<scene id>.qa.meta.json`` (key, config, counts, timings) atomically.
+   ``out`` defaults to the scene folder itself.
+
+An index is **reused** when its meta file's key matches: the key hashes the index version,
+the build config, the SHA-256 of ``scene.json`` (views, poses, instances) and the selected
+families with the distributions and versions that provide them (and the judge's name). Any
+change rebuilds it; ``force=True`` always does.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from collections import Counter
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spacedg.data.qa import QARecord
+from spacedg.data.scene import Scene
+from spacedg.errors import FileFormatError, ParameterError
+
+__all__ = [
+    "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "prepare_scene", "generate_records",
+    "index_paths", "build_scene_index", "read_index",
+]
+
+#: Bump when the index layout or the build procedure changes (part of the key).
+QA_INDEX_VERSION = 1
+
+
+@dataclass(frozen=True)
+class QABuildConfig:
+    """How a scene's question index is built.
+
+    Attributes:
+        seed: master seed; each (scene, family) draws from ``derive_seed(seed, scene, family)``.
+        families: family names to run (empty = every registered family).
+        per_sub_type: at most this many records per ``sub_question_type`` and family.
+        max_scan: at most this many candidates examined per family.
+        visibility_size: reduced render size (width, height) px for instance visibility.
+        covisibility_size: reduced render size (width, height) px for covisibility.
+    """
+
+    seed: int = 0
+    families: tuple[str, ...] = ()
+    per_sub_type: int = 25
+    max_scan: int = 20_000
+    visibility_size: tuple[int, int] = (160, 120)
+    covisibility_size: tuple[int, int] = (80, 60)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ParameterError(f"QABuildConfig: seed must be an integer >= 0, got {self.seed!r}")
+        for name in ("per_sub_type", "max_scan"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ParameterError(f"QABuildConfig: {name} must be a positive integer, got {value!r}")
+        object.__setattr__(self, "families", tuple(self.families))
+        object.__setattr__(self, "visibility_size", tuple(self.visibility_size))
+        object.__setattr__(self, "covisibility_size", tuple(self.covisibility_size))
+
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["families"] = list(self.families)
+        out["visibility_size"] = list(self.visibility_size)
+        out["covisibility_size"] = list(self.covisibility_size)
+        return out
+
+
+@dataclass
+class SceneQA:
+    """The result of indexing one scene."""
+
+    scene_id: str
+    path: Path
+    records: list[QARecord]
+    reused: bool
+    seconds: dict[str, float] = field(default_factory=dict)
+    dropped: dict[str, int] = field(default_factory=dict)
+
+    def counts(self) -> dict[str, int]:
+        return dict(sorted(Counter(r.question_type for r in self.records).items()))
+
+
+# ------------------------------------------------------------------ building
+def _families(names: Sequence[str]) -> list[Any]:
+    from spacedg.plugins import get_question_family, list_question_families
+
+    if not names:
+        return list_question_families()
+    return [get_question_family(n) for n in sorted(set(names))]
+
+
+def prepare_scene(
+    scene: Scene,
+    cache_dir: str | Path | None,
+    config: QABuildConfig = QABuildConfig(),
+    *,
+    backend: str = "auto",
+    progress: bool = True,
+    timings: dict[str, float] | None = None,
+) -> Scene:
+    """``scene`` with visibility and covisibility attached (cached under ``cache_dir`` if given)."""
+    from spacedg.data.covisibility import with_covisibility
+    from spacedg.data.visibility import compute_visibility, load_or_compute_visibility, with_visibility
+
+    t0 = time.perf_counter()
+    if cache_dir is None:
+        table = compute_visibility(scene, image_size=config.visibility_size, backend=backend, progress=progress)
+    else:
+        table = load_or_compute_visibility(scene, cache_dir, image_size=config.visibility_size, backend=backend, progress=progress)
+    scene = with_visibility(scene, table)
+    t1 = time.perf_counter()
+    scene = with_covisibility(scene, cache_dir, image_size=config.covisibility_size, backend=backend, progress=progress)
+    if timings is not None:
+        timings["visibility_s"] = t1 - t0
+        timings["covisibility_s"] = time.perf_counter() - t1
+    return scene
+
+
+def generate_records(
+    scene: Scene,
+    config: QABuildConfig = QABuildConfig(),
+    *,
+    judge: Any = None,
+    dropped: dict[str, int] | None = None,
+) -> list[QARecord]:
+    """Records of every selected family for a prepared scene (see the module docstring).
+
+    ``judge``: a callable ``judge(image, label, description) -> "KEEP"/"DROP"`` or a
+    :class:`~spacedg.data.judge.DescriptionJudge`; ``dropped`` receives per-family counts of
+    records the judge removed.
+    """
+    from spacedg.data.judge import DescriptionJudge
+    from spacedg.data.pipeline import derive_seed
+
+    if judge is not None and not isinstance(judge, DescriptionJudge):
+        judge = DescriptionJudge(scene, judge)
+    out: list[QARecord] = []
+    for family in _families(config.families):
+        rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
+        per_sub: Counter[str] = Counter()
+        for scanned, record in enumerate(family.generate(scene, rng)):
+            if scanned >= config.max_scan:
+                break
+            if per_sub[record.sub_question_type] >= config.per_sub_type:
+                if all(per_sub[s] >= config.per_sub_type for s in family.sub_question_types):
+                    break
+                continue
+            if judge is not None and not judge.keep(record):
+                if dropped is not None:
+                    dropped[family.name] = dropped.get(family.name, 0) + 1
+                continue
+            per_sub[record.sub_question_type] += 1
+            out.append(record)
+    return out
+
+
+def index_paths(scene_id: str, out_dir: str | Path) -> tuple[Path, Path]:
+    """``(<out>/<id>.qa.jsonl, <out>/<id>.qa.meta.json)``."""
+    out = Path(out_dir)
+    return out / f"{scene_id}.qa.jsonl", out / f"{scene_id}.qa.meta.json"
+
+
+def _index_key(scene_json: Path, config: QABuildConfig, families: Iterable[Any], judge: Any) -> str:
+    digest = hashlib.sha256()
+    digest.update(scene_json.read_bytes())
+    fams = []
+    for fam in families:
+        origin = fam.origin
+        fams.append([fam.name, getattr(origin, "distribution", None), getattr(origin, "version", None)])
+    judge_name = None if judge is None else getattr(judge, "__name__", type(judge).__name__)
+    head = {"version": QA_INDEX_VERSION, "config": config.to_dict(), "families": fams, "judge": judge_name}
+    digest.update(json.dumps(head, sort_keys=True).encode())
+    return digest.hexdigest()
+
+
+def _read_meta(path: Path) -> dict[str, Any] | None:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def build_scene_index(
+    scene_dir: str | Path,
+    config: QABuildConfig = QABuildConfig(),
+    *,
+    out_dir: str | Path | None = None,
+    judge: Any = None,
+    force: bool = False,
+    backend: str = "auto",
+    progress: bool = True,
+) -> SceneQA:
+    """Build (or reuse) the question index of one native scene folder (see the module docstring)."""
+    from spacedg.data.io import load_scene
+    from spacedg.data.io._files import atomic_write_bytes
+
+    scene_dir = Path(scene_dir)
+    scene = load_scene(scene_dir)
+    scene_json = scene_dir / "scene.json" if scene_dir.is_dir() else scene_dir
+    families = _families(config.families)
+    key = _index_key(scene_json, config, families, judge)
+    jsonl, meta_path = index_paths(scene.id, out_dir if out_dir is not None else scene_json.parent)
+    meta = _read_meta(meta_path) if not force else None
+    if meta is not None and meta.get("key") == key and jsonl.is_file():
+        return SceneQA(scene.id, jsonl, read_index(jsonl), reused=True, seconds=dict(meta.get("seconds", {})))
+    timings: dict[str, float] = {}
+    prepared = prepare_scene(scene, scene_json.parent / "cache", config, backend=backend, progress=progress, timings=timings)
+    dropped: dict[str, int] = {}
+    t0 = time.perf_counter()
+    records = generate_records(prepared, config, judge=judge, dropped=dropped)
+    timings["generate_s"] = time.perf_counter() - t0
+    body = "".join(r.to_json() + "\n" for r in records).encode("utf-8")
+    jsonl.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(jsonl, body)
+    meta = {
+        "format": "spacedg-qa-index", "version": QA_INDEX_VERSION, "key": key, "scene_id": scene.id,
+        "config": config.to_dict(), "records": len(records),
+        "counts": dict(sorted(Counter(r.question_type for r in records).items())),
+        "dropped_by_judge": dropped, "seconds": {k: round(v, 4) for k, v in timings.items()},
+    }
+    atomic_write_bytes(meta_path, (json.dumps(meta, indent=2) + "\n").encode("utf-8"))
+    return SceneQA(scene.id, jsonl, records, reused=False, seconds=timings, dropped=dropped)
+
+
+def read_index(path: str | Path) -> list[QARecord]:
+    """Records of a ``*.qa.jsonl`` file; :class:`FileFormatError` naming the file and line on bad input."""
+    path = Path(path)
+    records = []
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError as err:
+        raise FileFormatError(f"{path}: cannot read the question index ({err.strerror})") from err
+    for number, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            records.append(QARecord.from_json(line))
+        except Exception as err:  # noqa: BLE001 - report which line is bad
+            raise FileFormatError(f"{path}:{number}: not a question record ({err}); rebuild with `spacedg qa build`") from err
+    return records
