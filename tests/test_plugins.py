@@ -51,7 +51,12 @@ SPACEDG_SCRIPT = Path(sys.executable).parent / "spacedg"
 BUILTIN_DEGRADATIONS = {
     "defocus", "distortion", "motion_blur", "haze", "water_droplets", "low_light", "over_exposure", "jpeg_compression", "low_res",
 }
-BUILTINS = BUILTIN_DEGRADATIONS | {"object_counting"}
+BUILTIN_FAMILIES = {
+    "camera_translation", "camera_rotation", "camera_object_distance_estimation", "camera_object_relative_direction",
+    "cross_view_cardinal_direction", "inter_object_distance", "object_proxy_cardinal_direction", "object_size_comparison",
+    "object_bounding_size_estimation", "object_existence_estimation", "object_counting",
+}
+BUILTINS = BUILTIN_DEGRADATIONS | BUILTIN_FAMILIES
 
 
 def _subprocess_env(**extra: str) -> dict[str, str]:
@@ -271,7 +276,7 @@ def test_unknown_names_suggest(clean_env) -> None:
     message = str(info.value)
     assert "Did you mean 'jpeg_compression'" in message
     assert "Available degradations: " + ", ".join(sorted(BUILTIN_DEGRADATIONS)) in message
-    with pytest.raises(UnknownPluginError, match="Did you mean 'object_counting'.*Available question families: object_counting"):
+    with pytest.raises(UnknownPluginError, match="Did you mean 'object_counting'.*Available question families: " + ", ".join(sorted(BUILTIN_FAMILIES))):
         get_question_family("object_count")
     with pytest.raises(UnknownPluginError, match="unknown degradation 'zzz'"):
         get_degradation("zzz")

@@ -3,7 +3,8 @@
 In the room's canonical frame (z up): the camera centre follows the layout's loop at eye
 height with smooth lateral sway and a walking bob; it looks towards the room's middle,
 swinging 50–80° left and right (so every wall and the central group are filmed
-from several sides), tilted down 8–22° with a little roll. Consecutive views are 6–20 cm
+from several sides), tilted down 8–22° on average and nodding up to ±14° around it (looking at
+the floor, then at shelves), with up to 4° of roll. Consecutive views are 6–20 cm
 apart with small rotations, so their fields of view overlap strongly, as in a real scan.
 
 Intrinsics are those of a phone camera in landscape: horizontal field of view 60–75°,
@@ -84,8 +85,8 @@ def handheld_trajectory(shape: RoomShape, config: CaptureConfig, rng: np.random.
     cycles = int(rng.integers(1, max_cycles + 1))
     phase = rng.uniform(0, 2 * math.pi)
     yaw = to_middle + swing_amp * np.sin(2 * math.pi * cycles * t + phase) + math.radians(10) * _smooth(t, int(seeds[2]), 5.0)
-    pitch = -math.radians(float(rng.uniform(8, 22))) + math.radians(6) * _smooth(t, int(seeds[3]), 6.0)
-    roll = math.radians(2.0) * _smooth(t, int(seeds[4]), 8.0)
+    pitch = -math.radians(float(rng.uniform(8, 22))) + math.radians(14) * _smooth(t, int(seeds[3]), 10.0)
+    roll = math.radians(4.0) * _smooth(t, int(seeds[4]), 8.0)
     rot = rotation_from_angles(yaw, pitch, roll)
     hfov = math.radians(float(rng.uniform(60, 75)))
     fx = config.width / 2 / math.tan(hfov / 2)

@@ -1,0 +1,435 @@
+"""Camera–object relative direction (``question_type = "camera_object_relative_direction"``; camera-object, MCQ).
+
+Three sub types (SPEC-QA, type 4; wording from the paper's appendix "Question Templates"):
+
+``single_view`` (1 view)
+    "What is the relative position of <B> with respect to <A> in this view?" (the paper's four
+    templates, :data:`SINGLE_VIEW_TEMPLATES`, drawn by ``rng``). Both objects are clearly
+    visible in the view and named by :func:`~spacedg.plugins.questions.language.object_phrase`.
+    The displacement ``v = R^T (c_B - c_A)`` (box centres, metres) is taken in that camera's
+    OpenCV frame (x right, y down, z forward) and labelled by
+    :func:`~spacedg.plugins.questions.geometry.dominant_parts` (largest |component| first; a
+    second part only when ``|c2| >= 0.5774 |c1|``; at most 2 parts) with
+    :data:`~spacedg.plugins.questions.geometry.BODY_DIRECTION_WORDS` (Right/Left, Down/Up,
+    Front/Back), e.g. ``"Right-Up"``. **Decision**: "Front" = farther from the camera along
+    its optical axis, "Back" = nearer; since "B is in front of A" is ambiguous in English, the
+    question ends with :data:`SINGLE_VIEW_NOTE` saying so. Skipped when ``|v| <`` 
+    :data:`MIN_DISPLACEMENT_M` = 0.1 m (decision: below that the centres practically coincide
+    and the direction is noise).
+``bbox_center_direction`` (2 views, :data:`~spacedg.data.view_sampling.LOW_COVIS_DIRECTION_PAIRS`:
+    covisibility in (0.05, 0.25], baseline >= 0.2 m, rotation >= 15°)
+    The object is clearly visible in image A (whether B shows it is not constrained: the low
+    covisibility makes it often out of view). Its centre in camera B's frame,
+    ``R_b^T (c - t_b)``, is labelled as above ("Front" = ahead of the camera). Skipped when the
+    centre is closer than 0.1 m to camera B or camera B is inside the box. The question is
+    ``find_in_image(phrase, 0)`` followed by one of the paper's two wordings
+    (:data:`TWO_VIEW_TEMPLATES`, drawn by ``rng``), which name the object by its label.
+``relpos_a_facing_b`` (2 views, :data:`~spacedg.data.view_sampling.OBJECT_DIRECTION_PAIRS`:
+    covisibility > 0.25, baseline >= 0.2 m, rotation >= 15°)
+    **Deviation**: the brief's ``relpos_A_facing_B`` is not a valid sub type
+    (``SUB_TYPE_PATTERN`` allows lower case only), so the name is lower-cased.
+    Three distinct instances A (where you stand), B (what you face), C (the query) obey the
+    three-object rule (:func:`~spacedg.data.view_sampling.split_across_views`: each clearly
+    visible in image A or B, neither image shows all three). Each object is found in image A if
+    it is clearly visible there without a description clash, else in image B on the same
+    condition, else the triplet is skipped. With ``up = Scene.up``: ``forward = horizontal(c_B -
+    c_A)`` (flattened on the ground plane); skipped when ``|forward| <`` 0.25 m or when the
+    A→B vector is vertical-dominant (vertical >= 1.2 × horizontal; decision: the paper's
+    "forward nearly collinear with up" rule, with the same factor as for C). ``angle =
+    ground_angle(forward, c_C - c_A, up)`` (degrees clockwise from forward seen from above,
+    90 = right, right = forward × up); skipped when C − A is vertical-dominant or its
+    horizontal length < 0.25 m; triplets with any two intersecting boxes
+    (:meth:`~spacedg.data.box.OrientedBox.intersects` with ``tol =`` :data:`INTERSECT_TOL_M`
+    = 1 mm: decision, so that boxes that merely touch, e.g. a lamp on a table, count as apart
+    whatever the float noise) are skipped. The truth is
+    ``RELPOS_SECTORS.classify(angle)`` (eight 45° sectors centred on front, front-right, …);
+    distractors come from ``RELPOS_SECTORS.distractors`` (the neighbour across a boundary
+    within 3° is never offered). The question is one ``find_in_image`` marker per object (A, B,
+    C in that order, each pointing at its image) and then "You are positioned at the <A> and
+    face the <B>. In which direction is the <C> relative to you?". **Decision**: the objects
+    are named by their labels when the three labels differ, by their phrases otherwise; a
+    triplet whose names still coincide is skipped.
+
+Every referenced object is clearly visible in the view the question points to and has no
+description clash there (:func:`~spacedg.data.view_sampling.description_clash`). Only camera
+frames and ``Scene.up`` enter the answers, so questions, options and answers are unchanged when
+the whole scene moves rigidly (any up direction).
+
+Options: :func:`~spacedg.plugins.questions.geometry.build_mcq` (truth never among the
+distractors; seeded shuffle). Camera-frame labels take :func:`flipped_labels` first (1 for a
+one-part label, 3 for a two-part one), padded with the single words of the other axes in a
+seeded order.
+
+Geometry block (JSON): ``up``; ``cameras`` (view → 4×4 ``cam_to_world``); ``objects`` (id,
+label, description, box centre/extents/rotation); ``refs`` (``[{"id", "label", "description",
+"view"}]`` in question order); ``visibility``; ``visibility_thresholds``; ``template``;
+``thresholds``; for the camera-frame sub types ``frame_view``, ``vector_world``,
+``vector_camera``, ``norm_m``, ``parts`` (``[[axis, sign], …]``), ``label``, ``ratio``,
+``max_parts``; for ``relpos_a_facing_b`` ``roles``, ``forward``, ``right``, the horizontal and
+vertical lengths of A→B and A→C, ``angle_deg``, ``sector_index``, ``sector_label``,
+``sector_starts_deg``, ``boundary_distance_deg``, ``neighbour_index``, ``banned_labels``; for
+two views ``pair`` and ``pair_rules``.
+
+Order (decision, as in ``camera_object_distance_estimation``): one child generator per sub type,
+sub types interleaved round-robin; views (single view) or the pairs of ``sample_pairs``
+visited round-robin, each group's candidates in a seeded order; lazy throughout.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+import numpy as np
+
+from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.scene import Instance, Scene
+from spacedg.data.view_sampling import (
+    LOW_COVIS_DIRECTION_PAIRS,
+    OBJECT_DIRECTION_PAIRS,
+    PairRules,
+    ViewPair,
+    VisibilityIndex,
+    description_clash,
+    label_key,
+    sample_pairs,
+    split_across_views,
+)
+from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.questions.camera_object_distance_estimation import (
+    camera_entry,
+    child_rngs,
+    object_entry,
+    ref_entry,
+    round_robin,
+    seeded_order,
+    visibility_entry,
+    visibility_thresholds,
+)
+from spacedg.plugins.questions.geometry import (
+    BODY_DIRECTION_WORDS,
+    BOUNDARY_GUARD_DEG,
+    MAX_PARTS,
+    RELPOS_SECTORS,
+    TAN30,
+    build_mcq,
+    camera_center,
+    dominant_parts,
+    flipped_labels,
+    ground_angle,
+    horizontal,
+    parts_label,
+    point_in_camera,
+    single_word_pool,
+    vertical_dominates,
+)
+from spacedg.plugins.questions.language import find_in_image, label_text, object_phrase
+from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+
+__all__ = [
+    "BBOX_CENTER_DIRECTION",
+    "FAMILY",
+    "INTERSECT_TOL_M",
+    "MIN_DISPLACEMENT_M",
+    "MIN_HORIZONTAL_M",
+    "NAME",
+    "RELPOS",
+    "RELPOS_TEMPLATE",
+    "SINGLE_VIEW",
+    "SINGLE_VIEW_NOTE",
+    "SINGLE_VIEW_TEMPLATES",
+    "SUB_QUESTION_TYPES",
+    "TWO_VIEW_TEMPLATES",
+    "VERTICAL_FACTOR",
+    "body_direction",
+    "generate",
+    "make_family",
+]
+
+NAME = "camera_object_relative_direction"
+SINGLE_VIEW = "single_view"
+BBOX_CENTER_DIRECTION = "bbox_center_direction"
+RELPOS = "relpos_a_facing_b"
+SUB_QUESTION_TYPES: tuple[str, ...] = (SINGLE_VIEW, BBOX_CENTER_DIRECTION, RELPOS)
+
+#: Camera-frame vectors shorter than this (metres) have no meaningful direction: skipped.
+MIN_DISPLACEMENT_M = 0.1
+#: Horizontal A→B and A→C lengths below this (metres) are skipped (relpos).
+MIN_HORIZONTAL_M = 0.25
+#: Vertical-dominant if |vertical| >= this × |horizontal| (relpos).
+VERTICAL_FACTOR = 1.2
+#: Boxes "intersect" only when they overlap by more than this (metres) along every separating
+#: axis: touching boxes (a lamp standing on a table) are not intersecting, and float noise of
+#: a rigid motion of the scene must not flip the decision.
+INTERSECT_TOL_M = 1e-3
+
+#: ``{b}``: the object asked about, ``{a}``: the reference object (paper order).
+SINGLE_VIEW_TEMPLATES: tuple[str, ...] = (
+    "What is the relative position of the {b} with respect to the {a} in this view?",
+    "Where is the {b} located relative to the {a}?",
+    "Describe the spatial relationship between the {b} and the {a}.",
+    "In which direction is the {b} compared to the {a}?",
+)
+#: Appended to single-view questions: what Front/Back mean in the camera frame.
+SINGLE_VIEW_NOTE = " Directions are as seen from the camera; Front means farther from the camera, Back nearer to it."
+#: ``{label}``: the label as written (paper wording, after the image-A marker).
+TWO_VIEW_TEMPLATES: tuple[str, ...] = (
+    "Which direction is the \"{label}\" relative to you when taking image B?",
+    "When you were taking the photo in Image B, where is the {label} area relative to you?",
+)
+RELPOS_TEMPLATE = "You are positioned at the {a} and face the {b}. In which direction is the {c} relative to you?"
+
+
+# ------------------------------------------------------- camera-frame labels
+def body_direction(vector_camera: np.ndarray, rng: np.random.Generator) -> tuple[list[tuple[int, int]], str, tuple[str, ...], str]:
+    """``(parts, truth, options, letter)`` of a camera-frame vector (see the module docstring)."""
+    parts = dominant_parts(vector_camera)
+    truth = parts_label(parts, BODY_DIRECTION_WORDS)
+    pool = single_word_pool(BODY_DIRECTION_WORDS, exclude_axes=[axis for axis, _ in parts])
+    pad = [pool[int(i)] for i in rng.permutation(len(pool))]
+    options, letter = build_mcq(truth, flipped_labels(parts, BODY_DIRECTION_WORDS) + pad, rng)
+    return parts, truth, options, letter
+
+
+def _body_geometry(view: str, world: np.ndarray, cam: np.ndarray, parts: list[tuple[int, int]], truth: str) -> dict[str, Any]:
+    return {
+        "frame_view": view,
+        "vector_world": world.tolist(),
+        "vector_camera": cam.tolist(),
+        "norm_m": float(np.linalg.norm(cam)),
+        "parts": [[axis, sign] for axis, sign in parts],
+        "label": truth,
+        "ratio": TAN30,
+        "max_parts": MAX_PARTS,
+    }
+
+
+def _usable(index: VisibilityIndex, view: str, iid: int) -> bool:
+    """Clearly visible in ``view`` and no same-label same-description neighbour seen there."""
+    return iid in index.visible[view] and not description_clash(index, view, index.instance(iid))
+
+
+def _record(
+    scene: Scene, index: VisibilityIndex, sub: str, views: tuple[str, ...], objects: Sequence[Instance],
+    refs: Sequence[tuple[Instance, str]], question: str, options: tuple[str, ...], letter: str, template: int,
+    extra: dict[str, Any],
+) -> QARecord:
+    ids = [inst.id for inst in objects]
+    geometry = {
+        "up": scene.up.tolist(),
+        "cameras": camera_entry(scene, views),
+        "objects": [object_entry(inst) for inst in objects],
+        "refs": [ref_entry(inst, view) for inst, view in refs],
+        "visibility": visibility_entry(index, views, ids),
+        "visibility_thresholds": visibility_thresholds(scene, index, views),
+        "template": template,
+        **extra,
+    }
+    return QARecord(
+        id=make_record_id(scene.id, NAME, sub, views, {"objects": ids, "template": template}),
+        scene_id=scene.id,
+        question_type=NAME,
+        sub_question_type=sub,
+        task_group=TaskGroup.CAMERA_OBJECT,
+        answer_type=AnswerType.MCQ,
+        views=views,
+        question=question,
+        options=options,
+        answer=letter,
+        geometry=geometry,
+    )
+
+
+# --------------------------------------------------------------- single view
+def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np.random.Generator) -> Iterator[QARecord]:
+    usable = [i for i in index.visible[view] if _usable(index, view, i)]
+    cam = scene.views[view]
+    for ia, ib in seeded_order(list(itertools.permutations(usable, 2)), rng):
+        a, b = index.instance(ia), index.instance(ib)
+        phrase_a, phrase_b = object_phrase(a.label, a.description), object_phrase(b.label, b.description)
+        if phrase_a.lower() == phrase_b.lower():
+            continue
+        world = b.box.center - a.box.center
+        vec = np.asarray(cam.cam_to_world, dtype=np.float64)[:3, :3].T @ world
+        if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
+            continue
+        template = int(rng.integers(len(SINGLE_VIEW_TEMPLATES)))
+        parts, truth, options, letter = body_direction(vec, rng)
+        question = SINGLE_VIEW_TEMPLATES[template].format(a=phrase_a, b=phrase_b) + SINGLE_VIEW_NOTE
+        extra = {**_body_geometry(view, world, vec, parts, truth), "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M}}
+        yield _record(scene, index, SINGLE_VIEW, (view,), (a, b), ((a, view), (b, view)), question, options, letter, template, extra)
+
+
+def _single_view_records(scene: Scene, index: VisibilityIndex, rng: np.random.Generator) -> Iterator[QARecord]:
+    views = list(scene.views)
+    order = [views[int(i)] for i in rng.permutation(len(views))]
+    yield from round_robin([_single_view_stream(scene, index, v, rng) for v in order])
+
+
+# ------------------------------------------------------------ bbox direction
+def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+    cam_b = scene.views[pair.b]
+    centre_b = camera_center(cam_b)
+    for iid in seeded_order(index.visible[pair.a], rng):
+        inst = index.instance(iid)
+        if description_clash(index, pair.a, inst) or bool(inst.box.contains(centre_b[None, :])[0]):
+            continue
+        vec = point_in_camera(cam_b, inst.box.center)
+        if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
+            continue
+        template = int(rng.integers(len(TWO_VIEW_TEMPLATES)))
+        parts, truth, options, letter = body_direction(vec, rng)
+        question = find_in_image(object_phrase(inst.label, inst.description), 0) + "\n" + TWO_VIEW_TEMPLATES[template].format(label=label_text(inst.label))
+        extra = {
+            **_body_geometry(pair.b, inst.box.center - centre_b, vec, parts, truth),
+            "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
+            "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
+        }
+        yield _record(scene, index, BBOX_CENTER_DIRECTION, (pair.a, pair.b), (inst,), ((inst, pair.a),), question, options, letter, template, extra)
+
+
+# ------------------------------------------------------------------- relpos
+def _relpos_candidates(index: VisibilityIndex, pair: ViewPair) -> tuple[dict[int, str], list[tuple[int, int, int]]]:
+    """Each usable object's reference view, and the ordered triplets of usable objects that pass
+    the three-object rule (neither view shows all three)."""
+    views = (pair.a, pair.b)
+    union = sorted(set(index.visible[pair.a]) | set(index.visible[pair.b]))
+    ref_view: dict[int, str] = {}
+    for iid in union:
+        found = next((v for v in views if _usable(index, v, iid)), None)  # image A first, else image B
+        if found is not None:
+            ref_view[iid] = found
+    seen_a, seen_b = set(index.seen[pair.a]), set(index.seen[pair.b])
+    triplets: list[tuple[int, int, int]] = []
+    for combo in itertools.combinations(sorted(ref_view), 3):
+        if set(combo) <= seen_a or set(combo) <= seen_b:
+            continue  # one view shows all three: the task would collapse to a single view
+        triplets.extend(itertools.permutations(combo))
+    return ref_view, triplets
+
+
+def _relpos_names(objs: Sequence[Instance]) -> list[str] | None:
+    """Labels when they differ, else phrases; ``None`` when even the phrases coincide."""
+    if len({label_key(o.label) for o in objs}) == len(objs):
+        return [label_text(o.label) for o in objs]
+    phrases = [object_phrase(o.label, o.description) for o in objs]
+    if len({p.lower() for p in phrases}) < len(objs):
+        return None
+    return phrases
+
+
+def _intersects(cache: dict[tuple[int, int], bool], p: Instance, q: Instance) -> bool:
+    key = (min(p.id, q.id), max(p.id, q.id))
+    if key not in cache:
+        cache[key] = p.box.intersects(q.box, tol=INTERSECT_TOL_M)
+    return cache[key]
+
+
+def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+    up = np.asarray(scene.up, dtype=np.float64)
+    views = (pair.a, pair.b)
+    ref_view, triplets = _relpos_candidates(index, pair)
+    intersecting: dict[tuple[int, int], bool] = {}
+    for ids in seeded_order(triplets, rng):
+        if not split_across_views(index, pair.a, pair.b, ids):
+            continue  # the authoritative three-object rule (the prefilter already applied it)
+        objs = [index.instance(i) for i in ids]
+        names = _relpos_names(objs)
+        if names is None:
+            continue
+        if any(_intersects(intersecting, p, q) for p, q in itertools.combinations(objs, 2)):
+            continue
+        ref_views = [ref_view[i] for i in ids]
+        ca, cb, cc = (o.box.center for o in objs)
+        ab, ac = cb - ca, cc - ca
+        forward = horizontal(ab, up)
+        ab_h = float(np.linalg.norm(forward))
+        if ab_h < MIN_HORIZONTAL_M or vertical_dominates(ab, up, VERTICAL_FACTOR):
+            continue
+        ac_h = float(np.linalg.norm(horizontal(ac, up)))
+        if ac_h < MIN_HORIZONTAL_M or vertical_dominates(ac, up, VERTICAL_FACTOR):
+            continue
+        angle = ground_angle(forward, ac, up)
+        hit = RELPOS_SECTORS.classify(angle)
+        truth = RELPOS_SECTORS.labels[hit.index]
+        options, letter = build_mcq(truth, RELPOS_SECTORS.distractors(hit, rng), rng)
+        markers = " ".join(
+            find_in_image(object_phrase(o.label, o.description), views.index(v)) for o, v in zip(objs, ref_views)
+        )
+        question = markers + "\n" + RELPOS_TEMPLATE.format(a=names[0], b=names[1], c=names[2])
+        fwd_unit = forward / ab_h
+        banned = [RELPOS_SECTORS.labels[hit.neighbour]] if hit.boundary_distance_deg < BOUNDARY_GUARD_DEG else []
+        extra = {
+            "roles": {"anchor": ids[0], "facing": ids[1], "query": ids[2]},
+            "forward": fwd_unit.tolist(),
+            "right": np.cross(fwd_unit, up).tolist(),
+            "ab_horizontal_m": ab_h,
+            "ab_vertical_m": float(ab @ up),
+            "ac_horizontal_m": ac_h,
+            "ac_vertical_m": float(ac @ up),
+            "angle_deg": angle,
+            "sector_index": hit.index,
+            "sector_label": truth,
+            "sector_starts_deg": list(RELPOS_SECTORS.starts),
+            "boundary_distance_deg": hit.boundary_distance_deg,
+            "neighbour_index": hit.neighbour,
+            "banned_labels": banned,
+            "thresholds": {
+                "min_horizontal_m": MIN_HORIZONTAL_M, "vertical_factor": VERTICAL_FACTOR, "boundary_guard_deg": BOUNDARY_GUARD_DEG,
+                "intersect_tol_m": INTERSECT_TOL_M,
+            },
+            "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
+        }
+        yield _record(scene, index, RELPOS, views, objs, list(zip(objs, ref_views)), question, options, letter, 0, extra)
+
+
+def _pair_records(scene: Scene, index: VisibilityIndex, rng: np.random.Generator, rules: PairRules, stream: Any) -> Iterator[QARecord]:
+    pairs = sample_pairs(scene, rules, rng)
+    yield from round_robin([stream(scene, index, p, rules, rng) for p in pairs])
+
+
+def generate(
+    scene: Scene,
+    rng: np.random.Generator,
+    thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
+    bbox_rules: PairRules = LOW_COVIS_DIRECTION_PAIRS,
+    relpos_rules: PairRules = OBJECT_DIRECTION_PAIRS,
+) -> Iterator[QARecord]:
+    """Every valid camera–object direction question of ``scene``, lazily, in a seeded order (see the module docstring)."""
+    index = VisibilityIndex(scene, thresholds)
+    rng_single, rng_bbox, rng_relpos = child_rngs(rng, 3)
+    yield from round_robin([
+        _single_view_records(scene, index, rng_single),
+        _pair_records(scene, index, rng_bbox, bbox_rules, _bbox_stream),
+        _pair_records(scene, index, rng_relpos, relpos_rules, _relpos_stream),
+    ])
+
+
+def make_family(
+    thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
+    bbox_rules: PairRules = LOW_COVIS_DIRECTION_PAIRS,
+    relpos_rules: PairRules = OBJECT_DIRECTION_PAIRS,
+) -> QuestionFamily:
+    """The family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
+    return QuestionFamily(
+        name=NAME,
+        task_group=TaskGroup.CAMERA_OBJECT,
+        answer_types=frozenset({AnswerType.MCQ}),
+        sub_question_types=SUB_QUESTION_TYPES,
+        num_views=(1, 2),
+        generate=functools.partial(generate, thresholds=thresholds, bbox_rules=bbox_rules, relpos_rules=relpos_rules),
+        needs=frozenset({"visibility", "covisibility"}),
+        description="Direction of an object relative to another in one view, to camera B, or to a person at A facing B.",
+    )
+
+
+FAMILY = make_family()
+
+
+@hookimpl
+def spacedg_register_question_families(register: Any) -> None:
+    """Register :data:`FAMILY`."""
+    register(FAMILY)

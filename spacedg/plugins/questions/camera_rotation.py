@@ -1,0 +1,240 @@
+"""Camera rotation (``question_type = "camera_rotation"``; camera-centric, two views, MCQ).
+
+"View A" is the **first** image of a record (``record.views[0]``), "view B" the second.
+``R_rel = R_a^T R_b`` (B's axes in A's OpenCV camera frame) is decomposed as
+``R_rel = R_y(yaw) @ R_x(pitch) @ R_z(roll)`` by
+:func:`~spacedg.plugins.questions.geometry.euler_yaw_pitch_roll` (degrees; yaw+ = "turn right",
+pitch+ = "tilt up", roll+ = "clockwise roll", as seen by the photographer). The angles are
+rounded to 1e-6° (:data:`ANGLE_DECIMALS`) and everything below is decided on the rounded
+values stored in the geometry block.
+
+Rule (SPEC-QA type 2), in this order:
+
+1. skip ``|pitch| > 60°`` (:data:`MAX_ABS_PITCH_DEG`): near ±90° yaw and roll are ill-defined
+   (gimbal lock) and the decomposition stops meaning what the words say;
+2. skip when yaw or roll exceeds 150° in magnitude (:data:`MAX_ABS_ANGLE_DEG`; not in the spec):
+   the turn direction is ambiguous when going the other way round is nearly as short;
+3. sort ``|yaw|, |pitch|, |roll|``: ``a1 >= a2`` (ties in the order yaw, pitch, roll); the
+   smallest is ignored; skip if ``a1 < 5°``;
+4. ``r = a2 / a1``: **single**-dominant if ``a2 < 5°`` or ``r <= 0.4``; **dual**-dominant if
+   ``r >= 0.6``; skip the grey zone ``0.4 < r < 0.6``.
+
+Options (4, letters after a seeded shuffle, :func:`~spacedg.plugins.questions.geometry.build_mcq`):
+
+- single: both words of both axes (e.g. "turn right", "turn left", "tilt up", "tilt down"),
+  truth = the word of ``a1``'s axis and sign;
+- dual: the four sign combinations "<yaw word> and <pitch word>", truth = the actual signs.
+
+The two axes are always written in the order yaw, pitch, roll, in the question text and in
+the dual options, **not** in dominance order (which would give the answer away).
+``sub_question_type = f"{ax1}+{ax2}_{mode}"`` with ``ax1`` the dominant axis (all 12
+combinations are declared).
+
+Pairs: :func:`~spacedg.data.view_sampling.sample_pairs` with
+:data:`~spacedg.data.view_sampling.ROTATION_PAIRS` (covisibility > 0.25, rotation >= 15°; which
+view is A is a seeded coin, so turn directions are balanced). One record per qualifying pair,
+in ``sample_pairs``' round-robin order; each pair's option shuffle uses its own child
+generator seeded from ``rng``.
+
+Geometry block (JSON): ``up``, ``cam_to_world_a``, ``cam_to_world_b`` (4×4), ``pair``,
+``r_rel`` (3×3), ``euler_deg`` ``{"yaw", "pitch", "roll"}``, ``axes`` ``[ax1, ax2]``,
+``a1_deg``, ``a2_deg``, ``ratio``, ``mode``, ``signs`` (``{axis: ±1}`` of the asked axes),
+``thresholds`` (``min_rotation_deg`` 5, ``single_max_ratio`` 0.4, ``dual_min_ratio`` 0.6,
+``max_abs_pitch_deg`` 60, ``max_abs_angle_deg`` 150, ``euler`` convention), ``template``
+(0 single, 1 dual) and ``refs`` ``[]``.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.scene import Scene
+from spacedg.data.view_sampling import ROTATION_PAIRS, PairRules, ViewPair, sample_pairs
+from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.questions.camera_translation import child_rngs, pair_geometry
+from spacedg.plugins.questions.geometry import (
+    ROTATION_WORDS,
+    build_mcq,
+    euler_yaw_pitch_roll,
+    relative_rotation,
+)
+from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+
+__all__ = [
+    "AXES",
+    "AXIS_PHRASES",
+    "FAMILY",
+    "NAME",
+    "SUB_TYPES",
+    "TEMPLATES",
+    "RotationCase",
+    "classify_rotation",
+    "generate",
+    "make_family",
+]
+
+NAME = "camera_rotation"
+#: Axis names in their canonical (text) order.
+AXES: tuple[str, ...] = ("yaw", "pitch", "roll")
+#: How an axis is named in the question text.
+AXIS_PHRASES: dict[str, str] = {
+    "yaw": "yaw (turn left/right)",
+    "pitch": "pitch (tilt up/down)",
+    "roll": "roll (clockwise/counterclockwise)",
+}
+_LEAD = "Given view A and view B, consider the relative rotation from A to B expressed in view A's camera frame. "
+#: 0: single-axis dominant, 1: two-axis (the paper's wording).
+TEMPLATES: tuple[str, ...] = (
+    _LEAD + "Which SINGLE rotation direction is the most prominent?\n"
+    "(This question focuses on the dominant axis among {axis1} and {axis2}.)",
+    _LEAD + "Which option best describes the rotation direction using TWO components: {axis1} and {axis2}?",
+)
+MODES: tuple[str, ...] = ("single", "dual")
+SUB_TYPES: tuple[str, ...] = tuple(f"{a}+{b}_{m}" for m in MODES for a in AXES for b in AXES if a != b)
+
+ANGLE_DECIMALS = 6
+MIN_ROTATION_DEG = 5.0
+SINGLE_MAX_RATIO = 0.4
+DUAL_MIN_RATIO = 0.6
+MAX_ABS_PITCH_DEG = 60.0
+MAX_ABS_ANGLE_DEG = 150.0
+EULER_CONVENTION = "R_rel = R_y(yaw) R_x(pitch) R_z(roll), OpenCV camera axes, degrees"
+
+
+@dataclass(frozen=True)
+class RotationCase:
+    """A rotation that can be asked: dominant axis ``ax1``, second ``ax2``, their angles, ratio, mode."""
+
+    ax1: str
+    ax2: str
+    a1: float
+    a2: float
+    ratio: float
+    mode: str
+
+
+def classify_rotation(yaw: float, pitch: float, roll: float) -> RotationCase | str:
+    """The :class:`RotationCase` of Euler angles (degrees), or why it is skipped (a string)."""
+    angles = {"yaw": float(yaw), "pitch": float(pitch), "roll": float(roll)}
+    if abs(angles["pitch"]) > MAX_ABS_PITCH_DEG:
+        return "gimbal: |pitch| > 60"
+    if max(abs(angles["yaw"]), abs(angles["roll"])) > MAX_ABS_ANGLE_DEG:
+        return "ambiguous: |angle| > 150"
+    ax1, ax2, _ = sorted(AXES, key=lambda a: (-abs(angles[a]), AXES.index(a)))
+    a1, a2 = abs(angles[ax1]), abs(angles[ax2])
+    if a1 < MIN_ROTATION_DEG:
+        return "too small: a1 < 5"
+    ratio = a2 / a1
+    if a2 < MIN_ROTATION_DEG or ratio <= SINGLE_MAX_RATIO:
+        mode = "single"
+    elif ratio >= DUAL_MIN_RATIO:
+        mode = "dual"
+    else:
+        return "grey zone: 0.4 < r < 0.6"
+    return RotationCase(ax1, ax2, a1, a2, ratio, mode)
+
+
+def _word(axis: str, sign: int) -> str:
+    return ROTATION_WORDS[axis][0 if sign > 0 else 1]
+
+
+def _options(case: RotationCase, euler: dict[str, float]) -> tuple[str, list[str], list[str]]:
+    """``(truth, distractors, text_axes)``; ``text_axes`` = the two axes in canonical order."""
+    text_axes = [a for a in AXES if a in (case.ax1, case.ax2)]
+    if case.mode == "single":
+        sign = 1 if euler[case.ax1] > 0 else -1
+        truth = _word(case.ax1, sign)
+        words = [_word(a, s) for a in text_axes for s in (1, -1)]
+        return truth, [w for w in words if w != truth], text_axes
+    signs = [1 if euler[a] > 0 else -1 for a in text_axes]
+    truth = f"{_word(text_axes[0], signs[0])} and {_word(text_axes[1], signs[1])}"
+    combos = [f"{_word(text_axes[0], s0)} and {_word(text_axes[1], s1)}" for s0 in (1, -1) for s1 in (1, -1)]
+    return truth, [c for c in combos if c != truth], text_axes
+
+
+def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator) -> QARecord | None:
+    r_rel = relative_rotation(scene.views[pair.a], scene.views[pair.b])
+    if not np.all(np.isfinite(r_rel)):
+        return None
+    yaw, pitch, roll = (round(v, ANGLE_DECIMALS) + 0.0 for v in euler_yaw_pitch_roll(r_rel))
+    case = classify_rotation(yaw, pitch, roll)
+    if isinstance(case, str):
+        return None
+    euler = {"yaw": yaw, "pitch": pitch, "roll": roll}
+    truth, distractors, text_axes = _options(case, euler)
+    options, answer = build_mcq(truth, distractors, rng)
+    template = MODES.index(case.mode)
+    sub = f"{case.ax1}+{case.ax2}_{case.mode}"
+    geometry = {
+        **pair_geometry(scene, pair),
+        "r_rel": r_rel.tolist(),
+        "euler_deg": euler,
+        "axes": [case.ax1, case.ax2],
+        "a1_deg": case.a1,
+        "a2_deg": case.a2,
+        "ratio": case.ratio,
+        "mode": case.mode,
+        "signs": {a: (1 if euler[a] > 0 else -1) for a in text_axes},
+        "truth": truth,
+        "thresholds": {
+            "min_rotation_deg": MIN_ROTATION_DEG, "single_max_ratio": SINGLE_MAX_RATIO,
+            "dual_min_ratio": DUAL_MIN_RATIO, "max_abs_pitch_deg": MAX_ABS_PITCH_DEG,
+            "max_abs_angle_deg": MAX_ABS_ANGLE_DEG, "euler": EULER_CONVENTION,
+        },
+        "template": template,
+        "refs": [],
+    }
+    views = (pair.a, pair.b)
+    question = TEMPLATES[template].format(axis1=AXIS_PHRASES[text_axes[0]], axis2=AXIS_PHRASES[text_axes[1]])
+    return QARecord(
+        id=make_record_id(scene.id, NAME, sub, views, {"truth": truth, "template": template}),
+        scene_id=scene.id,
+        question_type=NAME,
+        sub_question_type=sub,
+        task_group=TaskGroup.CAMERA_CENTRIC,
+        answer_type=AnswerType.MCQ,
+        views=views,
+        question=question,
+        options=options,
+        answer=answer,
+        geometry=geometry,
+    )
+
+
+def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = ROTATION_PAIRS) -> Iterator[QARecord]:
+    """Every camera-rotation question of ``scene`` (at most one per pair), lazily, in a seeded order."""
+    pairs = sample_pairs(scene, rules, rng)
+    seeds = child_rngs(rng, (len(pairs),))
+    for pair, seed in zip(pairs, seeds):
+        record = _record(scene, pair, np.random.default_rng(int(seed)))
+        if record is not None:
+            yield record
+
+
+def make_family(rules: PairRules = ROTATION_PAIRS) -> QuestionFamily:
+    """The camera-rotation family with custom pair rules (the registered one uses :data:`ROTATION_PAIRS`)."""
+    return QuestionFamily(
+        name=NAME,
+        task_group=TaskGroup.CAMERA_CENTRIC,
+        answer_types=frozenset({AnswerType.MCQ}),
+        sub_question_types=SUB_TYPES,
+        num_views=(2,),
+        generate=functools.partial(generate, rules=rules),
+        needs=frozenset({"covisibility"}),
+        description="How the camera turned from view A to view B: the dominant rotation axis/axes and their directions.",
+    )
+
+
+FAMILY = make_family()
+
+
+@hookimpl
+def spacedg_register_question_families(register: Any) -> None:
+    """Register :data:`FAMILY`."""
+    register(FAMILY)

@@ -1,0 +1,175 @@
+"""Inter-object distance (``question_type = "inter_object_distance"``; object-centric, 2 views, NA).
+
+Sub type ``two_view`` (SPEC-QA, type 6; paper appendix "Object-Object Distance"). Object 1 is
+clearly visible in image A, object 2 clearly visible in image B; the answer is the Euclidean
+distance between their oriented-box centres, ``|c_1 − c_2|`` in **metres**, rounded to
+:data:`DECIMALS` = 3 decimals (invariant under any rigid motion of the scene; ``Scene.up`` plays
+no part).
+
+Objects (decisions in brackets):
+
+- pairs of views from :func:`~spacedg.data.view_sampling.sample_pairs` with
+  :data:`~spacedg.data.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m);
+- object 1 clearly visible in A and object 2 clearly visible in B, each without a description
+  clash in that view (:func:`~spacedg.data.view_sampling.description_clash`); either may also be
+  seen in the other image (nothing required there);
+- distinct instances with different labels (:func:`~spacedg.data.view_sampling.label_key`);
+- [skipped when the centres are closer than :data:`MIN_DISTANCE_M` = 0.05 m: such boxes
+  practically coincide (duplicate or nested annotations), and a relative-accuracy score on a
+  distance of a few centimetres measures annotation noise; a rounded answer of 0 would also
+  make the relative error undefined.]
+
+Question: the two marker sentences, then the paper's wording on its own lines::
+
+    In image A, find the red lamp. In image B, find the wooden chair.
+    Estimate the 3D metric distance (in meters) between the centers of these two physical objects.
+    Return only one number in meters (e.g., 1.2).
+
+(The paper's last line "Output format: <answer>NUMBER</answer>" is left out: the evaluation
+system prompt asks for the tags, as in ``camera_object_distance_estimation``.)
+
+Order: pairs in ``sample_pairs`` order, visited round-robin (one record per pair per round);
+each pair's (object 1, object 2) candidates in a lazily drawn seeded permutation
+(:func:`~spacedg.plugins.questions.cross_view_cardinal_direction.lazy_permutation`). Same seed,
+same records in the same order; everything is lazy.
+
+Geometry block (JSON): ``up``; ``cameras`` (view → 4×4 ``cam_to_world``); ``objects`` (id,
+label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{"id", "label",
+"description", "view"}]``); ``visibility``; ``visibility_thresholds``; ``vector`` (``c_2 − c_1``,
+metres); ``distance_m`` (unrounded); ``decimals``; ``thresholds`` (``min_distance_m``);
+``template`` (always 0); ``pair``; ``pair_rules``.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.scene import Scene
+from spacedg.data.view_sampling import (
+    OBJECT_PAIRS,
+    PairRules,
+    ViewPair,
+    VisibilityIndex,
+    label_key,
+    sample_pairs,
+)
+from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.questions.camera_object_distance_estimation import (
+    camera_entry,
+    object_entry,
+    ref_entry,
+    round_robin,
+    visibility_entry,
+    visibility_thresholds,
+)
+from spacedg.plugins.questions.cross_view_cardinal_direction import (
+    lazy_permutation,
+    usable,
+)
+from spacedg.plugins.questions.language import find_in_image, object_phrase
+from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+
+__all__ = ["DECIMALS", "FAMILY", "MIN_DISTANCE_M", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "generate", "make_family", "render_question"]
+
+NAME = "inter_object_distance"
+SUB_QUESTION_TYPE = "two_view"
+#: The paper's wording after the markers.
+TEMPLATE = (
+    "Estimate the 3D metric distance (in meters) between the centers of these two physical objects.\n"
+    "Return only one number in meters (e.g., 1.2)."
+)
+#: Answers are metres rounded to this many decimals.
+DECIMALS = 3
+#: Centres closer than this (metres) are skipped.
+MIN_DISTANCE_M = 0.05
+
+
+def render_question(phrase1: str, phrase2: str) -> str:
+    """Markers for object 1 in image A and object 2 in image B, then the paper's question."""
+    return f"{find_in_image(phrase1, 0)} {find_in_image(phrase2, 1)}\n{TEMPLATE}"
+
+
+def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+    views = (pair.a, pair.b)
+    ones = [i for i in index.visible[pair.a] if usable(index, pair.a, i)]
+    twos = [i for i in index.visible[pair.b] if usable(index, pair.b, i)]
+    if not ones or not twos:
+        return
+    for k in lazy_permutation(len(ones) * len(twos), rng):
+        i, j = divmod(k, len(twos))
+        one, two = index.instance(ones[i]), index.instance(twos[j])
+        if one.id == two.id or label_key(one.label) == label_key(two.label):
+            continue
+        vector = two.box.center - one.box.center
+        distance = float(np.linalg.norm(vector))
+        if distance < MIN_DISTANCE_M:
+            continue
+        geometry = {
+            "up": scene.up.tolist(),
+            "cameras": camera_entry(scene, views),
+            "objects": [object_entry(one), object_entry(two)],
+            "refs": [ref_entry(one, pair.a), ref_entry(two, pair.b)],
+            "visibility": visibility_entry(index, views, [one.id, two.id]),
+            "visibility_thresholds": visibility_thresholds(scene, index, views),
+            "vector": vector.tolist(),
+            "distance_m": distance,
+            "decimals": DECIMALS,
+            "thresholds": {"min_distance_m": MIN_DISTANCE_M},
+            "template": 0,
+            "pair": pair.to_dict(),
+            "pair_rules": rules.to_dict(),
+        }
+        yield QARecord(
+            id=make_record_id(scene.id, NAME, SUB_QUESTION_TYPE, views, {"objects": [one.id, two.id]}),
+            scene_id=scene.id,
+            question_type=NAME,
+            sub_question_type=SUB_QUESTION_TYPE,
+            task_group=TaskGroup.OBJECT_CENTRIC,
+            answer_type=AnswerType.NA,
+            views=views,
+            question=render_question(object_phrase(one.label, one.description), object_phrase(two.label, two.description)),
+            options=(),
+            answer=round(distance, DECIMALS),
+            geometry=geometry,
+        )
+
+
+def generate(
+    scene: Scene,
+    rng: np.random.Generator,
+    thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
+    pair_rules: PairRules = OBJECT_PAIRS,
+) -> Iterator[QARecord]:
+    """Every valid inter-object distance question of ``scene``, lazily, in a seeded order (module docstring)."""
+    index = VisibilityIndex(scene, thresholds)
+    pairs = sample_pairs(scene, pair_rules, rng)
+    yield from round_robin([_pair_stream(scene, index, p, pair_rules, rng) for p in pairs])
+
+
+def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS) -> QuestionFamily:
+    """The family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
+    return QuestionFamily(
+        name=NAME,
+        task_group=TaskGroup.OBJECT_CENTRIC,
+        answer_types=frozenset({AnswerType.NA}),
+        sub_question_types=(SUB_QUESTION_TYPE,),
+        num_views=(2,),
+        generate=functools.partial(generate, thresholds=thresholds, pair_rules=pair_rules),
+        needs=frozenset({"visibility", "covisibility"}),
+        description="Metric distance between the centres of an object seen in image A and a differently labelled one seen in image B.",
+    )
+
+
+FAMILY = make_family()
+
+
+@hookimpl
+def spacedg_register_question_families(register: Any) -> None:
+    """Register :data:`FAMILY`."""
+    register(FAMILY)

@@ -1,0 +1,158 @@
+"""Object bounding-box size (``question_type = "object_bounding_size_estimation"``; object-centric, 1 view, SIZE_LIST).
+
+For one view and one object the answer is the object's oriented-box extents (full side
+lengths, metres) sorted ascending and rounded to 2 decimals:
+``[shortest, middle, longest]`` (:class:`~spacedg.data.qa.QARecord` SIZE_LIST). Sorting happens
+before rounding; rounding is monotone, so the rounded list stays sorted.
+
+Object rule: the object is **clearly visible** in the view and
+:func:`~spacedg.data.view_sampling.description_clash` is False there (no same-label instance
+with the same description is seen in that image). Decision: an object whose shortest side
+rounds to 0.00 m (a flat annotation, < 5 mm) is skipped, because relative-error scoring of a
+zero target is undefined. Every other (view, object) pair is a candidate, so an object seen
+clearly in several views yields one question per view.
+
+Templates (the paper's appendix, bounding-box size), chosen per record by the seeded ``rng``;
+``{target_obj}`` is :func:`~spacedg.plugins.questions.language.object_phrase` (description,
+else label):
+
+0. ``What are the 3D physical dimensions of the <obj>? Please answer in the format [shortest edge, middle edge, longest edge] in meters (e.g. [0.10, 0.20, 0.30]).``
+1. ``Estimate the physical size of the <obj> in meters, and respond as [shortest edge, middle edge, longest edge] (e.g. [0.10, 0.20, 0.30]).``
+2. ``Could you provide the three edge lengths of the <obj> in the format [shortest, middle, longest] (meters, e.g. [0.10, 0.20, 0.30])?``
+3. ``What is the bounding box extent of the <obj>? Reply as [shortest edge, middle edge, longest edge] in meters (e.g. [0.10, 0.20, 0.30]).``
+
+``sub_question_type`` is ``"extent_list"``.
+
+Order: every (view, object) candidate is built first (views in scene order, objects in id
+order), then shuffled with ``rng.permutation``; each candidate then draws its template with
+``rng.integers`` (as :mod:`object_counting`), and records are built lazily.
+
+Geometry block (JSON): ``view``, ``up``, ``object`` (``id``, ``label``, ``description``, box
+``center`` / ``extents`` / ``rotation``), ``sorted_extents`` (unrounded, metres),
+``rounding_decimals`` (2), ``visibility`` (:meth:`VisibilityIndex.vis_entry`), ``template`` and
+``refs`` (the object with its view). The answer depends on the extents only, so it is
+invariant under any rigid motion of the scene.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.scene import Instance, Scene
+from spacedg.data.view_sampling import VisibilityIndex
+from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.questions.language import object_phrase
+from spacedg.plugins.questions.object_size_comparison import (
+    box_geometry,
+    object_ref,
+    referable,
+)
+from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+
+__all__ = ["DECIMALS", "FAMILY", "NAME", "SUB_QUESTION_TYPE", "TEMPLATES", "generate", "make_family", "render_question", "size_list"]
+
+NAME = "object_bounding_size_estimation"
+SUB_QUESTION_TYPE = "extent_list"
+#: Decimals of the answer, metres.
+DECIMALS = 2
+
+#: ``{target_obj}``: the object's phrase.
+TEMPLATES: tuple[str, ...] = (
+    (
+        "What are the 3D physical dimensions of the {target_obj}? Please answer in the format "
+        "[shortest edge, middle edge, longest edge] in meters (e.g. [0.10, 0.20, 0.30])."
+    ),
+    (
+        "Estimate the physical size of the {target_obj} in meters, and respond as "
+        "[shortest edge, middle edge, longest edge] (e.g. [0.10, 0.20, 0.30])."
+    ),
+    (
+        "Could you provide the three edge lengths of the {target_obj} in the format "
+        "[shortest, middle, longest] (meters, e.g. [0.10, 0.20, 0.30])?"
+    ),
+    (
+        "What is the bounding box extent of the {target_obj}? Reply as "
+        "[shortest edge, middle edge, longest edge] in meters (e.g. [0.10, 0.20, 0.30])."
+    ),
+)
+
+
+def size_list(inst: Instance) -> tuple[float, float, float]:
+    """The box extents sorted ascending, then rounded to :data:`DECIMALS` decimals (metres)."""
+    a, b, c = (round(float(v), DECIMALS) for v in sorted(float(e) for e in inst.box.extents))
+    return a, b, c
+
+
+def render_question(template: int, inst: Instance) -> str:
+    """The question text of template index ``template`` for ``inst``."""
+    return TEMPLATES[template].format(target_obj=object_phrase(inst.label, inst.description))
+
+
+def _record(scene: Scene, index: VisibilityIndex, view: str, inst: Instance, template: int) -> QARecord:
+    answer = size_list(inst)
+    geometry = {
+        "view": view,
+        "up": np.asarray(scene.up, dtype=np.float64).tolist(),
+        "object": box_geometry(inst),
+        "sorted_extents": sorted(float(e) for e in inst.box.extents),
+        "rounding_decimals": DECIMALS,
+        "visibility": index.vis_entry(view, inst.id),
+        "template": template,
+        "refs": [object_ref(inst, view)],
+    }
+    views = (view,)
+    return QARecord(
+        id=make_record_id(scene.id, NAME, SUB_QUESTION_TYPE, views, {"object": inst.id, "template": template}),
+        scene_id=scene.id,
+        question_type=NAME,
+        sub_question_type=SUB_QUESTION_TYPE,
+        task_group=TaskGroup.OBJECT_CENTRIC,
+        answer_type=AnswerType.SIZE_LIST,
+        views=views,
+        question=render_question(template, inst),
+        options=(),
+        answer=answer,
+        geometry=geometry,
+    )
+
+
+def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> Iterator[QARecord]:
+    """Every valid bounding-size question of ``scene``, in an order shuffled by ``rng`` (module docstring)."""
+    index = VisibilityIndex(scene, thresholds)
+    candidates = [
+        (view, inst) for view in scene.views for inst in referable(index, view) if size_list(inst)[0] > 0.0
+    ]
+    order = rng.permutation(len(candidates))
+    templates = rng.integers(0, len(TEMPLATES), size=len(candidates))
+    for idx in order:
+        view, inst = candidates[idx]
+        yield _record(scene, index, view, inst, int(templates[idx]))
+
+
+def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> QuestionFamily:
+    """The bounding-size family with custom visibility thresholds (the registered one uses the defaults)."""
+    return QuestionFamily(
+        name=NAME,
+        task_group=TaskGroup.OBJECT_CENTRIC,
+        answer_types=frozenset({AnswerType.SIZE_LIST}),
+        sub_question_types=(SUB_QUESTION_TYPE,),
+        num_views=(1,),
+        generate=functools.partial(generate, thresholds=thresholds),
+        needs=frozenset({"visibility"}),
+        description="The three edge lengths [shortest, middle, longest] of a clearly visible object's box, in metres.",
+    )
+
+
+FAMILY = make_family()
+
+
+@hookimpl
+def spacedg_register_question_families(register: Any) -> None:
+    """Register :data:`FAMILY`."""
+    register(FAMILY)

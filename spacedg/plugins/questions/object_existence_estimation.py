@@ -1,0 +1,230 @@
+"""Object existence (``question_type = "object_existence_estimation"``; object-centric, 1 view, YN).
+
+For one view and one label the answer is (SPEC-QA, type 10; classes from
+:func:`spacedg.data.visibility.classify` via :class:`~spacedg.data.view_sampling.VisibilityIndex`):
+
+- ``"yes"`` when at least one instance of the label is **clearly visible** (``VISIBLE``) in the
+  view (other instances of the label may be partial or hidden: there still is one);
+- ``"no"`` when **no** instance of the label has a single visible pixel there (all
+  ``HIDDEN``, or the label has no instance in the scene at all);
+- skipped (grey zone) when none is clearly visible but some instance is ``PARTIAL``.
+
+Labels are grouped by :func:`~spacedg.data.view_sampling.label_key` (case, space and
+underscore insensitive). Candidate labels are the scene's instance labels (question text: the
+first spelling in instance-id order; ``label_source = "scene"``) plus the labels of
+``Scene.vocabulary`` that no instance carries (first spelling in vocabulary order;
+``label_source = "vocabulary"``). So negatives use labels present elsewhere in the scene or in
+the scene's category vocabulary; positives are always scene labels. Limitation: a vocabulary
+word that names an unannotated or differently-labelled object ("couch" for an annotated
+"sofa") cannot be detected here; the vocabulary must use the annotation's label words.
+
+The question names the **label only**, never a description (a description of a specific
+instance would leak that it exists). Templates (the paper's appendix, existence), chosen per
+record by the seeded ``rng``:
+
+0. ``Is there a <label> visible in this image?``
+1. ``Can you find a <label> in the current view?``
+2. ``Does the image contain a <label>?``
+3. ``Check if a <label> is present in this picture.``
+
+**Deviation**: templates 1–3 of the paper say "the <label>"; a definite article presupposes
+that the object exists, so every template uses the indefinite article (``a`` / ``an`` by
+:func:`indefinite_article`). ``sub_question_type`` is ``"existence"``.
+
+Balance (exact 50/50 per scene): all positive and all negative (view, label) candidates are
+listed (views in scene order, labels in key order), each list is shuffled with
+``rng.permutation`` (positives first, then negatives), a fair coin ``rng.random() < 0.5``
+chooses whether the stream starts with "yes" or "no", and the stream alternates strictly
+(yes, no, yes, no, … or no, yes, …), stopping when either list is exhausted. The generator
+therefore yields ``2 · min(#yes, #no)`` records, and **every prefix** a caller takes is
+balanced within ±1. Templates are drawn (``rng.integers``) per record when it is built.
+
+Geometry block (JSON): ``view``, ``label`` (as written in the question), ``label_key``,
+``label_source`` (``"scene"`` / ``"vocabulary"``), ``instances`` (every instance of the label:
+``id`` with :meth:`VisibilityIndex.vis_entry` — ``visible_pixels``, ``visible_fraction``,
+``class``), ``image_size`` ``[width, height]`` px, ``thresholds`` (``min_pixels`` scaled to the
+image, ``min_fraction``), ``up``, ``template`` and ``refs = []`` (no object is named). The
+answer is independent of geometry, hence invariant under a rigid motion of the scene.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.scene import Instance, Scene
+from spacedg.data.view_sampling import VisibilityIndex, label_key
+from spacedg.data.visibility import (
+    DEFAULT_THRESHOLDS,
+    VisibilityClass,
+    VisibilityThresholds,
+)
+from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.questions.language import label_text
+from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+
+__all__ = [
+    "FAMILY",
+    "NAME",
+    "SUB_QUESTION_TYPE",
+    "TEMPLATES",
+    "candidates",
+    "generate",
+    "indefinite_article",
+    "make_family",
+    "render_question",
+]
+
+NAME = "object_existence_estimation"
+SUB_QUESTION_TYPE = "existence"
+
+#: ``{article}``: "a" / "an"; ``{label}``: the label text.
+TEMPLATES: tuple[str, ...] = (
+    "Is there {article} {label} visible in this image?",
+    "Can you find {article} {label} in the current view?",
+    "Does the image contain {article} {label}?",
+    "Check if {article} {label} is present in this picture.",
+)
+
+# Letters whose spoken name starts with a vowel sound (acronyms: "an HDMI cable", "a TV").
+_VOWEL_SOUND_LETTERS = frozenset("AEFHILMNORSX")
+# Vowel-letter words spoken with a consonant sound, and silent-h words.
+_A_PREFIXES = ("uni", "use", "usb", "uten", "eu", "one", "once", "ewe")
+_AN_PREFIXES = ("hour", "honest", "honor", "honour", "heir")
+
+
+def indefinite_article(label: str) -> str:
+    """``"a"`` or ``"an"`` for ``label`` by its first sound (simple spelling rules, acronyms by letter name)."""
+    text = label_text(label)
+    if not text:
+        return "a"
+    word = text.split(" ")[0]
+    if len(word) > 1 and word.isupper():
+        return "an" if word[0] in _VOWEL_SOUND_LETTERS else "a"
+    lower = word.lower()
+    if lower.startswith(_AN_PREFIXES):
+        return "an"
+    if lower.startswith(_A_PREFIXES):
+        return "a"
+    return "an" if lower[0] in "aeiou" else "a"
+
+
+def render_question(template: int, label: str) -> str:
+    """The question text of template index ``template`` for ``label``."""
+    return TEMPLATES[template].format(article=indefinite_article(label), label=label_text(label))
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    view: str
+    key: str
+    label: str
+    source: str
+    members: tuple[Instance, ...]
+    answer: str
+
+
+def _labels(scene: Scene) -> list[tuple[str, str, str, tuple[Instance, ...]]]:
+    """``(key, text, source, members)`` of every candidate label, in key order."""
+    members: dict[str, list[Instance]] = {}
+    text: dict[str, str] = {}
+    for inst in sorted(scene.instances, key=lambda i: i.id):
+        key = label_key(inst.label)
+        if key:
+            members.setdefault(key, []).append(inst)
+            text.setdefault(key, inst.label)
+    vocab: dict[str, str] = {}
+    for word in scene.vocabulary:
+        key = label_key(word)
+        if key and key not in members:
+            vocab.setdefault(key, word)
+    out = [(k, text[k], "scene", tuple(members[k])) for k in members]
+    out += [(k, w, "vocabulary", ()) for k, w in vocab.items()]
+    return sorted(out, key=lambda item: item[0])
+
+
+def candidates(scene: Scene, index: VisibilityIndex) -> tuple[list[_Candidate], list[_Candidate]]:
+    """``(positives, negatives)`` in a fixed order (views in scene order, labels in key order); grey zone dropped."""
+    labels = _labels(scene)
+    pos: list[_Candidate] = []
+    neg: list[_Candidate] = []
+    for view in scene.views:
+        for key, text, source, members in labels:
+            classes = [index.cls(view, inst.id) for inst in members]
+            if VisibilityClass.VISIBLE in classes:
+                pos.append(_Candidate(view, key, text, source, members, "yes"))
+            elif all(c is VisibilityClass.HIDDEN for c in classes):
+                neg.append(_Candidate(view, key, text, source, members, "no"))
+            # else: grey zone (some partial, none clearly visible) → skipped
+    return pos, neg
+
+
+def _record(scene: Scene, index: VisibilityIndex, cand: _Candidate, template: int) -> QARecord:
+    cam = scene.views[cand.view]
+    area = cam.width * cam.height
+    geometry = {
+        "view": cand.view,
+        "label": cand.label,
+        "label_key": cand.key,
+        "label_source": cand.source,
+        "instances": [{"id": inst.id, **index.vis_entry(cand.view, inst.id)} for inst in cand.members],
+        "image_size": [cam.width, cam.height],
+        "thresholds": {"min_pixels": index.thresholds.pixels_for(area), "min_fraction": float(index.thresholds.min_fraction)},
+        "up": np.asarray(scene.up, dtype=np.float64).tolist(),
+        "template": template,
+        "refs": [],
+    }
+    views = (cand.view,)
+    return QARecord(
+        id=make_record_id(scene.id, NAME, SUB_QUESTION_TYPE, views, {"label": cand.key, "template": template}),
+        scene_id=scene.id,
+        question_type=NAME,
+        sub_question_type=SUB_QUESTION_TYPE,
+        task_group=TaskGroup.OBJECT_CENTRIC,
+        answer_type=AnswerType.YN,
+        views=views,
+        question=render_question(template, cand.label),
+        options=(),
+        answer=cand.answer,
+        geometry=geometry,
+    )
+
+
+def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> Iterator[QARecord]:
+    """Balanced existence questions of ``scene``: strictly alternating yes/no in a seeded order (module docstring)."""
+    index = VisibilityIndex(scene, thresholds)
+    pos, neg = candidates(scene, index)
+    pos = [pos[i] for i in rng.permutation(len(pos))]
+    neg = [neg[i] for i in rng.permutation(len(neg))]
+    first, second = (pos, neg) if rng.random() < 0.5 else (neg, pos)
+    for a, b in zip(first, second):
+        yield _record(scene, index, a, int(rng.integers(0, len(TEMPLATES))))
+        yield _record(scene, index, b, int(rng.integers(0, len(TEMPLATES))))
+
+
+def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> QuestionFamily:
+    """The existence family with custom visibility thresholds (the registered one uses the defaults)."""
+    return QuestionFamily(
+        name=NAME,
+        task_group=TaskGroup.OBJECT_CENTRIC,
+        answer_types=frozenset({AnswerType.YN}),
+        sub_question_types=(SUB_QUESTION_TYPE,),
+        num_views=(1,),
+        generate=functools.partial(generate, thresholds=thresholds),
+        needs=frozenset({"visibility"}),
+        description="Whether an object of a label is visible in one image (yes/no balanced 50/50; grey zone skipped).",
+    )
+
+
+FAMILY = make_family()
+
+
+@hookimpl
+def spacedg_register_question_families(register: Any) -> None:
+    """Register :data:`FAMILY`."""
+    register(FAMILY)

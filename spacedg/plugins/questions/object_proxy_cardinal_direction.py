@@ -1,0 +1,254 @@
+"""Object-proxy cardinal direction (``question_type = "object_proxy_cardinal_direction"``; object-centric, 2 views, MCQ).
+
+Sub type ``proxy_frame`` (SPEC-QA, type 7; paper appendix "Object-Object Cardinal Direction").
+Three distinct objects A (defines the frame), B (the proxy origin) and C (the query): "The
+direction of <A> relative to <B> is <assumed_dir>. What is the direction of <C> relative to <B>?"
+
+Frame (exact definition; world metres, ``up = Scene.up``, box centres ``c_A, c_B, c_C``):
+
+- origin = B's box centre; reference leg ``c_A − c_B``, query leg ``c_C − c_B``;
+- the assumed direction ``d`` is drawn by ``rng`` from
+  :data:`~spacedg.plugins.questions.geometry.CARDINALS`; **north** is the unit ground vector
+  such that ``horizontal(c_A − c_B)`` lies ``angle(d)`` (0, 90, 180, 270°) clockwise from it
+  seen from above; **east = north × up**
+  (:func:`~spacedg.plugins.questions.cross_view_cardinal_direction.compass_frame`). Example,
+  z up: B at the origin, A at +x declared "west" → north = −y, east = −x, and C at +y is "south";
+- ``angle = ground_angle(north, c_C − c_B, up)`` ∈ [0, 360) clockwise from north; the truth is
+  ``COMPASS_SECTORS.classify(angle)`` (cardinals ±30° around their axis, diagonals the 30°
+  between: the 0.5774 rule). Options: the truth and three of the other seven labels from
+  ``COMPASS_SECTORS.distractors`` (seeded; within 3° of a sector boundary the label across it is
+  never offered), letters by :func:`~spacedg.plugins.questions.geometry.build_mcq`.
+
+Skipped (the paper's "geometric ambiguity filters"): any two of the three boxes intersect
+(:meth:`~spacedg.data.box.OrientedBox.intersects` with ``tol =`` :data:`INTERSECT_TOL_M` = 1 mm:
+boxes must overlap by more than 1 mm along every separating axis; touching boxes, e.g. a vase
+standing on a table, are kept. Decision: with ``tol = 0`` float noise decides touching boxes,
+and the answer set changed under a rigid motion of the scene);
+``|horizontal(c_A − c_B)|`` or ``|horizontal(c_C − c_B)|`` below 0.25 m; either leg
+vertical-dominant (vertical ≥ 1.2 × horizontal; this is also the paper's "forward nearly
+collinear with up" rule).
+
+Objects (decisions in brackets): pairs of views from
+:func:`~spacedg.data.view_sampling.sample_pairs` with
+:data:`~spacedg.data.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m). The
+triplet obeys the three-object rule (:func:`~spacedg.data.view_sampling.split_across_views`:
+each clearly visible in image A or B, neither image shows all three). Each object is named in
+[image A if it is clearly visible there without a description clash, else image B on the same
+condition]; an object usable in neither makes the triplet invalid. Because neither image shows
+all three, the markers always point into both images. [The three phrases
+(:func:`~spacedg.plugins.questions.language.object_phrase`) must differ case-insensitively; the
+question names the objects by these phrases, the same words as the markers.]
+
+Question: one marker per object in role order A, B, C (each pointing at its image), then the
+paper's sentence::
+
+    In image A, find the red lamp. In image A, find the wooden table. In image B, find the blue sofa.
+    The direction of red lamp relative to wooden table is west. What is the direction of blue sofa relative to wooden table?
+
+Order and bounded enumeration: pairs in ``sample_pairs`` order, visited round-robin (one record
+per pair per round). A pair's candidates are the ordered triplets of distinct usable objects,
+``n(n−1)(n−2)`` of them, walked in a seeded random order drawn **lazily**
+(:func:`~spacedg.plugins.questions.cross_view_cardinal_direction.lazy_permutation`: memory and
+time grow with what is taken, not with ``n³``); pairs where no triplet can satisfy the
+three-object rule (every usable object seen in one of the images) are dropped before any draw.
+Cheap tests run first (three-object rule, phrases, leg lengths), box intersections last and
+cached per pair. For each accepted triplet ``rng`` draws the assumed direction, then the
+distractor order and the letter. Same seed, same records in the same order.
+
+Geometry block (JSON): ``up``; ``cameras`` (view → 4×4 ``cam_to_world``); ``objects`` (A, B, C:
+id, label, description, box ``center``/``extents``/``rotation``); ``roles`` (``{"A", "B", "C"}``
+→ ids); ``refs`` (``[{"id", "label", "description", "view"}]`` in question order A, B, C);
+``visibility``; ``visibility_thresholds``; ``reference`` (leg B→A) and ``query`` (leg B→C), each
+``origin`` (c_B), ``vector``, ``horizontal``, ``horizontal_m``, ``vertical_m``; ``assumed_dir``;
+``assumed_angle_deg``; ``north``; ``east``; ``angle_deg``; ``sector_index``; ``sector_label``;
+``sector_labels``; ``sector_starts_deg``; ``boundary_distance_deg``; ``neighbour_index``;
+``banned_labels``; ``thresholds``; ``intersect_tol_m``; ``template`` (always 0); ``pair``;
+``pair_rules``.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.scene import Scene
+from spacedg.data.view_sampling import (
+    OBJECT_PAIRS,
+    PairRules,
+    ViewPair,
+    VisibilityIndex,
+    sample_pairs,
+    split_across_views,
+)
+from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.questions.camera_object_distance_estimation import (
+    camera_entry,
+    object_entry,
+    ref_entry,
+    round_robin,
+    visibility_entry,
+    visibility_thresholds,
+)
+from spacedg.plugins.questions.cross_view_cardinal_direction import (
+    compass_block,
+    ground_leg,
+    lazy_permutation,
+    phrase_key,
+    usable,
+)
+from spacedg.plugins.questions.geometry import CARDINALS, COMPASS_SECTORS, build_mcq
+from spacedg.plugins.questions.language import find_in_image, object_phrase
+from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+
+__all__ = ["FAMILY", "INTERSECT_TOL_M", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "decode_triplet", "generate", "make_family", "render_question"]
+
+NAME = "object_proxy_cardinal_direction"
+SUB_QUESTION_TYPE = "proxy_frame"
+#: Boxes intersect only when they overlap by more than this (metres) along every separating axis.
+INTERSECT_TOL_M = 1e-3
+#: The paper's wording after the markers; ``{a}``, ``{b}``, ``{c}``: phrases; ``{assumed}``: a cardinal.
+TEMPLATE = "The direction of {a} relative to {b} is {assumed}. What is the direction of {c} relative to {b}?"
+
+
+def decode_triplet(k: int, n: int) -> tuple[int, int, int]:
+    """The ``k``-th ordered triplet of distinct indices in ``range(n)`` (``0 <= k < n(n−1)(n−2)``)."""
+    x, rest = divmod(k, (n - 1) * (n - 2))
+    y, z = divmod(rest, n - 2)
+    if y >= x:
+        y += 1
+    for skip in sorted((x, y)):
+        if z >= skip:
+            z += 1
+    return x, y, z
+
+
+def render_question(phrases: tuple[str, str, str], images: tuple[int, int, int], assumed_dir: str) -> str:
+    """One marker per object (A, B, C; ``images`` are 0 for image A, 1 for image B), then the paper's question."""
+    markers = " ".join(find_in_image(p, i) for p, i in zip(phrases, images))
+    return markers + "\n" + TEMPLATE.format(a=phrases[0], b=phrases[1], c=phrases[2], assumed=assumed_dir)
+
+
+def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+    up = np.asarray(scene.up, dtype=np.float64)
+    views = (pair.a, pair.b)
+    ref_view: dict[int, str] = {}
+    for view in views:
+        for iid in index.visible[view]:
+            if iid not in ref_view and usable(index, view, iid):
+                ref_view[iid] = view
+    ids = sorted(ref_view)
+    n = len(ids)
+    seen_a, seen_b = set(index.seen[pair.a]), set(index.seen[pair.b])
+    only_b = [i not in seen_a for i in ids]  # must come from image B: not seen in A
+    only_a = [i not in seen_b for i in ids]
+    if n < 3 or not any(only_a) or not any(only_b):
+        return  # no triplet can be split across the two views
+    insts = [index.instance(i) for i in ids]
+    keys = [phrase_key(inst) for inst in insts]
+    centres = [inst.box.center for inst in insts]
+    legs: dict[tuple[int, int], dict[str, Any] | None] = {}
+    hits: dict[tuple[int, int], bool] = {}
+
+    def leg(to: int, origin: int) -> dict[str, Any] | None:
+        if (to, origin) not in legs:
+            legs[(to, origin)] = ground_leg(centres[to] - centres[origin], up)
+        return legs[(to, origin)]
+
+    def overlap(p: int, q: int) -> bool:
+        key = (min(p, q), max(p, q))
+        if key not in hits:
+            hits[key] = insts[p].box.intersects(insts[q].box, tol=INTERSECT_TOL_M)
+        return hits[key]
+
+    for k in lazy_permutation(n * (n - 1) * (n - 2), rng):
+        tri = decode_triplet(k, n)
+        if not any(only_a[t] for t in tri) or not any(only_b[t] for t in tri):
+            continue
+        triplet_ids = tuple(ids[t] for t in tri)
+        if not split_across_views(index, pair.a, pair.b, triplet_ids):
+            continue
+        x, y, z = tri
+        if len({keys[x], keys[y], keys[z]}) < 3:
+            continue
+        ref, query = leg(x, y), leg(z, y)
+        if ref is None or query is None:
+            continue
+        if any(overlap(p, q) for p, q in itertools.combinations(tri, 2)):
+            continue
+        assumed = CARDINALS[int(rng.integers(len(CARDINALS)))]
+        truth, hit, compass = compass_block(np.asarray(ref["vector"]), assumed, np.asarray(query["vector"]), up)
+        options, letter = build_mcq(truth, COMPASS_SECTORS.distractors(hit, rng), rng)
+        objs = [insts[t] for t in tri]
+        obj_views = [ref_view[i] for i in triplet_ids]
+        phrases = tuple(object_phrase(o.label, o.description) for o in objs)
+        origin = centres[y].tolist()
+        geometry = {
+            "up": up.tolist(),
+            "cameras": camera_entry(scene, views),
+            "objects": [object_entry(o) for o in objs],
+            "roles": {"A": objs[0].id, "B": objs[1].id, "C": objs[2].id},
+            "refs": [ref_entry(o, v) for o, v in zip(objs, obj_views)],
+            "visibility": visibility_entry(index, views, list(triplet_ids)),
+            "visibility_thresholds": visibility_thresholds(scene, index, views),
+            "reference": {"origin": origin, **ref},
+            "query": {"origin": origin, **query},
+            **compass,
+            "template": 0,
+            "intersect_tol_m": INTERSECT_TOL_M,
+            "pair": pair.to_dict(),
+            "pair_rules": rules.to_dict(),
+        }
+        yield QARecord(
+            id=make_record_id(scene.id, NAME, SUB_QUESTION_TYPE, views, {"roles": list(triplet_ids), "assumed_dir": assumed}),
+            scene_id=scene.id,
+            question_type=NAME,
+            sub_question_type=SUB_QUESTION_TYPE,
+            task_group=TaskGroup.OBJECT_CENTRIC,
+            answer_type=AnswerType.MCQ,
+            views=views,
+            question=render_question(phrases, tuple(views.index(v) for v in obj_views), assumed),  # type: ignore[arg-type]
+            options=options,
+            answer=letter,
+            geometry=geometry,
+        )
+
+
+def generate(
+    scene: Scene,
+    rng: np.random.Generator,
+    thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
+    pair_rules: PairRules = OBJECT_PAIRS,
+) -> Iterator[QARecord]:
+    """Every valid proxy-frame compass question of ``scene``, lazily, in a seeded order (module docstring)."""
+    index = VisibilityIndex(scene, thresholds)
+    pairs = sample_pairs(scene, pair_rules, rng)
+    yield from round_robin([_pair_stream(scene, index, p, pair_rules, rng) for p in pairs])
+
+
+def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS) -> QuestionFamily:
+    """The family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
+    return QuestionFamily(
+        name=NAME,
+        task_group=TaskGroup.OBJECT_CENTRIC,
+        answer_types=frozenset({AnswerType.MCQ}),
+        sub_question_types=(SUB_QUESTION_TYPE,),
+        num_views=(2,),
+        generate=functools.partial(generate, thresholds=thresholds, pair_rules=pair_rules),
+        needs=frozenset({"visibility", "covisibility"}),
+        description="Given the compass direction of object A from object B, the compass direction of object C from B.",
+    )
+
+
+FAMILY = make_family()
+
+
+@hookimpl
+def spacedg_register_question_families(register: Any) -> None:
+    """Register :data:`FAMILY`."""
+    register(FAMILY)

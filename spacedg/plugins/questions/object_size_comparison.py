@@ -1,0 +1,328 @@
+"""Object size comparison (``question_type = "object_size_comparison"``; object-centric, 2 views, MCQ).
+
+Two objects are compared across two images: object 1 is **clearly visible** in image A
+(:attr:`VisibilityIndex.visible`), object 2 clearly visible in image B. The pair of views comes
+from :func:`~spacedg.data.view_sampling.sample_pairs` with
+:data:`~spacedg.data.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m).
+
+Sub question types and the measured quantity (metres):
+
+``longest_side_compare``
+    ``value = max(box.extents)``: the longest full side of the oriented box. Not a corner
+    distance (the reference pipeline measured a face or space diagonal, which is wrong).
+    Question: ``Which is longer (consider the longest side of the object)? <obj1> or <obj2>?``
+``top_height_compare``
+    ``value = max_k (corner_k · up)`` over the 8 box corners, with ``up = Scene.up``: the
+    elevation of the object's **top** along the scene's up direction (origin at the world
+    origin; only the difference matters). Because that is what is measured, the wording
+    deviates from the paper's "Which object is taller": ``Which object's top is higher
+    (consider the top of the objects)? <obj1> or <obj2>?`` (a cup on a high shelf has a
+    higher top than a standing lamp, though the lamp is taller).
+
+``Δ = value1 − value2``; when ``|Δ| < 0.01 m`` (:data:`TIE_THRESHOLD_M`, the paper's 1e-2) the
+truth is :data:`SAME`; otherwise the phrase of the object with the larger value.
+
+Options (:func:`~spacedg.plugins.questions.geometry.build_mcq`, seeded shuffle): object 1's
+phrase, object 2's phrase, ``"about the same"`` and the never-correct option
+:data:`NEVER_CORRECT` = ``"cannot be determined"``: both boxes are annotated in metres, so the
+comparison is always determinable, and this option is never the truth.
+
+Object rules (decisions the spec left open):
+
+- each object is clearly visible in its reference view (object 1 in A, object 2 in B) and
+  :func:`~spacedg.data.view_sampling.description_clash` is False there (no same-label,
+  same-description neighbour is seen in that image);
+- the two are distinct instances that can be told apart in words: their labels differ
+  (:func:`~spacedg.data.view_sampling.label_key`) **or** their descriptions differ
+  (:func:`~spacedg.data.view_sampling.description_key`), **and** their question phrases
+  (:func:`~spacedg.plugins.questions.language.object_phrase`) differ case-insensitively, so
+  the two options never read the same;
+- an object may also be visible in the other image; nothing is required there.
+
+Question text: the two marker sentences, then the question on its own line::
+
+    In image A, find the grey fabric sofa. In image B, find the wooden chair.
+    Which is longer (consider the longest side of the object)? grey fabric sofa or wooden chair?
+
+Order: pairs come in :func:`sample_pairs` order (round-robin over anchor views). Each pair's
+candidates ``(object 1, object 2, sub type)`` are shuffled by ``rng.permutation`` the first
+time the pair is visited; records are then emitted **round-robin over pairs** (the first
+candidate of every pair, then the second of every pair, ...), so a caller that stops after
+``n`` records gets them spread over as many view pairs as possible. Every draw comes from the
+one ``rng``, so a seed fixes the records and their order. Records are built lazily.
+
+Geometry block (JSON): ``pair`` (``a``, ``b``, covisibility, baseline, rotation), ``up``,
+``quantity``, ``objects`` (per object: ``id``, ``label``, ``description``, ``view``, box
+``center`` / ``extents`` / ``rotation`` (columns = box axes in world coordinates), ``value``
+and, for heights, ``top_corner``), ``values`` ``[v1, v2]``, ``delta`` ``v1 − v2``,
+``tie_threshold_m``, ``truth`` (``"object1"`` / ``"object2"`` / ``"same"``), ``truth_text``,
+``never_correct_option``, ``template`` and ``refs`` (``id``, ``label``, ``description``,
+``view`` of both objects, in question order). Answers, questions and options are invariant
+under a rigid motion of the whole scene (``Scene.transformed``): extents are unchanged and
+every top elevation shifts by the same ``t · up``.
+
+Shared helpers :func:`box_geometry` and :func:`object_ref` are defined here (no shared home
+existed); :mod:`object_bounding_size_estimation` imports them.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.scene import Instance, Scene
+from spacedg.data.view_sampling import (
+    OBJECT_PAIRS,
+    PairRules,
+    ViewPair,
+    VisibilityIndex,
+    description_clash,
+    description_key,
+    label_key,
+    sample_pairs,
+)
+from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.questions.geometry import build_mcq
+from spacedg.plugins.questions.language import find_in_image, object_phrase
+from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+
+__all__ = [
+    "FAMILY",
+    "LONGEST",
+    "NAME",
+    "NEVER_CORRECT",
+    "SAME",
+    "SUB_QUESTION_TYPES",
+    "TEMPLATES",
+    "TIE_THRESHOLD_M",
+    "TOP",
+    "box_geometry",
+    "generate",
+    "longest_side",
+    "make_family",
+    "object_ref",
+    "referable",
+    "render_question",
+    "top_elevation",
+]
+
+NAME = "object_size_comparison"
+LONGEST = "longest_side_compare"
+TOP = "top_height_compare"
+SUB_QUESTION_TYPES: tuple[str, ...] = (LONGEST, TOP)
+
+#: One template per sub type; ``{obj1}`` / ``{obj2}``: the objects' phrases.
+TEMPLATES: dict[str, str] = {
+    LONGEST: "Which is longer (consider the longest side of the object)? {obj1} or {obj2}?",
+    TOP: "Which object's top is higher (consider the top of the objects)? {obj1} or {obj2}?",
+}
+#: ``|Δ|`` below this many metres → "about the same" (the paper's 1e-2).
+TIE_THRESHOLD_M = 0.01
+#: Option text of a tie.
+SAME = "about the same"
+#: The never-correct fourth option (the boxes always determine the answer).
+NEVER_CORRECT = "cannot be determined"
+
+
+# ------------------------------------------------------------------ measures
+def longest_side(inst: Instance) -> float:
+    """Longest full side of the instance's oriented box, metres (``max(extents)``)."""
+    return float(np.max(inst.box.extents))
+
+
+def _top(inst: Instance, up: np.ndarray) -> tuple[float, np.ndarray]:
+    corners = inst.box.corners()
+    heights = corners @ np.asarray(up, dtype=np.float64)
+    k = int(np.argmax(heights))
+    return float(heights[k]), corners[k]
+
+
+def top_elevation(inst: Instance, up: np.ndarray) -> float:
+    """``max_k corner_k · up`` over the 8 box corners: the top's elevation along ``up``, metres."""
+    return _top(inst, up)[0]
+
+
+# ------------------------------------------------------------ shared helpers
+def box_geometry(inst: Instance) -> dict[str, Any]:
+    """``id``, ``label``, ``description`` and the box (``center``, ``extents``, ``rotation``) of ``inst``."""
+    return {
+        "id": inst.id,
+        "label": inst.label,
+        "description": inst.description,
+        "center": inst.box.center.tolist(),
+        "extents": inst.box.extents.tolist(),
+        "rotation": inst.box.rotation.tolist(),
+    }
+
+
+def object_ref(inst: Instance, view: str) -> dict[str, Any]:
+    """The ``refs`` entry of an object named in a question: ``id``, ``label``, ``description``, ``view``."""
+    return {"id": inst.id, "label": inst.label, "description": inst.description, "view": view}
+
+
+def referable(index: VisibilityIndex, view: str) -> list[Instance]:
+    """Instances a question may name in ``view``: clearly visible and without a description clash (id order)."""
+    out = []
+    for iid in index.visible[view]:
+        inst = index.instance(iid)
+        if not description_clash(index, view, inst):
+            out.append(inst)
+    return out
+
+
+def _phrase(inst: Instance) -> str:
+    return object_phrase(inst.label, inst.description)
+
+
+def _distinguishable(one: Instance, two: Instance) -> bool:
+    """Distinct instances whose labels or descriptions differ and whose phrases read differently
+    (case-insensitively, and unlike the fixed option texts)."""
+    if one.id == two.id:
+        return False
+    if label_key(one.label) == label_key(two.label) and description_key(one.description) == description_key(two.description):
+        return False
+    keys = {" ".join(_phrase(inst).lower().split()) for inst in (one, two)}
+    return len(keys) == 2 and not keys & {SAME, NEVER_CORRECT}
+
+
+def render_question(sub: str, phrase1: str, phrase2: str) -> str:
+    """Marker sentences for images A and B, then the sub type's question on its own line."""
+    markers = f"{find_in_image(phrase1, 0)} {find_in_image(phrase2, 1)}"
+    return f"{markers}\n{TEMPLATES[sub].format(obj1=phrase1, obj2=phrase2)}"
+
+
+# ---------------------------------------------------------------- records
+def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str, rng: np.random.Generator) -> QARecord:
+    up = np.asarray(scene.up, dtype=np.float64)
+    objects = [{**box_geometry(one), "view": pair.a}, {**box_geometry(two), "view": pair.b}]
+    if sub == LONGEST:
+        values = [longest_side(one), longest_side(two)]
+        quantity = "longest_side"
+    else:
+        (v1, c1), (v2, c2) = _top(one, up), _top(two, up)
+        values = [v1, v2]
+        objects[0]["top_corner"], objects[1]["top_corner"] = c1.tolist(), c2.tolist()
+        quantity = "top_elevation"
+    for entry, value in zip(objects, values):
+        entry["value"] = value
+    delta = values[0] - values[1]
+    phrase1, phrase2 = _phrase(one), _phrase(two)
+    if abs(delta) < TIE_THRESHOLD_M:
+        truth, truth_text = "same", SAME
+    elif delta > 0:
+        truth, truth_text = "object1", phrase1
+    else:
+        truth, truth_text = "object2", phrase2
+    texts = [phrase1, phrase2, SAME, NEVER_CORRECT]
+    options, letter = build_mcq(truth_text, [t for t in texts if t != truth_text], rng)
+    views = (pair.a, pair.b)
+    geometry = {
+        "pair": {"a": pair.a, "b": pair.b, **pair.to_dict()},
+        "up": up.tolist(),
+        "quantity": quantity,
+        "objects": objects,
+        "values": values,
+        "delta": delta,
+        "tie_threshold_m": TIE_THRESHOLD_M,
+        "truth": truth,
+        "truth_text": truth_text,
+        "never_correct_option": NEVER_CORRECT,
+        "template": 0,
+        "refs": [object_ref(one, pair.a), object_ref(two, pair.b)],
+    }
+    return QARecord(
+        id=make_record_id(scene.id, NAME, sub, views, {"objects": [one.id, two.id]}),
+        scene_id=scene.id,
+        question_type=NAME,
+        sub_question_type=sub,
+        task_group=TaskGroup.OBJECT_CENTRIC,
+        answer_type=AnswerType.MCQ,
+        views=views,
+        question=render_question(sub, phrase1, phrase2),
+        options=options,
+        answer=letter,
+        geometry=geometry,
+    )
+
+
+@dataclass
+class _PairSlot:
+    """One view pair's candidates: index ``k`` decodes to (object 1, object 2, sub type)."""
+
+    pair: ViewPair
+    ones: list[Instance]
+    twos: list[Instance]
+    order: np.ndarray | None = None
+    cursor: int = 0
+
+    @property
+    def size(self) -> int:
+        return len(self.ones) * len(self.twos) * len(SUB_QUESTION_TYPES)
+
+    def decode(self, k: int) -> tuple[Instance, Instance, str]:
+        rest, s = divmod(k, len(SUB_QUESTION_TYPES))
+        i, j = divmod(rest, len(self.twos))
+        return self.ones[i], self.twos[j], SUB_QUESTION_TYPES[s]
+
+
+def generate(
+    scene: Scene,
+    rng: np.random.Generator,
+    thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
+    pair_rules: PairRules = OBJECT_PAIRS,
+) -> Iterator[QARecord]:
+    """Every valid size-comparison question of ``scene``, lazily, in a seeded order (module docstring)."""
+    index = VisibilityIndex(scene, thresholds)
+    by_view: dict[str, list[Instance]] = {}
+    slots: list[_PairSlot] = []
+    for pair in sample_pairs(scene, pair_rules, rng):
+        for view in (pair.a, pair.b):
+            if view not in by_view:
+                by_view[view] = referable(index, view)
+        ones, twos = by_view[pair.a], by_view[pair.b]
+        if ones and twos:
+            slots.append(_PairSlot(pair, ones, twos))
+    active = slots
+    while active:
+        still: list[_PairSlot] = []
+        for slot in active:
+            if slot.order is None:
+                slot.order = rng.permutation(slot.size)
+            while slot.cursor < slot.size:
+                one, two, sub = slot.decode(int(slot.order[slot.cursor]))
+                slot.cursor += 1
+                if _distinguishable(one, two):
+                    yield _record(scene, slot.pair, one, two, sub, rng)
+                    break
+            if slot.cursor < slot.size:
+                still.append(slot)
+        active = still
+
+
+def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS) -> QuestionFamily:
+    """The size-comparison family with custom visibility thresholds / pair rules (registered: defaults)."""
+    return QuestionFamily(
+        name=NAME,
+        task_group=TaskGroup.OBJECT_CENTRIC,
+        answer_types=frozenset({AnswerType.MCQ}),
+        sub_question_types=SUB_QUESTION_TYPES,
+        num_views=(2,),
+        generate=functools.partial(generate, thresholds=thresholds, pair_rules=pair_rules),
+        needs=frozenset({"visibility", "covisibility"}),
+        description="Which of two objects, seen in two images, has the longer longest side or the higher top.",
+    )
+
+
+FAMILY = make_family()
+
+
+@hookimpl
+def spacedg_register_question_families(register: Any) -> None:
+    """Register :data:`FAMILY`."""
+    register(FAMILY)
