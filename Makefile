@@ -27,6 +27,8 @@ demo: $(STAMP)
 	$(BIN)/spacedg scenes info $(DEMO_DIR)/scenes
 	$(BIN)/spacedg scenes preview $(DEMO_DIR)/scenes --out $(DEMO_DIR)/floorplans.png
 	$(BIN)/spacedg gallery $(DEMO_DIR)/scenes/room-000000 --view frame_0000 --out $(DEMO_DIR)/gallery.png
+	$(BIN)/spacedg qa build $(DEMO_DIR)/scenes
+	$(BIN)/spacedg qa stats $(DEMO_DIR)/scenes
 	$(BIN)/spacedg plugins
 
 test: $(STAMP)

@@ -12,12 +12,10 @@ import importlib
 import json
 import os
 import pickle
-import shutil
 import subprocess
 import sys
 import textwrap
 import threading
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +44,7 @@ from spacedg.plugins import (
     reset_registry,
 )
 
-from conftest import EXAMPLES, Installed
+from conftest import Installed
 SPACEDG_SCRIPT = Path(sys.executable).parent / "spacedg"
 BUILTIN_DEGRADATIONS = {
     "defocus", "distortion", "motion_blur", "haze", "water_droplets", "low_light", "over_exposure", "jpeg_compression", "low_res",

@@ -21,7 +21,9 @@ from spacedg.plugins import AnswerType, TaskGroup, get_question_family
 from spacedg.plugins.questions import cross_view_cardinal_direction as cross
 from spacedg.plugins.questions import inter_object_distance as dist
 from spacedg.plugins.questions import object_proxy_cardinal_direction as proxy
+from spacedg.plugins.questions.geometry import compass_answer, compass_frame
 from spacedg.plugins.questions.language import object_phrase
+from spacedg.plugins.questions.records import lazy_permutation
 
 COMPASS = ("north", "northeast", "east", "southeast", "south", "southwest", "west", "northwest")
 CARD = ("north", "east", "south", "west")
@@ -71,26 +73,26 @@ def comparable(record) -> tuple:
 
 # -------------------------------------------------------------- pure frame
 def test_frame_north_x_gives_east_minus_y():
-    north, east = cross.compass_frame(np.array([2.0, 0.0, 0.7]), "north", Z)
+    north, east = compass_frame(np.array([2.0, 0.0, 0.7]), "north", Z)
     np.testing.assert_allclose(north, [1, 0, 0], atol=1e-12)
     np.testing.assert_allclose(east, [0, -1, 0], atol=1e-12)
-    assert cross.compass_answer(np.array([1.0, 0, 0]), "north", np.array([0, -1.0, 0]), Z)[0] == "east"
-    assert cross.compass_answer(np.array([1.0, 0, 0]), "north", np.array([1.0, -1.0, 0]), Z)[0] == "northeast"
+    assert compass_answer(np.array([1.0, 0, 0]), "north", np.array([0, -1.0, 0]), Z)[0] == "east"
+    assert compass_answer(np.array([1.0, 0, 0]), "north", np.array([1.0, -1.0, 0]), Z)[0] == "northeast"
 
 
 @pytest.mark.parametrize("assumed", CARD)
 def test_frame_puts_reference_at_assumed_direction(assumed):
     ref = np.array([0.3, -1.7, 0.4])
-    north, east = cross.compass_frame(ref, assumed, Z)
+    north, east = compass_frame(ref, assumed, Z)
     assert abs(north @ Z) < 1e-12 and abs(np.linalg.norm(north) - 1) < 1e-12
     np.testing.assert_allclose(east, np.cross(north, Z), atol=1e-12)
-    label, angle, *_ = cross.compass_answer(ref, assumed, ref, Z)
+    label, angle, *_ = compass_answer(ref, assumed, ref, Z)
     assert label == assumed and abs((angle - 90 * CARD.index(assumed) + 180) % 360 - 180) < 1e-9
 
 
 def test_proxy_example_west_then_plus_y_is_south():
     # B at the origin, A at +x declared west → north = −y, east = −x, C at +y is south
-    label, _, _, north, east = cross.compass_answer(np.array([1.0, 0, 0]), "west", np.array([0, 1.0, 0]), Z)
+    label, _, _, north, east = compass_answer(np.array([1.0, 0, 0]), "west", np.array([0, 1.0, 0]), Z)
     assert label == "south"
     np.testing.assert_allclose(north, [0, -1, 0], atol=1e-12)
     np.testing.assert_allclose(east, [-1, 0, 0], atol=1e-12)
@@ -99,7 +101,7 @@ def test_proxy_example_west_then_plus_y_is_south():
 def test_lazy_permutation_and_triplet_decoding():
     rng = np.random.default_rng(3)
     for n in (0, 1, 2, 7, 500):
-        assert sorted(cross.lazy_permutation(n, rng)) == list(range(n))
+        assert sorted(lazy_permutation(n, rng)) == list(range(n))
     for n in (3, 5):
         got = [proxy.decode_triplet(k, n) for k in range(n * (n - 1) * (n - 2))]
         assert sorted(got) == sorted(itertools.permutations(range(n), 3))
@@ -144,7 +146,7 @@ def test_cross_view_wording():
     assumed = r.geometry["assumed_dir"]
     assert r.question == (
         "In image A, find the red lamp. In image B, find the wooden chair.\n"
-        f"The direction of red lamp relative to image A is {assumed}. What is the direction of wooden chair relative to image B?"
+        f"The direction of the red lamp relative to image A is {assumed}. What is the direction of the wooden chair relative to image B?"
     )
     assert r.question_type == "cross_view_cardinal_direction" and r.sub_question_type == "assumed_direction"
     assert r.task_group is TaskGroup.CAMERA_OBJECT and r.answer_type is AnswerType.MCQ and r.views == ("A", "B")
@@ -267,7 +269,8 @@ def test_proxy_west_and_plus_y_is_south():
     assert r.question == (
         f"In {marker[views[1]]}, find the red lamp. In {marker[views[2]]}, find the wooden table. "
         f"In {marker[views[3]]}, find the blue sofa.\n"
-        "The direction of red lamp relative to wooden table is west. What is the direction of blue sofa relative to wooden table?"
+        "The direction of the red lamp relative to the wooden table is west. "
+        "What is the direction of the blue sofa relative to the wooden table?"
     )
     assert views[1] == "A" and views[3] == "B"  # the lamp is only in view A, the sofa only in view B
     assert r.question_type == "object_proxy_cardinal_direction" and r.sub_question_type == "proxy_frame"

@@ -21,6 +21,7 @@ from spacedg.plugins import AnswerType, TaskGroup, get_question_family, reset_re
 from spacedg.plugins.questions import object_bounding_size_estimation as bsize
 from spacedg.plugins.questions import object_existence_estimation as exist
 from spacedg.plugins.questions import object_size_comparison as cmp
+from spacedg.plugins.questions.language import object_phrase
 
 VIEWS = {"a": camera((0.0, 0.0, 1.2), 0.0), "b": camera((0.0, 1.0, 1.2), 10.0)}
 
@@ -82,7 +83,7 @@ def test_question_text_and_options() -> None:
     sofa = obj(1, "sofa", (2.0, 0.0, 0.4), (2.0, 0.9, 0.8), "grey fabric sofa")
     chair = obj(2, "chair", (2.0, 1.5, 0.45), (0.5, 0.5, 0.9), "wooden chair")
     for rec in _records(cmp.FAMILY, _two_objects(sofa, chair)):
-        p1, p2 = (cmp.object_phrase(ref["label"], ref["description"]) for ref in rec.geometry["refs"])
+        p1, p2 = (object_phrase(ref["label"], ref["description"]) for ref in rec.geometry["refs"])
         assert rec.question == cmp.render_question(rec.sub_question_type, p1, p2)
         assert rec.question.startswith(f"In image A, find the {p1}. In image B, find the {p2}.\n")
         assert sorted(o[3:] for o in rec.options) == sorted([p1, p2, "about the same", "cannot be determined"])
@@ -278,7 +279,7 @@ def test_bounding_size_templates_and_visibility() -> None:
         for r in _records(bsize.FAMILY, scene, seed):
             seen.add(r.geometry["template"])
             assert r.question == bsize.TEMPLATES[r.geometry["template"]].format(
-                target_obj=bsize.object_phrase(r.geometry["object"]["label"], r.geometry["object"]["description"])
+                target_obj=object_phrase(r.geometry["object"]["label"], r.geometry["object"]["description"])
             )
     assert seen == {0, 1, 2, 3}
     keys = {(r.geometry["object"]["id"], r.views[0]) for r in _records(bsize.FAMILY, scene)}
@@ -470,7 +471,7 @@ def test_geometry_recomputes_answers() -> None:
                 corners = [c + rot @ (np.array(s) * ext / 2) for s in itertools.product((-1, 1), repeat=3)]
                 vals.append(max(float(p @ up) for p in corners))
         d = vals[0] - vals[1]
-        names = [cmp.object_phrase(o["label"], o["description"]) for o in g["objects"]]
+        names = [object_phrase(o["label"], o["description"]) for o in g["objects"]]
         expected = "about the same" if abs(d) < g["tie_threshold_m"] else (names[0] if d > 0 else names[1])
         assert _truth(r) == expected
     for r in _records(bsize.FAMILY, scene, 5):

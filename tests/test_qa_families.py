@@ -74,3 +74,21 @@ def test_answers_invariant_under_rigid_motion_of_the_scene(prepared, records_by_
         assert not all(math.isclose(a, b) for a, b in zip(moved.up, scene.up))
         original = [_comparable(r) for r in records_by_scene[scene.id]]
         assert [_comparable(r) for r in generate_records(moved, CONFIG)] == original
+
+
+def test_scorer_routes_every_generated_record_and_accepts_its_answer(records_by_scene):
+    """The scorer's SpaceDG routing agrees with each record's answer type, and the true answer,
+    written as a model would, scores 1; a wrong letter scores 0."""
+    from spacedg.eval import route, score
+
+    for records in records_by_scene.values():
+        for r in records:
+            assert route(r.question_type, r.sub_question_type) is r.answer_type, (r.question_type, r.sub_question_type)
+            if r.answer_type is AnswerType.SIZE_LIST:
+                text = "[" + ", ".join(f"{v:.2f}" for v in r.answer) + "]"
+            else:
+                text = str(r.answer)
+            assert score(f"Thinking... <answer>{text}</answer>", r).score == 1.0, (r.id, text)
+            if r.answer_type is AnswerType.MCQ:
+                wrong = next(k for k in "ABCD" if k != r.answer)
+                assert score(f"<answer>{wrong}</answer>", r).score == 0.0

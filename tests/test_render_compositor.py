@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from render_helpers import brute_force_composite, camera, random_gaussians
-from spacedg.render import Defocus, RasterSettings, render
+from spacedg.render import RasterSettings, render
 from spacedg.render import project_cpu, raster_cpu, raster_torch
 from spacedg.render.project import Projected
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CR, DEPTH, OPA, PX, PY, RADX, RADY

@@ -38,10 +38,12 @@ Three sub types (SPEC-QA, type 4; wording from the paper's appendix "Question Te
     "forward nearly collinear with up" rule, with the same factor as for C). ``angle =
     ground_angle(forward, c_C - c_A, up)`` (degrees clockwise from forward seen from above,
     90 = right, right = forward × up); skipped when C − A is vertical-dominant or its
-    horizontal length < 0.25 m; triplets with any two intersecting boxes
-    (:meth:`~spacedg.data.box.OrientedBox.intersects` with ``tol =`` :data:`INTERSECT_TOL_M`
-    = 1 mm: decision, so that boxes that merely touch, e.g. a lamp on a table, count as apart
-    whatever the float noise) are skipped. The truth is
+    horizontal length < 0.25 m (both legs by :func:`~spacedg.plugins.questions.geometry.ground_leg`);
+    triplets with any two intersecting boxes
+    (:func:`~spacedg.plugins.questions.geometry.boxes_intersect`: tolerance
+    :data:`~spacedg.plugins.questions.geometry.INTERSECT_TOL_M` = 1 mm, the same as
+    ``object_proxy_cardinal_direction``; decision, so that boxes that merely touch, e.g. a lamp
+    on a table, count as apart whatever the float noise) are skipped. The truth is
     ``RELPOS_SECTORS.classify(angle)`` (eight 45° sectors centred on front, front-right, …);
     distractors come from ``RELPOS_SECTORS.distractors`` (the neighbour across a boundary
     within 3° is never offered). The question is one ``find_in_image`` marker per object (A, B,
@@ -51,7 +53,8 @@ Three sub types (SPEC-QA, type 4; wording from the paper's appendix "Question Te
     triplet whose names still coincide is skipped.
 
 Every referenced object is clearly visible in the view the question points to and has no
-description clash there (:func:`~spacedg.data.view_sampling.description_clash`). Only camera
+description clash there (:func:`~spacedg.data.view_sampling.description_clash`; together
+:func:`~spacedg.plugins.questions.records.referable`). Only camera
 frames and ``Scene.up`` enter the answers, so questions, options and answers are unchanged when
 the whole scene moves rigidly (any up direction).
 
@@ -72,7 +75,8 @@ two views ``pair`` and ``pair_rules``.
 
 Order (decision, as in ``camera_object_distance_estimation``): one child generator per sub type,
 sub types interleaved round-robin; views (single view) or the pairs of ``sample_pairs``
-visited round-robin, each group's candidates in a seeded order; lazy throughout.
+visited round-robin, each group's candidates in a seeded order; lazy throughout. The
+record-building helpers come from :mod:`~spacedg.plugins.questions.records`.
 """
 
 from __future__ import annotations
@@ -84,7 +88,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.qa import QARecord
 from spacedg.data.scene import Instance, Scene
 from spacedg.data.view_sampling import (
     LOW_COVIS_DIRECTION_PAIRS,
@@ -92,49 +96,51 @@ from spacedg.data.view_sampling import (
     PairRules,
     ViewPair,
     VisibilityIndex,
-    description_clash,
     label_key,
-    sample_pairs,
     split_across_views,
 )
 from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
-from spacedg.plugins.questions.camera_object_distance_estimation import (
-    camera_entry,
-    child_rngs,
-    object_entry,
-    ref_entry,
-    round_robin,
-    seeded_order,
-    visibility_entry,
-    visibility_thresholds,
-)
 from spacedg.plugins.questions.geometry import (
     BODY_DIRECTION_WORDS,
     BOUNDARY_GUARD_DEG,
+    INTERSECT_TOL_M,
     MAX_PARTS,
+    MIN_HORIZONTAL_M,
     RELPOS_SECTORS,
     TAN30,
+    VERTICAL_FACTOR,
+    boxes_intersect,
     build_mcq,
     camera_center,
     dominant_parts,
     flipped_labels,
     ground_angle,
-    horizontal,
+    ground_leg,
     parts_label,
     point_in_camera,
     single_word_pool,
-    vertical_dominates,
 )
-from spacedg.plugins.questions.language import find_in_image, label_text, object_phrase
+from spacedg.plugins.questions.language import find_in_image, label_text
+from spacedg.plugins.questions.records import (
+    child_rngs,
+    make_record,
+    objects_block,
+    phrase,
+    phrase_key,
+    referable,
+    referable_ids,
+    round_robin,
+    round_robin_pairs,
+    round_robin_views,
+    seeded_order,
+)
 from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
 
 __all__ = [
     "BBOX_CENTER_DIRECTION",
     "FAMILY",
-    "INTERSECT_TOL_M",
     "MIN_DISPLACEMENT_M",
-    "MIN_HORIZONTAL_M",
     "NAME",
     "RELPOS",
     "RELPOS_TEMPLATE",
@@ -143,7 +149,6 @@ __all__ = [
     "SINGLE_VIEW_TEMPLATES",
     "SUB_QUESTION_TYPES",
     "TWO_VIEW_TEMPLATES",
-    "VERTICAL_FACTOR",
     "body_direction",
     "generate",
     "make_family",
@@ -157,14 +162,6 @@ SUB_QUESTION_TYPES: tuple[str, ...] = (SINGLE_VIEW, BBOX_CENTER_DIRECTION, RELPO
 
 #: Camera-frame vectors shorter than this (metres) have no meaningful direction: skipped.
 MIN_DISPLACEMENT_M = 0.1
-#: Horizontal A→B and A→C lengths below this (metres) are skipped (relpos).
-MIN_HORIZONTAL_M = 0.25
-#: Vertical-dominant if |vertical| >= this × |horizontal| (relpos).
-VERTICAL_FACTOR = 1.2
-#: Boxes "intersect" only when they overlap by more than this (metres) along every separating
-#: axis: touching boxes (a lamp standing on a table) are not intersecting, and float noise of
-#: a rigid motion of the scene must not flip the decision.
-INTERSECT_TOL_M = 1e-3
 
 #: ``{b}``: the object asked about, ``{a}``: the reference object (paper order).
 SINGLE_VIEW_TEMPLATES: tuple[str, ...] = (
@@ -207,50 +204,24 @@ def _body_geometry(view: str, world: np.ndarray, cam: np.ndarray, parts: list[tu
     }
 
 
-def _usable(index: VisibilityIndex, view: str, iid: int) -> bool:
-    """Clearly visible in ``view`` and no same-label same-description neighbour seen there."""
-    return iid in index.visible[view] and not description_clash(index, view, index.instance(iid))
-
-
 def _record(
     scene: Scene, index: VisibilityIndex, sub: str, views: tuple[str, ...], objects: Sequence[Instance],
     refs: Sequence[tuple[Instance, str]], question: str, options: tuple[str, ...], letter: str, template: int,
     extra: dict[str, Any],
 ) -> QARecord:
-    ids = [inst.id for inst in objects]
-    geometry = {
-        "up": scene.up.tolist(),
-        "cameras": camera_entry(scene, views),
-        "objects": [object_entry(inst) for inst in objects],
-        "refs": [ref_entry(inst, view) for inst, view in refs],
-        "visibility": visibility_entry(index, views, ids),
-        "visibility_thresholds": visibility_thresholds(scene, index, views),
-        "template": template,
-        **extra,
-    }
-    return QARecord(
-        id=make_record_id(scene.id, NAME, sub, views, {"objects": ids, "template": template}),
-        scene_id=scene.id,
-        question_type=NAME,
-        sub_question_type=sub,
-        task_group=TaskGroup.CAMERA_OBJECT,
-        answer_type=AnswerType.MCQ,
-        views=views,
-        question=question,
-        options=options,
-        answer=letter,
-        geometry=geometry,
+    geometry = {**objects_block(scene, index, views, objects, refs), "template": template, **extra}
+    return make_record(
+        scene, NAME, sub, TaskGroup.CAMERA_OBJECT, AnswerType.MCQ, views, {"objects": [inst.id for inst in objects], "template": template},
+        question=question, answer=letter, geometry=geometry, options=options,
     )
 
 
 # --------------------------------------------------------------- single view
 def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np.random.Generator) -> Iterator[QARecord]:
-    usable = [i for i in index.visible[view] if _usable(index, view, i)]
     cam = scene.views[view]
-    for ia, ib in seeded_order(list(itertools.permutations(usable, 2)), rng):
+    for ia, ib in seeded_order(list(itertools.permutations(referable_ids(index, view), 2)), rng):
         a, b = index.instance(ia), index.instance(ib)
-        phrase_a, phrase_b = object_phrase(a.label, a.description), object_phrase(b.label, b.description)
-        if phrase_a.lower() == phrase_b.lower():
+        if phrase_key(a) == phrase_key(b):
             continue
         world = b.box.center - a.box.center
         vec = np.asarray(cam.cam_to_world, dtype=np.float64)[:3, :3].T @ world
@@ -258,15 +229,9 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
             continue
         template = int(rng.integers(len(SINGLE_VIEW_TEMPLATES)))
         parts, truth, options, letter = body_direction(vec, rng)
-        question = SINGLE_VIEW_TEMPLATES[template].format(a=phrase_a, b=phrase_b) + SINGLE_VIEW_NOTE
+        question = SINGLE_VIEW_TEMPLATES[template].format(a=phrase(a), b=phrase(b)) + SINGLE_VIEW_NOTE
         extra = {**_body_geometry(view, world, vec, parts, truth), "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M}}
         yield _record(scene, index, SINGLE_VIEW, (view,), (a, b), ((a, view), (b, view)), question, options, letter, template, extra)
-
-
-def _single_view_records(scene: Scene, index: VisibilityIndex, rng: np.random.Generator) -> Iterator[QARecord]:
-    views = list(scene.views)
-    order = [views[int(i)] for i in rng.permutation(len(views))]
-    yield from round_robin([_single_view_stream(scene, index, v, rng) for v in order])
 
 
 # ------------------------------------------------------------ bbox direction
@@ -275,14 +240,14 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     centre_b = camera_center(cam_b)
     for iid in seeded_order(index.visible[pair.a], rng):
         inst = index.instance(iid)
-        if description_clash(index, pair.a, inst) or bool(inst.box.contains(centre_b[None, :])[0]):
+        if not referable(index, pair.a, iid) or bool(inst.box.contains(centre_b[None, :])[0]):
             continue
         vec = point_in_camera(cam_b, inst.box.center)
         if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
             continue
         template = int(rng.integers(len(TWO_VIEW_TEMPLATES)))
         parts, truth, options, letter = body_direction(vec, rng)
-        question = find_in_image(object_phrase(inst.label, inst.description), 0) + "\n" + TWO_VIEW_TEMPLATES[template].format(label=label_text(inst.label))
+        question = find_in_image(phrase(inst), 0) + "\n" + TWO_VIEW_TEMPLATES[template].format(label=label_text(inst.label))
         extra = {
             **_body_geometry(pair.b, inst.box.center - centre_b, vec, parts, truth),
             "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
@@ -299,7 +264,7 @@ def _relpos_candidates(index: VisibilityIndex, pair: ViewPair) -> tuple[dict[int
     union = sorted(set(index.visible[pair.a]) | set(index.visible[pair.b]))
     ref_view: dict[int, str] = {}
     for iid in union:
-        found = next((v for v in views if _usable(index, v, iid)), None)  # image A first, else image B
+        found = next((v for v in views if referable(index, v, iid)), None)  # image A first, else image B
         if found is not None:
             ref_view[iid] = found
     seen_a, seen_b = set(index.seen[pair.a]), set(index.seen[pair.b])
@@ -315,16 +280,15 @@ def _relpos_names(objs: Sequence[Instance]) -> list[str] | None:
     """Labels when they differ, else phrases; ``None`` when even the phrases coincide."""
     if len({label_key(o.label) for o in objs}) == len(objs):
         return [label_text(o.label) for o in objs]
-    phrases = [object_phrase(o.label, o.description) for o in objs]
-    if len({p.lower() for p in phrases}) < len(objs):
+    if len({phrase_key(o) for o in objs}) < len(objs):
         return None
-    return phrases
+    return [phrase(o) for o in objs]
 
 
 def _intersects(cache: dict[tuple[int, int], bool], p: Instance, q: Instance) -> bool:
     key = (min(p.id, q.id), max(p.id, q.id))
     if key not in cache:
-        cache[key] = p.box.intersects(q.box, tol=INTERSECT_TOL_M)
+        cache[key] = boxes_intersect(p.box, q.box)
     return cache[key]
 
 
@@ -345,20 +309,15 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
         ref_views = [ref_view[i] for i in ids]
         ca, cb, cc = (o.box.center for o in objs)
         ab, ac = cb - ca, cc - ca
-        forward = horizontal(ab, up)
-        ab_h = float(np.linalg.norm(forward))
-        if ab_h < MIN_HORIZONTAL_M or vertical_dominates(ab, up, VERTICAL_FACTOR):
+        leg_ab, leg_ac = ground_leg(ab, up), ground_leg(ac, up)
+        if leg_ab is None or leg_ac is None:
             continue
-        ac_h = float(np.linalg.norm(horizontal(ac, up)))
-        if ac_h < MIN_HORIZONTAL_M or vertical_dominates(ac, up, VERTICAL_FACTOR):
-            continue
+        forward, ab_h = np.asarray(leg_ab["horizontal"]), leg_ab["horizontal_m"]
         angle = ground_angle(forward, ac, up)
         hit = RELPOS_SECTORS.classify(angle)
         truth = RELPOS_SECTORS.labels[hit.index]
         options, letter = build_mcq(truth, RELPOS_SECTORS.distractors(hit, rng), rng)
-        markers = " ".join(
-            find_in_image(object_phrase(o.label, o.description), views.index(v)) for o, v in zip(objs, ref_views)
-        )
+        markers = " ".join(find_in_image(phrase(o), views.index(v)) for o, v in zip(objs, ref_views))
         question = markers + "\n" + RELPOS_TEMPLATE.format(a=names[0], b=names[1], c=names[2])
         fwd_unit = forward / ab_h
         banned = [RELPOS_SECTORS.labels[hit.neighbour]] if hit.boundary_distance_deg < BOUNDARY_GUARD_DEG else []
@@ -367,9 +326,9 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
             "forward": fwd_unit.tolist(),
             "right": np.cross(fwd_unit, up).tolist(),
             "ab_horizontal_m": ab_h,
-            "ab_vertical_m": float(ab @ up),
-            "ac_horizontal_m": ac_h,
-            "ac_vertical_m": float(ac @ up),
+            "ab_vertical_m": leg_ab["vertical_m"],
+            "ac_horizontal_m": leg_ac["horizontal_m"],
+            "ac_vertical_m": leg_ac["vertical_m"],
             "angle_deg": angle,
             "sector_index": hit.index,
             "sector_label": truth,
@@ -386,11 +345,6 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
         yield _record(scene, index, RELPOS, views, objs, list(zip(objs, ref_views)), question, options, letter, 0, extra)
 
 
-def _pair_records(scene: Scene, index: VisibilityIndex, rng: np.random.Generator, rules: PairRules, stream: Any) -> Iterator[QARecord]:
-    pairs = sample_pairs(scene, rules, rng)
-    yield from round_robin([stream(scene, index, p, rules, rng) for p in pairs])
-
-
 def generate(
     scene: Scene,
     rng: np.random.Generator,
@@ -402,9 +356,9 @@ def generate(
     index = VisibilityIndex(scene, thresholds)
     rng_single, rng_bbox, rng_relpos = child_rngs(rng, 3)
     yield from round_robin([
-        _single_view_records(scene, index, rng_single),
-        _pair_records(scene, index, rng_bbox, bbox_rules, _bbox_stream),
-        _pair_records(scene, index, rng_relpos, relpos_rules, _relpos_stream),
+        round_robin_views(scene, index, rng_single, _single_view_stream),
+        round_robin_pairs(scene, index, bbox_rules, rng_bbox, _bbox_stream),
+        round_robin_pairs(scene, index, relpos_rules, rng_relpos, _relpos_stream),
     ])
 
 
@@ -413,7 +367,7 @@ def make_family(
     bbox_rules: PairRules = LOW_COVIS_DIRECTION_PAIRS,
     relpos_rules: PairRules = OBJECT_DIRECTION_PAIRS,
 ) -> QuestionFamily:
-    """The family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
+    """The camera–object direction family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
     return QuestionFamily(
         name=NAME,
         task_group=TaskGroup.CAMERA_OBJECT,

@@ -34,7 +34,7 @@ Pairs: :func:`~spacedg.data.view_sampling.sample_pairs` with
 :data:`~spacedg.data.view_sampling.ROTATION_PAIRS` (covisibility > 0.25, rotation >= 15°; which
 view is A is a seeded coin, so turn directions are balanced). One record per qualifying pair,
 in ``sample_pairs``' round-robin order; each pair's option shuffle uses its own child
-generator seeded from ``rng``.
+generator seeded from ``rng`` (:func:`~spacedg.plugins.questions.records.child_rngs`).
 
 Geometry block (JSON): ``up``, ``cam_to_world_a``, ``cam_to_world_b`` (4×4), ``pair``,
 ``r_rel`` (3×3), ``euler_deg`` ``{"yaw", "pitch", "roll"}``, ``axes`` ``[ax1, ax2]``,
@@ -53,17 +53,17 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.qa import QARecord
 from spacedg.data.scene import Scene
 from spacedg.data.view_sampling import ROTATION_PAIRS, PairRules, ViewPair, sample_pairs
 from spacedg.plugins.hookspecs import hookimpl
-from spacedg.plugins.questions.camera_translation import child_rngs, pair_geometry
 from spacedg.plugins.questions.geometry import (
     ROTATION_WORDS,
     build_mcq,
     euler_yaw_pitch_roll,
     relative_rotation,
 )
+from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry
 from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
 
 __all__ = [
@@ -192,27 +192,17 @@ def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator) -> QARecord 
     }
     views = (pair.a, pair.b)
     question = TEMPLATES[template].format(axis1=AXIS_PHRASES[text_axes[0]], axis2=AXIS_PHRASES[text_axes[1]])
-    return QARecord(
-        id=make_record_id(scene.id, NAME, sub, views, {"truth": truth, "template": template}),
-        scene_id=scene.id,
-        question_type=NAME,
-        sub_question_type=sub,
-        task_group=TaskGroup.CAMERA_CENTRIC,
-        answer_type=AnswerType.MCQ,
-        views=views,
-        question=question,
-        options=options,
-        answer=answer,
-        geometry=geometry,
+    return make_record(
+        scene, NAME, sub, TaskGroup.CAMERA_CENTRIC, AnswerType.MCQ, views, {"truth": truth, "template": template},
+        question=question, answer=answer, geometry=geometry, options=options,
     )
 
 
 def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = ROTATION_PAIRS) -> Iterator[QARecord]:
     """Every camera-rotation question of ``scene`` (at most one per pair), lazily, in a seeded order."""
     pairs = sample_pairs(scene, rules, rng)
-    seeds = child_rngs(rng, (len(pairs),))
-    for pair, seed in zip(pairs, seeds):
-        record = _record(scene, pair, np.random.default_rng(int(seed)))
+    for pair, child in zip(pairs, child_rngs(rng, len(pairs))):
+        record = _record(scene, pair, child)
         if record is not None:
             yield record
 

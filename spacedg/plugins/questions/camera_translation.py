@@ -49,15 +49,18 @@ Order and randomness: **all three** sub types are asked for every pair (every va
 is yielded). They come in three passes over the pairs (in ``sample_pairs``' round-robin
 order): pass ``p`` gives pair ``k`` the sub type ``SUB_TYPES[(s + k + p) % 3]`` with a seeded
 start ``s``, so a caller that stops after ``n <=`` #pairs records gets ``n`` different pairs and
-a balanced mix of sub types. Each (pair, sub type) draws from its own child generator seeded
-from ``rng``, so its options and threshold do not depend on which other pairs were skipped.
+a balanced mix of sub types. Each (pair, sub type) draws from its own child generator
+(:func:`~spacedg.plugins.questions.records.child_rngs`, seeded from ``rng``), so its options and
+threshold do not depend on which other pairs were skipped.
 
 Geometry block (JSON): ``up``, ``cam_to_world_a``, ``cam_to_world_b`` (4×4), ``pair``
-(:meth:`ViewPair.to_dict`), ``d`` (metres, A's camera frame), ``distance_m`` (``|d|``, full
-precision), ``parts`` (``[[axis, sign], ...]``; axis 0 = x, 1 = y, 2 = z), ``label``,
-``thresholds`` (``ratio`` 0.5774, ``max_parts`` 2, ``min_translation_m``), per sub type
-``options_source`` (main_dir: how the distractors were made) or ``factor_drawn``, ``factor``,
-``threshold_m`` (distance_threshold), ``template`` 0, and ``refs`` ``[]`` (no objects).
+(:meth:`ViewPair.to_dict`; these four from
+:func:`~spacedg.plugins.questions.records.pair_geometry`), ``d`` (metres, A's camera frame),
+``distance_m`` (``|d|``, full precision), ``parts`` (``[[axis, sign], ...]``; axis 0 = x,
+1 = y, 2 = z), ``label``, ``thresholds`` (``ratio`` 0.5774, ``max_parts`` 2,
+``min_translation_m``), per sub type ``options_source`` (main_dir: how the distractors were
+made) or ``factor_drawn``, ``factor``, ``threshold_m`` (distance_threshold), ``template`` 0, and
+``refs`` ``[]`` (no objects).
 """
 
 from __future__ import annotations
@@ -70,7 +73,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.qa import QARecord
 from spacedg.data.scene import Scene
 from spacedg.data.view_sampling import (
     TRANSLATION_PAIRS,
@@ -90,6 +93,7 @@ from spacedg.plugins.questions.geometry import (
     relative_translation,
     single_word_pool,
 )
+from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry
 from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
 
 __all__ = [
@@ -97,11 +101,9 @@ __all__ = [
     "NAME",
     "SUB_TYPES",
     "TEMPLATES",
-    "child_rngs",
     "generate",
     "main_dir_options",
     "make_family",
-    "pair_geometry",
     "snap_factor",
     "threshold_for",
 ]
@@ -128,21 +130,6 @@ FACTOR_RANGE = (0.6, 1.4)
 FACTOR_SNAP = (0.85, 1.15)
 #: Smallest threshold ever asked, metres.
 MIN_THRESHOLD_M = 0.05
-
-
-def pair_geometry(scene: Scene, pair: ViewPair) -> dict[str, Any]:
-    """The pose part of a two-view geometry block: ``up``, both 4×4 ``cam_to_world`` and ``pair``."""
-    return {
-        "up": [float(v) for v in scene.up],
-        "cam_to_world_a": np.asarray(scene.views[pair.a].cam_to_world, dtype=np.float64).tolist(),
-        "cam_to_world_b": np.asarray(scene.views[pair.b].cam_to_world, dtype=np.float64).tolist(),
-        "pair": pair.to_dict(),
-    }
-
-
-def child_rngs(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
-    """Seeds (int64 array of ``shape``) for independent child generators, drawn from ``rng``."""
-    return rng.integers(0, 2**62, size=shape, dtype=np.int64)
 
 
 def snap_factor(factor: float, coin: float) -> float:
@@ -227,18 +214,9 @@ def _record(scene: Scene, cand: _Candidate, sub: str, rng: np.random.Generator, 
         answer_type = AnswerType.YN
         key["threshold"] = threshold
     views = (cand.pair.a, cand.pair.b)
-    return QARecord(
-        id=make_record_id(scene.id, NAME, sub, views, key),
-        scene_id=scene.id,
-        question_type=NAME,
-        sub_question_type=sub,
-        task_group=TaskGroup.CAMERA_CENTRIC,
-        answer_type=answer_type,
-        views=views,
-        question=question,
-        options=options,
-        answer=answer,
-        geometry=geometry,
+    return make_record(
+        scene, NAME, sub, TaskGroup.CAMERA_CENTRIC, answer_type, views, key,
+        question=question, answer=answer, geometry=geometry, options=options,
     )
 
 
@@ -246,12 +224,12 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = TRANSLAT
     """Every camera-translation question of ``scene`` (3 per valid pair), lazily, in a seeded order."""
     pairs = sample_pairs(scene, rules, rng)
     start = int(rng.integers(len(SUB_TYPES)))
-    seeds = child_rngs(rng, (len(pairs), len(SUB_TYPES)))
+    children = child_rngs(rng, len(pairs) * len(SUB_TYPES))  # row-major: pair k, sub type s
     cands = [(k, c) for k, pair in enumerate(pairs) if (c := _candidate(scene, pair, rules)) is not None]
     for p in range(len(SUB_TYPES)):
         for k, cand in cands:
             s = (start + k + p) % len(SUB_TYPES)
-            yield _record(scene, cand, SUB_TYPES[s], np.random.default_rng(int(seeds[k, s])), rules)
+            yield _record(scene, cand, SUB_TYPES[s], children[k * len(SUB_TYPES) + s], rules)
 
 
 def make_family(rules: PairRules = TRANSLATION_PAIRS) -> QuestionFamily:

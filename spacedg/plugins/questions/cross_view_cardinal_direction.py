@@ -13,7 +13,8 @@ Frame (exact definition; every vector in world metres, ``up = Scene.up``):
   ``d`` is drawn by ``rng`` from :data:`~spacedg.plugins.questions.geometry.CARDINALS`
   (north, east, south, west at 0°, 90°, 180°, 270° clockwise seen from above); **north** is the
   unit ground vector such that ``horizontal(u)`` lies at angle ``angle(d)`` from north, i.e.
-  north = ``horizontal(u)`` turned by ``−angle(d)`` about ``up`` (:func:`compass_frame`);
+  north = ``horizontal(u)`` turned by ``−angle(d)`` about ``up``
+  (:func:`~spacedg.plugins.questions.geometry.compass_frame`);
   **east = north × up** (right-handed world, up against gravity: with z up and north = +x,
   east = −y). Camera A's orientation plays no part (the reference pipeline used camera A's
   x–z plane; we use the ground plane, so the answer survives any camera tilt or roll);
@@ -23,8 +24,10 @@ Frame (exact definition; every vector in world metres, ``up = Scene.up``):
   on the (north, east) components a cardinal label covers ±30° around its axis and a diagonal
   label the 30° between (north [330, 30), northeast [30, 60), east [60, 120), …).
 
-Skipped: ``|horizontal(u)|`` or ``|horizontal(v)|`` below :data:`MIN_HORIZONTAL_M` = 0.25 m, or
-``u`` or ``v`` vertical-dominant (vertical ≥ :data:`VERTICAL_FACTOR` = 1.2 × horizontal).
+Skipped (:func:`~spacedg.plugins.questions.geometry.ground_leg`): ``|horizontal(u)|`` or
+``|horizontal(v)|`` below :data:`~spacedg.plugins.questions.geometry.MIN_HORIZONTAL_M` = 0.25 m,
+or ``u`` or ``v`` vertical-dominant (vertical ≥
+:data:`~spacedg.plugins.questions.geometry.VERTICAL_FACTOR` = 1.2 × horizontal).
 
 Options: the truth and three of the seven other compass labels
 (``COMPASS_SECTORS.distractors``: seeded order; when ``angle`` is within
@@ -36,21 +39,25 @@ Objects (decisions): pairs of views from :func:`~spacedg.data.view_sampling.samp
 :data:`~spacedg.data.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m; no
 rotation minimum: camera B's orientation does not enter the answer). Object 1 is clearly
 visible in A and object 2 clearly visible in B, each without a description clash in that view
-(:func:`~spacedg.data.view_sampling.description_clash`); they are distinct instances and their
+(:func:`~spacedg.data.view_sampling.description_clash`; together
+:func:`~spacedg.plugins.questions.records.referable`); they are distinct instances and their
 phrases (:func:`~spacedg.plugins.questions.language.object_phrase`) differ case-insensitively
 (the same phrase twice would read as the same object). Either object may also be seen in the
 other image; nothing is required there.
 
-Question (paper wording, objects named by their phrases, the same as in the markers)::
+Question (the paper's wording, objects named by their phrases, the same as in the markers;
+**deviation**: the paper's template has no article before the object, which reads badly with
+descriptions, so "the" is added)::
 
     In image A, find the red lamp. In image B, find the wooden chair.
-    The direction of red lamp relative to image A is north. What is the direction of wooden chair relative to image B?
+    The direction of the red lamp relative to image A is north. What is the direction of the wooden chair relative to image B?
 
 Order: pairs in ``sample_pairs`` order, visited round-robin (one record per pair per round);
 each pair's (object 1, object 2) candidates in a lazily drawn seeded permutation
-(:func:`lazy_permutation`); for each accepted candidate ``rng`` draws the assumed direction,
-then the distractor order and the letter. All draws come from the one ``rng``: same seed, same
-records in the same order; everything is lazy.
+(:func:`~spacedg.plugins.questions.records.lazy_permutation`); for each accepted candidate
+``rng`` draws the assumed direction, then the distractor order and the letter
+(:func:`~spacedg.plugins.questions.records.compass_question`). All draws come from the one
+``rng``: same seed, same records in the same order; everything is lazy.
 
 Geometry block (JSON): ``up``; ``cameras`` (view → 4×4 ``cam_to_world``); ``objects`` (id,
 label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{"id", "label",
@@ -62,11 +69,12 @@ label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{"id"
 ``thresholds`` (``min_horizontal_m``, ``vertical_factor``, ``boundary_guard_deg``,
 ``cardinal_ratio``); ``template`` (always 0); ``pair``; ``pair_rules``.
 
-Helpers shared by the compass families (:func:`compass_frame`, :func:`compass_answer`,
-:func:`lazy_permutation`, :func:`usable`, :func:`phrase_key`, :func:`ground_leg`) live here
-(``geometry.py`` has none of them); ``inter_object_distance`` and
-``object_proxy_cardinal_direction`` import them. Generic geometry-block helpers come from
-``camera_object_distance_estimation``.
+The compass frame (:func:`~spacedg.plugins.questions.geometry.compass_frame`,
+:func:`~spacedg.plugins.questions.geometry.compass_answer`,
+:func:`~spacedg.plugins.questions.geometry.ground_leg`) lives in ``geometry.py``; the compass
+part of the block (:func:`~spacedg.plugins.questions.records.compass_block`) and the other
+record-building helpers in ``records.py``, shared with ``object_proxy_cardinal_direction`` and
+``inter_object_distance``.
 """
 
 from __future__ import annotations
@@ -77,176 +85,51 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord, make_record_id
-from spacedg.data.scene import Instance, Scene
+from spacedg.data.qa import QARecord
+from spacedg.data.scene import Scene
 from spacedg.data.view_sampling import (
     OBJECT_PAIRS,
     PairRules,
     ViewPair,
     VisibilityIndex,
-    description_clash,
-    sample_pairs,
 )
 from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
-from spacedg.errors import InvalidDataError
 from spacedg.plugins.hookspecs import hookimpl
-from spacedg.plugins.questions.camera_object_distance_estimation import (
-    camera_entry,
-    object_entry,
-    ref_entry,
-    round_robin,
-    visibility_entry,
-    visibility_thresholds,
-)
 from spacedg.plugins.questions.geometry import (
-    BOUNDARY_GUARD_DEG,
-    CARDINALS,
-    COMPASS_SECTORS,
-    TAN30,
-    SectorHit,
-    build_mcq,
     camera_center,
-    ground_angle,
-    horizontal,
-    vertical_dominates,
+    ground_leg,
 )
-from spacedg.plugins.questions.language import find_in_image, object_phrase
+from spacedg.plugins.questions.language import find_in_image
+from spacedg.plugins.questions.records import (
+    compass_question,
+    lazy_permutation,
+    make_record,
+    objects_block,
+    phrase,
+    phrase_key,
+    referable_ids,
+    round_robin_pairs,
+)
 from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
 
 __all__ = [
     "FAMILY",
-    "MIN_HORIZONTAL_M",
     "NAME",
     "SUB_QUESTION_TYPE",
     "TEMPLATE",
-    "VERTICAL_FACTOR",
-    "compass_answer",
-    "compass_block",
-    "compass_frame",
     "generate",
-    "ground_leg",
-    "lazy_permutation",
     "make_family",
-    "phrase_key",
     "render_question",
-    "usable",
 ]
 
 NAME = "cross_view_cardinal_direction"
 SUB_QUESTION_TYPE = "assumed_direction"
-#: The paper's wording after the markers; ``{obj1}``, ``{obj2}``: phrases; ``{assumed}``: a cardinal.
+#: The paper's wording after the markers, with "the" before each object; ``{obj1}``, ``{obj2}``:
+#: phrases; ``{assumed}``: a cardinal.
 TEMPLATE = (
-    "The direction of {obj1} relative to image A is {assumed}. "
-    "What is the direction of {obj2} relative to image B?"
+    "The direction of the {obj1} relative to image A is {assumed}. "
+    "What is the direction of the {obj2} relative to image B?"
 )
-#: A ground-plane leg shorter than this (metres) has no reliable direction: skipped.
-MIN_HORIZONTAL_M = 0.25
-#: A leg whose |vertical part| >= this × its horizontal length is skipped.
-VERTICAL_FACTOR = 1.2
-
-#: (cos, sin) of 0°, 90°, 180°, 270°: exact, so the frame has no rounding from trigonometry.
-_QUARTER_TURNS: tuple[tuple[float, float], ...] = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))
-
-
-# ------------------------------------------------------------ shared helpers
-def compass_frame(reference: np.ndarray, assumed_dir: str, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(north, east)`` unit ground vectors such that ``reference`` points towards ``assumed_dir``.
-
-    ``assumed_dir`` is one of :data:`CARDINALS` at ``90·k`` degrees clockwise from north (seen
-    from above). With ``f = horizontal(reference)/|…|`` and ``r = f × up`` (f's right):
-    ``north = cos(90k) f − sin(90k) r`` (f turned back by 90k), ``east = north × up``. So
-    ``ground_angle(north, reference, up) == 90k``. Raises :class:`InvalidDataError` when
-    ``reference`` has no ground component.
-    """
-    if assumed_dir not in CARDINALS:
-        raise InvalidDataError(f"compass_frame: assumed_dir must be one of {CARDINALS}, got {assumed_dir!r}")
-    u = np.asarray(up, dtype=np.float64)
-    u = u / np.linalg.norm(u)
-    flat = horizontal(reference, u)
-    norm = float(np.linalg.norm(flat))
-    if norm <= 1e-12:
-        raise InvalidDataError("compass_frame: the reference vector is vertical; it defines no direction on the ground")
-    f = flat / norm
-    r = np.cross(f, u)
-    c, s = _QUARTER_TURNS[CARDINALS.index(assumed_dir)]
-    north = c * f - s * r
-    return north, np.cross(north, u)
-
-
-def compass_answer(reference: np.ndarray, assumed_dir: str, query: np.ndarray, up: np.ndarray) -> tuple[str, float, SectorHit, np.ndarray, np.ndarray]:
-    """``(label, angle_deg, hit, north, east)`` of ``query`` in the frame where ``reference`` points to ``assumed_dir``."""
-    north, east = compass_frame(reference, assumed_dir, up)
-    angle = ground_angle(north, query, up)
-    hit = COMPASS_SECTORS.classify(angle)
-    return COMPASS_SECTORS.labels[hit.index], angle, hit, north, east
-
-
-def lazy_permutation(n: int, rng: np.random.Generator, batch: int = 256) -> Iterator[int]:
-    """The integers ``0 … n−1`` in a uniformly random order drawn lazily (Fisher–Yates with a sparse swap map).
-
-    Memory and time grow with the number of items taken, not with ``n``, so a huge candidate
-    space (ordered triplets) can be walked in a seeded order and abandoned early. Uniform
-    floats are drawn from ``rng`` in batches of ``batch``; the sequence is a pure function of
-    the generator's state.
-    """
-    swaps: dict[int, int] = {}
-    i = 0
-    while i < n:
-        for x in rng.random(min(batch, n - i)):
-            j = min(n - 1, i + int(float(x) * (n - i)))
-            value = swaps.get(j, j)
-            swaps[j] = swaps.pop(i, i)
-            yield value
-            i += 1
-
-
-def usable(index: VisibilityIndex, view: str, instance_id: int) -> bool:
-    """An object a question may name in ``view``: clearly visible there and no description clash."""
-    return instance_id in index.visible[view] and not description_clash(index, view, index.instance(instance_id))
-
-
-def phrase_key(inst: Instance) -> str:
-    """The object's question phrase, lower case, whitespace collapsed (to test that names differ)."""
-    return " ".join(object_phrase(inst.label, inst.description).lower().split())
-
-
-def ground_leg(vector: np.ndarray, up: np.ndarray, min_horizontal_m: float = MIN_HORIZONTAL_M, factor: float = VERTICAL_FACTOR) -> dict[str, Any] | None:
-    """``{"vector", "horizontal", "horizontal_m", "vertical_m"}`` of a leg, or ``None`` when it is skipped.
-
-    Skipped: horizontal length ``< min_horizontal_m`` metres, or vertical-dominant
-    (``|vertical| >= factor × horizontal``).
-    """
-    v = np.asarray(vector, dtype=np.float64)
-    flat = horizontal(v, up)
-    length = float(np.linalg.norm(flat))
-    if length < min_horizontal_m or vertical_dominates(v, up, factor):
-        return None
-    return {"vector": v.tolist(), "horizontal": flat.tolist(), "horizontal_m": length, "vertical_m": float(v @ np.asarray(up, dtype=np.float64))}
-
-
-def compass_block(reference: np.ndarray, assumed_dir: str, query: np.ndarray, up: np.ndarray) -> tuple[str, SectorHit, dict[str, Any]]:
-    """Truth label, sector hit and the compass part of a geometry block (frame, angle, sector, guard)."""
-    label, angle, hit, north, east = compass_answer(reference, assumed_dir, query, up)
-    banned = [COMPASS_SECTORS.labels[hit.neighbour]] if hit.boundary_distance_deg < BOUNDARY_GUARD_DEG else []
-    block = {
-        "assumed_dir": assumed_dir,
-        "assumed_angle_deg": 90.0 * CARDINALS.index(assumed_dir),
-        "north": north.tolist(),
-        "east": east.tolist(),
-        "angle_deg": angle,
-        "sector_index": hit.index,
-        "sector_label": label,
-        "sector_labels": list(COMPASS_SECTORS.labels),
-        "sector_starts_deg": list(COMPASS_SECTORS.starts),
-        "boundary_distance_deg": hit.boundary_distance_deg,
-        "neighbour_index": hit.neighbour,
-        "banned_labels": banned,
-        "thresholds": {
-            "min_horizontal_m": MIN_HORIZONTAL_M, "vertical_factor": VERTICAL_FACTOR,
-            "boundary_guard_deg": BOUNDARY_GUARD_DEG, "cardinal_ratio": TAN30,
-        },
-    }
-    return label, hit, block
 
 
 # ------------------------------------------------------------------ records
@@ -259,8 +142,7 @@ def render_question(phrase1: str, phrase2: str, assumed_dir: str) -> str:
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
-    ones = [i for i in index.visible[pair.a] if usable(index, pair.a, i)]
-    twos = [i for i in index.visible[pair.b] if usable(index, pair.b, i)]
+    ones, twos = referable_ids(index, pair.a), referable_ids(index, pair.b)
     if not ones or not twos:
         return
     origin_a, origin_b = camera_center(scene.views[pair.a]), camera_center(scene.views[pair.b])
@@ -273,17 +155,9 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         query = ground_leg(two.box.center - origin_b, up)
         if ref is None or query is None:
             continue
-        assumed = CARDINALS[int(rng.integers(len(CARDINALS)))]
-        truth, hit, compass = compass_block(np.asarray(ref["vector"]), assumed, np.asarray(query["vector"]), up)
-        options, letter = build_mcq(truth, COMPASS_SECTORS.distractors(hit, rng), rng)
-        phrase1, phrase2 = object_phrase(one.label, one.description), object_phrase(two.label, two.description)
+        assumed, options, letter, compass = compass_question(np.asarray(ref["vector"]), np.asarray(query["vector"]), up, rng)
         geometry = {
-            "up": up.tolist(),
-            "cameras": camera_entry(scene, views),
-            "objects": [object_entry(one), object_entry(two)],
-            "refs": [ref_entry(one, pair.a), ref_entry(two, pair.b)],
-            "visibility": visibility_entry(index, views, [one.id, two.id]),
-            "visibility_thresholds": visibility_thresholds(scene, index, views),
+            **objects_block(scene, index, views, [one, two], [(one, pair.a), (two, pair.b)]),
             "reference": {"origin_view": pair.a, "origin": origin_a.tolist(), "object": one.id, **ref},
             "query": {"origin_view": pair.b, "origin": origin_b.tolist(), "object": two.id, **query},
             **compass,
@@ -291,35 +165,22 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             "pair": pair.to_dict(),
             "pair_rules": rules.to_dict(),
         }
-        yield QARecord(
-            id=make_record_id(scene.id, NAME, SUB_QUESTION_TYPE, views, {"objects": [one.id, two.id], "assumed_dir": assumed}),
-            scene_id=scene.id,
-            question_type=NAME,
-            sub_question_type=SUB_QUESTION_TYPE,
-            task_group=TaskGroup.CAMERA_OBJECT,
-            answer_type=AnswerType.MCQ,
-            views=views,
-            question=render_question(phrase1, phrase2, assumed),
-            options=options,
-            answer=letter,
-            geometry=geometry,
+        yield make_record(
+            scene, NAME, SUB_QUESTION_TYPE, TaskGroup.CAMERA_OBJECT, AnswerType.MCQ, views,
+            {"objects": [one.id, two.id], "assumed_dir": assumed},
+            question=render_question(phrase(one), phrase(two), assumed), answer=letter, geometry=geometry, options=options,
         )
 
 
 def generate(
-    scene: Scene,
-    rng: np.random.Generator,
-    thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
-    pair_rules: PairRules = OBJECT_PAIRS,
+    scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS,
 ) -> Iterator[QARecord]:
     """Every valid cross-view cardinal question of ``scene``, lazily, in a seeded order (module docstring)."""
-    index = VisibilityIndex(scene, thresholds)
-    pairs = sample_pairs(scene, pair_rules, rng)
-    yield from round_robin([_pair_stream(scene, index, p, pair_rules, rng) for p in pairs])
+    yield from round_robin_pairs(scene, VisibilityIndex(scene, thresholds), pair_rules, rng, _pair_stream)
 
 
 def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS) -> QuestionFamily:
-    """The family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
+    """The cross-view cardinal family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
     return QuestionFamily(
         name=NAME,
         task_group=TaskGroup.CAMERA_OBJECT,

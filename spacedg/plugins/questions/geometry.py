@@ -1,7 +1,9 @@
-"""Geometry shared by every question family: relative poses, direction words, sectors, options.
+"""Geometry shared by every question family: relative poses, direction words, sectors, options,
+the ground-plane compass frame and the box-intersection tolerance.
 
-No family re-implements these; the independent recomputation test re-derives answers with its
-own code from the stored ``geometry`` blocks.
+No family re-implements these (the helpers that build records and their ``geometry`` blocks
+live in :mod:`~spacedg.plugins.questions.records`); the independent recomputation test
+re-derives answers with its own code from the stored ``geometry`` blocks.
 
 Conventions (SPEC-QA):
 
@@ -17,6 +19,17 @@ Conventions (SPEC-QA):
   from a reference direction ``forward`` towards ``right = forward x up``, in degrees [0, 360):
   0 = ahead, 90 = right, seen from above. Compass labels use north as ``forward`` and east =
   north x up.
+- **Ground legs** (:func:`ground_leg`): a vector whose ground-plane length is below
+  :data:`MIN_HORIZONTAL_M` = 0.25 m, or whose vertical part is at least
+  :data:`VERTICAL_FACTOR` = 1.2 × its horizontal length, has no reliable direction on the
+  ground; compass and relative-position questions skip it.
+- **Compass frame** (:func:`compass_frame`): given a reference vector declared to point
+  towards a cardinal ``d`` (90·k° clockwise from north seen from above), north is the unit
+  ground vector the reference's ground projection lies ``90·k``° clockwise from, and
+  east = north × up.
+- **Box intersection** (:func:`boxes_intersect`): boxes intersect only when they overlap by
+  more than :data:`INTERSECT_TOL_M` = 1 mm along every separating axis, so touching boxes (a
+  lamp on a table) are apart whatever the float noise of a rigid motion of the scene.
 - **Sectors**: relative-position questions split the ground plane into eight 45° sectors
   centred on front, front-right, ... (:data:`RELPOS_SECTORS`); compass questions use the
   0.5774 rule on the (north, east) components, so a cardinal label covers ±30° around its axis
@@ -34,9 +47,11 @@ import math
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from spacedg.data.box import OrientedBox
 from spacedg.data.qa import MCQ_LETTERS
 from spacedg.errors import InvalidDataError
 from spacedg.render.camera import Camera
@@ -48,6 +63,8 @@ __all__ = [
     "horizontal", "ground_angle", "vertical_dominates",
     "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS",
     "euler_yaw_pitch_roll", "ROTATION_WORDS",
+    "MIN_HORIZONTAL_M", "VERTICAL_FACTOR", "ground_leg", "compass_frame", "compass_answer",
+    "INTERSECT_TOL_M", "boxes_intersect",
 ]
 
 #: Secondary-axis ratio: a second part is named only when |c2| >= TAN30 * |c1| (30°).
@@ -56,6 +73,14 @@ TAN30 = 0.5774
 MAX_PARTS = 2
 #: Within this many degrees of a sector boundary, the neighbour across it is no distractor.
 BOUNDARY_GUARD_DEG = 3.0
+#: A ground-plane leg shorter than this (metres) has no reliable direction: skipped.
+MIN_HORIZONTAL_M = 0.25
+#: A vector whose |vertical part| >= this × its horizontal length is vertical-dominant.
+VERTICAL_FACTOR = 1.2
+#: Boxes "intersect" only when they overlap by more than this (metres) along every separating
+#: axis: touching boxes (a lamp standing on a table) are not intersecting, and float noise of
+#: a rigid motion of the scene must not flip the decision.
+INTERSECT_TOL_M = 1e-3
 
 #: Camera-frame words per axis (x, y, z): (positive, negative). Camera translation questions.
 CAMERA_MOTION_WORDS: tuple[tuple[str, str], ...] = (("right", "left"), ("down", "up"), ("forward", "backward"))
@@ -204,7 +229,16 @@ def horizontal(vector: np.ndarray, up: np.ndarray) -> np.ndarray:
     return v - float(v @ u) * u
 
 
-def vertical_dominates(vector: np.ndarray, up: np.ndarray, factor: float = 1.2) -> bool:
+def _ground_unit(vector: np.ndarray, up: np.ndarray, caller: str) -> np.ndarray:
+    """``horizontal(vector, up)`` scaled to unit length; :class:`InvalidDataError` when it is (nearly) zero."""
+    flat = horizontal(vector, up)
+    norm = float(np.linalg.norm(flat))
+    if norm <= 1e-12:
+        raise InvalidDataError(f"{caller}: the reference direction is vertical; it has no direction on the ground")
+    return flat / norm
+
+
+def vertical_dominates(vector: np.ndarray, up: np.ndarray, factor: float = VERTICAL_FACTOR) -> bool:
     """True when ``|vertical part| >= factor * |horizontal part|`` (direction on the ground ill-defined)."""
     v = np.asarray(vector, dtype=np.float64)
     vertical = abs(float(v @ np.asarray(up, dtype=np.float64)))
@@ -218,15 +252,34 @@ def ground_angle(forward: np.ndarray, vector: np.ndarray, up: np.ndarray) -> flo
     ``forward`` seen from above (right-handed world, ``up`` against gravity).
     """
     u = np.asarray(up, dtype=np.float64)
-    f = horizontal(forward, u)
-    norm = float(np.linalg.norm(f))
-    if norm <= 1e-12:
-        raise InvalidDataError("ground_angle: the reference direction is vertical; it has no direction on the ground")
-    f = f / norm
+    f = _ground_unit(forward, u, "ground_angle")
     right = np.cross(f, u)
     v = horizontal(vector, u)
     angle = math.degrees(math.atan2(float(v @ right), float(v @ f)))
     return angle % 360.0
+
+
+def ground_leg(vector: np.ndarray, up: np.ndarray, min_horizontal_m: float = MIN_HORIZONTAL_M, factor: float = VERTICAL_FACTOR) -> dict[str, Any] | None:
+    """``{"vector", "horizontal", "horizontal_m", "vertical_m"}`` of a leg (world metres), or ``None`` when it is skipped.
+
+    ``horizontal`` is the ground-plane projection, ``horizontal_m`` its length, ``vertical_m``
+    the signed component along ``up``. Skipped: horizontal length ``< min_horizontal_m``
+    metres, or vertical-dominant (``|vertical| >= factor × horizontal``).
+    """
+    v = np.asarray(vector, dtype=np.float64)
+    flat = horizontal(v, up)
+    length = float(np.linalg.norm(flat))
+    if length < min_horizontal_m or vertical_dominates(v, up, factor):
+        return None
+    vertical = float(v @ np.asarray(up, dtype=np.float64))
+    return {"vector": v.tolist(), "horizontal": flat.tolist(), "horizontal_m": length, "vertical_m": vertical}
+
+
+# ---------------------------------------------------------------- boxes
+def boxes_intersect(a: OrientedBox, b: OrientedBox) -> bool:
+    """True when the boxes overlap by more than :data:`INTERSECT_TOL_M` (1 mm) along every
+    separating axis (:meth:`~spacedg.data.box.OrientedBox.intersects`); touching boxes do not intersect."""
+    return a.intersects(b, tol=INTERSECT_TOL_M)
 
 
 # ---------------------------------------------------------------- sectors
@@ -287,3 +340,40 @@ COMPASS_SECTORS = Sectors(
 )
 #: The four cardinal labels (the assumed direction of compass questions is one of them).
 CARDINALS: tuple[str, ...] = ("north", "east", "south", "west")
+
+
+# ---------------------------------------------------------------- compass frame
+#: (cos, sin) of 0°, 90°, 180°, 270°: exact, so the frame has no rounding from trigonometry.
+_QUARTER_TURNS: tuple[tuple[float, float], ...] = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))
+
+
+def compass_frame(reference: np.ndarray, assumed_dir: str, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(north, east)`` unit ground vectors such that ``reference`` points towards ``assumed_dir``.
+
+    ``assumed_dir`` is one of :data:`CARDINALS` at ``90·k`` degrees clockwise from north (seen
+    from above). With ``f = horizontal(reference)/|…|`` and ``r = f × up`` (f's right):
+    ``north = cos(90k) f − sin(90k) r`` (f turned back by 90k), ``east = north × up``. So
+    ``ground_angle(north, reference, up) == 90k``. World metres; ``up`` is normalised first.
+    Raises :class:`InvalidDataError` when ``reference`` has no ground component.
+    """
+    if assumed_dir not in CARDINALS:
+        raise InvalidDataError(f"compass_frame: assumed_dir must be one of {CARDINALS}, got {assumed_dir!r}")
+    u = np.asarray(up, dtype=np.float64)
+    u = u / np.linalg.norm(u)
+    f = _ground_unit(reference, u, "compass_frame")
+    r = np.cross(f, u)
+    c, s = _QUARTER_TURNS[CARDINALS.index(assumed_dir)]
+    north = c * f - s * r
+    return north, np.cross(north, u)
+
+
+def compass_answer(reference: np.ndarray, assumed_dir: str, query: np.ndarray, up: np.ndarray) -> tuple[str, float, SectorHit, np.ndarray, np.ndarray]:
+    """``(label, angle_deg, hit, north, east)`` of ``query`` in the frame where ``reference`` points to ``assumed_dir``.
+
+    ``angle_deg`` is :func:`ground_angle` from north (clockwise seen from above, [0, 360));
+    ``label``/``hit`` are its :data:`COMPASS_SECTORS` classification (the 0.5774 rule).
+    """
+    north, east = compass_frame(reference, assumed_dir, up)
+    angle = ground_angle(north, query, up)
+    hit = COMPASS_SECTORS.classify(angle)
+    return COMPASS_SECTORS.labels[hit.index], angle, hit, north, east

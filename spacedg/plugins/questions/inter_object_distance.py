@@ -11,8 +11,9 @@ Objects (decisions in brackets):
 - pairs of views from :func:`~spacedg.data.view_sampling.sample_pairs` with
   :data:`~spacedg.data.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m);
 - object 1 clearly visible in A and object 2 clearly visible in B, each without a description
-  clash in that view (:func:`~spacedg.data.view_sampling.description_clash`); either may also be
-  seen in the other image (nothing required there);
+  clash in that view (:func:`~spacedg.data.view_sampling.description_clash`; together
+  :func:`~spacedg.plugins.questions.records.referable`); either may also be seen in the other
+  image (nothing required there);
 - distinct instances with different labels (:func:`~spacedg.data.view_sampling.label_key`);
 - [skipped when the centres are closer than :data:`MIN_DISTANCE_M` = 0.05 m: such boxes
   practically coincide (duplicate or nested annotations), and a relative-accuracy score on a
@@ -30,8 +31,8 @@ system prompt asks for the tags, as in ``camera_object_distance_estimation``.)
 
 Order: pairs in ``sample_pairs`` order, visited round-robin (one record per pair per round);
 each pair's (object 1, object 2) candidates in a lazily drawn seeded permutation
-(:func:`~spacedg.plugins.questions.cross_view_cardinal_direction.lazy_permutation`). Same seed,
-same records in the same order; everything is lazy.
+(:func:`~spacedg.plugins.questions.records.lazy_permutation`). Same seed, same records in the
+same order; everything is lazy.
 
 Geometry block (JSON): ``up``; ``cameras`` (view → 4×4 ``cam_to_world``); ``objects`` (id,
 label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{"id", "label",
@@ -48,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.qa import QARecord
 from spacedg.data.scene import Scene
 from spacedg.data.view_sampling import (
     OBJECT_PAIRS,
@@ -56,23 +57,18 @@ from spacedg.data.view_sampling import (
     ViewPair,
     VisibilityIndex,
     label_key,
-    sample_pairs,
 )
 from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
-from spacedg.plugins.questions.camera_object_distance_estimation import (
-    camera_entry,
-    object_entry,
-    ref_entry,
-    round_robin,
-    visibility_entry,
-    visibility_thresholds,
-)
-from spacedg.plugins.questions.cross_view_cardinal_direction import (
+from spacedg.plugins.questions.language import find_in_image
+from spacedg.plugins.questions.records import (
     lazy_permutation,
-    usable,
+    make_record,
+    objects_block,
+    phrase,
+    referable_ids,
+    round_robin_pairs,
 )
-from spacedg.plugins.questions.language import find_in_image, object_phrase
 from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
 
 __all__ = ["DECIMALS", "FAMILY", "MIN_DISTANCE_M", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "generate", "make_family", "render_question"]
@@ -97,8 +93,7 @@ def render_question(phrase1: str, phrase2: str) -> str:
 
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
     views = (pair.a, pair.b)
-    ones = [i for i in index.visible[pair.a] if usable(index, pair.a, i)]
-    twos = [i for i in index.visible[pair.b] if usable(index, pair.b, i)]
+    ones, twos = referable_ids(index, pair.a), referable_ids(index, pair.b)
     if not ones or not twos:
         return
     for k in lazy_permutation(len(ones) * len(twos), rng):
@@ -111,12 +106,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         if distance < MIN_DISTANCE_M:
             continue
         geometry = {
-            "up": scene.up.tolist(),
-            "cameras": camera_entry(scene, views),
-            "objects": [object_entry(one), object_entry(two)],
-            "refs": [ref_entry(one, pair.a), ref_entry(two, pair.b)],
-            "visibility": visibility_entry(index, views, [one.id, two.id]),
-            "visibility_thresholds": visibility_thresholds(scene, index, views),
+            **objects_block(scene, index, views, [one, two], [(one, pair.a), (two, pair.b)]),
             "vector": vector.tolist(),
             "distance_m": distance,
             "decimals": DECIMALS,
@@ -125,35 +115,21 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             "pair": pair.to_dict(),
             "pair_rules": rules.to_dict(),
         }
-        yield QARecord(
-            id=make_record_id(scene.id, NAME, SUB_QUESTION_TYPE, views, {"objects": [one.id, two.id]}),
-            scene_id=scene.id,
-            question_type=NAME,
-            sub_question_type=SUB_QUESTION_TYPE,
-            task_group=TaskGroup.OBJECT_CENTRIC,
-            answer_type=AnswerType.NA,
-            views=views,
-            question=render_question(object_phrase(one.label, one.description), object_phrase(two.label, two.description)),
-            options=(),
-            answer=round(distance, DECIMALS),
-            geometry=geometry,
+        yield make_record(
+            scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.NA, views, {"objects": [one.id, two.id]},
+            question=render_question(phrase(one), phrase(two)), answer=round(distance, DECIMALS), geometry=geometry,
         )
 
 
 def generate(
-    scene: Scene,
-    rng: np.random.Generator,
-    thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
-    pair_rules: PairRules = OBJECT_PAIRS,
+    scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS,
 ) -> Iterator[QARecord]:
     """Every valid inter-object distance question of ``scene``, lazily, in a seeded order (module docstring)."""
-    index = VisibilityIndex(scene, thresholds)
-    pairs = sample_pairs(scene, pair_rules, rng)
-    yield from round_robin([_pair_stream(scene, index, p, pair_rules, rng) for p in pairs])
+    yield from round_robin_pairs(scene, VisibilityIndex(scene, thresholds), pair_rules, rng, _pair_stream)
 
 
 def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS) -> QuestionFamily:
-    """The family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
+    """The inter-object distance family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
     return QuestionFamily(
         name=NAME,
         task_group=TaskGroup.OBJECT_CENTRIC,

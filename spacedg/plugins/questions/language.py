@@ -8,8 +8,9 @@
   ``scissors``, ``books``) are returned unchanged.
 - :func:`count_phrase`: ``"1 chair"``, ``"3 chairs"``.
 
-Option lettering and seeded option shuffles for MCQ families belong here too when those
-families arrive.
+Option lettering and seeded option shuffles live in
+:func:`~spacedg.plugins.questions.geometry.build_mcq`; how a question names a scene instance
+(:func:`~spacedg.plugins.questions.records.phrase`) builds on :func:`object_phrase`.
 """
 
 from __future__ import annotations

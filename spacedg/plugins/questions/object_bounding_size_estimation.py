@@ -7,7 +7,8 @@ before rounding; rounding is monotone, so the rounded list stays sorted.
 
 Object rule: the object is **clearly visible** in the view and
 :func:`~spacedg.data.view_sampling.description_clash` is False there (no same-label instance
-with the same description is seen in that image). Decision: an object whose shortest side
+with the same description is seen in that image;
+:func:`~spacedg.plugins.questions.records.referable`). Decision: an object whose shortest side
 rounds to 0.00 m (a flat annotation, < 5 mm) is skipped, because relative-error scoring of a
 zero target is undefined. Every other (view, object) pair is a candidate, so an object seen
 clearly in several views yields one question per view.
@@ -28,7 +29,7 @@ order), then shuffled with ``rng.permutation``; each candidate then draws its te
 ``rng.integers`` (as :mod:`object_counting`), and records are built lazily.
 
 Geometry block (JSON): ``view``, ``up``, ``object`` (``id``, ``label``, ``description``, box
-``center`` / ``extents`` / ``rotation``), ``sorted_extents`` (unrounded, metres),
+``center`` / ``extents`` / ``rotation``: :func:`~spacedg.plugins.questions.records.object_entry`), ``sorted_extents`` (unrounded, metres),
 ``rounding_decimals`` (2), ``visibility`` (:meth:`VisibilityIndex.vis_entry`), ``template`` and
 ``refs`` (the object with its view). The answer depends on the extents only, so it is
 invariant under any rigid motion of the scene.
@@ -42,16 +43,17 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.qa import QARecord
 from spacedg.data.scene import Instance, Scene
 from spacedg.data.view_sampling import VisibilityIndex
 from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
-from spacedg.plugins.questions.language import object_phrase
-from spacedg.plugins.questions.object_size_comparison import (
-    box_geometry,
-    object_ref,
-    referable,
+from spacedg.plugins.questions.records import (
+    make_record,
+    object_entry,
+    phrase,
+    ref_entry,
+    referable_ids,
 )
 from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
 
@@ -91,7 +93,7 @@ def size_list(inst: Instance) -> tuple[float, float, float]:
 
 def render_question(template: int, inst: Instance) -> str:
     """The question text of template index ``template`` for ``inst``."""
-    return TEMPLATES[template].format(target_obj=object_phrase(inst.label, inst.description))
+    return TEMPLATES[template].format(target_obj=phrase(inst))
 
 
 def _record(scene: Scene, index: VisibilityIndex, view: str, inst: Instance, template: int) -> QARecord:
@@ -99,26 +101,17 @@ def _record(scene: Scene, index: VisibilityIndex, view: str, inst: Instance, tem
     geometry = {
         "view": view,
         "up": np.asarray(scene.up, dtype=np.float64).tolist(),
-        "object": box_geometry(inst),
+        "object": object_entry(inst),
         "sorted_extents": sorted(float(e) for e in inst.box.extents),
         "rounding_decimals": DECIMALS,
         "visibility": index.vis_entry(view, inst.id),
         "template": template,
-        "refs": [object_ref(inst, view)],
+        "refs": [ref_entry(inst, view)],
     }
     views = (view,)
-    return QARecord(
-        id=make_record_id(scene.id, NAME, SUB_QUESTION_TYPE, views, {"object": inst.id, "template": template}),
-        scene_id=scene.id,
-        question_type=NAME,
-        sub_question_type=SUB_QUESTION_TYPE,
-        task_group=TaskGroup.OBJECT_CENTRIC,
-        answer_type=AnswerType.SIZE_LIST,
-        views=views,
-        question=render_question(template, inst),
-        options=(),
-        answer=answer,
-        geometry=geometry,
+    return make_record(
+        scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.SIZE_LIST, views, {"object": inst.id, "template": template},
+        question=render_question(template, inst), answer=answer, geometry=geometry,
     )
 
 
@@ -126,7 +119,7 @@ def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThres
     """Every valid bounding-size question of ``scene``, in an order shuffled by ``rng`` (module docstring)."""
     index = VisibilityIndex(scene, thresholds)
     candidates = [
-        (view, inst) for view in scene.views for inst in referable(index, view) if size_list(inst)[0] > 0.0
+        (view, inst) for view in scene.views for inst in map(index.instance, referable_ids(index, view)) if size_list(inst)[0] > 0.0
     ]
     order = rng.permutation(len(candidates))
     templates = rng.integers(0, len(TEMPLATES), size=len(candidates))

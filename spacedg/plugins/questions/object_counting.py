@@ -43,11 +43,12 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.qa import QARecord
 from spacedg.data.scene import Instance, Scene
 from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.language import label_text, plural
+from spacedg.plugins.questions.records import make_record
 from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
 
 __all__ = ["NAME", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
@@ -124,18 +125,10 @@ def _record(scene: Scene, cand: _Candidate, template: int, thresholds: Visibilit
         "template": template,
     }
     views = (cand.view,)
-    return QARecord(
-        id=make_record_id(scene.id, NAME, SUB_QUESTION_TYPE, views, {"label": _label_key(cand.label), "counted": counted_ids, "template": template}),
-        scene_id=scene.id,
-        question_type=NAME,
-        sub_question_type=SUB_QUESTION_TYPE,
-        task_group=TaskGroup.OBJECT_CENTRIC,
-        answer_type=AnswerType.COUNT,
-        views=views,
-        question=render_question(template, cand.label),
-        options=(),
-        answer=len(cand.counted),
-        geometry=geometry,
+    return make_record(
+        scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.COUNT, views,
+        {"label": _label_key(cand.label), "counted": counted_ids, "template": template},
+        question=render_question(template, cand.label), answer=len(cand.counted), geometry=geometry,
     )
 
 

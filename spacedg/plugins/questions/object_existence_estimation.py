@@ -56,7 +56,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.qa import QARecord
 from spacedg.data.scene import Instance, Scene
 from spacedg.data.view_sampling import VisibilityIndex, label_key
 from spacedg.data.visibility import (
@@ -66,6 +66,7 @@ from spacedg.data.visibility import (
 )
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.language import label_text
+from spacedg.plugins.questions.records import make_record
 from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
 
 __all__ = [
@@ -180,18 +181,9 @@ def _record(scene: Scene, index: VisibilityIndex, cand: _Candidate, template: in
         "refs": [],
     }
     views = (cand.view,)
-    return QARecord(
-        id=make_record_id(scene.id, NAME, SUB_QUESTION_TYPE, views, {"label": cand.key, "template": template}),
-        scene_id=scene.id,
-        question_type=NAME,
-        sub_question_type=SUB_QUESTION_TYPE,
-        task_group=TaskGroup.OBJECT_CENTRIC,
-        answer_type=AnswerType.YN,
-        views=views,
-        question=render_question(template, cand.label),
-        options=(),
-        answer=cand.answer,
-        geometry=geometry,
+    return make_record(
+        scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.YN, views, {"label": cand.key, "template": template},
+        question=render_question(template, cand.label), answer=cand.answer, geometry=geometry,
     )
 
 

@@ -11,7 +11,7 @@ Frame (exact definition; world metres, ``up = Scene.up``, box centres ``c_A, c_B
   :data:`~spacedg.plugins.questions.geometry.CARDINALS`; **north** is the unit ground vector
   such that ``horizontal(c_A − c_B)`` lies ``angle(d)`` (0, 90, 180, 270°) clockwise from it
   seen from above; **east = north × up**
-  (:func:`~spacedg.plugins.questions.cross_view_cardinal_direction.compass_frame`). Example,
+  (:func:`~spacedg.plugins.questions.geometry.compass_frame`). Example,
   z up: B at the origin, A at +x declared "west" → north = −y, east = −x, and C at +y is "south";
 - ``angle = ground_angle(north, c_C − c_B, up)`` ∈ [0, 360) clockwise from north; the truth is
   ``COMPASS_SECTORS.classify(angle)`` (cardinals ±30° around their axis, diagonals the 30°
@@ -20,45 +20,50 @@ Frame (exact definition; world metres, ``up = Scene.up``, box centres ``c_A, c_B
   never offered), letters by :func:`~spacedg.plugins.questions.geometry.build_mcq`.
 
 Skipped (the paper's "geometric ambiguity filters"): any two of the three boxes intersect
-(:meth:`~spacedg.data.box.OrientedBox.intersects` with ``tol =`` :data:`INTERSECT_TOL_M` = 1 mm:
-boxes must overlap by more than 1 mm along every separating axis; touching boxes, e.g. a vase
-standing on a table, are kept. Decision: with ``tol = 0`` float noise decides touching boxes,
-and the answer set changed under a rigid motion of the scene);
-``|horizontal(c_A − c_B)|`` or ``|horizontal(c_C − c_B)|`` below 0.25 m; either leg
+(:func:`~spacedg.plugins.questions.geometry.boxes_intersect`, tolerance
+:data:`~spacedg.plugins.questions.geometry.INTERSECT_TOL_M` = 1 mm: boxes must overlap by more
+than 1 mm along every separating axis; touching boxes, e.g. a vase standing on a table, are
+kept. Decision: with ``tol = 0`` float noise decides touching boxes, and the answer set changed
+under a rigid motion of the scene; ``camera_object_relative_direction`` uses the same
+tolerance); ``|horizontal(c_A − c_B)|`` or ``|horizontal(c_C − c_B)|`` below 0.25 m; either leg
 vertical-dominant (vertical ≥ 1.2 × horizontal; this is also the paper's "forward nearly
-collinear with up" rule).
+collinear with up" rule; both by :func:`~spacedg.plugins.questions.geometry.ground_leg`).
 
 Objects (decisions in brackets): pairs of views from
 :func:`~spacedg.data.view_sampling.sample_pairs` with
 :data:`~spacedg.data.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m). The
 triplet obeys the three-object rule (:func:`~spacedg.data.view_sampling.split_across_views`:
 each clearly visible in image A or B, neither image shows all three). Each object is named in
-[image A if it is clearly visible there without a description clash, else image B on the same
-condition]; an object usable in neither makes the triplet invalid. Because neither image shows
-all three, the markers always point into both images. [The three phrases
+[image A if it is clearly visible there without a description clash
+(:func:`~spacedg.plugins.questions.records.referable`), else image B on the same condition];
+an object usable in neither makes the triplet invalid. Because neither image shows all three,
+the markers always point into both images. [The three phrases
 (:func:`~spacedg.plugins.questions.language.object_phrase`) must differ case-insensitively; the
 question names the objects by these phrases, the same words as the markers.]
 
 Question: one marker per object in role order A, B, C (each pointing at its image), then the
-paper's sentence::
+paper's sentence (**deviation**: with "the" before each object, which the paper's template
+leaves out and which reads badly with descriptions)::
 
     In image A, find the red lamp. In image A, find the wooden table. In image B, find the blue sofa.
-    The direction of red lamp relative to wooden table is west. What is the direction of blue sofa relative to wooden table?
+    The direction of the red lamp relative to the wooden table is west. What is the direction of the blue sofa relative to the wooden table?
 
 Order and bounded enumeration: pairs in ``sample_pairs`` order, visited round-robin (one record
 per pair per round). A pair's candidates are the ordered triplets of distinct usable objects,
 ``n(n−1)(n−2)`` of them, walked in a seeded random order drawn **lazily**
-(:func:`~spacedg.plugins.questions.cross_view_cardinal_direction.lazy_permutation`: memory and
-time grow with what is taken, not with ``n³``); pairs where no triplet can satisfy the
+(:func:`~spacedg.plugins.questions.records.lazy_permutation`: memory and time grow with what
+is taken, not with ``n³``); pairs where no triplet can satisfy the
 three-object rule (every usable object seen in one of the images) are dropped before any draw.
 Cheap tests run first (three-object rule, phrases, leg lengths), box intersections last and
 cached per pair. For each accepted triplet ``rng`` draws the assumed direction, then the
-distractor order and the letter. Same seed, same records in the same order.
+distractor order and the letter (:func:`~spacedg.plugins.questions.records.compass_question`).
+Same seed, same records in the same order.
 
 Geometry block (JSON): ``up``; ``cameras`` (view → 4×4 ``cam_to_world``); ``objects`` (A, B, C:
-id, label, description, box ``center``/``extents``/``rotation``); ``roles`` (``{"A", "B", "C"}``
-→ ids); ``refs`` (``[{"id", "label", "description", "view"}]`` in question order A, B, C);
-``visibility``; ``visibility_thresholds``; ``reference`` (leg B→A) and ``query`` (leg B→C), each
+id, label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{"id", "label",
+"description", "view"}]`` in question order A, B, C); ``visibility``; ``visibility_thresholds``
+(these six from :func:`~spacedg.plugins.questions.records.objects_block`); ``roles``
+(``{"A", "B", "C"}`` → ids); ``reference`` (leg B→A) and ``query`` (leg B→C), each
 ``origin`` (c_B), ``vector``, ``horizontal``, ``horizontal_m``, ``vertical_m``; ``assumed_dir``;
 ``assumed_angle_deg``; ``north``; ``east``; ``angle_deg``; ``sector_index``; ``sector_label``;
 ``sector_labels``; ``sector_starts_deg``; ``boundary_distance_deg``; ``neighbour_index``;
@@ -75,45 +80,42 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.qa import QARecord
 from spacedg.data.scene import Scene
 from spacedg.data.view_sampling import (
     OBJECT_PAIRS,
     PairRules,
     ViewPair,
     VisibilityIndex,
-    sample_pairs,
     split_across_views,
 )
 from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
-from spacedg.plugins.questions.camera_object_distance_estimation import (
-    camera_entry,
-    object_entry,
-    ref_entry,
-    round_robin,
-    visibility_entry,
-    visibility_thresholds,
-)
-from spacedg.plugins.questions.cross_view_cardinal_direction import (
-    compass_block,
+from spacedg.plugins.questions.geometry import (
+    INTERSECT_TOL_M,
+    boxes_intersect,
     ground_leg,
-    lazy_permutation,
-    phrase_key,
-    usable,
 )
-from spacedg.plugins.questions.geometry import CARDINALS, COMPASS_SECTORS, build_mcq
-from spacedg.plugins.questions.language import find_in_image, object_phrase
+from spacedg.plugins.questions.language import find_in_image
+from spacedg.plugins.questions.records import (
+    compass_question,
+    lazy_permutation,
+    make_record,
+    objects_block,
+    phrase,
+    phrase_key,
+    referable_ids,
+    round_robin_pairs,
+)
 from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
 
-__all__ = ["FAMILY", "INTERSECT_TOL_M", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "decode_triplet", "generate", "make_family", "render_question"]
+__all__ = ["FAMILY", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "decode_triplet", "generate", "make_family", "render_question"]
 
 NAME = "object_proxy_cardinal_direction"
 SUB_QUESTION_TYPE = "proxy_frame"
-#: Boxes intersect only when they overlap by more than this (metres) along every separating axis.
-INTERSECT_TOL_M = 1e-3
-#: The paper's wording after the markers; ``{a}``, ``{b}``, ``{c}``: phrases; ``{assumed}``: a cardinal.
-TEMPLATE = "The direction of {a} relative to {b} is {assumed}. What is the direction of {c} relative to {b}?"
+#: The paper's wording after the markers, with "the" before each object; ``{a}``, ``{b}``, ``{c}``:
+#: phrases; ``{assumed}``: a cardinal.
+TEMPLATE = "The direction of the {a} relative to the {b} is {assumed}. What is the direction of the {c} relative to the {b}?"
 
 
 def decode_triplet(k: int, n: int) -> tuple[int, int, int]:
@@ -139,9 +141,8 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     views = (pair.a, pair.b)
     ref_view: dict[int, str] = {}
     for view in views:
-        for iid in index.visible[view]:
-            if iid not in ref_view and usable(index, view, iid):
-                ref_view[iid] = view
+        for iid in referable_ids(index, view):
+            ref_view.setdefault(iid, view)  # image A first, else image B
     ids = sorted(ref_view)
     n = len(ids)
     seen_a, seen_b = set(index.seen[pair.a]), set(index.seen[pair.b])
@@ -163,7 +164,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     def overlap(p: int, q: int) -> bool:
         key = (min(p, q), max(p, q))
         if key not in hits:
-            hits[key] = insts[p].box.intersects(insts[q].box, tol=INTERSECT_TOL_M)
+            hits[key] = boxes_intersect(insts[p].box, insts[q].box)
         return hits[key]
 
     for k in lazy_permutation(n * (n - 1) * (n - 2), rng):
@@ -181,21 +182,14 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             continue
         if any(overlap(p, q) for p, q in itertools.combinations(tri, 2)):
             continue
-        assumed = CARDINALS[int(rng.integers(len(CARDINALS)))]
-        truth, hit, compass = compass_block(np.asarray(ref["vector"]), assumed, np.asarray(query["vector"]), up)
-        options, letter = build_mcq(truth, COMPASS_SECTORS.distractors(hit, rng), rng)
+        assumed, options, letter, compass = compass_question(np.asarray(ref["vector"]), np.asarray(query["vector"]), up, rng)
         objs = [insts[t] for t in tri]
         obj_views = [ref_view[i] for i in triplet_ids]
-        phrases = tuple(object_phrase(o.label, o.description) for o in objs)
+        phrases = tuple(phrase(o) for o in objs)
         origin = centres[y].tolist()
         geometry = {
-            "up": up.tolist(),
-            "cameras": camera_entry(scene, views),
-            "objects": [object_entry(o) for o in objs],
+            **objects_block(scene, index, views, objs, zip(objs, obj_views)),
             "roles": {"A": objs[0].id, "B": objs[1].id, "C": objs[2].id},
-            "refs": [ref_entry(o, v) for o, v in zip(objs, obj_views)],
-            "visibility": visibility_entry(index, views, list(triplet_ids)),
-            "visibility_thresholds": visibility_thresholds(scene, index, views),
             "reference": {"origin": origin, **ref},
             "query": {"origin": origin, **query},
             **compass,
@@ -204,35 +198,23 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             "pair": pair.to_dict(),
             "pair_rules": rules.to_dict(),
         }
-        yield QARecord(
-            id=make_record_id(scene.id, NAME, SUB_QUESTION_TYPE, views, {"roles": list(triplet_ids), "assumed_dir": assumed}),
-            scene_id=scene.id,
-            question_type=NAME,
-            sub_question_type=SUB_QUESTION_TYPE,
-            task_group=TaskGroup.OBJECT_CENTRIC,
-            answer_type=AnswerType.MCQ,
-            views=views,
+        yield make_record(
+            scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.MCQ, views,
+            {"roles": list(triplet_ids), "assumed_dir": assumed},
             question=render_question(phrases, tuple(views.index(v) for v in obj_views), assumed),  # type: ignore[arg-type]
-            options=options,
-            answer=letter,
-            geometry=geometry,
+            answer=letter, geometry=geometry, options=options,
         )
 
 
 def generate(
-    scene: Scene,
-    rng: np.random.Generator,
-    thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
-    pair_rules: PairRules = OBJECT_PAIRS,
+    scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS,
 ) -> Iterator[QARecord]:
     """Every valid proxy-frame compass question of ``scene``, lazily, in a seeded order (module docstring)."""
-    index = VisibilityIndex(scene, thresholds)
-    pairs = sample_pairs(scene, pair_rules, rng)
-    yield from round_robin([_pair_stream(scene, index, p, pair_rules, rng) for p in pairs])
+    yield from round_robin_pairs(scene, VisibilityIndex(scene, thresholds), pair_rules, rng, _pair_stream)
 
 
 def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS) -> QuestionFamily:
-    """The family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
+    """The proxy-frame compass family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
     return QuestionFamily(
         name=NAME,
         task_group=TaskGroup.OBJECT_CENTRIC,

@@ -31,12 +31,14 @@ Object rules (decisions the spec left open):
 
 - each object is clearly visible in its reference view (object 1 in A, object 2 in B) and
   :func:`~spacedg.data.view_sampling.description_clash` is False there (no same-label,
-  same-description neighbour is seen in that image);
+  same-description neighbour is seen in that image;
+  :func:`~spacedg.plugins.questions.records.referable`);
 - the two are distinct instances that can be told apart in words: their labels differ
   (:func:`~spacedg.data.view_sampling.label_key`) **or** their descriptions differ
   (:func:`~spacedg.data.view_sampling.description_key`), **and** their question phrases
-  (:func:`~spacedg.plugins.questions.language.object_phrase`) differ case-insensitively, so
-  the two options never read the same;
+  (:func:`~spacedg.plugins.questions.language.object_phrase`) differ case-insensitively
+  (:func:`~spacedg.plugins.questions.records.phrase_key`), so the two options never read the
+  same;
 - an object may also be visible in the other image; nothing is required there.
 
 Question text: the two marker sentences, then the question on its own line::
@@ -61,8 +63,8 @@ and, for heights, ``top_corner``), ``values`` ``[v1, v2]``, ``delta`` ``v1 − v
 under a rigid motion of the whole scene (``Scene.transformed``): extents are unchanged and
 every top elevation shifts by the same ``t · up``.
 
-Shared helpers :func:`box_geometry` and :func:`object_ref` are defined here (no shared home
-existed); :mod:`object_bounding_size_estimation` imports them.
+The ``objects`` and ``refs`` entries are :func:`~spacedg.plugins.questions.records.object_entry`
+(plus ``view``, ``value``, ``top_corner``) and :func:`~spacedg.plugins.questions.records.ref_entry`.
 """
 
 from __future__ import annotations
@@ -74,14 +76,13 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord, make_record_id
+from spacedg.data.qa import QARecord
 from spacedg.data.scene import Instance, Scene
 from spacedg.data.view_sampling import (
     OBJECT_PAIRS,
     PairRules,
     ViewPair,
     VisibilityIndex,
-    description_clash,
     description_key,
     label_key,
     sample_pairs,
@@ -89,7 +90,15 @@ from spacedg.data.view_sampling import (
 from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.geometry import build_mcq
-from spacedg.plugins.questions.language import find_in_image, object_phrase
+from spacedg.plugins.questions.language import find_in_image
+from spacedg.plugins.questions.records import (
+    make_record,
+    object_entry,
+    phrase,
+    phrase_key,
+    ref_entry,
+    referable_ids,
+)
 from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
 
 __all__ = [
@@ -102,12 +111,9 @@ __all__ = [
     "TEMPLATES",
     "TIE_THRESHOLD_M",
     "TOP",
-    "box_geometry",
     "generate",
     "longest_side",
     "make_family",
-    "object_ref",
-    "referable",
     "render_question",
     "top_elevation",
 ]
@@ -148,38 +154,6 @@ def top_elevation(inst: Instance, up: np.ndarray) -> float:
     return _top(inst, up)[0]
 
 
-# ------------------------------------------------------------ shared helpers
-def box_geometry(inst: Instance) -> dict[str, Any]:
-    """``id``, ``label``, ``description`` and the box (``center``, ``extents``, ``rotation``) of ``inst``."""
-    return {
-        "id": inst.id,
-        "label": inst.label,
-        "description": inst.description,
-        "center": inst.box.center.tolist(),
-        "extents": inst.box.extents.tolist(),
-        "rotation": inst.box.rotation.tolist(),
-    }
-
-
-def object_ref(inst: Instance, view: str) -> dict[str, Any]:
-    """The ``refs`` entry of an object named in a question: ``id``, ``label``, ``description``, ``view``."""
-    return {"id": inst.id, "label": inst.label, "description": inst.description, "view": view}
-
-
-def referable(index: VisibilityIndex, view: str) -> list[Instance]:
-    """Instances a question may name in ``view``: clearly visible and without a description clash (id order)."""
-    out = []
-    for iid in index.visible[view]:
-        inst = index.instance(iid)
-        if not description_clash(index, view, inst):
-            out.append(inst)
-    return out
-
-
-def _phrase(inst: Instance) -> str:
-    return object_phrase(inst.label, inst.description)
-
-
 def _distinguishable(one: Instance, two: Instance) -> bool:
     """Distinct instances whose labels or descriptions differ and whose phrases read differently
     (case-insensitively, and unlike the fixed option texts)."""
@@ -187,7 +161,7 @@ def _distinguishable(one: Instance, two: Instance) -> bool:
         return False
     if label_key(one.label) == label_key(two.label) and description_key(one.description) == description_key(two.description):
         return False
-    keys = {" ".join(_phrase(inst).lower().split()) for inst in (one, two)}
+    keys = {phrase_key(inst) for inst in (one, two)}
     return len(keys) == 2 and not keys & {SAME, NEVER_CORRECT}
 
 
@@ -200,7 +174,7 @@ def render_question(sub: str, phrase1: str, phrase2: str) -> str:
 # ---------------------------------------------------------------- records
 def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str, rng: np.random.Generator) -> QARecord:
     up = np.asarray(scene.up, dtype=np.float64)
-    objects = [{**box_geometry(one), "view": pair.a}, {**box_geometry(two), "view": pair.b}]
+    objects = [{**object_entry(one), "view": pair.a}, {**object_entry(two), "view": pair.b}]
     if sub == LONGEST:
         values = [longest_side(one), longest_side(two)]
         quantity = "longest_side"
@@ -212,7 +186,7 @@ def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str
     for entry, value in zip(objects, values):
         entry["value"] = value
     delta = values[0] - values[1]
-    phrase1, phrase2 = _phrase(one), _phrase(two)
+    phrase1, phrase2 = phrase(one), phrase(two)
     if abs(delta) < TIE_THRESHOLD_M:
         truth, truth_text = "same", SAME
     elif delta > 0:
@@ -234,20 +208,11 @@ def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str
         "truth_text": truth_text,
         "never_correct_option": NEVER_CORRECT,
         "template": 0,
-        "refs": [object_ref(one, pair.a), object_ref(two, pair.b)],
+        "refs": [ref_entry(one, pair.a), ref_entry(two, pair.b)],
     }
-    return QARecord(
-        id=make_record_id(scene.id, NAME, sub, views, {"objects": [one.id, two.id]}),
-        scene_id=scene.id,
-        question_type=NAME,
-        sub_question_type=sub,
-        task_group=TaskGroup.OBJECT_CENTRIC,
-        answer_type=AnswerType.MCQ,
-        views=views,
-        question=render_question(sub, phrase1, phrase2),
-        options=options,
-        answer=letter,
-        geometry=geometry,
+    return make_record(
+        scene, NAME, sub, TaskGroup.OBJECT_CENTRIC, AnswerType.MCQ, views, {"objects": [one.id, two.id]},
+        question=render_question(sub, phrase1, phrase2), answer=letter, geometry=geometry, options=options,
     )
 
 
@@ -284,7 +249,7 @@ def generate(
     for pair in sample_pairs(scene, pair_rules, rng):
         for view in (pair.a, pair.b):
             if view not in by_view:
-                by_view[view] = referable(index, view)
+                by_view[view] = list(map(index.instance, referable_ids(index, view)))
         ones, twos = by_view[pair.a], by_view[pair.b]
         if ones and twos:
             slots.append(_PairSlot(pair, ones, twos))

@@ -1,0 +1,320 @@
+"""What every family's records are built from: seeded orders, the objects a question may name,
+and the entries of the ``geometry`` block.
+
+Shared by the question families (:mod:`~spacedg.plugins.questions.geometry` holds the maths:
+poses, direction words, sectors, the compass frame, options;
+:mod:`~spacedg.plugins.questions.language` the wording). No family defines any of these itself.
+
+Randomness and order (every draw comes from the family's seeded ``rng``, so the same seed gives
+the same records in the same order; everything that can be lazy is):
+
+- :func:`child_rngs`: independent child generators, one per sub type / pair / candidate, so a
+  skipped candidate does not shift the draws of the others;
+- :func:`round_robin`, :func:`round_robin_views`, :func:`round_robin_pairs`: one record from
+  each stream in turn (views in a seeded order; pairs in
+  :func:`~spacedg.data.view_sampling.sample_pairs` order), so a caller that stops after ``n``
+  records gets them spread over as many views or pairs as possible;
+- :func:`seeded_order` (one ``rng.permutation`` of a small list) and :func:`lazy_permutation`
+  (a huge candidate space walked in a random order drawn lazily).
+
+Objects: :func:`referable` is the one rule for naming an object in a view (clearly visible
+there and no :func:`~spacedg.data.view_sampling.description_clash`); :func:`phrase` and
+:func:`phrase_key` are how a question names it and how two names are compared.
+
+Geometry-block entries (JSON types; world metres; cameras are OpenCV ``cam_to_world`` 4×4):
+:func:`object_entry` (``id``, ``label``, ``description``, box ``center``/``extents``/``rotation``),
+:func:`ref_entry` (``id``, ``label``, ``description``, ``view``: where the question says to find
+the object), :func:`camera_entry` (view → ``cam_to_world``), :func:`pair_geometry` (``up``,
+``cam_to_world_a``, ``cam_to_world_b``, ``pair``: the camera-motion families),
+:func:`visibility_entry`, :func:`visibility_thresholds`, :func:`objects_block` (the common head
+of every object question's block: ``up``, ``cameras``, ``objects``, ``refs``, ``visibility``,
+``visibility_thresholds``) and :func:`compass_block` / :func:`compass_question` (the compass
+part of the two compass families' blocks, with the seeded assumed direction and options).
+:func:`make_record` builds the :class:`~spacedg.data.qa.QARecord` with its deterministic id.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from typing import Any, TypeVar
+
+import numpy as np
+
+from spacedg.data.qa import Answer, QARecord, make_record_id
+from spacedg.data.scene import Instance, Scene
+from spacedg.data.view_sampling import (
+    PairRules,
+    ViewPair,
+    VisibilityIndex,
+    description_clash,
+    sample_pairs,
+)
+from spacedg.plugins.questions.geometry import (
+    BOUNDARY_GUARD_DEG,
+    CARDINALS,
+    COMPASS_SECTORS,
+    MIN_HORIZONTAL_M,
+    TAN30,
+    VERTICAL_FACTOR,
+    SectorHit,
+    build_mcq,
+    compass_answer,
+)
+from spacedg.plugins.questions.language import object_phrase
+from spacedg.plugins.specs import AnswerType, TaskGroup
+
+__all__ = [
+    "camera_entry",
+    "child_rngs",
+    "compass_block",
+    "compass_question",
+    "lazy_permutation",
+    "make_record",
+    "object_entry",
+    "objects_block",
+    "pair_geometry",
+    "phrase",
+    "phrase_key",
+    "ref_entry",
+    "referable",
+    "referable_ids",
+    "round_robin",
+    "round_robin_pairs",
+    "round_robin_views",
+    "seeded_order",
+    "visibility_entry",
+    "visibility_thresholds",
+]
+
+T = TypeVar("T")
+#: A per-view record stream: ``stream(scene, index, view, rng)``.
+ViewStream = Callable[[Scene, VisibilityIndex, str, np.random.Generator], Iterator[QARecord]]
+#: A per-pair record stream: ``stream(scene, index, pair, rules, rng)``.
+PairStream = Callable[[Scene, VisibilityIndex, ViewPair, PairRules, np.random.Generator], Iterator[QARecord]]
+
+
+# ------------------------------------------------------------ randomness and order
+def child_rngs(rng: np.random.Generator, n: int) -> list[np.random.Generator]:
+    """``n`` independent generators seeded from ``rng`` (one draw of ``n`` integers in [0, 2**63 − 1)).
+
+    A family that needs a grid of children (pair × sub type) takes ``n = rows × cols`` and
+    indexes ``row * cols + col``: the seeds are drawn in that (row-major) order.
+    """
+    seeds = rng.integers(0, 2**63 - 1, size=n, dtype=np.int64)
+    return [np.random.default_rng(int(s)) for s in seeds]
+
+
+def round_robin(streams: Iterable[Iterator[T]]) -> Iterator[T]:
+    """One item from each stream in turn until all are exhausted (streams are started lazily)."""
+    queue = deque(streams)
+    while queue:
+        stream = queue.popleft()
+        try:
+            item = next(stream)
+        except StopIteration:
+            continue
+        yield item
+        queue.append(stream)
+
+
+def seeded_order(items: Sequence[T], rng: np.random.Generator) -> Iterator[T]:
+    """``items`` in the order of ``rng.permutation(len(items))`` (drawn on the first ``next``)."""
+    for i in rng.permutation(len(items)):
+        yield items[int(i)]
+
+
+def lazy_permutation(n: int, rng: np.random.Generator, batch: int = 256) -> Iterator[int]:
+    """The integers ``0 … n−1`` in a uniformly random order drawn lazily (Fisher–Yates with a sparse swap map).
+
+    Memory and time grow with the number of items taken, not with ``n``, so a huge candidate
+    space (ordered triplets) can be walked in a seeded order and abandoned early. Uniform
+    floats are drawn from ``rng`` in batches of ``batch``; the sequence is a pure function of
+    the generator's state. (Not the same draws as :func:`seeded_order`, which permutes a small
+    list in one ``rng.permutation`` call.)
+    """
+    swaps: dict[int, int] = {}
+    i = 0
+    while i < n:
+        for x in rng.random(min(batch, n - i)):
+            j = min(n - 1, i + int(float(x) * (n - i)))
+            value = swaps.get(j, j)
+            swaps[j] = swaps.pop(i, i)
+            yield value
+            i += 1
+
+
+def round_robin_views(scene: Scene, index: VisibilityIndex, rng: np.random.Generator, stream: ViewStream) -> Iterator[QARecord]:
+    """The scene's views in a seeded order (:func:`seeded_order`), one record of each view's ``stream`` in turn.
+
+    Lazy: nothing is drawn before the first ``next``; every stream gets the same ``rng``.
+    """
+    yield from round_robin([stream(scene, index, view, rng) for view in seeded_order(list(scene.views), rng)])
+
+
+def round_robin_pairs(scene: Scene, index: VisibilityIndex, rules: PairRules, rng: np.random.Generator, stream: PairStream) -> Iterator[QARecord]:
+    """The pairs of :func:`~spacedg.data.view_sampling.sample_pairs` (``rules``, ``rng``), one record of each pair's ``stream`` in turn.
+
+    Lazy: not even the pairs are sampled before the first ``next``; every stream gets the same ``rng``.
+    """
+    pairs = sample_pairs(scene, rules, rng)
+    yield from round_robin([stream(scene, index, pair, rules, rng) for pair in pairs])
+
+
+# ------------------------------------------------------------------ objects
+def referable(index: VisibilityIndex, view: str, instance_id: int) -> bool:
+    """An object a question may name in ``view``: clearly visible there and no description clash
+    (no other same-label instance with the same description is seen in that image)."""
+    return instance_id in index.visible[view] and not description_clash(index, view, index.instance(instance_id))
+
+
+def referable_ids(index: VisibilityIndex, view: str) -> list[int]:
+    """Ids of the objects a question may name in ``view`` (:func:`referable`), in id order."""
+    return [i for i in index.visible[view] if referable(index, view, i)]
+
+
+def phrase(inst: Instance) -> str:
+    """How a question names ``inst``: :func:`~spacedg.plugins.questions.language.object_phrase` of its label and description."""
+    return object_phrase(inst.label, inst.description)
+
+
+def phrase_key(inst: Instance) -> str:
+    """The object's question phrase, lower case, whitespace collapsed (to test that names differ)."""
+    return " ".join(phrase(inst).lower().split())
+
+
+# ------------------------------------------------------------ geometry-block entries
+def object_entry(inst: Instance) -> dict[str, Any]:
+    """An object's identity and oriented box (world metres): ``id``, ``label``, ``description``,
+    ``center``, ``extents`` (full side lengths) and ``rotation`` (columns = box axes in world coordinates)."""
+    return {
+        "id": inst.id, "label": inst.label, "description": inst.description,
+        "center": inst.box.center.tolist(), "extents": inst.box.extents.tolist(), "rotation": inst.box.rotation.tolist(),
+    }
+
+
+def ref_entry(inst: Instance, view: str) -> dict[str, Any]:
+    """``{"id", "label", "description", "view"}``: an object named in the question and the view it is found in."""
+    return {"id": inst.id, "label": inst.label, "description": inst.description, "view": view}
+
+
+def camera_entry(scene: Scene, views: Sequence[str]) -> dict[str, list[list[float]]]:
+    """View → 4×4 ``cam_to_world`` (OpenCV axes, metres) of the views a question uses."""
+    return {v: np.asarray(scene.views[v].cam_to_world, dtype=np.float64).tolist() for v in views}
+
+
+def pair_geometry(scene: Scene, pair: ViewPair) -> dict[str, Any]:
+    """The pose part of a two-view camera-motion block: ``up``, both 4×4 ``cam_to_world`` (``_a``, ``_b``; OpenCV axes, metres) and ``pair``."""
+    return {
+        "up": [float(v) for v in scene.up],
+        "cam_to_world_a": np.asarray(scene.views[pair.a].cam_to_world, dtype=np.float64).tolist(),
+        "cam_to_world_b": np.asarray(scene.views[pair.b].cam_to_world, dtype=np.float64).tolist(),
+        "pair": pair.to_dict(),
+    }
+
+
+def visibility_entry(index: VisibilityIndex, views: Sequence[str], ids: Sequence[int]) -> list[dict[str, Any]]:
+    """Visibility (pixels, fraction, class) of every object in every view of the question."""
+    return [{"view": v, "id": i, **index.vis_entry(v, i)} for v in views for i in ids]
+
+
+def visibility_thresholds(scene: Scene, index: VisibilityIndex, views: Sequence[str]) -> dict[str, Any]:
+    """The "clearly visible" thresholds scaled to each view's image size."""
+    out: dict[str, Any] = {"min_fraction": float(index.thresholds.min_fraction), "min_pixels": {}}
+    for v in views:
+        cam = scene.views[v]
+        out["min_pixels"][v] = index.thresholds.pixels_for(cam.width * cam.height)
+    return out
+
+
+def objects_block(
+    scene: Scene, index: VisibilityIndex, views: Sequence[str], objects: Sequence[Instance], refs: Iterable[tuple[Instance, str]],
+) -> dict[str, Any]:
+    """The head of an object question's geometry block, in this key order: ``up``, ``cameras``
+    (:func:`camera_entry`), ``objects`` (:func:`object_entry` of each of ``objects``), ``refs``
+    (:func:`ref_entry` of each ``(object, view)`` in question order), ``visibility``
+    (:func:`visibility_entry` of ``objects`` in ``views``) and ``visibility_thresholds``."""
+    return {
+        "up": scene.up.tolist(),
+        "cameras": camera_entry(scene, views),
+        "objects": [object_entry(inst) for inst in objects],
+        "refs": [ref_entry(inst, view) for inst, view in refs],
+        "visibility": visibility_entry(index, views, [inst.id for inst in objects]),
+        "visibility_thresholds": visibility_thresholds(scene, index, views),
+    }
+
+
+def compass_block(reference: np.ndarray, assumed_dir: str, query: np.ndarray, up: np.ndarray) -> tuple[str, SectorHit, dict[str, Any]]:
+    """Truth label, sector hit and the compass part of a geometry block (frame, angle, sector, guard).
+
+    ``reference`` points towards ``assumed_dir`` (:func:`~spacedg.plugins.questions.geometry.compass_answer`);
+    the block holds ``assumed_dir``, ``assumed_angle_deg``, ``north``, ``east`` (unit ground vectors),
+    ``angle_deg`` of ``query`` (clockwise from north seen from above), the sector (``sector_index``,
+    ``sector_label``, ``sector_labels``, ``sector_starts_deg``, ``boundary_distance_deg``,
+    ``neighbour_index``), ``banned_labels`` (the neighbour across a boundary within
+    :data:`~spacedg.plugins.questions.geometry.BOUNDARY_GUARD_DEG`) and ``thresholds``.
+    """
+    label, angle, hit, north, east = compass_answer(reference, assumed_dir, query, up)
+    banned = [COMPASS_SECTORS.labels[hit.neighbour]] if hit.boundary_distance_deg < BOUNDARY_GUARD_DEG else []
+    block = {
+        "assumed_dir": assumed_dir,
+        "assumed_angle_deg": 90.0 * CARDINALS.index(assumed_dir),
+        "north": north.tolist(),
+        "east": east.tolist(),
+        "angle_deg": angle,
+        "sector_index": hit.index,
+        "sector_label": label,
+        "sector_labels": list(COMPASS_SECTORS.labels),
+        "sector_starts_deg": list(COMPASS_SECTORS.starts),
+        "boundary_distance_deg": hit.boundary_distance_deg,
+        "neighbour_index": hit.neighbour,
+        "banned_labels": banned,
+        "thresholds": {
+            "min_horizontal_m": MIN_HORIZONTAL_M, "vertical_factor": VERTICAL_FACTOR,
+            "boundary_guard_deg": BOUNDARY_GUARD_DEG, "cardinal_ratio": TAN30,
+        },
+    }
+    return label, hit, block
+
+
+def compass_question(reference: np.ndarray, query: np.ndarray, up: np.ndarray, rng: np.random.Generator) -> tuple[str, tuple[str, ...], str, dict[str, Any]]:
+    """``(assumed_dir, options, letter, block)`` of a compass question, drawn from ``rng`` in this order:
+    the assumed cardinal (``rng.integers`` over :data:`~spacedg.plugins.questions.geometry.CARDINALS`),
+    then the distractor order (``COMPASS_SECTORS.distractors``) and the options and letter
+    (:func:`~spacedg.plugins.questions.geometry.build_mcq`). ``block`` is :func:`compass_block`'s."""
+    assumed = CARDINALS[int(rng.integers(len(CARDINALS)))]
+    truth, hit, block = compass_block(reference, assumed, query, up)
+    options, letter = build_mcq(truth, COMPASS_SECTORS.distractors(hit, rng), rng)
+    return assumed, options, letter, block
+
+
+# ------------------------------------------------------------------ records
+def make_record(
+    scene: Scene,
+    question_type: str,
+    sub_question_type: str,
+    task_group: TaskGroup,
+    answer_type: AnswerType,
+    views: tuple[str, ...],
+    key: Any,
+    question: str,
+    answer: Answer,
+    geometry: dict[str, Any],
+    options: tuple[str, ...] = (),
+) -> QARecord:
+    """A :class:`~spacedg.data.qa.QARecord` of ``scene`` whose id is
+    ``make_record_id(scene.id, question_type, sub_question_type, views, key)`` (``key``: what
+    identifies the question within its family and views)."""
+    return QARecord(
+        id=make_record_id(scene.id, question_type, sub_question_type, views, key),
+        scene_id=scene.id,
+        question_type=question_type,
+        sub_question_type=sub_question_type,
+        task_group=task_group,
+        answer_type=answer_type,
+        views=views,
+        question=question,
+        options=options,
+        answer=answer,
+        geometry=geometry,
+    )
