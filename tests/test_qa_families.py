@@ -92,3 +92,19 @@ def test_scorer_routes_every_generated_record_and_accepts_its_answer(records_by_
             if r.answer_type is AnswerType.MCQ:
                 wrong = next(k for k in "ABCD" if k != r.answer)
                 assert score(f"<answer>{wrong}</answer>", r).score == 0.0
+
+
+def test_answer_balance_and_blind_baseline(records_by_scene):
+    """Correct letter uniform over A–D within ±4 points, yes/no 50 ± 4, and a blind model that
+    always gives the most frequent answer of the sub type (learnt on the other rooms) is no
+    better than chance + 5 points."""
+    from spacedg.data.qa_stats import answer_balance, blind_baseline
+
+    every = [r for rs in records_by_scene.values() for r in rs]
+    balance = answer_balance(every)
+    assert balance["mcq_n"] >= 200 and balance["yn_n"] >= 50
+    assert all(abs(share - 25.0) <= 4.0 for share in balance["letters"].values()), balance
+    assert abs(balance["yes_pct"] - 50.0) <= 4.0, balance
+    overall = blind_baseline(records_by_scene)[-1]
+    assert overall["question_type"] == "ALL"
+    assert overall["letter_prior"] <= overall["chance"] + 5.0, overall

@@ -109,3 +109,29 @@ def test_cli_build_and_stats(qa_room_dirs, tmp_path, capsys):
     assert main(["qa", "stats", str(out)]) == 0 and "Blind baseline" in capsys.readouterr().out
     assert main(["qa", "stats", str(tmp_path / "nothing")]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def test_judge_in_generation_drops_and_counts(qa_room_dirs, tmp_path):
+    """A judge that answers DROP removes exactly the records naming an object whose image shows
+    a same-label neighbour; one that answers KEEP changes nothing. Real renders feed the judge."""
+    from spacedg.data.io import load_scene
+    from spacedg.data.qa_index import generate_records, prepare_scene
+    from spacedg.data.view_sampling import VisibilityIndex, same_label_neighbours
+
+    config = QABuildConfig(seed=1, per_sub_type=6, families=("object_bounding_size_estimation", "inter_object_distance"))
+    scene = prepare_scene(load_scene(qa_room_dirs[0]), tmp_path, config, progress=False)  # has visible same-label sets
+    plain = generate_records(scene, config)
+    shapes = set()
+
+    def keep_all(image, label, description):
+        shapes.add((image.shape, str(image.dtype)))
+        return "KEEP"
+
+    assert generate_records(scene, config, judge=keep_all) == plain
+    dropped: dict[str, int] = {}
+    strict = generate_records(scene, config, judge=lambda image, label, description: "DROP", dropped=dropped)
+    index = VisibilityIndex(scene)
+    for record in strict:
+        for ref in record.geometry["refs"]:
+            assert not same_label_neighbours(index, ref["view"], scene.instance(ref["id"]))
+    assert sum(dropped.values()) > 0 and shapes == {((240, 320, 3), "uint8")}

@@ -7,10 +7,12 @@ Building one scene (:func:`build_scene_index`):
 2. for every selected family (sorted by name), run ``family.generate(scene, rng)`` with
    ``rng = default_rng(derive_seed(seed, scene_id, family))``: the records are seeded per
    (scene, family), so adding a family never changes another family's records;
-3. keep records in generation order up to ``per_sub_type`` per ``sub_question_type``, looking
-   at no more than ``max_scan`` candidates per family; an optional judge
+3. pool up to ``pool_factor × per_sub_type`` candidates per ``sub_question_type`` (no more
+   than ``max_scan`` per family) and take ``per_sub_type`` of them round-robin over the correct
+   answers (option text, yes/no, count), so a blind model cannot profit from one answer being
+   common where the scene offers alternatives; an optional judge
    (:class:`~spacedg.data.judge.DescriptionJudge`) drops records whose descriptions it finds
-   ambiguous;
+   ambiguous (asked only about records being taken);
 4. write ``<out>/<scene id>.qa.jsonl`` (one :class:`QARecord` per line, families in name
    order) and ``<out>/<scene id>.qa.meta.json`` (key, config, counts, timings) atomically.
    ``out`` defaults to the scene folder itself.
@@ -37,10 +39,11 @@ import numpy as np
 from spacedg.data.qa import QARecord
 from spacedg.data.scene import Scene
 from spacedg.errors import FileFormatError, ParameterError
+from spacedg.plugins.specs import AnswerType
 
 __all__ = [
     "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "prepare_scene", "generate_records",
-    "index_paths", "build_scene_index", "read_index",
+    "index_paths", "build_scene_index", "read_index", "truth_key",
 ]
 
 #: Bump when the index layout or the build procedure changes (part of the key).
@@ -56,6 +59,8 @@ class QABuildConfig:
         families: family names to run (empty = every registered family).
         per_sub_type: at most this many records per ``sub_question_type`` and family.
         max_scan: at most this many candidates examined per family.
+        pool_factor: candidates pooled per sub type, as a multiple of ``per_sub_type``, for
+            answer balancing (1 = no balancing: the first ``per_sub_type`` in seeded order).
         visibility_size: reduced render size (width, height) px for instance visibility.
         covisibility_size: reduced render size (width, height) px for covisibility.
     """
@@ -64,13 +69,14 @@ class QABuildConfig:
     families: tuple[str, ...] = ()
     per_sub_type: int = 25
     max_scan: int = 20_000
+    pool_factor: int = 8
     visibility_size: tuple[int, int] = (160, 120)
     covisibility_size: tuple[int, int] = (80, 60)
 
     def __post_init__(self) -> None:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ParameterError(f"QABuildConfig: seed must be an integer >= 0, got {self.seed!r}")
-        for name in ("per_sub_type", "max_scan"):
+        for name in ("per_sub_type", "max_scan", "pool_factor"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ParameterError(f"QABuildConfig: {name} must be a positive integer, got {value!r}")
@@ -137,6 +143,38 @@ def prepare_scene(
     return scene
 
 
+def truth_key(record: QARecord) -> str | None:
+    """What answer balancing groups by: the correct option's text (MCQ), the answer (YN, COUNT),
+    or ``None`` for metric answers (NA, SIZE_LIST), which are not balanced."""
+    if record.answer_type is AnswerType.MCQ:
+        letter = str(record.answer)
+        return next((o[3:] for o in record.options if o.startswith(letter + ". ")), letter)
+    if record.answer_type in (AnswerType.YN, AnswerType.COUNT):
+        return str(record.answer)
+    return None
+
+
+def _select_balanced(pool: list[QARecord], cap: int, keep: Any) -> list[QARecord]:
+    """Up to ``cap`` records of one sub type, round-robin over truth buckets (first-seen order).
+
+    Each bucket is consumed in generation order; ``keep(record)`` (the judge) is asked only for
+    records about to be taken. The result is returned in generation order.
+    """
+    buckets: dict[str | None, list[int]] = {}
+    for i, record in enumerate(pool):
+        buckets.setdefault(truth_key(record), []).append(i)
+    queues = [list(reversed(ix)) for ix in buckets.values()]
+    taken: list[int] = []
+    while len(taken) < cap and any(queues):
+        for queue in queues:
+            while queue and len(taken) < cap:
+                i = queue.pop()
+                if keep(pool[i]):
+                    taken.append(i)
+                    break
+    return [pool[i] for i in sorted(taken)]
+
+
 def generate_records(
     scene: Scene,
     config: QABuildConfig = QABuildConfig(),
@@ -146,9 +184,15 @@ def generate_records(
 ) -> list[QARecord]:
     """Records of every selected family for a prepared scene (see the module docstring).
 
+    Per family, candidates are pooled (up to ``pool_factor × per_sub_type`` per sub type,
+    ``max_scan`` in all); then each sub type takes ``per_sub_type`` records round-robin over
+    its truth buckets (:func:`truth_key`: the correct option's text, the yes/no or count
+    answer), so no single answer dominates where the candidates allow; metric answers are
+    taken in generation order.
+
     ``judge``: a callable ``judge(image, label, description) -> "KEEP"/"DROP"`` or a
-    :class:`~spacedg.data.judge.DescriptionJudge`; ``dropped`` receives per-family counts of
-    records the judge removed.
+    :class:`~spacedg.data.judge.DescriptionJudge`, asked only about records being taken;
+    ``dropped`` receives per-family counts of records the judge removed.
     """
     from spacedg.data.judge import DescriptionJudge
     from spacedg.data.pipeline import derive_seed
@@ -156,22 +200,28 @@ def generate_records(
     if judge is not None and not isinstance(judge, DescriptionJudge):
         judge = DescriptionJudge(scene, judge)
     out: list[QARecord] = []
+    want = config.per_sub_type * config.pool_factor
     for family in _families(config.families):
         rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
-        per_sub: Counter[str] = Counter()
+        pools: dict[str, list[QARecord]] = {}
         for scanned, record in enumerate(family.generate(scene, rng)):
             if scanned >= config.max_scan:
                 break
-            if per_sub[record.sub_question_type] >= config.per_sub_type:
-                if all(per_sub[s] >= config.per_sub_type for s in family.sub_question_types):
-                    break
-                continue
-            if judge is not None and not judge.keep(record):
-                if dropped is not None:
-                    dropped[family.name] = dropped.get(family.name, 0) + 1
-                continue
-            per_sub[record.sub_question_type] += 1
-            out.append(record)
+            pool = pools.setdefault(record.sub_question_type, [])
+            if len(pool) < want:
+                pool.append(record)
+            elif all(len(pools.get(s, ())) >= want for s in family.sub_question_types):
+                break
+
+        def keep(record: QARecord, family_name: str = family.name) -> bool:
+            if judge is None or judge.keep(record):
+                return True
+            if dropped is not None:
+                dropped[family_name] = dropped.get(family_name, 0) + 1
+            return False
+
+        for sub in family.sub_question_types:
+            out.extend(_select_balanced(pools.get(sub, []), config.per_sub_type, keep))
     return out
 
 

@@ -59,6 +59,7 @@ from spacedg.data.view_sampling import ROTATION_PAIRS, PairRules, ViewPair, samp
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.geometry import (
     ROTATION_WORDS,
+    BalancedDeck,
     build_mcq,
     euler_yaw_pitch_roll,
     relative_rotation,
@@ -158,7 +159,7 @@ def _options(case: RotationCase, euler: dict[str, float]) -> tuple[str, list[str
     return truth, [c for c in combos if c != truth], text_axes
 
 
-def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator) -> QARecord | None:
+def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator, decks: dict[str, BalancedDeck]) -> QARecord | None:
     r_rel = relative_rotation(scene.views[pair.a], scene.views[pair.b])
     if not np.all(np.isfinite(r_rel)):
         return None
@@ -168,7 +169,7 @@ def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator) -> QARecord 
         return None
     euler = {"yaw": yaw, "pitch": pitch, "roll": roll}
     truth, distractors, text_axes = _options(case, euler)
-    options, answer = build_mcq(truth, distractors, rng)
+    options, answer = build_mcq(truth, distractors, rng, slot=decks[case.mode].next())
     template = MODES.index(case.mode)
     sub = f"{case.ax1}+{case.ax2}_{case.mode}"
     geometry = {
@@ -201,8 +202,10 @@ def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator) -> QARecord 
 def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = ROTATION_PAIRS) -> Iterator[QARecord]:
     """Every camera-rotation question of ``scene`` (at most one per pair), lazily, in a seeded order."""
     pairs = sample_pairs(scene, rules, rng)
+    deck_rngs = child_rngs(rng, len(MODES))
+    decks = {mode: BalancedDeck(r) for mode, r in zip(MODES, deck_rngs)}  # correct letter per mode, balanced
     for pair, child in zip(pairs, child_rngs(rng, len(pairs))):
-        record = _record(scene, pair, child)
+        record = _record(scene, pair, child, decks)
         if record is not None:
             yield record
 

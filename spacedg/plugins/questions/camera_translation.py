@@ -30,7 +30,9 @@ Sub types (SPEC-QA type 1; wording from the paper's appendix "Question Templates
     ``|d|`` in metres, rounded to 3 decimals.
 ``distance_threshold`` (YN)
     ``f ~ U(0.6, 1.4)``; inside ``(0.85, 1.15)`` it snaps to the nearer of 0.85 / 1.15 (an exact
-    tie at 1.0 by a seeded coin); threshold ``= round(max(0.05, |d| f), 2)`` metres, printed
+    tie at 1.0 by a seeded coin). The side of 1 (``f < 1`` ⇔ "yes") is dealt from a balanced
+    yes/no deck and ``f`` is drawn from ``U(0.6, 1.4)`` restricted to that side, so each answer
+    keeps the spec's conditional law while yes/no is exactly 50/50 over the generation; threshold ``= round(max(0.05, |d| f), 2)`` metres, printed
     with two decimals; the answer is "yes" iff ``|d| >`` the **printed** threshold. With
     ``|d| >= 0.35`` m the margin is at least ``0.15 x 0.35 - 0.005 = 0.0475`` m. The prompt
     does not mention camera matrices (the reference did, without giving them).
@@ -86,6 +88,7 @@ from spacedg.plugins.questions.geometry import (
     CAMERA_MOTION_WORDS,
     MAX_PARTS,
     TAN30,
+    BalancedDeck,
     build_mcq,
     dominant_parts,
     flipped_labels,
@@ -180,7 +183,10 @@ def _candidate(scene: Scene, pair: ViewPair, rules: PairRules) -> _Candidate | N
     return _Candidate(pair, d, float(np.linalg.norm(d)), parts)
 
 
-def _record(scene: Scene, cand: _Candidate, sub: str, rng: np.random.Generator, rules: PairRules) -> QARecord:
+def _record(
+    scene: Scene, cand: _Candidate, sub: str, rng: np.random.Generator, rules: PairRules, deck: BalancedDeck | None,
+) -> QARecord:
+    """One record of sub type ``sub``; ``deck`` deals the MCQ letter or the yes/no side (None for NA)."""
     geometry: dict[str, Any] = {
         **pair_geometry(scene, cand.pair),
         "d": cand.d.tolist(),
@@ -195,7 +201,8 @@ def _record(scene: Scene, cand: _Candidate, sub: str, rng: np.random.Generator, 
     key: dict[str, Any] = {"sub": sub}
     if sub == "main_dir":
         truth, distractors, how = main_dir_options(cand.parts, rng)
-        options, answer = build_mcq(truth, distractors, rng)
+        assert deck is not None
+        options, answer = build_mcq(truth, distractors, rng, slot=deck.next())
         geometry["options_source"] = how
         question = TEMPLATES[sub]
         answer_type = AnswerType.MCQ
@@ -205,7 +212,11 @@ def _record(scene: Scene, cand: _Candidate, sub: str, rng: np.random.Generator, 
         question = TEMPLATES[sub]
         answer_type = AnswerType.NA
     else:
-        drawn = float(rng.uniform(*FACTOR_RANGE))
+        # balanced yes/no: the side (f < 1 → "yes") comes from the deck, then f is drawn from
+        # U(0.6, 1.4) restricted to that side and snapped: the same law as the spec's, per side
+        assert deck is not None
+        low_side = deck.next() == 0
+        drawn = float(rng.uniform(FACTOR_RANGE[0], 1.0) if low_side else rng.uniform(1.0, FACTOR_RANGE[1]))
         factor = snap_factor(drawn, float(rng.random()))
         threshold = threshold_for(cand.distance, factor)
         answer = "yes" if cand.distance > threshold else "no"
@@ -225,11 +236,13 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = TRANSLAT
     pairs = sample_pairs(scene, rules, rng)
     start = int(rng.integers(len(SUB_TYPES)))
     children = child_rngs(rng, len(pairs) * len(SUB_TYPES))  # row-major: pair k, sub type s
+    letter_rng, side_rng = child_rngs(rng, 2)
+    decks = {"main_dir": BalancedDeck(letter_rng, 4), "distance_threshold": BalancedDeck(side_rng, 2)}
     cands = [(k, c) for k, pair in enumerate(pairs) if (c := _candidate(scene, pair, rules)) is not None]
     for p in range(len(SUB_TYPES)):
         for k, cand in cands:
             s = (start + k + p) % len(SUB_TYPES)
-            yield _record(scene, cand, SUB_TYPES[s], children[k * len(SUB_TYPES) + s], rules)
+            yield _record(scene, cand, SUB_TYPES[s], children[k * len(SUB_TYPES) + s], rules, decks.get(SUB_TYPES[s]))
 
 
 def make_family(rules: PairRules = TRANSLATION_PAIRS) -> QuestionFamily:

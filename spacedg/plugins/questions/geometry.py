@@ -59,7 +59,7 @@ from spacedg.render.camera import Camera
 __all__ = [
     "TAN30", "MAX_PARTS", "BOUNDARY_GUARD_DEG", "CAMERA_MOTION_WORDS", "BODY_DIRECTION_WORDS",
     "relative_rotation", "relative_translation", "camera_center", "point_in_camera",
-    "dominant_parts", "parts_label", "flipped_labels", "single_word_pool", "build_mcq",
+    "dominant_parts", "parts_label", "flipped_labels", "single_word_pool", "build_mcq", "BalancedDeck",
     "horizontal", "ground_angle", "vertical_dominates",
     "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS",
     "euler_yaw_pitch_roll", "ROTATION_WORDS",
@@ -197,14 +197,35 @@ def _next_letter(rng: np.random.Generator) -> int:
     return deck.pop()
 
 
-def build_mcq(truth: str, distractors: Sequence[str], rng: np.random.Generator) -> tuple[tuple[str, ...], str]:
+class BalancedDeck:
+    """Draws ``0 … k-1`` in shuffled blocks of ``k`` from its own generator, so any prefix of
+    ``n`` draws holds each value ``n/k`` times to within one block: exact balance, seeded.
+
+    Families whose records each use a private child generator keep one deck per sub type
+    and pass ``slot=deck.next()`` to :func:`build_mcq` (or use it for a yes/no side).
+    """
+
+    def __init__(self, rng: np.random.Generator, k: int = 4) -> None:
+        self.rng = rng
+        self.k = k
+        self._left: list[int] = []
+
+    def next(self) -> int:
+        if not self._left:
+            self._left = [int(v) for v in self.rng.permutation(self.k)]
+        return self._left.pop()
+
+
+def build_mcq(
+    truth: str, distractors: Sequence[str], rng: np.random.Generator, slot: int | None = None,
+) -> tuple[tuple[str, ...], str]:
     """Four ``"A. text"`` option lines and the correct letter.
 
     ``distractors`` are the candidates in preference order; the first three distinct ones
-    that differ from ``truth`` are used, in an order shuffled by ``rng``. The correct letter
-    comes from a deck of shuffled A–D blocks drawn from the same ``rng`` (one deck per
-    generator), so the letters of one family's generation are balanced exactly, not only in
-    expectation; the sequence is still a pure function of the seed.
+    that differ from ``truth`` are used, in an order shuffled by ``rng``. The correct letter is
+    ``slot`` (0–3) when given, else it comes from a deck of shuffled A–D blocks drawn from the
+    same ``rng`` (one deck per generator), so the letters of one family's generation are
+    balanced exactly, not only in expectation; the sequence is still a pure function of the seed.
     Raises :class:`InvalidDataError` if fewer than three usable distractors exist.
     """
     chosen: list[str] = []
@@ -216,7 +237,10 @@ def build_mcq(truth: str, distractors: Sequence[str], rng: np.random.Generator) 
     if len(chosen) < 3:
         raise InvalidDataError(f"build_mcq: need 3 distractors different from {truth!r}, got {list(distractors)}")
     others = [chosen[i] for i in rng.permutation(3)]
-    slot = _next_letter(rng)
+    if slot is None:
+        slot = _next_letter(rng)
+    elif slot not in (0, 1, 2, 3):
+        raise InvalidDataError(f"build_mcq: slot must be 0-3 (the correct letter's position), got {slot!r}")
     texts = others[:slot] + [truth] + others[slot:]
     return tuple(f"{MCQ_LETTERS[k]}. {t}" for k, t in enumerate(texts)), MCQ_LETTERS[slot]
 
