@@ -33,6 +33,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
+    except BrokenPipeError:  # output piped into `head` and closed: not an error
+        sys.stderr.close()
+        return 0
     except SpaceDGError as err:
         # Bad input: one clear line, no traceback.
         print(f"spacedg: error: {err}", file=sys.stderr)

@@ -38,7 +38,7 @@ def _build(args: argparse.Namespace) -> int:
 
     families = tuple(f.strip() for f in args.families.split(",") if f.strip())
     config = QABuildConfig(seed=args.seed, families=families, per_sub_type=args.per_sub_type)
-    print(f"{'scene':<16} {'records':>8} {'visibility s':>12} {'covis s':>8} {'generate s':>10} {'q/s':>8}  index")
+    tqdm.write(f"{'scene':<16} {'records':>8} {'visibility s':>12} {'covis s':>8} {'generate s':>10} {'q/s':>8}  index")
     total = 0
     start = time.perf_counter()
     for folder in tqdm(_scene_dirs(args.scenes), desc="qa build", unit="scene"):
@@ -47,7 +47,7 @@ def _build(args: argparse.Namespace) -> int:
         gen = s.get("generate_s", 0.0)
         rate = f"{len(result.records) / gen:,.0f}" if gen > 0 and not result.reused else "-"
         note = "reused" if result.reused else ""
-        print(f"{result.scene_id:<16} {len(result.records):>8} {s.get('visibility_s', 0):>12.2f} {s.get('covisibility_s', 0):>8.2f} "
+        tqdm.write(f"{result.scene_id:<16} {len(result.records):>8} {s.get('visibility_s', 0):>12.2f} {s.get('covisibility_s', 0):>8.2f} "
               f"{gen:>10.3f} {rate:>8}  {result.path} {note}")
         total += len(result.records)
     print(f"{total} records in {time.perf_counter() - start:.1f} s")
