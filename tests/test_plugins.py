@@ -484,6 +484,7 @@ def test_question_family_validation() -> None:
     family = QuestionFamily(**base)
     assert family.generate.__wrapped__ is gen and family.num_views == (1,)
     assert QuestionFamily(**{**base, "sub_question_types": ("yaw+pitch_dual",)}).sub_question_types == ("yaw+pitch_dual",)
+    assert QuestionFamily(**{**base, "sub_question_types": ("relpos_A_facing_B",)}).sub_question_types == ("relpos_A_facing_B",)
     for changes, pattern in [
         ({"task_group": "objects"}, "task_group 'objects' is not one of"),
         ({"answer_types": {"COUNTS"}}, r"answer type 'COUNTS'.*Did you mean 'COUNT'"),

@@ -197,7 +197,7 @@ def test_bbox_center_direction_needs_low_covisibility():
 def test_relpos_sectors(c_pos, expected):
     r = _relpos_abc(relpos_scene(c_pos))
     assert r is not None and _truth(r) == expected
-    assert r.sub_question_type == "relpos_a_facing_b" and r.views in (("v0", "v1"), ("v1", "v0"))
+    assert r.sub_question_type == "relpos_A_facing_B" and r.views in (("v0", "v1"), ("v1", "v0"))
     a, b = ("A", "B") if r.views[0] == "v0" else ("B", "A")
     assert r.question == (
         f"In image {a}, find the chair. In image {a}, find the table. In image {b}, find the plant.\n"

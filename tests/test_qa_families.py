@@ -21,7 +21,7 @@ ELEVEN = {
 NAMED_SUB_TYPES = {
     ("camera_translation", "main_dir"), ("camera_translation", "distance_exact"), ("camera_translation", "distance_threshold"),
     ("camera_object_distance_estimation", "bbox_center_distance"), ("camera_object_relative_direction", "bbox_center_direction"),
-    ("camera_object_relative_direction", "relpos_a_facing_b"), ("object_size_comparison", "longest_side_compare"),
+    ("camera_object_relative_direction", "relpos_A_facing_B"), ("object_size_comparison", "longest_side_compare"),
     ("object_size_comparison", "top_height_compare"),
 }
 CONFIG = QABuildConfig(seed=7, per_sub_type=15)

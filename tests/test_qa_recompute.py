@@ -277,7 +277,7 @@ def test_near_boundary_cases_are_exercised(scenes_and_records):
     near = 0
     for _, records in scenes_and_records:
         for r in records:
-            if r.sub_question_type in ("relpos_a_facing_b", "assumed_direction", "proxy_frame"):
+            if r.sub_question_type in ("relpos_A_facing_B", "assumed_direction", "proxy_frame"):
                 g = r.geometry
                 dist = g.get("boundary_distance_deg", g.get("sector", {}).get("boundary_distance_deg") if isinstance(g.get("sector"), dict) else None)
                 near += dist is not None and dist < 3

@@ -81,7 +81,7 @@ ROUTES = [
     ("camera_object_distance_estimation", "bbox_center_distance", AnswerType.NA),
     ("camera_object_relative_direction", "single_view", AnswerType.MCQ),
     ("camera_object_relative_direction", "bbox_center_direction", AnswerType.MCQ),
-    ("camera_object_relative_direction", "relpos_a_facing_b", AnswerType.MCQ),
+    ("camera_object_relative_direction", "relpos_A_facing_B", AnswerType.MCQ),
     ("cross_view_cardinal_direction", "cross_view_cardinal_direction", AnswerType.MCQ),
     ("inter_object_distance", "inter_object_distance", AnswerType.NA),
     ("inter_object_distance", "center_distance", AnswerType.NA),

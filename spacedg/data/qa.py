@@ -121,7 +121,8 @@ class QARecord:
         id: unique, deterministic id (see :func:`make_record_id`).
         scene_id: the scene's id.
         question_type: the question family's name.
-        sub_question_type: the family's sub type (``^[a-z][a-z0-9_]*$``; may contain ``+`` for
+        sub_question_type: the family's sub type (``^[a-z][A-Za-z0-9_+]*$``: the evaluator's names such
+            as ``relpos_A_facing_B`` keep their capitals; ``+`` appears in
             the rotation family's ``"{ax1}+{ax2}_{mode}"``).
         task_group: :class:`~spacedg.plugins.specs.TaskGroup`.
         answer_type: :class:`~spacedg.plugins.specs.AnswerType`; fixes ``answer`` and ``options``.
@@ -153,7 +154,7 @@ class QARecord:
         if not isinstance(self.question_type, str) or not NAME_PATTERN.match(self.question_type):
             raise InvalidDataError(f"{where}: question_type {self.question_type!r} must match ^[a-z][a-z0-9_]*$ (the family name)")
         if not isinstance(self.sub_question_type, str) or not SUB_TYPE_PATTERN.match(self.sub_question_type):
-            raise InvalidDataError(f"{where}: sub_question_type {self.sub_question_type!r} must be lower-case letters, digits, '_' or '+'")
+            raise InvalidDataError(f"{where}: sub_question_type {self.sub_question_type!r} must start with a lower-case letter, then letters, digits, '_' or '+' (e.g. 'relpos_A_facing_B')")
         object.__setattr__(self, "task_group", _coerce(TaskGroup, self.task_group, where, "task_group"))
         object.__setattr__(self, "answer_type", _coerce(AnswerType, self.answer_type, where, "answer_type"))
         views = (self.views,) if isinstance(self.views, str) else tuple(self.views)

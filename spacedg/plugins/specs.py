@@ -92,7 +92,7 @@ __all__ = [
 #: Names of degradations, question families, parameters and sub question types.
 NAME_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
 #: ``sub_question_type`` values: like names, plus ``+`` (camera rotation's ``"yaw+pitch_dual"``).
-SUB_TYPE_PATTERN = re.compile(r"^[a-z][a-z0-9_+]*$")
+SUB_TYPE_PATTERN = re.compile(r"^[a-z][A-Za-z0-9_+]*$")
 _PRESET_PATTERN = re.compile(r"^[a-z0-9][a-z0-9_]*$")
 
 #: Severity presets, mild → harsh.
@@ -593,8 +593,8 @@ class QuestionFamily:
         for s in subs:
             if not isinstance(s, str) or not SUB_TYPE_PATTERN.match(s):
                 raise PluginError(
-                    f"{where}: sub_question_type {s!r} is not valid: use lower-case letters, digits, '_' and '+', "
-                    "starting with a letter"
+                    f"{where}: sub_question_type {s!r} is not valid: start with a lower-case letter, then use "
+                    "letters, digits, '_' and '+' (e.g. 'relpos_A_facing_B', 'yaw+pitch_dual')"
                 )
         object.__setattr__(self, "sub_question_types", subs)
         views = (self.num_views,) if isinstance(self.num_views, int) else tuple(self.num_views)

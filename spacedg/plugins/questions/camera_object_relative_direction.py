@@ -24,10 +24,9 @@ Three sub types (SPEC-QA, type 4; wording from the paper's appendix "Question Te
     centre is closer than 0.1 m to camera B or camera B is inside the box. The question is
     ``find_in_image(phrase, 0)`` followed by one of the paper's two wordings
     (:data:`TWO_VIEW_TEMPLATES`, drawn by ``rng``), which name the object by its label.
-``relpos_a_facing_b`` (2 views, :data:`~spacedg.data.view_sampling.OBJECT_DIRECTION_PAIRS`:
+``relpos_A_facing_B`` (2 views, :data:`~spacedg.data.view_sampling.OBJECT_DIRECTION_PAIRS`:
     covisibility > 0.25, baseline >= 0.2 m, rotation >= 15°)
-    **Deviation**: the brief's ``relpos_A_facing_B`` is not a valid sub type
-    (``SUB_TYPE_PATTERN`` allows lower case only), so the name is lower-cased.
+    (the public evaluator's name, capitals included).
     Three distinct instances A (where you stand), B (what you face), C (the query) obey the
     three-object rule (:func:`~spacedg.data.view_sampling.split_across_views`: each clearly
     visible in image A or B, neither image shows all three). Each object is found in image A if
@@ -68,7 +67,7 @@ label, description, box centre/extents/rotation); ``refs`` (``[{"id", "label", "
 "view"}]`` in question order); ``visibility``; ``visibility_thresholds``; ``template``;
 ``thresholds``; for the camera-frame sub types ``frame_view``, ``vector_world``,
 ``vector_camera``, ``norm_m``, ``parts`` (``[[axis, sign], …]``), ``label``, ``ratio``,
-``max_parts``; for ``relpos_a_facing_b`` ``roles``, ``forward``, ``right``, the horizontal and
+``max_parts``; for ``relpos_A_facing_B`` ``roles``, ``forward``, ``right``, the horizontal and
 vertical lengths of A→B and A→C, ``angle_deg``, ``sector_index``, ``sector_label``,
 ``sector_starts_deg``, ``boundary_distance_deg``, ``neighbour_index``, ``banned_labels``; for
 two views ``pair`` and ``pair_rules``.
@@ -157,7 +156,7 @@ __all__ = [
 NAME = "camera_object_relative_direction"
 SINGLE_VIEW = "single_view"
 BBOX_CENTER_DIRECTION = "bbox_center_direction"
-RELPOS = "relpos_a_facing_b"
+RELPOS = "relpos_A_facing_B"
 SUB_QUESTION_TYPES: tuple[str, ...] = (SINGLE_VIEW, BBOX_CENTER_DIRECTION, RELPOS)
 
 #: Camera-frame vectors shorter than this (metres) have no meaningful direction: skipped.
