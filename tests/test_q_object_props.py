@@ -20,6 +20,7 @@ from spacedg.data.scene import Instance, InstanceVisibility, Scene
 from spacedg.plugins import AnswerType, TaskGroup, get_question_family, reset_registry
 from spacedg.plugins.questions import object_bounding_size_estimation as bsize
 from spacedg.plugins.questions import object_existence_estimation as exist
+from spacedg.plugins.questions import language
 from spacedg.plugins.questions import object_size_comparison as cmp
 from spacedg.plugins.questions.language import object_phrase
 
@@ -355,7 +356,8 @@ def test_existence_geometry_and_wording() -> None:
     assert exist.render_question(1, "umbrella") == "Can you find an umbrella in the current view?"
     assert exist.render_question(2, "coffee_table") == "Does the image contain a coffee table?"
     assert exist.render_question(3, "apple") == "Check if an apple is present in this picture."
-    assert [exist.indefinite_article(w) for w in ("unicorn toy", "hour glass", "TV", "HDMI cable", "oven")] == ["a", "an", "a", "an", "an"]
+    assert [language.indefinite_article(w) for w in ("unicorn toy", "hour glass", "TV", "HDMI cable", "oven")] == ["a", "an", "a", "an", "an"]
+    assert language.with_articles("A orange lamp with a olive shade, a uniform and a red cup") == "An orange lamp with an olive shade, a uniform and a red cup"
 
 
 def test_existence_negatives_from_vocabulary() -> None:

@@ -88,8 +88,11 @@ class Appearance:
         return MATERIALS[self.material]
 
     def describe(self, label: str, template: str = "{colour} {material} {label}") -> str:
-        """View-invariant description, e.g. ``"blue fabric sofa"`` (``template`` may reorder it)."""
-        return template.format(colour=self.colour, material=self.spec.adjective, label=label)
+        """View-invariant description, e.g. ``"blue fabric sofa"`` (``template`` may reorder it;
+        "a" becomes "an" before a vowel sound: ``"lamp with an orange fabric shade"``)."""
+        from spacedg.plugins.questions.language import with_articles
+
+        return with_articles(template.format(colour=self.colour, material=self.spec.adjective, label=label))
 
 
 def all_appearances(materials: tuple[str, ...]) -> list[Appearance]:

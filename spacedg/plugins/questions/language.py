@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["label_text", "plural", "count_phrase", "object_phrase", "find_in_image", "IMAGE_NAMES"]
+__all__ = ["label_text", "plural", "count_phrase", "indefinite_article", "with_articles", "object_phrase", "find_in_image", "IMAGE_NAMES"]
 
 #: How questions name the images of a record, in ``QARecord.views`` order.
 IMAGE_NAMES: tuple[str, ...] = ("A", "B", "C", "D")
@@ -198,3 +198,41 @@ def object_phrase(label: str, description: str = "") -> str:
 def find_in_image(phrase: str, image: int) -> str:
     """The marker sentence that tells where an object is seen: ``"In image A, find the red cup."``."""
     return f"In image {IMAGE_NAMES[image]}, find the {phrase}."
+
+
+# Letters whose spoken name starts with a vowel sound (acronyms: "an HDMI cable", "a TV").
+_VOWEL_SOUND_LETTERS = frozenset("AEFHILMNORSX")
+# Vowel-letter words spoken with a consonant sound, and silent-h words.
+_A_PREFIXES = ("uni", "use", "usb", "uten", "eu", "one", "once", "ewe")
+_AN_PREFIXES = ("hour", "honest", "honor", "honour", "heir")
+
+
+def indefinite_article(label: str) -> str:
+    """``"a"`` or ``"an"`` for ``label`` by its first sound (simple spelling rules, acronyms by letter name)."""
+    text = label_text(label)
+    if not text:
+        return "a"
+    word = text.split(" ")[0]
+    if len(word) > 1 and word.isupper():
+        return "an" if word[0] in _VOWEL_SOUND_LETTERS else "a"
+    lower = word.lower()
+    if lower.startswith(_AN_PREFIXES):
+        return "an"
+    if lower.startswith(_A_PREFIXES):
+        return "a"
+    return "an" if lower[0] in "aeiou" else "a"
+
+
+_A_BEFORE = re.compile(r"\b([Aa]) (\w[\w-]*)")
+
+
+def with_articles(text: str) -> str:
+    """``text`` with each article "a" corrected to "an" before a vowel sound (``"a orange cup"`` →
+    ``"an orange cup"``); other words are untouched."""
+    def fix(match: re.Match[str]) -> str:
+        article = indefinite_article(match.group(2))
+        if match.group(1) == "A":
+            article = article.capitalize()
+        return f"{article} {match.group(2)}"
+
+    return _A_BEFORE.sub(fix, text)

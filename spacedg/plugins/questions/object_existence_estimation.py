@@ -65,7 +65,7 @@ from spacedg.data.visibility import (
     VisibilityThresholds,
 )
 from spacedg.plugins.hookspecs import hookimpl
-from spacedg.plugins.questions.language import label_text
+from spacedg.plugins.questions.language import indefinite_article, label_text
 from spacedg.plugins.questions.records import make_record
 from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
 
@@ -76,7 +76,6 @@ __all__ = [
     "TEMPLATES",
     "candidates",
     "generate",
-    "indefinite_article",
     "make_family",
     "render_question",
 ]
@@ -91,29 +90,6 @@ TEMPLATES: tuple[str, ...] = (
     "Does the image contain {article} {label}?",
     "Check if {article} {label} is present in this picture.",
 )
-
-# Letters whose spoken name starts with a vowel sound (acronyms: "an HDMI cable", "a TV").
-_VOWEL_SOUND_LETTERS = frozenset("AEFHILMNORSX")
-# Vowel-letter words spoken with a consonant sound, and silent-h words.
-_A_PREFIXES = ("uni", "use", "usb", "uten", "eu", "one", "once", "ewe")
-_AN_PREFIXES = ("hour", "honest", "honor", "honour", "heir")
-
-
-def indefinite_article(label: str) -> str:
-    """``"a"`` or ``"an"`` for ``label`` by its first sound (simple spelling rules, acronyms by letter name)."""
-    text = label_text(label)
-    if not text:
-        return "a"
-    word = text.split(" ")[0]
-    if len(word) > 1 and word.isupper():
-        return "an" if word[0] in _VOWEL_SOUND_LETTERS else "a"
-    lower = word.lower()
-    if lower.startswith(_AN_PREFIXES):
-        return "an"
-    if lower.startswith(_A_PREFIXES):
-        return "a"
-    return "an" if lower[0] in "aeiou" else "a"
-
 
 def render_question(template: int, label: str) -> str:
     """The question text of template index ``template`` for ``label``."""
