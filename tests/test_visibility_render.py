@@ -205,3 +205,37 @@ def test_cache_round_trip_and_invalidation(room_views: Scene, tmp_path, monkeypa
     covisibility_cache_path(room_views, tmp_path).write_bytes(b"not an npz")
     _, m3 = load_or_compute_covisibility(room_views, tmp_path, progress=False)
     assert len(calls) == 4 and np.array_equal(m3, m)
+
+
+def test_torch_backend_agrees_with_compiled(small_room: Scene) -> None:
+    """The readable torch path (what runs on CUDA) gives the same visibility and covisibility
+    as the compiled CPU path, up to pixels on object edges."""
+    names = list(small_room.views)[:3]
+    cpu = compute_visibility(small_room, names, image_size=(80, 60), backend="cpu", progress=False)
+    tch = compute_visibility(small_room, names, image_size=(80, 60), backend="torch", progress=False)
+    for name in names:
+        for iid, v in cpu[name].items():
+            w = tch[name][iid]
+            assert abs(v.visible_pixels - w.visible_pixels) <= max(0.05 * v.visible_pixels, 2 * 64)  # 64 full-res px per 80×60 px
+            assert (v.visible_pixels == 0) == (w.visible_pixels == 0) or max(v.visible_pixels, w.visible_pixels) <= 2 * 64
+    _, m_cpu = covisibility_matrix(small_room, names, image_size=(40, 30), backend="cpu", progress=False)
+    _, m_tch = covisibility_matrix(small_room, names, image_size=(40, 30), backend="torch", progress=False)
+    assert np.abs(m_cpu - m_tch).max() < 0.03
+
+
+def test_visibility_cache_round_trip(small_room: Scene, tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from spacedg.data import visibility as vis_mod
+
+    views = {name: small_room.views[name] for name in list(small_room.views)[:2]}
+    scene = Scene(small_room.id, small_room.gaussians, views, small_room.instances, small_room.up)
+    first = vis_mod.load_or_compute_visibility(scene, tmp_path, image_size=(40, 30), progress=False)
+    monkeypatch.setattr(vis_mod, "compute_visibility", lambda *a, **k: pytest.fail("cache not used"))
+    assert vis_mod.load_or_compute_visibility(scene, tmp_path, image_size=(40, 30), progress=False) == first
+    moved = dict(views)
+    first_view = next(iter(moved))
+    pose = np.array(moved[first_view].cam_to_world, dtype=np.float64)
+    pose[0, 3] += 0.1
+    moved[first_view] = moved[first_view].with_pose(pose)
+    with pytest.raises(pytest.fail.Exception, match="cache not used"):  # a moved view invalidates the entry
+        vis_mod.load_or_compute_visibility(Scene(scene.id, scene.gaussians, moved, scene.instances, scene.up), tmp_path,
+                                           image_size=(40, 30), progress=False)
