@@ -505,3 +505,24 @@ def test_registered(monkeypatch: pytest.MonkeyPatch, module: object, needs: set,
         ]
     finally:
         reset_registry()
+
+
+def test_label_only_questions_skip_confusable_labels():
+    """Counting "lamp" or answering "no lamp" while a "floor lamp" is in view is ambiguous: skipped."""
+    from qa_scenes import CLEAR, build, camera, obj
+    from spacedg.data.view_sampling import confusable, head_noun
+    from spacedg.plugins.questions import object_counting
+
+    assert head_noun("Floor_Lamp") == "lamp" and head_noun("pair of shoes") == "pair"
+    assert confusable("lamp", "floor lamp") and not confusable("lamp", "Lamp") and not confusable("chair", "armchair")
+    views = {"both": camera((0, 0, 1.5)), "floor_only": camera((0, -1, 1.5)), "lamp_only": camera((0, 1, 1.5))}
+    insts = [obj(1, "lamp", (2, 0, 0.8)), obj(2, "floor lamp", (2, 1, 0.8)), obj(3, "chair", (3, 0, 0.4))]
+    vis = {"both": {1: CLEAR, 2: CLEAR, 3: CLEAR}, "floor_only": {2: CLEAR, 3: CLEAR}, "lamp_only": {1: CLEAR, 3: CLEAR}}
+    scene = build(insts, views, vis, vocabulary=["lamp", "floor lamp", "chair", "sofa"])
+    counts = {(r.views[0], r.geometry["label"]) for r in object_counting.FAMILY.generate(scene, np.random.default_rng(0))}
+    assert ("both", "lamp") not in counts and ("both", "floor lamp") not in counts
+    assert {("lamp_only", "lamp"), ("floor_only", "floor lamp"), ("both", "chair")} <= counts
+    answers = {(r.views[0], r.geometry["label_key"]): r.answer for seed in range(6)
+               for r in exist.FAMILY.generate(scene, np.random.default_rng(seed))}
+    assert ("floor_only", "lamp") not in answers and ("lamp_only", "floor lamp") not in answers  # "no" would be ambiguous
+    assert answers.get(("both", "lamp")) in (None, "yes") and ("floor_only", "sofa") in answers

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 
@@ -135,3 +136,33 @@ def test_judge_in_generation_drops_and_counts(qa_room_dirs, tmp_path):
         for ref in record.geometry["refs"]:
             assert not same_label_neighbours(index, ref["view"], scene.instance(ref["id"]))
     assert sum(dropped.values()) > 0 and shapes == {((240, 320, 3), "uint8")}
+
+
+def test_qa_preview_sheet_and_cli(qa_room_dirs, tmp_path, capsys):
+    """`spacedg qa preview` draws one panel per picked question (real renders, boxes of named objects)."""
+    import cv2
+
+    from spacedg.data.io import load_scene
+    from spacedg.data.qa_preview import ascii_text, qa_sheet
+
+    room = tmp_path / "room"
+    shutil.copytree(qa_room_dirs[1], room)
+    out = tmp_path / "qa.png"
+    assert main(["qa", "preview", str(room), "--out", str(out), "--n", "3", "--types",
+                 "inter_object_distance,object_counting", "--thumb-width", "96"]) == 0
+    assert "3 questions" in capsys.readouterr().out
+    image = cv2.imread(str(out))
+    assert image is not None and image.shape[1] >= 2 * 96
+    index = build_scene_index(room, progress=False)  # reused: built by the preview
+    assert index.reused
+    record = next(r for r in index.records if r.question_type == "inter_object_distance")
+    scene = load_scene(room)
+    sheet = qa_sheet(scene, [record], thumb_width=96, progress=False)
+    bare = qa_sheet(scene, [dataclasses.replace(record, geometry={**record.geometry, "refs": []})], thumb_width=96, progress=False)
+    drawn = np.any(sheet != bare, axis=2)
+    assert sheet.dtype == np.uint8 and drawn.sum() > 20  # the boxes of the two named objects
+    red, blue = sheet[drawn][:, 0].astype(int), sheet[drawn][:, 2].astype(int)
+    assert np.mean(np.abs(red - blue) > 60) > 0.5  # drawn in red (object 1) and blue (object 2)
+    assert ascii_text("15° – ×") == "15 deg - x"
+    assert main(["qa", "preview", str(room), "--out", str(out), "--types", "no_such_type"]) == 2
+    assert "no questions of type" in capsys.readouterr().err

@@ -26,6 +26,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     build.add_argument("--backend", default="auto", choices=("auto", "cpu", "torch"), help="renderer for visibility/covisibility")
     build.set_defaults(func=_build)
 
+    preview = sub.add_parser("preview", help="PNG sheet of a scene's questions: views, named objects' boxes, text")
+    preview.add_argument("scene", type=Path, help="a native scene folder (its index is built first if missing)")
+    preview.add_argument("--out", type=Path, required=True, help="PNG file to write")
+    preview.add_argument("--n", type=int, default=8, help="number of questions (default 8, spread over question types)")
+    preview.add_argument("--types", default="", help="comma-separated question types to show (default: all)")
+    preview.add_argument("--seed", type=int, default=0, help="which questions are picked (default 0)")
+    preview.add_argument("--thumb-width", type=int, default=256, help="width of each view, pixels")
+    preview.add_argument("--backend", default="auto", choices=("auto", "cpu", "torch"))
+    preview.set_defaults(func=_preview)
+
     stats = sub.add_parser("stats", help="counts per question type, answer balance, blind baseline")
     stats.add_argument("paths", type=Path, nargs="+", help="*.qa.jsonl files, or folders holding them (scene folders work)")
     stats.add_argument("--json", action="store_true", help="print JSON instead of tables")
@@ -95,4 +105,44 @@ def _stats(args: argparse.Namespace) -> int:
     if report["blind_baseline"]:
         print("\nBlind baseline (leave-one-scene-out majority, accuracy %):")
         print(format_table(report["blind_baseline"]))
+    return 0
+
+
+def _pick(records: list, n: int, types: set[str], seed: int) -> list:
+    """Up to ``n`` records, one question type after another (types in name order), seeded."""
+    import numpy as np
+
+    by_type: dict[str, list] = {}
+    for r in records:
+        if not types or r.question_type in types:
+            by_type.setdefault(r.question_type, []).append(r)
+    rng = np.random.default_rng(seed)
+    queues = {t: [rs[i] for i in rng.permutation(len(rs))] for t, rs in sorted(by_type.items())}
+    picked: list = []
+    while len(picked) < n and any(queues.values()):
+        for queue in queues.values():
+            if queue and len(picked) < n:
+                picked.append(queue.pop())
+    return picked
+
+
+def _preview(args: argparse.Namespace) -> int:
+    from spacedg.commands.render import _check_png, write_png_atomic
+    from spacedg.data.io import load_scene
+    from spacedg.data.qa_index import build_scene_index
+    from spacedg.data.qa_preview import qa_sheet
+
+    _check_png("--out", args.out)
+    if args.n < 1 or args.thumb_width < 32:
+        raise InvalidDataError(f"--n must be >= 1 and --thumb-width >= 32, got {args.n} and {args.thumb_width}")
+    types = {t.strip() for t in args.types.split(",") if t.strip()}
+    index = build_scene_index(args.scene, backend=args.backend)
+    records = _pick(index.records, args.n, types, args.seed)
+    if not records:
+        known = sorted({r.question_type for r in index.records})
+        raise InvalidDataError(f"{args.scene}: no questions of type(s) {sorted(types)}; the index has {known}")
+    scene = load_scene(args.scene)
+    sheet = qa_sheet(scene, records, thumb_width=args.thumb_width, backend=args.backend)
+    write_png_atomic(args.out, sheet[:, :, ::-1], "--out")
+    print(f"wrote {args.out} ({len(records)} questions, {sheet.shape[1]}x{sheet.shape[0]} px)")
     return 0

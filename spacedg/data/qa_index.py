@@ -19,7 +19,8 @@ Building one scene (:func:`build_scene_index`):
 
 An index is **reused** when its meta file's key matches: the key hashes the index version,
 the build config, the SHA-256 of ``scene.json`` (views, poses, instances) and the selected
-families with the distributions and versions that provide them (and the judge's name). Any
+families with the distributions and versions that provide them and the SHA-256 of each
+family's module source (and the judge's name). Any
 change rebuilds it; ``force=True`` always does.
 """
 
@@ -47,7 +48,7 @@ __all__ = [
 ]
 
 #: Bump when the index layout or the build procedure changes (part of the key).
-QA_INDEX_VERSION = 1
+QA_INDEX_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -237,11 +238,25 @@ def _index_key(scene_json: Path, config: QABuildConfig, families: Iterable[Any],
     fams = []
     for fam in families:
         origin = fam.origin
-        fams.append([fam.name, getattr(origin, "distribution", None), getattr(origin, "version", None)])
+        fams.append([fam.name, getattr(origin, "distribution", None), getattr(origin, "version", None), _module_digest(fam)])
     judge_name = None if judge is None else getattr(judge, "__name__", type(judge).__name__)
     head = {"version": QA_INDEX_VERSION, "config": config.to_dict(), "families": fams, "judge": judge_name}
     digest.update(json.dumps(head, sort_keys=True).encode())
     return digest.hexdigest()
+
+
+def _module_digest(family: Any) -> str | None:
+    """SHA-256 of the source file of the family's module (so editing a family rebuilds indexes
+    even without a version bump); ``None`` when it has no file."""
+    import importlib.util
+
+    raw = getattr(family.generate, "__wrapped__", family.generate)
+    raw = getattr(raw, "func", raw)  # functools.partial
+    module = getattr(raw, "__module__", None)
+    spec = importlib.util.find_spec(module) if module else None
+    if spec is None or not spec.origin or not Path(spec.origin).is_file():
+        return None
+    return hashlib.sha256(Path(spec.origin).read_bytes()).hexdigest()
 
 
 def _read_meta(path: Path) -> dict[str, Any] | None:

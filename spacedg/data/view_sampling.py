@@ -8,6 +8,8 @@
 - :func:`split_across_views`: the three-object rule (the two views together show the three
   objects; neither view shows all three).
 - :func:`description_clash` / :func:`same_label_neighbours`: the description ambiguity filter.
+- :func:`confusable`: two labels with one head noun ("lamp" / "floor lamp"); label-only
+  questions (counting, existence) skip views that show the other one.
 
 Anchor policy: a view **may** appear in several pairs (scenes with few views would otherwise
 yield few questions), but :func:`sample_pairs` returns pairs in a seeded *round-robin over
@@ -35,7 +37,7 @@ from spacedg.errors import InvalidDataError, ParameterError
 
 __all__ = [
     "VisibilityIndex", "PairRules", "ViewPair", "sample_pairs", "split_across_views",
-    "description_key", "label_key", "same_label_neighbours", "description_clash",
+    "description_key", "label_key", "head_noun", "confusable", "same_label_neighbours", "description_clash",
     "TRANSLATION_PAIRS", "ROTATION_PAIRS", "OBJECT_PAIRS", "OBJECT_DIRECTION_PAIRS", "LOW_COVIS_DIRECTION_PAIRS",
 ]
 
@@ -43,6 +45,19 @@ __all__ = [
 def label_key(label: str) -> str:
     """Labels compare case-, space- and underscore-insensitively (``"Coffee_table"`` = ``"coffee table"``)."""
     return " ".join(str(label).replace("_", " ").lower().split())
+
+
+def head_noun(label: str) -> str:
+    """The noun a label names: its last word, or the word before " of " (``"floor lamp"`` → ``"lamp"``,
+    ``"pair of shoes"`` → ``"pair"``)."""
+    words = label_key(label).partition(" of ")[0].split()
+    return words[-1] if words else ""
+
+
+def confusable(label_a: str, label_b: str) -> bool:
+    """True for two different labels with the same head noun (``"lamp"`` / ``"floor lamp"``,
+    ``"table"`` / ``"coffee table"``): a viewer asked about one may reasonably count the other."""
+    return label_key(label_a) != label_key(label_b) and head_noun(label_a) == head_noun(label_b)
 
 
 def description_key(text: str) -> str:

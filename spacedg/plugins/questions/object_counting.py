@@ -4,7 +4,9 @@ Rule (SPEC-QA, type 11): for one view and one label, the answer is the number of
 that label that are **clearly visible** in the view (:func:`spacedg.data.visibility.classify`
 → ``VISIBLE``). The (view, label) pair is skipped when any instance of the label is in the
 grey zone (``PARTIAL``) there, since a viewer could reasonably count it or not; instances with
-no visible pixel (``HIDDEN``) are simply not counted. Only counts ≥ 1 are asked (a count of 0
+no visible pixel (``HIDDEN``) are simply not counted. The pair is also skipped when the view
+shows (any pixel) an instance of a *confusable* label, one with the same head noun
+(:func:`~spacedg.data.view_sampling.confusable`: counting "lamp" next to a "floor lamp"). Only counts ≥ 1 are asked (a count of 0
 would be an existence question about an absent label).
 
 Labels are grouped case- and underscore-insensitively (``"Chair"``, ``"chair"`` and
@@ -45,6 +47,7 @@ import numpy as np
 
 from spacedg.data.qa import QARecord
 from spacedg.data.scene import Instance, Scene
+from spacedg.data.view_sampling import confusable
 from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.language import label_text, plural
@@ -99,9 +102,20 @@ def _candidates(scene: Scene, thresholds: VisibilityThresholds) -> list[_Candida
             counted = tuple(inst for inst, c in zip(members, classes) if c is VisibilityClass.VISIBLE)
             if not counted:
                 continue
+            if any(
+                confusable(other.label, members[0].label) and inst_vis_pixels(other, view) > 0
+                for other in scene.instances
+            ):
+                continue  # e.g. counting "lamp" while a "floor lamp" is in view: ambiguous
             hidden = tuple(inst for inst, c in zip(members, classes) if c is VisibilityClass.HIDDEN)
             out.append(_Candidate(view, members[0].label, counted, hidden, (cam.width, cam.height), thresholds.pixels_for(area)))
     return out
+
+
+def inst_vis_pixels(inst: Instance, view: str) -> int:
+    """Visible pixels of ``inst`` in ``view`` (0 without a record)."""
+    vis = inst.visibility.get(view)
+    return 0 if vis is None else vis.visible_pixels
 
 
 def _vis_entry(inst: Instance, view: str) -> dict[str, Any]:

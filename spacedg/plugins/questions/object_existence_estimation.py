@@ -7,7 +7,9 @@ For one view and one label the answer is (SPEC-QA, type 10; classes from
   view (other instances of the label may be partial or hidden: there still is one);
 - ``"no"`` when **no** instance of the label has a single visible pixel there (all
   ``HIDDEN``, or the label has no instance in the scene at all);
-- skipped (grey zone) when none is clearly visible but some instance is ``PARTIAL``.
+- skipped (grey zone) when none is clearly visible but some instance is ``PARTIAL``, and a
+  "no" is skipped when the view shows an instance of a *confusable* label (same head noun,
+  :func:`~spacedg.data.view_sampling.confusable`: "Is there a table?" next to a coffee table).
 
 Labels are grouped by :func:`~spacedg.data.view_sampling.label_key` (case, space and
 underscore insensitive). Candidate labels are the scene's instance labels (question text: the
@@ -58,7 +60,7 @@ import numpy as np
 
 from spacedg.data.qa import QARecord
 from spacedg.data.scene import Instance, Scene
-from spacedg.data.view_sampling import VisibilityIndex, label_key
+from spacedg.data.view_sampling import VisibilityIndex, confusable, label_key
 from spacedg.data.visibility import (
     DEFAULT_THRESHOLDS,
     VisibilityClass,
@@ -136,6 +138,8 @@ def candidates(scene: Scene, index: VisibilityIndex) -> tuple[list[_Candidate], 
             if VisibilityClass.VISIBLE in classes:
                 pos.append(_Candidate(view, key, text, source, members, "yes"))
             elif all(c is VisibilityClass.HIDDEN for c in classes):
+                if any(confusable(index.instance(i).label, text) for i in index.seen[view]):
+                    continue  # "no table" while a coffee table is in view: ambiguous
                 neg.append(_Candidate(view, key, text, source, members, "no"))
             # else: grey zone (some partial, none clearly visible) → skipped
     return pos, neg
