@@ -92,3 +92,39 @@ def test_lazy_loader_result_is_validated():
     scene = Scene("s1", lambda: _gaussians(ids=(0, 7)), _views(), [_inst(0)])
     with pytest.raises(InvalidDataError, match=r"instance ids \[7\]"):
         scene.gaussians
+
+
+def test_covisibility_is_validated_kept_and_pickled():
+    from spacedg.data.scene import ViewCovisibility
+    from spacedg.errors import ParameterError
+
+    views = {**_views(), "b": Camera(100, 100, 50, 50, 100, 100, look_at([0, 1, 1], [1, 0, 1], [0, 0, 1]))}
+    names = tuple(views)
+    cov = ViewCovisibility(names, np.eye(len(names)) * 0.5 + 0.25)
+    scene = Scene("s", _gaussians(), views, [_inst(0), _inst(1, "table")], covisibility=cov)
+    assert scene.with_instances(scene.instances).covisibility is cov
+    assert pickle.loads(pickle.dumps(scene)).covisibility.between(names[0], names[-1]) == pytest.approx(0.25)
+    with pytest.raises(ParameterError, match="no view 'zz'"):
+        cov.index("zz")
+    with pytest.raises(InvalidDataError, match="shape"):
+        ViewCovisibility(names, np.ones((1, 1)))
+    with pytest.raises(InvalidDataError, match=r"\[0, 1\]"):
+        ViewCovisibility(names, np.full((len(names),) * 2, np.nan))
+    with pytest.raises(InvalidDataError, match="lacks view"):
+        Scene("s", _gaussians(), views, covisibility=ViewCovisibility(names[:1], np.ones((1, 1))))
+
+
+def test_transformed_moves_everything_rigidly_and_stays_lazy():
+    calls: list = []
+    scene = Scene("s", functools.partial(_load_counting, calls), _views(), [_inst(0), _inst(1, "table")], up=(0, 0, 1))
+    angle = np.radians(30)
+    rot = np.array([[1, 0, 0], [0, np.cos(angle), -np.sin(angle)], [0, np.sin(angle), np.cos(angle)]])
+    moved = scene.transformed(rot, [1.0, 2.0, 3.0])
+    assert calls == []  # Gaussians still not loaded
+    assert np.allclose(moved.up, rot @ [0, 0, 1])
+    name = next(iter(_views()))
+    assert np.allclose(moved.views[name].cam_to_world[:3, 3], rot @ scene.views[name].cam_to_world[:3, 3] + [1, 2, 3])
+    assert np.allclose(moved.instances[0].box.center, rot @ scene.instances[0].box.center + [1, 2, 3])
+    assert np.allclose(moved.gaussians.means, scene.gaussians.means @ rot.T + [1, 2, 3], atol=1e-5)
+    with pytest.raises(InvalidDataError):
+        scene.transformed(np.diag([1.0, 1.0, -1.0]), [0, 0, 0])  # a reflection is not a rigid motion
