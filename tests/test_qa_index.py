@@ -166,3 +166,11 @@ def test_qa_preview_sheet_and_cli(qa_room_dirs, tmp_path, capsys):
     assert ascii_text("15° – ×") == "15 deg - x"
     assert main(["qa", "preview", str(room), "--out", str(out), "--types", "no_such_type"]) == 2
     assert "no questions of type" in capsys.readouterr().err
+
+
+def test_index_api_is_importable_from_the_records_module():
+    import spacedg.data.qa as qa
+
+    assert qa.build_scene_index is build_scene_index and qa.QABuildConfig is QABuildConfig
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        qa.nope  # noqa: B018

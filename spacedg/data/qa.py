@@ -22,6 +22,10 @@ numpy scalars → Python numbers; NaN/Inf and non-string keys rejected), so
 ``QARecord.from_dict(record.to_dict()) == record`` and ``from_dict(d).to_dict() == d`` for any
 ``d`` produced by ``to_dict``.
 
+The per-scene question index (build, reuse, JSONL files) is :mod:`spacedg.data.qa_index`;
+its names (``build_scene_index``, ``QABuildConfig``, ``read_index``, …) can also be imported
+from this module.
+
 Record ids are deterministic: :func:`make_record_id` gives
 ``"{scene_id}/{question_type}/{sub_question_type}/{hash}"`` with ``hash`` the first 12 hex
 digits of the SHA-1 of the views and a family-chosen key (instances, template, …).
@@ -274,3 +278,15 @@ def _coerce(enum_cls: Any, value: object, where: str, name: str) -> Any:
     except ValueError:
         allowed = ", ".join(m.value for m in enum_cls)
         raise InvalidDataError(f"{where}: {name} {value!r} is not one of {allowed}") from None
+
+
+#: The per-scene question index API, importable from here too (it lives in ``spacedg.data.qa_index``).
+_INDEX_NAMES = frozenset({"QABuildConfig", "SceneQA", "build_scene_index", "read_index", "prepare_scene", "generate_records", "index_paths"})
+
+
+def __getattr__(name: str) -> Any:
+    if name in _INDEX_NAMES:
+        from spacedg.data import qa_index  # lazy: qa_index imports this module
+
+        return getattr(qa_index, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
