@@ -108,3 +108,24 @@ def test_answer_balance_and_blind_baseline(records_by_scene):
     overall = blind_baseline(records_by_scene)[-1]
     assert overall["question_type"] == "ALL"
     assert overall["letter_prior"] <= overall["chance"] + 5.0, overall
+
+
+def test_questions_about_a_real_splat_object(shared_splats):
+    """A real .splat object (the shared teapot) placed in a room becomes an instance that questions
+    name, measure and locate like the procedural furniture; sizes are its box's."""
+    from spacedg.data.synthetic import CaptureConfig, ExternalObject, RoomConfig, generate_room
+
+    teapot = ExternalObject.from_splat(shared_splats / "teapot" / "teapot_10k.splat", size_m=0.35)
+    room = generate_room(5, RoomConfig(gaussians=30_000, capture=CaptureConfig(320, 240, 24, 32), external=(teapot,)))
+    config = QABuildConfig(seed=0, per_sub_type=40)
+    scene = prepare_scene(room, None, config, progress=False)
+    ids = {inst.id for inst in scene.instances if inst.label == "teapot"}
+    assert ids
+    records = generate_records(scene, config)
+    naming = [r for r in records if any(ref["id"] in ids for ref in r.geometry.get("refs", []))]
+    assert len({r.question_type for r in naming}) >= 3
+    for r in naming:
+        if r.question_type == "object_bounding_size_estimation":
+            box = scene.instance(r.geometry["object"]["id"]).box
+            assert list(r.answer) == [round(v, 2) for v in sorted(box.extents)]
+            assert max(r.answer) == pytest.approx(0.35, abs=0.011)
