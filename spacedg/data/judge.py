@@ -54,13 +54,10 @@ def parse_verdict(reply: object) -> bool:
 
 
 def render_clean_view(scene: Scene, view: str) -> np.ndarray:
-    """The clean sRGB image of ``view`` at its full size, uint8 (H, W, 3)."""
-    from spacedg.render.colour_cpu import encode_srgb_u8
-    from spacedg.render.renderer import render
+    """The clean sRGB image of ``view`` at its full size, uint8 (H, W, 3): the sample pipeline's clean render."""
+    from spacedg.data.pipeline import degrade
 
-    frame = render(scene.gaussians, scene.camera(view), outputs="rgb")
-    assert frame.rgb is not None
-    return encode_srgb_u8(np.ascontiguousarray(frame.rgb, dtype=np.float32))
+    return degrade(scene, [view], None).images[0]
 
 
 class DescriptionJudge:

@@ -62,16 +62,14 @@ def _text_block(lines: Sequence[str], width: int) -> np.ndarray:
 
 
 def render_thumbnail(scene: Scene, view: str, width: int, backend: str = "auto") -> tuple[np.ndarray, Camera]:
-    """The clean sRGB view at ``width`` px wide (uint8 H×W×3) and the camera it was rendered with."""
-    from spacedg.render.colour_cpu import encode_srgb_u8
-    from spacedg.render.renderer import render
+    """The clean sRGB view at ``width`` px wide (uint8 H×W×3, the sample pipeline's clean render)
+    and the camera it was rendered with."""
+    from spacedg.data.pipeline import PipelineOptions, degrade
 
     full = scene.camera(view)
     height = max(1, round(full.height * width / full.width))
-    cam = full.resized(width, height)
-    frame = render(scene.gaussians, cam, outputs="rgb", backend=backend)
-    rgb = frame.rgb if isinstance(frame.rgb, np.ndarray) else frame.rgb.detach().cpu().numpy()  # type: ignore[union-attr]
-    return encode_srgb_u8(np.ascontiguousarray(rgb, dtype=np.float32)), cam
+    image = degrade(scene, [view], None, options=PipelineOptions(image_size=(width, height), backend=backend)).images[0]
+    return image, full.resized(width, height)
 
 
 def _draw_box(image: np.ndarray, cam: Camera, corners: np.ndarray, colour: tuple[int, int, int], tag: str) -> None:
