@@ -44,7 +44,7 @@ from spacedg.plugins.specs import AnswerType
 
 __all__ = [
     "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "prepare_scene", "generate_records",
-    "index_paths", "build_scene_index", "read_index", "truth_key",
+    "index_paths", "build_scene_index", "read_index", "truth_key", "index_is_current",
 ]
 
 #: Bump when the index layout or the build procedure changes (part of the key).
@@ -284,11 +284,10 @@ def build_scene_index(
     scene_dir = Path(scene_dir)
     scene = load_scene(scene_dir)
     scene_json = scene_dir / "scene.json" if scene_dir.is_dir() else scene_dir
-    families = _families(config.families)
-    key = _index_key(scene_json, config, families, judge)
+    key = _index_key(scene_json, config, _families(config.families), judge)
     jsonl, meta_path = index_paths(scene.id, out_dir if out_dir is not None else scene_json.parent)
-    meta = _read_meta(meta_path) if not force else None
-    if meta is not None and meta.get("key") == key and jsonl.is_file():
+    if not force and _is_current(jsonl, meta_path, key):
+        meta = _read_meta(meta_path) or {}
         return SceneQA(scene.id, jsonl, read_index(jsonl), reused=True, seconds=dict(meta.get("seconds", {})))
     timings: dict[str, float] = {}
     prepared = prepare_scene(scene, scene_json.parent / "cache", config, backend=backend, progress=progress, timings=timings)
@@ -307,6 +306,23 @@ def build_scene_index(
     }
     atomic_write_bytes(meta_path, (json.dumps(meta, indent=2) + "\n").encode("utf-8"))
     return SceneQA(scene.id, jsonl, records, reused=False, seconds=timings, dropped=dropped)
+
+
+def _is_current(jsonl: Path, meta_path: Path, key: str) -> bool:
+    meta = _read_meta(meta_path)
+    return meta is not None and meta.get("key") == key and jsonl.is_file()
+
+
+def index_is_current(scene_dir: str | Path, config: QABuildConfig = QABuildConfig(), out_dir: str | Path | None = None) -> bool:
+    """Whether ``build_scene_index(scene_dir, config, out_dir=out_dir)`` would reuse its index
+    (reads ``scene.json`` and the meta file only: nothing is rendered)."""
+    from spacedg.data.io import load_scene
+
+    scene_dir = Path(scene_dir)
+    scene_json = scene_dir / "scene.json" if scene_dir.is_dir() else scene_dir
+    scene_id = load_scene(scene_dir).id
+    jsonl, meta_path = index_paths(scene_id, out_dir if out_dir is not None else scene_json.parent)
+    return _is_current(jsonl, meta_path, _index_key(scene_json, config, _families(config.families), None))
 
 
 def read_index(path: str | Path) -> list[QARecord]:

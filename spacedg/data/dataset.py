@@ -1,0 +1,271 @@
+"""``SpaceDGDataset``: degraded multi-view question samples rendered online, for PyTorch.
+
+A map-style :class:`torch.utils.data.Dataset`. Its length and every item are a pure function of
+the arguments (the seed, the scenes and their question indexes), whatever process or worker
+renders them.
+
+- **Scenes**: native scene folders (``scenes=[...]``), or by default the built-in procedural
+  rooms (:func:`~spacedg.data.scene_store.builtin_scene_dirs`, generated on first use). Each
+  scene goes to one split (:func:`~spacedg.data.scene_store.assign_splits`), so ``train``,
+  ``val`` and ``bench`` never share a scene.
+- **Questions**: each scene's question index (:mod:`spacedg.data.qa_index`), built on first use
+  in a *spawned* process; optionally restricted to ``question_types``.
+- **Degradations**:
+  - ``train`` / ``val``: one item per question. The item is clean with probability
+    ``clean_prob``, otherwise one chain drawn uniformly from ``degradations``. Names without a
+    preset take ``severity``, which is ``"bench"`` (the paper's table), ``"1"``–``"5"``, or
+    ``"random"`` (a seeded severity per item). :meth:`set_epoch` redraws the choices per epoch.
+  - ``bench``: every question under clean and under each chain of ``degradations`` (default:
+    the paper's nine at ``bench``), i.e. ``questions × 10`` items.
+  - ``degradations`` also accepts ``"all"`` (every registered degradation, third-party
+    included), mixture recipes (``"night_capture"``), presets (``"haze:3"``) and chains
+    (``"haze+low_res"``).
+- **Item**: a dict with ``images`` (uint8 tensor ``V×3×H×W``, RGB), ``question``, ``options``,
+  ``answer``, ``question_type``, ``sub_question_type``, ``task_group``, ``answer_type``,
+  ``degradation`` (provenance list), ``degradation_type`` (``"ori"`` for clean, else the chain's
+  name), ``scene_id``, ``views``, ``record_id``, ``index``.
+- **Workers**: the dataset object holds only paths and small records, so it pickles cheaply.
+  Scenes load lazily inside each worker into a byte-bounded LRU cache. Construction never
+  renders (indexes are built in a spawned process), so no numba or CUDA state exists before a
+  DataLoader forks.
+
+:func:`chat_collate` turns a batch into chat messages for a transformers processor.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch.utils.data import Dataset
+
+from spacedg.data.pipeline import BENCH_DEGRADATIONS, MIXTURES, PipelineOptions, derive_seed, parse_chain
+from spacedg.data.qa import QARecord
+from spacedg.data.qa_index import QABuildConfig, index_paths, read_index
+from spacedg.data.scene_store import SPLITS, ByteLRU, assign_splits, builtin_scene_dirs, ensure_indexes, scene_dirs_of
+from spacedg.errors import InvalidDataError, ParameterError
+
+__all__ = ["SpaceDGDataset", "chat_collate", "format_question", "CLEAN"]
+
+#: ``degradation_type`` of a clean sample (the VLMEvalKit / SpaceDG convention).
+CLEAN = "ori"
+_SEVERITIES = ("bench", "1", "2", "3", "4", "5", "random")
+
+
+def format_question(question: str, options: Sequence[str]) -> str:
+    """The question text with its option lines (MCQ), as a model sees it."""
+    return question if not options else question + "\n" + "\n".join(options)
+
+
+class SpaceDGDataset(Dataset):
+    """Online degraded SpaceDG samples (see the module docstring).
+
+    Args:
+        split: ``"train"``, ``"val"`` or ``"bench"``.
+        degradations: chains (names, ``name:preset``, mixtures, ``a+b``), or ``"all"``; ``None``
+            means the nine paper degradations for ``bench`` and clean only for ``train``/``val``.
+        scenes: scene folders (or folders of them); default: the built-in rooms.
+        question_types: keep only these families (default: all).
+        severity: preset for chains named without one: ``"bench"``, ``"1"``–``"5"`` or ``"random"``.
+        clean_prob: probability of a clean item in ``train``/``val`` (ignored by ``bench``).
+        image_size: ``(width, height)`` to render at, or ``None`` for the views' own size.
+        seed: master seed (question indexes, degradation choices and noise).
+        cache: byte budget of the per-worker scene cache (Gaussians), default 2 GiB.
+        qa_config: how the question indexes are built (default: ``QABuildConfig(seed=seed)``).
+        split_fractions: ``(val, bench)`` share of scenes.
+        on_bad_scene: ``"raise"`` (default) or ``"skip"`` a scene that cannot be read or indexed
+            (skipped scenes are named in a warning and in :attr:`skipped`).
+        backend, device: renderer backend and device (``"auto"``, ``"cpu"``, ``"torch"``).
+        builtin_rooms: how many built-in rooms when ``scenes`` is not given.
+    """
+
+    def __init__(
+        self,
+        split: str = "train",
+        degradations: Any = None,
+        *,
+        scenes: Sequence[str | os.PathLike[str]] | None = None,
+        question_types: Sequence[str] | None = None,
+        severity: str = "bench",
+        clean_prob: float = 0.1,
+        image_size: tuple[int, int] | None = None,
+        seed: int = 0,
+        cache: int = 2 << 30,
+        qa_config: QABuildConfig | None = None,
+        split_fractions: tuple[float, float] = (0.1, 0.1),
+        on_bad_scene: str = "raise",
+        backend: str = "auto",
+        device: str | None = None,
+        builtin_rooms: int = 16,
+    ) -> None:
+        if split not in SPLITS:
+            raise ParameterError(f"SpaceDGDataset: split must be one of {list(SPLITS)}, got {split!r}")
+        if severity not in _SEVERITIES:
+            raise ParameterError(f"SpaceDGDataset: severity must be one of {list(_SEVERITIES)}, got {severity!r}")
+        if not 0.0 <= float(clean_prob) <= 1.0:
+            raise ParameterError(f"SpaceDGDataset: clean_prob must be in [0, 1], got {clean_prob!r}")
+        if on_bad_scene not in ("raise", "skip"):
+            raise ParameterError(f"SpaceDGDataset: on_bad_scene must be 'raise' or 'skip', got {on_bad_scene!r}")
+        self.split, self.severity, self.clean_prob, self.seed = split, severity, float(clean_prob), int(seed)
+        self.options = PipelineOptions(image_size=tuple(image_size) if image_size else None, backend=backend, device=device)
+        self.chains = self._chains(degradations)
+        self.qa_config = qa_config or QABuildConfig(seed=self.seed)
+        dirs = scene_dirs_of(scenes) if scenes is not None else builtin_scene_dirs(builtin_rooms)
+        self.skipped: dict[str, str] = {}
+        failed = ensure_indexes(dirs, self.qa_config)
+        if failed:
+            listing = "; ".join(f"{d}: {e}" for d, e in failed.items())
+            if on_bad_scene == "raise":
+                raise InvalidDataError(f"{len(failed)} scene(s) cannot be used: {listing}. Fix or remove them, or pass on_bad_scene='skip'")
+            warnings.warn(f"SpaceDGDataset: skipping {len(failed)} scene(s): {listing}", stacklevel=2)
+            self.skipped = dict(failed)
+            dirs = [d for d in dirs if str(d) not in failed]
+        records_by_dir = {d: self._records(d) for d in dirs}
+        ids = {d: recs[0].scene_id if recs else d.name for d, recs in records_by_dir.items()}
+        splits = assign_splits(list(ids.values()), split_fractions, seed=self.seed)
+        self.scene_dirs: dict[str, Path] = {ids[d]: d for d in dirs if splits[ids[d]] == split}
+        wanted = self._question_types(question_types)
+        self.records: list[QARecord] = [
+            r for d in dirs if splits[ids[d]] == split for r in records_by_dir[d] if wanted is None or r.question_type in wanted
+        ]
+        self.epoch = 0
+        self._cache_bytes = int(cache)
+        self._scenes: ByteLRU | None = None  # created lazily in each worker
+
+    # ------------------------------------------------------------ construction
+    def _chains(self, degradations: Any) -> list[str]:
+        from spacedg.plugins import list_degradations
+
+        if degradations is None:
+            names: list[str] = list(BENCH_DEGRADATIONS) if self.split == "bench" else []
+        elif isinstance(degradations, str) and degradations == "all":
+            names = [spec.name for spec in list_degradations()]
+        elif isinstance(degradations, str):
+            names = [degradations]
+        else:
+            names = [str(d) for d in degradations]
+        chains = []
+        for name in names:
+            chain = name if (":" in name or "+" in name or name in MIXTURES or self.severity == "random") else f"{name}:{self.severity}"
+            parse_chain(chain.replace(":random", ""))  # unknown names and presets fail here, with suggestions
+            chains.append(chain)
+        if len(set(chains)) != len(chains):
+            raise ParameterError(f"SpaceDGDataset: degradations repeat a chain: {chains}")
+        return chains
+
+    def _records(self, folder: Path) -> list[QARecord]:
+        from spacedg.data.io import load_scene
+
+        jsonl, _ = index_paths(load_scene(folder).id, folder)
+        return read_index(jsonl)
+
+    @staticmethod
+    def _question_types(question_types: Sequence[str] | None) -> set[str] | None:
+        if question_types is None:
+            return None
+        from spacedg.plugins import get_question_family
+
+        return {get_question_family(name).name for name in question_types}  # unknown names fail with suggestions
+
+    # ------------------------------------------------------------ indexing
+    def __len__(self) -> int:
+        return len(self.records) * (len(self.chains) + 1 if self.split == "bench" else 1)
+
+    def set_epoch(self, epoch: int) -> None:
+        """Redraw the train/val degradation choices for ``epoch`` (like ``DistributedSampler.set_epoch``)."""
+        self.epoch = int(epoch)
+
+    def plan(self, index: int) -> tuple[QARecord, str | None, str]:
+        """``(record, chain or None for clean, degradation_type)`` of item ``index`` (no rendering)."""
+        if not 0 <= index < len(self):
+            raise IndexError(f"SpaceDGDataset index {index} out of range [0, {len(self)})")
+        if self.split == "bench":
+            record = self.records[index // (len(self.chains) + 1)]
+            k = index % (len(self.chains) + 1)
+            chain = None if k == 0 else self.chains[k - 1]
+        else:
+            record = self.records[index]
+            rng = np.random.default_rng(derive_seed(self.seed, "choice", self.epoch, record.id))
+            chain = None if (not self.chains or rng.random() < self.clean_prob) else self.chains[int(rng.integers(len(self.chains)))]
+            if chain is not None and self.severity == "random" and ":" not in chain and "+" not in chain and chain not in MIXTURES:
+                chain = f"{chain}:{int(rng.integers(1, 6))}"
+        name = CLEAN if chain is None else chain.split(":")[0]
+        return record, chain, name
+
+    # ------------------------------------------------------------ items
+    def _scene(self, scene_id: str) -> Any:
+        from spacedg.data.io import load_scene
+
+        if self._scenes is None:
+            self._scenes = ByteLRU(self._cache_bytes, lambda scene: scene.gaussians.nbytes)
+        folder = self.scene_dirs[scene_id]
+        return self._scenes.get(scene_id, lambda: load_scene(folder))
+
+    def __getitem__(self, index: int) -> dict[str, Any]:
+        from spacedg.data.pipeline import degrade
+
+        record, chain, name = self.plan(index)
+        scene = self._scene(record.scene_id)
+        sample_seed = derive_seed(self.seed, "sample", record.id, name, self.epoch if self.split != "bench" else 0)
+        result = degrade(scene, record.views, chain, seed=sample_seed, options=self.options)
+        images = torch.from_numpy(np.ascontiguousarray(result.images.transpose(0, 3, 1, 2)))
+        return {
+            "images": images,
+            "question": record.question,
+            "options": list(record.options),
+            "answer": list(record.answer) if isinstance(record.answer, tuple) else record.answer,
+            "question_type": record.question_type,
+            "sub_question_type": record.sub_question_type,
+            "task_group": record.task_group.value,
+            "answer_type": record.answer_type.value,
+            "degradation": result.degradations,
+            "degradation_type": name,
+            "scene_id": record.scene_id,
+            "views": list(record.views),
+            "record_id": record.id,
+            "index": int(index),
+            "stats": dict(result.stats),
+        }
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_scenes"] = None  # each worker builds its own cache
+        return state
+
+
+def answer_text(answer: Any) -> str:
+    """An answer as the model should write it inside ``<answer>…</answer>``."""
+    if isinstance(answer, (list, tuple)):
+        return "[" + ", ".join(f"{float(v):.2f}" for v in answer) + "]"
+    return str(answer)
+
+
+def chat_collate(batch: Sequence[dict[str, Any]], *, system_prompt: str | None = None, with_answer: bool = True) -> dict[str, Any]:
+    """A batch of items → chat messages for ``processor.apply_chat_template``.
+
+    Returns ``{"messages": [...], "images": [[uint8 H×W×3 arrays] per sample], "answers": [...],
+    "items": batch}``. Each conversation is a system turn (the SpaceDG answer prompt), a user turn
+    with one ``{"type": "image"}`` entry per view followed by the question (options included),
+    and with ``with_answer`` the assistant turn ``<answer>…</answer>``.
+    """
+    from spacedg.eval.scoring import ANSWER_PROMPT
+
+    prompt = ANSWER_PROMPT if system_prompt is None else system_prompt
+    messages, images, answers = [], [], []
+    for item in batch:
+        views = [img.permute(1, 2, 0).numpy() if isinstance(img, torch.Tensor) else np.asarray(img) for img in item["images"]]
+        content: list[dict[str, Any]] = [{"type": "image"} for _ in views]
+        content.append({"type": "text", "text": format_question(item["question"], item["options"])})
+        conversation = [{"role": "system", "content": [{"type": "text", "text": prompt}]}, {"role": "user", "content": content}]
+        answer = f"<answer>{answer_text(item['answer'])}</answer>"
+        if with_answer:
+            conversation.append({"role": "assistant", "content": [{"type": "text", "text": answer}]})
+        messages.append(conversation)
+        images.append(views)
+        answers.append(answer)
+    return {"messages": messages, "images": images, "answers": answers, "items": list(batch)}
