@@ -232,3 +232,18 @@ def test_scene_camera_lookup_suggests_close_names(small_room) -> None:
     assert small_room.camera(name) is small_room.views[name]
     with pytest.raises(ParameterError, match=rf"no view '{name[:-1]}x'; did you mean"):
         small_room.camera(name[:-1] + "x")
+
+
+def test_render_cache_shares_clean_renders_across_calls(small_room, views, render_log) -> None:
+    """A render cache keeps clean renders between calls (post-render chains reuse them, raster
+    chains never do) and changes no byte."""
+    from spacedg.data.pipeline import frames_nbytes
+    from spacedg.data.scene_store import ByteLRU
+
+    cache = ByteLRU(1 << 30, frames_nbytes)
+    plain = [degrade(small_room, views, chain, seed=4, options=SMALL).images for chain in ("clean", "jpeg_compression", "defocus")]
+    render_log.clear()
+    cached = [degrade(small_room, views, chain, seed=4, options=SMALL, render_cache=cache).images for chain in ("clean", "jpeg_compression", "defocus")]
+    assert all(np.array_equal(a, b) for a, b in zip(plain, cached))
+    assert len(render_log) == 2 * len(views)  # one clean set (shared by jpeg) + one defocus set
+    assert cache.hits == 1 and len(cache) == 1 and cache.bytes > 0

@@ -75,7 +75,8 @@ class SpaceDGDataset(Dataset):
         clean_prob: probability of a clean item in ``train``/``val`` (ignored by ``bench``).
         image_size: ``(width, height)`` to render at, or ``None`` for the views' own size.
         seed: master seed (question indexes, degradation choices and noise).
-        cache: byte budget of the per-worker scene cache (Gaussians), default 2 GiB.
+        cache: byte budget of each worker's LRU cache of scenes (their Gaussians) and clean
+            renders (shared by every chain without a raster step), default 2 GiB.
         qa_config: how the question indexes are built (default: ``QABuildConfig(seed=seed)``).
         split_fractions: ``(val, bench)`` share of scenes.
         on_bad_scene: ``"raise"`` (default) or ``"skip"`` a scene that cannot be read or indexed
@@ -198,13 +199,22 @@ class SpaceDGDataset(Dataset):
         return record, chain, name
 
     # ------------------------------------------------------------ items
+    def _cache(self) -> ByteLRU:
+        """This worker's cache: scenes (sized by their Gaussians) and clean renders (by their arrays)."""
+        if self._scenes is None:
+            from spacedg.data.pipeline import frames_nbytes
+
+            def size_of(value: Any) -> int:
+                return frames_nbytes(value) if isinstance(value, list) else value.gaussians.nbytes
+
+            self._scenes = ByteLRU(self._cache_bytes, size_of)
+        return self._scenes
+
     def _scene(self, scene_id: str) -> Any:
         from spacedg.data.io import load_scene
 
-        if self._scenes is None:
-            self._scenes = ByteLRU(self._cache_bytes, lambda scene: scene.gaussians.nbytes)
         folder = self.scene_dirs[scene_id]
-        return self._scenes.get(scene_id, lambda: load_scene(folder))
+        return self._cache().get(("scene", scene_id), lambda: load_scene(folder))
 
     def __getitem__(self, index: int) -> dict[str, Any]:
         from spacedg.data.pipeline import degrade
@@ -212,7 +222,7 @@ class SpaceDGDataset(Dataset):
         record, chain, name = self.plan(index)
         scene = self._scene(record.scene_id)
         sample_seed = derive_seed(self.seed, "sample", record.id, name, self.epoch if self.split != "bench" else 0)
-        result = degrade(scene, record.views, chain, seed=sample_seed, options=self.options)
+        result = degrade(scene, record.views, chain, seed=sample_seed, options=self.options, render_cache=self._cache())
         images = torch.from_numpy(np.ascontiguousarray(result.images.transpose(0, 3, 1, 2)))
         return {
             "images": images,

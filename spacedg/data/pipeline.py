@@ -299,8 +299,13 @@ def _cameras(scene: Scene, views: Sequence[str], options: PipelineOptions) -> li
 
 
 def _render_group(
-    scene: Scene, cameras: Sequence[Any], raster: Sequence[ResolvedDegradation], outputs: frozenset[str], options: PipelineOptions
+    scene: Scene, cameras: Sequence[Any], raster: Sequence[ResolvedDegradation], outputs: frozenset[str], options: PipelineOptions,
+    views: Sequence[str] = (), render_cache: Any = None,
 ) -> list[Frame]:
+    if render_cache is not None and not raster:
+        # clean renders are the same for every sample of these views: share them across calls
+        key = ("clean-render", scene.id, tuple(views), options.image_size, tuple(sorted(outputs)), options.backend, str(options.device))
+        return render_cache.get(key, lambda: _render_group(scene, cameras, raster, outputs, options))
     frames = []
     for index, camera in enumerate(cameras):
         request = RenderRequest(camera, outputs=outputs)
@@ -378,6 +383,7 @@ def degrade_variants(
     seed: int = 0,
     options: PipelineOptions | None = None,
     progress: bool = False,
+    render_cache: Any = None,
 ) -> list[DegradedViews]:
     """Images of ``views`` under each chain of ``chains``, sharing renders between chains.
 
@@ -389,6 +395,9 @@ def degrade_variants(
         seed: the sample's seed (see the module docstring).
         options: rendering and resolving options.
         progress: show a progress bar over the render groups (for long runs such as a gallery).
+        render_cache: optional cache with ``get(key, make)`` (e.g.
+            :class:`~spacedg.data.scene_store.ByteLRU` with :func:`frames_nbytes`) that keeps the
+            **clean** renders (chains without a raster step) across calls; frames are read-only.
 
     Returns:
         One :class:`DegradedViews` per chain, in order.
@@ -410,7 +419,7 @@ def degrade_variants(
         raster = _by_stage(resolved[members[0]], Stage.RASTER)
         needs = frozenset({"rgb"}).union(*(step.spec.needs for i in members for step in _by_stage(resolved[i], Stage.LINEAR)))
         t0 = time.perf_counter()
-        frames = _render_group(scene, cameras, raster, needs, options)
+        frames = _render_group(scene, cameras, raster, needs, options, views, render_cache)
         render_ms = (time.perf_counter() - t0) * 1e3
         far_depth = max(surface_far_depth(f.depth, f.alpha) for f in frames) if "depth" in needs else None
         for i in members:
@@ -429,10 +438,22 @@ def degrade_variants(
 
 
 def degrade(
-    scene: Scene, views: Sequence[str], degradations: Any = None, seed: int = 0, options: PipelineOptions | None = None
+    scene: Scene, views: Sequence[str], degradations: Any = None, seed: int = 0, options: PipelineOptions | None = None,
+    render_cache: Any = None,
 ) -> DegradedViews:
     """Images of ``views`` under one chain of ``degradations`` (see :func:`degrade_variants`)."""
-    return degrade_variants(scene, views, [degradations], seed, options)[0]
+    return degrade_variants(scene, views, [degradations], seed, options, render_cache=render_cache)[0]
+
+
+def frames_nbytes(frames: Sequence[Frame]) -> int:
+    """Bytes held by the arrays of ``frames`` (for byte-bounded render caches)."""
+    total = 0
+    for frame in frames:
+        for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids", "valid"):
+            array = getattr(frame, name, None)
+            if isinstance(array, np.ndarray):
+                total += array.nbytes
+    return total
 
 
 def degrade_image(
