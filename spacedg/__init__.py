@@ -44,10 +44,13 @@ from spacedg import render  # the package is callable: spacedg.render(gaussians,
 from spacedg.render import Defocus, Frame, MotionBlur, RasterSettings
 from spacedg.render.camera import Camera, FisheyeLens
 from spacedg.render.gaussians import Gaussians
+from spacedg.data.dataset import SpaceDGDataset, chat_collate
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "SpaceDGDataset",
+    "chat_collate",
     "Camera",
     "Defocus",
     "DuplicatePluginError",
