@@ -14,7 +14,8 @@ renders them.
   - ``train`` / ``val``: one item per question. The item is clean with probability
     ``clean_prob``, otherwise one chain drawn uniformly from ``degradations``. Names without a
     preset take ``severity``, which is ``"bench"`` (the paper's table), ``"1"``–``"5"``, or
-    ``"random"`` (a seeded severity per item). :meth:`set_epoch` redraws the choices per epoch.
+    ``"random"`` (a seeded severity per item); mixtures keep their own recipe.
+    :meth:`set_epoch` redraws the choices per epoch (shared memory, so persistent workers see it).
   - ``bench``: every question under clean and under each chain of ``degradations`` (default:
     the paper's nine at ``bench``), i.e. ``questions × 10`` items.
   - ``degradations`` also accepts ``"all"`` (every registered degradation, third-party
@@ -26,8 +27,14 @@ renders them.
   name), ``scene_id``, ``views``, ``record_id``, ``index``.
 - **Workers**: the dataset object holds only paths and small records, so it pickles cheaply.
   Scenes load lazily inside each worker into a byte-bounded LRU cache. Construction never
-  renders (indexes are built in a spawned process), so no numba or CUDA state exists before a
-  DataLoader forks.
+  renders (indexes are built in a separate Python process), so no numba or CUDA state exists
+  before a DataLoader forks. If the main process renders first (``dataset[0]`` before the
+  DataLoader), forked workers cannot use numba's OpenMP threads: the worker raises a clear
+  error asking for ``multiprocessing_context="forkserver"``.
+- **Bench split**: ``severity`` does not apply (the protocol is the ``bench`` preset); use
+  ``degradations=["haze:3", ...]`` for other levels. With several workers, batch sizes that
+  are multiples of ``len(chains) + 1`` keep a question's variants in one worker, where they
+  share the clean render.
 
 :func:`chat_collate` turns a batch into chat messages for a transformers processor.
 """
@@ -44,13 +51,13 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from spacedg.data.pipeline import BENCH_DEGRADATIONS, MIXTURES, PipelineOptions, derive_seed, parse_chain
+from spacedg.data.pipeline import BENCH_DEGRADATIONS, MIXTURES, PipelineOptions, derive_seed, resolve_chain
 from spacedg.data.qa import QARecord
 from spacedg.data.qa_index import QABuildConfig, index_paths, read_index
 from spacedg.data.scene_store import SPLITS, ByteLRU, assign_splits, builtin_scene_dirs, ensure_indexes, scene_dirs_of
 from spacedg.errors import InvalidDataError, ParameterError
 
-__all__ = ["SpaceDGDataset", "chat_collate", "format_question", "CLEAN"]
+__all__ = ["SpaceDGDataset", "chat_collate", "format_question", "answer_text", "chain_name", "CLEAN"]
 
 #: ``degradation_type`` of a clean sample (the VLMEvalKit / SpaceDG convention).
 CLEAN = "ori"
@@ -74,11 +81,14 @@ class SpaceDGDataset(Dataset):
         severity: preset for chains named without one: ``"bench"``, ``"1"``–``"5"`` or ``"random"``.
         clean_prob: probability of a clean item in ``train``/``val`` (ignored by ``bench``).
         image_size: ``(width, height)`` to render at, or ``None`` for the views' own size.
-        seed: master seed (question indexes, degradation choices and noise).
+        seed: seed of the degradation choices and their noise (not of the splits or questions).
         cache: byte budget of each worker's LRU cache of scenes (their Gaussians) and clean
             renders (shared by every chain without a raster step), default 2 GiB.
-        qa_config: how the question indexes are built (default: ``QABuildConfig(seed=seed)``).
+        qa_config: how the question indexes are built (default: ``QABuildConfig()``, seed 0;
+            the index files are shared by every dataset over the same folders).
         split_fractions: ``(val, bench)`` share of scenes.
+        split_seed: seed of the scene → split assignment (kept apart from ``seed`` so that
+            changing the augmentation seed never moves a scene between splits).
         on_bad_scene: ``"raise"`` (default) or ``"skip"`` a scene that cannot be read or indexed
             (skipped scenes are named in a warning and in :attr:`skipped`).
         backend, device: renderer backend and device (``"auto"``, ``"cpu"``, ``"torch"``).
@@ -99,6 +109,7 @@ class SpaceDGDataset(Dataset):
         cache: int = 2 << 30,
         qa_config: QABuildConfig | None = None,
         split_fractions: tuple[float, float] = (0.1, 0.1),
+        split_seed: int = 0,
         on_bad_scene: str = "raise",
         backend: str = "auto",
         device: str | None = None,
@@ -108,14 +119,14 @@ class SpaceDGDataset(Dataset):
             raise ParameterError(f"SpaceDGDataset: split must be one of {list(SPLITS)}, got {split!r}")
         if severity not in _SEVERITIES:
             raise ParameterError(f"SpaceDGDataset: severity must be one of {list(_SEVERITIES)}, got {severity!r}")
-        if not 0.0 <= float(clean_prob) <= 1.0:
+        if isinstance(clean_prob, bool) or not isinstance(clean_prob, (int, float)) or not 0.0 <= float(clean_prob) <= 1.0:
             raise ParameterError(f"SpaceDGDataset: clean_prob must be in [0, 1], got {clean_prob!r}")
         if on_bad_scene not in ("raise", "skip"):
             raise ParameterError(f"SpaceDGDataset: on_bad_scene must be 'raise' or 'skip', got {on_bad_scene!r}")
         self.split, self.severity, self.clean_prob, self.seed = split, severity, float(clean_prob), int(seed)
         self.options = PipelineOptions(image_size=tuple(image_size) if image_size else None, backend=backend, device=device)
         self.chains = self._chains(degradations)
-        self.qa_config = qa_config or QABuildConfig(seed=self.seed)
+        self.qa_config = qa_config or QABuildConfig()
         dirs = scene_dirs_of(scenes) if scenes is not None else builtin_scene_dirs(builtin_rooms)
         self.skipped: dict[str, str] = {}
         failed = ensure_indexes(dirs, self.qa_config)
@@ -125,17 +136,22 @@ class SpaceDGDataset(Dataset):
                 raise InvalidDataError(f"{len(failed)} scene(s) cannot be used: {listing}. Fix or remove them, or pass on_bad_scene='skip'")
             warnings.warn(f"SpaceDGDataset: skipping {len(failed)} scene(s): {listing}", stacklevel=2)
             self.skipped = dict(failed)
-            dirs = [d for d in dirs if str(d) not in failed]
+        all_dirs = list(dirs)
+        dirs = [d for d in dirs if str(d) not in failed]
         records_by_dir = {d: self._records(d) for d in dirs}
         ids = {d: recs[0].scene_id if recs else d.name for d, recs in records_by_dir.items()}
-        splits = assign_splits(list(ids.values()), split_fractions, seed=self.seed)
+        # skipped scenes keep their place in the assignment, so skipping never moves another scene
+        every_id = [ids.get(d, d.name) for d in all_dirs]
+        splits = assign_splits(every_id, split_fractions, seed=int(split_seed))
         self.scene_dirs: dict[str, Path] = {ids[d]: d for d in dirs if splits[ids[d]] == split}
         wanted = self._question_types(question_types)
         self.records: list[QARecord] = [
             r for d in dirs if splits[ids[d]] == split for r in records_by_dir[d] if wanted is None or r.question_type in wanted
         ]
-        self.epoch = 0
+        # shared memory: set_epoch() in the main process reaches persistent DataLoader workers
+        self._epoch = torch.zeros((), dtype=torch.int64).share_memory_()
         self._cache_bytes = int(cache)
+        self._checked_pid = -1  # the process whose fork safety was checked (forked workers inherit it)
         self._scenes: ByteLRU | None = None  # created lazily in each worker
 
     # ------------------------------------------------------------ construction
@@ -152,8 +168,10 @@ class SpaceDGDataset(Dataset):
             names = [str(d) for d in degradations]
         chains = []
         for name in names:
-            chain = name if (":" in name or "+" in name or name in MIXTURES or self.severity == "random") else f"{name}:{self.severity}"
-            parse_chain(chain.replace(":random", ""))  # unknown names and presets fail here, with suggestions
+            chain = name if self.severity == "random" else _with_severity(name, self.severity)
+            levels = ["1", "2", "3", "4", "5"] if self.severity == "random" and self.split != "bench" else [None]
+            for level in levels:  # unknown names, presets and repeats fail here, with suggestions
+                resolve_chain(chain if level is None else _with_severity(chain, level), 0)
             chains.append(chain)
         if len(set(chains)) != len(chains):
             raise ParameterError(f"SpaceDGDataset: degradations repeat a chain: {chains}")
@@ -177,9 +195,14 @@ class SpaceDGDataset(Dataset):
     def __len__(self) -> int:
         return len(self.records) * (len(self.chains) + 1 if self.split == "bench" else 1)
 
+    @property
+    def epoch(self) -> int:
+        return int(self._epoch)
+
     def set_epoch(self, epoch: int) -> None:
-        """Redraw the train/val degradation choices for ``epoch`` (like ``DistributedSampler.set_epoch``)."""
-        self.epoch = int(epoch)
+        """Redraw the train/val degradation choices for ``epoch`` (like ``DistributedSampler.set_epoch``);
+        the value lives in shared memory, so persistent DataLoader workers see it too."""
+        self._epoch.fill_(int(epoch))
 
     def plan(self, index: int) -> tuple[QARecord, str | None, str]:
         """``(record, chain or None for clean, degradation_type)`` of item ``index`` (no rendering)."""
@@ -193,10 +216,9 @@ class SpaceDGDataset(Dataset):
             record = self.records[index]
             rng = np.random.default_rng(derive_seed(self.seed, "choice", self.epoch, record.id))
             chain = None if (not self.chains or rng.random() < self.clean_prob) else self.chains[int(rng.integers(len(self.chains)))]
-            if chain is not None and self.severity == "random" and ":" not in chain and "+" not in chain and chain not in MIXTURES:
-                chain = f"{chain}:{int(rng.integers(1, 6))}"
-        name = CLEAN if chain is None else chain.split(":")[0]
-        return record, chain, name
+            if chain is not None and self.severity == "random":
+                chain = _with_severity(chain, str(int(rng.integers(1, 6))))
+        return record, chain, chain_name(chain)
 
     # ------------------------------------------------------------ items
     def _cache(self) -> ByteLRU:
@@ -216,9 +238,29 @@ class SpaceDGDataset(Dataset):
         folder = self.scene_dirs[scene_id]
         return self._cache().get(("scene", scene_id), lambda: load_scene(folder))
 
+    def _check_fork_safety(self) -> None:
+        """In a DataLoader worker, fail clearly if it was forked from a process whose numba
+        OpenMP threads were running (GNU OpenMP is not fork-safe: the worker would abort)."""
+        self._checked_pid = os.getpid()
+        if torch.utils.data.get_worker_info() is None:
+            return
+        try:
+            import numba
+            from numba.np.ufunc import parallel
+        except ImportError:  # pragma: no cover - numba is a dependency
+            return
+        if getattr(parallel, "_is_initialized", False) and numba.threading_layer() == "omp":
+            raise ParameterError(
+                "this DataLoader worker was forked after the main process had rendered (numba's OpenMP threads were "
+                "running), which is not fork-safe. Create the DataLoader with multiprocessing_context='forkserver' "
+                "(or 'spawn'); the dataset pickles small. Or set NUMBA_THREADING_LAYER=workqueue before importing spacedg"
+            )
+
     def __getitem__(self, index: int) -> dict[str, Any]:
         from spacedg.data.pipeline import degrade
 
+        if self._checked_pid != os.getpid():
+            self._check_fork_safety()
         record, chain, name = self.plan(index)
         scene = self._scene(record.scene_id)
         sample_seed = derive_seed(self.seed, "sample", record.id, name, self.epoch if self.split != "bench" else 0)
@@ -245,7 +287,25 @@ class SpaceDGDataset(Dataset):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_scenes"] = None  # each worker builds its own cache
+        state["_checked_pid"] = -1
         return state
+
+
+def _with_severity(chain: str, severity: str) -> str:
+    """``severity`` added to every part of ``chain`` named without a preset (``"haze+low_res:3"``,
+    ``"2"`` → ``"haze:2+low_res:3"``); a mixture name is left to the pipeline (its primary at
+    ``bench``, auxiliaries at the mixture preset)."""
+    if chain in MIXTURES:
+        return chain
+    return "+".join(part if ":" in part else f"{part.strip()}:{severity}" for part in chain.split("+"))
+
+
+def chain_name(chain: str | None) -> str:
+    """The ``degradation_type`` of a chain: ``"ori"`` for clean, else its parts without presets
+    (``"haze:3+low_res"`` → ``"haze+low_res"``; ``"night_capture"`` stays)."""
+    if chain is None:
+        return CLEAN
+    return "+".join(part.split(":")[0].strip() for part in chain.split("+"))
 
 
 def answer_text(answer: Any) -> str:

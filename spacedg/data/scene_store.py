@@ -128,7 +128,7 @@ def ensure_indexes(dirs: Sequence[Path], config: Any) -> dict[str, str]:
 
 
 def _run_isolated(action: str, payload: dict[str, Any]) -> dict[str, str]:
-    """Run ``action`` of this module's ``__main__`` in a fresh interpreter (``python -m``).
+    """Run ``action`` of this module's :func:`_main` in a fresh interpreter (``python -c``).
 
     A separate interpreter, not ``multiprocessing`` spawn: spawn re-imports the caller's main
     script, which breaks scripts without an ``if __name__ == "__main__"`` guard. The child's
@@ -139,7 +139,7 @@ def _run_isolated(action: str, payload: dict[str, Any]) -> dict[str, str]:
     import sys
 
     proc = subprocess.run(
-        [sys.executable, "-m", "spacedg.data.scene_store", action],
+        [sys.executable, "-c", "from spacedg.data.scene_store import _main; _main()", action],
         input=json.dumps(payload), stdout=subprocess.PIPE, stderr=None, text=True, check=False,
     )
     if proc.returncode != 0:
@@ -184,11 +184,11 @@ class ByteLRU:
 
 
 def _main() -> None:
-    """``python -m spacedg.data.scene_store ACTION`` with a JSON payload on stdin (see :func:`_run_isolated`)."""
+    """``python -c "…_main()" ACTION`` with a JSON payload on stdin (see :func:`_run_isolated`)."""
     import json
     import sys
 
-    action = sys.argv[1]
+    action = sys.argv[-1]
     payload = json.loads(sys.stdin.read())
     if action == "build-indexes":
         result = _build_indexes(payload["dirs"], payload["config"])
@@ -198,6 +198,3 @@ def _main() -> None:
         raise SystemExit(f"unknown action {action!r}")
     print(json.dumps(result))
 
-
-if __name__ == "__main__":
-    _main()

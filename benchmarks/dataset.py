@@ -1,0 +1,367 @@
+"""SpaceDGDataset throughput: samples/s with 0 and 2 DataLoader workers, where the time goes, memory.
+
+Prints tables only (never part of the test run).
+
+    .venv/bin/python benchmarks/dataset.py              # 4 built-in rooms, the views' size (640×480)
+    .venv/bin/python benchmarks/dataset.py --quick      # 30k-Gaussian rooms, 320×240, few samples (< 1 min)
+    .venv/bin/python benchmarks/dataset.py --small --samples 64 --size 640x480
+
+Scenes: ``--rooms`` built-in rooms (seeds 0…n-1, :func:`~spacedg.data.scene_store.builtin_scene_dirs`)
+or, with ``--small``, 30k-Gaussian rooms, generated once into ``--root`` (default
+``$SPACEDG_HOME/benchmark-rooms``) with their question indexes (``--per-sub-type`` records per
+sub type, every family). Rooms and indexes are reused by later runs.
+
+Configurations, each a fresh dataset (fresh caches):
+
+- ``clean``: the train split, ``clean_prob=1``;
+- each of the nine degradations: the train split, ``clean_prob=0``, ``degradations=[name]`` (bench preset);
+- ``bench mix``: the bench split (every question under clean + the nine), its first N items
+  (N rounded up to whole questions); with workers also ``bench mix b10``: the same items in
+  batches of 10, so one worker renders a question's clean views once for its seven chains
+  without a raster step (``batch_size=1`` spreads them over the workers' separate caches).
+
+For each, ``--samples`` items (the train configurations: a seeded random subset; bench: the
+first N) are read through ``DataLoader(batch_size=1)`` after a warm-up on other items (each
+worker renders once per scene: kernels loaded, Gaussians cached). Columns: samples/s (wall),
+mean ms per sample (inside ``dataset[i]``, per worker), the share of that time spent rendering /
+in linear degradations / encoding / in display degradations (``item["stats"]``; "other" is
+scene loading, camera set-up, tensor conversion), and the memory high-water mark
+(``ru_maxrss``: the main process for 0 workers, the largest worker for 2 workers; the main
+process's own high-water mark is printed at the end).
+
+The workers runs come first: numba's OpenMP thread pool is not fork-safe, so the main process
+renders nothing until every forked worker is gone.
+
+Goal check ("a clean 2-view sample costs ≤ 1.2× its two renders"): for clean 2-view items,
+``dataset[i]`` (its cached clean renders evicted first, so it renders) against two direct
+``spacedg.render.render(scene.gaussians, camera.resized(w, h), outputs="rgb")`` calls on the
+same views at the same size, interleaved, medians over ``--repeats``, kernels compiled and the
+scene loaded. The same with the renders left in the cache is printed for reference.
+
+Timings are wall clock on whatever else the machine is doing: the first line prints the load
+average and CPU count.
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import os
+import platform
+import resource
+import shutil
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spacedg.data.dataset import SpaceDGDataset
+from spacedg.data.pipeline import BENCH_DEGRADATIONS
+from spacedg.data.qa_index import QABuildConfig
+from spacedg.data.scene_store import builtin_scene_dirs, spacedg_home
+
+STAGES = ("render_ms", "linear_ms", "encode_ms", "display_ms")
+
+
+# ------------------------------------------------------------------ scenes
+def _generate_small(root: str, seeds: list[int]) -> None:
+    from spacedg.data.io import save_scene
+    from spacedg.data.synthetic import RoomConfig, generate_room
+
+    for seed in seeds:
+        folder = Path(root) / f"room-{seed:06d}"
+        if not (folder / "scene.json").is_file():
+            tmp = folder.with_name(folder.name + ".tmp")
+            shutil.rmtree(tmp, ignore_errors=True)
+            save_scene(generate_room(seed, RoomConfig(gaussians=30_000), scene_id=folder.name), tmp)
+            tmp.rename(folder)
+
+
+def scene_folders(args: argparse.Namespace) -> list[Path]:
+    root = Path(args.root) if args.root else spacedg_home() / "benchmark-rooms"
+    if not args.small:
+        return builtin_scene_dirs(args.rooms, root=root / "builtin")
+    folder = root / "small"
+    folder.mkdir(parents=True, exist_ok=True)
+    seeds = list(range(args.rooms))
+    if any(not (folder / f"room-{s:06d}" / "scene.json").is_file() for s in seeds):
+        # in a spawned process, so this one starts no numba threads before forking workers
+        with multiprocessing.get_context("spawn").Pool(1) as pool:
+            pool.apply(_generate_small, (str(folder), seeds))
+    return [folder / f"room-{s:06d}" for s in seeds]
+
+
+# ------------------------------------------------------------------ timed reading
+class Timed:
+    """``(configuration, index)`` → that dataset's item, with its time and the worker's high-water mark."""
+
+    def __init__(self, datasets: dict[str, SpaceDGDataset]) -> None:
+        self.datasets = datasets
+
+    def __getitem__(self, key: tuple[str, int]) -> dict[str, Any]:
+        name, index = key
+        t0 = time.perf_counter()
+        item = self.datasets[name][index]
+        item["item_ms"] = (time.perf_counter() - t0) * 1e3
+        item["maxrss_kb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        return item
+
+    def __len__(self) -> int:
+        return sum(len(d) for d in self.datasets.values())
+
+
+class Keys:
+    """A sampler whose keys can be swapped between epochs (read in the main process at ``iter``)."""
+
+    def __init__(self) -> None:
+        self.keys: list[tuple[str, int]] = []
+
+    def __iter__(self) -> Iterator[tuple[str, int]]:
+        return iter(list(self.keys))
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+
+def _as_list(batch: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return batch
+
+
+def _limit_threads(threads: int) -> Any:
+    def init(_worker_id: int) -> None:
+        import numba
+
+        numba.set_num_threads(threads)
+
+    return init
+
+
+def plan_items(ds: SpaceDGDataset, n: int, workers: int, first: bool, seed: int = 0) -> tuple[list[int], list[int]]:
+    """``(warm-up indices, measured indices)``: warm-up = ``max(workers, 1)`` items per scene of
+    the split, in scene-major order (round-robin dispatch gives each worker one per scene)."""
+    by_scene: dict[str, list[int]] = {}
+    for i in range(len(ds)):
+        by_scene.setdefault(ds.plan(i)[0].scene_id, []).append(i)
+    per = max(workers, 1)
+    warm: list[int] = []
+    for indices in by_scene.values():
+        warm.extend(indices[-per:])  # the split's last items, away from the bench's first N
+    skip = set(warm)
+    rest = [i for i in range(len(ds)) if i not in skip]
+    if first:
+        measured = rest[: -(-n // 10) * 10]  # whole questions (clean + nine each)
+    else:
+        measured = sorted(np.random.default_rng(seed).choice(rest, size=min(n, len(rest)), replace=False).tolist())
+    return warm, measured
+
+
+def measure(datasets: dict[str, SpaceDGDataset], plans: dict[str, tuple[list[int], list[int]]], workers: int,
+            threads: int | None) -> dict[str, dict[str, float]]:
+    """Each configuration on a fresh ``DataLoader`` (fresh workers and caches). With workers, the
+    bench mix is also read in batches of 10 (one question's ten items on one worker)."""
+    from torch.utils.data import DataLoader
+
+    runs = [(name, name, 1) for name in plans]
+    if workers and "bench mix" in plans:
+        runs.append(("bench mix b10", "bench mix", 10))
+    results = {}
+    for label, name, batch_size in runs:
+        warm, measured = plans[name]
+        timed = Timed({name: pickle_copy(datasets[name])})  # a fresh, empty cache
+        keys = Keys()
+        kwargs: dict[str, Any] = {}
+        if workers:
+            kwargs = {"persistent_workers": True, "prefetch_factor": 2}
+            if threads:
+                kwargs["worker_init_fn"] = _limit_threads(threads)
+        loader = DataLoader(timed, batch_size=batch_size, sampler=keys, num_workers=workers, collate_fn=_as_list, **kwargs)
+        keys.keys = [(name, i) for i in warm] * (1 if batch_size == 1 else batch_size)
+        for _ in loader:
+            pass
+        keys.keys = [(name, i) for i in measured]
+        t0 = time.perf_counter()
+        items = [item for batch in loader for item in batch]
+        wall = time.perf_counter() - t0
+        del loader  # shuts the workers down
+        item_ms = np.array([it["item_ms"] for it in items])
+        stage = {s: float(np.sum([it["stats"][s] for it in items])) for s in STAGES}
+        total = float(item_ms.sum())
+        results[label] = {
+            "n": len(items), "sps": len(items) / wall, "ms": float(item_ms.mean()),
+            **{s: stage[s] / total for s in STAGES}, "other": max(0.0, 1.0 - sum(stage.values()) / total),
+            "maxrss_mb": max(it["maxrss_kb"] for it in items) / 1024.0,
+            "views": float(np.mean([len(it["views"]) for it in items])),
+        }
+        print(f"  {label:<16} {workers} workers: {results[label]['sps']:6.2f} samples/s", file=sys.stderr, flush=True)
+    return results
+
+
+def pickle_copy(ds: SpaceDGDataset) -> SpaceDGDataset:
+    import pickle
+
+    return pickle.loads(pickle.dumps(ds))
+
+
+def print_table(title: str, results: dict[str, dict[str, float]]) -> None:
+    print(f"\n{title}")
+    head = f"{'configuration':<16} {'n':>4} {'views':>5} {'samples/s':>9} {'ms/sample':>9} {'render':>7} {'linear':>7} " \
+           f"{'encode':>7} {'display':>7} {'other':>6} {'RSS MB':>7}"
+    print(head)
+    print("-" * len(head))
+    for name, r in results.items():
+        print(f"{name:<16} {r['n']:>4} {r['views']:>5.2f} {r['sps']:>9.2f} {r['ms']:>9.1f} {r['render_ms']:>7.1%} "
+              f"{r['linear_ms']:>7.1%} {r['encode_ms']:>7.1%} {r['display_ms']:>7.1%} {r['other']:>6.1%} {r['maxrss_mb']:>7.0f}")
+
+
+# ------------------------------------------------------------------ goal: clean 2-view sample vs its two renders
+def clean_vs_renders(ds: SpaceDGDataset, samples: int, repeats: int, size: tuple[int, int] | None) -> None:
+    from spacedg.data.io import load_scene
+    from spacedg.render import render
+
+    two_view = [i for i in range(len(ds)) if len(ds.plan(i)[0].views) == 2]
+    if not two_view:
+        print("\nno 2-view questions in the clean dataset: goal check skipped")
+        return
+    chosen = [two_view[k] for k in np.linspace(0, len(two_view) - 1, min(samples, len(two_view))).astype(int)]
+    scenes: dict[str, Any] = {}
+
+    def cameras(record: Any) -> list[Any]:
+        scene = scenes.setdefault(record.scene_id, load_scene(ds.scene_dirs[record.scene_id]))
+        cams = [scene.camera(v) for v in record.views]
+        return [c.resized(*size) if size else c for c in cams]
+
+    def evict_renders() -> None:
+        cache = ds._cache()  # benchmark only: drop the cached clean renders so the next item renders
+        for key in [k for k in cache._items if k[0] == "clean-render"]:
+            _, nbytes = cache._items.pop(key)
+            cache.bytes -= nbytes
+
+    # warm-up: kernels compiled, every scene loaded in both paths
+    for i in chosen:
+        record = ds.plan(i)[0]
+        ds[i]
+        for cam in cameras(record):
+            render(scenes[record.scene_id].gaussians, cam, outputs="rgb")
+    rows = []
+    for i in chosen:
+        record = ds.plan(i)[0]
+        gaussians, cams = scenes[record.scene_id].gaussians, cameras(record)
+        cold, warm, direct = [], [], []
+        for _ in range(repeats):
+            evict_renders()
+            t0 = time.perf_counter()
+            ds[i]
+            t1 = time.perf_counter()
+            ds[i]
+            t2 = time.perf_counter()
+            for cam in cams:
+                render(gaussians, cam, outputs="rgb")
+            t3 = time.perf_counter()
+            cold.append(t1 - t0)
+            warm.append(t2 - t1)
+            direct.append(t3 - t2)
+        rows.append((i, float(np.median(cold)) * 1e3, float(np.median(warm)) * 1e3, float(np.median(direct)) * 1e3))
+    cam = cameras(ds.plan(chosen[0])[0])[0]
+    print(f"\ngoal: clean 2-view sample ≤ 1.2× its two renders ({len(rows)} items, {cam.width}×{cam.height}, "
+          f"median of {repeats} repeats each)")
+    print(f"{'index':>6} {'dataset[i] ms':>13} {'2 renders ms':>12} {'ratio':>6} {'cached ms':>9}")
+    for i, c, w, d in rows:
+        print(f"{i:>6} {c:>13.1f} {d:>12.1f} {c / d:>6.3f} {w:>9.1f}")
+    c_all, w_all, d_all = (np.array([r[k] for r in rows]) for k in (1, 2, 3))
+    ratios = c_all / d_all
+    print(f"ratio: median {np.median(ratios):.3f}, max {ratios.max():.3f}, total {c_all.sum() / d_all.sum():.3f} "
+          f"→ goal {'MET' if np.median(ratios) <= 1.2 else 'MISSED'} (median ≤ 1.2); "
+          f"with the clean renders cached: {w_all.sum() / d_all.sum():.3f}× the renders")
+
+
+# ------------------------------------------------------------------ main
+def machine_line() -> str:
+    return (f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, python {platform.python_version()}, "
+            f"numpy {np.__version__}, load average {os.getloadavg()[0]:.2f}")
+
+
+def parse_size(text: str | None) -> tuple[int, int] | None:
+    if not text:
+        return None
+    w, _, h = text.lower().partition("x")
+    return int(w), int(h)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="30k rooms, 320x240, 8 samples (< 1 minute)")
+    parser.add_argument("--small", action="store_true", help="30k-Gaussian rooms instead of the built-in size")
+    parser.add_argument("--rooms", type=int, default=4, help="rooms (>= 3; default 4: 2 train, 1 val, 1 bench)")
+    parser.add_argument("--root", default=None, help="where rooms are generated (default $SPACEDG_HOME/benchmark-rooms)")
+    parser.add_argument("--samples", type=int, default=None, help="items per configuration (default 32; quick 8)")
+    parser.add_argument("--size", default=None, help="render size WxH (default: the views' own size; quick 320x240)")
+    parser.add_argument("--workers", default="2,0", help="worker counts, comma-separated (default 2,0; >0 run first)")
+    parser.add_argument("--worker-threads", type=int, default=None, help="numba threads per worker (default: numba's)")
+    parser.add_argument("--per-sub-type", type=int, default=None, help="index records per sub type (default 4; quick 2)")
+    parser.add_argument("--ratio-samples", type=int, default=None, help="2-view items for the goal check (default 12)")
+    parser.add_argument("--repeats", type=int, default=None, help="repeats per item in the goal check (default 5)")
+    parser.add_argument("--only", default=None, help="comma-separated configurations (clean, a degradation, bench)")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.small = True
+    samples = args.samples or (8 if args.quick else 32)
+    size = parse_size(args.size) or ((320, 240) if args.quick else None)
+    per_sub_type = args.per_sub_type or (2 if args.quick else 4)
+    ratio_samples = args.ratio_samples or (4 if args.quick else 12)
+    repeats = args.repeats or (3 if args.quick else 5)
+    worker_counts = sorted({int(w) for w in args.workers.split(",")}, reverse=True)
+
+    t_start = time.perf_counter()
+    print(machine_line())
+    dirs = scene_folders(args)
+    config = QABuildConfig(seed=0, per_sub_type=per_sub_type)
+    common = {"scenes": dirs, "image_size": size, "qa_config": config}
+    t0 = time.perf_counter()
+    datasets = {"clean": SpaceDGDataset("train", None, clean_prob=1.0, **common)}
+    for name in BENCH_DEGRADATIONS:
+        datasets[name] = SpaceDGDataset("train", [name], clean_prob=0.0, **common)
+    datasets["bench mix"] = SpaceDGDataset("bench", None, **common)
+    if args.only:
+        wanted = {w.strip() for w in args.only.split(",")}
+        datasets = {k: v for k, v in datasets.items() if k in wanted or (k == "bench mix" and "bench" in wanted)}
+    setup_s = time.perf_counter() - t0
+    train, bench = SpaceDGDataset("train", None, **common), SpaceDGDataset("bench", None, **common)
+    from spacedg.data.io import load_scene
+
+    first = load_scene(dirs[0])
+    view = next(iter(first.views.values()))
+    gaussians = [len(load_scene(d).gaussians) for d in dirs]
+    shown = size or (view.width, view.height)
+    print(f"scenes: {len(dirs)} {'small' if args.small else 'built-in'} rooms ({min(gaussians):,}–{max(gaussians):,} Gaussians, "
+          f"views {view.width}×{view.height}), rendered at {shown[0]}×{shown[1]}; train {len(train)} questions "
+          f"({len(train.scene_dirs)} scenes), bench {len(bench.records)} questions × 10 = {len(bench)} items; "
+          f"datasets ready in {setup_s:.1f} s (indexes built or checked)")
+    print(f"{samples} samples per configuration after a warm-up; numba threads per worker: "
+          f"{args.worker_threads or 'default (all CPUs)'}; shares are of the time inside dataset[i]")
+
+    plans = {}
+    for name, ds in datasets.items():
+        plans[name] = plan_items(ds, samples, max(worker_counts), first=(name == "bench mix"))
+
+    from numba.np.ufunc import parallel
+
+    for workers in worker_counts:
+        if workers and parallel._is_initialized:
+            print(f"\n(skipping {workers} workers: numba's thread pool already runs in this process; forking is unsafe)")
+            continue
+        results = measure(datasets, plans, workers, args.worker_threads)
+        print_table(f"{workers} workers (DataLoader batch_size=1; RSS = {'largest worker' if workers else 'this process'}"
+                    f" high-water mark)", results)
+    if "clean" in datasets:
+        clean_vs_renders(pickle_copy(datasets["clean"]), ratio_samples, repeats, size)
+    me = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
+    print(f"\nmemory high-water mark: this process {me:.0f} MB; largest finished child (workers, index builder) {kids:.0f} MB")
+    print(f"total {time.perf_counter() - t_start:.1f} s")
+
+
+if __name__ == "__main__":
+    main()
