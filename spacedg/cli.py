@@ -12,7 +12,7 @@ from spacedg.errors import SpaceDGError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from spacedg.commands import gallery, plugins, qa, render, scenes
+    from spacedg.commands import export, gallery, plugins, qa, render, scenes
 
     parser = argparse.ArgumentParser(
         prog="spacedg",
@@ -23,6 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_parser(sub)
     gallery.add_parser(sub)
     qa.add_parser(sub)
+    export.add_parser(sub)
     plugins.add_parser(sub)
     return parser
 
