@@ -1,5 +1,5 @@
 # Two entry points, both self-installing on a fresh machine (see README):
-#   make demo   set up, then build the built-in synthetic scenes and summarise them
+#   make demo   set up, then build the built-in synthetic scenes, export a small bench and its gallery
 #   make test   set up, then run the test suite (what CI runs through .ci/run)
 PYTHON ?= python3
 VENV ?= .venv
@@ -29,6 +29,8 @@ demo: $(STAMP)
 	$(BIN)/spacedg gallery $(DEMO_DIR)/scenes/room-000000 --view frame_0000 --out $(DEMO_DIR)/gallery.png
 	$(BIN)/spacedg qa build $(DEMO_DIR)/scenes
 	$(BIN)/spacedg qa stats $(DEMO_DIR)/scenes
+	$(BIN)/spacedg export --split bench --scenes $(DEMO_DIR)/scenes --out $(DEMO_DIR)/bench --image-size 320x240 --max-questions 44
+	$(BIN)/spacedg qa preview $(DEMO_DIR)/scenes/room-000000 --out $(DEMO_DIR)/questions.png
 	$(BIN)/spacedg plugins
 
 test: $(STAMP)

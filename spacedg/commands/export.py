@@ -24,6 +24,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--per-sub-type", type=int, default=25, help="questions per sub type and scene (index building)")
     parser.add_argument("--clean-prob", type=float, default=0.1, help="train/val only")
+    parser.add_argument("--max-questions", type=int, default=None, help="keep at most N questions, spread over question types")
     parser.add_argument("--shard", default="0/1", help="i/n: export the chunks k with k %% n == i")
     parser.add_argument("--chunk-size", type=int, default=256, help="items per resumable chunk")
     parser.add_argument("--skip-bad-scenes", action="store_true", help="skip scenes that cannot be read (they are named)")
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
         args.split, _names(args.degradations), scenes=args.scenes, question_types=_names(args.question_types),
         image_size=_size(args.image_size), seed=args.seed, clean_prob=args.clean_prob,
         qa_config=QABuildConfig(per_sub_type=args.per_sub_type),
-        on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend,
+        on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, max_questions=args.max_questions,
     )
     summary = export_split(dataset, args.out, shard=shard, chunk_size=args.chunk_size)
     print(f"{len(dataset)} items in {summary.chunks_total} chunk(s); this shard wrote {len(summary.chunks_written)} "

@@ -30,7 +30,8 @@ renders them.
   renders (indexes are built in a separate Python process), so no numba or CUDA state exists
   before a DataLoader forks. If the main process renders first (``dataset[0]`` before the
   DataLoader), forked workers cannot use numba's OpenMP threads: the worker raises a clear
-  error asking for ``multiprocessing_context="forkserver"``.
+  error asking for ``multiprocessing_context="forkserver"`` (or GNU OpenMP kills it before it
+  gets there: "worker exited unexpectedly"). With ``forkserver`` it works.
 - **Bench split**: ``severity`` does not apply (the protocol is the ``bench`` preset); use
   ``degradations=["haze:3", ...]`` for other levels. With several workers, batch sizes that
   are multiples of ``len(chains) + 1`` keep a question's variants in one worker, where they
@@ -93,6 +94,8 @@ class SpaceDGDataset(Dataset):
             (skipped scenes are named in a warning and in :attr:`skipped`).
         backend, device: renderer backend and device (``"auto"``, ``"cpu"``, ``"torch"``).
         builtin_rooms: how many built-in rooms when ``scenes`` is not given.
+        max_questions: keep at most this many questions, spread over question types
+            round-robin in a seeded order (a small bench or a quick run); ``None`` keeps all.
     """
 
     def __init__(
@@ -114,6 +117,7 @@ class SpaceDGDataset(Dataset):
         backend: str = "auto",
         device: str | None = None,
         builtin_rooms: int = 16,
+        max_questions: int | None = None,
     ) -> None:
         if split not in SPLITS:
             raise ParameterError(f"SpaceDGDataset: split must be one of {list(SPLITS)}, got {split!r}")
@@ -148,6 +152,8 @@ class SpaceDGDataset(Dataset):
         self.records: list[QARecord] = [
             r for d in dirs if splits[ids[d]] == split for r in records_by_dir[d] if wanted is None or r.question_type in wanted
         ]
+        if max_questions is not None:
+            self.records = _spread_subset(self.records, int(max_questions), derive_seed(int(split_seed), "subset", split))
         # shared memory: set_epoch() in the main process reaches persistent DataLoader workers
         self._epoch = torch.zeros((), dtype=torch.int64).share_memory_()
         self._cache_bytes = int(cache)
@@ -289,6 +295,24 @@ class SpaceDGDataset(Dataset):
         state["_scenes"] = None  # each worker builds its own cache
         state["_checked_pid"] = -1
         return state
+
+
+def _spread_subset(records: list[QARecord], n: int, seed: int) -> list[QARecord]:
+    """At most ``n`` records, taken round-robin over question types (each type's records in a
+    seeded order), returned in their original order."""
+    if n < 1:
+        raise ParameterError(f"SpaceDGDataset: max_questions must be >= 1, got {n}")
+    rng = np.random.default_rng(seed)
+    by_type: dict[str, list[int]] = {}
+    for i, record in enumerate(records):
+        by_type.setdefault(record.question_type, []).append(i)
+    queues = [[ix[j] for j in rng.permutation(len(ix))] for _, ix in sorted(by_type.items())]
+    taken: list[int] = []
+    while len(taken) < n and any(queues):
+        for queue in queues:
+            if queue and len(taken) < n:
+                taken.append(queue.pop())
+    return [records[i] for i in sorted(taken)]
 
 
 def _with_severity(chain: str, severity: str) -> str:
