@@ -564,3 +564,16 @@ def test_dataset_pickles_small_without_gaussians(rooms):
     copy = pickle.loads(buffer.getvalue())
     assert copy._scenes is None and len(copy) == len(ds) and copy.records == ds.records
     assert torch.equal(copy[1]["images"], ds[1]["images"])
+
+
+def test_default_scenes_are_the_builtin_rooms_made_on_first_use(tmp_path, monkeypatch, capfd):
+    """Without ``scenes=``, the built-in rooms are generated into $SPACEDG_HOME (with a progress
+    bar) and indexed on first use, then reused."""
+    monkeypatch.setenv("SPACEDG_HOME", str(tmp_path))
+    config = QABuildConfig(per_sub_type=1, families=("object_counting",))
+    ds = SpaceDGDataset("bench", builtin_rooms=3, qa_config=config, image_size=SIZE, degradations=["low_res"])
+    assert "built-in rooms (first use)" in capfd.readouterr().err
+    assert sorted(p.name for p in (tmp_path / "rooms").iterdir()) == ["room-000000", "room-000001", "room-000002"]
+    assert len(ds.scene_dirs) == 1 and len(ds) == 2 * len(ds.records) and ds[0]["images"].dtype == torch.uint8
+    again = SpaceDGDataset("bench", builtin_rooms=3, qa_config=config, image_size=SIZE, degradations=["low_res"])
+    assert "first use" not in capfd.readouterr().err and [r.id for r in again.records] == [r.id for r in ds.records]
