@@ -48,21 +48,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _scene_dirs(paths: list[Path]) -> list[Path]:
-    """Expand folders of scene folders; every result holds a scene.json."""
-    found: list[Path] = []
-    for path in paths:
-        if (path / "scene.json").is_file():
-            found.append(path)
-        elif path.is_file() and path.name == "scene.json":
-            found.append(path.parent)
-        elif path.is_dir():
-            children = sorted(p.parent for p in path.glob("*/scene.json"))
-            if not children:
-                raise InvalidDataError(f"{path}: no scene.json in it or in its sub-folders; build scenes with `spacedg scenes synth`")
-            found.extend(children)
-        else:
-            raise InvalidDataError(f"{path}: no such scene folder")
-    return found
+    """Expand folders of scene folders; every result holds a scene.json (sorted by name)."""
+    from spacedg.data.scene_store import scene_dirs_of
+
+    return scene_dirs_of(paths)
 
 
 def _synth(args: argparse.Namespace) -> int:

@@ -67,8 +67,10 @@ def scene_dirs_of(paths: Sequence[str | os.PathLike[str]]) -> list[Path]:
             found.append(path.parent)
         elif path.is_dir() and any(path.glob("*/scene.json")):
             found.extend(sorted(p.parent for p in path.glob("*/scene.json")))
+        elif path.is_dir():
+            raise InvalidDataError(f"{path}: no scene.json in it or in its sub-folders; build scenes with `spacedg scenes synth`")
         else:
-            raise InvalidDataError(f"{path}: not a scene folder (no scene.json in it or its sub-folders)")
+            raise InvalidDataError(f"{path}: no such scene folder")
     return sorted(set(found), key=lambda p: (p.name, str(p)))
 
 
