@@ -263,6 +263,8 @@ def test_dataloader_after_an_in_process_sample(rooms, tmp_path):
                               check=False)
         assert proc.returncode == 0, proc.stderr[-2000:]
         outputs[ctx] = proc.stdout.strip()
+        if ctx is None:  # the parent says why before it forks
+            assert "multiprocessing_context='forkserver'" in proc.stderr
     # usually the worker reaches our check and raises the clear message; sometimes GNU OpenMP
     # kills it first (the fork happens while its threads exist): either way it fails, never hangs
     assert outputs[None].startswith("ERROR")

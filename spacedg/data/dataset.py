@@ -297,6 +297,35 @@ class SpaceDGDataset(Dataset):
         return state
 
 
+_FORK_HINT = (
+    "spacedg: this process forks (e.g. DataLoader workers) after numba's OpenMP threads started rendering; "
+    "GNU OpenMP is not fork-safe, so the children may fail. Use DataLoader(..., multiprocessing_context='forkserver')."
+)
+_fork_warned = False
+
+
+def _warn_before_unsafe_fork() -> None:
+    """``os.register_at_fork`` hook: say why forked workers may die, once, on stderr."""
+    global _fork_warned
+    if _fork_warned:
+        return
+    try:
+        import numba
+        from numba.np.ufunc import parallel
+
+        unsafe = bool(getattr(parallel, "_is_initialized", False)) and numba.threading_layer() == "omp"
+    except Exception:  # noqa: BLE001 - a warning hook must never break a fork
+        return
+    if unsafe:
+        _fork_warned = True
+        import sys
+
+        sys.stderr.write(_FORK_HINT + "\n")
+
+
+os.register_at_fork(before=_warn_before_unsafe_fork)
+
+
 def _spread_subset(records: list[QARecord], n: int, seed: int) -> list[QARecord]:
     """At most ``n`` records, taken round-robin over question types (each type's records in a
     seeded order), returned in their original order."""
