@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import io
 import json
 import shutil
 
@@ -10,20 +11,30 @@ import cv2
 import pandas as pd
 import pytest
 
+import spacedg.data.export as export_module
 from spacedg.cli import main
 from spacedg.data.dataset import CLEAN, SpaceDGDataset
-from spacedg.data.export import TSV_COLUMNS, chunk_ids, export_split, parse_shard
+from spacedg.data.export import (
+    TSV_COLUMNS,
+    _tsv_bytes,
+    chunk_ids,
+    export_bench,
+    merge_parts,
+    parse_shard,
+    shard_from_env,
+)
 from spacedg.data.pipeline import BENCH_DEGRADATIONS
 from spacedg.data.qa_index import QABuildConfig
-from spacedg.errors import ParameterError
+from spacedg.errors import InvalidDataError, ParameterError
 
-CONFIG = QABuildConfig(per_sub_type=1, families=("object_counting", "camera_translation", "object_size_comparison"))
+CONFIG = QABuildConfig(seed=0, per_sub_type=1, families=("object_counting", "camera_translation", "object_size_comparison"))
 SIZE = (64, 48)
 REQUIRED = ["index", "question", "answer", "image_path", "question_type", "sub_question_type", "task_group", "degradation_type"]
 
 
 @pytest.fixture(scope="module")
 def rooms(qa_room_dirs, tmp_path_factory):
+    """A private copy of the four session rooms (this module's indexes do not touch the originals)."""
     root = tmp_path_factory.mktemp("export_rooms")
     for d in qa_room_dirs:
         shutil.copytree(d, root / d.name, ignore=shutil.ignore_patterns("*.qa.*"))
@@ -38,31 +49,56 @@ def bench(rooms):
 @pytest.fixture(scope="module")
 def exported(bench, tmp_path_factory):
     out = tmp_path_factory.mktemp("bench_export")
-    summary = export_split(bench, out, chunk_size=7, progress=False)
+    summary = export_bench(bench, out, shard_size=7, progress=False)
     return out, summary
 
 
+def _tree(out):
+    """Bytes of every exported file (temporary files of atomic writes would show up here too)."""
+    return {p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+
+
+# ------------------------------------------------------------------ formats
 def test_tsv_loads_with_pandas_and_matches_the_dataset(bench, exported):
     out, summary = exported
     assert summary.merged and summary.items_written == len(bench) == len(bench.records) * 10
-    table = pd.read_csv(out / "bench.tsv", sep="\t", keep_default_na=False)
+    assert summary.chunks_written == list(range(summary.chunks_total)) and not summary.chunks_skipped
+    table = pd.read_csv(out / "bench.tsv", sep="\t")  # exactly what VLMEvalKit's load() does
     assert list(table.columns) == list(TSV_COLUMNS) and set(REQUIRED) <= set(table.columns)
     assert len(table) == len(bench) and table["index"].tolist() == list(range(len(bench)))
+    assert table["index"].dtype.kind == "i"
     assert set(table["degradation_type"]) == {CLEAN, *BENCH_DEGRADATIONS}
     for row in table.itertuples():
         record, _, name = bench.plan(row.index)
         assert row.degradation_type == name and row.record_id == record.id and row.question_type == record.question_type
+        assert row.sub_question_type == record.sub_question_type and row.task_group == record.task_group.value
         expected = "[" + ", ".join(f"{v:.2f}" for v in record.answer) + "]" if isinstance(record.answer, tuple) else str(record.answer)
         assert str(row.answer) == expected or float(row.answer) == pytest.approx(float(expected))
+        provenance = json.loads(row.degradation)  # the chain's steps, as JSON; [] for clean
+        assert [step["name"] for step in provenance] == ([] if name == CLEAN else name.split("+"))
         paths = ast.literal_eval(row.image_path)
-        assert len(paths) == len(record.views)
+        assert len(paths) == len(record.views) and all(not p.startswith("/") for p in paths)
         for p in paths:
-            image = cv2.imread(str(out / p))
-            assert image is not None and image.shape == (SIZE[1], SIZE[0], 3)
+            image = cv2.imread(str(out / p), cv2.IMREAD_UNCHANGED)
+            assert image is not None and image.shape == (SIZE[1], SIZE[0], 3) and image.dtype == "uint8"
         if record.options:
-            assert row.question.endswith("\n".join(record.options)) and row.A == record.options[0][3:]
-    counts = json.loads((out / "summary.json").read_text())["counts"]
-    assert sum(sum(row.values()) for row in counts.values()) == len(bench)
+            assert row.question == record.question + "\n" + "\n".join(record.options)
+            assert [row.A, row.B] == [record.options[0][3:], record.options[1][3:]]
+        else:
+            assert row.question == record.question and pd.isna(row.A)
+    counts = json.loads((out / "summary.json").read_text())
+    assert sum(sum(row.values()) for row in counts["counts"].values()) == len(bench) == counts["items"]
+    assert counts["by_degradation"][CLEAN] == len(bench.records)
+    assert "| total |" in summary.merge.table and CLEAN in summary.merge.table.splitlines()[0]
+
+
+def test_tsv_quoting_survives_quotes_tabs_and_newlines():
+    tricky = 'He said "3"\tthen\nleft; \'quoted\' and "a\r\nb"'
+    row = dict.fromkeys(TSV_COLUMNS, "")
+    row.update(index=7, question=tricky, answer="NA-like", image_path=repr(["images/0000007_0.png"]), A='"x"')
+    table = pd.read_csv(io.BytesIO(_tsv_bytes([row, {**row, "index": 8}], header=True)), sep="\t", keep_default_na=False)
+    assert len(table) == 2 and table["question"].tolist() == [tricky, tricky] and table["A"][0] == '"x"'
+    assert ast.literal_eval(table["image_path"][0]) == ["images/0000007_0.png"]
 
 
 def test_exported_images_equal_the_dataset_items(bench, exported):
@@ -77,60 +113,140 @@ def test_exported_images_equal_the_dataset_items(bench, exported):
 def test_chat_jsonl(bench, exported):
     out, _ = exported
     rows = [json.loads(line) for line in (out / "bench.jsonl").read_text().splitlines()]
-    assert len(rows) == len(bench)
-    for row in rows[:30]:
+    assert len(rows) == len(bench) and [r["index"] for r in rows] == list(range(len(bench)))
+    table = pd.read_csv(out / "bench.tsv", sep="\t")
+    for row, tsv in zip(rows, table.itertuples()):
         user, assistant = row["messages"]
-        assert user["content"].count("<image>") == len(row["images"]) and user["role"] == "user"
-        assert assistant["content"].startswith("<answer>") and assistant["content"].endswith("</answer>")
+        assert user["role"] == "user" and assistant["role"] == "assistant"
+        assert user["content"].count("<image>") == len(row["images"]) == len(ast.literal_eval(tsv.image_path))
+        assert user["content"] == "<image>" * len(row["images"]) + tsv.question
+        assert assistant["content"] == f"<answer>{tsv.answer}</answer>" or float(assistant["content"][8:-9]) == pytest.approx(float(tsv.answer))
+        assert row["images"] == ast.literal_eval(tsv.image_path) and row["degradation_type"] == tsv.degradation_type
         assert "<answer>" in row["system"]
 
 
-def test_shards_are_disjoint_complete_and_resumable(bench, exported, tmp_path):
+# ------------------------------------------------------------------ shards and resume
+def test_shards_are_disjoint_complete_and_byte_identical(bench, exported, tmp_path):
     out = tmp_path / "sharded"
-    first = export_split(bench, out, shard=(0, 2), chunk_size=7, progress=False)
-    assert not first.merged and not (out / "bench.tsv").exists()
-    second = export_split(bench, out, shard=(1, 2), chunk_size=7, progress=False)
-    assert second.merged and set(first.chunks_written).isdisjoint(second.chunks_written)
-    assert sorted(first.chunks_written + second.chunks_written) == list(range(first.chunks_total))
-    assert (out / "bench.tsv").read_bytes() == (exported[0] / "bench.tsv").read_bytes()
-    # an interrupted run: a chunk's parts are missing → only that chunk is redone, no duplicates
-    (out / "parts" / "part-00002.tsv").unlink()
-    again = export_split(bench, out, chunk_size=7, progress=False)
-    assert again.chunks_written == [2] and again.merged
+    first = export_bench(bench, out, shard=(0, 3), shard_size=7, progress=False)
+    assert not first.merged and not (out / "bench.tsv").exists() and first.merge.missing
+    second = export_bench(bench, out, shard=(2, 3), shard_size=7, progress=False)
+    third = export_bench(bench, out, shard=(1, 3), shard_size=7, progress=False)
+    written = [first.chunks_written, second.chunks_written, third.chunks_written]
+    assert third.merged and sum(map(len, written)) == len(set().union(*written)) == first.chunks_total
+    assert all(k % 3 == i for i, ks in zip((0, 2, 1), written) for k in ks)
+    assert _tree(out) == _tree(exported[0])  # deterministic: sharded = one process, byte for byte
+    assert chunk_ids(20, 7, (1, 2)) == [1] and chunk_ids(20, 7) == [0, 1, 2]
+    for n in (1, 2, 5):
+        parts = [chunk_ids(100, 9, (i, n)) for i in range(n)]
+        assert sorted(k for p in parts for k in p) == list(range(12))
+
+
+def test_interrupted_export_resumes_without_duplicates(bench, exported, tmp_path, monkeypatch):
+    out = tmp_path / "interrupted"
+    real, calls = export_module._write_png, []
+
+    def crash_after_25(path, image):
+        calls.append(path)
+        if len(calls) > 25:
+            raise KeyboardInterrupt("killed")
+        real(path, image)
+
+    monkeypatch.setattr(export_module, "_write_png", crash_after_25)
+    with pytest.raises(KeyboardInterrupt):
+        export_bench(bench, out, shard_size=7, progress=False)
+    monkeypatch.setattr(export_module, "_write_png", real)
+    done = sorted(p.name for p in (out / "parts").glob("part-*"))
+    assert done and not (out / "bench.tsv").exists() and not list(out.rglob(".*.tmp"))
+    resumed = export_bench(bench, out, shard_size=7, progress=False)
+    assert resumed.merged and resumed.chunks_skipped == list(range(len(done) // 2))
     table = pd.read_csv(out / "bench.tsv", sep="\t")
     assert table["index"].is_unique and len(table) == len(bench)
-    assert chunk_ids(20, 7, (1, 2)) == [1] and chunk_ids(20, 7) == [0, 1, 2]
+    assert _tree(out) == _tree(exported[0])
+    # a lost part: only its chunk is rebuilt
+    (out / "parts" / "part-00002.tsv").unlink()
+    again = export_bench(bench, out, shard_size=7, progress=False)
+    assert again.chunks_written == [2] and again.merged and _tree(out) == _tree(exported[0])
+    # nothing left: a rerun only merges
+    assert export_bench(bench, out, shard_size=7, progress=False).items_written == 0
 
 
-@pytest.mark.parametrize("text", ["2/2", "x", "1/0", "-1/3", "1"])
+def test_other_settings_in_the_same_folder_are_refused(bench, rooms, exported, tmp_path):
+    out = tmp_path / "mixed"
+    export_bench(bench, out, shard=(0, 2), shard_size=7, progress=False)
+    with pytest.raises(ParameterError, match="shard_size"):
+        export_bench(bench, out, shard=(1, 2), shard_size=8, progress=False)
+    other = SpaceDGDataset("bench", ["haze"], scenes=rooms, image_size=SIZE, qa_config=CONFIG)
+    with pytest.raises(ParameterError, match="other settings"):
+        export_bench(other, out, shard=(1, 2), shard_size=7, progress=False)
+    assert not merge_parts(out) and merge_parts(out).missing
+    with pytest.raises(ParameterError, match="manifest"):
+        merge_parts(tmp_path / "nothing")
+
+
+@pytest.mark.parametrize("text", ["2/2", "3/2", "x", "1/0", "-1/3", "1", "1/2/3", "a/b"])
 def test_bad_shard(text):
     with pytest.raises(ParameterError, match="shard"):
         parse_shard(text)
 
 
-def test_cli_export_and_bad_scene(rooms, tmp_path, capsys):
+def test_shard_from_launcher_environment():
+    assert parse_shard("1/4") == (1, 4)
+    assert shard_from_env({"RANK": "3", "WORLD_SIZE": "8"}) == (3, 8)
+    assert shard_from_env({"SLURM_ARRAY_TASK_ID": "5", "SLURM_ARRAY_TASK_COUNT": "4", "SLURM_ARRAY_TASK_MIN": "2"}) == (3, 4)
+    assert shard_from_env({"SLURM_PROCID": "0", "SLURM_NTASKS": "2"}) == (0, 2)
+    with pytest.raises(ParameterError, match="RANK"):
+        shard_from_env({})
+    with pytest.raises(ParameterError, match="shard"):
+        shard_from_env({"RANK": "8", "WORLD_SIZE": "8"})
+
+
+# ------------------------------------------------------------------ bad scenes
+def test_a_scene_corrupted_after_indexing_is_named(bench, rooms, tmp_path):
+    copy = tmp_path / "rooms"
+    shutil.copytree(rooms[0].parent, copy)  # with the question indexes: nothing is rebuilt
+    dataset = SpaceDGDataset("bench", scenes=[copy], image_size=SIZE, qa_config=CONFIG)
+    folder = dataset.scene_dirs[dataset.records[0].scene_id]
+    ply = folder / "gaussians.ply"
+    ply.write_bytes(ply.read_bytes()[: ply.stat().st_size // 3])  # truncated
+    with pytest.raises(InvalidDataError, match=str(folder)) as caught:
+        export_bench(dataset, tmp_path / "out", shard_size=7, progress=False)
+    assert "item 0" in str(caught.value) and "gaussians.ply" in str(caught.value)
+    assert not list((tmp_path / "out" / "parts").glob("part-*"))
+
+
+# ------------------------------------------------------------------ CLI
+def test_cli_export_and_bad_scene(rooms, tmp_path, capsys, monkeypatch):
     out = tmp_path / "cli"
     argv = ["export", "--split", "bench", "--out", str(out), "--scenes", *map(str, rooms), "--image-size", "64x48",
-            "--per-sub-type", "1", "--question-types", "object_counting", "--chunk-size", "50"]
+            "--per-sub-type", "1", "--question-types", "object_counting", "--shard-size", "50", "--no-progress"]
     assert main(argv) == 0
     text = capsys.readouterr().out
-    assert "bench.tsv" in text and "| object_counting |" in text
-    assert main(argv) == 0 and "skipped 1 finished" in capsys.readouterr().out  # a rerun does nothing
-    assert main([*argv[:4], str(tmp_path / "x"), "--shard", "3/2"]) == 2
-    assert "shard" in capsys.readouterr().err
+    assert "bench.tsv" in text and "| object_counting |" in text and "| total |" in text
+    assert len(pd.read_csv(out / "bench.tsv", sep="\t")) == sum(json.loads((out / "summary.json").read_text())["by_question_type"].values())
+    assert main(argv) == 0 and "wrote 0 chunk(s)" in capsys.readouterr().out  # a rerun does nothing
+    monkeypatch.setenv("RANK", "0")
+    monkeypatch.setenv("WORLD_SIZE", "1")
+    assert main([*argv, "--shard", "env"]) == 0 and "shard 0/1" in capsys.readouterr().out
+    for bad in ("3/2", "x"):
+        assert main([*argv[:4], str(tmp_path / "x"), "--shard", bad]) == 2
+        assert "shard" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()  # refused before any work
     # a corrupted scene is named; with --skip-bad-scenes the others still export
     broken = tmp_path / "broken_rooms"
     shutil.copytree(rooms[0].parent, broken)
     bad = sorted(broken.iterdir())[1]
     (bad / "scene.json").write_text("{ not json")
     argv_broken = ["export", "--split", "train", "--out", str(tmp_path / "b"), "--scenes", str(broken), "--image-size", "64x48",
-                   "--per-sub-type", "1", "--question-types", "object_counting", "--clean-prob", "1"]
+                   "--per-sub-type", "1", "--question-types", "object_counting", "--clean-prob", "1", "--no-progress"]
     assert main(argv_broken) == 2
-    assert str(bad) in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert str(bad) in err and "skip" in err
     with pytest.warns(UserWarning, match=str(bad)):
         assert main([*argv_broken, "--skip-bad-scenes"]) == 0
     assert f"skipped scene {bad}" in capsys.readouterr().out
-    assert len(pd.read_csv(tmp_path / "b" / "train.tsv", sep="\t")) > 0
+    table = pd.read_csv(tmp_path / "b" / "train.tsv", sep="\t")
+    assert len(table) > 0 and set(table["degradation_type"]) == {CLEAN} and bad.name not in set(table["scene_id"])
 
 
 def test_max_questions_spreads_over_types(rooms):

@@ -1,8 +1,9 @@
-"""``spacedg export --split bench --out DIR``: images + VLMEvalKit TSV + chat JSONL, sharded and resumable."""
+"""``spacedg export --split bench --out DIR``: PNGs + VLMEvalKit TSV + chat JSONL, sharded and resumable."""
 
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from spacedg.errors import ParameterError
@@ -11,24 +12,28 @@ from spacedg.errors import ParameterError
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "export", help="render a split to PNGs + a VLMEvalKit TSV + chat JSONL (resumable, --shard i/n)",
-        description="Render every item of a split and write images, <split>.tsv (VLMEvalKit / SpaceDG evaluator "
-                    "columns) and <split>.jsonl (chat format). Finished chunks are skipped on a rerun; --shard i/n "
-                    "splits the chunks across processes or machines (see docs/distributed-export.md).",
+        description="Render every item of a split and write images/, <split>.tsv (VLMEvalKit / SpaceDG evaluator "
+                    "columns), <split>.jsonl (chat format) and summary.json. Finished chunks are skipped on a rerun; "
+                    "--shard i/n splits the chunks across processes or machines (see docs/distributed-export.md).",
     )
     parser.add_argument("--split", default="bench", choices=("train", "val", "bench"))
-    parser.add_argument("--out", type=Path, required=True, help="output folder")
-    parser.add_argument("--scenes", type=Path, nargs="*", default=None, help="scene folders (default: the built-in rooms)")
+    parser.add_argument("--out", type=Path, required=True, help="output folder (shared by every shard)")
+    parser.add_argument("--scenes", type=Path, nargs="+", default=None, help="scene folders or folders of them (default: the built-in rooms)")
     parser.add_argument("--degradations", default=None, help="comma-separated chains (default: the nine for bench, clean for train/val)")
     parser.add_argument("--question-types", default=None, help="comma-separated question types (default: all)")
-    parser.add_argument("--image-size", default=None, help="WxH to render at, e.g. 640x480 (default: the views' own size)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--per-sub-type", type=int, default=25, help="questions per sub type and scene (index building)")
-    parser.add_argument("--clean-prob", type=float, default=0.1, help="train/val only")
+    parser.add_argument("--image-size", default=None, help="WxH in pixels to render at, e.g. 640x480 (default: the views' own size)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the questions and of the degradations (default 0)")
+    parser.add_argument("--per-sub-type", type=int, default=25, help="questions per sub type and scene when indexes are built (default 25)")
+    parser.add_argument("--clean-prob", type=float, default=0.1, help="share of clean items, train/val only (default 0.1)")
     parser.add_argument("--max-questions", type=int, default=None, help="keep at most N questions, spread over question types")
-    parser.add_argument("--shard", default="0/1", help="i/n: export the chunks k with k %% n == i")
-    parser.add_argument("--chunk-size", type=int, default=256, help="items per resumable chunk")
+    parser.add_argument("--shard", default="0/1", help="i/n: export the chunks k with k %% n == i; 'env' reads RANK/WORLD_SIZE "
+                                                       "(torchrun) or SLURM_ARRAY_TASK_ID/COUNT (default 0/1)")
+    parser.add_argument("--shard-size", "--chunk-size", dest="shard_size", type=int, default=None,
+                        help="items per resumable chunk; the same in every shard (default 256)")
     parser.add_argument("--skip-bad-scenes", action="store_true", help="skip scenes that cannot be read (they are named)")
-    parser.add_argument("--backend", default="auto", choices=("auto", "cpu", "torch"))
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--backend", default="auto", choices=("auto", "cpu", "torch"), help="renderer (default auto: compiled CPU)")
+    parser.add_argument("--device", default=None, help="torch device for the torch backend, e.g. cuda or cuda:1 (default: CPU)")
     parser.set_defaults(func=run)
 
 
@@ -50,24 +55,38 @@ def _names(text: str | None) -> list[str] | None:
 
 def run(args: argparse.Namespace) -> int:
     from spacedg.data.dataset import SpaceDGDataset
-    from spacedg.data.export import counts_table, export_split, parse_shard
+    from spacedg.data.export import (
+        DEFAULT_SHARD_SIZE,
+        export_bench,
+        parse_shard,
+        shard_from_env,
+    )
     from spacedg.data.qa_index import QABuildConfig
 
-    shard = parse_shard(args.shard)
+    # every flag is checked before the (slow) dataset construction
+    shard = shard_from_env(os.environ) if args.shard.strip().lower() == "env" else parse_shard(args.shard)
+    shard_size = DEFAULT_SHARD_SIZE if args.shard_size is None else args.shard_size
+    if shard_size < 1:
+        raise ParameterError(f"--shard-size must be >= 1, got {shard_size}")
+    size = _size(args.image_size)
     dataset = SpaceDGDataset(
         args.split, _names(args.degradations), scenes=args.scenes, question_types=_names(args.question_types),
-        image_size=_size(args.image_size), seed=args.seed, clean_prob=args.clean_prob,
-        qa_config=QABuildConfig(per_sub_type=args.per_sub_type),
-        on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, max_questions=args.max_questions,
+        image_size=size, seed=args.seed, clean_prob=args.clean_prob,
+        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type),
+        on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device, max_questions=args.max_questions,
     )
-    summary = export_split(dataset, args.out, shard=shard, chunk_size=args.chunk_size)
-    print(f"{len(dataset)} items in {summary.chunks_total} chunk(s); this shard wrote {len(summary.chunks_written)} "
-          f"chunk(s) ({summary.items_written} items), skipped {len(summary.chunks_skipped)} finished")
     for folder, error in dataset.skipped.items():
         print(f"skipped scene {folder}: {error}")
+    summary = export_bench(dataset, args.out, shard=shard, shard_size=shard_size, progress=not args.no_progress)
+    print(f"{len(dataset)} items in {summary.chunks_total} chunk(s) of {shard_size}; shard {shard[0]}/{shard[1]} wrote "
+          f"{len(summary.chunks_written)} chunk(s) ({summary.items_written} items) in {summary.seconds:.1f} s, "
+          f"skipped {len(summary.chunks_skipped)} finished")
     if summary.merged:
-        print(f"wrote {args.out / (args.split + '.tsv')} and {args.out / (args.split + '.jsonl')}\n")
-        print(counts_table(summary.counts))
+        print(f"wrote {args.out / (args.split + '.tsv')}, {args.out / (args.split + '.jsonl')} and {args.out / 'summary.json'}\n")
+        print(summary.merge.table)
     else:
-        print("other shards still missing: run them, then any shard again (or this one) to merge")
+        missing = summary.merge.missing
+        shown = ", ".join(map(str, missing[:10])) + (" …" if len(missing) > 10 else "")
+        print(f"{len(missing)} chunk(s) still missing ({shown}): run the other shards; the last to finish merges "
+              f"(or run any shard again)")
     return 0

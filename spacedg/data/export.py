@@ -1,40 +1,52 @@
 """Export a split to files: PNG images, a VLMEvalKit TSV, and chat JSONL for training tools.
 
-Layout of ``out_dir``::
+Layout of ``out_dir`` (every path inside the exported rows is relative to it)::
 
-    images/{index:07d}_{k}.png       view k of dataset item ``index`` (RGB PNG)
-    parts/part-{chunk:05d}.tsv       rows of one chunk (header included), written after its images
-    parts/part-{chunk:05d}.jsonl     the same chunk as chat JSONL
-    bench.tsv, bench.jsonl           all chunks in index order (written once every chunk exists)
+    images/{index:07d}_{v}.png       view v of dataset item ``index`` (8-bit RGB PNG)
+    parts/manifest.json              split, item count, shard size, fingerprint of the settings
+    parts/part-{k:05d}.jsonl         chunk k as chat JSONL, written after its images
+    parts/part-{k:05d}.tsv           chunk k as TSV rows (header included), written last
+    <split>.tsv, <split>.jsonl       every chunk in index order (written once all chunks exist)
     summary.json                     counts per question_type × degradation_type
 
-Work is split into **chunks** of ``chunk_size`` consecutive dataset indices; ``shard=(i, n)``
-processes the chunks ``k`` with ``k % n == i``, so ``n`` processes or machines split the work
+**Chunks and shards.** Items are grouped into chunks of ``shard_size`` consecutive dataset
+indices (chunk ``k`` = indices ``[k·shard_size, (k+1)·shard_size)``); ``shard=(i, n)``
+processes the chunks with ``k % n == i``, so ``n`` processes or machines split the work
 disjointly and together completely. A chunk whose two part files exist is skipped, so an
-interrupted export resumes where it stopped; every file is written atomically (temporary
-name, then rename), so a crash never leaves a half-written part. Items are deterministic, so
-re-running a chunk anywhere writes the same bytes.
+interrupted export resumes where it stopped. Every file is written atomically (temporary
+sibling, then rename), so a crash never leaves a half-written file; an interrupted chunk just
+has some images and no parts, and is redone. Items are a pure function of the dataset's
+arguments, so re-running a chunk anywhere writes the same bytes. ``parts/manifest.json`` pins
+the settings: a shard started with other arguments on the same folder fails instead of mixing
+two exports.
 
-TSV columns (what the public SpaceDG evaluator and VLMEvalKit read): ``index``, ``question``
-(with the option lines for MCQ), ``answer`` (letter, yes/no, number, ``[a, b, c]``),
-``image_path`` (a Python list literal of relative paths), ``question_type``,
-``sub_question_type``, ``task_group``, ``degradation_type`` (``ori`` for clean), then
-``answer_type``, ``A``–``D`` (option texts, empty for non-MCQ), ``scene_id``, ``record_id`` and
-``degradation`` (the provenance as JSON). Tabs and newlines inside fields are quoted (CSV
-quoting, ``pandas.read_csv(path, sep="\\t")`` reads them back).
+**TSV** (what the public SpaceDG evaluator and VLMEvalKit read with
+``pandas.read_csv(path, sep="\\t")``): ``index`` (the dataset index, int), ``question`` (with
+the option lines for MCQ), ``answer`` (letter, yes/no, integer, number, ``[a, b, c]``),
+``image_path`` (a Python list literal of relative paths, ``"['images/0000000_0.png', ...]"``,
+which VLMEvalKit's ``toliststr`` evaluates), ``question_type``, ``sub_question_type``,
+``task_group``, ``degradation_type`` (``ori`` for clean), then ``answer_type``, ``A``–``D``
+(option texts, empty for non-MCQ, which pandas reads as NaN as VLMEvalKit expects),
+``scene_id``, ``record_id`` and ``degradation`` (the provenance as compact JSON). Fields holding
+tabs, newlines or quotes are quoted CSV-style (``"..."`` with ``""`` for a quote), which is
+pandas' default dialect, so multi-line questions read back unchanged.
 
-Chat JSONL (LLaMA-Factory / ShareGPT style): ``{"id", "images": [paths], "system":
-ANSWER_PROMPT, "messages": [{"role": "user", "content": "<image>"×V + question}, {"role":
-"assistant", "content": "<answer>…</answer>"}], ...metadata}``.
+**Chat JSONL** (LLaMA-Factory ShareGPT style, ``"messages"`` + ``"images"`` columns): ``{"id",
+"index", "images": [paths], "system": ANSWER_PROMPT, "messages": [{"role": "user", "content":
+"<image>"×V + question}, {"role": "assistant", "content": "<answer>…</answer>"}], ...metadata}``
+with exactly one ``<image>`` placeholder per image, in view order.
 """
 
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import json
 import math
+import time
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,55 +54,199 @@ from typing import Any
 import cv2
 import numpy as np
 
-from spacedg.data.dataset import SpaceDGDataset, answer_text, format_question
+from spacedg.data.dataset import CLEAN, SpaceDGDataset, answer_text, format_question
 from spacedg.data.io._files import atomic_write_bytes
-from spacedg.errors import ParameterError
+from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
 
-__all__ = ["TSV_COLUMNS", "ExportSummary", "export_split", "merge_parts", "parse_shard", "chunk_ids"]
+__all__ = [
+    "DEFAULT_SHARD_SIZE",
+    "TSV_COLUMNS",
+    "ExportSummary",
+    "MergeResult",
+    "chunk_ids",
+    "counts_table",
+    "dataset_fingerprint",
+    "export_bench",
+    "export_split",
+    "merge_parts",
+    "parse_shard",
+    "shard_from_env",
+]
 
+#: Column order of the TSV: the evaluator's eight first, then options and provenance.
 TSV_COLUMNS: tuple[str, ...] = (
     "index", "question", "answer", "image_path", "question_type", "sub_question_type", "task_group", "degradation_type",
     "answer_type", "A", "B", "C", "D", "scene_id", "record_id", "degradation",
 )
+#: Items per chunk (the unit of resuming and of sharding) unless told otherwise.
+DEFAULT_SHARD_SIZE = 256
+_MANIFEST_VERSION = 1
+
+
+# ---------------------------------------------------------------- results
+@dataclass
+class MergeResult:
+    """Outcome of :func:`merge_parts`. Truthy when the merged files were written.
+
+    Attributes:
+        complete: every chunk of the export exists and ``<split>.tsv``/``.jsonl`` were written.
+        missing: chunk ids whose parts are absent (empty when complete).
+        counts: ``question_type → degradation_type → items`` (empty when incomplete).
+        table: :func:`counts_table` of ``counts`` (empty when incomplete).
+    """
+
+    complete: bool
+    missing: list[int] = field(default_factory=list)
+    counts: dict[str, dict[str, int]] = field(default_factory=dict)
+    table: str = ""
+
+    def __bool__(self) -> bool:
+        return self.complete
 
 
 @dataclass
 class ExportSummary:
-    """What one call did: chunks written and skipped, items written, and whether the merge ran."""
+    """What one :func:`export_bench` call did.
 
+    Attributes:
+        split: the dataset's split.
+        items_total: ``len(dataset)``.
+        shard_size: items per chunk.
+        chunks_total: chunks of the whole export, ``ceil(items_total / shard_size)``.
+        shard: ``(i, n)`` this call processed.
+        chunks_written / chunks_skipped: this shard's chunks exported now / found finished.
+        items_written: items exported now (rendered, images and rows written).
+        seconds: wall time of the call, merge included.
+        merge: the merge attempt at the end (complete or not).
+    """
+
+    split: str
+    items_total: int
+    shard_size: int
     chunks_total: int
+    shard: tuple[int, int] = (0, 1)
     chunks_written: list[int] = field(default_factory=list)
     chunks_skipped: list[int] = field(default_factory=list)
     items_written: int = 0
-    merged: bool = False
-    counts: dict[str, dict[str, int]] = field(default_factory=dict)
+    seconds: float = 0.0
+    merge: MergeResult = field(default_factory=lambda: MergeResult(False))
+
+    @property
+    def merged(self) -> bool:
+        """Whether the merged ``<split>.tsv`` / ``.jsonl`` exist after this call."""
+        return self.merge.complete
+
+    @property
+    def counts(self) -> dict[str, dict[str, int]]:
+        return self.merge.counts
 
 
+# ---------------------------------------------------------------- sharding
 def parse_shard(text: str) -> tuple[int, int]:
-    """``"i/n"`` → ``(i, n)`` with ``0 <= i < n``; :class:`ParameterError` otherwise."""
+    """``"i/n"`` → ``(i, n)`` with ``0 <= i < n``; a :class:`ParameterError` otherwise."""
     try:
         i_text, n_text = str(text).split("/")
         i, n = int(i_text), int(n_text)
     except ValueError:
-        raise ParameterError(f"--shard must read i/n (e.g. 0/4), got {text!r}") from None
+        raise ParameterError(f"--shard must read i/n with integers 0 <= i < n (e.g. 0/4), or 'env'; got {text!r}") from None
     if n < 1 or not 0 <= i < n:
-        raise ParameterError(f"--shard {text}: need 0 <= i < n, e.g. 0/{max(n, 1)} … {max(n, 1) - 1}/{max(n, 1)}")
+        m = max(n, 1)
+        raise ParameterError(f"--shard {text}: need 0 <= i < n (shards of n={m} are 0/{m} … {m - 1}/{m})")
     return i, n
 
 
-def chunk_ids(total_items: int, chunk_size: int, shard: tuple[int, int] = (0, 1)) -> list[int]:
-    """The chunks of a dataset of ``total_items`` that ``shard`` owns."""
-    if chunk_size < 1:
-        raise ParameterError(f"chunk_size must be >= 1, got {chunk_size}")
+def shard_from_env(environ: Mapping[str, str]) -> tuple[int, int]:
+    """``(i, n)`` from a launcher's environment: ``RANK``/``WORLD_SIZE`` (torchrun, accelerate,
+    deepspeed), ``SLURM_ARRAY_TASK_ID``/``SLURM_ARRAY_TASK_COUNT`` (a job array starting at
+    ``SLURM_ARRAY_TASK_MIN``, default 0), or ``SLURM_PROCID``/``SLURM_NTASKS`` (``srun``)."""
+    pairs = (("RANK", "WORLD_SIZE"), ("SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT"), ("SLURM_PROCID", "SLURM_NTASKS"))
+    for rank_key, size_key in pairs:
+        if rank_key in environ and size_key in environ:
+            try:
+                rank = int(environ[rank_key]) - (int(environ.get("SLURM_ARRAY_TASK_MIN", "0")) if rank_key.startswith("SLURM_ARRAY") else 0)
+            except ValueError:
+                raise ParameterError(f"--shard env: {rank_key}={environ[rank_key]!r} is not an integer") from None
+            return parse_shard(f"{rank}/{environ[size_key]}")
+    names = ", ".join(f"{a}/{b}" for a, b in pairs)
+    raise ParameterError(f"--shard env: none of {names} is set; pass --shard i/n explicitly")
+
+
+def chunk_ids(total_items: int, shard_size: int, shard: tuple[int, int] = (0, 1)) -> list[int]:
+    """The chunks of an export of ``total_items`` items that ``shard=(i, n)`` owns (``k % n == i``)."""
+    if isinstance(shard_size, bool) or not isinstance(shard_size, int) or shard_size < 1:
+        raise ParameterError(f"shard_size must be an integer >= 1, got {shard_size!r}")
     i, n = shard
-    return [k for k in range(math.ceil(total_items / chunk_size)) if k % n == i]
+    if n < 1 or not 0 <= i < n:
+        raise ParameterError(f"shard must be (i, n) with 0 <= i < n, got {shard!r}")
+    return [k for k in range(math.ceil(total_items / shard_size)) if k % n == i]
 
 
-def _part_paths(out_dir: Path, chunk: int) -> tuple[Path, Path]:
-    return out_dir / "parts" / f"part-{chunk:05d}.tsv", out_dir / "parts" / f"part-{chunk:05d}.jsonl"
+def _chunk_range(k: int, shard_size: int, total: int) -> range:
+    return range(k * shard_size, min(total, (k + 1) * shard_size))
 
 
-def _tsv(rows: list[dict[str, Any]], header: bool) -> bytes:
+# ---------------------------------------------------------------- manifest
+def dataset_fingerprint(dataset: SpaceDGDataset) -> str:
+    """SHA-256 (16 hex) of what decides the exported content: split, chains, seeds, image size,
+    severity, clean probability, and every question record (id, text, options, answer, views).
+    The renderer backend is not part of it."""
+    digest = hashlib.sha256()
+    settings = {
+        "split": dataset.split, "chains": list(dataset.chains), "seed": dataset.seed, "severity": dataset.severity,
+        "clean_prob": dataset.clean_prob, "epoch": dataset.epoch,
+        "image_size": list(dataset.options.image_size) if dataset.options.image_size else None,
+    }
+    digest.update(json.dumps(settings, sort_keys=True).encode())
+    for record in dataset.records:
+        digest.update(json.dumps([record.id, record.question, list(record.options), answer_text(record.answer), list(record.views)]).encode())
+    return digest.hexdigest()[:16]
+
+
+def _manifest(dataset: SpaceDGDataset, shard_size: int) -> dict[str, Any]:
+    return {
+        "version": _MANIFEST_VERSION, "split": dataset.split, "items": len(dataset), "shard_size": shard_size,
+        "chunks": math.ceil(len(dataset) / shard_size), "fingerprint": dataset_fingerprint(dataset),
+    }
+
+
+def _read_manifest(out: Path) -> dict[str, Any] | None:
+    path = out / "parts" / "manifest.json"
+    if not path.is_file():
+        return None
+    try:
+        return dict(json.loads(path.read_text(encoding="utf-8")))
+    except (ValueError, TypeError) as err:
+        raise InvalidDataError(f"{path}: not a valid export manifest ({err}); delete it (and parts/) to start over") from None
+
+
+def _claim_manifest(out: Path, manifest: dict[str, Any]) -> None:
+    """Write ``parts/manifest.json``, or check that the one there describes the same export."""
+    found = _read_manifest(out)
+    if found is None:
+        atomic_write_bytes(out / "parts" / "manifest.json", (json.dumps(manifest, indent=2) + "\n").encode())
+        return
+    differ = [k for k in ("split", "items", "shard_size", "fingerprint") if found.get(k) != manifest[k]]
+    if differ:
+        what = ", ".join(f"{k} {found.get(k)!r} there vs {manifest[k]!r} now" for k in differ)
+        raise ParameterError(
+            f"{out} holds an export made with other settings ({what}). Every shard must use the same arguments "
+            "apart from --shard (same scenes, degradations, seed, image size, --shard-size); use a new --out folder "
+            "to export different settings"
+        )
+
+
+# ---------------------------------------------------------------- rows
+def _part_paths(out: Path, chunk: int) -> tuple[Path, Path]:
+    """``(tsv, jsonl)`` part files of ``chunk``."""
+    return out / "parts" / f"part-{chunk:05d}.tsv", out / "parts" / f"part-{chunk:05d}.jsonl"
+
+
+def _chunk_done(out: Path, chunk: int) -> bool:
+    return all(p.is_file() for p in _part_paths(out, chunk))
+
+
+def _tsv_bytes(rows: list[dict[str, Any]], header: bool) -> bytes:
+    """Rows as TSV (UTF-8, ``\\n`` line ends, CSV quoting of fields with tabs, newlines or quotes)."""
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=TSV_COLUMNS, delimiter="\t", lineterminator="\n", quoting=csv.QUOTE_MINIMAL)
     if header:
@@ -99,111 +255,175 @@ def _tsv(rows: list[dict[str, Any]], header: bool) -> bytes:
     return buffer.getvalue().encode("utf-8")
 
 
-def _rows(item: dict[str, Any], paths: list[str]) -> tuple[dict[str, Any], dict[str, Any]]:
-    options = {line[0]: line[3:] for line in item["options"]}
+def _rows(item: dict[str, Any], paths: list[str], system: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The TSV row and the chat JSONL row of one dataset item whose images are at ``paths``."""
+    options = {line[0]: line[3:] for line in item["options"]}  # "A. text" → {"A": "text"}
     answer = answer_text(item["answer"])
     question = format_question(item["question"], item["options"])
+    meta = {k: item[k] for k in ("question_type", "sub_question_type", "task_group", "degradation_type", "answer_type", "scene_id", "record_id")}
     tsv = {
-        "index": item["index"], "question": question, "answer": answer, "image_path": repr(paths),
-        "question_type": item["question_type"], "sub_question_type": item["sub_question_type"],
-        "task_group": item["task_group"], "degradation_type": item["degradation_type"], "answer_type": item["answer_type"],
-        **{k: options.get(k, "") for k in "ABCD"}, "scene_id": item["scene_id"], "record_id": item["record_id"],
+        "index": int(item["index"]), "question": question, "answer": answer, "image_path": repr(list(paths)), **meta,
+        **{k: options.get(k, "") for k in "ABCD"},
         "degradation": json.dumps(item["degradation"], separators=(",", ":")),
     }
     chat = {
-        "id": f"{item['index']:07d}", "images": paths,
-        "system": None,
+        "id": f"{item['index']:07d}", "index": int(item["index"]), "images": list(paths), "system": system,
         "messages": [
             {"role": "user", "content": "<image>" * len(paths) + question},
             {"role": "assistant", "content": f"<answer>{answer}</answer>"},
         ],
-        **{k: tsv[k] for k in ("question_type", "sub_question_type", "task_group", "degradation_type", "answer_type", "scene_id", "record_id")},
+        **meta, "views": list(item["views"]),
     }
     return tsv, chat
 
 
-def _write_png(path: Path, image: np.ndarray) -> None:
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(image[:, :, ::-1]))
+def _write_png(path: Path, rgb: np.ndarray) -> None:
+    """Write an H×W×3 uint8 RGB image as PNG, atomically (encoded in memory, then one rename)."""
+    ok, data = cv2.imencode(".png", np.ascontiguousarray(rgb[:, :, ::-1]))
     if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
         raise OSError(f"could not encode {path}")
     atomic_write_bytes(path, data.tobytes())
 
 
-def export_split(
+def _item(dataset: SpaceDGDataset, index: int) -> dict[str, Any]:
+    """``dataset[index]``, with an error that names the item's scene folder if it fails."""
+    try:
+        return dataset[index]
+    except (SpaceDGError, OSError) as err:
+        record, _, name = dataset.plan(index)
+        folder = dataset.scene_dirs.get(record.scene_id, record.scene_id)
+        raise InvalidDataError(f"item {index} ({name} of {record.id}) failed: scene {folder}: {err}") from err
+
+
+def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, system: str, bar: Any) -> int:
+    """Render chunk ``k``, write its images, then its JSONL part, then its TSV part; returns its item count."""
+    tsv_rows, chat_rows = [], []
+    for index in _chunk_range(k, shard_size, len(dataset)):
+        item = _item(dataset, index)
+        paths = []
+        for v, image in enumerate(item["images"]):
+            rel = f"images/{index:07d}_{v}.png"
+            _write_png(out / rel, image.permute(1, 2, 0).numpy())
+            paths.append(rel)
+        tsv, chat = _rows(item, paths, system)
+        tsv_rows.append(tsv)
+        chat_rows.append(chat)
+        bar.update(1)
+    tsv_path, jsonl_path = _part_paths(out, k)
+    atomic_write_bytes(jsonl_path, "".join(json.dumps(r, ensure_ascii=False) + "\n" for r in chat_rows).encode("utf-8"))
+    atomic_write_bytes(tsv_path, _tsv_bytes(tsv_rows, header=True))
+    return len(tsv_rows)
+
+
+# ---------------------------------------------------------------- export
+def export_bench(
     dataset: SpaceDGDataset,
     out_dir: str | Path,
     *,
     shard: tuple[int, int] = (0, 1),
-    chunk_size: int = 256,
+    shard_size: int = DEFAULT_SHARD_SIZE,
     progress: bool = True,
 ) -> ExportSummary:
-    """Export the chunks of ``dataset`` that ``shard`` owns (see the module docstring), then merge
-    if every chunk of the dataset is present."""
+    """Export the chunks of ``dataset`` that ``shard=(i, n)`` owns, then merge if every chunk exists.
+
+    Works for any split (``bench``: each question × clean + each chain; ``train``/``val``: one
+    item per question). See the module docstring for the layout, formats and resume rules.
+
+    Args:
+        dataset: the dataset to export (its items are rendered in index order).
+        out_dir: output folder (created); shared by every shard of one export.
+        shard: ``(i, n)``: process the chunks ``k`` with ``k % n == i``.
+        shard_size: items per chunk (the unit of resuming); every shard must use the same.
+        progress: show a tqdm bar over this shard's items.
+
+    Raises:
+        ParameterError: a bad ``shard``/``shard_size``, or ``out_dir`` holds an export of other settings.
+        InvalidDataError: an item cannot be rendered (the message names its scene folder).
+    """
     from tqdm import tqdm
 
     from spacedg.eval.scoring import ANSWER_PROMPT
 
+    started = time.perf_counter()
     out = Path(out_dir)
+    mine = chunk_ids(len(dataset), shard_size, shard)
     (out / "images").mkdir(parents=True, exist_ok=True)
     (out / "parts").mkdir(parents=True, exist_ok=True)
-    mine = chunk_ids(len(dataset), chunk_size, shard)
-    summary = ExportSummary(chunks_total=math.ceil(len(dataset) / chunk_size))
-    todo = [k for k in mine if not all(p.is_file() for p in _part_paths(out, k))]
-    summary.chunks_skipped = [k for k in mine if k not in todo]
-    total = sum(min(chunk_size, len(dataset) - k * chunk_size) for k in todo)
-    bar = tqdm(total=total, desc=f"export {dataset.split} shard {shard[0]}/{shard[1]}", unit="item", disable=not progress)
-    for k in todo:
-        tsv_rows, chat_rows = [], []
-        for index in range(k * chunk_size, min(len(dataset), (k + 1) * chunk_size)):
-            item = dataset[index]
-            paths = []
-            for v, image in enumerate(item["images"]):
-                rel = f"images/{index:07d}_{v}.png"
-                _write_png(out / rel, image.permute(1, 2, 0).numpy())
-                paths.append(rel)
-            tsv, chat = _rows(item, paths)
-            chat["system"] = ANSWER_PROMPT
-            tsv_rows.append(tsv)
-            chat_rows.append(chat)
-            bar.update(1)
-        tsv_path, jsonl_path = _part_paths(out, k)
-        atomic_write_bytes(jsonl_path, "".join(json.dumps(r, ensure_ascii=False) + "\n" for r in chat_rows).encode("utf-8"))
-        atomic_write_bytes(tsv_path, _tsv(tsv_rows, header=True))  # the TSV last: it marks the chunk done
-        summary.chunks_written.append(k)
-        summary.items_written += len(tsv_rows)
-    bar.close()
-    summary.merged, summary.counts = merge_parts(out, summary.chunks_total, dataset.split)
+    _claim_manifest(out, _manifest(dataset, shard_size))
+    summary = ExportSummary(dataset.split, len(dataset), shard_size, math.ceil(len(dataset) / shard_size), tuple(shard))
+    todo = [k for k in mine if not _chunk_done(out, k)]
+    summary.chunks_skipped = sorted(set(mine) - set(todo))
+    total = sum(len(_chunk_range(k, shard_size, len(dataset))) for k in todo)
+    with tqdm(total=total, desc=f"export {dataset.split} {shard[0]}/{shard[1]}", unit="item", disable=not progress) as bar:
+        for k in todo:
+            summary.items_written += _export_chunk(dataset, out, k, shard_size, ANSWER_PROMPT, bar)
+            summary.chunks_written.append(k)
+    summary.merge = merge_parts(out)
+    summary.seconds = time.perf_counter() - started
     return summary
 
 
-def merge_parts(out_dir: str | Path, chunks_total: int, split: str = "bench") -> tuple[bool, dict[str, dict[str, int]]]:
-    """Write ``<split>.tsv``, ``<split>.jsonl`` and ``summary.json`` when all ``chunks_total`` parts
-    exist; returns ``(merged, counts per question_type × degradation_type)``."""
+#: The same function; the name reads better for ``train``/``val`` exports.
+export_split = export_bench
+
+
+# ---------------------------------------------------------------- merge
+def merge_parts(out_dir: str | Path, *, verbose: bool = False) -> MergeResult:
+    """Concatenate every chunk's parts into ``<split>.tsv`` and ``<split>.jsonl`` (index order,
+    one header) and write ``summary.json``, if every chunk named by ``parts/manifest.json``
+    exists; otherwise write nothing and report the missing chunks.
+
+    Safe to call from several processes at once (each file is replaced atomically with the
+    same bytes). With ``verbose`` the counts table is printed.
+
+    Raises:
+        ParameterError: ``out_dir`` has no export manifest.
+        InvalidDataError: a part holds other rows than its chunk's indices (a foreign or edited file).
+    """
     out = Path(out_dir)
-    parts = [_part_paths(out, k) for k in range(chunks_total)]
-    if not all(t.is_file() and j.is_file() for t, j in parts):
-        return False, {}
+    manifest = _read_manifest(out)
+    if manifest is None:
+        raise ParameterError(f"{out}: no parts/manifest.json; not a spacedg export folder (run spacedg export first)")
+    chunks, size, items, split = int(manifest["chunks"]), int(manifest["shard_size"]), int(manifest["items"]), str(manifest["split"])
+    missing = [k for k in range(chunks) if not _chunk_done(out, k)]
+    if missing:
+        return MergeResult(False, missing)
     tsv_chunks, jsonl_chunks = [], []
     counts: dict[str, Counter[str]] = {}
-    for k, (tsv_path, jsonl_path) in enumerate(parts):
-        text = tsv_path.read_bytes()
-        tsv_chunks.append(text if k == 0 else text.split(b"\n", 1)[1])
+    for k in range(chunks):
+        tsv_path, jsonl_path = _part_paths(out, k)
+        tsv_bytes = tsv_path.read_bytes()
+        tsv_chunks.append(tsv_bytes if k == 0 else tsv_bytes.split(b"\n", 1)[1])
         jsonl = jsonl_path.read_bytes()
         jsonl_chunks.append(jsonl)
-        for line in jsonl.decode("utf-8").splitlines():
-            row = json.loads(line)
+        rows = [json.loads(line) for line in jsonl.decode("utf-8").splitlines()]
+        if [r.get("index") for r in rows] != list(_chunk_range(k, size, items)):
+            raise InvalidDataError(f"{jsonl_path}: rows are not the indices of chunk {k}; delete its two part files and rerun")
+        for row in rows:
             counts.setdefault(row["question_type"], Counter())[row["degradation_type"]] += 1
+    table = {q: dict(sorted(c.items(), key=lambda kv: (kv[0] != CLEAN, kv[0]))) for q, c in sorted(counts.items())}
     atomic_write_bytes(out / f"{split}.tsv", b"".join(tsv_chunks))
     atomic_write_bytes(out / f"{split}.jsonl", b"".join(jsonl_chunks))
-    table = {q: dict(sorted(c.items())) for q, c in sorted(counts.items())}
-    atomic_write_bytes(out / "summary.json", (json.dumps({"split": split, "counts": table}, indent=2) + "\n").encode("utf-8"))
-    return True, table
+    by_degradation: Counter[str] = Counter()
+    for row in table.values():
+        by_degradation.update(row)
+    summary = {
+        "split": split, "items": items, "chunks": chunks, "shard_size": size, "fingerprint": manifest.get("fingerprint"),
+        "counts": table, "by_degradation": dict(sorted(by_degradation.items(), key=lambda kv: (kv[0] != CLEAN, kv[0]))),
+        "by_question_type": {q: sum(row.values()) for q, row in table.items()},
+    }
+    atomic_write_bytes(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode("utf-8"))
+    text = counts_table(table)
+    if verbose:
+        print(text)
+    return MergeResult(True, [], table, text)
 
 
-def counts_table(counts: dict[str, dict[str, int]]) -> str:
-    """A Markdown table of ``counts`` (question_type rows × degradation_type columns, with totals)."""
-    columns = sorted({d for row in counts.values() for d in row}, key=lambda d: (d != "ori", d))
-    lines = ["| question_type | " + " | ".join(columns) + " | total |", "|---|" + "---|" * (len(columns) + 1)]
+def counts_table(counts: Mapping[str, Mapping[str, int]]) -> str:
+    """A Markdown table of ``counts``: question_type rows × degradation_type columns (``ori``
+    first, then by name), with a total column and a total row."""
+    columns = sorted({d for row in counts.values() for d in row}, key=lambda d: (d != CLEAN, d))
+    lines = ["| question_type | " + " | ".join(columns) + " | total |", "|---|" + "---:|" * (len(columns) + 1)]
     for q, row in counts.items():
         lines.append(f"| {q} | " + " | ".join(str(row.get(c, 0)) for c in columns) + f" | {sum(row.values())} |")
     totals = [sum(row.get(c, 0) for row in counts.values()) for c in columns]
