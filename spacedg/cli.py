@@ -12,7 +12,7 @@ from spacedg.errors import SpaceDGError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from spacedg.commands import export, gallery, plugins, qa, render, scenes
+    from spacedg.commands import evaluate, export, gallery, plugins, predict, qa, render, scenes
 
     parser = argparse.ArgumentParser(
         prog="spacedg",
@@ -24,6 +24,8 @@ def build_parser() -> argparse.ArgumentParser:
     gallery.add_parser(sub)
     qa.add_parser(sub)
     export.add_parser(sub)
+    predict.add_parser(sub)
+    evaluate.add_parser(sub)
     plugins.add_parser(sub)
     return parser
 

@@ -1,6 +1,11 @@
-"""Evaluation: parsing model outputs and scoring them against SpaceDG answers.
+"""Evaluation: answering a bench with a VLM, scoring the answers, and reporting like the paper.
 
-See :mod:`spacedg.eval.parsing` (reading answers) and :mod:`spacedg.eval.scoring` (answer extraction, routing, MRA).
+* :mod:`spacedg.eval.parsing` reads answers; :mod:`spacedg.eval.scoring` routes and scores them (MRA).
+* :mod:`spacedg.eval.bench` reads an exported bench; :mod:`spacedg.eval.predictions` reads prediction
+  files (ours and VLMEvalKit's); :mod:`spacedg.eval.prompts` holds the paper's prompt variants.
+* :mod:`spacedg.eval.predict` runs a local transformers VLM over a bench (``spacedg predict``).
+* :mod:`spacedg.eval.aggregate`, :mod:`spacedg.eval.correlation`, :mod:`spacedg.eval.report` and
+  :mod:`spacedg.eval.plots` make the tables, the point-biserial analysis and the plots (``spacedg eval``).
 """
 
 from __future__ import annotations
@@ -13,6 +18,9 @@ from spacedg.eval.parsing import (
     parse_size_list,
     parse_yes_no,
 )
+from spacedg.eval.bench import Bench, BenchRow, load_bench
+from spacedg.eval.predictions import PredictionSet, read_predictions
+from spacedg.eval.report import Report, build_report, write_report
 from spacedg.eval.scoring import (
     ANSWER_PROMPT,
     MRA_THRESHOLDS,
@@ -25,6 +33,14 @@ from spacedg.eval.scoring import (
 
 __all__ = [
     "ANSWER_PROMPT",
+    "Bench",
+    "BenchRow",
+    "PredictionSet",
+    "Report",
+    "build_report",
+    "load_bench",
+    "read_predictions",
+    "write_report",
     "MRA_THRESHOLDS",
     "ScoreResult",
     "extract_answer_text",

@@ -54,6 +54,7 @@ from spacedg.eval.parsing import (
 from spacedg.plugins.specs import AnswerType
 
 __all__ = [
+    "ANSWER_FORMATS",
     "ANSWER_PROMPT",
     "MRA_THRESHOLDS",
     "ScoreResult",
@@ -63,14 +64,18 @@ __all__ = [
     "summarize",
 ]
 
-#: System text given to the model: answer only, wrapped in ``<answer>…</answer>``.
-ANSWER_PROMPT: str = (
-    "Answer the question about the image(s). Output only the final answer, wrapped in "
-    "<answer></answer> tags, with no other text: for a multiple-choice question the option "
+#: How each answer type is written inside the tags (shared by every prompt variant).
+ANSWER_FORMATS: str = (
+    "for a multiple-choice question the option "
     "letter (e.g. <answer>B</answer>); for a yes/no question yes or no (e.g. "
     "<answer>no</answer>); for a count an integer (e.g. <answer>3</answer>); for a distance "
     "or size one number in meters (e.g. <answer>1.25</answer>); for object dimensions a list "
     "[shortest edge, middle edge, longest edge] in meters (e.g. <answer>[0.10, 0.20, 0.30]</answer>)."
+)
+#: System text given to the model: answer only, wrapped in ``<answer>…</answer>``.
+ANSWER_PROMPT: str = (
+    "Answer the question about the image(s). Output only the final answer, wrapped in "
+    "<answer></answer> tags, with no other text: " + ANSWER_FORMATS
 )
 
 #: MRA confidence thresholds θ in hundredths: 0.50, 0.55, …, 0.95 (10 values, as in the paper).

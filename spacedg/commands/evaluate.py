@@ -1,0 +1,42 @@
+"""``spacedg eval preds… --bench DIR --out REPORT_DIR``: score predictions and write the paper's tables."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "eval", help="score prediction files and write tables (CSV + Markdown), correlations and plots",
+        description="Score one or more prediction files (spacedg predict's .jsonl, or VLMEvalKit's .xlsx/.tsv/.csv/.json "
+                    "with a 'prediction' column) and write the paper's tables: model x degradation, per task group, "
+                    "question type and answer type, the clean-to-degraded drop, the point-biserial |r| across models, "
+                    "and plots. Name a file's model with LABEL=PATH, and its prompt variant with LABEL@VARIANT=PATH "
+                    "(variants: default, no_image, degradation_info, cot).",
+    )
+    parser.add_argument("predictions", nargs="+", help="prediction files: PATH, LABEL=PATH or LABEL@VARIANT=PATH")
+    parser.add_argument("--bench", type=Path, default=None,
+                        help="the bench the predictions answer (default: the questions the .jsonl files carry)")
+    parser.add_argument("--out", type=Path, required=True, help="report folder")
+    parser.add_argument("--allow-missing", action="store_true", help="score bench items without a prediction as wrong")
+    parser.add_argument("--no-plots", action="store_true", help="tables only")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from spacedg.eval.bench import load_bench
+    from spacedg.eval.predictions import read_predictions
+    from spacedg.eval.report import build_report, write_report
+
+    bench = load_bench(args.bench) if args.bench is not None else None
+    sets = [read_predictions(source) for source in args.predictions]
+    report = build_report(sets, bench, allow_missing=args.allow_missing)
+    written = write_report(report, args.out, with_plots=not args.no_plots)
+    print(report.out["main"].markdown())
+    for s in sets:
+        missing = sum(i.missing for i in report.items[s.label])
+        if missing:
+            print(f"note: {s.label}: {missing} item(s) without a prediction were scored as wrong")
+    print(f"{len(written)} files in {args.out} (report.md collects them)")
+    return 0

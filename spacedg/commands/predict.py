@@ -1,0 +1,78 @@
+"""``spacedg predict --model PATH --bench DIR --out preds.jsonl``: answer a bench with a local VLM."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from spacedg.errors import ParameterError
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    from spacedg.eval.prompts import VARIANTS
+
+    parser = subparsers.add_parser(
+        "predict", help="run a local transformers VLM over a bench (batched, resumable)",
+        description="Answer every item of an exported bench (--bench) or of SpaceDGDataset(split='bench') rendered online "
+                    "(--scenes) with a local transformers VLM (Qwen2-VL, Qwen2.5-VL, Qwen3-VL, InternVL, ...). Answers are "
+                    "appended to --out after each batch; a rerun skips answered items.",
+    )
+    parser.add_argument("--model", type=Path, required=True, help="model folder (config.json + weights + processor files)")
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--bench", type=Path, help="exported bench folder (spacedg export) or its .tsv")
+    source.add_argument("--scenes", type=Path, nargs="+", help="scene folders: render SpaceDGDataset(split='bench') online")
+    parser.add_argument("--out", type=Path, required=True, help="predictions file, *.jsonl (resumed when it exists)")
+    variant = parser.add_mutually_exclusive_group()
+    variant.add_argument("--no-image", dest="variant", action="store_const", const="no_image",
+                         help="non-image baseline: the questions without their images")
+    variant.add_argument("--degradation-info", dest="variant", action="store_const", const="degradation_info",
+                         help="prepend the degradation type and its parameter ranges (the paper's Table 2)")
+    variant.add_argument("--cot", dest="variant", action="store_const", const="cot",
+                         help="two-stage chain of thought: name the degradation first, then reason")
+    variant.add_argument("--variant", dest="variant", choices=VARIANTS, help="the prompt variant by name")
+    parser.set_defaults(variant="default")
+    parser.add_argument("--name", default=None, help="model name in reports (default: the model folder's name)")
+    parser.add_argument("--batch-size", type=int, default=8, help="conversations per generate call (default 8)")
+    parser.add_argument("--max-new-tokens", type=int, default=None, help="generation budget (default 32; cot 512)")
+    parser.add_argument("--limit", type=int, default=None, help="answer at most N pending items (smoke runs)")
+    parser.add_argument("--device", default=None, help="torch device (default: cuda when available, else cpu)")
+    parser.add_argument("--dtype", default="auto", choices=("auto", "float32", "bfloat16", "float16"),
+                        help="weights dtype (default auto: bfloat16 on CUDA, float32 on CPU)")
+    parser.add_argument("--min-pixels", type=int, default=None, help="image budget: fewest pixels per image after resizing")
+    parser.add_argument("--max-pixels", type=int, default=None, help="image budget: most pixels per image after resizing")
+    parser.add_argument("--image-size", default=None, help="--scenes only: WxH to render at (default: the views' size)")
+    parser.add_argument("--max-questions", type=int, default=None, help="--scenes only: at most N questions")
+    parser.add_argument("--seed", type=int, default=0, help="--scenes only: dataset seed (default 0)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import torch
+
+    from spacedg.commands.export import _size
+    from spacedg.eval.predict import bench_source, dataset_source, predict
+
+    if args.limit is not None and args.limit < 1:
+        raise ParameterError(f"--limit must be >= 1, got {args.limit}")
+    if args.bench is not None:
+        from spacedg.eval.bench import load_bench
+
+        source = bench_source(load_bench(args.bench))
+    else:
+        from spacedg.data.dataset import SpaceDGDataset
+
+        dataset = SpaceDGDataset(split="bench", scenes=args.scenes, image_size=_size(args.image_size), seed=args.seed,
+                                 max_questions=args.max_questions)
+        source = dataset_source(dataset)
+    device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    summary = predict(
+        args.model, source, args.out, variant=args.variant, model_name=args.name, batch_size=args.batch_size,
+        max_new_tokens=args.max_new_tokens, limit=args.limit, device=device, dtype=args.dtype,
+        min_pixels=args.min_pixels, max_pixels=args.max_pixels, progress=not args.no_progress,
+    )
+    rate = summary.answered / summary.seconds if summary.seconds > 0 else 0.0
+    print(f"{summary.out}: {summary.answered} answered now ({summary.generated} model calls, {summary.seconds:.1f} s, "
+          f"{rate:.2f} items/s), {summary.skipped} found answered, "
+          f"{summary.total - summary.skipped - summary.answered} left of {summary.total}")
+    return 0

@@ -1,0 +1,261 @@
+"""Reading an exported benchmark (``spacedg export``) for prediction and scoring.
+
+A bench folder holds ``<split>.tsv`` (VLMEvalKit columns, see :mod:`spacedg.data.export`) and
+``images/``. :func:`load_bench` reads the TSV with the standard ``csv`` module, **every field as
+text**: pandas' default reader turns the answer type ``"NA"`` (numerical answer) and an answer
+``"None"`` into missing values, which is why the answer type is also re-derived by
+:func:`~spacedg.eval.scoring.route` when a row lacks it.
+
+Rows are :class:`BenchRow` s; their :meth:`BenchRow.scoring_fields` is what
+:func:`~spacedg.eval.scoring.score` takes.
+"""
+
+from __future__ import annotations
+
+import ast
+import csv
+import hashlib
+import json
+import re
+import sys
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from spacedg.data.qa import MCQ_LETTERS
+from spacedg.errors import FileFormatError, InvalidDataError
+from spacedg.eval.scoring import route
+from spacedg.plugins.specs import AnswerType
+
+__all__ = ["CLEAN", "Bench", "BenchRow", "load_bench", "read_table", "row_from_mapping"]
+
+#: ``degradation_type`` of clean items.
+CLEAN = "ori"
+#: ``"A. "`` … ``"D. "`` in front of an option written as a line.
+_OPTION_PREFIX = re.compile(r"^\s*[A-D][.)]\s+")
+#: Columns without which a row cannot be scored.
+_REQUIRED = ("index", "question", "answer", "question_type")
+
+csv.field_size_limit(min(sys.maxsize, 2**31 - 1))
+
+
+@dataclass(frozen=True)
+class BenchRow:
+    """One benchmark item: a question about some views under one degradation condition.
+
+    Attributes:
+        index: the item's index in the bench (unique; the key predictions refer to).
+        question: the question text, option lines included for MCQ (as the model sees it).
+        answer: the ground truth as text (letter, yes/no, integer, number in metres, ``[a, b, c]``).
+        answer_type: how the answer is scored.
+        question_type / sub_question_type / task_group: the evaluator's names.
+        degradation_type: ``"ori"`` for clean, else the chain name (``"haze"``, ``"haze+low_res"``).
+        options: MCQ option texts in letter order (empty for other answer types).
+        image_paths: image files relative to the bench folder, in view order.
+        scene_id / record_id: provenance of the question.
+        degradation: provenance of the degradation: ``[{"name", "params", "seed", "preset"}, …]``.
+    """
+
+    index: int
+    question: str
+    answer: str
+    answer_type: AnswerType
+    question_type: str
+    sub_question_type: str = ""
+    task_group: str = ""
+    degradation_type: str = CLEAN
+    options: tuple[str, ...] = ()
+    image_paths: tuple[str, ...] = ()
+    scene_id: str = ""
+    record_id: str = ""
+    degradation: tuple[Mapping[str, Any], ...] = field(default_factory=tuple)
+
+    @property
+    def is_clean(self) -> bool:
+        return self.degradation_type == CLEAN
+
+    def scoring_fields(self) -> dict[str, Any]:
+        """The mapping :func:`spacedg.eval.scoring.score` reads."""
+        fields: dict[str, Any] = {
+            "answer": self.answer, "answer_type": self.answer_type.value,
+            "question_type": self.question_type, "sub_question_type": self.sub_question_type,
+        }
+        if self.options:
+            fields["options"] = {MCQ_LETTERS[i]: text for i, text in enumerate(self.options)}
+        return fields
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready fields (what a prediction line repeats so that it is self-contained)."""
+        return {
+            "index": self.index, "question": self.question, "answer": self.answer,
+            "answer_type": self.answer_type.value, "question_type": self.question_type,
+            "sub_question_type": self.sub_question_type, "task_group": self.task_group,
+            "degradation_type": self.degradation_type, "options": list(self.options),
+            "image_paths": list(self.image_paths), "scene_id": self.scene_id, "record_id": self.record_id,
+            "degradation": [dict(d) for d in self.degradation],
+        }
+
+
+@dataclass
+class Bench:
+    """An exported benchmark: its rows, in file order, and where its images are.
+
+    Attributes:
+        root: the bench folder (image paths are relative to it).
+        path: the TSV read.
+        rows: the items.
+        fingerprint: SHA-256 (16 hex) of the TSV bytes; predictions record it so that a
+            resumed or scored run can tell it is looking at the same bench.
+    """
+
+    root: Path
+    path: Path
+    rows: list[BenchRow]
+    fingerprint: str
+
+    def __post_init__(self) -> None:
+        self.by_index: dict[int, BenchRow] = {}
+        for row in self.rows:
+            if row.index in self.by_index:
+                raise FileFormatError(f"{self.path}: index {row.index} appears twice; every row needs its own index")
+            self.by_index[row.index] = row
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def __iter__(self) -> Iterator[BenchRow]:
+        return iter(self.rows)
+
+    def image_file(self, row: BenchRow, view: int) -> Path:
+        return self.root / row.image_paths[view]
+
+
+# ------------------------------------------------------------------ reading
+def _text(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, float) and value != value:  # NaN from a pandas-written file
+        return ""
+    return str(value)
+
+
+def _listish(value: Any, what: str, where: str) -> list[Any]:
+    if isinstance(value, (list, tuple)):
+        return list(value)
+    text = _text(value).strip()
+    if not text:
+        return []
+    try:
+        parsed = json.loads(text)
+    except json.JSONDecodeError:
+        try:
+            parsed = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            parsed = text  # one bare path
+    if isinstance(parsed, str):
+        return [parsed]
+    if not isinstance(parsed, (list, tuple)):
+        raise FileFormatError(f"{where}: {what} must be a list, got {text[:80]!r}")
+    return list(parsed)
+
+
+def _answer_type(fields: Mapping[str, Any], where: str) -> AnswerType:
+    kind = _text(fields.get("answer_type")).strip().upper()
+    if kind in ("", "NAN", "NONE"):
+        return route(_text(fields.get("question_type")), _text(fields.get("sub_question_type")))
+    try:
+        return AnswerType(kind)
+    except ValueError:
+        allowed = ", ".join(a.value for a in AnswerType)
+        raise FileFormatError(f"{where}: answer_type {kind!r} is not one of {allowed}") from None
+
+
+def _options(fields: Mapping[str, Any]) -> tuple[str, ...]:
+    given = fields.get("options")
+    if isinstance(given, Mapping):
+        return tuple(_text(given[k]) for k in MCQ_LETTERS if _text(given.get(k)).strip())
+    if isinstance(given, (list, tuple)) and given:
+        return tuple(_OPTION_PREFIX.sub("", _text(o), count=1) for o in given)
+    texts = [_text(fields.get(k)).strip() for k in MCQ_LETTERS]
+    return tuple(t for t in texts if t)
+
+
+def row_from_mapping(fields: Mapping[str, Any], where: str) -> BenchRow:
+    """A :class:`BenchRow` from one TSV row / JSON object (columns as in the export).
+
+    ``where`` names the row in errors (``"bench.tsv:12"``). Missing optional columns default
+    to empty; ``answer_type`` falls back to routing by question type.
+    """
+    missing = [c for c in _REQUIRED if not _text(fields.get(c)).strip()]
+    if missing:
+        raise FileFormatError(f"{where}: missing {', '.join(missing)} (needed to score a row)")
+    try:
+        index = int(float(_text(fields["index"]).strip()))
+    except ValueError:
+        raise FileFormatError(f"{where}: index {fields['index']!r} is not an integer") from None
+    answer = fields["answer"]
+    if isinstance(answer, (list, tuple)):
+        answer = "[" + ", ".join(str(v) for v in answer) + "]"
+    degradation = [d for d in _listish(fields.get("degradation"), "degradation", where) if isinstance(d, Mapping)]
+    return BenchRow(
+        index=index,
+        question=_text(fields["question"]),
+        answer=_text(answer).strip(),
+        answer_type=_answer_type(fields, where),
+        question_type=_text(fields["question_type"]).strip(),
+        sub_question_type=_text(fields.get("sub_question_type")).strip(),
+        task_group=_text(fields.get("task_group")).strip(),
+        degradation_type=_text(fields.get("degradation_type")).strip() or CLEAN,
+        options=_options(fields),
+        image_paths=tuple(str(p) for p in _listish(fields.get("image_path", fields.get("image_paths")), "image_path", where)),
+        scene_id=_text(fields.get("scene_id")),
+        record_id=_text(fields.get("record_id")),
+        degradation=tuple(degradation),
+    )
+
+
+def read_table(path: Path) -> list[dict[str, str]]:
+    """Rows of a TSV (``.tsv``) or CSV (``.csv``) file as text dicts (quoted fields understood)."""
+    delimiter = "," if path.suffix.lower() == ".csv" else "\t"
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            reader = csv.DictReader(handle, delimiter=delimiter)
+            rows = list(reader)
+    except UnicodeDecodeError as err:
+        raise FileFormatError(f"{path}: not UTF-8 text ({err.reason} at byte {err.start})") from None
+    except csv.Error as err:
+        raise FileFormatError(f"{path}: malformed {'CSV' if delimiter == ',' else 'TSV'} ({err})") from None
+    if reader.fieldnames is None:
+        raise FileFormatError(f"{path}: empty file (expected a header row)")
+    return rows
+
+
+def _bench_table(path: Path) -> Path:
+    if path.is_file():
+        return path
+    if not path.is_dir():
+        raise InvalidDataError(f"bench {path} does not exist; pass the folder written by `spacedg export` (or its .tsv)")
+    for name in ("bench.tsv", "val.tsv", "train.tsv"):
+        if (path / name).is_file():
+            return path / name
+    tables = sorted(path.glob("*.tsv"))
+    if len(tables) == 1:
+        return tables[0]
+    if not tables:
+        raise InvalidDataError(
+            f"bench {path} has no .tsv; export one with `spacedg export --split bench --out {path}` "
+            "(an interrupted export writes bench.tsv only once every chunk exists: rerun it to finish)"
+        )
+    raise InvalidDataError(f"bench {path} has several tables ({', '.join(t.name for t in tables)}); pass the .tsv to use")
+
+
+def load_bench(path: str | Path) -> Bench:
+    """Read an exported bench: a folder with ``bench.tsv`` (or ``val.tsv``/``train.tsv``, or
+    one ``.tsv``), or the TSV itself. Errors name the file and line."""
+    table = _bench_table(Path(path))
+    data = table.read_bytes()
+    rows = [row_from_mapping(fields, f"{table}:{n + 2}") for n, fields in enumerate(read_table(table))]
+    if not rows:
+        raise InvalidDataError(f"{table}: no rows")
+    return Bench(root=table.parent, path=table, rows=rows, fingerprint=hashlib.sha256(data).hexdigest()[:16])
