@@ -1,5 +1,6 @@
 # Two entry points, both self-installing on a fresh machine (see README):
-#   make demo   set up, then build the built-in synthetic scenes, export a small bench and its gallery
+#   make demo   set up, then build the built-in synthetic scenes, export a small bench and its gallery,
+#               answer it with a tiny VLM and write the evaluation report
 #   make test   set up, then run the test suite (what CI runs through .ci/run)
 PYTHON ?= python3
 VENV ?= .venv
@@ -31,6 +32,11 @@ demo: $(STAMP)
 	$(BIN)/spacedg qa stats $(DEMO_DIR)/scenes
 	$(BIN)/spacedg export --split bench --scenes $(DEMO_DIR)/scenes --out $(DEMO_DIR)/bench --image-size 320x240 --max-questions 44
 	$(BIN)/spacedg qa preview $(DEMO_DIR)/scenes/room-000000 --out $(DEMO_DIR)/questions.png
+	# evaluation pipeline end to end with a tiny random VLM built in code (its answers are noise)
+	$(BIN)/python -c "from spacedg.vlm import save_tiny_vlm; save_tiny_vlm('$(DEMO_DIR)/tiny-vlm')"
+	$(BIN)/spacedg predict --model $(DEMO_DIR)/tiny-vlm --bench $(DEMO_DIR)/bench --out $(DEMO_DIR)/preds/tiny.jsonl --name tiny-vlm
+	$(BIN)/spacedg predict --model $(DEMO_DIR)/tiny-vlm --bench $(DEMO_DIR)/bench --out $(DEMO_DIR)/preds/tiny-blind.jsonl --name tiny-vlm --no-image
+	$(BIN)/spacedg eval $(DEMO_DIR)/preds/tiny.jsonl $(DEMO_DIR)/preds/tiny-blind.jsonl --bench $(DEMO_DIR)/bench --out $(DEMO_DIR)/report
 	$(BIN)/spacedg plugins
 
 test: $(STAMP)

@@ -26,10 +26,7 @@ Every number is a mean of per-item scores in [0, 1], shown as percent (see
 
 from __future__ import annotations
 
-import csv
-import io
 import json
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,7 +40,7 @@ from spacedg.eval.labels import degradation_label
 from spacedg.eval.correlation import MIN_MODELS, degradation_correlation
 from spacedg.eval.predictions import PredictionSet
 from spacedg.eval.prompts import known_degradations, parse_degradation_guess
-from spacedg.eval.tables import Table, fmt_corr, fmt_delta, fmt_pct, is_number
+from spacedg.eval.tables import Table, csv_bytes, fmt_corr, fmt_delta, fmt_pct, is_number
 
 __all__ = ["Report", "build_report", "write_report"]
 
@@ -254,15 +251,6 @@ def _recognition_table(report: Report) -> Table:
 
 
 # ------------------------------------------------------------------ writing
-def _csv_bytes(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> bytes:
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(header)
-    for row in rows:
-        writer.writerow(["" if isinstance(v, float) and not math.isfinite(v) else v for v in row])
-    return buffer.getvalue().encode()
-
-
 def _long_scores(report: Report) -> bytes:
     rows = []
     for s in report.sets:
@@ -270,7 +258,7 @@ def _long_scores(report: Report) -> bytes:
             for slice_name, cells in table.items():
                 for condition, cell in cells.items():
                     rows.append([s.model, s.variant, kind, slice_name, condition, cell.n, cell.score, cell.parse_rate])
-    return _csv_bytes(["model", "variant", "slice_kind", "slice", "condition", "n", "score", "parse_rate"], rows)
+    return csv_bytes(["model", "variant", "slice_kind", "slice", "condition", "n", "score", "parse_rate"], rows)
 
 
 def _item_rows(report: Report) -> bytes:
@@ -283,7 +271,7 @@ def _item_rows(report: Report) -> bytes:
             rows.append([s.model, s.variant, i.index, i.record_id, i.degradation_type, i.question_type, i.sub_question_type,
                          i.task_group, i.answer_type, i.answer, i.prediction, "" if parsed is None else parsed, i.score,
                          int(i.parse_ok), int(i.missing)])
-    return _csv_bytes(header, rows)
+    return csv_bytes(header, rows)
 
 
 def _summary(report: Report) -> dict[str, Any]:

@@ -17,7 +17,7 @@ from typing import Any
 
 from spacedg.data.io._files import atomic_write_bytes
 
-__all__ = ["Table", "fmt_corr", "fmt_delta", "fmt_pct", "is_number"]
+__all__ = ["Table", "csv_bytes", "fmt_corr", "fmt_delta", "fmt_pct", "is_number"]
 
 
 def is_number(value: Any) -> bool:
@@ -37,6 +37,16 @@ def fmt_delta(value: Any) -> str:
 def fmt_corr(value: Any) -> str:
     """0.4567 → ``"0.46"``; missing → ``"-"``."""
     return f"{value:.2f}" if is_number(value) else "-"
+
+
+def csv_bytes(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> bytes:
+    """CSV text (UTF-8) of ``rows`` under ``header``; ``None`` and non-finite floats as empty cells."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(header)
+    for row in rows:
+        writer.writerow(["" if v is None or (isinstance(v, float) and not math.isfinite(v)) else v for v in row])
+    return buffer.getvalue().encode()
 
 
 @dataclass
@@ -85,12 +95,7 @@ class Table:
         return "\n".join(out) + "\n"
 
     def csv_text(self) -> str:
-        buffer = io.StringIO()
-        writer = csv.writer(buffer, lineterminator="\n")
-        writer.writerow(self.header)
-        for values in self.values:
-            writer.writerow(["" if v is None or (isinstance(v, float) and not math.isfinite(v)) else v for v in values])
-        return buffer.getvalue()
+        return csv_bytes(self.header, self.values).decode()
 
     def write(self, folder: Path, stem: str) -> list[Path]:
         """Write ``<stem>.md`` and ``<stem>.csv`` atomically; returns both paths."""
