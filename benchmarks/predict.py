@@ -75,7 +75,7 @@ def main() -> None:
               f"{summary.answered / summary.seconds:>9.1f}{'-':>18}")
         t0 = time.perf_counter()
         sets = [read_predictions(p) for p in [*outputs, out]]
-        report = build_report(sets, bench, allow_missing=args.limit is not None)
+        report = build_report(sets, bench, missing="skip" if args.limit is not None else "error")
         t_score = time.perf_counter() - t0
         files = write_report(report, work / "report")
         t_all = time.perf_counter() - t0

@@ -127,3 +127,14 @@ def write_vlmevalkit_xlsx(path: Path, model: str) -> Path:
         sheet.append([row[k] for k in rows[0]])
     book.save(path)
     return path
+
+
+if __name__ == "__main__":  # python -m tests.eval_fixtures OUT: the fixed bench and predictions as files
+    import sys
+
+    root = Path(sys.argv[1] if len(sys.argv) > 1 else "runs/eval-fixtures")
+    write_bench(root / "bench")
+    write_jsonl(root / "good-model.jsonl", "good-model")
+    write_vlmevalkit_xlsx(root / "mid-model_SpaceDG.xlsx", "mid-model")
+    write_vlmevalkit_tsv(root / "tsv-model_SpaceDG.tsv", "tsv-model")
+    print(f"wrote {root}/bench/bench.tsv and 3 prediction files (.jsonl, VLMEvalKit .xlsx and .tsv)")

@@ -200,3 +200,26 @@ def test_cli_predict(bench_dir, model_dir, tmp_path, capsys) -> None:
     assert "nothing" in capsys.readouterr().err
     with pytest.raises(ParameterError, match=r"\*.jsonl"):
         predict(model_dir, bench_source(load_bench(bench_dir)), tmp_path / "x.csv")
+
+
+def test_shards_split_the_bench_and_eval_merges_them(bench_dir, model_dir, tmp_path, monkeypatch, capsys) -> None:
+    out = tmp_path / "sharded.jsonl"
+    base = ["predict", "--model", str(model_dir), "--bench", str(bench_dir), "--out", str(out), "--no-progress"]
+    assert main([*base, "--shard", "0/2"]) == 0
+    monkeypatch.setenv("RANK", "1")
+    monkeypatch.setenv("WORLD_SIZE", "2")
+    assert main([*base, "--shard", "env"]) == 0
+    parts = [tmp_path / "sharded.shard0of2.jsonl", tmp_path / "sharded.shard1of2.jsonl"]
+    first, second = ({x["index"] for x in _lines(p)} for p in parts)
+    bench = load_bench(bench_dir)
+    assert not first & second and first | second == {r.index for r in bench}
+    assert len(first) == (len(bench) + 1) // 2
+    whole = tmp_path / "whole.jsonl"
+    assert main(["predict", "--model", str(model_dir), "--bench", str(bench_dir), "--out", str(whole), "--no-progress"]) == 0
+    capsys.readouterr()
+    merged = build_report([read_predictions(p) for p in parts], bench)
+    once = build_report([read_predictions(whole)], bench)
+    assert [s.label for s in merged.sets] == ["tiny-qwen2.5-vl"]
+    assert merged.overall("tiny-qwen2.5-vl") == once.overall("tiny-qwen2.5-vl")
+    assert main([*base, "--shard", "2/2"]) == 2
+    assert "need 0 <= i < n" in capsys.readouterr().err

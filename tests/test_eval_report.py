@@ -249,11 +249,15 @@ def test_missing_predictions(bench_dir: Path, tmp_path: Path) -> None:
     path = write_jsonl(tmp_path / "p.jsonl", "good-model")
     lines = path.read_text().splitlines()
     path.write_text("\n".join(lines[:-2]) + "\n")  # indices 13 and 14 unanswered
-    with pytest.raises(InvalidDataError, match=r"2 of 15 bench items have no prediction \(first index 13\).*--allow-missing"):
+    with pytest.raises(InvalidDataError, match=r"2 of 15 bench items have no prediction \(first index 13\).*--missing wrong"):
         build_report([read_predictions(path)], load_bench(bench_dir))
-    report = build_report([read_predictions(path)], load_bench(bench_dir), allow_missing=True)
+    report = build_report([read_predictions(path)], load_bench(bench_dir), missing="wrong")
     items = report.items["p"]
     assert sum(i.missing for i in items) == 2 and all(i.score == 0 for i in items if i.missing)
+    assert report.overall("p")["low_light"] == pytest.approx((0 + 1 + 0.5) / 5)
+    subset = build_report([read_predictions(path)], load_bench(bench_dir), missing="skip")
+    assert len(subset.items["p"]) == 13 and subset.tables["p"]["all"]["all"]["low_light"].n == 3
+    assert subset.overall("p")["low_light"] == pytest.approx((0 + 1 + 0.5) / 3)
 
 
 def test_bad_inputs_get_one_clear_error(bench_dir: Path, tmp_path: Path) -> None:
@@ -282,7 +286,7 @@ def test_bad_inputs_get_one_clear_error(bench_dir: Path, tmp_path: Path) -> None
     with pytest.raises(ParameterError, match="prompt variant 'fancy'"):
         read_predictions(f"M@fancy={write_jsonl(tmp_path / 'q.jsonl', 'good-model')}")
     same = write_jsonl(tmp_path / "r.jsonl", "good-model")
-    with pytest.raises(InvalidDataError, match="both 'M'"):
+    with pytest.raises(InvalidDataError, match="both 'M' and both answer item 0"):
         build_report([read_predictions(f"M={same}"), read_predictions(f"M={same}")], bench)
     (tmp_path / "bad.xlsx").write_bytes(b"not a zip")
     with pytest.raises(FileFormatError, match="not a readable .xlsx"):

@@ -19,7 +19,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--bench", type=Path, default=None,
                         help="the bench the predictions answer (default: the questions the .jsonl files carry)")
     parser.add_argument("--out", type=Path, required=True, help="report folder")
-    parser.add_argument("--allow-missing", action="store_true", help="score bench items without a prediction as wrong")
+    parser.add_argument("--missing", choices=("error", "wrong", "skip"), default="error",
+                        help="bench items without a prediction: error (default), score them as wrong, or skip them "
+                             "(score only the answered items, e.g. a subset)")
     parser.add_argument("--no-plots", action="store_true", help="tables only")
     parser.set_defaults(func=run)
 
@@ -31,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
 
     bench = load_bench(args.bench) if args.bench is not None else None
     sets = [read_predictions(source) for source in args.predictions]
-    report = build_report(sets, bench, allow_missing=args.allow_missing)
+    report = build_report(sets, bench, missing=args.missing)
     written = write_report(report, args.out, with_plots=not args.no_plots)
     print(report.out["main"].markdown())
     for s in sets:

@@ -35,7 +35,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--batch-size", type=int, default=8, help="conversations per generate call (default 8)")
     parser.add_argument("--max-new-tokens", type=int, default=None, help="generation budget (default 32; cot 512)")
     parser.add_argument("--limit", type=int, default=None, help="answer at most N pending items (smoke runs)")
-    parser.add_argument("--device", default=None, help="torch device (default: cuda when available, else cpu)")
+    parser.add_argument("--shard", default="0/1", help="i/n: answer every n-th item starting at i, into OUT with .shard{i}of{n} "
+                                                       "before .jsonl; 'env' reads RANK/WORLD_SIZE (torchrun) or SLURM "
+                                                       "variables (default 0/1); spacedg eval merges the shards")
+    parser.add_argument("--device", default=None, help="torch device (default: cuda, or cuda:LOCAL_RANK under a launcher, "
+                                                        "when available, else cpu)")
     parser.add_argument("--dtype", default="auto", choices=("auto", "float32", "bfloat16", "float16"),
                         help="weights dtype (default auto: bfloat16 on CUDA, float32 on CPU)")
     parser.add_argument("--min-pixels", type=int, default=None, help="image budget: fewest pixels per image after resizing")
@@ -50,8 +54,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch
 
+    import os
+
     from spacedg.commands.export import _size
-    from spacedg.eval.predict import bench_source, dataset_source, predict
+    from spacedg.data.export import parse_shard, shard_from_env
+    from spacedg.eval.predict import bench_source, dataset_source, predict, shard_path
 
     if args.limit is not None and args.limit < 1:
         raise ParameterError(f"--limit must be >= 1, got {args.limit}")
@@ -65,10 +72,12 @@ def run(args: argparse.Namespace) -> int:
         dataset = SpaceDGDataset(split="bench", scenes=args.scenes, image_size=_size(args.image_size), seed=args.seed,
                                  max_questions=args.max_questions)
         source = dataset_source(dataset)
-    device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    shard = shard_from_env(os.environ) if args.shard == "env" else parse_shard(args.shard)
+    device = args.device or (f"cuda:{os.environ.get('LOCAL_RANK', '0')}" if torch.cuda.is_available() else "cpu")
     summary = predict(
-        args.model, source, args.out, variant=args.variant, model_name=args.name, batch_size=args.batch_size,
-        max_new_tokens=args.max_new_tokens, limit=args.limit, device=device, dtype=args.dtype,
+        args.model, source, shard_path(args.out, shard), variant=args.variant, model_name=args.name,
+        batch_size=args.batch_size, max_new_tokens=args.max_new_tokens, limit=args.limit, shard=shard, device=device,
+        dtype=args.dtype,
         min_pixels=args.min_pixels, max_pixels=args.max_pixels, progress=not args.no_progress,
     )
     rate = summary.answered / summary.seconds if summary.seconds > 0 else 0.0

@@ -28,6 +28,7 @@ from spacedg.plugins.specs import AnswerType
 __all__ = [
     "AVG",
     "SLICE_KINDS",
+    "MISSING_POLICIES",
     "ItemScore",
     "answer_format",
     "condition_order",
@@ -58,7 +59,7 @@ class ItemScore:
     """The score of one prediction, with the row's labels.
 
     ``parsed`` is what the parser read (``None`` when unreadable); ``missing`` marks an item
-    the prediction file has no answer for (scored 0, only with ``allow_missing``).
+    the prediction file has no answer for (scored 0, only with ``missing="wrong"``).
     """
 
     index: int
@@ -110,21 +111,32 @@ def _truth_rows(pred: PredictionSet, bench_rows: Mapping[int, BenchRow] | None) 
     return bench_rows
 
 
-def score_set(pred: PredictionSet, bench_rows: Mapping[int, BenchRow] | None = None, *, allow_missing: bool = False) -> list[ItemScore]:
+#: What :func:`score_set` does with a bench item that has no prediction.
+MISSING_POLICIES = ("error", "wrong", "skip")
+
+
+def score_set(pred: PredictionSet, bench_rows: Mapping[int, BenchRow] | None = None, *, missing: str = "error") -> list[ItemScore]:
     """Score every item of the bench (or, without one, every item the file carries).
 
-    A bench item without a prediction is an error naming how many are missing, unless
-    ``allow_missing``: then it scores 0 and is marked ``missing`` (the report counts them).
+    A bench item without a prediction is, by ``missing``: ``"error"`` (default) an error naming
+    how many are missing; ``"wrong"`` scored 0 and marked ``missing`` (the report counts them);
+    ``"skip"`` left out, so only the answered items are scored (a subset evaluation, such as the
+    paper's human study on part of the bench).
     """
+    if missing not in MISSING_POLICIES:
+        raise ValueError(f"missing must be one of {', '.join(MISSING_POLICIES)}, got {missing!r}")
     rows = _truth_rows(pred, bench_rows)
     absent = [i for i in rows if i not in pred.predictions]
-    if absent and not allow_missing:
+    if absent and missing == "error":
         raise InvalidDataError(
             f"{pred.path}: {len(absent)} of {len(rows)} bench items have no prediction (first index {min(absent)}); "
-            "finish the run (spacedg predict resumes) or pass --allow-missing to score them as wrong"
+            "finish the run (spacedg predict resumes), or pass --missing wrong to score them as wrong, "
+            "or --missing skip to score only the answered items"
         )
     out = []
     for index in sorted(rows):
+        if missing == "skip" and index not in pred.predictions:
+            continue
         row = rows[index]
         text = pred.predictions.get(index)
         result = score(text, row.scoring_fields())

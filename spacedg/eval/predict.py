@@ -38,7 +38,7 @@ from spacedg.eval.bench import Bench, BenchRow, row_from_mapping
 from spacedg.eval.predictions import meta_path
 from spacedg.eval.prompts import VARIANTS, conversation, cot_followup, known_degradations, parse_degradation_guess, prompt_texts
 
-__all__ = ["PredictSummary", "Source", "bench_source", "dataset_source", "predict"]
+__all__ = ["PredictSummary", "Source", "bench_source", "dataset_source", "predict", "shard_path"]
 
 #: Version of the prediction file layout (in the sidecar).
 PREDICTIONS_VERSION = 1
@@ -125,6 +125,13 @@ class PredictSummary:
     out: Path
 
 
+def shard_path(out: Path, shard: tuple[int, int]) -> Path:
+    """The file shard ``(i, n)`` writes: ``preds.jsonl`` → ``preds.shard0of4.jsonl`` (``n = 1``: ``out``).
+    ``spacedg eval`` merges the shards of one model and variant back into one run."""
+    i, n = shard
+    return out if n == 1 else out.with_name(f"{out.stem}.shard{i}of{n}{out.suffix}")
+
+
 # ------------------------------------------------------------------ resume
 def _existing(out: Path, meta: dict[str, Any]) -> set[int]:
     side = meta_path(out)
@@ -136,7 +143,7 @@ def _existing(out: Path, meta: dict[str, Any]) -> set[int]:
         old = json.loads(side.read_text(encoding="utf-8"))
     except json.JSONDecodeError as err:
         raise FileFormatError(f"{side}: not JSON ({err.msg}); delete it and {out.name} to start over") from None
-    for key in ("bench_fingerprint", "model_path", "variant", "generation", "prompts", "version"):
+    for key in ("bench_fingerprint", "model_path", "variant", "generation", "prompts", "version", "shard"):
         if old.get(key) != meta.get(key):
             raise InvalidDataError(
                 f"{out} holds a run with another {key} ({old.get(key)!r}, now {meta.get(key)!r}); "
@@ -182,6 +189,7 @@ def predict(
     batch_size: int = 8,
     max_new_tokens: int | None = None,
     limit: int | None = None,
+    shard: tuple[int, int] = (0, 1),
     device: str = "cpu",
     dtype: str = "auto",
     min_pixels: int | None = None,
@@ -199,6 +207,8 @@ def predict(
         batch_size: conversations per ``generate`` call.
         max_new_tokens: generation budget (default 32; 512 for ``cot``, whose answers reason).
         limit: answer at most this many pending items (a smoke run).
+        shard: ``(i, n)``: answer only the items at positions ``p`` with ``p % n == i`` (one
+            process or GPU of ``n``; write each shard to its own file, see :func:`shard_path`).
         device / dtype / min_pixels / max_pixels: see :func:`spacedg.vlm.load_vlm`.
         progress: show a progress bar.
     """
@@ -225,15 +235,16 @@ def predict(
         "format": "spacedg-predictions", "version": PREDICTIONS_VERSION, "model": name, "model_path": model_path,
         "variant": variant, "bench": source.name, "bench_fingerprint": source.fingerprint,
         "generation": {"max_new_tokens": tokens, "do_sample": False}, "image_pixels": {"min": min_pixels, "max": max_pixels},
-        "prompts": prompt_texts(),
+        "prompts": prompt_texts(), "shard": list(shard),
     }
     out.parent.mkdir(parents=True, exist_ok=True)
     done = _existing(out, meta)
-    pending = [i for i in source.indices if i not in done]
+    pending = [i for pos, i in enumerate(source.indices) if pos % shard[1] == shard[0] and i not in done]
     if limit is not None:
         pending = pending[:limit]
     start = time.perf_counter()
-    summary = PredictSummary(len(source.indices), len(done), 0, 0, 0.0, out)
+    owned = sum(1 for pos in range(len(source.indices)) if pos % shard[1] == shard[0])
+    summary = PredictSummary(owned, len(done), 0, 0, 0.0, out)
     if not pending:
         return summary
     if vlm is None:

@@ -27,7 +27,7 @@ from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
 from spacedg.eval.bench import BenchRow, read_table, row_from_mapping
 from spacedg.eval.prompts import VARIANTS
 
-__all__ = ["PredictionSet", "meta_path", "parse_source", "read_predictions"]
+__all__ = ["PredictionSet", "merge_shards", "meta_path", "parse_source", "read_predictions"]
 
 
 @dataclass
@@ -55,6 +55,30 @@ class PredictionSet:
     @property
     def label(self) -> str:
         return self.model if self.variant == "default" else f"{self.model}@{self.variant}"
+
+
+def merge_shards(sets: list[PredictionSet]) -> list[PredictionSet]:
+    """Sets sharing a label (model and variant) merged into one, in first-seen order: the
+    shards of one run (``spacedg predict --shard i/n``) or any files answering disjoint items.
+    Two files of one label that answer the same item are an error naming both."""
+    merged: dict[str, PredictionSet] = {}
+    for s in sets:
+        if s.label not in merged:
+            merged[s.label] = PredictionSet(s.model, s.variant, s.path, dict(s.predictions), dict(s.rows), dict(s.extras),
+                                            {**s.meta, "files": [str(s.path)]})
+            continue
+        into = merged[s.label]
+        shared = sorted(set(into.predictions) & set(s.predictions))
+        if shared:
+            raise InvalidDataError(
+                f"{s.path} and {into.path} are both {s.label!r} and both answer item {shared[0]} ({len(shared)} shared); "
+                f"name them apart with LABEL=PATH (e.g. {s.model}-b={s.path}), or pass each shard once"
+            )
+        into.predictions.update(s.predictions)
+        into.rows.update(s.rows)
+        into.extras.update(s.extras)
+        into.meta["files"].append(str(s.path))
+    return list(merged.values())
 
 
 def meta_path(path: Path) -> Path:

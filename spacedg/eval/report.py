@@ -38,7 +38,7 @@ from spacedg.eval.aggregate import AVG, SLICE_KINDS, Cell, ItemScore, condition_
 from spacedg.eval.bench import CLEAN, Bench
 from spacedg.eval.labels import degradation_label
 from spacedg.eval.correlation import MIN_MODELS, degradation_correlation
-from spacedg.eval.predictions import PredictionSet
+from spacedg.eval.predictions import PredictionSet, merge_shards
 from spacedg.eval.prompts import known_degradations, parse_degradation_guess
 from spacedg.eval.tables import Table, csv_bytes, fmt_corr, fmt_delta, fmt_pct, is_number
 
@@ -86,20 +86,16 @@ class Report:
 
 
 # ------------------------------------------------------------------ building
-def build_report(sets: Sequence[PredictionSet], bench: Bench | None = None, *, allow_missing: bool = False) -> Report:
+def build_report(sets: Sequence[PredictionSet], bench: Bench | None = None, *, missing: str = "error") -> Report:
     """Score ``sets`` (against ``bench`` when given, else against the rows the files carry)
-    and compute every table. Two sets with the same model and variant are an error."""
+    and compute every table. Sets with the same model and variant are merged when they answer
+    disjoint items (the shards of one run), else an error. ``missing``: see
+    :func:`~spacedg.eval.aggregate.score_set`."""
     if not sets:
         raise InvalidDataError("spacedg eval: give at least one prediction file")
-    seen: dict[str, Path] = {}
-    for s in sets:
-        if s.label in seen:
-            raise InvalidDataError(
-                f"{s.path} and {seen[s.label]} are both {s.label!r}; name them apart with LABEL=PATH (e.g. {s.model}-b={s.path})"
-            )
-        seen[s.label] = s.path
+    sets = merge_shards(list(sets))
     rows = bench.by_index if bench is not None else None
-    items = {s.label: score_set(s, rows, allow_missing=allow_missing) for s in sets}
+    items = {s.label: score_set(s, rows, missing=missing) for s in sets}
     conditions = condition_order({i.degradation_type for group in items.values() for i in group}, known_degradations())
     kinds = ("all", *SLICE_KINDS)
     tables = {label: {kind: slice_table(group, kind, conditions) for kind in kinds} for label, group in items.items()}
