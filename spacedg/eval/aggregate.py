@@ -85,6 +85,16 @@ class ItemScore:
         return getattr(self, kind) or "unknown"
 
 
+def _same_answer(a: str, b: str) -> bool:
+    """Answers equal as text, or as numbers (a spreadsheet turns ``"2.50"`` into ``2.5``)."""
+    if a.strip().lower() == b.strip().lower():
+        return True
+    try:
+        return float(a) == float(b)
+    except ValueError:
+        return False
+
+
 def _truth_rows(pred: PredictionSet, bench_rows: Mapping[int, BenchRow] | None) -> Mapping[int, BenchRow]:
     if bench_rows is None:
         lacking = [i for i in pred.predictions if i not in pred.rows]
@@ -102,7 +112,7 @@ def _truth_rows(pred: PredictionSet, bench_rows: Mapping[int, BenchRow] | None) 
         )
     for index, own in pred.rows.items():
         truth = bench_rows[index]
-        if own.question.strip() != truth.question.strip() or own.answer != truth.answer:
+        if own.question.strip() != truth.question.strip() or not _same_answer(own.answer, truth.answer):
             raise InvalidDataError(
                 f"{pred.path}: index {index} carries another question or answer than the bench "
                 f"({own.record_id or own.question[:40]!r} vs {truth.record_id or truth.question[:40]!r}); "
