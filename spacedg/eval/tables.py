@@ -85,7 +85,9 @@ class Table:
         def line(cells: Sequence[str]) -> str:
             return "| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |"
 
-        out = [f"### {self.title}", "", line(self.header), "|" + "|".join(["---"] + ["---:"] * (len(self.header) - 1)) + "|"]
+        numeric = [all(v is None or is_number(v) for v in column) for column in zip(*self.values)] or [False] * len(self.header)
+        align = ["---:" if k > 0 and numeric[k] else "---" for k in range(len(self.header))]
+        out = [f"### {self.title}", "", line(self.header), "|" + "|".join(align) + "|"]
         for r, cells in enumerate(self.cells):
             if r in self.sections:
                 out.append(line([f"*{self.sections[r]}*"] + [""] * (len(self.header) - 1)))
