@@ -37,6 +37,8 @@ demo: $(STAMP)
 	$(BIN)/spacedg predict --model $(DEMO_DIR)/tiny-vlm --bench $(DEMO_DIR)/bench --out $(DEMO_DIR)/preds/tiny.jsonl --name tiny-vlm
 	$(BIN)/spacedg predict --model $(DEMO_DIR)/tiny-vlm --bench $(DEMO_DIR)/bench --out $(DEMO_DIR)/preds/tiny-blind.jsonl --name tiny-vlm --no-image
 	$(BIN)/spacedg eval $(DEMO_DIR)/preds/tiny.jsonl $(DEMO_DIR)/preds/tiny-blind.jsonl --bench $(DEMO_DIR)/bench --out $(DEMO_DIR)/report
+	# fine-tuning smoke run (tiny VLM, online degraded samples, 4 steps with a checkpoint and an evaluation)
+	$(BIN)/python -m spacedg.sft +experiment=tiny 'data.scenes=[$(DEMO_DIR)/scenes]' output_dir=$(DEMO_DIR)/sft-tiny
 	$(BIN)/spacedg plugins
 
 test: $(STAMP)

@@ -25,6 +25,7 @@ inference.
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -134,6 +135,49 @@ def _check_folder(path: str | Path) -> Path:
     return folder
 
 
+def _adapter_base(folder: Path) -> Path | str | None:
+    """For a folder holding a peft adapter (``adapter_config.json``, no ``config.json``): its base model folder.
+
+    ``base_model_name_or_path`` is tried as given, then relative to the adapter folder. A base named
+    ``tiny:<family>`` (a tiny model built in code, see :mod:`spacedg.vlm.tiny`) is returned as is.
+    """
+    if not folder.is_dir() or (folder / "config.json").is_file() or not (folder / "adapter_config.json").is_file():
+        return None
+    base = _read_json(folder / "adapter_config.json").get("base_model_name_or_path")
+    if not base:
+        raise InvalidDataError(f"{folder} holds a PEFT adapter but its adapter_config.json names no "
+                               f"base_model_name_or_path; set it to the base model folder")
+    if str(base).startswith("tiny:"):
+        return str(base)
+    for candidate in (Path(base), folder / base):
+        if (candidate / "config.json").is_file():
+            return candidate
+    raise InvalidDataError(f"{folder} holds a PEFT adapter whose base model folder {base!r} (base_model_name_or_path "
+                           f"in adapter_config.json) does not exist or has no config.json; put the base model there "
+                           f"or edit base_model_name_or_path to point at it")
+
+
+def _merge_adapter(model: Any, folder: Path) -> Any:
+    """``model`` with the peft adapter saved in ``folder`` merged into its weights (a plain model again)."""
+    try:
+        from peft import PeftModel
+    except ImportError as err:
+        raise InvalidDataError(f"{folder} holds a PEFT adapter; loading it needs the peft package "
+                               f"(pip install peft)") from err
+    try:
+        with warnings.catch_warnings():  # peft reads the deprecated `is_gradient_checkpointing` (transformers 5.23)
+            warnings.filterwarnings("ignore", message=".*is_gradient_checkpointing.*", category=FutureWarning)
+            return PeftModel.from_pretrained(model, folder).merge_and_unload()
+    except (ValueError, KeyError, OSError, RuntimeError) as err:
+        detail = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise InvalidDataError(f"{folder}: cannot apply the PEFT adapter to its base model ({detail})") from err
+
+
+def _has_processor(folder: Path) -> bool:
+    return any((folder / name).is_file() for name in
+               ("processor_config.json", "preprocessor_config.json", "tokenizer_config.json"))
+
+
 def load_processor(path: str | Path, *, min_pixels: int | None = None, max_pixels: int | None = None) -> Any:
     """The processor saved in ``path``, with the pixel budget applied (see module doc).
 
@@ -182,18 +226,41 @@ def load_vlm(path: str | Path, *, device: str = "cpu", dtype: str | torch.dtype 
              min_pixels: int | None = None, max_pixels: int | None = None) -> tuple[Any, Any]:
     """``(model, processor)`` from a local folder: ``AutoModelForImageTextToText``, eval mode, on ``device``.
 
+    A folder holding a peft adapter (``adapter_config.json`` and no ``config.json``) loads too: the
+    base model from the folder named by ``base_model_name_or_path`` in ``adapter_config.json``,
+    with the adapter merged into it; the processor from the adapter folder when it has one, else
+    from the base folder. A base named ``tiny:<family>`` (what :func:`spacedg.sft.model.prepare_model`
+    records for a tiny model built in code) is rebuilt with :func:`spacedg.vlm.build_tiny_vlm`.
+
     Raises :class:`~spacedg.errors.InvalidDataError` naming the path when the folder is missing,
-    has no ``config.json`` or holds a model that is not an image-text-to-text model.
+    has no ``config.json`` or holds a model that is not an image-text-to-text model (or, for an
+    adapter, when its base folder is missing).
     """
     from transformers import AutoModelForImageTextToText
 
-    folder = _check_folder(path)
+    adapter = Path(path)
+    base = _adapter_base(adapter)
     torch_dtype = resolve_dtype(dtype, device)
+    if isinstance(base, str):  # an adapter trained on a tiny model built in code (seed 0)
+        from spacedg.vlm.tiny import build_tiny_vlm
+
+        model, processor = build_tiny_vlm(base[len("tiny:"):])
+        model = _merge_adapter(model.to(torch_dtype), adapter)
+        if _has_processor(adapter):
+            processor = load_processor(adapter, min_pixels=min_pixels, max_pixels=max_pixels)
+        else:
+            processor.tokenizer.padding_side = "left"
+            set_pixel_budget(processor, min_pixels, max_pixels)
+        return model.to(device).eval(), processor
+    folder = _check_folder(path) if base is None else base
     try:
         model = AutoModelForImageTextToText.from_pretrained(folder, dtype=torch_dtype)
     except (ValueError, KeyError, OSError) as err:
         detail = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
         raise InvalidDataError(f"{folder}: cannot load an image-text-to-text model ({detail}); "
                                f"pass a transformers VLM folder (Qwen2-VL, Qwen2.5-VL, Qwen3-VL, InternVL, ...)") from err
+    if base is not None:
+        model = _merge_adapter(model, adapter)
+        folder = adapter if _has_processor(adapter) else base
     processor = load_processor(folder, min_pixels=min_pixels, max_pixels=max_pixels)
     return model.to(device).eval(), processor

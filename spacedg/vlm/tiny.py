@@ -28,7 +28,7 @@ from typing import Any
 
 import torch
 
-__all__ = ["CHAT_TEMPLATE", "TINY_FAMILIES", "build_tiny_vlm", "save_tiny_vlm"]
+__all__ = ["CHAT_TEMPLATE", "IMAGE_PLACEHOLDERS", "TINY_FAMILIES", "build_tiny_vlm", "save_tiny_vlm"]
 
 #: Families :func:`build_tiny_vlm` can build (transformers ``model_type`` names).
 TINY_FAMILIES = ("qwen2_vl", "qwen2_5_vl", "qwen3_vl", "internvl")
@@ -84,7 +84,8 @@ CHAT_TEMPLATE = (
     "{% endfor %}"
     "{% if add_generation_prompt %}<|im_start|>assistant\n{% endif %}"
 )
-_IMAGE_PLACEHOLDER = {"qwen": "<|vision_start|><|image_pad|><|vision_end|>", "internvl": "<IMG_CONTEXT>\n"}
+#: Image placeholder of each family in the chat template (the processor expands it).
+IMAGE_PLACEHOLDERS = {"qwen": "<|vision_start|><|image_pad|><|vision_end|>", "internvl": "<IMG_CONTEXT>\n"}
 
 _TEXT = {"hidden_size": 64, "intermediate_size": 128, "num_hidden_layers": 2, "num_attention_heads": 4,
          "num_key_value_heads": 2, "max_position_embeddings": 2048}
@@ -173,7 +174,7 @@ def _processor(family: str, tok: Any) -> Any:
 
     cls = {"qwen2_vl": tf.Qwen2VLProcessor, "qwen2_5_vl": tf.Qwen2_5_VLProcessor,
            "qwen3_vl": tf.Qwen3VLProcessor, "internvl": tf.InternVLProcessor}[family]
-    placeholder = _IMAGE_PLACEHOLDER["internvl" if family == "internvl" else "qwen"]
+    placeholder = IMAGE_PLACEHOLDERS["internvl" if family == "internvl" else "qwen"]
     template = CHAT_TEMPLATE.replace("{image}", placeholder)
     extra = {"image_seq_length": 4} if family == "internvl" else {}
     # A placeholder video processor stands in for the torchvision-only real one (see loading.py).

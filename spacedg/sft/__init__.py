@@ -1,0 +1,7 @@
+"""Supervised fine-tuning of VLMs on SpaceDG samples (``python -m spacedg.sft +experiment=qwen``).
+
+Modules: :mod:`~spacedg.sft.app` (the Hydra app), :mod:`~spacedg.sft.model` (freezing, LoRA,
+checkpoint export), :mod:`~spacedg.sft.data` (samples and the token budget),
+:mod:`~spacedg.sft.collator` (assistant-only labels), :mod:`~spacedg.sft.trainer` (strict resume,
+generation-based evaluation), :mod:`~spacedg.sft.template` (chat template with answer markers).
+"""
