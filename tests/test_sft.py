@@ -105,6 +105,16 @@ def test_resume_continues_from_the_saved_loss(rooms, tmp_path, monkeypatch) -> N
     for name in ("checkpoint-2", "data_stats.json"):
         src = tmp_path / "whole" / name
         (shutil.copytree if src.is_dir() else shutil.copy)(src, tmp_path / "resumed" / name)
+    # through the Trainer too, frozen parts keep their weights bit-exact and trained parts move
+    from safetensors.torch import load_file
+
+    before = load_file(str(tmp_path / "whole" / "base-model" / "model.safetensors"))
+    after = load_file(str(tmp_path / "whole" / "final" / "model.safetensors"))
+    vision = [k for k in before if k.startswith("visual.") and ".merger." not in k]  # saved in hub key format
+    language = [k for k in before if k.startswith(("model.layers.", "lm_head."))]
+    assert vision and language and set(before) == set(after)
+    assert all(torch.equal(before[k], after[k]) for k in vision)
+    assert not any(torch.equal(before[k], after[k]) for k in language if k.endswith("proj.weight"))
     resumed = run(_config(rooms, tmp_path / "resumed", "resume=auto"))
     assert resumed["losses"] == whole["losses"]  # steps 3 and 4 continue exactly
     # the stock Trainer path loses the trained weights here: its steps 3-4 differ
@@ -115,8 +125,12 @@ def test_resume_continues_from_the_saved_loss(rooms, tmp_path, monkeypatch) -> N
 
 
 def test_run_writes_checkpoints_predict_can_load(rooms, tmp_path) -> None:
-    summary = run(_config(rooms, tmp_path / "run", "model.lora=true"))
+    summary = run(_config(rooms, tmp_path / "run", "model.lora=true", "model.min_pixels=1024", "model.max_pixels=4096"))
     out = tmp_path / "run"
+    from spacedg.vlm import load_processor
+
+    budget = load_processor(out / "checkpoint-2").image_processor.size
+    assert (budget["shortest_edge"], budget["longest_edge"]) == (1024, 4096)  # the pixel budget travels with checkpoints
     assert (out / "checkpoint-2" / "adapter_model.safetensors").is_file()
     assert (out / "checkpoint-2" / "processor_config.json").is_file() and (out / "checkpoint-2" / "spacedg_sft.yaml").is_file()
     evaluation = summary["last_evaluation"]
@@ -182,6 +196,9 @@ def test_sft_runs_from_an_installed_wheel(rooms, tmp_path) -> None:
     assert result.returncode == 0, result.stderr[-3000:]
     summary = json.loads((work / "out" / "train_summary.json").read_text())
     assert summary["global_step"] == 2 and (work / "out" / "final" / "config.json").is_file()
+    script = subprocess.run([str(site / "bin" / "spacedg-sft"), "+experiment=tiny", "--cfg", "job"], cwd=work, env=env,
+                            capture_output=True, text=True, timeout=120)
+    assert script.returncode == 0 and "path: tiny:qwen2_5_vl" in script.stdout  # the console script finds the packaged configs
 
 
 def test_torchrun_two_process_ddp(rooms, tmp_path) -> None:
