@@ -195,6 +195,7 @@ def run(cfg: Any) -> dict[str, Any]:
     evaluations = [entry for entry in trainer.state.log_history if "eval_score" in entry]
     summary = {
         "global_step": trainer.state.global_step, "train_loss": result.training_loss, "losses": losses,
+        "train_runtime_s": result.metrics.get("train_runtime"),
         "last_evaluation": evaluations[-1] if evaluations else None, "dropped_in_collator": trainer.data_collator.dropped,
         "data": stats,
         "distributed": {"world_size": args.world_size, "parallel_mode": str(args.parallel_mode.value),
