@@ -58,7 +58,7 @@ from spacedg.data.qa_index import QABuildConfig, index_paths, read_index
 from spacedg.data.scene_store import SPLITS, ByteLRU, assign_splits, builtin_scene_dirs, ensure_indexes, scene_dirs_of
 from spacedg.errors import InvalidDataError, ParameterError
 
-__all__ = ["SpaceDGDataset", "chat_collate", "format_question", "answer_text", "chain_name", "CLEAN"]
+__all__ = ["SpaceDGDataset", "chat_collate", "format_question", "answer_text", "chain_name", "item_images", "CLEAN"]
 
 #: ``degradation_type`` of a clean sample (the VLMEvalKit / SpaceDG convention).
 CLEAN = "ori"
@@ -368,6 +368,12 @@ def answer_text(answer: Any) -> str:
     return str(answer)
 
 
+def item_images(item: dict[str, Any]) -> list[np.ndarray]:
+    """The views of a dataset item as uint8 H×W×3 RGB arrays (contiguous), in view order."""
+    return [np.ascontiguousarray(img.permute(1, 2, 0).numpy()) if isinstance(img, torch.Tensor) else np.asarray(img)
+            for img in item["images"]]
+
+
 def chat_collate(batch: Sequence[dict[str, Any]], *, system_prompt: str | None = None, with_answer: bool = True) -> dict[str, Any]:
     """A batch of items → chat messages for ``processor.apply_chat_template``.
 
@@ -381,7 +387,7 @@ def chat_collate(batch: Sequence[dict[str, Any]], *, system_prompt: str | None =
     prompt = ANSWER_PROMPT if system_prompt is None else system_prompt
     messages, images, answers = [], [], []
     for item in batch:
-        views = [img.permute(1, 2, 0).numpy() if isinstance(img, torch.Tensor) else np.asarray(img) for img in item["images"]]
+        views = item_images(item)
         content: list[dict[str, Any]] = [{"type": "image"} for _ in views]
         content.append({"type": "text", "text": format_question(item["question"], item["options"])})
         conversation = [{"role": "system", "content": [{"type": "text", "text": prompt}]}, {"role": "user", "content": content}]

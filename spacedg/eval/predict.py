@@ -89,7 +89,7 @@ def _provenance(part: str) -> dict[str, str]:
 def dataset_source(dataset: Any) -> Source:
     """A :class:`Source` over a :class:`~spacedg.data.dataset.SpaceDGDataset`: rows from its
     plan (no rendering), images rendered online for the items asked for."""
-    from spacedg.data.dataset import answer_text, format_question
+    from spacedg.data.dataset import answer_text, format_question, item_images
     from spacedg.data.export import dataset_fingerprint
 
     def row(index: int) -> BenchRow:
@@ -106,7 +106,7 @@ def dataset_source(dataset: Any) -> Source:
 
     def images(index: int) -> list[np.ndarray]:
         item = dataset[index]
-        return [np.ascontiguousarray(v.permute(1, 2, 0).numpy()) for v in item["images"]]
+        return item_images(item)
 
     name = f"SpaceDGDataset(split={dataset.split!r}, items={len(dataset)})"
     return Source(name, dataset_fingerprint(dataset), list(range(len(dataset))), row, images)

@@ -70,7 +70,7 @@ def build_train_data(data: dict[str, Any]) -> Any:
 def build_val_items(data: dict[str, Any]) -> list[dict[str, Any]]:
     """``data.val.samples`` items of the ``val`` split (a seeded spread), rendered once, each with
     its prompt (no answer), images, condition and the fields the scorer reads."""
-    from spacedg.data.dataset import format_question
+    from spacedg.data.dataset import format_question, item_images
     from spacedg.sft.data import conversation_of
 
     val = data.get("val") or {}
@@ -82,7 +82,7 @@ def build_val_items(data: dict[str, Any]) -> list[dict[str, Any]]:
     items = []
     for index in sorted(int(i) for i in order):
         item = dataset[index]
-        images = [np.ascontiguousarray(v.permute(1, 2, 0).numpy()) for v in item["images"]]
+        images = item_images(item)
         conversation = conversation_of(format_question(item["question"], item["options"]), "", len(images))[:2]
         truth = {k: item[k] for k in ("answer", "answer_type", "question_type", "sub_question_type")}
         truth["options"] = {"ABCD"[i]: text for i, text in enumerate(item["options"])}

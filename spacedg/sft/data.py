@@ -70,10 +70,10 @@ class OnlineSFTDataset(Dataset):
         return self.dataset.options.image_size
 
     def __getitem__(self, index: int) -> dict[str, Any]:
-        from spacedg.data.dataset import answer_text, format_question
+        from spacedg.data.dataset import answer_text, format_question, item_images
 
         item = self.dataset[index]
-        images = [np.ascontiguousarray(view.permute(1, 2, 0).numpy()) for view in item["images"]]
+        images = item_images(item)
         question = format_question(item["question"], item["options"])
         answer = f"<answer>{answer_text(item['answer'])}</answer>"
         return {"conversation": conversation_of(question, answer, len(images)), "images": images,
