@@ -334,6 +334,7 @@ def test_hub_id_paths_go_through_snapshot_download(tmp_path, monkeypatch):
     assert calls == ["Org/Tiny-VL", "Org/Missing"]
 
 
+@pytest.mark.filterwarnings("ignore:Could not find a config file in tiny:UserWarning")  # the base is rebuilt in code
 def test_adapter_of_a_tiny_model_built_in_code_loads(tmp_path):
     model, processor = prepare_model(ModelOptions("tiny:internvl", lora=True, lora_dropout=0.0))
     _train(model, processor, steps=2)
