@@ -172,6 +172,12 @@ def run(cfg: Any) -> dict[str, Any]:
     lengths = token_lengths(train_data, processor)
     budgeted = BudgetedDataset(train_data, lengths, int(data.get("max_length", 4096)))
     val_items = build_val_items(data)
+    if int(config["train"].get("dataloader_num_workers") or 0) > 0:
+        # The main process has rendered (val items): numba's OpenMP threads are not fork-safe, so workers start
+        # from a fork server (the datasets pickle small).
+        import multiprocessing
+
+        multiprocessing.set_start_method("forkserver", force=True)
     args = training_arguments(dict(config["train"]), output_dir, seed, evaluate=bool(val_items))
     val = data.get("val") or {}
     from omegaconf import OmegaConf
