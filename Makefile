@@ -11,6 +11,9 @@ TORCH_SPEC ?= torch==2.13.0
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.spacedg-installed
 DEMO_DIR ?= runs/demo
+# the browser the review page's end-to-end tests drive (Debian's package; playwright's own
+# browser downloads are not used)
+CHROMIUM ?= /usr/bin/chromium
 
 .PHONY: setup demo test clean
 
@@ -21,6 +24,16 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -c "import torch" 2>/dev/null || $(BIN)/python -m pip install --quiet $(TORCH_SPEC)
 	$(BIN)/python -m pip install --quiet -e '.[test]'
+	@# the browser tests (tests/test_review_browser.py) drive Debian's chromium through playwright
+	@command -v $(CHROMIUM) >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=; elif command -v sudo >/dev/null 2>&1; then SUDO="sudo -n"; else SUDO=none; fi; \
+	  if [ "$$SUDO" != none ] && $$SUDO apt-get update -qq && \
+	     $$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; then \
+	    echo "installed chromium for the browser tests"; \
+	  else \
+	    echo "NOTE: could not install chromium (needs root or sudo and apt-get); the browser tests will" \
+	         "fail in CI and skip elsewhere: run 'sudo apt-get install chromium' and 'make setup' again"; \
+	  fi; }
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -12,7 +12,7 @@ from spacedg.errors import SpaceDGError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from spacedg.commands import evaluate, export, gallery, plugins, predict, qa, render, scenes
+    from spacedg.commands import evaluate, export, gallery, plugins, predict, qa, render, review, scenes
 
     parser = argparse.ArgumentParser(
         prog="spacedg",
@@ -26,6 +26,7 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_parser(sub)
     predict.add_parser(sub)
     evaluate.add_parser(sub)
+    review.add_parser(sub)
     plugins.add_parser(sub)
     return parser
 

@@ -1,0 +1,42 @@
+"""``spacedg review BENCH_DIR [--port …]``: a local page to inspect, filter and correct a bench."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "review", help="serve a local page to inspect, filter, edit and drop bench items (edits go to a new file + log)",
+        description="Serve a review page for an exported bench on 127.0.0.1. Each item shows its images (with a clean vs "
+                    "degraded toggle), question, answer, metadata and the record's geometry; reviewers filter by question "
+                    "type, task group, degradation or keyword, edit questions, answers and options, and drop items. Every "
+                    "change is validated, then written atomically to a new TSV (never the original) with an edit log.",
+    )
+    parser.add_argument("bench", type=Path, help="exported bench folder (spacedg export) or its .tsv")
+    parser.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1 (default 8765; 0 = any free port)")
+    parser.add_argument("--out", type=Path, default=None, help="reviewed TSV (default: <bench>.reviewed.tsv beside the original)")
+    parser.add_argument("--reviewer", default=None, help="name recorded in the edit log (default: the login name)")
+    parser.add_argument("--scenes", type=Path, nargs="+", default=None, help="scene folders, to show each record's geometry")
+    parser.add_argument("--verbose", action="store_true", help="log every request")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import getpass
+
+    from spacedg.review.server import make_server
+
+    reviewer = args.reviewer or getpass.getuser()
+    server = make_server(args.bench, out=args.out, reviewer=reviewer, scenes=args.scenes, port=args.port, verbose=args.verbose)
+    print(f"reviewing {server.store.table} ({len(server.store)} items) as {reviewer}")
+    print(f"edits → {server.store.out}, log → {server.store.log}")
+    print(f"open {server.url}  (Ctrl+C to stop)", flush=True)
+    try:
+        server.httpd.serve_forever()
+    except KeyboardInterrupt:
+        print("stopped")
+    finally:
+        server.httpd.server_close()
+    return 0
