@@ -123,6 +123,11 @@ def test_chat_jsonl(bench, exported):
         assert assistant["content"] == f"<answer>{tsv.answer}</answer>" or float(assistant["content"][8:-9]) == pytest.approx(float(tsv.answer))
         assert row["images"] == ast.literal_eval(tsv.image_path) and row["degradation_type"] == tsv.degradation_type
         assert "<answer>" in row["system"]
+        assert row["geometry"] == bench.plan(row["index"])[0].geometry  # the audit block travels with the bench
+    from spacedg.review import ReviewStore
+
+    store = ReviewStore(out, out=out.parent / "reviewed.tsv")  # the review page shows it without --scenes
+    assert store.item(0)["geometry"] == rows[0]["geometry"]
 
 
 # ------------------------------------------------------------------ shards and resume

@@ -33,8 +33,9 @@ pandas' default dialect, so multi-line questions read back unchanged.
 
 **Chat JSONL** (LLaMA-Factory ShareGPT style, ``"messages"`` + ``"images"`` columns): ``{"id",
 "index", "images": [paths], "system": ANSWER_PROMPT, "messages": [{"role": "user", "content":
-"<image>"×V + question}, {"role": "assistant", "content": "<answer>…</answer>"}], ...metadata}``
-with exactly one ``<image>`` placeholder per image, in view order.
+"<image>"×V + question}, {"role": "assistant", "content": "<answer>…</answer>"}], ...metadata,
+"geometry"}`` with exactly one ``<image>`` placeholder per image, in view order; ``geometry`` is
+the record's geometry block (poses, boxes, visibility: what the answer was computed from).
 """
 
 from __future__ import annotations
@@ -306,6 +307,7 @@ def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, s
             _write_png(out / rel, image.permute(1, 2, 0).numpy())
             paths.append(rel)
         tsv, chat = _rows(item, paths, system)
+        chat["geometry"] = dataset.plan(index)[0].geometry  # what the answer was computed from (spacedg review shows it)
         tsv_rows.append(tsv)
         chat_rows.append(chat)
         bar.update(1)
