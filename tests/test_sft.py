@@ -159,6 +159,8 @@ def test_config_errors(rooms, tmp_path) -> None:
         run(_config(rooms, tmp_path / "a", "+train.no_such_key=1"))
     with pytest.raises(ParameterError, match="resume=.*no such checkpoint"):
         run(_config(rooms, tmp_path / "b", f"resume={tmp_path / 'missing'}"))
+    with pytest.raises(ParameterError, match="model: .*colour"):
+        run(_config(rooms, tmp_path / "d", "+model.colour=red"))
     with pytest.raises(ParameterError, match="data.jsonl=PATH"):
         run(_config(rooms, tmp_path / "c", "data.source=jsonl"))
 

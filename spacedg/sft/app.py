@@ -166,7 +166,11 @@ def run(cfg: Any) -> dict[str, Any]:
         # A tiny model built in code is saved first, so checkpoints (LoRA adapters included) name a real base folder.
         # Other ranks build the same weights in memory (same seed) instead of racing on the folder.
         model_config["path"] = str(_tiny_base(str(model_config["path"]), output_dir / "base-model"))
-    model, processor = prepare_model(ModelOptions(**model_config))
+    try:
+        options = ModelOptions(**model_config)
+    except TypeError as err:
+        raise ParameterError(f"model: {err}; the model group takes the fields of spacedg.sft.model.ModelOptions") from None
+    model, processor = prepare_model(options)
     replaced = ensure_generation_markers(processor)
     train_data = build_train_data(data)
     lengths = token_lengths(train_data, processor)
