@@ -16,7 +16,7 @@ from spacedg.cli import main
 from spacedg.data.dataset import CLEAN, SpaceDGDataset
 from spacedg.data.export import (
     TSV_COLUMNS,
-    _tsv_bytes,
+    tsv_bytes,
     chunk_ids,
     export_bench,
     merge_parts,
@@ -96,7 +96,7 @@ def test_tsv_quoting_survives_quotes_tabs_and_newlines():
     tricky = 'He said "3"\tthen\nleft; \'quoted\' and "a\r\nb"'
     row = dict.fromkeys(TSV_COLUMNS, "")
     row.update(index=7, question=tricky, answer="NA-like", image_path=repr(["images/0000007_0.png"]), A='"x"')
-    table = pd.read_csv(io.BytesIO(_tsv_bytes([row, {**row, "index": 8}], header=True)), sep="\t", keep_default_na=False)
+    table = pd.read_csv(io.BytesIO(tsv_bytes([row, {**row, "index": 8}], header=True)), sep="\t", keep_default_na=False)
     assert len(table) == 2 and table["question"].tolist() == [tricky, tricky] and table["A"][0] == '"x"'
     assert ast.literal_eval(table["image_path"][0]) == ["images/0000007_0.png"]
 

@@ -47,7 +47,7 @@ import json
 import math
 import time
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -62,6 +62,7 @@ from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
 __all__ = [
     "DEFAULT_SHARD_SIZE",
     "TSV_COLUMNS",
+    "tsv_bytes",
     "ExportSummary",
     "MergeResult",
     "chunk_ids",
@@ -246,10 +247,11 @@ def _chunk_done(out: Path, chunk: int) -> bool:
     return all(p.is_file() for p in _part_paths(out, chunk))
 
 
-def _tsv_bytes(rows: list[dict[str, Any]], header: bool) -> bytes:
-    """Rows as TSV (UTF-8, ``\\n`` line ends, CSV quoting of fields with tabs, newlines or quotes)."""
+def tsv_bytes(rows: Sequence[Mapping[str, Any]], header: bool = True, columns: Sequence[str] = TSV_COLUMNS) -> bytes:
+    """Rows as the bench's TSV dialect (UTF-8, ``\\n`` line ends, CSV quoting of fields with tabs,
+    newlines or quotes) under ``columns`` (default: the export's); also used for reviewed benches."""
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=TSV_COLUMNS, delimiter="\t", lineterminator="\n", quoting=csv.QUOTE_MINIMAL)
+    writer = csv.DictWriter(buffer, fieldnames=list(columns), delimiter="\t", lineterminator="\n", quoting=csv.QUOTE_MINIMAL)
     if header:
         writer.writeheader()
     writer.writerows(rows)
@@ -313,7 +315,7 @@ def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, s
         bar.update(1)
     tsv_path, jsonl_path = _part_paths(out, k)
     atomic_write_bytes(jsonl_path, "".join(json.dumps(r, ensure_ascii=False) + "\n" for r in chat_rows).encode("utf-8"))
-    atomic_write_bytes(tsv_path, _tsv_bytes(tsv_rows, header=True))
+    atomic_write_bytes(tsv_path, tsv_bytes(tsv_rows, header=True))
     return len(tsv_rows)
 
 

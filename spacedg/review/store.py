@@ -48,7 +48,6 @@ from __future__ import annotations
 
 import ast
 import csv
-import io
 import json
 import math
 import os
@@ -59,6 +58,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from spacedg.data.export import tsv_bytes
 from spacedg.data.io._files import atomic_write_bytes
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.eval.bench import CLEAN, _bench_table, read_table
@@ -183,16 +183,6 @@ def _image_paths(text: str) -> list[str]:
     if isinstance(parsed, (list, tuple)):
         return [str(p) for p in parsed]
     return [text]
-
-
-def _tsv_bytes(header: Sequence[str], rows: Sequence[Mapping[str, str]]) -> bytes:
-    """Rows as TSV in the exporter's dialect (see ``spacedg.data.export._tsv_bytes``)."""
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(header), delimiter="\t", lineterminator="\n",
-                            quoting=csv.QUOTE_MINIMAL)
-    writer.writeheader()
-    writer.writerows(rows)
-    return buffer.getvalue().encode("utf-8")
 
 
 def _now() -> str:
@@ -446,7 +436,7 @@ class ReviewStore:
     def _write_tsv(self) -> None:
         rows = [{k: row.get(k, "") for k in self.header}
                 for row, dropped in zip(self._current, self._dropped) if not dropped]
-        atomic_write_bytes(self.out, _tsv_bytes(self.header, rows))
+        atomic_write_bytes(self.out, tsv_bytes(rows, columns=self.header))
 
     def _replay(self) -> None:
         try:
