@@ -191,6 +191,10 @@ def test_list_and_filters(review: Review) -> None:
     page.select_option("#filter-degradation", "low_light")
     expect(page.locator("#count")).to_have_text("1 of 15")
     assert review.listed() == [11]
+    page.select_option("#filter-degradation", "")
+    page.fill("#filter-keyword", "backward")  # an option's text (below the question's first line) is searched too
+    expect(page.locator("#count")).to_have_text("3 of 15")
+    assert review.listed() == [0, 5, 10]
     page.fill("#filter-keyword", "no such words")
     expect(page.locator("#count")).to_have_text("0 of 15")
     expect(page.locator("#item-list li")).to_have_count(0)

@@ -281,6 +281,8 @@ class ReviewStore:
                     "degradation_type": row.get("degradation_type", "").strip() or CLEAN,
                     "answer_type": _answer_type(row).value,
                     "title": title,
+                    # what the page's keyword box searches: the whole question (options included), the answer, the scene
+                    "text": " ".join((row.get("question", ""), row.get("answer", ""), row.get("scene_id", ""))),
                     "dropped": self._dropped[n],
                     "edited": self._edited(n),
                 })
