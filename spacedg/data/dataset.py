@@ -382,19 +382,16 @@ def chat_collate(batch: Sequence[dict[str, Any]], *, system_prompt: str | None =
     with one ``{"type": "image"}`` entry per view followed by the question (options included),
     and with ``with_answer`` the assistant turn ``<answer>…</answer>``.
     """
+    from spacedg.eval.prompts import chat_messages
     from spacedg.eval.scoring import ANSWER_PROMPT
 
     prompt = ANSWER_PROMPT if system_prompt is None else system_prompt
     messages, images, answers = [], [], []
     for item in batch:
         views = item_images(item)
-        content: list[dict[str, Any]] = [{"type": "image"} for _ in views]
-        content.append({"type": "text", "text": format_question(item["question"], item["options"])})
-        conversation = [{"role": "system", "content": [{"type": "text", "text": prompt}]}, {"role": "user", "content": content}]
         answer = f"<answer>{answer_text(item['answer'])}</answer>"
-        if with_answer:
-            conversation.append({"role": "assistant", "content": [{"type": "text", "text": answer}]})
-        messages.append(conversation)
+        question = format_question(item["question"], item["options"])
+        messages.append(chat_messages(question, len(views), system=prompt, answer=answer if with_answer else None))
         images.append(views)
         answers.append(answer)
     return {"messages": messages, "images": images, "answers": answers, "items": list(batch)}

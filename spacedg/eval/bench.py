@@ -28,7 +28,7 @@ from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.eval.scoring import route
 from spacedg.plugins.specs import AnswerType
 
-__all__ = ["CLEAN", "Bench", "BenchRow", "load_bench", "read_table", "row_from_mapping"]
+__all__ = ["CLEAN", "Bench", "BenchRow", "bench_table", "cell_text", "load_bench", "read_table", "row_from_mapping"]
 
 #: ``degradation_type`` of clean items.
 CLEAN = "ori"
@@ -132,7 +132,8 @@ class Bench:
 
 
 # ------------------------------------------------------------------ reading
-def _text(value: Any) -> str:
+def cell_text(value: Any) -> str:
+    """A table cell as text: ``None`` and a pandas/openpyxl NaN become ``""``."""
     if value is None:
         return ""
     if isinstance(value, float) and value != value:  # NaN from a pandas-written file
@@ -143,7 +144,7 @@ def _text(value: Any) -> str:
 def _listish(value: Any, what: str, where: str) -> list[Any]:
     if isinstance(value, (list, tuple)):
         return list(value)
-    text = _text(value).strip()
+    text = cell_text(value).strip()
     if not text:
         return []
     try:
@@ -161,9 +162,9 @@ def _listish(value: Any, what: str, where: str) -> list[Any]:
 
 
 def _answer_type(fields: Mapping[str, Any], where: str) -> AnswerType:
-    kind = _text(fields.get("answer_type")).strip().upper()
+    kind = cell_text(fields.get("answer_type")).strip().upper()
     if kind in ("", "NAN", "NONE"):
-        return route(_text(fields.get("question_type")), _text(fields.get("sub_question_type")))
+        return route(cell_text(fields.get("question_type")), cell_text(fields.get("sub_question_type")))
     try:
         return AnswerType(kind)
     except ValueError:
@@ -174,10 +175,10 @@ def _answer_type(fields: Mapping[str, Any], where: str) -> AnswerType:
 def _options(fields: Mapping[str, Any]) -> tuple[str, ...]:
     given = fields.get("options")
     if isinstance(given, Mapping):
-        return tuple(_text(given[k]) for k in MCQ_LETTERS if _text(given.get(k)).strip())
+        return tuple(cell_text(given[k]) for k in MCQ_LETTERS if cell_text(given.get(k)).strip())
     if isinstance(given, (list, tuple)) and given:
-        return tuple(_OPTION_PREFIX.sub("", _text(o), count=1) for o in given)
-    texts = [_text(fields.get(k)).strip() for k in MCQ_LETTERS]
+        return tuple(_OPTION_PREFIX.sub("", cell_text(o), count=1) for o in given)
+    texts = [cell_text(fields.get(k)).strip() for k in MCQ_LETTERS]
     return tuple(t for t in texts if t)
 
 
@@ -187,11 +188,11 @@ def row_from_mapping(fields: Mapping[str, Any], where: str) -> BenchRow:
     ``where`` names the row in errors (``"bench.tsv:12"``). Missing optional columns default
     to empty; ``answer_type`` falls back to routing by question type.
     """
-    missing = [c for c in _REQUIRED if not _text(fields.get(c)).strip()]
+    missing = [c for c in _REQUIRED if not cell_text(fields.get(c)).strip()]
     if missing:
         raise FileFormatError(f"{where}: missing {', '.join(missing)} (needed to score a row)")
     try:
-        index = int(float(_text(fields["index"]).strip()))
+        index = int(float(cell_text(fields["index"]).strip()))
     except ValueError:
         raise FileFormatError(f"{where}: index {fields['index']!r} is not an integer") from None
     answer = fields["answer"]
@@ -200,17 +201,17 @@ def row_from_mapping(fields: Mapping[str, Any], where: str) -> BenchRow:
     degradation = [d for d in _listish(fields.get("degradation"), "degradation", where) if isinstance(d, Mapping)]
     return BenchRow(
         index=index,
-        question=_text(fields["question"]),
-        answer=_text(answer).strip(),
+        question=cell_text(fields["question"]),
+        answer=cell_text(answer).strip(),
         answer_type=_answer_type(fields, where),
-        question_type=_text(fields["question_type"]).strip(),
-        sub_question_type=_text(fields.get("sub_question_type")).strip(),
-        task_group=_text(fields.get("task_group")).strip(),
-        degradation_type=_text(fields.get("degradation_type")).strip() or CLEAN,
+        question_type=cell_text(fields["question_type"]).strip(),
+        sub_question_type=cell_text(fields.get("sub_question_type")).strip(),
+        task_group=cell_text(fields.get("task_group")).strip(),
+        degradation_type=cell_text(fields.get("degradation_type")).strip() or CLEAN,
         options=_options(fields),
         image_paths=tuple(str(p) for p in _listish(fields.get("image_path", fields.get("image_paths")), "image_path", where)),
-        scene_id=_text(fields.get("scene_id")),
-        record_id=_text(fields.get("record_id")),
+        scene_id=cell_text(fields.get("scene_id")),
+        record_id=cell_text(fields.get("record_id")),
         degradation=tuple(degradation),
     )
 
@@ -231,7 +232,8 @@ def read_table(path: Path) -> list[dict[str, str]]:
     return rows
 
 
-def _bench_table(path: Path) -> Path:
+def bench_table(path: Path) -> Path:
+    """The TSV of a bench: ``path`` itself, or ``bench.tsv`` / ``val.tsv`` / ``train.tsv`` / the one ``.tsv`` in the folder."""
     if path.is_file():
         return path
     if not path.is_dir():
@@ -253,7 +255,7 @@ def _bench_table(path: Path) -> Path:
 def load_bench(path: str | Path) -> Bench:
     """Read an exported bench: a folder with ``bench.tsv`` (or ``val.tsv``/``train.tsv``, or
     one ``.tsv``), or the TSV itself. Errors name the file and line."""
-    table = _bench_table(Path(path))
+    table = bench_table(Path(path))
     data = table.read_bytes()
     rows = [row_from_mapping(fields, f"{table}:{n + 2}") for n, fields in enumerate(read_table(table))]
     if not rows:

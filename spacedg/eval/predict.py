@@ -29,10 +29,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
-from spacedg.data.io._files import atomic_write_bytes
+from spacedg.data.io._files import atomic_write_bytes, read_rgb
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
 from spacedg.eval.bench import Bench, BenchRow, row_from_mapping
 from spacedg.eval.predictions import meta_path
@@ -69,12 +68,12 @@ def bench_source(bench: Bench) -> Source:
     def images(index: int) -> list[np.ndarray]:
         row = bench.by_index[index]
         out = []
-        for view, rel in enumerate(row.image_paths):
+        for view in range(len(row.image_paths)):
             path = bench.image_file(row, view)
-            image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+            image = read_rgb(path)
             if image is None:
                 raise InvalidDataError(f"{path}: missing or unreadable image of bench item {index}; re-export the bench")
-            out.append(cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
+            out.append(image)
         return out
 
     return Source(str(bench.path), bench.fingerprint, [r.index for r in bench.rows], bench.by_index.__getitem__, images)
@@ -256,7 +255,8 @@ def predict(
         units = _work_units(source, pending, variant)
         for start_unit in range(0, len(units), batch_size):
             batch = units[start_unit:start_unit + batch_size]
-            leaders = [source.row(unit[0]) for unit in batch]
+            rows = {index: source.row(index) for unit in batch for index in unit}
+            leaders = [rows[unit[0]] for unit in batch]
             images = [[] if variant == "no_image" else source.images(row.index) for row in leaders]
             chats = [conversation(row, variant, len(imgs)) for row, imgs in zip(leaders, images)]
             stage1: list[str] = []
@@ -269,7 +269,7 @@ def predict(
             lines = []
             for k, unit in enumerate(batch):
                 for index in unit:
-                    line = {**source.row(index).to_dict(), "prediction": answers[k], "model": name, "variant": variant}
+                    line = {**rows[index].to_dict(), "prediction": answers[k], "model": name, "variant": variant}
                     if variant == "cot":
                         line["stage1"] = stage1[k]
                         line["degradation_guess"] = parse_degradation_guess(stage1[k], names)

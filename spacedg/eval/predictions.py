@@ -17,14 +17,13 @@ A label may carry the prompt variant after ``@`` (``"Qwen3-VL-8B@no_image"``).
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
-from spacedg.eval.bench import BenchRow, read_table, row_from_mapping
+from spacedg.eval.bench import BenchRow, cell_text, read_table, row_from_mapping
 from spacedg.eval.prompts import VARIANTS
 
 __all__ = ["PredictionSet", "merge_shards", "meta_path", "parse_source", "read_predictions"]
@@ -166,12 +165,6 @@ def _model_name(path: Path, meta: Mapping[str, Any]) -> str:
     return stem
 
 
-def _prediction_text(value: Any) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return ""
-    return str(value)
-
-
 def read_predictions(source: str | Path, *, model: str | None = None, variant: str | None = None) -> PredictionSet:
     """Read one prediction file (any accepted format; see the module docstring).
 
@@ -209,7 +202,7 @@ def read_predictions(source: str | Path, *, model: str | None = None, variant: s
             index = int(float(str(fields["index"]).strip()))
         except ValueError:
             raise FileFormatError(f"{where}: index {fields['index']!r} is not an integer") from None
-        text = _prediction_text(fields["prediction"])
+        text = cell_text(fields["prediction"])
         if index in out.predictions and out.predictions[index] != text:
             raise FileFormatError(f"{where}: index {index} has two different predictions; keep one line per index")
         out.predictions[index] = text

@@ -38,6 +38,7 @@ __all__ = [
     "COT_STAGE2_SUFFIX",
     "COT_SYSTEM_PROMPT",
     "VARIANTS",
+    "chat_messages",
     "conversation",
     "cot_followup",
     "degradation_info",
@@ -129,14 +130,16 @@ def degradation_info(row: BenchRow) -> str:
     return "The images are degraded by " + " and ".join(described) + ".\n"
 
 
-def _user_turn(row: BenchRow, n_images: int, text: str) -> dict[str, Any]:
-    content: list[dict[str, Any]] = [{"type": "image"} for _ in range(n_images)]
-    content.append({"type": "text", "text": text})
-    return {"role": "user", "content": content}
-
-
-def _system(text: str) -> dict[str, Any]:
-    return {"role": "system", "content": [{"type": "text", "text": text}]}
+def chat_messages(question: str, n_images: int, *, system: str = ANSWER_PROMPT, answer: str | None = None) -> list[dict[str, Any]]:
+    """A system turn, a user turn (``n_images`` image entries, then ``question``) and, when
+    ``answer`` is given, the assistant turn: the one conversation layout of prediction,
+    evaluation during training, and training samples."""
+    user: list[dict[str, Any]] = [{"type": "image"} for _ in range(n_images)]
+    user.append({"type": "text", "text": question})
+    messages = [{"role": "system", "content": [{"type": "text", "text": system}]}, {"role": "user", "content": user}]
+    if answer is not None:
+        messages.append({"role": "assistant", "content": [{"type": "text", "text": answer}]})
+    return messages
 
 
 def conversation(row: BenchRow, variant: str, n_images: int | None = None) -> list[dict[str, Any]]:
@@ -149,13 +152,13 @@ def conversation(row: BenchRow, variant: str, n_images: int | None = None) -> li
         raise ValueError(f"unknown prompt variant {variant!r}; choose one of {', '.join(VARIANTS)}")
     views = len(row.image_paths) if n_images is None else n_images
     if variant == "no_image":
-        return [_system(ANSWER_PROMPT), _user_turn(row, 0, row.question)]
+        return chat_messages(row.question, 0)
     if variant == "degradation_info":
-        return [_system(ANSWER_PROMPT), _user_turn(row, views, degradation_info(row) + row.question)]
+        return chat_messages(degradation_info(row) + row.question, views)
     if variant == "cot":
         choices = ", ".join(["clean (no degradation)", *(n.replace("_", " ") for n in known_degradations())])
-        return [_system(COT_SYSTEM_PROMPT), _user_turn(row, views, COT_STAGE1_PROMPT.format(choices=choices))]
-    return [_system(ANSWER_PROMPT), _user_turn(row, views, row.question)]
+        return chat_messages(COT_STAGE1_PROMPT.format(choices=choices), views, system=COT_SYSTEM_PROMPT)
+    return chat_messages(row.question, views)
 
 
 def cot_followup(messages: Sequence[Mapping[str, Any]], stage1_answer: str, row: BenchRow) -> list[dict[str, Any]]:

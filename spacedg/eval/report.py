@@ -49,10 +49,6 @@ _CORRELATION_PANELS = {"all": "(a) Overall", "answer_format": "(b) Answer format
                        "question_type": "(d) Question type"}
 
 
-def _label(condition: str) -> str:
-    return degradation_label(condition)
-
-
 @dataclass
 class Report:
     """Everything :func:`write_report` writes, as data.
@@ -124,7 +120,7 @@ def _score_columns(report: Report) -> list[str]:
 
 def _main_table(report: Report) -> Table:
     columns = _score_columns(report)
-    table = Table("Scores per degradation (the paper's Table 1)", ["Model", *(_label(c) for c in columns)])
+    table = Table("Scores per degradation (the paper's Table 1)", ["Model", *(degradation_label(c) for c in columns)])
     blind = report.runs("no_image")
     for s in blind:
         everything = mean(i.score for i in report.items[s.label])
@@ -151,7 +147,7 @@ def _main_table(report: Report) -> Table:
 def _slice_table(report: Report, kind: str) -> Table:
     columns = _score_columns(report)
     name = SLICE_KINDS[kind]
-    table = Table(f"Scores by {name.lower()}", ["Model", name, *(_label(c) for c in columns), "n"])
+    table = Table(f"Scores by {name.lower()}", ["Model", name, *(degradation_label(c) for c in columns), "n"])
     for s in report.sets:
         for slice_name, cells in report.tables[s.label][kind].items():
             values = [cells[c].score if c in cells else None for c in columns]
@@ -164,7 +160,7 @@ def _slice_table(report: Report, kind: str) -> Table:
 def _drop_table(report: Report) -> Table:
     degradations = report.degradations
     header = ["Model", "Clean", "Degraded (Avg.)", "Drop (pts)", "Relative drop (%)", "Largest drop",
-              *(f"Δ {_label(d)}" for d in degradations)]
+              *(f"Δ {degradation_label(d)}" for d in degradations)]
     table = Table("Drop from clean to degraded", header)
     for s in report.sets:
         if s.variant == "no_image":
@@ -178,7 +174,7 @@ def _drop_table(report: Report) -> Table:
         worst = max(finite, key=finite.get) if finite else None
         table.add(
             [s.label, clean, avg, drop, relative, worst, *(per[d] for d in degradations)],
-            [s.label, fmt_pct(clean), fmt_pct(avg), fmt_delta(drop), fmt_pct(relative), _label(worst) if worst else "-",
+            [s.label, fmt_pct(clean), fmt_pct(avg), fmt_delta(drop), fmt_pct(relative), degradation_label(worst) if worst else "-",
              *(fmt_delta(per[d]) for d in degradations)],
         )
     table.note = "Drop = clean − degraded, in percentage points (positive: the degradation hurts)."
@@ -188,7 +184,7 @@ def _drop_table(report: Report) -> Table:
 def _correlation_table(report: Report) -> Table:
     columns = [*report.degradations, AVG]
     table = Table("Degradation-wise correlation |r| (point-biserial, across models)",
-                  ["Panel", "Slice", *(_label(c) for c in columns), "Models"])
+                  ["Panel", "Slice", *(degradation_label(c) for c in columns), "Models"])
     for kind, panel in _CORRELATION_PANELS.items():
         for slice_name, row in report.correlation[kind].items():
             rs = [abs(row[c][0]) if is_number(row[c][0]) else None for c in columns]
@@ -211,7 +207,7 @@ def _paired(report: Report, variant: str) -> list[tuple[PredictionSet, Predictio
 def _delta_table(report: Report, variant: str) -> Table:
     columns = [*report.degradations, AVG]
     table = Table("Change when the degradation type and severity are in the prompt (the paper's Table 2)",
-                  ["Model", *(f"Δ {_label(c)}" for c in columns)])
+                  ["Model", *(f"Δ {degradation_label(c)}" for c in columns)])
     for base, run in _paired(report, variant):
         a, b = report.overall(base.label), report.overall(run.label)
         deltas = [b[c] - a[c] if is_number(a.get(c)) and is_number(b.get(c)) else None for c in columns]
@@ -232,7 +228,7 @@ def _cot_table(report: Report) -> Table:
 
 def _recognition_table(report: Report) -> Table:
     columns = report.conditions
-    table = Table("Degradation recognition accuracy in CoT stage 1", ["Model", *(_label(c) for c in columns)])
+    table = Table("Degradation recognition accuracy in CoT stage 1", ["Model", *(degradation_label(c) for c in columns)])
     names = known_degradations()
     for s in report.runs("cot"):
         by_condition: dict[str, list[float]] = {}

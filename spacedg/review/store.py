@@ -61,7 +61,7 @@ from typing import Any
 from spacedg.data.export import tsv_bytes
 from spacedg.data.io._files import atomic_write_bytes
 from spacedg.errors import InvalidDataError, ParameterError
-from spacedg.eval.bench import CLEAN, _bench_table, read_table
+from spacedg.eval.bench import CLEAN, bench_table, read_table
 from spacedg.eval.scoring import route
 from spacedg.plugins.specs import AnswerType
 
@@ -205,7 +205,7 @@ class ReviewStore:
     def __init__(self, bench: str | Path, *, out: str | Path | None = None,
                  scenes: Sequence[str | Path] | None = None) -> None:
         self._lock = threading.Lock()
-        self.table: Path = _bench_table(Path(bench))
+        self.table: Path = bench_table(Path(bench))
         self.root: Path = self.table.parent
         self.out: Path = Path(out) if out is not None else self.table.with_name(f"{self.table.stem}.reviewed.tsv")
         if self.out.exists() and self.out.is_dir():
@@ -396,20 +396,20 @@ class ReviewStore:
                 "record_id": self._original[n].get("record_id", ""), "action": action,
                 "before": before, "after": after}
 
-    def _apply(self, n: int, entry: Mapping[str, Any]) -> None:
-        after = entry["after"]
+    def _set(self, n: int, entry: Mapping[str, Any], side: str) -> None:
+        """Put row ``n`` in the state of ``entry[side]`` (``"after"``: apply, ``"before"``: undo)."""
+        values = entry[side]
         if entry["action"] == "edit":
-            self._current[n].update(after)
+            self._current[n].update(values)
         else:
-            self._dropped[n] = bool(after["dropped"])
+            self._dropped[n] = bool(values["dropped"])
+
+    def _apply(self, n: int, entry: Mapping[str, Any]) -> None:
+        self._set(n, entry, "after")
         self._history[n].append(dict(entry))
 
     def _unapply(self, n: int, entry: Mapping[str, Any]) -> None:
-        before = entry["before"]
-        if entry["action"] == "edit":
-            self._current[n].update(before)
-        else:
-            self._dropped[n] = bool(before["dropped"])
+        self._set(n, entry, "before")
         self._history[n].pop()
 
     def _commit(self, n: int, entry: dict[str, Any]) -> None:

@@ -71,7 +71,7 @@ def build_val_items(data: dict[str, Any]) -> list[dict[str, Any]]:
     """``data.val.samples`` items of the ``val`` split (a seeded spread), rendered once, each with
     its prompt (no answer), images, condition and the fields the scorer reads."""
     from spacedg.data.dataset import format_question, item_images
-    from spacedg.sft.data import conversation_of
+    from spacedg.eval.prompts import chat_messages
 
     val = data.get("val") or {}
     count = int(val.get("samples", 0))
@@ -83,7 +83,7 @@ def build_val_items(data: dict[str, Any]) -> list[dict[str, Any]]:
     for index in sorted(int(i) for i in order):
         item = dataset[index]
         images = item_images(item)
-        conversation = conversation_of(format_question(item["question"], item["options"]), "", len(images))[:2]
+        conversation = chat_messages(format_question(item["question"], item["options"]), len(images))
         truth = {k: item[k] for k in ("answer", "answer_type", "question_type", "sub_question_type")}
         truth["options"] = {"ABCD"[i]: text for i, text in enumerate(item["options"])}
         items.append({"conversation": conversation, "images": images, "degradation_type": item["degradation_type"], "truth": truth})

@@ -22,28 +22,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 from torch.utils.data import Dataset
 
+from spacedg.data.io._files import read_rgb
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
+from spacedg.eval.prompts import chat_messages
+from spacedg.eval.scoring import ANSWER_PROMPT
 
-__all__ = ["BudgetedDataset", "ChatJsonlDataset", "OnlineSFTDataset", "conversation_of", "token_lengths"]
+__all__ = ["BudgetedDataset", "ChatJsonlDataset", "OnlineSFTDataset", "token_lengths"]
 
 _IMAGE_TAG = re.compile(r"<image>")
-
-
-def conversation_of(question: str, answer: str, n_images: int, system: str | None = None) -> list[dict[str, Any]]:
-    """System + user (``n_images`` image entries, then ``question``) + assistant ``answer``."""
-    from spacedg.eval.scoring import ANSWER_PROMPT
-
-    user: list[dict[str, Any]] = [{"type": "image"} for _ in range(n_images)]
-    user.append({"type": "text", "text": question})
-    return [
-        {"role": "system", "content": [{"type": "text", "text": system if system is not None else ANSWER_PROMPT}]},
-        {"role": "user", "content": user},
-        {"role": "assistant", "content": [{"type": "text", "text": answer}]},
-    ]
 
 
 class OnlineSFTDataset(Dataset):
@@ -76,7 +65,7 @@ class OnlineSFTDataset(Dataset):
         images = item_images(item)
         question = format_question(item["question"], item["options"])
         answer = f"<answer>{answer_text(item['answer'])}</answer>"
-        return {"conversation": conversation_of(question, answer, len(images)), "images": images,
+        return {"conversation": chat_messages(question, len(images), answer=answer), "images": images,
                 "degradation_type": item["degradation_type"]}
 
 
@@ -135,18 +124,18 @@ class ChatJsonlDataset(Dataset):
         first = self.lines[0]
         if not first.images:
             return None
-        image = cv2.imread(str(self.path.parent / first.images[0]), cv2.IMREAD_COLOR)
+        image = read_rgb(self.path.parent / first.images[0])
         return None if image is None else (image.shape[1], image.shape[0])
 
     def __getitem__(self, index: int) -> dict[str, Any]:
         line = self.lines[index]
         images = []
         for rel in line.images:
-            image = cv2.imread(str(self.path.parent / rel), cv2.IMREAD_COLOR)
+            image = read_rgb(self.path.parent / rel)
             if image is None:
                 raise InvalidDataError(f"{self.path}: image {rel} of sample {index} is missing or unreadable")
-            images.append(cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
-        return {"conversation": conversation_of(line.question, line.answer, len(images), line.system), "images": images,
+            images.append(image)
+        return {"conversation": chat_messages(line.question, len(images), system=ANSWER_PROMPT if line.system is None else line.system, answer=line.answer), "images": images,
                 "degradation_type": line.degradation_type}
 
 
@@ -163,7 +152,7 @@ def token_lengths(dataset: OnlineSFTDataset | ChatJsonlDataset, processor: Any) 
     for index in range(len(dataset)):
         question, answer, views, key = dataset.question(index)
         if key not in measured:
-            batch = encode_chats(processor, [conversation_of(question, answer, views)], [[blank] * views], add_generation_prompt=False)
+            batch = encode_chats(processor, [chat_messages(question, views, answer=answer)], [[blank] * views], add_generation_prompt=False)
             measured[key] = int(batch["input_ids"].shape[1])
         lengths.append(measured[key])
     return lengths

@@ -221,13 +221,14 @@ def default_lora_target(model: torch.nn.Module) -> str:
 def _lora_targets(model: torch.nn.Module, regex: str) -> list[str]:
     """The module names ``regex`` selects (peft's ``re.fullmatch`` rule), checked to be in the language model."""
     groups = module_groups(model)
-    matched = [n for n, _ in model.named_modules() if n and re.fullmatch(regex, n)]
+    modules = dict(model.named_modules())
+    matched = [n for n in modules if n and re.fullmatch(regex, n)]
     outside = [n for n in matched if not any(_under(n, p) for p in groups["language"])]
     if outside:
         raise ParameterError(f"lora_target {regex!r} matches {len(outside)} modules outside the language model "
                              f"(first: {', '.join(outside[:3])}); LoRA is applied to the language model only, "
                              f"anchor the regex on {groups['language'][0]!r}")
-    linear = [n for n in matched if isinstance(dict(model.named_modules())[n], torch.nn.Linear)]
+    linear = [n for n in matched if isinstance(modules[n], torch.nn.Linear)]
     if not linear:
         raise ParameterError(f"lora_target {regex!r} matches no linear layer of the language model "
                              f"(it is matched with re.fullmatch against names like "

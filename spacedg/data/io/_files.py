@@ -144,3 +144,11 @@ def dump_json(data: Any) -> str:
         raise InvalidDataError(f"cannot write JSON: {err} (NaN/Inf values are not valid JSON)") from err
     except TypeError as err:
         raise InvalidDataError(f"cannot write JSON: {err}; metadata and attributes must be JSON-serialisable") from err
+
+
+def read_rgb(path: PathLike) -> Any:
+    """An image file as a uint8 H×W×3 RGB array, or ``None`` when it is missing or unreadable."""
+    import cv2
+
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    return None if image is None else cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
