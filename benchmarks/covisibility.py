@@ -28,10 +28,10 @@ import time
 
 import numpy as np
 
-from spacedg.data.synthetic import RoomConfig, generate_room
-from spacedg.data.synthetic.trajectory import CaptureConfig
-from spacedg.data.covisibility import COVISIBILITY_IMAGE_SIZE, covisibility_matrix, symmetrize
-from spacedg.data.visibility import compute_visibility
+from spacedg.scene.synthetic import RoomConfig, generate_room
+from spacedg.scene.synthetic.trajectory import CaptureConfig
+from spacedg.scene.covisibility import COVISIBILITY_IMAGE_SIZE, covisibility_matrix, symmetrize
+from spacedg.scene.visibility import compute_visibility
 from spacedg.render.renderer import render
 
 

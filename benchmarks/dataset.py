@@ -6,7 +6,7 @@ Prints tables only (never part of the test run).
     .venv/bin/python benchmarks/dataset.py --quick      # 30k-Gaussian rooms, 320×240, few samples (< 1 min)
     .venv/bin/python benchmarks/dataset.py --small --samples 64 --size 640x480
 
-Scenes: ``--rooms`` built-in rooms (seeds 0…n-1, :func:`~spacedg.data.scene_store.builtin_scene_dirs`)
+Scenes: ``--rooms`` built-in rooms (seeds 0…n-1, :func:`~spacedg.scene.store.builtin_scene_dirs`)
 or, with ``--small``, 30k-Gaussian rooms, generated once into ``--root`` (default
 ``$SPACEDG_HOME/benchmark-rooms``) with their question indexes (``--per-sub-type`` records per
 sub type, every family). Rooms and indexes are reused by later runs.
@@ -61,15 +61,15 @@ import numpy as np
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.pipeline import BENCH_DEGRADATIONS
 from spacedg.data.qa_index import QABuildConfig
-from spacedg.data.scene_store import builtin_scene_dirs, spacedg_home
+from spacedg.scene.store import builtin_scene_dirs, spacedg_home
 
 STAGES = ("render_ms", "linear_ms", "encode_ms", "display_ms")
 
 
 # ------------------------------------------------------------------ scenes
 def _generate_small(root: str, seeds: list[int]) -> None:
-    from spacedg.data.io import save_scene
-    from spacedg.data.synthetic import RoomConfig, generate_room
+    from spacedg.scene.io import save_scene
+    from spacedg.scene.synthetic import RoomConfig, generate_room
 
     for seed in seeds:
         folder = Path(root) / f"room-{seed:06d}"
@@ -218,7 +218,7 @@ def print_table(title: str, results: dict[str, dict[str, float]]) -> None:
 
 # ------------------------------------------------------------------ goal: clean 2-view sample vs its two renders
 def clean_vs_renders(ds: SpaceDGDataset, samples: int, repeats: int, size: tuple[int, int] | None) -> None:
-    from spacedg.data.io import load_scene
+    from spacedg.scene.io import load_scene
     from spacedg.render import render
 
     two_view = [i for i in range(len(ds)) if len(ds.plan(i)[0].views) == 2]
@@ -329,7 +329,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         datasets = {k: v for k, v in datasets.items() if k in wanted or (k == "bench mix" and "bench" in wanted)}
     setup_s = time.perf_counter() - t0
     train, bench = SpaceDGDataset("train", None, **common), SpaceDGDataset("bench", None, **common)
-    from spacedg.data.io import load_scene
+    from spacedg.scene.io import load_scene
 
     first = load_scene(dirs[0])
     view = next(iter(first.views.values()))

@@ -40,7 +40,7 @@ from collections import defaultdict
 import numpy as np
 
 from spacedg.data.pipeline import BENCH_DEGRADATIONS, PipelineOptions, degrade, degrade_variants
-from spacedg.data.synthetic import generate_room
+from spacedg.scene.synthetic import generate_room
 from spacedg.plugins.registry import get_degradation
 from spacedg.plugins.specs import Stage
 from spacedg.render.settings import RasterSettings

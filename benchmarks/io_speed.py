@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from spacedg.data.io import read_ply, read_splat, write_ply
-from spacedg.data.synthetic import RoomConfig, generate_room
+from spacedg.scene.io import read_ply, read_splat, write_ply
+from spacedg.scene.synthetic import RoomConfig, generate_room
 from spacedg.render.gaussians import Gaussians
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "splats"

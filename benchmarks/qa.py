@@ -23,7 +23,7 @@ import time
 
 from spacedg.data.qa_index import QABuildConfig, generate_records, prepare_scene
 from spacedg.data.qa_stats import answer_balance, blind_baseline, count_table, format_table
-from spacedg.data.synthetic import RoomConfig, generate_room
+from spacedg.scene.synthetic import RoomConfig, generate_room
 from spacedg.plugins import list_question_families
 
 

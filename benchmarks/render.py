@@ -31,7 +31,7 @@ from typing import Callable
 
 import numpy as np
 
-from spacedg.data.synthetic import generate_room
+from spacedg.scene.synthetic import generate_room
 from spacedg.render.camera import Camera, look_at
 from spacedg.render.colour import linear_to_srgb
 from spacedg.render.frame import Frame
@@ -71,7 +71,7 @@ def random_scene(n: int, degree: int, seed: int) -> tuple[Gaussians, Camera]:
 
 def plant_scene() -> tuple[Gaussians, Camera]:
     """The plant capture, seen slightly from above (its up axis is -y) so it fills most of the frame."""
-    from spacedg.data.io import read_splat
+    from spacedg.scene.io import read_splat
 
     g = read_splat(PLANT)
     lo, hi = np.percentile(g.means, 0.5, axis=0), np.percentile(g.means, 99.5, axis=0)

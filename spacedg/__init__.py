@@ -2,7 +2,7 @@
 
 The front door. Core types and conventions (metres; OpenCV camera axes; activated Gaussian
 parameters) are documented in :mod:`spacedg.render.gaussians`, :mod:`spacedg.render.camera`
-and :mod:`spacedg.data.scene`.
+and :mod:`spacedg.scene.model`.
 
     import spacedg
     scene = spacedg.load_scene("runs/demo/scenes/room-000000")
@@ -20,10 +20,10 @@ import os as _os
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 
-from spacedg.data.box import OrientedBox
-from spacedg.data.io import load_scene, save_scene, scene_from_files
-from spacedg.data.scene import Instance, InstanceVisibility, Scene
-from spacedg.data.synthetic import ExternalObject, RoomConfig, generate_room
+from spacedg.scene.box import OrientedBox
+from spacedg.scene.io import load_scene, save_scene, scene_from_files
+from spacedg.scene.model import Instance, InstanceVisibility, Scene
+from spacedg.scene.synthetic import ExternalObject, RoomConfig, generate_room
 from spacedg.errors import (
     DuplicatePluginError,
     FileFormatError,

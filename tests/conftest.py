@@ -31,7 +31,7 @@ def shared_splats() -> Path:
 @pytest.fixture(scope="session")
 def small_room():
     """A small but complete synthetic room (30k Gaussians), generated once per session."""
-    from spacedg.data.synthetic import RoomConfig, generate_room
+    from spacedg.scene.synthetic import RoomConfig, generate_room
 
     return generate_room(7, RoomConfig(gaussians=30_000))
 
@@ -40,8 +40,8 @@ def small_room():
 def qa_room_dirs(tmp_path_factory) -> list[Path]:
     """Four small synthetic rooms (30k Gaussians, 24–32 views at 320×240, random world frames)
     saved as native scene folders, for question-index tests."""
-    from spacedg.data.io import save_scene
-    from spacedg.data.synthetic import CaptureConfig, RoomConfig, generate_room
+    from spacedg.scene.io import save_scene
+    from spacedg.scene.synthetic import CaptureConfig, RoomConfig, generate_room
 
     root = tmp_path_factory.mktemp("qa_rooms")
     dirs = []

@@ -5,7 +5,7 @@ which objects each view shows and which views overlap.
 
 World frame: z up, metres. ``camera(eye, yaw_deg, pitch_deg=0, roll_deg=0)`` builds an OpenCV
 camera at ``eye`` whose optical axis points along heading ``yaw`` (0 = +x, 90 = +y, i.e.
-counter-clockwise seen from above, as in ``spacedg.data.synthetic.trajectory``), tilted up by
+counter-clockwise seen from above, as in ``spacedg.scene.synthetic.trajectory``), tilted up by
 ``pitch`` and rolled clockwise by ``roll``. A camera with yaw 0 at the origin sees +x ahead,
 −y to its right and +z up.
 """
@@ -17,9 +17,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from spacedg.data.box import OrientedBox
-from spacedg.data.scene import Instance, InstanceVisibility, Scene, ViewCovisibility
-from spacedg.data.synthetic.trajectory import rotation_from_angles
+from spacedg.scene.box import OrientedBox
+from spacedg.scene.model import Instance, InstanceVisibility, Scene, ViewCovisibility
+from spacedg.scene.synthetic.trajectory import rotation_from_angles
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
 

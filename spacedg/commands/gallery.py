@@ -34,7 +34,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def _gallery(args: argparse.Namespace) -> int:
     from spacedg.commands.render import _check_png, _pick_view, write_png_atomic
     from spacedg.data.gallery import gallery_sheet
-    from spacedg.data.io import load_scene
+    from spacedg.scene.io import load_scene
     from spacedg.data.pipeline import PipelineOptions
 
     _check_png("--out", args.out)

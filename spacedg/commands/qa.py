@@ -128,7 +128,7 @@ def _pick(records: list, n: int, types: set[str], seed: int) -> list:
 
 def _preview(args: argparse.Namespace) -> int:
     from spacedg.commands.render import _check_png, write_png_atomic
-    from spacedg.data.io import load_scene
+    from spacedg.scene.io import load_scene
     from spacedg.data.qa_index import build_scene_index
     from spacedg.data.qa_preview import qa_sheet
 

@@ -110,7 +110,7 @@ def _check_png(flag: str, path: Path) -> None:
 
 def write_png_atomic(path: Path, image: np.ndarray, flag: str) -> None:
     """Write ``image`` (BGR or single channel) as PNG atomically (encoded in memory, then one rename)."""
-    from spacedg.data.io._files import atomic_write_bytes
+    from spacedg.files import atomic_write_bytes
 
     ok, data = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     if not ok:
@@ -126,7 +126,7 @@ def encode_depth_mm(depth_m: np.ndarray) -> np.ndarray:
 
 
 def _render(args: argparse.Namespace) -> int:
-    from spacedg.data.io import load_scene
+    from spacedg.scene.io import load_scene
     from spacedg.render import Defocus, FisheyeLens, MotionBlur, render
     from spacedg.render.renderer import resolve_backend
 

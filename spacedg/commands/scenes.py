@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from spacedg.data.synthetic.room import RoomConfig
+from spacedg.scene.synthetic.room import RoomConfig
 from spacedg.errors import InvalidDataError
 
 
@@ -49,14 +49,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def _scene_dirs(paths: list[Path]) -> list[Path]:
     """Expand folders of scene folders; every result holds a scene.json (sorted by name)."""
-    from spacedg.data.scene_store import scene_dirs_of
+    from spacedg.scene.store import scene_dirs_of
 
     return scene_dirs_of(paths)
 
 
 def _synth(args: argparse.Namespace) -> int:
-    from spacedg.data.io import load_scene, save_scene
-    from spacedg.data.synthetic import CaptureConfig, ExternalObject, generate_room
+    from spacedg.scene.io import load_scene, save_scene
+    from spacedg.scene.synthetic import CaptureConfig, ExternalObject, generate_room
 
     if args.n < 1:
         raise InvalidDataError(f"--n must be at least 1, got {args.n}")
@@ -113,7 +113,7 @@ def _config_record(config: RoomConfig) -> dict:
 
 
 def _info(args: argparse.Namespace) -> int:
-    from spacedg.data.io import load_scene
+    from spacedg.scene.io import load_scene
 
     summaries = []
     for folder in _scene_dirs(args.paths):
@@ -134,8 +134,8 @@ def _info(args: argparse.Namespace) -> int:
 
 
 def _preview(args: argparse.Namespace) -> int:
-    from spacedg.data.floorplan import contact_sheet, floorplan
-    from spacedg.data.io import load_scene
+    from spacedg.scene.floorplan import contact_sheet, floorplan
+    from spacedg.scene.io import load_scene
 
     if args.out.suffix.lower() != ".png":
         raise InvalidDataError(f"--out {args.out}: write a .png file")

@@ -5,8 +5,8 @@ the arguments (the seed, the scenes and their question indexes), whatever proces
 renders them.
 
 - **Scenes**: native scene folders (``scenes=[...]``), or by default the built-in procedural
-  rooms (:func:`~spacedg.data.scene_store.builtin_scene_dirs`, generated on first use). Each
-  scene goes to one split (:func:`~spacedg.data.scene_store.assign_splits`), so ``train``,
+  rooms (:func:`~spacedg.scene.store.builtin_scene_dirs`, generated on first use). Each
+  scene goes to one split (:func:`~spacedg.scene.store.assign_splits`), so ``train``,
   ``val`` and ``bench`` never share a scene.
 - **Questions**: each scene's question index (:mod:`spacedg.data.qa_index`), built on first use
   in a *spawned* process; optionally restricted to ``question_types``.
@@ -52,10 +52,11 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from spacedg.data.pipeline import BENCH_DEGRADATIONS, MIXTURES, PipelineOptions, derive_seed, resolve_chain
-from spacedg.data.qa import QARecord
-from spacedg.data.qa_index import QABuildConfig, index_paths, read_index
-from spacedg.data.scene_store import SPLITS, ByteLRU, assign_splits, builtin_scene_dirs, ensure_indexes, scene_dirs_of
+from spacedg.data.pipeline import BENCH_DEGRADATIONS, MIXTURES, PipelineOptions, resolve_chain
+from spacedg.seeding import derive_seed
+from spacedg.plugins.qa_record import QARecord
+from spacedg.data.qa_index import QABuildConfig, ensure_indexes, index_paths, read_index
+from spacedg.scene.store import SPLITS, ByteLRU, assign_splits, builtin_scene_dirs, scene_dirs_of
 from spacedg.errors import InvalidDataError, ParameterError
 
 __all__ = ["SpaceDGDataset", "chat_collate", "format_question", "answer_text", "chain_name", "item_images", "CLEAN"]
@@ -184,7 +185,7 @@ class SpaceDGDataset(Dataset):
         return chains
 
     def _records(self, folder: Path) -> list[QARecord]:
-        from spacedg.data.io import load_scene
+        from spacedg.scene.io import load_scene
 
         jsonl, _ = index_paths(load_scene(folder).id, folder)
         return read_index(jsonl)
@@ -239,7 +240,7 @@ class SpaceDGDataset(Dataset):
         return self._scenes
 
     def _scene(self, scene_id: str) -> Any:
-        from spacedg.data.io import load_scene
+        from spacedg.scene.io import load_scene
 
         folder = self.scene_dirs[scene_id]
         return self._cache().get(("scene", scene_id), lambda: load_scene(folder))

@@ -56,7 +56,7 @@ import cv2
 import numpy as np
 
 from spacedg.data.dataset import CLEAN, SpaceDGDataset, answer_text, format_question
-from spacedg.data.io._files import atomic_write_bytes
+from spacedg.files import atomic_write_bytes
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
 
 __all__ = [

@@ -16,13 +16,13 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from spacedg.data.floorplan import contact_sheet
+from spacedg.scene.floorplan import contact_sheet
 from spacedg.data.pipeline import DegradedViews, PipelineOptions, degrade_variants
 from spacedg.plugins.registry import get_degradation, list_degradations
 from spacedg.plugins.specs import SEVERITY_PRESETS
 
 if TYPE_CHECKING:
-    from spacedg.data.scene import Scene
+    from spacedg.scene.model import Scene
 
 __all__ = ["GALLERY_PRESETS", "gallery_sheet"]
 

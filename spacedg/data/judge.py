@@ -1,6 +1,6 @@
 """Optional description judge: a VLM (or any callable) confirms that a description picks out one object.
 
-The deterministic filter (:func:`spacedg.data.view_sampling.description_clash`) already drops a
+The deterministic filter (:func:`spacedg.plugins.questions.view_sampling.description_clash`) already drops a
 question when an image shows two same-label instances with the same description. When the
 image shows same-label instances whose descriptions *differ*, the paper asks a VLM judge
 whether the description still identifies exactly one instance; uncertain cases are dropped.
@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Scene
-from spacedg.data.view_sampling import VisibilityIndex, same_label_neighbours
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Scene
+from spacedg.plugins.questions.view_sampling import VisibilityIndex, same_label_neighbours
 
 __all__ = ["JUDGE_PROMPT", "Judge", "parse_verdict", "DescriptionJudge", "render_clean_view"]
 
@@ -54,10 +54,12 @@ def parse_verdict(reply: object) -> bool:
 
 
 def render_clean_view(scene: Scene, view: str) -> np.ndarray:
-    """The clean sRGB image of ``view`` at its full size, uint8 (H, W, 3): the sample pipeline's clean render."""
-    from spacedg.data.pipeline import degrade
+    """The clean sRGB image of ``view`` at its full size, uint8 (H, W, 3): the same bytes as the
+    sample pipeline's clean image (render, then the exact 8-bit sRGB encode)."""
+    from spacedg.render import render
+    from spacedg.render.colour_cpu import encode_srgb_u8  # numba: compiled on first use
 
-    return degrade(scene, [view], None).images[0]
+    return encode_srgb_u8(render(scene.gaussians, scene.camera(view), outputs="rgb").rgb)
 
 
 class DescriptionJudge:

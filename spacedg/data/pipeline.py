@@ -34,7 +34,6 @@ used are in :attr:`DegradedViews.sub_steps`.
 
 from __future__ import annotations
 
-import hashlib
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -43,16 +42,17 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from spacedg.errors import ParameterError, PluginError, UnknownPluginError
-from spacedg.plugins.degradations._common import surface_far_depth
+from spacedg.plugins.degradations.common import surface_far_depth
 from spacedg.plugins.registry import get_degradation
 from spacedg.plugins.specs import DegradationSpec, Stage, suggest
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import RasterSettings
+from spacedg.seeding import derive_seed
 
 if TYPE_CHECKING:
     import torch
 
-    from spacedg.data.scene import Scene
+    from spacedg.scene.model import Scene
     from spacedg.render.frame import Frame
 
 __all__ = [
@@ -66,7 +66,6 @@ __all__ = [
     "degrade",
     "degrade_image",
     "degrade_variants",
-    "derive_seed",
     "parse_chain",
     "resolve_chain",
 ]
@@ -165,12 +164,6 @@ def parse_chain(chain: Any, mixture_preset: str = "2") -> tuple[DegradationChoic
 
 
 # --------------------------------------------------------------- resolving
-def derive_seed(seed: int, *keys: object) -> int:
-    """A 63-bit seed from ``seed`` and ``keys`` (SHA-256 based: the same in every process)."""
-    text = ":".join([str(int(seed)), *(str(k) for k in keys)])
-    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "little") >> 1
-
-
 @dataclass(frozen=True)
 class ResolvedDegradation:
     """A degradation with concrete parameters and its seed (what provenance records)."""
@@ -396,7 +389,7 @@ def degrade_variants(
         options: rendering and resolving options.
         progress: show a progress bar over the render groups (for long runs such as a gallery).
         render_cache: optional cache with ``get(key, make)`` (e.g.
-            :class:`~spacedg.data.scene_store.ByteLRU` with :func:`frames_nbytes`) that keeps the
+            :class:`~spacedg.scene.store.ByteLRU` with :func:`frames_nbytes`) that keeps the
             **clean** renders (chains without a raster step) across calls; frames are read-only.
 
     Returns:
@@ -479,7 +472,7 @@ def degrade_image(
     Returns:
         ``(uint8 image, provenance list)``.
     """
-    from spacedg.plugins.degradations._common import check_display_image
+    from spacedg.plugins.degradations.common import check_display_image
     from spacedg.render.colour_cpu import decode_srgb, encode_srgb_u8
 
     image = check_display_image(image, "degrade_image")

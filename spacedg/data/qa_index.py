@@ -37,14 +37,14 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Scene
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Scene
 from spacedg.errors import FileFormatError, ParameterError
 from spacedg.plugins.specs import AnswerType
 
 __all__ = [
     "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "prepare_scene", "generate_records",
-    "index_paths", "build_scene_index", "read_index", "truth_key", "index_is_current",
+    "index_paths", "build_scene_index", "read_index", "truth_key", "index_is_current", "ensure_indexes",
 ]
 
 #: Bump when the index layout or the build procedure changes (part of the key).
@@ -127,8 +127,8 @@ def prepare_scene(
     timings: dict[str, float] | None = None,
 ) -> Scene:
     """``scene`` with visibility and covisibility attached (cached under ``cache_dir`` if given)."""
-    from spacedg.data.covisibility import with_covisibility
-    from spacedg.data.visibility import compute_visibility, load_or_compute_visibility, with_visibility
+    from spacedg.scene.covisibility import with_covisibility
+    from spacedg.scene.visibility import compute_visibility, load_or_compute_visibility, with_visibility
 
     t0 = time.perf_counter()
     if cache_dir is None:
@@ -196,7 +196,7 @@ def generate_records(
     ``dropped`` receives per-family counts of records the judge removed.
     """
     from spacedg.data.judge import DescriptionJudge
-    from spacedg.data.pipeline import derive_seed
+    from spacedg.seeding import derive_seed
 
     if judge is not None and not isinstance(judge, DescriptionJudge):
         judge = DescriptionJudge(scene, judge)
@@ -278,8 +278,8 @@ def build_scene_index(
     progress: bool = True,
 ) -> SceneQA:
     """Build (or reuse) the question index of one native scene folder (see the module docstring)."""
-    from spacedg.data.io import load_scene
-    from spacedg.data.io._files import atomic_write_bytes
+    from spacedg.scene.io import load_scene
+    from spacedg.files import atomic_write_bytes
 
     scene_dir = Path(scene_dir)
     scene = load_scene(scene_dir)
@@ -316,7 +316,7 @@ def _is_current(jsonl: Path, meta_path: Path, key: str) -> bool:
 def index_is_current(scene_dir: str | Path, config: QABuildConfig = QABuildConfig(), out_dir: str | Path | None = None) -> bool:
     """Whether ``build_scene_index(scene_dir, config, out_dir=out_dir)`` would reuse its index
     (reads ``scene.json`` and the meta file only: nothing is rendered)."""
-    from spacedg.data.io import load_scene
+    from spacedg.scene.io import load_scene
 
     scene_dir = Path(scene_dir)
     scene_json = scene_dir / "scene.json" if scene_dir.is_dir() else scene_dir
@@ -341,3 +341,44 @@ def read_index(path: str | Path) -> list[QARecord]:
         except Exception as err:  # noqa: BLE001 - report which line is bad
             raise FileFormatError(f"{path}:{number}: not a question record ({err}); rebuild with `spacedg qa build`") from err
     return records
+
+
+# --------------------------------------------------------- many scenes, isolated
+def _build_indexes(payload: dict[str, Any]) -> dict[str, str]:
+    """Child side of :func:`ensure_indexes`: build the indexes of ``payload["dirs"]``; returns
+    ``folder → error message`` for the scenes that failed."""
+    from tqdm import tqdm
+
+    from spacedg.errors import SpaceDGError
+
+    config = payload["config"]
+    cfg = QABuildConfig(**{**config, "families": tuple(config["families"]), "visibility_size": tuple(config["visibility_size"]),
+                           "covisibility_size": tuple(config["covisibility_size"])})
+    failed: dict[str, str] = {}
+    for folder in tqdm(payload["dirs"], desc="question indexes (first use)", unit="scene"):
+        try:
+            build_scene_index(folder, cfg, progress=False)
+        except (SpaceDGError, OSError, ValueError) as err:
+            failed[folder] = str(err)
+    return failed
+
+
+def ensure_indexes(dirs: Sequence[Path], config: QABuildConfig) -> dict[str, str]:
+    """Build the question index of each scene folder whose index is missing or stale, **in a
+    separate Python process** (:func:`~spacedg.scene.store.run_isolated`: the caller never starts
+    numba or CUDA threads before a DataLoader forks its workers); returns ``folder → error`` for
+    scenes that could not be read or indexed."""
+    from spacedg.errors import SpaceDGError
+    from spacedg.scene.store import run_isolated
+
+    failed: dict[str, str] = {}
+    stale = []
+    for d in dirs:
+        try:
+            if not index_is_current(d, config):
+                stale.append(str(d))
+        except (SpaceDGError, OSError, ValueError) as err:
+            failed[str(d)] = str(err)
+    if stale:
+        failed.update(run_isolated("spacedg.data.qa_index:_build_indexes", {"dirs": stale, "config": config.to_dict()}))
+    return failed

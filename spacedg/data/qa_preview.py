@@ -17,9 +17,9 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from spacedg.data.floorplan import contact_sheet
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Scene
+from spacedg.scene.floorplan import contact_sheet
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Scene
 from spacedg.render.camera import Camera
 
 __all__ = ["render_thumbnail", "record_panel", "qa_sheet", "ascii_text"]

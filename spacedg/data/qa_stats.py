@@ -16,7 +16,7 @@ from collections import Counter, defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
-from spacedg.data.qa import MCQ_LETTERS, QARecord
+from spacedg.plugins.qa_record import MCQ_LETTERS, QARecord
 from spacedg.plugins.specs import AnswerType
 
 __all__ = ["count_table", "answer_balance", "blind_baseline", "format_table"]

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from spacedg.data.qa import MCQ_LETTERS
+from spacedg.plugins.qa_record import MCQ_LETTERS
 from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.eval.scoring import route
 from spacedg.plugins.specs import AnswerType

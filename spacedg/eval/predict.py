@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.io._files import atomic_write_bytes, read_rgb
+from spacedg.files import atomic_write_bytes, read_rgb
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
 from spacedg.eval.bench import Bench, BenchRow, row_from_mapping
 from spacedg.eval.predictions import meta_path

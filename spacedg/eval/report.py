@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from spacedg.data.io._files import atomic_write_bytes
+from spacedg.files import atomic_write_bytes
 from spacedg.errors import InvalidDataError
 from spacedg.eval.aggregate import AVG, SLICE_KINDS, Cell, ItemScore, condition_order, mean, score_set, slice_table
 from spacedg.eval.bench import CLEAN, Bench

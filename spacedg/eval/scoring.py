@@ -43,7 +43,7 @@ from dataclasses import dataclass
 from decimal import Decimal, localcontext
 from typing import Any
 
-from spacedg.data.qa import MCQ_LETTERS
+from spacedg.plugins.qa_record import MCQ_LETTERS
 from spacedg.eval.parsing import (
     parse_count,
     parse_mcq,
@@ -251,7 +251,7 @@ def _truth_sizes(answer: Any) -> list[float]:
 
 
 def score(prediction: str | None, record_or_fields: Any, *, sort_sizes: bool = True) -> ScoreResult:
-    """Score one model output against a :class:`~spacedg.data.qa.QARecord` or a mapping.
+    """Score one model output against a :class:`~spacedg.plugins.qa_record.QARecord` or a mapping.
 
     ``record_or_fields`` is a ``QARecord`` or any mapping / object with ``answer`` and either
     ``answer_type`` or ``question_type`` (+ ``sub_question_type``) for :func:`route`; MCQ may

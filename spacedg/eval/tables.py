@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from spacedg.data.io._files import atomic_write_bytes
+from spacedg.files import atomic_write_bytes
 
 __all__ = ["Table", "csv_bytes", "fmt_corr", "fmt_delta", "fmt_pct", "is_number"]
 

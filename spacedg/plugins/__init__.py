@@ -30,6 +30,8 @@ from spacedg.plugins.registry import (
     list_question_families,
     reset_registry,
 )
+from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.question_family import QuestionFamily
 from spacedg.plugins.specs import (
     REQUIRED_PRESETS,
     SEVERITY_PRESETS,
@@ -40,7 +42,6 @@ from spacedg.plugins.specs import (
     LinearApply,
     ParamRange,
     ParamSpec,
-    QuestionFamily,
     RasterApply,
     Stage,
     TaskGroup,
@@ -61,6 +62,7 @@ __all__ = [
     "LinearApply",
     "ParamRange",
     "ParamSpec",
+    "QARecord",
     "PluginOrigin",
     "PluginRecord",
     "QuestionFamily",

@@ -27,7 +27,8 @@ from typing import TYPE_CHECKING
 import pluggy
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
-    from spacedg.plugins.specs import DegradationSpec, QuestionFamily
+    from spacedg.plugins.question_family import QuestionFamily
+    from spacedg.plugins.specs import DegradationSpec
 
 PROJECT_NAME = "spacedg"
 #: The entry-point group the registry loads plugins from.

@@ -45,7 +45,8 @@ import pluggy
 
 from spacedg.errors import DuplicatePluginError, PluginError, UnknownPluginError
 from spacedg.plugins import hookspecs
-from spacedg.plugins.specs import DegradationSpec, QuestionFamily, suggest
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import DegradationSpec, suggest
 
 __all__ = [
     "AUTOLOAD_ENV",

@@ -13,7 +13,7 @@ Conventions:
   Rays beyond ``max_theta`` (radians) are invalid, never NaN.
 
 Conversions from other conventions (OpenGL/nerfstudio, COLMAP world-to-camera) happen in
-``spacedg.data.io``, once.
+``spacedg.scene.io``, once.
 """
 
 from __future__ import annotations

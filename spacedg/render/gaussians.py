@@ -11,7 +11,7 @@ Conventions (the whole engine uses these; readers convert file conventions once)
   degree 0–3, ordered as in the original 3DGS code. The colour seen along unit direction
   ``d`` (from the camera centre to the Gaussian) is ``0.5 + Σ_k sh[:, k] · Y_k(d)``; the
   renderer clamps it at 0. For a degree-0 scene that is ``0.5 + SH_C0 · sh[:, 0]``.
-- ``instance_ids`` (N,) int32, the :class:`~spacedg.data.scene.Instance` id a Gaussian
+- ``instance_ids`` (N,) int32, the :class:`~spacedg.scene.model.Instance` id a Gaussian
   belongs to, or -1 for none (walls, clutter). Optional.
 
 Arrays are stored read-only so a ``Gaussians`` can be shared between views, caches and

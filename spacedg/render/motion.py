@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from spacedg.render.camera import Camera, exposure_poses
-from spacedg.render.colour_cpu import decode_srgb
+from spacedg.render.composite import composite_view, frame_from_images
 from spacedg.render.frame import Frame
 from spacedg.render.gaussians import Gaussians
 from spacedg.render.settings import Defocus, MotionBlur, RasterSettings
@@ -105,7 +105,7 @@ def render_motion(
     defocus: Defocus | None,
 ) -> Frame:
     """Render a motion-blurred frame (see the module docstring)."""
-    from spacedg.render.renderer import composite_view, frame_from_images
+    from spacedg.render.colour_cpu import decode_srgb  # numba: compiled on first render, not with spacedg
 
     t0 = time.perf_counter()
     translation, rotation = np.array(motion.translation), np.array(motion.rotation)

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from spacedg.errors import ParameterError
 from spacedg.render.camera import Camera
+from spacedg.render.renderer import render
 from spacedg.render.settings import Defocus, MotionBlur, RasterSettings, parse_outputs
 
 if TYPE_CHECKING:
@@ -64,8 +65,6 @@ class RenderRequest:
         settings: RasterSettings | None = None,
     ) -> Frame:
         """Render this request (see :func:`spacedg.render.render`)."""
-        from spacedg.render.renderer import render
-
         return render(
             gaussians, self.camera, defocus=self.defocus, motion=self.motion, outputs=self.outputs,
             backend=backend, device=device, settings=settings,

@@ -59,7 +59,7 @@ from pathlib import Path
 from typing import Any
 
 from spacedg.data.export import tsv_bytes
-from spacedg.data.io._files import atomic_write_bytes
+from spacedg.files import atomic_write_bytes
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.eval.bench import CLEAN, bench_table, read_table
 from spacedg.eval.scoring import route

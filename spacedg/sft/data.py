@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from torch.utils.data import Dataset
 
-from spacedg.data.io._files import read_rgb
+from spacedg.files import read_rgb
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
 from spacedg.eval.prompts import chat_messages
 from spacedg.eval.scoring import ANSWER_PROMPT

@@ -6,7 +6,7 @@ against ``transformers.VideoProcessorMixin``, which is exported only with torchv
 check dies with ``AttributeError: ... has no attribute '_extra_content'``, and
 ``AutoProcessor.from_pretrained`` fails the same way or with an ``ImportError`` (the video
 processors need torchvision too). Where torchvision cannot be used (e.g. a CPU torch without a matching torchvision wheel),
-:func:`assemble_processor` builds the family's real processor class from the saved tokenizer, the
+:func:`~spacedg.vlm.processor.assemble_processor` builds the family's real processor class from the saved tokenizer, the
 PIL image processor (``AutoImageProcessor.from_pretrained(path, backend="pil")``) and a
 placeholder ``BaseVideoProcessor()``, skipping only that class check, for that one instance.
 Images work exactly as with the stock processor; videos do not (nothing in spacedg uses them).
@@ -32,27 +32,10 @@ from typing import Any
 import torch
 
 from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.vlm.processor import assemble_processor
+from spacedg.vlm.tiny import build_tiny_vlm
 
-__all__ = ["assemble_processor", "load_processor", "load_vlm", "resolve_dtype", "set_pixel_budget"]
-
-
-def assemble_processor(cls: type, tokenizer: Any, image_processor: Any, **kwargs: Any) -> Any:
-    """An instance of the processor class ``cls`` with a placeholder video processor.
-
-    Works with and without torchvision: the argument class check of ``ProcessorMixin`` (which
-    needs torchvision to find ``VideoProcessorMixin``) is bypassed for this instance only.
-    ``kwargs`` go to ``cls.__init__`` (``chat_template``, InternVL's ``image_seq_length``, ...).
-    """
-    from transformers.video_processing_utils import BaseVideoProcessor
-
-    processor = cls.__new__(cls)
-    processor.check_argument_for_proper_class = lambda name, arg: None  # instance-local bypass
-    try:
-        cls.__init__(processor, image_processor=image_processor, tokenizer=tokenizer,
-                     video_processor=BaseVideoProcessor(), **kwargs)
-    finally:
-        del processor.check_argument_for_proper_class
-    return processor
+__all__ = ["assemble_processor", "load_processor", "load_vlm", "resolve_dtype", "set_pixel_budget"]  # assemble_processor: re-exported
 
 
 def set_pixel_budget(processor: Any, min_pixels: int | None = None, max_pixels: int | None = None) -> Any:
@@ -242,8 +225,6 @@ def load_vlm(path: str | Path, *, device: str = "cpu", dtype: str | torch.dtype 
     base = _adapter_base(adapter)
     torch_dtype = resolve_dtype(dtype, device)
     if isinstance(base, str):  # an adapter trained on a tiny model built in code (seed 0)
-        from spacedg.vlm.tiny import build_tiny_vlm
-
         model, processor = build_tiny_vlm(base[len("tiny:"):])
         model = _merge_adapter(model.to(torch_dtype), adapter)
         if _has_processor(adapter):

@@ -28,6 +28,9 @@ from typing import Any
 
 import torch
 
+from spacedg.errors import ParameterError
+from spacedg.vlm.processor import assemble_processor
+
 __all__ = ["CHAT_TEMPLATE", "IMAGE_PLACEHOLDERS", "TINY_FAMILIES", "build_tiny_vlm", "save_tiny_vlm"]
 
 #: Families :func:`build_tiny_vlm` can build (transformers ``model_type`` names).
@@ -170,8 +173,6 @@ def _model(family: str, tok: Any) -> Any:
 def _processor(family: str, tok: Any) -> Any:
     import transformers as tf
 
-    from spacedg.vlm.loading import assemble_processor
-
     cls = {"qwen2_vl": tf.Qwen2VLProcessor, "qwen2_5_vl": tf.Qwen2_5_VLProcessor,
            "qwen3_vl": tf.Qwen3VLProcessor, "internvl": tf.InternVLProcessor}[family]
     placeholder = IMAGE_PLACEHOLDERS["internvl" if family == "internvl" else "qwen"]
@@ -187,8 +188,6 @@ def build_tiny_vlm(family: str = "qwen2_5_vl", *, seed: int = 0) -> tuple[Any, A
     Text model: hidden 64, 2 layers, 4 heads (2 KV heads), vocab = the tiny tokenizer's size.
     Vision tower: 2 layers, hidden 32. The weights depend only on ``seed``.
     """
-    from spacedg.errors import ParameterError
-
     if family not in TINY_FAMILIES:
         raise ParameterError(f"unknown tiny VLM family {family!r}; choose one of {', '.join(TINY_FAMILIES)}")
     tok = _tokenizer(family)

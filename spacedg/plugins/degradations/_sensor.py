@@ -77,7 +77,7 @@ except ImportError:  # pragma: no cover - older/newer numba without the intrinsi
         return n
 
 from spacedg.errors import InvalidDataError
-from spacedg.plugins.degradations._common import check_linear_rgb
+from spacedg.plugins.degradations.common import check_linear_rgb
 from spacedg.plugins.specs import DegradationSpec, ParamRange, ParamSpec
 
 __all__ = [
@@ -442,7 +442,7 @@ def sensor_capture(
         exposure: gain e ≥ 0 on linear light.
         k: normalised full scale per photo-electron, ≥ 0 (0: no shot noise).
         sigma_read: read-noise std in normalised linear units, ≥ 0 (0: no read noise).
-        key: 63-bit stream key (:func:`~spacedg.plugins.degradations._common.stream_key`).
+        key: 63-bit stream key (:func:`~spacedg.plugins.degradations.common.stream_key`).
         read_model: :data:`READ_GAUSSIAN` or :data:`READ_TUKEY`.
         read_lambda: Tukey λ (> −0.5), used when ``read_model == READ_TUKEY``.
         clip: clip the result to [0, 1] (saturation).

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.degradations._common import aux_image, check_linear_rgb, surface_far_depth
+from spacedg.plugins.degradations.common import aux_image, check_linear_rgb, surface_far_depth
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 

@@ -24,7 +24,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from spacedg.plugins.degradations._common import check_display_image
+from spacedg.plugins.degradations.common import check_display_image
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.degradations._common import stream_key
+from spacedg.plugins.degradations.common import stream_key
 from spacedg.plugins.degradations._sensor import (
     K_DEFAULT,
     READ_GAUSSIAN,

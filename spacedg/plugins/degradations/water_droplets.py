@@ -80,7 +80,7 @@ import numba
 import numpy as np
 
 from spacedg.errors import InvalidDataError, ParameterError
-from spacedg.plugins.degradations._common import check_linear_rgb
+from spacedg.plugins.degradations.common import check_linear_rgb
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.specs import Category, DegradationSpec, ParamSpec, Stage
 

@@ -4,7 +4,7 @@ ground-plane compass frame, the box-intersection tolerance),
 :mod:`~spacedg.plugins.questions.records` (what every family's records are built from: seeded
 orders, the "referable object" rule, geometry-block entries) and
 :mod:`~spacedg.plugins.questions.language` (wording). A family imports shared code only from
-these and :mod:`spacedg.data.view_sampling`, never from another family module.
+these and :mod:`spacedg.plugins.questions.view_sampling`, never from another family module.
 
 Each family module defines ``FAMILY`` (a :class:`~spacedg.plugins.specs.QuestionFamily`) and
 the hook ``spacedg_register_question_families``; it is announced as an entry point of the

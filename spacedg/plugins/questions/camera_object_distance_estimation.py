@@ -7,16 +7,16 @@ Answer: the straight-line distance in **metres** from a camera centre (the trans
 Sub types (SPEC-QA, type 3):
 
 ``single_view`` (1 view)
-    The object is clearly visible in the view (:class:`~spacedg.data.view_sampling.VisibilityIndex`
+    The object is clearly visible in the view (:class:`~spacedg.plugins.questions.view_sampling.VisibilityIndex`
     ``visible``) and no other same-label instance with the same description is seen there
-    (:func:`~spacedg.data.view_sampling.description_clash`; together
+    (:func:`~spacedg.plugins.questions.view_sampling.description_clash`; together
     :func:`~spacedg.plugins.questions.records.referable`). The object is named by
     :func:`~spacedg.plugins.questions.language.object_phrase`. The four paper templates
     (:data:`TEMPLATES`, drawn by ``rng``) are kept, with one **deviation**: each states the
     unit and that the distance is measured to the object's centre (the paper's templates 1–3
     give no unit, and none says which point of the object is meant; the answer is in metres
     to the box centre, so the question says so).
-``bbox_center_distance`` (2 views, :data:`~spacedg.data.view_sampling.OBJECT_PAIRS`:
+``bbox_center_distance`` (2 views, :data:`~spacedg.plugins.questions.view_sampling.OBJECT_PAIRS`:
     covisibility > 0.25, baseline >= 0.2 m)
     The object is clearly visible in image A **and** in image B, and has no description clash
     in either (decision: B is checked too, since the model must find "the same physical
@@ -42,7 +42,7 @@ Order (decision): ``generate`` splits ``rng`` into one child generator per sub t
 interleaves the sub types round-robin (so a caller taking the first ``n`` records gets both
 kinds). Within ``single_view`` the views are visited round-robin in a seeded order, each view's
 objects in a seeded order; within ``bbox_center_distance`` the pairs of
-:func:`~spacedg.data.view_sampling.sample_pairs` (its seeded anchor round-robin) are visited
+:func:`~spacedg.plugins.questions.view_sampling.sample_pairs` (its seeded anchor round-robin) are visited
 round-robin, each pair's objects in a seeded order. Everything is lazy: a caller that stops
 early pays only for what it took. Same seed → same records in the same order.
 
@@ -58,15 +58,15 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Instance, Scene
-from spacedg.data.view_sampling import (
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Instance, Scene
+from spacedg.plugins.questions.view_sampling import (
     OBJECT_PAIRS,
     PairRules,
     ViewPair,
     VisibilityIndex,
 )
-from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.geometry import camera_center
 from spacedg.plugins.questions.language import find_in_image, label_text
@@ -81,7 +81,8 @@ from spacedg.plugins.questions.records import (
     round_robin_views,
     seeded_order,
 )
-from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
     "BBOX_CENTER_DISTANCE",

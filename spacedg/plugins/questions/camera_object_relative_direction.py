@@ -16,7 +16,7 @@ Three sub types (SPEC-QA, type 4; wording from the paper's appendix "Question Te
     question ends with :data:`SINGLE_VIEW_NOTE` saying so. Skipped when ``|v| <`` 
     :data:`MIN_DISPLACEMENT_M` = 0.1 m (decision: below that the centres practically coincide
     and the direction is noise).
-``bbox_center_direction`` (2 views, :data:`~spacedg.data.view_sampling.LOW_COVIS_DIRECTION_PAIRS`:
+``bbox_center_direction`` (2 views, :data:`~spacedg.plugins.questions.view_sampling.LOW_COVIS_DIRECTION_PAIRS`:
     covisibility in (0.05, 0.25], baseline >= 0.2 m, rotation >= 15°)
     The object is clearly visible in image A (whether B shows it is not constrained: the low
     covisibility makes it often out of view). Its centre in camera B's frame,
@@ -24,11 +24,11 @@ Three sub types (SPEC-QA, type 4; wording from the paper's appendix "Question Te
     centre is closer than 0.1 m to camera B or camera B is inside the box. The question is
     ``find_in_image(phrase, 0)`` followed by one of the paper's two wordings
     (:data:`TWO_VIEW_TEMPLATES`, drawn by ``rng``), which name the object by its label.
-``relpos_A_facing_B`` (2 views, :data:`~spacedg.data.view_sampling.OBJECT_DIRECTION_PAIRS`:
+``relpos_A_facing_B`` (2 views, :data:`~spacedg.plugins.questions.view_sampling.OBJECT_DIRECTION_PAIRS`:
     covisibility > 0.25, baseline >= 0.2 m, rotation >= 15°)
     (the public evaluator's name, capitals included).
     Three distinct instances A (where you stand), B (what you face), C (the query) obey the
-    three-object rule (:func:`~spacedg.data.view_sampling.split_across_views`: each clearly
+    three-object rule (:func:`~spacedg.plugins.questions.view_sampling.split_across_views`: each clearly
     visible in image A or B, neither image shows all three). Each object is found in image A if
     it is clearly visible there without a description clash, else in image B on the same
     condition, else the triplet is skipped. With ``up = Scene.up``: ``forward = horizontal(c_B -
@@ -52,7 +52,7 @@ Three sub types (SPEC-QA, type 4; wording from the paper's appendix "Question Te
     triplet whose names still coincide is skipped.
 
 Every referenced object is clearly visible in the view the question points to and has no
-description clash there (:func:`~spacedg.data.view_sampling.description_clash`; together
+description clash there (:func:`~spacedg.plugins.questions.view_sampling.description_clash`; together
 :func:`~spacedg.plugins.questions.records.referable`). Only camera
 frames and ``Scene.up`` enter the answers, so questions, options and answers are unchanged when
 the whole scene moves rigidly (any up direction).
@@ -87,9 +87,9 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Instance, Scene
-from spacedg.data.view_sampling import (
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Instance, Scene
+from spacedg.plugins.questions.view_sampling import (
     LOW_COVIS_DIRECTION_PAIRS,
     OBJECT_DIRECTION_PAIRS,
     PairRules,
@@ -98,7 +98,7 @@ from spacedg.data.view_sampling import (
     label_key,
     split_across_views,
 )
-from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.geometry import (
     BODY_DIRECTION_WORDS,
@@ -134,7 +134,8 @@ from spacedg.plugins.questions.records import (
     round_robin_views,
     seeded_order,
 )
-from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
     "BBOX_CENTER_DIRECTION",

@@ -30,8 +30,8 @@ the dual options, **not** in dominance order (which would give the answer away).
 ``sub_question_type = f"{ax1}+{ax2}_{mode}"`` with ``ax1`` the dominant axis (all 12
 combinations are declared).
 
-Pairs: :func:`~spacedg.data.view_sampling.sample_pairs` with
-:data:`~spacedg.data.view_sampling.ROTATION_PAIRS` (covisibility > 0.25, rotation >= 15°; which
+Pairs: :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` with
+:data:`~spacedg.plugins.questions.view_sampling.ROTATION_PAIRS` (covisibility > 0.25, rotation >= 15°; which
 view is A is a seeded coin, so turn directions are balanced). One record per qualifying pair,
 in ``sample_pairs``' round-robin order; each pair's option shuffle uses its own child
 generator seeded from ``rng`` (:func:`~spacedg.plugins.questions.records.child_rngs`).
@@ -53,9 +53,9 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Scene
-from spacedg.data.view_sampling import ROTATION_PAIRS, PairRules, ViewPair, sample_pairs
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Scene
+from spacedg.plugins.questions.view_sampling import ROTATION_PAIRS, PairRules, ViewPair, sample_pairs
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.geometry import (
     ROTATION_WORDS,
@@ -65,7 +65,8 @@ from spacedg.plugins.questions.geometry import (
     relative_rotation,
 )
 from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry
-from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
     "AXES",

@@ -42,8 +42,8 @@ the option letter", "Output format: <answer>…"): options live in ``record.opti
 answer format is the evaluation prompt's job (SPEC-QA "Scoring"). The YN text keeps "Return
 ONLY one token: 'yes' or 'no'." since it tells what is asked.
 
-Pairs: :func:`~spacedg.data.view_sampling.sample_pairs` with
-:data:`~spacedg.data.view_sampling.TRANSLATION_PAIRS` (covisibility > 0.25, baseline >= 0.35 m;
+Pairs: :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` with
+:data:`~spacedg.plugins.questions.view_sampling.TRANSLATION_PAIRS` (covisibility > 0.25, baseline >= 0.35 m;
 a view may anchor several pairs; which view is A is a seeded coin). A pair is skipped when its
 ``d`` is not finite or shorter than the rule's minimum (re-checked on the unrounded pose).
 
@@ -75,9 +75,9 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Scene
-from spacedg.data.view_sampling import (
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Scene
+from spacedg.plugins.questions.view_sampling import (
     TRANSLATION_PAIRS,
     PairRules,
     ViewPair,
@@ -97,7 +97,8 @@ from spacedg.plugins.questions.geometry import (
     single_word_pool,
 )
 from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry
-from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
     "FAMILY",

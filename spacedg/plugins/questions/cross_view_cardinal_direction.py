@@ -35,11 +35,11 @@ Options: the truth and three of the seven other compass labels
 label across that boundary is never offered), letters by
 :func:`~spacedg.plugins.questions.geometry.build_mcq`.
 
-Objects (decisions): pairs of views from :func:`~spacedg.data.view_sampling.sample_pairs` with
-:data:`~spacedg.data.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m; no
+Objects (decisions): pairs of views from :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` with
+:data:`~spacedg.plugins.questions.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m; no
 rotation minimum: camera B's orientation does not enter the answer). Object 1 is clearly
 visible in A and object 2 clearly visible in B, each without a description clash in that view
-(:func:`~spacedg.data.view_sampling.description_clash`; together
+(:func:`~spacedg.plugins.questions.view_sampling.description_clash`; together
 :func:`~spacedg.plugins.questions.records.referable`); they are distinct instances and their
 phrases (:func:`~spacedg.plugins.questions.language.object_phrase`) differ case-insensitively
 (the same phrase twice would read as the same object). Either object may also be seen in the
@@ -85,15 +85,15 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Scene
-from spacedg.data.view_sampling import (
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Scene
+from spacedg.plugins.questions.view_sampling import (
     OBJECT_PAIRS,
     PairRules,
     ViewPair,
     VisibilityIndex,
 )
-from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.geometry import (
     camera_center,
@@ -110,7 +110,8 @@ from spacedg.plugins.questions.records import (
     referable_ids,
     round_robin_pairs,
 )
-from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
     "FAMILY",

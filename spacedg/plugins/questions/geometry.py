@@ -51,8 +51,8 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.box import OrientedBox
-from spacedg.data.qa import MCQ_LETTERS
+from spacedg.scene.box import OrientedBox
+from spacedg.plugins.qa_record import MCQ_LETTERS
 from spacedg.errors import InvalidDataError
 from spacedg.render.camera import Camera
 
@@ -302,7 +302,7 @@ def ground_leg(vector: np.ndarray, up: np.ndarray, min_horizontal_m: float = MIN
 # ---------------------------------------------------------------- boxes
 def boxes_intersect(a: OrientedBox, b: OrientedBox) -> bool:
     """True when the boxes overlap by more than :data:`INTERSECT_TOL_M` (1 mm) along every
-    separating axis (:meth:`~spacedg.data.box.OrientedBox.intersects`); touching boxes do not intersect."""
+    separating axis (:meth:`~spacedg.scene.box.OrientedBox.intersects`); touching boxes do not intersect."""
     return a.intersects(b, tol=INTERSECT_TOL_M)
 
 

@@ -8,13 +8,13 @@ no part).
 
 Objects (decisions in brackets):
 
-- pairs of views from :func:`~spacedg.data.view_sampling.sample_pairs` with
-  :data:`~spacedg.data.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m);
+- pairs of views from :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` with
+  :data:`~spacedg.plugins.questions.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m);
 - object 1 clearly visible in A and object 2 clearly visible in B, each without a description
-  clash in that view (:func:`~spacedg.data.view_sampling.description_clash`; together
+  clash in that view (:func:`~spacedg.plugins.questions.view_sampling.description_clash`; together
   :func:`~spacedg.plugins.questions.records.referable`); either may also be seen in the other
   image (nothing required there);
-- distinct instances with different labels (:func:`~spacedg.data.view_sampling.label_key`);
+- distinct instances with different labels (:func:`~spacedg.plugins.questions.view_sampling.label_key`);
 - [skipped when the centres are closer than :data:`MIN_DISTANCE_M` = 0.05 m: such boxes
   practically coincide (duplicate or nested annotations), and a relative-accuracy score on a
   distance of a few centimetres measures annotation noise; a rounded answer of 0 would also
@@ -49,16 +49,16 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Scene
-from spacedg.data.view_sampling import (
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Scene
+from spacedg.plugins.questions.view_sampling import (
     OBJECT_PAIRS,
     PairRules,
     ViewPair,
     VisibilityIndex,
     label_key,
 )
-from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.records import (
@@ -69,7 +69,8 @@ from spacedg.plugins.questions.records import (
     referable_ids,
     round_robin_pairs,
 )
-from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = ["DECIMALS", "FAMILY", "MIN_DISTANCE_M", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "generate", "make_family", "render_question"]
 

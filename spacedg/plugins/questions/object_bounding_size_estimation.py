@@ -2,11 +2,11 @@
 
 For one view and one object the answer is the object's oriented-box extents (full side
 lengths, metres) sorted ascending and rounded to 2 decimals:
-``[shortest, middle, longest]`` (:class:`~spacedg.data.qa.QARecord` SIZE_LIST). Sorting happens
+``[shortest, middle, longest]`` (:class:`~spacedg.plugins.qa_record.QARecord` SIZE_LIST). Sorting happens
 before rounding; rounding is monotone, so the rounded list stays sorted.
 
 Object rule: the object is **clearly visible** in the view and
-:func:`~spacedg.data.view_sampling.description_clash` is False there (no same-label instance
+:func:`~spacedg.plugins.questions.view_sampling.description_clash` is False there (no same-label instance
 with the same description is seen in that image;
 :func:`~spacedg.plugins.questions.records.referable`). Decision: an object whose shortest side
 rounds to 0.00 m (a flat annotation, < 5 mm) is skipped, because relative-error scoring of a
@@ -43,10 +43,10 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Instance, Scene
-from spacedg.data.view_sampling import VisibilityIndex
-from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Instance, Scene
+from spacedg.plugins.questions.view_sampling import VisibilityIndex
+from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.records import (
     make_record,
@@ -55,7 +55,8 @@ from spacedg.plugins.questions.records import (
     ref_entry,
     referable_ids,
 )
-from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = ["DECIMALS", "FAMILY", "NAME", "SUB_QUESTION_TYPE", "TEMPLATES", "generate", "make_family", "render_question", "size_list"]
 

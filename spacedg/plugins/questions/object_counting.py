@@ -1,12 +1,12 @@
 """Object counting (``question_type = "object_counting"``; object-centric, single view, COUNT).
 
 Rule (SPEC-QA, type 11): for one view and one label, the answer is the number of instances of
-that label that are **clearly visible** in the view (:func:`spacedg.data.visibility.classify`
+that label that are **clearly visible** in the view (:func:`spacedg.scene.visibility.classify`
 → ``VISIBLE``). The (view, label) pair is skipped when any instance of the label is in the
 grey zone (``PARTIAL``) there, since a viewer could reasonably count it or not; instances with
 no visible pixel (``HIDDEN``) are simply not counted. The pair is also skipped when the view
 shows (any pixel) an instance of a *confusable* label, one with the same head noun
-(:func:`~spacedg.data.view_sampling.confusable`: counting "lamp" next to a "floor lamp"). Only counts ≥ 1 are asked (a count of 0
+(:func:`~spacedg.plugins.questions.view_sampling.confusable`: counting "lamp" next to a "floor lamp"). Only counts ≥ 1 are asked (a count of 0
 would be an existence question about an absent label).
 
 Labels are grouped case- and underscore-insensitively (``"Chair"``, ``"chair"`` and
@@ -45,14 +45,15 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Instance, Scene
-from spacedg.data.view_sampling import confusable
-from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Instance, Scene
+from spacedg.plugins.questions.view_sampling import confusable
+from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.language import label_text, plural
 from spacedg.plugins.questions.records import make_record
-from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = ["NAME", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
 

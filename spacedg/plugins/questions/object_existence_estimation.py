@@ -1,7 +1,7 @@
 """Object existence (``question_type = "object_existence_estimation"``; object-centric, 1 view, YN).
 
 For one view and one label the answer is (SPEC-QA, type 10; classes from
-:func:`spacedg.data.visibility.classify` via :class:`~spacedg.data.view_sampling.VisibilityIndex`):
+:func:`spacedg.scene.visibility.classify` via :class:`~spacedg.plugins.questions.view_sampling.VisibilityIndex`):
 
 - ``"yes"`` when at least one instance of the label is **clearly visible** (``VISIBLE``) in the
   view (other instances of the label may be partial or hidden: there still is one);
@@ -9,9 +9,9 @@ For one view and one label the answer is (SPEC-QA, type 10; classes from
   ``HIDDEN``, or the label has no instance in the scene at all);
 - skipped (grey zone) when none is clearly visible but some instance is ``PARTIAL``, and a
   "no" is skipped when the view shows an instance of a *confusable* label (same head noun,
-  :func:`~spacedg.data.view_sampling.confusable`: "Is there a table?" next to a coffee table).
+  :func:`~spacedg.plugins.questions.view_sampling.confusable`: "Is there a table?" next to a coffee table).
 
-Labels are grouped by :func:`~spacedg.data.view_sampling.label_key` (case, space and
+Labels are grouped by :func:`~spacedg.plugins.questions.view_sampling.label_key` (case, space and
 underscore insensitive). Candidate labels are the scene's instance labels (question text: the
 first spelling in instance-id order; ``label_source = "scene"``) plus the labels of
 ``Scene.vocabulary`` that no instance carries (first spelling in vocabulary order;
@@ -58,10 +58,10 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Instance, Scene
-from spacedg.data.view_sampling import VisibilityIndex, confusable, label_key
-from spacedg.data.visibility import (
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Instance, Scene
+from spacedg.plugins.questions.view_sampling import VisibilityIndex, confusable, label_key
+from spacedg.scene.visibility import (
     DEFAULT_THRESHOLDS,
     VisibilityClass,
     VisibilityThresholds,
@@ -69,7 +69,8 @@ from spacedg.data.visibility import (
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.language import indefinite_article, label_text
 from spacedg.plugins.questions.records import make_record
-from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
     "FAMILY",

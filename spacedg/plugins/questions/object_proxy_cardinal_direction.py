@@ -30,9 +30,9 @@ vertical-dominant (vertical ≥ 1.2 × horizontal; this is also the paper's "for
 collinear with up" rule; both by :func:`~spacedg.plugins.questions.geometry.ground_leg`).
 
 Objects (decisions in brackets): pairs of views from
-:func:`~spacedg.data.view_sampling.sample_pairs` with
-:data:`~spacedg.data.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m). The
-triplet obeys the three-object rule (:func:`~spacedg.data.view_sampling.split_across_views`:
+:func:`~spacedg.plugins.questions.view_sampling.sample_pairs` with
+:data:`~spacedg.plugins.questions.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m). The
+triplet obeys the three-object rule (:func:`~spacedg.plugins.questions.view_sampling.split_across_views`:
 each clearly visible in image A or B, neither image shows all three). Each object is named in
 [image A if it is clearly visible there without a description clash
 (:func:`~spacedg.plugins.questions.records.referable`), else image B on the same condition];
@@ -80,16 +80,16 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Scene
-from spacedg.data.view_sampling import (
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Scene
+from spacedg.plugins.questions.view_sampling import (
     OBJECT_PAIRS,
     PairRules,
     ViewPair,
     VisibilityIndex,
     split_across_views,
 )
-from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.geometry import (
     INTERSECT_TOL_M,
@@ -107,7 +107,8 @@ from spacedg.plugins.questions.records import (
     referable_ids,
     round_robin_pairs,
 )
-from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = ["FAMILY", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "decode_triplet", "generate", "make_family", "render_question"]
 

@@ -2,8 +2,8 @@
 
 Two objects are compared across two images: object 1 is **clearly visible** in image A
 (:attr:`VisibilityIndex.visible`), object 2 clearly visible in image B. The pair of views comes
-from :func:`~spacedg.data.view_sampling.sample_pairs` with
-:data:`~spacedg.data.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m).
+from :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` with
+:data:`~spacedg.plugins.questions.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m).
 
 Sub question types and the measured quantity (metres):
 
@@ -30,12 +30,12 @@ comparison is always determinable, and this option is never the truth.
 Object rules (decisions the spec left open):
 
 - each object is clearly visible in its reference view (object 1 in A, object 2 in B) and
-  :func:`~spacedg.data.view_sampling.description_clash` is False there (no same-label,
+  :func:`~spacedg.plugins.questions.view_sampling.description_clash` is False there (no same-label,
   same-description neighbour is seen in that image;
   :func:`~spacedg.plugins.questions.records.referable`);
 - the two are distinct instances that can be told apart in words: their labels differ
-  (:func:`~spacedg.data.view_sampling.label_key`) **or** their descriptions differ
-  (:func:`~spacedg.data.view_sampling.description_key`), **and** their question phrases
+  (:func:`~spacedg.plugins.questions.view_sampling.label_key`) **or** their descriptions differ
+  (:func:`~spacedg.plugins.questions.view_sampling.description_key`), **and** their question phrases
   (:func:`~spacedg.plugins.questions.language.object_phrase`) differ case-insensitively
   (:func:`~spacedg.plugins.questions.records.phrase_key`), so the two options never read the
   same;
@@ -76,9 +76,9 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa import QARecord
-from spacedg.data.scene import Instance, Scene
-from spacedg.data.view_sampling import (
+from spacedg.plugins.qa_record import QARecord
+from spacedg.scene.model import Instance, Scene
+from spacedg.plugins.questions.view_sampling import (
     OBJECT_PAIRS,
     PairRules,
     ViewPair,
@@ -87,7 +87,7 @@ from spacedg.data.view_sampling import (
     label_key,
     sample_pairs,
 )
-from spacedg.data.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.geometry import build_mcq
 from spacedg.plugins.questions.language import find_in_image
@@ -99,7 +99,8 @@ from spacedg.plugins.questions.records import (
     ref_entry,
     referable_ids,
 )
-from spacedg.plugins.specs import AnswerType, QuestionFamily, TaskGroup
+from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
     "FAMILY",

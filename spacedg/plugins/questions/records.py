@@ -12,13 +12,13 @@ the same records in the same order; everything that can be lazy is):
   skipped candidate does not shift the draws of the others;
 - :func:`round_robin`, :func:`round_robin_views`, :func:`round_robin_pairs`: one record from
   each stream in turn (views in a seeded order; pairs in
-  :func:`~spacedg.data.view_sampling.sample_pairs` order), so a caller that stops after ``n``
+  :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` order), so a caller that stops after ``n``
   records gets them spread over as many views or pairs as possible;
 - :func:`seeded_order` (one ``rng.permutation`` of a small list) and :func:`lazy_permutation`
   (a huge candidate space walked in a random order drawn lazily).
 
 Objects: :func:`referable` is the one rule for naming an object in a view (clearly visible
-there and no :func:`~spacedg.data.view_sampling.description_clash`); :func:`phrase` and
+there and no :func:`~spacedg.plugins.questions.view_sampling.description_clash`); :func:`phrase` and
 :func:`phrase_key` are how a question names it and how two names are compared.
 
 Geometry-block entries (JSON types; world metres; cameras are OpenCV ``cam_to_world`` 4×4):
@@ -30,7 +30,7 @@ the object), :func:`camera_entry` (view → ``cam_to_world``), :func:`pair_geome
 of every object question's block: ``up``, ``cameras``, ``objects``, ``refs``, ``visibility``,
 ``visibility_thresholds``) and :func:`compass_block` / :func:`compass_question` (the compass
 part of the two compass families' blocks, with the seeded assumed direction and options).
-:func:`make_record` builds the :class:`~spacedg.data.qa.QARecord` with its deterministic id.
+:func:`make_record` builds the :class:`~spacedg.plugins.qa_record.QARecord` with its deterministic id.
 """
 
 from __future__ import annotations
@@ -41,9 +41,9 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from spacedg.data.qa import Answer, QARecord, make_record_id
-from spacedg.data.scene import Instance, Scene
-from spacedg.data.view_sampling import (
+from spacedg.plugins.qa_record import Answer, QARecord, make_record_id
+from spacedg.scene.model import Instance, Scene
+from spacedg.plugins.questions.view_sampling import (
     PairRules,
     ViewPair,
     VisibilityIndex,
@@ -153,7 +153,7 @@ def round_robin_views(scene: Scene, index: VisibilityIndex, rng: np.random.Gener
 
 
 def round_robin_pairs(scene: Scene, index: VisibilityIndex, rules: PairRules, rng: np.random.Generator, stream: PairStream) -> Iterator[QARecord]:
-    """The pairs of :func:`~spacedg.data.view_sampling.sample_pairs` (``rules``, ``rng``), one record of each pair's ``stream`` in turn.
+    """The pairs of :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` (``rules``, ``rng``), one record of each pair's ``stream`` in turn.
 
     Lazy: not even the pairs are sampled before the first ``next``; every stream gets the same ``rng``.
     """
@@ -302,7 +302,7 @@ def make_record(
     geometry: dict[str, Any],
     options: tuple[str, ...] = (),
 ) -> QARecord:
-    """A :class:`~spacedg.data.qa.QARecord` of ``scene`` whose id is
+    """A :class:`~spacedg.plugins.qa_record.QARecord` of ``scene`` whose id is
     ``make_record_id(scene.id, question_type, sub_question_type, views, key)`` (``key``: what
     identifies the question within its family and views)."""
     return QARecord(

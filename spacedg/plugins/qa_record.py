@@ -1,0 +1,279 @@
+"""Question–answer records: :class:`QARecord`, JSON-serialisable, validated at construction.
+
+Answer representation by :class:`~spacedg.plugins.specs.AnswerType` (JSON in brackets):
+
+``MCQ``
+    ``answer`` is the correct option letter, ``"A"`` … ``"D"`` (string); ``options`` holds
+    exactly 4 lines ``"A. text"``, ``"B. text"``, ``"C. text"``, ``"D. text"``, in letter order
+    (letters assigned after a seeded shuffle by the family).
+``YN``
+    ``"yes"`` or ``"no"`` (string, lower case).
+``NA``
+    a finite number (``float``), in the unit the question states (metres for distances).
+``COUNT``
+    a non-negative ``int`` (JSON integer); exports that need text use ``str(answer)``.
+``SIZE_LIST``
+    a tuple of 3 finite non-negative floats ``(shortest, middle, longest)`` in metres,
+    non-decreasing (JSON list).
+
+Every non-MCQ record has ``options == ()``. ``geometry`` is the audit block of the numbers
+the answer came from; it is normalised to plain JSON types at construction (tuples → lists,
+numpy scalars → Python numbers; NaN/Inf and non-string keys rejected), so
+``QARecord.from_dict(record.to_dict()) == record`` and ``from_dict(d).to_dict() == d`` for any
+``d`` produced by ``to_dict``.
+
+The per-scene question index (build, reuse, JSONL files) is :mod:`spacedg.data.qa_index`.
+
+Record ids are deterministic: :func:`make_record_id` gives
+``"{scene_id}/{question_type}/{sub_question_type}/{hash}"`` with ``hash`` the first 12 hex
+digits of the SHA-1 of the views and a family-chosen key (instances, template, …).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from spacedg.errors import InvalidDataError
+from spacedg.plugins.specs import NAME_PATTERN, SUB_TYPE_PATTERN, AnswerType, TaskGroup
+
+__all__ = ["QARecord", "MCQ_LETTERS", "make_record_id", "json_ready"]
+
+#: Option letters of a multiple-choice question, in order.
+MCQ_LETTERS: tuple[str, ...] = ("A", "B", "C", "D")
+_OPTION = re.compile(r"^([A-D])\. \S")
+_FIELDS = (
+    "id",
+    "scene_id",
+    "question_type",
+    "sub_question_type",
+    "task_group",
+    "answer_type",
+    "views",
+    "question",
+    "options",
+    "answer",
+    "geometry",
+)
+
+Answer = str | int | float | tuple[float, ...]
+
+
+def json_ready(value: Any, path: str = "geometry") -> Any:
+    """``value`` converted to plain JSON types (dict with str keys, list, str, int, float, bool, None).
+
+    Tuples and numpy arrays become lists, numpy scalars Python numbers. Raises
+    :class:`InvalidDataError` naming the path of a NaN/Inf, a non-string key or an
+    unsupported type.
+    """
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        number = float(value)
+        if not math.isfinite(number):
+            raise InvalidDataError(f"QARecord: {path} is {number}; geometry values must be finite (JSON has no NaN/Inf)")
+        return number
+    if isinstance(value, np.ndarray):
+        return json_ready(value.tolist(), path)
+    if isinstance(value, Mapping):
+        out: dict[str, Any] = {}
+        for key, item in value.items():
+            if not isinstance(key, str):
+                raise InvalidDataError(f"QARecord: {path} has key {key!r} of type {type(key).__name__}; JSON keys must be strings")
+            out[key] = json_ready(item, f"{path}.{key}")
+        return out
+    if isinstance(value, (list, tuple)):
+        return [json_ready(item, f"{path}[{i}]") for i, item in enumerate(value)]
+    raise InvalidDataError(f"QARecord: {path} is a {type(value).__name__}, which is not JSON-serialisable; convert it to numbers, strings, lists or dicts")
+
+
+def make_record_id(
+    scene_id: str,
+    question_type: str,
+    sub_question_type: str,
+    views: Sequence[str],
+    key: Any,
+) -> str:
+    """Deterministic id ``"{scene_id}/{question_type}/{sub_question_type}/{12 hex}"``.
+
+    ``key`` is any JSON-ready value that identifies the question within its family and views
+    (instance ids, template index, threshold, …); the hash covers ``views`` and ``key``.
+    """
+    payload = json.dumps({"views": list(views), "key": json_ready(key, "key")}, sort_keys=True, separators=(",", ":"))
+    digest = hashlib.sha1(payload.encode("utf-8")).hexdigest()[:12]
+    return f"{scene_id}/{question_type}/{sub_question_type}/{digest}"
+
+
+@dataclass(frozen=True)
+class QARecord:
+    """One spatial question with its ground-truth answer (see the module docstring).
+
+    Attributes:
+        id: unique, deterministic id (see :func:`make_record_id`).
+        scene_id: the scene's id.
+        question_type: the question family's name.
+        sub_question_type: the family's sub type (``^[a-z][A-Za-z0-9_+]*$``: the evaluator's names such
+            as ``relpos_A_facing_B`` keep their capitals; ``+`` appears in
+            the rotation family's ``"{ax1}+{ax2}_{mode}"``).
+        task_group: :class:`~spacedg.plugins.specs.TaskGroup`.
+        answer_type: :class:`~spacedg.plugins.specs.AnswerType`; fixes ``answer`` and ``options``.
+        views: names of the views (images) the question shows, in order (image 1, 2, …).
+        question: the question text.
+        options: 4 ``"A. text"`` lines for MCQ, else empty.
+        answer: see the module docstring.
+        geometry: the numbers the answer came from (JSON types).
+    """
+
+    id: str
+    scene_id: str
+    question_type: str
+    sub_question_type: str
+    task_group: TaskGroup
+    answer_type: AnswerType
+    views: tuple[str, ...]
+    question: str
+    options: tuple[str, ...] = ()
+    answer: Answer = ""
+    geometry: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        where = f"QARecord {self.id!r}"
+        for name in ("id", "scene_id", "question"):
+            value = getattr(self, name)
+            if not isinstance(value, str) or not value.strip():
+                raise InvalidDataError(f"{where}: {name} must be a non-empty string, got {value!r}")
+        if not isinstance(self.question_type, str) or not NAME_PATTERN.match(self.question_type):
+            raise InvalidDataError(f"{where}: question_type {self.question_type!r} must match ^[a-z][a-z0-9_]*$ (the family name)")
+        if not isinstance(self.sub_question_type, str) or not SUB_TYPE_PATTERN.match(self.sub_question_type):
+            raise InvalidDataError(f"{where}: sub_question_type {self.sub_question_type!r} must start with a lower-case letter, then letters, digits, '_' or '+' (e.g. 'relpos_A_facing_B')")
+        object.__setattr__(self, "task_group", _coerce(TaskGroup, self.task_group, where, "task_group"))
+        object.__setattr__(self, "answer_type", _coerce(AnswerType, self.answer_type, where, "answer_type"))
+        views = (self.views,) if isinstance(self.views, str) else tuple(self.views)
+        if not views or any(not isinstance(v, str) or not v for v in views):
+            raise InvalidDataError(f"{where}: views must be one or more non-empty view names, got {self.views!r}")
+        if len(set(views)) != len(views):
+            raise InvalidDataError(f"{where}: views {list(views)} repeat a view; each image appears once")
+        object.__setattr__(self, "views", views)
+        object.__setattr__(self, "options", self._check_options(where))
+        object.__setattr__(self, "answer", self._check_answer(where))
+        if not isinstance(self.geometry, Mapping):
+            raise InvalidDataError(f"{where}: geometry must be a dict of the numbers the answer came from, got {type(self.geometry).__name__}")
+        object.__setattr__(self, "geometry", json_ready(self.geometry))
+
+    def _check_options(self, where: str) -> tuple[str, ...]:
+        if isinstance(self.options, str):
+            raise InvalidDataError(f"{where}: options must be a sequence of strings, not one string")
+        options = tuple(self.options)
+        if self.answer_type is not AnswerType.MCQ:
+            if options:
+                raise InvalidDataError(f"{where}: only MCQ records have options; a {self.answer_type.value} record must have options=()")
+            return options
+        if len(options) != 4:
+            raise InvalidDataError(f"{where}: an MCQ needs exactly 4 options 'A. …' to 'D. …', got {len(options)}")
+        for letter, option in zip(MCQ_LETTERS, options):
+            match = _OPTION.match(option) if isinstance(option, str) else None
+            if match is None or match.group(1) != letter:
+                raise InvalidDataError(f"{where}: option {letter} must read '{letter}. <text>', got {option!r}")
+        texts = [o[3:].strip() for o in options]
+        if len(set(texts)) != 4:
+            raise InvalidDataError(f"{where}: MCQ options repeat a text: {list(options)}; the 4 options must differ")
+        return options
+
+    def _check_answer(self, where: str) -> Answer:
+        answer = self.answer
+        kind = self.answer_type
+        if kind is AnswerType.MCQ:
+            if answer not in MCQ_LETTERS:
+                raise InvalidDataError(f"{where}: an MCQ answer is the option letter 'A'–'D', got {answer!r}")
+            return answer
+        if kind is AnswerType.YN:
+            if answer not in ("yes", "no"):
+                raise InvalidDataError(f"{where}: a YN answer is 'yes' or 'no' (lower case), got {answer!r}")
+            return answer
+        if kind is AnswerType.COUNT:
+            if isinstance(answer, (bool, np.bool_)) or not isinstance(answer, (int, np.integer)) or answer < 0:
+                raise InvalidDataError(f"{where}: a COUNT answer is an integer >= 0, got {answer!r}")
+            return int(answer)
+        if kind is AnswerType.NA:
+            if isinstance(answer, (bool, np.bool_)) or not isinstance(answer, (int, float, np.integer, np.floating)) or not math.isfinite(float(answer)):
+                raise InvalidDataError(f"{where}: an NA answer is a finite number, got {answer!r}")
+            return float(answer)
+        # SIZE_LIST
+        if isinstance(answer, (str, bytes)) or not isinstance(answer, (Sequence, np.ndarray)) or len(answer) != 3:
+            raise InvalidDataError(f"{where}: a SIZE_LIST answer is [shortest, middle, longest] in metres, got {answer!r}")
+        values = []
+        for v in answer:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(float(v)) or v < 0:
+                raise InvalidDataError(f"{where}: SIZE_LIST entries must be finite lengths >= 0 metres, got {list(answer)!r}")
+            values.append(float(v))
+        if values != sorted(values):
+            raise InvalidDataError(f"{where}: a SIZE_LIST answer must be sorted [shortest, middle, longest], got {values}")
+        return tuple(values)
+
+    def __hash__(self) -> int:
+        return hash(self.id)
+
+    # ------------------------------------------------------------- JSON
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON types; ``json.dumps(record.to_dict())`` always works."""
+        return {
+            "id": self.id,
+            "scene_id": self.scene_id,
+            "question_type": self.question_type,
+            "sub_question_type": self.sub_question_type,
+            "task_group": self.task_group.value,
+            "answer_type": self.answer_type.value,
+            "views": list(self.views),
+            "question": self.question,
+            "options": list(self.options),
+            "answer": list(self.answer) if isinstance(self.answer, tuple) else self.answer,
+            "geometry": json.loads(json.dumps(self.geometry)),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> QARecord:
+        """Inverse of :meth:`to_dict`; rejects missing and unknown keys."""
+        if not isinstance(data, Mapping):
+            raise InvalidDataError(f"QARecord: expected a JSON object, got {type(data).__name__}")
+        where = f"QARecord {data.get('id', '?')!r}"
+        missing = [k for k in _FIELDS if k not in data and k not in ("options", "geometry")]
+        if missing:
+            raise InvalidDataError(f"{where}: missing key(s) {missing}")
+        unknown = sorted(set(data) - set(_FIELDS))
+        if unknown:
+            raise InvalidDataError(f"{where}: unknown key(s) {unknown}; known keys: {list(_FIELDS)}")
+        return cls(**{k: data[k] for k in _FIELDS if k in data})
+
+    def to_json(self) -> str:
+        """One line of JSON (keys in field order)."""
+        return json.dumps(self.to_dict(), ensure_ascii=False, separators=(",", ":"))
+
+    @classmethod
+    def from_json(cls, text: str) -> QARecord:
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as err:
+            raise InvalidDataError(f"QARecord: not valid JSON ({err})") from err
+        return cls.from_dict(data)
+
+
+def _coerce(enum_cls: Any, value: object, where: str, name: str) -> Any:
+    if isinstance(value, enum_cls):
+        return value
+    try:
+        return enum_cls(value)
+    except ValueError:
+        allowed = ", ".join(m.value for m in enum_cls)
+        raise InvalidDataError(f"{where}: {name} {value!r} is not one of {allowed}") from None
+

@@ -1,0 +1,241 @@
+"""Which views and objects a question may use: visibility index, view pairs, object rules.
+
+- :class:`VisibilityIndex`: per view, the instances that are clearly visible
+  (:func:`~spacedg.scene.visibility.classify` → ``VISIBLE``) and those with any visible pixel.
+- :class:`PairRules` + :func:`sample_pairs`: two-view pairs from the scene's covisibility
+  (:attr:`Scene.covisibility`, symmetrised with **min**: both views must see the overlap),
+  with a minimum camera baseline and relative rotation where a family needs motion.
+- :func:`split_across_views`: the three-object rule (the two views together show the three
+  objects; neither view shows all three).
+- :func:`description_clash` / :func:`same_label_neighbours`: the description ambiguity filter.
+- :func:`confusable`: two labels with one head noun ("lamp" / "floor lamp"); label-only
+  questions (counting, existence) skip views that show the other one.
+
+Anchor policy: a view **may** appear in several pairs (scenes with few views would otherwise
+yield few questions), but :func:`sample_pairs` returns pairs in a seeded *round-robin over
+anchors*: every anchor view's first pair comes before any anchor's second pair, so a family
+that stops after ``n`` records spreads them over as many views as possible. Which view of an
+unordered pair is A (the anchor) is a seeded coin flip, so motion directions are balanced
+(forward/backward, left/right).
+
+Thresholds (SPEC-QA, "View sampling"): covisibility > 0.25; baseline >= 0.35 m for camera
+translation, >= 0.2 m for object questions; relative rotation >= 15° for rotation and
+object-direction pairs; camera-object direction pairs take covisibility in [0.05, 0.25] so the
+object is not trivially in view.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from spacedg.scene.model import Instance, Scene
+from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
+from spacedg.errors import InvalidDataError, ParameterError
+
+__all__ = [
+    "VisibilityIndex", "PairRules", "ViewPair", "sample_pairs", "split_across_views",
+    "description_key", "label_key", "head_noun", "confusable", "same_label_neighbours", "description_clash",
+    "TRANSLATION_PAIRS", "ROTATION_PAIRS", "OBJECT_PAIRS", "OBJECT_DIRECTION_PAIRS", "LOW_COVIS_DIRECTION_PAIRS",
+]
+
+
+def label_key(label: str) -> str:
+    """Labels compare case-, space- and underscore-insensitively (``"Coffee_table"`` = ``"coffee table"``)."""
+    return " ".join(str(label).replace("_", " ").lower().split())
+
+
+def head_noun(label: str) -> str:
+    """The noun a label names: its last word, or the word before " of " (``"floor lamp"`` → ``"lamp"``,
+    ``"pair of shoes"`` → ``"pair"``)."""
+    words = label_key(label).partition(" of ")[0].split()
+    return words[-1] if words else ""
+
+
+def confusable(label_a: str, label_b: str) -> bool:
+    """True for two different labels with the same head noun (``"lamp"`` / ``"floor lamp"``,
+    ``"table"`` / ``"coffee table"``): a viewer asked about one may reasonably count the other."""
+    return label_key(label_a) != label_key(label_b) and head_noun(label_a) == head_noun(label_b)
+
+
+def description_key(text: str) -> str:
+    """Descriptions compare case- and whitespace-insensitively, trailing full stop ignored."""
+    return " ".join(str(text).lower().split()).rstrip(".")
+
+
+class VisibilityIndex:
+    """Visibility classes of every instance in every view of a scene (built once per generation).
+
+    Attributes:
+        visible: view → ids of clearly visible instances (sorted).
+        seen: view → ids with at least one visible pixel (``VISIBLE`` or ``PARTIAL``), sorted.
+    """
+
+    def __init__(self, scene: Scene, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> None:
+        self.scene = scene
+        self.thresholds = thresholds
+        self.visible: dict[str, tuple[int, ...]] = {}
+        self.seen: dict[str, tuple[int, ...]] = {}
+        self.classes: dict[str, dict[int, VisibilityClass]] = {}
+        for view, cam in scene.views.items():
+            area = cam.width * cam.height
+            row = {inst.id: classify(inst.visibility.get(view), thresholds, area) for inst in scene.instances}
+            self.classes[view] = row
+            self.visible[view] = tuple(sorted(i for i, c in row.items() if c is VisibilityClass.VISIBLE))
+            self.seen[view] = tuple(sorted(i for i, c in row.items() if c is not VisibilityClass.HIDDEN))
+        self._by_id = {inst.id: inst for inst in scene.instances}
+
+    def instance(self, instance_id: int) -> Instance:
+        return self._by_id[instance_id]
+
+    def cls(self, view: str, instance_id: int) -> VisibilityClass:
+        return self.classes[view].get(instance_id, VisibilityClass.HIDDEN)
+
+    def vis_entry(self, view: str, instance_id: int) -> dict[str, object]:
+        """``{"visible_pixels", "visible_fraction", "class"}`` of one instance in one view (for geometry blocks)."""
+        vis = self._by_id[instance_id].visibility.get(view)
+        return {
+            "visible_pixels": 0 if vis is None else vis.visible_pixels,
+            "visible_fraction": 0.0 if vis is None else vis.visible_fraction,
+            "class": self.cls(view, instance_id).value,
+        }
+
+
+# ------------------------------------------------------------------- pairs
+@dataclass(frozen=True)
+class PairRules:
+    """Constraints on a two-view pair.
+
+    Attributes:
+        min_covisibility: symmetrised (min) covisibility must be **greater** than this.
+        max_covisibility: ... and at most this (1 = no upper bound).
+        min_translation_m: camera baseline ``|t_b - t_a|`` at least this, metres.
+        min_rotation_deg: relative rotation angle of ``R_a^T R_b`` at least this, degrees.
+    """
+
+    min_covisibility: float = 0.25
+    max_covisibility: float = 1.0
+    min_translation_m: float = 0.0
+    min_rotation_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.min_covisibility < self.max_covisibility <= 1.0:
+            raise ParameterError(f"PairRules: need 0 <= min_covisibility < max_covisibility <= 1, got {self.min_covisibility}, {self.max_covisibility}")
+        if not (math.isfinite(self.min_translation_m) and self.min_translation_m >= 0):
+            raise ParameterError(f"PairRules: min_translation_m must be >= 0 metres, got {self.min_translation_m}")
+        if not 0.0 <= self.min_rotation_deg <= 180.0:
+            raise ParameterError(f"PairRules: min_rotation_deg must be in [0, 180], got {self.min_rotation_deg}")
+
+    def to_dict(self) -> dict[str, float]:
+        return {
+            "min_covisibility": self.min_covisibility, "max_covisibility": self.max_covisibility,
+            "min_translation_m": self.min_translation_m, "min_rotation_deg": self.min_rotation_deg,
+        }
+
+
+#: Camera translation questions: covisible, baseline >= 0.35 m.
+TRANSLATION_PAIRS = PairRules(min_translation_m=0.35)
+#: Camera rotation questions: covisible, rotation >= 15°.
+ROTATION_PAIRS = PairRules(min_rotation_deg=15.0)
+#: Two-view object questions: covisible, baseline >= 0.2 m.
+OBJECT_PAIRS = PairRules(min_translation_m=0.2)
+#: Object-direction questions (``relpos_A_facing_B``): covisible, baseline >= 0.2 m, rotation >= 15°.
+OBJECT_DIRECTION_PAIRS = PairRules(min_translation_m=0.2, min_rotation_deg=15.0)
+#: ``bbox_center_direction``: low covisibility [0.05, 0.25] so the object is not trivially in view B.
+LOW_COVIS_DIRECTION_PAIRS = PairRules(min_covisibility=0.05, max_covisibility=0.25, min_translation_m=0.2, min_rotation_deg=15.0)
+
+
+@dataclass(frozen=True)
+class ViewPair:
+    """An ordered pair: ``a`` is the anchor (image A), ``b`` image B."""
+
+    a: str
+    b: str
+    covisibility: float
+    translation_m: float
+    rotation_deg: float
+
+    def to_dict(self) -> dict[str, float | str]:
+        return {"covisibility": self.covisibility, "translation_m": self.translation_m, "rotation_deg": self.rotation_deg}
+
+
+def _poses(scene: Scene, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    poses = np.stack([np.asarray(scene.views[n].cam_to_world, dtype=np.float64) for n in names])
+    return poses[:, :3, :3], poses[:, :3, 3]
+
+
+def sample_pairs(scene: Scene, rules: PairRules, rng: np.random.Generator) -> list[ViewPair]:
+    """Every pair of views satisfying ``rules``, oriented and ordered by ``rng`` (see module docstring).
+
+    Raises:
+        InvalidDataError: the scene has no covisibility (compute it with
+            ``spacedg.scene.covisibility.with_covisibility``).
+    """
+    cov = scene.covisibility
+    if cov is None:
+        raise InvalidDataError(
+            f"scene {scene.id!r} has no covisibility; two-view questions need it: "
+            "scene = spacedg.scene.covisibility.with_covisibility(scene, cache_dir=...)"
+        )
+    names = [n for n in cov.names if n in scene.views]
+    idx = np.array([cov.index(n) for n in names], dtype=np.int64)
+    sym = np.minimum(cov.matrix, cov.matrix.T)[np.ix_(idx, idx)].astype(np.float64)
+    rot, centre = _poses(scene, names)
+    i, j = np.triu_indices(len(names), k=1)
+    score = sym[i, j]
+    baseline = np.linalg.norm(centre[j] - centre[i], axis=1)
+    trace = np.einsum("nij,nij->n", rot[i], rot[j])  # trace(R_i^T R_j)
+    angle = np.degrees(np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0)))
+    keep = (
+        (score > rules.min_covisibility) & (score <= rules.max_covisibility)
+        & (baseline >= rules.min_translation_m) & (angle >= rules.min_rotation_deg)
+    )
+    i, j, score, baseline, angle = i[keep], j[keep], score[keep], baseline[keep], angle[keep]
+    order = rng.permutation(len(i))
+    flips = rng.random(len(i)) < 0.5
+    seen_count: dict[int, int] = {}
+    ranked: list[tuple[int, int, ViewPair]] = []
+    for pos, k in enumerate(order):
+        a, b = (j[k], i[k]) if flips[k] else (i[k], j[k])
+        rank = seen_count.get(int(a), 0)
+        seen_count[int(a)] = rank + 1
+        pair = ViewPair(names[a], names[b], round(float(score[k]), 6), round(float(baseline[k]), 6), round(float(angle[k]), 6))
+        ranked.append((rank, pos, pair))
+    ranked.sort(key=lambda item: (item[0], item[1]))
+    return [pair for _, _, pair in ranked]
+
+
+# ------------------------------------------------------------- object rules
+def split_across_views(index: VisibilityIndex, view_a: str, view_b: str, ids: tuple[int, ...]) -> bool:
+    """The three-object rule: each object clearly visible in A or B, and neither view shows all of them.
+
+    "Shows" means any visible pixel, so a partly visible third object also collapses the task.
+    """
+    visible = set(index.visible[view_a]) | set(index.visible[view_b])
+    if not set(ids) <= visible or len(set(ids)) < 3:
+        return False
+    return not (set(ids) <= set(index.seen[view_a]) or set(ids) <= set(index.seen[view_b]))
+
+
+def same_label_neighbours(index: VisibilityIndex, view: str, instance: Instance) -> list[Instance]:
+    """Other instances with the same label that ``view`` shows (any visible pixel)."""
+    key = label_key(instance.label)
+    return [
+        index.instance(i) for i in index.seen[view]
+        if i != instance.id and label_key(index.instance(i).label) == key
+    ]
+
+
+def description_clash(index: VisibilityIndex, view: str, instance: Instance) -> bool:
+    """True when ``view`` shows another same-label instance with the same description (drop the question).
+
+    An instance with an empty description is referred to by its label alone, so any visible
+    same-label neighbour makes it ambiguous.
+    """
+    mine = description_key(instance.description)
+    for other in same_label_neighbours(index, view, instance):
+        if not mine or description_key(other.description) == mine:
+            return True
+    return False

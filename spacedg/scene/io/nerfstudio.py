@@ -1,0 +1,216 @@
+"""nerfstudio / instant-ngp / Blender ``transforms.json`` camera files.
+
+Conventions read:
+
+- Intrinsics at the top level (``fl_x``, ``fl_y``, ``cx``, ``cy``, ``w``, ``h``,
+  ``camera_model``, ``k1``..``k4``, ``p1``, ``p2``), each overridable per frame.
+- Blender style: without ``fl_x``, ``fl_x = 0.5 · w / tan(camera_angle_x / 2)`` (and
+  ``fl_y`` from ``camera_angle_y`` likewise, else ``fl_y = fl_x``); ``cx``/``cy`` default to
+  the image centre ``w/2``, ``h/2``.
+- Without ``w``/``h``, the size of the **first frame's image** is read (``file_path``
+  relative to the JSON's folder; ``.png``/``.jpg`` appended when the path has no
+  extension, as in the Blender synthetic scenes).
+- ``camera_model``: ``OPENCV`` (the nerfstudio default), ``PINHOLE`` or ``OPENCV_FISHEYE``
+  (→ :class:`FisheyeLens` with ``max_theta`` = π/2 unless given). Non-zero OPENCV
+  distortion follows the same policy as :func:`~spacedg.scene.io.colmap.read_colmap`:
+  ``opencv_distortion="error"`` refuses it, ``"drop"`` renders an ideal pinhole and warns.
+- ``transform_matrix`` is camera-to-world with **OpenGL** camera axes (x right, y up,
+  z backwards); spacedg's OpenCV pose is ``c2w @ diag(1, −1, −1, 1)``. It must be rigid.
+- Poses are taken in the file's own world frame. ``applied_transform`` (nerfstudio's record
+  of how it moved the COLMAP world) is information only and is **not** applied or undone.
+- The view name is ``file_path`` exactly as written.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from spacedg.files import FileValueError, PathLike, as_path, read_json
+from spacedg.scene.io.colmap import DEFAULT_FISHEYE_MAX_THETA
+from spacedg.errors import FileFormatError, InvalidDataError
+from spacedg.render.camera import Camera, FisheyeLens
+
+_INTRINSIC_KEYS = (
+    "fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model", "camera_angle_x", "camera_angle_y",
+    "k1", "k2", "k3", "k4", "p1", "p2",
+)
+_MODELS = ("OPENCV", "PINHOLE", "OPENCV_FISHEYE")
+_GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
+#: Largest |RᵀR − I| accepted for a transform_matrix rotation (larger: scaled or sheared).
+RIGID_TOL = 1e-4
+_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".PNG", ".JPG", ".JPEG")
+
+
+def _number(where: str, key: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise FileFormatError(f"{where}: '{key}' must be a number, got {value!r}")
+    out = float(value)
+    if not math.isfinite(out):
+        raise FileValueError(f"{where}: '{key}' is {value!r}; it must be a finite number")
+    return out
+
+
+def _size(where: str, key: str, value: Any) -> int:
+    out = _number(where, key, value)
+    if out != int(out) or out < 1:
+        raise FileValueError(f"{where}: '{key}' must be a positive whole number of pixels, got {value!r}")
+    return int(out)
+
+
+def _image_size(folder: Path, file_path: str, where: str) -> tuple[int, int]:
+    import cv2
+
+    if not isinstance(file_path, str) or not file_path:
+        raise FileFormatError(f"{where}: the JSON gives no image size ('w', 'h') and frames[0] has no usable 'file_path'")
+    base = folder / file_path
+    candidates = [base] if base.suffix else [base, *(base.with_name(base.name + s) for s in _IMAGE_SUFFIXES)]
+    for candidate in candidates:
+        if candidate.is_file():
+            image = cv2.imread(str(candidate), cv2.IMREAD_UNCHANGED)
+            if image is None:
+                raise FileFormatError(f"{where}: cannot decode image {candidate} to learn the image size; add 'w' and 'h' to the JSON")
+            return int(image.shape[1]), int(image.shape[0])
+    raise FileFormatError(
+        f"{where}: the JSON gives no image size ('w', 'h') and the first frame's image {base} was not found; "
+        "add 'w' and 'h' (pixels) at the top level"
+    )
+
+
+def _pose(where: str, value: Any) -> np.ndarray:
+    try:
+        matrix = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise FileFormatError(f"{where}: 'transform_matrix' must be a 4×4 list of numbers") from None
+    if matrix.shape == (3, 4):
+        matrix = np.vstack([matrix, [0.0, 0.0, 0.0, 1.0]])
+    if matrix.shape != (4, 4):
+        raise FileFormatError(f"{where}: 'transform_matrix' must be 4×4 (or 3×4), got shape {matrix.shape}")
+    if not np.isfinite(matrix).all():
+        raise FileValueError(f"{where}: 'transform_matrix' holds NaN or Inf")
+    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise FileValueError(f"{where}: 'transform_matrix' last row must be [0, 0, 0, 1], got {matrix[3].tolist()}")
+    rot = matrix[:3, :3]
+    err = float(np.abs(rot.T @ rot - np.eye(3)).max())
+    if err > RIGID_TOL:
+        raise FileValueError(
+            f"{where}: 'transform_matrix' is not rigid (max |RᵀR − I| = {err:.3g}); it holds a scale or shear. "
+            "Export camera-to-world poses without scaling (scale the scene with scene_from_files(scale=...) instead)"
+        )
+    if np.linalg.det(rot) < 0:
+        raise FileValueError(f"{where}: 'transform_matrix' rotation is a reflection (det < 0)")
+    if err > 1e-9:  # re-orthonormalise the rounding noise of printed matrices
+        u, _, vt = np.linalg.svd(rot)
+        matrix[:3, :3] = u @ vt
+    return matrix @ _GL_TO_CV
+
+
+
+def _focal(where: str, params: dict[str, Any], axis: str, size: int) -> float | None:
+    """Focal length in pixels along ``axis`` from ``fl_<axis>`` or ``camera_angle_<axis>`` (radians), else None."""
+    if f"fl_{axis}" in params:
+        return _number(where, f"fl_{axis}", params[f"fl_{axis}"])
+    key = f"camera_angle_{axis}"
+    if key not in params:
+        return None
+    angle = _number(where, key, params[key])
+    if not 0.0 < angle < math.pi:
+        raise FileValueError(f"{where}: {key} must be in (0, π) radians, got {angle}")
+    return 0.5 * size / math.tan(0.5 * angle)
+
+def _camera(
+    where: str, params: dict[str, Any], pose: np.ndarray, size: tuple[int, int], max_theta: float
+) -> tuple[Camera, bool]:
+    w = _size(where, "w", params["w"]) if "w" in params else size[0]
+    h = _size(where, "h", params["h"]) if "h" in params else size[1]
+    model = params.get("camera_model", "OPENCV")
+    if model not in _MODELS:
+        raise FileFormatError(f"{where}: camera_model {model!r} is not supported (supported: {', '.join(_MODELS)})")
+    fx = _focal(where, params, "x", w)
+    if fx is None:
+        raise FileFormatError(f"{where}: no focal length: give 'fl_x' (pixels) or 'camera_angle_x' (radians)")
+    fy = _focal(where, params, "y", h)
+    if fy is None:
+        fy = fx
+    cx = _number(where, "cx", params["cx"]) if "cx" in params else w / 2.0
+    cy = _number(where, "cy", params["cy"]) if "cy" in params else h / 2.0
+    dist = {k: _number(where, k, params[k]) for k in ("k1", "k2", "k3", "k4", "p1", "p2") if k in params}
+    lens = None
+    distorted = False
+    if model == "OPENCV_FISHEYE":
+        lens = FisheyeLens(dist.get("k1", 0.0), dist.get("k2", 0.0), dist.get("k3", 0.0), dist.get("k4", 0.0), max_theta)
+    else:
+        distorted = any(v != 0.0 for v in dist.values())
+    try:
+        return Camera(fx, fy, cx, cy, w, h, pose, lens), distorted
+    except InvalidDataError as err:
+        raise FileValueError(f"{where}: {err}") from err
+
+
+def read_transforms(
+    path: PathLike,
+    *,
+    opencv_distortion: Literal["error", "drop"] = "error",
+    fisheye_max_theta: float = DEFAULT_FISHEYE_MAX_THETA,
+) -> dict[str, Camera]:
+    """Read a ``transforms.json`` into cameras keyed by ``file_path`` (file order).
+
+    Args:
+        path: the JSON file.
+        opencv_distortion: ``"error"`` or ``"drop"`` (see the module docstring).
+        fisheye_max_theta: ``max_theta`` (radians) of ``OPENCV_FISHEYE`` lenses.
+
+    Raises:
+        FileFormatError: not JSON, missing ``frames``/``file_path``/``transform_matrix``/
+            focal length/size, unknown camera model, distortion (with ``"error"``),
+            duplicate names; :class:`FileValueError` for NaN or non-rigid poses.
+    """
+    if opencv_distortion not in ("error", "drop"):
+        raise InvalidDataError(f"read_transforms: opencv_distortion must be 'error' or 'drop', got {opencv_distortion!r}")
+    p = as_path(path, "transforms.json")
+    data = read_json(p, "transforms.json")
+    if not isinstance(data, dict):
+        raise FileFormatError(f"{p}: expected a JSON object with 'frames', got a {type(data).__name__}")
+    frames = data.get("frames")
+    if not isinstance(frames, list) or not frames:
+        raise FileFormatError(f"{p}: 'frames' must be a non-empty list of frames (each with 'file_path' and 'transform_matrix')")
+    top = {k: data[k] for k in _INTRINSIC_KEYS if k in data}
+    size: tuple[int, int] | None = None
+    out: dict[str, Camera] = {}
+    dropped: list[str] = []
+    for index, frame in enumerate(frames):
+        where = f"{p}: frames[{index}]"
+        if not isinstance(frame, dict):
+            raise FileFormatError(f"{where}: expected an object, got {type(frame).__name__}")
+        for key in ("file_path", "transform_matrix"):
+            if key not in frame:
+                raise FileFormatError(f"{where}: missing '{key}'")
+        name = frame["file_path"]
+        if not isinstance(name, str) or not name:
+            raise FileFormatError(f"{where}: 'file_path' must be a non-empty string, got {name!r}")
+        where = f"{where} ({name!r})"
+        if name in out:
+            raise FileFormatError(f"{where}: file_path {name!r} appears twice; view names must be unique")
+        params = {**top, **{k: frame[k] for k in _INTRINSIC_KEYS if k in frame}}
+        if ("w" not in params or "h" not in params) and size is None:
+            size = _image_size(p.parent, frames[0].get("file_path"), where)
+        camera, distorted = _camera(where, params, _pose(where, frame["transform_matrix"]), size or (0, 0), fisheye_max_theta)
+        if distorted:
+            if opencv_distortion == "error":
+                raise FileFormatError(
+                    f"{where}: non-zero OPENCV distortion (k1..k4, p1, p2); spacedg renders pinhole and equidistant-fisheye "
+                    "lenses only: undistort the images first, or pass opencv_distortion='drop' to render ideal pinholes"
+                )
+            dropped.append(name)
+        out[name] = camera
+    if dropped:
+        warnings.warn(
+            f"{p}: lens distortion ignored for {len(dropped)} view(s) (opencv_distortion='drop'), e.g. {dropped[:3]}; "
+            "they render as ideal pinholes and will not match the photos exactly",
+            stacklevel=2,
+        )
+    return out

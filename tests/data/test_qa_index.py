@@ -1,0 +1,168 @@
+"""Question index per scene (spacedg.data.qa_index), the judge hook and `spacedg qa build/stats`."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from tests.qa_scenes import CLEAR, build, camera, obj
+from spacedg.cli import main
+from spacedg.data.judge import DescriptionJudge, parse_verdict
+from spacedg.data.qa_index import QABuildConfig, build_scene_index, index_paths, read_index
+from spacedg.errors import FileFormatError, ParameterError
+
+
+def test_build_reuse_and_rebuild(qa_room_dirs, tmp_path):
+    room = tmp_path / "room"
+    shutil.copytree(qa_room_dirs[0], room)
+    config = QABuildConfig(seed=3, families=("object_counting", "camera_translation"), per_sub_type=5)
+    first = build_scene_index(room, config, progress=False)
+    assert not first.reused and first.records
+    jsonl, meta = index_paths(first.scene_id, room)
+    assert first.path == jsonl and meta.is_file() and (room / "cache" / f"{first.scene_id}.visibility.npz").is_file()
+    assert read_index(jsonl) == first.records
+    subs = {}
+    for r in first.records:
+        subs[(r.question_type, r.sub_question_type)] = subs.get((r.question_type, r.sub_question_type), 0) + 1
+    assert max(subs.values()) <= 5 and {q for q, _ in subs} == {"object_counting", "camera_translation"}
+    second = build_scene_index(room, config, progress=False)
+    assert second.reused and second.records == first.records
+    forced = build_scene_index(room, config, progress=False, force=True)
+    assert not forced.reused and [r.to_dict() for r in forced.records] == [r.to_dict() for r in first.records]
+    other_seed = build_scene_index(room, QABuildConfig(seed=4, families=config.families, per_sub_type=5), progress=False)
+    assert not other_seed.reused and other_seed.records != first.records
+    # editing the scene (its scene.json) makes the index stale
+    record = json.loads((room / "scene.json").read_text())
+    record["metadata"]["note"] = "edited"
+    (room / "scene.json").write_text(json.dumps(record))
+    assert not build_scene_index(room, QABuildConfig(seed=4, families=config.families, per_sub_type=5), progress=False).reused
+
+
+def test_corrupt_index_line_is_named(tmp_path):
+    path = tmp_path / "x.qa.jsonl"
+    path.write_text('{"id": "broken"\n')
+    with pytest.raises(FileFormatError, match=r"x\.qa\.jsonl:1"):
+        read_index(path)
+
+
+def test_bad_config_and_unknown_family(qa_room_dirs, tmp_path):
+    with pytest.raises(ParameterError, match="per_sub_type"):
+        QABuildConfig(per_sub_type=0)
+    with pytest.raises(LookupError, match="camera_translaton|did you mean"):
+        build_scene_index(qa_room_dirs[0], QABuildConfig(families=("camera_translaton",)), out_dir=tmp_path, progress=False)
+
+
+@pytest.mark.parametrize("reply, keep", [
+    ("KEEP", True), ("keep.", True), ("Answer: KEEP", True), ("DROP", False), ("KEEP or DROP", False),
+    ("", False), ("I think it is fine", False), (None, False), ("keeping", False),
+])
+def test_parse_verdict(reply, keep):
+    assert parse_verdict(reply) is keep
+
+
+def test_judge_drops_only_judged_ambiguous_references():
+    views = {"a": camera((0, 0, 1.5))}
+    insts = [obj(1, "chair", (2, 0, 0.4), description="red chair"), obj(2, "chair", (2, 1, 0.4), description="blue chair"),
+             obj(3, "table", (3, 0, 0.4), description="oak table")]
+    scene = build(insts, views, {"a": {1: CLEAR, 2: CLEAR, 3: CLEAR}})
+    asked = []
+
+    def judge(image, label, description):
+        asked.append((image.shape, label, description))
+        return "DROP" if description == "red chair" else "KEEP"
+
+    dj = DescriptionJudge(scene, judge, image_for=lambda s, v: np.zeros((4, 4, 3), np.uint8))
+
+    class R:  # only geometry["refs"] is read
+        def __init__(self, refs):
+            self.geometry = {"refs": refs}
+
+    assert not dj.keep(R([{"id": 1, "view": "a"}]))
+    assert dj.keep(R([{"id": 2, "view": "a"}]))
+    assert dj.keep(R([{"id": 3, "view": "a"}]))  # no other table: never asked
+    assert dj.keep(R([]))
+    assert [a[2] for a in asked] == ["red chair", "blue chair"] and dj.calls == 2
+    assert not dj.keep(R([{"id": 1, "view": "a"}])) and dj.calls == 2  # cached
+
+    def broken(image, label, description):
+        raise RuntimeError("model crashed")
+
+    assert not DescriptionJudge(scene, broken, image_for=lambda s, v: np.zeros((4, 4, 3), np.uint8)).keep(R([{"id": 2, "view": "a"}]))
+
+
+def test_cli_build_and_stats(qa_room_dirs, tmp_path, capsys):
+    out = tmp_path / "qa"
+    argv = ["qa", "build", str(qa_room_dirs[0]), str(qa_room_dirs[1]), "--out", str(out),
+            "--families", "object_counting,object_existence_estimation", "--per-sub-type", "6"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "records in" in text and len(list(out.glob("*.qa.jsonl"))) == 2
+    assert main(argv) == 0 and "reused" in capsys.readouterr().out
+    assert main(["qa", "stats", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["scenes"] == 2 and report["records"] == sum(row["n"] for row in report["counts"])
+    assert {row["question_type"] for row in report["counts"]} == {"object_counting", "object_existence_estimation"}
+    assert report["blind_baseline"][-1]["question_type"] == "ALL"
+    assert main(["qa", "stats", str(out)]) == 0 and "Blind baseline" in capsys.readouterr().out
+    assert main(["qa", "stats", str(tmp_path / "nothing")]) == 2
+    assert "no such file" in capsys.readouterr().err
+
+
+def test_judge_in_generation_drops_and_counts(qa_room_dirs, tmp_path):
+    """A judge that answers DROP removes exactly the records naming an object whose image shows
+    a same-label neighbour; one that answers KEEP changes nothing. Real renders feed the judge."""
+    from spacedg.scene.io import load_scene
+    from spacedg.data.qa_index import generate_records, prepare_scene
+    from spacedg.plugins.questions.view_sampling import VisibilityIndex, same_label_neighbours
+
+    config = QABuildConfig(seed=1, per_sub_type=6, families=("object_bounding_size_estimation", "inter_object_distance"))
+    scene = prepare_scene(load_scene(qa_room_dirs[0]), tmp_path, config, progress=False)  # has visible same-label sets
+    plain = generate_records(scene, config)
+    shapes = set()
+
+    def keep_all(image, label, description):
+        shapes.add((image.shape, str(image.dtype)))
+        return "KEEP"
+
+    assert generate_records(scene, config, judge=keep_all) == plain
+    dropped: dict[str, int] = {}
+    strict = generate_records(scene, config, judge=lambda image, label, description: "DROP", dropped=dropped)
+    index = VisibilityIndex(scene)
+    for record in strict:
+        for ref in record.geometry["refs"]:
+            assert not same_label_neighbours(index, ref["view"], scene.instance(ref["id"]))
+    assert sum(dropped.values()) > 0 and shapes == {((240, 320, 3), "uint8")}
+
+
+def test_qa_preview_sheet_and_cli(qa_room_dirs, tmp_path, capsys):
+    """`spacedg qa preview` draws one panel per picked question (real renders, boxes of named objects)."""
+    import cv2
+
+    from spacedg.scene.io import load_scene
+    from spacedg.data.qa_preview import ascii_text, qa_sheet
+
+    room = tmp_path / "room"
+    shutil.copytree(qa_room_dirs[1], room)
+    out = tmp_path / "qa.png"
+    assert main(["qa", "preview", str(room), "--out", str(out), "--n", "3", "--types",
+                 "inter_object_distance,object_counting", "--thumb-width", "96"]) == 0
+    assert "3 questions" in capsys.readouterr().out
+    image = cv2.imread(str(out))
+    assert image is not None and image.shape[1] >= 2 * 96
+    index = build_scene_index(room, progress=False)  # reused: built by the preview
+    assert index.reused
+    record = next(r for r in index.records if r.question_type == "inter_object_distance")
+    scene = load_scene(room)
+    sheet = qa_sheet(scene, [record], thumb_width=96, progress=False)
+    bare = qa_sheet(scene, [dataclasses.replace(record, geometry={**record.geometry, "refs": []})], thumb_width=96, progress=False)
+    drawn = np.any(sheet != bare, axis=2)
+    assert sheet.dtype == np.uint8 and drawn.sum() > 20  # the boxes of the two named objects
+    red, blue = sheet[drawn][:, 0].astype(int), sheet[drawn][:, 2].astype(int)
+    assert np.mean(np.abs(red - blue) > 60) > 0.5  # drawn in red (object 1) and blue (object 2)
+    assert ascii_text("15° – ×") == "15 deg - x"
+    assert main(["qa", "preview", str(room), "--out", str(out), "--types", "no_such_type"]) == 2
+    assert "no questions of type" in capsys.readouterr().err

@@ -1,0 +1,154 @@
+"""Shared question geometry (spacedg.plugins.questions.geometry) and view sampling rules."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tests.qa_scenes import CLEAR, PARTLY, build, camera, obj
+from spacedg.plugins.questions.view_sampling import (
+    OBJECT_PAIRS,
+    TRANSLATION_PAIRS,
+    PairRules,
+    VisibilityIndex,
+    description_clash,
+    sample_pairs,
+    split_across_views,
+)
+from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.plugins.questions.geometry import (
+    CAMERA_MOTION_WORDS,
+    COMPASS_SECTORS,
+    RELPOS_SECTORS,
+    build_mcq,
+    dominant_parts,
+    euler_yaw_pitch_roll,
+    flipped_labels,
+    ground_angle,
+    parts_label,
+    relative_rotation,
+    relative_translation,
+    vertical_dominates,
+)
+
+
+def _rot(yaw: float, pitch: float, roll: float) -> np.ndarray:
+    a, b, c = np.radians([yaw, pitch, roll])
+    ry = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
+    rx = np.array([[1, 0, 0], [0, math.cos(b), -math.sin(b)], [0, math.sin(b), math.cos(b)]])
+    rz = np.array([[math.cos(c), -math.sin(c), 0], [math.sin(c), math.cos(c), 0], [0, 0, 1]])
+    return ry @ rx @ rz
+
+
+@pytest.mark.parametrize("angles", [(30, 0, 0), (-12, 40, 3), (170, -60, -100), (0, 0, 45)])
+def test_euler_round_trip(angles):
+    assert np.allclose(euler_yaw_pitch_roll(_rot(*angles)), angles, atol=1e-9)
+
+
+def test_camera_motion_words_follow_opencv_axes():
+    a = camera((0, 0, 1.5), yaw_deg=0)  # looks along +x; its right is -y
+    assert parts_label(dominant_parts(relative_translation(a, camera((0, -1, 1.5)))), CAMERA_MOTION_WORDS) == "right"
+    assert parts_label(dominant_parts(relative_translation(a, camera((0, 0, 2.5)))), CAMERA_MOTION_WORDS) == "up"
+    assert parts_label(dominant_parts(relative_translation(a, camera((1, 0.3, 1.5)))), CAMERA_MOTION_WORDS) == "forward"
+    yaw, pitch, roll = euler_yaw_pitch_roll(relative_rotation(a, camera((0, 0, 1.5), yaw_deg=-20)))
+    assert yaw == pytest.approx(20) and abs(pitch) < 1e-9 and abs(roll) < 1e-9  # turning right
+
+
+def test_dominant_parts_rule_and_cap():
+    assert dominant_parts([1.0, 0.5, 0.0]) == [(0, 1)]  # 0.5 < 0.5774
+    assert dominant_parts([1.0, -0.6, 0.0]) == [(0, 1), (1, -1)]
+    assert dominant_parts([1.0, 0.9, -0.95]) == [(0, 1), (2, -1)]  # at most two parts
+    assert dominant_parts([0.0, 0.0, 0.0]) == []
+    assert flipped_labels([(0, 1), (2, 1)], CAMERA_MOTION_WORDS) == ["left-forward", "right-backward", "left-backward"]
+
+
+def test_sectors_and_boundary_guard():
+    assert RELPOS_SECTORS.classify(0).index == 0 and RELPOS_SECTORS.classify(90).index == 2
+    hit = RELPOS_SECTORS.classify(21.0)  # 1.5° before the front / front-right boundary
+    assert RELPOS_SECTORS.labels[hit.index] == "front" and RELPOS_SECTORS.labels[hit.neighbour] == "front-right"
+    for seed in range(20):
+        assert "front-right" not in RELPOS_SECTORS.distractors(hit, np.random.default_rng(seed))
+    far = RELPOS_SECTORS.classify(5.0)
+    assert any("front-right" in RELPOS_SECTORS.distractors(far, np.random.default_rng(s)) for s in range(20))
+    # compass by the 0.5774 rule: cardinal within ±30°
+    assert [COMPASS_SECTORS.labels[COMPASS_SECTORS.classify(a).index] for a in (29.9, 30.1, 59.9, 60.1, 330.1, 329.9)] == [
+        "north", "northeast", "northeast", "east", "north", "northwest"]
+
+
+def test_ground_angle_uses_up_not_a_world_axis():
+    up = np.array([0.0, 0.0, 1.0])
+    assert ground_angle([1, 0, 0], [0, -1, 0], up) == pytest.approx(90.0)  # right of +x with z up
+    assert ground_angle([1, 0, 5], [1, 0, -3], up) == pytest.approx(0.0)  # vertical parts ignored
+    # same geometry with y up: the answer follows the scene's up
+    assert ground_angle([1, 0, 0], [0, 0, 1], np.array([0.0, 1.0, 0.0])) == pytest.approx(90.0)
+    assert vertical_dominates([0.1, 0, 1.0], up) and not vertical_dominates([1.0, 0, 1.0], up)
+    with pytest.raises(InvalidDataError, match="vertical"):
+        ground_angle([0, 0, 1], [1, 0, 0], up)
+
+
+def test_build_mcq_letter_uniform_and_truth_unique():
+    letters = []
+    rng = np.random.default_rng(3)
+    for _ in range(402):
+        options, letter = build_mcq("right", ["left", "up", "down", "left"], rng)
+        assert options[("ABCD".index(letter))][3:] == "right"
+        assert sum(o[3:] == "right" for o in options) == 1
+        letters.append(letter)
+    counts = [letters.count(k) for k in "ABCD"]
+    assert max(counts) - min(counts) <= 1  # dealt from shuffled blocks of four: exact balance
+    assert letters[:4] != letters[4:8] or letters[4:8] != letters[8:12]  # but not a fixed cycle
+    other = [build_mcq("right", ["left", "up", "down"], np.random.default_rng(3))[1] for _ in range(3)]
+    assert len(set(other)) == 1  # a fresh generator with the same seed deals the same letter
+    with pytest.raises(InvalidDataError, match="3 distractors"):
+        build_mcq("right", ["left", "right"], np.random.default_rng(0))
+
+
+# ------------------------------------------------------------------ view sampling
+def _pairs_scene(covis: np.ndarray):
+    views = {"v0": camera((0, 0, 1.5)), "v1": camera((0, -0.5, 1.5)), "v2": camera((0, -0.1, 1.5)), "v3": camera((0, 0, 1.5), yaw_deg=40)}
+    return build([obj(1, "chair", (2, 0, 0.4))], views, covisibility=covis)
+
+
+def test_sample_pairs_thresholds_round_robin_and_seed():
+    covis = np.full((4, 4), 0.6, np.float32)
+    covis[0, 1] = 0.2  # asymmetric: min(0.2, 0.6) = 0.2 fails > 0.25
+    np.fill_diagonal(covis, 1)
+    scene = _pairs_scene(covis)
+    pairs = sample_pairs(scene, TRANSLATION_PAIRS, np.random.default_rng(0))
+    keys = {frozenset((p.a, p.b)) for p in pairs}
+    assert frozenset(("v0", "v1")) not in keys  # covisibility (min-symmetrised) too low
+    assert frozenset(("v0", "v2")) not in keys  # 0.1 m baseline
+    assert frozenset(("v1", "v2")) in keys and all(p.translation_m >= 0.35 for p in pairs)
+    rot = sample_pairs(scene, PairRules(min_rotation_deg=15), np.random.default_rng(0))
+    assert {frozenset((p.a, p.b)) for p in rot} == {frozenset(("v3", v)) for v in ("v0", "v1", "v2")}
+    again = sample_pairs(scene, OBJECT_PAIRS, np.random.default_rng(5))
+    assert again == sample_pairs(scene, OBJECT_PAIRS, np.random.default_rng(5))
+    # round robin: no anchor repeats before every anchor had its first pair
+    anchors = [p.a for p in again]
+    first_repeat = next((i for i, a in enumerate(anchors) if a in anchors[:i]), len(anchors))
+    assert len(set(anchors[:first_repeat])) == len(set(anchors))
+
+
+def test_sample_pairs_needs_covisibility():
+    scene = _pairs_scene(np.eye(4)).with_covisibility(None)
+    with pytest.raises(InvalidDataError, match="with_covisibility"):
+        sample_pairs(scene, OBJECT_PAIRS, np.random.default_rng(0))
+    with pytest.raises(ParameterError):
+        PairRules(min_covisibility=0.5, max_covisibility=0.4)
+
+
+def test_three_object_rule_and_description_clash():
+    views = {"a": camera((0, 0, 1.5)), "b": camera((0, -1, 1.5))}
+    insts = [obj(1, "chair", (2, 0, 0.4), description="red chair"), obj(2, "chair", (2, 1, 0.4), description="red chair"),
+             obj(3, "table", (3, 0, 0.4)), obj(4, "chair", (2, -1, 0.4), description="blue chair")]
+    vis = {"a": {1: CLEAR, 3: CLEAR, 4: CLEAR}, "b": {2: CLEAR, 3: CLEAR, 1: PARTLY}}
+    scene = build(insts, views, vis)
+    index = VisibilityIndex(scene)
+    assert index.visible["a"] == (1, 3, 4) and index.seen["b"] == (1, 2, 3)
+    assert split_across_views(index, "a", "b", (1, 2, 4))  # 2 only in b; 4 only in a
+    assert not split_across_views(index, "a", "b", (1, 3, 4))  # all three in a
+    assert not split_across_views(index, "a", "b", (1, 2, 3))  # all three seen in b (1 partly)
+    assert description_clash(index, "b", scene.instance(2))  # 1 is seen in b with the same description
+    assert not description_clash(index, "a", scene.instance(1))  # 4 differs ("blue chair")
