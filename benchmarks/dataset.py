@@ -59,7 +59,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.data.dataset import SpaceDGDataset
-from spacedg.data.pipeline import BENCH_DEGRADATIONS
+from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.data.qa_index import QABuildConfig
 from spacedg.scene.store import builtin_scene_dirs, spacedg_home
 

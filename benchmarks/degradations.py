@@ -39,7 +39,8 @@ from collections import defaultdict
 
 import numpy as np
 
-from spacedg.data.pipeline import BENCH_DEGRADATIONS, PipelineOptions, degrade, degrade_variants
+from spacedg.data.chain import BENCH_DEGRADATIONS
+from spacedg.data.pipeline import PipelineOptions, degrade, degrade_variants
 from spacedg.scene.synthetic import generate_room
 from spacedg.plugins.registry import get_degradation
 from spacedg.plugins.specs import Stage

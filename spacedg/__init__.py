@@ -6,6 +6,7 @@ and :mod:`spacedg.scene.model`.
 
     import spacedg
     scene = spacedg.load_scene("runs/demo/scenes/room-000000")
+    dataset = spacedg.SpaceDGDataset("train", ["haze"])   # torch is imported here, on first use
     room = spacedg.generate_room(seed=3)
     spacedg.list_degradations(), spacedg.get_question_family("object_counting")
 """
@@ -44,9 +45,20 @@ from spacedg import render  # the package is callable: spacedg.render(gaussians,
 from spacedg.render import Defocus, Frame, MotionBlur, RasterSettings
 from spacedg.render.camera import Camera, FisheyeLens
 from spacedg.render.gaussians import Gaussians
-from spacedg.data.dataset import SpaceDGDataset, chat_collate
+from spacedg.data.chat import chat_collate
 
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str) -> object:
+    """``spacedg.SpaceDGDataset`` on first access: the dataset needs torch, which the rest of the
+    front door does not (``import spacedg`` stays light for readers, the renderer and the CLI)."""
+    if name == "SpaceDGDataset":
+        from spacedg.data.dataset import SpaceDGDataset  # torch: imported on first use
+
+        globals()[name] = SpaceDGDataset
+        return SpaceDGDataset
+    raise AttributeError(f"module 'spacedg' has no attribute {name!r}")
 
 __all__ = [
     "SpaceDGDataset",

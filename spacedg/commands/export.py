@@ -54,6 +54,7 @@ def _names(text: str | None) -> list[str] | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from spacedg.data.chain import Chain
     from spacedg.data.dataset import SpaceDGDataset
     from spacedg.data.export import (
         DEFAULT_SHARD_SIZE,
@@ -69,8 +70,11 @@ def run(args: argparse.Namespace) -> int:
     if shard_size < 1:
         raise ParameterError(f"--shard-size must be >= 1, got {shard_size}")
     size = _size(args.image_size)
+    chains = _names(args.degradations)
+    for chain in chains or ():
+        Chain.parse(chain).check()  # an unknown name or preset fails now, with suggestions
     dataset = SpaceDGDataset(
-        args.split, _names(args.degradations), scenes=args.scenes, question_types=_names(args.question_types),
+        args.split, chains, scenes=args.scenes, question_types=_names(args.question_types),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,
         qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type),
         on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device, max_questions=args.max_questions,

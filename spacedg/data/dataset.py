@@ -37,7 +37,7 @@ renders them.
   are multiples of ``len(chains) + 1`` keep a question's variants in one worker, where they
   share the clean render.
 
-:func:`chat_collate` turns a batch into chat messages for a transformers processor.
+:func:`spacedg.data.chat.chat_collate` turns a batch into chat messages for a transformers processor.
 """
 
 from __future__ import annotations
@@ -52,23 +52,19 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from spacedg.data.pipeline import BENCH_DEGRADATIONS, MIXTURES, PipelineOptions, resolve_chain
-from spacedg.seeding import derive_seed
-from spacedg.plugins.qa_record import QARecord
+from spacedg.data.chain import BENCH_DEGRADATIONS, SEVERITIES, Chain
+from spacedg.data.pipeline import PipelineOptions, degrade, frames_nbytes
 from spacedg.data.qa_index import QABuildConfig, ensure_indexes, index_paths, read_index
-from spacedg.scene.store import SPLITS, ByteLRU, assign_splits, builtin_scene_dirs, scene_dirs_of
 from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.registry import get_question_family, list_degradations
+from spacedg.scene.io import load_scene
+from spacedg.scene.store import SPLITS, ByteLRU, assign_splits, builtin_scene_dirs, scene_dirs_of
+from spacedg.seeding import derive_seed
 
-__all__ = ["SpaceDGDataset", "chat_collate", "format_question", "answer_text", "chain_name", "item_images", "CLEAN"]
+__all__ = ["SpaceDGDataset"]
 
-#: ``degradation_type`` of a clean sample (the VLMEvalKit / SpaceDG convention).
-CLEAN = "ori"
-_SEVERITIES = ("bench", "1", "2", "3", "4", "5", "random")
-
-
-def format_question(question: str, options: Sequence[str]) -> str:
-    """The question text with its option lines (MCQ), as a model sees it."""
-    return question if not options else question + "\n" + "\n".join(options)
+_SEVERITIES = (*SEVERITIES, "random")
 
 
 class SpaceDGDataset(Dataset):
@@ -163,30 +159,28 @@ class SpaceDGDataset(Dataset):
 
     # ------------------------------------------------------------ construction
     def _chains(self, degradations: Any) -> list[str]:
-        from spacedg.plugins import list_degradations
-
+        """Canonical chain texts; unknown names, presets and repeats fail here, with suggestions."""
         if degradations is None:
-            names: list[str] = list(BENCH_DEGRADATIONS) if self.split == "bench" else []
+            items: list[Any] = list(BENCH_DEGRADATIONS) if self.split == "bench" else []
         elif isinstance(degradations, str) and degradations == "all":
-            names = [spec.name for spec in list_degradations()]
-        elif isinstance(degradations, str):
-            names = [degradations]
+            items = [spec.name for spec in list_degradations()]
+        elif isinstance(degradations, (str, Chain)):
+            items = [degradations]
         else:
-            names = [str(d) for d in degradations]
+            items = list(degradations)
+        random_levels = self.severity == "random" and self.split != "bench"
         chains = []
-        for name in names:
-            chain = name if self.severity == "random" else _with_severity(name, self.severity)
-            levels = ["1", "2", "3", "4", "5"] if self.severity == "random" and self.split != "bench" else [None]
-            for level in levels:  # unknown names, presets and repeats fail here, with suggestions
-                resolve_chain(chain if level is None else _with_severity(chain, level), 0)
-            chains.append(chain)
+        for item in items:
+            chain = Chain.parse(item)
+            if self.severity != "random":
+                chain = chain.with_severity(self.severity)
+            chain.check(SEVERITIES[1:] if random_levels else (None,))
+            chains.append(chain.text)
         if len(set(chains)) != len(chains):
             raise ParameterError(f"SpaceDGDataset: degradations repeat a chain: {chains}")
         return chains
 
     def _records(self, folder: Path) -> list[QARecord]:
-        from spacedg.scene.io import load_scene
-
         jsonl, _ = index_paths(load_scene(folder).id, folder)
         return read_index(jsonl)
 
@@ -194,8 +188,6 @@ class SpaceDGDataset(Dataset):
     def _question_types(question_types: Sequence[str] | None) -> set[str] | None:
         if question_types is None:
             return None
-        from spacedg.plugins import get_question_family
-
         return {get_question_family(name).name for name in question_types}  # unknown names fail with suggestions
 
     # ------------------------------------------------------------ indexing
@@ -224,15 +216,22 @@ class SpaceDGDataset(Dataset):
             rng = np.random.default_rng(derive_seed(self.seed, "choice", self.epoch, record.id))
             chain = None if (not self.chains or rng.random() < self.clean_prob) else self.chains[int(rng.integers(len(self.chains)))]
             if chain is not None and self.severity == "random":
-                chain = _with_severity(chain, str(int(rng.integers(1, 6))))
-        return record, chain, chain_name(chain)
+                chain = Chain.parse(chain).with_severity(str(int(rng.integers(1, 6)))).text
+        return record, chain, Chain.parse(chain).name
+
+    def _sample_seed(self, record: QARecord, name: str) -> int:
+        return derive_seed(self.seed, "sample", record.id, name, self.epoch if self.split != "bench" else 0)
+
+    def provenance(self, index: int) -> list[dict[str, Any]]:
+        """The degradation provenance item ``index`` records (``[{name, params, seed, preset}, …]``,
+        every part of a mixture with its parameters), computed without rendering."""
+        record, chain, name = self.plan(index)
+        return Chain.parse(chain).provenance(self._sample_seed(record, name), self.options.default_preset, self.options.mixture_preset)
 
     # ------------------------------------------------------------ items
     def _cache(self) -> ByteLRU:
         """This worker's cache: scenes (sized by their Gaussians) and clean renders (by their arrays)."""
         if self._scenes is None:
-            from spacedg.data.pipeline import frames_nbytes
-
             def size_of(value: Any) -> int:
                 return frames_nbytes(value) if isinstance(value, list) else value.gaussians.nbytes
 
@@ -240,8 +239,6 @@ class SpaceDGDataset(Dataset):
         return self._scenes
 
     def _scene(self, scene_id: str) -> Any:
-        from spacedg.scene.io import load_scene
-
         folder = self.scene_dirs[scene_id]
         return self._cache().get(("scene", scene_id), lambda: load_scene(folder))
 
@@ -264,14 +261,11 @@ class SpaceDGDataset(Dataset):
             )
 
     def __getitem__(self, index: int) -> dict[str, Any]:
-        from spacedg.data.pipeline import degrade
-
         if self._checked_pid != os.getpid():
             self._check_fork_safety()
         record, chain, name = self.plan(index)
         scene = self._scene(record.scene_id)
-        sample_seed = derive_seed(self.seed, "sample", record.id, name, self.epoch if self.split != "bench" else 0)
-        result = degrade(scene, record.views, chain, seed=sample_seed, options=self.options, render_cache=self._cache())
+        result = degrade(scene, record.views, chain, seed=self._sample_seed(record, name), options=self.options, render_cache=self._cache())
         images = torch.from_numpy(np.ascontiguousarray(result.images.transpose(0, 3, 1, 2)))
         return {
             "images": images,
@@ -343,56 +337,3 @@ def _spread_subset(records: list[QARecord], n: int, seed: int) -> list[QARecord]
             if queue and len(taken) < n:
                 taken.append(queue.pop())
     return [records[i] for i in sorted(taken)]
-
-
-def _with_severity(chain: str, severity: str) -> str:
-    """``severity`` added to every part of ``chain`` named without a preset (``"haze+low_res:3"``,
-    ``"2"`` → ``"haze:2+low_res:3"``); a mixture name is left to the pipeline (its primary at
-    ``bench``, auxiliaries at the mixture preset)."""
-    if chain in MIXTURES:
-        return chain
-    return "+".join(part if ":" in part else f"{part.strip()}:{severity}" for part in chain.split("+"))
-
-
-def chain_name(chain: str | None) -> str:
-    """The ``degradation_type`` of a chain: ``"ori"`` for clean, else its parts without presets
-    (``"haze:3+low_res"`` → ``"haze+low_res"``; ``"night_capture"`` stays)."""
-    if chain is None:
-        return CLEAN
-    return "+".join(part.split(":")[0].strip() for part in chain.split("+"))
-
-
-def answer_text(answer: Any) -> str:
-    """An answer as the model should write it inside ``<answer>…</answer>``."""
-    if isinstance(answer, (list, tuple)):
-        return "[" + ", ".join(f"{float(v):.2f}" for v in answer) + "]"
-    return str(answer)
-
-
-def item_images(item: dict[str, Any]) -> list[np.ndarray]:
-    """The views of a dataset item as uint8 H×W×3 RGB arrays (contiguous), in view order."""
-    return [np.ascontiguousarray(img.permute(1, 2, 0).numpy()) if isinstance(img, torch.Tensor) else np.asarray(img)
-            for img in item["images"]]
-
-
-def chat_collate(batch: Sequence[dict[str, Any]], *, system_prompt: str | None = None, with_answer: bool = True) -> dict[str, Any]:
-    """A batch of items → chat messages for ``processor.apply_chat_template``.
-
-    Returns ``{"messages": [...], "images": [[uint8 H×W×3 arrays] per sample], "answers": [...],
-    "items": batch}``. Each conversation is a system turn (the SpaceDG answer prompt), a user turn
-    with one ``{"type": "image"}`` entry per view followed by the question (options included),
-    and with ``with_answer`` the assistant turn ``<answer>…</answer>``.
-    """
-    from spacedg.eval.prompts import chat_messages
-    from spacedg.eval.scoring import ANSWER_PROMPT
-
-    prompt = ANSWER_PROMPT if system_prompt is None else system_prompt
-    messages, images, answers = [], [], []
-    for item in batch:
-        views = item_images(item)
-        answer = f"<answer>{answer_text(item['answer'])}</answer>"
-        question = format_question(item["question"], item["options"])
-        messages.append(chat_messages(question, len(views), system=prompt, answer=answer if with_answer else None))
-        images.append(views)
-        answers.append(answer)
-    return {"messages": messages, "images": images, "answers": answers, "items": list(batch)}

@@ -55,7 +55,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from spacedg.data.dataset import CLEAN, SpaceDGDataset, answer_text, format_question
+from spacedg.data.chain import CLEAN
+from spacedg.data.chat import ANSWER_PROMPT, format_question
+from spacedg.data.dataset import SpaceDGDataset
+from spacedg.plugins.answers import answer_text
 from spacedg.files import atomic_write_bytes
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
 
@@ -345,8 +348,6 @@ def export_bench(
         InvalidDataError: an item cannot be rendered (the message names its scene folder).
     """
     from tqdm import tqdm
-
-    from spacedg.eval.scoring import ANSWER_PROMPT
 
     started = time.perf_counter()
     out = Path(out_dir)

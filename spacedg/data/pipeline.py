@@ -3,8 +3,9 @@
 Given a scene, the names of a sample's views, one or several **chains** of degradations and a
 seed, :func:`degrade_variants` does the least work that produces every chain's images:
 
-1. Each chain is resolved: names (or name + preset, or name + explicit parameters, or a
-   mixture recipe) become :class:`ResolvedDegradation` objects with concrete parameters drawn
+1. Each chain is resolved (:class:`~spacedg.data.chain.Chain`: names, name + preset, name +
+   explicit parameters, or a mixture recipe) into
+   :class:`~spacedg.data.chain.ResolvedDegradation` objects with concrete parameters drawn
    from a seed, sorted into the physical order (raster → linear → display, then each
    stage's ``order``) whatever order the user listed them in.
 2. Chains with the same raster-stage degradations (same names, parameters and seeds) share one
@@ -22,9 +23,9 @@ sample. Its parameters are drawn from ``np.random.default_rng(deg_seed)`` (prese
 declaration order); its ``apply`` for view ``i`` gets ``np.random.default_rng([deg_seed, i])``.
 The provenance ``{name, params, seed, preset}`` therefore reproduces the image exactly.
 
-Mixtures. The six recipes of the paper (:data:`MIXTURES`) are available by name: the primary
-degradation at the chain's default preset (``bench``) and the others at the milder
-``mixture_preset`` (severity ``"2"`` by default).
+Mixtures. The six recipes of the paper (:data:`spacedg.data.chain.MIXTURES`) are available by
+name: the primary degradation at the chain's default preset (``bench``) and the others at the
+milder ``mixture_preset`` (severity ``"2"`` by default).
 
 Motion blur. ``motion="fast"`` (default) renders with the renderer's fast path (fewer
 sub-steps chosen from the on-screen displacement; > 40 dB PSNR against N = 80 on the measured
@@ -35,19 +36,18 @@ used are in :attr:`DegradedViews.sub_steps`.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from spacedg.errors import ParameterError, PluginError, UnknownPluginError
-from spacedg.plugins.degradations.common import surface_far_depth
-from spacedg.plugins.registry import get_degradation
-from spacedg.plugins.specs import DegradationSpec, Stage, suggest
+from spacedg.data.chain import Chain, ResolvedDegradation
+from spacedg.errors import ParameterError, PluginError
+from spacedg.plugins.degradations.common import check_display_image, surface_far_depth
+from spacedg.plugins.specs import Stage
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import RasterSettings
-from spacedg.seeding import derive_seed
 
 if TYPE_CHECKING:
     import torch
@@ -56,177 +56,13 @@ if TYPE_CHECKING:
     from spacedg.render.frame import Frame
 
 __all__ = [
-    "BENCH_DEGRADATIONS",
-    "MIXTURES",
-    "DegradationChoice",
     "DegradedViews",
-    "Mixture",
     "PipelineOptions",
-    "ResolvedDegradation",
     "degrade",
     "degrade_image",
     "degrade_variants",
-    "parse_chain",
-    "resolve_chain",
+    "frames_nbytes",
 ]
-
-#: The nine degradations of SpaceDG-Bench, in the paper's table order.
-BENCH_DEGRADATIONS: tuple[str, ...] = (
-    "defocus", "distortion", "haze", "jpeg_compression", "low_light",
-    "low_res", "motion_blur", "over_exposure", "water_droplets",
-)
-
-
-@dataclass(frozen=True)
-class Mixture:
-    """A real-world inspired mixture recipe: one primary degradation, milder auxiliaries."""
-
-    primary: str
-    auxiliaries: tuple[str, ...]
-    description: str
-
-
-#: The paper's six mixture recipes (Table "mixed-degradation settings"); primary first.
-MIXTURES: Mapping[str, Mixture] = {
-    "night_capture": Mixture("low_light", ("motion_blur", "low_res"), "LL + MB + LR"),
-    "hazy_long_range": Mixture("haze", ("low_res", "motion_blur"), "HZ + LR + MB"),
-    "wet_lens_motion": Mixture("water_droplets", ("motion_blur", "low_light"), "WD + MB + LL"),
-    "backlit_dynamics": Mixture("over_exposure", ("motion_blur",), "OE + MB"),
-    "motion_defocus": Mixture("motion_blur", ("defocus", "low_res"), "MB + DF + LR"),
-    "compressed_portrait": Mixture("defocus", ("jpeg_compression",), "DF + JPEG"),
-}
-
-
-# ----------------------------------------------------------------- choices
-@dataclass(frozen=True)
-class DegradationChoice:
-    """One degradation as a user asks for it.
-
-    Attributes:
-        name: a registered degradation name.
-        preset: preset to sample parameters from (``None`` = the pipeline's default preset).
-        params: explicit parameter values; parameters not given are sampled from the preset.
-    """
-
-    name: str
-    preset: str | None = None
-    params: Mapping[str, float] | None = None
-
-
-def _choice_from_mapping(item: Mapping[str, Any]) -> DegradationChoice:
-    unknown = sorted(set(item) - {"name", "preset", "params"})
-    if unknown or "name" not in item:
-        raise ParameterError(
-            f"a degradation given as a mapping needs 'name' and may have 'preset' and 'params'; got keys {sorted(item)}"
-        )
-    preset = item.get("preset")
-    return DegradationChoice(str(item["name"]), None if preset is None else str(preset), item.get("params"))
-
-
-def _choices_from_text(text: str, mixture_preset: str) -> list[DegradationChoice]:
-    name, _, preset = text.strip().partition(":")
-    name = name.strip()
-    if name in MIXTURES:
-        if preset:
-            raise ParameterError(f"mixture {name!r} takes no preset ({text!r}); its primary uses the default preset and the others {mixture_preset!r}")
-        recipe = MIXTURES[name]
-        return [DegradationChoice(recipe.primary), *(DegradationChoice(a, mixture_preset) for a in recipe.auxiliaries)]
-    return [DegradationChoice(name, preset.strip() or None)]
-
-
-def parse_chain(chain: Any, mixture_preset: str = "2") -> tuple[DegradationChoice, ...]:
-    """Normalise one chain to :class:`DegradationChoice` objects (mixtures expanded).
-
-    Accepted: ``None`` or ``"clean"`` (no degradation); a string ``"haze"``, ``"haze:3"``,
-    ``"haze+low_res:bench"`` or a mixture name ``"night_capture"``; a mapping ``{"name",
-    "preset", "params"}``; a :class:`DegradationChoice`; ``(name, params_dict)`` or ``(name,
-    preset)``; or a list of any of these.
-    """
-    if chain is None:
-        return ()
-    if isinstance(chain, str):
-        if chain.strip() in ("", "clean"):
-            return ()
-        return tuple(c for part in chain.split("+") for c in _choices_from_text(part, mixture_preset))
-    if isinstance(chain, DegradationChoice):
-        return (chain,)
-    if isinstance(chain, Mapping):
-        return (_choice_from_mapping(chain),)
-    if isinstance(chain, tuple) and len(chain) == 2 and isinstance(chain[0], str) and isinstance(chain[1], (Mapping, str, int)):
-        name, extra = chain
-        return (DegradationChoice(name, params=extra) if isinstance(extra, Mapping) else DegradationChoice(name, str(extra)),)
-    if isinstance(chain, Iterable):
-        return tuple(c for item in chain for c in parse_chain(item, mixture_preset))
-    raise ParameterError(
-        f"cannot read a degradation from {chain!r}; give a name ('haze', 'haze:3'), a mixture "
-        f"({', '.join(MIXTURES)}), a mapping {{'name', 'preset', 'params'}} or a list of these"
-    )
-
-
-# --------------------------------------------------------------- resolving
-@dataclass(frozen=True)
-class ResolvedDegradation:
-    """A degradation with concrete parameters and its seed (what provenance records)."""
-
-    spec: DegradationSpec
-    params: Mapping[str, int | float]
-    seed: int
-    preset: str | None
-
-    @property
-    def name(self) -> str:
-        return self.spec.name
-
-    def view_rng(self, view_index: int) -> np.random.Generator:
-        """The generator ``apply`` gets for view ``view_index`` of the sample."""
-        return np.random.default_rng([self.seed, view_index])
-
-    def key(self) -> tuple[Any, ...]:
-        """Hashable identity (name, parameters, seed): equal keys render and apply identically."""
-        return (self.name, tuple(sorted(self.params.items())), self.seed)
-
-    def provenance(self) -> dict[str, Any]:
-        """``{name, params, seed, preset}``, JSON-serialisable."""
-        return {"name": self.name, "params": dict(self.params), "seed": self.seed, "preset": self.preset}
-
-
-def _lookup(name: str) -> DegradationSpec:
-    try:
-        return get_degradation(name)
-    except UnknownPluginError as err:
-        close = suggest(name, list(MIXTURES))
-        hint = f" Mixtures: {', '.join(MIXTURES)}." if not close else f" Did you mean the mixture {close[0]!r}?"
-        raise UnknownPluginError(f"{err}{hint}") from None
-
-
-def resolve_chain(
-    chain: Any, seed: int, default_preset: str = "bench", mixture_preset: str = "2"
-) -> tuple[ResolvedDegradation, ...]:
-    """Resolve one chain (see :func:`parse_chain`) into sorted :class:`ResolvedDegradation` objects.
-
-    Raises :class:`ParameterError` for an unknown name, unknown preset, unknown parameter,
-    a value outside its hard limits, or the same degradation twice in one chain.
-    """
-    resolved: list[ResolvedDegradation] = []
-    seen: set[str] = set()
-    for choice in parse_chain(chain, mixture_preset):
-        spec = _lookup(choice.name)
-        if spec.name in seen:
-            raise ParameterError(
-                f"degradation {spec.name!r} appears twice in one chain; a chain applies each degradation once "
-                "(a mixture already includes its auxiliaries)"
-            )
-        seen.add(spec.name)
-        deg_seed = derive_seed(seed, spec.name)
-        preset = choice.preset or default_preset
-        params = spec.sample_params(preset, np.random.default_rng(deg_seed))
-        if choice.params:
-            params.update(spec.validate_params(choice.params, partial=True))
-            if set(choice.params) == set(spec.param_map):
-                preset = None  # every value explicit: no preset involved
-        resolved.append(ResolvedDegradation(spec, spec.validate_params(params), deg_seed, preset))
-    return tuple(sorted(resolved, key=lambda r: r.spec.sort_key))
-
 
 # ----------------------------------------------------------------- running
 @dataclass(frozen=True)
@@ -347,7 +183,7 @@ def _finish(
     index: int, far_depth: float | None, timer: dict[str, float],
 ) -> np.ndarray:
     """Linear chain → lens mask → encode → display chain for one view."""
-    from spacedg.render.colour_cpu import encode_srgb_u8
+    from spacedg.render.colour_cpu import encode_srgb_u8  # numba: compiled on first use
 
     t0 = time.perf_counter()
     rgb = frame.rgb
@@ -383,8 +219,8 @@ def degrade_variants(
     Args:
         scene: the scene (its Gaussians load on first use).
         views: view names of the sample, e.g. the two views of a two-view question.
-        chains: one entry per variant, each anything :func:`parse_chain` accepts (``None`` or
-            ``"clean"`` = no degradation), e.g. ``["clean", "haze", "night_capture"]``.
+        chains: one entry per variant, each anything :meth:`Chain.parse <spacedg.data.chain.Chain.parse>`
+            accepts (``None`` or ``"clean"`` = no degradation), e.g. ``["clean", "haze", "night_capture"]``.
         seed: the sample's seed (see the module docstring).
         options: rendering and resolving options.
         progress: show a progress bar over the render groups (for long runs such as a gallery).
@@ -398,7 +234,7 @@ def degrade_variants(
     options = options or PipelineOptions()
     views = (views,) if isinstance(views, str) else tuple(views)
     cameras = _cameras(scene, views, options)
-    resolved = [resolve_chain(c, seed, options.default_preset, options.mixture_preset) for c in chains]
+    resolved = [Chain.parse(c).resolve(seed, options.default_preset, options.mixture_preset) for c in chains]
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i, chain in enumerate(resolved):
         groups.setdefault(tuple(step.key() for step in _by_stage(chain, Stage.RASTER)), []).append(i)
@@ -463,7 +299,7 @@ def degrade_image(
 
     Args:
         image: uint8 (H, W, 3) sRGB RGB.
-        degradations: one chain (see :func:`parse_chain`); raster-stage degradations are refused
+        degradations: one chain (see :class:`~spacedg.data.chain.Chain`); raster-stage degradations are refused
             (they change how the scene is rendered, which needs the Gaussians).
         seed: the sample's seed.
         depth, alpha: (H, W) metric depth (metres) and coverage for depth-hungry degradations
@@ -472,11 +308,10 @@ def degrade_image(
     Returns:
         ``(uint8 image, provenance list)``.
     """
-    from spacedg.plugins.degradations.common import check_display_image
-    from spacedg.render.colour_cpu import decode_srgb, encode_srgb_u8
+    from spacedg.render.colour_cpu import decode_srgb, encode_srgb_u8  # numba: compiled on first use
 
     image = check_display_image(image, "degrade_image")
-    chain = resolve_chain(degradations, seed, default_preset, mixture_preset)
+    chain = Chain.parse(degradations).resolve(seed, default_preset, mixture_preset)
     raster = _by_stage(chain, Stage.RASTER)
     if raster:
         raise ParameterError(

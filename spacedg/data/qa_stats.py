@@ -16,7 +16,8 @@ from collections import Counter, defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
-from spacedg.plugins.qa_record import MCQ_LETTERS, QARecord
+from spacedg.plugins.answers import MCQ_LETTERS
+from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import AnswerType
 
 __all__ = ["count_table", "answer_balance", "blind_baseline", "format_table"]

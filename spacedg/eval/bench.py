@@ -23,15 +23,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from spacedg.plugins.qa_record import MCQ_LETTERS
+from spacedg.data.chain import CLEAN
 from spacedg.errors import FileFormatError, InvalidDataError
+from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.eval.scoring import route
 from spacedg.plugins.specs import AnswerType
 
 __all__ = ["CLEAN", "Bench", "BenchRow", "bench_table", "cell_text", "load_bench", "read_table", "row_from_mapping"]
 
-#: ``degradation_type`` of clean items.
-CLEAN = "ori"
 #: ``"A. "`` … ``"D. "`` in front of an option written as a line.
 _OPTION_PREFIX = re.compile(r"^\s*[A-D][.)]\s+")
 #: Columns without which a row cannot be scored.

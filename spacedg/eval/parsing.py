@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from decimal import Decimal
 from typing import Any
 
-from spacedg.plugins.qa_record import MCQ_LETTERS
+from spacedg.plugins.answers import MCQ_LETTERS
 
 __all__ = ["extract_answer_text", "parse_mcq", "parse_number", "parse_yes_no", "parse_count", "parse_size_list"]
 

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from spacedg.data.chain import CLEAN
 from spacedg.eval.labels import DEGRADATION_LABELS, degradation_label
 
 __all__ = [
@@ -35,7 +36,7 @@ __all__ = [
 ]
 
 _DPI = 150
-_CLEAN = "ori"
+
 _AVG = "avg"
 _HEATMAP_ABOVE = 5  # a correlation panel with more slices than this is drawn as a heatmap
 _NA = "n/a"
@@ -87,8 +88,8 @@ def _columns(data: Mapping[str, Mapping[str, Any]], what: str) -> list[str]:
     columns = list(seen)
     if not columns:
         raise ValueError(f"{what}: nothing to plot (no conditions given)")
-    middle = [c for c in columns if c not in (_CLEAN, _AVG)]
-    return [c for c in (_CLEAN,) if c in seen] + middle + [c for c in (_AVG,) if c in seen]
+    middle = [c for c in columns if c not in (CLEAN, _AVG)]
+    return [c for c in (CLEAN,) if c in seen] + middle + [c for c in (_AVG,) if c in seen]
 
 
 def _colors(n: int) -> list[Any]:
@@ -161,7 +162,7 @@ def _separators(ax: Any, columns: Sequence[str], *, heatmap: bool = False) -> No
     """A dotted line after Clean and before Avg. (they are not degradations)."""
     style = {"color": "white" if heatmap else "#808080", "linewidth": 4.0 if heatmap else 0.8,
              "linestyle": "-" if heatmap else ":", "zorder": 4}
-    if columns and columns[0] == _CLEAN and len(columns) > 1:
+    if columns and columns[0] == CLEAN and len(columns) > 1:
         ax.axvline(0.5, **style)
     if columns and columns[-1] == _AVG and len(columns) > 1:
         ax.axvline(len(columns) - 1.5, **style)

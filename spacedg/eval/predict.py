@@ -31,7 +31,9 @@ from typing import Any
 
 import numpy as np
 
+from spacedg.data.chat import format_question, item_images
 from spacedg.files import atomic_write_bytes, read_rgb
+from spacedg.plugins.answers import answer_text
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
 from spacedg.eval.bench import Bench, BenchRow, row_from_mapping
 from spacedg.eval.predictions import meta_path
@@ -79,16 +81,9 @@ def bench_source(bench: Bench) -> Source:
     return Source(str(bench.path), bench.fingerprint, [r.index for r in bench.rows], bench.by_index.__getitem__, images)
 
 
-def _provenance(part: str) -> dict[str, str]:
-    """``"haze:3"`` → ``{"name": "haze", "preset": "3"}`` (no preset: ``bench``)."""
-    name, _, preset = part.strip().partition(":")
-    return {"name": name.strip(), "preset": preset.strip() or "bench"}
-
-
 def dataset_source(dataset: Any) -> Source:
     """A :class:`Source` over a :class:`~spacedg.data.dataset.SpaceDGDataset`: rows from its
     plan (no rendering), images rendered online for the items asked for."""
-    from spacedg.data.dataset import answer_text, format_question, item_images
     from spacedg.data.export import dataset_fingerprint
 
     def row(index: int) -> BenchRow:
@@ -99,7 +94,7 @@ def dataset_source(dataset: Any) -> Source:
             "sub_question_type": record.sub_question_type, "task_group": record.task_group.value,
             "degradation_type": name, "scene_id": record.scene_id, "record_id": record.id,
             "options": list(record.options),
-            "degradation": [_provenance(part) for part in (chain or "").split("+") if part.strip()],
+            "degradation": dataset.provenance(index),
         }
         return row_from_mapping(fields, f"dataset item {index}")
 

@@ -3,7 +3,7 @@
 Variants (``--variant`` of ``spacedg predict``):
 
 ``default``
-    System :data:`~spacedg.eval.scoring.ANSWER_PROMPT` (answer only, in ``<answer>`` tags); user
+    System :data:`~spacedg.data.chat.ANSWER_PROMPT` (answer only, in ``<answer>`` tags); user
     turn = one ``{"type": "image"}`` per view, then the question with its option lines.
 ``no_image``
     The paper's non-image baseline: the same conversation without the images. The question
@@ -31,7 +31,8 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from spacedg.eval.bench import CLEAN, BenchRow
-from spacedg.eval.scoring import ANSWER_FORMATS, ANSWER_PROMPT
+from spacedg.data.chain import Chain
+from spacedg.data.chat import ANSWER_FORMATS, ANSWER_PROMPT, chat_messages
 
 __all__ = [
     "COT_STAGE1_PROMPT",
@@ -120,26 +121,14 @@ def degradation_info(row: BenchRow) -> str:
     if row.is_clean:
         return ""
     steps = [(str(d.get("name", "")), str(d.get("preset") or "bench")) for d in row.degradation if d.get("name")]
-    if not steps:
-        steps = [(name, "bench") for name in row.degradation_type.split("+")]
+    if not steps:  # a foreign bench without provenance: its degradation_type, mixtures expanded
+        steps = [(c.name, c.preset or "bench") for c in Chain.parse(row.degradation_type).choices()]
     described = []
     for name, preset in steps:
         ranges = _ranges_text(name, preset)
         label = name.replace("_", " ")
         described.append(f"{label} (severity given as the rendering parameter ranges: {ranges})" if ranges else label)
     return "The images are degraded by " + " and ".join(described) + ".\n"
-
-
-def chat_messages(question: str, n_images: int, *, system: str = ANSWER_PROMPT, answer: str | None = None) -> list[dict[str, Any]]:
-    """A system turn, a user turn (``n_images`` image entries, then ``question``) and, when
-    ``answer`` is given, the assistant turn: the one conversation layout of prediction,
-    evaluation during training, and training samples."""
-    user: list[dict[str, Any]] = [{"type": "image"} for _ in range(n_images)]
-    user.append({"type": "text", "text": question})
-    messages = [{"role": "system", "content": [{"type": "text", "text": system}]}, {"role": "user", "content": user}]
-    if answer is not None:
-        messages.append({"role": "assistant", "content": [{"type": "text", "text": answer}]})
-    return messages
 
 
 def conversation(row: BenchRow, variant: str, n_images: int | None = None) -> list[dict[str, Any]]:

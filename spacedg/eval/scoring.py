@@ -43,7 +43,8 @@ from dataclasses import dataclass
 from decimal import Decimal, localcontext
 from typing import Any
 
-from spacedg.plugins.qa_record import MCQ_LETTERS
+from spacedg.data.chat import ANSWER_FORMATS, ANSWER_PROMPT  # noqa: F401  (re-exported: the prompt the scorer's answers follow)
+from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.eval.parsing import (
     parse_count,
     parse_mcq,
@@ -63,20 +64,6 @@ __all__ = [
     "score",
     "summarize",
 ]
-
-#: How each answer type is written inside the tags (shared by every prompt variant).
-ANSWER_FORMATS: str = (
-    "for a multiple-choice question the option "
-    "letter (e.g. <answer>B</answer>); for a yes/no question yes or no (e.g. "
-    "<answer>no</answer>); for a count an integer (e.g. <answer>3</answer>); for a distance "
-    "or size one number in meters (e.g. <answer>1.25</answer>); for object dimensions a list "
-    "[shortest edge, middle edge, longest edge] in meters (e.g. <answer>[0.10, 0.20, 0.30]</answer>)."
-)
-#: System text given to the model: answer only, wrapped in ``<answer>…</answer>``.
-ANSWER_PROMPT: str = (
-    "Answer the question about the image(s). Output only the final answer, wrapped in "
-    "<answer></answer> tags, with no other text: " + ANSWER_FORMATS
-)
 
 #: MRA confidence thresholds θ in hundredths: 0.50, 0.55, …, 0.95 (10 values, as in the paper).
 MRA_THRESHOLDS: tuple[Decimal, ...] = tuple(Decimal(50 + 5 * k) / 100 for k in range(10))

@@ -1,6 +1,7 @@
 """Question–answer records: :class:`QARecord`, JSON-serialisable, validated at construction.
 
-Answer representation by :class:`~spacedg.plugins.specs.AnswerType` (JSON in brackets):
+Answer representation by :class:`~spacedg.plugins.specs.AnswerType` (JSON in brackets; checked
+by :func:`spacedg.plugins.answers.validate_answer`, written by :func:`~spacedg.plugins.answers.answer_text`):
 
 ``MCQ``
     ``answer`` is the correct option letter, ``"A"`` … ``"D"`` (string); ``options`` holds
@@ -42,12 +43,11 @@ from typing import Any
 import numpy as np
 
 from spacedg.errors import InvalidDataError
+from spacedg.plugins.answers import MCQ_LETTERS, Answer, validate_answer
 from spacedg.plugins.specs import NAME_PATTERN, SUB_TYPE_PATTERN, AnswerType, TaskGroup
 
 __all__ = ["QARecord", "MCQ_LETTERS", "make_record_id", "json_ready"]
 
-#: Option letters of a multiple-choice question, in order.
-MCQ_LETTERS: tuple[str, ...] = ("A", "B", "C", "D")
 _OPTION = re.compile(r"^([A-D])\. \S")
 _FIELDS = (
     "id",
@@ -62,8 +62,6 @@ _FIELDS = (
     "answer",
     "geometry",
 )
-
-Answer = str | int | float | tuple[float, ...]
 
 
 def json_ready(value: Any, path: str = "geometry") -> Any:
@@ -191,35 +189,7 @@ class QARecord:
         return options
 
     def _check_answer(self, where: str) -> Answer:
-        answer = self.answer
-        kind = self.answer_type
-        if kind is AnswerType.MCQ:
-            if answer not in MCQ_LETTERS:
-                raise InvalidDataError(f"{where}: an MCQ answer is the option letter 'A'–'D', got {answer!r}")
-            return answer
-        if kind is AnswerType.YN:
-            if answer not in ("yes", "no"):
-                raise InvalidDataError(f"{where}: a YN answer is 'yes' or 'no' (lower case), got {answer!r}")
-            return answer
-        if kind is AnswerType.COUNT:
-            if isinstance(answer, (bool, np.bool_)) or not isinstance(answer, (int, np.integer)) or answer < 0:
-                raise InvalidDataError(f"{where}: a COUNT answer is an integer >= 0, got {answer!r}")
-            return int(answer)
-        if kind is AnswerType.NA:
-            if isinstance(answer, (bool, np.bool_)) or not isinstance(answer, (int, float, np.integer, np.floating)) or not math.isfinite(float(answer)):
-                raise InvalidDataError(f"{where}: an NA answer is a finite number, got {answer!r}")
-            return float(answer)
-        # SIZE_LIST
-        if isinstance(answer, (str, bytes)) or not isinstance(answer, (Sequence, np.ndarray)) or len(answer) != 3:
-            raise InvalidDataError(f"{where}: a SIZE_LIST answer is [shortest, middle, longest] in metres, got {answer!r}")
-        values = []
-        for v in answer:
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(float(v)) or v < 0:
-                raise InvalidDataError(f"{where}: SIZE_LIST entries must be finite lengths >= 0 metres, got {list(answer)!r}")
-            values.append(float(v))
-        if values != sorted(values):
-            raise InvalidDataError(f"{where}: a SIZE_LIST answer must be sorted [shortest, middle, longest], got {values}")
-        return tuple(values)
+        return validate_answer(self.answer_type, self.answer, where)
 
     def __hash__(self) -> int:
         return hash(self.id)

@@ -51,14 +51,14 @@ from __future__ import annotations
 import difflib
 import math
 import re
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 
-from spacedg.errors import InvalidDataError, ParameterError, PluginError
+from spacedg.errors import ParameterError, PluginError
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from spacedg.plugins.registry import PluginOrigin

@@ -49,7 +49,6 @@ from __future__ import annotations
 import ast
 import csv
 import json
-import math
 import os
 import re
 import threading
@@ -63,16 +62,14 @@ from spacedg.files import atomic_write_bytes
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.eval.bench import CLEAN, bench_table, read_table
 from spacedg.eval.scoring import route
+from spacedg.plugins.answers import MCQ_LETTERS, answer_from_text
 from spacedg.plugins.specs import AnswerType
 
 __all__ = ["EDITABLE", "ReviewError", "ReviewStore"]
 
 #: Fields a reviewer may change.
 EDITABLE: tuple[str, ...] = ("question", "answer", "A", "B", "C", "D")
-_LETTERS = ("A", "B", "C", "D")
 _TITLE_CHARS = 120
-_NUMBER = re.compile(r"^[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?$")
-_COUNT = re.compile(r"^\d+$")
 _OPTION_LINE = re.compile(r"^\s*([A-D])[.)]\s")
 _REQUIRED_COLUMNS = ("index", "question", "answer", "question_type")
 
@@ -82,57 +79,12 @@ class ReviewError(InvalidDataError):
 
 
 # ------------------------------------------------------------------ validation helpers
-def _number(text: str) -> float | None:
-    if not _NUMBER.match(text):
-        return None
-    value = float(text)
-    return value if math.isfinite(value) else None
-
-
-def _size_list(text: str) -> list[float] | None:
-    if not (text.startswith("[") and text.endswith("]")):
-        return None
-    parts = [p.strip() for p in text[1:-1].split(",")]
-    if len(parts) != 3:
-        return None
-    values = [_number(p) for p in parts]
-    if any(v is None or v < 0 for v in values):
-        return None
-    return values  # type: ignore[return-value]
-
-
 def _normalise_answer(kind: AnswerType, answer: str, options: Mapping[str, str]) -> str:
     """The answer as stored, or :class:`ReviewError` saying what a valid one looks like."""
-    text = answer.strip()
-    if "\n" in text or "\t" in text:
-        raise ReviewError("answer must be one line")
-    if kind is AnswerType.MCQ:
-        letter = text.upper()
-        if letter not in _LETTERS:
-            raise ReviewError(f"answer {text!r} is not an option letter; an MCQ answer is one of A, B, C, D")
-        if not options.get(letter, "").strip():
-            present = ", ".join(k for k in _LETTERS if options.get(k, "").strip()) or "none"
-            raise ReviewError(f"answer {letter} has no option text (options present: {present})")
-        return letter
-    if kind is AnswerType.YN:
-        if text.lower() not in ("yes", "no"):
-            raise ReviewError(f"answer {text!r} is not yes or no (a yes/no question)")
-        return text.lower()
-    if kind is AnswerType.COUNT:
-        if not _COUNT.match(text):
-            raise ReviewError(f"answer {text!r} is not a non-negative integer (a counting question)")
-        return text
-    if kind is AnswerType.NA:
-        if _number(text) is None:
-            raise ReviewError(f"answer {text!r} is not a finite number (a numerical question, e.g. 2.35)")
-        return text
-    if kind is AnswerType.SIZE_LIST:
-        if _size_list(text) is None:
-            raise ReviewError(
-                f"answer {text!r} is not a size list: three finite non-negative numbers like [0.10, 0.20, 0.30]"
-            )
-        return text
-    raise ReviewError(f"unknown answer type {kind!r}")  # pragma: no cover - AnswerType is closed
+    try:
+        return answer_from_text(kind, answer, options)
+    except InvalidDataError as err:
+        raise ReviewError(str(err)) from None
 
 
 def _answer_type(row: Mapping[str, str]) -> AnswerType:
@@ -346,7 +298,7 @@ class ReviewStore:
         for name, value in changes.items():
             if name not in EDITABLE:
                 raise ReviewError(f"field {name!r} cannot be edited; editable fields: {', '.join(EDITABLE)}")
-            if name in _LETTERS and name not in self.header:
+            if name in MCQ_LETTERS and name not in self.header:
                 raise ReviewError(f"field {name!r} is not a column of {self.table.name}")
             if not isinstance(value, str):
                 raise ReviewError(f"{name} must be text, got {type(value).__name__}")
@@ -356,7 +308,7 @@ class ReviewStore:
         row = dict(current)
         if "question" in changes:
             row["question"] = changes["question"].replace("\r\n", "\n").replace("\r", "\n")
-        for letter in _LETTERS:
+        for letter in MCQ_LETTERS:
             if letter not in changes:
                 continue
             new = changes[letter].strip()
@@ -375,14 +327,14 @@ class ReviewStore:
             row["question"] = _rewrite_option_line(row["question"], letter, old, new)
         if not row.get("question", "").strip():
             raise ReviewError("question cannot be empty")
-        options = {k: row.get(k, "") for k in _LETTERS}
+        options = {k: row.get(k, "") for k in MCQ_LETTERS}
         if kind is AnswerType.MCQ:
-            for letter in _LETTERS:
+            for letter in MCQ_LETTERS:
                 if original.get(letter, "").strip() and not options[letter].strip():
                     raise ReviewError(f"option {letter} cannot be empty")
         if "answer" in changes:
             row["answer"] = _normalise_answer(kind, changes["answer"], options)
-        elif row.get("answer", "") != current.get("answer", "") or any(k in changes for k in _LETTERS):
+        elif row.get("answer", "") != current.get("answer", "") or any(k in changes for k in MCQ_LETTERS):
             # the answer must still point at a present option after option edits
             _normalise_answer(kind, row.get("answer", ""), options)
         fields = [f for f in EDITABLE if f in row and row.get(f, "") != current.get(f, "")]
@@ -497,7 +449,7 @@ class ReviewStore:
         item: dict[str, Any] = {k: row.get(k, "") for k in self.header}
         item["index"] = index
         item["answer_type"] = _answer_type(row).value
-        item["options"] = {k: row[k] for k in _LETTERS if row.get(k, "").strip()}
+        item["options"] = {k: row[k] for k in MCQ_LETTERS if row.get(k, "").strip()}
         item["image_paths"] = _image_paths(row.get("image_path", ""))
         item["dropped"] = self._dropped[n]
         item["edited"] = self._edited(n)

@@ -24,7 +24,7 @@ from spacedg.scene.derived_cache import read_npz_entry, views_key, write_npz_ent
 from spacedg.scene.model import Scene, ViewCovisibility
 from spacedg.errors import ParameterError
 from spacedg.render.camera import Camera
-from spacedg.scene.visibility import _check_size, _reduced, _view_names
+from spacedg.scene.visibility import check_size, reduced_camera, view_names
 from spacedg.render.gaussians import Gaussians
 
 __all__ = [
@@ -182,8 +182,8 @@ def covisibility_matrix(
     """
     from tqdm import tqdm
 
-    names = _view_names(scene, views, "covisibility_matrix")
-    size = _check_size(image_size, "covisibility_matrix")
+    names = view_names(scene, views, "covisibility_matrix")
+    size = check_size(image_size, "covisibility_matrix")
     if isinstance(rel_threshold, bool) or not isinstance(rel_threshold, (int, float)) or not 0.0 < rel_threshold < 1.0:
         raise ParameterError(f"covisibility_matrix: rel_threshold must be in (0, 1) (relative depth tolerance), got {rel_threshold!r}")
     if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1:
@@ -191,7 +191,7 @@ def covisibility_matrix(
     gaussians = scene.gaussians
     t0 = time.perf_counter()
     dviews = [
-        _depth_view(gaussians, _reduced(scene.views[n], size), int(stride), backend)
+        _depth_view(gaussians, reduced_camera(scene.views[n], size), int(stride), backend)
         for n in tqdm(names, desc=f"covisibility depth {scene.id}", unit="view", disable=not progress)
     ]
     t1 = time.perf_counter()
@@ -273,8 +273,8 @@ def load_or_compute_covisibility(
     recomputed and replaced atomically (temporary file + ``os.replace``). The backend is not
     part of the key (backends agree to float precision).
     """
-    names = _view_names(scene, views, "load_or_compute_covisibility")
-    size = _check_size(image_size, "load_or_compute_covisibility")
+    names = view_names(scene, views, "load_or_compute_covisibility")
+    size = check_size(image_size, "load_or_compute_covisibility")
     key = covisibility_key(scene, names, image_size=size, rel_threshold=rel_threshold, stride=stride)
     path = covisibility_cache_path(scene, cache_dir)
     cached = read_npz_entry(path, key)

@@ -1,35 +1,20 @@
-"""Instance visibility classes: when is an object *clearly visible*, *partly visible*, *hidden*.
+"""Per-view instance visibility computed from rendered instance ids, cached per scene.
 
-- :func:`classify`: visibility class of one instance in one view (thresholds below).
 - :func:`compute_visibility` / :func:`with_visibility`: :class:`~spacedg.scene.model.InstanceVisibility`
-  of every instance in every view, from the rendered instance-id map.
-- view covisibility from rendered depth lives in :mod:`spacedg.scene.covisibility`.
-
-Classes (shared by every question family, e.g. counting and existence):
-
-``HIDDEN``
-    no record for the view, or 0 visible pixels: the image shows nothing of it.
-``VISIBLE`` (clearly visible)
-    ``visible_pixels >= min_pixels`` (scaled to the image, see below) **and**
-    ``visible_fraction >= min_fraction``.
-``PARTIAL``
-    the grey zone in between: some pixels, but too few or too occluded/truncated to be sure a
-    viewer counts it. Families that need certainty skip questions touching it.
-
-Defaults (:data:`DEFAULT_THRESHOLDS`): ``min_pixels = 400`` at the reference image size
-640×480 (0.13 % of the image, a 20×20 px patch), scaled linearly with the image area so a
-view's classification does not change with its resolution; ``min_fraction = 0.5`` (at least
-half of the object's unoccluded, untruncated projection is visible).
+  of every instance in every view, from the rendered instance-id map;
+  :func:`load_or_compute_visibility` caches the table in ``<scene>/cache/``.
+- The classes read from it (clearly visible / partly visible / hidden) and their thresholds are
+  :mod:`spacedg.scene.visibility_classes`; view covisibility from rendered depth lives in
+  :mod:`spacedg.scene.covisibility`.
 """
+
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
-from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -39,80 +24,11 @@ from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
 
+
 __all__ = [
-    "VisibilityClass", "VisibilityThresholds", "DEFAULT_THRESHOLDS", "REFERENCE_AREA", "classify",
     "compute_visibility", "with_visibility", "unbounded_canvas", "VISIBILITY_IMAGE_SIZE", "load_or_compute_visibility",
+    "view_names", "check_size", "reduced_camera",
 ]
-
-#: Pixels of the reference image size 640×480 at which ``min_pixels`` is stated.
-REFERENCE_AREA = 640 * 480
-
-
-class VisibilityClass(StrEnum):
-    """How well a view shows an instance."""
-
-    VISIBLE = "visible"
-    PARTIAL = "partial"
-    HIDDEN = "hidden"
-
-
-@dataclass(frozen=True)
-class VisibilityThresholds:
-    """Thresholds of :func:`classify`.
-
-    Attributes:
-        min_pixels: visible pixels needed for "clearly visible" at :attr:`reference_area`
-            (> 0); scaled linearly with the image area.
-        min_fraction: visible fraction of the instance's own projection needed, in (0, 1].
-        reference_area: image area in pixels at which ``min_pixels`` holds (default 640×480).
-    """
-
-    min_pixels: float = 400.0
-    min_fraction: float = 0.5
-    reference_area: int = REFERENCE_AREA
-
-    def __post_init__(self) -> None:
-        if isinstance(self.min_pixels, bool) or not isinstance(self.min_pixels, (int, float)) or not math.isfinite(self.min_pixels) or self.min_pixels <= 0:
-            raise InvalidDataError(f"VisibilityThresholds: min_pixels must be a number > 0 (pixels at 640×480), got {self.min_pixels!r}")
-        if isinstance(self.min_fraction, bool) or not isinstance(self.min_fraction, (int, float)) or not 0.0 < self.min_fraction <= 1.0:
-            raise InvalidDataError(f"VisibilityThresholds: min_fraction must be in (0, 1], got {self.min_fraction!r}")
-        if isinstance(self.reference_area, bool) or not isinstance(self.reference_area, int) or self.reference_area < 1:
-            raise InvalidDataError(f"VisibilityThresholds: reference_area must be a positive integer number of pixels, got {self.reference_area!r}")
-
-    def pixels_for(self, image_area: int | None) -> float:
-        """``min_pixels`` scaled to an image of ``image_area`` pixels (unscaled if ``None``)."""
-        if image_area is None:
-            return float(self.min_pixels)
-        if isinstance(image_area, bool) or int(image_area) != image_area or image_area < 1:
-            raise InvalidDataError(f"visibility: image_area must be a positive integer number of pixels, got {image_area!r}")
-        return float(self.min_pixels) * float(image_area) / float(self.reference_area)
-
-    def to_dict(self) -> dict[str, float]:
-        return {"min_pixels": float(self.min_pixels), "min_fraction": float(self.min_fraction), "reference_area": self.reference_area}
-
-
-DEFAULT_THRESHOLDS = VisibilityThresholds()
-
-
-def classify(
-    vis: InstanceVisibility | None,
-    thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
-    image_area: int | None = None,
-) -> VisibilityClass:
-    """Classify one instance in one view.
-
-    Args:
-        vis: the instance's visibility in the view (``None``: no record → hidden).
-        thresholds: see :class:`VisibilityThresholds`.
-        image_area: the view's ``width * height`` in pixels, to scale ``min_pixels``; ``None``
-            uses ``min_pixels`` as is.
-    """
-    if vis is None or vis.visible_pixels == 0:
-        return VisibilityClass.HIDDEN
-    if vis.visible_pixels >= thresholds.pixels_for(image_area) and vis.visible_fraction >= thresholds.min_fraction:
-        return VisibilityClass.VISIBLE
-    return VisibilityClass.PARTIAL
-
 
 # =========================================================================================
 # Computing visibility from renders
@@ -121,7 +37,7 @@ def classify(
 VISIBILITY_IMAGE_SIZE = (160, 120)
 
 
-def _view_names(scene: Scene, views: Iterable[str] | None, caller: str) -> list[str]:
+def view_names(scene: Scene, views: Iterable[str] | None, caller: str) -> list[str]:
     """The requested view names (all of the scene's views if ``None``), checked to exist."""
     if views is None:
         names = list(scene.views)
@@ -140,7 +56,7 @@ def _view_names(scene: Scene, views: Iterable[str] | None, caller: str) -> list[
     return names
 
 
-def _check_size(image_size: tuple[int, int], caller: str) -> tuple[int, int]:
+def check_size(image_size: tuple[int, int], caller: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in image_size)
     except (TypeError, ValueError):
@@ -150,7 +66,7 @@ def _check_size(image_size: tuple[int, int], caller: str) -> tuple[int, int]:
     return w, h
 
 
-def _reduced(camera: Camera, image_size: tuple[int, int]) -> Camera:
+def reduced_camera(camera: Camera, image_size: tuple[int, int]) -> Camera:
     """``camera`` resized to ``image_size`` (never enlarged beyond its own resolution, per axis)."""
     w = min(image_size[0], camera.width)
     h = min(image_size[1], camera.height)
@@ -243,8 +159,8 @@ def compute_visibility(
 
     from spacedg.render.renderer import render
 
-    names = _view_names(scene, views, "compute_visibility")
-    size = _check_size(image_size, "compute_visibility")
+    names = view_names(scene, views, "compute_visibility")
+    size = check_size(image_size, "compute_visibility")
     gaussians = scene.gaussians
     members = _instance_index(gaussians, scene.id)
     instance_ids = [inst.id for inst in scene.instances]
@@ -252,7 +168,7 @@ def compute_visibility(
     out: dict[str, dict[int, InstanceVisibility]] = {}
     for name in tqdm(names, desc=f"visibility {scene.id}", unit="view", disable=not progress):
         full = scene.views[name]
-        cam = _reduced(full, size)
+        cam = reduced_camera(full, size)
         ids = render(gaussians, cam, outputs="instance_ids", backend=backend).instance_ids
         assert ids is not None
         present = ids[ids >= 0]
@@ -324,7 +240,7 @@ def load_or_compute_visibility(
     from spacedg.scene.derived_cache import read_npz_entry, views_key, write_npz_entry
 
     names = list(scene.views)
-    size = _check_size(image_size, "load_or_compute_visibility")
+    size = check_size(image_size, "load_or_compute_visibility")
     ids = [inst.id for inst in scene.instances]
     params = {"version": VISIBILITY_VERSION, "image_size": list(size), "canvas_scale": int(canvas_scale), "instances": ids}
     key = views_key(scene, names, params)

@@ -39,7 +39,7 @@ def _plain(cfg: Any) -> dict[str, Any]:
 
 def _spacedg_dataset(data: dict[str, Any], split: str, degradations: Any, clean_prob: float) -> Any:
     from spacedg.data.dataset import SpaceDGDataset
-    from spacedg.data.pipeline import BENCH_DEGRADATIONS
+    from spacedg.data.chain import BENCH_DEGRADATIONS
 
     size = data.get("image_size")
     if degradations is None:  # the config's null means the paper's nine (the dataset's own default is clean only)
@@ -70,8 +70,7 @@ def build_train_data(data: dict[str, Any]) -> Any:
 def build_val_items(data: dict[str, Any]) -> list[dict[str, Any]]:
     """``data.val.samples`` items of the ``val`` split (a seeded spread), rendered once, each with
     its prompt (no answer), images, condition and the fields the scorer reads."""
-    from spacedg.data.dataset import format_question, item_images
-    from spacedg.eval.prompts import chat_messages
+    from spacedg.data.chat import chat_messages, format_question, item_images
 
     val = data.get("val") or {}
     count = int(val.get("samples", 0))

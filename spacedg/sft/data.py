@@ -2,7 +2,7 @@
 
 Every sample becomes ``{"conversation": [system, user, assistant], "images": [uint8 H×W×3],
 "degradation_type": str}``: the conversation ``spacedg predict`` sends (system
-:data:`~spacedg.eval.scoring.ANSWER_PROMPT`, one image entry per view, the question with its
+:data:`~spacedg.data.chat.ANSWER_PROMPT`, one image entry per view, the question with its
 options) plus the assistant turn ``<answer>…</answer>``, so training and evaluation prompts agree.
 
 **Token budget.** A sample longer than ``max_length`` tokens is dropped, never truncated
@@ -27,8 +27,8 @@ from torch.utils.data import Dataset
 
 from spacedg.files import read_rgb
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
-from spacedg.eval.prompts import chat_messages
-from spacedg.eval.scoring import ANSWER_PROMPT
+from spacedg.data.chat import ANSWER_PROMPT, chat_messages, format_question, item_images
+from spacedg.plugins.answers import answer_text
 
 __all__ = ["BudgetedDataset", "ChatJsonlDataset", "OnlineSFTDataset", "token_lengths"]
 
@@ -50,8 +50,6 @@ class OnlineSFTDataset(Dataset):
 
     def question(self, index: int) -> tuple[str, str, int, str]:
         """``(question, answer, views, key)`` of item ``index`` without rendering it."""
-        from spacedg.data.dataset import answer_text, format_question
-
         record, _, _ = self.dataset.plan(index)
         return format_question(record.question, record.options), f"<answer>{answer_text(record.answer)}</answer>", len(record.views), record.id
 
@@ -59,8 +57,6 @@ class OnlineSFTDataset(Dataset):
         return self.dataset.options.image_size
 
     def __getitem__(self, index: int) -> dict[str, Any]:
-        from spacedg.data.dataset import answer_text, format_question, item_images
-
         item = self.dataset[index]
         images = item_images(item)
         question = format_question(item["question"], item["options"])

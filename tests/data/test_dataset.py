@@ -25,9 +25,11 @@ import pytest
 import torch
 from torch.utils.data import DistributedSampler
 
-from spacedg.data.dataset import CLEAN, SpaceDGDataset, chat_collate, format_question
+from spacedg.data.chain import CLEAN
+from spacedg.data.chat import chat_collate, format_question
+from spacedg.data.dataset import SpaceDGDataset
 from spacedg.scene.io import load_scene
-from spacedg.data.pipeline import BENCH_DEGRADATIONS
+from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.data.qa_index import QABuildConfig, index_paths, read_index
 from spacedg.errors import InvalidDataError, ParameterError, UnknownPluginError
 from spacedg.eval.scoring import ANSWER_PROMPT, score

@@ -13,7 +13,8 @@ import pytest
 
 import spacedg.data.export as export_module
 from spacedg.cli import main
-from spacedg.data.dataset import CLEAN, SpaceDGDataset
+from spacedg.data.chain import CLEAN
+from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.export import (
     TSV_COLUMNS,
     tsv_bytes,
@@ -23,7 +24,7 @@ from spacedg.data.export import (
     parse_shard,
     shard_from_env,
 )
-from spacedg.data.pipeline import BENCH_DEGRADATIONS
+from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.data.qa_index import QABuildConfig
 from spacedg.errors import InvalidDataError, ParameterError
 

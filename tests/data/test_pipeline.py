@@ -5,17 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spacedg.data.pipeline import (
-    BENCH_DEGRADATIONS,
-    MIXTURES,
-    DegradationChoice,
-    PipelineOptions,
-    degrade,
-    degrade_image,
-    degrade_variants,
-    parse_chain,
-    resolve_chain,
-)
+from spacedg.data.chain import BENCH_DEGRADATIONS, MIXTURES, DegradationChoice, parse_chain, resolve_chain
+from spacedg.data.pipeline import PipelineOptions, degrade, degrade_image, degrade_variants
 from spacedg.errors import InvalidDataError, ParameterError, PluginError, UnknownPluginError
 from spacedg.render.request import RenderRequest
 
@@ -207,11 +198,11 @@ def test_degrade_image_on_a_photo() -> None:
 def test_a_broken_plugin_output_is_named(small_room, views, monkeypatch) -> None:
     from dataclasses import replace
 
-    from spacedg.data import pipeline
+    from spacedg.data import chain as chain_module
     from spacedg.plugins.degradations import low_res
 
     broken = replace(low_res.SPEC, apply=lambda image, params, rng: image[:, :-1])
-    monkeypatch.setattr(pipeline, "get_degradation", lambda name: broken)
+    monkeypatch.setattr(chain_module, "get_degradation", lambda name: broken)
     with pytest.raises(PluginError, match="display degradation 'low_res' must return uint8"):
         degrade(small_room, views[:1], "low_res", options=SMALL)
 

@@ -15,7 +15,8 @@ from pathlib import Path
 import pytest
 
 from spacedg.cli import main
-from spacedg.data.dataset import SpaceDGDataset, chat_collate
+from spacedg.data.chat import chat_collate
+from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.export import export_bench
 from spacedg.data.qa_index import QABuildConfig
 from spacedg.errors import InvalidDataError, ParameterError
@@ -223,3 +224,25 @@ def test_shards_split_the_bench_and_eval_merges_them(bench_dir, model_dir, tmp_p
     assert merged.overall("tiny-qwen2.5-vl") == once.overall("tiny-qwen2.5-vl")
     assert main([*base, "--shard", "2/2"]) == 2
     assert "need 0 <= i < n" in capsys.readouterr().err
+
+
+def test_a_mixture_predicted_online_records_every_part_with_its_parameters(rooms, vlm, tmp_path) -> None:
+    dataset = SpaceDGDataset("bench", ["night_capture", "haze:3+low_res"], scenes=rooms, image_size=SIZE,
+                             qa_config=CONFIG, max_questions=1)
+    source = dataset_source(dataset)
+    mixture = next(i for i in source.indices if dataset.plan(i)[2] == "night_capture")
+    row = source.row(mixture)
+    parts = {d["name"]: d for d in row.degradation}
+    assert set(parts) == {"low_light", "motion_blur", "low_res"}
+    assert parts["low_light"]["preset"] == "bench" and parts["motion_blur"]["preset"] == "2" == parts["low_res"]["preset"]
+    assert all(d["params"] and isinstance(d["seed"], int) for d in row.degradation)
+    assert [dict(d) for d in row.degradation] == dataset[mixture]["degradation"]  # what the render recorded
+    info = degradation_info(row)  # before the fix: "degraded by night capture" with no ranges
+    assert "low light (severity given as the rendering parameter ranges: exposure in [0.003, 0.005]" in info
+    assert "motion blur (severity" in info and "low res (severity" in info and "night capture" not in info
+    summary = predict(vlm, source, tmp_path / "mix.jsonl", variant="degradation_info", progress=False)
+    assert summary.answered == len(dataset)
+    line = next(x for x in _lines(tmp_path / "mix.jsonl") if x["index"] == mixture)
+    assert [d["name"] for d in line["degradation"]] == [d["name"] for d in row.degradation]
+    chained = next(i for i in source.indices if dataset.plan(i)[2] == "haze+low_res")
+    assert {d["name"]: d["preset"] for d in source.row(chained).degradation} == {"haze": "3", "low_res": "bench"}

@@ -9,14 +9,8 @@ from spacedg.scene.box import OrientedBox
 from spacedg.scene.model import Instance, Scene
 import spacedg.scene.covisibility as covisibility
 from spacedg.scene.covisibility import covisibility_cache_path, covisibility_matrix, load_or_compute_covisibility, symmetrize
-from spacedg.scene.visibility import (
-    VisibilityClass,
-    VisibilityThresholds,
-    classify,
-    compute_visibility,
-    unbounded_canvas,
-    with_visibility,
-)
+from spacedg.scene.visibility_classes import VisibilityClass, VisibilityThresholds, classify
+from spacedg.scene.visibility import compute_visibility, unbounded_canvas, with_visibility
 from spacedg.errors import ParameterError
 from spacedg.render.camera import Camera, FisheyeLens
 from spacedg.render.gaussians import Gaussians

@@ -93,7 +93,7 @@ from spacedg.plugins.questions.view_sampling import (
     ViewPair,
     VisibilityIndex,
 )
-from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.geometry import (
     camera_center,

@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.scene.box import OrientedBox
-from spacedg.plugins.qa_record import MCQ_LETTERS
+from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.errors import InvalidDataError
 from spacedg.render.camera import Camera
 

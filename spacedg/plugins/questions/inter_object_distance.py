@@ -58,7 +58,7 @@ from spacedg.plugins.questions.view_sampling import (
     VisibilityIndex,
     label_key,
 )
-from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.records import (

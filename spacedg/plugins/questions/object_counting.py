@@ -48,7 +48,7 @@ import numpy as np
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import confusable
-from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
+from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.language import label_text, plural
 from spacedg.plugins.questions.records import make_record

@@ -61,11 +61,7 @@ import numpy as np
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import VisibilityIndex, confusable, label_key
-from spacedg.scene.visibility import (
-    DEFAULT_THRESHOLDS,
-    VisibilityClass,
-    VisibilityThresholds,
-)
+from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.language import indefinite_article, label_text
 from spacedg.plugins.questions.records import make_record

@@ -89,7 +89,7 @@ from spacedg.plugins.questions.view_sampling import (
     VisibilityIndex,
     split_across_views,
 )
-from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.geometry import (
     INTERSECT_TOL_M,

@@ -87,7 +87,7 @@ from spacedg.plugins.questions.view_sampling import (
     label_key,
     sample_pairs,
 )
-from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityThresholds
+from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.questions.geometry import build_mcq
 from spacedg.plugins.questions.language import find_in_image

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from spacedg.scene.model import Instance, Scene
-from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
+from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
 from spacedg.errors import InvalidDataError, ParameterError
 
 __all__ = [

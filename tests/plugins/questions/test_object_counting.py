@@ -31,7 +31,7 @@ import pytest
 from spacedg.scene.box import OrientedBox
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, InstanceVisibility, Scene
-from spacedg.scene.visibility import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
+from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins import AnswerType, TaskGroup, get_question_family, reset_registry
 from spacedg.plugins.questions import object_counting
