@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import os
 import shutil
 import subprocess
 import sys
@@ -16,8 +17,12 @@ from spacedg.plugins import AUTOLOAD_ENV, PLUGINS_ENV, reset_registry
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_SPLATS = REPO_ROOT.parent / "shared" / "data" / "splats"
-#: Example third-party plugin packages (pip-installed into temporary folders by ``installed``).
+#: Example third-party plugin packages (pip-installed into temporary folders by ``installed``
+#: and ``installed_family``).
 EXAMPLES = Path(__file__).resolve().parent / "plugins"
+#: The example question-family package (installed on its own, so the degradation examples'
+#: tests see exactly the plugins they expect).
+FAMILY_EXAMPLE = "spacedg-nearest-object"
 
 
 @pytest.fixture(scope="session")
@@ -87,6 +92,17 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Installed:
     return Installed(main, clash)
 
 
+@pytest.fixture(scope="session")
+def installed_family(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Build and install the example question family (a copy) into a folder of its own; returns that folder."""
+    root = tmp_path_factory.mktemp("family_example")
+    source = root / "src" / FAMILY_EXAMPLE
+    shutil.copytree(EXAMPLES / FAMILY_EXAMPLE, source, ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
+    target = root / "site"
+    _pip_install(target, [source])
+    return target
+
+
 @pytest.fixture
 def clean_env(monkeypatch: pytest.MonkeyPatch):
     """No plugin environment variables; a fresh registry before and after."""
@@ -101,6 +117,18 @@ def clean_env(monkeypatch: pytest.MonkeyPatch):
 def third_party(installed: Installed, clean_env: pytest.MonkeyPatch):
     """The vignetting and broken examples on sys.path (discoverable through their metadata)."""
     clean_env.syspath_prepend(str(installed.main))
+    importlib.invalidate_caches()
+    reset_registry()
+    yield clean_env
+    reset_registry()
+
+
+@pytest.fixture
+def family_plugin(installed_family: Path, clean_env: pytest.MonkeyPatch):
+    """The example question family on sys.path, and on PYTHONPATH for child processes (the CLI,
+    the dataset's index builder), discoverable through its installed metadata."""
+    clean_env.syspath_prepend(str(installed_family))
+    clean_env.setenv("PYTHONPATH", os.pathsep.join(p for p in (str(installed_family), os.environ.get("PYTHONPATH", "")) if p))
     importlib.invalidate_caches()
     reset_registry()
     yield clean_env

@@ -16,11 +16,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     qa = subparsers.add_parser("qa", help="build question indexes of scenes and summarise them")
     sub = qa.add_subparsers(dest="qa_command", required=True, metavar="ACTION")
 
-    build = sub.add_parser("build", help="generate every family's questions for scenes (JSONL per scene)")
+    build = sub.add_parser(
+        "build", help="generate every family's questions for scenes (JSONL per scene)",
+        description="Build each scene's question index. Without --families: the full index <scene id>.qa.jsonl "
+        "(every registered family), the one SpaceDGDataset, export and review read. With --families a,b: a selection "
+        "index <scene id>.qa.a+b.jsonl (names sorted, joined by '+') written beside the full index, which is never "
+        "replaced; its records equal that selection's records in a full index built with the same settings.",
+    )
     build.add_argument("scenes", type=Path, nargs="+", help="native scene folders, or folders of them")
-    build.add_argument("--out", type=Path, default=None, help="folder for <scene>.qa.jsonl (default: next to each scene)")
+    build.add_argument("--out", type=Path, default=None, help="folder for the index files (default: next to each scene)")
     build.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
-    build.add_argument("--families", default="", help="comma-separated family names (default: all registered)")
+    build.add_argument(
+        "--families", default="",
+        help="comma-separated family names: write them to their own <scene id>.qa.<a+b>.jsonl beside the full index, "
+        "which stays untouched (default: all registered families, written to <scene id>.qa.jsonl)",
+    )
     build.add_argument("--per-sub-type", type=int, default=25, help="records per sub_question_type and family per scene (default 25)")
     build.add_argument("--force", action="store_true", help="rebuild even when the index is up to date")
     build.add_argument("--backend", default="auto", choices=("auto", "cpu", "torch"), help="renderer for visibility/covisibility")
@@ -38,6 +48,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     stats = sub.add_parser("stats", help="counts per question type, answer balance, blind baseline")
     stats.add_argument("paths", type=Path, nargs="+", help="*.qa.jsonl files, or folders holding them (scene folders work)")
+    stats.add_argument("--families", default="",
+                       help="in folders, read the selection indexes that `qa build --families` wrote with these names "
+                       "(default: the full indexes <scene id>.qa.jsonl)")
     stats.add_argument("--json", action="store_true", help="print JSON instead of tables")
     stats.set_defaults(func=_stats)
 
@@ -46,8 +59,7 @@ def _build(args: argparse.Namespace) -> int:
     from spacedg.commands.scenes import _scene_dirs
     from spacedg.data.qa_index import QABuildConfig, build_scene_index
 
-    families = tuple(f.strip() for f in args.families.split(",") if f.strip())
-    config = QABuildConfig(seed=args.seed, families=families, per_sub_type=args.per_sub_type)
+    config = QABuildConfig(seed=args.seed, families=_family_names(args.families), per_sub_type=args.per_sub_type)
     tqdm.write(f"{'scene':<16} {'records':>8} {'visibility s':>12} {'covis s':>8} {'generate s':>10} {'q/s':>8}  index")
     total = 0
     start = time.perf_counter()
@@ -64,15 +76,27 @@ def _build(args: argparse.Namespace) -> int:
     return 0
 
 
-def _index_files(paths: list[Path]) -> list[Path]:
+def _family_names(text: str) -> tuple[str, ...]:
+    return tuple(f.strip() for f in text.split(",") if f.strip())
+
+
+def _index_files(paths: list[Path], families: tuple[str, ...] = ()) -> list[Path]:
+    """Index files named by ``paths``: files as given; in folders (or their sub-folders) the full
+    indexes ``*.qa.jsonl``, or with ``families`` that selection's ``*.qa.<selection>.jsonl``."""
+    from spacedg.data.qa_index import selection_name
+
+    selection = selection_name(families)
+    pattern = f"*.qa.{selection}.jsonl" if selection else "*.qa.jsonl"
     found: list[Path] = []
     for path in paths:
         if path.is_file():
             found.append(path)
         elif path.is_dir():
-            files = sorted(path.glob("*.qa.jsonl")) or sorted(path.glob("*/*.qa.jsonl"))
+            files = sorted(path.glob(pattern)) or sorted(path.glob(f"*/{pattern}"))
             if not files:
-                raise InvalidDataError(f"{path}: no *.qa.jsonl in it or its sub-folders; build them with `spacedg qa build`")
+                others = sorted(p.name for p in [*path.glob("*.qa.*.jsonl"), *path.glob("*/*.qa.*.jsonl")])
+                hint = f" (it has selection indexes {others[:3]}: pass --families)" if others and not selection else ""
+                raise InvalidDataError(f"{path}: no {pattern} in it or its sub-folders{hint}; build them with `spacedg qa build`")
             found.extend(files)
         else:
             raise InvalidDataError(f"{path}: no such file or folder")
@@ -84,7 +108,7 @@ def _stats(args: argparse.Namespace) -> int:
     from spacedg.data.qa_stats import answer_balance, blind_baseline, count_table, format_table
 
     by_scene = {}
-    for file in _index_files(args.paths):
+    for file in _index_files(args.paths, _family_names(args.families)):
         records = read_index(file)
         if records:
             by_scene.setdefault(records[0].scene_id, []).extend(records)

@@ -82,8 +82,10 @@ class SpaceDGDataset(Dataset):
         seed: seed of the degradation choices and their noise (not of the splits or questions).
         cache: byte budget of each worker's LRU cache of scenes (their Gaussians) and clean
             renders (shared by every chain without a raster step), default 2 GiB.
-        qa_config: how the question indexes are built (default: ``QABuildConfig()``, seed 0;
-            the index files are shared by every dataset over the same folders).
+        qa_config: how the question indexes are built (default: ``QABuildConfig()``, seed 0:
+            each scene's full index ``<scene id>.qa.jsonl``, shared by every dataset over the
+            same folders; a config naming ``families`` reads that selection's own index file,
+            :func:`~spacedg.data.qa_index.index_paths`).
         split_fractions: ``(val, bench)`` share of scenes.
         split_seed: seed of the scene → split assignment (kept apart from ``seed`` so that
             changing the augmentation seed never moves a scene between splits).
@@ -181,7 +183,7 @@ class SpaceDGDataset(Dataset):
         return chains
 
     def _records(self, folder: Path) -> list[QARecord]:
-        jsonl, _ = index_paths(load_scene(folder).id, folder)
+        jsonl, _ = index_paths(load_scene(folder).id, folder, self.qa_config.families)
         return read_index(jsonl)
 
     @staticmethod

@@ -17,6 +17,19 @@ Building one scene (:func:`build_scene_index`):
    order) and ``<out>/<scene id>.qa.meta.json`` (key, config, counts, timings) atomically.
    ``out`` defaults to the scene folder itself.
 
+**Full index and selection indexes** (:func:`index_paths`). The *full* index
+``<scene id>.qa.jsonl`` holds every registered family (``QABuildConfig.families`` empty): it is
+what :class:`~spacedg.data.dataset.SpaceDGDataset` reads by default, what exports and the review
+page find. A build restricted to some families (``families=("a", "b")``, ``spacedg qa build
+--families a,b``) writes a *selection index* beside it, ``<scene id>.qa.a+b.jsonl`` with
+``<scene id>.qa.a+b.meta.json`` (names sorted and joined by ``+``; a selection longer than
+:data:`MAX_SELECTION_CHARS` characters is named ``families-<12 hex of its SHA-1>``), and never
+touches the full index. Records are seeded per (scene, family), so a selection index holds
+exactly the records that family selection has in the full index built with the same settings:
+writing it apart loses nothing, while replacing or merging into the full index would leave one
+file whose meta key no longer describes its content. A dataset built with
+``qa_config=QABuildConfig(families=...)`` reads (and builds) that selection's index.
+
 An index is **reused** when its meta file's key matches: the key hashes the index version,
 the build config, the SHA-256 of ``scene.json`` (views, poses, instances) and the selected
 families with the distributions and versions that provide them and the SHA-256 of each
@@ -40,11 +53,11 @@ import numpy as np
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.errors import FileFormatError, ParameterError
-from spacedg.plugins.specs import AnswerType
+from spacedg.plugins.specs import NAME_PATTERN, AnswerType
 
 __all__ = [
     "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "prepare_scene", "generate_records",
-    "index_paths", "build_scene_index", "read_index", "truth_key", "index_is_current", "ensure_indexes",
+    "MAX_SELECTION_CHARS", "selection_name", "index_paths", "build_scene_index", "read_index", "truth_key", "index_is_current", "ensure_indexes",
 ]
 
 #: Bump when the index layout or the build procedure changes (part of the key).
@@ -57,7 +70,9 @@ class QABuildConfig:
 
     Attributes:
         seed: master seed; each (scene, family) draws from ``derive_seed(seed, scene, family)``.
-        families: family names to run (empty = every registered family).
+        families: family names to run (empty = every registered family, the *full* index);
+            stored sorted and without repeats. A non-empty selection has an index file of its
+            own (:func:`index_paths`).
         per_sub_type: at most this many records per ``sub_question_type`` and family.
         max_scan: at most this many candidates examined per family.
         pool_factor: candidates pooled per sub type, as a multiple of ``per_sub_type``, for
@@ -81,7 +96,9 @@ class QABuildConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ParameterError(f"QABuildConfig: {name} must be a positive integer, got {value!r}")
-        object.__setattr__(self, "families", tuple(self.families))
+        if isinstance(self.families, str):
+            raise ParameterError(f"QABuildConfig: families must be a sequence of family names, not one string ({self.families!r})")
+        object.__setattr__(self, "families", tuple(sorted(set(self.families))))
         object.__setattr__(self, "visibility_size", tuple(self.visibility_size))
         object.__setattr__(self, "covisibility_size", tuple(self.covisibility_size))
 
@@ -226,10 +243,32 @@ def generate_records(
     return out
 
 
-def index_paths(scene_id: str, out_dir: str | Path) -> tuple[Path, Path]:
-    """``(<out>/<id>.qa.jsonl, <out>/<id>.qa.meta.json)``."""
+#: A family selection whose ``+``-joined names are longer than this is named by its hash.
+MAX_SELECTION_CHARS = 100
+
+
+def selection_name(families: Sequence[str]) -> str:
+    """The file-name part of a family selection: ``""`` for the full index (no selection), else
+    the sorted distinct names joined by ``+`` (``"object_counting+camera_rotation"`` order-free),
+    or ``families-<first 12 hex of the SHA-1 of that text>`` when it exceeds :data:`MAX_SELECTION_CHARS`."""
+    names = sorted(set(families))
+    for name in names:
+        if not isinstance(name, str) or not NAME_PATTERN.match(name):
+            raise ParameterError(f"family selection: {name!r} is not a family name (^[a-z][a-z0-9_]*$); see `spacedg plugins`")
+    text = "+".join(names)
+    if len(text) > MAX_SELECTION_CHARS:
+        return "families-" + hashlib.sha1(text.encode("utf-8")).hexdigest()[:12]
+    return text
+
+
+def index_paths(scene_id: str, out_dir: str | Path, families: Sequence[str] = ()) -> tuple[Path, Path]:
+    """``(<out>/<id>.qa.jsonl, <out>/<id>.qa.meta.json)``: the full index; with ``families``, the
+    selection index ``(<out>/<id>.qa.<selection>.jsonl, <out>/<id>.qa.<selection>.meta.json)``
+    (:func:`selection_name`; see the module docstring)."""
     out = Path(out_dir)
-    return out / f"{scene_id}.qa.jsonl", out / f"{scene_id}.qa.meta.json"
+    selection = selection_name(families)
+    stem = f"{scene_id}.qa" if not selection else f"{scene_id}.qa.{selection}"
+    return out / f"{stem}.jsonl", out / f"{stem}.meta.json"
 
 
 def _index_key(scene_json: Path, config: QABuildConfig, families: Iterable[Any], judge: Any) -> str:
@@ -277,7 +316,8 @@ def build_scene_index(
     backend: str = "auto",
     progress: bool = True,
 ) -> SceneQA:
-    """Build (or reuse) the question index of one native scene folder (see the module docstring)."""
+    """Build (or reuse) the question index of one native scene folder (see the module docstring):
+    the full index, or with ``config.families`` the selection index beside it (:func:`index_paths`)."""
     from spacedg.scene.io import load_scene
     from spacedg.files import atomic_write_bytes
 
@@ -285,7 +325,7 @@ def build_scene_index(
     scene = load_scene(scene_dir)
     scene_json = scene_dir / "scene.json" if scene_dir.is_dir() else scene_dir
     key = _index_key(scene_json, config, _families(config.families), judge)
-    jsonl, meta_path = index_paths(scene.id, out_dir if out_dir is not None else scene_json.parent)
+    jsonl, meta_path = index_paths(scene.id, out_dir if out_dir is not None else scene_json.parent, config.families)
     if not force and _is_current(jsonl, meta_path, key):
         meta = _read_meta(meta_path) or {}
         return SceneQA(scene.id, jsonl, read_index(jsonl), reused=True, seconds=dict(meta.get("seconds", {})))
@@ -321,7 +361,7 @@ def index_is_current(scene_dir: str | Path, config: QABuildConfig = QABuildConfi
     scene_dir = Path(scene_dir)
     scene_json = scene_dir / "scene.json" if scene_dir.is_dir() else scene_dir
     scene_id = load_scene(scene_dir).id
-    jsonl, meta_path = index_paths(scene_id, out_dir if out_dir is not None else scene_json.parent)
+    jsonl, meta_path = index_paths(scene_id, out_dir if out_dir is not None else scene_json.parent, config.families)
     return _is_current(jsonl, meta_path, _index_key(scene_json, config, _families(config.families), None))
 
 

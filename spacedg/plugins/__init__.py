@@ -13,6 +13,9 @@ Public API::
 
 See :mod:`spacedg.plugins.specs` for the stage contracts, :mod:`spacedg.plugins.registry`
 for loading rules and environment variables, and ``spacedg plugins`` for what is installed.
+Question-family authors import their helpers (records, wording, visibility, view pairs,
+options, answers) from :mod:`spacedg.plugins.authoring`, a module of its own (not re-exported
+here: it reaches into the question helpers, which this package's contracts do not need).
 """
 
 from spacedg.plugins.hookspecs import ENTRY_POINT_GROUP, hookimpl

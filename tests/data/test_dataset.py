@@ -39,7 +39,7 @@ SIZE = (64, 48)  # (width, height)
 FAMILIES = ("camera_rotation", "inter_object_distance", "object_bounding_size_estimation", "object_counting")
 CONFIG = QABuildConfig(seed=0, per_sub_type=2, families=FAMILIES)
 MIX = ["haze", "low_res:3", "jpeg_compression", "defocus", "water_droplets"]
-INDEX_FILES = shutil.ignore_patterns("*.qa.jsonl", "*.qa.meta.json", "cache")
+INDEX_FILES = shutil.ignore_patterns("*.qa.*", "cache")  # full and selection indexes
 
 
 def make(rooms: list[Path], split: str = "train", degradations=None, **kwargs) -> SpaceDGDataset:
@@ -76,14 +76,14 @@ def test_splits_disjoint_by_scene_and_cover_all(rooms, splits):
     for split, ds in splits.items():
         assert ds.records and {r.scene_id for r in ds.records} <= scenes[split]
     # every question of every scene is in exactly one split
-    total = sum(len(read_index(index_paths(load_scene(d).id, d)[0])) for d in rooms)
+    total = sum(len(read_index(index_paths(load_scene(d).id, d, CONFIG.families)[0])) for d in rooms)
     assert sum(len(ds.records) for ds in splits.values()) == total
 
 
 def test_records_are_the_index_records(rooms, splits):
     for ds in splits.values():
         expected = [
-            r for d in rooms if load_scene(d).id in ds.scene_dirs for r in read_index(index_paths(load_scene(d).id, d)[0])
+            r for d in rooms if load_scene(d).id in ds.scene_dirs for r in read_index(index_paths(load_scene(d).id, d, CONFIG.families)[0])
         ]
         assert ds.records == expected
         assert {r.question_type for r in ds.records} <= set(FAMILIES)

@@ -22,7 +22,9 @@ def test_build_reuse_and_rebuild(qa_room_dirs, tmp_path):
     config = QABuildConfig(seed=3, families=("object_counting", "camera_translation"), per_sub_type=5)
     first = build_scene_index(room, config, progress=False)
     assert not first.reused and first.records
-    jsonl, meta = index_paths(first.scene_id, room)
+    jsonl, meta = index_paths(first.scene_id, room, config.families)
+    assert jsonl.name == f"{first.scene_id}.qa.camera_translation+object_counting.jsonl"
+    assert not index_paths(first.scene_id, room)[0].exists()  # a selection never writes the full index
     assert first.path == jsonl and meta.is_file() and (room / "cache" / f"{first.scene_id}.visibility.npz").is_file()
     assert read_index(jsonl) == first.records
     subs = {}
@@ -100,14 +102,18 @@ def test_cli_build_and_stats(qa_room_dirs, tmp_path, capsys):
             "--families", "object_counting,object_existence_estimation", "--per-sub-type", "6"]
     assert main(argv) == 0
     text = capsys.readouterr().out
-    assert "records in" in text and len(list(out.glob("*.qa.jsonl"))) == 2
+    # a family selection has its own index beside the (absent) full one
+    assert "records in" in text and len(list(out.glob("*.qa.object_counting+object_existence_estimation.jsonl"))) == 2
+    assert not list(out.glob("*.qa.jsonl"))
     assert main(argv) == 0 and "reused" in capsys.readouterr().out
-    assert main(["qa", "stats", str(out), "--json"]) == 0
+    assert main(["qa", "stats", str(out)]) == 2 and "pass --families" in capsys.readouterr().err
+    assert main(["qa", "stats", str(out), "--json", "--families", "object_existence_estimation,object_counting"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["scenes"] == 2 and report["records"] == sum(row["n"] for row in report["counts"])
     assert {row["question_type"] for row in report["counts"]} == {"object_counting", "object_existence_estimation"}
     assert report["blind_baseline"][-1]["question_type"] == "ALL"
-    assert main(["qa", "stats", str(out)]) == 0 and "Blind baseline" in capsys.readouterr().out
+    files = sorted(map(str, out.glob("*.jsonl")))
+    assert main(["qa", "stats", *files]) == 0 and "Blind baseline" in capsys.readouterr().out
     assert main(["qa", "stats", str(tmp_path / "nothing")]) == 2
     assert "no such file" in capsys.readouterr().err
 
@@ -166,3 +172,33 @@ def test_qa_preview_sheet_and_cli(qa_room_dirs, tmp_path, capsys):
     assert ascii_text("15° – ×") == "15 deg - x"
     assert main(["qa", "preview", str(room), "--out", str(out), "--types", "no_such_type"]) == 2
     assert "no questions of type" in capsys.readouterr().err
+
+
+def test_selection_names_and_paths(tmp_path):
+    from spacedg.data.qa_index import MAX_SELECTION_CHARS, selection_name
+
+    assert selection_name(()) == "" and index_paths("room", tmp_path) == (tmp_path / "room.qa.jsonl", tmp_path / "room.qa.meta.json")
+    assert selection_name(["object_counting", "camera_rotation", "object_counting"]) == "camera_rotation+object_counting"
+    assert index_paths("room", tmp_path, ("b", "a"))[1] == tmp_path / "room.qa.a+b.meta.json"
+    long = [f"family_number_{k:02d}" for k in range(12)]
+    name = selection_name(long)
+    assert name.startswith("families-") and len(name) == len("families-") + 12 and name == selection_name(long[::-1])
+    assert len("+".join(long)) > MAX_SELECTION_CHARS
+    with pytest.raises(ParameterError, match="not a family name"):
+        selection_name(["../escape"])
+    assert QABuildConfig(families=("b", "a", "b")).families == ("a", "b")
+    with pytest.raises(ParameterError, match="not one string"):
+        QABuildConfig(families="object_counting")
+
+
+def test_selection_never_replaces_the_full_index(qa_room_dirs, tmp_path):
+    """Building a family selection leaves the full index (bytes and key) as it was; the selection's
+    records are exactly that family's records in the full index (per-(scene, family) seeds)."""
+    room = shutil.copytree(qa_room_dirs[2], tmp_path / "room", ignore=shutil.ignore_patterns("*.qa.*"))
+    full = build_scene_index(room, QABuildConfig(per_sub_type=3), progress=False)
+    before = [p.read_bytes() for p in index_paths(full.scene_id, room)]
+    part = build_scene_index(room, QABuildConfig(per_sub_type=3, families=("object_counting",)), progress=False, force=True)
+    assert part.path == index_paths(full.scene_id, room, ("object_counting",))[0] != full.path
+    assert [p.read_bytes() for p in index_paths(full.scene_id, room)] == before
+    assert build_scene_index(room, QABuildConfig(per_sub_type=3), progress=False).reused
+    assert part.records and part.records == [r for r in full.records if r.question_type == "object_counting"]
