@@ -34,6 +34,7 @@ routes it (and still reads older exports that carry our internal names).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -114,7 +115,7 @@ _EXISTENCE = "object_existence_estimation"
 
 def _name(value: Any) -> str:
     """A name cell as text: ``None`` and NaN (pandas' empty cell) are ``""``; spaces stripped."""
-    if value is None or (isinstance(value, float) and value != value):
+    if value is None or (isinstance(value, float) and math.isnan(value)):
         return ""
     return str(value).strip()
 

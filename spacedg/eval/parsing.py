@@ -55,7 +55,9 @@ _EXPLICIT = re.compile(
 _LEADING = re.compile(r"^[\s*\"'`]*(?:\(([A-Da-d])\)|([A-Da-d])\s*[.):])(?:\s|$)")
 # any single letter A–D standing alone (not part of a word, number, or "3D").
 _LONE = re.compile(r"(?<![A-Za-z0-9'’_])([A-Da-d])(?![A-Za-z0-9'’_])")
-_VERBS_AFTER_OPTION = frozenset({"is", "seems", "would", "should", "fits", "matches", "looks", "best", "appears", "describes"})
+_VERBS_AFTER_OPTION = frozenset({"is", "seems", "would", "should", "fits", "matches", "looks", "best", "appears", "describes",
+                                 # an article is never followed by a conjunction: "A or B" names two options
+                                 "or", "and", "nor", "vs", "versus"})
 _PUNCT = re.compile(r"[^\w\s]+")
 
 
@@ -128,7 +130,8 @@ def parse_mcq(text: str | None, options: Sequence[str] | Mapping[str, Any] | Non
        option's text (``"left"`` for ``"B. left"``) → that option's letter.
 
     Letters inside words never count (the ``A`` of ``Answer``), nor ``D`` in ``3D``; the
-    article ``a``/``A`` followed by a word never counts (see rules above).
+    article ``a``/``A`` followed by a word never counts (see rules above), except a verb
+    (``"A is correct"``) or a conjunction (``"A or B"`` names two options: ambiguous → ``None``).
     """
     answer = extract_answer_text(text)
     if not answer:

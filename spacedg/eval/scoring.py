@@ -8,30 +8,27 @@ Pipeline for one prediction
 1. :func:`extract_answer_text`: the content of the first ``<answer>…</answer>`` (tags
    case-insensitive, content may span lines), else the whole text; stripped. ``None`` → ``""``.
 2. The answer type: the record's ``answer_type``, or :func:`route` from
-   ``(question_type, sub_question_type)`` when a plain mapping has none.
+   ``(question_type, sub_question_type)`` when a plain mapping has none (the public evaluator's
+   routing rule: an exported row is scored as the same answer type by both).
 3. A type-specific parser (each one runs step 1 itself, so raw model text may be passed):
    :func:`parse_mcq`, :func:`parse_yes_no`, :func:`parse_number`, :func:`parse_count`,
    :func:`parse_size_list`. A parser returns ``None`` when it cannot find an unambiguous answer.
 4. The score in ``[0, 1]``: MCQ / YN / COUNT exact match (1 or 0); NA
    :func:`mean_relative_accuracy`; SIZE_LIST the mean of the per-edge MRA.
-   **An unparseable prediction always scores 0** (the public evaluator scored an unparseable
-   MCQ prediction against an unparseable ground truth as a hit; fixed here).
+   **An unparseable prediction always scores 0**.
 
-:func:`summarize` averages :class:`ScoreResult` s over **every** answer type (the public
-evaluator's overall figure left NA and SIZE_LIST out; fixed here) and per answer type.
+:func:`summarize` averages :class:`ScoreResult` s over **every** answer type and per answer type.
 
-Deliberate deviations from the public evaluator (all on inputs it mishandled)
-----------------------------------------------------------------------------
+Deliberate deviations from the public evaluator
+-----------------------------------------------
 
-* Length units written after a number are converted to metres (``"30 cm"`` → 0.3; mm, cm,
-  m, km, ft, inches); the reference would read ``"30 cm"`` as 30 m.
-* ``"1,234"`` is one thousand two hundred and thirty-four, number words are read
-  (``"twenty-one"`` → 21).
-* MRA thresholds are exact: a relative error of exactly 0.05 counts at θ = 0.95 (see
-  :func:`mean_relative_accuracy`); ground truth 0 has a defined score.
-* SIZE_LIST predictions are sorted before comparing (see :func:`score`).
-* An MCQ answer that gives no letter but exactly repeats one option's text is mapped to that
-  option's letter (see :func:`parse_mcq`).
+Every difference from the public SpaceDG evaluator (VLMEvalKit ``SpaceDGBench`` with its EASI
+helpers) is listed in ``docs/scoring.md``, one line each with an example, both scores and the
+reason: existence scored as yes/no on records (lettered on exported rows), internal names of
+older exports, unparseable truths never a hit, option text → letter, a final letter / yes-no
+answer after a correction, hedges, units converted, decimal comma, thousands, number words,
+uncertainties and ranges, exact MRA thresholds, truth 0, fractional counts refused, sorted size
+lists, extra numbers in size lists, and NA / size lists in the overall figure.
 """
 
 from __future__ import annotations
@@ -99,7 +96,7 @@ class ScoreResult:
 # ------------------------------------------------------------------ routing
 def _cell(value: Any) -> str:
     """A table cell as stripped text: ``None`` and NaN (an empty pandas / xlsx cell) are ``""``."""
-    if value is None or (isinstance(value, float) and value != value):
+    if value is None or (isinstance(value, float) and math.isnan(value)):
         return ""
     return str(value).strip()
 
@@ -152,9 +149,10 @@ def mean_relative_accuracy(pred: float | None, truth: float) -> float:
     Exactness: both numbers are taken as their shortest round-trip decimal strings (``2.1``
     is 2.1, not the binary 2.1000000000000000888…) and compared in exact decimal arithmetic as
     ``|p − t| ≤ (1 − θ)·|t|``, so boundary cases count (truth 2.0, pred 2.1: e = 0.05 exactly
-    → counts at θ = 0.95 → MRA 1.0). The public code's floating-point division drops such
-    boundary hits (and VSI-Bench's ``linspace(0.5, 0.95, 11)`` uses 11 thresholds spaced 0.045);
-    the paper's definition, followed here, has the 10 thresholds above.
+    → counts at θ = 0.95 → MRA 1.0). The public code uses the same 10 thresholds (its
+    ``int((0.95 - 0.5) / 0.05 + 2)`` is 10 in floating point) but compares in floating point,
+    which drops some boundary hits (truth 0.1, pred 0.08: e = 0.2 exactly, 0.6 there, 0.7 here);
+    the paper's definition is followed here.
 
     Edge cases: ``pred`` ``None`` or non-finite → 0.0. ``truth == 0``: relative error is
     undefined, so MRA is 1.0 when ``pred == 0`` and 0.0 otherwise. A non-finite ``truth``

@@ -90,8 +90,7 @@ def _is_float(text: str) -> bool:
 def public_image_file(lmu_data: Path, tsv_dir: Path, rel: str) -> Path | None:
     """``dump_image`` as read: a leading ``images/`` is dropped, then the path is tried under the TSV's
     folder, ``$LMUData``, ``$LMUData/images`` and ``$LMUData/images/spacedg_bench``."""
-    rel = rel.replace("\\", "/")
-    rel = rel[len("images/"):] if rel.startswith("images/") else rel
+    rel = rel.replace("\\", "/").removeprefix("images/")
     for base in (tsv_dir, lmu_data, lmu_data / "images", lmu_data / "images" / "spacedg_bench"):
         if (base / rel).is_file():
             return base / rel
@@ -162,13 +161,20 @@ def test_single_view_types_carry_an_empty_sub_type_and_existence_is_lettered(exp
         assert (chat["sub_question_type"] or "") == ("" if pd.isna(row.sub_question_type) else row.sub_question_type)
 
 
-def test_lmudata_layout_resolves_every_image_as_the_public_class_does(exported):
+def test_lmudata_layout_resolves_every_image_as_the_public_class_does(exported, tmp_path):
     _, out, _ = exported
     assert (out / "spacedg_bench.tsv").read_bytes() == (out / "bench.tsv").read_bytes()
     table = pd.read_csv(out / "spacedg_bench.tsv", sep="\t")
     for cell in table["image_path"]:
         paths = ast.literal_eval(cell)  # toliststr
         assert paths and all(public_image_file(out, out, p) == out / p for p in paths)
+    # a shared LMUData folder (other benches' TSVs beside it) is read by spacedg eval too
+    lmu = tmp_path / "LMUData"
+    lmu.mkdir()
+    shutil.copy(out / "spacedg_bench.tsv", lmu)
+    (lmu / "MMBench_DEV_EN.tsv").write_text("index\tquestion\n0\tq\n")
+    (lmu / "images").symlink_to(out / "images")
+    assert len(load_bench(lmu)) == len(table)
 
 
 def test_spacedg_eval_scores_the_true_answers_of_the_export_as_correct(exported):
@@ -242,3 +248,24 @@ def test_an_old_format_export_folder_is_not_resumed(exported, tmp_path):
     with pytest.raises(Exception, match="format version 1"):
         export_bench(dataset, copy, shard_size=64, progress=False)
     assert os.path.exists(copy / "bench.tsv")
+
+
+def test_rows_the_public_evaluator_would_route_differently_are_reported(exported, tmp_path):
+    """A third-party family's names the public table does not know (e.g. a YN family with sub type
+    "pair", as in the README's plugin example) are reported by the merge, not silently exported."""
+    from spacedg.data.export import merge_parts
+    from spacedg.data.public_format import public_mismatch
+
+    assert public_mismatch({"question_type": "camera_closer", "sub_question_type": "pair", "answer_type": "YN"})
+    assert public_mismatch({"question_type": "object_counting", "sub_question_type": "", "answer_type": "COUNT"}) is None
+    assert "empty" in public_mismatch({"question_type": "camera_closer", "sub_question_type": "", "answer_type": "NA"})
+    _, out, _ = exported
+    copy = tmp_path / "edited"
+    shutil.copytree(out, copy)
+    part = copy / "parts" / "part-00000.jsonl"
+    lines = [json.loads(line) for line in part.read_text().splitlines()]
+    lines[0].update(question_type="camera_closer", sub_question_type="pair", answer_type="YN")
+    part.write_text("".join(json.dumps(line) + "\n" for line in lines))
+    result = merge_parts(copy)
+    assert list(result.mismatches) == ["camera_closer/pair"] and "MCQ" in result.mismatches["camera_closer/pair"]
+    assert json.loads((copy / "summary.json").read_text())["public_evaluator_mismatches"] == result.mismatches

@@ -153,6 +153,8 @@ def test_route_refuses_an_empty_sub_type_the_public_table_lacks(qtype: str) -> N
         ("The answer is A. Actually, the answer is C.", None),
         ("A, B, C or D", None),
         ("(A/B/C/D)", None),
+        ("A or B", None),  # two options offered: a hedge, not B
+        ("Either A or C", None),
         ("It happened at 10 a.m.", None),
         ("In 3D space it is left", None),
         ("Answer", None),
