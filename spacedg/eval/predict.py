@@ -100,7 +100,9 @@ def dataset_source(dataset: Any) -> Source:
         return item_images(item)
 
     name = f"SpaceDGDataset(split={dataset.split!r}, items={len(dataset)})"
-    return Source(name, dataset_fingerprint(dataset), list(range(len(dataset))), row, images)
+    # the rows are in the public bench's format (existence lettered): a run that answered the earlier
+    # yes/no rows of the same dataset is another bench, not one to resume
+    return Source(name, f"{dataset_fingerprint(dataset)}-public", list(range(len(dataset))), row, images)
 
 
 @dataclass
