@@ -15,7 +15,8 @@ black, and questions come out of black images. :func:`check_frame` measures, che
 
 Refused (``problems`` non-empty, :meth:`FrameReport.raise_if_bad` raises
 :class:`FrameMismatchError`) when fewer than :data:`MIN_IN_VIEW` of the Gaussians are in any
-view ("Gaussians and cameras disagree"), when the rendered views are all nearly empty
+view or fewer than :data:`MIN_VIEWS_SEEING` of the views see any ("Gaussians and cameras
+disagree"), when the rendered views are all nearly empty
 (< :data:`MIN_COVERAGE`), or when fewer than :data:`MIN_BOXES` of the boxes hold Gaussians
 ("boxes and Gaussians disagree"). :func:`diagnose` tries named corrections (the inverse of a
 ``dataparser_transforms.json``, nerfstudio's ``applied_transform``, OpenGL camera axes, a
@@ -32,10 +33,15 @@ import numpy as np
 from spacedg.errors import InvalidDataError
 from spacedg.scene.model import Scene
 
-__all__ = ["FrameMismatchError", "FrameReport", "check_frame", "diagnose", "require_frame", "MIN_IN_VIEW", "MIN_COVERAGE", "MIN_BOXES"]
+__all__ = [
+    "FrameMismatchError", "FrameReport", "check_frame", "diagnose", "require_frame", "generic_corrections", "normalised_hint",
+    "MIN_IN_VIEW", "MIN_VIEWS_SEEING", "MIN_COVERAGE", "MIN_BOXES",
+]
 
 #: Fewest share of Gaussians inside some view's frustum.
 MIN_IN_VIEW = 0.10
+#: Fewest share of views that see Gaussians (every view of a capture looks at the scene).
+MIN_VIEWS_SEEING = 0.5
 #: Fewest mean share of covered pixels over the rendered check views.
 MIN_COVERAGE = 0.02
 #: Fewest share of boxes that hold Gaussians.
@@ -133,6 +139,8 @@ def check_frame(scene: Scene, *, renders: int = 4, render_width: int = 64, backe
             coverage.append(float((frame.alpha > 0.5).mean()))
     if in_view < MIN_IN_VIEW:
         problems.append(f"the Gaussians and the cameras disagree: only {in_view:.1%} of the Gaussians lie in any view")
+    elif views_seeing < MIN_VIEWS_SEEING:
+        problems.append(f"the Gaussians and the cameras disagree: only {views_seeing:.0%} of the views see any Gaussians")
     if coverage and max(coverage) < MIN_COVERAGE:
         problems.append(f"the cameras see (almost) nothing: the {len(coverage)} check renders cover at most {max(coverage):.1%} of their pixels")
     if boxes is not None and boxes < MIN_BOXES:

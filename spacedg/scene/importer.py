@@ -525,6 +525,8 @@ def _corrections(scene: Scene, parts: _Parts) -> dict[str, Callable[[Scene], Sce
 def _nearby_dataparser(parts: _Parts) -> list[Path]:
     found = []
     for folder in (parts.gaussians_path.parent, parts.gaussians_path.parent.parent):
-        for pattern in ("dataparser_transforms.json", "*/dataparser_transforms.json", "*/*/*/dataparser_transforms.json"):
+        # ns-train writes outputs/<experiment>/<method>/<timestamp>/dataparser_transforms.json
+        for pattern in ("dataparser_transforms.json", "*/dataparser_transforms.json", "*/*/*/dataparser_transforms.json",
+                        "*/*/*/*/dataparser_transforms.json"):
             found += [p for p in sorted(folder.glob(pattern))[:3] if p not in found]
     return found[:3]
