@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -41,6 +42,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Detect the layout of SRC, read Gaussians, cameras and instance boxes, check that they share one frame, "
         "give the Gaussians instance ids, and write a native scene folder (scene.json + gaussians.ply).",
     )
+    # let "--up -y" (an axis with a minus) be a value, not an option
+    if hasattr(imp, "_negative_number_matcher"):
+        imp._negative_number_matcher = re.compile(r"^-(?:[xyzXYZ]|\.?\d)")
     imp.add_argument("src", type=Path, metavar="SRC",
                      help="INRIA output folder, COLMAP project/model folder, nerfstudio folder or transforms.json, "
                           "ScanNet++ scene folder, or a Gaussians file (.ply/.splat/.spz) with --cameras")
