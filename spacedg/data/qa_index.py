@@ -143,10 +143,17 @@ def prepare_scene(
     progress: bool = True,
     timings: dict[str, float] | None = None,
 ) -> Scene:
-    """``scene`` with visibility and covisibility attached (cached under ``cache_dir`` if given)."""
+    """``scene`` with visibility and covisibility attached (cached under ``cache_dir`` if given).
+
+    First the scene's frame is checked (a scene whose cameras see nothing is refused, naming the
+    cause) and Gaussians without instance ids get them by box containment (with a warning)."""
     from spacedg.scene.covisibility import with_covisibility
+    from spacedg.scene.frame_check import require_frame
+    from spacedg.scene.labelling import ensure_instance_ids
     from spacedg.scene.visibility import compute_visibility, load_or_compute_visibility, with_visibility
 
+    require_frame(scene, backend=backend)
+    scene = ensure_instance_ids(scene)
     t0 = time.perf_counter()
     if cache_dir is None:
         table = compute_visibility(scene, image_size=config.visibility_size, backend=backend, progress=progress)
