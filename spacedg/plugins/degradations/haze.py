@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.plugins.degradations.common import aux_image, check_linear_rgb, surface_far_depth
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 
 __all__ = ["SPEC", "haze", "VISIBILITY_DENSITY"]
@@ -127,8 +127,4 @@ SPEC = DegradationSpec(
     order=10.0,
 )
 
-
-@hookimpl
-def spacedg_register_degradations(register: Any) -> None:
-    """Register :data:`SPEC`."""
-    register(SPEC)
+spacedg_register_degradations = registering(SPEC)

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from spacedg.plugins.degradations.common import check_display_image
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 
 __all__ = ["SPEC", "low_res", "reduced_size"]
@@ -70,8 +70,4 @@ SPEC = DegradationSpec(
     order=10.0,
 )
 
-
-@hookimpl
-def spacedg_register_degradations(register: Any) -> None:
-    """Register :data:`SPEC`."""
-    register(SPEC)
+spacedg_register_degradations = registering(SPEC)

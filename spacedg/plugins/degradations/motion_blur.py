@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import MotionBlur
@@ -88,8 +88,4 @@ SPEC = DegradationSpec(
     order=30.0,
 )
 
-
-@hookimpl
-def spacedg_register_degradations(register: Any) -> None:
-    """Register :data:`SPEC`."""
-    register(SPEC)
+spacedg_register_degradations = registering(SPEC)
