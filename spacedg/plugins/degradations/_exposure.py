@@ -78,9 +78,7 @@ class SensorExposure:
     def __init__(self, name: str, exposure: ParamSpec, *, clip: bool, presets: Mapping[str, tuple[float, float]], description: str) -> None:
         self.clip = clip
         self.spec = DegradationSpec(
-            name=name,
-            category=Category.PHOTOMETRIC,
-            stage=Stage.LINEAR,
+            name=name, category=Category.PHOTOMETRIC, stage=Stage.LINEAR,
             params=(exposure, *SENSOR_PARAMS),
             presets={preset: {"exposure": ParamRange(low, high), **SENSOR_PRESET} for preset, (low, high) in presets.items()},
             apply=self.apply,

@@ -55,9 +55,7 @@ def apply(request: RenderRequest, params: Mapping[str, Any], rng: np.random.Gene
 
 
 SPEC = DegradationSpec(
-    name="defocus",
-    category=Category.OPTICAL_DYNAMIC,
-    stage=Stage.RASTER,
+    name="defocus", category=Category.OPTICAL_DYNAMIC, stage=Stage.RASTER,
     params=(
         ParamSpec("aperture", "px", "CoC radius of a point at infinity, pixels at the rendered resolution.", low=0.0, high=1000.0, harsher="higher"),
         ParamSpec("depth", "m", "Focus distance along the optical axis.", low=0.01, high=1e4),

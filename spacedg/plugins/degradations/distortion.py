@@ -104,9 +104,7 @@ def _coefficient(name: str, power: int, harsher: str | None) -> ParamSpec:
 
 
 SPEC = DegradationSpec(
-    name="distortion",
-    category=Category.OPTICAL_DYNAMIC,
-    stage=Stage.RASTER,
+    name="distortion", category=Category.OPTICAL_DYNAMIC, stage=Stage.RASTER,
     params=(
         _coefficient("k1", 2, "lower"),
         _coefficient("k2", 4, None),

@@ -103,9 +103,7 @@ def _preset(density: tuple[float, float], depth_ref: float = 0.0) -> dict[str, P
 
 
 SPEC = DegradationSpec(
-    name="haze",
-    category=Category.METEOROLOGICAL,
-    stage=Stage.LINEAR,
+    name="haze", category=Category.METEOROLOGICAL, stage=Stage.LINEAR,
     params=(
         ParamSpec("density", "1", "Optical depth β·D at the normalisation depth D.", low=0.0, high=100.0, harsher="higher"),
         ParamSpec("airlight", "linear", "Atmospheric light A (1 = diffuse white).", low=0.0, high=100.0),

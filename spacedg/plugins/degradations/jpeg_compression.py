@@ -75,9 +75,7 @@ def apply(image: np.ndarray, params: Mapping[str, Any], rng: np.random.Generator
 
 
 SPEC = DegradationSpec(
-    name="jpeg_compression",
-    category=Category.DIGITAL,
-    stage=Stage.DISPLAY,
+    name="jpeg_compression", category=Category.DIGITAL, stage=Stage.DISPLAY,
     params=(QUALITY,),
     presets={
         "bench": {"quality": ParamRange(2, 5)},

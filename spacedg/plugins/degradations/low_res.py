@@ -53,9 +53,7 @@ def apply(image: np.ndarray, params: Mapping[str, Any], rng: np.random.Generator
 
 
 SPEC = DegradationSpec(
-    name="low_res",
-    category=Category.DIGITAL,
-    stage=Stage.DISPLAY,
+    name="low_res", category=Category.DIGITAL, stage=Stage.DISPLAY,
     params=(ParamSpec("scale", "1", "Linear size factor of the reduced image.", low=1e-6, high=1.0, harsher="lower"),),
     presets={
         "bench": {"scale": ParamRange(0.02, 0.05)},

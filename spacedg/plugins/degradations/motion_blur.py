@@ -67,9 +67,7 @@ def _preset(trans: tuple[float, float], rot: tuple[float, float]) -> dict[str, P
 
 
 SPEC = DegradationSpec(
-    name="motion_blur",
-    category=Category.OPTICAL_DYNAMIC,
-    stage=Stage.RASTER,
+    name="motion_blur", category=Category.OPTICAL_DYNAMIC, stage=Stage.RASTER,
     params=(
         ParamSpec("trans", "m", "Camera path length over the exposure (direction random per view).", low=0.0, high=10.0, harsher="higher"),
         ParamSpec("rot", "rad", "Camera rotation angle over the exposure (axis random per view).", low=0.0, high=math.pi, harsher="higher"),

@@ -378,9 +378,7 @@ def apply(rgb: np.ndarray, aux: Mapping[str, np.ndarray], params: Mapping[str, A
 
 
 SPEC = DegradationSpec(
-    name=NAME,
-    category=Category.METEOROLOGICAL,
-    stage=Stage.LINEAR,
+    name=NAME, category=Category.METEOROLOGICAL, stage=Stage.LINEAR,
     params=(SCALE, RADIUS, STRENGTH, BLUR_SIGMA, BLUR_KERNEL),
     presets={
         "bench": {"scale": (2.5, 4.0), "radius": (0.25, 0.75), "strength": (0.3, 0.5), "blur_sigma": (2.0, 2.5), "blur_kernel": 9},

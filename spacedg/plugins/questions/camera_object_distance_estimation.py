@@ -84,16 +84,8 @@ from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
-    "BBOX_CENTER_DISTANCE",
-    "DECIMALS",
-    "FAMILY",
-    "NAME",
-    "SINGLE_VIEW",
-    "SUB_QUESTION_TYPES",
-    "TEMPLATES",
-    "TWO_VIEW_TEMPLATE",
-    "generate",
-    "make_family",
+    "BBOX_CENTER_DISTANCE", "DECIMALS", "FAMILY", "NAME", "SINGLE_VIEW", "SUB_QUESTION_TYPES", "TEMPLATES", "TWO_VIEW_TEMPLATE",
+    "generate", "make_family",
 ]
 
 NAME = "camera_object_distance_estimation"

@@ -88,6 +88,7 @@ TEMPLATES: tuple[str, ...] = (
     "Check if {article} {label} is present in this picture.",
 )
 
+
 def render_question(template: int, label: str) -> str:
     """The question text of template index ``template`` for ``label``."""
     return TEMPLATES[template].format(article=indefinite_article(label), label=label_text(label))
