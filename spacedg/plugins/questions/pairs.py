@@ -91,10 +91,10 @@ def object_pairs(index: VisibilityIndex, pair: ViewPair, rng: np.random.Generato
     The candidates are the ``len(ones) · len(twos)`` combinations of
     :func:`~spacedg.plugins.questions.records.referable_ids` of A (``ones``) and of B
     (``twos``), candidate ``k`` = ``(ones[k // len(twos)], twos[k % len(twos)])``, walked in the
-    order of :func:`~spacedg.plugins.questions.records.lazy_permutation` (``n``, ``rng``): its
-    draws are taken only as the caller asks for more, so a caller drawing from ``rng`` between
-    candidates interleaves with it the same way on every run. The same instance twice is
-    skipped. Either object may also be seen in the other image; nothing is required there.
+    order of :func:`~spacedg.plugins.questions.records.lazy_permutation` of their number and
+    ``rng``: its draws are taken only as the caller asks for more, so a caller drawing from
+    ``rng`` between candidates interleaves with it the same way on every run. The same instance
+    twice is skipped. Either object may also be seen in the other image; nothing is required there.
     """
     ones, twos = referable_ids(index, pair.a), referable_ids(index, pair.b)
     for k in lazy_permutation(len(ones) * len(twos), rng):
