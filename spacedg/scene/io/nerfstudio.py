@@ -40,6 +40,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from spacedg._checks import require_homogeneous
 from spacedg.files import FileValueError, PathLike, as_path, read_json
 from spacedg.scene.io.colmap import DEFAULT_FISHEYE_MAX_THETA
 from spacedg.errors import FileFormatError, InvalidDataError
@@ -100,10 +101,7 @@ def _pose(where: str, value: Any) -> np.ndarray:
         matrix = np.vstack([matrix, [0.0, 0.0, 0.0, 1.0]])
     if matrix.shape != (4, 4):
         raise FileFormatError(f"{where}: 'transform_matrix' must be 4×4 (or 3×4), got shape {matrix.shape}")
-    if not np.isfinite(matrix).all():
-        raise FileValueError(f"{where}: 'transform_matrix' holds NaN or Inf")
-    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
-        raise FileValueError(f"{where}: 'transform_matrix' last row must be [0, 0, 0, 1], got {matrix[3].tolist()}")
+    require_homogeneous(matrix, f"{where}: 'transform_matrix'", FileValueError)
     rot = matrix[:3, :3]
     err = float(np.abs(rot.T @ rot - np.eye(3)).max())
     if err > RIGID_TOL:
