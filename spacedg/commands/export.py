@@ -32,6 +32,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                                                        "(torchrun) or SLURM_ARRAY_TASK_ID/COUNT (default 0/1)")
     parser.add_argument("--shard-size", "--chunk-size", dest="shard_size", type=int, default=None,
                         help="items per resumable chunk; the same in every shard (default 256)")
+    parser.add_argument("--all-bench", action="store_true",
+                        help="put every scene in the bench split (works from one scene); same as --split-fractions 0,1")
+    parser.add_argument("--split-fractions", default=None, metavar="VAL,BENCH",
+                        help="share of scenes for val and bench, the rest train (default 0.1,0.1; 0 leaves a split empty)")
     parser.add_argument("--skip-bad-scenes", action="store_true", help="skip scenes that cannot be read (they are named)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--backend", default="auto", choices=("auto", "cpu", "torch"), help="renderer (default auto: compiled CPU)")
@@ -49,6 +53,22 @@ def _size(text: str | None) -> tuple[int, int] | None:
     if w < 8 or h < 8:
         raise ParameterError(f"--image-size {text}: width and height must be >= 8 pixels")
     return w, h
+
+
+def _fractions(args: argparse.Namespace) -> tuple[float, float]:
+    if args.all_bench and args.split_fractions is not None:
+        raise ParameterError("--all-bench and --split-fractions are alternatives; pass one")
+    if args.all_bench:
+        if args.split != "bench":
+            raise ParameterError(f"--all-bench puts every scene in the bench split, but --split is {args.split!r}")
+        return (0.0, 1.0)
+    if args.split_fractions is None:
+        return (0.1, 0.1)
+    try:
+        val, bench = (float(v) for v in args.split_fractions.split(","))
+    except ValueError:
+        raise ParameterError(f"--split-fractions must read VAL,BENCH, e.g. 0.1,0.1 or 0,1, got {args.split_fractions!r}") from None
+    return val, bench
 
 
 def _names(text: str | None) -> list[str] | None:
@@ -72,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     if shard_size < 1:
         raise ParameterError(f"--shard-size must be >= 1, got {shard_size}")
     size = _size(args.image_size)
+    fractions = _fractions(args)
     chains = _names(args.degradations)
     for chain in chains or ():
         Chain.parse(chain).check()  # an unknown name or preset fails now, with suggestions
@@ -80,7 +101,14 @@ def run(args: argparse.Namespace) -> int:
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,
         qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type),
         on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device, max_questions=args.max_questions,
+        split_fractions=fractions,
     )
+    counts = {name: sum(1 for s in dataset.scene_splits.values() if s == name) for name in ("train", "val", "bench")}
+    print(f"scenes: {counts['bench']} bench, {counts['val']} val, {counts['train']} train; exporting split {args.split!r} "
+          f"({len(dataset.scene_dirs)} scene(s), {len(dataset.records)} question(s))")
+    if not len(dataset):
+        raise ParameterError(f"split {args.split!r} has no items ({len(dataset.scene_dirs)} scene(s) in it); "
+                             "pass --all-bench or --split-fractions to put scenes there, or check the scenes' questions (spacedg qa stats)")
     for folder, error in dataset.skipped.items():
         print(f"skipped scene {folder}: {error}")
     summary = export_bench(dataset, args.out, shard=shard, shard_size=shard_size, progress=not args.no_progress)

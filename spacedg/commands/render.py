@@ -15,6 +15,8 @@ from spacedg.errors import InvalidDataError, ParameterError
 
 #: Largest image side accepted by --width / --height, pixels.
 MAX_SIDE = 16384
+#: Smallest share of covered pixels (alpha > ½) of a render that is not "empty".
+MIN_COVERAGE = 0.001
 #: Depth PNG unit: millimetres, so uint16 covers 0–65.535 m.
 DEPTH_SCALE = 1000.0
 
@@ -55,6 +57,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--backend", choices=BACKENDS, default="auto",
                         help="auto (default), cpu (compiled tiles) or torch")
     render.add_argument("--device", default=None, help="torch device for the torch backend, e.g. cuda (default cpu)")
+    render.add_argument("--allow-empty", action="store_true",
+                        help="write the PNG even when the view renders (almost) nothing (default: exit non-zero)")
     render.set_defaults(func=_render)
 
 
@@ -184,6 +188,12 @@ def _render(args: argparse.Namespace) -> int:
         scene.gaussians, camera, defocus=defocus, motion=motion,
         outputs="rgb,depth" if want_depth else "rgb", backend=backend, device=args.device,
     )
+    covered = float((frame.alpha > 0.5).mean())
+    if covered < MIN_COVERAGE and not args.allow_empty:
+        raise InvalidDataError(
+            f"view {args.view} of {args.scene} renders empty ({covered:.2%} of the pixels covered): the Gaussians and this "
+            "camera do not meet (a frame mismatch? see `spacedg scenes info`); pass --allow-empty to write it anyway"
+        )
     write_png_atomic(args.out, encode_srgb_u8(frame.rgb)[:, :, ::-1], "--out")
     stats = frame.stats
     visible = f"{stats['visible']:,}" if "visible" in stats else "n/a"

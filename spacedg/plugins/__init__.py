@@ -3,9 +3,9 @@
 Public API::
 
     from spacedg.plugins import (
-        hookimpl,                                     # decorator for plugin authors
+        hookimpl, registering,                        # for plugin authors: the hook decorator, or a hook from constants
         DegradationSpec, ParamSpec, ParamRange, Category, Stage,
-        QuestionFamily, AnswerType, TaskGroup,
+        QuestionFamily, FamilyFactory, AnswerType, TaskGroup,
         get_registry, reset_registry,
         list_degradations, get_degradation,
         list_question_families, get_question_family,
@@ -18,7 +18,7 @@ options, answers) from :mod:`spacedg.plugins.authoring`, a module of its own (no
 here: it reaches into the question helpers, which this package's contracts do not need).
 """
 
-from spacedg.plugins.hookspecs import ENTRY_POINT_GROUP, hookimpl
+from spacedg.plugins.hookspecs import ENTRY_POINT_GROUP, hookimpl, registering
 from spacedg.plugins.registry import (
     AUTOLOAD_ENV,
     PLUGINS_ENV,
@@ -34,7 +34,7 @@ from spacedg.plugins.registry import (
     reset_registry,
 )
 from spacedg.plugins.qa_record import QARecord
-from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.question_family import FamilyFactory, QuestionFamily
 from spacedg.plugins.specs import (
     REQUIRED_PRESETS,
     SEVERITY_PRESETS,
@@ -57,10 +57,12 @@ __all__ = [
     "REQUIRED_PRESETS",
     "SEVERITY_PRESETS",
     "hookimpl",
+    "registering",
     "AnswerType",
     "BrokenPlugin",
     "Category",
     "DegradationSpec",
+    "FamilyFactory",
     "DisplayApply",
     "LinearApply",
     "ParamRange",

@@ -38,7 +38,7 @@ import threading
 import traceback
 import types
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any, Literal
 
 import pluggy
@@ -117,14 +117,8 @@ class PluginOrigin:
         return what
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "value": self.value,
-            "distribution": self.distribution,
-            "version": self.version,
-            "builtin": self.builtin,
-            "source": self.source,
-        }
+        """Every field, in declaration order (plain JSON types)."""
+        return asdict(self)
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,9 @@
 """Supervised fine-tuning of VLMs on SpaceDG samples (``python -m spacedg.sft +experiment=qwen``).
 
-Modules: :mod:`~spacedg.sft.app` (the Hydra app), :mod:`~spacedg.sft.model` (freezing, LoRA,
-checkpoint export), :mod:`~spacedg.sft.data` (samples and the token budget),
+Modules: :mod:`~spacedg.sft.app` (the Hydra app), :mod:`~spacedg.sft.config` (config groups →
+objects with ``hydra.utils.instantiate``), :mod:`~spacedg.sft.model` (model options, freezing, LoRA,
+checkpoint export), :mod:`~spacedg.sft.sources` (data options: what trains and what evaluates),
+:mod:`~spacedg.sft.data` (samples and the token budget),
 :mod:`~spacedg.sft.collator` (assistant-only labels), :mod:`~spacedg.sft.trainer` (strict resume,
 generation-based evaluation), :mod:`~spacedg.sft.template` (chat template with answer markers).
 """

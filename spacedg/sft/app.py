@@ -1,9 +1,13 @@
 """``python -m spacedg.sft +experiment=qwen``: supervised fine-tuning of a VLM on SpaceDG samples.
 
-The Hydra app reads ``conf/sft.yaml`` (shipped in the package as ``spacedg.conf``), builds the
-model (:mod:`spacedg.sft.model`), the training data (:mod:`spacedg.sft.data`: online degraded
-samples or an exported JSONL, under a token budget), the collator (:mod:`spacedg.sft.collator`)
-and the trainer (:mod:`spacedg.sft.trainer`), then trains. ``output_dir`` receives:
+The Hydra app reads ``conf/sft.yaml`` (shipped in the package as ``spacedg.conf``) and instantiates
+its ``data`` group into :class:`~spacedg.sft.sources.DataOptions` (degradation names checked before
+anything is built) and its ``model`` group into :class:`~spacedg.sft.model.ModelOptions`
+(:func:`spacedg.sft.config.build`: ``hydra.utils.instantiate`` with spacedg's errors). From those it
+builds the model (:func:`~spacedg.sft.model.prepare_model`), the training data (online degraded
+samples or an exported JSONL, under a token budget: :mod:`spacedg.sft.data`), the val items, the
+collator (:mod:`spacedg.sft.collator`) and the trainer (:mod:`spacedg.sft.trainer`, with
+``TrainingArguments`` from the ``train`` group), then trains. ``output_dir`` receives:
 
 * ``checkpoint-N/``: weights (or LoRA adapters), optimizer state, the processor (with its image
   budget and chat template) and ``spacedg_sft.yaml``; ``spacedg predict --model`` loads it;
@@ -17,76 +21,32 @@ set ``output_dir`` (or ``hydra.run.dir``) explicitly, since each rank evaluates 
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import multiprocessing
 import os
 import random
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import hydra
 import numpy as np
 import torch
+from omegaconf import DictConfig, OmegaConf
+from transformers import TrainingArguments
 
 from spacedg.errors import ParameterError
+from spacedg.sft.collator import SFTCollator
+from spacedg.sft.config import build
+from spacedg.sft.data import BudgetedDataset, token_lengths
+from spacedg.sft.model import ModelOptions, prepare_model, save_for_inference, trainable_summary
+from spacedg.sft.sources import DataOptions
+from spacedg.sft.template import ensure_generation_markers
+from spacedg.sft.trainer import EpochCallback, SaveProcessorCallback, SFTTrainer, latest_checkpoint
+from spacedg.vlm import save_tiny_vlm
 
-__all__ = ["build_val_items", "main", "run"]
-
-
-def _plain(cfg: Any) -> dict[str, Any]:
-    from omegaconf import OmegaConf
-
-    return OmegaConf.to_container(cfg, resolve=True) if not isinstance(cfg, dict) else dict(cfg)
-
-
-def _spacedg_dataset(data: dict[str, Any], split: str, degradations: Any, clean_prob: float) -> Any:
-    from spacedg.data.dataset import SpaceDGDataset
-    from spacedg.data.chain import BENCH_DEGRADATIONS
-
-    size = data.get("image_size")
-    if degradations is None:  # the config's null means the paper's nine (the dataset's own default is clean only)
-        degradations = list(BENCH_DEGRADATIONS)
-    return SpaceDGDataset(
-        split, degradations, scenes=data.get("scenes"), question_types=data.get("question_types"),
-        severity=data.get("severity", "random") if split != "bench" else "bench", clean_prob=clean_prob,
-        image_size=tuple(size) if size else None, seed=int(data.get("seed", 0)),
-        max_questions=data.get("max_questions") if split == "train" else None,
-        builtin_rooms=int(data.get("builtin_rooms", 16)),
-    )
-
-
-def build_train_data(data: dict[str, Any]) -> Any:
-    """The unbudgeted training samples of ``data`` (the ``data`` config group as a dict)."""
-    from spacedg.sft.data import ChatJsonlDataset, OnlineSFTDataset
-
-    source = data.get("source", "online")
-    if source == "jsonl":
-        if not data.get("jsonl"):
-            raise ParameterError("data.source=jsonl needs data.jsonl=PATH (a chat .jsonl written by spacedg export)")
-        return ChatJsonlDataset(data["jsonl"])
-    if source != "online":
-        raise ParameterError(f"data.source must be online or jsonl, got {source!r}")
-    return OnlineSFTDataset(_spacedg_dataset(data, "train", data.get("degradations"), float(data.get("clean_prob", 0.1))))
-
-
-def build_val_items(data: dict[str, Any]) -> list[dict[str, Any]]:
-    """``data.val.samples`` items of the ``val`` split (a seeded spread), rendered once, each with
-    its prompt (no answer), images, condition and the fields the scorer reads."""
-    from spacedg.data.chat import chat_messages, format_question, item_images
-
-    val = data.get("val") or {}
-    count = int(val.get("samples", 0))
-    if count <= 0 or data.get("source", "online") != "online":
-        return []
-    dataset = _spacedg_dataset(data, "val", val.get("degradations"), float(val.get("clean_prob", 0.1)))
-    order = np.random.default_rng(int(data.get("seed", 0))).permutation(len(dataset))[:count]
-    items = []
-    for index in sorted(int(i) for i in order):
-        item = dataset[index]
-        images = item_images(item)
-        conversation = chat_messages(format_question(item["question"], item["options"]), len(images))
-        truth = {k: item[k] for k in ("answer", "answer_type", "question_type", "sub_question_type")}
-        truth["options"] = {"ABCD"[i]: text for i, text in enumerate(item["options"])}
-        items.append({"conversation": conversation, "images": images, "degradation_type": item["degradation_type"], "truth": truth})
-    return items
+__all__ = ["main", "run", "training_arguments"]
 
 
 def _bf16(value: Any) -> bool:
@@ -95,18 +55,17 @@ def _bf16(value: Any) -> bool:
     return bool(value)
 
 
-def training_arguments(train: dict[str, Any], output_dir: Path, seed: int, evaluate: bool) -> Any:
-    """``TrainingArguments`` from the ``train`` group; an unknown key is one clear error."""
-    from transformers import TrainingArguments
-
+def training_arguments(train: Mapping[str, Any], output_dir: Path, seed: int, evaluate: bool) -> TrainingArguments:
+    """``TrainingArguments`` from the ``train`` group (keys set to null are left to transformers'
+    defaults; ``bf16: auto`` is on where the device supports it); an unknown key is one clear error."""
     options = {k: v for k, v in train.items() if v is not None}
-    options["bf16"] = _bf16(options.get("bf16", "auto"))
+    if "bf16" in options:
+        options["bf16"] = _bf16(options["bf16"])
     if not torch.cuda.is_available():
         # Without this, accelerate treats a multi-process CPU launch (torchrun) as not distributed and
         # every rank would train its own copy; with it, DDP runs on gloo.
         options.setdefault("use_cpu", True)
     eval_steps = options.pop("eval_steps", None)
-    options.setdefault("save_strategy", "steps")
     if evaluate and eval_steps:
         options.update(eval_strategy="steps", eval_steps=eval_steps)
     else:
@@ -118,8 +77,6 @@ def training_arguments(train: dict[str, Any], output_dir: Path, seed: int, evalu
 
 
 def _resume_path(resume: Any, output_dir: Path) -> str | None:
-    from spacedg.sft.trainer import latest_checkpoint
-
     if resume in (None, False, "", "null"):
         return None
     if resume == "auto":
@@ -131,13 +88,17 @@ def _resume_path(resume: Any, output_dir: Path) -> str | None:
     return str(path)
 
 
-def _tiny_base(path: str, folder: Path) -> Path:
-    """``tiny:<family>`` saved to ``folder`` (once; reused when it exists)."""
-    from spacedg.vlm import save_tiny_vlm
-
+def _model_options(node: DictConfig, output_dir: Path) -> ModelOptions:
+    """The ``model`` group as :class:`ModelOptions`. A tiny model built in code is saved first (once, to
+    ``output_dir/base-model``), so checkpoints (LoRA adapters included) name a real base folder; ranks
+    other than the first build the same weights in memory (same seed) instead of racing on the folder."""
+    options: ModelOptions = build(node, "model")
+    if options.tiny_family is None or int(os.environ.get("LOCAL_RANK", "0")) != 0:
+        return options
+    folder = output_dir / "base-model"
     if not (folder / "config.json").is_file():
-        save_tiny_vlm(folder, path.split(":", 1)[1])
-    return folder
+        save_tiny_vlm(folder, options.tiny_family)
+    return dataclasses.replace(options, path=str(folder))
 
 
 def _seed_everything(seed: int) -> None:
@@ -146,60 +107,41 @@ def _seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def run(cfg: Any) -> dict[str, Any]:
+def run(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     """Train as ``cfg`` (the composed Hydra config, or a plain dict of the same shape) says;
     returns the summary also written to ``train_summary.json``."""
-    from spacedg.sft.collator import SFTCollator
-    from spacedg.sft.data import BudgetedDataset, token_lengths
-    from spacedg.sft.model import ModelOptions, prepare_model, save_for_inference, trainable_summary
-    from spacedg.sft.template import ensure_generation_markers
-    from spacedg.sft.trainer import EpochCallback, SaveProcessorCallback, SFTTrainer
-
-    config = _plain(cfg)
+    cfg = cfg if isinstance(cfg, DictConfig) else OmegaConf.create(dict(cfg))
+    config = OmegaConf.to_container(cfg, resolve=True)
     output_dir = Path(config["output_dir"])
-    seed = int(config.get("seed", 0))
+    seed = config["seed"]
     _seed_everything(seed)
-    data = dict(config["data"])
-    model_config = dict(config["model"])
-    if str(model_config["path"]).startswith("tiny:") and int(os.environ.get("LOCAL_RANK", "0")) == 0:
-        # A tiny model built in code is saved first, so checkpoints (LoRA adapters included) name a real base folder.
-        # Other ranks build the same weights in memory (same seed) instead of racing on the folder.
-        model_config["path"] = str(_tiny_base(str(model_config["path"]), output_dir / "base-model"))
-    try:
-        options = ModelOptions(**model_config)
-    except TypeError as err:
-        raise ParameterError(f"model: {err}; the model group takes the fields of spacedg.sft.model.ModelOptions") from None
-    model, processor = prepare_model(options)
+    data: DataOptions = build(cfg.data, "data")  # degradation names are checked here, before any model or index
+    model, processor = prepare_model(_model_options(cfg.model, output_dir))
     replaced = ensure_generation_markers(processor)
-    train_data = build_train_data(data)
+    train_data = data.train_data()
     lengths = token_lengths(train_data, processor)
-    budgeted = BudgetedDataset(train_data, lengths, int(data.get("max_length", 4096)))
-    val_items = build_val_items(data)
-    if int(config["train"].get("dataloader_num_workers") or 0) > 0:
+    budgeted = BudgetedDataset(train_data, lengths, data.max_length)
+    val_items = data.val_items()
+    args = training_arguments(config["train"], output_dir, seed, evaluate=bool(val_items))
+    if args.dataloader_num_workers > 0:
         # The main process has rendered (val items): numba's OpenMP threads are not fork-safe, so workers start
         # from a fork server (the datasets pickle small).
-        import multiprocessing
-
         multiprocessing.set_start_method("forkserver", force=True)
-    args = training_arguments(dict(config["train"]), output_dir, seed, evaluate=bool(val_items))
-    val = data.get("val") or {}
-    from omegaconf import OmegaConf
-
     trainer = SFTTrainer(
         model=model, args=args, train_dataset=budgeted, eval_dataset=val_items or None,
-        data_collator=SFTCollator(processor, int(data.get("max_length", 4096))),
-        val_items=val_items, processor=processor, val_max_new_tokens=int(val.get("max_new_tokens", 32)),
-        val_batch_size=int(val.get("batch_size", 8)),
+        data_collator=SFTCollator(processor, data.max_length),
+        val_items=val_items, processor=processor, val_max_new_tokens=data.val.max_new_tokens,
+        val_batch_size=data.val.batch_size,
         callbacks=[SaveProcessorCallback(processor, {"spacedg_sft.yaml": OmegaConf.to_yaml(OmegaConf.create(config))}),
                    EpochCallback(train_data)],
     )
     stats = {"samples": len(lengths), "kept": len(budgeted), "dropped_over_budget": budgeted.dropped,
-             "longest_tokens": budgeted.longest, "max_length": int(data.get("max_length", 4096)),
+             "longest_tokens": budgeted.longest, "max_length": data.max_length,
              "chat_template_replaced": replaced, "parameters": trainable_summary(model)}
     if args.process_index == 0:
         output_dir.mkdir(parents=True, exist_ok=True)
         (output_dir / "data_stats.json").write_text(json.dumps(stats, indent=2) + "\n")
-    result = trainer.train(resume_from_checkpoint=_resume_path(config.get("resume"), output_dir))
+    result = trainer.train(resume_from_checkpoint=_resume_path(config["resume"], output_dir))
     losses = [entry["loss"] for entry in trainer.state.log_history if "loss" in entry]
     evaluations = [entry for entry in trainer.state.log_history if "eval_score" in entry]
     summary = {
@@ -220,7 +162,6 @@ def run(cfg: Any) -> dict[str, Any]:
 
 def main() -> None:
     """Console entry point (``spacedg-sft`` and ``python -m spacedg.sft``)."""
-    import hydra
 
     @hydra.main(version_base="1.3", config_path="pkg://spacedg.conf", config_name="sft")
     def _app(cfg: Any) -> None:

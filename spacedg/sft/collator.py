@@ -16,6 +16,7 @@ from typing import Any
 import torch
 
 from spacedg.errors import InvalidDataError
+from spacedg.vlm import encode_chats
 
 __all__ = ["IGNORE_INDEX", "SFTCollator"]
 
@@ -34,8 +35,6 @@ class SFTCollator:
         self.dropped = 0
 
     def _encode(self, samples: Sequence[dict[str, Any]]) -> Any:
-        from spacedg.vlm import encode_chats
-
         return encode_chats(self.processor, [s["conversation"] for s in samples], [s["images"] for s in samples],
                             add_generation_prompt=False, return_assistant_mask=True)
 

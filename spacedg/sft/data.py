@@ -29,6 +29,7 @@ from spacedg.files import read_rgb
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
 from spacedg.data.chat import ANSWER_PROMPT, chat_messages, format_question, item_images
 from spacedg.plugins.answers import answer_text
+from spacedg.vlm import encode_chats
 
 __all__ = ["BudgetedDataset", "ChatJsonlDataset", "OnlineSFTDataset", "token_lengths"]
 
@@ -138,8 +139,6 @@ class ChatJsonlDataset(Dataset):
 def token_lengths(dataset: OnlineSFTDataset | ChatJsonlDataset, processor: Any) -> list[int]:
     """Tokens of every sample (system + user with images + answer), measured once per distinct
     question on blank images of the dataset's image size (image tokens depend only on size)."""
-    from spacedg.vlm import encode_chats
-
     size = dataset.image_size()
     width, height = size if size is not None else (640, 480)
     blank = np.zeros((height, width, 3), np.uint8)

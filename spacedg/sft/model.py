@@ -14,7 +14,7 @@ Every parameter is in exactly one group; an architecture with parameters outside
 refused with a :class:`~spacedg.errors.ParameterError` naming them.
 
 **Freezing** uses ``requires_grad_()`` on each group's parameters (setting ``requires_grad`` on a
-*module* attribute freezes nothing). Defaults: vision frozen, merger and language model trained.
+*module* attribute freezes nothing). Defaults (``conf/model/base.yaml``): vision frozen, merger and language model trained.
 
 **LoRA** (``lora=True``) adds adapters to the language model only: the default target regex matches
 the attention and MLP projections of its decoder layers (``q/k/v/o_proj``, ``gate/up/down_proj``),
@@ -47,14 +47,18 @@ from __future__ import annotations
 
 import copy
 import re
+import sys
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import huggingface_hub
 import torch
 
 from spacedg.errors import ParameterError
+from spacedg.vlm.loading import load_vlm, resolve_dtype, set_pixel_budget
+from spacedg.vlm.tiny import TINY_FAMILIES, build_tiny_vlm
 
 __all__ = ["GROUPS", "ModelOptions", "default_lora_target", "drop_vision_input_grad_hooks", "module_groups", "prepare_model", "save_for_inference",
            "trainable_summary"]
@@ -72,6 +76,10 @@ _TINY_PREFIX = "tiny:"
 class ModelOptions:
     """What to load and what to train (see the module doc).
 
+    Every field is required: the defaults live once, in ``conf/model/base.yaml`` (which the other
+    model configs extend); the app builds this class from the ``model`` group with
+    ``hydra.utils.instantiate``.
+
     ``path``: a local model folder, or ``"tiny:<family>"`` for a tiny model built in code
     (:func:`spacedg.vlm.build_tiny_vlm`); a path that is no folder but looks like a hub id
     (``Qwen/Qwen2.5-VL-7B-Instruct``) is fetched with ``huggingface_hub.snapshot_download`` first. ``dtype``: ``"auto"`` (bfloat16 on a CUDA device that
@@ -82,31 +90,34 @@ class ModelOptions:
     """
 
     path: str
-    dtype: str = "auto"
-    freeze_vision: bool = True
-    freeze_merger: bool = False
-    freeze_language: bool = False
-    lora: bool = False
-    lora_r: int = 16
-    lora_alpha: int = 32
-    lora_dropout: float = 0.05
-    lora_target: str | None = None
-    gradient_checkpointing: bool = False
-    min_pixels: int | None = None
-    max_pixels: int | None = None
+    dtype: str
+    freeze_vision: bool
+    freeze_merger: bool
+    freeze_language: bool
+    lora: bool
+    lora_r: int
+    lora_alpha: int
+    lora_dropout: float
+    lora_target: str | None
+    gradient_checkpointing: bool
+    min_pixels: int | None
+    max_pixels: int | None
 
     def __post_init__(self) -> None:
         self.validate()
 
+    @property
+    def tiny_family(self) -> str | None:
+        """``<family>`` of a ``tiny:<family>`` path, else ``None``."""
+        path = str(self.path)
+        return path[len(_TINY_PREFIX):] if path.startswith(_TINY_PREFIX) else None
+
     def validate(self) -> None:
         """Raise :class:`~spacedg.errors.ParameterError` for an impossible or ill-typed setting."""
-        from spacedg.vlm.loading import resolve_dtype
-        from spacedg.vlm.tiny import TINY_FAMILIES
-
         if not isinstance(self.path, (str, Path)) or not str(self.path).strip():
             raise ParameterError("model path is empty; give a local model folder or 'tiny:<family>'")
         path = str(self.path)
-        if path.startswith(_TINY_PREFIX) and path[len(_TINY_PREFIX):] not in TINY_FAMILIES:
+        if self.tiny_family is not None and self.tiny_family not in TINY_FAMILIES:
             raise ParameterError(f"unknown tiny model {path!r}; use tiny:<family> with family one of "
                                  f"{', '.join(TINY_FAMILIES)}")
         resolve_dtype(self.dtype, "cpu")  # raises ParameterError for an unknown name
@@ -306,13 +317,9 @@ def drop_vision_input_grad_hooks(model: torch.nn.Module) -> int:
 
 
 def _build(options: ModelOptions, device: str) -> tuple[Any, Any]:
-    from spacedg.vlm.loading import load_vlm, resolve_dtype, set_pixel_budget
-    from spacedg.vlm.tiny import build_tiny_vlm
-
     path = str(options.path)
-    if path.startswith(_TINY_PREFIX):
-        family = path[len(_TINY_PREFIX):]
-        model, processor = build_tiny_vlm(family)
+    if options.tiny_family is not None:
+        model, processor = build_tiny_vlm(options.tiny_family)
         model.name_or_path = path  # recorded as base_model_name_or_path in LoRA adapter configs
         model = model.to(device=device, dtype=resolve_dtype(options.dtype, device))
         return model, set_pixel_budget(processor, options.min_pixels, options.max_pixels)
@@ -332,9 +339,7 @@ def _local_folder(path: str) -> str:
     if Path(path).exists() or not _HUB_ID.fullmatch(path):
         return path
     try:
-        from huggingface_hub import snapshot_download
-
-        return snapshot_download(path)
+        return huggingface_hub.snapshot_download(path)
     except Exception as err:  # network, auth, missing repo: one message
         detail = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
         raise ParameterError(f"model path {path!r} is not a local folder and could not be fetched as a hub model "
@@ -344,7 +349,7 @@ def _local_folder(path: str) -> str:
 
 def _apply_lora(model: Any, options: ModelOptions, groups: dict[str, list[str]]) -> Any:
     try:
-        from peft import LoraConfig, get_peft_model
+        from peft import LoraConfig, get_peft_model  # peft takes seconds to import; only LoRA runs need it
     except ImportError as err:
         raise ParameterError("lora=true needs the peft package (pip install peft)") from err
     regex = options.lora_target or default_lora_target(model)
@@ -387,11 +392,8 @@ def prepare_model(options: ModelOptions, *, device: str = "cpu") -> tuple[Any, A
 
 
 def _is_peft(model: Any) -> bool:
-    try:
-        from peft import PeftModel
-    except ImportError:
-        return False
-    return isinstance(model, PeftModel)
+    peft = sys.modules.get("peft")  # a PeftModel exists only once peft was imported: no import needed here
+    return peft is not None and isinstance(model, peft.PeftModel)
 
 
 def save_for_inference(model: Any, processor: Any, out_dir: str | Path) -> Path:

@@ -23,7 +23,12 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from peft import PeftModel, set_peft_model_state_dict
+from safetensors.torch import load_file
 from transformers import Trainer, TrainerCallback
+
+from spacedg.eval.scoring import score
+from spacedg.vlm import generate
 
 __all__ = ["EpochCallback", "SFTTrainer", "SaveProcessorCallback", "ValItem", "latest_checkpoint"]
 
@@ -64,12 +69,12 @@ class SFTTrainer(Trainer):
     Args:
         val_items: evaluation items (may be empty: no evaluation).
         processor: the model's processor (for generation).
-        val_max_new_tokens / val_batch_size: generation settings of the evaluation.
+        val_max_new_tokens / val_batch_size: generation settings of the evaluation (``data.val``).
         Other arguments go to :class:`transformers.Trainer`.
     """
 
-    def __init__(self, *args: Any, val_items: Sequence[ValItem] = (), processor: Any = None, val_max_new_tokens: int = 32,
-                 val_batch_size: int = 8, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, val_items: Sequence[ValItem], processor: Any, val_max_new_tokens: int,
+                 val_batch_size: int, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.val_items = list(val_items)
         self.val_processor = processor
@@ -80,12 +85,7 @@ class SFTTrainer(Trainer):
     def _load_from_checkpoint(self, resume_from_checkpoint: str, model: Any = None) -> None:
         model = self.model if model is None else model
         folder = Path(resume_from_checkpoint)
-        from peft import PeftModel
-
         if isinstance(model, PeftModel):
-            from peft import set_peft_model_state_dict
-            from safetensors.torch import load_file
-
             weights = folder / "adapter_model.safetensors"
             if not weights.is_file():
                 raise FileNotFoundError(f"{folder}: no adapter_model.safetensors to resume the LoRA adapters from")
@@ -103,9 +103,6 @@ class SFTTrainer(Trainer):
 
     # -------------------------------------------------------------- evaluation
     def evaluate(self, eval_dataset: Any = None, ignore_keys: Any = None, metric_key_prefix: str = "eval") -> dict[str, float]:
-        from spacedg.eval.scoring import score
-        from spacedg.vlm import generate
-
         if not self.val_items or self.is_fsdp_enabled:
             return {}
         rank, world = self.args.process_index, self.args.world_size

@@ -26,25 +26,13 @@ from spacedg.eval import (
 )
 from spacedg.errors import InvalidDataError
 from spacedg.plugins import AnswerType, TaskGroup
-
-OPTIONS = ("A. left", "B. right", "C. forward", "D. backward")
+from tests.qa_records import MCQ_OPTIONS as OPTIONS
+from tests.qa_records import qa_record
 
 
 def _record(answer_type: AnswerType, answer: Any, **changes: Any) -> QARecord:
-    kwargs: dict[str, Any] = dict(
-        id="room/q/sub/abc",
-        scene_id="room",
-        question_type="camera_translation",
-        sub_question_type="main_dir",
-        task_group=TaskGroup.CAMERA_CENTRIC,
-        answer_type=answer_type,
-        views=("v0", "v1"),
-        question="?",
-        options=OPTIONS if answer_type is AnswerType.MCQ else (),
-        answer=answer,
-    )
-    kwargs.update(changes)
-    return QARecord(**kwargs)
+    """A record of ``answer_type`` answering ``answer`` (four options for an MCQ, none otherwise)."""
+    return qa_record(answer_type=answer_type, answer=answer, options=OPTIONS if answer_type is AnswerType.MCQ else (), **changes)
 
 
 # ------------------------------------------------------------------ prompt / extraction

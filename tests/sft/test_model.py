@@ -24,6 +24,7 @@ from spacedg.vlm import (
     load_vlm,
     save_tiny_vlm,
 )
+from tests.sft.configs import model_options
 
 IMAGE = np.random.default_rng(0).integers(0, 256, (64, 64, 3), dtype=np.uint8)
 CHAT = [
@@ -90,14 +91,14 @@ def test_groups_partition_the_parameters(family):
     assert groups["language"] == ["model.language_model", "lm_head"]
     assert not any("merger" in p or "projector" in p for p in groups["vision"])
     # the same partition on the peft-wrapped model (names under base_model.model.)
-    lora_model, _ = prepare_model(ModelOptions(f"tiny:{family}", lora=True))
+    lora_model, _ = prepare_model(model_options(f"tiny:{family}", lora=True))
     wrapped = module_groups(lora_model)
     assert all(len(_group_of(n, wrapped)) == 1 for n, _ in lora_model.named_parameters())
 
 
 @pytest.mark.parametrize("family", TINY_FAMILIES)
 def test_default_options_freeze_vision_and_train_merger_and_language(family):
-    model, processor = prepare_model(ModelOptions(f"tiny:{family}"))
+    model, processor = prepare_model(model_options(f"tiny:{family}"))
     assert model.training
     groups = module_groups(model)
     before = _snapshot(model)
@@ -119,7 +120,7 @@ def test_default_options_freeze_vision_and_train_merger_and_language(family):
 
 @pytest.mark.parametrize("family", TINY_FAMILIES)
 def test_lora_wraps_only_the_language_model_and_keeps_base_weights(family):
-    model, processor = prepare_model(ModelOptions(f"tiny:{family}", lora=True, lora_dropout=0.0))
+    model, processor = prepare_model(model_options(f"tiny:{family}", lora=True, lora_dropout=0.0))
     from peft import PeftModel
 
     assert isinstance(model, PeftModel)
@@ -153,10 +154,10 @@ def test_lora_wraps_only_the_language_model_and_keeps_base_weights(family):
 
 
 def test_lora_respects_frozen_merger_and_unfrozen_vision():
-    model, _ = prepare_model(ModelOptions("tiny:qwen2_5_vl", lora=True, freeze_merger=True))
+    model, _ = prepare_model(model_options("tiny:qwen2_5_vl", lora=True, freeze_merger=True))
     groups = module_groups(model)
     assert all(_group_of(n, groups) == ["language"] for n, p in model.named_parameters() if p.requires_grad)
-    model, processor = prepare_model(ModelOptions("tiny:qwen2_5_vl", lora=True, freeze_vision=False))
+    model, processor = prepare_model(model_options("tiny:qwen2_5_vl", lora=True, freeze_vision=False))
     groups = module_groups(model)
     vision = [n for n, p in model.named_parameters() if p.requires_grad and _group_of(n, groups) == ["vision"]]
     assert vision and all(".modules_to_save.default." in n for n in vision)
@@ -164,13 +165,13 @@ def test_lora_respects_frozen_merger_and_unfrozen_vision():
 
 
 def test_custom_lora_target_must_stay_in_the_language_model():
-    model, _ = prepare_model(ModelOptions("tiny:internvl", lora=True, lora_target=r".*language_model.*\.(q_proj|v_proj)"))
+    model, _ = prepare_model(model_options("tiny:internvl", lora=True, lora_target=r".*language_model.*\.(q_proj|v_proj)"))
     assert len(_lora_modules(model)) == 4
     # InternVL's vision tower has q_proj / k_proj / v_proj too: an unanchored list must be refused
     with pytest.raises(ParameterError, match="outside the language model"):
-        prepare_model(ModelOptions("tiny:internvl", lora=True, lora_target=r".*\.(q_proj|v_proj)"))
+        prepare_model(model_options("tiny:internvl", lora=True, lora_target=r".*\.(q_proj|v_proj)"))
     with pytest.raises(ParameterError, match="matches no linear layer"):
-        prepare_model(ModelOptions("tiny:qwen2_vl", lora=True, lora_target=r"nothing\.here"))
+        prepare_model(model_options("tiny:qwen2_vl", lora=True, lora_target=r"nothing\.here"))
 
 
 def _grads(options: ModelOptions, lora_b: float | None = None) -> tuple[dict[str, torch.Tensor], object]:
@@ -194,8 +195,8 @@ def _grads(options: ModelOptions, lora_b: float | None = None) -> tuple[dict[str
     ("qwen3_vl", {"freeze_language": True}),  # only the merger trains: grads must cross frozen embeddings + LM
 ])
 def test_gradient_checkpointing_matches_plain_backward(family, options):
-    plain, _ = _grads(ModelOptions(f"tiny:{family}", **options), lora_b=0.1 if options.get("lora") else None)
-    checkpointed, model = _grads(ModelOptions(f"tiny:{family}", gradient_checkpointing=True, **options),
+    plain, _ = _grads(model_options(f"tiny:{family}", **options), lora_b=0.1 if options.get("lora") else None)
+    checkpointed, model = _grads(model_options(f"tiny:{family}", gradient_checkpointing=True, **options),
                                  lora_b=0.1 if options.get("lora") else None)
     base = model.get_base_model() if hasattr(model, "get_base_model") else model
     assert not any(p.requires_grad for p in base.get_input_embeddings().parameters())
@@ -211,7 +212,7 @@ def test_gradient_checkpointing_matches_plain_backward(family, options):
 @pytest.mark.parametrize("lora", [False, True])
 def test_frozen_vision_tower_is_not_recorded_by_autograd(family, lora):
     # enable_input_require_grads (transformers, and peft again) also hooks the vision patch embedding
-    model, processor = prepare_model(ModelOptions(f"tiny:{family}", lora=lora, gradient_checkpointing=True))
+    model, processor = prepare_model(model_options(f"tiny:{family}", lora=lora, gradient_checkpointing=True))
     groups = module_groups(model)
     merger = dict(model.named_modules())[groups["merger"][0]]
     seen: list[bool] = []
@@ -226,7 +227,7 @@ def test_frozen_vision_tower_is_not_recorded_by_autograd(family, lora):
 
 @pytest.mark.parametrize("family", ["qwen2_vl", "internvl"])
 def test_save_for_inference_merges_a_copy(family, tmp_path):
-    options = ModelOptions(f"tiny:{family}", lora=True, lora_dropout=0.0, gradient_checkpointing=True,
+    options = model_options(f"tiny:{family}", lora=True, lora_dropout=0.0, gradient_checkpointing=True,
                            min_pixels=28 * 28 * 4, max_pixels=28 * 28 * 4 * 4)
     model, processor = prepare_model(options)
     _train(model, processor, steps=2)
@@ -257,7 +258,7 @@ def test_save_for_inference_merges_a_copy(family, tmp_path):
 
 
 def test_save_for_inference_of_a_fully_trained_model(tmp_path):
-    model, processor = prepare_model(ModelOptions("tiny:qwen3_vl", gradient_checkpointing=True))
+    model, processor = prepare_model(model_options("tiny:qwen3_vl", gradient_checkpointing=True))
     _train(model, processor, steps=1)
     batch = _batch(processor)
     expected = _logits(model, batch)
@@ -268,7 +269,7 @@ def test_save_for_inference_of_a_fully_trained_model(tmp_path):
 
 def test_adapter_folder_loads_through_load_vlm(tmp_path):
     base = save_tiny_vlm(tmp_path / "base", "qwen2_5_vl")
-    model, processor = prepare_model(ModelOptions(str(base), lora=True, lora_dropout=0.0))
+    model, processor = prepare_model(model_options(str(base), lora=True, lora_dropout=0.0))
     _train(model, processor, steps=2)
     batch = _batch(processor)
     expected = _logits(model, batch)
@@ -303,11 +304,11 @@ def test_adapter_folder_loads_through_load_vlm(tmp_path):
 def test_bad_options_are_refused(kwargs, message):
     kwargs = {"path": "tiny:qwen2_vl", **kwargs}
     with pytest.raises(ParameterError, match=message):
-        ModelOptions(**kwargs)
+        model_options(**kwargs)
 
 
 def test_lora_with_everything_frozen_is_fine():
-    options = ModelOptions("tiny:qwen2_vl", lora=True, freeze_vision=True, freeze_merger=True, freeze_language=True)
+    options = model_options("tiny:qwen2_vl", lora=True, freeze_vision=True, freeze_merger=True, freeze_language=True)
     model, _ = prepare_model(options)
     assert all(".lora_" in n for n, p in model.named_parameters() if p.requires_grad)
 
@@ -325,18 +326,18 @@ def test_hub_id_paths_go_through_snapshot_download(tmp_path, monkeypatch):
         return str(folder)
 
     monkeypatch.setattr(huggingface_hub, "snapshot_download", fake_download)
-    model, _ = prepare_model(ModelOptions("Org/Tiny-VL"))
+    model, _ = prepare_model(model_options("Org/Tiny-VL"))
     assert calls == ["Org/Tiny-VL"] and type(model).__name__ == "Qwen2VLForConditionalGeneration"
     with pytest.raises(ParameterError, match="not a local folder and could not be fetched"):
-        prepare_model(ModelOptions("Org/Missing"))
+        prepare_model(model_options("Org/Missing"))
     with pytest.raises(InvalidDataError, match="does not exist"):  # not hub-shaped: the local-folder error
-        prepare_model(ModelOptions(str(tmp_path / "no" / "such" / "folder")))
+        prepare_model(model_options(str(tmp_path / "no" / "such" / "folder")))
     assert calls == ["Org/Tiny-VL", "Org/Missing"]
 
 
 @pytest.mark.filterwarnings("ignore:Could not find a config file in tiny:UserWarning")  # the base is rebuilt in code
 def test_adapter_of_a_tiny_model_built_in_code_loads(tmp_path):
-    model, processor = prepare_model(ModelOptions("tiny:internvl", lora=True, lora_dropout=0.0))
+    model, processor = prepare_model(model_options("tiny:internvl", lora=True, lora_dropout=0.0))
     _train(model, processor, steps=2)
     batch = _batch(processor)
     expected = _logits(model, batch)

@@ -1,5 +1,6 @@
 """SFT recipe (spacedg.sft) with a real tiny VLM on CPU: labels, overfitting, resume, the Hydra
-app from an installed wheel, torchrun DDP, exported JSONL data and config errors.
+app from an installed wheel, torchrun DDP, exported JSONL data and config errors (the configs
+themselves: test_config.py).
 
 Losses are deterministic on this CPU for a fixed seed; runs use the four small session rooms.
 """
@@ -15,16 +16,17 @@ from pathlib import Path
 
 import pytest
 import torch
-from hydra import compose, initialize_config_module
 from transformers import Trainer
 
 from spacedg.errors import InvalidDataError, ParameterError
-from spacedg.sft.app import build_train_data, run
+from spacedg.sft.app import run
 from spacedg.sft.collator import IGNORE_INDEX, SFTCollator
+from spacedg.sft.config import build
 from spacedg.sft.data import BudgetedDataset, token_lengths
-from spacedg.sft.model import ModelOptions, prepare_model
+from spacedg.sft.model import prepare_model
 from spacedg.sft.trainer import SFTTrainer
 from spacedg.vlm import load_vlm
+from tests.sft.configs import compose_sft, model_options
 
 ROOT = Path(__file__).resolve().parents[2]
 FAST = ["train.max_steps=4", "train.save_steps=2", "train.eval_steps=2", "data.val.samples=4", "data.max_questions=16"]
@@ -39,18 +41,17 @@ def rooms(qa_room_dirs, tmp_path_factory) -> Path:
 
 
 def _config(rooms: Path, out: Path, *overrides: str):
-    with initialize_config_module(config_module="spacedg.conf", version_base="1.3"):
-        return compose("sft", overrides=["+experiment=tiny", f"data.scenes=[{rooms}]", f"output_dir={out}", *FAST, *overrides])
+    return compose_sft("+experiment=tiny", f"data.scenes=[{rooms}]", f"output_dir={out}", *FAST, *overrides)
 
 
-def _data(rooms: Path, **data):
-    base = {"source": "online", "scenes": [str(rooms)], "builtin_rooms": 3, "image_size": [64, 48], "degradations": ["haze", "low_res"],
-            "clean_prob": 0.3, "severity": "random", "max_questions": 8, "seed": 0}
-    return build_train_data({**base, **data})
+def _data(rooms: Path):
+    """8 training samples of the rooms at 64×48: haze or low_res at a random severity, clean with probability 0.3."""
+    config = _config(rooms, Path("unused"), "data.degradations=[haze,low_res]", "data.clean_prob=0.3", "data.max_questions=8")
+    return build(config.data, "data").train_data()
 
 
 def test_supervised_tokens_are_exactly_the_answer(rooms) -> None:
-    model, processor = prepare_model(ModelOptions(path="tiny:qwen2_5_vl"))
+    model, processor = prepare_model(model_options())
     samples = [_data(rooms)[i] for i in range(4)]
     batch = SFTCollator(processor, 4096)(samples)
     for row, sample in enumerate(samples):
@@ -67,7 +68,7 @@ def test_supervised_tokens_are_exactly_the_answer(rooms) -> None:
 
 
 def test_over_budget_samples_are_dropped_and_counted(rooms) -> None:
-    _, processor = prepare_model(ModelOptions(path="tiny:qwen2_5_vl"))
+    _, processor = prepare_model(model_options())
     data = _data(rooms)
     lengths = token_lengths(data, processor)
     limit = sorted(lengths)[len(lengths) // 2]
@@ -84,7 +85,7 @@ def test_over_budget_samples_are_dropped_and_counted(rooms) -> None:
 
 def test_a_few_steps_overfit_a_fixed_batch(rooms) -> None:
     torch.manual_seed(0)
-    model, processor = prepare_model(ModelOptions(path="tiny:qwen2_5_vl"))
+    model, processor = prepare_model(model_options())
     batch = SFTCollator(processor, 4096)([_data(rooms)[i] for i in range(2)])
     optimizer = torch.optim.AdamW([p for p in model.parameters() if p.requires_grad], lr=3e-3)
     losses = []
@@ -159,7 +160,7 @@ def test_config_errors(rooms, tmp_path) -> None:
         run(_config(rooms, tmp_path / "a", "+train.no_such_key=1"))
     with pytest.raises(ParameterError, match="resume=.*no such checkpoint"):
         run(_config(rooms, tmp_path / "b", f"resume={tmp_path / 'missing'}"))
-    with pytest.raises(ParameterError, match="model: .*colour"):
+    with pytest.raises(ParameterError, match="model: unknown key 'colour'; the known keys are path, dtype, .*lora"):
         run(_config(rooms, tmp_path / "d", "+model.colour=red"))
     with pytest.raises(ParameterError, match="data.jsonl=PATH"):
         run(_config(rooms, tmp_path / "c", "data.source=jsonl"))
@@ -208,7 +209,8 @@ def test_torchrun_two_process_ddp(rooms, tmp_path) -> None:
     result = subprocess.run(
         [str(torchrun), "--nproc_per_node", "2", "--master_port", "29533", "-m", "spacedg.sft", "+experiment=tiny",
          f"data.scenes=[{rooms}]", f"output_dir={tmp_path / 'ddp'}", *FAST],
-        cwd=tmp_path, env=_env_without_repo(), capture_output=True, text=True, timeout=600,
+        cwd=tmp_path, env={**_env_without_repo(), "PYTHONPATH": str(ROOT)},  # this checkout, not whichever is installed
+        capture_output=True, text=True, timeout=600,
     )
     assert result.returncode == 0, result.stderr[-3000:]
     summary = json.loads((tmp_path / "ddp" / "train_summary.json").read_text())

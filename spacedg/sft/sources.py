@@ -1,0 +1,145 @@
+"""The ``data`` config group: what trains (online SpaceDG samples or an exported chat JSONL) and
+what evaluates (``val`` items).
+
+``conf/data/online.yaml`` is instantiated (:func:`spacedg.sft.config.build`) into a
+:class:`DataOptions` holding a :class:`ValOptions`. Neither declares defaults: the YAML holds each
+one, once. Building the options checks them, degradation chains included (with
+:class:`~spacedg.data.chain.Chain`, as :class:`~spacedg.data.dataset.SpaceDGDataset` will), so an
+unknown name or preset fails before any model loads or any question index is built.
+
+Conventions of the config that differ from :class:`~spacedg.data.dataset.SpaceDGDataset`:
+``degradations: null`` means the paper's nine (:data:`~spacedg.data.chain.BENCH_DEGRADATIONS`) for
+training and evaluation alike (the dataset's own ``None`` means clean only for ``train``/``val``);
+``max_questions`` caps the training questions only; ``val`` renders the ``val`` split (scenes apart
+from the training ones) with the training ``scenes``, ``builtin_rooms``, ``image_size``,
+``severity`` and ``seed``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from spacedg.data.chain import BENCH_DEGRADATIONS, SEVERITIES, Chain
+from spacedg.data.chat import chat_messages, format_question, item_images
+from spacedg.data.dataset import SpaceDGDataset
+from spacedg.errors import ParameterError, error_context
+from spacedg.sft.data import ChatJsonlDataset, OnlineSFTDataset
+
+__all__ = ["DataOptions", "ValOptions"]
+
+_SEVERITIES = (*SEVERITIES, "random")
+
+#: A ``degradations`` value: null (the nine), ``"all"``, one chain or a list of chains.
+Degradations = str | Sequence[Any] | None
+
+
+def _check_degradations(degradations: Degradations, severity: str, where: str) -> None:
+    """Parse and resolve each chain of ``degradations`` with :meth:`Chain.check` at every severity
+    it can be drawn at (``"random"``: ``"1"``–``"5"``), so unknown names, presets and repeats raise
+    now, their message prefixed with ``where`` (the config key). ``None`` (the nine) and ``"all"``
+    (every registered degradation) need no check."""
+    if degradations is None or degradations == "all":
+        return
+    levels = SEVERITIES[1:] if severity == "random" else (severity,)
+    with error_context(where):
+        for chain in [degradations] if isinstance(degradations, str) else degradations:
+            Chain.parse(chain).check(levels)
+
+
+@dataclass(frozen=True)
+class ValOptions:
+    """The ``data.val`` node: generation-based evaluation on the ``val`` split.
+
+    ``samples``: items per evaluation (0: none); ``degradations`` / ``clean_prob``: the mixture of
+    those items (as in :class:`DataOptions`); ``max_new_tokens`` / ``batch_size``: greedy generation.
+    """
+
+    samples: int
+    degradations: Degradations
+    clean_prob: float
+    max_new_tokens: int
+    batch_size: int
+
+    def __post_init__(self) -> None:
+        for name, least in (("samples", 0), ("max_new_tokens", 1), ("batch_size", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < least:
+                raise ParameterError(f"data.val.{name} must be an integer >= {least}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class DataOptions:
+    """The ``data`` group (keys documented in ``conf/data/online.yaml``); validated on construction.
+
+    ``image_size`` is ``[width, height]`` in pixels (``None``: each view's own size);
+    ``max_length`` is the token budget per sample (longer samples are dropped, never truncated).
+    """
+
+    source: Literal["online", "jsonl"]
+    jsonl: str | None
+    scenes: Sequence[str] | None
+    builtin_rooms: int
+    image_size: Sequence[int] | None
+    degradations: Degradations
+    clean_prob: float
+    severity: str
+    question_types: Sequence[str] | None
+    max_questions: int | None
+    seed: int
+    max_length: int
+    val: ValOptions
+
+    def __post_init__(self) -> None:
+        if self.source == "jsonl":
+            if not self.jsonl:
+                raise ParameterError("data.source=jsonl needs data.jsonl=PATH (a chat .jsonl written by spacedg export)")
+            return
+        if self.source != "online":
+            raise ParameterError(f"data.source must be online or jsonl, got {self.source!r}")
+        if self.severity not in _SEVERITIES:
+            raise ParameterError(f"data.severity must be one of {list(_SEVERITIES)}, got {self.severity!r}")
+        _check_degradations(self.degradations, self.severity, "data.degradations")
+        if self.val.samples > 0:
+            _check_degradations(self.val.degradations, self.severity, "data.val.degradations")
+
+    def _dataset(self, split: str, degradations: Degradations, clean_prob: float, max_questions: int | None) -> SpaceDGDataset:
+        return SpaceDGDataset(
+            split, list(BENCH_DEGRADATIONS) if degradations is None else degradations, scenes=self.scenes,
+            question_types=self.question_types, severity=self.severity, clean_prob=clean_prob,
+            image_size=self.image_size, seed=self.seed, max_questions=max_questions, builtin_rooms=self.builtin_rooms,
+        )
+
+    def train_data(self) -> OnlineSFTDataset | ChatJsonlDataset:
+        """The unbudgeted training samples: the ``train`` split rendered online, or the JSONL's."""
+        if self.source == "jsonl":
+            return ChatJsonlDataset(self.jsonl)
+        return OnlineSFTDataset(self._dataset("train", self.degradations, self.clean_prob, self.max_questions))
+
+    def val_dataset(self) -> SpaceDGDataset | None:
+        """The ``val`` split the evaluation draws from; ``None`` without evaluation (``val.samples``
+        0, or JSONL training data)."""
+        if self.val.samples <= 0 or self.source != "online":
+            return None
+        return self._dataset("val", self.val.degradations, self.val.clean_prob, None)
+
+    def val_items(self) -> list[dict[str, Any]]:
+        """``val.samples`` items of the ``val`` split (a spread drawn with ``seed``), rendered once,
+        each with its prompt (no answer), images, condition and the fields the scorer reads."""
+        dataset = self.val_dataset()
+        if dataset is None:
+            return []
+        order = np.random.default_rng(self.seed).permutation(len(dataset))[:self.val.samples]
+        items = []
+        for index in sorted(int(i) for i in order):
+            item = dataset[index]
+            images = item_images(item)
+            conversation = chat_messages(format_question(item["question"], item["options"]), len(images))
+            truth = {k: item[k] for k in ("answer", "answer_type", "question_type", "sub_question_type")}
+            truth["options"] = {"ABCD"[i]: text for i, text in enumerate(item["options"])}
+            items.append({"conversation": conversation, "images": images, "degradation_type": item["degradation_type"],
+                          "truth": truth})
+        return items
