@@ -12,8 +12,10 @@ from spacedg.errors import ParameterError
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "export", help="render a split to PNGs + a VLMEvalKit TSV + chat JSONL (resumable, --shard i/n)",
-        description="Render every item of a split and write images/, <split>.tsv (VLMEvalKit / SpaceDG evaluator "
-                    "columns), <split>.jsonl (chat format) and summary.json. Finished chunks are skipped on a rerun; "
+        description="Render every item of a split and write images/, <split>.tsv (the public SpaceDG bench's format: "
+                    "its columns, names and lettered existence options; for --split bench also spacedg_bench.tsv, so the "
+                    "folder is VLMEvalKit's LMUData for --data spacedg_bench), <split>.jsonl (chat format) and "
+                    "summary.json. Finished chunks are skipped on a rerun; "
                     "--shard i/n splits the chunks across processes or machines (see docs/distributed-export.md).",
     )
     parser.add_argument("--split", default="bench", choices=("train", "val", "bench"))
@@ -116,6 +118,10 @@ def run(args: argparse.Namespace) -> int:
     if summary.merged:
         print(f"wrote {args.out / (args.split + '.tsv')}, {args.out / (args.split + '.jsonl')} and {args.out / 'summary.json'}\n")
         print(summary.merge.table)
+        if args.split == "bench":
+            print(f"\nVLMEvalKit (public SpaceDG evaluator): LMUData={args.out} run.py --data spacedg_bench")
+        for names, why in summary.merge.mismatches.items():
+            print(f"WARNING: {names}: {why}; the public evaluator routes by question_type/sub_question_type only")
     else:
         missing = summary.merge.missing
         shown = ", ".join(map(str, missing[:10])) + (" …" if len(missing) > 10 else "")

@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.chat import format_question, item_images
+from spacedg.data.chat import item_images
+from spacedg.data.public_format import public_fields
 from spacedg.files import atomic_write_bytes, read_rgb
-from spacedg.plugins.answers import answer_text
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
 from spacedg.eval.bench import Bench, BenchRow, row_from_mapping
 from spacedg.eval.predictions import meta_path
@@ -88,12 +88,9 @@ def dataset_source(dataset: Any) -> Source:
 
     def row(index: int) -> BenchRow:
         record, chain, name = dataset.plan(index)
-        fields = {
-            "index": index, "question": format_question(record.question, record.options), "answer": answer_text(record.answer),
-            "answer_type": record.answer_type.value, "question_type": record.question_type,
-            "sub_question_type": record.sub_question_type, "task_group": record.task_group.value,
+        fields = {  # the row the export writes for this item (public names, existence as lettered options)
+            "index": index, **public_fields(record), "task_group": record.task_group.value,
             "degradation_type": name, "scene_id": record.scene_id, "record_id": record.id,
-            "options": list(record.options),
             "degradation": dataset.provenance(index),
         }
         return row_from_mapping(fields, f"dataset item {index}")
@@ -103,7 +100,9 @@ def dataset_source(dataset: Any) -> Source:
         return item_images(item)
 
     name = f"SpaceDGDataset(split={dataset.split!r}, items={len(dataset)})"
-    return Source(name, dataset_fingerprint(dataset), list(range(len(dataset))), row, images)
+    # the rows are in the public bench's format (existence lettered): a run that answered the earlier
+    # yes/no rows of the same dataset is another bench, not one to resume
+    return Source(name, f"{dataset_fingerprint(dataset)}-public", list(range(len(dataset))), row, images)
 
 
 @dataclass
