@@ -35,10 +35,9 @@ routes it (and still reads older exports that carry our internal names).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
-from spacedg.data.chat import format_question
 from spacedg.errors import InvalidDataError
 from spacedg.plugins.answers import answer_text
 from spacedg.plugins.specs import AnswerType
@@ -54,6 +53,7 @@ __all__ = [
     "PUBLIC_TSV_COLUMNS",
     "PUBLIC_YN_SUB_TYPES",
     "existence_options",
+    "format_question",
     "from_public",
     "internal_answer_type",
     "public_answer_type",
@@ -111,6 +111,11 @@ INTERNAL_ANSWER_TYPES: Mapping[tuple[str, str], AnswerType] = {
 #: Option texts of an exported existence question (the record's yes/no answers, lower case).
 EXISTENCE_OPTION_TEXTS: tuple[str, str] = ("yes", "no")
 _EXISTENCE = "object_existence_estimation"
+
+
+def format_question(question: str, options: Sequence[str]) -> str:
+    """The question text with its option lines (MCQ), as a model sees it."""
+    return question if not options else question + "\n" + "\n".join(options)
 
 
 def _name(value: Any) -> str:

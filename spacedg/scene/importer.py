@@ -35,11 +35,11 @@ from typing import Any, Literal
 
 import numpy as np
 
-from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
+from spacedg.errors import FileFormatError, ParameterError
 from spacedg.files import PathLike, read_json
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
-from spacedg.scene.frame_check import FrameMismatchError, FrameReport, check_frame, diagnose, generic_corrections, normalised_hint
+from spacedg.scene.frame_check import FrameReport, check_frame, diagnose, generic_corrections, normalised_hint
 from spacedg.scene.io import estimate_up, read_gaussians, read_instances, read_views, save_scene
 from spacedg.scene.io._assemble import GAUSSIAN_SUFFIXES
 from spacedg.scene.io.colmap import read_colmap
