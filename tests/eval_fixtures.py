@@ -30,7 +30,7 @@ QUESTIONS = [
 PREDICTIONS: dict[str, dict[str, list[str]]] = {
     "good-model": {
         "ori": ["B", "yes", "2.0", "3", "[0.1, 0.2, 0.3]"],
-        "haze": ["B", "no", "2.5", "3", "[0.3, 0.1, 0.2]"],
+        "haze": ["B", "no", "2.5", "3", "0.1 x 0.2 x 0.3 m"],
         "low_light": ["A", "yes", "2.6", "3", "[0.1, 0.2, 0.6]"],
     },
     "mid-model": {

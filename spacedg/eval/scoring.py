@@ -241,7 +241,7 @@ def _truth_sizes(answer: Any) -> list[float]:
     return values
 
 
-def score(prediction: str | None, record_or_fields: Any, *, sort_sizes: bool = True) -> ScoreResult:
+def score(prediction: str | None, record_or_fields: Any, *, sort_sizes: bool = False) -> ScoreResult:
     """Score one model output against a :class:`~spacedg.plugins.qa_record.QARecord` or a mapping.
 
     ``record_or_fields`` is a ``QARecord`` or any mapping / object with ``answer`` and either
@@ -257,11 +257,11 @@ def score(prediction: str | None, record_or_fields: Any, *, sort_sizes: bool = T
     * YN: :func:`parse_yes_no`; exact match.
     * COUNT: :func:`parse_count`; exact integer match.
     * NA: :func:`parse_number`; :func:`mean_relative_accuracy`.
-    * SIZE_LIST: :func:`parse_size_list`; with ``sort_sizes`` (default) the three predicted
-      edges are **sorted ascending** before comparison, since the truth is
-      ``[shortest, middle, longest]`` and the three edge lengths, not their listing order, are
-      what is estimated (the paper asks for ascending order; pass ``sort_sizes=False`` to
-      compare positionally and penalise out-of-order lists). Score = mean of the 3 MRAs.
+    * SIZE_LIST: :func:`parse_size_list`; the three predicted edges are compared
+      **positionally** with ``[shortest, middle, longest]``, as the public evaluator does and the
+      paper decides ("we require the model to output answers in ascending order"; the prompt asks
+      for that order). ``sort_sizes=True`` sorts the prediction first (a lenient reading that
+      scores the three lengths whatever their order). Score = mean of the 3 MRAs.
     """
     kind = _answer_type_of(record_or_fields)
     truth = _field(record_or_fields, "answer")

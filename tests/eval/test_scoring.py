@@ -391,10 +391,10 @@ def test_score_size_list_sorted_and_positional() -> None:
     )
     ok = score("[0.5, 1.0, 2.0]", rec)
     assert ok.score == pytest.approx(1.0) and ok.parsed == (0.5, 1.0, 2.0)
-    shuffled = score("Dimensions: 2 x 0.5 x 1 m", rec)
+    shuffled = score("Dimensions: 2 x 0.5 x 1 m", rec, sort_sizes=True)  # the lenient reading
     assert shuffled.score == pytest.approx(1.0) and shuffled.parsed == (0.5, 1.0, 2.0)
-    # positional: 2 vs 0.5 → 0, 0.5 vs 1.0 → e = 0.5 → 0.1, 1 vs 2 → 0.1
-    assert score("2, 0.5, 1", rec, sort_sizes=False).score == pytest.approx(0.2 / 3)
+    # positional by default (the paper requires ascending order): 2 vs 0.5 → 0, 0.5 vs 1.0 → e = 0.5 → 0.1, 1 vs 2 → 0.1
+    assert score("2, 0.5, 1", rec).score == pytest.approx(0.2 / 3)
     # per-element MRA averaged: e = 0.05 (1.0), e = 0.25 (0.6), e = 0 (1.0)
     assert score("[0.525, 1.25, 2.0]", rec).score == pytest.approx(2.6 / 3)
     assert score("0.5 and 1.0", rec).parse_ok is False
