@@ -92,30 +92,32 @@ def atomic_write_bytes(path: PathLike, data: bytes) -> None:
         handle.write(data)
 
 
-#: What :func:`tempfile.mkstemp` adds between ``prefix`` and ``suffix`` (8 characters of this set).
-_MKSTEMP_RANDOM = r"[a-z0-9_]{8}"
+#: The names :func:`atomic_write` gives its temporary files: ``".<target name>.<8 characters
+#: of tempfile's random set>.tmp"``.
+_TEMP_NAME = re.compile(r"\.(?P<target>.+)\.[a-z0-9_]{8}\.tmp")
 
 
-def temp_pattern(target_name: str) -> re.Pattern[str]:
-    """The names :func:`atomic_write` gives the temporary siblings of a file called ``target_name``
-    (``".<name>.<8 random characters>.tmp"``)."""
-    return re.compile(rf"\.{re.escape(target_name)}\.{_MKSTEMP_RANDOM}\.tmp")
+def temp_target(name: str) -> str | None:
+    """The file a temporary file called ``name`` was going to become (``None``: not one of ours)."""
+    match = _TEMP_NAME.fullmatch(name)
+    return match.group("target") if match else None
 
 
-def remove_stale_temps(folder: PathLike, target_names: Iterable[str]) -> list[Path]:
-    """Delete the temporary files :func:`atomic_write` left in ``folder`` for the files named
-    ``target_names`` (a killed writer's; the caller must own those files: no live writer may be
-    writing them). Returns what was removed. Files of any other name are never touched."""
+def remove_stale_temps(folder: PathLike, targets: Iterable[str] | Callable[[str], bool]) -> list[Path]:
+    """Delete the temporary files :func:`atomic_write` left in ``folder`` (a killed writer's) for
+    the target files named in ``targets`` (or for which ``targets(name)`` is true). The caller
+    must own those targets: no live writer may be writing them. Files that do not match the
+    temporary-name pattern are never touched. Returns what was removed."""
     root = Path(folder)
-    patterns = [temp_pattern(name) for name in target_names]
-    if not patterns or not root.is_dir():
+    owns = targets if callable(targets) else set(targets).__contains__
+    if not root.is_dir():
         return []
     removed = []
     for entry in os.scandir(root):
-        if entry.name.startswith(".") and entry.name.endswith(".tmp") and any(p.fullmatch(entry.name) for p in patterns):
-            if entry.is_file(follow_symlinks=False):
-                Path(entry.path).unlink(missing_ok=True)
-                removed.append(Path(entry.path))
+        target = temp_target(entry.name)
+        if target is not None and owns(target) and entry.is_file(follow_symlinks=False):
+            Path(entry.path).unlink(missing_ok=True)
+            removed.append(Path(entry.path))
     return removed
 
 
@@ -168,7 +170,10 @@ def exclusive_lock(path: PathLike, what: str) -> ExclusiveLock:
     except ImportError:  # pragma: no cover - not POSIX
         return ExclusiveLock(target, None)
     for _ in range(50):
-        fd = os.open(target, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fd = os.open(target, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as err:
+            raise ParameterError(f"cannot create the lock file {target} ({err.strerror}); choose an output folder you can write to") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
