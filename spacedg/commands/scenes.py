@@ -98,11 +98,10 @@ def _synth(args: argparse.Namespace) -> int:
 
 def _check_synth(args: argparse.Namespace) -> None:
     """Every flag of ``scenes synth``, before any room is generated."""
-    _args.in_range("--n", args.n, 1, 1_000_000)
+    _args.at_least("--n", args.n, 1)
     _args.seed("--seed", args.seed)
     _args.seed("--seed + --n - 1 (the last room's seed)", args.seed + args.n - 1)
-    if args.gaussians is not None:
-        _args.in_range("--gaussians", args.gaussians, 10_000, 5_000_000)
+    RoomConfig(gaussians=args.gaussians)  # its own range check ("gaussians must be in [10000, 5000000]")
     _args.at_least("--min-views", args.min_views, 1)
     _args.at_least("--max-views", args.max_views, 1)
     if args.min_views > args.max_views:

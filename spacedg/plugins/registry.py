@@ -382,9 +382,7 @@ class Registry:
         turn a Ctrl+C into :class:`PluginImportInterrupted` naming it (see the module docstring).
         A ``KeyboardInterrupt`` the plugin raised itself propagates as is (recorded as broken)."""
         started = time.perf_counter()
-        timer = threading.Timer(SLOW_IMPORT_SECONDS, _warn_slow, args=(origin, SLOW_IMPORT_SECONDS))
-        timer.daemon = True
-        timer.start()
+        _IMPORT_CLOCK.begin(origin)
         try:
             interrupted = PluginImportInterrupted(f"interrupted while importing plugin {origin.describe()}")
             with _sigint_watch() as state:
@@ -399,7 +397,7 @@ class Registry:
             if state["sigint"]:  # the plugin swallowed the KeyboardInterrupt; the user still asked to stop
                 raise interrupted
         finally:
-            timer.cancel()
+            _IMPORT_CLOCK.end()
             self._import_seconds[origin] = time.perf_counter() - started
 
     def register_plugin(
@@ -671,8 +669,60 @@ def _rounded(seconds: float | None) -> float | None:
     return None if seconds is None else round(seconds, 3)
 
 
+class _ImportClock:
+    """One watcher thread (started on first use, then idle) that announces an import still
+    running after :data:`SLOW_IMPORT_SECONDS`: cheaper than a timer thread per import."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._current: list[Any] | None = None  # [origin, started, announced]
+        self._wake = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def begin(self, origin: PluginOrigin) -> None:
+        with self._lock:
+            self._current = [origin, time.monotonic(), False]
+            if self._thread is None or not self._thread.is_alive():
+                self._thread = threading.Thread(target=self._watch, name="spacedg-plugin-import-clock", daemon=True)
+                self._thread.start()
+        self._wake.set()
+
+    def end(self) -> None:
+        with self._lock:
+            self._current = None
+
+    def _watch(self) -> None:
+        while True:
+            self._wake.wait()
+            with self._lock:
+                current = self._current
+                if current is None:
+                    self._wake.clear()
+                    continue
+                origin, started, announced = current
+                limit = SLOW_IMPORT_SECONDS
+                due = not announced and time.monotonic() - started >= limit
+                if due:
+                    current[2] = True
+            if due:
+                _warn_slow(origin, limit)
+            time.sleep(0.05)
+
+
+_IMPORT_CLOCK = _ImportClock()
+
+
+def _new_clock_after_fork() -> None:  # a forked child has no watcher thread, and maybe a held lock
+    global _IMPORT_CLOCK
+    _IMPORT_CLOCK = _ImportClock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_new_clock_after_fork)
+
+
 def _warn_slow(origin: PluginOrigin, seconds: float) -> None:
-    """The note of an import still running after ``seconds`` (runs on a timer thread)."""
+    """The note of an import still running after ``seconds`` (runs on the watcher thread)."""
     if origin.builtin:
         fix = "spacedg's own plugins import in well under a second: check the machine's load and the Python environment"
     else:

@@ -42,7 +42,7 @@ SYNTH = ["scenes", "synth", "--n", "1", "--gaussians", "10000", "--width", "64",
     (["--seed", "-3"], ["--seed must be a non-negative integer"]),
     (["--width", "0"], ["--width must be from 8 to 16384 pixels, got 0"]),
     (["--splat-size", "nan"], ["--splat-size must be a finite number > 0"]),
-    (["--gaussians", "5"], ["--gaussians must be from 10000 to 5000000"]),
+    (["--gaussians", "5"], ["gaussians must be in [10000, 5000000], got 5"]),
 ])
 def test_scenes_synth_numbers(capsys, tmp_path: Path, extra: list[str], needles: list[str]) -> None:
     out = tmp_path / "rooms"
