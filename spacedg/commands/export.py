@@ -6,6 +6,7 @@ import argparse
 import os
 from pathlib import Path
 
+from spacedg.commands import _args
 from spacedg.errors import ParameterError
 
 
@@ -91,11 +92,16 @@ def run(args: argparse.Namespace) -> int:
     shard_size = DEFAULT_SHARD_SIZE if args.shard_size is None else args.shard_size
     if shard_size < 1:
         raise ParameterError(f"--shard-size must be >= 1, got {shard_size}")
+    _args.seed("--seed", args.seed)
+    _args.at_least("--per-sub-type", args.per_sub_type, 1)
+    _args.fraction("--clean-prob", args.clean_prob)
+    _args.at_least("--max-questions", args.max_questions, 1)
     size = _size(args.image_size)
     fractions = _fractions(args)
     chains = _names(args.degradations)
     for chain in chains or ():
         Chain.parse(chain).check()  # an unknown name or preset fails now, with suggestions
+    _args.output_folder("--out", args.out)
     dataset = SpaceDGDataset(
         args.split, chains, scenes=args.scenes, question_types=_names(args.question_types),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,

@@ -11,6 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from spacedg.commands import _args
 from spacedg.errors import InvalidDataError, ParameterError
 
 #: Largest image side accepted by --width / --height, pixels.
@@ -140,11 +141,13 @@ def _render(args: argparse.Namespace) -> int:
             raise ParameterError("--view NAME is required (or pass --list-views to see the names)")
         if args.out is None:
             raise ParameterError("--out FILE.png is required")
-        _check_png("--out", args.out)
+        _args.output_file("--out", args.out, (".png",))
         if args.depth_out is not None:
-            _check_png("--depth-out", args.depth_out)
+            _args.output_file("--depth-out", args.depth_out, (".png",))
             if args.depth_out.resolve() == args.out.resolve():
                 raise ParameterError("--depth-out must be another file than --out")
+    if args.sub_steps is not None:
+        _args.in_range("--sub-steps", args.sub_steps, 1, 4096)
     defocus = None
     if args.defocus is not None:
         aperture, focus = parse_numbers("--defocus", args.defocus, ("APERTURE_PX", "FOCUS_M"))

@@ -13,9 +13,10 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from spacedg.commands import _args
 from spacedg.scene.importer import LAYOUTS
 from spacedg.scene.synthetic.room import RoomConfig
-from spacedg.errors import InvalidDataError
+from spacedg.errors import InvalidDataError, ParameterError
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -27,8 +28,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     synth.add_argument("--out", type=Path, required=True, help="folder that receives one sub-folder per room")
     synth.add_argument("--seed", type=int, default=0, help="seed of the first room; room i uses seed + i (default 0)")
     synth.add_argument("--gaussians", type=int, default=None, help="target Gaussians per room (default: 150k–300k by seed)")
-    synth.add_argument("--min-views", type=int, default=48)
-    synth.add_argument("--max-views", type=int, default=120)
+    synth.add_argument("--min-views", type=int, default=48, help="fewest views per room (default 48)")
+    synth.add_argument("--max-views", type=int, default=120, help="most views per room, >= --min-views (default 120)")
     synth.add_argument("--width", type=int, default=640, help="image width of the views, pixels")
     synth.add_argument("--height", type=int, default=480, help="image height of the views, pixels")
     synth.add_argument("--splat", type=Path, action="append", default=[],
@@ -80,7 +81,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     preview = sub.add_parser("preview", help="draw top-down floor plans of scenes into one PNG")
     preview.add_argument("paths", type=Path, nargs="+", help="native scene folders, or folders of them")
     preview.add_argument("--out", type=Path, required=True, help="PNG file to write")
-    preview.add_argument("--columns", type=int, default=2)
+    preview.add_argument("--columns", type=int, default=2, help="floor plans per row (default 2)")
     preview.set_defaults(func=_preview)
 
 
@@ -95,8 +96,7 @@ def _synth(args: argparse.Namespace) -> int:
     from spacedg.scene.io import load_scene, save_scene
     from spacedg.scene.synthetic import CaptureConfig, ExternalObject, generate_room
 
-    if args.n < 1:
-        raise InvalidDataError(f"--n must be at least 1, got {args.n}")
+    _check_synth(args)
     externals = tuple(ExternalObject.from_splat(p, size_m=args.splat_size) for p in args.splat)
     config = RoomConfig(
         gaussians=args.gaussians,
@@ -131,6 +131,25 @@ def _synth(args: argparse.Namespace) -> int:
         print(f"{scene_id:<14} {len(g):>10,} {len(scene.instances):>9} {labels:>6} {len(scene.views):>5} {took:>8}")
     print(f"wrote {len(rows)} scene folder(s) under {args.out}")
     return 0
+
+
+def _check_synth(args: argparse.Namespace) -> None:
+    """Every flag of ``scenes synth``, before any room is generated."""
+    _args.at_least("--n", args.n, 1)
+    _args.seed("--seed", args.seed)
+    _args.seed("--seed + --n - 1 (the last room's seed)", args.seed + args.n - 1)
+    RoomConfig(gaussians=args.gaussians)  # its own range check ("gaussians must be in [10000, 5000000]")
+    _args.at_least("--min-views", args.min_views, 1)
+    _args.at_least("--max-views", args.max_views, 1)
+    if args.min_views > args.max_views:
+        raise ParameterError(
+            f"--min-views {args.min_views} is more than --max-views {args.max_views}; each room takes between the two: "
+            "pass --min-views <= --max-views"
+        )
+    _args.in_range("--width", args.width, 8, 16384, "pixels")
+    _args.in_range("--height", args.height, 8, 16384, "pixels")
+    _args.positive_number("--splat-size", args.splat_size)
+    _args.output_folder("--out", args.out)
 
 
 def _config_record(config: RoomConfig) -> dict:
@@ -208,8 +227,8 @@ def _preview(args: argparse.Namespace) -> int:
     from spacedg.scene.floorplan import contact_sheet, floorplan
     from spacedg.scene.io import load_scene
 
-    if args.out.suffix.lower() != ".png":
-        raise InvalidDataError(f"--out {args.out}: write a .png file")
+    _args.at_least("--columns", args.columns, 1)
+    _args.output_file("--out", args.out, (".png",))
     images = [floorplan(load_scene(folder)) for folder in tqdm(_scene_dirs(args.paths), desc="floor plans", unit="scene")]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(args.out), contact_sheet(images, columns=args.columns)[:, :, ::-1]):

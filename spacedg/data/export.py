@@ -17,7 +17,9 @@ processes the chunks with ``k % n == i``, so ``n`` processes or machines split t
 disjointly and together completely. A chunk whose two part files exist is skipped, so an
 interrupted export resumes where it stopped. Every file is written atomically (temporary
 sibling, then rename), so a crash never leaves a half-written file; an interrupted chunk just
-has some images and no parts, and is redone. Items are a pure function of the dataset's
+has some images and no parts, and is redone, after its own leftover temporary files
+(``images/.NNNNNNN_v.png.*.tmp``, ``parts/.part-KKKKK.*.tmp`` of that chunk only, so shards
+working on other chunks are never disturbed) are removed. Items are a pure function of the dataset's
 arguments, so re-running a chunk anywhere writes the same bytes. ``parts/manifest.json`` pins
 the settings: a shard started with other arguments on the same folder fails instead of mixing
 two exports.
@@ -70,7 +72,7 @@ from spacedg.data.chat import ANSWER_PROMPT
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.public_format import PUBLIC_BENCH_NAME, public_fields, public_mismatch
 from spacedg.plugins.answers import answer_text
-from spacedg.files import atomic_write_bytes
+from spacedg.files import atomic_write_bytes, remove_stale_temps
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
 
 __all__ = [
@@ -326,8 +328,21 @@ def _item(dataset: SpaceDGDataset, index: int) -> dict[str, Any]:
         raise InvalidDataError(f"item {index} ({name} of {record.id}) failed: scene {folder}: {err}") from err
 
 
+def _remove_chunk_temps(out: Path, k: int, shard_size: int, total: int) -> None:
+    """Remove the temporary files a killed export of chunk ``k`` left (its images' and parts')."""
+    indices = _chunk_range(k, shard_size, total)
+
+    def image_of_chunk(name: str) -> bool:
+        stem, _, view = name.removesuffix(".png").partition("_")
+        return name.endswith(".png") and len(stem) == 7 and stem.isdigit() and view.isdigit() and int(stem) in indices
+
+    remove_stale_temps(out / "images", image_of_chunk)
+    remove_stale_temps(out / "parts", [p.name for p in _part_paths(out, k)])
+
+
 def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, system: str, bar: Any) -> int:
     """Render chunk ``k``, write its images, then its JSONL part, then its TSV part; returns its item count."""
+    _remove_chunk_temps(out, k, shard_size, len(dataset))
     tsv_rows, chat_rows = [], []
     for index in _chunk_range(k, shard_size, len(dataset)):
         item = _item(dataset, index)

@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.errors import FileFormatError, ParameterError
@@ -230,14 +231,15 @@ def generate_records(
     for family in _families(config.families):
         rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
         pools: dict[str, list[QARecord]] = {}
-        for scanned, record in enumerate(family.generate(scene, rng)):
-            if scanned >= config.max_scan:
-                break
-            pool = pools.setdefault(record.sub_question_type, [])
-            if len(pool) < want:
-                pool.append(record)
-            elif all(len(pools.get(s, ())) >= want for s in family.sub_question_types):
-                break
+        with plugin_call("question family", family, "generate"):
+            for scanned, record in enumerate(family.generate(scene, rng)):
+                if scanned >= config.max_scan:
+                    break
+                pool = pools.setdefault(record.sub_question_type, [])
+                if len(pool) < want:
+                    pool.append(record)
+                elif all(len(pools.get(s, ())) >= want for s in family.sub_question_types):
+                    break
 
         def keep(record: QARecord, family_name: str = family.name) -> bool:
             if judge is None or judge.keep(record):

@@ -9,6 +9,7 @@ Public API::
         get_registry, reset_registry,
         list_degradations, get_degradation,
         list_question_families, get_question_family,
+        degradation_names, question_family_names,     # names only (never raise for a clash)
     )
 
 See :mod:`spacedg.plugins.specs` for the stage contracts, :mod:`spacedg.plugins.registry`
@@ -23,14 +24,17 @@ from spacedg.plugins.registry import (
     AUTOLOAD_ENV,
     PLUGINS_ENV,
     BrokenPlugin,
+    PluginClash,
     PluginOrigin,
     PluginRecord,
     Registry,
+    degradation_names,
     get_degradation,
     get_question_family,
     get_registry,
     list_degradations,
     list_question_families,
+    question_family_names,
     reset_registry,
 )
 from spacedg.plugins.qa_record import QARecord
@@ -60,6 +64,7 @@ __all__ = [
     "registering",
     "AnswerType",
     "BrokenPlugin",
+    "PluginClash",
     "Category",
     "DegradationSpec",
     "FamilyFactory",
@@ -75,10 +80,12 @@ __all__ = [
     "Registry",
     "Stage",
     "TaskGroup",
+    "degradation_names",
     "get_degradation",
     "get_question_family",
     "get_registry",
     "list_degradations",
     "list_question_families",
+    "question_family_names",
     "reset_registry",
 ]

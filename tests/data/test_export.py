@@ -180,6 +180,26 @@ def test_interrupted_export_resumes_without_duplicates(bench, exported, tmp_path
     assert export_bench(bench, out, shard_size=7, progress=False).items_written == 0
 
 
+def test_a_killed_exports_temp_files_are_removed_by_the_rerun(bench, exported, tmp_path):
+    """The finding: `images/.NNN.png.*.tmp` of a killed export stayed forever. A rerun removes
+    the temporary files of each chunk it redoes (and only files of that exact pattern)."""
+    out = tmp_path / "killed"
+    shutil.copytree(exported[0], out)
+    for part in (out / "parts").glob("part-00001.*"):  # chunk 1 (indices 7-13) was being written when killed
+        part.unlink()
+    stale = [out / "images" / ".0000008_0.png.k1ll3d_x.tmp", out / "parts" / ".part-00001.tsv.a8c_d2zz.tmp",
+             out / "parts" / ".part-00001.jsonl.00000000.tmp"]
+    kept = [out / "images" / ".0000008_0.png.tmp", out / "images" / "notes.tmp", out / "parts" / ".part-00001.tsv.NOTOURS.tmp"]
+    for path in stale + kept:
+        path.write_bytes(b"half")
+    summary = export_bench(bench, out, shard_size=7, progress=False)
+    assert summary.chunks_written == [1] and summary.merged
+    assert not any(p.exists() for p in stale) and all(p.exists() for p in kept)
+    for path in kept:
+        path.unlink()
+    assert _tree(out) == _tree(exported[0])
+
+
 def test_other_settings_in_the_same_folder_are_refused(bench, rooms, exported, tmp_path):
     out = tmp_path / "mixed"
     export_bench(bench, out, shard=(0, 2), shard_size=7, progress=False)
