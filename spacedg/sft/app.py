@@ -26,6 +26,7 @@ import json
 import multiprocessing
 import os
 import random
+import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -36,7 +37,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from transformers import TrainingArguments
 
-from spacedg.errors import ParameterError
+from spacedg.errors import ParameterError, SpaceDGError
 from spacedg.sft.collator import SFTCollator
 from spacedg.sft.config import build
 from spacedg.sft.data import BudgetedDataset, token_lengths
@@ -165,7 +166,11 @@ def main() -> None:
 
     @hydra.main(version_base="1.3", config_path="pkg://spacedg.conf", config_name="sft")
     def _app(cfg: Any) -> None:
-        run(cfg)
+        try:
+            run(cfg)
+        except SpaceDGError as err:  # one clear line, as the spacedg CLI prints it (Hydra would print a traceback)
+            print(f"spacedg-sft: error: {err}", file=sys.stderr)
+            raise SystemExit(2) from None
 
     os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
     _app()
