@@ -41,6 +41,12 @@ def small_room():
     return generate_room(7, RoomConfig(gaussians=30_000))
 
 
+def private_copies(dirs: list[Path], root: Path) -> list[Path]:
+    """Copies of scene folders under ``root``, with their visibility caches and without question
+    indexes (tests that build indexes write into the scene folders)."""
+    return [Path(shutil.copytree(d, root / d.name, ignore=shutil.ignore_patterns("*.qa.*"))) for d in dirs]
+
+
 @pytest.fixture(scope="session")
 def qa_room_dirs(tmp_path_factory) -> list[Path]:
     """Four small synthetic rooms (30k Gaussians, 24–32 views at 320×240, random world frames)

@@ -2,6 +2,8 @@
 :class:`~spacedg.errors.ParameterError` s that name the flag, the value and what is accepted.
 
 - numbers: :func:`at_least`, :func:`in_range`, :func:`seed`, :func:`fraction`, :func:`positive_number`;
+- the renderer: :func:`add_backend_arguments` declares ``--backend`` / ``--device`` once for every
+  command that renders;
 - outputs: :func:`output_folder` / :func:`output_file`: the path (or its nearest existing
   ancestor, since commands create missing folders) must be a folder this process can write in
   (checked by creating and removing a temporary file there: permission bits alone say nothing
@@ -11,14 +13,25 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import tempfile
 from pathlib import Path
 
 from spacedg.errors import ParameterError
+from spacedg.render.renderer import BACKENDS
 
-__all__ = ["at_least", "fraction", "in_range", "output_file", "output_folder", "positive_number", "seed"]
+__all__ = ["add_backend_arguments", "at_least", "fraction", "in_range", "output_file", "output_folder", "positive_number", "seed"]
+
+
+def add_backend_arguments(parser: argparse.ArgumentParser, what: str = "renderer", device: bool = True) -> None:
+    """``--backend`` (one of :data:`spacedg.render.renderer.BACKENDS`, default ``auto``) and, with
+    ``device``, ``--device`` (a torch device for the torch backend); ``what`` names what renders."""
+    parser.add_argument("--backend", choices=BACKENDS, default="auto",
+                        help=f"{what}: auto (default: the compiled CPU path, or torch on a non-CPU --device), cpu or torch")
+    if device:
+        parser.add_argument("--device", default=None, help="torch device for the torch backend, e.g. cuda or cuda:1 (default: CPU)")
 
 #: Largest seed accepted (numpy's SeedSequence takes any non-negative integer; 2**63 keeps it an int64).
 MAX_SEED = 2**63 - 1

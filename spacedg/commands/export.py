@@ -39,8 +39,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="share of scenes for val and bench, the rest train (default 0.1,0.1; 0 leaves a split empty)")
     parser.add_argument("--skip-bad-scenes", action="store_true", help="skip scenes that cannot be read (they are named)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.add_argument("--backend", default="auto", choices=("auto", "cpu", "torch"), help="renderer (default auto: compiled CPU)")
-    parser.add_argument("--device", default=None, help="torch device for the torch backend, e.g. cuda or cuda:1 (default: CPU)")
+    _args.add_backend_arguments(parser)
     parser.set_defaults(func=run)
 
 

@@ -10,8 +10,6 @@ from spacedg.errors import ParameterError
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    from spacedg.render.renderer import BACKENDS
-
     gallery = subparsers.add_parser(
         "gallery",
         help="contact sheet of one view: clean + each degradation at severities 1-5 and bench",
@@ -27,8 +25,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     gallery.add_argument("--thumb-width", type=int, default=256, help="thumbnail width in pixels (default 256)")
     gallery.add_argument("--motion", choices=("fast", "reference"), default="fast",
                          help="motion blur sub-steps: renderer's fast choice (default) or the exact sub_steps")
-    gallery.add_argument("--backend", choices=BACKENDS, default="auto", help="render backend (default auto)")
-    gallery.add_argument("--device", default=None, help="torch device for the torch backend")
+    _args.add_backend_arguments(gallery)
     gallery.set_defaults(func=_gallery)
 
 

@@ -34,7 +34,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     build.add_argument("--per-sub-type", type=int, default=25, help="records per sub_question_type and family per scene (default 25)")
     build.add_argument("--force", action="store_true", help="rebuild even when the index is up to date")
-    build.add_argument("--backend", default="auto", choices=("auto", "cpu", "torch"), help="renderer for visibility/covisibility")
+    _args.add_backend_arguments(build, "renderer of visibility and covisibility", device=False)
     build.set_defaults(func=_build)
 
     preview = sub.add_parser("preview", help="PNG sheet of a scene's questions: views, named objects' boxes, text")
@@ -44,7 +44,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     preview.add_argument("--types", default="", help="comma-separated question types to show (default: all)")
     preview.add_argument("--seed", type=int, default=0, help="which questions are picked (default 0)")
     preview.add_argument("--thumb-width", type=int, default=256, help="width of each view, pixels")
-    preview.add_argument("--backend", default="auto", choices=("auto", "cpu", "torch"))
+    _args.add_backend_arguments(preview, device=False)
     preview.set_defaults(func=_preview)
 
     stats = sub.add_parser("stats", help="counts per question type, answer balance, blind baseline")

@@ -23,8 +23,6 @@ DEPTH_SCALE = 1000.0
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    from spacedg.render.renderer import BACKENDS
-
     render = subparsers.add_parser(
         "render",
         help="render one view of a scene to a PNG",
@@ -55,9 +53,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="motion blur sub-exposures (default 80; with --fast-motion the upper bound)")
     render.add_argument("--fast-motion", action="store_true",
                         help="choose fewer sub-steps from the on-screen motion (the renderer's fast path)")
-    render.add_argument("--backend", choices=BACKENDS, default="auto",
-                        help="auto (default), cpu (compiled tiles) or torch")
-    render.add_argument("--device", default=None, help="torch device for the torch backend, e.g. cuda (default cpu)")
+    _args.add_backend_arguments(render)
     render.add_argument("--allow-empty", action="store_true",
                         help="write the PNG even when the view renders (almost) nothing (default: exit non-zero)")
     render.set_defaults(func=_render)

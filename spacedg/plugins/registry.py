@@ -341,15 +341,7 @@ class Registry:
                 if builtin_only and not origin.builtin:
                     self._skipped.append(origin)
                     continue
-                try:
-                    with self._importing(origin):
-                        obj = ep.load()
-                except PluginImportInterrupted:
-                    raise
-                except BaseException as err:  # noqa: BLE001 - any import failure marks the plugin broken
-                    self._broken.append(BrokenPlugin.from_exception(origin, "import", err))
-                    continue
-                self._add_recording(obj, origin)
+                self._load_guarded(origin, ep.load)
 
     def load_module(self, target: str) -> None:
         """Import ``"pkg.mod"`` (or ``"pkg.mod:attr"``) and register it; failures are recorded as broken."""
@@ -357,18 +349,27 @@ class Registry:
         dist, version = _distribution_of_module(module_name)
         builtin = dist is not None and _canonical(dist) == BUILTIN_DISTRIBUTION
         origin = PluginOrigin(target, target, dist, version, builtin, "env")
+        def load() -> Any:
+            obj: Any = importlib.import_module(module_name)
+            for part in filter(None, attr.split(".")):
+                obj = getattr(obj, part)
+            return obj
+
         with self._lock:
-            try:
-                with self._importing(origin):
-                    obj: Any = importlib.import_module(module_name)
-                    for part in filter(None, attr.split(".")):
-                        obj = getattr(obj, part)
-            except PluginImportInterrupted:
-                raise
-            except BaseException as err:  # noqa: BLE001 - any import failure marks the plugin broken
-                self._broken.append(BrokenPlugin.from_exception(origin, "import", err))
-                return
-            self._add_recording(obj, origin)
+            self._load_guarded(origin, load)
+
+    def _load_guarded(self, origin: PluginOrigin, load: Callable[[], Any]) -> None:
+        """Import one plugin with ``load()`` and register what it provides; any failure but a real
+        Ctrl+C (:class:`PluginImportInterrupted`) marks it broken."""
+        try:
+            with self._importing(origin):
+                obj = load()
+        except PluginImportInterrupted:
+            raise
+        except BaseException as err:  # noqa: BLE001 - any import failure marks the plugin broken
+            self._broken.append(BrokenPlugin.from_exception(origin, "import", err))
+            return
+        self._add_recording(obj, origin)
 
     @contextmanager
     def _importing(self, origin: PluginOrigin) -> Iterator[None]:
@@ -595,22 +596,20 @@ class Registry:
     def get_degradation(self, name: str) -> DegradationSpec:
         """The degradation called ``name``; :class:`UnknownPluginError` with suggestions, or
         :class:`DuplicatePluginError` naming both sources when two plugins registered it."""
-        if isinstance(name, str):
-            self._check_clashes("degradation", name)
-        spec = self._degradations.get(name) if isinstance(name, str) else None
-        if spec is None:
-            raise UnknownPluginError(self._unknown_message("degradation", name, self._degradations))
-        return spec
+        return self._lookup("degradation", name, self._degradations)
 
     def get_question_family(self, name: str) -> QuestionFamily:
         """The question family called ``name``; :class:`UnknownPluginError` with suggestions, or
         :class:`DuplicatePluginError` naming both sources when two plugins registered it."""
+        return self._lookup("question family", name, self._families)
+
+    def _lookup(self, kind: str, name: object, table: Mapping[str, Any]) -> Any:
         if isinstance(name, str):
-            self._check_clashes("question family", name)
-        fam = self._families.get(name) if isinstance(name, str) else None
-        if fam is None:
-            raise UnknownPluginError(self._unknown_message("question family", name, self._families))
-        return fam
+            self._check_clashes(kind, name)
+        found = table.get(name) if isinstance(name, str) else None
+        if found is None:
+            raise UnknownPluginError(self._unknown_message(kind, name, table))
+        return found
 
     def _unknown_message(self, kind: str, name: object, available: Iterable[str]) -> str:
         names = sorted(available)

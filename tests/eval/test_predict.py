@@ -9,7 +9,6 @@ and scoring the output are all exercised for real.
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import pytest
@@ -26,6 +25,7 @@ from spacedg.eval.predictions import meta_path, read_predictions
 from spacedg.eval.prompts import conversation, degradation_info, parse_degradation_guess
 from spacedg.eval.report import build_report
 from spacedg.vlm import encode_chats, load_vlm, save_tiny_vlm
+from tests.conftest import private_copies
 
 CONFIG = QABuildConfig(seed=0, per_sub_type=1, families=("object_counting", "camera_translation", "object_existence_estimation"))
 SIZE = (64, 48)
@@ -34,10 +34,7 @@ DEGRADATIONS = ["haze", "low_res"]
 
 @pytest.fixture(scope="module")
 def rooms(qa_room_dirs, tmp_path_factory) -> list[Path]:
-    root = tmp_path_factory.mktemp("predict_rooms")
-    for d in qa_room_dirs:
-        shutil.copytree(d, root / d.name, ignore=shutil.ignore_patterns("*.qa.*"))
-    return sorted(root.iterdir())
+    return private_copies(qa_room_dirs, tmp_path_factory.mktemp("predict_rooms"))
 
 
 def _dataset(rooms: list[Path]) -> SpaceDGDataset:

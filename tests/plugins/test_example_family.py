@@ -22,6 +22,7 @@ from spacedg.plugins import get_question_family, list_question_families
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.questions.language import object_phrase
 from spacedg.scene.io import load_scene
+from tests.conftest import private_copies
 
 SPACEDG_SCRIPT = Path(sys.executable).parent / "spacedg"
 NAME = "nearest_object"
@@ -31,8 +32,7 @@ CONFIG = QABuildConfig(per_sub_type=4)
 @pytest.fixture(scope="module")
 def rooms(qa_room_dirs, tmp_path_factory) -> list[Path]:
     """Private copies of the four session rooms (with their visibility caches, without indexes)."""
-    root = tmp_path_factory.mktemp("family_rooms")
-    return [Path(shutil.copytree(d, root / d.name, ignore=shutil.ignore_patterns("*.qa.*"))) for d in qa_room_dirs]
+    return private_copies(qa_room_dirs, tmp_path_factory.mktemp("family_rooms"))
 
 
 def rederive(record) -> str:

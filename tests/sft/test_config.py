@@ -4,7 +4,6 @@ datasets the app built before; bad keys and degradation names fail early with sp
 from __future__ import annotations
 
 import ast
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +22,7 @@ from spacedg.sft.model import ModelOptions
 from spacedg.sft.sources import DataOptions, ValOptions
 from spacedg.data.public_format import public_fields
 from tests.sft.configs import compose_sft
+from tests.conftest import private_copies
 
 ROOT = Path(__file__).resolve().parents[2]
 CONF = ROOT / "conf"
@@ -124,8 +124,7 @@ def test_configs_override_only_what_differs() -> None:
 @pytest.fixture(scope="module")
 def rooms(qa_room_dirs, tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("config_rooms")
-    for d in qa_room_dirs:
-        shutil.copytree(d, root / d.name, ignore=shutil.ignore_patterns("*.qa.*"))
+    private_copies(qa_room_dirs, root)
     return root
 
 

@@ -25,6 +25,7 @@ import numpy as np
 from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.files import FileValueError, PathLike, as_path, read_json
 from spacedg.scene.box import OrientedBox
+from spacedg.scene.io.fields import instance_list
 from spacedg.scene.model import Instance
 
 __all__ = ["read_embodiedscan_boxes", "euler_zxy_to_matrix"]
@@ -59,13 +60,7 @@ def _entry(p: object, data: Any, scene: str | None) -> tuple[list[Any], dict[str
             data = entries[0]
         else:
             raise FileFormatError(f"{p}: {len(entries)} scans in data_list; name one (scene=..., the end of its sample_idx)")
-    if isinstance(data, dict):
-        if "instances" not in data:
-            raise FileFormatError(f"{p}: expected 'instances' (EmbodiedScan info entry), 'data_list', or a list of instances")
-        data = data["instances"]
-    if not isinstance(data, list):
-        raise FileFormatError(f"{p}: 'instances' must be a list")
-    return data, categories
+    return instance_list(p, data, "'instances' (EmbodiedScan info entry), 'data_list', or a list of instances"), categories
 
 
 def read_embodiedscan_boxes(path: PathLike, scene: str | None = None) -> list[Instance]:

@@ -34,6 +34,7 @@ import numpy as np
 from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.files import FileValueError, PathLike, as_path, read_json
 from spacedg.render.camera import Camera
+from spacedg.scene.io.fields import matrix_field, named_record
 
 __all__ = ["read_inria_cameras", "read_cfg_args", "latest_point_cloud", "is_inria_output"]
 
@@ -88,18 +89,6 @@ def read_cfg_args(path: PathLike) -> dict[str, Any]:
     return out
 
 
-def _matrix(where: str, key: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
-    try:
-        array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise FileFormatError(f"{where}: '{key}' must be numbers of shape {shape}") from None
-    if array.shape != shape:
-        raise FileFormatError(f"{where}: '{key}' must have shape {shape}, got {array.shape}")
-    if not np.isfinite(array).all():
-        raise FileValueError(f"{where}: '{key}' holds NaN or Inf")
-    return array
-
-
 def _number(where: str, key: str, value: Any, positive: bool = True) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or (positive and value <= 0):
         raise FileValueError(f"{where}: '{key}' must be a {'positive ' if positive else ''}finite number, got {value!r}")
@@ -119,26 +108,16 @@ def read_inria_cameras(path: PathLike) -> dict[str, Camera]:
         raise FileFormatError(f"{p}: expected a non-empty JSON list of cameras (the INRIA 3DGS cameras.json)")
     out: dict[str, Camera] = {}
     for index, record in enumerate(data):
-        where = f"{p}: [{index}]"
-        if not isinstance(record, dict):
-            raise FileFormatError(f"{where}: expected an object, got {type(record).__name__}")
-        missing = [k for k in ("img_name", "width", "height", "position", "rotation", "fx", "fy") if k not in record]
-        if missing:
-            raise FileFormatError(f"{where}: missing {missing}; an INRIA camera has id, img_name, width, height, position, rotation, fx, fy")
-        name = record["img_name"]
-        if not isinstance(name, str) or not name:
-            raise FileFormatError(f"{where}: 'img_name' must be a non-empty string, got {name!r}")
-        where = f"{where} ({name!r})"
-        if name in out:
-            raise FileFormatError(f"{where}: img_name {name!r} appears twice")
-        rot = _matrix(where, "rotation", record["rotation"], (3, 3))
+        name, where = named_record(f"{p}: [{index}]", record, "img_name", ("img_name", "width", "height", "position", "rotation", "fx", "fy"),
+                                   out, "an INRIA camera has id, img_name, width, height, position, rotation, fx, fy")
+        rot = matrix_field(where, "rotation", record["rotation"], (3, 3))
         err = float(np.abs(rot.T @ rot - np.eye(3)).max())
         if err > RIGID_TOL or np.linalg.det(rot) < 0:
             raise FileValueError(f"{where}: 'rotation' is not a rotation matrix (max |RᵀR − I| = {err:.3g}, det {np.linalg.det(rot):.3f})")
         u, _, vt = np.linalg.svd(rot)
         pose = np.eye(4)
         pose[:3, :3] = u @ vt
-        pose[:3, 3] = _matrix(where, "position", record["position"], (3,))
+        pose[:3, 3] = matrix_field(where, "position", record["position"], (3,))
         width = _number(where, "width", record["width"])
         height = _number(where, "height", record["height"])
         if width != int(width) or height != int(height):

@@ -41,6 +41,7 @@ import numpy as np
 
 from spacedg.scene.box import OrientedBox
 from spacedg.files import FileValueError, PathLike, as_path, atomic_write, dump_json, read_json
+from spacedg.scene.io.fields import instance_list, matrix_field
 from spacedg.scene.model import Instance, InstanceVisibility
 from spacedg.errors import FileFormatError, InvalidDataError
 
@@ -57,18 +58,6 @@ def _first_key(item: Mapping[str, Any], keys: Sequence[str]) -> str | None:
     return None
 
 
-def _matrix(where: str, key: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
-    try:
-        array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise FileFormatError(f"{where}: '{key}' must be numbers of shape {shape}") from None
-    if array.shape != shape:
-        raise FileFormatError(f"{where}: '{key}' must have shape {shape}, got {array.shape}")
-    if not np.isfinite(array).all():
-        raise FileValueError(f"{where}: '{key}' holds NaN or Inf")
-    return array
-
-
 def _box(where: str, item: Mapping[str, Any]) -> OrientedBox:
     corner_key = _first_key(item, _CORNER_KEYS)
     has_transform = "obb_transform" in item or "obb_extents" in item
@@ -82,10 +71,10 @@ def _box(where: str, item: Mapping[str, Any]) -> OrientedBox:
             for key in ("obb_transform", "obb_extents"):
                 if key not in item:
                     raise FileFormatError(f"{where}: '{key}' is missing; 'obb_transform' and 'obb_extents' go together")
-            transform = _matrix(where, "obb_transform", item["obb_transform"], (4, 4))
+            transform = matrix_field(where, "obb_transform", item["obb_transform"], (4, 4))
             if not np.allclose(transform[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
                 raise FileValueError(f"{where}: 'obb_transform' last row must be [0, 0, 0, 1], got {transform[3].tolist()}")
-            extents = _matrix(where, "obb_extents", item["obb_extents"], (3,))
+            extents = matrix_field(where, "obb_extents", item["obb_extents"], (3,))
             box = OrientedBox.from_transform(transform, extents)  # a reflection becomes a rotation
         if corner_key is not None:
             raw = item[corner_key]
@@ -94,7 +83,7 @@ def _box(where: str, item: Mapping[str, Any]) -> OrientedBox:
                     raw = [[c["x"], c["y"], c["z"]] for c in raw]
                 except KeyError:
                     raise FileFormatError(f"{where}: '{corner_key}' corners must each have 'x', 'y' and 'z'") from None
-            corners = _matrix(where, corner_key, raw, (8, 3))
+            corners = matrix_field(where, corner_key, raw, (8, 3))
             from_corners = OrientedBox.from_corners(corners)
             if box is None:
                 return from_corners
@@ -256,12 +245,7 @@ def read_instances(path: PathLike, views: Iterable[str] | None = None) -> list[I
     """
     p = as_path(path, "instance JSON")
     data = read_json(p, "instance JSON")
-    if isinstance(data, dict):
-        if "instances" not in data:
-            raise FileFormatError(f"{p}: expected a list of instances or an object with an 'instances' list (keys: {sorted(data)[:10]})")
-        data = data["instances"]
-    if not isinstance(data, list):
-        raise FileFormatError(f"{p}: 'instances' must be a list, got {type(data).__name__}")
+    data = instance_list(p, data, "a list of instances or an object with an 'instances' list")
     instances = [_instance(f"{p}: instance [{i}]", item) for i, item in enumerate(data)]
     dup = sorted(i for i, n in Counter(inst.id for inst in instances).items() if n > 1)
     if dup:

@@ -43,6 +43,7 @@ import numpy as np
 from spacedg._checks import require_homogeneous
 from spacedg.files import FileValueError, PathLike, as_path, read_json
 from spacedg.scene.io.colmap import DEFAULT_FISHEYE_MAX_THETA
+from spacedg.scene.io.fields import named_record
 from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.render.camera import Camera, FisheyeLens
 
@@ -92,15 +93,21 @@ def _image_size(folder: Path, file_path: str, where: str) -> tuple[int, int]:
     )
 
 
-def _pose(where: str, value: Any) -> np.ndarray:
+def _as_4x4(where: str, key: str, value: Any) -> np.ndarray:
+    """The JSON field ``key``: a 4×4 float64 matrix (a 3×4 one gets the row ``0 0 0 1``)."""
     try:
         matrix = np.array(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise FileFormatError(f"{where}: 'transform_matrix' must be a 4×4 list of numbers") from None
+        raise FileFormatError(f"{where}: '{key}' must be a 4×4 (or 3×4) list of numbers") from None
     if matrix.shape == (3, 4):
         matrix = np.vstack([matrix, [0.0, 0.0, 0.0, 1.0]])
     if matrix.shape != (4, 4):
-        raise FileFormatError(f"{where}: 'transform_matrix' must be 4×4 (or 3×4), got shape {matrix.shape}")
+        raise FileFormatError(f"{where}: '{key}' must be 4×4 (or 3×4), got shape {matrix.shape}")
+    return matrix
+
+
+def _pose(where: str, value: Any) -> np.ndarray:
+    matrix = _as_4x4(where, "transform_matrix", value)
     require_homogeneous(matrix, f"{where}: 'transform_matrix'", FileValueError)
     rot = matrix[:3, :3]
     err = float(np.abs(rot.T @ rot - np.eye(3)).max())
@@ -197,18 +204,8 @@ def read_transforms(
     out: dict[str, Camera] = {}
     dropped: list[str] = []
     for key, index, frame in listed:
-        where = f"{p}: {key}[{index}]"
-        if not isinstance(frame, dict):
-            raise FileFormatError(f"{where}: expected an object, got {type(frame).__name__}")
-        for key in ("file_path", "transform_matrix"):
-            if key not in frame:
-                raise FileFormatError(f"{where}: missing '{key}'")
-        name = frame["file_path"]
-        if not isinstance(name, str) or not name:
-            raise FileFormatError(f"{where}: 'file_path' must be a non-empty string, got {name!r}")
-        where = f"{where} ({name!r})"
-        if name in out:
-            raise FileFormatError(f"{where}: file_path {name!r} appears twice; view names must be unique")
+        name, where = named_record(f"{p}: {key}[{index}]", frame, "file_path", ("file_path", "transform_matrix"), out,
+                                   "a frame has 'file_path' and 'transform_matrix'")
         params = {**top, **{k: frame[k] for k in _INTRINSIC_KEYS if k in frame}}
         if ("w" not in params or "h" not in params) and size is None:
             size = _image_size(p.parent, frames[0].get("file_path"), where)
@@ -231,14 +228,9 @@ def read_transforms(
 
 
 def _rows34(where: str, key: str, value: Any) -> np.ndarray:
-    try:
-        matrix = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise FileFormatError(f"{where}: '{key}' must be a 3×4 (or 4×4) list of numbers") from None
-    if matrix.shape == (3, 4):
-        matrix = np.vstack([matrix, [0.0, 0.0, 0.0, 1.0]])
-    if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
-        raise FileFormatError(f"{where}: '{key}' must be 3×4 (or 4×4) finite numbers, got shape {matrix.shape}")
+    matrix = _as_4x4(where, key, value)
+    if not np.isfinite(matrix).all():
+        raise FileFormatError(f"{where}: '{key}' must be finite numbers")
     rot = matrix[:3, :3]
     if float(np.abs(rot.T @ rot - np.eye(3)).max()) > RIGID_TOL or np.linalg.det(rot) < 0:
         raise FileValueError(f"{where}: '{key}' rotation part is not a rotation (scaled, sheared or reflected)")

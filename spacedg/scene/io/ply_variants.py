@@ -75,18 +75,14 @@ def decode_compressed(path: Path, elements: dict[str, np.ndarray]) -> Gaussians:
         return chunk[name].astype(np.float64)[ci]
 
     words = {k: vertex[k].astype(np.uint32) for k in _PACKED}
-    pos = words["packed_position"]
-    means = np.stack([
-        _lerp(col("min_x"), col("max_x"), _unorm(pos, 21, 11)),
-        _lerp(col("min_y"), col("max_y"), _unorm(pos, 11, 10)),
-        _lerp(col("min_z"), col("max_z"), _unorm(pos, 0, 11)),
-    ], axis=1)
-    sc = words["packed_scale"]
-    log_scales = np.stack([
-        _lerp(col("min_scale_x"), col("max_scale_x"), _unorm(sc, 21, 11)),
-        _lerp(col("min_scale_y"), col("max_scale_y"), _unorm(sc, 11, 10)),
-        _lerp(col("min_scale_z"), col("max_scale_z"), _unorm(sc, 0, 11)),
-    ], axis=1)
+    def unpack_11_10_11(word: np.ndarray, field: str) -> np.ndarray:
+        """x, y, z packed as 11, 10, 11 bits, each between the chunk's min_ and max_ of ``field``."""
+        bits = ((21, 11), (11, 10), (0, 11))
+        return np.stack([_lerp(col(f"min_{field}{axis}"), col(f"max_{field}{axis}"), _unorm(word, shift, width))
+                         for axis, (shift, width) in zip("xyz", bits)], axis=1)
+
+    means = unpack_11_10_11(words["packed_position"], "")
+    log_scales = unpack_11_10_11(words["packed_scale"], "scale_")
     rot = words["packed_rotation"]
     norm = np.sqrt(2.0)  # 1 / (√2 / 2)
     abc = np.stack([(_unorm(rot, s, 10) - 0.5) * norm for s in (20, 10, 0)], axis=1)
