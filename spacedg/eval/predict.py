@@ -208,7 +208,7 @@ def predict(
     """
     from tqdm.auto import tqdm
 
-    from spacedg.vlm import generate, load_vlm
+    from spacedg.vlm import generate, load_vlm, pixel_budget
 
     if variant not in VARIANTS:
         raise ParameterError(f"unknown prompt variant {variant!r}; choose one of {', '.join(VARIANTS)}")
@@ -243,6 +243,7 @@ def predict(
         return summary
     if vlm is None:
         vlm, processor = load_vlm(model, device=device, dtype=dtype, min_pixels=min_pixels, max_pixels=max_pixels)
+    meta["image_pixels"] = pixel_budget(processor)  # the budget in force: the model's saved one unless overridden
     atomic_write_bytes(meta_path(out), json.dumps(meta, indent=2).encode() + b"\n")
     names = known_degradations()
     bar = tqdm(total=len(pending), desc=f"predict {name} [{variant}]", unit="item", disable=not progress)
