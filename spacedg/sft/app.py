@@ -228,11 +228,13 @@ def run(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     args = training_arguments(config["train"], output_dir, seed, evaluate=data.val.samples > 0)
     _barrier()
     launch = launch_of(args)
-    if launch.kind == "fsdp":
-        os.environ.setdefault("ACCELERATE_USE_FSDP", "true")  # transformers then loads ranks > 0 on meta (cpu_ram_efficient_loading)
     options = _for_launch(options, launch, args)
+    # FSDP with cpu_ram_efficient_loading: only rank 0 reads the weights; accelerate broadcasts them into
+    # the other ranks' shards (transformers 5.23 would read them on every rank)
+    rank0_reads = launch.kind == "fsdp" and bool((args.fsdp_plugin_args or {}).get("cpu_ram_efficient_loading"))
+    empty = rank0_reads and args.process_index != 0
     model, processor = prepare_model(options, mixed_precision=launch.mixed_precision,
-                                     shards_parameters=launch.shards_parameters)
+                                     shards_parameters=launch.shards_parameters, empty_weights=empty)
     wrapped = _fill_wrap_classes(args, model)
     predicted = {rank: memory_for(model, launch, rank=rank) for rank in range(args.world_size)}
     replaced = ensure_generation_markers(processor)
@@ -274,7 +276,8 @@ def run(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
         "distributed": {"world_size": args.world_size, "parallel_mode": str(args.parallel_mode.value),
                         "launch": launch.name, "mixed_precision": launch.mixed_precision,
                         "fsdp": bool(trainer.is_fsdp_enabled), "deepspeed": bool(trainer.is_deepspeed_enabled),
-                        "model_class": type(trainer.model_wrapped).__name__, "wrapped_classes": wrapped},
+                        "model_class": type(trainer.model_wrapped).__name__, "wrapped_classes": wrapped,
+                        "weights_read_by": "rank 0" if rank0_reads else "every rank"},
         "memory": _memory(probe, predicted, args.world_size),
     }
     if trainer.is_world_process_zero():

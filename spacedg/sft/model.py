@@ -357,8 +357,39 @@ def storage_dtypes(dtype: str, mixed_precision: str = "no", shards_parameters: b
     return torch.float32, half if half is not None and not shards_parameters else torch.float32
 
 
-def _build(options: ModelOptions, device: str, dtype: torch.dtype) -> tuple[Any, Any]:
+def _empty(folder: str, dtype: torch.dtype, options: ModelOptions) -> tuple[Any, Any]:
+    """The model of ``folder`` without its weights (parameters on the meta device, buffers real) and
+    its processor: what FSDP ranks other than the first need when rank 0 broadcasts the weights."""
+    from accelerate import init_empty_weights
+    from transformers import AutoConfig, AutoModelForImageTextToText
+
+    from spacedg.vlm import load_processor
+
+    config = AutoConfig.from_pretrained(folder)
+    with init_empty_weights():  # include_buffers=False: rotary tables and other buffers are computed for real
+        model = AutoModelForImageTextToText.from_config(config, dtype=dtype)
+    return model, load_processor(folder, min_pixels=options.min_pixels, max_pixels=options.max_pixels)
+
+
+def _unread(model: torch.nn.Module) -> None:
+    """Give every meta-device parameter uninitialised CPU storage (``torch.empty``: pages the OS commits
+    only when written, i.e. when FSDP fills this rank's shards), as accelerate's FSDP preparation
+    expects of the ranks that do not read the weights; tied parameters stay tied."""
+    made: dict[int, torch.nn.Parameter] = {}
+    for module in model.modules():
+        for name, param in list(module.named_parameters(recurse=False)):
+            if param.device.type != "meta":
+                continue
+            if id(param) not in made:
+                made[id(param)] = torch.nn.Parameter(torch.empty(param.shape, dtype=param.dtype, device="cpu"),
+                                                     requires_grad=param.requires_grad)
+            module._parameters[name] = made[id(param)]
+
+
+def _build(options: ModelOptions, device: str, dtype: torch.dtype, empty: bool = False) -> tuple[Any, Any]:
     path = str(options.path)
+    if empty and options.tiny_family is None:
+        return _empty(_local_folder(path), dtype, options)
     if options.tiny_family is not None:
         model, processor = build_tiny_vlm(options.tiny_family)
         model.name_or_path = path  # recorded as base_model_name_or_path in LoRA adapter configs
@@ -408,16 +439,18 @@ def _apply_lora(model: Any, options: ModelOptions, groups: dict[str, list[str]])
 
 
 def prepare_model(options: ModelOptions, *, device: str = "cpu", mixed_precision: str = "no",
-                  shards_parameters: bool = False) -> tuple[Any, Any]:
+                  shards_parameters: bool = False, empty_weights: bool = False) -> tuple[Any, Any]:
     """``(model, processor)`` ready for training as ``options`` says (see the module doc).
 
     The model is a transformers model, or a peft ``PeftModelForCausalLM`` with ``lora=True``, in
     train mode on ``device``; its weights are stored as :func:`storage_dtypes` says for the
-    launch's ``mixed_precision`` and ``shards_parameters``. The processor has the pixel budget applied.
+    launch's ``mixed_precision`` and ``shards_parameters``. ``empty_weights``: the weights are not
+    read (uninitialised storage; FSDP's ``cpu_ram_efficient_loading`` fills this rank's shards from
+    rank 0). The processor has the pixel budget applied.
     """
     options.validate()
     trained, frozen_dtype = storage_dtypes(options.dtype, mixed_precision, shards_parameters)
-    model, processor = _build(options, device, frozen_dtype)
+    model, processor = _build(options, device, frozen_dtype, empty_weights)
     groups = module_groups(model)
     frozen = {"vision": options.freeze_vision, "merger": options.merger_frozen,
               "language": options.freeze_language or options.lora}
@@ -430,6 +463,8 @@ def prepare_model(options: ModelOptions, *, device: str = "cpu", mixed_precision
     for param in model.parameters():
         if param.requires_grad and param.dtype != trained:
             param.data = param.data.to(trained)
+    if empty_weights:
+        _unread(model)
     # training needs no KV cache; with activation checkpointing (the model's or FSDP's) a cache would
     # grow again in each recomputation
     _set_use_cache(model, False)

@@ -80,7 +80,8 @@ def test_torchrun_two_process_ddp(ddp) -> None:
     summary, out = ddp
     assert summary["distributed"] == {"world_size": 2, "parallel_mode": "distributed", "launch": "ddp",
                                       "mixed_precision": "no", "fsdp": False, "deepspeed": False,
-                                      "model_class": "DistributedDataParallel", "wrapped_classes": None}
+                                      "model_class": "DistributedDataParallel", "wrapped_classes": None,
+                                      "weights_read_by": "every rank"}
     assert summary["global_step"] == 4 and summary["last_evaluation"]["eval_samples"] == 4
     _check_memory(summary)
     assert (out / "final" / "model.safetensors").is_file()
@@ -92,6 +93,7 @@ def test_fsdp2_resumes_bit_exactly_and_writes_a_final_model(ddp, rooms, tmp_path
     assert whole["distributed"]["launch"] == "fsdp2" and whole["distributed"]["fsdp"]
     assert whole["distributed"]["model_class"] == "FSDPQwen2_5_VLForConditionalGeneration"
     assert whole["distributed"]["wrapped_classes"] == ["Qwen2_5_VLDecoderLayer", "Qwen2_5_VLVisionBlock"]
+    assert whole["distributed"]["weights_read_by"] == "rank 0"  # rank 1 received its shards (cpu_ram_efficient_loading)
     assert whole["losses"] == pytest.approx(reference["losses"], abs=1e-6)  # sharding changes nothing
     _check_memory(whole)  # each rank holds exactly its shards
     assert (tmp_path / "whole" / "checkpoint-2" / "pytorch_model_fsdp_0").is_dir()  # sharded checkpoints
