@@ -8,6 +8,7 @@ and :mod:`spacedg.scene.model`.
     scene = spacedg.load_scene("runs/demo/scenes/room-000000")
     dataset = spacedg.SpaceDGDataset("train", ["haze"])   # torch is imported here, on first use
     room = spacedg.generate_room(seed=3)
+    scene, report = spacedg.import_scene("output/kitchen", "scenes/kitchen", instances="kitchen.json")  # a real capture
     spacedg.list_degradations(), spacedg.get_question_family("object_counting")
 """
 
@@ -50,9 +51,25 @@ from spacedg.data.chat import chat_collate
 __version__ = "0.1.0"
 
 
+#: Front-door names imported on first access: name → (module, attribute).
+_LAZY = {
+    "import_scene": ("spacedg.scene.importer", "import_scene"),
+    "assign_instances": ("spacedg.scene.labelling", "assign_instances"),
+    "check_frame": ("spacedg.scene.frame_check", "check_frame"),
+}
+
+
 def __getattr__(name: str) -> object:
     """``spacedg.SpaceDGDataset`` on first access: the dataset needs torch, which the rest of the
-    front door does not (``import spacedg`` stays light for readers, the renderer and the CLI)."""
+    front door does not (``import spacedg`` stays light for readers, the renderer and the CLI).
+    ``import_scene``, ``assign_instances`` and ``check_frame`` load their modules on first access too."""
+    if name in _LAZY:
+        import importlib
+
+        module, attribute = _LAZY[name]
+        value = getattr(importlib.import_module(module), attribute)
+        globals()[name] = value
+        return value
     if name == "SpaceDGDataset":
         from spacedg.data.dataset import SpaceDGDataset  # torch: imported on first use
 
@@ -62,6 +79,9 @@ def __getattr__(name: str) -> object:
 
 __all__ = [
     "SpaceDGDataset",
+    "assign_instances",
+    "check_frame",
+    "import_scene",
     "chat_collate",
     "Camera",
     "Defocus",

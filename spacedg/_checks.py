@@ -1,10 +1,14 @@
 """Small validation helpers that produce the project's uniform error messages.
 
-Messages follow one pattern: ``"<source>: field '<name>': <what> (<count> of <total>,
+Array messages follow one pattern: ``"<source>: field '<name>': <what> (<count> of <total>,
 first at index <i>: <value>). <fix>"`` so a user can find the record and knows what to do.
+Scalar and pose checks (:func:`finite_float`, :func:`require_homogeneous`) start with the
+caller's ``what`` (where the value came from and its name) and raise the caller's error type.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -91,3 +95,25 @@ def require_rotation(matrix: np.ndarray, field: str, source: str, tol: float = 1
     det = float(np.linalg.det(matrix))
     if det < 0:
         raise InvalidDataError(f"{_where(source, field)}: is a reflection (det = {det:.3g}); flip one axis to get a right-handed rotation")
+
+
+def finite_float(value: object, what: str, error: type[Exception] = InvalidDataError) -> float:
+    """``value`` as a finite ``float``; else ``error("<what> must be a number, got …")`` or ``("<what> must be finite, got …")``."""
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise error(f"{what} must be a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise error(f"{what} must be finite, got {number}")
+    return number
+
+
+def require_homogeneous(matrix: np.ndarray, what: str, error: type[Exception] = InvalidDataError) -> None:
+    """Require a 4×4 pose matrix (shape checked by the caller) to be finite with last row ``[0, 0, 0, 1]`` (atol 1e-9).
+
+    Raises ``error("<what> holds NaN or Inf")`` or ``error("<what> last row must be [0, 0, 0, 1], got …")``.
+    """
+    if not np.isfinite(matrix).all():
+        raise error(f"{what} holds NaN or Inf")
+    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise error(f"{what} last row must be [0, 0, 0, 1], got {matrix[3].tolist()}")

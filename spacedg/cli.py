@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from collections.abc import Sequence
+from typing import Any, TextIO
 
-from spacedg.errors import SpaceDGError
+from spacedg.errors import SpaceDGError, SpaceDGWarning
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -32,18 +34,45 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``spacedg`` console script; returns the process exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except BrokenPipeError:  # output piped into `head` and closed: not an error
-        sys.stderr.close()
-        return 0
-    except SpaceDGError as err:
-        # Bad input: one clear line, no traceback.
-        print(f"spacedg: error: {err}", file=sys.stderr)
-        return 2
+    """Entry point of the ``spacedg`` console script; returns the process exit code.
+
+    Exit status 2 with one line ``spacedg: error: …`` for bad input (any
+    :class:`~spacedg.errors.SpaceDGError`), 130 with one line for Ctrl+C (naming the plugin
+    being imported when that is where it landed); warnings of spacedg
+    (:class:`~spacedg.errors.SpaceDGWarning`: plugin clashes, slow plugin imports, ...) print as
+    one line ``spacedg: warning: …`` on stderr.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("default", SpaceDGWarning)
+        warnings.showwarning = _one_line_warnings(warnings.showwarning)
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        try:
+            return int(args.func(args) or 0)
+        except BrokenPipeError:  # output piped into `head` and closed: not an error
+            sys.stderr.close()
+            return 0
+        except SpaceDGError as err:
+            # Bad input: one clear line, no traceback.
+            print(f"spacedg: error: {err}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt as err:
+            text = str(err).strip()
+            print(f"spacedg: {text}" if text else "spacedg: interrupted", file=sys.stderr)
+            return 130
+
+
+def _one_line_warnings(fallback: Any) -> Any:
+    """A ``warnings.showwarning`` that prints spacedg's warnings as ``spacedg: warning: …``."""
+
+    def show(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+             file: TextIO | None = None, line: str | None = None) -> None:
+        if issubclass(category, SpaceDGWarning):
+            print(f"spacedg: warning: {message}", file=file or sys.stderr, flush=True)
+        else:
+            fallback(message, category, filename, lineno, file, line)
+
+    return show
 
 
 if __name__ == "__main__":  # pragma: no cover

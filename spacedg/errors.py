@@ -42,6 +42,41 @@ class DuplicatePluginError(PluginError):
     """Two plugins registered the same name."""
 
 
+class PluginRuntimeError(PluginError):
+    """A plugin's own code raised while spacedg ran it (a degradation's ``apply``, a question
+    family's ``generate``).
+
+    The message names the plugin and the distribution that installed it; the original
+    exception is chained as ``__cause__``.
+
+    Attributes:
+        plugin: the degradation or question-family name.
+        distribution: the installed distribution providing it (``None`` if unknown).
+    """
+
+    def __init__(self, message: str, *, plugin: str | None = None, distribution: str | None = None) -> None:
+        super().__init__(message)
+        self.plugin = plugin
+        self.distribution = distribution
+
+
+class PluginImportInterrupted(KeyboardInterrupt):
+    """Ctrl+C (SIGINT) arrived while a plugin was being imported; the message names the plugin.
+
+    A :class:`KeyboardInterrupt`, so everything that stops on Ctrl+C still stops; the command
+    line prints its message on one line and exits with status 130.
+    """
+
+
+class SpaceDGWarning(UserWarning):
+    """Something the user should know that does not stop the work (the command line prints
+    ``spacedg: warning: <message>`` on one line)."""
+
+
+class PluginWarning(SpaceDGWarning):
+    """A plugin problem that does not stop the command: a name clash, a slow import."""
+
+
 @contextmanager
 def error_context(prefix: str) -> Iterator[None]:
     """Prefix the message of any :class:`SpaceDGError` raised inside the block.

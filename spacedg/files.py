@@ -4,6 +4,10 @@
   reader never sees a half-written file (the old file stays until the new one is complete).
 - :func:`read_json`: parse a JSON file and turn a syntax error into a
   :class:`~spacedg.errors.FileFormatError` naming the line and column.
+- :func:`exclusive_lock`: one writer per output file (``fcntl.flock`` on ``<file>.lock``); a
+  second process gets a :class:`~spacedg.errors.ParameterError` naming the holder.
+- :func:`remove_stale_temps`: delete the temporary siblings that :func:`atomic_write` leaves
+  when a process is killed mid-write (only names of that exact pattern).
 - :class:`FileValueError`: the error raised when a file parses but holds values that break a
   convention (NaN positions, zero quaternions, ...). It is both a
   :class:`~spacedg.errors.FileFormatError` (the file is bad) and an
@@ -16,13 +20,14 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
-from spacedg.errors import FileFormatError, FileValueError, InvalidDataError  # noqa: F401  (re-exported)
+from spacedg.errors import FileFormatError, FileValueError, InvalidDataError, ParameterError  # noqa: F401  (re-exported)
 
 #: JSON files larger than this are refused (a scene/instance/transforms file is kilobytes).
 MAX_JSON_BYTES = 256 * 1024 * 1024
@@ -39,11 +44,15 @@ def as_path(path: PathLike, what: str) -> Path:
 
 
 def require_file(path: Path, what: str) -> int:
-    """Size in bytes of the regular file ``path``, or a clear error if it is missing."""
+    """Size in bytes of the regular file ``path``, or a clear error if it is missing.
+
+    ``what`` names the file for messages (``"PLY file"``, ``".splat file"``, ``"scene.json"``).
+    """
     if not path.exists():
         raise FileFormatError(f"{path}: {what} not found; check the path")
     if not path.is_file():
-        raise FileFormatError(f"{path}: expected a {what} file, found a directory or special file")
+        noun = what if re.search(r"(?i)\bfile$", what.strip()) else f"{what} file"
+        raise FileFormatError(f"{path}: expected a {noun}, found a directory or special file")
     return path.stat().st_size
 
 
@@ -81,6 +90,113 @@ def atomic_write_bytes(path: PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically (see :func:`atomic_write`)."""
     with atomic_write(path, "wb") as handle:
         handle.write(data)
+
+
+#: The names :func:`atomic_write` gives its temporary files: ``".<target name>.<8 characters
+#: of tempfile's random set>.tmp"``.
+_TEMP_NAME = re.compile(r"\.(?P<target>.+)\.[a-z0-9_]{8}\.tmp")
+
+
+def temp_target(name: str) -> str | None:
+    """The file a temporary file called ``name`` was going to become (``None``: not one of ours)."""
+    match = _TEMP_NAME.fullmatch(name)
+    return match.group("target") if match else None
+
+
+def remove_stale_temps(folder: PathLike, targets: Iterable[str] | Callable[[str], bool]) -> list[Path]:
+    """Delete the temporary files :func:`atomic_write` left in ``folder`` (a killed writer's) for
+    the target files named in ``targets`` (or for which ``targets(name)`` is true). The caller
+    must own those targets: no live writer may be writing them. Files that do not match the
+    temporary-name pattern are never touched. Returns what was removed."""
+    root = Path(folder)
+    owns = targets if callable(targets) else set(targets).__contains__
+    if not root.is_dir():
+        return []
+    removed = []
+    for entry in os.scandir(root):
+        target = temp_target(entry.name)
+        if target is not None and owns(target) and entry.is_file(follow_symlinks=False):
+            Path(entry.path).unlink(missing_ok=True)
+            removed.append(Path(entry.path))
+    return removed
+
+
+class ExclusiveLock:
+    """An exclusive advisory lock held on ``path`` (see :func:`exclusive_lock`); ``release()``
+    (or leaving the ``with`` block, or the process ending, even by ``kill -9``) frees it."""
+
+    def __init__(self, path: Path, fd: int | None) -> None:
+        self.path = path
+        self._fd = fd
+
+    @property
+    def held(self) -> bool:
+        return self._fd is not None
+
+    def release(self) -> None:
+        """Remove the lock file and free the lock (idempotent)."""
+        fd, self._fd = self._fd, None
+        if fd is None:
+            return
+        try:
+            self.path.unlink(missing_ok=True)  # while still locked: a waiter re-checks the inode and retries
+        except OSError:
+            pass
+        os.close(fd)
+
+    def __enter__(self) -> ExclusiveLock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    def __del__(self) -> None:  # pragma: no cover - a forgotten lock is freed with its object
+        try:
+            self.release()
+        except Exception:  # noqa: BLE001
+            pass
+
+
+def exclusive_lock(path: PathLike, what: str) -> ExclusiveLock:
+    """Take an exclusive, non-blocking lock on the file ``path`` (created, holding this pid).
+
+    ``what`` completes the error message (``"preds.jsonl is being written by another spacedg
+    predict"``). Raises :class:`~spacedg.errors.ParameterError` naming the holder's pid when another
+    process (or another lock in this one) holds it. Without ``fcntl`` (Windows) no lock is taken.
+    """
+    target = Path(path)
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        return ExclusiveLock(target, None)
+    for _ in range(50):
+        try:
+            fd = os.open(target, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as err:
+            raise ParameterError(f"cannot create the lock file {target} ({err.strerror}); choose an output folder you can write to") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            try:
+                holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
+            except OSError:
+                holder = "?"
+            os.close(fd)
+            raise ParameterError(f"{what} (pid {holder}, lock file {target}); wait for it to finish or use another output") from None
+        except OSError as err:
+            os.close(fd)
+            raise ParameterError(f"cannot lock {target} ({err.strerror}); put the output on a local disk") from None
+        try:
+            same = os.path.samestat(os.stat(target), os.fstat(fd))
+        except FileNotFoundError:
+            same = False
+        if not same:  # the previous holder removed the file between our open and our lock: start again
+            os.close(fd)
+            continue
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        return ExclusiveLock(target, fd)
+    raise ParameterError(f"cannot lock {target}: it keeps being replaced; {what}")  # pragma: no cover
 
 
 def write_temp_sibling(path: PathLike, writer: Callable[[Path], None]) -> Path:

@@ -17,12 +17,12 @@ QUESTIONS = [
     # (question_type, sub_question_type, task_group, answer_type, answer, options, question)
     ("camera_translation", "main_dir", "camera_centric", "MCQ", "B", ["left", "right", "forward", "backward"],
      "Where did the camera move?\nA. left\nB. right\nC. forward\nD. backward"),
-    ("object_existence_estimation", "object_existence_estimation", "object_centric", "YN", "yes", [],
+    ("object_existence_estimation", "existence", "object_centric", "YN", "yes", [],  # as older exports wrote it
      "Is there a chair in the image?"),
     ("camera_object_distance_estimation", "distance_exact", "camera_object", "NA", "2.0", [],
      "How far is the lamp from the camera, in meters?"),
-    ("object_counting", "object_counting", "object_centric", "COUNT", "3", [], "How many cups are there?"),
-    ("object_bounding_size_estimation", "object_bounding_size_estimation", "object_centric", "SIZE_LIST",
+    ("object_counting", "", "object_centric", "COUNT", "3", [], "How many cups are there?"),  # public names: empty sub type
+    ("object_bounding_size_estimation", "", "object_centric", "SIZE_LIST",
      "[0.10, 0.20, 0.30]", [], "What are the dimensions of the box?"),
 ]
 
@@ -30,7 +30,7 @@ QUESTIONS = [
 PREDICTIONS: dict[str, dict[str, list[str]]] = {
     "good-model": {
         "ori": ["B", "yes", "2.0", "3", "[0.1, 0.2, 0.3]"],
-        "haze": ["B", "no", "2.5", "3", "[0.3, 0.1, 0.2]"],
+        "haze": ["B", "no", "2.5", "3", "0.1 x 0.2 x 0.3 m"],
         "low_light": ["A", "yes", "2.6", "3", "[0.1, 0.2, 0.6]"],
     },
     "mid-model": {

@@ -6,14 +6,17 @@ import argparse
 import os
 from pathlib import Path
 
+from spacedg.commands import _args
 from spacedg.errors import ParameterError
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "export", help="render a split to PNGs + a VLMEvalKit TSV + chat JSONL (resumable, --shard i/n)",
-        description="Render every item of a split and write images/, <split>.tsv (VLMEvalKit / SpaceDG evaluator "
-                    "columns), <split>.jsonl (chat format) and summary.json. Finished chunks are skipped on a rerun; "
+        description="Render every item of a split and write images/, <split>.tsv (the public SpaceDG bench's format: "
+                    "its columns, names and lettered existence options; for --split bench also spacedg_bench.tsv, so the "
+                    "folder is VLMEvalKit's LMUData for --data spacedg_bench), <split>.jsonl (chat format) and "
+                    "summary.json. Finished chunks are skipped on a rerun; "
                     "--shard i/n splits the chunks across processes or machines (see docs/distributed-export.md).",
     )
     parser.add_argument("--split", default="bench", choices=("train", "val", "bench"))
@@ -30,6 +33,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                                                        "(torchrun) or SLURM_ARRAY_TASK_ID/COUNT (default 0/1)")
     parser.add_argument("--shard-size", "--chunk-size", dest="shard_size", type=int, default=None,
                         help="items per resumable chunk; the same in every shard (default 256)")
+    parser.add_argument("--all-bench", action="store_true",
+                        help="put every scene in the bench split (works from one scene); same as --split-fractions 0,1")
+    parser.add_argument("--split-fractions", default=None, metavar="VAL,BENCH",
+                        help="share of scenes for val and bench, the rest train (default 0.1,0.1; 0 leaves a split empty)")
     parser.add_argument("--skip-bad-scenes", action="store_true", help="skip scenes that cannot be read (they are named)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--backend", default="auto", choices=("auto", "cpu", "torch"), help="renderer (default auto: compiled CPU)")
@@ -47,6 +54,22 @@ def _size(text: str | None) -> tuple[int, int] | None:
     if w < 8 or h < 8:
         raise ParameterError(f"--image-size {text}: width and height must be >= 8 pixels")
     return w, h
+
+
+def _fractions(args: argparse.Namespace) -> tuple[float, float]:
+    if args.all_bench and args.split_fractions is not None:
+        raise ParameterError("--all-bench and --split-fractions are alternatives; pass one")
+    if args.all_bench:
+        if args.split != "bench":
+            raise ParameterError(f"--all-bench puts every scene in the bench split, but --split is {args.split!r}")
+        return (0.0, 1.0)
+    if args.split_fractions is None:
+        return (0.1, 0.1)
+    try:
+        val, bench = (float(v) for v in args.split_fractions.split(","))
+    except ValueError:
+        raise ParameterError(f"--split-fractions must read VAL,BENCH, e.g. 0.1,0.1 or 0,1, got {args.split_fractions!r}") from None
+    return val, bench
 
 
 def _names(text: str | None) -> list[str] | None:
@@ -69,16 +92,29 @@ def run(args: argparse.Namespace) -> int:
     shard_size = DEFAULT_SHARD_SIZE if args.shard_size is None else args.shard_size
     if shard_size < 1:
         raise ParameterError(f"--shard-size must be >= 1, got {shard_size}")
+    _args.seed("--seed", args.seed)
+    _args.at_least("--per-sub-type", args.per_sub_type, 1)
+    _args.fraction("--clean-prob", args.clean_prob)
+    _args.at_least("--max-questions", args.max_questions, 1)
     size = _size(args.image_size)
+    fractions = _fractions(args)
     chains = _names(args.degradations)
     for chain in chains or ():
         Chain.parse(chain).check()  # an unknown name or preset fails now, with suggestions
+    _args.output_folder("--out", args.out)
     dataset = SpaceDGDataset(
         args.split, chains, scenes=args.scenes, question_types=_names(args.question_types),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,
         qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type),
         on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device, max_questions=args.max_questions,
+        split_fractions=fractions,
     )
+    counts = {name: sum(1 for s in dataset.scene_splits.values() if s == name) for name in ("train", "val", "bench")}
+    print(f"scenes: {counts['bench']} bench, {counts['val']} val, {counts['train']} train; exporting split {args.split!r} "
+          f"({len(dataset.scene_dirs)} scene(s), {len(dataset.records)} question(s))")
+    if not len(dataset):
+        raise ParameterError(f"split {args.split!r} has no items ({len(dataset.scene_dirs)} scene(s) in it); "
+                             "pass --all-bench or --split-fractions to put scenes there, or check the scenes' questions (spacedg qa stats)")
     for folder, error in dataset.skipped.items():
         print(f"skipped scene {folder}: {error}")
     summary = export_bench(dataset, args.out, shard=shard, shard_size=shard_size, progress=not args.no_progress)
@@ -88,6 +124,10 @@ def run(args: argparse.Namespace) -> int:
     if summary.merged:
         print(f"wrote {args.out / (args.split + '.tsv')}, {args.out / (args.split + '.jsonl')} and {args.out / 'summary.json'}\n")
         print(summary.merge.table)
+        if args.split == "bench":
+            print(f"\nVLMEvalKit (public SpaceDG evaluator): LMUData={args.out} run.py --data spacedg_bench")
+        for names, why in summary.merge.mismatches.items():
+            print(f"WARNING: {names}: {why}; the public evaluator routes by question_type/sub_question_type only")
     else:
         missing = summary.merge.missing
         shown = ", ".join(map(str, missing[:10])) + (" …" if len(missing) > 10 else "")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from spacedg.commands import _args
 from spacedg.errors import ParameterError
 
 
@@ -32,14 +33,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _gallery(args: argparse.Namespace) -> int:
-    from spacedg.commands.render import _check_png, _pick_view, write_png_atomic
+    from spacedg.commands.render import _pick_view, write_png_atomic
     from spacedg.data.gallery import gallery_sheet
     from spacedg.scene.io import load_scene
     from spacedg.data.pipeline import PipelineOptions
 
-    _check_png("--out", args.out)
     if not 64 <= args.thumb_width <= 2048:
         raise ParameterError(f"--thumb-width must be in [64, 2048] pixels, got {args.thumb_width}")
+    _args.seed("--seed", args.seed)
+    _args.output_file("--out", args.out, (".png",))
     names = [n.strip() for n in args.degradations.split(",") if n.strip()] if args.degradations else None
     scene = load_scene(args.scene)
     view = args.view if args.view is not None else next(iter(scene.views), None)

@@ -1,7 +1,9 @@
-"""``spacedg plugins [--json]``: list plugins, what they provide, and the broken ones.
+"""``spacedg plugins [--json]``: list plugins, what they provide, the broken ones and name clashes.
 
-Exit status 0 even when some plugins are broken (they are listed with their error); a name
-clash between two plugins is an error (exit 2, message naming both and the fix).
+This is the diagnosis tool, so it works whatever is installed: exit status 0 even when some
+plugins are broken (listed with their error) or two plugins register one name (the clash is
+listed with both sources and the fix; other commands warn about it and fail only when they use
+that name). An import slower than the registry's threshold is listed with its duration.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import json
 import sys
 from typing import Any
 
-from spacedg.plugins.registry import AUTOLOAD_ENV, PLUGINS_ENV, Registry, get_registry
+from spacedg.plugins.registry import AUTOLOAD_ENV, PLUGINS_ENV, SLOW_IMPORT_SECONDS, Registry, get_registry
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -44,14 +46,16 @@ def format_text(registry: Registry) -> str:
     """The human-readable listing."""
     doc = registry.describe()
     lines: list[str] = []
-    n_ok, n_broken = len(doc["plugins"]), len(doc["broken"])
+    n_ok, n_broken, n_clash = len(doc["plugins"]), len(doc["broken"]), len(doc["clashes"])
     state = "on" if doc["autoload"] else f"off ({AUTOLOAD_ENV}=1: built-ins only)"
-    lines.append(f"spacedg plugins: {n_ok} loaded, {n_broken} broken; autoload {state}")
+    clashes = f", {n_clash} name clash{'es' if n_clash != 1 else ''}" if n_clash else ""
+    lines.append(f"spacedg plugins: {n_ok} loaded, {n_broken} broken{clashes}; autoload {state}")
     if doc["explicit_modules"]:
         lines.append(f"  {PLUGINS_ENV}: {', '.join(doc['explicit_modules'])}")
     for plugin in doc["plugins"]:
         lines.append("")
-        lines.append(f"{plugin['name']}  [{_dist(plugin)}, {'built-in' if plugin['builtin'] else 'third-party'}]  {plugin['value']}")
+        lines.append(f"{plugin['name']}  [{_dist(plugin)}, {'built-in' if plugin['builtin'] else 'third-party'}]  "
+                     f"{plugin['value']}{_slow(plugin)}")
         for deg in plugin["degradations"]:
             params = ", ".join(
                 f"{p['name']} ({p['unit']}) {_limits(p)}" for p in deg["params"]
@@ -69,13 +73,26 @@ def format_text(registry: Registry) -> str:
         lines.append("")
         lines.append("Broken plugins (not loaded):")
         for b in doc["broken"]:
-            lines.append(f"  {b['name']}  [{_dist(b)}, {b['value']}] failed at {b['phase']}: {b['error_type']}: {b['message']}")
+            lines.append(f"  {b['name']}  [{_dist(b)}, {b['value']}] failed at {b['phase']}: {b['error_type']}: "
+                         f"{b['message']}{_slow(b)}")
+    if doc["clashes"]:
+        lines.append("")
+        lines.append("Name clashes (the name is withheld: commands that use it fail until one plugin is uninstalled):")
+        for c in doc["clashes"]:
+            sources = ", ".join(f"{s['name']} [{_dist(s)}, {'built-in' if s['builtin'] else 'third-party'}]" for s in c["sources"])
+            lines.append(f"  {c['kind']} {c['name']!r}: {sources}")
+            lines.append(f"    {c['message']}")
     if doc["skipped"]:
         lines.append("")
         lines.append(f"Skipped (autoload disabled; add to {PLUGINS_ENV} to load):")
         for s in doc["skipped"]:
             lines.append(f"  {s['name']}  [{_dist(s)}]  {s['value']}")
     return "\n".join(lines) + "\n"
+
+
+def _slow(entry: dict[str, Any]) -> str:
+    seconds = entry.get("import_seconds")
+    return f"  (slow import: {seconds:.1f} s)" if seconds is not None and seconds >= SLOW_IMPORT_SECONDS else ""
 
 
 def _dist(entry: dict[str, Any]) -> str:

@@ -33,7 +33,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(variant="default")
     parser.add_argument("--name", default=None, help="model name in reports (default: the model folder's name)")
     parser.add_argument("--batch-size", type=int, default=8, help="conversations per generate call (default 8)")
-    parser.add_argument("--max-new-tokens", type=int, default=None, help="generation budget (default 32; cot 512)")
+    parser.add_argument("--max-new-tokens", type=int, default=None, help="generation budget, >= 1 (default 32; cot 512)")
     parser.add_argument("--limit", type=int, default=None, help="answer at most N pending items (smoke runs)")
     parser.add_argument("--shard", default="0/1", help="i/n: answer every n-th item starting at i, into OUT with .shard{i}of{n} "
                                                        "before .jsonl; 'env' reads RANK/WORLD_SIZE (torchrun) or SLURM "
@@ -51,6 +51,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
+def _check(args: argparse.Namespace) -> None:
+    """Every flag of ``predict``, before the bench, the dataset or the model is loaded."""
+    from spacedg.commands import _args
+
+    _args.at_least("--limit", args.limit, 1)
+    _args.at_least("--batch-size", args.batch_size, 1)
+    _args.in_range("--max-new-tokens", args.max_new_tokens, 1, 1_000_000)
+    _args.at_least("--min-pixels", args.min_pixels, 1)
+    _args.at_least("--max-pixels", args.max_pixels, 1)
+    if args.min_pixels is not None and args.max_pixels is not None and args.min_pixels > args.max_pixels:
+        raise ParameterError(f"--min-pixels {args.min_pixels} is more than --max-pixels {args.max_pixels}; pass min <= max")
+    _args.at_least("--max-questions", args.max_questions, 1)
+    _args.seed("--seed", args.seed)
+    _args.output_file("--out", args.out, (".jsonl",))
+
+
 def run(args: argparse.Namespace) -> int:
     import torch
 
@@ -60,8 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from spacedg.data.export import parse_shard, shard_from_env
     from spacedg.eval.predict import bench_source, dataset_source, predict, shard_path
 
-    if args.limit is not None and args.limit < 1:
-        raise ParameterError(f"--limit must be >= 1, got {args.limit}")
+    _check(args)
     if args.bench is not None:
         from spacedg.eval.bench import load_bench
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from spacedg.commands import _args
 from spacedg.errors import InvalidDataError
 
 
@@ -59,6 +60,10 @@ def _build(args: argparse.Namespace) -> int:
     from spacedg.commands.scenes import _scene_dirs
     from spacedg.data.qa_index import QABuildConfig, build_scene_index
 
+    _args.seed("--seed", args.seed)
+    _args.at_least("--per-sub-type", args.per_sub_type, 1)
+    if args.out is not None:
+        _args.output_folder("--out", args.out)
     config = QABuildConfig(seed=args.seed, families=_family_names(args.families), per_sub_type=args.per_sub_type)
     tqdm.write(f"{'scene':<16} {'records':>8} {'visibility s':>12} {'covis s':>8} {'generate s':>10} {'q/s':>8}  index")
     total = 0
@@ -151,14 +156,16 @@ def _pick(records: list, n: int, types: set[str], seed: int) -> list:
 
 
 def _preview(args: argparse.Namespace) -> int:
-    from spacedg.commands.render import _check_png, write_png_atomic
+    from spacedg.commands.render import write_png_atomic
     from spacedg.scene.io import load_scene
     from spacedg.data.qa_index import build_scene_index
     from spacedg.data.qa_preview import qa_sheet
 
-    _check_png("--out", args.out)
     if args.n < 1 or args.thumb_width < 32:
         raise InvalidDataError(f"--n must be >= 1 and --thumb-width >= 32, got {args.n} and {args.thumb_width}")
+    _args.in_range("--thumb-width", args.thumb_width, 32, 4096, "pixels")
+    _args.seed("--seed", args.seed)
+    _args.output_file("--out", args.out, (".png",))
     types = {t.strip() for t in args.types.split(",") if t.strip()}
     index = build_scene_index(args.scene, backend=args.backend)
     records = _pick(index.records, args.n, types, args.seed)

@@ -11,10 +11,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from spacedg.commands import _args
 from spacedg.errors import InvalidDataError, ParameterError
 
 #: Largest image side accepted by --width / --height, pixels.
 MAX_SIDE = 16384
+#: Smallest share of covered pixels (alpha > ½) of a render that is not "empty".
+MIN_COVERAGE = 0.001
 #: Depth PNG unit: millimetres, so uint16 covers 0–65.535 m.
 DEPTH_SCALE = 1000.0
 
@@ -55,6 +58,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--backend", choices=BACKENDS, default="auto",
                         help="auto (default), cpu (compiled tiles) or torch")
     render.add_argument("--device", default=None, help="torch device for the torch backend, e.g. cuda (default cpu)")
+    render.add_argument("--allow-empty", action="store_true",
+                        help="write the PNG even when the view renders (almost) nothing (default: exit non-zero)")
     render.set_defaults(func=_render)
 
 
@@ -136,11 +141,13 @@ def _render(args: argparse.Namespace) -> int:
             raise ParameterError("--view NAME is required (or pass --list-views to see the names)")
         if args.out is None:
             raise ParameterError("--out FILE.png is required")
-        _check_png("--out", args.out)
+        _args.output_file("--out", args.out, (".png",))
         if args.depth_out is not None:
-            _check_png("--depth-out", args.depth_out)
+            _args.output_file("--depth-out", args.depth_out, (".png",))
             if args.depth_out.resolve() == args.out.resolve():
                 raise ParameterError("--depth-out must be another file than --out")
+    if args.sub_steps is not None:
+        _args.in_range("--sub-steps", args.sub_steps, 1, 4096)
     defocus = None
     if args.defocus is not None:
         aperture, focus = parse_numbers("--defocus", args.defocus, ("APERTURE_PX", "FOCUS_M"))
@@ -184,6 +191,12 @@ def _render(args: argparse.Namespace) -> int:
         scene.gaussians, camera, defocus=defocus, motion=motion,
         outputs="rgb,depth" if want_depth else "rgb", backend=backend, device=args.device,
     )
+    covered = float((frame.alpha > 0.5).mean())
+    if covered < MIN_COVERAGE and not args.allow_empty:
+        raise InvalidDataError(
+            f"view {args.view} of {args.scene} renders empty ({covered:.2%} of the pixels covered): the Gaussians and this "
+            "camera do not meet (a frame mismatch? see `spacedg scenes info`); pass --allow-empty to write it anyway"
+        )
     write_png_atomic(args.out, encode_srgb_u8(frame.rgb)[:, :, ::-1], "--out")
     stats = frame.stats
     visible = f"{stats['visible']:,}" if "visible" in stats else "n/a"

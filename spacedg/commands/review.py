@@ -15,28 +15,37 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                     "change is validated, then written atomically to a new TSV (never the original) with an edit log.",
     )
     parser.add_argument("bench", type=Path, help="exported bench folder (spacedg export) or its .tsv")
-    parser.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1 (default 8765; 0 = any free port)")
+    parser.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1, 0-65535 (default 8765; 0 = any free port)")
     parser.add_argument("--out", type=Path, default=None, help="reviewed TSV (default: <bench>.reviewed.tsv beside the original)")
-    parser.add_argument("--reviewer", default=None, help="name recorded in the edit log (default: the login name)")
+    parser.add_argument("--reviewer", default=None, help="name recorded in the edit log for every change made through this "
+                                                        "server (default: the login name)")
     parser.add_argument("--scenes", type=Path, nargs="+", default=None, help="scene folders, to show each record's geometry")
     parser.add_argument("--verbose", action="store_true", help="log every request")
     parser.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
+def _login_name() -> str:
     import getpass
 
-    from spacedg.review.server import make_server
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):  # no login name (a container without a passwd entry)
+        return "reviewer"
 
-    reviewer = args.reviewer or getpass.getuser()
+
+def run(args: argparse.Namespace) -> int:
+    from spacedg.review.server import check_port, check_reviewer, make_server
+
+    check_port(args.port)  # before anything is opened or written
+    reviewer = check_reviewer(args.reviewer if args.reviewer is not None else _login_name())
     server = make_server(args.bench, out=args.out, reviewer=reviewer, scenes=args.scenes, port=args.port, verbose=args.verbose)
-    print(f"reviewing {server.store.table} ({len(server.store)} items) as {reviewer}")
+    print(f"reviewing {server.store.table} ({len(server.store)} items) as {server.httpd.reviewer}")
     print(f"edits → {server.store.out}, log → {server.store.log}")
-    print(f"open {server.url}  (Ctrl+C to stop)", flush=True)
+    print(f"open {server.url}  (the token in this address is the session's key; Ctrl+C to stop)", flush=True)
     try:
         server.httpd.serve_forever()
     except KeyboardInterrupt:
         print("stopped")
     finally:
-        server.httpd.server_close()
+        server.close()
     return 0

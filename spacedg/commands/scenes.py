@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -12,8 +13,10 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from spacedg.commands import _args
+from spacedg.scene.importer import LAYOUTS
 from spacedg.scene.synthetic.room import RoomConfig
-from spacedg.errors import InvalidDataError
+from spacedg.errors import InvalidDataError, ParameterError
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -25,8 +28,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     synth.add_argument("--out", type=Path, required=True, help="folder that receives one sub-folder per room")
     synth.add_argument("--seed", type=int, default=0, help="seed of the first room; room i uses seed + i (default 0)")
     synth.add_argument("--gaussians", type=int, default=None, help="target Gaussians per room (default: 150k–300k by seed)")
-    synth.add_argument("--min-views", type=int, default=48)
-    synth.add_argument("--max-views", type=int, default=120)
+    synth.add_argument("--min-views", type=int, default=48, help="fewest views per room (default 48)")
+    synth.add_argument("--max-views", type=int, default=120, help="most views per room, >= --min-views (default 120)")
     synth.add_argument("--width", type=int, default=640, help="image width of the views, pixels")
     synth.add_argument("--height", type=int, default=480, help="image height of the views, pixels")
     synth.add_argument("--splat", type=Path, action="append", default=[],
@@ -34,6 +37,41 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     synth.add_argument("--splat-size", type=float, default=0.35, help="longest side of placed .splat objects, metres")
     synth.add_argument("--overwrite", action="store_true", help="regenerate rooms whose folder already exists")
     synth.set_defaults(func=_synth)
+
+    imp = sub.add_parser(
+        "import", help="turn a real capture (INRIA / COLMAP / nerfstudio / ScanNet++ + boxes) into a native scene folder",
+        description="Detect the layout of SRC, read Gaussians, cameras and instance boxes, check that they share one frame, "
+        "give the Gaussians instance ids, and write a native scene folder (scene.json + gaussians.ply).",
+    )
+    # let "--up -y" (an axis with a minus) be a value, not an option
+    if hasattr(imp, "_negative_number_matcher"):
+        imp._negative_number_matcher = re.compile(r"^-(?:[xyzXYZ]|\.?\d)")
+    imp.add_argument("src", type=Path, metavar="SRC",
+                     help="INRIA output folder, COLMAP project/model folder, nerfstudio folder or transforms.json, "
+                          "ScanNet++ scene folder, or a Gaussians file (.ply/.splat/.spz) with --cameras")
+    imp.add_argument("--out", type=Path, required=True, help="scene folder to write")
+    imp.add_argument("--instances", type=Path, default=None,
+                     help="instance boxes: spacedg / Holi-Spatial JSON, ScanNet++ segments_anno.json, EmbodiedScan JSON")
+    imp.add_argument("--format", default="auto", choices=LAYOUTS, help="layout of SRC (default: detect)")
+    imp.add_argument("--name", default=None, help="scene id (default: the folder or file name)")
+    imp.add_argument("--up", default="auto", help="world up in the files' frame: auto (default), +z, -y, ... or x,y,z")
+    imp.add_argument("--metres-per-unit", type=float, default=1.0, help="metres per file unit, applied to every part (default 1)")
+    imp.add_argument("--gaussians", type=Path, default=None, help="Gaussians file (overrides what the layout picks)")
+    imp.add_argument("--cameras", type=Path, default=None, help="COLMAP model folder, transforms.json or INRIA cameras.json")
+    imp.add_argument("--dataparser-transforms", type=Path, default=None,
+                     help="splatfacto's dataparser_transforms.json (found next to the ply when not given)")
+    imp.add_argument("--undo-applied-transform", action="store_true",
+                     help="move transforms.json cameras back to the COLMAP frame (Gaussians trained on the COLMAP model)")
+    imp.add_argument("--masks", type=Path, default=None, help="folder of Holi-Spatial masks <image stem>/<label>.png")
+    imp.add_argument("--assign", default="auto", choices=("auto", "boxes", "masks", "none"),
+                     help="instance ids when the Gaussians carry none (default auto = boxes; masks votes with Holi-Spatial masks)")
+    imp.add_argument("--device", default="dslr", choices=("dslr", "iphone"), help="ScanNet++ cameras (default dslr)")
+    imp.add_argument("--embodiedscan-scene", default=None, help="scan to take from a multi-scan EmbodiedScan JSON")
+    imp.add_argument("--drop-distortion", action="store_true", help="render distorted OPENCV cameras as ideal pinholes")
+    imp.add_argument("--allow-frame-mismatch", action="store_true", help="write the scene even if the frame check fails")
+    imp.add_argument("--overwrite", action="store_true", help="replace an existing scene folder")
+    imp.add_argument("--json", action="store_true", help="print the report as JSON")
+    imp.set_defaults(func=_import)
 
     info = sub.add_parser("info", help="counts, bounds and instances per label of scenes")
     info.add_argument("paths", type=Path, nargs="+", help="native scene folders, or folders of them")
@@ -43,7 +81,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     preview = sub.add_parser("preview", help="draw top-down floor plans of scenes into one PNG")
     preview.add_argument("paths", type=Path, nargs="+", help="native scene folders, or folders of them")
     preview.add_argument("--out", type=Path, required=True, help="PNG file to write")
-    preview.add_argument("--columns", type=int, default=2)
+    preview.add_argument("--columns", type=int, default=2, help="floor plans per row (default 2)")
     preview.set_defaults(func=_preview)
 
 
@@ -58,8 +96,7 @@ def _synth(args: argparse.Namespace) -> int:
     from spacedg.scene.io import load_scene, save_scene
     from spacedg.scene.synthetic import CaptureConfig, ExternalObject, generate_room
 
-    if args.n < 1:
-        raise InvalidDataError(f"--n must be at least 1, got {args.n}")
+    _check_synth(args)
     externals = tuple(ExternalObject.from_splat(p, size_m=args.splat_size) for p in args.splat)
     config = RoomConfig(
         gaussians=args.gaussians,
@@ -96,6 +133,25 @@ def _synth(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_synth(args: argparse.Namespace) -> None:
+    """Every flag of ``scenes synth``, before any room is generated."""
+    _args.at_least("--n", args.n, 1)
+    _args.seed("--seed", args.seed)
+    _args.seed("--seed + --n - 1 (the last room's seed)", args.seed + args.n - 1)
+    RoomConfig(gaussians=args.gaussians)  # its own range check ("gaussians must be in [10000, 5000000]")
+    _args.at_least("--min-views", args.min_views, 1)
+    _args.at_least("--max-views", args.max_views, 1)
+    if args.min_views > args.max_views:
+        raise ParameterError(
+            f"--min-views {args.min_views} is more than --max-views {args.max_views}; each room takes between the two: "
+            "pass --min-views <= --max-views"
+        )
+    _args.in_range("--width", args.width, 8, 16384, "pixels")
+    _args.in_range("--height", args.height, 8, 16384, "pixels")
+    _args.positive_number("--splat-size", args.splat_size)
+    _args.output_folder("--out", args.out)
+
+
 def _config_record(config: RoomConfig) -> dict:
     """JSON-stable record of generation settings (to detect a folder made with other ones)."""
     record = {
@@ -112,13 +168,44 @@ def _config_record(config: RoomConfig) -> dict:
     return json.loads(json.dumps(record))
 
 
+def _import(args: argparse.Namespace) -> int:
+    from spacedg.scene.importer import import_scene
+
+    _, report = import_scene(
+        args.src, args.out, instances=args.instances, format=args.format, name=args.name, up=args.up,
+        metres_per_unit=args.metres_per_unit, gaussians=args.gaussians, cameras=args.cameras,
+        dataparser_transforms=args.dataparser_transforms, undo_applied_transform=args.undo_applied_transform,
+        masks=args.masks, assign=args.assign, device=args.device, embodiedscan_scene=args.embodiedscan_scene,
+        opencv_distortion="drop" if args.drop_distortion else "error",
+        frame_check="warn" if args.allow_frame_mismatch else "error", overwrite=args.overwrite, progress=not args.json,
+    )
+    print(json.dumps(report.to_dict(), indent=2) if args.json else report.text())
+    return 0
+
+
 def _info(args: argparse.Namespace) -> int:
+    from spacedg.scene.frame_check import check_frame
     from spacedg.scene.io import load_scene
 
     summaries = []
     for folder in _scene_dirs(args.paths):
-        summary = load_scene(folder).summary()
+        scene = load_scene(folder)
+        summary = scene.summary()
         summary["path"] = str(folder)
+        warnings_ = []
+        if scene.instances and scene.gaussians.instance_ids is None:
+            warnings_.append("the Gaussians carry no instance ids: qa build assigns them by boxes on each run; "
+                             "re-import with `spacedg scenes import` (or spacedg.assign_instances + save_scene) to keep them")
+        elif scene.instances:
+            present = set(np.unique(scene.gaussians.instance_ids).tolist())
+            empty = [inst.id for inst in scene.instances if inst.id not in present]
+            if empty:
+                warnings_.append(f"{len(empty)} instance(s) have no Gaussians (ids {empty[:8]}): their questions are skipped")
+        frame = check_frame(scene, renders=2)
+        summary["frame_check"] = frame.to_dict()
+        if not frame.ok:
+            warnings_.append("frame check failed: " + "; ".join(frame.problems))
+        summary["warnings"] = warnings_
         summaries.append(summary)
     if args.json:
         print(json.dumps(summaries, indent=2))
@@ -130,6 +217,9 @@ def _info(args: argparse.Namespace) -> int:
         print(f"  bounds min {lo.round(2).tolist()} max {hi.round(2).tolist()} m, size {(hi - lo).round(2).tolist()} m, up {s['up']}")
         labels = ", ".join(f"{label} ×{n}" for label, n in s["labels"].items())
         print(f"  instances per label: {labels or '(none)'}")
+        print(f"  frame check: {'ok' if s['frame_check']['ok'] else 'MISMATCH'}")
+        for warning in s["warnings"]:
+            print(f"  warning: {warning}")
     return 0
 
 
@@ -137,8 +227,8 @@ def _preview(args: argparse.Namespace) -> int:
     from spacedg.scene.floorplan import contact_sheet, floorplan
     from spacedg.scene.io import load_scene
 
-    if args.out.suffix.lower() != ".png":
-        raise InvalidDataError(f"--out {args.out}: write a .png file")
+    _args.at_least("--columns", args.columns, 1)
+    _args.output_file("--out", args.out, (".png",))
     images = [floorplan(load_scene(folder)) for folder in tqdm(_scene_dirs(args.paths), desc="floor plans", unit="scene")]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(args.out), contact_sheet(images, columns=args.columns)[:, :, ::-1]):

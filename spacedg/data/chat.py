@@ -2,13 +2,16 @@
 
 - :data:`ANSWER_PROMPT`: the system text (answer only, in ``<answer>…</answer>`` tags), with
   :data:`ANSWER_FORMATS` saying how each answer type is written inside the tags.
-- :func:`format_question`: the question with its option lines, as a model sees it.
+- :func:`format_question`: the question with its option lines, as a model sees it (defined in
+  :mod:`spacedg.data.public_format`, re-exported here).
 - :func:`chat_messages`: system turn, user turn (one ``{"type": "image"}`` entry per view, then the
   question) and, when given, the assistant turn.
 - :func:`chat_collate`: a DataLoader batch of :class:`~spacedg.data.dataset.SpaceDGDataset` items
   → conversations and images for ``processor.apply_chat_template``; :func:`item_images`.
 
-The answer text inside the tags is :func:`spacedg.plugins.answers.answer_text`.
+Training samples, exports and predictions show a model the same thing: the public bench's form of
+a record (:func:`spacedg.data.public_format.public_fields`: existence as lettered options, the
+answer text of :func:`spacedg.plugins.answers.answer_text`).
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.answers import answer_text
+from spacedg.data.public_format import format_question, public_fields
 
 __all__ = ["ANSWER_FORMATS", "ANSWER_PROMPT", "format_question", "chat_messages", "item_images", "chat_collate"]
 
@@ -35,11 +38,6 @@ ANSWER_PROMPT: str = (
     "Answer the question about the image(s). Output only the final answer, wrapped in "
     "<answer></answer> tags, with no other text: " + ANSWER_FORMATS
 )
-
-
-def format_question(question: str, options: Sequence[str]) -> str:
-    """The question text with its option lines (MCQ), as a model sees it."""
-    return question if not options else question + "\n" + "\n".join(options)
 
 
 def chat_messages(question: str, n_images: int, *, system: str = ANSWER_PROMPT, answer: str | None = None) -> list[dict[str, Any]]:
@@ -74,8 +72,9 @@ def chat_collate(batch: Sequence[dict[str, Any]], *, system_prompt: str | None =
     messages, images, answers = [], [], []
     for item in batch:
         views = item_images(item)
-        answer = f"<answer>{answer_text(item['answer'])}</answer>"
-        question = format_question(item["question"], item["options"])
+        fields = public_fields(item)  # what the bench shows: public names, existence as lettered options
+        answer = f"<answer>{fields['answer']}</answer>"
+        question = fields["question"]
         messages.append(chat_messages(question, len(views), system=prompt, answer=answer if with_answer else None))
         images.append(views)
         answers.append(answer)

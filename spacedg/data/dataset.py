@@ -86,7 +86,8 @@ class SpaceDGDataset(Dataset):
             each scene's full index ``<scene id>.qa.jsonl``, shared by every dataset over the
             same folders; a config naming ``families`` reads that selection's own index file,
             :func:`~spacedg.data.qa_index.index_paths`).
-        split_fractions: ``(val, bench)`` share of scenes.
+        split_fractions: ``(val, bench)`` share of scenes; ``(0, 1)`` puts every scene (even one) in
+            ``bench`` (see :func:`~spacedg.scene.store.assign_splits`).
         split_seed: seed of the scene → split assignment (kept apart from ``seed`` so that
             changing the augmentation seed never moves a scene between splits).
         on_bad_scene: ``"raise"`` (default) or ``"skip"`` a scene that cannot be read or indexed
@@ -146,6 +147,7 @@ class SpaceDGDataset(Dataset):
         # skipped scenes keep their place in the assignment, so skipping never moves another scene
         every_id = [ids.get(d, d.name) for d in all_dirs]
         splits = assign_splits(every_id, split_fractions, seed=int(split_seed))
+        self.scene_splits: dict[str, str] = dict(splits)  # every scene id → its split (what went where)
         self.scene_dirs: dict[str, Path] = {ids[d]: d for d in dirs if splits[ids[d]] == split}
         wanted = self._question_types(question_types)
         self.records: list[QARecord] = [

@@ -7,6 +7,8 @@ Layout of ``out_dir`` (every path inside the exported rows is relative to it)::
     parts/part-{k:05d}.jsonl         chunk k as chat JSONL, written after its images
     parts/part-{k:05d}.tsv           chunk k as TSV rows (header included), written last
     <split>.tsv, <split>.jsonl       every chunk in index order (written once all chunks exist)
+    spacedg_bench.tsv                the same bytes as bench.tsv (split ``bench`` only): the file the
+                                     public evaluator reads, so the folder is VLMEvalKit's ``$LMUData``
     summary.json                     counts per question_type × degradation_type
 
 **Chunks and shards.** Items are grouped into chunks of ``shard_size`` consecutive dataset
@@ -15,27 +17,37 @@ processes the chunks with ``k % n == i``, so ``n`` processes or machines split t
 disjointly and together completely. A chunk whose two part files exist is skipped, so an
 interrupted export resumes where it stopped. Every file is written atomically (temporary
 sibling, then rename), so a crash never leaves a half-written file; an interrupted chunk just
-has some images and no parts, and is redone. Items are a pure function of the dataset's
+has some images and no parts, and is redone, after its own leftover temporary files
+(``images/.NNNNNNN_v.png.*.tmp``, ``parts/.part-KKKKK.*.tmp`` of that chunk only, so shards
+working on other chunks are never disturbed) are removed. Items are a pure function of the dataset's
 arguments, so re-running a chunk anywhere writes the same bytes. ``parts/manifest.json`` pins
 the settings: a shard started with other arguments on the same folder fails instead of mixing
 two exports.
 
 **TSV** (what the public SpaceDG evaluator and VLMEvalKit read with
-``pandas.read_csv(path, sep="\\t")``): ``index`` (the dataset index, int), ``question`` (with
+``pandas.read_csv(path, sep="\\t")``), in the public bench's format
+(:mod:`spacedg.data.public_format`): ``index`` (the dataset index, int), ``question`` (with
 the option lines for MCQ), ``answer`` (letter, yes/no, integer, number, ``[a, b, c]``),
 ``image_path`` (a Python list literal of relative paths, ``"['images/0000000_0.png', ...]"``,
-which VLMEvalKit's ``toliststr`` evaluates), ``question_type``, ``sub_question_type``,
-``task_group``, ``degradation_type`` (``ori`` for clean), then ``answer_type``, ``A``–``D``
-(option texts, empty for non-MCQ, which pandas reads as NaN as VLMEvalKit expects),
-``scene_id``, ``record_id`` and ``degradation`` (the provenance as compact JSON). Fields holding
-tabs, newlines or quotes are quoted CSV-style (``"..."`` with ``""`` for a quote), which is
-pandas' default dialect, so multi-line questions read back unchanged.
+which VLMEvalKit's ``toliststr`` evaluates; the public class finds them under ``$LMUData``),
+``question_type``, ``sub_question_type`` (the public names: **empty** for single-view distance,
+counting, bounding size and existence, ``inter_object_distance`` for the inter-object distance),
+``task_group``, ``degradation_type`` (``ori`` for clean): the eight columns the public loader
+requires, then ``answer_type`` (how the row is scored: the public routing of its names),
+``A``–``D`` (option texts, empty for non-MCQ, which pandas reads as NaN as VLMEvalKit expects),
+``scene_id``, ``record_id`` (``scene/question_type/internal sub type/hash``) and ``degradation``
+(the provenance as compact JSON), which the public loader carries along unused. Existence
+questions are exported as two lettered options (``A. yes`` / ``B. no`` in a seeded order) with
+the letter as the answer, as the public evaluator scores them. Fields holding tabs, newlines or
+quotes are quoted CSV-style (``"..."`` with ``""`` for a quote), which is pandas' default
+dialect, so multi-line questions read back unchanged.
 
 **Chat JSONL** (LLaMA-Factory ShareGPT style, ``"messages"`` + ``"images"`` columns): ``{"id",
 "index", "images": [paths], "system": ANSWER_PROMPT, "messages": [{"role": "user", "content":
 "<image>"×V + question}, {"role": "assistant", "content": "<answer>…</answer>"}], ...metadata,
-"geometry"}`` with exactly one ``<image>`` placeholder per image, in view order; ``geometry`` is
-the record's geometry block (poses, boxes, visibility: what the answer was computed from).
+"geometry"}`` with exactly one ``<image>`` placeholder per image, in view order; the question,
+answer and names are the TSV row's (the text the bench shows); ``geometry`` is the record's
+geometry block (poses, boxes, visibility: what the answer was computed from).
 """
 
 from __future__ import annotations
@@ -56,10 +68,11 @@ import cv2
 import numpy as np
 
 from spacedg.data.chain import CLEAN
-from spacedg.data.chat import ANSWER_PROMPT, format_question
+from spacedg.data.chat import ANSWER_PROMPT
 from spacedg.data.dataset import SpaceDGDataset
+from spacedg.data.public_format import PUBLIC_BENCH_NAME, public_fields, public_mismatch
 from spacedg.plugins.answers import answer_text
-from spacedg.files import atomic_write_bytes
+from spacedg.files import atomic_write_bytes, remove_stale_temps
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
 
 __all__ = [
@@ -85,7 +98,8 @@ TSV_COLUMNS: tuple[str, ...] = (
 )
 #: Items per chunk (the unit of resuming and of sharding) unless told otherwise.
 DEFAULT_SHARD_SIZE = 256
-_MANIFEST_VERSION = 1
+#: Version of the exported format (2: the public bench's names and existence as lettered options).
+_MANIFEST_VERSION = 2
 
 
 # ---------------------------------------------------------------- results
@@ -98,12 +112,16 @@ class MergeResult:
         missing: chunk ids whose parts are absent (empty when complete).
         counts: ``question_type → degradation_type → items`` (empty when incomplete).
         table: :func:`counts_table` of ``counts`` (empty when incomplete).
+        mismatches: ``"question_type/sub_question_type"`` → why the public evaluator would score
+            those rows with another answer type than ours (empty for the built-in families; see
+            :func:`~spacedg.data.public_format.public_mismatch`).
     """
 
     complete: bool
     missing: list[int] = field(default_factory=list)
     counts: dict[str, dict[str, int]] = field(default_factory=dict)
     table: str = ""
+    mismatches: dict[str, str] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
         return self.complete
@@ -230,6 +248,12 @@ def _claim_manifest(out: Path, manifest: dict[str, Any]) -> None:
     if found is None:
         atomic_write_bytes(out / "parts" / "manifest.json", (json.dumps(manifest, indent=2) + "\n").encode())
         return
+    if found.get("version") != manifest["version"]:
+        raise ParameterError(
+            f"{out} holds an export in format version {found.get('version')!r}, this spacedg writes version "
+            f"{manifest['version']} (the public bench's names, existence as lettered options); its parts cannot be "
+            "mixed: use a new --out folder (or delete this one) and export again"
+        )
     differ = [k for k in ("split", "items", "shard_size", "fingerprint") if found.get(k) != manifest[k]]
     if differ:
         what = ", ".join(f"{k} {found.get(k)!r} there vs {manifest[k]!r} now" for k in differ)
@@ -262,11 +286,14 @@ def tsv_bytes(rows: Sequence[Mapping[str, Any]], header: bool = True, columns: S
 
 
 def _rows(item: dict[str, Any], paths: list[str], system: str) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The TSV row and the chat JSONL row of one dataset item whose images are at ``paths``."""
-    options = {line[0]: line[3:] for line in item["options"]}  # "A. text" → {"A": "text"}
-    answer = answer_text(item["answer"])
-    question = format_question(item["question"], item["options"])
-    meta = {k: item[k] for k in ("question_type", "sub_question_type", "task_group", "degradation_type", "answer_type", "scene_id", "record_id")}
+    """The TSV row and the chat JSONL row of one dataset item whose images are at ``paths``, in the
+    public bench's format (:func:`~spacedg.data.public_format.public_fields`: public names, existence
+    as lettered options)."""
+    public = public_fields(item)
+    options = {line[0]: line[3:] for line in public["options"]}  # "A. text" → {"A": "text"}
+    answer, question = public["answer"], public["question"]
+    meta = {k: public[k] if k in public else item[k]
+            for k in ("question_type", "sub_question_type", "task_group", "degradation_type", "answer_type", "scene_id", "record_id")}
     tsv = {
         "index": int(item["index"]), "question": question, "answer": answer, "image_path": repr(list(paths)), **meta,
         **{k: options.get(k, "") for k in "ABCD"},
@@ -301,8 +328,21 @@ def _item(dataset: SpaceDGDataset, index: int) -> dict[str, Any]:
         raise InvalidDataError(f"item {index} ({name} of {record.id}) failed: scene {folder}: {err}") from err
 
 
+def _remove_chunk_temps(out: Path, k: int, shard_size: int, total: int) -> None:
+    """Remove the temporary files a killed export of chunk ``k`` left (its images' and parts')."""
+    indices = _chunk_range(k, shard_size, total)
+
+    def image_of_chunk(name: str) -> bool:
+        stem, _, view = name.removesuffix(".png").partition("_")
+        return name.endswith(".png") and len(stem) == 7 and stem.isdigit() and view.isdigit() and int(stem) in indices
+
+    remove_stale_temps(out / "images", image_of_chunk)
+    remove_stale_temps(out / "parts", [p.name for p in _part_paths(out, k)])
+
+
 def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, system: str, bar: Any) -> int:
     """Render chunk ``k``, write its images, then its JSONL part, then its TSV part; returns its item count."""
+    _remove_chunk_temps(out, k, shard_size, len(dataset))
     tsv_rows, chat_rows = [], []
     for index in _chunk_range(k, shard_size, len(dataset)):
         item = _item(dataset, index)
@@ -395,6 +435,7 @@ def merge_parts(out_dir: str | Path, *, verbose: bool = False) -> MergeResult:
         return MergeResult(False, missing)
     tsv_chunks, jsonl_chunks = [], []
     counts: dict[str, Counter[str]] = {}
+    mismatches: dict[str, str] = {}
     for k in range(chunks):
         tsv_path, jsonl_path = _part_paths(out, k)
         tsv_bytes = tsv_path.read_bytes()
@@ -406,8 +447,14 @@ def merge_parts(out_dir: str | Path, *, verbose: bool = False) -> MergeResult:
             raise InvalidDataError(f"{jsonl_path}: rows are not the indices of chunk {k}; delete its two part files and rerun")
         for row in rows:
             counts.setdefault(row["question_type"], Counter())[row["degradation_type"]] += 1
+            if "answer_type" in row:
+                why = public_mismatch(row)
+                if why:
+                    mismatches.setdefault(f"{row['question_type']}/{row['sub_question_type']}", why)
     table = {q: dict(sorted(c.items(), key=lambda kv: (kv[0] != CLEAN, kv[0]))) for q, c in sorted(counts.items())}
     atomic_write_bytes(out / f"{split}.tsv", b"".join(tsv_chunks))
+    if split == "bench":  # VLMEvalKit's SpaceDGBench reads $LMUData/spacedg_bench.tsv: this folder is its LMUData
+        atomic_write_bytes(out / f"{PUBLIC_BENCH_NAME}.tsv", b"".join(tsv_chunks))
     atomic_write_bytes(out / f"{split}.jsonl", b"".join(jsonl_chunks))
     by_degradation: Counter[str] = Counter()
     for row in table.values():
@@ -416,12 +463,13 @@ def merge_parts(out_dir: str | Path, *, verbose: bool = False) -> MergeResult:
         "split": split, "items": items, "chunks": chunks, "shard_size": size, "fingerprint": manifest.get("fingerprint"),
         "counts": table, "by_degradation": dict(sorted(by_degradation.items(), key=lambda kv: (kv[0] != CLEAN, kv[0]))),
         "by_question_type": {q: sum(row.values()) for q, row in table.items()},
+        "public_evaluator_mismatches": mismatches,
     }
     atomic_write_bytes(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode("utf-8"))
     text = counts_table(table)
     if verbose:
         print(text)
-    return MergeResult(True, [], table, text)
+    return MergeResult(True, [], table, text, mismatches)
 
 
 def counts_table(counts: Mapping[str, Mapping[str, int]]) -> str:

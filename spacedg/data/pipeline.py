@@ -45,6 +45,7 @@ import numpy as np
 from spacedg.data.chain import Chain, ResolvedDegradation
 from spacedg.errors import ParameterError, PluginError
 from spacedg.plugins.degradations.common import check_display_image, surface_far_depth
+from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.specs import Stage
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import RasterSettings
@@ -139,7 +140,8 @@ def _render_group(
     for index, camera in enumerate(cameras):
         request = RenderRequest(camera, outputs=outputs)
         for step in raster:
-            edited = step.spec.apply(request, step.params, step.view_rng(index))
+            with plugin_call("degradation", step.spec, "apply"):
+                edited = step.spec.apply(request, step.params, step.view_rng(index))
             if not isinstance(edited, RenderRequest):
                 raise PluginError(f"raster degradation {step.name!r} returned {type(edited).__name__}, not a RenderRequest")
             request = edited
@@ -156,7 +158,8 @@ def _render_group(
 
 def _run_linear(rgb: np.ndarray, aux: Mapping[str, Any], steps: Sequence[ResolvedDegradation], index: int) -> np.ndarray:
     for step in steps:
-        out = step.spec.apply(rgb, aux, step.params, step.view_rng(index))
+        with plugin_call("degradation", step.spec, "apply"):
+            out = step.spec.apply(rgb, aux, step.params, step.view_rng(index))
         if not isinstance(out, np.ndarray) or out.dtype != np.float32 or out.shape != rgb.shape:
             got = f"{out.dtype} {out.shape}" if isinstance(out, np.ndarray) else type(out).__name__
             raise PluginError(f"linear degradation {step.name!r} must return float32 {rgb.shape}, got {got}")
@@ -166,7 +169,8 @@ def _run_linear(rgb: np.ndarray, aux: Mapping[str, Any], steps: Sequence[Resolve
 
 def _run_display(image: np.ndarray, steps: Sequence[ResolvedDegradation], index: int) -> np.ndarray:
     for step in steps:
-        out = step.spec.apply(image, step.params, step.view_rng(index))
+        with plugin_call("degradation", step.spec, "apply"):
+            out = step.spec.apply(image, step.params, step.view_rng(index))
         if not isinstance(out, np.ndarray) or out.dtype != np.uint8 or out.shape != image.shape:
             got = f"{out.dtype} {out.shape}" if isinstance(out, np.ndarray) else type(out).__name__
             raise PluginError(f"display degradation {step.name!r} must return uint8 {image.shape}, got {got}")

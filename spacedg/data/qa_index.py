@@ -40,6 +40,7 @@ change rebuilds it; ``force=True`` always does.
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import json
 import time
 from collections import Counter
@@ -50,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.errors import FileFormatError, ParameterError
@@ -143,10 +145,17 @@ def prepare_scene(
     progress: bool = True,
     timings: dict[str, float] | None = None,
 ) -> Scene:
-    """``scene`` with visibility and covisibility attached (cached under ``cache_dir`` if given)."""
+    """``scene`` with visibility and covisibility attached (cached under ``cache_dir`` if given).
+
+    First the scene's frame is checked (a scene whose cameras see nothing is refused, naming the
+    cause) and Gaussians without instance ids get them by box containment (with a warning)."""
     from spacedg.scene.covisibility import with_covisibility
+    from spacedg.scene.frame_check import require_frame
+    from spacedg.scene.labelling import ensure_instance_ids
     from spacedg.scene.visibility import compute_visibility, load_or_compute_visibility, with_visibility
 
+    require_frame(scene, backend=backend)
+    scene = ensure_instance_ids(scene)
     t0 = time.perf_counter()
     if cache_dir is None:
         table = compute_visibility(scene, image_size=config.visibility_size, backend=backend, progress=progress)
@@ -222,14 +231,15 @@ def generate_records(
     for family in _families(config.families):
         rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
         pools: dict[str, list[QARecord]] = {}
-        for scanned, record in enumerate(family.generate(scene, rng)):
-            if scanned >= config.max_scan:
-                break
-            pool = pools.setdefault(record.sub_question_type, [])
-            if len(pool) < want:
-                pool.append(record)
-            elif all(len(pools.get(s, ())) >= want for s in family.sub_question_types):
-                break
+        with plugin_call("question family", family, "generate"):
+            for scanned, record in enumerate(family.generate(scene, rng)):
+                if scanned >= config.max_scan:
+                    break
+                pool = pools.setdefault(record.sub_question_type, [])
+                if len(pool) < want:
+                    pool.append(record)
+                elif all(len(pools.get(s, ())) >= want for s in family.sub_question_types):
+                    break
 
         def keep(record: QARecord, family_name: str = family.name) -> bool:
             if judge is None or judge.keep(record):
@@ -285,17 +295,24 @@ def _index_key(scene_json: Path, config: QABuildConfig, families: Iterable[Any],
 
 
 def _module_digest(family: Any) -> str | None:
-    """SHA-256 of the source file of the family's module (so editing a family rebuilds indexes
-    even without a version bump); ``None`` when it has no file."""
-    import importlib.util
-
+    """SHA-256 of the source of the modules that make the family's records (so editing a family
+    rebuilds indexes even without a version bump): the module of its raw ``generate`` and, when
+    that is a ``functools.partial`` (what a family factory such as
+    :func:`~spacedg.plugins.questions.pairs.pair_family` stores), of the functions bound into it
+    (a pair family's stream). One module: the SHA-256 of its file; several: the SHA-256 of their
+    files' digests in that order. ``None`` when none has a file."""
     raw = getattr(family.generate, "__wrapped__", family.generate)
-    raw = getattr(raw, "func", raw)  # functools.partial
-    module = getattr(raw, "__module__", None)
-    spec = importlib.util.find_spec(module) if module else None
-    if spec is None or not spec.origin or not Path(spec.origin).is_file():
-        return None
-    return hashlib.sha256(Path(spec.origin).read_bytes()).hexdigest()
+    func = getattr(raw, "func", None)  # functools.partial
+    parts = [raw] if func is None else [func, *(p for p in (*raw.args, *raw.keywords.values()) if callable(p))]
+    modules = dict.fromkeys(getattr(part, "__module__", None) for part in parts)
+    files = []
+    for module in filter(None, modules):
+        spec = importlib.util.find_spec(module)
+        if spec is not None and spec.origin and Path(spec.origin).is_file():
+            files.append(hashlib.sha256(Path(spec.origin).read_bytes()))
+    if len(files) < 2:
+        return files[0].hexdigest() if files else None
+    return hashlib.sha256(b"".join(f.digest() for f in files)).hexdigest()
 
 
 def _read_meta(path: Path) -> dict[str, Any] | None:

@@ -19,6 +19,7 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
+from spacedg.data.public_format import from_public
 from spacedg.errors import InvalidDataError
 from spacedg.eval.bench import CLEAN, BenchRow
 from spacedg.eval.predictions import PredictionSet
@@ -152,7 +153,10 @@ def score_set(pred: PredictionSet, bench_rows: Mapping[int, BenchRow] | None = N
         result = score(text, row.scoring_fields())
         out.append(ItemScore(
             index=index, record_id=row.record_id, degradation_type=row.degradation_type,
-            question_type=row.question_type, sub_question_type=row.sub_question_type, task_group=row.task_group,
+            question_type=row.question_type, task_group=row.task_group,
+            # our finer sub type names (the public bench leaves single-view types blank): labels stay the same
+            # for exports in the public format and older ones
+            sub_question_type=from_public(row.question_type, row.sub_question_type)[1],
             answer_type=result.answer_type.value, answer=row.answer, prediction=text or "",
             parsed=result.parsed, score=result.score, parse_ok=result.parse_ok, missing=text is None,
         ))

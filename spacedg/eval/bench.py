@@ -232,12 +232,13 @@ def read_table(path: Path) -> list[dict[str, str]]:
 
 
 def bench_table(path: Path) -> Path:
-    """The TSV of a bench: ``path`` itself, or ``bench.tsv`` / ``val.tsv`` / ``train.tsv`` / the one ``.tsv`` in the folder."""
+    """The TSV of a bench: ``path`` itself, or ``bench.tsv`` / ``spacedg_bench.tsv`` (a VLMEvalKit ``LMUData``
+    folder) / ``val.tsv`` / ``train.tsv`` / the one ``.tsv`` in the folder."""
     if path.is_file():
         return path
     if not path.is_dir():
         raise InvalidDataError(f"bench {path} does not exist; pass the folder written by `spacedg export` (or its .tsv)")
-    for name in ("bench.tsv", "val.tsv", "train.tsv"):
+    for name in ("bench.tsv", "spacedg_bench.tsv", "val.tsv", "train.tsv"):
         if (path / name).is_file():
             return path / name
     tables = sorted(path.glob("*.tsv"))

@@ -20,14 +20,15 @@ from spacedg.plugins.answers import MCQ_LETTERS
 __all__ = ["extract_answer_text", "parse_mcq", "parse_number", "parse_yes_no", "parse_count", "parse_size_list"]
 
 # ------------------------------------------------------------------ extraction
-_ANSWER_TAG = re.compile(r"<answer>(.*?)</answer>", re.IGNORECASE | re.DOTALL)
+_ANSWER_TAG = re.compile(r"<\s*answer\b[^>]*>(.*?)</\s*answer\s*>", re.IGNORECASE | re.DOTALL)
 
 
 def extract_answer_text(prediction: str | None) -> str:
     """The stripped content of the first ``<answer>…</answer>``, else the whole text stripped.
 
     Tags are matched case-insensitively and non-greedily (the first closing tag ends the
-    first answer); the content may span lines. ``None`` gives ``""``; other non-strings are
+    first answer), with the public evaluator's tolerance (``< answer >``, ``<answer id=1>``,
+    ``</ answer >``); the content may span lines. ``None`` gives ``""``; other non-strings are
     converted with ``str``.
     """
     if prediction is None:
@@ -54,7 +55,9 @@ _EXPLICIT = re.compile(
 _LEADING = re.compile(r"^[\s*\"'`]*(?:\(([A-Da-d])\)|([A-Da-d])\s*[.):])(?:\s|$)")
 # any single letter A–D standing alone (not part of a word, number, or "3D").
 _LONE = re.compile(r"(?<![A-Za-z0-9'’_])([A-Da-d])(?![A-Za-z0-9'’_])")
-_VERBS_AFTER_OPTION = frozenset({"is", "seems", "would", "should", "fits", "matches", "looks", "best", "appears", "describes"})
+_VERBS_AFTER_OPTION = frozenset({"is", "seems", "would", "should", "fits", "matches", "looks", "best", "appears", "describes",
+                                 # an article is never followed by a conjunction: "A or B" names two options
+                                 "or", "and", "nor", "vs", "versus"})
 _PUNCT = re.compile(r"[^\w\s]+")
 
 
@@ -127,7 +130,8 @@ def parse_mcq(text: str | None, options: Sequence[str] | Mapping[str, Any] | Non
        option's text (``"left"`` for ``"B. left"``) → that option's letter.
 
     Letters inside words never count (the ``A`` of ``Answer``), nor ``D`` in ``3D``; the
-    article ``a``/``A`` followed by a word never counts (see rules above).
+    article ``a``/``A`` followed by a word never counts (see rules above), except a verb
+    (``"A is correct"``) or a conjunction (``"A or B"`` names two options: ambiguous → ``None``).
     """
     answer = extract_answer_text(text)
     if not answer:
@@ -165,16 +169,69 @@ def parse_mcq(text: str | None, options: Sequence[str] | Mapping[str, Any] | Non
 
 # ------------------------------------------------------------------ yes / no
 _YES_NO = re.compile(r"\b(yes|no)\b", re.IGNORECASE)
+# a final-answer statement: "the answer is yes", "Answer: no", "final answer - yes", "so no", "therefore, yes"
+_YN_STATEMENT = re.compile(
+    r"(?:\banswer\b\s*(?:is|would\s+be|should\s+be|will\s+be|=|:|-|–|—)?|"
+    r"\b(?:so|therefore|thus|hence|overall|in\s+conclusion)\b\s*[,:]?)"
+    r"\s*[*\"'`(\[]*\s*(yes|no)\b",
+    re.IGNORECASE,
+)
+# a hedge: the two words offered as alternatives ("yes or no", "yes/no", "yes and no", "maybe yes, maybe no",
+# "yes, but also no", "either yes or no"), the second one closing the phrase
+_YN_HEDGE = re.compile(
+    r"\b(yes|no)\b[\s*\"'`.,;:!)\]]*(?:/|\\|\bor\b|\band\b|\bbut\s+(?:also|maybe|perhaps|possibly)\b|"
+    r"\b(?:maybe|perhaps|possibly)\b|\bor\s+(?:maybe|perhaps|possibly)\b)[\s*\"'`,]*\b(yes|no)\b"
+    r"(?!\s+[A-Za-z])",  # "Yes, and no other lamp" is an answer, not a hedge: the second word ends the phrase
+    re.IGNORECASE,
+)
+_LINE_START = re.compile(r"^[\W_]*(yes|no)\b", re.IGNORECASE)
+_LINE_END = re.compile(r"\b(yes|no)[\W_]*$", re.IGNORECASE)
+
+
+def _hedged_at(text: str, word: re.Match[str]) -> bool:
+    """Whether the deciding yes/no ``word`` (group 1 of a match in ``text``) opens or closes a hedge."""
+    return any(
+        h.group(1).lower() != h.group(2).lower() and word.start(1) in (h.start(1), h.start(2))
+        for h in _YN_HEDGE.finditer(text)
+    )
 
 
 def parse_yes_no(text: str | None) -> str | None:
-    """``"yes"`` or ``"no"`` when exactly one of the two words occurs (any case), else ``None``.
+    """``"yes"`` or ``"no"``: the answer's one yes/no word, or its final answer; else ``None``.
 
-    Runs on :func:`extract_answer_text`. Whole words only (``"not"``, ``"none"``, ``"nobody"``
-    do not count); both words present (``"yes … no"``) is ambiguous → ``None``.
+    Runs on :func:`extract_answer_text` (so ``<answer>…</answer>`` wins over text around it).
+    Whole words only (``"not"``, ``"none"``, ``"nobody"`` do not count), any case.
+
+    1. Only one of the two words occurs → that word (``"No, there is none."`` → no).
+    2. Both occur: the **final answer** decides, in this order:
+
+       a. the last final-answer statement: ``answer is X`` / ``answer: X`` / ``final answer X`` /
+          ``so X`` / ``therefore X`` / ``thus X`` / ``hence X`` (``"At first I'd say no, but
+          the answer is yes"`` → yes);
+       b. else the last non-empty line, when it ends with one of the words (``"No, wait —
+          yes."`` → yes) or else starts with one (``"…\nYes, there is no other lamp."`` →
+          yes).
+
+       The deciding word must not be part of a **hedge**, the two words offered as
+       alternatives: ``"yes or no"``, ``"yes/no"``, ``"yes and no"``, ``"maybe yes, maybe
+       no"``, ``"Yes, but also no"``, ``"the answer is yes or no"`` → ``None`` (a hedge
+       elsewhere, e.g. the question restated before a final ``"Yes."``, does not matter).
+       No statement and a last line that neither ends nor starts with an answer word →
+       ambiguous → ``None``.
     """
-    words = {m.group(1).lower() for m in _YES_NO.finditer(extract_answer_text(text))}
-    return words.pop() if len(words) == 1 else None
+    answer = extract_answer_text(text)
+    words = {m.group(1).lower() for m in _YES_NO.finditer(answer)}
+    if len(words) < 2:
+        return words.pop() if words else None
+    statements = list(_YN_STATEMENT.finditer(answer))
+    if statements:
+        last = statements[-1]
+        return None if _hedged_at(answer, last) else last.group(1).lower()
+    last_line = [line.strip() for line in answer.splitlines() if line.strip()][-1]
+    m = _LINE_END.search(last_line) or _LINE_START.match(last_line)
+    if m is None or _hedged_at(last_line, m):
+        return None
+    return m.group(1).lower()
 
 
 # ------------------------------------------------------------------ numbers
@@ -421,25 +478,74 @@ def parse_count(text: str | None) -> int | None:
 
 
 _BRACKET_GROUP = re.compile(r"[\[(]([^\[\]()]*)[\])]")
+# an enumeration label of a numbered list ("1. ", "2) ", "3: ", "(1) "), at a line start or after a separator
+_ENUM_LABEL = re.compile(r"(?:^|(?<=[\s,;]))(?:\((?P<p>\d{1,2})\)|(?P<n>\d{1,2})[.):])(?=[ \t]+\S)", re.MULTILINE)
+# what may stand between two numbers of one written list: separators, "and", "by", nothing else
+_LIST_GAP = re.compile(r"^[\s,;/*x×]*(?:(?:and|by)[\s,;/*x×]*)?$", re.IGNORECASE)
+
+
+def _strip_enumeration(text: str) -> str:
+    """``text`` with the labels of a numbered list blanked out (same length, so offsets hold).
+
+    Labels count only when they number 1, 2, …, k (k ≥ 2) in order: all of them anywhere, or
+    else those at line starts. ``"1. 0.31\n2. 0.9\n3. 1.11"`` → the three values; ``"I see
+    2. The edges …"`` keeps its 2 (a lone label is not a list).
+    """
+    def numbered(labels: list[re.Match[str]]) -> bool:
+        values = [int(m.group("p") or m.group("n")) for m in labels]
+        return len(values) >= 2 and values == list(range(1, len(values) + 1))
+
+    labels = list(_ENUM_LABEL.finditer(text))
+    if not numbered(labels):
+        labels = [m for m in labels if m.start() == 0 or text[m.start() - 1] == "\n"]
+        if not numbered(labels):
+            return text
+    out = list(text)
+    for m in labels:
+        out[m.start():m.end()] = " " * (m.end() - m.start())
+    return "".join(out)
+
+
+def _last_triple(nums: list[_Num], text: str) -> list[_Num] | None:
+    """The last run of exactly three numbers written as one list (only separators between them:
+    spaces, ``,`` ``;`` ``/`` ``x`` ``×`` ``*``, ``and``, ``by``), or ``None``."""
+    runs: list[list[_Num]] = []
+    for num in nums:
+        if runs and _LIST_GAP.match(text[runs[-1][-1].end:num.start]):
+            runs[-1].append(num)
+        else:
+            runs.append([num])
+    triples = [run for run in runs if len(run) == 3]
+    return triples[-1] if triples else None
 
 
 def parse_size_list(text: str | None, *, convert_units: bool = True) -> list[float] | None:
     """Three lengths in metres from a prediction, in the order written, or ``None``.
 
     Runs on :func:`extract_answer_text`. Commas always separate numbers here (box edges are
-    never thousands of metres). Choice of the three numbers:
+    never thousands of metres), and the labels of a numbered list are not values
+    (``"1. 0.31\n2. 0.9\n3. 1.11"`` → ``[0.31, 0.9, 1.11]``; see :func:`_strip_enumeration`).
+    Choice of the three numbers (a box has three edge lengths; the answer must name three):
 
     1. the last bracketed group ``[a, b, c]`` / ``(a, b, c)`` holding exactly 3 numbers;
-    2. else, if the answer holds 3 numbers or more, the last three (``"0.5 x 1.2 x 2 m"``,
-       ``"Dimensions: 0.5, 1.2, 2.0"``).
+    2. else, if the answer holds exactly 3 numbers, those (``"0.5 x 1.2 x 2 m"``,
+       ``"shortest 0.4, middle 0.6 and longest 1.0"``);
+    3. **extra numbers**: else the last run of exactly three numbers written as one list, with
+       only separators between them (``", "``, ``" x "``, ``"and"``, ``"by"``): ``"The 3 edges
+       are 0.31, 0.9 and 1.11 m"`` → the three edges, ``"0.31, 0.9, 1.11 (about 2 ft)"`` → the
+       first three, a corrected ``"0.3, 0.8, 1.0, no: 0.31, 0.9, 1.11"`` → the last three;
+    4. else ``None``: four or more values in one list (``"0.31, 0.9, 1.11, 2.0"``,
+       ``"[0.31, 0.9, 1.11, 2.0]"``) do not say which three are the edges, and guessing the
+       first or the last three would reward one arbitrary guess.
 
     Units (with ``convert_units``) as in :func:`parse_number`; a unit written only after the
-    last of the three applies to all three (``"50 x 120 x 200 cm"``). Fewer than 3 numbers or
-    a non-finite value → ``None``.
+    last of the three applies to all three (``"50 x 120 x 200 cm"``). Numbers in words are read
+    only when the answer has no digits. Fewer than 3 numbers or a non-finite value → ``None``.
     """
     answer = extract_answer_text(text)
     if not answer:
         return None
+    answer = _strip_enumeration(answer)
     chosen: list[_Num] | None = None
     for group in reversed(list(_BRACKET_GROUP.finditer(answer))):
         nums = _digit_numbers(group.group(1), thousands=False)
@@ -450,13 +556,10 @@ def parse_size_list(text: str | None, *, convert_units: bool = True) -> list[flo
                 chosen = [_Num(n.start, n.end, n.value, tail.group("unit")) for n in nums]
             break
     if chosen is None:
-        nums = _digit_numbers(answer, thousands=False)
-        if len(nums) < 3:
-            words = _word_numbers(answer) if not nums else []
-            if len(words) < 3:
-                return None
-            nums = words
-        chosen = nums[-3:]
+        nums = _digit_numbers(answer, thousands=False) or _word_numbers(answer)
+        chosen = nums if len(nums) == 3 else _last_triple(nums, answer)
+        if chosen is None:
+            return None
         if chosen[-1].unit is not None and all(n.unit is None for n in chosen[:-1]):
             chosen = [_Num(n.start, n.end, n.value, chosen[-1].unit) for n in chosen]
     values = [_to_float(n.value * _unit_factor(n.unit)) if convert_units else _to_float(n.value) for n in chosen]

@@ -11,8 +11,12 @@ the model, the variant, the bench's fingerprint, the generation settings and eve
 
 Resuming: an existing output is read, its answered indices are skipped and new lines are
 appended. A sidecar that disagrees (another bench, model, variant, prompt or generation
-setting) is an error, so one file never mixes two runs. A torn last line (a crash mid-write) is
-dropped and redone.
+setting) is an error, so one file never mixes two runs; an output with no prediction line yet
+starts over whatever its sidecar says. A torn last line (a crash mid-write) is dropped and redone.
+
+One writer per output: a run holds ``<out>.lock`` (``fcntl.flock``, freed when it ends, even by
+``kill -9``), so a second ``predict`` on the same ``--out`` fails at once naming the first's pid
+instead of appending the same items again. Every setting is checked before the sidecar is written.
 
 Work that a sample does not need is skipped: ``no_image`` generates once per distinct question
 (the same question under ten degradations is one prompt) and copies the answer; images are
@@ -31,9 +35,9 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.chat import format_question, item_images
-from spacedg.files import atomic_write_bytes, read_rgb
-from spacedg.plugins.answers import answer_text
+from spacedg.data.chat import item_images
+from spacedg.data.public_format import public_fields
+from spacedg.files import atomic_write_bytes, exclusive_lock, read_rgb
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
 from spacedg.eval.bench import Bench, BenchRow, row_from_mapping
 from spacedg.eval.predictions import meta_path
@@ -88,12 +92,9 @@ def dataset_source(dataset: Any) -> Source:
 
     def row(index: int) -> BenchRow:
         record, chain, name = dataset.plan(index)
-        fields = {
-            "index": index, "question": format_question(record.question, record.options), "answer": answer_text(record.answer),
-            "answer_type": record.answer_type.value, "question_type": record.question_type,
-            "sub_question_type": record.sub_question_type, "task_group": record.task_group.value,
+        fields = {  # the row the export writes for this item (public names, existence as lettered options)
+            "index": index, **public_fields(record), "task_group": record.task_group.value,
             "degradation_type": name, "scene_id": record.scene_id, "record_id": record.id,
-            "options": list(record.options),
             "degradation": dataset.provenance(index),
         }
         return row_from_mapping(fields, f"dataset item {index}")
@@ -103,7 +104,9 @@ def dataset_source(dataset: Any) -> Source:
         return item_images(item)
 
     name = f"SpaceDGDataset(split={dataset.split!r}, items={len(dataset)})"
-    return Source(name, dataset_fingerprint(dataset), list(range(len(dataset))), row, images)
+    # the rows are in the public bench's format (existence lettered): a run that answered the earlier
+    # yes/no rows of the same dataset is another bench, not one to resume
+    return Source(name, f"{dataset_fingerprint(dataset)}-public", list(range(len(dataset))), row, images)
 
 
 @dataclass
@@ -129,8 +132,8 @@ def shard_path(out: Path, shard: tuple[int, int]) -> Path:
 # ------------------------------------------------------------------ resume
 def _existing(out: Path, meta: dict[str, Any]) -> set[int]:
     side = meta_path(out)
-    if not out.exists():
-        return set()
+    if not out.exists() or not out.read_bytes().strip():
+        return set()  # nothing answered yet: whatever a sidecar says, this run starts the file over
     if not side.exists():
         raise InvalidDataError(f"{out} exists but has no {side.name}; it was not written by spacedg predict. Choose another --out")
     try:
@@ -206,10 +209,6 @@ def predict(
         device / dtype / min_pixels / max_pixels: see :func:`spacedg.vlm.load_vlm`.
         progress: show a progress bar.
     """
-    from tqdm.auto import tqdm
-
-    from spacedg.vlm import generate, load_vlm, pixel_budget
-
     if variant not in VARIANTS:
         raise ParameterError(f"unknown prompt variant {variant!r}; choose one of {', '.join(VARIANTS)}")
     if batch_size < 1:
@@ -218,6 +217,10 @@ def predict(
     if out.suffix != ".jsonl":
         raise ParameterError(f"--out {out}: predictions are written as JSON lines; name the file *.jsonl")
     tokens = max_new_tokens if max_new_tokens is not None else (512 if variant == "cot" else 32)
+    if isinstance(tokens, bool) or not isinstance(tokens, int) or tokens < 1:
+        raise ParameterError(f"--max-new-tokens must be a whole number >= 1, got {max_new_tokens!r}")
+    if limit is not None and limit < 1:
+        raise ParameterError(f"--limit must be >= 1, got {limit}")
     if isinstance(model, tuple):
         vlm, processor = model
         model_path = str(getattr(vlm, "name_or_path", "") or "in-memory model")
@@ -232,6 +235,19 @@ def predict(
         "prompts": prompt_texts(), "shard": list(shard),
     }
     out.parent.mkdir(parents=True, exist_ok=True)
+    with exclusive_lock(out.with_name(out.name + ".lock"), f"{out} is being written by another spacedg predict"):
+        return _run(model, source, out, meta, name, variant, tokens, batch_size, limit, shard, device, dtype,
+                    min_pixels, max_pixels, progress, vlm, processor)
+
+
+def _run(model: Any, source: Source, out: Path, meta: dict[str, Any], name: str, variant: str, tokens: int, batch_size: int,
+         limit: int | None, shard: tuple[int, int], device: str, dtype: str, min_pixels: int | None, max_pixels: int | None,
+         progress: bool, vlm: Any, processor: Any) -> PredictSummary:
+    """:func:`predict` once the output's lock is held."""
+    from tqdm.auto import tqdm
+
+    from spacedg.vlm import generate, load_vlm, pixel_budget
+
     done = _existing(out, meta)
     pending = [i for pos, i in enumerate(source.indices) if pos % shard[1] == shard[0] and i not in done]
     if limit is not None:

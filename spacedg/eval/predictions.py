@@ -17,12 +17,13 @@ A label may carry the prompt variant after ``@`` (``"Qwen3-VL-8B@no_image"``).
 from __future__ import annotations
 
 import json
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
+from spacedg.errors import FileFormatError, InvalidDataError, ParameterError, SpaceDGWarning
 from spacedg.eval.bench import BenchRow, cell_text, read_table, row_from_mapping
 from spacedg.eval.prompts import VARIANTS
 
@@ -170,7 +171,9 @@ def read_predictions(source: str | Path, *, model: str | None = None, variant: s
 
     ``model`` / ``variant`` override what the file says. Errors name the file and line: a
     missing ``index`` or ``prediction`` column, a non-integer index, two different predictions
-    for one index, an unknown variant.
+    for one index, an unknown variant. An index repeated with the same prediction (two runs
+    appended to one file) is counted once and reported in one
+    :class:`~spacedg.errors.SpaceDGWarning` giving how many lines repeated and the first index.
     """
     label, label_variant, path = parse_source(str(source))
     model = model or label
@@ -194,6 +197,7 @@ def read_predictions(source: str | Path, *, model: str | None = None, variant: s
     if variant not in VARIANTS:
         raise ParameterError(f"{path}: prompt variant {variant!r} is not one of {', '.join(VARIANTS)}")
     out = PredictionSet(model=model or _model_name(path, meta), variant=variant, path=path, predictions={}, meta=meta)
+    repeated: list[int] = []
     for number, fields in enumerate(records, 1):
         where = f"{path}:{number + (1 if suffix in ('.tsv', '.csv', '.xlsx') else 0)}"
         if "index" not in fields or "prediction" not in fields:
@@ -203,8 +207,10 @@ def read_predictions(source: str | Path, *, model: str | None = None, variant: s
         except ValueError:
             raise FileFormatError(f"{where}: index {fields['index']!r} is not an integer") from None
         text = cell_text(fields["prediction"])
-        if index in out.predictions and out.predictions[index] != text:
-            raise FileFormatError(f"{where}: index {index} has two different predictions; keep one line per index")
+        if index in out.predictions:
+            if out.predictions[index] != text:
+                raise FileFormatError(f"{where}: index {index} has two different predictions; keep one line per index")
+            repeated.append(index)
         out.predictions[index] = text
         if "answer" in fields and "question_type" in fields:
             out.rows[index] = row_from_mapping(fields, where)
@@ -213,4 +219,9 @@ def read_predictions(source: str | Path, *, model: str | None = None, variant: s
             out.extras[index] = extra
     if not out.predictions:
         raise InvalidDataError(f"{path}: no predictions")
+    if repeated:
+        warnings.warn(SpaceDGWarning(
+            f"{path}: {len(repeated)} line(s) repeat an index already answered with the same prediction (first: index "
+            f"{repeated[0]}); each index is scored once. Two runs appended to one file? Keep one line per index"
+        ), stacklevel=2)
     return out

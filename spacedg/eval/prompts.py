@@ -85,9 +85,9 @@ _ALIASES: dict[str, str] = {
 
 def known_degradations() -> list[str]:
     """Names of the loaded degradation plugins (sorted), the choices of ``cot`` stage 1."""
-    from spacedg.plugins.registry import list_degradations
+    from spacedg.plugins.registry import degradation_names
 
-    return sorted(spec.name for spec in list_degradations())
+    return degradation_names()  # names only: a clash between two plugins is not an error here
 
 
 def _number(value: float) -> str:
@@ -95,11 +95,14 @@ def _number(value: float) -> str:
 
 
 def _ranges_text(name: str, preset: str) -> str:
-    from spacedg.plugins.registry import list_degradations
+    from spacedg.errors import UnknownPluginError
+    from spacedg.plugins.registry import get_degradation
 
-    specs = {spec.name: spec for spec in list_degradations()}
-    spec = specs.get(name)
-    if spec is None or preset not in spec.presets:
+    try:
+        spec = get_degradation(name)
+    except UnknownPluginError:
+        return ""
+    if preset not in spec.presets:
         return ""
     parts = []
     for param, span in spec.presets[preset].items():

@@ -40,6 +40,7 @@ from spacedg.eval.labels import degradation_label
 from spacedg.eval.correlation import MIN_MODELS, degradation_correlation
 from spacedg.eval.predictions import PredictionSet, merge_shards
 from spacedg.eval.prompts import known_degradations, parse_degradation_guess
+from spacedg.eval.scoring import SCORER
 from spacedg.eval.tables import Table, csv_bytes, fmt_corr, fmt_delta, fmt_pct, is_number
 
 __all__ = ["Report", "build_report", "write_report"]
@@ -281,7 +282,7 @@ def _summary(report: Report) -> dict[str, Any]:
         }
     overall = report.correlation["all"].get("all", {})
     return {
-        "conditions": report.conditions, "models": models,
+        "scorer": SCORER, "conditions": report.conditions, "models": models,
         "correlation_overall": {k: {"r": clean_number(r), "models": m} for k, (r, m) in overall.items()},
     }
 
@@ -325,7 +326,7 @@ def write_report(report: Report, out_dir: str | Path, *, with_plots: bool = True
         written.append(folder / name)
     images = _plots(report, folder / "plots") if with_plots else {}
     written += images.values()
-    page = ["# SpaceDG evaluation report", "",
+    page = ["# SpaceDG evaluation report", "", f"Scorer: {SCORER}.", "",
             "Runs: " + ", ".join(f"`{s.label}` ({len(report.items[s.label])} items, {s.path.name})" for s in report.sets), ""]
     for name, table in report.out.items():
         page.append(table.markdown())

@@ -8,30 +8,27 @@ Pipeline for one prediction
 1. :func:`extract_answer_text`: the content of the first ``<answer>…</answer>`` (tags
    case-insensitive, content may span lines), else the whole text; stripped. ``None`` → ``""``.
 2. The answer type: the record's ``answer_type``, or :func:`route` from
-   ``(question_type, sub_question_type)`` when a plain mapping has none.
+   ``(question_type, sub_question_type)`` when a plain mapping has none (the public evaluator's
+   routing rule: an exported row is scored as the same answer type by both).
 3. A type-specific parser (each one runs step 1 itself, so raw model text may be passed):
    :func:`parse_mcq`, :func:`parse_yes_no`, :func:`parse_number`, :func:`parse_count`,
    :func:`parse_size_list`. A parser returns ``None`` when it cannot find an unambiguous answer.
 4. The score in ``[0, 1]``: MCQ / YN / COUNT exact match (1 or 0); NA
    :func:`mean_relative_accuracy`; SIZE_LIST the mean of the per-edge MRA.
-   **An unparseable prediction always scores 0** (the public evaluator scored an unparseable
-   MCQ prediction against an unparseable ground truth as a hit; fixed here).
+   **An unparseable prediction always scores 0**.
 
-:func:`summarize` averages :class:`ScoreResult` s over **every** answer type (the public
-evaluator's overall figure left NA and SIZE_LIST out; fixed here) and per answer type.
+:func:`summarize` averages :class:`ScoreResult` s over **every** answer type and per answer type.
 
-Deliberate deviations from the public evaluator (all on inputs it mishandled)
-----------------------------------------------------------------------------
+Deliberate deviations from the public evaluator
+-----------------------------------------------
 
-* Length units written after a number are converted to metres (``"30 cm"`` → 0.3; mm, cm,
-  m, km, ft, inches); the reference would read ``"30 cm"`` as 30 m.
-* ``"1,234"`` is one thousand two hundred and thirty-four, number words are read
-  (``"twenty-one"`` → 21).
-* MRA thresholds are exact: a relative error of exactly 0.05 counts at θ = 0.95 (see
-  :func:`mean_relative_accuracy`); ground truth 0 has a defined score.
-* SIZE_LIST predictions are sorted before comparing (see :func:`score`).
-* An MCQ answer that gives no letter but exactly repeats one option's text is mapped to that
-  option's letter (see :func:`parse_mcq`).
+Every difference from the public SpaceDG evaluator (VLMEvalKit ``SpaceDGBench`` with its EASI
+helpers) is listed in ``docs/scoring.md``, one line each with an example, both scores and the
+reason: existence scored as yes/no on records (lettered on exported rows), internal names of
+older exports, unparseable truths never a hit, option text → letter, a final letter / yes-no
+answer after a correction, hedges, units converted, decimal comma, thousands, number words,
+uncertainties and ranges, exact MRA thresholds, truth 0, fractional counts refused, sorted size
+lists, extra numbers in size lists, and NA / size lists in the overall figure.
 """
 
 from __future__ import annotations
@@ -44,6 +41,7 @@ from decimal import Decimal, localcontext
 from typing import Any
 
 from spacedg.data.chat import ANSWER_FORMATS, ANSWER_PROMPT  # noqa: F401  (re-exported: the prompt the scorer's answers follow)
+from spacedg.data.public_format import internal_answer_type, public_answer_type
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.eval.parsing import (
     parse_count,
@@ -58,6 +56,7 @@ __all__ = [
     "ANSWER_FORMATS",
     "ANSWER_PROMPT",
     "MRA_THRESHOLDS",
+    "SCORER",
     "ScoreResult",
     "route",
     "mean_relative_accuracy",
@@ -65,6 +64,12 @@ __all__ = [
     "summarize",
 ]
 
+#: Which scorer a report comes from (written into ``summary.json`` and ``report.md`` of ``spacedg eval``).
+SCORER: str = (
+    "spacedg.eval.scoring: rows routed exactly as the public SpaceDG evaluator (VLMEvalKit SpaceDGBench) routes "
+    "them; answers parsed and scored by spacedg's rules, which differ from the public evaluator only as listed in "
+    "docs/scoring.md"
+)
 #: MRA confidence thresholds θ in hundredths: 0.50, 0.55, …, 0.95 (10 values, as in the paper).
 MRA_THRESHOLDS: tuple[Decimal, ...] = tuple(Decimal(50 + 5 * k) / 100 for k in range(10))
 
@@ -89,46 +94,43 @@ class ScoreResult:
 
 
 # ------------------------------------------------------------------ routing
-_YN_SUBTYPES = frozenset({"distance_threshold"})
-_YN_TYPES = frozenset({"object_existence_estimation"})
-_NA_SUBTYPES = frozenset({"distance_exact", "bbox_center_distance", "inter_object_distance"})
-_NA_TYPES = frozenset({"camera_object_distance_estimation", "inter_object_distance"})
-_COUNT_TYPES = frozenset({"object_counting"})
-_SIZE_TYPES = frozenset({"object_bounding_size_estimation"})
+def _cell(value: Any) -> str:
+    """A table cell as stripped text: ``None`` and NaN (an empty pandas / xlsx cell) are ``""``."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    return str(value).strip()
 
 
 def route(question_type: str | None, sub_question_type: str | None = None) -> AnswerType:
-    """The answer type of a question, by the SpaceDG routing rule.
+    """The answer type of a question, routed exactly as the public SpaceDG evaluator routes it.
 
-    Names are compared lower-cased and stripped; the sub type is checked before the type.
+    The rule (:func:`spacedg.data.public_format.public_answer_type`, read from the public
+    evaluator's ``infer_eval_task``):
 
-    ========================================================  ===========
-    ``sub_question_type == "distance_threshold"``             YN
-    ``question_type == "object_existence_estimation"``        YN
+    ==============================================================  ===========
+    empty ``sub_question_type``, by ``question_type``:
+    ``camera_object_distance_estimation`` (``distance_estimation``)  NA
+    ``object_existence_estimation`` (``existence_estimation``)      MCQ
+    ``object_counting``                                             COUNT
+    ``object_bounding_size_estimation`` (``size_estimation``)       SIZE_LIST
+    ``sub_question_type == "distance_threshold"``                   YN
     ``sub_question_type`` in ``distance_exact``,
-    ``bbox_center_distance``, ``inter_object_distance``       NA
-    ``question_type`` in ``camera_object_distance_estimation``
-    (single-view distance and ``bbox_center_distance``),
-    ``inter_object_distance``                                 NA
-    ``object_counting`` (type or sub type)                    COUNT
-    ``object_bounding_size_estimation`` (type or sub type)    SIZE_LIST
-    anything else (``camera_translation/main_dir``,
-    ``camera_rotation``, relative / cardinal direction, size
-    comparison, unknown names)                                MCQ
-    ========================================================  ===========
+    ``bbox_center_distance``, ``inter_object_distance``             NA
+    any other ``sub_question_type``                                 MCQ
+    ==============================================================  ===========
+
+    Our internal names, which records and exports made before the public format carry
+    (:data:`~spacedg.data.public_format.INTERNAL_ANSWER_TYPES`: ``single_view`` distance → NA,
+    ``count`` → COUNT, ``extent_list`` → SIZE_LIST, ``existence`` → YN, ``two_view`` → NA), route
+    to their own answer type first, so those files keep scoring as they were written.
+
+    Names are compared lower-cased and stripped (the public evaluator compares them exactly; every
+    exported name is lower case). An empty sub type with a question type outside the table above
+    raises :class:`~spacedg.errors.InvalidDataError`, as the public evaluator raises.
     """
-    qtype = (question_type or "").strip().lower()
-    sub = (sub_question_type or "").strip().lower()
-    names = {qtype, sub}
-    if sub in _YN_SUBTYPES or names & _YN_TYPES:
-        return AnswerType.YN
-    if sub in _NA_SUBTYPES or qtype in _NA_TYPES:
-        return AnswerType.NA
-    if names & _COUNT_TYPES:
-        return AnswerType.COUNT
-    if names & _SIZE_TYPES:
-        return AnswerType.SIZE_LIST
-    return AnswerType.MCQ
+    qtype, sub = _cell(question_type).lower(), _cell(sub_question_type).lower()
+    internal = internal_answer_type(qtype, sub)
+    return internal if internal is not None else public_answer_type(qtype, sub)
 
 
 # ------------------------------------------------------------------ MRA
@@ -147,9 +149,10 @@ def mean_relative_accuracy(pred: float | None, truth: float) -> float:
     Exactness: both numbers are taken as their shortest round-trip decimal strings (``2.1``
     is 2.1, not the binary 2.1000000000000000888…) and compared in exact decimal arithmetic as
     ``|p − t| ≤ (1 − θ)·|t|``, so boundary cases count (truth 2.0, pred 2.1: e = 0.05 exactly
-    → counts at θ = 0.95 → MRA 1.0). The public code's floating-point division drops such
-    boundary hits (and VSI-Bench's ``linspace(0.5, 0.95, 11)`` uses 11 thresholds spaced 0.045);
-    the paper's definition, followed here, has the 10 thresholds above.
+    → counts at θ = 0.95 → MRA 1.0). The public code uses the same 10 thresholds (its
+    ``int((0.95 - 0.5) / 0.05 + 2)`` is 10 in floating point) but compares in floating point,
+    which drops some boundary hits (truth 0.1, pred 0.08: e = 0.2 exactly, 0.6 there, 0.7 here);
+    the paper's definition is followed here.
 
     Edge cases: ``pred`` ``None`` or non-finite → 0.0. ``truth == 0``: relative error is
     undefined, so MRA is 1.0 when ``pred == 0`` and 0.0 otherwise. A non-finite ``truth``
@@ -188,7 +191,8 @@ def _field(source: Any, name: str, default: Any = None) -> Any:
 
 def _answer_type_of(source: Any) -> AnswerType:
     kind = _field(source, "answer_type")
-    if kind is not None and str(kind).strip():
+    # pandas reads the answer type "NA" (and an empty cell) as NaN: route those by name
+    if isinstance(kind, AnswerType) or _cell(kind).upper() not in ("", "NAN", "NONE"):
         try:
             return AnswerType(kind if isinstance(kind, AnswerType) else str(kind).strip().upper())
         except ValueError:
@@ -211,7 +215,7 @@ def _options_of(source: Any) -> Sequence[str] | Mapping[str, Any] | None:
     if options:
         return options
     if isinstance(source, Mapping):  # VLMEvalKit TSV rows carry options as columns A…D
-        columns = {k: source[k] for k in MCQ_LETTERS if k in source and source[k] is not None}
+        columns = {k: source[k] for k in MCQ_LETTERS if k in source and _cell(source[k])}
         return columns or None
     return None
 
@@ -237,7 +241,7 @@ def _truth_sizes(answer: Any) -> list[float]:
     return values
 
 
-def score(prediction: str | None, record_or_fields: Any, *, sort_sizes: bool = True) -> ScoreResult:
+def score(prediction: str | None, record_or_fields: Any, *, sort_sizes: bool = False) -> ScoreResult:
     """Score one model output against a :class:`~spacedg.plugins.qa_record.QARecord` or a mapping.
 
     ``record_or_fields`` is a ``QARecord`` or any mapping / object with ``answer`` and either
@@ -253,11 +257,11 @@ def score(prediction: str | None, record_or_fields: Any, *, sort_sizes: bool = T
     * YN: :func:`parse_yes_no`; exact match.
     * COUNT: :func:`parse_count`; exact integer match.
     * NA: :func:`parse_number`; :func:`mean_relative_accuracy`.
-    * SIZE_LIST: :func:`parse_size_list`; with ``sort_sizes`` (default) the three predicted
-      edges are **sorted ascending** before comparison, since the truth is
-      ``[shortest, middle, longest]`` and the three edge lengths, not their listing order, are
-      what is estimated (the paper asks for ascending order; pass ``sort_sizes=False`` to
-      compare positionally and penalise out-of-order lists). Score = mean of the 3 MRAs.
+    * SIZE_LIST: :func:`parse_size_list`; the three predicted edges are compared
+      **positionally** with ``[shortest, middle, longest]``, as the public evaluator does and the
+      paper decides ("we require the model to output answers in ascending order"; the prompt asks
+      for that order). ``sort_sizes=True`` sorts the prediction first (a lenient reading that
+      scores the three lengths whatever their order). Score = mean of the 3 MRAs.
     """
     kind = _answer_type_of(record_or_fields)
     truth = _field(record_or_fields, "answer")

@@ -3,12 +3,13 @@
 Public API::
 
     from spacedg.plugins import (
-        hookimpl,                                     # decorator for plugin authors
+        hookimpl, registering,                        # for plugin authors: the hook decorator, or a hook from constants
         DegradationSpec, ParamSpec, ParamRange, Category, Stage,
-        QuestionFamily, AnswerType, TaskGroup,
+        QuestionFamily, FamilyFactory, AnswerType, TaskGroup,
         get_registry, reset_registry,
         list_degradations, get_degradation,
         list_question_families, get_question_family,
+        degradation_names, question_family_names,     # names only (never raise for a clash)
     )
 
 See :mod:`spacedg.plugins.specs` for the stage contracts, :mod:`spacedg.plugins.registry`
@@ -18,23 +19,26 @@ options, answers) from :mod:`spacedg.plugins.authoring`, a module of its own (no
 here: it reaches into the question helpers, which this package's contracts do not need).
 """
 
-from spacedg.plugins.hookspecs import ENTRY_POINT_GROUP, hookimpl
+from spacedg.plugins.hookspecs import ENTRY_POINT_GROUP, hookimpl, registering
 from spacedg.plugins.registry import (
     AUTOLOAD_ENV,
     PLUGINS_ENV,
     BrokenPlugin,
+    PluginClash,
     PluginOrigin,
     PluginRecord,
     Registry,
+    degradation_names,
     get_degradation,
     get_question_family,
     get_registry,
     list_degradations,
     list_question_families,
+    question_family_names,
     reset_registry,
 )
 from spacedg.plugins.qa_record import QARecord
-from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.question_family import FamilyFactory, QuestionFamily
 from spacedg.plugins.specs import (
     REQUIRED_PRESETS,
     SEVERITY_PRESETS,
@@ -57,10 +61,13 @@ __all__ = [
     "REQUIRED_PRESETS",
     "SEVERITY_PRESETS",
     "hookimpl",
+    "registering",
     "AnswerType",
     "BrokenPlugin",
+    "PluginClash",
     "Category",
     "DegradationSpec",
+    "FamilyFactory",
     "DisplayApply",
     "LinearApply",
     "ParamRange",
@@ -73,10 +80,12 @@ __all__ = [
     "Registry",
     "Stage",
     "TaskGroup",
+    "degradation_names",
     "get_degradation",
     "get_question_family",
     "get_registry",
     "list_degradations",
     "list_question_families",
+    "question_family_names",
     "reset_registry",
 ]

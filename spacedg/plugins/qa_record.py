@@ -44,7 +44,7 @@ import numpy as np
 
 from spacedg.errors import InvalidDataError
 from spacedg.plugins.answers import MCQ_LETTERS, Answer, validate_answer
-from spacedg.plugins.specs import NAME_PATTERN, SUB_TYPE_PATTERN, AnswerType, TaskGroup
+from spacedg.plugins.specs import NAME_PATTERN, SUB_TYPE_PATTERN, AnswerType, TaskGroup, enum_member
 
 __all__ = ["QARecord", "MCQ_LETTERS", "make_record_id", "json_ready"]
 
@@ -239,11 +239,8 @@ class QARecord:
 
 
 def _coerce(enum_cls: Any, value: object, where: str, name: str) -> Any:
-    if isinstance(value, enum_cls):
-        return value
-    try:
-        return enum_cls(value)
-    except ValueError:
-        allowed = ", ".join(m.value for m in enum_cls)
-        raise InvalidDataError(f"{where}: {name} {value!r} is not one of {allowed}") from None
+    member = enum_member(enum_cls, value)
+    if member is None:
+        raise InvalidDataError(f"{where}: {name} {value!r} is not one of {', '.join(m.value for m in enum_cls)}")
+    return member
 

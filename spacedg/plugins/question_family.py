@@ -5,11 +5,16 @@ A question family is described by its name (= ``question_type``), :class:`TaskGr
 covisibility, …) and ``generate(scene, rng)``, which yields every valid
 :class:`~spacedg.plugins.qa_record.QARecord` candidate in a seeded random order. The stored
 generator checks each record against the declaration.
+
+:class:`FamilyFactory` is how a family module declares its family once and still lets a caller
+build it with other generator options (visibility thresholds, pair rules, …).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import functools
+import inspect
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -23,7 +28,7 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
     from spacedg.plugins.registry import PluginOrigin
     from spacedg.scene.model import Scene
 
-__all__ = ["SCENE_NEEDS", "QuestionFamily", "QuestionGenerator"]
+__all__ = ["SCENE_NEEDS", "FamilyFactory", "QuestionFamily", "QuestionGenerator"]
 
 #: What a question family may need from the scene beyond its instances and views.
 SCENE_NEEDS: frozenset[str] = frozenset({"visibility", "covisibility", "gaussians", "depth", "instance_ids"})
@@ -133,6 +138,52 @@ class QuestionFamily:
             "needs": sorted(self.needs),
             "description": self.description,
         }
+
+
+@dataclass(frozen=True, eq=False)
+class FamilyFactory:
+    """A question family's declaration; calling it with the generator's options makes the :class:`QuestionFamily`.
+
+    ``generate(scene, rng, …)`` takes the family's options after ``scene`` and ``rng``
+    (visibility thresholds, pair rules, …), each with a default. A family module writes::
+
+        make_family = FamilyFactory(generate, name=NAME, task_group=..., answer_types=..., ...)
+        FAMILY = make_family()  # the registered family: the generator's defaults
+
+    and ``make_family(thresholds)`` or ``make_family(pair_rules=rules)`` is the same family
+    with other options, bound as in a call of ``generate`` (an unknown option raises
+    ``TypeError``). The family stores ``functools.partial(generate, **options)``, so it pickles
+    when ``generate`` does.
+
+    Attributes:
+        generate: the raw generator, options not bound.
+        name, task_group, answer_types, sub_question_types, num_views, needs, description:
+            as :class:`QuestionFamily` (any iterable of answer types and of needs).
+    """
+
+    generate: Callable[..., Iterator[QARecord]]
+    name: str
+    task_group: TaskGroup
+    answer_types: Iterable[AnswerType]
+    sub_question_types: tuple[str, ...]
+    num_views: tuple[int, ...]
+    needs: Iterable[str] = frozenset()
+    description: str = ""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> QuestionFamily:
+        """The family whose ``generate(scene, rng)`` is ``self.generate(scene, rng, *args, **kwargs)``."""
+        bound = inspect.signature(self.generate).bind_partial(None, None, *args, **kwargs).arguments
+        options = dict(list(bound.items())[2:])  # past scene and rng
+        return QuestionFamily(
+            name=self.name,
+            task_group=self.task_group,
+            answer_types=frozenset(self.answer_types),
+            sub_question_types=self.sub_question_types,
+            num_views=self.num_views,
+            generate=functools.partial(self.generate, **options),
+            needs=frozenset(self.needs),
+            description=self.description,
+        )
 
 
 class _CheckedGenerator:

@@ -1,4 +1,4 @@
-"""The plugin registry: loads entry points, records broken plugins, rejects duplicate names.
+"""The plugin registry: loads entry points, records broken plugins, withholds clashing names.
 
 Loading (what :func:`get_registry` does on first use, once per process):
 
@@ -12,7 +12,31 @@ Loading (what :func:`get_registry` does on first use, once per process):
    raises is recorded as a :class:`BrokenPlugin` (entry point, distribution and version, error
    type and message, a short traceback) and contributes nothing; the others load normally.
 3. Two plugins registering one name (degradation names and question-family names are separate
-   namespaces) raise :class:`~spacedg.errors.DuplicatePluginError` naming both.
+   namespaces) is a **clash**. Loading goes on: the clash is recorded (:attr:`Registry.clashes`,
+   listed by ``spacedg plugins``) and announced once as a :class:`~spacedg.errors.PluginWarning`
+   (the command line prints ``spacedg: warning: …`` on stderr). The clashing name is withheld:
+   :func:`get_degradation` / :func:`get_question_family` of that name, and
+   :func:`list_degradations` / :func:`list_question_families` (whose callers use every name)
+   raise :class:`~spacedg.errors.DuplicatePluginError` naming both sources and the fix. Every
+   other name, including the other names of both plugins, works as usual, so commands that do
+   not use the clashing name run on. :func:`degradation_names` / :func:`question_family_names`
+   list names only (clashing ones included) and never raise.
+
+Interrupts and slow imports (the import is the only plugin code that runs on every command):
+
+- Ctrl+C (SIGINT) while a plugin is being imported raises
+  :class:`~spacedg.errors.PluginImportInterrupted` (a ``KeyboardInterrupt``) whose message names
+  that plugin; the command line prints it on one line and exits with status 130. A plugin that
+  raises ``KeyboardInterrupt`` (or ``SystemExit``) itself, with no SIGINT delivered, is recorded as
+  broken like any other import failure. (SIGINT is told apart by a handler installed for the
+  duration of each import, in the main thread when Python's default handler is in place. Under
+  another SIGINT handler a ``KeyboardInterrupt`` during an import is taken as the user's; in other
+  threads, where SIGINT never lands, as the plugin's.)
+- An import still running after :data:`SLOW_IMPORT_SECONDS` (2 s) triggers one
+  :class:`~spacedg.errors.PluginWarning` at that moment, naming the plugin and
+  ``SPACEDG_DISABLE_PLUGIN_AUTOLOAD=1``; every import's duration is kept
+  (:meth:`Registry.import_seconds`, shown by ``spacedg plugins`` when slow). The built-ins
+  import in about 0.3 s together, 0.1 s at most each.
 
 Environment:
 
@@ -24,7 +48,7 @@ Environment:
     whether or not autoload is disabled. A module that is already registered is skipped.
 
 In-process use: :meth:`Registry.register_plugin` registers an object or module directly
-(errors raise instead of being recorded).
+(errors, clashes included, raise instead of being recorded).
 """
 
 from __future__ import annotations
@@ -34,16 +58,26 @@ import importlib
 import importlib.metadata as metadata
 import os
 import re
+import signal
 import threading
+import time
 import traceback
 import types
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+import warnings
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass
 from typing import Any, Literal
 
 import pluggy
 
-from spacedg.errors import DuplicatePluginError, PluginError, UnknownPluginError
+from spacedg.errors import (
+    DuplicatePluginError,
+    PluginError,
+    PluginImportInterrupted,
+    PluginWarning,
+    UnknownPluginError,
+)
 from spacedg.plugins import hookspecs
 from spacedg.plugins.question_family import QuestionFamily
 from spacedg.plugins.specs import DegradationSpec, suggest
@@ -55,13 +89,17 @@ __all__ = [
     "PluginOrigin",
     "BrokenPlugin",
     "PluginRecord",
+    "PluginClash",
     "Registry",
+    "SLOW_IMPORT_SECONDS",
     "get_registry",
     "reset_registry",
     "list_degradations",
     "get_degradation",
     "list_question_families",
     "get_question_family",
+    "degradation_names",
+    "question_family_names",
 ]
 
 AUTOLOAD_ENV = "SPACEDG_DISABLE_PLUGIN_AUTOLOAD"
@@ -71,6 +109,8 @@ BUILTIN_DISTRIBUTION = "spacedg"
 Source = Literal["entry_point", "env", "programmatic"]
 _HOOKS = ("spacedg_register_degradations", "spacedg_register_question_families")
 _TRUE = {"1", "true", "yes", "on"}
+#: A plugin import still running after this many seconds is announced (a PluginWarning naming it).
+SLOW_IMPORT_SECONDS = 2.0
 _FALSE = {"", "0", "false", "no", "off"}
 
 
@@ -117,14 +157,8 @@ class PluginOrigin:
         return what
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "value": self.value,
-            "distribution": self.distribution,
-            "version": self.version,
-            "builtin": self.builtin,
-            "source": self.source,
-        }
+        """Every field, in declaration order (plain JSON types)."""
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -167,6 +201,42 @@ class PluginRecord:
     origin: PluginOrigin
     degradations: tuple[str, ...] = ()
     question_families: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class PluginClash:
+    """One name registered by more than one plugin (withheld: using it is an error).
+
+    Attributes:
+        kind: ``"degradation"`` or ``"question family"``.
+        name: the clashing name.
+        sources: every plugin that registered it, in load order (built-ins first).
+    """
+
+    kind: str
+    name: str
+    sources: tuple[PluginOrigin, ...]
+
+    def message(self) -> str:
+        """The error text: both sources and the fix."""
+        return Registry._duplicate_message(self.kind, self.name, self.sources[0], self.sources[-1], self.sources[1:-1])
+
+    def warning(self) -> str:
+        """The one-line warning printed when the registry loads."""
+        dists = ", ".join(_short(o) for o in self.sources)
+        return (
+            f"{self.kind} {self.name!r} is registered by {len(self.sources)} plugins ({dists}); the name is withheld: "
+            f"using it is an error until one is uninstalled, other names work. `spacedg plugins` lists the clash"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "name": self.name, "sources": [o.to_dict() for o in self.sources], "message": self.message()}
+
+
+def _short(origin: PluginOrigin) -> str:
+    if origin.distribution:
+        return f"{origin.distribution} {origin.version or '?'}"
+    return origin.value
 
 
 class _PluginFailure(Exception):
@@ -231,6 +301,8 @@ class Registry:
         self._plugins: list[PluginRecord] = []
         self._broken: list[BrokenPlugin] = []
         self._skipped: list[PluginOrigin] = []
+        self._clashes: dict[tuple[str, str], PluginClash] = {}
+        self._import_seconds: dict[PluginOrigin, float] = {}
         self.autoload: bool = True
         self.explicit_modules: tuple[str, ...] = ()
 
@@ -248,6 +320,8 @@ class Registry:
         registry.load_entry_points(builtin_only=not autoload)
         for module in modules:
             registry.load_module(module)
+        for clash in registry.clashes:
+            warnings.warn(PluginWarning(clash.warning()), stacklevel=2)
         return registry
 
     def load_entry_points(self, *, builtin_only: bool = False) -> None:
@@ -268,8 +342,11 @@ class Registry:
                     self._skipped.append(origin)
                     continue
                 try:
-                    obj = ep.load()
-                except (Exception, SystemExit) as err:  # noqa: BLE001 - any import failure marks the plugin broken
+                    with self._importing(origin):
+                        obj = ep.load()
+                except PluginImportInterrupted:
+                    raise
+                except BaseException as err:  # noqa: BLE001 - any import failure marks the plugin broken
                     self._broken.append(BrokenPlugin.from_exception(origin, "import", err))
                     continue
                 self._add_recording(obj, origin)
@@ -282,13 +359,40 @@ class Registry:
         origin = PluginOrigin(target, target, dist, version, builtin, "env")
         with self._lock:
             try:
-                obj: Any = importlib.import_module(module_name)
-                for part in filter(None, attr.split(".")):
-                    obj = getattr(obj, part)
-            except (Exception, SystemExit) as err:  # noqa: BLE001
+                with self._importing(origin):
+                    obj: Any = importlib.import_module(module_name)
+                    for part in filter(None, attr.split(".")):
+                        obj = getattr(obj, part)
+            except PluginImportInterrupted:
+                raise
+            except BaseException as err:  # noqa: BLE001 - any import failure marks the plugin broken
                 self._broken.append(BrokenPlugin.from_exception(origin, "import", err))
                 return
             self._add_recording(obj, origin)
+
+    @contextmanager
+    def _importing(self, origin: PluginOrigin) -> Iterator[None]:
+        """Import one plugin: time it (a warning once it passes :data:`SLOW_IMPORT_SECONDS`), and
+        turn a Ctrl+C into :class:`PluginImportInterrupted` naming it (see the module docstring).
+        A ``KeyboardInterrupt`` the plugin raised itself propagates as is (recorded as broken)."""
+        started = time.perf_counter()
+        _IMPORT_CLOCK.begin(origin)
+        try:
+            interrupted = PluginImportInterrupted(f"interrupted while importing plugin {origin.describe()}")
+            with _sigint_watch() as state:
+                try:
+                    yield
+                except KeyboardInterrupt as err:
+                    if isinstance(err, PluginImportInterrupted):
+                        raise
+                    if state["sigint"] or (not state["watched"] and state["main"]):
+                        raise interrupted from None
+                    raise
+            if state["sigint"]:  # the plugin swallowed the KeyboardInterrupt; the user still asked to stop
+                raise interrupted
+        finally:
+            _IMPORT_CLOCK.end()
+            self._import_seconds[origin] = time.perf_counter() - started
 
     def register_plugin(
         self,
@@ -316,11 +420,11 @@ class Registry:
 
     def _add_recording(self, obj: object, origin: PluginOrigin) -> None:
         try:
-            self._add(obj, origin)
+            self._add(obj, origin, record_clashes=True)
         except _PluginFailure as failure:
             self._broken.append(BrokenPlugin.from_exception(origin, failure.phase, failure.err))
 
-    def _add(self, obj: object, origin: PluginOrigin) -> PluginRecord:
+    def _add(self, obj: object, origin: PluginOrigin, *, record_clashes: bool = False) -> PluginRecord:
         if self._pm.is_registered(obj):
             # e.g. a module named in SPACEDG_PLUGINS that an entry point already loaded
             for record in self._plugins:
@@ -362,7 +466,7 @@ class Registry:
                     impl.function(*[kwargs[arg] for arg in impl.argnames])
                 except Exception as err:  # noqa: BLE001 - a raising hook marks the plugin broken
                     raise _PluginFailure("hook", err) from err
-            record = self._commit(origin, degradations, families)
+            record = self._commit(origin, degradations, families, record_clashes=record_clashes)
         except BaseException:
             self._pm.unregister(obj)
             raise
@@ -381,15 +485,34 @@ class Registry:
         register.__doc__ = f"Register one {kind.__name__} (from {origin.describe()})."
         return register
 
-    def _commit(self, origin: PluginOrigin, degradations: list[DegradationSpec], families: list[QuestionFamily]) -> PluginRecord:
+    def _commit(self, origin: PluginOrigin, degradations: list[DegradationSpec], families: list[QuestionFamily],
+                *, record_clashes: bool = False) -> PluginRecord:
+        """Add one plugin's specs. A name it registers twice fails the plugin; a name another
+        plugin holds raises :class:`DuplicatePluginError` (``record_clashes=False``) or is kept
+        out and recorded as a :class:`PluginClash` (loading from the environment)."""
+        clashing: list[tuple[str, str, PluginOrigin | None]] = []
         for kind, specs, table in (("degradation", degradations, self._degradations), ("question family", families, self._families)):
-            seen: dict[str, Any] = {}
+            seen: set[str] = set()
             for spec in specs:
+                if spec.name in seen:
+                    err = DuplicatePluginError(self._duplicate_message(kind, spec.name, origin, origin))
+                    if record_clashes:
+                        raise _PluginFailure("hook", err)
+                    raise err
+                seen.add(spec.name)
                 other = table.get(spec.name)
-                if other is not None or spec.name in seen:
-                    first = other.origin if other is not None else origin
-                    raise DuplicatePluginError(self._duplicate_message(kind, spec.name, first, origin))
-                seen[spec.name] = spec
+                if other is not None or (kind, spec.name) in self._clashes:
+                    first = other.origin if other is not None else self._clashes[(kind, spec.name)].sources[0]
+                    if not record_clashes:
+                        raise DuplicatePluginError(self._duplicate_message(kind, spec.name, first, origin))
+                    clashing.append((kind, spec.name, first))
+        for kind, name, first in clashing:
+            known = self._clashes.get((kind, name))
+            sources = (*known.sources, origin) if known is not None else (first, origin)
+            self._clashes[(kind, name)] = PluginClash(kind, name, tuple(s for s in sources if s is not None))
+        withheld = {(kind, name) for kind, name, _ in clashing}
+        degradations = [s for s in degradations if ("degradation", s.name) not in withheld]
+        families = [f for f in families if ("question family", f.name) not in withheld]
         stamped_d = [_with_origin(spec, origin) for spec in degradations]
         stamped_f = [_with_origin(spec, origin) for spec in families]
         for spec in stamped_d:
@@ -401,17 +524,23 @@ class Registry:
         return record
 
     @staticmethod
-    def _duplicate_message(kind: str, name: str, first: PluginOrigin | None, second: PluginOrigin) -> str:
+    def _duplicate_message(kind: str, name: str, first: PluginOrigin | None, second: PluginOrigin,
+                           others: Iterable[PluginOrigin] = ()) -> str:
         first_text = first.describe() if first is not None else "an unknown plugin"
         if first == second:
             return f"{kind} {name!r} is registered twice by {second.describe()}; register each name once"
+        others = list(others)
         fix_dist = second.distribution if not second.builtin else (first.distribution if first is not None else None)
         uninstall = f"pip uninstall {fix_dist}" if fix_dist else "uninstall one of them"
-        return (
-            f"{kind} {name!r} is registered by two plugins: {first_text}, and {second.describe()}. "
-            f"Names must be unique. Fix: uninstall one of them (e.g. `{uninstall}`), or set "
-            f"{AUTOLOAD_ENV}=1 and name the plugin module you want in {PLUGINS_ENV}."
-        )
+        count = "two" if not others else str(2 + len(others))
+        middle = "".join(f", {o.describe()}" for o in others)
+        if first is not None and first.builtin:
+            fix = (f"Fix: uninstall the third-party one (e.g. `{uninstall}`): a built-in cannot be replaced, "
+                   f"so a plugin must choose another name; or set {AUTOLOAD_ENV}=1 to load only the built-ins.")
+        else:
+            fix = (f"Fix: uninstall one of them (e.g. `{uninstall}`), or set {AUTOLOAD_ENV}=1 and name the plugin "
+                   f"module you want in {PLUGINS_ENV}.")
+        return f"{kind} {name!r} is registered by {count} plugins: {first_text}{middle}, and {second.describe()}. Names must be unique. {fix}"
 
     # ------------------------------------------------------------ queries
     @property
@@ -429,23 +558,55 @@ class Registry:
         """Installed third-party entry points not loaded because autoload is disabled."""
         return list(self._skipped)
 
+    @property
+    def clashes(self) -> list[PluginClash]:
+        """Names registered by more than one plugin (withheld), in the order found."""
+        return list(self._clashes.values())
+
+    def import_seconds(self, origin: PluginOrigin) -> float | None:
+        """How long importing the plugin of ``origin`` took (``None``: not imported by this registry)."""
+        return self._import_seconds.get(origin)
+
+    def _check_clashes(self, kind: str, name: str | None = None) -> None:
+        found = [c for (k, n), c in self._clashes.items() if k == kind and (name is None or n == name)]
+        if found:
+            raise DuplicatePluginError(" ".join(c.message() for c in found))
+
     def list_degradations(self) -> list[DegradationSpec]:
-        """Every registered degradation, sorted by name."""
+        """Every registered degradation, sorted by name (:class:`DuplicatePluginError` while a
+        degradation name clashes: the caller would use it; :meth:`degradation_names` does not raise)."""
+        self._check_clashes("degradation")
         return [self._degradations[k] for k in sorted(self._degradations)]
 
     def list_question_families(self) -> list[QuestionFamily]:
-        """Every registered question family, sorted by name."""
+        """Every registered question family, sorted by name (:class:`DuplicatePluginError` while
+        a family name clashes; :meth:`question_family_names` does not raise)."""
+        self._check_clashes("question family")
         return [self._families[k] for k in sorted(self._families)]
 
+    def degradation_names(self) -> list[str]:
+        """Every degradation name, clashing ones included, sorted (names only: never raises)."""
+        return sorted(set(self._degradations) | {n for k, n in self._clashes if k == "degradation"})
+
+    def question_family_names(self) -> list[str]:
+        """Every question-family name, clashing ones included, sorted (names only: never raises)."""
+        return sorted(set(self._families) | {n for k, n in self._clashes if k == "question family"})
+
     def get_degradation(self, name: str) -> DegradationSpec:
-        """The degradation called ``name``; :class:`UnknownPluginError` with suggestions otherwise."""
+        """The degradation called ``name``; :class:`UnknownPluginError` with suggestions, or
+        :class:`DuplicatePluginError` naming both sources when two plugins registered it."""
+        if isinstance(name, str):
+            self._check_clashes("degradation", name)
         spec = self._degradations.get(name) if isinstance(name, str) else None
         if spec is None:
             raise UnknownPluginError(self._unknown_message("degradation", name, self._degradations))
         return spec
 
     def get_question_family(self, name: str) -> QuestionFamily:
-        """The question family called ``name``; :class:`UnknownPluginError` with suggestions otherwise."""
+        """The question family called ``name``; :class:`UnknownPluginError` with suggestions, or
+        :class:`DuplicatePluginError` naming both sources when two plugins registered it."""
+        if isinstance(name, str):
+            self._check_clashes("question family", name)
         fam = self._families.get(name) if isinstance(name, str) else None
         if fam is None:
             raise UnknownPluginError(self._unknown_message("question family", name, self._families))
@@ -486,14 +647,108 @@ class Registry:
             "plugins": [
                 {
                     **record.origin.to_dict(),
+                    "import_seconds": _rounded(self._import_seconds.get(record.origin)),
                     "degradations": [self._degradations[n].describe() for n in record.degradations],
                     "question_families": [self._families[n].describe() for n in record.question_families],
                 }
                 for record in self._plugins
             ],
-            "broken": [b.to_dict() for b in self._broken],
+            "broken": [{**b.to_dict(), "import_seconds": _rounded(self._import_seconds.get(b.origin))} for b in self._broken],
             "skipped": [o.to_dict() for o in self._skipped],
+            "clashes": [c.to_dict() for c in self._clashes.values()],
         }
+
+
+def _rounded(seconds: float | None) -> float | None:
+    return None if seconds is None else round(seconds, 3)
+
+
+class _ImportClock:
+    """One watcher thread (started on first use, then idle) that announces an import still
+    running after :data:`SLOW_IMPORT_SECONDS`: cheaper than a timer thread per import."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._current: list[Any] | None = None  # [origin, started, announced]
+        self._wake = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def begin(self, origin: PluginOrigin) -> None:
+        with self._lock:
+            self._current = [origin, time.monotonic(), False]
+            if self._thread is None or not self._thread.is_alive():
+                self._thread = threading.Thread(target=self._watch, name="spacedg-plugin-import-clock", daemon=True)
+                self._thread.start()
+        self._wake.set()
+
+    def end(self) -> None:
+        with self._lock:
+            self._current = None
+
+    def _watch(self) -> None:
+        while True:
+            self._wake.wait()
+            with self._lock:
+                current = self._current
+                if current is None:
+                    self._wake.clear()
+                    continue
+                origin, started, announced = current
+                limit = SLOW_IMPORT_SECONDS
+                due = not announced and time.monotonic() - started >= limit
+                if due:
+                    current[2] = True
+            if due:
+                _warn_slow(origin, limit)
+            time.sleep(0.05)
+
+
+_IMPORT_CLOCK = _ImportClock()
+
+
+def _new_clock_after_fork() -> None:  # a forked child has no watcher thread, and maybe a held lock
+    global _IMPORT_CLOCK
+    _IMPORT_CLOCK = _ImportClock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_new_clock_after_fork)
+
+
+def _warn_slow(origin: PluginOrigin, seconds: float) -> None:
+    """The note of an import still running after ``seconds`` (runs on the watcher thread)."""
+    if origin.builtin:
+        fix = "spacedg's own plugins import in well under a second: check the machine's load and the Python environment"
+    else:
+        what = f"uninstall {origin.distribution} (`pip uninstall {origin.distribution}`)" if origin.distribution else "remove it"
+        fix = (f"every spacedg command imports the installed plugins: set {AUTOLOAD_ENV}=1 to skip third-party plugins, "
+               f"or {what}")
+    warnings.warn(PluginWarning(f"importing plugin {origin.describe()} has taken over {seconds:g} s and is still running; {fix}"),
+                  stacklevel=1)
+
+
+@contextmanager
+def _sigint_watch() -> Iterator[dict[str, bool]]:
+    """Tell a Ctrl+C apart from a ``KeyboardInterrupt`` raised by plugin code: ``state["sigint"]``
+    becomes true when SIGINT arrives. Only in the main thread with Python's default handler
+    (``state["watched"]``); otherwise the handlers are left alone (``state["main"]``: in the
+    main thread, where an unwatched ``KeyboardInterrupt`` may be the user's; elsewhere it cannot)."""
+    main = threading.current_thread() is threading.main_thread()
+    state = {"sigint": False, "watched": False, "main": main}
+    if not main or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield state
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        state["sigint"] = True
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, handler)
+    state["watched"] = True
+    try:
+        yield state
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _with_origin(spec: Any, origin: PluginOrigin) -> Any:
@@ -545,3 +800,13 @@ def list_question_families() -> list[QuestionFamily]:
 def get_question_family(name: str) -> QuestionFamily:
     """The question family called ``name`` (raises :class:`UnknownPluginError` with suggestions)."""
     return get_registry().get_question_family(name)
+
+
+def degradation_names() -> list[str]:
+    """Every degradation name (clashing ones included), sorted; never raises for a clash."""
+    return get_registry().degradation_names()
+
+
+def question_family_names() -> list[str]:
+    """Every question-family name (clashing ones included), sorted; never raises for a clash."""
+    return get_registry().question_family_names()

@@ -52,9 +52,9 @@ import difflib
 import math
 import re
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from enum import StrEnum
-from typing import TYPE_CHECKING, Any, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol, TypeVar
 
 import numpy as np
 
@@ -80,8 +80,11 @@ __all__ = [
     "LinearApply",
     "DisplayApply",
     "DegradationSpec",
+    "enum_member",
     "suggest",
 ]
+
+E = TypeVar("E", bound=StrEnum)
 
 #: Names of degradations, question families, parameters and sub question types.
 NAME_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -182,14 +185,22 @@ class TaskGroup(StrEnum):
     OBJECT_CENTRIC = "object_centric"
 
 
-def _enum(enum_cls: type[StrEnum], value: object, what: str) -> Any:
+def enum_member(enum_cls: type[E], value: object) -> E | None:
+    """``value`` as a member of ``enum_cls`` (a member, or a member's value), or ``None`` if it is neither."""
     if isinstance(value, enum_cls):
         return value
     try:
         return enum_cls(value)
     except ValueError:
-        allowed = ", ".join(m.value for m in enum_cls)
-        raise PluginError(f"{what} {value!r} is not one of: {allowed}.{_did_you_mean(str(value), [m.value for m in enum_cls])}") from None
+        return None
+
+
+def _enum(enum_cls: type[StrEnum], value: object, what: str) -> Any:
+    member = enum_member(enum_cls, value)
+    if member is None:
+        allowed = [m.value for m in enum_cls]
+        raise PluginError(f"{what} {value!r} is not one of: {', '.join(allowed)}.{_did_you_mean(str(value), allowed)}")
+    return member
 
 
 # ------------------------------------------------------------- protocols
@@ -285,15 +296,8 @@ class ParamSpec:
         return number
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "unit": self.unit,
-            "description": self.description,
-            "low": self.low,
-            "high": self.high,
-            "integer": self.integer,
-            "harsher": self.harsher,
-        }
+        """Every field, in declaration order (plain JSON types)."""
+        return asdict(self)
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg._checks import require_rotation
+from spacedg._checks import finite_float, require_homogeneous, require_rotation
 from spacedg.render.gaussians import quat_from_matrix
 from spacedg.errors import InvalidDataError
 
@@ -134,14 +134,7 @@ class Camera:
 
     def __post_init__(self) -> None:
         for name in ("fx", "fy", "cx", "cy"):
-            value = getattr(self, name)
-            try:
-                value = float(value)
-            except (TypeError, ValueError):
-                raise InvalidDataError(f"{_SOURCE}: {name} must be a number, got {value!r}") from None
-            if not math.isfinite(value):
-                raise InvalidDataError(f"{_SOURCE}: {name} must be finite, got {value}")
-            object.__setattr__(self, name, value)
+            object.__setattr__(self, name, finite_float(getattr(self, name), f"{_SOURCE}: {name}"))
         if self.fx <= 0 or self.fy <= 0:
             raise InvalidDataError(f"{_SOURCE}: focal lengths must be > 0 pixels (got fx={self.fx}, fy={self.fy})")
         for name in ("width", "height"):
@@ -152,10 +145,7 @@ class Camera:
         pose = np.array(self.cam_to_world, dtype=np.float64)
         if pose.shape != (4, 4):
             raise InvalidDataError(f"{_SOURCE}: cam_to_world must be 4×4, got shape {pose.shape}")
-        if not np.isfinite(pose).all():
-            raise InvalidDataError(f"{_SOURCE}: cam_to_world holds NaN or Inf")
-        if not np.allclose(pose[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
-            raise InvalidDataError(f"{_SOURCE}: cam_to_world last row must be [0, 0, 0, 1], got {pose[3].tolist()}")
+        require_homogeneous(pose, f"{_SOURCE}: cam_to_world")
         require_rotation(pose[:3, :3], "cam_to_world rotation", _SOURCE, tol=1e-5)
         pose.flags.writeable = False
         object.__setattr__(self, "cam_to_world", pose)

@@ -12,6 +12,7 @@ from typing import Iterable
 
 import numpy as np
 
+from spacedg._checks import finite_float
 from spacedg.errors import ParameterError
 
 #: Names of the render outputs (``Frame`` attributes).
@@ -25,12 +26,7 @@ TRANSMITTANCE_MIN = 1e-4
 
 
 def _finite(name: str, value: object, low: float | None = None, high: float | None = None, *, open_low: bool = False) -> float:
-    try:
-        number = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise ParameterError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(number):
-        raise ParameterError(f"{name} must be finite, got {number}")
+    number = finite_float(value, name, ParameterError)
     if low is not None and (number < low or (open_low and number == low)):
         bound = ">" if open_low else ">="
         raise ParameterError(f"{name} must be {bound} {low}, got {number}")

@@ -9,7 +9,7 @@ A :class:`ReviewStore` opens an exported bench (``spacedg export``: ``bench.tsv`
     of fields with tabs, newlines or quotes), so :func:`spacedg.eval.bench.load_bench` and
     ``pandas.read_csv(out, sep="\\t")`` read it. Rewritten atomically after every change.
 ``<out stem>.log.jsonl``
-    one JSON line per accepted change, appended and fsynced before the TSV is rewritten::
+    one JSON line per accepted change (the record of truth; the TSV is derived from it)::
 
         {"time": "2025-01-01T12:00:00.123456+00:00", "reviewer": "ana", "index": 3,
          "record_id": "room/…/0", "action": "edit" | "drop" | "restore",
@@ -19,6 +19,19 @@ A :class:`ReviewStore` opens an exported bench (``spacedg export``: ``bench.tsv`
     an existing log is replayed in order, every entry checked against the bench (its index must
     exist with the same ``record_id``, and its ``before`` values must be the row's values at
     that point), so reviewing resumes where it stopped and a log of another bench is refused.
+
+Crash safety. A change is committed in this order: the new TSV is written in full to a
+temporary sibling and fsynced; the log line is appended; the temporary file is renamed over
+the TSV; then the log and the folder are fsynced. A ``kill -9`` can only land between the
+append and the rename (two system calls) for the TSV to lag the log by that one change, and
+every start replays the log and rewrites the TSV (removing a killed writer's temporary files),
+so after a restart the two always agree. A failed write (disk full) undoes all three and
+raises. With ``lock=True`` (what ``spacedg review`` uses) the store holds ``<out>.lock`` so a
+second review of the same output fails at once instead of interleaving two logs.
+
+The bench must be complete: every row has every column of the header and the fields
+:func:`~spacedg.eval.bench.load_bench` needs (the same check), and the file ends with a line
+break, so a truncated copy is refused instead of being rewritten without its tail.
 
 Edits (:meth:`ReviewStore.edit`) touch ``question``, ``answer`` and the option texts ``A``–``D``
 only, and the row is validated **after** the change by its answer type (the ``answer_type``
@@ -58,9 +71,9 @@ from pathlib import Path
 from typing import Any
 
 from spacedg.data.export import tsv_bytes
-from spacedg.files import atomic_write_bytes
-from spacedg.errors import InvalidDataError, ParameterError
-from spacedg.eval.bench import CLEAN, bench_table, read_table
+from spacedg.files import ExclusiveLock, exclusive_lock, remove_stale_temps, write_temp_sibling
+from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
+from spacedg.eval.bench import CLEAN, bench_table, read_table, row_from_mapping
 from spacedg.eval.scoring import route
 from spacedg.plugins.answers import MCQ_LETTERS, answer_from_text
 from spacedg.plugins.specs import AnswerType
@@ -128,7 +141,7 @@ def _image_paths(text: str) -> list[str]:
     except json.JSONDecodeError:
         try:
             parsed = ast.literal_eval(text)
-        except (ValueError, SyntaxError):
+        except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
             parsed = text
     if isinstance(parsed, str):
         return [parsed]
@@ -139,6 +152,20 @@ def _image_paths(text: str) -> list[str]:
 
 def _now() -> str:
     return datetime.now(UTC).isoformat()
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Make a rename in ``folder`` durable (a no-op where folders cannot be opened)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 # ------------------------------------------------------------------ the store
@@ -152,11 +179,14 @@ class ReviewStore:
             not be the original table. The log is ``<out stem>.log.jsonl`` beside it.
         scenes: scene folders, or folders of them, whose ``<scene_id>.qa.jsonl`` indexes give
             each record's ``geometry``.
+        lock: hold ``<out>.lock`` (one writer per output; :meth:`close` frees it) and remove the
+            temporary files a killed writer of ``out`` left.
     """
 
     def __init__(self, bench: str | Path, *, out: str | Path | None = None,
-                 scenes: Sequence[str | Path] | None = None) -> None:
+                 scenes: Sequence[str | Path] | None = None, lock: bool = False) -> None:
         self._lock = threading.Lock()
+        self._file_lock: ExclusiveLock | None = None
         self.table: Path = bench_table(Path(bench))
         self.root: Path = self.table.parent
         self.out: Path = Path(out) if out is not None else self.table.with_name(f"{self.table.stem}.reviewed.tsv")
@@ -175,7 +205,31 @@ class ReviewStore:
         self._scene_roots = [Path(s) for s in (scenes or ())]
         self._scene_cache: dict[str, dict[str, Any]] = {}
         self._jsonl_geometry: dict[int, Any] | None = None
+        if lock:
+            if not self.out.parent.is_dir():
+                raise ParameterError(f"review output {self.out}: folder {self.out.parent} does not exist; create it or pass another --out")
+            self._file_lock = exclusive_lock(self.out.with_name(self.out.name + ".lock"),
+                                             f"{self.out} is being reviewed by another spacedg review")
+        try:
+            self._open()
+        except BaseException:
+            self.close()
+            raise
 
+    def close(self) -> None:
+        """Free ``<out>.lock`` (a store opened with ``lock=True``); the store stays readable."""
+        if self._file_lock is not None:
+            self._file_lock.release()
+
+    def _open(self) -> None:
+        if self._file_lock is not None:
+            remove_stale_temps(self.out.parent, [self.out.name])
+        raw_bytes = self.table.read_bytes()
+        if raw_bytes and not raw_bytes.endswith(b"\n"):
+            raise FileFormatError(
+                f"{self.table}: does not end with a line break, so its last row may be cut off (an interrupted copy "
+                "or export?); copy or export the bench again"
+            )
         rows = read_table(self.table)
         with self.table.open(newline="", encoding="utf-8") as handle:
             header = next(csv.reader(handle, delimiter="\t"), None) or []
@@ -190,11 +244,18 @@ class ReviewStore:
         for n, raw in enumerate(rows):
             if None in raw:
                 raise InvalidDataError(f"{self.table}:{n + 2}: more fields than header columns")
+            short = [k for k, v in raw.items() if v is None]
+            if short:
+                raise FileFormatError(
+                    f"{self.table}:{n + 2}: {len(self.header) - len(short)} of {len(self.header)} fields (no "
+                    f"{', '.join(short[:3])}{' …' if len(short) > 3 else ''}); the file looks truncated: copy or export it again"
+                )
             row = {k: (v if v is not None else "") for k, v in raw.items()}
             try:
                 index = int(float(row["index"].strip()))
-            except ValueError:
+            except (ValueError, OverflowError):
                 raise InvalidDataError(f"{self.table}:{n + 2}: index {row['index']!r} is not an integer") from None
+            row_from_mapping(raw, f"{self.table}:{n + 2}")  # what load_bench checks (it refuses such a bench too)
             if index in self._pos:
                 raise InvalidDataError(f"{self.table}:{n + 2}: index {index} appears twice; every row needs its own index")
             self._pos[index] = n
@@ -216,6 +277,15 @@ class ReviewStore:
     # -------------------------------------------------------------- reading
     def __len__(self) -> int:
         return len(self._original)
+
+    def referenced_images(self) -> list[str]:
+        """Every image path the bench's rows name (``image_path``, relative to the bench folder),
+        once each, in file order: what the review page may show."""
+        seen: dict[str, None] = {}
+        for row in self._original:
+            for path in _image_paths(row.get("image_path", "")):
+                seen.setdefault(path, None)
+        return list(seen)
 
     def summaries(self) -> list[dict[str, Any]]:
         """One short dict per row, in file order (the page's list and filters)."""
@@ -365,32 +435,58 @@ class ReviewStore:
         self._history[n].pop()
 
     def _commit(self, n: int, entry: dict[str, Any]) -> None:
-        """Log ``entry`` (fsynced), apply it, rewrite the TSV; on failure undo all three."""
+        """Apply ``entry``, write the new TSV to a temporary file, append the log line, rename the
+        TSV into place, then fsync the log (see "Crash safety"); on failure undo all three."""
         line = (json.dumps(entry, ensure_ascii=False) + "\n").encode("utf-8")
         size = self.log.stat().st_size if self.log.exists() else None
         self._apply(n, entry)
+        tmp: Path | None = None
+        renamed = False
         try:
+            tmp = self._prepare_tsv()
             with self.log.open("ab") as handle:
                 handle.write(line)
                 handle.flush()
+                os.replace(tmp, self.out)  # the commit point; a kill between these two lines is repaired on start
+                renamed = True
                 os.fsync(handle.fileno())
-            self._write_tsv()
+            _fsync_folder(self.out.parent)
         except BaseException:
             self._unapply(n, entry)
+            if tmp is not None and not renamed:
+                tmp.unlink(missing_ok=True)
             try:
                 if size is None:
                     self.log.unlink(missing_ok=True)
                 else:
                     with self.log.open("r+b") as handle:
                         handle.truncate(size)
+                if renamed:  # put the previous rows back
+                    os.replace(self._prepare_tsv(), self.out)
             except OSError:
                 pass
             raise
 
-    def _write_tsv(self) -> None:
+    def _tsv(self) -> bytes:
         rows = [{k: row.get(k, "") for k in self.header}
                 for row, dropped in zip(self._current, self._dropped) if not dropped]
-        atomic_write_bytes(self.out, tsv_bytes(rows, columns=self.header))
+        return tsv_bytes(rows, columns=self.header)
+
+    def _prepare_tsv(self) -> Path:
+        """The current rows written in full (and fsynced) to a temporary sibling of ``out``."""
+        data = self._tsv()
+
+        def write(path: Path) -> None:
+            with path.open("wb") as handle:
+                handle.write(data)
+                handle.flush()
+                os.fsync(handle.fileno())
+
+        return write_temp_sibling(self.out, write)
+
+    def _write_tsv(self) -> None:
+        os.replace(self._prepare_tsv(), self.out)
+        _fsync_folder(self.out.parent)
 
     def _replay(self) -> None:
         try:

@@ -6,6 +6,8 @@
   shoes`` → ``pairs of shoes``); labels that are already plural or plural-only (``stairs``,
   ``scissors``, ``books``) are returned unchanged.
 - :func:`indefinite_article` / :func:`with_articles`: "a" or "an" by the first sound.
+- :func:`strip_article`: a description without its leading article (``"a round white lace
+  doily"`` → ``"round white lace doily"``), so questions that say "the …" never print "the a".
 
 Question wording built on these (object phrases, counts, image markers) lives in
 :mod:`spacedg.plugins.questions.language`.
@@ -15,7 +17,20 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["label_text", "plural", "indefinite_article", "with_articles"]
+__all__ = ["label_text", "plural", "indefinite_article", "with_articles", "strip_article"]
+
+_LEADING_ARTICLE = re.compile(r"^\s*(?:a|an|the)\s+(?=\S)", re.IGNORECASE)
+
+
+def strip_article(description: str) -> str:
+    """``description`` without one leading "a", "an" or "the" (any case), whitespace trimmed.
+
+    Only a whole word followed by more text is removed: ``"A-frame ladder"`` and ``"the"``
+    stay as they are. Applied once, when an :class:`~spacedg.scene.model.Instance` is made.
+    """
+    text = str(description).strip()
+    stripped = _LEADING_ARTICLE.sub("", text, count=1)
+    return stripped if stripped else text
 
 # Irregular singular → plural (lower case).
 _IRREGULAR: dict[str, str] = {

@@ -26,6 +26,7 @@ import numpy as np
 
 from spacedg._checks import require_rotation
 from spacedg.scene.box import OrientedBox
+from spacedg.scene.language import strip_article
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
@@ -67,7 +68,9 @@ class Instance:
     Attributes:
         id: integer id, unique in the scene, ``>= 0``; Gaussians carry it in ``instance_ids``.
         label: category word used in questions ("chair").
-        description: view-invariant description (colour, material, type; never "on the left").
+        description: view-invariant description (colour, material, type; never "on the left"),
+            a noun phrase without a leading article: one given with "a"/"an"/"the" is stripped
+            once here (:func:`~spacedg.scene.language.strip_article`), so questions never say "the a …".
         box: oriented bounding box in world metres.
         images: names of views in which the source annotation saw the object (may be empty).
         visibility: view name → :class:`InstanceVisibility`, filled by ``spacedg.scene.visibility``.
@@ -90,6 +93,9 @@ class Instance:
             raise InvalidDataError(f"Instance {self.id}: label must be a non-empty string, got {self.label!r}")
         if not isinstance(self.description, str):
             raise InvalidDataError(f"Instance {self.id}: description must be a string, got {type(self.description).__name__}")
+        stripped = strip_article(self.description)
+        if stripped != self.description.strip():  # only a leading article changes the text
+            object.__setattr__(self, "description", stripped)
         if not isinstance(self.box, OrientedBox):
             raise InvalidDataError(f"Instance {self.id}: box must be an OrientedBox, got {type(self.box).__name__}")
         object.__setattr__(self, "images", tuple(self.images))

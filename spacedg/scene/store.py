@@ -70,7 +70,7 @@ def scene_dirs_of(paths: Sequence[str | os.PathLike[str]]) -> list[Path]:
         elif path.is_dir() and any(path.glob("*/scene.json")):
             found.extend(sorted(p.parent for p in path.glob("*/scene.json")))
         elif path.is_dir():
-            raise InvalidDataError(f"{path}: no scene.json in it or in its sub-folders; build scenes with `spacedg scenes synth`")
+            raise InvalidDataError(f"{path}: no scene.json in it or in its sub-folders; import a capture with `spacedg scenes import SRC --out DIR` (INRIA, COLMAP, nerfstudio, ScanNet++) or build rooms with `spacedg scenes synth`")
         else:
             raise InvalidDataError(f"{path}: no such scene folder")
     return sorted(set(found), key=lambda p: (p.name, str(p)))
@@ -79,15 +79,30 @@ def scene_dirs_of(paths: Sequence[str | os.PathLike[str]]) -> list[Path]:
 def assign_splits(scene_ids: Sequence[str], fractions: tuple[float, float] = (0.1, 0.1), seed: int = 0) -> dict[str, str]:
     """``scene id → split``. ``fractions = (val, bench)``: scenes are ordered by ``sha256(seed:id)``;
     the first ``ceil(bench·n)`` go to ``bench``, the next ``ceil(val·n)`` to ``val``, the rest to
-    ``train`` (each non-empty when there are at least 3 scenes). Adding a scene moves few others."""
+    ``train``. A fraction of 0 leaves its split empty; ``(0, 1)`` puts every scene in ``bench``
+    (``spacedg export --all-bench``), which works from one scene. Otherwise every split with a
+    positive fraction (and ``train``, unless the fractions sum to 1) gets at least one scene, so
+    that needs as many scenes as non-empty splits. Adding a scene moves few others."""
     import math
 
     ids = sorted(set(scene_ids))
-    if len(ids) < 3:
-        raise InvalidDataError(f"need at least 3 scenes to make disjoint train/val/bench splits, got {len(ids)}: {ids}")
+    val_f, bench_f = (float(f) for f in fractions)
+    if not (0.0 <= val_f <= 1.0 and 0.0 <= bench_f <= 1.0 and val_f + bench_f <= 1.0 + 1e-9):
+        raise InvalidDataError(f"split fractions (val, bench) must be in [0, 1] and sum to at most 1, got {fractions}")
+    wanted = (bench_f > 0) + (val_f > 0) + (val_f + bench_f < 1.0 - 1e-9)
+    if len(ids) < max(1, wanted):
+        raise InvalidDataError(
+            f"need at least {max(1, wanted)} scenes to make the {wanted} disjoint split(s) of fractions (val {val_f:g}, bench {bench_f:g}), "
+            f"got {len(ids)}: {ids}. To put every scene in the bench pass --all-bench (split_fractions=(0, 1))"
+        )
     order = sorted(ids, key=lambda s: hashlib.sha256(f"{seed}:{s}".encode()).hexdigest())
-    n_bench = max(1, math.ceil(fractions[1] * len(ids)))
-    n_val = max(1, math.ceil(fractions[0] * len(ids)))
+    n_bench = max(1, math.ceil(bench_f * len(ids))) if bench_f > 0 else 0
+    n_val = max(1, math.ceil(val_f * len(ids))) if val_f > 0 else 0
+    if val_f + bench_f >= 1.0 - 1e-9:
+        n_val = len(ids) - n_bench if val_f > 0 else 0
+        n_bench = len(ids) - n_val
+    elif n_bench + n_val >= len(ids):  # keep one scene for train
+        n_val = max(0, len(ids) - 1 - n_bench)
     out = {}
     for k, scene_id in enumerate(order):
         out[scene_id] = "bench" if k < n_bench else "val" if k < n_bench + n_val else "train"

@@ -27,8 +27,8 @@ from torch.utils.data import Dataset
 
 from spacedg.files import read_rgb
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
-from spacedg.data.chat import ANSWER_PROMPT, chat_messages, format_question, item_images
-from spacedg.plugins.answers import answer_text
+from spacedg.data.chat import ANSWER_PROMPT, chat_messages, item_images
+from spacedg.data.public_format import public_fields
 from spacedg.vlm import encode_chats
 
 __all__ = ["BudgetedDataset", "ChatJsonlDataset", "OnlineSFTDataset", "token_lengths"]
@@ -52,7 +52,8 @@ class OnlineSFTDataset(Dataset):
     def question(self, index: int) -> tuple[str, str, int, str]:
         """``(question, answer, views, key)`` of item ``index`` without rendering it."""
         record, _, _ = self.dataset.plan(index)
-        return format_question(record.question, record.options), f"<answer>{answer_text(record.answer)}</answer>", len(record.views), record.id
+        fields = public_fields(record)  # the bench's form: existence as lettered options
+        return fields["question"], f"<answer>{fields['answer']}</answer>", len(record.views), record.id
 
     def image_size(self) -> tuple[int, int] | None:
         return self.dataset.options.image_size
@@ -60,9 +61,9 @@ class OnlineSFTDataset(Dataset):
     def __getitem__(self, index: int) -> dict[str, Any]:
         item = self.dataset[index]
         images = item_images(item)
-        question = format_question(item["question"], item["options"])
-        answer = f"<answer>{answer_text(item['answer'])}</answer>"
-        return {"conversation": chat_messages(question, len(images), answer=answer), "images": images,
+        fields = public_fields(item)
+        answer = f"<answer>{fields['answer']}</answer>"
+        return {"conversation": chat_messages(fields["question"], len(images), answer=answer), "images": images,
                 "degradation_type": item["degradation_type"]}
 
 

@@ -26,7 +26,8 @@ from typing import Any, Literal
 import numpy as np
 
 from spacedg.data.chain import BENCH_DEGRADATIONS, SEVERITIES, Chain
-from spacedg.data.chat import chat_messages, format_question, item_images
+from spacedg.data.chat import chat_messages, item_images
+from spacedg.data.public_format import public_fields
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.errors import ParameterError, error_context
 from spacedg.sft.data import ChatJsonlDataset, OnlineSFTDataset
@@ -145,9 +146,10 @@ class DataOptions:
         for index in sorted(int(i) for i in order):
             item = dataset[index]
             images = item_images(item)
-            conversation = chat_messages(format_question(item["question"], item["options"]), len(images))
-            truth = {k: item[k] for k in ("answer", "answer_type", "question_type", "sub_question_type")}
-            truth["options"] = {"ABCD"[i]: text for i, text in enumerate(item["options"])}
+            fields = public_fields(item)  # asked and scored in the bench's form
+            conversation = chat_messages(fields["question"], len(images))
+            truth = {k: fields[k] for k in ("answer", "answer_type", "question_type", "sub_question_type")}
+            truth["options"] = {line[0]: line[3:] for line in fields["options"]}
             items.append({"conversation": conversation, "images": images, "degradation_type": item["degradation_type"],
                           "truth": truth})
         return items

@@ -27,6 +27,7 @@ from torch.utils.data import DistributedSampler
 
 from spacedg.data.chain import CLEAN
 from spacedg.data.chat import chat_collate, format_question
+from spacedg.data.public_format import public_fields
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.scene.io import load_scene
 from spacedg.data.chain import BENCH_DEGRADATIONS
@@ -487,13 +488,21 @@ def test_chat_collate_builds_messages(splits):
 
 
 def test_every_training_target_scores_full_marks(splits):
+    """The assistant target of every record, in the bench's form (existence as lettered options),
+    scores 1 against the row the bench exports for it."""
     for ds in splits.values():
         for record in ds.records:
             item = {"images": torch.zeros((len(record.views), 3, 2, 2), dtype=torch.uint8), "question": record.question,
-                    "options": list(record.options), "views": list(record.views),
+                    "options": list(record.options), "views": list(record.views), "record_id": record.id,
+                    "answer_type": record.answer_type.value, "question_type": record.question_type,
+                    "sub_question_type": record.sub_question_type,
                     "answer": list(record.answer) if isinstance(record.answer, tuple) else record.answer}
             (answer,) = chat_collate([item])["answers"]
-            assert score(answer, record).score == pytest.approx(1.0), (record.answer_type, record.answer, answer)
+            row = public_fields(item)
+            truth = {**row, "options": {line[0]: line[3:] for line in row["options"]}}
+            assert score(answer, truth).score == pytest.approx(1.0), (record.answer_type, record.answer, answer)
+            if record.question_type == "object_existence_estimation":
+                assert row["answer_type"] == "MCQ" and answer in ("<answer>A</answer>", "<answer>B</answer>")
 
 
 # ------------------------------------------------------------------ bad scenes

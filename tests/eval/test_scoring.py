@@ -24,26 +24,15 @@ from spacedg.eval import (
     score,
     summarize,
 )
+from spacedg.errors import InvalidDataError
 from spacedg.plugins import AnswerType, TaskGroup
-
-OPTIONS = ("A. left", "B. right", "C. forward", "D. backward")
+from tests.qa_records import MCQ_OPTIONS as OPTIONS
+from tests.qa_records import qa_record
 
 
 def _record(answer_type: AnswerType, answer: Any, **changes: Any) -> QARecord:
-    kwargs: dict[str, Any] = dict(
-        id="room/q/sub/abc",
-        scene_id="room",
-        question_type="camera_translation",
-        sub_question_type="main_dir",
-        task_group=TaskGroup.CAMERA_CENTRIC,
-        answer_type=answer_type,
-        views=("v0", "v1"),
-        question="?",
-        options=OPTIONS if answer_type is AnswerType.MCQ else (),
-        answer=answer,
-    )
-    kwargs.update(changes)
-    return QARecord(**kwargs)
+    """A record of ``answer_type`` answering ``answer`` (four options for an MCQ, none otherwise)."""
+    return qa_record(answer_type=answer_type, answer=answer, options=OPTIONS if answer_type is AnswerType.MCQ else (), **changes)
 
 
 # ------------------------------------------------------------------ prompt / extraction
@@ -70,40 +59,55 @@ def test_extract_answer_text(text: str | None, expected: str) -> None:
 
 
 # ------------------------------------------------------------------ routing
+#: The public evaluator's routing (an empty sub type routes by question type; only distance_threshold
+#: is YN; three NA sub types; anything else MCQ), plus our internal names (records, older exports).
 ROUTES = [
+    # public names, as every export carries them
     ("camera_translation", "main_dir", AnswerType.MCQ),
     ("camera_translation", "distance_exact", AnswerType.NA),
     ("camera_translation", "distance_threshold", AnswerType.YN),
     ("camera_rotation", "yaw+pitch_dual", AnswerType.MCQ),
     ("camera_rotation", "roll+yaw_single", AnswerType.MCQ),
-    ("camera_object_distance_estimation", "single_view", AnswerType.NA),
-    ("camera_object_distance_estimation", "camera_object_distance_estimation", AnswerType.NA),
+    ("camera_object_distance_estimation", "", AnswerType.NA),
     ("camera_object_distance_estimation", "bbox_center_distance", AnswerType.NA),
     ("camera_object_relative_direction", "single_view", AnswerType.MCQ),
     ("camera_object_relative_direction", "bbox_center_direction", AnswerType.MCQ),
     ("camera_object_relative_direction", "relpos_A_facing_B", AnswerType.MCQ),
-    ("cross_view_cardinal_direction", "cross_view_cardinal_direction", AnswerType.MCQ),
+    ("cross_view_cardinal_direction", "assumed_direction", AnswerType.MCQ),
     ("inter_object_distance", "inter_object_distance", AnswerType.NA),
-    ("inter_object_distance", "center_distance", AnswerType.NA),
-    ("object_proxy_cardinal_direction", "object_proxy_cardinal_direction", AnswerType.MCQ),
+    ("object_proxy_cardinal_direction", "proxy_frame", AnswerType.MCQ),
     ("object_size_comparison", "longest_side_compare", AnswerType.MCQ),
     ("object_size_comparison", "top_height_compare", AnswerType.MCQ),
-    ("object_bounding_size_estimation", "object_bounding_size_estimation", AnswerType.SIZE_LIST),
-    ("object_bounding_size_estimation", "size", AnswerType.SIZE_LIST),
-    ("object_existence_estimation", "object_existence_estimation", AnswerType.YN),
-    ("object_existence_estimation", "exists", AnswerType.YN),
+    ("object_bounding_size_estimation", "", AnswerType.SIZE_LIST),
+    ("object_existence_estimation", "", AnswerType.MCQ),  # lettered options, as the public bench scores it
+    ("object_counting", None, AnswerType.COUNT),
+    ("distance_estimation", "", AnswerType.NA),  # the public table's short aliases
+    ("existence_estimation", "", AnswerType.MCQ),
+    ("size_estimation", "", AnswerType.SIZE_LIST),
+    # our internal names (records; exports made before the public format)
+    ("camera_object_distance_estimation", "single_view", AnswerType.NA),
+    ("inter_object_distance", "two_view", AnswerType.NA),
+    ("object_bounding_size_estimation", "extent_list", AnswerType.SIZE_LIST),
+    ("object_existence_estimation", "existence", AnswerType.YN),
     ("object_counting", "count", AnswerType.COUNT),
-    ("object_counting", "object_counting", AnswerType.COUNT),
+    # names of neither kind: the public rule (a non-empty unknown sub type is MCQ)
     ("some_future_family", "whatever", AnswerType.MCQ),
+    ("inter_object_distance", "center_distance", AnswerType.MCQ),
+    ("object_counting", "object_counting", AnswerType.MCQ),
     ("Camera_Translation ", " DISTANCE_THRESHOLD", AnswerType.YN),
     (None, "distance_exact", AnswerType.NA),
-    ("object_counting", None, AnswerType.COUNT),
 ]
 
 
 @pytest.mark.parametrize(("qtype", "sub", "expected"), ROUTES)
 def test_route_table(qtype: str | None, sub: str | None, expected: AnswerType) -> None:
     assert route(qtype, sub) is expected
+
+
+@pytest.mark.parametrize("qtype", ["camera_translation", "some_future_family", ""])
+def test_route_refuses_an_empty_sub_type_the_public_table_lacks(qtype: str) -> None:
+    with pytest.raises(InvalidDataError, match="sub_question_type is empty"):
+        route(qtype, "")
 
 
 # ------------------------------------------------------------------ MCQ
@@ -137,6 +141,8 @@ def test_route_table(qtype: str | None, sub: str | None, expected: AnswerType) -
         ("The answer is A. Actually, the answer is C.", None),
         ("A, B, C or D", None),
         ("(A/B/C/D)", None),
+        ("A or B", None),  # two options offered: a hedge, not B
+        ("Either A or C", None),
         ("It happened at 10 a.m.", None),
         ("In 3D space it is left", None),
         ("Answer", None),
@@ -170,6 +176,22 @@ def test_parse_mcq_option_text_fallback() -> None:
         ("Nothing notable", None),
         ("maybe", None),
         ("", None),
+        # both words: the final answer decides (statement, else the last line), a hedge is ambiguous
+        ("At first I'd say no, but the answer is yes", "yes"),
+        ("There is no chair at first glance. Final answer: **No**", "no"),
+        ("There is no lamp on the left, so yes", "yes"),
+        ("No, wait: yes.", "yes"),
+        ("Is it yes or no? Looking closer, I see it.\nYes.", "yes"),
+        ("Is it yes or no? Looking closer, I see it: yes.", "yes"),
+        ("Yes, and no other lamp is visible.", "yes"),
+        ("I first thought yes.\nNo, there is none.", "no"),
+        ("<answer>I said no before, but the answer is yes</answer>", "yes"),
+        ("the answer is yes or no", None),
+        ("maybe yes, maybe no", None),
+        ("yes/no", None),
+        ("Yes or no, I cannot tell.", None),
+        ("I cannot tell: yes and no.", None),
+        ("There is no chair but yes a table in the corner", None),  # neither a statement nor a final word
     ],
 )
 def test_parse_yes_no(text: str, expected: str | None) -> None:
@@ -266,6 +288,21 @@ def test_parse_count(text: str, expected: int | None) -> None:
         ("shortest 0.4, middle 0.6 and longest 1.0", [0.4, 0.6, 1.0]),
         ("0.5 by 1.2", None),
         ("", None),
+        # numbered lists: the labels are not values
+        ("1. 0.31\n2. 0.9\n3. 1.11", [0.31, 0.9, 1.11]),
+        ("<answer>1. 0.31\n2. 0.9\n3. 1.11</answer>", [0.31, 0.9, 1.11]),
+        ("1) 31 cm 2) 90 cm 3) 111 cm", [0.31, 0.9, 1.11]),
+        ("(1) 0.31 (2) 0.9 (3) 1.11", [0.31, 0.9, 1.11]),
+        ("Edge 1: 0.31 m\nEdge 2: 0.9 m\nEdge 3: 1.11 m", [0.31, 0.9, 1.11]),
+        ("1. The shortest edge is 0.31 m\n2. The middle one 0.9 m\n3. The longest 1.11 m", [0.31, 0.9, 1.11]),
+        ("I see 2. The edges are 0.3, 0.5, 1.2", [0.3, 0.5, 1.2]),  # a lone "2." is not a list label
+        # extra numbers: the last run of exactly three listed numbers, else refused
+        ("The 3 edges are 0.31, 0.9 and 1.11 m", [0.31, 0.9, 1.11]),
+        ("0.31, 0.9, 1.11 (about 2 ft)", [0.31, 0.9, 1.11]),
+        ("0.3, 0.8, 1.0, no: 0.31, 0.9, 1.11", [0.31, 0.9, 1.11]),
+        ("0.31, 0.9, 1.11, 2.0", None),
+        ("[0.31, 0.9, 1.11, 2.0]", None),
+        ("Shortest 0.31 m, middle 0.9 m, longest 1.11 m, volume 0.31 m3", None),
     ],
 )
 def test_parse_size_list(text: str, expected: list[float] | None) -> None:
@@ -354,10 +391,10 @@ def test_score_size_list_sorted_and_positional() -> None:
     )
     ok = score("[0.5, 1.0, 2.0]", rec)
     assert ok.score == pytest.approx(1.0) and ok.parsed == (0.5, 1.0, 2.0)
-    shuffled = score("Dimensions: 2 x 0.5 x 1 m", rec)
+    shuffled = score("Dimensions: 2 x 0.5 x 1 m", rec, sort_sizes=True)  # the lenient reading
     assert shuffled.score == pytest.approx(1.0) and shuffled.parsed == (0.5, 1.0, 2.0)
-    # positional: 2 vs 0.5 → 0, 0.5 vs 1.0 → e = 0.5 → 0.1, 1 vs 2 → 0.1
-    assert score("2, 0.5, 1", rec, sort_sizes=False).score == pytest.approx(0.2 / 3)
+    # positional by default (the paper requires ascending order): 2 vs 0.5 → 0, 0.5 vs 1.0 → e = 0.5 → 0.1, 1 vs 2 → 0.1
+    assert score("2, 0.5, 1", rec).score == pytest.approx(0.2 / 3)
     # per-element MRA averaged: e = 0.05 (1.0), e = 0.25 (0.6), e = 0 (1.0)
     assert score("[0.525, 1.25, 2.0]", rec).score == pytest.approx(2.6 / 3)
     assert score("0.5 and 1.0", rec).parse_ok is False
@@ -370,8 +407,14 @@ def test_score_from_tsv_like_mapping() -> None:
     assert score("<answer>B</answer>", row).answer_type is AnswerType.MCQ
     na_row = {"question_type": "inter_object_distance", "sub_question_type": "inter_object_distance", "answer": "2.0"}
     assert score("2.5", na_row).score == pytest.approx(0.6)
-    yn_row = {"question_type": "object_existence_estimation", "sub_question_type": "x", "answer": "Yes"}
+    yn_row = {"question_type": "camera_translation", "sub_question_type": "distance_threshold", "answer": "Yes"}
     assert score("yes", yn_row).score == 1.0
+    old_existence = {"question_type": "object_existence_estimation", "sub_question_type": "existence", "answer": "no"}
+    assert score("<answer>no</answer>", old_existence).answer_type is AnswerType.YN  # an export with our internal names
+    existence = {"question_type": "object_existence_estimation", "sub_question_type": float("nan"), "answer": "B",
+                 "A": "yes", "B": "no", "C": float("nan"), "D": float("nan")}  # as pandas reads the public format
+    assert score("<answer>B</answer>", existence).score == 1.0 and score("no", existence).score == 1.0
+    assert score("yes", existence).score == 0.0 and score("<answer>no</answer>", existence).answer_type is AnswerType.MCQ
     size_row = {"answer_type": "SIZE_LIST", "answer": "[0.1, 0.2, 0.3]"}
     assert score("[0.1, 0.2, 0.3]", size_row).score == pytest.approx(1.0)
     mcq_json_options = {"answer_type": "MCQ", "answer": "C", "options": json.dumps(list(OPTIONS))}

@@ -10,28 +10,9 @@ import pytest
 
 from spacedg.plugins.qa_record import QARecord, json_ready, make_record_id
 from spacedg.errors import InvalidDataError
-from spacedg.plugins import AnswerType, TaskGroup
-
-MCQ_OPTIONS = ("A. left", "B. right", "C. forward", "D. backward")
-
-
-def _record(**changes: Any) -> QARecord:
-    kwargs: dict[str, Any] = dict(
-        id="room/camera_translation/main_dir/abc",
-        scene_id="room",
-        question_type="camera_translation",
-        sub_question_type="main_dir",
-        task_group=TaskGroup.CAMERA_CENTRIC,
-        answer_type=AnswerType.MCQ,
-        views=("v0", "v1"),
-        question="What is the primary camera motion direction from view A to view B?",
-        options=MCQ_OPTIONS,
-        answer="B",
-        geometry={"translation_m": [0.5, 0.0, 0.1]},
-    )
-    kwargs.update(changes)
-    return QARecord(**kwargs)
-
+from spacedg.plugins import AnswerType
+from tests.qa_records import MCQ_OPTIONS
+from tests.qa_records import qa_record as _record
 
 VALID = {
     "MCQ": {},

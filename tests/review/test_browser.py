@@ -18,7 +18,10 @@ import json
 import os
 import re
 import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -45,8 +48,9 @@ def _unavailable(reason: str) -> None:
     pytest.skip(message)
 
 
-@pytest.fixture(scope="module")
-def browser():
+@contextmanager
+def launch_chromium(*extra_args: str) -> Iterator[Any]:
+    """Headless Chromium under playwright (with ``extra_args``); skips or fails as documented above."""
     try:
         from playwright.sync_api import sync_playwright
     except ImportError as err:
@@ -61,13 +65,19 @@ def browser():
     try:
         try:
             chromium = playwright.chromium.launch(executable_path=executable, headless=True,
-                                                  args=["--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage"])
+                                                  args=["--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", *extra_args])
         except Exception as err:  # noqa: BLE001 - any launch failure is an environment problem
             _unavailable(f"{executable} did not start under playwright ({str(err).splitlines()[0]})")
         yield chromium
         chromium.close()
     finally:
         playwright.stop()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with launch_chromium() as chromium:
+        yield chromium
 
 
 def _write_views(bench: Path) -> None:
@@ -134,7 +144,7 @@ class Review:
             " return imgs.length > 0 && imgs.every(i => i.complete); }", timeout=TIMEOUT_MS)
         sizes = self.page.locator(f"{box} img").evaluate_all("els => els.map(e => [e.src, e.naturalWidth])")
         assert all(width == 320 for _, width in sizes), f"{box}: an image did not load: {sizes}"
-        return [src for src, _ in sizes]
+        return [src.split("?", 1)[0] for src, _ in sizes]  # the session token rides in the query
 
 
 @pytest.fixture
@@ -148,9 +158,10 @@ def review(browser, tmp_path: Path):
     page = context.new_page()
     errors: list[str] = []
     page.on("pageerror", lambda err: errors.append(str(err)))
+    page.on("console", lambda msg: errors.append(msg.text) if "Content Security Policy" in msg.text else None)
     try:
         yield Review(bench, server, page)
-        assert not errors, f"uncaught errors in the page: {errors}"
+        assert not errors, f"uncaught errors or CSP violations in the page: {errors}"
     finally:
         context.close()
         server.close()

@@ -21,6 +21,7 @@ from spacedg.sft.config import build
 from spacedg.sft.data import ChatJsonlDataset
 from spacedg.sft.model import ModelOptions
 from spacedg.sft.sources import DataOptions, ValOptions
+from spacedg.data.public_format import public_fields
 from tests.sft.configs import compose_sft
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -154,7 +155,8 @@ def test_instantiated_data_builds_the_datasets_of_before(rooms) -> None:
     _same(val, SpaceDGDataset("val", list(BENCH_DEGRADATIONS), max_questions=None, **common), [])
     chosen = [val[int(i)] for i in sorted(np.random.default_rng(0).permutation(len(val))[:3])]  # the app's spread
     items = data.val_items()
-    assert [item["truth"]["answer"] for item in items] == [item["answer"] for item in chosen]
+    # asked and scored in the bench's form (existence as lettered options)
+    assert [item["truth"]["answer"] for item in items] == [public_fields(item)["answer"] for item in chosen]
     assert [item["degradation_type"] for item in items] == [item["degradation_type"] for item in chosen]
     assert all(np.array_equal(a, b) for item, old in zip(items, chosen) for a, b in zip(item["images"], item_images(old)))
 

@@ -77,8 +77,6 @@ except ImportError:  # pragma: no cover - older/newer numba without the intrinsi
         return n
 
 from spacedg.errors import InvalidDataError
-from spacedg.plugins.degradations.common import check_linear_rgb
-from spacedg.plugins.specs import DegradationSpec, ParamRange, ParamSpec
 
 __all__ = [
     "K_DEFAULT",
@@ -87,11 +85,8 @@ __all__ = [
     "READ_GAUSSIAN",
     "READ_TUKEY",
     "SIGNAL_CAP",
-    "SENSOR_PARAMS",
-    "SENSOR_PRESET",
     "tukey_lambda_std",
     "sensor_capture",
-    "capture_for",
 ]
 
 #: System gain: normalised full scale per photo-electron (full well ≈ 10⁴ e⁻).
@@ -183,21 +178,6 @@ def _normal_table() -> np.ndarray:
 
 _POISSON_THRESHOLDS, _POISSON_ROW_START, _POISSON_GUIDE = _poisson_tables()
 _NORMAL_COEFFICIENTS = _normal_table()
-
-SENSOR_PARAMS: tuple[ParamSpec, ...] = (
-    ParamSpec("k", "1/e-", "System gain: normalised full-scale signal per photo-electron (1/k electrons fill the full scale); 0 disables shot noise.", low=0.0, high=1.0, harsher="higher"),
-    ParamSpec("sigma_read", "1", "Read-noise standard deviation in normalised linear units (full scale = 1); 0 disables read noise.", low=0.0, high=1.0, harsher="higher"),
-    ParamSpec("read_model", "1", "Read-noise shape: 0 = Gaussian (the paper's formula), 1 = Tukey lambda scaled to unit variance (ELD).", low=READ_GAUSSIAN, high=READ_TUKEY, integer=True),
-    ParamSpec("read_lambda", "1", "Tukey-lambda shape of the read noise (read_model = 1): 0.14 ≈ normal, < 0 heavy-tailed, 0 logistic.", low=-0.45, high=1.0),
-)
-
-#: Fixed sensor ranges every preset of the photometric degradations uses.
-SENSOR_PRESET: dict[str, ParamRange] = {
-    "k": ParamRange(K_DEFAULT, K_DEFAULT),
-    "sigma_read": ParamRange(SIGMA_READ_DEFAULT, SIGMA_READ_DEFAULT),
-    "read_model": ParamRange(READ_GAUSSIAN, READ_GAUSSIAN),
-    "read_lambda": ParamRange(READ_LAMBDA_DEFAULT, READ_LAMBDA_DEFAULT),
-}
 
 
 # ------------------------------------------------------------ random numbers
@@ -505,26 +485,3 @@ def _tukey_bound(lam: float) -> float:
     if abs(lam) < _TUKEY_LOGISTIC:
         return abs(math.log(p / (1.0 - p)))
     return abs((math.expm1(lam * math.log(p)) - math.expm1(lam * math.log1p(-p))) / lam)
-
-
-def capture_for(
-    spec: DegradationSpec,
-    rgb: np.ndarray,
-    exposure: float,
-    key: int,
-    k: float,
-    sigma_read: float,
-    read_model: int,
-    read_lambda: float,
-    *,
-    clip: bool,
-) -> np.ndarray:
-    """Check ``rgb`` and the parameters against ``spec`` (low_light / over_exposure), then :func:`sensor_capture`."""
-    rgb = check_linear_rgb(rgb, spec.name)
-    p = spec.validate_params(
-        {"exposure": exposure, "k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": read_lambda}
-    )
-    return sensor_capture(
-        rgb, exposure=p["exposure"], k=p["k"], sigma_read=p["sigma_read"], key=key,
-        read_model=int(p["read_model"]), read_lambda=p["read_lambda"], clip=clip,
-    )

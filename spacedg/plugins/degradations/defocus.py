@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import Defocus
@@ -55,9 +55,7 @@ def apply(request: RenderRequest, params: Mapping[str, Any], rng: np.random.Gene
 
 
 SPEC = DegradationSpec(
-    name="defocus",
-    category=Category.OPTICAL_DYNAMIC,
-    stage=Stage.RASTER,
+    name="defocus", category=Category.OPTICAL_DYNAMIC, stage=Stage.RASTER,
     params=(
         ParamSpec("aperture", "px", "CoC radius of a point at infinity, pixels at the rendered resolution.", low=0.0, high=1000.0, harsher="higher"),
         ParamSpec("depth", "m", "Focus distance along the optical axis.", low=0.01, high=1e4),
@@ -75,8 +73,4 @@ SPEC = DegradationSpec(
     order=20.0,
 )
 
-
-@hookimpl
-def spacedg_register_degradations(register: Any) -> None:
-    """Register :data:`SPEC`."""
-    register(SPEC)
+spacedg_register_degradations = registering(SPEC)

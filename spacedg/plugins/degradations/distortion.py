@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 from spacedg.render.camera import Camera, FisheyeLens
 from spacedg.render.request import RenderRequest
@@ -104,9 +104,7 @@ def _coefficient(name: str, power: int, harsher: str | None) -> ParamSpec:
 
 
 SPEC = DegradationSpec(
-    name="distortion",
-    category=Category.OPTICAL_DYNAMIC,
-    stage=Stage.RASTER,
+    name="distortion", category=Category.OPTICAL_DYNAMIC, stage=Stage.RASTER,
     params=(
         _coefficient("k1", 2, "lower"),
         _coefficient("k2", 4, None),
@@ -127,8 +125,4 @@ SPEC = DegradationSpec(
     order=10.0,
 )
 
-
-@hookimpl
-def spacedg_register_degradations(register: Any) -> None:
-    """Register :data:`SPEC`."""
-    register(SPEC)
+spacedg_register_degradations = registering(SPEC)

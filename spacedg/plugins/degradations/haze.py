@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.plugins.degradations.common import aux_image, check_linear_rgb, surface_far_depth
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 
 __all__ = ["SPEC", "haze", "VISIBILITY_DENSITY"]
@@ -103,9 +103,7 @@ def _preset(density: tuple[float, float], depth_ref: float = 0.0) -> dict[str, P
 
 
 SPEC = DegradationSpec(
-    name="haze",
-    category=Category.METEOROLOGICAL,
-    stage=Stage.LINEAR,
+    name="haze", category=Category.METEOROLOGICAL, stage=Stage.LINEAR,
     params=(
         ParamSpec("density", "1", "Optical depth β·D at the normalisation depth D.", low=0.0, high=100.0, harsher="higher"),
         ParamSpec("airlight", "linear", "Atmospheric light A (1 = diffuse white).", low=0.0, high=100.0),
@@ -127,8 +125,4 @@ SPEC = DegradationSpec(
     order=10.0,
 )
 
-
-@hookimpl
-def spacedg_register_degradations(register: Any) -> None:
-    """Register :data:`SPEC`."""
-    register(SPEC)
+spacedg_register_degradations = registering(SPEC)

@@ -39,20 +39,12 @@ import numpy as np
 
 from spacedg.errors import InvalidDataError
 from spacedg.plugins.degradations.common import check_display_image
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 
 __all__ = ["SPEC", "jpeg_compress"]
 
-QUALITY = ParamSpec(
-    name="quality",
-    unit="1",
-    description="libjpeg quality factor (1 = coarsest quantisation, 100 = finest).",
-    low=1,
-    high=100,
-    integer=True,
-    harsher="lower",
-)
+QUALITY = ParamSpec("quality", "1", "libjpeg quality factor (1 = coarsest quantisation, 100 = finest).", low=1, high=100, integer=True, harsher="lower")
 
 
 def jpeg_compress(image: np.ndarray, quality: int) -> np.ndarray:
@@ -83,9 +75,7 @@ def apply(image: np.ndarray, params: Mapping[str, Any], rng: np.random.Generator
 
 
 SPEC = DegradationSpec(
-    name="jpeg_compression",
-    category=Category.DIGITAL,
-    stage=Stage.DISPLAY,
+    name="jpeg_compression", category=Category.DIGITAL, stage=Stage.DISPLAY,
     params=(QUALITY,),
     presets={
         "bench": {"quality": ParamRange(2, 5)},
@@ -100,8 +90,4 @@ SPEC = DegradationSpec(
     order=20.0,
 )
 
-
-@hookimpl
-def spacedg_register_degradations(register: Any) -> None:
-    """Register :data:`SPEC`."""
-    register(SPEC)
+spacedg_register_degradations = registering(SPEC)

@@ -1,6 +1,8 @@
 """Low light (photometric, linear stage): exposure e ≪ 1, photon shot noise and read noise.
 
-Model: the paper's "Low-light" formula on linear light (:mod:`._sensor`),
+Model: the paper's "Low-light" formula on linear light (the sensor of :mod:`._sensor`; this
+degradation's spec and plain function are made by :class:`._exposure.SensorExposure`, shared
+with ``over_exposure``),
 
     I' = k · Poisson(e·I / k) + σ_read · R,     R ~ N(0, 1)  (or Tukey lambda, ELD),
 
@@ -26,97 +28,30 @@ Presets (``exposure``; the sensor parameters fixed at their defaults, Gaussian r
 
 Conventions: ``rgb`` float32 (H, W, 3) linear light, unclamped, not modified; NaN values are
 treated as 0 and ±inf as ±1e12 (:data:`._sensor.SIGNAL_CAP`). ``apply`` consumes exactly one
-draw of ``rng`` (:func:`._common.stream_key`) per call; the noise is counter-based, so the
+draw of ``rng`` (:func:`.common.stream_key`) per call; the noise is counter-based, so the
 bytes do not depend on the thread count. Identity: ``exposure = 1, k = 0, sigma_read = 0``
 returns the input bit for bit.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
-import numpy as np
-
-from spacedg.plugins.degradations.common import stream_key
-from spacedg.plugins.degradations._sensor import (
-    K_DEFAULT,
-    READ_GAUSSIAN,
-    READ_LAMBDA_DEFAULT,
-    SENSOR_PARAMS,
-    SENSOR_PRESET,
-    SIGMA_READ_DEFAULT,
-    capture_for,
-)
-from spacedg.plugins.hookspecs import hookimpl
-from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
+from spacedg.plugins.degradations._exposure import SensorExposure
+from spacedg.plugins.hookspecs import registering
+from spacedg.plugins.specs import ParamSpec
 
 __all__ = ["SPEC", "low_light"]
 
-EXPOSURE = ParamSpec(
-    name="exposure",
-    unit="1",
-    description="Gain on linear light (fraction of the normal exposure); 1 = unchanged.",
-    low=0.0,
-    high=1.0,
-    harsher="lower",
-)
-
-
-def low_light(
-    rgb: np.ndarray,
-    exposure: float,
-    key: int,
-    k: float = K_DEFAULT,
-    sigma_read: float = SIGMA_READ_DEFAULT,
-    read_model: int = READ_GAUSSIAN,
-    read_lambda: float = READ_LAMBDA_DEFAULT,
-) -> np.ndarray:
-    """Under-expose linear light and add sensor noise; returns new float32 (H, W, 3), unclipped.
-
-    Args:
-        rgb: float32 (H, W, 3) linear light, unclamped.
-        exposure: gain in [0, 1].
-        key: 63-bit noise key (``stream_key(rng)``).
-        k, sigma_read, read_model, read_lambda: the sensor (module docstring).
-    """
-    return capture_for(SPEC, rgb, exposure, key, k, sigma_read, read_model, read_lambda, clip=False)
-
-
-def apply(rgb: np.ndarray, aux: Mapping[str, np.ndarray], params: Mapping[str, Any], rng: np.random.Generator) -> np.ndarray:
-    """Linear-stage ``apply``; ``aux`` is unused; one ``stream_key(rng)`` draw."""
-    p = SPEC.validate_params(params)
-    return low_light(rgb, key=stream_key(rng), **p)
-
-
-def _preset(low: float, high: float) -> dict[str, ParamRange]:
-    return {"exposure": ParamRange(low, high), **SENSOR_PRESET}
-
-
-SPEC = DegradationSpec(
-    name="low_light",
-    category=Category.PHOTOMETRIC,
-    stage=Stage.LINEAR,
-    params=(EXPOSURE, *SENSOR_PARAMS),
-    presets={
-        "bench": _preset(0.003, 0.005),
-        "1": _preset(0.1, 0.2),
-        "2": _preset(0.04, 0.07),
-        "3": _preset(0.015, 0.03),
-        "4": _preset(0.007, 0.012),
-        "5": _preset(0.003, 0.005),
-    },
-    apply=apply,
-    needs=frozenset(),
+EXPOSURE = ParamSpec("exposure", "1", "Gain on linear light (fraction of the normal exposure); 1 = unchanged.", low=0.0, high=1.0, harsher="lower")
+_SENSOR = SensorExposure(
+    "low_light", EXPOSURE, clip=False,
+    presets={"bench": (0.003, 0.005), "1": (0.1, 0.2), "2": (0.04, 0.07), "3": (0.015, 0.03), "4": (0.007, 0.012), "5": (0.003, 0.005)},
     description=(
         "Low light on linear light: I' = k·Poisson(e·I/k) + σ_read·N(0,1), e ≪ 1, k = 1e-4 (10⁴ e⁻ full well), "
         "σ_read = 2.5e-4 (2.5 e⁻); dark output, no gain afterwards; Tukey-lambda read noise optional (ELD)."
     ),
-    order=30.0,
 )
-
-
-@hookimpl
-def spacedg_register_degradations(register: Any) -> None:
-    """Register :data:`SPEC`."""
-    register(SPEC)
+SPEC = _SENSOR.spec
+#: ``low_light(rgb, exposure, key, k=…, sigma_read=…, read_model=…, read_lambda=…)``: the plain function
+#: (:meth:`~spacedg.plugins.degradations._exposure.SensorExposure.capture`).
+low_light = _SENSOR.capture
+spacedg_register_degradations = registering(SPEC)

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from spacedg.plugins.degradations.common import check_display_image
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 
 __all__ = ["SPEC", "low_res", "reduced_size"]
@@ -53,9 +53,7 @@ def apply(image: np.ndarray, params: Mapping[str, Any], rng: np.random.Generator
 
 
 SPEC = DegradationSpec(
-    name="low_res",
-    category=Category.DIGITAL,
-    stage=Stage.DISPLAY,
+    name="low_res", category=Category.DIGITAL, stage=Stage.DISPLAY,
     params=(ParamSpec("scale", "1", "Linear size factor of the reduced image.", low=1e-6, high=1.0, harsher="lower"),),
     presets={
         "bench": {"scale": ParamRange(0.02, 0.05)},
@@ -70,8 +68,4 @@ SPEC = DegradationSpec(
     order=10.0,
 )
 
-
-@hookimpl
-def spacedg_register_degradations(register: Any) -> None:
-    """Register :data:`SPEC`."""
-    register(SPEC)
+spacedg_register_degradations = registering(SPEC)

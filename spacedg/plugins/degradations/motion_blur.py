@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import MotionBlur
@@ -67,9 +67,7 @@ def _preset(trans: tuple[float, float], rot: tuple[float, float]) -> dict[str, P
 
 
 SPEC = DegradationSpec(
-    name="motion_blur",
-    category=Category.OPTICAL_DYNAMIC,
-    stage=Stage.RASTER,
+    name="motion_blur", category=Category.OPTICAL_DYNAMIC, stage=Stage.RASTER,
     params=(
         ParamSpec("trans", "m", "Camera path length over the exposure (direction random per view).", low=0.0, high=10.0, harsher="higher"),
         ParamSpec("rot", "rad", "Camera rotation angle over the exposure (axis random per view).", low=0.0, high=math.pi, harsher="higher"),
@@ -88,8 +86,4 @@ SPEC = DegradationSpec(
     order=30.0,
 )
 
-
-@hookimpl
-def spacedg_register_degradations(register: Any) -> None:
-    """Register :data:`SPEC`."""
-    register(SPEC)
+spacedg_register_degradations = registering(SPEC)

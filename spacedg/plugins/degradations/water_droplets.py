@@ -81,7 +81,7 @@ import numpy as np
 
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins.degradations.common import check_linear_rgb
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamSpec, Stage
 
 __all__ = [
@@ -120,46 +120,11 @@ SHININESS = 2**SHININESS_LOG2
 #: Most drop cells of the finest layer (guards extreme aspect ratios at high ``scale``).
 MAX_CELLS = 10_000_000
 
-SCALE = ParamSpec(
-    name="scale",
-    unit="1/image",
-    description="Drop-field frequency: cells of the largest drop layer across the image's shorter side (0 = no drops).",
-    low=0.0,
-    high=100.0,
-)
-RADIUS = ParamSpec(
-    name="radius",
-    unit="1",
-    description="Largest drop radius as a fraction of its cell's half-size (0 = no drops).",
-    low=0.0,
-    high=1.0,
-    harsher="higher",
-)
-STRENGTH = ParamSpec(
-    name="strength",
-    unit="1",
-    description="Refraction: a pixel shows the scene at p - strength * r * n_xy (magnifier of power 1/(1 - strength); > 1 inverts).",
-    low=0.0,
-    high=5.0,
-    harsher="higher",
-)
-BLUR_SIGMA = ParamSpec(
-    name="blur_sigma",
-    unit="px",
-    description="Standard deviation of the Gaussian blur inside drops (0 = no blur).",
-    low=0.0,
-    high=20.0,
-    harsher="higher",
-)
-BLUR_KERNEL = ParamSpec(
-    name="blur_kernel",
-    unit="px",
-    description="Odd side of the square Gaussian kernel inside drops (OpenCV ksize; 1 = no blur).",
-    low=1,
-    high=51,
-    integer=True,
-    harsher="higher",
-)
+SCALE = ParamSpec("scale", "1/image", "Drop-field frequency: cells of the largest drop layer across the image's shorter side (0 = no drops).", low=0.0, high=100.0)
+RADIUS = ParamSpec("radius", "1", "Largest drop radius as a fraction of its cell's half-size (0 = no drops).", low=0.0, high=1.0, harsher="higher")
+STRENGTH = ParamSpec("strength", "1", "Refraction: a pixel shows the scene at p - strength * r * n_xy (magnifier of power 1/(1 - strength); > 1 inverts).", low=0.0, high=5.0, harsher="higher")
+BLUR_SIGMA = ParamSpec("blur_sigma", "px", "Standard deviation of the Gaussian blur inside drops (0 = no blur).", low=0.0, high=20.0, harsher="higher")
+BLUR_KERNEL = ParamSpec("blur_kernel", "px", "Odd side of the square Gaussian kernel inside drops (OpenCV ksize; 1 = no blur).", low=1, high=51, integer=True, harsher="higher")
 
 
 @dataclass(frozen=True)
@@ -413,9 +378,7 @@ def apply(rgb: np.ndarray, aux: Mapping[str, np.ndarray], params: Mapping[str, A
 
 
 SPEC = DegradationSpec(
-    name=NAME,
-    category=Category.METEOROLOGICAL,
-    stage=Stage.LINEAR,
+    name=NAME, category=Category.METEOROLOGICAL, stage=Stage.LINEAR,
     params=(SCALE, RADIUS, STRENGTH, BLUR_SIGMA, BLUR_KERNEL),
     presets={
         "bench": {"scale": (2.5, 4.0), "radius": (0.25, 0.75), "strength": (0.3, 0.5), "blur_sigma": (2.0, 2.5), "blur_kernel": 9},
@@ -435,8 +398,4 @@ SPEC = DegradationSpec(
     order=20.0,
 )
 
-
-@hookimpl
-def spacedg_register_degradations(register: Any) -> None:
-    """Register :data:`SPEC`."""
-    register(SPEC)
+spacedg_register_degradations = registering(SPEC)

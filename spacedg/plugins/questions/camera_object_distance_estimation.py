@@ -52,7 +52,6 @@ The record-building helpers (seeded orders, round robins, geometry-block entries
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Iterator
 from typing import Any
 
@@ -67,7 +66,7 @@ from spacedg.plugins.questions.view_sampling import (
     VisibilityIndex,
 )
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import camera_center
 from spacedg.plugins.questions.language import find_in_image, label_text
 from spacedg.plugins.questions.records import (
@@ -81,20 +80,12 @@ from spacedg.plugins.questions.records import (
     round_robin_views,
     seeded_order,
 )
-from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
-    "BBOX_CENTER_DISTANCE",
-    "DECIMALS",
-    "FAMILY",
-    "NAME",
-    "SINGLE_VIEW",
-    "SUB_QUESTION_TYPES",
-    "TEMPLATES",
-    "TWO_VIEW_TEMPLATE",
-    "generate",
-    "make_family",
+    "BBOX_CENTER_DISTANCE", "DECIMALS", "FAMILY", "NAME", "SINGLE_VIEW", "SUB_QUESTION_TYPES", "TEMPLATES", "TWO_VIEW_TEMPLATE",
+    "generate", "make_family",
 ]
 
 NAME = "camera_object_distance_estimation"
@@ -191,24 +182,12 @@ def generate(
     ])
 
 
-def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS) -> QuestionFamily:
-    """The camera–object distance family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
-    return QuestionFamily(
-        name=NAME,
-        task_group=TaskGroup.CAMERA_OBJECT,
-        answer_types=frozenset({AnswerType.NA}),
-        sub_question_types=SUB_QUESTION_TYPES,
-        num_views=(1, 2),
-        generate=functools.partial(generate, thresholds=thresholds, pair_rules=pair_rules),
-        needs=frozenset({"visibility", "covisibility"}),
-        description="Metric distance from a camera centre to an object's box centre (single view, or camera B of a pair).",
-    )
-
-
+#: ``make_family(thresholds, pair_rules)``: this family with other visibility thresholds / pair rules
+#: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = FamilyFactory(
+    generate, name=NAME, task_group=TaskGroup.CAMERA_OBJECT, answer_types={AnswerType.NA}, sub_question_types=SUB_QUESTION_TYPES,
+    num_views=(1, 2), needs={"visibility", "covisibility"},
+    description="Metric distance from a camera centre to an object's box centre (single view, or camera B of a pair).",
+)
 FAMILY = make_family()
-
-
-@hookimpl
-def spacedg_register_question_families(register: Any) -> None:
-    """Register :data:`FAMILY`."""
-    register(FAMILY)
+spacedg_register_question_families = registering(FAMILY)

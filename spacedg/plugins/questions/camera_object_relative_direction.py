@@ -80,7 +80,6 @@ record-building helpers come from :mod:`~spacedg.plugins.questions.records`.
 
 from __future__ import annotations
 
-import functools
 import itertools
 from collections.abc import Iterator, Sequence
 from typing import Any
@@ -99,7 +98,7 @@ from spacedg.plugins.questions.view_sampling import (
     split_across_views,
 )
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import (
     BODY_DIRECTION_WORDS,
     BOUNDARY_GUARD_DEG,
@@ -134,7 +133,7 @@ from spacedg.plugins.questions.records import (
     round_robin_views,
     seeded_order,
 )
-from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -362,28 +361,12 @@ def generate(
     ])
 
 
-def make_family(
-    thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
-    bbox_rules: PairRules = LOW_COVIS_DIRECTION_PAIRS,
-    relpos_rules: PairRules = OBJECT_DIRECTION_PAIRS,
-) -> QuestionFamily:
-    """The camera–object direction family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
-    return QuestionFamily(
-        name=NAME,
-        task_group=TaskGroup.CAMERA_OBJECT,
-        answer_types=frozenset({AnswerType.MCQ}),
-        sub_question_types=SUB_QUESTION_TYPES,
-        num_views=(1, 2),
-        generate=functools.partial(generate, thresholds=thresholds, bbox_rules=bbox_rules, relpos_rules=relpos_rules),
-        needs=frozenset({"visibility", "covisibility"}),
-        description="Direction of an object relative to another in one view, to camera B, or to a person at A facing B.",
-    )
-
-
+#: ``make_family(thresholds, bbox_rules, relpos_rules)``: this family with other visibility thresholds / pair rules
+#: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = FamilyFactory(
+    generate, name=NAME, task_group=TaskGroup.CAMERA_OBJECT, answer_types={AnswerType.MCQ}, sub_question_types=SUB_QUESTION_TYPES,
+    num_views=(1, 2), needs={"visibility", "covisibility"},
+    description="Direction of an object relative to another in one view, to camera B, or to a person at A facing B.",
+)
 FAMILY = make_family()
-
-
-@hookimpl
-def spacedg_register_question_families(register: Any) -> None:
-    """Register :data:`FAMILY`."""
-    register(FAMILY)
+spacedg_register_question_families = registering(FAMILY)

@@ -46,17 +46,15 @@ Geometry block (JSON): ``up``, ``cam_to_world_a``, ``cam_to_world_b`` (4×4), ``
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.plugins.questions.view_sampling import ROTATION_PAIRS, PairRules, ViewPair, sample_pairs
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import (
     ROTATION_WORDS,
     BalancedDeck,
@@ -65,7 +63,7 @@ from spacedg.plugins.questions.geometry import (
     relative_rotation,
 )
 from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry
-from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -211,24 +209,12 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = ROTATION
             yield record
 
 
-def make_family(rules: PairRules = ROTATION_PAIRS) -> QuestionFamily:
-    """The camera-rotation family with custom pair rules (the registered one uses :data:`ROTATION_PAIRS`)."""
-    return QuestionFamily(
-        name=NAME,
-        task_group=TaskGroup.CAMERA_CENTRIC,
-        answer_types=frozenset({AnswerType.MCQ}),
-        sub_question_types=SUB_TYPES,
-        num_views=(2,),
-        generate=functools.partial(generate, rules=rules),
-        needs=frozenset({"covisibility"}),
-        description="How the camera turned from view A to view B: the dominant rotation axis/axes and their directions.",
-    )
-
-
+#: ``make_family(rules)``: this family with other pair rules
+#: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = FamilyFactory(
+    generate, name=NAME, task_group=TaskGroup.CAMERA_CENTRIC, answer_types={AnswerType.MCQ}, sub_question_types=SUB_TYPES,
+    num_views=(2,), needs={"covisibility"},
+    description="How the camera turned from view A to view B: the dominant rotation axis/axes and their directions.",
+)
 FAMILY = make_family()
-
-
-@hookimpl
-def spacedg_register_question_families(register: Any) -> None:
-    """Register :data:`FAMILY`."""
-    register(FAMILY)
+spacedg_register_question_families = registering(FAMILY)

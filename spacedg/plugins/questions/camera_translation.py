@@ -67,7 +67,6 @@ made) or ``factor_drawn``, ``factor``, ``threshold_m`` (distance_threshold), ``t
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -83,7 +82,7 @@ from spacedg.plugins.questions.view_sampling import (
     ViewPair,
     sample_pairs,
 )
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import (
     CAMERA_MOTION_WORDS,
     MAX_PARTS,
@@ -97,7 +96,7 @@ from spacedg.plugins.questions.geometry import (
     single_word_pool,
 )
 from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry
-from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -246,24 +245,12 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = TRANSLAT
             yield _record(scene, cand, SUB_TYPES[s], children[k * len(SUB_TYPES) + s], rules, decks.get(SUB_TYPES[s]))
 
 
-def make_family(rules: PairRules = TRANSLATION_PAIRS) -> QuestionFamily:
-    """The camera-translation family with custom pair rules (the registered one uses :data:`TRANSLATION_PAIRS`)."""
-    return QuestionFamily(
-        name=NAME,
-        task_group=TaskGroup.CAMERA_CENTRIC,
-        answer_types=frozenset({AnswerType.MCQ, AnswerType.NA, AnswerType.YN}),
-        sub_question_types=SUB_TYPES,
-        num_views=(2,),
-        generate=functools.partial(generate, rules=rules),
-        needs=frozenset({"covisibility"}),
-        description="How the camera moved from view A to view B: main direction, distance, distance above a threshold.",
-    )
-
-
+#: ``make_family(rules)``: this family with other pair rules
+#: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = FamilyFactory(
+    generate, name=NAME, task_group=TaskGroup.CAMERA_CENTRIC, answer_types={AnswerType.MCQ, AnswerType.NA, AnswerType.YN},
+    sub_question_types=SUB_TYPES, num_views=(2,), needs={"covisibility"},
+    description="How the camera moved from view A to view B: main direction, distance, distance above a threshold.",
+)
 FAMILY = make_family()
-
-
-@hookimpl
-def spacedg_register_question_families(register: Any) -> None:
-    """Register :data:`FAMILY`."""
-    register(FAMILY)
+spacedg_register_question_families = registering(FAMILY)

@@ -52,9 +52,10 @@ descriptions, so "the" is added)::
     In image A, find the red lamp. In image B, find the wooden chair.
     The direction of the red lamp relative to image A is north. What is the direction of the wooden chair relative to image B?
 
-Order: pairs in ``sample_pairs`` order, visited round-robin (one record per pair per round);
-each pair's (object 1, object 2) candidates in a lazily drawn seeded permutation
-(:func:`~spacedg.plugins.questions.records.lazy_permutation`); for each accepted candidate
+Order: pairs in ``sample_pairs`` order, visited round-robin (one record per pair per round;
+the family is made by :func:`~spacedg.plugins.questions.pairs.pair_family`); each pair's
+(object 1, object 2) candidates in a lazily drawn seeded permutation
+(:func:`~spacedg.plugins.questions.pairs.object_pairs`); for each accepted candidate
 ``rng`` draws the assumed direction, then the distractor order and the letter
 (:func:`~spacedg.plugins.questions.records.compass_question`). All draws come from the one
 ``rng``: same seed, same records in the same order; everything is lazy.
@@ -79,38 +80,25 @@ record-building helpers in ``records.py``, shared with ``object_proxy_cardinal_d
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Iterator
-from typing import Any
 
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.plugins.questions.view_sampling import (
-    OBJECT_PAIRS,
     PairRules,
     ViewPair,
     VisibilityIndex,
 )
-from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import (
     camera_center,
     ground_leg,
 )
 from spacedg.plugins.questions.language import find_in_image
-from spacedg.plugins.questions.records import (
-    compass_question,
-    lazy_permutation,
-    make_record,
-    objects_block,
-    phrase,
-    phrase_key,
-    referable_ids,
-    round_robin_pairs,
-)
-from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.questions.pairs import object_pairs, pair_family
+from spacedg.plugins.questions.records import compass_question, make_record, objects_block, phrase, phrase_key
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -118,7 +106,6 @@ __all__ = [
     "NAME",
     "SUB_QUESTION_TYPE",
     "TEMPLATE",
-    "generate",
     "make_family",
     "render_question",
 ]
@@ -143,14 +130,9 @@ def render_question(phrase1: str, phrase2: str, assumed_dir: str) -> str:
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
-    ones, twos = referable_ids(index, pair.a), referable_ids(index, pair.b)
-    if not ones or not twos:
-        return
     origin_a, origin_b = camera_center(scene.views[pair.a]), camera_center(scene.views[pair.b])
-    for k in lazy_permutation(len(ones) * len(twos), rng):
-        i, j = divmod(k, len(twos))
-        one, two = index.instance(ones[i]), index.instance(twos[j])
-        if one.id == two.id or phrase_key(one) == phrase_key(two):
+    for one, two in object_pairs(index, pair, rng):
+        if phrase_key(one) == phrase_key(two):
             continue
         ref = ground_leg(one.box.center - origin_a, up)
         query = ground_leg(two.box.center - origin_b, up)
@@ -173,31 +155,11 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         )
 
 
-def generate(
-    scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS,
-) -> Iterator[QARecord]:
-    """Every valid cross-view cardinal question of ``scene``, lazily, in a seeded order (module docstring)."""
-    yield from round_robin_pairs(scene, VisibilityIndex(scene, thresholds), pair_rules, rng, _pair_stream)
-
-
-def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS) -> QuestionFamily:
-    """The cross-view cardinal family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
-    return QuestionFamily(
-        name=NAME,
-        task_group=TaskGroup.CAMERA_OBJECT,
-        answer_types=frozenset({AnswerType.MCQ}),
-        sub_question_types=(SUB_QUESTION_TYPE,),
-        num_views=(2,),
-        generate=functools.partial(generate, thresholds=thresholds, pair_rules=pair_rules),
-        needs=frozenset({"visibility", "covisibility"}),
-        description="Given the compass direction of an object seen from image A, the compass direction of another seen from image B.",
-    )
-
-
+#: ``make_family(thresholds, pair_rules)``: this family with other visibility thresholds / pair rules
+#: (:func:`~spacedg.plugins.questions.pairs.pair_family`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = pair_family(
+    _pair_stream, name=NAME, task_group=TaskGroup.CAMERA_OBJECT, answer_types={AnswerType.MCQ}, sub_question_types=(SUB_QUESTION_TYPE,),
+    description="Given the compass direction of an object seen from image A, the compass direction of another seen from image B.",
+)
 FAMILY = make_family()
-
-
-@hookimpl
-def spacedg_register_question_families(register: Any) -> None:
-    """Register :data:`FAMILY`."""
-    register(FAMILY)
+spacedg_register_question_families = registering(FAMILY)

@@ -29,10 +29,11 @@ Question: the two marker sentences, then the paper's wording on its own lines::
 (The paper's last line "Output format: <answer>NUMBER</answer>" is left out: the evaluation
 system prompt asks for the tags, as in ``camera_object_distance_estimation``.)
 
-Order: pairs in ``sample_pairs`` order, visited round-robin (one record per pair per round);
-each pair's (object 1, object 2) candidates in a lazily drawn seeded permutation
-(:func:`~spacedg.plugins.questions.records.lazy_permutation`). Same seed, same records in the
-same order; everything is lazy.
+Order: pairs in ``sample_pairs`` order, visited round-robin (one record per pair per round;
+the family is made by :func:`~spacedg.plugins.questions.pairs.pair_family`); each pair's
+(object 1, object 2) candidates in a lazily drawn seeded permutation
+(:func:`~spacedg.plugins.questions.pairs.object_pairs`). Same seed, same records in the same
+order; everything is lazy.
 
 Geometry block (JSON): ``up``; ``cameras`` (view → 4×4 ``cam_to_world``); ``objects`` (id,
 label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{"id", "label",
@@ -43,36 +44,25 @@ metres); ``distance_m`` (unrounded); ``decimals``; ``thresholds`` (``min_distanc
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Iterator
-from typing import Any
 
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.plugins.questions.view_sampling import (
-    OBJECT_PAIRS,
     PairRules,
     ViewPair,
     VisibilityIndex,
     label_key,
 )
-from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.language import find_in_image
-from spacedg.plugins.questions.records import (
-    lazy_permutation,
-    make_record,
-    objects_block,
-    phrase,
-    referable_ids,
-    round_robin_pairs,
-)
-from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.questions.pairs import object_pairs, pair_family
+from spacedg.plugins.questions.records import make_record, objects_block, phrase
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
-__all__ = ["DECIMALS", "FAMILY", "MIN_DISTANCE_M", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "generate", "make_family", "render_question"]
+__all__ = ["DECIMALS", "FAMILY", "MIN_DISTANCE_M", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "make_family", "render_question"]
 
 NAME = "inter_object_distance"
 SUB_QUESTION_TYPE = "two_view"
@@ -94,13 +84,8 @@ def render_question(phrase1: str, phrase2: str) -> str:
 
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
     views = (pair.a, pair.b)
-    ones, twos = referable_ids(index, pair.a), referable_ids(index, pair.b)
-    if not ones or not twos:
-        return
-    for k in lazy_permutation(len(ones) * len(twos), rng):
-        i, j = divmod(k, len(twos))
-        one, two = index.instance(ones[i]), index.instance(twos[j])
-        if one.id == two.id or label_key(one.label) == label_key(two.label):
+    for one, two in object_pairs(index, pair, rng):
+        if label_key(one.label) == label_key(two.label):
             continue
         vector = two.box.center - one.box.center
         distance = float(np.linalg.norm(vector))
@@ -122,31 +107,11 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         )
 
 
-def generate(
-    scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS,
-) -> Iterator[QARecord]:
-    """Every valid inter-object distance question of ``scene``, lazily, in a seeded order (module docstring)."""
-    yield from round_robin_pairs(scene, VisibilityIndex(scene, thresholds), pair_rules, rng, _pair_stream)
-
-
-def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS) -> QuestionFamily:
-    """The inter-object distance family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
-    return QuestionFamily(
-        name=NAME,
-        task_group=TaskGroup.OBJECT_CENTRIC,
-        answer_types=frozenset({AnswerType.NA}),
-        sub_question_types=(SUB_QUESTION_TYPE,),
-        num_views=(2,),
-        generate=functools.partial(generate, thresholds=thresholds, pair_rules=pair_rules),
-        needs=frozenset({"visibility", "covisibility"}),
-        description="Metric distance between the centres of an object seen in image A and a differently labelled one seen in image B.",
-    )
-
-
+#: ``make_family(thresholds, pair_rules)``: this family with other visibility thresholds / pair rules
+#: (:func:`~spacedg.plugins.questions.pairs.pair_family`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = pair_family(
+    _pair_stream, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.NA}, sub_question_types=(SUB_QUESTION_TYPE,),
+    description="Metric distance between the centres of an object seen in image A and a differently labelled one seen in image B.",
+)
 FAMILY = make_family()
-
-
-@hookimpl
-def spacedg_register_question_families(register: Any) -> None:
-    """Register :data:`FAMILY`."""
-    register(FAMILY)
+spacedg_register_question_families = registering(FAMILY)

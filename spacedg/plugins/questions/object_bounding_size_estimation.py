@@ -37,9 +37,7 @@ invariant under any rigid motion of the scene.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Iterator
-from typing import Any
 
 import numpy as np
 
@@ -47,7 +45,7 @@ from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import VisibilityIndex
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.records import (
     make_record,
     object_entry,
@@ -55,7 +53,7 @@ from spacedg.plugins.questions.records import (
     ref_entry,
     referable_ids,
 )
-from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = ["DECIMALS", "FAMILY", "NAME", "SUB_QUESTION_TYPE", "TEMPLATES", "generate", "make_family", "render_question", "size_list"]
@@ -129,24 +127,11 @@ def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThres
         yield _record(scene, index, view, inst, int(templates[idx]))
 
 
-def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> QuestionFamily:
-    """The bounding-size family with custom visibility thresholds (the registered one uses the defaults)."""
-    return QuestionFamily(
-        name=NAME,
-        task_group=TaskGroup.OBJECT_CENTRIC,
-        answer_types=frozenset({AnswerType.SIZE_LIST}),
-        sub_question_types=(SUB_QUESTION_TYPE,),
-        num_views=(1,),
-        generate=functools.partial(generate, thresholds=thresholds),
-        needs=frozenset({"visibility"}),
-        description="The three edge lengths [shortest, middle, longest] of a clearly visible object's box, in metres.",
-    )
-
-
+#: ``make_family(thresholds)``: this family with other visibility thresholds
+#: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = FamilyFactory(
+    generate, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.SIZE_LIST}, sub_question_types=(SUB_QUESTION_TYPE,),
+    num_views=(1,), needs={"visibility"}, description="The three edge lengths [shortest, middle, longest] of a clearly visible object's box, in metres.",
+)
 FAMILY = make_family()
-
-
-@hookimpl
-def spacedg_register_question_families(register: Any) -> None:
-    """Register :data:`FAMILY`."""
-    register(FAMILY)
+spacedg_register_question_families = registering(FAMILY)

@@ -38,7 +38,6 @@ seed gives the same records in the same order, and a caller may stop after any n
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -49,10 +48,10 @@ from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import confusable
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.language import label_text, plural
 from spacedg.plugins.questions.records import make_record
-from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = ["NAME", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
@@ -159,24 +158,11 @@ def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThres
         yield _record(scene, candidates[idx], int(templates[idx]), thresholds)
 
 
-def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> QuestionFamily:
-    """The object-counting family with custom visibility thresholds (the registered one uses the defaults)."""
-    return QuestionFamily(
-        name=NAME,
-        task_group=TaskGroup.OBJECT_CENTRIC,
-        answer_types=frozenset({AnswerType.COUNT}),
-        sub_question_types=(SUB_QUESTION_TYPE,),
-        num_views=(1,),
-        generate=functools.partial(generate, thresholds=thresholds),
-        needs=frozenset({"visibility"}),
-        description="How many clearly visible instances of a label one image shows (grey-zone views skipped).",
-    )
-
-
+#: ``make_family(thresholds)``: this family with other visibility thresholds
+#: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = FamilyFactory(
+    generate, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.COUNT}, sub_question_types=(SUB_QUESTION_TYPE,),
+    num_views=(1,), needs={"visibility"}, description="How many clearly visible instances of a label one image shows (grey-zone views skipped).",
+)
 FAMILY = make_family()
-
-
-@hookimpl
-def spacedg_register_question_families(register: Any) -> None:
-    """Register :data:`FAMILY`."""
-    register(FAMILY)
+spacedg_register_question_families = registering(FAMILY)

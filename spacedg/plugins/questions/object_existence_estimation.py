@@ -51,10 +51,8 @@ answer is independent of geometry, hence invariant under a rigid motion of the s
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -62,10 +60,10 @@ from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import VisibilityIndex, confusable, label_key
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.language import indefinite_article, label_text
 from spacedg.plugins.questions.records import make_record
-from spacedg.plugins.question_family import QuestionFamily
+from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -89,6 +87,7 @@ TEMPLATES: tuple[str, ...] = (
     "Does the image contain {article} {label}?",
     "Check if {article} {label} is present in this picture.",
 )
+
 
 def render_question(template: int, label: str) -> str:
     """The question text of template index ``template`` for ``label``."""
@@ -176,24 +175,11 @@ def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThres
         yield _record(scene, index, b, int(rng.integers(0, len(TEMPLATES))))
 
 
-def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> QuestionFamily:
-    """The existence family with custom visibility thresholds (the registered one uses the defaults)."""
-    return QuestionFamily(
-        name=NAME,
-        task_group=TaskGroup.OBJECT_CENTRIC,
-        answer_types=frozenset({AnswerType.YN}),
-        sub_question_types=(SUB_QUESTION_TYPE,),
-        num_views=(1,),
-        generate=functools.partial(generate, thresholds=thresholds),
-        needs=frozenset({"visibility"}),
-        description="Whether an object of a label is visible in one image (yes/no balanced 50/50; grey zone skipped).",
-    )
-
-
+#: ``make_family(thresholds)``: this family with other visibility thresholds
+#: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = FamilyFactory(
+    generate, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.YN}, sub_question_types=(SUB_QUESTION_TYPE,),
+    num_views=(1,), needs={"visibility"}, description="Whether an object of a label is visible in one image (yes/no balanced 50/50; grey zone skipped).",
+)
 FAMILY = make_family()
-
-
-@hookimpl
-def spacedg_register_question_families(register: Any) -> None:
-    """Register :data:`FAMILY`."""
-    register(FAMILY)
+spacedg_register_question_families = registering(FAMILY)

@@ -49,8 +49,9 @@ leaves out and which reads badly with descriptions)::
     The direction of the red lamp relative to the wooden table is west. What is the direction of the blue sofa relative to the wooden table?
 
 Order and bounded enumeration: pairs in ``sample_pairs`` order, visited round-robin (one record
-per pair per round). A pair's candidates are the ordered triplets of distinct usable objects,
-``n(n−1)(n−2)`` of them, walked in a seeded random order drawn **lazily**
+per pair per round; the family is made by :func:`~spacedg.plugins.questions.pairs.pair_family`).
+A pair's candidates are the ordered triplets of distinct usable objects, ``n(n−1)(n−2)`` of
+them, walked in a seeded random order drawn **lazily**
 (:func:`~spacedg.plugins.questions.records.lazy_permutation`: memory and time grow with what
 is taken, not with ``n³``); pairs where no triplet can satisfy the
 three-object rule (every usable object seen in one of the images) are dropped before any draw.
@@ -73,7 +74,6 @@ id, label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{
 
 from __future__ import annotations
 
-import functools
 import itertools
 from collections.abc import Iterator
 from typing import Any
@@ -83,20 +83,19 @@ import numpy as np
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.plugins.questions.view_sampling import (
-    OBJECT_PAIRS,
     PairRules,
     ViewPair,
     VisibilityIndex,
     split_across_views,
 )
-from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import (
     INTERSECT_TOL_M,
     boxes_intersect,
     ground_leg,
 )
 from spacedg.plugins.questions.language import find_in_image
+from spacedg.plugins.questions.pairs import pair_family
 from spacedg.plugins.questions.records import (
     compass_question,
     lazy_permutation,
@@ -105,12 +104,10 @@ from spacedg.plugins.questions.records import (
     phrase,
     phrase_key,
     referable_ids,
-    round_robin_pairs,
 )
-from spacedg.plugins.question_family import QuestionFamily
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
-__all__ = ["FAMILY", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "decode_triplet", "generate", "make_family", "render_question"]
+__all__ = ["FAMILY", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "decode_triplet", "make_family", "render_question"]
 
 NAME = "object_proxy_cardinal_direction"
 SUB_QUESTION_TYPE = "proxy_frame"
@@ -207,31 +204,11 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         )
 
 
-def generate(
-    scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS,
-) -> Iterator[QARecord]:
-    """Every valid proxy-frame compass question of ``scene``, lazily, in a seeded order (module docstring)."""
-    yield from round_robin_pairs(scene, VisibilityIndex(scene, thresholds), pair_rules, rng, _pair_stream)
-
-
-def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS) -> QuestionFamily:
-    """The proxy-frame compass family with custom visibility thresholds / pair rules (the registered one uses the defaults)."""
-    return QuestionFamily(
-        name=NAME,
-        task_group=TaskGroup.OBJECT_CENTRIC,
-        answer_types=frozenset({AnswerType.MCQ}),
-        sub_question_types=(SUB_QUESTION_TYPE,),
-        num_views=(2,),
-        generate=functools.partial(generate, thresholds=thresholds, pair_rules=pair_rules),
-        needs=frozenset({"visibility", "covisibility"}),
-        description="Given the compass direction of object A from object B, the compass direction of object C from B.",
-    )
-
-
+#: ``make_family(thresholds, pair_rules)``: this family with other visibility thresholds / pair rules
+#: (:func:`~spacedg.plugins.questions.pairs.pair_family`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = pair_family(
+    _pair_stream, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.MCQ}, sub_question_types=(SUB_QUESTION_TYPE,),
+    description="Given the compass direction of object A from object B, the compass direction of object C from B.",
+)
 FAMILY = make_family()
-
-
-@hookimpl
-def spacedg_register_question_families(register: Any) -> None:
-    """Register :data:`FAMILY`."""
-    register(FAMILY)
+spacedg_register_question_families = registering(FAMILY)

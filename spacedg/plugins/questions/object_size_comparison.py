@@ -48,8 +48,9 @@ Question text: the two marker sentences, then the question on its own line::
 
 Order: pairs come in :func:`sample_pairs` order (round-robin over anchor views). Each pair's
 candidates ``(object 1, object 2, sub type)`` are shuffled by ``rng.permutation`` the first
-time the pair is visited; records are then emitted **round-robin over pairs** (the first
-candidate of every pair, then the second of every pair, ...), so a caller that stops after
+time the pair is visited; records are then emitted **round-robin over pairs** (the first valid
+candidate of every pair, then the second of every pair, ...; the family is made by
+:func:`~spacedg.plugins.questions.pairs.pair_family`), so a caller that stops after
 ``n`` records gets them spread over as many view pairs as possible. Every draw comes from the
 one ``rng``, so a seed fixes the records and their order. Records are built lazily.
 
@@ -69,28 +70,23 @@ The ``objects`` and ``refs`` entries are :func:`~spacedg.plugins.questions.recor
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Iterator
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
-    OBJECT_PAIRS,
     PairRules,
     ViewPair,
     VisibilityIndex,
     description_key,
     label_key,
-    sample_pairs,
 )
-from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
-from spacedg.plugins.hookspecs import hookimpl
+from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import build_mcq
 from spacedg.plugins.questions.language import find_in_image
+from spacedg.plugins.questions.pairs import pair_family
 from spacedg.plugins.questions.records import (
     make_record,
     object_entry,
@@ -99,7 +95,6 @@ from spacedg.plugins.questions.records import (
     ref_entry,
     referable_ids,
 )
-from spacedg.plugins.question_family import QuestionFamily
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -112,7 +107,6 @@ __all__ = [
     "TEMPLATES",
     "TIE_THRESHOLD_M",
     "TOP",
-    "generate",
     "longest_side",
     "make_family",
     "render_question",
@@ -217,78 +211,27 @@ def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str
     )
 
 
-@dataclass
-class _PairSlot:
-    """One view pair's candidates: index ``k`` decodes to (object 1, object 2, sub type)."""
-
-    pair: ViewPair
-    ones: list[Instance]
-    twos: list[Instance]
-    order: np.ndarray | None = None
-    cursor: int = 0
-
-    @property
-    def size(self) -> int:
-        return len(self.ones) * len(self.twos) * len(SUB_QUESTION_TYPES)
-
-    def decode(self, k: int) -> tuple[Instance, Instance, str]:
-        rest, s = divmod(k, len(SUB_QUESTION_TYPES))
-        i, j = divmod(rest, len(self.twos))
-        return self.ones[i], self.twos[j], SUB_QUESTION_TYPES[s]
+def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+    """The pair's candidates ``(object 1, object 2, sub type)`` in the order of one ``rng.permutation``
+    (drawn on the first ``next``); candidate ``k`` = object 1 ``k // (len(twos) · 2)``, object 2
+    ``k // 2 % len(twos)``, sub type ``k % 2``. A pair without objects on both sides draws nothing."""
+    ones = [index.instance(i) for i in referable_ids(index, pair.a)]
+    twos = [index.instance(i) for i in referable_ids(index, pair.b)]
+    size = len(ones) * len(twos) * len(SUB_QUESTION_TYPES)
+    if not size:
+        return
+    for k in rng.permutation(size):
+        rest, s = divmod(int(k), len(SUB_QUESTION_TYPES))
+        i, j = divmod(rest, len(twos))
+        if _distinguishable(ones[i], twos[j]):
+            yield _record(scene, pair, ones[i], twos[j], SUB_QUESTION_TYPES[s], rng)
 
 
-def generate(
-    scene: Scene,
-    rng: np.random.Generator,
-    thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
-    pair_rules: PairRules = OBJECT_PAIRS,
-) -> Iterator[QARecord]:
-    """Every valid size-comparison question of ``scene``, lazily, in a seeded order (module docstring)."""
-    index = VisibilityIndex(scene, thresholds)
-    by_view: dict[str, list[Instance]] = {}
-    slots: list[_PairSlot] = []
-    for pair in sample_pairs(scene, pair_rules, rng):
-        for view in (pair.a, pair.b):
-            if view not in by_view:
-                by_view[view] = list(map(index.instance, referable_ids(index, view)))
-        ones, twos = by_view[pair.a], by_view[pair.b]
-        if ones and twos:
-            slots.append(_PairSlot(pair, ones, twos))
-    active = slots
-    while active:
-        still: list[_PairSlot] = []
-        for slot in active:
-            if slot.order is None:
-                slot.order = rng.permutation(slot.size)
-            while slot.cursor < slot.size:
-                one, two, sub = slot.decode(int(slot.order[slot.cursor]))
-                slot.cursor += 1
-                if _distinguishable(one, two):
-                    yield _record(scene, slot.pair, one, two, sub, rng)
-                    break
-            if slot.cursor < slot.size:
-                still.append(slot)
-        active = still
-
-
-def make_family(thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS, pair_rules: PairRules = OBJECT_PAIRS) -> QuestionFamily:
-    """The size-comparison family with custom visibility thresholds / pair rules (registered: defaults)."""
-    return QuestionFamily(
-        name=NAME,
-        task_group=TaskGroup.OBJECT_CENTRIC,
-        answer_types=frozenset({AnswerType.MCQ}),
-        sub_question_types=SUB_QUESTION_TYPES,
-        num_views=(2,),
-        generate=functools.partial(generate, thresholds=thresholds, pair_rules=pair_rules),
-        needs=frozenset({"visibility", "covisibility"}),
-        description="Which of two objects, seen in two images, has the longer longest side or the higher top.",
-    )
-
-
+#: ``make_family(thresholds, pair_rules)``: this family with other visibility thresholds / pair rules
+#: (:func:`~spacedg.plugins.questions.pairs.pair_family`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = pair_family(
+    _pair_stream, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.MCQ}, sub_question_types=SUB_QUESTION_TYPES,
+    description="Which of two objects, seen in two images, has the longer longest side or the higher top.",
+)
 FAMILY = make_family()
-
-
-@hookimpl
-def spacedg_register_question_families(register: Any) -> None:
-    """Register :data:`FAMILY`."""
-    register(FAMILY)
+spacedg_register_question_families = registering(FAMILY)

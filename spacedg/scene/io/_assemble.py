@@ -13,10 +13,12 @@ import numpy as np
 
 from spacedg.files import PathLike, as_path, require_file
 from spacedg.scene.io.colmap import read_colmap
+from spacedg.scene.io.inria import read_inria_cameras
 from spacedg.scene.io.instances import read_instances
 from spacedg.scene.io.nerfstudio import read_transforms
 from spacedg.scene.io.ply import read_ply
 from spacedg.scene.io.splat import read_splat
+from spacedg.scene.io.spz import read_spz
 from spacedg.scene.model import Instance, Scene
 from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.render.camera import Camera
@@ -26,15 +28,27 @@ from spacedg.render.gaussians import Gaussians
 MIN_UP_AGREEMENT = 0.5
 
 
+#: Gaussian file suffixes :func:`read_gaussians` reads.
+GAUSSIAN_SUFFIXES = (".ply", ".splat", ".spz")
+
+
 def read_gaussians(path: PathLike) -> Gaussians:
-    """Read Gaussians from a ``.ply`` (INRIA 3DGS) or ``.splat`` file, chosen by suffix."""
+    """Read Gaussians from a ``.ply`` (INRIA 3DGS, PlayCanvas compressed, colour-only), ``.splat``
+    or ``.spz`` file, chosen by suffix. ``.ksplat`` is refused with a conversion hint."""
     p = as_path(path, "Gaussians file")
     suffix = p.suffix.lower()
     if suffix == ".ply":
         return read_ply(p)
     if suffix == ".splat":
         return read_splat(p)
-    raise FileFormatError(f"{p}: unknown Gaussians file type {p.suffix!r}; use a .ply (INRIA 3DGS) or .splat file")
+    if suffix == ".spz":
+        return read_spz(p)
+    if suffix == ".ksplat":
+        raise FileFormatError(
+            f"{p}: .ksplat (GaussianSplats3D's viewer format) is not read: it has versioned, quantised sections with no "
+            "published spec outside that viewer. Export the scene as .ply (or convert with that viewer's tools) and import the .ply"
+        )
+    raise FileFormatError(f"{p}: unknown Gaussians file type {p.suffix!r}; use a .ply (INRIA 3DGS / compressed), .splat or .spz file")
 
 
 def load_scaled_gaussians(path: str, scale: float) -> Gaussians:
@@ -45,10 +59,12 @@ def load_scaled_gaussians(path: str, scale: float) -> Gaussians:
 
 def read_views(source: PathLike | Mapping[str, Camera], opencv_distortion: Literal["error", "drop"] = "error") -> dict[str, Camera]:
     """Cameras from a COLMAP model folder, a ``transforms.json`` (or a folder holding one and
-    no COLMAP model), or a ready mapping name → Camera."""
+    no COLMAP model), an INRIA ``cameras.json``, or a ready mapping name → Camera."""
     if isinstance(source, Mapping):
         return dict(source)
     p = as_path(source, "views")
+    if p.is_file() and p.name == "cameras.json":
+        return read_inria_cameras(p)
     if p.is_dir():
         has_colmap = any((p / f"cameras.{ext}").is_file() for ext in ("bin", "txt"))
         if not has_colmap and (p / "transforms.json").is_file():
@@ -109,9 +125,10 @@ def scene_from_files(
     Args:
         id: scene id.
         gaussians_path: ``.ply`` (INRIA 3DGS) or ``.splat``; loaded lazily on first use.
-        views: a COLMAP model folder, a ``transforms.json`` (or its folder), or a mapping
-            name → Camera (see :func:`read_views`).
-        instances_path: instance JSON (:func:`read_instances`); image names must be views.
+        views: a COLMAP model folder, a ``transforms.json`` (or its folder), an INRIA
+            ``cameras.json``, or a mapping name → Camera (see :func:`read_views`).
+        instances_path: instance JSON (:func:`read_instances`, Holi-Spatial's layout included);
+            image references must resolve to views.
         up: unit vector against gravity, in the **files'** world frame; ``None`` estimates it
             with :func:`estimate_up` (recorded in ``metadata["up_source"]``).
         scale: metres per file unit, applied once to Gaussians (positions and sizes), camera
@@ -124,8 +141,8 @@ def scene_from_files(
     scale = float(scale)
     gpath = as_path(gaussians_path, "Gaussians file")
     require_file(gpath, "Gaussians file")
-    if gpath.suffix.lower() not in (".ply", ".splat"):
-        raise FileFormatError(f"{gpath}: unknown Gaussians file type {gpath.suffix!r}; use a .ply or .splat file")
+    if gpath.suffix.lower() not in GAUSSIAN_SUFFIXES:
+        read_gaussians(gpath)  # raises the suffix's own message
     cameras = read_views(views, opencv_distortion)
     instances = read_instances(instances_path, views=cameras.keys()) if instances_path is not None else []
     if up is None:

@@ -44,6 +44,7 @@ from spacedg.files import FileValueError, PathLike, as_path
 from spacedg.errors import FileFormatError, InvalidDataError, error_context
 from spacedg.render.camera import Camera, FisheyeLens
 from spacedg.render.gaussians import quat_to_matrix
+from spacedg.scene.io.colmap_check import check_text_model, pycolmap_message
 
 #: Field of view limit of COLMAP fisheye cameras, radians from the optical axis.
 DEFAULT_FISHEYE_MAX_THETA = math.pi / 2
@@ -209,13 +210,13 @@ def _load_reconstruction(folder: Path) -> Any:
     ext = _detect_format(folder)
     if ext == "bin":
         _check_binary(folder)
+    else:
+        check_text_model(folder)  # file:line messages for what pycolmap reports as C++ "Check failed" text
     with _staged(folder, ext) as stage:
         try:
             return pycolmap.Reconstruction(str(stage))
         except Exception as err:  # pycolmap raises ValueError/RuntimeError with C++ messages
-            raise FileFormatError(
-                f"{folder}: pycolmap could not read this COLMAP {'binary' if ext == 'bin' else 'text'} model: {err}"
-            ) from err
+            raise FileFormatError(pycolmap_message(folder, ext, err)) from err
 
 
 # ------------------------------------------------------------------- conversion

@@ -3,16 +3,26 @@
 Accepted layout: a JSON list of instances, or an object ``{"instances": [...]}``. Each
 instance is an object with:
 
-- ``id`` (or ``instance_id``): integer >= 0, unique in the file.
+- ``id`` (or ``instance_id``, or Holi-Spatial's ``ins_id``): integer >= 0 (a string of
+  digits, as Holi-Spatial writes it, is accepted), unique in the file.
 - ``label`` (or ``category``): category word.
 - ``description`` (optional, default ``""``): view-invariant description.
 - the box, either
   - ``obb_transform`` (4×4 local-to-world, rigid) + ``obb_extents`` (3 **full** side
     lengths), or
-  - 8 corners in any order under ``corners``, ``bbox_corners`` or ``obb_corners``.
+  - 8 corners in any order under ``corners``, ``bbox_corners``, ``obb_corners`` or
+    ``bounding_box`` (Holi-Spatial), each ``[x, y, z]`` or ``{"x", "y", "z"}``.
+  A reflected ``obb_transform`` (det −1, as ``trimesh.bounds.oriented_bounds`` may return)
+  describes the same box and is turned into a rotation.
   When both are present they must describe the same box (the transform is used).
-- ``images`` (or ``visible_images``, optional): names of the views the object was annotated in.
-- ``best_image`` / ``best_view`` (optional): stored in ``attributes["best_image"]``.
+- ``images`` (or ``visible_images``, optional): the views the object was annotated in. With
+  ``views`` given, each reference is resolved to a view name: the exact name, else the same
+  file name, else the same file stem (INRIA names views by stem), else the **parent folder**
+  of a mask file (Holi-Spatial writes mask paths ``<mask_root>/<image stem>/<label>.png``);
+  such mask paths are kept in ``attributes["masks"]`` (view → path as written).
+- ``best_image`` / ``best_view`` / ``highest_confidence_mask`` (optional): stored in
+  ``attributes["best_image"]`` (resolved the same way).
+- ``mask_encodings`` (Holi-Spatial's COCO RLE masks) are not read: masks come from the files.
 - ``attributes`` (optional object) and ``visibility`` (optional, as written by
   :func:`write_instances`) are kept.
 
@@ -23,6 +33,8 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import replace
+from pathlib import PurePath
 from typing import Any
 
 import numpy as np
@@ -32,7 +44,8 @@ from spacedg.files import FileValueError, PathLike, as_path, atomic_write, dump_
 from spacedg.scene.model import Instance, InstanceVisibility
 from spacedg.errors import FileFormatError, InvalidDataError
 
-_CORNER_KEYS = ("corners", "bbox_corners", "obb_corners")
+_CORNER_KEYS = ("corners", "bbox_corners", "obb_corners", "bounding_box")
+_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".npy")
 #: Largest disagreement between given corners and obb_transform/extents, relative to the box diagonal.
 CORNER_AGREEMENT_TOL = 1e-4
 
@@ -73,9 +86,15 @@ def _box(where: str, item: Mapping[str, Any]) -> OrientedBox:
             if not np.allclose(transform[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
                 raise FileValueError(f"{where}: 'obb_transform' last row must be [0, 0, 0, 1], got {transform[3].tolist()}")
             extents = _matrix(where, "obb_extents", item["obb_extents"], (3,))
-            box = OrientedBox.from_transform(transform, extents)
+            box = OrientedBox.from_transform(transform, extents)  # a reflection becomes a rotation
         if corner_key is not None:
-            corners = _matrix(where, corner_key, item[corner_key], (8, 3))
+            raw = item[corner_key]
+            if isinstance(raw, list) and raw and all(isinstance(c, dict) for c in raw):
+                try:
+                    raw = [[c["x"], c["y"], c["z"]] for c in raw]
+                except KeyError:
+                    raise FileFormatError(f"{where}: '{corner_key}' corners must each have 'x', 'y' and 'z'") from None
+            corners = _matrix(where, corner_key, raw, (8, 3))
             from_corners = OrientedBox.from_corners(corners)
             if box is None:
                 return from_corners
@@ -105,12 +124,14 @@ def _names(where: str, key: str, value: Any) -> tuple[str, ...]:
 def _instance(where: str, item: Any) -> Instance:
     if not isinstance(item, dict):
         raise FileFormatError(f"{where}: expected an object, got {type(item).__name__}")
-    id_key = _first_key(item, ("id", "instance_id"))
+    id_key = _first_key(item, ("id", "instance_id", "ins_id"))
     if id_key is None:
-        raise FileFormatError(f"{where}: missing 'id' (or 'instance_id')")
+        raise FileFormatError(f"{where}: missing 'id' (or 'instance_id' / 'ins_id')")
     inst_id = item[id_key]
+    if isinstance(inst_id, str) and inst_id.strip().isdigit():
+        inst_id = int(inst_id.strip())
     if isinstance(inst_id, bool) or not isinstance(inst_id, int) or inst_id < 0:
-        raise FileValueError(f"{where}: '{id_key}' must be an integer >= 0, got {inst_id!r}")
+        raise FileValueError(f"{where}: '{id_key}' must be an integer >= 0 (or a string of digits), got {inst_id!r}")
     where = f"{where} (id {inst_id})"
     label_key = _first_key(item, ("label", "category"))
     if label_key is None:
@@ -127,7 +148,7 @@ def _instance(where: str, item: Any) -> Instance:
     if not isinstance(attributes, dict):
         raise FileFormatError(f"{where}: 'attributes' must be an object, got {type(attributes).__name__}")
     attributes = dict(attributes)
-    best_key = _first_key(item, ("best_image", "best_view"))
+    best_key = _first_key(item, ("best_image", "best_view", "highest_confidence_mask"))
     if best_key is not None:
         best = item[best_key]
         if not isinstance(best, str) or not best:
@@ -151,21 +172,74 @@ def _visibility(where: str, value: Any) -> dict[str, InstanceVisibility]:
     return out
 
 
-def _check_views(path: str, instances: list[Instance], views: Iterable[str]) -> None:
-    known = set(views)
+class _ViewResolver:
+    """Maps an image reference to a view name (see the module docstring for the rules)."""
+
+    def __init__(self, views: Iterable[str]) -> None:
+        self.known = set(views)
+        self.by_name: dict[str, set[str]] = {}
+        self.by_stem: dict[str, set[str]] = {}
+        for view in self.known:
+            name = PurePath(view).name
+            self.by_name.setdefault(name, set()).add(view)
+            self.by_stem.setdefault(name.rsplit(".", 1)[0] if "." in name else name, set()).add(view)
+
+    @staticmethod
+    def _one(found: set[str] | None) -> str | None:
+        return next(iter(found)) if found is not None and len(found) == 1 else None
+
+    def __call__(self, ref: str) -> tuple[str | None, bool]:
+        """``(view or None, is_mask_path)``."""
+        if ref in self.known:
+            return ref, False
+        path = PurePath(ref.replace("\\", "/"))
+        view = self._one(self.by_name.get(path.name)) or self._one(self.by_stem.get(path.stem))
+        if view is not None:
+            return view, False
+        if path.suffix.lower() in _IMAGE_SUFFIXES and path.parent.name:
+            view = self._one(self.by_stem.get(path.parent.name))
+            if view is not None:
+                return view, True
+        return None, False
+
+
+def _resolve_views(path: str, instances: list[Instance], views: Iterable[str]) -> list[Instance]:
+    resolve = _ViewResolver(views)
+    known = resolve.known
     unknown: list[tuple[int, str]] = []
+    out = []
     for inst in instances:
-        names = [*inst.images, *inst.visibility]
-        best = inst.attributes.get("best_image")
+        images: list[str] = []
+        masks: dict[str, str] = dict(inst.attributes.get("masks", {}) or {})
+        for ref in inst.images:
+            view, is_mask = resolve(ref)
+            if view is None:
+                unknown.append((inst.id, ref))
+                continue
+            if view not in images:
+                images.append(view)
+            if is_mask:
+                masks.setdefault(view, ref)
+        attributes = dict(inst.attributes)
+        best = attributes.get("best_image")
         if isinstance(best, str):
-            names.append(best)
-        unknown += [(inst.id, n) for n in names if n not in known]
+            view, _ = resolve(best)
+            if view is None:
+                unknown.append((inst.id, best))
+            else:
+                attributes["best_image"] = view
+        unknown += [(inst.id, n) for n in inst.visibility if n not in known]
+        if masks:
+            attributes["masks"] = masks
+        out.append(replace(inst, images=tuple(images), attributes=attributes))
     if unknown:
         shown = ", ".join(f"{name!r} (instance {iid})" for iid, name in unknown[:5])
         raise FileValueError(
             f"{path}: {len(unknown)} image reference(s) name views the scene does not have, e.g. {shown}; "
-            f"known views are e.g. {sorted(known)[:5]}. Check that the annotation and the cameras come from the same capture"
+            f"known views are e.g. {sorted(known)[:5]}. Check that the annotation and the cameras come from the same capture "
+            "(references are matched by name, file name, file stem, or a mask file's parent folder)"
         )
+    return out
 
 
 def read_instances(path: PathLike, views: Iterable[str] | None = None) -> list[Instance]:
@@ -173,7 +247,8 @@ def read_instances(path: PathLike, views: Iterable[str] | None = None) -> list[I
 
     Args:
         path: the JSON file.
-        views: if given, the scene's view names; every image the annotation names must be one.
+        views: if given, the scene's view names; every image the annotation names must resolve
+            to one of them (name, file name, stem, or a mask file's parent folder).
 
     Raises:
         FileFormatError: bad JSON (line and column named), missing id/label/box, malformed
@@ -192,7 +267,7 @@ def read_instances(path: PathLike, views: Iterable[str] | None = None) -> list[I
     if dup:
         raise FileValueError(f"{p}: instance ids {dup[:10]} are used more than once; ids must be unique")
     if views is not None:
-        _check_views(str(p), instances, views)
+        instances = _resolve_views(str(p), instances, views)
     return instances
 
 

@@ -17,8 +17,18 @@ Conventions read:
 - ``transform_matrix`` is camera-to-world with **OpenGL** camera axes (x right, y up,
   z backwards); spacedg's OpenCV pose is ``c2w @ diag(1, −1, −1, 1)``. It must be rigid.
 - Poses are taken in the file's own world frame. ``applied_transform`` (nerfstudio's record
-  of how it moved the COLMAP world) is information only and is **not** applied or undone.
+  of how it moved the COLMAP world: ``p_json = A · p_colmap``, 3×4) is **not** applied by
+  :func:`read_transforms`; :func:`read_applied_transform` returns it for the importer.
+- ``frames`` **and** ``test_frames`` (ScanNet++'s held-out views, one in eight) are read, in
+  that order; a ``file_path`` in both is an error.
 - The view name is ``file_path`` exactly as written.
+
+splatfacto (``ns-train splatfacto``) trains in a normalised frame and writes
+``dataparser_transforms.json`` = ``{"transform": 3×4, "scale": s}`` with
+``p_norm = s · (T · [p_json; 1])``; ``ns-export gaussian-splat`` writes the Gaussians in that
+normalised frame. :func:`read_dataparser_transforms` reads it, and
+:func:`~spacedg.scene.io.nerfstudio.denormalising_similarity` gives the similarity that takes
+normalised points back to the ``transforms.json`` frame.
 """
 
 from __future__ import annotations
@@ -30,6 +40,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from spacedg._checks import require_homogeneous
 from spacedg.files import FileValueError, PathLike, as_path, read_json
 from spacedg.scene.io.colmap import DEFAULT_FISHEYE_MAX_THETA
 from spacedg.errors import FileFormatError, InvalidDataError
@@ -90,10 +101,7 @@ def _pose(where: str, value: Any) -> np.ndarray:
         matrix = np.vstack([matrix, [0.0, 0.0, 0.0, 1.0]])
     if matrix.shape != (4, 4):
         raise FileFormatError(f"{where}: 'transform_matrix' must be 4×4 (or 3×4), got shape {matrix.shape}")
-    if not np.isfinite(matrix).all():
-        raise FileValueError(f"{where}: 'transform_matrix' holds NaN or Inf")
-    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
-        raise FileValueError(f"{where}: 'transform_matrix' last row must be [0, 0, 0, 1], got {matrix[3].tolist()}")
+    require_homogeneous(matrix, f"{where}: 'transform_matrix'", FileValueError)
     rot = matrix[:3, :3]
     err = float(np.abs(rot.T @ rot - np.eye(3)).max())
     if err > RIGID_TOL:
@@ -156,13 +164,15 @@ def read_transforms(
     *,
     opencv_distortion: Literal["error", "drop"] = "error",
     fisheye_max_theta: float = DEFAULT_FISHEYE_MAX_THETA,
+    include_test_frames: bool = True,
 ) -> dict[str, Camera]:
-    """Read a ``transforms.json`` into cameras keyed by ``file_path`` (file order).
+    """Read a ``transforms.json`` into cameras keyed by ``file_path`` (``frames`` then ``test_frames``).
 
     Args:
         path: the JSON file.
         opencv_distortion: ``"error"`` or ``"drop"`` (see the module docstring).
         fisheye_max_theta: ``max_theta`` (radians) of ``OPENCV_FISHEYE`` lenses.
+        include_test_frames: also read ``test_frames`` (ScanNet++), default True.
 
     Raises:
         FileFormatError: not JSON, missing ``frames``/``file_path``/``transform_matrix``/
@@ -178,12 +188,16 @@ def read_transforms(
     frames = data.get("frames")
     if not isinstance(frames, list) or not frames:
         raise FileFormatError(f"{p}: 'frames' must be a non-empty list of frames (each with 'file_path' and 'transform_matrix')")
+    test_frames = data.get("test_frames", []) if include_test_frames else []
+    if not isinstance(test_frames, list):
+        raise FileFormatError(f"{p}: 'test_frames' must be a list of frames like 'frames', got {type(test_frames).__name__}")
+    listed = [("frames", i, f) for i, f in enumerate(frames)] + [("test_frames", i, f) for i, f in enumerate(test_frames)]
     top = {k: data[k] for k in _INTRINSIC_KEYS if k in data}
     size: tuple[int, int] | None = None
     out: dict[str, Camera] = {}
     dropped: list[str] = []
-    for index, frame in enumerate(frames):
-        where = f"{p}: frames[{index}]"
+    for key, index, frame in listed:
+        where = f"{p}: {key}[{index}]"
         if not isinstance(frame, dict):
             raise FileFormatError(f"{where}: expected an object, got {type(frame).__name__}")
         for key in ("file_path", "transform_matrix"):
@@ -214,3 +228,50 @@ def read_transforms(
             stacklevel=2,
         )
     return out
+
+
+def _rows34(where: str, key: str, value: Any) -> np.ndarray:
+    try:
+        matrix = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise FileFormatError(f"{where}: '{key}' must be a 3×4 (or 4×4) list of numbers") from None
+    if matrix.shape == (3, 4):
+        matrix = np.vstack([matrix, [0.0, 0.0, 0.0, 1.0]])
+    if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
+        raise FileFormatError(f"{where}: '{key}' must be 3×4 (or 4×4) finite numbers, got shape {matrix.shape}")
+    rot = matrix[:3, :3]
+    if float(np.abs(rot.T @ rot - np.eye(3)).max()) > RIGID_TOL or np.linalg.det(rot) < 0:
+        raise FileValueError(f"{where}: '{key}' rotation part is not a rotation (scaled, sheared or reflected)")
+    return matrix
+
+
+def read_applied_transform(path: PathLike) -> np.ndarray | None:
+    """nerfstudio's ``applied_transform`` of a ``transforms.json`` as a 4×4 (``p_json = A · p_colmap``),
+    or ``None`` when the file has none."""
+    p = as_path(path, "transforms.json")
+    data = read_json(p, "transforms.json")
+    if not isinstance(data, dict) or "applied_transform" not in data:
+        return None
+    return _rows34(str(p), "applied_transform", data["applied_transform"])
+
+
+def read_dataparser_transforms(path: PathLike) -> tuple[np.ndarray, float]:
+    """splatfacto's ``dataparser_transforms.json``: ``(T 4×4 rigid, s)`` with ``p_norm = s · T · p``.
+
+    Raises:
+        FileFormatError: missing ``transform`` / ``scale`` or malformed values.
+    """
+    p = as_path(path, "dataparser_transforms.json")
+    data = read_json(p, "dataparser_transforms.json")
+    if not isinstance(data, dict) or "transform" not in data or "scale" not in data:
+        raise FileFormatError(f"{p}: expected {{'transform': 3×4, 'scale': number}} (nerfstudio's dataparser_transforms.json)")
+    scale = _number(str(p), "scale", data["scale"])
+    if scale <= 0:
+        raise FileValueError(f"{p}: 'scale' must be positive, got {scale}")
+    return _rows34(str(p), "transform", data["transform"]), scale
+
+
+def denormalising_similarity(transform: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(R, t, k)`` with ``p = k · R p_norm + t`` undoing ``p_norm = scale · (transform · p)``."""
+    rot = transform[:3, :3]
+    return rot.T, -rot.T @ transform[:3, 3], 1.0 / scale

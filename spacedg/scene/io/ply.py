@@ -13,6 +13,11 @@ File layout (one ``vertex`` element, one record per Gaussian):
 - ``rot_0..3``: rotation quaternion **w, x, y, z**, not necessarily normalised.
 - ``instance_id`` (optional, any integer type): the spacedg instance id of each Gaussian, -1
   for none. Our native scene format writes it; other 3DGS tools ignore unknown properties.
+- ``filter_3D`` (optional, Mip-Splatting): folded into scales and opacities on read.
+
+Other layouts are recognised from the header and decoded by
+:mod:`spacedg.scene.io.ply_variants`: PlayCanvas / SuperSplat compressed plys (``chunk`` +
+packed ``vertex`` words) and colour-only plys (``red green blue`` instead of ``f_dc_*``).
 
 Reading converts once, at the boundary: ``scales = exp(scale_i)`` and ``opacities =
 sigmoid(opacity)`` are computed in float64 and rounded to float32; quaternions are normalised
@@ -54,6 +59,7 @@ import numpy as np
 from spacedg.files import FileValueError, PathLike, as_path, atomic_write, require_file
 from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.render.gaussians import QUAT_UNIT_TOL, SH_COEFFS, Gaussians
+from spacedg.scene.io.ply_variants import apply_filter_3d, decode_colour_points, decode_compressed, is_compressed
 
 #: The header (from ``ply`` to ``end_header``) must fit in this many bytes.
 MAX_HEADER_BYTES = 64 * 1024
@@ -452,13 +458,44 @@ def read_ply(path: PathLike) -> Gaussians:
         head = handle.read(MAX_HEADER_BYTES)
     header = _parse_header(p, head, file_size)
     vertex_index, vertex = _find_vertex(p, header)
+    names = {prop.name for prop in vertex.properties}
+    if is_compressed(names):
+        return decode_compressed(p, _read_fixed_elements(p, header, file_size))
+    if "f_dc_0" not in names and {"red", "green", "blue"} <= names and {"x", "y", "z"} <= names:
+        _check_fixed_before(p, header, vertex_index)
+        reader = _read_ascii if header.format == "ascii" else _read_binary
+        return decode_colour_points(p, reader(p, header, vertex_index, file_size))
     layout = _vertex_layout(p, vertex)
     _check_fixed_before(p, header, vertex_index)
     if header.format == "ascii":
         records = _read_ascii(p, header, vertex_index, file_size)
     else:
         records = _read_binary(p, header, vertex_index, file_size)
-    return _to_gaussians(p, records, layout)
+    gaussians = _to_gaussians(p, records, layout)
+    if "filter_3D" in names:
+        gaussians = apply_filter_3d(p, gaussians, records["filter_3D"])
+    return gaussians
+
+
+def _read_fixed_elements(path: Path, header: _Header, file_size: int) -> dict[str, np.ndarray]:
+    """Every element of a binary file whose elements are all fixed-size (the compressed layout)."""
+    if header.format == "ascii":
+        raise _fail(path, "a compressed (packed) ply must be binary")
+    order = _FORMATS[header.format]
+    out: dict[str, np.ndarray] = {}
+    offset = header.data_offset
+    for element in header.elements:
+        if not element.is_fixed_size:
+            raise _fail(path, f"element {element.name!r} has list properties; a compressed ply holds fixed-size elements only")
+        dtype = element.record_dtype(order)
+        need = element.count * dtype.itemsize
+        if offset + need > file_size:
+            raise _fail(path, f"truncated: element {element.name!r} declares {element.count} records ({need} bytes) past the end of the file")
+        with open(path, "rb") as handle:
+            handle.seek(offset)
+            out[element.name] = np.fromfile(handle, dtype=dtype, count=element.count)
+        offset += need
+    return out
 
 
 def _file_dtype(precision: str) -> np.dtype:

@@ -61,6 +61,15 @@ def _seed(rng: np.random.Generator) -> int:
     return int(rng.integers(0, 2**31 - 1))
 
 
+def _mottled(
+    color: np.ndarray, uv: np.ndarray, rng: np.random.Generator, scale: tuple[float, float], octaves: int, light: float, dark: float,
+) -> np.ndarray:
+    """``color · light`` blended towards ``color · dark`` by :func:`fbm` of ``uv`` scaled by ``scale``
+    (lattice cells per metre along u and v) with ``octaves``; one seed drawn from ``rng``."""
+    t = fbm(uv[:, 0] * scale[0], uv[:, 1] * scale[1], _seed(rng), octaves)
+    return _mix(color * light, color * dark, t)
+
+
 def wood(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Wood grain: stretched rings along u with noisy distortion, dark late-wood lines."""
     seed = _seed(rng)
@@ -95,17 +104,12 @@ def leather(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Ge
 
 def metal(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Brushed metal: fine streaks along u."""
-    seed = _seed(rng)
-    u, v = uv[:, 0], uv[:, 1]
-    streak = fbm(u * 3.0, v * 400.0, seed, 3)
-    return _mix(color * 1.15, color * 0.8, streak)
+    return _mottled(color, uv, rng, (3.0, 400.0), 3, 1.15, 0.8)
 
 
 def plastic(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Moulded plastic: nearly flat with a fine speckle."""
-    seed = _seed(rng)
-    speck = fbm(uv[:, 0] * 60.0, uv[:, 1] * 60.0, seed, 2)
-    return _mix(color * 1.06, color * 0.86, speck)
+    return _mottled(color, uv, rng, (60.0, 60.0), 2, 1.06, 0.86)
 
 
 def ceramic(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
@@ -193,10 +197,7 @@ def marble(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Gen
 
 def foliage(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """Leaves: high-contrast blotches of light and dark green."""
-    seed = _seed(rng)
-    u, v = uv[:, 0], uv[:, 1]
-    t = fbm(u * 40.0, v * 40.0, seed, 3)
-    return _mix(color * 1.35, color * 0.5, t)
+    return _mottled(color, uv, rng, (40.0, 40.0), 3, 1.35, 0.5)
 
 
 def screen(color: np.ndarray, uv: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spacedg.errors import InvalidDataError
 from spacedg.scene.synthetic.layout import RoomShape, loop_path
 from spacedg.scene.synthetic.textures import value_noise
 from spacedg.render.camera import Camera
@@ -31,6 +32,16 @@ class CaptureConfig:
     height: int = 480
     min_views: int = 48
     max_views: int = 120
+
+    def __post_init__(self) -> None:
+        for name, low, high in (("width", 8, 16384), ("height", 8, 16384), ("min_views", 1, 100_000), ("max_views", 1, 100_000)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= value <= high:
+                raise InvalidDataError(f"CaptureConfig: {name} must be an integer in [{low}, {high}], got {value!r}")
+        if self.min_views > self.max_views:
+            raise InvalidDataError(
+                f"CaptureConfig: min_views {self.min_views} is more than max_views {self.max_views}; pass min_views <= max_views"
+            )
 
 
 def _smooth(t: np.ndarray, seed: int, freq: float) -> np.ndarray:

@@ -189,8 +189,63 @@ def test_missing_and_garbage_models(tmp_path: Path) -> None:
     with pytest.raises(FileFormatError, match=r"no COLMAP model here.*sparse/0"):
         read_colmap(tmp_path / "empty")
     garbage = write_classic(tmp_path / "garbage", cameras="1 PINHOLE not numbers\n")
-    with pytest.raises(FileFormatError, match=rf"{garbage}.*pycolmap could not read"):
+    with pytest.raises(FileFormatError, match=rf"{garbage}/cameras.txt:1: WIDTH is 'not', not a whole number"):
         read_colmap(garbage)
+
+
+def _text_model(folder: Path) -> Path:
+    """A pycolmap-written text model with rigs and frames (two images, one camera, one rig)."""
+    folder.mkdir()
+    build_reconstruction({"PINHOLE": MODELS["PINHOLE"]}, image_ids=[1, 2]).write_text(str(folder))
+    return folder
+
+
+def _replace(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text, (old, text)
+    path.write_text(text.replace(old, new, 1))
+
+
+@pytest.mark.parametrize(("name", "old", "new", "match"), [
+    ("frames.txt", "\n1 1 ", "\n1 7 ", r"frames.txt:\d+: frame 1 refers to rig 7, which rigs.txt does not define \(its rigs: 1\)"),
+    ("images.txt", " 1 img_001.jpg", " x img_001.jpg", r"images.txt:\d+: CAMERA_ID is 'x', not a whole number"),
+    ("images.txt", " 1 img_001.jpg", " 9 img_001.jpg", r"images.txt:\d+: image 1 uses camera 9, which cameras.txt does not define"),
+    ("cameras.txt", " 321.5 239.25", "", r"cameras.txt:\d+: camera 1: a PINHOLE camera takes 4 parameters \(fx, fy, cx, cy\), the line has 2"),
+    ("cameras.txt", "PINHOLE", "PINHOL", r"cameras.txt:\d+: camera 1: unknown camera model 'PINHOL'"),
+    ("rigs.txt", "1 1 CAMERA 1", "1 1 CAMERA 5", r"rigs.txt:\d+: rig 1 lists camera 5, which cameras.txt does not define"),
+    ("frames.txt", "CAMERA 1 2\n", "CAMERA 1 9\n", r"frames.txt:\d+: frame 2 lists image 9, which images.txt does not define"),
+    ("frames.txt", "CAMERA 1 2\n", "CAMERA 1\n", r"frames.txt:\d+: the line ends before DATA_ID"),
+])
+def test_text_model_errors_name_file_line_and_fix(tmp_path: Path, name: str, old: str, new: str, match: str) -> None:
+    """The finding: pycolmap's "Rig with ID 7 does not exist" and "Check failed: line_stream1 >> …"."""
+    folder = _text_model(tmp_path / "m")
+    _replace(folder / name, old, new)
+    with pytest.raises(FileFormatError, match=match) as info:
+        read_colmap(folder)
+    message = str(info.value)
+    assert "Check failed" not in message and ".cc:" not in message and "model_converter" in message
+
+
+@pytest.mark.parametrize(("name", "offset", "value", "match"), [
+    ("frames.bin", 12, 7, r"frames.bin refers to rig 7, which rigs.bin does not define"),
+    ("rigs.bin", 20, 5, r"rigs.bin: rig 1 lists camera 5, which cameras.bin does not define"),
+    ("images.bin", 68, 9, r"image 1 of images.bin is not listed in frame 1 of frames.bin"),
+])
+def test_binary_model_dangling_ids_name_the_file(tmp_path: Path, name: str, offset: int, value: int, match: str) -> None:
+    folder = _binary_model(tmp_path / "m")
+    data = (folder / name).read_bytes()
+    (folder / name).write_bytes(data[:offset] + struct.pack("<I", value) + data[offset + 4:])
+    with pytest.raises(FileFormatError, match=match) as info:
+        read_colmap(folder)
+    assert "Check failed" not in str(info.value) and "does not exist" not in str(info.value)
+
+
+def test_unknown_pycolmap_messages_lose_their_cpp_location() -> None:
+    from spacedg.scene.io.colmap_check import pycolmap_message
+
+    message = pycolmap_message(Path("/m"), "txt", RuntimeError("[foo_bar.cc:12] Check failed: x >> y Something odd happened"))
+    assert message.startswith("/m: pycolmap could not read this COLMAP text model (Something odd happened)")
+    assert ".cc" not in message and "Check failed" not in message
 
 
 def _binary_model(folder: Path) -> Path:

@@ -44,7 +44,7 @@ def test_corners_in_any_order(tmp_path: Path) -> None:
     ]
     got = read_instances(write(tmp_path / "i.json", items), views=["v1", "v2", "v3"])
     assert [i.id for i in got] == [3, 4] and [i.label for i in got] == ["chair", "lamp"]
-    assert got[0].description == "a red wooden chair" and got[1].description == ""
+    assert got[0].description == "red wooden chair" and got[1].description == ""
     assert got[0].images == ("v1", "v2") and got[1].images == ("v2",)
     assert got[1].attributes == {"best_image": "v2"}
     for inst in got:
@@ -105,7 +105,7 @@ def test_unknown_views_listed(tmp_path: Path) -> None:
         ({"id": 0, "label": "  ", "corners": BOX.corners().tolist()}, FileValueError, "non-empty string"),
         ({"label": "x", "corners": BOX.corners().tolist()}, FileFormatError, "missing 'id'"),
         ({"id": -2, "label": "x", "corners": BOX.corners().tolist()}, FileValueError, "integer >= 0"),
-        ({"id": "3", "label": "x", "corners": BOX.corners().tolist()}, FileValueError, "integer >= 0"),
+        ({"id": "3a", "label": "x", "corners": BOX.corners().tolist()}, FileValueError, "integer >= 0"),
         ({"id": 0, "label": "x", "corners": BOX.corners().tolist(), "images": "v1"}, FileFormatError, "list of view names"),
         ({"id": 0, "label": "x", "corners": BOX.corners().tolist(), "description": 5}, FileValueError, "description"),
         ("not an object", FileFormatError, "expected an object"),

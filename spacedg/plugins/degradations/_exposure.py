@@ -1,0 +1,124 @@
+"""What ``low_light`` and ``over_exposure`` share (not a plugin: no entry point): the sensor as a degradation.
+
+Both multiply linear light by a gain ``exposure`` and capture it with the shared sensor
+(:mod:`._sensor`: photon shot noise and read noise); over-exposure then clips to [0, 1].
+They differ only in their data: the name, the ``exposure`` parameter (hard limits, harsher
+direction), the clip, the presets and the description. This module holds the rest:
+
+- :data:`SENSOR_PARAMS` (``k``, ``sigma_read``, ``read_model``, ``read_lambda``, after
+  ``exposure`` in every spec) and :data:`SENSOR_PRESET` (every preset fixes them at the sensor's
+  defaults, Gaussian read noise);
+- :class:`SensorExposure`: one such degradation from its data. Its plain function is
+  :meth:`SensorExposure.capture`; its :attr:`~SensorExposure.spec` is photometric, linear stage,
+  order 30 (the sensor, after the optics), needs nothing from the render, and its ``apply``
+  checks ``params`` against the spec, draws one :func:`.common.stream_key` of ``rng`` and captures.
+
+Conventions: ``rgb`` float32 (H, W, 3) linear light, unclamped, not modified; the result is a
+new float32 array (see :func:`._sensor.sensor_capture` for non-finite input and the noise).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from spacedg.plugins.degradations._sensor import (
+    K_DEFAULT,
+    READ_GAUSSIAN,
+    READ_LAMBDA_DEFAULT,
+    READ_TUKEY,
+    SIGMA_READ_DEFAULT,
+    sensor_capture,
+)
+from spacedg.plugins.degradations.common import check_linear_rgb, stream_key
+from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
+
+__all__ = ["EXPOSURE_ORDER", "SENSOR_PARAMS", "SENSOR_PRESET", "SensorExposure"]
+
+#: Position of the sensor within the linear stage (:data:`~spacedg.plugins.specs.ORDER_GUIDE`).
+EXPOSURE_ORDER = 30.0
+
+#: The sensor's parameters, declared by both exposure degradations after ``exposure``.
+SENSOR_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec("k", "1/e-", "System gain: normalised full-scale signal per photo-electron (1/k electrons fill the full scale); 0 disables shot noise.", low=0.0, high=1.0, harsher="higher"),
+    ParamSpec("sigma_read", "1", "Read-noise standard deviation in normalised linear units (full scale = 1); 0 disables read noise.", low=0.0, high=1.0, harsher="higher"),
+    ParamSpec("read_model", "1", "Read-noise shape: 0 = Gaussian (the paper's formula), 1 = Tukey lambda scaled to unit variance (ELD).", low=READ_GAUSSIAN, high=READ_TUKEY, integer=True),
+    ParamSpec("read_lambda", "1", "Tukey-lambda shape of the read noise (read_model = 1): 0.14 ≈ normal, < 0 heavy-tailed, 0 logistic.", low=-0.45, high=1.0),
+)
+
+#: Fixed sensor ranges every preset of the exposure degradations uses.
+SENSOR_PRESET: dict[str, ParamRange] = {
+    "k": ParamRange(K_DEFAULT, K_DEFAULT),
+    "sigma_read": ParamRange(SIGMA_READ_DEFAULT, SIGMA_READ_DEFAULT),
+    "read_model": ParamRange(READ_GAUSSIAN, READ_GAUSSIAN),
+    "read_lambda": ParamRange(READ_LAMBDA_DEFAULT, READ_LAMBDA_DEFAULT),
+}
+
+
+class SensorExposure:
+    """One exposure degradation of the shared sensor: its plain function and its spec (module docstring).
+
+    A class rather than closures so that the spec's ``apply`` pickles.
+
+    Args:
+        name: the degradation's name.
+        exposure: its ``exposure`` parameter: the gain on linear light, unit "1".
+        clip: clip the captured light to [0, 1] (saturation, over-exposure) or leave it unclipped.
+        presets: preset name → ``(low, high)`` range of ``exposure``; the sensor parameters are
+            fixed at :data:`SENSOR_PRESET` in every preset.
+        description: the spec's description (the model in a sentence, with units).
+
+    Attributes:
+        clip: as given.
+        spec: the :class:`~spacedg.plugins.specs.DegradationSpec`; its ``apply`` is :meth:`apply`.
+    """
+
+    def __init__(self, name: str, exposure: ParamSpec, *, clip: bool, presets: Mapping[str, tuple[float, float]], description: str) -> None:
+        self.clip = clip
+        self.spec = DegradationSpec(
+            name=name, category=Category.PHOTOMETRIC, stage=Stage.LINEAR,
+            params=(exposure, *SENSOR_PARAMS),
+            presets={preset: {"exposure": ParamRange(low, high), **SENSOR_PRESET} for preset, (low, high) in presets.items()},
+            apply=self.apply,
+            needs=frozenset(),
+            description=description,
+            order=EXPOSURE_ORDER,
+        )
+
+    def capture(
+        self,
+        rgb: np.ndarray,
+        exposure: float,
+        key: int,
+        k: float = K_DEFAULT,
+        sigma_read: float = SIGMA_READ_DEFAULT,
+        read_model: int = READ_GAUSSIAN,
+        read_lambda: float = READ_LAMBDA_DEFAULT,
+    ) -> np.ndarray:
+        """Expose linear light by ``exposure``, add the sensor's noise (and clip if :attr:`clip`); returns new float32 (H, W, 3).
+
+        Args:
+            rgb: float32 (H, W, 3) linear light, unclamped.
+            exposure: the gain, within the ``exposure`` parameter's hard limits.
+            key: 63-bit noise key (``stream_key(rng)``).
+            k, sigma_read, read_model, read_lambda: the sensor (:mod:`._sensor`; defaults: its defaults).
+
+        Raises:
+            InvalidDataError: ``rgb`` is not float32 (H, W, 3).
+            ParameterError: a parameter outside its hard limits.
+        """
+        rgb = check_linear_rgb(rgb, self.spec.name)
+        p = self.spec.validate_params(
+            {"exposure": exposure, "k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": read_lambda}
+        )
+        return sensor_capture(
+            rgb, exposure=p["exposure"], k=p["k"], sigma_read=p["sigma_read"], key=key,
+            read_model=int(p["read_model"]), read_lambda=p["read_lambda"], clip=self.clip,
+        )
+
+    def apply(self, rgb: np.ndarray, aux: Mapping[str, np.ndarray], params: Mapping[str, Any], rng: np.random.Generator) -> np.ndarray:
+        """Linear-stage ``apply``: ``params`` checked against :attr:`spec`; ``aux`` is unused; one ``stream_key(rng)`` draw."""
+        p = self.spec.validate_params(params)
+        return self.capture(rgb, key=stream_key(rng), **p)

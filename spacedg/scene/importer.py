@@ -1,0 +1,532 @@
+"""``import_scene``: a real capture (INRIA / COLMAP / nerfstudio / ScanNet++ + instance boxes) → a native scene folder.
+
+What it does, in order (each step reported in :class:`ImportReport`):
+
+1. **Detect the layout** of ``src`` (or take ``format``): an INRIA output folder
+   (``point_cloud/iteration_*/point_cloud.ply``, the latest iteration; cameras from ``cfg_args``'
+   ``source_path/sparse/0`` when it exists, else ``cameras.json``); a COLMAP project or model
+   folder + a Gaussians file; a nerfstudio data folder or ``transforms.json`` (``frames`` and
+   ``test_frames``) + a Gaussians file (a splatfacto export is brought back from nerfstudio's
+   normalised frame with ``dataparser_transforms.json``, found next to the ply or given); a
+   ScanNet++ scene folder (DSLR or iPhone nerfstudio JSON, ``scans/segments_anno.json`` boxes,
+   Gaussians given or found in an INRIA output below it); or a bare Gaussians file + cameras.
+2. **Read** the Gaussians (INRIA ply, PlayCanvas compressed ply, colour-only ply, Mip-Splatting
+   ``filter_3D``, ``.splat``, ``.spz``), the cameras and the instances (spacedg / Holi-Spatial JSON,
+   ScanNet++ ``segments_anno.json``, EmbodiedScan JSON), apply ``metres_per_unit`` once to all.
+3. **Up**: given (``"+z"``, ``"-y"``, ``"0,0,1"``), ScanNet++'s +z, or estimated from the cameras.
+4. **Frame check** (:mod:`spacedg.scene.frame_check`): refused with the disagreeing parts and the
+   probable cause unless ``frame_check="warn"``.
+5. **Instance ids**: kept when the Gaussians carry them; otherwise assigned
+   (:func:`~spacedg.scene.labelling.assign_instances`, by boxes unless masks are asked for) and
+   reported per instance (with the rendered-mask IoU where Holi-Spatial mask files are found).
+6. **Write** the native scene folder (``scene.json`` + ``gaussians.ply``) that every command takes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from spacedg.errors import FileFormatError, ParameterError
+from spacedg.files import PathLike, read_json
+from spacedg.render.camera import Camera
+from spacedg.render.gaussians import Gaussians
+from spacedg.scene.frame_check import FrameReport, check_frame, diagnose, generic_corrections, normalised_hint
+from spacedg.scene.io import estimate_up, read_gaussians, read_instances, read_views, save_scene
+from spacedg.scene.io._assemble import GAUSSIAN_SUFFIXES
+from spacedg.scene.io.colmap import read_colmap
+from spacedg.scene.io.embodiedscan import read_embodiedscan_boxes
+from spacedg.scene.io.inria import is_inria_output, latest_point_cloud, read_cfg_args, read_inria_cameras
+from spacedg.scene.io.nerfstudio import denormalising_similarity, read_applied_transform, read_dataparser_transforms, read_transforms
+from spacedg.scene.io.scannetpp import is_scannetpp_scene, read_segments_anno, scannetpp_cameras
+from spacedg.scene.labelling import AssignmentReport, assign_instances
+from spacedg.scene.model import Instance, Scene
+
+__all__ = ["LAYOUTS", "ImportReport", "import_scene", "detect_layout", "parse_up", "read_any_instances"]
+
+#: Layouts :func:`import_scene` knows (``format=``).
+LAYOUTS = ("auto", "inria", "colmap", "nerfstudio", "scannetpp", "gaussians")
+_AXES = {"x": 0, "y": 1, "z": 2}
+_SAFE_ID = re.compile(r"[^A-Za-z0-9_.\-]+")
+
+
+@dataclass
+class ImportReport:
+    """What :func:`import_scene` found and did (printed by ``spacedg scenes import``)."""
+
+    scene_id: str
+    layout: str
+    out: Path | None
+    gaussians_path: str
+    gaussians: int
+    sh_degree: int
+    views: int
+    test_views: int
+    cameras_path: str
+    instances: int
+    instances_path: str | None
+    up: list[float]
+    up_source: str
+    metres_per_unit: float
+    frame: FrameReport
+    ids: str
+    assignment: AssignmentReport | None = None
+    notes: list[str] = field(default_factory=list)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def text(self) -> str:
+        """Human-readable summary, one fact per line."""
+        lines = [
+            f"layout       {self.layout}",
+            f"gaussians    {self.gaussians:,} (SH degree {self.sh_degree}) from {self.gaussians_path}",
+            f"views        {self.views} ({self.test_views} of them test views) from {self.cameras_path}",
+            f"instances    {self.instances}" + (f" from {self.instances_path}" if self.instances_path else " (no annotation given)"),
+            f"up           {[round(v, 4) for v in self.up]} ({self.up_source}); {self.metres_per_unit:g} m per file unit",
+            f"frame check  {'ok' if self.frame.ok else 'MISMATCH'}: {self.frame.summary()}",
+        ]
+        lines += [f"note         {n}" for n in self.notes]
+        if self.assignment is not None:
+            a = self.assignment
+            iou = a.mean_mask_iou()
+            covered = [c.box_coverage for c in a.instances if c.gaussians]
+            lines.append(
+                f"instance ids {self.ids}: {a.assigned:,} of {a.total:,} Gaussians assigned in {a.seconds:.2f} s, "
+                f"{len(a.empty_instances)} instance(s) got none, mean box coverage "
+                f"{np.mean(covered) if covered else 0:.0%}" + (f", mean rendered-mask IoU {iou:.2f}" if iou is not None else "")
+            )
+            lines.append(a.table())
+        else:
+            lines.append(f"instance ids {self.ids}")
+        if self.out is not None:
+            lines.append(f"wrote        {self.out}")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "scene_id": self.scene_id, "layout": self.layout, "out": None if self.out is None else str(self.out),
+            "gaussians_path": self.gaussians_path, "gaussians": self.gaussians, "sh_degree": self.sh_degree,
+            "views": self.views, "test_views": self.test_views, "cameras_path": self.cameras_path,
+            "instances": self.instances, "instances_path": self.instances_path, "up": self.up, "up_source": self.up_source,
+            "metres_per_unit": self.metres_per_unit, "frame_check": self.frame.to_dict(), "ids": self.ids,
+            "assignment": None if self.assignment is None else self.assignment.to_dict(), "notes": list(self.notes),
+            "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
+        }
+
+
+# --------------------------------------------------------------------------- detection
+def detect_layout(src: Path) -> str:
+    """The layout of ``src`` (see :data:`LAYOUTS`); :class:`FileFormatError` naming what was looked for."""
+    if src.is_file():
+        if src.suffix.lower() in GAUSSIAN_SUFFIXES or src.suffix.lower() == ".ksplat":
+            return "gaussians"
+        if src.suffix.lower() == ".json":
+            return "nerfstudio"
+        raise FileFormatError(f"{src}: not a Gaussians file ({', '.join(GAUSSIAN_SUFFIXES)}) nor a transforms.json")
+    if not src.is_dir():
+        raise FileFormatError(f"{src}: no such file or folder")
+    if is_inria_output(src):
+        return "inria"
+    if is_scannetpp_scene(src):
+        return "scannetpp"
+    if (src / "transforms.json").is_file():
+        return "nerfstudio"
+    if _colmap_model(src) is not None:
+        return "colmap"
+    raise FileFormatError(
+        f"{src}: no known layout: looked for an INRIA output (point_cloud/iteration_*/point_cloud.ply), a ScanNet++ scene "
+        "(dslr/nerfstudio, scans/segments_anno.json), a nerfstudio transforms.json, a COLMAP model (sparse/0 or cameras.bin/txt); "
+        "pass --format, or a Gaussians file with --cameras"
+    )
+
+
+def _colmap_model(folder: Path) -> Path | None:
+    for candidate in (folder, folder / "sparse" / "0", folder / "sparse"):
+        if any((candidate / f"cameras.{ext}").is_file() and (candidate / f"images.{ext}").is_file() for ext in ("bin", "txt")):
+            return candidate
+    return None
+
+
+def _single_gaussians_file(folder: Path, what: str) -> Path:
+    found = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in GAUSSIAN_SUFFIXES and p.name != "input.ply")
+    if len(found) == 1:
+        return found[0]
+    listing = ", ".join(p.name for p in found[:5]) or "none"
+    raise FileFormatError(f"{folder}: {what} needs a Gaussians file: pass --gaussians FILE (found {len(found)}: {listing})")
+
+
+def parse_up(text: str | None) -> np.ndarray | None:
+    """``"auto"``/``None`` → None; ``"+z"``, ``"-y"``, ``"z"`` or ``"x,y,z"`` → a unit vector."""
+    if text is None or str(text).strip().lower() == "auto":
+        return None
+    t = str(text).strip().lower()
+    match = re.fullmatch(r"([+-]?)([xyz])", t)
+    if match:
+        out = np.zeros(3)
+        out[_AXES[match.group(2)]] = -1.0 if match.group(1) == "-" else 1.0
+        return out
+    try:
+        vec = np.array([float(v) for v in t.split(",")], dtype=np.float64)
+    except ValueError:
+        vec = np.zeros(0)
+    if vec.shape != (3,) or not np.isfinite(vec).all() or np.linalg.norm(vec) == 0:
+        raise ParameterError(f"--up {text!r}: give auto, an axis (+z, -y, x, ...) or three numbers x,y,z")
+    return vec / np.linalg.norm(vec)
+
+
+def read_any_instances(path: PathLike, views: Any = None, *, embodiedscan_scene: str | None = None) -> tuple[list[Instance], str]:
+    """Instances from a spacedg / Holi-Spatial JSON, a ScanNet++ ``segments_anno.json`` or an
+    EmbodiedScan JSON (told apart by content); returns ``(instances, format name)``."""
+    p = Path(path)
+    data = read_json(p, "instance JSON")
+    if isinstance(data, dict) and "segGroups" in data:
+        return read_segments_anno(p), "scannetpp segments_anno"
+    first = data[0] if isinstance(data, list) and data else None
+    if (isinstance(data, dict) and ("data_list" in data or ("instances" in data and data["instances"]
+                                                            and isinstance(data["instances"][0], dict) and "bbox_3d" in data["instances"][0]))) \
+            or (isinstance(first, dict) and "bbox_3d" in first):
+        return read_embodiedscan_boxes(p, embodiedscan_scene), "embodiedscan"
+    holi = isinstance(first, dict) and ("ins_id" in first or "bounding_box" in first)
+    return read_instances(p, views=views), "holi-spatial" if holi else "spacedg"
+
+
+def _count_test_frames(path: Path) -> int:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return 0
+    frames = data.get("test_frames") if isinstance(data, dict) else None
+    return len(frames) if isinstance(frames, list) else 0
+
+
+def _scene_id(name: str | None, src: Path) -> str:
+    raw = name if name is not None else (src.stem if src.is_file() else src.name)
+    sid = _SAFE_ID.sub("-", raw).strip("-.") or "scene"
+    if name is not None and sid != name:
+        raise ParameterError(f"--name {name!r}: use letters, digits, '_', '.', '-' (e.g. {sid!r})")
+    return sid if sid[0].isalnum() else "s" + sid
+
+
+def _scaled(views: dict[str, Camera], instances: list[Instance], gaussians: Gaussians, scale: float) -> tuple[dict[str, Camera], list[Instance], Gaussians]:
+    from dataclasses import replace
+
+    if scale == 1.0:
+        return views, instances, gaussians
+    out_views = {}
+    for name, cam in views.items():
+        pose = np.asarray(cam.cam_to_world, dtype=np.float64).copy()
+        pose[:3, 3] *= scale
+        out_views[name] = cam.with_pose(pose)
+    boxes = [replace(i, box=i.box.transformed(np.eye(3), np.zeros(3), scale)) for i in instances]
+    return out_views, boxes, gaussians.transformed(scale=scale)
+
+
+def _move_views(views: dict[str, Camera], matrix: np.ndarray) -> dict[str, Camera]:
+    """Poses moved by the rigid world transform ``matrix`` (4×4): ``p' = M p``."""
+    return {n: c.with_pose(matrix @ np.asarray(c.cam_to_world, dtype=np.float64)) for n, c in views.items()}
+
+
+# --------------------------------------------------------------------------- import
+@dataclass
+class _Parts:
+    layout: str
+    gaussians_path: Path
+    cameras_path: Path
+    cameras_kind: str
+    instances_path: Path | None
+    dataparser: Path | None
+    applied_transform: np.ndarray | None
+    default_up: np.ndarray | None
+    up_note: str
+    notes: list[str]
+
+
+def _inria_cameras(src: Path, notes: list[str]) -> tuple[Path, str]:
+    cfg = src / "cfg_args"
+    if cfg.is_file():
+        source = read_cfg_args(cfg).get("source_path")
+        if isinstance(source, str) and source:
+            for base in (Path(source), src / source, src.parent / source):
+                model = _colmap_model(base) if base.is_dir() else None
+                if model is not None:
+                    notes.append(f"cameras from the COLMAP model of cfg_args' source_path ({model})")
+                    return model, "colmap"
+            notes.append(f"cfg_args' source_path {source!r} has no COLMAP model here; cameras from cameras.json (principal point at the image centre)")
+    if (src / "cameras.json").is_file():
+        return src / "cameras.json", "inria"
+    raise FileFormatError(f"{src}: INRIA output without cameras: neither cfg_args' source_path/sparse/0 nor cameras.json; pass --cameras")
+
+
+def _cameras_kind(path: Path) -> str:
+    if path.is_file() and path.name == "cameras.json":
+        return "inria"
+    if path.is_file() and path.suffix.lower() == ".json":
+        return "nerfstudio"
+    if path.is_dir() and (path / "transforms.json").is_file() and _colmap_model(path) is None:
+        return "nerfstudio"
+    return "colmap"
+
+
+def _resolve_parts(
+    src: Path, layout: str, gaussians: Path | None, cameras: Path | None, instances: Path | None,
+    dataparser: Path | None, device: str,
+) -> _Parts:
+    notes: list[str] = []
+    default_up, up_note = None, ""
+    cameras_kind = ""
+    if layout == "inria":
+        gpath = gaussians or latest_point_cloud(src)
+        if gaussians is None:
+            notes.append(f"Gaussians of the latest iteration: {gpath.relative_to(src)}")
+        cpath, cameras_kind = (cameras, _cameras_kind(cameras)) if cameras else _inria_cameras(src, notes)
+    elif layout == "colmap":
+        model = _colmap_model(src)
+        if model is None and cameras is None:
+            raise FileFormatError(f"{src}: no COLMAP model (cameras + images .bin/.txt) here or in sparse/0")
+        cpath = cameras or model
+        cameras_kind = _cameras_kind(cpath)  # type: ignore[arg-type]
+        gpath = gaussians or _single_gaussians_file(src, "a COLMAP model")
+    elif layout == "nerfstudio":
+        cpath = cameras or (src if src.is_file() else src / "transforms.json")
+        cameras_kind = _cameras_kind(cpath)
+        gpath = gaussians or _single_gaussians_file(src if src.is_dir() else src.parent, "a nerfstudio transforms.json")
+    elif layout == "scannetpp":
+        cpath = cameras or scannetpp_cameras(src, device)
+        cameras_kind = _cameras_kind(cpath)
+        if instances is None and (src / "scans" / "segments_anno.json").is_file():
+            instances = src / "scans" / "segments_anno.json"
+        if gaussians is None:
+            found = sorted(src.glob("**/point_cloud/iteration_*/point_cloud.ply"))
+            if not found:
+                raise FileFormatError(
+                    f"{src}: ScanNet++ ships no Gaussians: train them on the DSLR images (INRIA, gsplat or splatfacto) and pass --gaussians FILE"
+                )
+            gpath = latest_point_cloud(found[-1].parents[2])
+            notes.append(f"Gaussians found in the scene folder: {gpath}")
+        else:
+            gpath = gaussians
+        default_up, up_note = np.array([0.0, 0.0, 1.0]), "ScanNet++ scan frame (z up)"
+    elif layout == "gaussians":
+        if cameras is None:
+            raise ParameterError(f"{src}: a bare Gaussians file needs --cameras (a COLMAP model folder, a transforms.json or an INRIA cameras.json)")
+        gpath, cpath = gaussians or src, cameras
+        cameras_kind = _cameras_kind(cpath)
+    else:
+        raise ParameterError(f"--format {layout!r}: choose one of {', '.join(LAYOUTS)}")
+    if dataparser is None and (gpath.parent / "dataparser_transforms.json").is_file():
+        dataparser = gpath.parent / "dataparser_transforms.json"
+        notes.append(f"found {dataparser.name} next to the Gaussians: they are a splatfacto export in nerfstudio's normalised frame")
+    applied = None
+    if cameras_kind == "nerfstudio":
+        json_path = cpath if cpath.is_file() else cpath / "transforms.json"
+        applied = read_applied_transform(json_path)
+    return _Parts(layout, Path(gpath), Path(cpath), cameras_kind, instances, dataparser, applied, default_up, up_note, notes)
+
+
+def _read_cameras(parts: _Parts, distortion: Literal["error", "drop"]) -> tuple[dict[str, Camera], int]:
+    path = parts.cameras_path
+    if parts.cameras_kind == "inria":
+        return read_inria_cameras(path), 0
+    if parts.cameras_kind == "nerfstudio":
+        json_path = path if path.is_file() else path / "transforms.json"
+        return read_transforms(json_path, opencv_distortion=distortion), _count_test_frames(json_path)
+    model = _colmap_model(path) if path.is_dir() else None
+    if model is None:
+        return read_views(path, distortion), 0
+    return read_colmap(model, opencv_distortion=distortion), 0
+
+
+def import_scene(
+    src: PathLike,
+    out: PathLike | None = None,
+    *,
+    instances: PathLike | None = None,
+    format: str = "auto",
+    name: str | None = None,
+    up: str | np.ndarray | None = "auto",
+    metres_per_unit: float = 1.0,
+    gaussians: PathLike | None = None,
+    cameras: PathLike | None = None,
+    dataparser_transforms: PathLike | None = None,
+    undo_applied_transform: bool = False,
+    masks: PathLike | None = None,
+    assign: Literal["auto", "boxes", "masks", "none"] = "auto",
+    device: str = "dslr",
+    embodiedscan_scene: str | None = None,
+    opencv_distortion: Literal["error", "drop"] = "error",
+    frame_check: Literal["error", "warn"] = "error",
+    overwrite: bool = False,
+    progress: bool = True,
+    backend: str = "auto",
+) -> tuple[Scene, ImportReport]:
+    """Turn a real capture into a native scene folder (see the module docstring).
+
+    Args:
+        src: the capture: an INRIA output folder, a COLMAP project/model folder, a nerfstudio data
+            folder or ``transforms.json``, a ScanNet++ scene folder, or a Gaussians file.
+        out: the scene folder to write (``None``: build and check only).
+        instances: instance annotation (spacedg / Holi-Spatial JSON, ScanNet++ ``segments_anno.json``,
+            EmbodiedScan JSON); ScanNet++ folders default to their own ``segments_anno.json``.
+        format: one of :data:`LAYOUTS` (``"auto"`` detects).
+        name: scene id (default: the folder or file name).
+        up: ``"auto"`` (ScanNet++: +z; otherwise estimated from the cameras), an axis (``"+z"``,
+            ``"-y"``) or three numbers, in the **files'** frame.
+        metres_per_unit: metres per file unit, applied once to Gaussians, cameras and boxes.
+        gaussians, cameras: override the Gaussians file / the cameras (COLMAP folder,
+            ``transforms.json``, INRIA ``cameras.json``) the layout would pick.
+        dataparser_transforms: splatfacto's ``dataparser_transforms.json`` (found next to the
+            Gaussians file when not given): the Gaussians are taken back from the normalised frame.
+        undo_applied_transform: move nerfstudio cameras back to the COLMAP frame (inverse of the
+            JSON's ``applied_transform``), for Gaussians trained on the COLMAP model.
+        masks: folder holding Holi-Spatial masks (``<image stem>/<label>.png``) when their recorded
+            paths do not exist here.
+        assign: instance ids when the Gaussians carry none: ``"auto"`` (= ``"boxes"``: every
+            annotation has boxes; mask files, when found, still give the report's rendered-mask
+            IoU), ``"boxes"``, ``"masks"`` (vote with Holi-Spatial's masks), ``"none"``.
+        device: ScanNet++ cameras, ``"dslr"`` or ``"iphone"``.
+        embodiedscan_scene: the scan in a multi-scan EmbodiedScan JSON.
+        opencv_distortion: non-zero OPENCV distortion: ``"error"`` or ``"drop"`` (ideal pinholes).
+        frame_check: ``"error"`` refuses a frame mismatch; ``"warn"`` notes it and writes anyway.
+        overwrite: replace an existing scene folder.
+        progress: progress bars.
+        backend: renderer backend of the checks and the mask work.
+
+    Returns:
+        ``(scene, report)``; the scene is the one written (Gaussians in memory).
+
+    Raises:
+        FileFormatError / FileValueError: unreadable parts (the file, the field and the fix named).
+        FrameMismatchError: the parts disagree (with ``frame_check="error"``).
+    """
+    src_path = Path(src)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    if out is not None and (Path(out) / "scene.json").is_file() and not overwrite:
+        raise ParameterError(f"{out}: a scene folder already exists; pass --overwrite (overwrite=True) or choose another --out")
+    if isinstance(metres_per_unit, bool) or not isinstance(metres_per_unit, (int, float)) or not (math.isfinite(metres_per_unit) and metres_per_unit > 0):
+        raise ParameterError(f"--metres-per-unit must be a positive number, got {metres_per_unit!r}")
+    if format not in LAYOUTS:
+        raise ParameterError(f"--format {format!r}: choose one of {', '.join(LAYOUTS)}")
+    layout = detect_layout(src_path) if format == "auto" else format
+    parts = _resolve_parts(
+        src_path, layout, None if gaussians is None else Path(gaussians), None if cameras is None else Path(cameras),
+        None if instances is None else Path(instances), None if dataparser_transforms is None else Path(dataparser_transforms), device,
+    )
+    notes = parts.notes
+    gauss = read_gaussians(parts.gaussians_path)
+    timings["read_gaussians"] = time.perf_counter() - t0
+    views, test_views = _read_cameras(parts, opencv_distortion)
+    if parts.dataparser is not None:
+        transform, scale = read_dataparser_transforms(parts.dataparser)
+        rot, trans, k = denormalising_similarity(transform, scale)
+        gauss = gauss.transformed(rot, trans, k)
+        notes.append(f"Gaussians taken back from nerfstudio's normalised frame with {parts.dataparser} (scale 1/{scale:.4g})")
+    if undo_applied_transform:
+        if parts.applied_transform is None:
+            raise ParameterError("--undo-applied-transform: the cameras are not a transforms.json with an applied_transform")
+        views = _move_views(views, np.linalg.inv(parts.applied_transform))
+        notes.append("cameras moved back to the COLMAP frame (inverse of transforms.json's applied_transform)")
+    found_instances: list[Instance] = []
+    instances_format = None
+    if parts.instances_path is not None:
+        found_instances, instances_format = read_any_instances(parts.instances_path, views.keys(), embodiedscan_scene=embodiedscan_scene)
+        notes.append(f"instances read as {instances_format}")
+    timings["read"] = time.perf_counter() - t0
+    up_vec = parse_up(up) if isinstance(up, (str, type(None))) else np.asarray(up, dtype=np.float64)
+    if up_vec is not None:
+        up_source = "given"
+    elif parts.default_up is not None:
+        up_vec, up_source = parts.default_up, parts.up_note
+    else:
+        up_vec, up_source = estimate_up(views), f"estimated from the -y axes of {len(views)} cameras"
+    views, found_instances, gauss = _scaled(views, found_instances, gauss, float(metres_per_unit))
+    scene_id = _scene_id(name, src_path)
+    metadata: dict[str, Any] = {
+        "source": {"layout": layout, "src": str(src_path), "gaussians": str(parts.gaussians_path), "cameras": str(parts.cameras_path),
+                   "instances": None if parts.instances_path is None else str(parts.instances_path),
+                   "instances_format": instances_format,
+                   "dataparser_transforms": None if parts.dataparser is None else str(parts.dataparser)},
+        "scale_to_metres": float(metres_per_unit), "up_source": up_source,
+    }
+    scene = Scene(scene_id, gauss, views, found_instances, up_vec.tolist(), None, metadata)
+
+    t1 = time.perf_counter()
+    report_frame = check_frame(scene, backend=backend)
+    if not report_frame.ok:
+        report_frame = diagnose(scene, report_frame, _corrections(scene, parts), backend=backend)
+        if not report_frame.hints:
+            hint = normalised_hint(scene)
+            if hint:
+                report_frame = FrameReport(report_frame.gaussians_in_view, report_frame.views_seeing, report_frame.boxes_with_gaussians,
+                                           report_frame.render_coverage, report_frame.problems, (hint,))
+        if frame_check == "error":
+            report_frame.raise_if_bad(scene_id, where=f"{src_path}")
+        notes.append("FRAME MISMATCH written anyway (frame_check='warn'): " + "; ".join(report_frame.problems))
+    timings["frame_check"] = time.perf_counter() - t1
+    scene.metadata["frame_check"] = report_frame.to_dict()
+
+    assignment = None
+    if gauss.instance_ids is not None:
+        ids_source = "kept from the Gaussians file"
+    elif not found_instances:
+        ids_source = "none (no instances: only camera questions can be built)"
+    elif assign == "none":
+        ids_source = "none (assign='none'): qa build will assign them by boxes on the fly"
+    else:
+        method = "boxes" if assign == "auto" else assign
+        t2 = time.perf_counter()
+        scene, assignment = assign_instances(scene, method, masks_root=masks, progress=progress, backend=backend)  # type: ignore[arg-type]
+        timings["assign_instances"] = time.perf_counter() - t2
+        ids_source = f"assigned by {method} (the Gaussians file carried none)"
+        scene.metadata["instance_assignment"] = {k: v for k, v in assignment.to_dict().items() if k != "instances"}
+    report = ImportReport(
+        scene_id, layout, None, str(parts.gaussians_path), len(gauss), gauss.sh_degree, len(views), test_views,
+        str(parts.cameras_path), len(found_instances), None if parts.instances_path is None else str(parts.instances_path),
+        [float(v) for v in scene.up], up_source, float(metres_per_unit), report_frame, ids_source, assignment, notes,
+    )
+    if out is not None:
+        t3 = time.perf_counter()
+        save_scene(scene, out)
+        timings["save"] = time.perf_counter() - t3
+        report.out = Path(out)
+    timings["total"] = time.perf_counter() - t0
+    report.seconds = timings
+    return scene, report
+
+
+def _corrections(scene: Scene, parts: _Parts) -> dict[str, Callable[[Scene], Scene]]:
+    out: dict[str, Callable[[Scene], Scene]] = {}
+
+    def with_gaussians(g: Gaussians) -> Callable[[Scene], Scene]:
+        return lambda s: Scene(s.id, g, s.views, s.instances, s.up, s.vocabulary, s.metadata)
+
+    if parts.dataparser is None:
+        for candidate in _nearby_dataparser(parts):
+            transform, scale = read_dataparser_transforms(candidate)
+            rot, trans, k = denormalising_similarity(transform, scale)
+            out[f"the Gaussians are in nerfstudio's normalised frame: pass dataparser_transforms.json (--dataparser-transforms {candidate})"] = \
+                with_gaussians(scene.gaussians.transformed(rot, trans, k))
+    if parts.applied_transform is not None:
+        inv = np.linalg.inv(parts.applied_transform)
+        out["the Gaussians are in the COLMAP frame while the cameras are in nerfstudio's transforms.json frame: "
+            "pass --undo-applied-transform (or --cameras <the COLMAP model>)"] = lambda s: Scene(
+            s.id, s.gaussians, _move_views(dict(s.views), inv), s.instances, s.up, s.vocabulary, s.metadata)
+    out.update(generic_corrections(scene))
+    return out
+
+
+def _nearby_dataparser(parts: _Parts) -> list[Path]:
+    found = []
+    for folder in (parts.gaussians_path.parent, parts.gaussians_path.parent.parent):
+        # ns-train writes outputs/<experiment>/<method>/<timestamp>/dataparser_transforms.json
+        for pattern in ("dataparser_transforms.json", "*/dataparser_transforms.json", "*/*/*/dataparser_transforms.json",
+                        "*/*/*/*/dataparser_transforms.json"):
+            found += [p for p in sorted(folder.glob(pattern))[:3] if p not in found]
+    return found[:3]
