@@ -246,7 +246,7 @@ def _run(model: Any, source: Source, out: Path, meta: dict[str, Any], name: str,
     """:func:`predict` once the output's lock is held."""
     from tqdm.auto import tqdm
 
-    from spacedg.vlm import generate, load_vlm
+    from spacedg.vlm import generate, load_vlm, pixel_budget
 
     done = _existing(out, meta)
     pending = [i for pos, i in enumerate(source.indices) if pos % shard[1] == shard[0] and i not in done]
@@ -259,6 +259,7 @@ def _run(model: Any, source: Source, out: Path, meta: dict[str, Any], name: str,
         return summary
     if vlm is None:
         vlm, processor = load_vlm(model, device=device, dtype=dtype, min_pixels=min_pixels, max_pixels=max_pixels)
+    meta["image_pixels"] = pixel_budget(processor)  # the budget in force: the model's saved one unless overridden
     atomic_write_bytes(meta_path(out), json.dumps(meta, indent=2).encode() + b"\n")
     names = known_degradations()
     bar = tqdm(total=len(pending), desc=f"predict {name} [{variant}]", unit="item", disable=not progress)

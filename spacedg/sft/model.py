@@ -14,7 +14,18 @@ Every parameter is in exactly one group; an architecture with parameters outside
 refused with a :class:`~spacedg.errors.ParameterError` naming them.
 
 **Freezing** uses ``requires_grad_()`` on each group's parameters (setting ``requires_grad`` on a
-*module* attribute freezes nothing). Defaults (``conf/model/base.yaml``): vision frozen, merger and language model trained.
+*module* attribute freezes nothing). Defaults (``conf/model/base.yaml``): vision frozen; merger and
+language model trained in full fine-tuning; with LoRA only the adapters train
+(``freeze_merger: auto`` resolves to frozen under LoRA and trained otherwise).
+
+**Storage dtypes** (:func:`storage_dtypes`). ``dtype: auto`` keeps every *trained* weight in
+float32 (the master weights: at lr 1e-5, bf16 weights round most updates away) and lets the
+launch's mixed precision (``train.bf16``) compute in bf16. *Frozen* weights are stored in the
+mixed-precision dtype (bf16) where every rank holds them whole (one process, DDP: the frozen base
+of a LoRA run is half the size) and in float32 where the launch shards them (FSDP, ZeRO-3: a shard
+costs 1/N, and FSDP2 needs uniform dtypes in a unit). The model is loaded in the frozen dtype
+(the published bf16 weights load losslessly) and its trained parameters are then upcast. An
+explicit ``dtype`` stores everything in it (``bfloat16``: pure bf16 training, no master weights).
 
 **LoRA** (``lora=True``) adds adapters to the language model only: the default target regex matches
 the attention and MLP projections of its decoder layers (``q/k/v/o_proj``, ``gate/up/down_proj``),
@@ -24,28 +35,32 @@ would also wrap the vision tower and merger: InternVL's vision tower even has ``
 ``k_proj`` / ``v_proj`` modules of its own, so an unanchored name list would too.) A custom
 ``lora_target`` must match at least one module of the language model and nothing outside it.
 With LoRA the base weights of the language model are always frozen (whatever ``freeze_language``
-says); the groups that are *not* frozen (by default the merger; the vision tower with
-``freeze_vision=False``) are trained in full as peft ``modules_to_save``: peft keeps the original
+says), and so, by default, are the vision tower and the merger; a group explicitly unfrozen
+(``freeze_merger=false``, ``freeze_vision=false``) is trained in full as peft ``modules_to_save``: peft keeps the original
 module frozen and trains a copy, so the copy's weights are saved in the adapter checkpoint next to
 ``lora_A`` / ``lora_B`` (a module that merely had ``requires_grad`` would silently be missing from
 the adapter files). Trainable parameters of a LoRA model are therefore exactly the ``lora_``
-parameters and the ``modules_to_save`` copies.
+parameters, plus the ``modules_to_save`` copies of the groups asked for.
 
 **Gradient checkpointing** is non-reentrant. transformers 5.23 renamed the API:
 ``activation_checkpointing_enable(activation_checkpointing_kwargs=...)``
 (``gradient_checkpointing_enable`` is a deprecated alias that warns); the older name is used only
 where the new one does not exist. With frozen input embeddings ``enable_input_require_grads()``
-makes the embedding output require grad, and ``use_cache`` is switched off in the config(s). That
+makes the embedding output require grad. ``use_cache`` is switched off in the config(s) of every
+training model (FSDP's activation checkpointing recomputes layers too). That
 transformers call (and peft's) also hooks the vision tower's patch embedding; on a frozen vision
 tower the hook is removed again, so autograd never records the frozen tower.
 
 :func:`prepare_model` returns the model in train mode. :func:`save_for_inference` writes a folder
-that :func:`spacedg.vlm.load_vlm` loads as a plain model (LoRA merged on a copy).
+that :func:`spacedg.vlm.load_vlm` loads as a plain model (LoRA merged on a copy);
+:func:`rebuild_with_state` rebuilds the training model on the CPU from gathered weights (the
+``final/`` export of sharded launches, see :mod:`spacedg.sft.distributed`).
 """
 
 from __future__ import annotations
 
 import copy
+import json
 import re
 import sys
 import warnings
@@ -60,8 +75,8 @@ from spacedg.errors import ParameterError
 from spacedg.vlm.loading import load_vlm, resolve_dtype, set_pixel_budget
 from spacedg.vlm.tiny import TINY_FAMILIES, build_tiny_vlm
 
-__all__ = ["GROUPS", "ModelOptions", "default_lora_target", "drop_vision_input_grad_hooks", "module_groups", "prepare_model", "save_for_inference",
-           "trainable_summary"]
+__all__ = ["GROUPS", "ModelOptions", "default_lora_target", "drop_vision_input_grad_hooks", "module_groups", "prepare_model",
+           "HALF_DTYPES", "rebuild_with_state", "save_for_inference", "storage_dtypes", "trainable_summary"]
 
 #: The parameter groups of a VLM, in model order.
 GROUPS = ("vision", "merger", "language")
@@ -92,7 +107,7 @@ class ModelOptions:
     path: str
     dtype: str
     freeze_vision: bool
-    freeze_merger: bool
+    freeze_merger: bool | str
     freeze_language: bool
     lora: bool
     lora_r: int
@@ -105,6 +120,11 @@ class ModelOptions:
 
     def __post_init__(self) -> None:
         self.validate()
+
+    @property
+    def merger_frozen(self) -> bool:
+        """``freeze_merger`` resolved: ``"auto"`` is frozen with LoRA and trained without."""
+        return self.lora if self.freeze_merger == "auto" else bool(self.freeze_merger)
 
     @property
     def tiny_family(self) -> str | None:
@@ -121,10 +141,12 @@ class ModelOptions:
             raise ParameterError(f"unknown tiny model {path!r}; use tiny:<family> with family one of "
                                  f"{', '.join(TINY_FAMILIES)}")
         resolve_dtype(self.dtype, "cpu")  # raises ParameterError for an unknown name
-        for name in ("freeze_vision", "freeze_merger", "freeze_language", "lora", "gradient_checkpointing"):
+        for name in ("freeze_vision", "freeze_language", "lora", "gradient_checkpointing"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(f"{name} must be true or false, got {getattr(self, name)!r}")
-        if not self.lora and self.freeze_vision and self.freeze_merger and self.freeze_language:
+        if not isinstance(self.freeze_merger, bool) and self.freeze_merger != "auto":
+            raise ParameterError(f"freeze_merger must be true, false or auto, got {self.freeze_merger!r}")
+        if not self.lora and self.freeze_vision and self.merger_frozen and self.freeze_language:
             raise ParameterError("nothing to train: freeze_vision, freeze_merger and freeze_language are all true "
                                  "and lora is false; unfreeze a part or set lora=true")
         if self.lora:
@@ -316,14 +338,64 @@ def drop_vision_input_grad_hooks(model: torch.nn.Module) -> int:
     return removed
 
 
-def _build(options: ModelOptions, device: str) -> tuple[Any, Any]:
+#: The storage / compute dtype of each mixed precision setting.
+HALF_DTYPES = {"bf16": torch.bfloat16, "fp16": torch.float16}
+
+
+def storage_dtypes(dtype: str, mixed_precision: str = "no", shards_parameters: bool = False) -> tuple[torch.dtype, torch.dtype]:
+    """``(trained, frozen)``: the dtypes the trained and the frozen weights are stored in.
+
+    ``dtype`` is the ``model.dtype`` option; ``mixed_precision`` the launch's (``"bf16"``,
+    ``"fp16"`` or ``"no"``); ``shards_parameters`` whether the launch shards the weights (FSDP,
+    ZeRO-3). ``"auto"``: trained float32 (master weights); frozen in the mixed-precision dtype
+    unless the launch shards them (then float32). Any other value: that dtype for both.
+    """
+    if dtype != "auto":
+        value = resolve_dtype(dtype, "cpu")
+        return value, value
+    half = HALF_DTYPES.get(mixed_precision)
+    return torch.float32, half if half is not None and not shards_parameters else torch.float32
+
+
+def _empty(folder: str, dtype: torch.dtype, options: ModelOptions) -> tuple[Any, Any]:
+    """The model of ``folder`` without its weights (parameters on the meta device, buffers real) and
+    its processor: what FSDP ranks other than the first need when rank 0 broadcasts the weights."""
+    from accelerate import init_empty_weights
+    from transformers import AutoConfig, AutoModelForImageTextToText
+
+    from spacedg.vlm import load_processor
+
+    config = AutoConfig.from_pretrained(folder)
+    with init_empty_weights():  # include_buffers=False: rotary tables and other buffers are computed for real
+        model = AutoModelForImageTextToText.from_config(config, dtype=dtype)
+    return model, load_processor(folder, min_pixels=options.min_pixels, max_pixels=options.max_pixels)
+
+
+def _unread(model: torch.nn.Module) -> None:
+    """Give every meta-device parameter uninitialised CPU storage (``torch.empty``: pages the OS commits
+    only when written, i.e. when FSDP fills this rank's shards), as accelerate's FSDP preparation
+    expects of the ranks that do not read the weights; tied parameters stay tied."""
+    made: dict[int, torch.nn.Parameter] = {}
+    for module in model.modules():
+        for name, param in list(module.named_parameters(recurse=False)):
+            if param.device.type != "meta":
+                continue
+            if id(param) not in made:
+                made[id(param)] = torch.nn.Parameter(torch.empty(param.shape, dtype=param.dtype, device="cpu"),
+                                                     requires_grad=param.requires_grad)
+            module._parameters[name] = made[id(param)]
+
+
+def _build(options: ModelOptions, device: str, dtype: torch.dtype, empty: bool = False) -> tuple[Any, Any]:
     path = str(options.path)
+    if empty and options.tiny_family is None:
+        return _empty(_local_folder(path), dtype, options)
     if options.tiny_family is not None:
         model, processor = build_tiny_vlm(options.tiny_family)
         model.name_or_path = path  # recorded as base_model_name_or_path in LoRA adapter configs
-        model = model.to(device=device, dtype=resolve_dtype(options.dtype, device))
+        model = model.to(device=device, dtype=dtype)
         return model, set_pixel_budget(processor, options.min_pixels, options.max_pixels)
-    return load_vlm(_local_folder(path), device=device, dtype=options.dtype, min_pixels=options.min_pixels,
+    return load_vlm(_local_folder(path), device=device, dtype=dtype, min_pixels=options.min_pixels,
                     max_pixels=options.max_pixels)
 
 
@@ -355,7 +427,7 @@ def _apply_lora(model: Any, options: ModelOptions, groups: dict[str, list[str]])
     regex = options.lora_target or default_lora_target(model)
     _lora_targets(model, regex)
     to_save = []
-    if not options.freeze_merger:
+    if not options.merger_frozen:
         to_save += _wrappable(model, groups["merger"])
     if not options.freeze_vision:
         to_save += _wrappable(model, groups["vision"])
@@ -366,16 +438,21 @@ def _apply_lora(model: Any, options: ModelOptions, groups: dict[str, list[str]])
         return get_peft_model(model, config)
 
 
-def prepare_model(options: ModelOptions, *, device: str = "cpu") -> tuple[Any, Any]:
+def prepare_model(options: ModelOptions, *, device: str = "cpu", mixed_precision: str = "no",
+                  shards_parameters: bool = False, empty_weights: bool = False) -> tuple[Any, Any]:
     """``(model, processor)`` ready for training as ``options`` says (see the module doc).
 
     The model is a transformers model, or a peft ``PeftModelForCausalLM`` with ``lora=True``, in
-    train mode on ``device``. The processor has the pixel budget applied.
+    train mode on ``device``; its weights are stored as :func:`storage_dtypes` says for the
+    launch's ``mixed_precision`` and ``shards_parameters``. ``empty_weights``: the weights are not
+    read (uninitialised storage; FSDP's ``cpu_ram_efficient_loading`` fills this rank's shards from
+    rank 0). The processor has the pixel budget applied.
     """
     options.validate()
-    model, processor = _build(options, device)
+    trained, frozen_dtype = storage_dtypes(options.dtype, mixed_precision, shards_parameters)
+    model, processor = _build(options, device, frozen_dtype, empty_weights)
     groups = module_groups(model)
-    frozen = {"vision": options.freeze_vision, "merger": options.freeze_merger,
+    frozen = {"vision": options.freeze_vision, "merger": options.merger_frozen,
               "language": options.freeze_language or options.lora}
     for name, param in model.named_parameters():
         param.requires_grad_(not frozen[_group_of(name, groups)])
@@ -383,8 +460,31 @@ def prepare_model(options: ModelOptions, *, device: str = "cpu") -> tuple[Any, A
         _enable_checkpointing(model)
     if options.lora:
         model = _apply_lora(model, options, groups)
+    for param in model.parameters():
+        if param.requires_grad and param.dtype != trained:
+            param.data = param.data.to(trained)
+    if empty_weights:
+        _unread(model)
+    # training needs no KV cache; with activation checkpointing (the model's or FSDP's) a cache would
+    # grow again in each recomputation
+    _set_use_cache(model, False)
     drop_vision_input_grad_hooks(model)
     return model.train(), processor
+
+
+def rebuild_with_state(options: ModelOptions, state: dict[str, torch.Tensor]) -> Any:
+    """The training model of ``options`` rebuilt on the CPU (float32) with ``state`` loaded strictly.
+
+    ``state`` holds every weight under the training model's own names (a gathered FSDP / ZeRO-3
+    state dict). Used by rank 0 to write ``final/`` of a sharded run; costs about two models'
+    memory on the host while it runs.
+    """
+    import dataclasses
+
+    plain = dataclasses.replace(options, dtype="float32", gradient_checkpointing=False)
+    model, _ = prepare_model(plain)
+    model.load_state_dict(state, strict=True)  # copied (and cast) into the float32 model
+    return model.eval()
 
 
 # ----------------------------------------------------------------------------------------------
@@ -396,28 +496,47 @@ def _is_peft(model: Any) -> bool:
     return peft is not None and isinstance(model, peft.PeftModel)
 
 
-def save_for_inference(model: Any, processor: Any, out_dir: str | Path) -> Path:
+def _cast(state: dict[str, torch.Tensor], dtype: torch.dtype | None) -> dict[str, torch.Tensor]:
+    if dtype is None:
+        return state
+    return {k: v.to(dtype) if v.is_floating_point() else v for k, v in state.items()}
+
+
+def save_for_inference(model: Any, processor: Any, out_dir: str | Path, *, save_dtype: torch.dtype | None = None,
+                       in_place: bool = False) -> Path:
     """Write ``model`` (LoRA merged) and ``processor`` to ``out_dir`` for :func:`spacedg.vlm.load_vlm`.
 
     A peft model is merged on a deep copy (the training model keeps its unmerged adapters; the
-    copy costs one model's memory on its device for the duration of the call). The saved config
-    has ``use_cache`` on again. The processor is saved alongside, pixel budget included.
+    copy costs one model's memory on its device for the duration of the call), or in place with
+    ``in_place=True`` (for a model built only to be saved). ``save_dtype`` (e.g. bfloat16 after mixed
+    precision training) casts the saved weights: the model itself only when it is ours (``in_place``,
+    or the merged copy), else a cast copy of its weights. The saved config has ``use_cache`` on again
+    and names the saved dtype. The processor is saved alongside, pixel budget included.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if _is_peft(model):
-        merged = copy.deepcopy(model).merge_and_unload()
-        _set_use_cache(merged, True)
-        merged.save_pretrained(out)
-        del merged
-    else:
-        configs = _text_configs(model)
-        before = [getattr(cfg, "use_cache", None) for cfg in configs]
-        _set_use_cache(model, True)
-        try:
-            model.save_pretrained(out)
-        finally:
-            for cfg, value in zip(configs, before):
-                cfg.use_cache = value
+        model = (model if in_place else copy.deepcopy(model)).merge_and_unload()
+        in_place = True  # the merged copy is ours
+    if in_place and save_dtype is not None:
+        model = model.to(save_dtype)
+    configs = _text_configs(model)
+    before = [getattr(cfg, "use_cache", None) for cfg in configs]
+    _set_use_cache(model, True)
+    try:
+        # a model that is not ours is saved through a cast copy of its weights
+        state = _cast(model.state_dict(), save_dtype) if save_dtype is not None and not in_place else None
+        model.save_pretrained(out, state_dict=state)
+    finally:
+        for cfg, use_cache in zip(configs, before):
+            cfg.use_cache = use_cache
+    if state is not None:  # save_pretrained wrote the model's own dtype into config.json
+        file = out / "config.json"
+        config = json.loads(file.read_text())
+        name = str(save_dtype).split(".")[-1]
+        for node in [config, *(v for v in config.values() if isinstance(v, dict) and "dtype" in v)]:
+            if "dtype" in node:
+                node["dtype"] = name
+        file.write_text(json.dumps(config, indent=2, sort_keys=True) + "\n")
     processor.save_pretrained(out)
     return out

@@ -12,7 +12,9 @@ Conventions of the config that differ from :class:`~spacedg.data.dataset.SpaceDG
 training and evaluation alike (the dataset's own ``None`` means clean only for ``train``/``val``);
 ``max_questions`` caps the training questions only; ``val`` renders the ``val`` split (scenes apart
 from the training ones) with the training ``scenes``, ``builtin_rooms``, ``image_size``,
-``severity`` and ``seed``.
+``severity`` and ``seed`` -- whatever the training source: with ``source: jsonl`` the evaluation
+still renders the ``val`` split of ``scenes`` (the built-in rooms when null); ``val.samples: 0``
+turns it off.
 """
 
 from __future__ import annotations
@@ -95,15 +97,14 @@ class DataOptions:
     val: ValOptions
 
     def __post_init__(self) -> None:
-        if self.source == "jsonl":
-            if not self.jsonl:
-                raise ParameterError("data.source=jsonl needs data.jsonl=PATH (a chat .jsonl written by spacedg export)")
-            return
-        if self.source != "online":
+        if self.source not in ("online", "jsonl"):
             raise ParameterError(f"data.source must be online or jsonl, got {self.source!r}")
+        if self.source == "jsonl" and not self.jsonl:
+            raise ParameterError("data.source=jsonl needs data.jsonl=PATH (a chat .jsonl written by spacedg export)")
         if self.severity not in _SEVERITIES:
             raise ParameterError(f"data.severity must be one of {list(_SEVERITIES)}, got {self.severity!r}")
-        _check_degradations(self.degradations, self.severity, "data.degradations")
+        if self.source == "online":
+            _check_degradations(self.degradations, self.severity, "data.degradations")
         if self.val.samples > 0:
             _check_degradations(self.val.degradations, self.severity, "data.val.degradations")
 
@@ -121,11 +122,18 @@ class DataOptions:
         return OnlineSFTDataset(self._dataset("train", self.degradations, self.clean_prob, self.max_questions))
 
     def val_dataset(self) -> SpaceDGDataset | None:
-        """The ``val`` split the evaluation draws from; ``None`` without evaluation (``val.samples``
-        0, or JSONL training data)."""
-        if self.val.samples <= 0 or self.source != "online":
+        """The ``val`` split the evaluation draws from (whatever the training source); ``None``
+        without evaluation (``val.samples`` 0)."""
+        if self.val.samples <= 0:
             return None
         return self._dataset("val", self.val.degradations, self.val.clean_prob, None)
+
+    def val_description(self) -> str:
+        """One line saying what the evaluation renders (recorded in ``train_summary.json``)."""
+        if self.val.samples <= 0:
+            return "none (data.val.samples=0)"
+        scenes = f"the scenes under data.scenes ({len(self.scenes)} path(s))" if self.scenes else f"{self.builtin_rooms} built-in rooms"
+        return f"{self.val.samples} items of the val split of {scenes}, rendered online"
 
     def val_items(self) -> list[dict[str, Any]]:
         """``val.samples`` items of the ``val`` split (a spread drawn with ``seed``), rendered once,

@@ -8,8 +8,8 @@
 """
 
 from spacedg.vlm.generate import encode_chats, generate, to_pil
-from spacedg.vlm.loading import load_processor, load_vlm
+from spacedg.vlm.loading import load_processor, load_vlm, pixel_budget
 from spacedg.vlm.tiny import TINY_FAMILIES, build_tiny_vlm, save_tiny_vlm
 
 __all__ = ["TINY_FAMILIES", "build_tiny_vlm", "encode_chats", "generate", "load_processor", "load_vlm",
-           "save_tiny_vlm", "to_pil"]
+           "pixel_budget", "save_tiny_vlm", "to_pil"]

@@ -35,7 +35,8 @@ from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.vlm.processor import assemble_processor
 from spacedg.vlm.tiny import build_tiny_vlm
 
-__all__ = ["assemble_processor", "load_processor", "load_vlm", "resolve_dtype", "set_pixel_budget"]  # assemble_processor: re-exported
+__all__ = ["assemble_processor", "load_processor", "load_vlm", "pixel_budget", "resolve_dtype",  # assemble_processor: re-exported
+           "set_pixel_budget"]
 
 
 def set_pixel_budget(processor: Any, min_pixels: int | None = None, max_pixels: int | None = None) -> Any:
@@ -65,6 +66,20 @@ def set_pixel_budget(processor: Any, min_pixels: int | None = None, max_pixels: 
         raise ParameterError(f"{type(image_processor).__name__} has no pixel budget spacedg knows how to set; "
                              f"leave min_pixels / max_pixels unset for this model")
     return processor
+
+
+def pixel_budget(processor: Any) -> dict[str, int | None]:
+    """``{"min": pixels, "max": pixels}``: the per-image budget ``processor`` applies (the inverse of
+    :func:`set_pixel_budget`; InternVL: its tile counts times the tile area; ``None`` where unknown)."""
+    image_processor = getattr(processor, "image_processor", None)
+    size = {k: v for k, v in dict(getattr(image_processor, "size", None) or {}).items() if v is not None}
+    if "shortest_edge" in size and "longest_edge" in size:
+        return {"min": int(size["shortest_edge"]), "max": int(size["longest_edge"])}
+    if "height" in size and "width" in size and hasattr(image_processor, "max_patches"):
+        tile = int(size["height"]) * int(size["width"])
+        low = getattr(image_processor, "min_patches", None)
+        return {"min": None if low is None else int(low) * tile, "max": int(image_processor.max_patches) * tile}
+    return {"min": None, "max": None}
 
 
 def _read_json(file: Path) -> dict[str, Any]:

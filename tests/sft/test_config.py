@@ -160,11 +160,18 @@ def test_instantiated_data_builds_the_datasets_of_before(rooms) -> None:
     assert all(np.array_equal(a, b) for item, old in zip(items, chosen) for a, b in zip(item["images"], item_images(old)))
 
 
-def test_jsonl_source_and_no_evaluation(tmp_path) -> None:
+def test_jsonl_source_still_evaluates_on_the_val_split(rooms, tmp_path) -> None:
     line = '{"messages": [{"role": "user", "content": "Is it? <image>"}, {"role": "assistant", "content": "yes"}], "images": ["a.png"]}\n'
     (tmp_path / "train.jsonl").write_text(line)
-    data = build(compose_sft("+experiment=tiny", "data.source=jsonl", f"data.jsonl={tmp_path / 'train.jsonl'}").data, "data")
-    assert isinstance(data.train_data(), ChatJsonlDataset) and data.val_items() == []
+    overrides = ["+experiment=tiny", "data.source=jsonl", f"data.jsonl={tmp_path / 'train.jsonl'}", f"data.scenes=[{rooms}]"]
+    data = build(compose_sft(*overrides).data, "data")
+    assert isinstance(data.train_data(), ChatJsonlDataset)
+    val = data.val_dataset()  # the JSONL trains; evaluation renders the val split of data.scenes, as with online data
+    online = build(compose_sft("+experiment=tiny", f"data.scenes=[{rooms}]").data, "data").val_dataset()
+    _same(val, online, [0])
+    assert data.val_description().startswith("8 items of the val split")
+    off = build(compose_sft(*overrides, "data.val.samples=0").data, "data")
+    assert off.val_dataset() is None and off.val_items() == [] and off.val_description().startswith("none")
 
 
 # ------------------------------------------------------------------ errors

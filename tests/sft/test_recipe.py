@@ -1,6 +1,6 @@
 """SFT recipe (spacedg.sft) with a real tiny VLM on CPU: labels, overfitting, resume, the Hydra
-app from an installed wheel, torchrun DDP, exported JSONL data and config errors (the configs
-themselves: test_config.py).
+app from an installed wheel, exported JSONL data and config errors (the configs themselves:
+test_config.py; the torchrun launches: test_distributed.py).
 
 Losses are deterministic on this CPU for a fixed seed; runs use the four small session rooms.
 """
@@ -103,9 +103,16 @@ def test_resume_continues_from_the_saved_loss(rooms, tmp_path, monkeypatch) -> N
     whole = run(_config(rooms, tmp_path / "whole"))
     assert whole["global_step"] == 4 and len(whole["losses"]) == 4
     assert whole["losses"][-1] < whole["losses"][0]
-    for name in ("checkpoint-2", "data_stats.json"):
+    assert whole["train_loss"] == pytest.approx(sum(whole["losses"]) / 4, rel=1e-6)
+    measured = whole["memory"]["per_rank"][0]
+    assert {k: measured[k] for k in ("params", "grads", "optimizer")} == measured["predicted"]
+    for name in ("checkpoint-2", "checkpoint-4", "data_stats.json"):
         src = tmp_path / "whole" / name
         (shutil.copytree if src.is_dir() else shutil.copy)(src, tmp_path / "resumed" / name)
+    # checkpoint-4's save was "interrupted": no trainer_state.json; resume=auto must take checkpoint-2
+    (tmp_path / "resumed" / "checkpoint-4" / "trainer_state.json").unlink()
+    with pytest.raises(ParameterError, match="incomplete"):
+        run(_config(rooms, tmp_path / "resumed", f"resume={tmp_path / 'resumed' / 'checkpoint-4'}"))
     # through the Trainer too, frozen parts keep their weights bit-exact and trained parts move
     from safetensors.torch import load_file
 
@@ -118,8 +125,8 @@ def test_resume_continues_from_the_saved_loss(rooms, tmp_path, monkeypatch) -> N
     assert not any(torch.equal(before[k], after[k]) for k in language if k.endswith("proj.weight"))
     resumed = run(_config(rooms, tmp_path / "resumed", "resume=auto"))
     assert resumed["losses"] == whole["losses"]  # steps 3 and 4 continue exactly
+    assert resumed["train_loss"] == whole["train_loss"]  # the mean over all 4 steps, not only the resumed 2
     # the stock Trainer path loses the trained weights here: its steps 3-4 differ
-    shutil.rmtree(tmp_path / "resumed" / "checkpoint-4")
     monkeypatch.setattr(SFTTrainer, "_load_from_checkpoint", Trainer._load_from_checkpoint)
     stock = run(_config(rooms, tmp_path / "stock", f"resume={tmp_path / 'whole' / 'checkpoint-2'}"))
     assert stock["losses"][2:] != whole["losses"][2:]
@@ -139,9 +146,20 @@ def test_run_writes_checkpoints_predict_can_load(rooms, tmp_path) -> None:
     assert any(k.startswith("eval_score_") for k in evaluation)
     stats = json.loads((out / "data_stats.json").read_text())
     assert stats["kept"] + stats["dropped_over_budget"] == stats["samples"] == 16
+    assert stats["parameters"]["merger"]["trainable"] == 0  # LoRA trains the adapters only (freeze_merger: auto)
     for folder in (out / "final", out / "checkpoint-4"):
         model, processor = load_vlm(folder)
         assert processor.chat_template and model.config.model_type == "qwen2_5_vl"
+    # spacedg predict records the pixel budget it used: the model's own when none is given
+    from spacedg.data.dataset import SpaceDGDataset
+    from spacedg.eval.predict import dataset_source, predict
+    from spacedg.eval.predictions import meta_path
+
+    dataset = SpaceDGDataset("val", ["haze"], scenes=[rooms], image_size=(64, 48), max_questions=2)
+    result = predict(out / "final", dataset_source(dataset), tmp_path / "pred.jsonl", max_new_tokens=4, limit=1,
+                     progress=False)
+    assert result.answered == 1
+    assert json.loads(meta_path(tmp_path / "pred.jsonl").read_text())["image_pixels"] == {"min": 1024, "max": 4096}
 
 
 def test_exported_jsonl_as_training_data(rooms, tmp_path) -> None:
@@ -152,7 +170,9 @@ def test_exported_jsonl_as_training_data(rooms, tmp_path) -> None:
     export_bench(dataset, tmp_path / "export", progress=False)
     summary = run(_config(rooms, tmp_path / "run", "data.source=jsonl", f"data.jsonl={tmp_path / 'export' / 'train.jsonl'}",
                           "train.max_steps=2"))
-    assert summary["global_step"] == 2 and summary["data"]["samples"] == 6 and summary["last_evaluation"] is None
+    assert summary["global_step"] == 2 and summary["data"]["samples"] == 6
+    # the exported data trains; the evaluation still renders the val split (it used to be silently off)
+    assert summary["last_evaluation"]["eval_samples"] == 4 and "val split" in summary["evaluation"]
 
 
 def test_config_errors(rooms, tmp_path) -> None:
@@ -202,18 +222,3 @@ def test_sft_runs_from_an_installed_wheel(rooms, tmp_path) -> None:
     script = subprocess.run([str(site / "bin" / "spacedg-sft"), "+experiment=tiny", "--cfg", "job"], cwd=work, env=env,
                             capture_output=True, text=True, timeout=120)
     assert script.returncode == 0 and "path: tiny:qwen2_5_vl" in script.stdout  # the console script finds the packaged configs
-
-
-def test_torchrun_two_process_ddp(rooms, tmp_path) -> None:
-    torchrun = Path(sys.executable).with_name("torchrun")
-    result = subprocess.run(
-        [str(torchrun), "--nproc_per_node", "2", "--master_port", "29533", "-m", "spacedg.sft", "+experiment=tiny",
-         f"data.scenes=[{rooms}]", f"output_dir={tmp_path / 'ddp'}", *FAST],
-        cwd=tmp_path, env={**_env_without_repo(), "PYTHONPATH": str(ROOT)},  # this checkout, not whichever is installed
-        capture_output=True, text=True, timeout=600,
-    )
-    assert result.returncode == 0, result.stderr[-3000:]
-    summary = json.loads((tmp_path / "ddp" / "train_summary.json").read_text())
-    assert summary["distributed"] == {"world_size": 2, "parallel_mode": "distributed", "fsdp": False, "deepspeed": False,
-                                      "model_class": "DistributedDataParallel"}
-    assert summary["global_step"] == 4 and summary["last_evaluation"]["eval_samples"] == 4
