@@ -352,12 +352,14 @@ def deal_letters(records: Sequence[QARecord], rng: np.random.Generator) -> list[
     """The MCQ ``records`` with their correct letters dealt again, per sub type in the given
     order, from shuffled A–D blocks of ``rng``: the letters of each sub type of a scene's index
     are uniform to within one block (the selection keeps a subset of a family's records, whose
-    letters were balanced over the whole generation only)."""
+    letters were balanced over the whole generation only). Only records with a ``selection``
+    entry are re-lettered: their geometry never refers to option positions (families without
+    one keep their letters)."""
     decks: dict[str, list[int]] = {}
     out = []
     for r in records:
-        if r.answer_type is not AnswerType.MCQ:
-            out.append(r)
+        if r.answer_type is not AnswerType.MCQ or _selection(r) is None:
+            out.append(r)  # a family without selection entries may tie its geometry to the option order
             continue
         deck = decks.setdefault(r.sub_question_type, [])
         if not deck:

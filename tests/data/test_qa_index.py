@@ -197,8 +197,8 @@ def test_selection_never_replaces_the_full_index(qa_room_dirs, tmp_path):
     room = shutil.copytree(qa_room_dirs[2], tmp_path / "room", ignore=shutil.ignore_patterns("*.qa.*"))
     full = build_scene_index(room, QABuildConfig(per_sub_type=3), progress=False)
     before = [p.read_bytes() for p in index_paths(full.scene_id, room)]
-    part = build_scene_index(room, QABuildConfig(per_sub_type=3, families=("object_counting",)), progress=False, force=True)
-    assert part.path == index_paths(full.scene_id, room, ("object_counting",))[0] != full.path
+    part = build_scene_index(room, QABuildConfig(per_sub_type=3, families=("camera_translation",)), progress=False, force=True)
+    assert part.path == index_paths(full.scene_id, room, ("camera_translation",))[0] != full.path
     assert [p.read_bytes() for p in index_paths(full.scene_id, room)] == before
     assert build_scene_index(room, QABuildConfig(per_sub_type=3), progress=False).reused
-    assert part.records and part.records == [r for r in full.records if r.question_type == "object_counting"]
+    assert part.records and part.records == [r for r in full.records if r.question_type == "camera_translation"]

@@ -138,6 +138,7 @@ __all__ = [
     "SAME_FRACTION",
     "DIFFERENT_M",
     "DIFFERENT_FRACTION",
+    "DELTA_DECIMALS",
     "TOP_DIFFERENT_M",
     "TOP",
     "longest_side",
@@ -195,16 +196,22 @@ def top_elevation(inst: Instance, up: np.ndarray) -> float:
 def thresholds_for(quantity: str, values: tuple[float, float] | list[float]) -> tuple[float, float]:
     """``(same_below, different_from)`` in metres for a pair of values of ``quantity``
     (``"longest_side"`` or ``"top_elevation"``): ``|Δ| < same_below`` is "about the same",
-    ``|Δ| >= different_from`` a clear difference, in between is skipped (module docstring)."""
+    ``|Δ| >= different_from`` a clear difference, in between is skipped (module docstring;
+    ``|Δ|`` is compared rounded to :data:`DELTA_DECIMALS` decimals)."""
     if quantity == "longest_side":
-        larger = max(abs(float(v)) for v in values)
+        larger = round(max(abs(float(v)) for v in values), DELTA_DECIMALS)
         return max(SAME_M, SAME_FRACTION * larger), max(DIFFERENT_M, DIFFERENT_FRACTION * larger)
     return SAME_M, TOP_DIFFERENT_M
 
 
+#: Differences are compared after rounding to this many decimals (metres), so float noise of a
+#: rigid motion of the scene never moves a pair across a threshold.
+DELTA_DECIMALS = 9
+
+
 def _outcome(values: tuple[float, float] | list[float], same_below: float) -> int:
     """0: the first value is larger, 1: the second, -1: about the same."""
-    delta = float(values[0]) - float(values[1])
+    delta = round(float(values[0]) - float(values[1]), DELTA_DECIMALS)
     if abs(delta) < same_below:
         return -1
     return 0 if delta > 0 else 1
@@ -269,10 +276,11 @@ def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str
         entry["value"] = value
     delta = values[0] - values[1]
     same_below, different_from = thresholds_for(quantity, values)
-    if same_below <= abs(delta) < different_from:
+    size = abs(round(delta, DELTA_DECIMALS))
+    if same_below <= size < different_from:
         return None  # a difference the eye sees but cannot be sure of: skipped
     phrase1, phrase2 = phrase(one), phrase(two)
-    if abs(delta) < same_below:
+    if size < same_below:
         truth, truth_text = "same", SAME
     elif delta > 0:
         truth, truth_text = "object1", phrase1
