@@ -71,7 +71,7 @@ label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{"id"
 ``cardinal_ratio``); ``template`` (always 0); ``pair``; ``pair_rules``; ``selection`` (cell = the
 assumed direction, roles = the eight compass labels: the answer was the assumed direction
 itself half the time, since the two cameras are close; the question index balances the eight
-answers per assumed direction; subject = the views and the objects).
+answers per assumed direction; subject = the ordered object pair, asked once per scene).
 
 The compass frame (:func:`~spacedg.plugins.questions.geometry.compass_frame`,
 :func:`~spacedg.plugins.questions.geometry.compass_answer`,
@@ -152,7 +152,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             "pair": pair.to_dict(),
             "pair_rules": rules.to_dict(),
             "selection": selection_entry(
-                f"views:{pair.a}|{pair.b}|objects:{one.id}|{two.id}", f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
+                f"objects:{one.id}|{two.id}", f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
             ),
         }
         yield make_record(
