@@ -370,7 +370,7 @@ class ParamRange:
         """``value`` drawn from this range, at ``scene_depth`` metres (module :data:`REFERENCE_DEPTH_M`)."""
         if not self.per_depth or scene_depth is None:
             return value
-        return float(value) * float(scene_depth) / REFERENCE_DEPTH_M
+        return float(value) * (float(scene_depth) / REFERENCE_DEPTH_M)  # ratio first: exact at the reference
 
 
 # --------------------------------------------------------- degradations

@@ -231,7 +231,11 @@ class Lexicon:
     def confuses(self, asked: str, seen: str) -> bool:
         """Whether a view showing an instance labelled ``seen`` makes a label-only question about
         ``asked`` ambiguous: the labels are related, or ``seen`` shows ``asked`` unannotated."""
-        return self.related(asked, seen) or label_key(seen) in self.shown_by(asked)
+        if self.related(asked, seen):
+            return True
+        containers = self.shown_by(asked)
+        key = label_key(seen)
+        return bool(containers & (self._synonyms_of(key) | self.broader(key)))
 
 
 #: The built-in lexicon: the synthetic rooms' catalogue and common indoor (ScanNet-style) labels.

@@ -296,3 +296,30 @@ def test_near_boundary_cases_are_exercised(scenes_and_records):
                 dist = g.get("boundary_distance_deg", g.get("sector", {}).get("boundary_distance_deg") if isinstance(g.get("sector"), dict) else None)
                 near += dist is not None and dist < 3
     assert near >= 1
+
+
+def test_index_selection_is_debiased(scenes_and_records):
+    """Per scene: no subject asked twice per sub type; every balanced cell holds whole rounds
+    (each of its roles equally often); the correct letters of each MCQ sub type are uniform to
+    within one block of four."""
+    from collections import Counter, defaultdict
+
+    from spacedg.data.qa_stats import record_subject
+
+    for _, records in scenes_and_records:
+        subjects = Counter((r.sub_question_type, record_subject(r)) for r in records)
+        assert max(subjects.values()) == 1
+        cells: dict[tuple[str, str], Counter] = defaultdict(Counter)
+        roles: dict[tuple[str, str], list] = {}
+        letters: dict[str, Counter] = defaultdict(Counter)
+        for r in records:
+            sel = r.geometry["selection"]
+            if "cell" in sel:
+                cells[(r.question_type, sel["cell"])][sel["role"]] += 1
+                roles[(r.question_type, sel["cell"])] = sel["roles"]
+            if r.answer_type.value == "MCQ":
+                letters[r.sub_question_type][r.answer] += 1
+        for key, counts in cells.items():
+            assert set(counts) == set(roles[key]) and len(set(counts.values())) == 1, (key, counts)
+        for sub, counts in letters.items():
+            assert max(counts.get(k, 0) for k in LETTERS) - min(counts.get(k, 0) for k in LETTERS) <= 1, (sub, counts)
