@@ -39,10 +39,12 @@ Predictors (all fitted on the training scenes only):
 Scores: accuracy (MCQ, YN, COUNT) or mean relative accuracy (NA, SIZE_LIST: MRA over
 θ ∈ {0.50, …, 0.95}, the bench's metric). ``chance`` is what uniform guessing gets: MCQ 1 / the
 number of the record's options that can be correct (*live* options: an option whose text, or
-role "an object the question names", is the truth of at least one record of its question
-type across all audited scenes; the size-comparison option "cannot be determined" is never
-correct, so those questions have three live options), YN 1/2, COUNT 1 / the number of distinct
-counts of the question type. ``best`` is the best predictor per sub type (chosen on the
+role "an object the question names", is the truth of at least one record of the same
+question type and wording (the question without the objects, labels and numbers it names)
+across all audited scenes: the size-comparison option "cannot be determined" is never correct,
+so those questions have three live options; "Up" is never where an object lies from a camera
+at eye height, so a direction question offering it has three), YN 1/2, COUNT 1 / the number of
+distinct counts of the question type. ``best`` is the best predictor per sub type (chosen on the
 held-out scores themselves: an upper bound on what these blind models reach); the ``ALL`` row
 pools MCQ, YN and COUNT records with each sub type's best predictor.
 
@@ -501,19 +503,24 @@ class AuditReport:
         return {"rows": [r.to_dict() for r in self.rows], "overall": self.overall, "solved": list(self.solved)}
 
 
-def _live_roles(records: Sequence[QARecord]) -> dict[str, set[str]]:
-    live: dict[str, set[str]] = defaultdict(set)
+def _wording(record: QARecord) -> tuple[str, str]:
+    """The question type and its wording without the objects, labels and numbers it names."""
+    return record.question_type, " ".join(sorted(w for w in _template_words(record) if not _NUMBER.match(w)))
+
+
+def _live_roles(records: Sequence[QARecord]) -> dict[tuple[str, str], set[str]]:
+    live: dict[tuple[str, str], set[str]] = defaultdict(set)
     for r in records:
         if r.answer_type is AnswerType.MCQ:
             role = option_role(r, truth_text(r))
-            live[r.question_type].add("object" if role.startswith("object:") else role)
+            live[_wording(r)].add("object" if role.startswith("object:") else role)
     return live
 
 
-def _chance(record: QARecord, live: Mapping[str, set[str]], counts: Mapping[str, int]) -> float | None:
+def _chance(record: QARecord, live: Mapping[tuple[str, str], set[str]], counts: Mapping[str, int]) -> float | None:
     if record.answer_type is AnswerType.MCQ:
         roles = [option_role(record, option_text(record, k)) for k in MCQ_LETTERS]
-        n = sum(("object" if r.startswith("object:") else r) in live[record.question_type] for r in roles)
+        n = sum(("object" if r.startswith("object:") else r) in live[_wording(record)] for r in roles)
         return 1.0 / max(1, n)
     if record.answer_type is AnswerType.YN:
         return 0.5

@@ -224,8 +224,9 @@ def select_records(
 
     - a subject is taken at most once per sub type (``(sub type, subject)``);
     - records with a ``cell`` are taken in **whole rounds**: one record of every role in the
-      cell's ``roles``, each the first in generation order whose subject is still free (and that
-      ``keep`` accepts); a round is taken only while every sub type it touches has room, and a
+      cell's ``roles`` (or, for an entry with ``all_roles`` false, of the roles the candidates
+      offer, at least two), each the first in generation order whose subject is still free (and
+      that ``keep`` accepts); a round is taken only while every sub type it touches has room, and a
       cell stops at its first incomplete round. Cells are visited round-robin in the order of
       their first record, one round per visit, until no cell can give a round;
     - records without a ``cell`` (metric answers) are taken in generation order.
@@ -257,6 +258,7 @@ def select_records(
     metric: list[int] = []
     cells: dict[str, dict[str, list[int]]] = {}
     cell_roles: dict[str, list[str]] = {}
+    partial: set[str] = set()
     for i, r in enumerate(records):
         sel = _selection(r)
         if sel is None:
@@ -267,6 +269,11 @@ def select_records(
             cell = f"{r.question_type}|{sel['cell']}"
             cells.setdefault(cell, {}).setdefault(str(sel["role"]), []).append(i)
             cell_roles.setdefault(cell, [str(x) for x in sel.get("roles", [])])
+            if sel.get("all_roles", True) is False:
+                partial.add(cell)
+    for cell in partial:  # rounds over the roles this scene offers in the cell (at least two)
+        offered = [role for role in cell_roles[cell] if cells[cell].get(role)]
+        cell_roles[cell] = offered if len(offered) >= 2 else []
 
     def subject(i: int) -> tuple[str, str]:
         return (records[i].sub_question_type, str(_selection(records[i])["subject"]))  # type: ignore[index]
@@ -280,7 +287,8 @@ def select_records(
             room[r.sub_question_type] -= 1
     # balanced cells: whole rounds, round-robin over cells
     cursors = {cell: {role: 0 for role in roles} for cell, roles in cell_roles.items()}
-    open_cells = [c for c in cells if cell_roles[c] and all(cells[c].get(role) for role in cell_roles[c])]
+    # a cell needs two roles at least: a one-role cell would be answered by its text alone
+    open_cells = [c for c in cells if len(cell_roles[c]) >= 2 and all(cells[c].get(role) for role in cell_roles[c])]
     while open_cells:
         still = []
         for cell in open_cells:

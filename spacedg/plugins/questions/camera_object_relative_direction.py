@@ -65,10 +65,17 @@ then both signs of two axes, and they never tell which axis is the truth's (padd
 words of two different axes left the truth's axis the only one shown with both signs, a
 blind 42 %).
 
+``bbox_center_direction`` does not ask an object whose label would name "Back" or "Up" (rare:
+behind camera B, or above a camera at eye height; a blind model learns to avoid them), nor one
+whose two-part option set (Up/Down × Front/Back) would leave a single askable answer; the
+options still offer those words, and the audit's chance counts only the answers that occur.
+
 Debiasing (the ``selection`` entry): the camera-frame sub types' **cell** is the sub type, the
 template (``single_view``'s four wordings) and the option set (what the text tells: which
 axes), ``relpos_A_facing_B``'s is the sub type with the eight
-sector labels as roles; the question index takes whole rounds (one record per role) per cell.
+sector labels as roles; the question index takes whole rounds (one record per role) per cell,
+over the roles the scene offers in the camera-frame cells (an object above a camera at eye
+height, "Up", hardly ever occurs: those rounds go over the other three options).
 Subjects: the view and the unordered object pair (``single_view``: "B relative to A" and "A
 relative to B" are one question), camera B's view and the object (``bbox_center_direction``),
 the ordered triplet (``relpos_A_facing_B``).
@@ -209,7 +216,7 @@ def _option_selection(subject: str, sub: str, template: int | None, truth: str, 
     """Selection entry whose cell is the sub type, template (if given) and option set (the roles are its four texts)."""
     texts = sorted(o[3:] for o in options)
     head = sub if template is None else f"{sub}|template:{template}"
-    return selection_entry(subject, f"{head}|options:" + "|".join(texts), truth, texts)
+    return selection_entry(subject, f"{head}|options:" + "|".join(texts), truth, texts, all_roles=False)
 
 
 def _body_geometry(view: str, world: np.ndarray, cam: np.ndarray, parts: list[tuple[int, int]], truth: str) -> dict[str, Any]:
@@ -269,16 +276,42 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         vec = point_in_camera(cam_b, inst.box.center)
         if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
             continue
+        if _rare_bbox_direction(vec):
+            continue
         template = int(rng.integers(len(TWO_VIEW_TEMPLATES)))
         parts, truth, options, letter = body_direction(vec, rng)
+        roles = sorted(o[3:] for o in options if not _rare_bbox_label(o[3:]))
         question = find_in_image(phrase(inst), 0) + "\n" + TWO_VIEW_TEMPLATES[template].format(label=label_text(inst.label))
         extra = {
             **_body_geometry(pair.b, inst.box.center - centre_b, vec, parts, truth),
             "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
             "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
-            "selection": _option_selection(f"view:{pair.b}|object:{iid}", BBOX_CENTER_DIRECTION, None, truth, options),
+            "selection": selection_entry(
+                f"view:{pair.b}|object:{iid}", f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(sorted(o[3:] for o in options)), truth, roles,
+            ),
         }
         yield _record(scene, index, BBOX_CENTER_DIRECTION, (pair.a, pair.b), (inst,), ((inst, pair.a),), question, options, letter, template, extra)
+
+
+def _rare_bbox_label(label: str) -> bool:
+    """A direction label naming "Back" or "Up" (see :func:`_rare_bbox_direction`)."""
+    return bool({"Back", "Up"} & set(label.split("-")))
+
+
+def _rare_bbox_direction(vec_camera: np.ndarray) -> bool:
+    """Whether ``bbox_center_direction`` skips this object (decision, debiasing): its label would
+    name "Back" (behind camera B) or "Up" (above a camera held at eye height). Both are rare
+    (a few per scene), so a blind model learns never to pick them; asked only where a scene
+    happens to offer them, they would make the rest predictable. The options still show them.
+    Also skipped: a label whose option set leaves fewer than two answers that are asked."""
+    parts = dominant_parts(vec_camera)
+    words = parts_label(parts, BODY_DIRECTION_WORDS).split("-")
+    if {"Back", "Up"} & set(words):
+        return True
+    if len(parts) == 2:  # the four sign combinations of two axes: at least two must be askable
+        axes = {axis for axis, _ in parts}
+        return axes == {1, 2}  # Up/Down × Front/Back: only "Front-Down"/"Down-Front" would be left
+    return False
 
 
 # ------------------------------------------------------------------- relpos

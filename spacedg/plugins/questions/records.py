@@ -296,7 +296,9 @@ def compass_question(reference: np.ndarray, query: np.ndarray, up: np.ndarray, r
     return assumed, options, letter, block
 
 
-def selection_entry(subject: str, cell: str | None = None, role: str | None = None, roles: Sequence[str] = ()) -> dict[str, Any]:
+def selection_entry(
+    subject: str, cell: str | None = None, role: str | None = None, roles: Sequence[str] = (), *, all_roles: bool = True,
+) -> dict[str, Any]:
     """The ``selection`` entry of a geometry block (module docstring, "Selection").
 
     ``subject``: what the question is about (``"object:12"``, ``"pair:3|7"``, ``"view:frame_0004|label:chair"``);
@@ -304,13 +306,18 @@ def selection_entry(subject: str, cell: str | None = None, role: str | None = No
     view has the same answer). ``cell``: what a text-only model can tell (``None``: the record's
     answer is metric or not balanced); ``role``: this record's truth in the cell's terms;
     ``roles``: every role the cell's questions can have (the index balances over exactly these,
-    taking whole rounds; a cell missing a role gives no records).
+    taking whole rounds; a cell missing a role gives no records). ``all_roles=False``: the
+    rounds go over the roles the scene offers in the cell (at least two), for cells whose
+    options name directions the geometry rarely or never produces ("Up" of an object seen
+    from a camera at eye height).
     """
     out: dict[str, Any] = {"subject": str(subject)}
     if cell is not None:
         if role is None or role not in roles:
             raise ValueError(f"selection_entry: role {role!r} must be one of roles {list(roles)}")
         out.update({"cell": str(cell), "role": str(role), "roles": [str(r) for r in roles]})
+        if not all_roles:
+            out["all_roles"] = False
     return out
 
 
