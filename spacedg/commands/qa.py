@@ -169,7 +169,7 @@ def _scenes_with_visibility(by_scene: dict[str, list], paths: list[Path], extra:
 
 def _stats(args: argparse.Namespace) -> int:
     from spacedg.data.qa_audit import blind_audit, format_audit
-    from spacedg.data.qa_stats import ambiguities, answer_balance, count_table, format_table, repeat_rate
+    from spacedg.data.qa_stats import ambiguities, answer_balance, blind_baseline, count_table, format_table, repeat_rate
 
     by_scene = _records_by_scene(args.paths, args.families)
     every = [r for rs in by_scene.values() for r in rs]
@@ -177,7 +177,8 @@ def _stats(args: argparse.Namespace) -> int:
     audit = blind_audit(by_scene) if len(by_scene) > 1 and not args.no_blind else None
     report = {
         "scenes": len(by_scene), "records": len(every), "counts": count_table(every),
-        "balance": answer_balance(every), "blind": audit.to_dict() if audit else None,
+        "balance": answer_balance(every), "blind_baseline": blind_baseline(by_scene) if len(by_scene) > 1 else [],
+        "blind": audit.to_dict() if audit else None,
         "repeats": repeat_rate(by_scene), "ambiguities": ambiguities(every, scenes),
     }
     if args.json:

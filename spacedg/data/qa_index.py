@@ -229,14 +229,16 @@ def select_records(
       that ``keep`` accepts); a round is taken only while every sub type it touches has room, and a
       cell stops at its first incomplete round. Cells are visited round-robin in the order of
       their first record, one round per visit, until no cell can give a round;
-    - records without a ``cell`` (metric answers) are taken in generation order.
+    - records without a ``cell`` (metric answers) are taken in generation order;
+    - a sub type whose ``per_sub_type`` is smaller than every round of its cells (e.g. 1) takes
+      its first free candidates in generation order instead, so a small index is not empty.
 
     Records without a ``selection`` entry are taken per sub type round-robin over their correct
     answers (:func:`truth_key`), as before version 3.
 
     ``stats`` (optional) receives per sub type: ``pooled``, ``taken``, and why the others were
-    not: ``repeat`` (subject already asked), ``quota`` (sub type full), ``unbalanced`` (no
-    complete round of its cell left), ``judge``.
+    not: ``repeat`` (subject already asked), ``quota`` (its sub type has no room for another
+    round of its cell), ``unbalanced`` (no complete round of its cell left), ``judge``.
     """
     keep = keep or (lambda record: True)
     judged_out: set[str] = set()
@@ -321,10 +323,35 @@ def select_records(
                 room[records[i].sub_question_type] -= 1
             still.append(cell)
         open_cells = still
+    # a sub type whose quota is smaller than every round of its cells (a tiny per_sub_type, e.g.
+    # 1) would stay empty: it takes its first free candidates in generation order instead (too
+    # few to balance anyway)
+    got = Counter(records[i].sub_question_type for i in taken)
+    smallest: dict[str, int] = {}
+    for cell, by_role in cells.items():
+        size = len(cell_roles[cell])
+        for queue in by_role.values():
+            for i in queue:
+                sub = records[i].sub_question_type
+                smallest[sub] = min(smallest.get(sub, size), size) if size >= 2 else smallest.get(sub, 10**9)
+    for i in sorted(i for by_role in cells.values() for queue in by_role.values() for i in queue):
+        r = records[i]
+        sub = r.sub_question_type
+        if got[sub] == 0 and 0 < room[sub] < smallest.get(sub, 0) and subject(i) not in subjects and accept(r):
+            taken.add(i)
+            subjects.add(subject(i))
+            room[sub] -= 1
     # records of families without selection entries
     for sub, ix in plain.items():
         for r in _select_balanced([records[i] for i in ix], per_sub_type, accept):
             taken.add(ix[[records[i].id for i in ix].index(r.id)])
+    def _round_size(r: QARecord) -> int:
+        sel = _selection(r)
+        if sel is None or "cell" not in sel:
+            return 1
+        roles = cell_roles.get(f"{r.question_type}|{sel['cell']}") or sel.get("roles", [])
+        return max(1, sum(1 for role in roles))
+
     if stats is not None:
         for i, r in enumerate(records):
             row = stats.setdefault(r.sub_question_type, Counter())
@@ -335,8 +362,8 @@ def select_records(
                 row["judge"] += 1
             elif _selection(r) is not None and subject(i) in subjects:
                 row["repeat"] += 1
-            elif room[r.sub_question_type] <= 0:
-                row["quota"] += 1
+            elif room[r.sub_question_type] < _round_size(r):
+                row["quota"] += 1  # no room for another round of its cell
             else:
                 row["unbalanced"] += 1
     return [records[i] for i in sorted(taken)]

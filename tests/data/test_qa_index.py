@@ -113,7 +113,10 @@ def test_cli_build_and_stats(qa_room_dirs, tmp_path, capsys):
     assert {row["question_type"] for row in report["counts"]} == {"object_counting", "object_existence_estimation"}
     assert report["blind_baseline"][-1]["question_type"] == "ALL"
     files = sorted(map(str, out.glob("*.jsonl")))
-    assert main(["qa", "stats", *files]) == 0 and "Blind baseline" in capsys.readouterr().out
+    assert report["repeats"][-1]["repeats"] == 0 and report["blind"]["rows"] and "ambiguities" in report
+    assert main(["qa", "stats", *files]) == 0
+    text = capsys.readouterr().out
+    assert "Blind stress test" in text and "Repeats" in text and "Ambiguities" in text
     assert main(["qa", "stats", str(tmp_path / "nothing")]) == 2
     assert "no such file" in capsys.readouterr().err
 

@@ -17,8 +17,12 @@ Balance (**debiasing**: a blind model that knows the label must not know the cou
 answers are the counts in ``counts`` (default :data:`COUNTS` = 0, 1, 2; a view showing more
 is not asked), and each label is asked equally often with each of them: a label is asked only
 when the scene has a view for every count, in whole rounds (one view per count). So neither
-"always 1" nor a per-label prior beats guessing among ``counts``. ``counts=None`` yields
-every valid candidate instead (any count ≥ 0), unbalanced.
+"always 1" nor a per-label prior beats guessing among ``counts``. After the balanced rounds
+come the other candidates with a count in ``counts``, in a seeded order, with a selection cell
+``label:<label>|unbalanced`` that never completes a round: the question index takes them
+only when its quota per sub type is smaller than a round (``per_sub_type`` 1 or 2), so a tiny
+index is not empty. ``counts=None`` yields every valid candidate instead (any count ≥ 0),
+unbalanced.
 
 Labels are grouped case- and underscore-insensitively (``"Chair"``, ``"chair"`` and
 ``"chair "`` are one label); the question uses the first spelling in id order.
@@ -152,7 +156,10 @@ def _vis_entry(inst: Instance, view: str) -> dict[str, Any]:
     }
 
 
-def _record(scene: Scene, cand: _Candidate, template: int, thresholds: VisibilityThresholds, counts: tuple[int, ...] | None) -> QARecord:
+def _record(
+    scene: Scene, cand: _Candidate, template: int, thresholds: VisibilityThresholds, counts: tuple[int, ...] | None,
+    unbalanced: bool = False,
+) -> QARecord:
     counted_ids = [inst.id for inst in cand.counted]
     count = len(cand.counted)
     geometry: dict[str, Any] = {
@@ -168,7 +175,8 @@ def _record(scene: Scene, cand: _Candidate, template: int, thresholds: Visibilit
     if counts is None:
         geometry["selection"] = selection_entry(subject)
     else:
-        geometry["selection"] = selection_entry(subject, f"label:{cand.key}|template:{template}", str(count), tuple(str(c) for c in counts))
+        cell = f"label:{cand.key}|unbalanced" if unbalanced else f"label:{cand.key}|template:{template}"
+        geometry["selection"] = selection_entry(subject, cell, str(count), tuple(str(c) for c in counts))
     views = (cand.view,)
     return make_record(
         scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.COUNT, views,
@@ -205,12 +213,19 @@ def generate(
         per = [by_key[key][c] for c in counts]
         per = [[group[i] for i in rng.permutation(len(group))] for group in per]
         queues.append([list(r) for r in zip(*per)])
+    used: set[int] = set()
     for rank in range(max((len(q) for q in queues), default=0)):
         for queue in queues:
             if rank < len(queue):
                 template = int(rng.integers(0, len(TEMPLATES)))  # one wording per round: the text tells nothing
                 for k in rng.permutation(len(counts)):
+                    used.add(id(queue[rank][int(k)]))
                     yield _record(scene, queue[rank][int(k)], template, thresholds, counts)
+    # then the other candidates with an asked count, in a seeded order: their cell never completes
+    # a round, so the question index takes them only to fill a quota too small for any round
+    rest = [c for c in candidates if id(c) not in used and len(c.counted) in counts]
+    for k in rng.permutation(len(rest)):
+        yield _record(scene, rest[int(k)], int(rng.integers(0, len(TEMPLATES))), thresholds, counts, unbalanced=True)
 
 
 #: ``make_family(thresholds, counts)``: this family with other visibility thresholds or counts
