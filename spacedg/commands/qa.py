@@ -1,4 +1,5 @@
-"""``spacedg qa build`` / ``spacedg qa stats``: per-scene question indexes and their balance."""
+"""``spacedg qa build`` / ``stats`` / ``audit`` / ``preview``: per-scene question indexes, their
+balance, repeats and ambiguities, and the blind stress test."""
 
 from __future__ import annotations
 
@@ -47,13 +48,37 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _args.add_backend_arguments(preview, device=False)
     preview.set_defaults(func=_preview)
 
-    stats = sub.add_parser("stats", help="counts per question type, answer balance, blind baseline")
+    stats = sub.add_parser(
+        "stats", help="counts per question type, answer balance, blind stress test, repeats, ambiguities",
+        description="Counts, correct-letter and yes/no balance, the blind stress test (as `qa audit`), the repeat rate "
+        "(records re-asking a subject already asked in the scene and sub type) and ambiguity counts (label-only questions "
+        "beside a related label or an object showing the label, undecidable size comparisons, imperceptible rotations; the "
+        "label checks read the scenes' cached visibility: scene folders beside the indexes, or --scenes).",
+    )
     stats.add_argument("paths", type=Path, nargs="+", help="*.qa.jsonl files, or folders holding them (scene folders work)")
     stats.add_argument("--families", default="",
                        help="in folders, read the selection indexes that `qa build --families` wrote with these names "
                        "(default: the full indexes <scene id>.qa.jsonl)")
+    stats.add_argument("--scenes", type=Path, nargs="*", default=[],
+                       help="scene folders (or folders of them) for the label ambiguity check when the indexes were written elsewhere")
+    stats.add_argument("--no-blind", action="store_true", help="skip the blind stress test")
     stats.add_argument("--json", action="store_true", help="print JSON instead of tables")
     stats.set_defaults(func=_stats)
+
+    audit = sub.add_parser(
+        "audit", help="blind stress test: what text-only models answer without the images, per sub type",
+        description="Leave-one-scene-out text-only predictors (majority letter, majority answer per template, option-text "
+        "prior, per-label priors incl. mean size per label, a logistic model on the question text) trained on the other "
+        "scenes and scored on the held-out one; prints accuracy (MRA for metric answers), chance, and how many items the "
+        "blind models solve. Needs indexes of at least two scenes.",
+    )
+    audit.add_argument("paths", type=Path, nargs="+", help="*.qa.jsonl files, or folders holding them (scene folders work)")
+    audit.add_argument("--families", default="", help="read these selection indexes instead of the full ones")
+    audit.add_argument("--solved", type=Path, default=None, help="write the ids of the records the blind models solve (JSONL)")
+    audit.add_argument("--show", type=int, default=0, help="print this many solved questions per sub type")
+    audit.add_argument("--no-learned", action="store_true", help="skip the logistic model (count-based priors only)")
+    audit.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    audit.set_defaults(func=_audit)
 
 
 def _build(args: argparse.Namespace) -> int:
@@ -108,19 +133,58 @@ def _index_files(paths: list[Path], families: tuple[str, ...] = ()) -> list[Path
     return found
 
 
-def _stats(args: argparse.Namespace) -> int:
+def _records_by_scene(paths: list[Path], families: str) -> dict[str, list]:
     from spacedg.data.qa_index import read_index
-    from spacedg.data.qa_stats import answer_balance, blind_baseline, count_table, format_table
 
-    by_scene = {}
-    for file in _index_files(args.paths, _family_names(args.families)):
+    by_scene: dict[str, list] = {}
+    for file in _index_files(paths, _family_names(families)):
         records = read_index(file)
         if records:
             by_scene.setdefault(records[0].scene_id, []).extend(records)
+    return by_scene
+
+
+def _scenes_with_visibility(by_scene: dict[str, list], paths: list[Path], extra: list[Path]) -> dict[str, object]:
+    """Scene id → scene with its cached visibility, for the scene folders found beside the
+    indexes or under ``extra`` (missing scenes are left out)."""
+    from spacedg.data.qa_index import QABuildConfig
+    from spacedg.errors import SpaceDGError
+    from spacedg.scene.io import load_scene
+    from spacedg.scene.visibility import load_or_compute_visibility, with_visibility
+
+    folders: dict[str, Path] = {}
+    for root in [*paths, *extra]:
+        root = root if root.is_dir() else root.parent
+        for candidate in [root, *sorted(p.parent for p in root.glob("*/scene.json"))]:
+            if (candidate / "scene.json").is_file():
+                folders.setdefault(candidate.name, candidate)
+    out: dict[str, object] = {}
+    size = QABuildConfig().visibility_size
+    for scene_id in by_scene:
+        folder = folders.get(scene_id)
+        if folder is None:
+            continue
+        try:
+            scene = load_scene(folder)
+            out[scene_id] = with_visibility(scene, load_or_compute_visibility(scene, folder / "cache", image_size=size, progress=False))
+        except (SpaceDGError, OSError, ValueError) as err:
+            tqdm.write(f"{folder}: no ambiguity check ({err})")
+    return out
+
+
+def _stats(args: argparse.Namespace) -> int:
+    from spacedg.data.qa_audit import blind_audit, format_audit
+    from spacedg.data.qa_stats import ambiguities, answer_balance, blind_baseline, count_table, format_table, repeat_rate
+
+    by_scene = _records_by_scene(args.paths, args.families)
     every = [r for rs in by_scene.values() for r in rs]
+    scenes = _scenes_with_visibility(by_scene, args.paths, args.scenes)
+    audit = blind_audit(by_scene) if len(by_scene) > 1 and not args.no_blind else None
     report = {
         "scenes": len(by_scene), "records": len(every), "counts": count_table(every),
         "balance": answer_balance(every), "blind_baseline": blind_baseline(by_scene) if len(by_scene) > 1 else [],
+        "blind": audit.to_dict() if audit else None,
+        "repeats": repeat_rate(by_scene), "ambiguities": ambiguities(every, scenes),
     }
     if args.json:
         print(json.dumps(report, indent=2))
@@ -131,9 +195,56 @@ def _stats(args: argparse.Namespace) -> int:
     letters = "  ".join(f"{k} {v:.1f}%" for k, v in bal["letters"].items())
     print(f"\nMCQ correct letter over {bal['mcq_n']} records: {letters}")
     print(f"YN over {bal['yn_n']} records: yes {bal['yes_pct']:.1f}%")
-    if report["blind_baseline"]:
-        print("\nBlind baseline (leave-one-scene-out majority, accuracy %):")
-        print(format_table(report["blind_baseline"]))
+    if audit is not None:
+        print("\nBlind stress test (leave-one-scene-out, text only; accuracy %, MRA % for metric answers):")
+        print(format_audit(audit))
+    rep = report["repeats"]
+    if rep:
+        total = rep[-1]
+        worst = [r for r in rep[:-1] if r["repeats"]]
+        print(f"\nRepeats (subject already asked in the scene and sub type): {total['repeats']} of {total['n']} "
+              f"({total['repeat_pct']:.1f}%)")
+        if worst:
+            print(format_table(worst, ["question_type", "sub_question_type", "n", "repeats", "repeat_pct"]))
+    amb = report["ambiguities"]
+    print(f"\nAmbiguities: label-only questions beside a related label {amb['label_related']}, beside an object showing the "
+          f"label unannotated {amb['label_shown_unannotated']} (of {amb['checked_label_only']} checked against {len(scenes)} "
+          f"scene(s)); undecidable size comparisons {amb['size_undecidable']}; rotations naming a component under 5° "
+          f"{amb['rotation_imperceptible']}")
+    return 0
+
+
+def _audit(args: argparse.Namespace) -> int:
+    from spacedg.data.qa_audit import blind_audit, format_audit
+
+    by_scene = _records_by_scene(args.paths, args.families)
+    if len(by_scene) < 2:
+        raise InvalidDataError(f"qa audit: found question indexes of {len(by_scene)} scene(s); the blind models are trained on "
+                               "other scenes and scored on a held-out one, so give at least two")
+    start = time.perf_counter()
+    report = blind_audit(by_scene, learned=not args.no_learned)
+    seconds = time.perf_counter() - start
+    if args.solved is not None:
+        from spacedg.files import atomic_write_bytes
+
+        atomic_write_bytes(args.solved, "".join(json.dumps({"id": i}) + "\n" for i in report.solved).encode("utf-8"))
+    if args.json:
+        print(json.dumps({**report.to_dict(), "seconds": seconds}, indent=2))
+        return 0
+    n = sum(len(v) for v in by_scene.values())
+    print(f"Blind stress test over {n} records of {len(by_scene)} scenes ({seconds:.1f} s): text-only models trained on the "
+          "other scenes, scored on the held-out one; accuracy % (MRA % for NA / SIZE_LIST); chance = uniform over the "
+          "options that can be correct")
+    print(format_audit(report))
+    if args.show > 0:
+        solved = set(report.solved)
+        shown: dict[tuple[str, str], int] = {}
+        for r in (r for rs in by_scene.values() for r in rs):
+            key = (r.question_type, r.sub_question_type)
+            if r.id in solved and shown.get(key, 0) < args.show:
+                shown[key] = shown.get(key, 0) + 1
+                options = "  ".join(r.options)
+                print(f"\n[{key[0]}/{key[1]}] {r.id}\n  {r.question}\n  {options}\n  answer: {r.answer}")
     return 0
 
 

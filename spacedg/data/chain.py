@@ -28,6 +28,13 @@ What a chain is used for, each in exactly one place:
 
 Seeds: each degradation of a chain draws its parameters from ``derive_seed(sample_seed, name)``, so
 one degradation draws the same parameters in every chain of a sample.
+
+Scene depth: presets whose metre ranges scale with the scene (``ParamRange(per_depth=True)``:
+defocus focus distance, motion-blur path, haze reference distance) are resolved at the sample's
+scene depth (``resolve(..., scene_depth=D)``, D in metres: the pipeline measures it,
+:func:`~spacedg.data.pipeline.sample_scene_depth`); the provenance then holds the resolved
+absolute metres and ``scene_depth_m``, so it still reproduces the bytes without measuring
+anything. :meth:`Chain.scales_with_depth` says whether a chain needs D.
 """
 
 from __future__ import annotations
@@ -124,6 +131,7 @@ class ResolvedDegradation:
     params: Mapping[str, int | float]
     seed: int
     preset: str | None
+    scene_depth: float | None = None
 
     @property
     def name(self) -> str:
@@ -138,8 +146,12 @@ class ResolvedDegradation:
         return (self.name, tuple(sorted(self.params.items())), self.seed)
 
     def provenance(self) -> dict[str, Any]:
-        """``{name, params, seed, preset}``, JSON-serialisable."""
-        return {"name": self.name, "params": dict(self.params), "seed": self.seed, "preset": self.preset}
+        """``{name, params, seed, preset}`` (plus ``scene_depth_m`` when the preset's metres were
+        scaled to the sample's scene depth), JSON-serialisable."""
+        out = {"name": self.name, "params": dict(self.params), "seed": self.seed, "preset": self.preset}
+        if self.scene_depth is not None:
+            out["scene_depth_m"] = self.scene_depth
+        return out
 
 
 # ------------------------------------------------------------------ parsing
@@ -251,9 +263,23 @@ class Chain:
                 out.append(item)
         return tuple(out)
 
-    def resolve(self, seed: int, default_preset: str = "bench", mixture_preset: str = "2") -> tuple[ResolvedDegradation, ...]:
+    def scales_with_depth(self, default_preset: str = "bench", mixture_preset: str = "2") -> bool:
+        """Whether resolving this chain reads the scene depth (a preset with a ``per_depth`` range
+        whose parameters are not all given explicitly)."""
+        for choice in self.choices(mixture_preset):
+            spec = _lookup(choice.name)
+            explicit = set(choice.params or ())
+            ranges = spec.presets.get(choice.preset or default_preset, {})
+            if any(r.per_depth and name not in explicit for name, r in ranges.items()):
+                return True
+        return False
+
+    def resolve(
+        self, seed: int, default_preset: str = "bench", mixture_preset: str = "2", scene_depth: float | None = None,
+    ) -> tuple[ResolvedDegradation, ...]:
         """Concrete parameters for each degradation, drawn from ``derive_seed(seed, name)``, sorted
-        into the physical order.
+        into the physical order; depth-relative ranges scaled to ``scene_depth`` metres (``None``:
+        the reference depth, the ranges as written).
 
         Raises :class:`ParameterError` (or :class:`UnknownPluginError`) for an unknown name, unknown
         preset, unknown parameter, a value outside its hard limits, or one degradation twice.
@@ -270,17 +296,25 @@ class Chain:
             seen.add(spec.name)
             deg_seed = derive_seed(seed, spec.name)
             preset = choice.preset or default_preset
-            params = spec.sample_params(preset, np.random.default_rng(deg_seed))
+            if preset not in spec.presets:
+                spec.sample_params(preset, np.random.default_rng(deg_seed))  # the unknown-preset error
+            scaled = scene_depth is not None and any(
+                r.per_depth and name not in (choice.params or {}) for name, r in spec.presets[preset].items()
+            )
+            params = spec.sample_params(preset, np.random.default_rng(deg_seed), scene_depth if scaled else None)
             if choice.params:
                 params.update(spec.validate_params(choice.params, partial=True))
                 if set(choice.params) == set(spec.param_map):
                     preset = None  # every value explicit: no preset involved
-            resolved.append(ResolvedDegradation(spec, spec.validate_params(params), deg_seed, preset))
+            depth = float(scene_depth) if scaled else None  # type: ignore[arg-type]
+            resolved.append(ResolvedDegradation(spec, spec.validate_params(params), deg_seed, preset, depth))
         return tuple(sorted(resolved, key=lambda r: r.spec.sort_key))
 
-    def provenance(self, seed: int, default_preset: str = "bench", mixture_preset: str = "2") -> list[dict[str, Any]]:
+    def provenance(
+        self, seed: int, default_preset: str = "bench", mixture_preset: str = "2", scene_depth: float | None = None,
+    ) -> list[dict[str, Any]]:
         """What a sample under this chain records: ``[{name, params, seed, preset}, …]`` in pipeline order."""
-        return [step.provenance() for step in self.resolve(seed, default_preset, mixture_preset)]
+        return [step.provenance() for step in self.resolve(seed, default_preset, mixture_preset, scene_depth)]
 
     def check(self, severities: Iterable[str | None] = (None,)) -> Chain:
         """Resolve once per severity (``None``: as written) so unknown names, presets and repeats

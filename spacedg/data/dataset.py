@@ -228,9 +228,17 @@ class SpaceDGDataset(Dataset):
 
     def provenance(self, index: int) -> list[dict[str, Any]]:
         """The degradation provenance item ``index`` records (``[{name, params, seed, preset}, …]``,
-        every part of a mixture with its parameters), computed without rendering."""
+        every part of a mixture with its parameters), computed without rendering (a chain whose
+        presets scale with the scene reads its Gaussians for the scene depth,
+        :func:`~spacedg.data.pipeline.sample_scene_depth`)."""
+        from spacedg.data.pipeline import sample_scene_depth
+
         record, chain, name = self.plan(index)
-        return Chain.parse(chain).provenance(self._sample_seed(record, name), self.options.default_preset, self.options.mixture_preset)
+        parsed = Chain.parse(chain)
+        depth = None
+        if parsed.scales_with_depth(self.options.default_preset, self.options.mixture_preset):
+            depth = sample_scene_depth(self._scene(record.scene_id), record.views)
+        return parsed.provenance(self._sample_seed(record, name), self.options.default_preset, self.options.mixture_preset, depth)
 
     # ------------------------------------------------------------ items
     def _cache(self) -> ByteLRU:

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from spacedg.scene.floorplan import contact_sheet
-from spacedg.data.pipeline import DegradedViews, PipelineOptions, degrade_variants
+from spacedg.data.pipeline import DegradedViews, PipelineOptions, degrade_variants, sample_scene_depth
 from spacedg.plugins.registry import get_degradation, list_degradations
 from spacedg.plugins.specs import SEVERITY_PRESETS
 
@@ -85,7 +85,9 @@ def gallery_sheet(
     specs = [get_degradation(n) for n in degradations] if degradations else list_degradations()
     chains = ["clean", *(f"{spec.name}:{preset}" for spec in specs for preset in GALLERY_PRESETS)]
     results = degrade_variants(scene, [view], chains, seed, options, progress=progress)
-    clean = _caption(_thumbnail(results[0].images[0], thumb_width), ["clean", view])
+    depth = sample_scene_depth(scene, [view])
+    clean_lines = ["clean" if depth is None else f"clean, scene depth {depth:.2f}", view]
+    clean = _caption(_thumbnail(results[0].images[0], thumb_width), clean_lines)
     cells: list[np.ndarray] = []
     for r, spec in enumerate(specs):
         row = results[1 + r * len(GALLERY_PRESETS): 1 + (r + 1) * len(GALLERY_PRESETS)]

@@ -23,6 +23,14 @@ sample. Its parameters are drawn from ``np.random.default_rng(deg_seed)`` (prese
 declaration order); its ``apply`` for view ``i`` gets ``np.random.default_rng([deg_seed, i])``.
 The provenance ``{name, params, seed, preset}`` therefore reproduces the image exactly.
 
+Scene depth. Presets whose metres scale with the scene (defocus focus distance, motion-blur
+path, haze reference distance: ``ParamRange(per_depth=True)``) are resolved at the sample's
+scene depth :func:`sample_scene_depth` (the median over its views of each view's median surface
+depth, measured from the Gaussians without rendering, cached per view), so a tabletop and a room
+degrade alike; at 2 m (:data:`~spacedg.plugins.specs.REFERENCE_DEPTH_M`, a ScanNet++ room) the
+presets are the paper's numbers. The provenance records the resolved metres and
+``scene_depth_m``: it reproduces the bytes without measuring anything.
+
 Mixtures. The six recipes of the paper (:data:`spacedg.data.chain.MIXTURES`) are available by
 name: the primary degradation at the chain's default preset (``bench``) and the others at the
 milder ``mixture_preset`` (severity ``"2"`` by default).
@@ -36,6 +44,7 @@ used are in :attr:`DegradedViews.sub_steps`.
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
@@ -63,6 +72,8 @@ __all__ = [
     "degrade_image",
     "degrade_variants",
     "frames_nbytes",
+    "sample_scene_depth",
+    "view_depth",
 ]
 
 # ----------------------------------------------------------------- running
@@ -114,6 +125,58 @@ class DegradedViews:
     degradations: list[dict[str, Any]]
     sub_steps: list[int]
     stats: dict[str, float] = field(default_factory=dict)
+
+
+#: Cells of the coarse depth grid of :func:`view_depth` (columns, rows).
+DEPTH_GRID: tuple[int, int] = (32, 24)
+#: Gaussians at least this opaque make a surface for :func:`view_depth`.
+DEPTH_MIN_OPACITY = 0.5
+_DEPTH_CACHE: OrderedDict[tuple[Any, ...], float | None] = OrderedDict()
+_DEPTH_CACHE_SIZE = 8192
+
+
+def view_depth(scene: Scene, camera: Any) -> float | None:
+    """The median depth (metres, along the optical axis) of the surfaces ``camera`` sees:
+    the nearest opaque Gaussian centre (opacity >= :data:`DEPTH_MIN_OPACITY`, in front of the
+    camera, inside the image) in each cell of a :data:`DEPTH_GRID` grid over the image, and the
+    median over the occupied cells. Pinhole projection (a fisheye lens only moves points within
+    the image), no rendering: a few milliseconds per view, cached per (scene, Gaussian count,
+    camera). ``None`` when the view sees no Gaussian."""
+    pose = np.asarray(camera.cam_to_world, dtype=np.float64)
+    g = scene.gaussians
+    key = (scene.id, len(g), pose.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
+    if key in _DEPTH_CACHE:
+        _DEPTH_CACHE.move_to_end(key)
+        return _DEPTH_CACHE[key]
+    means = np.asarray(g.means, dtype=np.float64)
+    opaque = np.asarray(g.opacities) >= DEPTH_MIN_OPACITY
+    pc = (means[opaque] - pose[:3, 3]) @ pose[:3, :3]
+    z = pc[:, 2]
+    front = z > 1e-3
+    pc, z = pc[front], z[front]
+    u = camera.fx * pc[:, 0] / z + camera.cx
+    v = camera.fy * pc[:, 1] / z + camera.cy
+    inside = (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
+    value: float | None = None
+    if np.any(inside):
+        cols, rows = DEPTH_GRID
+        cell = (v[inside] * rows // camera.height).astype(np.int64) * cols + (u[inside] * cols // camera.width).astype(np.int64)
+        nearest = np.full(cols * rows, np.inf)
+        np.minimum.at(nearest, cell, z[inside])
+        occupied = nearest[np.isfinite(nearest)]
+        value = float(np.median(occupied)) if occupied.size else None
+    _DEPTH_CACHE[key] = value
+    while len(_DEPTH_CACHE) > _DEPTH_CACHE_SIZE:
+        _DEPTH_CACHE.popitem(last=False)
+    return value
+
+
+def sample_scene_depth(scene: Scene, views: Sequence[str]) -> float | None:
+    """The scene depth of a sample (metres): the median of :func:`view_depth` over its views
+    (``None`` when no view sees anything). Depth-relative presets are resolved at it."""
+    views = (views,) if isinstance(views, str) else tuple(views)
+    depths = [d for d in (view_depth(scene, scene.camera(v)) for v in views) if d is not None]
+    return float(np.median(depths)) if depths else None
 
 
 def _cameras(scene: Scene, views: Sequence[str], options: PipelineOptions) -> list[Any]:
@@ -238,7 +301,11 @@ def degrade_variants(
     options = options or PipelineOptions()
     views = (views,) if isinstance(views, str) else tuple(views)
     cameras = _cameras(scene, views, options)
-    resolved = [Chain.parse(c).resolve(seed, options.default_preset, options.mixture_preset) for c in chains]
+    parsed = [Chain.parse(c) for c in chains]
+    depth = None
+    if any(c.scales_with_depth(options.default_preset, options.mixture_preset) for c in parsed):
+        depth = sample_scene_depth(scene, views)
+    resolved = [c.resolve(seed, options.default_preset, options.mixture_preset, depth) for c in parsed]
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i, chain in enumerate(resolved):
         groups.setdefault(tuple(step.key() for step in _by_stage(chain, Stage.RASTER)), []).append(i)
@@ -298,6 +365,7 @@ def degrade_image(
     alpha: np.ndarray | None = None,
     default_preset: str = "bench",
     mixture_preset: str = "2",
+    scene_depth: float | None = None,
 ) -> tuple[np.ndarray, list[dict[str, Any]]]:
     """Post-render degradations of an existing 8-bit sRGB image (e.g. a photo), no rasterizer.
 
@@ -308,6 +376,8 @@ def degrade_image(
         seed: the sample's seed.
         depth, alpha: (H, W) metric depth (metres) and coverage for depth-hungry degradations
             such as haze; alpha defaults to 1 (every pixel a surface).
+        scene_depth: the scene depth (metres) depth-relative presets are resolved at; default:
+            the median of ``depth`` where covered, else the reference depth (2 m).
 
     Returns:
         ``(uint8 image, provenance list)``.
@@ -315,7 +385,13 @@ def degrade_image(
     from spacedg.render.colour_cpu import decode_srgb, encode_srgb_u8  # numba: compiled on first use
 
     image = check_display_image(image, "degrade_image")
-    chain = Chain.parse(degradations).resolve(seed, default_preset, mixture_preset)
+    if scene_depth is None and depth is not None:
+        d = np.asarray(depth, dtype=np.float64)
+        cover = np.ones(d.shape, bool) if alpha is None else np.asarray(alpha) > 0.5
+        ok = cover & np.isfinite(d) & (d > 0)
+        scene_depth = float(np.median(d[ok])) if np.any(ok) else None
+    parsed = Chain.parse(degradations)
+    chain = parsed.resolve(seed, default_preset, mixture_preset, scene_depth if parsed.scales_with_depth(default_preset, mixture_preset) else None)
     raster = _by_stage(chain, Stage.RASTER)
     if raster:
         raise ParameterError(

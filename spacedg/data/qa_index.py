@@ -8,11 +8,16 @@ Building one scene (:func:`build_scene_index`):
    ``rng = default_rng(derive_seed(seed, scene_id, family))``: the records are seeded per
    (scene, family), so adding a family never changes another family's records;
 3. pool up to ``pool_factor × per_sub_type`` candidates per ``sub_question_type`` (no more
-   than ``max_scan`` per family) and take ``per_sub_type`` of them round-robin over the correct
-   answers (option text, yes/no, count), so a blind model cannot profit from one answer being
-   common where the scene offers alternatives; an optional judge
-   (:class:`~spacedg.data.judge.DescriptionJudge`) drops records whose descriptions it finds
-   ambiguous (asked only about records being taken);
+   than ``max_scan`` per family) and take up to ``per_sub_type`` of them per sub type with the
+   **debiased selection** (:func:`select_records`): a subject (an object, a pair, a view and
+   label: the ``selection`` entry of the record's geometry block) is asked at most once per
+   sub type; within each *cell* (what a text-only model can tell about the question: its
+   labels, its option set, the axes it names) records are taken in whole rounds, one per live
+   *role* (answer), so in every scene no function of what the text shows beats chance (the
+   blind stress test :mod:`spacedg.data.qa_audit` measures what is left); records without a
+   ``selection`` entry (third-party families) are taken round-robin over their correct
+   answers as before. An optional judge (:class:`~spacedg.data.judge.DescriptionJudge`) drops
+   records whose descriptions it finds ambiguous (asked only about records being taken);
 4. write ``<out>/<scene id>.qa.jsonl`` (one :class:`QARecord` per line, families in name
    order) and ``<out>/<scene id>.qa.meta.json`` (key, config, counts, timings) atomically.
    ``out`` defaults to the scene folder itself.
@@ -39,6 +44,7 @@ change rebuilds it; ``force=True`` always does.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import importlib.util
 import json
@@ -58,12 +64,13 @@ from spacedg.errors import FileFormatError, ParameterError
 from spacedg.plugins.specs import NAME_PATTERN, AnswerType
 
 __all__ = [
-    "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "prepare_scene", "generate_records",
+    "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "prepare_scene", "generate_records", "select_records", "deal_letters", "with_letter",
     "MAX_SELECTION_CHARS", "selection_name", "index_paths", "build_scene_index", "read_index", "truth_key", "index_is_current", "ensure_indexes",
 ]
 
 #: Bump when the index layout or the build procedure changes (part of the key).
-QA_INDEX_VERSION = 2
+#: 3: debiased selection (subjects once per sub type, whole rounds per cell), lexicon in the key.
+QA_INDEX_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -87,7 +94,7 @@ class QABuildConfig:
     families: tuple[str, ...] = ()
     per_sub_type: int = 25
     max_scan: int = 20_000
-    pool_factor: int = 8
+    pool_factor: int = 40
     visibility_size: tuple[int, int] = (160, 120)
     covisibility_size: tuple[int, int] = (80, 60)
 
@@ -185,7 +192,8 @@ def _select_balanced(pool: list[QARecord], cap: int, keep: Any) -> list[QARecord
     """Up to ``cap`` records of one sub type, round-robin over truth buckets (first-seen order).
 
     Each bucket is consumed in generation order; ``keep(record)`` (the judge) is asked only for
-    records about to be taken. The result is returned in generation order.
+    records about to be taken. The result is returned in generation order. (Records without a
+    ``selection`` entry: third-party families.)
     """
     buckets: dict[str | None, list[int]] = {}
     for i, record in enumerate(pool):
@@ -202,24 +210,221 @@ def _select_balanced(pool: list[QARecord], cap: int, keep: Any) -> list[QARecord
     return [pool[i] for i in sorted(taken)]
 
 
+def _selection(record: QARecord) -> dict[str, Any] | None:
+    entry = record.geometry.get("selection")
+    return entry if isinstance(entry, dict) and "subject" in entry else None
+
+
+def select_records(
+    records: Sequence[QARecord], per_sub_type: int, keep: Any = None, stats: dict[str, Counter[str]] | None = None,
+) -> list[QARecord]:
+    """The debiased selection among one family's candidates (in generation order): up to
+    ``per_sub_type`` records per sub type, returned in generation order.
+
+    For records with a ``selection`` entry (:func:`~spacedg.plugins.questions.records.selection_entry`):
+
+    - a subject is taken at most once per sub type (``(sub type, subject)``);
+    - records with a ``cell`` are taken in **whole rounds**: one record of every role in the
+      cell's ``roles`` (or, for an entry with ``all_roles`` false, of the roles the candidates
+      offer, at least two), each the first in generation order whose subject is still free (and
+      that ``keep`` accepts); a round is taken only while every sub type it touches has room, and a
+      cell stops at its first incomplete round. Cells are visited round-robin in the order of
+      their first record, one round per visit, until no cell can give a round;
+    - records without a ``cell`` (metric answers) are taken in generation order;
+    - a sub type whose ``per_sub_type`` is smaller than every round of its cells (e.g. 1) takes
+      its first free candidates in generation order instead, so a small index is not empty.
+
+    Records without a ``selection`` entry are taken per sub type round-robin over their correct
+    answers (:func:`truth_key`), as before version 3.
+
+    ``stats`` (optional) receives per sub type: ``pooled``, ``taken``, and why the others were
+    not: ``repeat`` (subject already asked), ``quota`` (its sub type has no room for another
+    round of its cell), ``unbalanced`` (no complete round of its cell left), ``judge``.
+    """
+    keep = keep or (lambda record: True)
+    judged_out: set[str] = set()
+
+    def accept(record: QARecord) -> bool:
+        if record.id in judged_out:
+            return False
+        if keep(record):
+            return True
+        judged_out.add(record.id)
+        return False
+
+    room: Counter[str] = Counter()
+    for r in records:
+        room[r.sub_question_type] = per_sub_type
+    taken: set[int] = set()
+    subjects: set[tuple[str, str]] = set()
+    plain: dict[str, list[int]] = {}
+    metric: list[int] = []
+    cells: dict[str, dict[str, list[int]]] = {}
+    cell_roles: dict[str, list[str]] = {}
+    partial: set[str] = set()
+    for i, r in enumerate(records):
+        sel = _selection(r)
+        if sel is None:
+            plain.setdefault(r.sub_question_type, []).append(i)
+        elif "cell" not in sel:
+            metric.append(i)
+        else:
+            cell = f"{r.question_type}|{sel['cell']}"
+            cells.setdefault(cell, {}).setdefault(str(sel["role"]), []).append(i)
+            cell_roles.setdefault(cell, [str(x) for x in sel.get("roles", [])])
+            if sel.get("all_roles", True) is False:
+                partial.add(cell)
+    for cell in partial:  # rounds over the roles this scene offers in the cell (at least two)
+        offered = [role for role in cell_roles[cell] if cells[cell].get(role)]
+        cell_roles[cell] = offered if len(offered) >= 2 else []
+
+    def subject(i: int) -> tuple[str, str]:
+        return (records[i].sub_question_type, str(_selection(records[i])["subject"]))  # type: ignore[index]
+
+    # metric answers: generation order, subjects once
+    for i in metric:
+        r = records[i]
+        if room[r.sub_question_type] > 0 and subject(i) not in subjects and accept(r):
+            taken.add(i)
+            subjects.add(subject(i))
+            room[r.sub_question_type] -= 1
+    # balanced cells: whole rounds, round-robin over cells
+    cursors = {cell: {role: 0 for role in roles} for cell, roles in cell_roles.items()}
+    # a cell needs two roles at least: a one-role cell would be answered by its text alone
+    open_cells = [c for c in cells if len(cell_roles[c]) >= 2 and all(cells[c].get(role) for role in cell_roles[c])]
+    while open_cells:
+        still = []
+        for cell in open_cells:
+            round_: list[int] = []
+            used: set[tuple[str, str]] = set()
+            need: Counter[str] = Counter()
+            complete = True
+            for role in cell_roles[cell]:
+                queue = cells[cell].get(role, [])
+                k = cursors[cell][role]
+                while k < len(queue):
+                    i = queue[k]
+                    k += 1
+                    if subject(i) in subjects or subject(i) in used or not accept(records[i]):
+                        continue
+                    round_.append(i)
+                    used.add(subject(i))
+                    need[records[i].sub_question_type] += 1
+                    break
+                else:
+                    complete = False
+                cursors[cell][role] = k
+                if not complete:
+                    break
+            if not complete or any(room[sub] < n for sub, n in need.items()):
+                continue  # the cell is exhausted, or a sub type it needs is full
+            for i in round_:
+                taken.add(i)
+                subjects.add(subject(i))
+                room[records[i].sub_question_type] -= 1
+            still.append(cell)
+        open_cells = still
+    # a sub type whose quota is smaller than every round of its cells (a tiny per_sub_type, e.g.
+    # 1) would stay empty: it takes its first free candidates in generation order instead (too
+    # few to balance anyway)
+    got = Counter(records[i].sub_question_type for i in taken)
+    smallest: dict[str, int] = {}
+    for cell, by_role in cells.items():
+        size = len(cell_roles[cell])
+        for queue in by_role.values():
+            for i in queue:
+                sub = records[i].sub_question_type
+                smallest[sub] = min(smallest.get(sub, size), size) if size >= 2 else smallest.get(sub, 10**9)
+    for i in sorted(i for by_role in cells.values() for queue in by_role.values() for i in queue):
+        r = records[i]
+        sub = r.sub_question_type
+        if got[sub] == 0 and 0 < room[sub] < smallest.get(sub, 0) and subject(i) not in subjects and accept(r):
+            taken.add(i)
+            subjects.add(subject(i))
+            room[sub] -= 1
+    # records of families without selection entries
+    for sub, ix in plain.items():
+        for r in _select_balanced([records[i] for i in ix], per_sub_type, accept):
+            taken.add(ix[[records[i].id for i in ix].index(r.id)])
+    def _round_size(r: QARecord) -> int:
+        sel = _selection(r)
+        if sel is None or "cell" not in sel:
+            return 1
+        roles = cell_roles.get(f"{r.question_type}|{sel['cell']}") or sel.get("roles", [])
+        return max(1, sum(1 for role in roles))
+
+    if stats is not None:
+        for i, r in enumerate(records):
+            row = stats.setdefault(r.sub_question_type, Counter())
+            row["pooled"] += 1
+            if i in taken:
+                row["taken"] += 1
+            elif r.id in judged_out:
+                row["judge"] += 1
+            elif _selection(r) is not None and subject(i) in subjects:
+                row["repeat"] += 1
+            elif room[r.sub_question_type] < _round_size(r):
+                row["quota"] += 1  # no room for another round of its cell
+            else:
+                row["unbalanced"] += 1
+    return [records[i] for i in sorted(taken)]
+
+
+def with_letter(record: QARecord, slot: int) -> QARecord:
+    """``record`` (MCQ) with its correct option moved to letter ``slot`` (0–3), the other options
+    keeping their order: the same question and answer text, another letter."""
+    from spacedg.plugins.answers import MCQ_LETTERS
+
+    texts = [line[3:] for line in record.options]
+    k = MCQ_LETTERS.index(str(record.answer))
+    others = texts[:k] + texts[k + 1:]
+    texts = others[:slot] + [texts[k]] + others[slot:]
+    return dataclasses.replace(
+        record, options=tuple(f"{MCQ_LETTERS[i]}. {t}" for i, t in enumerate(texts)), answer=MCQ_LETTERS[slot],
+    )
+
+
+def deal_letters(records: Sequence[QARecord], rng: np.random.Generator) -> list[QARecord]:
+    """The MCQ ``records`` with their correct letters dealt again, per sub type in the given
+    order, from shuffled A–D blocks of ``rng``: the letters of each sub type of a scene's index
+    are uniform to within one block (the selection keeps a subset of a family's records, whose
+    letters were balanced over the whole generation only). Only records with a ``selection``
+    entry are re-lettered: their geometry never refers to option positions (families without
+    one keep their letters)."""
+    decks: dict[str, list[int]] = {}
+    out = []
+    for r in records:
+        if r.answer_type is not AnswerType.MCQ or _selection(r) is None:
+            out.append(r)  # a family without selection entries may tie its geometry to the option order
+            continue
+        deck = decks.setdefault(r.sub_question_type, [])
+        if not deck:
+            deck.extend(int(v) for v in rng.permutation(4))
+        out.append(with_letter(r, deck.pop()))
+    return out
+
+
 def generate_records(
     scene: Scene,
     config: QABuildConfig = QABuildConfig(),
     *,
     judge: Any = None,
     dropped: dict[str, int] | None = None,
+    selection_stats: dict[str, dict[str, int]] | None = None,
 ) -> list[QARecord]:
     """Records of every selected family for a prepared scene (see the module docstring).
 
     Per family, candidates are pooled (up to ``pool_factor × per_sub_type`` per sub type,
-    ``max_scan`` in all); then each sub type takes ``per_sub_type`` records round-robin over
-    its truth buckets (:func:`truth_key`: the correct option's text, the yes/no or count
-    answer), so no single answer dominates where the candidates allow; metric answers are
-    taken in generation order.
+    ``max_scan`` in all); then :func:`select_records` takes up to ``per_sub_type`` per sub
+    type: each subject once, whole rounds of every cell's roles (no answer is predictable from
+    what the text shows), metric answers in generation order; the kept MCQ records get their
+    correct letters dealt again per sub type (:func:`deal_letters`, seeded by
+    ``derive_seed(seed, scene, family, "letters")``), so letters are uniform per sub type.
 
     ``judge``: a callable ``judge(image, label, description) -> "KEEP"/"DROP"`` or a
     :class:`~spacedg.data.judge.DescriptionJudge`, asked only about records being taken;
-    ``dropped`` receives per-family counts of records the judge removed.
+    ``dropped`` receives per-family counts of records the judge removed; ``selection_stats``
+    receives per ``question_type/sub_question_type`` the counts of :func:`select_records`.
     """
     from spacedg.data.judge import DescriptionJudge
     from spacedg.seeding import derive_seed
@@ -231,6 +436,7 @@ def generate_records(
     for family in _families(config.families):
         rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
         pools: dict[str, list[QARecord]] = {}
+        order: dict[int, int] = {}  # id(record) → scan position
         with plugin_call("question family", family, "generate"):
             for scanned, record in enumerate(family.generate(scene, rng)):
                 if scanned >= config.max_scan:
@@ -238,6 +444,7 @@ def generate_records(
                 pool = pools.setdefault(record.sub_question_type, [])
                 if len(pool) < want:
                     pool.append(record)
+                    order[id(record)] = scanned
                 elif all(len(pools.get(s, ())) >= want for s in family.sub_question_types):
                     break
 
@@ -248,8 +455,18 @@ def generate_records(
                 dropped[family_name] = dropped.get(family_name, 0) + 1
             return False
 
+        pooled = sorted((r for pool in pools.values() for r in pool), key=lambda r: order[id(r)])
+        stats: dict[str, Counter[str]] = {}
+        chosen = select_records(pooled, config.per_sub_type, keep, stats)
+        chosen = deal_letters(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "letters")))
+        by_sub: dict[str, list[QARecord]] = {}
+        for r in chosen:
+            by_sub.setdefault(r.sub_question_type, []).append(r)
         for sub in family.sub_question_types:
-            out.extend(_select_balanced(pools.get(sub, []), config.per_sub_type, keep))
+            out.extend(by_sub.get(sub, []))
+        if selection_stats is not None:
+            for sub, row in stats.items():
+                selection_stats[f"{family.name}/{sub}"] = dict(sorted(row.items()))
     return out
 
 
@@ -288,8 +505,13 @@ def _index_key(scene_json: Path, config: QABuildConfig, families: Iterable[Any],
     for fam in families:
         origin = fam.origin
         fams.append([fam.name, getattr(origin, "distribution", None), getattr(origin, "version", None), _module_digest(fam)])
+    from spacedg.scene.lexicon import default_lexicon
+
     judge_name = None if judge is None else getattr(judge, "__name__", type(judge).__name__)
-    head = {"version": QA_INDEX_VERSION, "config": config.to_dict(), "families": fams, "judge": judge_name}
+    head = {
+        "version": QA_INDEX_VERSION, "config": config.to_dict(), "families": fams, "judge": judge_name,
+        "lexicon": default_lexicon().digest(),
+    }
     digest.update(json.dumps(head, sort_keys=True).encode())
     return digest.hexdigest()
 
@@ -349,8 +571,9 @@ def build_scene_index(
     timings: dict[str, float] = {}
     prepared = prepare_scene(scene, scene_json.parent / "cache", config, backend=backend, progress=progress, timings=timings)
     dropped: dict[str, int] = {}
+    selection: dict[str, dict[str, int]] = {}
     t0 = time.perf_counter()
-    records = generate_records(prepared, config, judge=judge, dropped=dropped)
+    records = generate_records(prepared, config, judge=judge, dropped=dropped, selection_stats=selection)
     timings["generate_s"] = time.perf_counter() - t0
     body = "".join(r.to_json() + "\n" for r in records).encode("utf-8")
     jsonl.parent.mkdir(parents=True, exist_ok=True)
@@ -359,7 +582,7 @@ def build_scene_index(
         "format": "spacedg-qa-index", "version": QA_INDEX_VERSION, "key": key, "scene_id": scene.id,
         "config": config.to_dict(), "records": len(records),
         "counts": dict(sorted(Counter(r.question_type for r in records).items())),
-        "dropped_by_judge": dropped, "seconds": {k: round(v, 4) for k, v in timings.items()},
+        "dropped_by_judge": dropped, "selection": selection, "seconds": {k: round(v, 4) for k, v in timings.items()},
     }
     atomic_write_bytes(meta_path, (json.dumps(meta, indent=2) + "\n").encode("utf-8"))
     return SceneQA(scene.id, jsonl, records, reused=False, seconds=timings, dropped=dropped)

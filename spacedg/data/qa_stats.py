@@ -8,6 +8,17 @@
   measured: the most frequent **letter** (what a blind model can output) and the most
   frequent **option text** (a blind model that reads the options and picks the one that was
   most often right in the training scenes: catches text bias such as "forward" dominating).
+  The full blind stress test (per-label priors, option-text priors, a learned text model) is
+  :func:`spacedg.data.qa_audit.blind_audit`.
+- :func:`record_subject` / :func:`repeat_rate`: what a record asks about (read from its
+  geometry, the same for every index version) and the share of records that re-ask a subject
+  already asked in the same scene and sub type.
+- :func:`ambiguities`: records a person could not answer as stated: a label-only question
+  (counting, existence "no") while the view shows a related label or an object showing the
+  label unannotated (:mod:`spacedg.scene.lexicon`; needs the scenes' visibility), a size
+  comparison whose difference is visible but not decidable (between "about the same" and a
+  clear difference), and a rotation answer naming a component under 5° in the gravity-aware
+  reading.
 """
 
 from __future__ import annotations
@@ -20,7 +31,7 @@ from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import AnswerType
 
-__all__ = ["count_table", "answer_balance", "blind_baseline", "format_table"]
+__all__ = ["count_table", "answer_balance", "blind_baseline", "format_table", "record_subject", "repeat_rate", "ambiguities"]
 
 
 def count_table(records: Iterable[QARecord]) -> list[dict[str, Any]]:
@@ -126,3 +137,125 @@ def format_table(rows: Sequence[Mapping[str, Any]], columns: Sequence[str] | Non
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(cell(r.get(c, "")) for c in cols) + " |" for r in rows]
     return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ repeats
+def _ids(g: Mapping[str, Any]) -> list[int]:
+    return [int(r["id"]) for r in g.get("refs") or [] if "id" in r]
+
+
+def record_subject(record: QARecord) -> str:
+    """What ``record`` asks about, read from its geometry block the same way for every index
+    version (the built-ins' ``selection`` subjects are this key or stricter): the object (size estimation), the
+    unordered object pair (inter-object distance, size comparison), the measuring view and the
+    object (camera-object distance and ``bbox_center_direction``), the view and the unordered
+    pair (single-view direction), the ordered objects (three-object and compass questions), the
+    unordered view pair (camera motion), the view and the label (counting, existence); other
+    families: the views and the named objects."""
+    g = record.geometry
+    q, sub, views, ids = record.question_type, record.sub_question_type, record.views, _ids(g)
+    if q == "object_bounding_size_estimation" and ids:
+        return f"object:{ids[0]}"
+    if q in ("inter_object_distance", "object_size_comparison") and ids:
+        return f"{sub}|objects:" + "|".join(map(str, sorted(ids)))
+    if (q == "camera_object_distance_estimation" or sub == "bbox_center_direction") and ids:
+        return f"view:{views[-1]}|object:{ids[0]}"
+    if q == "camera_object_relative_direction" and sub == "single_view":
+        return f"view:{views[0]}|objects:" + "|".join(map(str, sorted(ids)))
+    if q in ("camera_translation", "camera_rotation"):
+        return "views:" + "|".join(sorted(views))
+    if q in ("object_counting", "object_existence_estimation"):
+        return f"view:{views[0]}|label:{str(g.get('label_key', g.get('label', ''))).lower()}"
+    if ids:
+        return "objects:" + "|".join(map(str, ids))
+    return "views:" + "|".join(views)
+
+
+def repeat_rate(records_by_scene: Mapping[str, Sequence[QARecord]]) -> list[dict[str, Any]]:
+    """Per (question_type, sub_question_type): ``n``, ``repeats`` (records whose subject was
+    already asked in the same scene and sub type: camera-motion families count a view pair,
+    label-only families a view and label) and ``repeat_pct``; a final ``ALL`` row."""
+    rows: dict[tuple[str, str], list[int]] = defaultdict(lambda: [0, 0])
+    for rs in records_by_scene.values():
+        seen: set[tuple[str, str, str]] = set()
+        for r in rs:
+            key = (r.question_type, r.sub_question_type, record_subject(r))
+            row = rows[(r.question_type, r.sub_question_type)]
+            row[0] += 1
+            row[1] += key in seen
+            seen.add(key)
+    out = [{"question_type": q, "sub_question_type": s, "n": n, "repeats": k, "repeat_pct": 100.0 * k / n}
+           for (q, s), (n, k) in sorted(rows.items()) if n]
+    total = sum(r["n"] for r in out)
+    if total:
+        reps = sum(r["repeats"] for r in out)
+        out.append({"question_type": "ALL", "sub_question_type": "", "n": total, "repeats": reps, "repeat_pct": 100.0 * reps / total})
+    return out
+
+
+# ------------------------------------------------------------------ ambiguities
+def _size_ambiguous(record: QARecord) -> bool:
+    g = record.geometry
+    values = g.get("values")
+    if not values or len(values) != 2:
+        return False
+    from spacedg.plugins.questions.object_size_comparison import thresholds_for
+
+    same, different = thresholds_for(str(g.get("quantity", "longest_side")), values)
+    delta = abs(round(float(values[0]) - float(values[1]), 9))
+    truth = g.get("truth")
+    return same <= delta < different or (delta < same and truth != "same") or (delta >= different and truth == "same")
+
+
+def _rotation_imperceptible(record: QARecord) -> bool:
+    import numpy as np
+
+    from spacedg.plugins.questions.camera_rotation import MIN_ROTATION_DEG
+    from spacedg.plugins.questions.geometry import gravity_rotation
+    from spacedg.render.camera import Camera
+
+    g = record.geometry
+    try:
+        poses = [np.asarray(g["cam_to_world_a"], dtype=np.float64), np.asarray(g["cam_to_world_b"], dtype=np.float64)]
+    except KeyError:
+        return False
+    cams = [Camera(1.0, 1.0, 1.0, 1.0, 2, 2, p) for p in poses]
+    yaw, pitch, roll = gravity_rotation(cams[0], cams[1], np.asarray(g.get("up", [0, 0, 1]), dtype=np.float64))
+    angles = {"yaw": yaw, "pitch": pitch, "roll": roll}
+    axes = g.get("axes") or []
+    named = axes[:1] if g.get("mode") == "single" else axes[:2]
+    return any(abs(angles.get(a, 0.0)) < MIN_ROTATION_DEG for a in named)
+
+
+def ambiguities(records: Iterable[QARecord], scenes: Mapping[str, Any] | None = None) -> dict[str, int]:
+    """Counts of records a person could not answer as stated (module docstring):
+    ``label_related`` (needs ``scenes``: scene id → :class:`~spacedg.scene.model.Scene` with
+    visibility; the view shows a related label or an object that shows the label unannotated,
+    books on a bookshelf counted apart as ``label_shown_unannotated``), ``size_undecidable``,
+    ``rotation_imperceptible``; ``checked_label_only`` says how many label-only records were
+    checked against a scene."""
+    from spacedg.scene.lexicon import default_lexicon
+    from spacedg.scene.visibility_classes import VisibilityClass, classify
+
+    lexicon = default_lexicon()
+    out = {"label_related": 0, "label_shown_unannotated": 0, "size_undecidable": 0, "rotation_imperceptible": 0, "checked_label_only": 0}
+    for r in records:
+        if r.question_type == "object_size_comparison":
+            out["size_undecidable"] += _size_ambiguous(r)
+        elif r.question_type == "camera_rotation":
+            out["rotation_imperceptible"] += _rotation_imperceptible(r)
+        elif r.question_type in ("object_counting", "object_existence_estimation") and scenes and r.scene_id in scenes:
+            if r.question_type == "object_existence_estimation" and r.answer == "yes":
+                continue  # "yes" stands whatever else is in view
+            scene = scenes[r.scene_id]
+            view = r.views[0]
+            label = str(r.geometry.get("label", ""))
+            cam = scene.views[view]
+            seen = [inst for inst in scene.instances
+                    if classify(inst.visibility.get(view), image_area=cam.width * cam.height) is not VisibilityClass.HIDDEN]
+            out["checked_label_only"] += 1
+            if any(lexicon.related(label, inst.label) for inst in seen):
+                out["label_related"] += 1
+            elif any(lexicon.confuses(label, inst.label) for inst in seen):
+                out["label_shown_unannotated"] += 1
+    return out

@@ -45,6 +45,7 @@ Geometry-block entries (JSON; world metres)
     - :func:`visibility_entry`: visible pixels, visible fraction and class of each object in each view.
     - :func:`visibility_thresholds`: the "clearly visible" thresholds, ``min_pixels`` scaled to each view's image size.
     - :func:`objects_block`: the usual head of an object question's block: ``up``, ``cameras``, ``objects``, ``refs``, ``visibility``, ``visibility_thresholds``.
+    - :func:`selection_entry`: the block's ``selection`` entry: the subject (asked once per sub type and scene), the cell (what the text tells a blind model), the record's role and the cell's roles; the question index takes whole rounds of a cell's roles, so nothing the text shows predicts the answer.
 
 Seeded order (all lazy: nothing is drawn before the first ``next``)
     - :func:`child_rngs`: ``n`` independent child generators, so skipping one candidate never shifts another's draws.
@@ -86,7 +87,9 @@ View pairs and object rules
     - :func:`split_across_views`: the three-object rule: the two views together show all three clearly, neither shows all three.
     - :func:`description_clash`: the view shows another same-label instance with the same description (drop the question).
     - :func:`same_label_neighbours`: other instances of the same label that a view shows.
-    - :func:`confusable`: two labels with one head noun (``"lamp"`` / ``"floor lamp"``).
+    - :func:`confusable`: two labels a person may take for one another (the label lexicon: ``"armchair"`` ⊂ ``"chair"``, ``"monitor"`` / ``"tv"``, one head noun).
+    - :func:`label_ambiguous`: the instances a view shows that make a label-only question ambiguous (a related label, or a bookshelf for "book").
+    - :class:`Lexicon`, :func:`default_lexicon`: label relations (synonyms, kinds, related pairs, objects showing unannotated ones, typical sizes), extensible by JSON (``SPACEDG_LEXICON``).
     - :func:`label_key`, :func:`description_key`, :func:`head_noun`: how labels and descriptions compare (case, spaces, ``_``).
 
 Options (MCQ) and balance
@@ -100,6 +103,8 @@ Poses, directions and the ground plane
     - :func:`relative_rotation`: ``R_a^T R_b``, view B's axes in view A's camera frame.
     - :func:`relative_translation`: ``R_a^T (t_b − t_a)``, B's centre in A's camera frame (metres).
     - :func:`euler_yaw_pitch_roll`: ``(yaw, pitch, roll)`` degrees of a camera-frame rotation (yaw+ = turn right, pitch+ = tilt up, roll+ = clockwise).
+    - :func:`gravity_rotation`: ``(yaw, pitch, roll)`` degrees of the motion A → B as a person perceives it (heading, elevation and bank changes with gravity as reference).
+    - :func:`camera_attitude`: a camera's ground heading, elevation above the horizon and bank.
     - :data:`ROTATION_WORDS`: the words of each rotation axis's positive and negative sense.
     - :func:`dominant_parts`: ``[(axis, sign), …]`` naming a direction: the largest component, plus the second when ``|c2| ≥ TAN30·|c1|``; at most ``MAX_PARTS``.
     - :func:`parts_label`: ``"right-up"`` from those parts and a word table.
@@ -149,12 +154,14 @@ from spacedg.plugins.questions.geometry import (
     Sectors,
     boxes_intersect,
     build_mcq,
+    camera_attitude,
     camera_center,
     compass_answer,
     compass_frame,
     dominant_parts,
     euler_yaw_pitch_roll,
     flipped_labels,
+    gravity_rotation,
     ground_angle,
     ground_leg,
     horizontal,
@@ -192,6 +199,7 @@ from spacedg.plugins.questions.records import (
     round_robin_pairs,
     round_robin_views,
     seeded_order,
+    selection_entry,
     visibility_entry,
     visibility_thresholds,
 )
@@ -201,10 +209,13 @@ from spacedg.plugins.questions.view_sampling import (
     OBJECT_PAIRS,
     ROTATION_PAIRS,
     TRANSLATION_PAIRS,
+    Lexicon,
     PairRules,
     ViewPair,
     VisibilityIndex,
     confusable,
+    default_lexicon,
+    label_ambiguous,
     description_clash,
     description_key,
     head_noun,
@@ -231,6 +242,7 @@ __all__ = [
     # records and geometry blocks
     "QARecord", "make_record", "make_record_id", "json_ready",
     "object_entry", "ref_entry", "camera_entry", "pair_geometry", "visibility_entry", "visibility_thresholds", "objects_block",
+    "selection_entry",
     # seeded order
     "child_rngs", "seeded_order", "lazy_permutation", "round_robin", "round_robin_views", "round_robin_pairs",
     # objects and wording
@@ -242,10 +254,12 @@ __all__ = [
     "PairRules", "ViewPair", "sample_pairs",
     "TRANSLATION_PAIRS", "ROTATION_PAIRS", "OBJECT_PAIRS", "OBJECT_DIRECTION_PAIRS", "LOW_COVIS_DIRECTION_PAIRS",
     "split_across_views", "description_clash", "same_label_neighbours", "confusable", "label_key", "description_key", "head_noun",
+    "label_ambiguous", "Lexicon", "default_lexicon",
     # options
     "build_mcq", "BalancedDeck", "MCQ_LETTERS",
     # poses, directions, ground plane
     "camera_center", "point_in_camera", "relative_rotation", "relative_translation", "euler_yaw_pitch_roll", "ROTATION_WORDS",
+    "gravity_rotation", "camera_attitude",
     "dominant_parts", "parts_label", "flipped_labels", "single_word_pool", "CAMERA_MOTION_WORDS", "BODY_DIRECTION_WORDS",
     "TAN30", "MAX_PARTS", "horizontal", "vertical_dominates", "ground_angle", "ground_leg", "MIN_HORIZONTAL_M", "VERTICAL_FACTOR",
     "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS", "BOUNDARY_GUARD_DEG",

@@ -113,7 +113,10 @@ def test_cli_build_and_stats(qa_room_dirs, tmp_path, capsys):
     assert {row["question_type"] for row in report["counts"]} == {"object_counting", "object_existence_estimation"}
     assert report["blind_baseline"][-1]["question_type"] == "ALL"
     files = sorted(map(str, out.glob("*.jsonl")))
-    assert main(["qa", "stats", *files]) == 0 and "Blind baseline" in capsys.readouterr().out
+    assert report["repeats"][-1]["repeats"] == 0 and report["blind"]["rows"] and "ambiguities" in report
+    assert main(["qa", "stats", *files]) == 0
+    text = capsys.readouterr().out
+    assert "Blind stress test" in text and "Repeats" in text and "Ambiguities" in text
     assert main(["qa", "stats", str(tmp_path / "nothing")]) == 2
     assert "no such file" in capsys.readouterr().err
 
@@ -197,8 +200,8 @@ def test_selection_never_replaces_the_full_index(qa_room_dirs, tmp_path):
     room = shutil.copytree(qa_room_dirs[2], tmp_path / "room", ignore=shutil.ignore_patterns("*.qa.*"))
     full = build_scene_index(room, QABuildConfig(per_sub_type=3), progress=False)
     before = [p.read_bytes() for p in index_paths(full.scene_id, room)]
-    part = build_scene_index(room, QABuildConfig(per_sub_type=3, families=("object_counting",)), progress=False, force=True)
-    assert part.path == index_paths(full.scene_id, room, ("object_counting",))[0] != full.path
+    part = build_scene_index(room, QABuildConfig(per_sub_type=3, families=("camera_translation",)), progress=False, force=True)
+    assert part.path == index_paths(full.scene_id, room, ("camera_translation",))[0] != full.path
     assert [p.read_bytes() for p in index_paths(full.scene_id, room)] == before
     assert build_scene_index(room, QABuildConfig(per_sub_type=3), progress=False).reused
-    assert part.records and part.records == [r for r in full.records if r.question_type == "object_counting"]
+    assert part.records and part.records == [r for r in full.records if r.question_type == "camera_translation"]

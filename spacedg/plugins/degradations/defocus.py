@@ -23,6 +23,13 @@ Units and decisions:
 
 Presets: ``bench`` = the paper's table, aperture ∈ [10, 15] px, depth ∈ [1, 8] m. Severities
 ``1``–``5``: aperture [2, 3], [4, 5], [6, 8], [9, 11], [12, 15] px, depth ∈ [1, 8] m in all.
+
+**Scale-aware** (decision): the focus ``depth`` ranges are stated for a scene whose median
+depth is :data:`~spacedg.plugins.specs.REFERENCE_DEPTH_M` (2.5 m, a ScanNet++ room) and scale
+with the sample's scene depth ``D`` (``ParamRange(per_depth=True)``): a plant filmed from 0.5 m
+is focused at 0.2–1.6 m, as a room is at 1–8 m. The blur ``aperture · |d − f| / d`` depends only
+on ``d / f``, so a tabletop and a room blur alike; ``aperture`` (pixels) is not scaled. At
+``D = 2.5 m`` the presets are the paper's numbers; the provenance records the resolved metres.
 """
 
 from __future__ import annotations
@@ -40,7 +47,7 @@ from spacedg.render.settings import Defocus
 
 __all__ = ["SPEC", "defocus"]
 
-_FOCUS_RANGE = ParamRange(1.0, 8.0)
+_FOCUS_RANGE = ParamRange(1.0, 8.0, per_depth=True)  # at REFERENCE_DEPTH_M; scales with the scene
 
 
 def defocus(request: RenderRequest, aperture: float, depth: float) -> RenderRequest:

@@ -9,7 +9,7 @@ Decisions the paper leaves open:
 
 - **Units of density.** The paper's density 3.5–6 cannot be β in 1/m for rooms (everything
   past 1 m would vanish). ``density`` is the optical depth ``β · D`` at a normalisation depth
-  ``D``, so ``β = density / D``. With ``depth_ref = 0`` (the bench and severity presets),
+  ``D``, so ``β = density / D``. With ``depth_ref = 0``,
   ``D`` is the far surface depth of the *sample*: the 99th percentile of covered-pixel depths,
   the maximum over the sample's views (the pipeline passes it as ``aux["far_depth"]``; a lone
   call uses its own view), so all views of one question see the same β and the haze is
@@ -31,6 +31,17 @@ Parameters: ``density`` ("1", [0, 100]), ``airlight`` (linear, [0, 100]), ``dept
 [0, 1e6], 0 = automatic). Presets: ``bench`` density ∈ [3.5, 6.0] (the paper's table);
 severities ``1``–``5``: density [0.15, 0.3], [0.35, 0.7], [0.8, 1.5], [1.75, 3.0], [3.5, 6.0]
 (the airlight is brighter than most indoor surfaces, so even density 0.2 is a visible veil).
+
+**Scale-aware** (decision): the bench and severity presets set ``depth_ref`` = 4 m at a scene of
+median depth :data:`~spacedg.plugins.specs.REFERENCE_DEPTH_M` (2.5 m, a ScanNet++ room), i.e.
+1.6 × the sample's scene depth ``D`` (``ParamRange(per_depth=True)``), so ``β = density /
+(1.6 D)``. 1.6 is where a room's far surfaces lie: the 99th-percentile depth of a built-in room
+frame is 1.1–2.6 × (median 1.5 ×) its median depth, so a room keeps about the veil of the
+far-depth normalisation the presets used before. An object filmed from 0.5 m, whose "far depth"
+is its own surface (nothing behind it), no longer turns into pure airlight: a surface at the
+median depth keeps ``exp(−density / 1.6)`` of its light at any scale. ``depth_ref = 0`` (the
+sample's far surface depth) stays available; ``fog_20m`` and ``smoke_5m`` are physical and
+never scaled. The provenance records the resolved metres.
 """
 
 from __future__ import annotations
@@ -44,7 +55,7 @@ from spacedg.plugins.degradations.common import aux_image, check_linear_rgb, sur
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 
-__all__ = ["SPEC", "haze", "VISIBILITY_DENSITY"]
+__all__ = ["SPEC", "haze", "VISIBILITY_DENSITY", "SCALED_DEPTH_REF_M"]
 
 #: Optical depth at the meteorological visibility distance: ln(1 / 0.02).
 VISIBILITY_DENSITY = 3.912
@@ -98,8 +109,12 @@ def apply(rgb: np.ndarray, aux: Mapping[str, np.ndarray], params: Mapping[str, A
     return haze(rgb, depth, alpha, p["density"], p["airlight"], p["depth_ref"], None if far is None else float(far))
 
 
-def _preset(density: tuple[float, float], depth_ref: float = 0.0) -> dict[str, ParamRange]:
-    return {"density": ParamRange(*density), "airlight": _AIRLIGHT, "depth_ref": ParamRange(depth_ref, depth_ref)}
+#: ``depth_ref`` of the bench and severity presets at REFERENCE_DEPTH_M (1.6 × the median depth).
+SCALED_DEPTH_REF_M = 4.0
+
+
+def _preset(density: tuple[float, float], depth_ref: float = SCALED_DEPTH_REF_M, per_depth: bool = True) -> dict[str, ParamRange]:
+    return {"density": ParamRange(*density), "airlight": _AIRLIGHT, "depth_ref": ParamRange(depth_ref, depth_ref, per_depth=per_depth)}
 
 
 SPEC = DegradationSpec(
@@ -116,12 +131,12 @@ SPEC = DegradationSpec(
         "3": _preset((0.8, 1.5)),
         "4": _preset((1.75, 3.0)),
         "5": _preset((3.5, 6.0)),
-        "fog_20m": _preset((VISIBILITY_DENSITY, VISIBILITY_DENSITY), 20.0),
-        "smoke_5m": _preset((VISIBILITY_DENSITY, VISIBILITY_DENSITY), 5.0),
+        "fog_20m": _preset((VISIBILITY_DENSITY, VISIBILITY_DENSITY), 20.0, per_depth=False),
+        "smoke_5m": _preset((VISIBILITY_DENSITY, VISIBILITY_DENSITY), 5.0, per_depth=False),
     },
     apply=apply,
     needs=frozenset({"depth", "alpha"}),
-    description="Koschmieder haze I = J·exp(−βd) + A(1 − exp(−βd)) on rendered depth; β = density / far depth (or / depth_ref m).",
+    description="Koschmieder haze I = J·exp(−βd) + A(1 − exp(−βd)) on rendered depth; β = density / depth_ref m (presets: 4 m at a 2.5 m scene, scaled with its depth; 0 = far depth).",
     order=10.0,
 )
 

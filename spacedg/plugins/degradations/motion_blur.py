@@ -22,6 +22,12 @@ Parameters: ``trans`` (m, total path length, [0, 10]), ``rot`` (rad, total angle
 m, rot ∈ [0.06, 0.12] rad, sub_steps = 80; severities ``1``–``5``: trans [0.02, 0.04], [0.05,
 0.08], [0.09, 0.14], [0.15, 0.22], [0.2, 0.35] m and rot [0.005, 0.01], [0.01, 0.02], [0.02,
 0.04], [0.04, 0.07], [0.06, 0.12] rad, sub_steps = 80.
+
+**Scale-aware** (decision): the ``trans`` ranges are stated for a scene of median depth
+:data:`~spacedg.plugins.specs.REFERENCE_DEPTH_M` (2.5 m, a ScanNet++ room) and scale with the
+sample's scene depth (``ParamRange(per_depth=True)``): a 0.3 m shake at 2.5 m moves the image as
+much as a 6 cm shake at 0.5 m. ``rot`` (radians) moves the image the same at any depth and
+is not scaled. The provenance records the resolved metres.
 """
 
 from __future__ import annotations
@@ -63,7 +69,7 @@ def apply(request: RenderRequest, params: Mapping[str, Any], rng: np.random.Gene
 
 
 def _preset(trans: tuple[float, float], rot: tuple[float, float]) -> dict[str, ParamRange]:
-    return {"trans": ParamRange(*trans), "rot": ParamRange(*rot), "sub_steps": ParamRange(80, 80)}
+    return {"trans": ParamRange(*trans, per_depth=True), "rot": ParamRange(*rot), "sub_steps": ParamRange(80, 80)}
 
 
 SPEC = DegradationSpec(

@@ -36,7 +36,8 @@ label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{"id"
 "description", "view"}]``: where the text says to find the object); ``visibility`` (per view
 and object: pixels, fraction, class); ``visibility_thresholds``; ``camera_center`` (of the
 measuring camera, world metres); ``distance_m`` (unrounded); ``decimals``; ``template``; for
-two views ``pair`` (covisibility, translation_m, rotation_deg) and ``pair_rules``.
+two views ``pair`` (covisibility, translation_m, rotation_deg) and ``pair_rules``; ``selection``
+(subject = the measuring view and the object).
 
 Order (decision): ``generate`` splits ``rng`` into one child generator per sub type and
 interleaves the sub types round-robin (so a caller taking the first ``n`` records gets both
@@ -79,6 +80,7 @@ from spacedg.plugins.questions.records import (
     round_robin_pairs,
     round_robin_views,
     seeded_order,
+    selection_entry,
 )
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
@@ -149,7 +151,7 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
             continue
         template = int(rng.integers(len(TEMPLATES)))
         question = TEMPLATES[template].format(obj=phrase(inst))
-        yield _record(scene, index, SINGLE_VIEW, (view,), inst, distance, question, template, {})
+        yield _record(scene, index, SINGLE_VIEW, (view,), inst, distance, question, template, {"selection": selection_entry(f"view:{view}|object:{inst.id}")})
 
 
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
@@ -162,7 +164,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         if distance is None:
             continue
         question = find_in_image(phrase(inst), 0) + "\n" + TWO_VIEW_TEMPLATE.format(label=label_text(inst.label))
-        extra = {"pair": pair.to_dict(), "pair_rules": rules.to_dict()}
+        extra = {"pair": pair.to_dict(), "pair_rules": rules.to_dict(), "selection": selection_entry(f"view:{pair.b}|object:{inst.id}")}
         yield _record(scene, index, BBOX_CENTER_DISTANCE, (pair.a, pair.b), inst, distance, question, 0, extra)
 
 

@@ -59,8 +59,26 @@ the whole scene moves rigidly (any up direction).
 
 Options: :func:`~spacedg.plugins.questions.geometry.build_mcq` (truth never among the
 distractors; seeded shuffle). Camera-frame labels take :func:`flipped_labels` first (1 for a
-one-part label, 3 for a two-part one), padded with the single words of the other axes in a
-seeded order.
+one-part label, 3 for a two-part one); a one-part label is padded with **both** words of one
+other axis (chosen by ``rng``), as ``camera_translation``'s ``main_dir``: the four options are
+then both signs of two axes, and they never tell which axis is the truth's (padding with
+words of two different axes left the truth's axis the only one shown with both signs, a
+blind 42 %).
+
+``bbox_center_direction`` does not ask an object whose label would name "Back" or "Up" (rare:
+behind camera B, or above a camera at eye height; a blind model learns to avoid them), nor one
+whose two-part option set (Up/Down × Front/Back) would leave a single askable answer; the
+options still offer those words, and the audit's chance counts only the answers that occur.
+
+Debiasing (the ``selection`` entry): the camera-frame sub types' **cell** is the sub type, the
+template (``single_view``'s four wordings) and the option set (what the text tells: which
+axes), ``relpos_A_facing_B``'s is the sub type with the eight
+sector labels as roles; the question index takes whole rounds (one record per role) per cell,
+over the roles the scene offers in the camera-frame cells (an object above a camera at eye
+height, "Up", hardly ever occurs: those rounds go over the other three options).
+Subjects: the view and the unordered object pair (``single_view``: "B relative to A" and "A
+relative to B" are one question), camera B's view and the object (``bbox_center_direction``),
+the ordered triplet (``relpos_A_facing_B``).
 
 Geometry block (JSON): ``up``; ``cameras`` (view → 4×4 ``cam_to_world``); ``objects`` (id,
 label, description, box centre/extents/rotation); ``refs`` (``[{"id", "label", "description",
@@ -70,7 +88,7 @@ label, description, box centre/extents/rotation); ``refs`` (``[{"id", "label", "
 ``max_parts``; for ``relpos_A_facing_B`` ``roles``, ``forward``, ``right``, the horizontal and
 vertical lengths of A→B and A→C, ``angle_deg``, ``sector_index``, ``sector_label``,
 ``sector_starts_deg``, ``boundary_distance_deg``, ``neighbour_index``, ``banned_labels``; for
-two views ``pair`` and ``pair_rules``.
+two views ``pair`` and ``pair_rules``; ``selection``.
 
 Order (decision, as in ``camera_object_distance_estimation``): one child generator per sub type,
 sub types interleaved round-robin; views (single view) or the pairs of ``sample_pairs``
@@ -132,6 +150,7 @@ from spacedg.plugins.questions.records import (
     round_robin_pairs,
     round_robin_views,
     seeded_order,
+    selection_entry,
 )
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
@@ -184,10 +203,20 @@ def body_direction(vector_camera: np.ndarray, rng: np.random.Generator) -> tuple
     """``(parts, truth, options, letter)`` of a camera-frame vector (see the module docstring)."""
     parts = dominant_parts(vector_camera)
     truth = parts_label(parts, BODY_DIRECTION_WORDS)
-    pool = single_word_pool(BODY_DIRECTION_WORDS, exclude_axes=[axis for axis, _ in parts])
-    pad = [pool[int(i)] for i in rng.permutation(len(pool))]
-    options, letter = build_mcq(truth, flipped_labels(parts, BODY_DIRECTION_WORDS) + pad, rng)
+    distractors = flipped_labels(parts, BODY_DIRECTION_WORDS)
+    if len(parts) == 1:
+        others = [axis for axis in range(3) if axis != parts[0][0]]
+        pad_axis = others[int(rng.integers(len(others)))]
+        distractors += single_word_pool(BODY_DIRECTION_WORDS, exclude_axes=[a for a in range(3) if a != pad_axis])
+    options, letter = build_mcq(truth, distractors, rng)
     return parts, truth, options, letter
+
+
+def _option_selection(subject: str, sub: str, template: int | None, truth: str, options: tuple[str, ...]) -> dict[str, Any]:
+    """Selection entry whose cell is the sub type, template (if given) and option set (the roles are its four texts)."""
+    texts = sorted(o[3:] for o in options)
+    head = sub if template is None else f"{sub}|template:{template}"
+    return selection_entry(subject, f"{head}|options:" + "|".join(texts), truth, texts, all_roles=False)
 
 
 def _body_geometry(view: str, world: np.ndarray, cam: np.ndarray, parts: list[tuple[int, int]], truth: str) -> dict[str, Any]:
@@ -229,7 +258,10 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
         template = int(rng.integers(len(SINGLE_VIEW_TEMPLATES)))
         parts, truth, options, letter = body_direction(vec, rng)
         question = SINGLE_VIEW_TEMPLATES[template].format(a=phrase(a), b=phrase(b)) + SINGLE_VIEW_NOTE
-        extra = {**_body_geometry(view, world, vec, parts, truth), "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M}}
+        extra = {
+            **_body_geometry(view, world, vec, parts, truth), "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
+            "selection": _option_selection(f"view:{view}|objects:{min(ia, ib)}|{max(ia, ib)}", SINGLE_VIEW, template, truth, options),
+        }
         yield _record(scene, index, SINGLE_VIEW, (view,), (a, b), ((a, view), (b, view)), question, options, letter, template, extra)
 
 
@@ -244,15 +276,42 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         vec = point_in_camera(cam_b, inst.box.center)
         if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
             continue
+        if _rare_bbox_direction(vec):
+            continue
         template = int(rng.integers(len(TWO_VIEW_TEMPLATES)))
         parts, truth, options, letter = body_direction(vec, rng)
+        roles = sorted(o[3:] for o in options if not _rare_bbox_label(o[3:]))
         question = find_in_image(phrase(inst), 0) + "\n" + TWO_VIEW_TEMPLATES[template].format(label=label_text(inst.label))
         extra = {
             **_body_geometry(pair.b, inst.box.center - centre_b, vec, parts, truth),
             "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
             "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
+            "selection": selection_entry(
+                f"view:{pair.b}|object:{iid}", f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(sorted(o[3:] for o in options)), truth, roles,
+            ),
         }
         yield _record(scene, index, BBOX_CENTER_DIRECTION, (pair.a, pair.b), (inst,), ((inst, pair.a),), question, options, letter, template, extra)
+
+
+def _rare_bbox_label(label: str) -> bool:
+    """A direction label naming "Back" or "Up" (see :func:`_rare_bbox_direction`)."""
+    return bool({"Back", "Up"} & set(label.split("-")))
+
+
+def _rare_bbox_direction(vec_camera: np.ndarray) -> bool:
+    """Whether ``bbox_center_direction`` skips this object (decision, debiasing): its label would
+    name "Back" (behind camera B) or "Up" (above a camera held at eye height). Both are rare
+    (a few per scene), so a blind model learns never to pick them; asked only where a scene
+    happens to offer them, they would make the rest predictable. The options still show them.
+    Also skipped: a label whose option set leaves fewer than two answers that are asked."""
+    parts = dominant_parts(vec_camera)
+    words = parts_label(parts, BODY_DIRECTION_WORDS).split("-")
+    if {"Back", "Up"} & set(words):
+        return True
+    if len(parts) == 2:  # the four sign combinations of two axes: at least two must be askable
+        axes = {axis for axis, _ in parts}
+        return axes == {1, 2}  # Up/Down × Front/Back: only "Front-Down"/"Down-Front" would be left
+    return False
 
 
 # ------------------------------------------------------------------- relpos
@@ -340,6 +399,7 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
                 "intersect_tol_m": INTERSECT_TOL_M,
             },
             "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
+            "selection": selection_entry(f"objects:{ids[0]}|{ids[1]}|{ids[2]}", RELPOS, truth, RELPOS_SECTORS.labels),
         }
         yield _record(scene, index, RELPOS, views, objs, list(zip(objs, ref_views)), question, options, letter, 0, extra)
 

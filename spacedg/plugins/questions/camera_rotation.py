@@ -1,17 +1,23 @@
 """Camera rotation (``question_type = "camera_rotation"``; camera-centric, two views, MCQ).
 
 "View A" is the **first** image of a record (``record.views[0]``), "view B" the second.
-``R_rel = R_a^T R_b`` (B's axes in A's OpenCV camera frame) is decomposed as
-``R_rel = R_y(yaw) @ R_x(pitch) @ R_z(roll)`` by
-:func:`~spacedg.plugins.questions.geometry.euler_yaw_pitch_roll` (degrees; yaw+ = "turn right",
-pitch+ = "tilt up", roll+ = "clockwise roll", as seen by the photographer). The angles are
-rounded to 1e-6° (:data:`ANGLE_DECIMALS`) and everything below is decided on the rounded
-values stored in the geometry block.
+
+**Reading** (decision: what a person perceives, not the camera-frame Euler angles): the motion
+from A to B is read with gravity as reference
+(:func:`~spacedg.plugins.questions.geometry.gravity_rotation`): **yaw** = change of heading
+about ``Scene.up`` (+ = "turn right"), **pitch** = change of the optical axis's elevation above
+the horizon (+ = "tilt up"), **roll** = change of the camera's bank about its optical axis (+ =
+"clockwise roll", as the photographer sees the image turn). A person sees a pan, a tilt and a
+horizon that rotates; the camera-frame decomposition of ``R_a^T R_b`` (the reading before,
+still stored as ``camera_euler_deg``) turns a pan of a downward-looking camera into a yaw plus
+a few degrees of "roll" and "tilt" nobody perceives. For a level camera A the two readings
+agree exactly. The angles are rounded to 1e-6° (:data:`ANGLE_DECIMALS`) and everything below
+is decided on the rounded values stored in the geometry block.
 
 Rule (SPEC-QA type 2), in this order:
 
-1. skip ``|pitch| > 60°`` (:data:`MAX_ABS_PITCH_DEG`): near ±90° yaw and roll are ill-defined
-   (gimbal lock) and the decomposition stops meaning what the words say;
+1. skip when either camera looks more than 60° above or below the horizon
+   (:data:`MAX_ABS_PITCH_DEG`): heading and bank are ill-defined near vertical;
 2. skip when yaw or roll exceeds 150° in magnitude (:data:`MAX_ABS_ANGLE_DEG`; not in the spec):
    the turn direction is ambiguous when going the other way round is nearly as short;
 3. sort ``|yaw|, |pitch|, |roll|``: ``a1 >= a2`` (ties in the order yaw, pitch, roll); the
@@ -30,6 +36,16 @@ the dual options, **not** in dominance order (which would give the answer away).
 ``sub_question_type = f"{ax1}+{ax2}_{mode}"`` with ``ax1`` the dominant axis (all 12
 combinations are declared).
 
+Every named component is perceivable: the answer's axes have ``|angle| >= 5°``
+(:data:`MIN_ROTATION_DEG`; a dual answer needs ``a2 >= 0.6 a1 >= 5°``).
+
+Debiasing (the ``selection`` entry): the question text tells a blind model the two axes and
+the mode, and pans are far more common than tilts, so the dominant axis was guessable. The
+**cell** is the mode and the two axes named in the text; the **roles** are the four option
+texts; the question index takes whole rounds (one record per option) per cell, across the two
+sub types that share a cell (``yaw+pitch_single`` and ``pitch+yaw_single``). The subject is
+the unordered view pair.
+
 Pairs: :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` with
 :data:`~spacedg.plugins.questions.view_sampling.ROTATION_PAIRS` (covisibility > 0.25, rotation >= 15°; which
 view is A is a seeded coin, so turn directions are balanced). One record per qualifying pair,
@@ -37,11 +53,13 @@ in ``sample_pairs``' round-robin order; each pair's option shuffle uses its own 
 generator seeded from ``rng`` (:func:`~spacedg.plugins.questions.records.child_rngs`).
 
 Geometry block (JSON): ``up``, ``cam_to_world_a``, ``cam_to_world_b`` (4×4), ``pair``,
-``r_rel`` (3×3), ``euler_deg`` ``{"yaw", "pitch", "roll"}``, ``axes`` ``[ax1, ax2]``,
+``r_rel`` (3×3), ``euler_deg`` ``{"yaw", "pitch", "roll"}`` (the gravity-aware reading the
+answer uses), ``attitude_a`` / ``attitude_b`` (``elevation_deg``, ``bank_deg``),
+``camera_euler_deg`` (the camera-frame decomposition, for comparison), ``axes`` ``[ax1, ax2]``,
 ``a1_deg``, ``a2_deg``, ``ratio``, ``mode``, ``signs`` (``{axis: ±1}`` of the asked axes),
 ``thresholds`` (``min_rotation_deg`` 5, ``single_max_ratio`` 0.4, ``dual_min_ratio`` 0.6,
 ``max_abs_pitch_deg`` 60, ``max_abs_angle_deg`` 150, ``euler`` convention), ``template``
-(0 single, 1 dual) and ``refs`` ``[]``.
+(0 single, 1 dual), ``refs`` ``[]`` and ``selection``.
 """
 
 from __future__ import annotations
@@ -59,10 +77,12 @@ from spacedg.plugins.questions.geometry import (
     ROTATION_WORDS,
     BalancedDeck,
     build_mcq,
+    camera_attitude,
     euler_yaw_pitch_roll,
+    gravity_rotation,
     relative_rotation,
 )
-from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry
+from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry, selection_entry
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -88,7 +108,10 @@ AXIS_PHRASES: dict[str, str] = {
     "pitch": "pitch (tilt up/down)",
     "roll": "roll (clockwise/counterclockwise)",
 }
-_LEAD = "Given view A and view B, consider the relative rotation from A to B expressed in view A's camera frame. "
+_LEAD = (
+    "Given view A and view B, consider how the camera turned from A to B, with the ground as reference "
+    "(yaw: turning left/right about the vertical; pitch: tilting up/down; roll: rotating about the viewing direction). "
+)
 #: 0: single-axis dominant, 1: two-axis (the paper's wording).
 TEMPLATES: tuple[str, ...] = (
     _LEAD + "Which SINGLE rotation direction is the most prominent?\n"
@@ -104,7 +127,10 @@ SINGLE_MAX_RATIO = 0.4
 DUAL_MIN_RATIO = 0.6
 MAX_ABS_PITCH_DEG = 60.0
 MAX_ABS_ANGLE_DEG = 150.0
-EULER_CONVENTION = "R_rel = R_y(yaw) R_x(pitch) R_z(roll), OpenCV camera axes, degrees"
+EULER_CONVENTION = (
+    "gravity-aware: yaw = change of heading about up (+ right), pitch = change of elevation (+ up), "
+    "roll = change of bank about the optical axis (+ clockwise), degrees"
+)
 
 
 @dataclass(frozen=True)
@@ -159,10 +185,15 @@ def _options(case: RotationCase, euler: dict[str, float]) -> tuple[str, list[str
 
 
 def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator, decks: dict[str, BalancedDeck]) -> QARecord | None:
-    r_rel = relative_rotation(scene.views[pair.a], scene.views[pair.b])
+    cam_a, cam_b = scene.views[pair.a], scene.views[pair.b]
+    r_rel = relative_rotation(cam_a, cam_b)
     if not np.all(np.isfinite(r_rel)):
         return None
-    yaw, pitch, roll = (round(v, ANGLE_DECIMALS) + 0.0 for v in euler_yaw_pitch_roll(r_rel))
+    up = np.asarray(scene.up, dtype=np.float64)
+    (_, elev_a, bank_a), (_, elev_b, bank_b) = camera_attitude(cam_a.cam_to_world, up), camera_attitude(cam_b.cam_to_world, up)
+    if max(abs(elev_a), abs(elev_b)) > MAX_ABS_PITCH_DEG:
+        return None
+    yaw, pitch, roll = (round(v, ANGLE_DECIMALS) + 0.0 for v in gravity_rotation(cam_a, cam_b, up))
     case = classify_rotation(yaw, pitch, roll)
     if isinstance(case, str):
         return None
@@ -171,10 +202,14 @@ def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator, decks: dict[
     options, answer = build_mcq(truth, distractors, rng, slot=decks[case.mode].next())
     template = MODES.index(case.mode)
     sub = f"{case.ax1}+{case.ax2}_{case.mode}"
+    options_text = [o[3:] for o in options]
     geometry = {
         **pair_geometry(scene, pair),
         "r_rel": r_rel.tolist(),
         "euler_deg": euler,
+        "attitude_a": {"elevation_deg": elev_a, "bank_deg": bank_a},
+        "attitude_b": {"elevation_deg": elev_b, "bank_deg": bank_b},
+        "camera_euler_deg": dict(zip(AXES, euler_yaw_pitch_roll(r_rel))),
         "axes": [case.ax1, case.ax2],
         "a1_deg": case.a1,
         "a2_deg": case.a2,
@@ -189,6 +224,9 @@ def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator, decks: dict[
         },
         "template": template,
         "refs": [],
+        "selection": selection_entry(
+            f"views:{min(pair.a, pair.b)}|{max(pair.a, pair.b)}", f"{case.mode}|{text_axes[0]}+{text_axes[1]}", truth, sorted(options_text),
+        ),
     }
     views = (pair.a, pair.b)
     question = TEMPLATES[template].format(axis1=AXIS_PHRASES[text_axes[0]], axis2=AXIS_PHRASES[text_axes[1]])

@@ -62,7 +62,12 @@ Geometry block (JSON): ``up``, ``cam_to_world_a``, ``cam_to_world_b`` (4×4), ``
 1 = y, 2 = z), ``label``, ``thresholds`` (``ratio`` 0.5774, ``max_parts`` 2,
 ``min_translation_m``), per sub type ``options_source`` (main_dir: how the distractors were
 made) or ``factor_drawn``, ``factor``, ``threshold_m`` (distance_threshold), ``template`` 0, and
-``refs`` ``[]`` (no objects).
+``refs`` ``[]`` (no objects) and ``selection``
+(:func:`~spacedg.plugins.questions.records.selection_entry`): the subject is the unordered view
+pair (a pair is asked once per sub type, in one orientation); ``main_dir``'s cell is its option
+set (the four options tell which two axes are in play), ``distance_threshold``'s the printed
+threshold in half-octave bins (:func:`threshold_cell`: a large threshold alone suggests "no"),
+so the index balances the truth within what the text shows.
 """
 
 from __future__ import annotations
@@ -95,7 +100,7 @@ from spacedg.plugins.questions.geometry import (
     relative_translation,
     single_word_pool,
 )
-from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry
+from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry, selection_entry
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -108,6 +113,7 @@ __all__ = [
     "main_dir_options",
     "make_family",
     "snap_factor",
+    "threshold_cell",
     "threshold_for",
 ]
 
@@ -149,6 +155,11 @@ def snap_factor(factor: float, coin: float) -> float:
 def threshold_for(distance_m: float, factor: float) -> float:
     """The threshold shown in the question: ``round(max(0.05, distance·factor), 2)`` metres."""
     return round(max(MIN_THRESHOLD_M, distance_m * factor), 2)
+
+
+def threshold_cell(threshold_m: float) -> str:
+    """The selection cell of a printed threshold: its half-octave bin, ``"threshold:<round(2 log2 t)>"``."""
+    return f"threshold:{round(2 * math.log2(max(threshold_m, 1e-3)))}"
 
 
 def main_dir_options(parts: list[tuple[int, int]], rng: np.random.Generator) -> tuple[str, list[str], str]:
@@ -224,6 +235,14 @@ def _record(
         question = TEMPLATES[sub].format(threshold=threshold)
         answer_type = AnswerType.YN
         key["threshold"] = threshold
+    subject = f"views:{min(cand.pair.a, cand.pair.b)}|{max(cand.pair.a, cand.pair.b)}"
+    if sub == "main_dir":
+        texts = sorted(o[3:] for o in options)
+        geometry["selection"] = selection_entry(subject, "options:" + "|".join(texts), truth, texts)
+    elif sub == "distance_threshold":
+        geometry["selection"] = selection_entry(subject, threshold_cell(threshold), str(answer), ("yes", "no"))
+    else:
+        geometry["selection"] = selection_entry(subject)
     views = (cand.pair.a, cand.pair.b)
     return make_record(
         scene, NAME, sub, TaskGroup.CAMERA_CENTRIC, answer_type, views, key,

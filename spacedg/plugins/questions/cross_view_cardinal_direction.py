@@ -68,7 +68,10 @@ label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{"id"
 ``north``; ``east``; ``angle_deg``; ``sector_index``; ``sector_label``; ``sector_labels``;
 ``sector_starts_deg``; ``boundary_distance_deg``; ``neighbour_index``; ``banned_labels``;
 ``thresholds`` (``min_horizontal_m``, ``vertical_factor``, ``boundary_guard_deg``,
-``cardinal_ratio``); ``template`` (always 0); ``pair``; ``pair_rules``.
+``cardinal_ratio``); ``template`` (always 0); ``pair``; ``pair_rules``; ``selection`` (cell = the
+assumed direction, roles = the eight compass labels: the answer was the assumed direction
+itself half the time, since the two cameras are close; the question index balances the eight
+answers per assumed direction; subject = the ordered object pair, asked once per scene).
 
 The compass frame (:func:`~spacedg.plugins.questions.geometry.compass_frame`,
 :func:`~spacedg.plugins.questions.geometry.compass_answer`,
@@ -98,7 +101,8 @@ from spacedg.plugins.questions.geometry import (
 )
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import object_pairs, pair_family
-from spacedg.plugins.questions.records import compass_question, make_record, objects_block, phrase, phrase_key
+from spacedg.plugins.questions.geometry import COMPASS_SECTORS
+from spacedg.plugins.questions.records import compass_question, make_record, objects_block, phrase, phrase_key, selection_entry
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -147,6 +151,9 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             "template": 0,
             "pair": pair.to_dict(),
             "pair_rules": rules.to_dict(),
+            "selection": selection_entry(
+                f"objects:{one.id}|{two.id}", f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
+            ),
         }
         yield make_record(
             scene, NAME, SUB_QUESTION_TYPE, TaskGroup.CAMERA_OBJECT, AnswerType.MCQ, views,

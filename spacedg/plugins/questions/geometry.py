@@ -62,7 +62,7 @@ __all__ = [
     "dominant_parts", "parts_label", "flipped_labels", "single_word_pool", "build_mcq", "BalancedDeck",
     "horizontal", "ground_angle", "vertical_dominates",
     "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS",
-    "euler_yaw_pitch_roll", "ROTATION_WORDS",
+    "euler_yaw_pitch_roll", "ROTATION_WORDS", "camera_attitude", "gravity_rotation",
     "MIN_HORIZONTAL_M", "VERTICAL_FACTOR", "ground_leg", "compass_frame", "compass_answer",
     "INTERSECT_TOL_M", "boxes_intersect",
 ]
@@ -137,6 +137,58 @@ def euler_yaw_pitch_roll(rotation: np.ndarray) -> tuple[float, float, float]:
     c = math.atan2(r[1, 0], r[1, 1])
     # a positive rotation about +x sends forward (z) towards -y, which is up: pitch up.
     return math.degrees(a), math.degrees(b), math.degrees(c)
+
+
+def camera_attitude(cam_to_world: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """``(forward_ground, elevation_deg, bank_deg)`` of an OpenCV camera pose with gravity as reference.
+
+    ``forward_ground``: the optical axis projected on the ground plane (unit; zero when it is
+    vertical); ``elevation_deg``: the optical axis's angle above the horizon (+ = looking up);
+    ``bank_deg``: the camera's rotation about its optical axis away from level, + = its right
+    axis dips towards the ground (the image turns clockwise as the photographer sees it). A
+    level camera's right axis is ``forward × up``, horizontal.
+    """
+    pose = np.asarray(cam_to_world, dtype=np.float64)
+    u = np.asarray(up, dtype=np.float64)
+    u = u / np.linalg.norm(u)
+    right, forward = pose[:3, 0], pose[:3, 2]
+    elevation = math.degrees(math.asin(float(np.clip(forward @ u, -1.0, 1.0))))
+    flat = horizontal(forward, u)
+    norm = float(np.linalg.norm(flat))
+    if norm <= 1e-12:
+        return np.zeros(3), elevation, 0.0
+    level_right = np.cross(forward, u)
+    level_right /= np.linalg.norm(level_right)
+    level_down = np.cross(forward, level_right)
+    bank = math.degrees(math.atan2(float(right @ level_down), float(right @ level_right)))
+    return flat / norm, elevation, bank
+
+
+def _wrap180(angle: float) -> float:
+    """``angle`` degrees wrapped to (-180, 180]."""
+    a = (float(angle) + 180.0) % 360.0 - 180.0
+    return 180.0 if a == -180.0 else a
+
+
+def gravity_rotation(cam_a: Camera, cam_b: Camera, up: np.ndarray) -> tuple[float, float, float]:
+    """``(yaw, pitch, roll)`` degrees of the camera motion from A to B **as a person perceives it**
+    (gravity-aware reading; :func:`camera_attitude` of each camera):
+
+    - ``yaw``: the change of heading about ``up`` (+ = turned right, clockwise seen from above),
+      wrapped to (-180, 180];
+    - ``pitch``: the change of elevation of the optical axis (+ = tilted up);
+    - ``roll``: the change of bank (+ = rolled clockwise), wrapped to (-180, 180].
+
+    Panning a tilted camera about the vertical is a pure yaw here, whereas the camera-frame
+    Euler angles of ``R_a^T R_b`` (:func:`euler_yaw_pitch_roll`) also show a few degrees of
+    "roll" and "tilt" nobody perceives. For a level camera A both readings agree exactly.
+    Heading and bank are ill-defined for a camera looking (nearly) straight up or down:
+    callers skip large elevations.
+    """
+    fa, ea, ba = camera_attitude(cam_a.cam_to_world, up)
+    fb, eb, bb = camera_attitude(cam_b.cam_to_world, up)
+    yaw = 0.0 if not (fa.any() and fb.any()) else _wrap180(ground_angle(fa, fb, up))
+    return yaw, eb - ea, _wrap180(bb - ba)
 
 
 # ------------------------------------------------------ dominant-part words

@@ -39,7 +39,8 @@ Geometry block (JSON): ``up``; ``cameras`` (view → 4×4 ``cam_to_world``); ``o
 label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{"id", "label",
 "description", "view"}]``); ``visibility``; ``visibility_thresholds``; ``vector`` (``c_2 − c_1``,
 metres); ``distance_m`` (unrounded); ``decimals``; ``thresholds`` (``min_distance_m``);
-``template`` (always 0); ``pair``; ``pair_rules``.
+``template`` (always 0); ``pair``; ``pair_rules``; ``selection`` (subject = the unordered
+object pair: the question index asks a pair once per scene, whatever the views).
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ from spacedg.plugins.questions.view_sampling import (
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import object_pairs, pair_family
-from spacedg.plugins.questions.records import make_record, objects_block, phrase
+from spacedg.plugins.questions.records import make_record, objects_block, phrase, selection_entry
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = ["DECIMALS", "FAMILY", "MIN_DISTANCE_M", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "make_family", "render_question"]
@@ -100,6 +101,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             "template": 0,
             "pair": pair.to_dict(),
             "pair_rules": rules.to_dict(),
+            "selection": selection_entry(f"objects:{min(one.id, two.id)}|{max(one.id, two.id)}"),
         }
         yield make_record(
             scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.NA, views, {"objects": [one.id, two.id]},

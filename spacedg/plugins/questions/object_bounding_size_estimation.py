@@ -11,7 +11,9 @@ with the same description is seen in that image;
 :func:`~spacedg.plugins.questions.records.referable`). Decision: an object whose shortest side
 rounds to 0.00 m (a flat annotation, < 5 mm) is skipped, because relative-error scoring of a
 zero target is undefined. Every other (view, object) pair is a candidate, so an object seen
-clearly in several views yields one question per view.
+clearly in several views yields one candidate per view; the answer is the same in every view,
+so the question index asks an object once per scene (the ``selection`` entry's subject is the
+object).
 
 Templates (the paper's appendix, bounding-box size), chosen per record by the seeded ``rng``;
 ``{target_obj}`` is :func:`~spacedg.plugins.questions.language.object_phrase` (description,
@@ -30,8 +32,8 @@ order), then shuffled with ``rng.permutation``; each candidate then draws its te
 
 Geometry block (JSON): ``view``, ``up``, ``object`` (``id``, ``label``, ``description``, box
 ``center`` / ``extents`` / ``rotation``: :func:`~spacedg.plugins.questions.records.object_entry`), ``sorted_extents`` (unrounded, metres),
-``rounding_decimals`` (2), ``visibility`` (:meth:`VisibilityIndex.vis_entry`), ``template`` and
-``refs`` (the object with its view). The answer depends on the extents only, so it is
+``rounding_decimals`` (2), ``visibility`` (:meth:`VisibilityIndex.vis_entry`), ``template``,
+``refs`` (the object with its view) and ``selection`` (subject = the object). The answer depends on the extents only, so it is
 invariant under any rigid motion of the scene.
 """
 
@@ -52,6 +54,7 @@ from spacedg.plugins.questions.records import (
     phrase,
     ref_entry,
     referable_ids,
+    selection_entry,
 )
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
@@ -106,6 +109,7 @@ def _record(scene: Scene, index: VisibilityIndex, view: str, inst: Instance, tem
         "visibility": index.vis_entry(view, inst.id),
         "template": template,
         "refs": [ref_entry(inst, view)],
+        "selection": selection_entry(f"object:{inst.id}"),
     }
     views = (view,)
     return make_record(

@@ -5,9 +5,24 @@ that label that are **clearly visible** in the view (:func:`spacedg.scene.visibi
 → ``VISIBLE``). The (view, label) pair is skipped when any instance of the label is in the
 grey zone (``PARTIAL``) there, since a viewer could reasonably count it or not; instances with
 no visible pixel (``HIDDEN``) are simply not counted. The pair is also skipped when the view
-shows (any pixel) an instance of a *confusable* label, one with the same head noun
-(:func:`~spacedg.plugins.questions.view_sampling.confusable`: counting "lamp" next to a "floor lamp"). Only counts ≥ 1 are asked (a count of 0
-would be an existence question about an absent label).
+shows (any pixel) an instance that makes the label ambiguous
+(:func:`~spacedg.plugins.questions.view_sampling.label_ambiguous`, the scene lexicon
+:mod:`spacedg.scene.lexicon`): a related label (counting "chair" beside an armchair, "lamp"
+beside a floor lamp, "table" beside a desk) or an object that shows the label without its own
+annotation (counting "book" beside a bookshelf full of books). A count of **0** is asked too
+(no instance of the label has a visible pixel, and nothing ambiguous is in view), for the
+scene's labels and its vocabulary.
+
+Balance (**debiasing**: a blind model that knows the label must not know the count): the
+answers are the counts in ``counts`` (default :data:`COUNTS` = 0, 1, 2; a view showing more
+is not asked), and each label is asked equally often with each of them: a label is asked only
+when the scene has a view for every count, in whole rounds (one view per count). So neither
+"always 1" nor a per-label prior beats guessing among ``counts``. After the balanced rounds
+come the other candidates with a count in ``counts``, in a seeded order, with a selection cell
+``label:<label>|unbalanced`` that never completes a round: the question index takes them
+only when its quota per sub type is smaller than a round (``per_sub_type`` 1 or 2), so a tiny
+index is not empty. ``counts=None`` yields every valid candidate instead (any count ≥ 0),
+unbalanced.
 
 Labels are grouped case- and underscore-insensitively (``"Chair"``, ``"chair"`` and
 ``"chair "`` are one label); the question uses the first spelling in id order.
@@ -29,10 +44,18 @@ Geometry block: ``view``, ``label``, ``image_size`` ``[width, height]`` px, ``co
 entry per counted instance: ``id``, ``visible_pixels``, ``visible_fraction``), ``not_counted``
 (the label's other instances with their ``class``, ``"hidden"``, and their visibility or
 ``null`` when the view has no record), ``thresholds`` (``min_pixels`` scaled to this image,
-``min_fraction``) and ``template`` (index into :data:`TEMPLATES`).
+``min_fraction``), ``template`` (index into :data:`TEMPLATES`) and ``selection``
+(:func:`~spacedg.plugins.questions.records.selection_entry`: subject = view and label, cell =
+the label and the template, roles = ``counts``).
 
-Order: every (view, label) candidate is built first, then shuffled with ``rng``
-(``rng.permutation``) and each candidate draws its template (``rng.integers``), so the same
+Order: every (view, label) candidate is built first (views in scene order, labels in key
+order). Balanced: the labels with a view for every count are visited in the order of one
+``rng.permutation``; each label's candidates of each count are shuffled (``rng.permutation``,
+counts in ascending order); the stream goes round-robin over the labels, one round (one view
+per count, counts in the order of an ``rng.permutation`` per round) per visit. Each round
+draws one template (``rng.integers``, before its permutation) for all its records, so its
+questions read word for word the same. Unbalanced (``counts=None``): all
+candidates in the order of one ``rng.permutation`` with templates drawn up front. The same
 seed gives the same records in the same order, and a caller may stop after any number.
 """
 
@@ -46,18 +69,20 @@ import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
-from spacedg.plugins.questions.view_sampling import confusable
-from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
+from spacedg.plugins.questions.view_sampling import VisibilityIndex, label_ambiguous
+from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.language import label_text, plural
-from spacedg.plugins.questions.records import make_record
+from spacedg.plugins.questions.records import make_record, selection_entry
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
-__all__ = ["NAME", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
+__all__ = ["COUNTS", "NAME", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
 
 NAME = "object_counting"
 SUB_QUESTION_TYPE = "count"
+#: The counts asked, each equally often per label (see the module docstring).
+COUNTS: tuple[int, ...] = (0, 1, 2)
 
 #: ``{plural}``: the label's plural; ``{label}``: the label as written.
 TEMPLATES: tuple[str, ...] = (
@@ -76,6 +101,7 @@ def render_question(template: int, label: str) -> str:
 @dataclass(frozen=True)
 class _Candidate:
     view: str
+    key: str
     label: str
     counted: tuple[Instance, ...]
     hidden: tuple[Instance, ...]
@@ -87,28 +113,31 @@ def _label_key(label: str) -> str:
     return label_text(label).lower()
 
 
-def _candidates(scene: Scene, thresholds: VisibilityThresholds) -> list[_Candidate]:
+def _candidates(scene: Scene, index: VisibilityIndex) -> list[_Candidate]:
     groups: dict[str, list[Instance]] = {}
+    spelling: dict[str, str] = {}
     for inst in sorted(scene.instances, key=lambda i: i.id):
-        groups.setdefault(_label_key(inst.label), []).append(inst)
+        key = _label_key(inst.label)
+        groups.setdefault(key, []).append(inst)
+        spelling.setdefault(key, inst.label)
+    for word in scene.vocabulary:
+        key = _label_key(word)
+        if key and key not in groups:
+            groups[key] = []
+            spelling[key] = word
     out: list[_Candidate] = []
     for view, cam in scene.views.items():
         area = cam.width * cam.height
         for key in sorted(groups):
             members = groups[key]
-            classes = [classify(inst.visibility.get(view), thresholds, area) for inst in members]
+            classes = [index.cls(view, inst.id) for inst in members]
             if VisibilityClass.PARTIAL in classes:
                 continue  # grey zone: the count is ambiguous
+            if label_ambiguous(index, view, spelling[key]):
+                continue  # counting "chair" beside an armchair, "book" beside a full bookshelf: ambiguous
             counted = tuple(inst for inst, c in zip(members, classes) if c is VisibilityClass.VISIBLE)
-            if not counted:
-                continue
-            if any(
-                confusable(other.label, members[0].label) and inst_vis_pixels(other, view) > 0
-                for other in scene.instances
-            ):
-                continue  # e.g. counting "lamp" while a "floor lamp" is in view: ambiguous
             hidden = tuple(inst for inst, c in zip(members, classes) if c is VisibilityClass.HIDDEN)
-            out.append(_Candidate(view, members[0].label, counted, hidden, (cam.width, cam.height), thresholds.pixels_for(area)))
+            out.append(_Candidate(view, key, spelling[key], counted, hidden, (cam.width, cam.height), index.thresholds.pixels_for(area)))
     return out
 
 
@@ -127,9 +156,13 @@ def _vis_entry(inst: Instance, view: str) -> dict[str, Any]:
     }
 
 
-def _record(scene: Scene, cand: _Candidate, template: int, thresholds: VisibilityThresholds) -> QARecord:
+def _record(
+    scene: Scene, cand: _Candidate, template: int, thresholds: VisibilityThresholds, counts: tuple[int, ...] | None,
+    unbalanced: bool = False,
+) -> QARecord:
     counted_ids = [inst.id for inst in cand.counted]
-    geometry = {
+    count = len(cand.counted)
+    geometry: dict[str, Any] = {
         "view": cand.view,
         "label": cand.label,
         "image_size": list(cand.image_size),
@@ -138,31 +171,69 @@ def _record(scene: Scene, cand: _Candidate, template: int, thresholds: Visibilit
         "thresholds": {"min_pixels": cand.min_pixels, "min_fraction": float(thresholds.min_fraction)},
         "template": template,
     }
+    subject = f"view:{cand.view}|label:{cand.key}"
+    if counts is None:
+        geometry["selection"] = selection_entry(subject)
+    else:
+        cell = f"label:{cand.key}|unbalanced" if unbalanced else f"label:{cand.key}|template:{template}"
+        geometry["selection"] = selection_entry(subject, cell, str(count), tuple(str(c) for c in counts))
     views = (cand.view,)
     return make_record(
         scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.COUNT, views,
-        {"label": _label_key(cand.label), "counted": counted_ids, "template": template},
-        question=render_question(template, cand.label), answer=len(cand.counted), geometry=geometry,
+        {"label": cand.key, "counted": counted_ids, "template": template},
+        question=render_question(template, cand.label), answer=count, geometry=geometry,
     )
 
 
-def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> Iterator[QARecord]:
-    """Every valid counting question of ``scene``, in an order shuffled by ``rng``.
+def generate(
+    scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
+    counts: tuple[int, ...] | None = COUNTS,
+) -> Iterator[QARecord]:
+    """Counting questions of ``scene`` in a seeded order: balanced over ``counts`` per label, or
+    every valid one when ``counts`` is ``None``.
 
-    Reads ``Instance.visibility[view]``; see the module docstring for the rule.
+    Reads ``Instance.visibility[view]``; see the module docstring for the rule and the order.
     """
-    candidates = _candidates(scene, thresholds)
-    order = rng.permutation(len(candidates))
-    templates = rng.integers(0, len(TEMPLATES), size=len(candidates))
-    for idx in order:
-        yield _record(scene, candidates[idx], int(templates[idx]), thresholds)
+    index = VisibilityIndex(scene, thresholds)
+    candidates = _candidates(scene, index)
+    if counts is None:
+        order = rng.permutation(len(candidates))
+        templates = rng.integers(0, len(TEMPLATES), size=len(candidates))
+        for idx in order:
+            yield _record(scene, candidates[idx], int(templates[idx]), thresholds, None)
+        return
+    counts = tuple(sorted({int(c) for c in counts}))
+    by_key: dict[str, dict[int, list[_Candidate]]] = {}
+    for cand in candidates:
+        by_key.setdefault(cand.key, {}).setdefault(len(cand.counted), []).append(cand)
+    keys = sorted(k for k, per in by_key.items() if all(per.get(c) for c in counts))
+    keys = [keys[i] for i in rng.permutation(len(keys))]
+    queues: list[list[list[_Candidate]]] = []
+    for key in keys:
+        per = [by_key[key][c] for c in counts]
+        per = [[group[i] for i in rng.permutation(len(group))] for group in per]
+        queues.append([list(r) for r in zip(*per)])
+    used: set[int] = set()
+    for rank in range(max((len(q) for q in queues), default=0)):
+        for queue in queues:
+            if rank < len(queue):
+                template = int(rng.integers(0, len(TEMPLATES)))  # one wording per round: the text tells nothing
+                for k in rng.permutation(len(counts)):
+                    used.add(id(queue[rank][int(k)]))
+                    yield _record(scene, queue[rank][int(k)], template, thresholds, counts)
+    # then the other candidates with an asked count, in a seeded order: their cell never completes
+    # a round, so the question index takes them only to fill a quota too small for any round
+    rest = [c for c in candidates if id(c) not in used and len(c.counted) in counts]
+    for k in rng.permutation(len(rest)):
+        yield _record(scene, rest[int(k)], int(rng.integers(0, len(TEMPLATES))), thresholds, counts, unbalanced=True)
 
 
-#: ``make_family(thresholds)``: this family with other visibility thresholds
+#: ``make_family(thresholds, counts)``: this family with other visibility thresholds or counts
 #: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
 make_family = FamilyFactory(
     generate, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.COUNT}, sub_question_types=(SUB_QUESTION_TYPE,),
-    num_views=(1,), needs={"visibility"}, description="How many clearly visible instances of a label one image shows (grey-zone views skipped).",
+    num_views=(1,), needs={"visibility"},
+    description="How many clearly visible instances of a label one image shows (0, 1 or 2, balanced per label; grey-zone and ambiguous views skipped).",
 )
 FAMILY = make_family()
 spacedg_register_question_families = registering(FAMILY)

@@ -8,8 +8,11 @@ For one view and one label the answer is (SPEC-QA, type 10; classes from
 - ``"no"`` when **no** instance of the label has a single visible pixel there (all
   ``HIDDEN``, or the label has no instance in the scene at all);
 - skipped (grey zone) when none is clearly visible but some instance is ``PARTIAL``, and a
-  "no" is skipped when the view shows an instance of a *confusable* label (same head noun,
-  :func:`~spacedg.plugins.questions.view_sampling.confusable`: "Is there a table?" next to a coffee table).
+  "no" is skipped when the view shows (any pixel) an instance that makes the label ambiguous
+  (:func:`~spacedg.plugins.questions.view_sampling.label_ambiguous`, the scene lexicon
+  :mod:`spacedg.scene.lexicon`): a related label ("Is there a chair?" beside an armchair, "a
+  monitor?" beside a TV, "a table?" beside a coffee table) or an object that shows the label
+  without its own annotation ("a book?" beside a bookshelf full of books).
 
 Labels are grouped by :func:`~spacedg.plugins.questions.view_sampling.label_key` (case, space and
 underscore insensitive). Candidate labels are the scene's instance labels (question text: the
@@ -33,19 +36,25 @@ record by the seeded ``rng``:
 that the object exists, so every template uses the indefinite article (``a`` / ``an`` by
 :func:`indefinite_article`). ``sub_question_type`` is ``"existence"``.
 
-Balance (exact 50/50 per scene): all positive and all negative (view, label) candidates are
-listed (views in scene order, labels in key order), each list is shuffled with
-``rng.permutation`` (positives first, then negatives), a fair coin ``rng.random() < 0.5``
-chooses whether the stream starts with "yes" or "no", and the stream alternates strictly
-(yes, no, yes, no, … or no, yes, …), stopping when either list is exhausted. The generator
-therefore yields ``2 · min(#yes, #no)`` records, and **every prefix** a caller takes is
-balanced within ±1. Templates are drawn (``rng.integers``) per record when it is built.
+Balance (exact 50/50 **per label**, so the label tells a blind model nothing): all positive
+and negative (view, label) candidates are listed (views in scene order, labels in key order)
+and grouped by label; only labels with both a "yes" and a "no" view are asked. The labels
+are visited in the order of one ``rng.permutation``; each label's positives and then its
+negatives are shuffled by ``rng.permutation`` (in that label order); a fair coin
+``rng.random() < 0.5`` chooses whether each label's pair starts with "yes" or "no". The stream
+then goes round-robin over the labels, one (yes, no) pair of the label per visit, until a
+label runs out of either. It yields ``2 · Σ_label min(#yes, #no)`` records, and **every
+prefix** a caller takes is balanced within ±1 overall and per label. Each pair draws one
+template (``rng.integers``) for both its records, so a "yes" and a "no" read word for word the
+same.
 
 Geometry block (JSON): ``view``, ``label`` (as written in the question), ``label_key``,
 ``label_source`` (``"scene"`` / ``"vocabulary"``), ``instances`` (every instance of the label:
 ``id`` with :meth:`VisibilityIndex.vis_entry` — ``visible_pixels``, ``visible_fraction``,
 ``class``), ``image_size`` ``[width, height]`` px, ``thresholds`` (``min_pixels`` scaled to the
-image, ``min_fraction``), ``up``, ``template`` and ``refs = []`` (no object is named). The
+image, ``min_fraction``), ``up``, ``template``, ``refs = []`` (no object is named) and
+``selection`` (:func:`~spacedg.plugins.questions.records.selection_entry`: subject = view and
+label, cell = the label and the template, roles yes / no). The
 answer is independent of geometry, hence invariant under a rigid motion of the scene.
 """
 
@@ -58,11 +67,11 @@ import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
-from spacedg.plugins.questions.view_sampling import VisibilityIndex, confusable, label_key
+from spacedg.plugins.questions.view_sampling import VisibilityIndex, label_ambiguous, label_key
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.language import indefinite_article, label_text
-from spacedg.plugins.questions.records import make_record
+from spacedg.plugins.questions.records import make_record, selection_entry
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -134,8 +143,8 @@ def candidates(scene: Scene, index: VisibilityIndex) -> tuple[list[_Candidate], 
             if VisibilityClass.VISIBLE in classes:
                 pos.append(_Candidate(view, key, text, source, members, "yes"))
             elif all(c is VisibilityClass.HIDDEN for c in classes):
-                if any(confusable(index.instance(i).label, text) for i in index.seen[view]):
-                    continue  # "no table" while a coffee table is in view: ambiguous
+                if label_ambiguous(index, view, text):
+                    continue  # "no chair" beside an armchair, "no book" beside a full bookshelf: ambiguous
                 neg.append(_Candidate(view, key, text, source, members, "no"))
             # else: grey zone (some partial, none clearly visible) → skipped
     return pos, neg
@@ -155,6 +164,7 @@ def _record(scene: Scene, index: VisibilityIndex, cand: _Candidate, template: in
         "up": np.asarray(scene.up, dtype=np.float64).tolist(),
         "template": template,
         "refs": [],
+        "selection": selection_entry(f"view:{cand.view}|label:{cand.key}", f"label:{cand.key}|template:{template}", cand.answer, ("yes", "no")),
     }
     views = (cand.view,)
     return make_record(
@@ -164,22 +174,35 @@ def _record(scene: Scene, index: VisibilityIndex, cand: _Candidate, template: in
 
 
 def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> Iterator[QARecord]:
-    """Balanced existence questions of ``scene``: strictly alternating yes/no in a seeded order (module docstring)."""
+    """Existence questions of ``scene``, yes/no balanced per label, round-robin over labels in a seeded order (module docstring)."""
     index = VisibilityIndex(scene, thresholds)
     pos, neg = candidates(scene, index)
-    pos = [pos[i] for i in rng.permutation(len(pos))]
-    neg = [neg[i] for i in rng.permutation(len(neg))]
-    first, second = (pos, neg) if rng.random() < 0.5 else (neg, pos)
-    for a, b in zip(first, second):
-        yield _record(scene, index, a, int(rng.integers(0, len(TEMPLATES))))
-        yield _record(scene, index, b, int(rng.integers(0, len(TEMPLATES))))
+    keys = sorted({c.key for c in pos} & {c.key for c in neg})
+    if not keys:
+        return
+    keys = [keys[i] for i in rng.permutation(len(keys))]
+    queues = []
+    for key in keys:
+        yes = [c for c in pos if c.key == key]
+        no = [c for c in neg if c.key == key]
+        yes = [yes[i] for i in rng.permutation(len(yes))]
+        no = [no[i] for i in rng.permutation(len(no))]
+        queues.append(list(zip(yes, no)))
+    yes_first = rng.random() < 0.5
+    for rank in range(max(len(q) for q in queues)):
+        for queue in queues:
+            if rank < len(queue):
+                a, b = queue[rank] if yes_first else queue[rank][::-1]
+                template = int(rng.integers(0, len(TEMPLATES)))  # one wording for both: the text tells nothing
+                yield _record(scene, index, a, template)
+                yield _record(scene, index, b, template)
 
 
 #: ``make_family(thresholds)``: this family with other visibility thresholds
 #: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
 make_family = FamilyFactory(
     generate, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.YN}, sub_question_types=(SUB_QUESTION_TYPE,),
-    num_views=(1,), needs={"visibility"}, description="Whether an object of a label is visible in one image (yes/no balanced 50/50; grey zone skipped).",
+    num_views=(1,), needs={"visibility"}, description="Whether an object of a label is visible in one image (yes/no balanced 50/50 per label; grey zone and related labels skipped).",
 )
 FAMILY = make_family()
 spacedg_register_question_families = registering(FAMILY)

@@ -69,7 +69,8 @@ id, label, description, box ``center``/``extents``/``rotation``); ``refs`` (``[{
 ``assumed_angle_deg``; ``north``; ``east``; ``angle_deg``; ``sector_index``; ``sector_label``;
 ``sector_labels``; ``sector_starts_deg``; ``boundary_distance_deg``; ``neighbour_index``;
 ``banned_labels``; ``thresholds``; ``intersect_tol_m``; ``template`` (always 0); ``pair``;
-``pair_rules``.
+``pair_rules``; ``selection`` (cell = the assumed direction, roles = the eight compass labels,
+balanced per assumed direction by the question index; subject = the ordered triplet).
 """
 
 from __future__ import annotations
@@ -90,6 +91,7 @@ from spacedg.plugins.questions.view_sampling import (
 )
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import (
+    COMPASS_SECTORS,
     INTERSECT_TOL_M,
     boxes_intersect,
     ground_leg,
@@ -104,6 +106,7 @@ from spacedg.plugins.questions.records import (
     phrase,
     phrase_key,
     referable_ids,
+    selection_entry,
 )
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -195,6 +198,9 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             "intersect_tol_m": INTERSECT_TOL_M,
             "pair": pair.to_dict(),
             "pair_rules": rules.to_dict(),
+            "selection": selection_entry(
+                "objects:" + "|".join(str(o.id) for o in objs), f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
+            ),
         }
         yield make_record(
             scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.MCQ, views,

@@ -19,8 +19,16 @@ Sub question types and the measured quantity (metres):
     (consider the top of the objects)? <obj1> or <obj2>?`` (a cup on a high shelf has a
     higher top than a standing lamp, though the lamp is taller).
 
-``Δ = value1 − value2``; when ``|Δ| < 0.01 m`` (:data:`TIE_THRESHOLD_M`, the paper's 1e-2) the
-truth is :data:`SAME`; otherwise the phrase of the object with the larger value.
+``Δ = value1 − value2``. **What a view can resolve** (decision; the paper's 1e-2 m tie cannot be
+seen: two sides 1–5 cm apart are neither "the same" to the eye nor decidable):
+
+- the truth is :data:`SAME` ("about the same") when ``|Δ| < max(5 cm, 10 % of the larger
+  value)`` (longest side; :data:`SAME_M`, :data:`SAME_FRACTION`) or ``|Δ| < 5 cm`` (top
+  elevation: its origin is arbitrary, so only the absolute rule applies);
+- the truth is the object with the larger value when ``|Δ| >= max(10 cm, 20 % of the larger
+  value)`` (longest side; :data:`DIFFERENT_M`, :data:`DIFFERENT_FRACTION`) or ``|Δ| >= 15 cm``
+  (top elevation, :data:`TOP_DIFFERENT_M`);
+- in between (a visible but unsure difference) the pair is **skipped**.
 
 Options (:func:`~spacedg.plugins.questions.geometry.build_mcq`, seeded shuffle): object 1's
 phrase, object 2's phrase, ``"about the same"`` and the never-correct option
@@ -46,6 +54,22 @@ Question text: the two marker sentences, then the question on its own line::
     In image A, find the grey fabric sofa. In image B, find the wooden chair.
     Which is longer (consider the longest side of the object)? grey fabric sofa or wooden chair?
 
+Debiasing (the ``selection`` entry, :func:`~spacedg.plugins.questions.records.selection_entry`):
+a blind model knows the labels, and label priors (a sofa is longer than a cup) answered most
+size comparisons before. The **prior** of a pair is what typical sizes say
+(:meth:`Lexicon.typical_size <spacedg.scene.lexicon.Lexicon.typical_size>`: longest side or
+top above the floor of a typical instance of each label; a label without one uses the mean of
+its instances in this scene, the strongest prior there is), classified by the same rule as the
+truth. A record's **role** is its outcome in label terms (``"first"`` / ``"second"``: the
+object whose (label, phrase) sorts first / second is larger, or ``"same"``) and its **cell** is
+the sub type, the prior's outcome in the same terms and how sure the prior is
+(:func:`prior_strength`). The question index takes whole rounds
+of the three roles per cell, so within a scene the prior is right exactly a third of the time:
+the pairs kept are ones whose sizes go against their labels as often as with them (two chairs,
+a small table and a large chair); a sofa and a cup are never compared. The subject is the sub
+type and the unordered pair of instances (a pair is asked once per sub type, whatever the
+views).
+
 Order: pairs come in :func:`sample_pairs` order (round-robin over anchor views). Each pair's
 candidates ``(object 1, object 2, sub type)`` are shuffled by ``rng.permutation`` the first
 time the pair is visited; records are then emitted **round-robin over pairs** (the first valid
@@ -58,9 +82,11 @@ Geometry block (JSON): ``pair`` (``a``, ``b``, covisibility, baseline, rotation)
 ``quantity``, ``objects`` (per object: ``id``, ``label``, ``description``, ``view``, box
 ``center`` / ``extents`` / ``rotation`` (columns = box axes in world coordinates), ``value``
 and, for heights, ``top_corner``), ``values`` ``[v1, v2]``, ``delta`` ``v1 − v2``,
-``tie_threshold_m``, ``truth`` (``"object1"`` / ``"object2"`` / ``"same"``), ``truth_text``,
-``never_correct_option``, ``template`` and ``refs`` (``id``, ``label``, ``description``,
-``view`` of both objects, in question order). Answers, questions and options are invariant
+``tie_threshold_m`` (``|Δ|`` below it: same) and ``different_threshold_m`` (``|Δ|`` at or above
+it: different) for this pair, ``truth`` (``"object1"`` / ``"object2"`` / ``"same"``),
+``truth_text``, ``never_correct_option``, ``template``, ``refs`` (``id``, ``label``,
+``description``, ``view`` of both objects, in question order), ``prior_values`` (the typical
+values the cell came from) and ``selection``. Answers, questions and options are invariant
 under a rigid motion of the whole scene (``Scene.transformed``): extents are unchanged and
 every top elevation shifts by the same ``t · up``.
 
@@ -80,6 +106,7 @@ from spacedg.plugins.questions.view_sampling import (
     PairRules,
     ViewPair,
     VisibilityIndex,
+    default_lexicon,
     description_key,
     label_key,
 )
@@ -94,6 +121,7 @@ from spacedg.plugins.questions.records import (
     phrase_key,
     ref_entry,
     referable_ids,
+    selection_entry,
 )
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -106,8 +134,16 @@ __all__ = [
     "SUB_QUESTION_TYPES",
     "TEMPLATES",
     "TIE_THRESHOLD_M",
+    "SAME_M",
+    "SAME_FRACTION",
+    "DIFFERENT_M",
+    "DIFFERENT_FRACTION",
+    "DELTA_DECIMALS",
+    "TOP_DIFFERENT_M",
     "TOP",
     "longest_side",
+    "prior_strength",
+    "thresholds_for",
     "make_family",
     "render_question",
     "top_elevation",
@@ -123,8 +159,16 @@ TEMPLATES: dict[str, str] = {
     LONGEST: "Which is longer (consider the longest side of the object)? {obj1} or {obj2}?",
     TOP: "Which object's top is higher (consider the top of the objects)? {obj1} or {obj2}?",
 }
-#: ``|Δ|`` below this many metres → "about the same" (the paper's 1e-2).
-TIE_THRESHOLD_M = 0.01
+#: "About the same" below ``max(SAME_M, SAME_FRACTION × larger value)`` (top elevation: SAME_M).
+SAME_M = 0.05
+SAME_FRACTION = 0.10
+#: Different at or above ``max(DIFFERENT_M, DIFFERENT_FRACTION × larger value)``; between: skipped.
+DIFFERENT_M = 0.10
+DIFFERENT_FRACTION = 0.20
+#: Top elevations are different at or above this many metres.
+TOP_DIFFERENT_M = 0.15
+#: The absolute part of the "about the same" rule, metres (kept under its old name).
+TIE_THRESHOLD_M = SAME_M
 #: Option text of a tie.
 SAME = "about the same"
 #: The never-correct fourth option (the boxes always determine the answer).
@@ -149,6 +193,56 @@ def top_elevation(inst: Instance, up: np.ndarray) -> float:
     return _top(inst, up)[0]
 
 
+def thresholds_for(quantity: str, values: tuple[float, float] | list[float]) -> tuple[float, float]:
+    """``(same_below, different_from)`` in metres for a pair of values of ``quantity``
+    (``"longest_side"`` or ``"top_elevation"``): ``|Δ| < same_below`` is "about the same",
+    ``|Δ| >= different_from`` a clear difference, in between is skipped (module docstring;
+    ``|Δ|`` is compared rounded to :data:`DELTA_DECIMALS` decimals)."""
+    if quantity == "longest_side":
+        larger = round(max(abs(float(v)) for v in values), DELTA_DECIMALS)
+        return max(SAME_M, SAME_FRACTION * larger), max(DIFFERENT_M, DIFFERENT_FRACTION * larger)
+    return SAME_M, TOP_DIFFERENT_M
+
+
+#: Differences are compared after rounding to this many decimals (metres), so float noise of a
+#: rigid motion of the scene never moves a pair across a threshold.
+DELTA_DECIMALS = 9
+
+
+def _outcome(values: tuple[float, float] | list[float], same_below: float) -> int:
+    """0: the first value is larger, 1: the second, -1: about the same."""
+    delta = round(float(values[0]) - float(values[1]), DELTA_DECIMALS)
+    if abs(delta) < same_below:
+        return -1
+    return 0 if delta > 0 else 1
+
+
+def prior_strength(quantity: str, prior: tuple[float, float] | list[float]) -> str:
+    """How sure the prior is: ``"weak"``, ``"medium"`` or ``"strong"`` (longest side: ratio of the
+    typical values below 1.25, 1.6, above; top: difference below 0.1 m, 0.3 m, above)."""
+    a, b = (abs(float(v)) for v in prior)
+    if quantity == "longest_side":
+        ratio = max(a, b) / max(min(a, b), 1e-6)
+        return "weak" if ratio < 1.25 else "medium" if ratio < 1.6 else "strong"
+    diff = abs(float(prior[0]) - float(prior[1]))
+    return "weak" if diff < 0.1 else "medium" if diff < 0.3 else "strong"
+
+
+def _prior_values(scene: Scene, quantity: str, one: Instance, two: Instance, up: np.ndarray) -> tuple[float, float]:
+    """Typical values of the two objects' labels (lexicon), or both labels' means in this scene."""
+    lexicon = default_lexicon()
+    typical = [lexicon.typical_size(inst.label) for inst in (one, two)]
+    if all(t is not None for t in typical):
+        k = 0 if quantity == "longest_side" else 1
+        return typical[0][k], typical[1][k]  # type: ignore[index]
+    means = []
+    for inst in (one, two):
+        same = [o for o in scene.instances if label_key(o.label) == label_key(inst.label)]
+        values = [longest_side(o) if quantity == "longest_side" else top_elevation(o, up) for o in same]
+        means.append(float(np.mean(values)))
+    return means[0], means[1]
+
+
 def _distinguishable(one: Instance, two: Instance) -> bool:
     """Distinct instances whose labels or descriptions differ and whose phrases read differently
     (case-insensitively, and unlike the fixed option texts)."""
@@ -167,7 +261,7 @@ def render_question(sub: str, phrase1: str, phrase2: str) -> str:
 
 
 # ---------------------------------------------------------------- records
-def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str, rng: np.random.Generator) -> QARecord:
+def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str, rng: np.random.Generator) -> QARecord | None:
     up = np.asarray(scene.up, dtype=np.float64)
     objects = [{**object_entry(one), "view": pair.a}, {**object_entry(two), "view": pair.b}]
     if sub == LONGEST:
@@ -181,13 +275,28 @@ def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str
     for entry, value in zip(objects, values):
         entry["value"] = value
     delta = values[0] - values[1]
+    same_below, different_from = thresholds_for(quantity, values)
+    size = abs(round(delta, DELTA_DECIMALS))
+    if same_below <= size < different_from:
+        return None  # a difference the eye sees but cannot be sure of: skipped
     phrase1, phrase2 = phrase(one), phrase(two)
-    if abs(delta) < TIE_THRESHOLD_M:
+    if size < same_below:
         truth, truth_text = "same", SAME
     elif delta > 0:
         truth, truth_text = "object1", phrase1
     else:
         truth, truth_text = "object2", phrase2
+    ordered = sorted([(label_key(one.label), phrase_key(one), 0), (label_key(two.label), phrase_key(two), 1)])
+    roles = ("first", "second", "same")
+
+    def role_of(outcome: int) -> str:  # outcome in question order → role in label order
+        return "same" if outcome < 0 else roles[[o[2] for o in ordered].index(outcome)]
+
+    role = role_of(_outcome(values, same_below))
+    prior = _prior_values(scene, quantity, one, two, up)
+    prior_role = role_of(_outcome(prior, thresholds_for(quantity, prior)[0]))
+    cell = f"{sub}|prior:{prior_role}|{prior_strength(quantity, prior)}"
+    subject = f"{sub}|objects:{min(one.id, two.id)}|{max(one.id, two.id)}"
     texts = [phrase1, phrase2, SAME, NEVER_CORRECT]
     options, letter = build_mcq(truth_text, [t for t in texts if t != truth_text], rng)
     views = (pair.a, pair.b)
@@ -198,12 +307,15 @@ def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str
         "objects": objects,
         "values": values,
         "delta": delta,
-        "tie_threshold_m": TIE_THRESHOLD_M,
+        "tie_threshold_m": same_below,
+        "different_threshold_m": different_from,
         "truth": truth,
         "truth_text": truth_text,
         "never_correct_option": NEVER_CORRECT,
         "template": 0,
         "refs": [ref_entry(one, pair.a), ref_entry(two, pair.b)],
+        "prior_values": list(prior),
+        "selection": selection_entry(subject, cell, role, roles),
     }
     return make_record(
         scene, NAME, sub, TaskGroup.OBJECT_CENTRIC, AnswerType.MCQ, views, {"objects": [one.id, two.id]},
@@ -224,7 +336,9 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         rest, s = divmod(int(k), len(SUB_QUESTION_TYPES))
         i, j = divmod(rest, len(twos))
         if _distinguishable(ones[i], twos[j]):
-            yield _record(scene, pair, ones[i], twos[j], SUB_QUESTION_TYPES[s], rng)
+            record = _record(scene, pair, ones[i], twos[j], SUB_QUESTION_TYPES[s], rng)
+            if record is not None:
+                yield record
 
 
 #: ``make_family(thresholds, pair_rules)``: this family with other visibility thresholds / pair rules

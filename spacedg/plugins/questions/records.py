@@ -31,6 +31,13 @@ of every object question's block: ``up``, ``cameras``, ``objects``, ``refs``, ``
 ``visibility_thresholds``) and :func:`compass_block` / :func:`compass_question` (the compass
 part of the two compass families' blocks, with the seeded assumed direction and options).
 :func:`make_record` builds the :class:`~spacedg.plugins.qa_record.QARecord` with its deterministic id.
+
+Selection (:func:`selection_entry`, the block's ``selection`` entry): what the question index
+needs to debias its choice among a family's candidates: the **subject** (asked at most once
+per sub type and scene), the **cell** (what a text-only model can tell about the question:
+its labels, the shape of its options, the template's axes) and the record's **role** among
+the cell's live **roles** (its truth in the cell's terms). The index takes whole rounds of a
+cell (one record of every role), so within a scene no function of the cell beats chance.
 """
 
 from __future__ import annotations
@@ -83,6 +90,7 @@ __all__ = [
     "round_robin_pairs",
     "round_robin_views",
     "seeded_order",
+    "selection_entry",
     "visibility_entry",
     "visibility_thresholds",
 ]
@@ -286,6 +294,31 @@ def compass_question(reference: np.ndarray, query: np.ndarray, up: np.ndarray, r
     truth, hit, block = compass_block(reference, assumed, query, up)
     options, letter = build_mcq(truth, COMPASS_SECTORS.distractors(hit, rng), rng)
     return assumed, options, letter, block
+
+
+def selection_entry(
+    subject: str, cell: str | None = None, role: str | None = None, roles: Sequence[str] = (), *, all_roles: bool = True,
+) -> dict[str, Any]:
+    """The ``selection`` entry of a geometry block (module docstring, "Selection").
+
+    ``subject``: what the question is about (``"object:12"``, ``"pair:3|7"``, ``"view:frame_0004|label:chair"``);
+    the question index asks one subject at most once per sub type and scene (a re-ask in another
+    view has the same answer). ``cell``: what a text-only model can tell (``None``: the record's
+    answer is metric or not balanced); ``role``: this record's truth in the cell's terms;
+    ``roles``: every role the cell's questions can have (the index balances over exactly these,
+    taking whole rounds; a cell missing a role gives no records). ``all_roles=False``: the
+    rounds go over the roles the scene offers in the cell (at least two), for cells whose
+    options name directions the geometry rarely or never produces ("Up" of an object seen
+    from a camera at eye height).
+    """
+    out: dict[str, Any] = {"subject": str(subject)}
+    if cell is not None:
+        if role is None or role not in roles:
+            raise ValueError(f"selection_entry: role {role!r} must be one of roles {list(roles)}")
+        out.update({"cell": str(cell), "role": str(role), "roles": [str(r) for r in roles]})
+        if not all_roles:
+            out["all_roles"] = False
+    return out
 
 
 # ------------------------------------------------------------------ records

@@ -8,8 +8,12 @@
 - :func:`split_across_views`: the three-object rule (the two views together show the three
   objects; neither view shows all three).
 - :func:`description_clash` / :func:`same_label_neighbours`: the description ambiguity filter.
-- :func:`confusable`: two labels with one head noun ("lamp" / "floor lamp"); label-only
-  questions (counting, existence) skip views that show the other one.
+- :func:`confusable`: two labels a person may take for one another (the scene lexicon,
+  :mod:`spacedg.scene.lexicon`: synonyms, kinds such as armchair ⊂ chair, debatable pairs
+  such as stool / chair, and one head noun such as "lamp" / "floor lamp");
+  :func:`label_ambiguous`: a view shows an instance that makes a label-only question
+  (counting, existence) ambiguous: a confusable label, or an object that shows the label
+  unannotated (books on a bookshelf). Those families skip such views.
 
 Anchor policy: a view **may** appear in several pairs (scenes with few views would otherwise
 yield few questions), but :func:`sample_pairs` returns pairs in a seeded *round-robin over
@@ -31,33 +35,26 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spacedg.scene.lexicon import Lexicon, default_lexicon, head_noun, label_key
 from spacedg.scene.model import Instance, Scene
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds, classify
 from spacedg.errors import InvalidDataError, ParameterError
 
 __all__ = [
     "VisibilityIndex", "PairRules", "ViewPair", "sample_pairs", "split_across_views",
-    "description_key", "label_key", "head_noun", "confusable", "same_label_neighbours", "description_clash",
+    "description_key", "label_key", "head_noun", "confusable", "label_ambiguous", "same_label_neighbours", "description_clash",
+    "Lexicon", "default_lexicon",
     "TRANSLATION_PAIRS", "ROTATION_PAIRS", "OBJECT_PAIRS", "OBJECT_DIRECTION_PAIRS", "LOW_COVIS_DIRECTION_PAIRS",
 ]
 
 
-def label_key(label: str) -> str:
-    """Labels compare case-, space- and underscore-insensitively (``"Coffee_table"`` = ``"coffee table"``)."""
-    return " ".join(str(label).replace("_", " ").lower().split())
-
-
-def head_noun(label: str) -> str:
-    """The noun a label names: its last word, or the word before " of " (``"floor lamp"`` → ``"lamp"``,
-    ``"pair of shoes"`` → ``"pair"``)."""
-    words = label_key(label).partition(" of ")[0].split()
-    return words[-1] if words else ""
-
-
-def confusable(label_a: str, label_b: str) -> bool:
-    """True for two different labels with the same head noun (``"lamp"`` / ``"floor lamp"``,
-    ``"table"`` / ``"coffee table"``): a viewer asked about one may reasonably count the other."""
-    return label_key(label_a) != label_key(label_b) and head_noun(label_a) == head_noun(label_b)
+def confusable(label_a: str, label_b: str, lexicon: Lexicon | None = None) -> bool:
+    """True for two different labels a viewer asked about one may reasonably take for the other:
+    :meth:`Lexicon.related <spacedg.scene.lexicon.Lexicon.related>` of ``lexicon`` (default
+    :func:`~spacedg.scene.lexicon.default_lexicon`): one head noun (``"lamp"`` / ``"floor lamp"``),
+    synonyms (``"sofa"`` / ``"couch"``), kinds (``"armchair"`` ⊂ ``"chair"``, ``"desk"`` ⊂
+    ``"table"``) and debatable pairs (``"stool"`` / ``"chair"``, ``"monitor"`` / ``"tv"``)."""
+    return (lexicon or default_lexicon()).related(label_a, label_b)
 
 
 def description_key(text: str) -> str:
@@ -217,6 +214,15 @@ def split_across_views(index: VisibilityIndex, view_a: str, view_b: str, ids: tu
     if not set(ids) <= visible or len(set(ids)) < 3:
         return False
     return not (set(ids) <= set(index.seen[view_a]) or set(ids) <= set(index.seen[view_b]))
+
+
+def label_ambiguous(index: VisibilityIndex, view: str, label: str, lexicon: Lexicon | None = None) -> list[Instance]:
+    """The instances ``view`` shows (any visible pixel) that make a label-only question about
+    ``label`` ambiguous (:meth:`Lexicon.confuses <spacedg.scene.lexicon.Lexicon.confuses>`): a
+    confusable label (an armchair for "chair"), or an object that shows ``label`` without its own
+    annotation (a bookshelf for "book"). Empty when the question is clear."""
+    lex = lexicon or default_lexicon()
+    return [index.instance(i) for i in index.seen[view] if lex.confuses(label, index.instance(i).label)]
 
 
 def same_label_neighbours(index: VisibilityIndex, view: str, instance: Instance) -> list[Instance]:

@@ -94,6 +94,26 @@ class ObjectModel:
     prebuilt: Gaussians | None = None
     attributes: dict[str, object] = field(default_factory=dict)
 
+    def scaled(self, factor: float) -> ObjectModel:
+        """This model scaled uniformly by ``factor`` about its footprint centre on the floor
+        (parts, offsets and supports; a prebuilt model is returned unchanged)."""
+        if self.prebuilt is not None or factor == 1.0:
+            return self
+        f = float(factor)
+        parts = []
+        for p in self.parts:
+            if p.shape == "box":
+                params = (tuple(float(v) * f for v in p.params[0]),)
+            elif p.shape == "frustum":
+                params = tuple(float(v) * f for v in p.params)
+            else:
+                radii, bump, z_min = p.params
+                params = (tuple(float(v) * f for v in radii), bump, None if z_min is None else float(z_min) * f)
+            parts.append(Part(p.shape, params, tuple(float(v) * f for v in p.offset), p.slot, p.faces, p.caps, p.yaw))
+        supports = [Support(s.x0 * f, s.x1 * f, s.y0 * f, s.y1 * f, s.z * f) for s in self.supports]
+        return ObjectModel(self.label, parts, self.slots, supports, dict(self.fixed), self.describe_slot,
+                           self.description_template, None, dict(self.attributes))
+
     def area(self) -> float:
         """Total surface area of the parts, m² (0 for prebuilt objects)."""
         return float(sum(p.area() for p in self.parts))

@@ -282,18 +282,25 @@ def fill_room(
     layout: Layout,
     target_objects: int,
     external_models: list[tuple[ObjectModel, str]] | None = None,
+    size_spread: tuple[float, float] = (1.0, 1.0),
 ) -> None:
     """Place furniture until ``target_objects`` instances stand in the room (or space runs out).
 
     Order: one central group (a table with chairs, or a coffee table), wall furniture, other
-    floor objects, external objects, then small objects on the tops.
+    floor objects, external objects, then small objects on the tops. Each catalogue object is
+    scaled by a factor drawn log-uniformly from ``size_spread`` (one draw per object, after its
+    builder's draws; none when the spread is ``(1, 1)``).
     """
     rng = layout.rng
     counts: dict[str, int] = {}
+    lo, hi = (float(v) for v in size_spread)
 
     def build(kind: str) -> ObjectModel:
         counts[kind] = counts.get(kind, 0) + 1
-        return CATALOGUE[kind].build(rng)
+        model = CATALOGUE[kind].build(rng)
+        if lo == hi == 1.0:
+            return model
+        return model.scaled(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
     def room_left() -> bool:
         return len(layout.placements) < target_objects

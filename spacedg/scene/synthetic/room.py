@@ -63,6 +63,10 @@ class RoomConfig:
         world_frame: ``"random"`` or one of ``"z_up"``, ``"y_down"``, ``"y_up"``.
         capture: image size and number of views.
         external: objects from files to place among the furniture.
+        size_spread: every catalogue object is scaled by a factor drawn log-uniformly from
+            this range (default 0.75–1.35: a chair's longest side then spans 0.62–1.32 m), so
+            a label does not fix an object's size: size questions cannot be answered from
+            label priors alone. ``(1, 1)`` keeps the catalogue's own ranges.
     """
 
     gaussians: int | None = None
@@ -72,8 +76,12 @@ class RoomConfig:
     world_frame: str = "random"
     capture: CaptureConfig = field(default_factory=CaptureConfig)
     external: tuple[ExternalObject, ...] = ()
+    size_spread: tuple[float, float] = (0.75, 1.35)
 
     def __post_init__(self) -> None:
+        lo, hi = (float(v) for v in self.size_spread)
+        if not 0.2 <= lo <= hi <= 5.0:
+            raise InvalidDataError(f"RoomConfig: size_spread must be (low, high) with 0.2 <= low <= high <= 5, got {self.size_spread}")
         if self.gaussians is not None and not 10_000 <= self.gaussians <= 5_000_000:
             raise InvalidDataError(f"RoomConfig: gaussians must be in [10000, 5000000], got {self.gaussians}")
         if not 1 <= self.min_objects <= self.max_objects <= 40:
@@ -263,7 +271,7 @@ def generate_room(seed: int, config: RoomConfig | None = None, scene_id: str | N
         shape = choose_room_shape(rng_layout)
         layout = Layout(shape, rng_layout)
         target = int(rng_layout.integers(config.min_objects, config.max_objects + 1))
-        fill_room(layout, target, externals)
+        fill_room(layout, target, externals, config.size_spread)
         placements = layout.placements
         if len(placements) >= config.min_objects and all(any(p.model is m for p in placements) for m, _ in externals):
             break

@@ -276,9 +276,9 @@ def test_rotation_geometry_reproduces_answer() -> None:
         pa, pb = np.array(g["cam_to_world_a"]), np.array(g["cam_to_world_b"])
         r = pa[:3, :3].T @ pb[:3, :3]
         assert np.allclose(r, g["r_rel"], atol=1e-9)
-        yaw = math.degrees(math.atan2(r[0, 2], r[2, 2]))
-        pitch = math.degrees(math.asin(-r[1, 2]))
+        yaw, pitch, roll = _gravity_reading(pa, pb, np.array(g["up"]))
         assert g["euler_deg"]["yaw"] == pytest.approx(yaw, abs=1e-5) and g["euler_deg"]["pitch"] == pytest.approx(pitch, abs=1e-5)
+        assert g["euler_deg"]["roll"] == pytest.approx(roll, abs=1e-5)
         ax1 = g["axes"][0]
         words = {"yaw": ("turn right", "turn left"), "pitch": ("tilt up", "tilt down"), "roll": ("clockwise roll", "counterclockwise roll")}
         word1 = words[ax1][0 if g["euler_deg"][ax1] > 0 else 1]
@@ -288,6 +288,56 @@ def test_rotation_geometry_reproduces_answer() -> None:
             assert words[ax2][0 if g["euler_deg"][ax2] > 0 else 1] in _truth(rec)
             assert g["ratio"] >= 0.6
         assert QARecord.from_json(rec.to_json()) == rec
+
+
+def _gravity_reading(pose_a: np.ndarray, pose_b: np.ndarray, up: np.ndarray) -> tuple[float, float, float]:
+    """Independent gravity-aware (yaw, pitch, roll): heading, elevation and bank differences."""
+    def attitude(pose):
+        right, forward = pose[:3, 0], pose[:3, 2]
+        elevation = math.degrees(math.asin(forward @ up))
+        flat = forward - (forward @ up) * up
+        heading_vec = flat / np.linalg.norm(flat)
+        level_right = np.cross(forward, up) / np.linalg.norm(np.cross(forward, up))
+        bank = math.degrees(math.atan2(right @ np.cross(forward, level_right), right @ level_right))
+        return heading_vec, elevation, bank
+
+    (fa, ea, ba), (fb, eb, bb) = attitude(pose_a), attitude(pose_b)
+    yaw = math.degrees(math.atan2(fb @ np.cross(fa, up), fb @ fa))  # + = towards A's right
+    wrap = lambda a: (a + 180.0) % 360.0 - 180.0  # noqa: E731
+    return yaw, eb - ea, wrap(bb - ba)
+
+
+def test_panning_a_tilted_camera_is_a_pure_yaw() -> None:
+    """Hand-worked: a camera looking 30° down pans 40° right about the vertical. A person sees a
+    pan; the camera-frame Euler angles of R_a^T R_b add about 10° of roll (the old reading)."""
+    from spacedg.plugins.questions.geometry import euler_yaw_pitch_roll, gravity_rotation, relative_rotation
+
+    a, b = camera(EYE, 0.0, -30.0), camera(EYE, -40.0, -30.0)
+    up = np.array([0.0, 0.0, 1.0])
+    assert gravity_rotation(a, b, up) == pytest.approx((40.0, 0.0, 0.0), abs=1e-9)
+    old_yaw, old_pitch, old_roll = euler_yaw_pitch_roll(relative_rotation(a, b))
+    assert abs(old_roll) > 9.0 and abs(old_pitch) > 5.0  # imperceptible components of the old reading
+    for seed in range(4):
+        (rec,) = _records(camera_rotation.FAMILY, build([obj(1, "chair", (3.0, 0.0, 0.5))], {"a": a, "b": b}), seed)
+        assert rec.geometry["mode"] == "single" and rec.geometry["axes"][0] == "yaw"
+        assert _truth(rec) == ("turn right" if rec.views == ("a", "b") else "turn left")
+        assert rec.geometry["euler_deg"]["roll"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_gravity_reading_hand_worked_cases() -> None:
+    from spacedg.plugins.questions.geometry import euler_yaw_pitch_roll, gravity_rotation, relative_rotation
+
+    up = np.array([0.0, 0.0, 1.0])
+    # a level camera: both readings agree exactly
+    a, b = camera(EYE, 10.0), camera(EYE, -20.0, 15.0, 8.0)
+    assert gravity_rotation(a, b, up) == pytest.approx(euler_yaw_pitch_roll(relative_rotation(a, b)), abs=1e-9)
+    assert gravity_rotation(a, b, up) == pytest.approx((30.0, 15.0, 8.0), abs=1e-9)
+    # looking down 35°, then 10° up: a tilt of 25°, nothing else
+    assert gravity_rotation(camera(EYE, 0.0, -35.0), camera(EYE, 0.0, -10.0), up) == pytest.approx((0.0, 25.0, 0.0), abs=1e-9)
+    # a tilted camera rolling 12° clockwise about its own optical axis keeps heading and elevation
+    assert gravity_rotation(camera(EYE, 50.0, -25.0), camera(EYE, 50.0, -25.0, 12.0), up) == pytest.approx((0.0, 0.0, 12.0), abs=1e-9)
+    # a turn across ±180° of heading wraps to the short way round
+    assert gravity_rotation(camera(EYE, 170.0), camera(EYE, -170.0), up)[0] == pytest.approx(-20.0, abs=1e-9)
 
 
 # ----------------------------------------------------------------- invariance

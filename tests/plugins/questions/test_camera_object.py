@@ -75,13 +75,20 @@ def single_view_scene() -> Scene:
     return build(instances, {"v0": camera((0.0, 0.0, 0.0), 0.0)})
 
 
-def bbox_direction_scene() -> Scene:
-    """Low covisibility pair. v0 at the origin looking +x, v1 at (4, 0, 0) turned 20°.
-    The vase (3, 0, 0), seen in v0 only, is behind v1; the stool (-1, 0, 0), seen in v1 only, is
-    behind v0. Whichever view is image A, the object is behind camera B."""
-    instances = [obj(1, "vase", (3.0, 0.0, 0.0), description="blue vase"),
-                 obj(2, "stool", (-1.0, 0.0, 0.0), description="metal stool")]
-    views = {"v0": camera((0.0, 0.0, 0.0), 0.0), "v1": camera((4.0, 0.0, 0.0), 20.0)}
+def bbox_direction_scene(behind: bool = False) -> Scene:
+    """Low covisibility pair. v0 at the origin looking +x, v1 at (4, 0, 0) looking back (heading 160°).
+    The vase (3, 0, 0), seen in v0 only, is 1 m ahead of v1, 0.34 m to its left: "Front"; the
+    stool (2, 1.2, 0), seen in v1 only, is ahead of v0 and 1.2 m to its left: "Front-Left".
+    ``behind``: v1 at (4, 0, 0) turned 20° instead, and the stool at (-1, 0, 0): whichever view
+    is image A, the object is behind camera B ("Back", not asked)."""
+    if behind:
+        instances = [obj(1, "vase", (3.0, 0.0, 0.0), description="blue vase"),
+                     obj(2, "stool", (-1.0, 0.0, 0.0), description="metal stool")]
+        views = {"v0": camera((0.0, 0.0, 0.0), 0.0), "v1": camera((4.0, 0.0, 0.0), 20.0)}
+    else:
+        instances = [obj(1, "vase", (3.0, 0.0, 0.0), description="blue vase"),
+                     obj(2, "stool", (2.0, 1.2, 0.0), description="metal stool")]
+        views = {"v0": camera((0.0, 0.0, 0.0), 0.0), "v1": camera((4.0, 0.0, 0.0), 160.0)}
     return build(instances, views, {"v0": {1: CLEAR}, "v1": {2: CLEAR}}, covisibility=0.1)
 
 
@@ -163,14 +170,16 @@ def test_single_view_direction_labels():
     assert r.geometry["parts"] == [[0, 1]] and r.geometry["vector_camera"] == pytest.approx([1.0, 0.0, 0.0], abs=1e-12)
 
 
-def test_bbox_center_direction_behind_camera_b():
+def test_bbox_center_direction_in_front_of_camera_b():
     seen_orientations = set()
     for seed in range(8):
         records = _records(DIRN, bbox_direction_scene(), seed, "bbox_center_direction")
         assert len(records) == 1
         r = records[0]
         seen_orientations.add(r.views)
-        assert _truth(r) == "Back" and "Front" in _texts(r)
+        assert _truth(r) == {"v0": "Front", "v1": "Front-Left"}[r.views[0]] and "Back" in " ".join(_texts(r))
+        # the rare answers (Back, Up) are offered but never balanced against: not a role of the cell
+        assert r.geometry["selection"]["roles"] == sorted(t for t in _texts(r) if "Back" not in t and "Up" not in t)
         expected_id = {"v0": 1, "v1": 2}[r.views[0]]
         assert _ids(r) == (expected_id,)
         phrase = {1: "blue vase", 2: "metal stool"}[expected_id]
@@ -180,6 +189,13 @@ def test_bbox_center_direction_behind_camera_b():
             f"In image A, find the {phrase}.\nWhen you were taking the photo in Image B, where is the {label} area relative to you?",
         )
     assert seen_orientations == {("v0", "v1"), ("v1", "v0")}
+
+
+def test_bbox_center_direction_behind_camera_b_is_not_asked():
+    """An object behind camera B ("Back") is rare; asked only where a scene happens to offer it,
+    a blind model that never answers Back would gain on the rest: not asked."""
+    for seed in range(4):
+        assert _records(DIRN, bbox_direction_scene(behind=True), seed, "bbox_center_direction") == []
 
 
 def test_bbox_center_direction_needs_low_covisibility():

@@ -10,20 +10,25 @@ v0      chair 1 (1000, .9), 2 (500, .6), 3 (0, 0)       2 chairs (3 hidden)
         box 4 (800, .9), 5 (50, .8) → 5 is partial      skipped (grey zone)
         shelf 6 (2000, 1.0)                             1 shelf
         glass 9 (300, .9): 300 < 400 px → partial       skipped
-        person 7, 8: no record                          nothing (count 0 is not asked)
+        person 7, 8: no record                          0 people
 v1      chair 1 (900, .3): fraction < .5 → partial      skipped
         box 4 (700, .7), 5 (450, .5)                    2 boxes
         person 7 (5000, 1.0), 8 (1200, .55)             2 people
         glass 9 (1000, 1.0)                             1 glass
 v2      320×240 image: min_pixels scales to 100         1 chair (150 px is enough here;
         chair 1 (150, .7), chair 2 no record                    2 hidden, no record)
+        no box, shelf, person, glass                    0 of each (v1: 0 shelves)
 ======  =============================================  ==============================
+
+These construction tests use the unbalanced family (``counts=None``: every valid count); the
+registered family asks 0, 1 and 2 equally often per label (``test_balanced_counts_per_label``).
 """
 
 from __future__ import annotations
 
 import itertools
 import json
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -42,6 +47,9 @@ from spacedg.render.gaussians import Gaussians
 
 V = InstanceVisibility
 EXPECTED = {("v0", "chair"): 2, ("v0", "shelf"): 1, ("v1", "box"): 2, ("v1", "person"): 2, ("v1", "glass"): 1, ("v2", "chair"): 1}
+ZEROS = {("v0", "person"): 0, ("v1", "shelf"): 0, ("v2", "box"): 0, ("v2", "shelf"): 0, ("v2", "person"): 0, ("v2", "glass"): 0}
+#: Every valid candidate, unbalanced.
+UNBALANCED = make_family(counts=None)
 
 
 def _camera(eye: tuple[float, float, float], width: int = 640, height: int = 480) -> Camera:
@@ -87,19 +95,19 @@ def scene() -> Scene:
 
 
 def _records(scene: Scene, seed: int = 0) -> list[QARecord]:
-    return list(FAMILY.generate(scene, np.random.default_rng(seed)))
+    return list(UNBALANCED.generate(scene, np.random.default_rng(seed)))
 
 
 # ------------------------------------------------------------- answers
 def test_counts_known_by_construction(scene: Scene) -> None:
     records = _records(scene)
     got = {(r.views[0], r.geometry["label"]): r.answer for r in records}
-    assert got == EXPECTED
-    assert len(records) == len(EXPECTED)  # one record per (view, label)
+    assert got == {**EXPECTED, **ZEROS}
+    assert len(records) == len(EXPECTED) + len(ZEROS)  # one record per (view, label)
     for r in records:
         assert r.question_type == "object_counting" and r.sub_question_type == "count"
         assert r.task_group is TaskGroup.OBJECT_CENTRIC and r.answer_type is AnswerType.COUNT
-        assert isinstance(r.answer, int) and r.answer >= 1 and r.options == ()
+        assert isinstance(r.answer, int) and r.answer >= 0 and r.options == ()
         assert r.scene_id == "counting_room" and r.id.startswith("counting_room/object_counting/count/")
         assert r.answer == len(r.geometry["counted"])
 
@@ -109,7 +117,7 @@ def test_grey_zone_skipped(scene: Scene) -> None:
     assert ("v0", "box") not in keys  # box 5 has too few pixels
     assert ("v1", "chair") not in keys  # chair 1 too occluded (fraction .3)
     assert ("v0", "glass") not in keys  # 300 px < 400 px at 640×480
-    assert ("v0", "person") not in keys  # nothing visible: counts of 0 are not asked
+    assert ("v0", "person") in keys  # nothing visible at all: a count of 0
 
 
 def test_hidden_instances_not_counted(scene: Scene) -> None:
@@ -127,7 +135,7 @@ def test_hidden_instances_not_counted(scene: Scene) -> None:
 
 
 def test_custom_thresholds() -> None:
-    strict = make_family(VisibilityThresholds(min_pixels=600, min_fraction=0.5))
+    strict = make_family(VisibilityThresholds(min_pixels=600, min_fraction=0.5), counts=None)
     got = {(r.views[0], r.geometry["label"]): r.answer for r in strict.generate(build_scene(), np.random.default_rng(0))}
     # v0: chair 2 (500 px) becomes partial → skipped; v1: box 5 (450 px) → skipped
     assert ("v0", "chair") not in got and ("v1", "box") not in got
@@ -141,9 +149,9 @@ def test_same_seed_same_records(scene: Scene) -> None:
     assert json.dumps([r.to_dict() for r in a]) == json.dumps([r.to_dict() for r in b])
     orders = {tuple((r.views[0], r.geometry["label"]) for r in _records(scene, seed)) for seed in range(6)}
     assert len(orders) > 1  # the seed shuffles the order ...
-    assert {frozenset(o) for o in orders} == {frozenset(EXPECTED)}  # ... of the same candidates
+    assert {frozenset(o) for o in orders} == {frozenset({**EXPECTED, **ZEROS})}  # ... of the same candidates
     # lazily generated: taking a prefix gives the prefix
-    prefix = list(itertools.islice(FAMILY.generate(scene, np.random.default_rng(42)), 3))
+    prefix = list(itertools.islice(UNBALANCED.generate(scene, np.random.default_rng(42)), 3))
     assert [r.id for r in prefix] == [r.id for r in a[:3]]
 
 
@@ -238,7 +246,7 @@ def test_registered_family_matches_module(monkeypatch: pytest.MonkeyPatch, scene
         assert family.origin is not None and family.origin.builtin
         assert family.needs == frozenset({"visibility"}) and family.num_views == (1,)
         via_registry = [r.to_dict() for r in family.generate(scene, np.random.default_rng(5))]
-        assert via_registry == [r.to_dict() for r in _records(scene, 5)]
+        assert via_registry == [r.to_dict() for r in FAMILY.generate(scene, np.random.default_rng(5))]
     finally:
         reset_registry()
 
@@ -256,6 +264,35 @@ def test_rng_must_be_a_generator(scene: Scene) -> None:
 def test_empty_scene_yields_nothing() -> None:
     empty = Scene("empty", Gaussians.empty(), {"v0": _camera((3.0, 0.0, 1.5))}, [])
     assert list(FAMILY.generate(empty, np.random.default_rng(0))) == []
+
+
+def test_balanced_counts_per_label() -> None:
+    """The registered family asks 0, 1 and 2 of a label equally often, one wording per round;
+    a label that cannot reach every count is not asked; related labels (armchair) and objects
+    showing a label (a bookshelf's books) make a view ambiguous."""
+    from tests.qa_scenes import CLEAR, build, camera, obj
+
+    chairs = [obj(1, "chair", (2, 0, 0.4), description="red chair"), obj(2, "chair", (2, 1, 0.4), description="blue chair")]
+    extra = [obj(3, "table", (3, 0, 0.4)), obj(4, "armchair", (3, 2, 0.4)), obj(5, "bookshelf", (4, 0, 1.0)), obj(6, "book", (3, 0, 0.8))]
+    views = {f"v{k}": camera((0, 0, 1.5), 10.0 * k) for k in range(7)}
+    vis = {
+        "v0": {1: CLEAR, 2: CLEAR, 3: CLEAR}, "v1": {1: CLEAR, 3: CLEAR}, "v2": {3: CLEAR}, "v3": {1: CLEAR, 2: CLEAR},
+        "v4": {1: CLEAR, 4: CLEAR},  # an armchair beside the chair: ambiguous for "chair"
+        "v5": {5: CLEAR}, "v6": {6: CLEAR},  # books on the shelf are not annotated: "book" is ambiguous in v5
+    }
+    scene = build(chairs + extra, views, vis)
+    every_record = list(FAMILY.generate(scene, np.random.default_rng(3)))
+    records = [r for r in every_record if not r.geometry["selection"]["cell"].endswith("|unbalanced")]
+    assert all(r.answer in (0, 1, 2) for r in every_record) and len(every_record) > len(records)  # then the fill-ins
+    got = Counter((r.geometry["label"], r.answer) for r in records)
+    assert got == {("chair", 0): 1, ("chair", 1): 1, ("chair", 2): 1}  # one round; v3's second 2 has no 0/1 partner left
+    assert len({r.question for r in records}) == 1  # one wording for the round
+    for r in records:
+        assert r.geometry["selection"]["cell"] == f"label:chair|template:{r.geometry['template']}"
+        assert r.geometry["selection"]["roles"] == ["0", "1", "2"]
+        assert r.views[0] != "v4"
+    every = {(r.views[0], r.geometry["label"]) for r in UNBALANCED.generate(scene, np.random.default_rng(0))}
+    assert ("v4", "chair") not in every and ("v5", "book") not in every and ("v6", "book") in every
 
 
 def test_module_hook_registers_family() -> None:

@@ -1,0 +1,84 @@
+"""The blind stress test (spacedg.data.qa_audit) on records whose blind answer is known by construction."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import time
+
+import numpy as np
+
+from spacedg.cli import main
+from spacedg.data.qa_audit import blind_audit, format_audit, mra, record_labels
+from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.specs import AnswerType, TaskGroup
+
+LABELS = ("chair", "lamp", "table", "cup", "sofa", "plant")
+
+
+def _yn(scene: str, k: int, label: str, answer: str) -> QARecord:
+    return QARecord(
+        id=f"{scene}/object_existence_estimation/existence/{k:012x}", scene_id=scene, question_type="object_existence_estimation",
+        sub_question_type="existence", task_group=TaskGroup.OBJECT_CENTRIC, answer_type=AnswerType.YN, views=(f"v{k}",),
+        question=f"Is there a {label} visible in this image?", options=(), answer=answer, geometry={"label": label, "refs": []},
+    )
+
+
+def _size(scene: str, k: int, big: str, small: str, rng: np.random.Generator) -> QARecord:
+    first_big = bool(rng.random() < 0.5)
+    one, two = (big, small) if first_big else (small, big)
+    texts = [f"wooden {one}", f"wooden {two}", "about the same", "cannot be determined"]
+    order = rng.permutation(4)
+    options = tuple(f"{'ABCD'[i]}. {texts[j]}" for i, j in enumerate(order))
+    truth = f"wooden {big}"
+    letter = "ABCD"[[texts[j] for j in order].index(truth)]
+    refs = [{"id": 1, "label": one, "description": f"wooden {one}", "view": "a"}, {"id": 2, "label": two, "description": f"wooden {two}", "view": "b"}]
+    question = f"In image A, find the wooden {one}. In image B, find the wooden {two}.\nWhich is longer? wooden {one} or wooden {two}?"
+    return QARecord(
+        id=f"{scene}/object_size_comparison/longest_side_compare/{k:012x}", scene_id=scene, question_type="object_size_comparison",
+        sub_question_type="longest_side_compare", task_group=TaskGroup.OBJECT_CENTRIC, answer_type=AnswerType.MCQ, views=("a", "b"),
+        question=question, options=options, answer=letter, geometry={"refs": refs},
+    )
+
+
+def test_label_priors_are_found_and_balance_defeats_them() -> None:
+    # biased: chairs are always there, lamps never; balanced: every label is "yes" as often as "no"
+    biased = {f"s{s}": [_yn(f"s{s}", k, lab, "yes" if lab in ("chair", "table", "cup") else "no")
+                        for k, lab in enumerate(LABELS * 4)] for s in range(4)}
+    balanced = {f"s{s}": [_yn(f"s{s}", k, lab, ans) for k, (lab, ans) in enumerate(itertools.product(LABELS * 2, ("yes", "no")))]
+                for s in range(4)}
+    row = blind_audit(biased).rows[0]
+    assert row.chance == 50.0 and row.scores["label"] == 100.0 and row.best_score == 100.0 and row.solved == row.n
+    fair = blind_audit(balanced)
+    assert fair.rows[0].best_score == 50.0 and fair.rows[0].solved == 0 and fair.overall["excess"] == 0.0
+    assert "existence" in format_audit(fair) and record_labels(balanced["s0"][0]) == ("chair",)
+
+
+def test_size_prior_and_live_chance() -> None:
+    """"sofa" is always the longer one: the priors read it. Neither "about the same" nor "cannot
+    be determined" is ever correct here, so two options are live (chance 1/2)."""
+    rng = np.random.default_rng(0)
+    by_scene = {f"s{s}": [_size(f"s{s}", k, "sofa", small, rng) for k, small in enumerate(["cup", "chair", "lamp", "plant"] * 5)]
+                for s in range(3)}
+    row = blind_audit(by_scene).rows[0]
+    assert row.chance == 50.0
+    assert row.scores["option_text"] == 100.0 and row.scores["learned"] == 100.0 and row.scores["letter"] < 50.0
+
+
+def test_mra_and_one_scene() -> None:
+    assert mra(1.0, 1.0) == 1.0 and mra(2.0, 1.0) == 0.0 and abs(mra(1.2, 1.0) - 0.6) < 1e-9
+    assert blind_audit({"s0": [_yn("s0", 0, "chair", "yes")]}).rows == []
+
+
+def test_ten_thousand_records_take_seconds(capsys, tmp_path) -> None:
+    records = {f"s{s}": [_yn(f"s{s}", k, LABELS[k % 6], "yes" if (k // 6 + s) % 3 else "no") for k in range(2500)] for s in range(4)}
+    start = time.perf_counter()
+    blind_audit(records)
+    assert time.perf_counter() - start < 30.0  # seconds on one slow core; ~2 s on a laptop
+    # the command line: qa audit over index files
+    for scene, rs in records.items():
+        (tmp_path / f"{scene}.qa.jsonl").write_text("".join(r.to_json() + "\n" for r in rs[:60]))
+    assert main(["qa", "audit", str(tmp_path), "--json", "--solved", str(tmp_path / "solved.jsonl")]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["rows"][0]["sub_question_type"] == "existence" and (tmp_path / "solved.jsonl").is_file()
+    assert main(["qa", "audit", str(tmp_path / "s0.qa.jsonl")]) == 2  # one scene: nothing to hold out

@@ -1,0 +1,63 @@
+"""Scale-aware presets: metre ranges follow the sample's scene depth; provenance keeps the metres."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from spacedg.data.chain import Chain
+from spacedg.data.pipeline import degrade, degrade_image, sample_scene_depth, view_depth
+from spacedg.errors import PluginError
+from spacedg.plugins import DegradationSpec, ParamRange, ParamSpec, get_degradation
+from spacedg.plugins.specs import REFERENCE_DEPTH_M
+from spacedg.render import render
+
+
+def test_bench_is_the_paper_table_at_the_reference_depth() -> None:
+    for name, param, paper in [("defocus", "depth", (1.0, 8.0)), ("motion_blur", "trans", (0.2, 0.35))]:
+        spec = get_degradation(name)
+        assert spec.presets["bench"][param].per_depth and spec.presets["bench"][param].to_list() == list(paper)
+        for seed in range(20):
+            at_ref = spec.sample_params("bench", np.random.default_rng(seed), REFERENCE_DEPTH_M)
+            plain = spec.sample_params("bench", np.random.default_rng(seed))
+            assert at_ref == plain and paper[0] <= at_ref[param] <= paper[1]
+            small = spec.sample_params("bench", np.random.default_rng(seed), REFERENCE_DEPTH_M / 5)
+            assert small[param] == pytest.approx(plain[param] / 5)
+            assert {k: v for k, v in small.items() if k != param} == {k: v for k, v in plain.items() if k != param}
+    haze = get_degradation("haze")
+    assert haze.presets["bench"]["density"].to_list() == [3.5, 6.0] and not haze.presets["fog_20m"]["depth_ref"].per_depth
+    assert haze.sample_params("fog_20m", np.random.default_rng(0), 0.3)["depth_ref"] == 20.0  # physical presets never scale
+
+
+def test_only_metres_may_scale() -> None:
+    with pytest.raises(PluginError, match="only a parameter in metres"):
+        DegradationSpec(
+            name="bad_scale", category="digital", stage="display", params=(ParamSpec("q", "1", "quality", low=0, high=100),),
+            presets={p: {"q": ParamRange(1, 2, per_depth=True)} for p in ("bench", "1", "2", "3", "4", "5")},
+            apply=lambda image, params, rng: image,
+        )
+
+
+def test_scene_depth_resolves_records_and_reproduces(small_room) -> None:
+    scene = small_room
+    view = next(iter(scene.views))
+    depth = sample_scene_depth(scene, [view])
+    # the Gaussian-based depth agrees with the rendered median depth within a few per cent
+    frame = render(scene.gaussians, scene.camera(view).resized(80, 60), outputs=("depth", "alpha"), backend="cpu")
+    rendered = float(np.median(frame.depth[(frame.alpha > 0.5) & np.isfinite(frame.depth)]))
+    assert depth == view_depth(scene, scene.camera(view)) and abs(depth / rendered - 1) < 0.1
+    chain = Chain.parse("defocus+motion_blur+haze+jpeg_compression")
+    assert chain.scales_with_depth() and not Chain.parse("jpeg_compression+low_light").scales_with_depth()
+    out = degrade(scene, [view], "defocus+haze", seed=3)
+    by_name = {p["name"]: p for p in out.degradations}
+    assert by_name["defocus"]["scene_depth_m"] == pytest.approx(depth) and by_name["haze"]["scene_depth_m"] == pytest.approx(depth)
+    reference = {p["name"]: p for p in chain.provenance(3)}
+    assert by_name["defocus"]["params"]["depth"] == pytest.approx(reference["defocus"]["params"]["depth"] * depth / REFERENCE_DEPTH_M)
+    # the recorded absolute metres reproduce the bytes without measuring the scene
+    explicit = [{"name": p["name"], "params": p["params"]} for p in out.degradations]
+    again = degrade(scene, [view], explicit, seed=3)
+    assert np.array_equal(again.images, out.images) and all("scene_depth_m" not in p for p in again.degradations)
+    # a photo with a depth map: its median depth
+    photo = out.images[0]
+    _, prov = degrade_image(photo, "haze", seed=1, depth=np.full(photo.shape[:2], 0.5, np.float32))
+    assert prov[0]["scene_depth_m"] == pytest.approx(0.5) and prov[0]["params"]["depth_ref"] == pytest.approx(4.0 * 0.5 / REFERENCE_DEPTH_M)
