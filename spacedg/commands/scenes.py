@@ -211,6 +211,8 @@ def _preview(args: argparse.Namespace) -> int:
 
     if args.out.suffix.lower() != ".png":
         raise InvalidDataError(f"--out {args.out}: write a .png file")
+    if not 1 <= args.columns <= 64:
+        raise InvalidDataError(f"--columns must be in [1, 64] floor plans per row, got {args.columns}")
     images = [floorplan(load_scene(folder)) for folder in tqdm(_scene_dirs(args.paths), desc="floor plans", unit="scene")]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(args.out), contact_sheet(images, columns=args.columns)[:, :, ::-1]):
