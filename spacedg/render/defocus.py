@@ -167,7 +167,8 @@ def render_cpu(
     sharp, sharp_rects = project_cpu.project_view(gaussians, wide, settings, None, want_color)  # type: ignore[arg-type]
     offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, wide.width, wide.height, tight)
     pair_out = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
-    defocus_cpu.measure_sharp(offsets, gauss, sharp, slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pair_out)  # type: ignore[attr-defined]
+    lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
+    defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pair_out)  # type: ignore[attr-defined]
     n = packed.shape[0]
     sums = np.stack([np.bincount(gauss, weights=pair_out[:, j], minlength=n) for j in range(pair_out.shape[1])], axis=1)
     kappa, rho = match_factors(sums, inside_fraction(sharp, wide.width, wide.height))

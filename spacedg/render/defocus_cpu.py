@@ -33,6 +33,7 @@ import math
 import numba
 import numpy as np
 
+from spacedg.render.colour_cpu import _DECODE_LUT, _TOE
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADY
 from spacedg.render.raster_cpu import _exp_neg
 from spacedg.render.threads import fork_safe
@@ -45,11 +46,17 @@ PAIR_COLUMNS = 6
 
 
 @numba.njit(cache=True, inline="always")
-def _decode(x):
-    """sRGB-encoded value → linear light (IEC 61966-2-1, negative → 0), float64."""
-    x = max(x, 0.0)
-    if x <= 0.04045:
+def _decode(x, lut):
+    """sRGB-encoded value → linear light (negative → 0), float64: the table of
+    :func:`spacedg.render.colour_cpu.decode_srgb` on [0.04045, 1), the exact curve elsewhere."""
+    if not x > 0.0:
+        return 0.0
+    if x <= _TOE:
         return x / 12.92
+    if x < 1.0:
+        s = (x - _TOE) * ((lut.shape[0] - 1) / (1.0 - _TOE))
+        j = min(int(s), lut.shape[0] - 2)
+        return lut[j] + (s - j) * (lut[j + 1] - lut[j])
     return ((x + 0.055) / 1.055) ** 2.4
 
 
@@ -58,32 +65,79 @@ _MT, _MLIVE, _ER, _EG, _EB, _LR, _LG, _LB, _TS = (np.uint64(256 * k) for k in ra
 
 
 @numba.njit(cache=True, inline="always")
-def _measure_pair(state, packed, g, x0, y0, amax, sweep, pair_out, k):
-    """Composite Gaussian ``g`` into one tile's state (sharp rules) and add its pair sums.
+def _pair_rows(packed, g, x0, y0):
+    """Row range and the tile-local conic of Gaussian ``g`` (the compositor's set-up)."""
+    gx = packed[g, PX] - np.float32(x0 + 0.5)
+    gy = packed[g, PY] - np.float32(y0 + 0.5)
+    ry = packed[g, RADY]
+    r0 = max(int(math.ceil(gy - ry)), 0)
+    r1 = min(int(math.floor(gy + ry)) + 1, 16)
+    return gx, gy, r0, r1
 
-    ``sweep`` 1 adds M, S, W and the colour mixes; sweep 2 adds U (the ρ planes are ready).
-    Both sweeps run the same arithmetic, so T and the stop decisions agree.
-    """
+
+@numba.njit(cache=True, inline="always")
+def _measure_sweep1(state, packed, lin, g, x0, y0, amax, pair_out, k):
+    """Composite Gaussian ``g`` into one tile's state (sharp rules); add its M, S, W and the two colour mixes."""
     t_min = np.float32(1e-4)
     zero = np.float32(0.0)
     one = np.float32(1.0)
-    gx = packed[g, PX] - np.float32(x0 + 0.5)
-    gy = packed[g, PY] - np.float32(y0 + 0.5)
+    gx, gy, r0, r1 = _pair_rows(packed, g, x0, y0)
     ca = np.float32(0.5) * packed[g, CA]
     cb = packed[g, CB]
     cc = np.float32(0.5) * packed[g, CC]
     opa = packed[g, OPA]
     amin = packed[g, AMIN]
     cr, cg, cbl = packed[g, CR], packed[g, CG], packed[g, CBL]
-    lr = np.float32(_decode(np.float64(cr)))
-    lg = np.float32(_decode(np.float64(cg)))
-    lb = np.float32(_decode(np.float64(cbl)))
-    ry = packed[g, RADY]
-    r0 = max(int(math.ceil(gy - ry)), 0)
-    r1 = min(int(math.floor(gy + ry)) + 1, 16)
+    lr, lg, lb = lin[g, 0], lin[g, 1], lin[g, 2]
     m_sum = zero
     s_sum = zero
     w_sum = zero
+    for row in range(r0, r1):
+        dy = np.float32(row) - gy
+        cdy = cc * dy * dy
+        bdy = cb * dy
+        base = np.uint64(row * 16)
+        for col in range(16):
+            p = base + np.uint64(col)
+            dx = np.float32(col) - gx
+            sigma = ca * dx * dx + bdy * dx + cdy
+            alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
+            alpha = alpha if (sigma >= zero and alpha >= amin) else zero
+            alpha = alpha * state[p + _MLIVE]
+            t_before = state[p + _MT]
+            t_after = t_before * (one - alpha)
+            take = zero if t_after <= t_min else one
+            a_taken = alpha * take
+            w = a_taken * t_before
+            m_sum += a_taken
+            s_sum += a_taken * state[p + _TS]
+            w_sum += w
+            state[p + _TS] = state[p + _TS] * (one - a_taken)
+            state[p + _ER] += w * cr
+            state[p + _EG] += w * cg
+            state[p + _EB] += w * cbl
+            state[p + _LR] += w * lr
+            state[p + _LG] += w * lg
+            state[p + _LB] += w * lb
+            state[p + _MT] = t_after if take > zero else t_before
+            state[p + _MLIVE] *= take
+    pair_out[k, 0] += m_sum
+    pair_out[k, 1] += s_sum
+    pair_out[k, 2] += w_sum
+
+
+@numba.njit(cache=True, inline="always")
+def _measure_sweep2(state, packed, g, x0, y0, amax, pair_out, k):
+    """The same composite again, once every pixel's ρ is known (in the linear-mix planes); add ``U = Σ w·ρ``."""
+    t_min = np.float32(1e-4)
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    gx, gy, r0, r1 = _pair_rows(packed, g, x0, y0)
+    ca = np.float32(0.5) * packed[g, CA]
+    cb = packed[g, CB]
+    cc = np.float32(0.5) * packed[g, CC]
+    opa = packed[g, OPA]
+    amin = packed[g, AMIN]
     ur = zero
     ug = zero
     ub = zero
@@ -102,33 +156,15 @@ def _measure_pair(state, packed, g, x0, y0, amax, sweep, pair_out, k):
             t_before = state[p + _MT]
             t_after = t_before * (one - alpha)
             take = zero if t_after <= t_min else one
-            a_taken = alpha * take
-            w = a_taken * t_before
-            if sweep == 1:
-                m_sum += a_taken
-                s_sum += a_taken * state[p + _TS]
-                w_sum += w
-                state[p + _TS] = state[p + _TS] * (one - a_taken)
-                state[p + _ER] += w * cr
-                state[p + _EG] += w * cg
-                state[p + _EB] += w * cbl
-                state[p + _LR] += w * lr
-                state[p + _LG] += w * lg
-                state[p + _LB] += w * lb
-            else:
-                ur += w * state[p + _LR]
-                ug += w * state[p + _LG]
-                ub += w * state[p + _LB]
+            w = alpha * take * t_before
+            ur += w * state[p + _LR]
+            ug += w * state[p + _LG]
+            ub += w * state[p + _LB]
             state[p + _MT] = t_after if take > zero else t_before
             state[p + _MLIVE] *= take
-    if sweep == 1:
-        pair_out[k, 0] += m_sum
-        pair_out[k, 1] += s_sum
-        pair_out[k, 2] += w_sum
-    else:
-        pair_out[k, 3] += ur
-        pair_out[k, 4] += ug
-        pair_out[k, 5] += ub
+    pair_out[k, 3] += ur
+    pair_out[k, 4] += ug
+    pair_out[k, 5] += ub
 
 
 @numba.njit(cache=True, inline="always")
@@ -141,12 +177,13 @@ def _all_dead(state):
 
 @fork_safe
 @numba.njit(parallel=True, fastmath=True, cache=True)
-def measure_sharp(offsets, gauss, packed, slab, tiles_x, alpha_max, pair_out):  # pragma: no cover - compiled
+def measure_sharp(offsets, gauss, packed, lin, slab, tiles_x, alpha_max, pair_out, lut=_DECODE_LUT):  # pragma: no cover - compiled
     """Fill ``pair_out`` (pairs, :data:`PAIR_COLUMNS`) float32 with each pair's sums (see the module docstring).
 
     Args:
         offsets, gauss: the sharp projection's tile lists (:func:`spacedg.render.raster_cpu.bin_tiles`).
         packed: the sharp projection (:func:`spacedg.render.project_cpu.project_view`, no defocus).
+        lin: (N, 3) float32 linear-light colours (the sRGB decode of the packed colours).
         slab: (N,) int64 depth slab of every Gaussian.
     """
     n_tiles = offsets.shape[0] - 1
@@ -167,7 +204,7 @@ def measure_sharp(offsets, gauss, packed, slab, tiles_x, alpha_max, pair_out):  
             g = gauss[k]
             if k > start and slab[g] != slab[gauss[k - 1]]:
                 state[2048:] = 1.0  # a new depth slab starts for every pixel of the tile
-            _measure_pair(state, packed, g, x0, y0, amax, 1, pair_out, k)
+            _measure_sweep1(state, packed, lin, g, x0, y0, amax, pair_out, k)
             if (k - start) % 32 == 31 and _all_dead(state):
                 stop = k + 1
                 break
@@ -175,12 +212,14 @@ def measure_sharp(offsets, gauss, packed, slab, tiles_x, alpha_max, pair_out):  
         for p in range(256):
             for c in range(3):
                 mix = np.float64(state[1280 + 256 * c + p])
-                enc = np.float64(state[512 + 256 * c + p])
-                state[1280 + 256 * c + p] = np.float32(_decode(enc) / mix) if mix > 0.0 else np.float32(1.0)
+                if mix > 0.0:
+                    state[1280 + 256 * c + p] = np.float32(_decode(np.float64(state[512 + 256 * c + p]), lut) / mix)
+                else:
+                    state[1280 + 256 * c + p] = np.float32(1.0)
             state[p] = 1.0
             state[256 + p] = 1.0
         for k in range(start, stop):
-            _measure_pair(state, packed, gauss[k], x0, y0, amax, 2, pair_out, k)
+            _measure_sweep2(state, packed, gauss[k], x0, y0, amax, pair_out, k)
 
 
 # state planes of composite_defocus (256 floats each)
