@@ -108,3 +108,25 @@ def test_render_cli_checks_the_pixel_count_before_reading(tmp_path: Path, capsys
                  "--width", "16384", "--height", "16384"])
     assert code == 2
     assert "16384×16384 = 268,435,456 pixels is over the limit" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "kwargs, fragment",
+    [
+        ({"width": 100_000}, "over the limit"),
+        ({"min_views": 4, "max_views": -1}, "max_views must be a positive integer"),
+        ({"min_views": 9, "max_views": 4}, "1 <= min_views <= max_views"),
+    ],
+)
+def test_synthetic_capture_config_is_checked(kwargs: dict, fragment: str) -> None:
+    from spacedg.scene.synthetic import CaptureConfig
+
+    with pytest.raises(InvalidDataError, match=fragment):
+        CaptureConfig(**kwargs)
+
+
+def test_generate_room_refuses_a_negative_seed() -> None:
+    from spacedg.scene.synthetic import generate_room
+
+    with pytest.raises(InvalidDataError, match="seed must be an integer >= 0"):
+        generate_room(-1)

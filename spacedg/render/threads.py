@@ -16,9 +16,10 @@ Alternatives measured on the built-in room at 640×480 (165k Gaussians), median 
 - TBB: fork-safe and fast, but not installable everywhere (``libtbb``).
 
 With serial twins the main process keeps OpenMP at full speed (no cost); only workers forked
-after the main process rendered run single-threaded (a render there takes the 1-thread time,
-~19 ms instead of ~13 ms on 2 threads at 640×480 — DataLoader workers usually share the cores
-between them anyway). Workers forked before any render, and processes on the ``tbb`` or
+after the main process rendered run single-threaded: a render there takes the 1-thread time
+(serial twins and the parallel kernels on 1 thread measured 20.6 vs 20.0 ms and 20.8 vs
+20.9 ms, alternating), i.e. ~20 ms instead of ~13 ms where 2 cores are free — DataLoader
+workers usually share the cores between them anyway, and this is the case that used to abort. Workers forked before any render, and processes on the ``tbb`` or
 ``workqueue`` layers, use the parallel kernels. ``OMP_WAIT_POLICY=PASSIVE`` (set by
 ``import spacedg``) is unchanged.
 """
