@@ -97,12 +97,24 @@ def require_rotation(matrix: np.ndarray, field: str, source: str, tol: float = 1
         raise InvalidDataError(f"{_where(source, field)}: is a reflection (det = {det:.3g}); flip one axis to get a right-handed rotation")
 
 
+def _short(value: object, limit: int = 80) -> str:
+    """``repr(value)`` cut to ``limit`` characters (a hostile value may be megabytes long)."""
+    try:
+        text = repr(value)
+    except ValueError:  # int repr beyond Python's digit limit
+        return "<a number too long to print>"
+    return text if len(text) <= limit else f"{text[:limit]}… ({len(text):,} characters)"
+
+
 def finite_float(value: object, what: str, error: type[Exception] = InvalidDataError) -> float:
     """``value`` as a finite ``float``; else ``error("<what> must be a number, got …")`` or ``("<what> must be finite, got …")``."""
     try:
         number = float(value)  # type: ignore[arg-type]
+    except OverflowError:  # an integer beyond float range (> 1.8e308)
+        digits = int(int(value).bit_length() * 0.30103) + 1  # type: ignore[call-overload]
+        raise error(f"{what} must be finite, got an integer of about {digits:,} digits") from None
     except (TypeError, ValueError):
-        raise error(f"{what} must be a number, got {value!r}") from None
+        raise error(f"{what} must be a number, got {_short(value)}") from None
     if not math.isfinite(number):
         raise error(f"{what} must be finite, got {number}")
     return number

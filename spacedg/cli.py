@@ -56,6 +56,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             # Bad input: one clear line, no traceback.
             print(f"spacedg: error: {err}", file=sys.stderr)
             return 2
+        except OSError as err:
+            # The file system refused (no such folder, permission, a name too long, disk full): one line too.
+            name = str(err.filename) if err.filename is not None else ""
+            where = f"{name[:200]}…" if len(name) > 200 else name
+            print(f"spacedg: error: {err.strerror or err}{': ' + where if where else ''}", file=sys.stderr)
+            return 2
         except KeyboardInterrupt as err:
             text = str(err).strip()
             print(f"spacedg: {text}" if text else "spacedg: interrupted", file=sys.stderr)

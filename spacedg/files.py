@@ -31,6 +31,36 @@ from spacedg.errors import FileFormatError, FileValueError, InvalidDataError, Pa
 
 #: JSON files larger than this are refused (a scene/instance/transforms file is kilobytes).
 MAX_JSON_BYTES = 256 * 1024 * 1024
+#: Longest integer literal (digits) read from JSON: every such integer converts to a finite float (< 1e308);
+#: longer ones exceed every float (1.8e308), count and id, and Python refuses past 4300 digits anyway.
+MAX_JSON_INT_DIGITS = 308
+
+
+class _LongInteger(Exception):
+    def __init__(self, digits: int) -> None:
+        super().__init__(digits)
+        self.digits = digits
+
+
+def _parse_int(text: str) -> int:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_JSON_INT_DIGITS:
+        raise _LongInteger(digits)
+    return int(text)
+
+
+def _long_integer_error(path: Path, what: str, text: str, digits: int) -> FileFormatError:
+    """Name the field (the key before the number, when there is one) and the line of a too-long integer."""
+    found = re.search(r"\d{%d,}" % (MAX_JSON_INT_DIGITS + 1), text)
+    where = ""
+    if found is not None:
+        line = text.count("\n", 0, found.start()) + 1
+        key = re.search(r'"((?:[^"\\]|\\.){0,200})"\s*:\s*-?$', text[max(0, found.start() - 300) : found.start()])
+        where = (f"field {key.group(1)!r}, " if key else "") + f"line {line}: "
+    return FileFormatError(
+        f"{path}: {what}: {where}an integer of {digits:,} digits; no number in a {what} can be that long "
+        f"(the limit is {MAX_JSON_INT_DIGITS} digits, past every float). The file is corrupt or hostile: repair that value"
+    )
 
 
 PathLike = str | os.PathLike[str]
@@ -243,7 +273,9 @@ def read_json(path: PathLike, what: str) -> Any:
     except UnicodeDecodeError as err:
         raise FileFormatError(f"{p}: {what} is not UTF-8 text (byte {err.start}); save it as UTF-8 JSON") from None
     try:
-        return json.loads(text)
+        return json.loads(text, parse_int=_parse_int)
+    except _LongInteger as err:
+        raise _long_integer_error(p, what, text, err.digits) from None
     except json.JSONDecodeError as err:
         raise FileFormatError(
             f"{p}: {what} is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}"

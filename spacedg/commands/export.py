@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 from spacedg.commands import _args
+from spacedg.commands.sizes import image_size
 from spacedg.errors import ParameterError
 
 
@@ -24,7 +25,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--scenes", type=Path, nargs="+", default=None, help="scene folders or folders of them (default: the built-in rooms)")
     parser.add_argument("--degradations", default=None, help="comma-separated chains (default: the nine for bench, clean for train/val)")
     parser.add_argument("--question-types", default=None, help="comma-separated question types (default: all)")
-    parser.add_argument("--image-size", default=None, help="WxH in pixels to render at, e.g. 640x480 (default: the views' own size)")
+    parser.add_argument("--image-size", type=image_size, default=None,
+                        help="WxH in pixels to render at, e.g. 640x480 (default: the views' own size)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the questions and of the degradations (default 0)")
     parser.add_argument("--per-sub-type", type=int, default=25, help="questions per sub type and scene when indexes are built (default 25)")
     parser.add_argument("--clean-prob", type=float, default=0.1, help="share of clean items, train/val only (default 0.1)")
@@ -41,18 +43,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     _args.add_backend_arguments(parser)
     parser.set_defaults(func=run)
-
-
-def _size(text: str | None) -> tuple[int, int] | None:
-    if text is None:
-        return None
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise ParameterError(f"--image-size must read WxH, e.g. 640x480, got {text!r}") from None
-    if w < 8 or h < 8:
-        raise ParameterError(f"--image-size {text}: width and height must be >= 8 pixels")
-    return w, h
 
 
 def _fractions(args: argparse.Namespace) -> tuple[float, float]:
@@ -95,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     _args.at_least("--per-sub-type", args.per_sub_type, 1)
     _args.fraction("--clean-prob", args.clean_prob)
     _args.at_least("--max-questions", args.max_questions, 1)
-    size = _size(args.image_size)
+    size = args.image_size
     fractions = _fractions(args)
     chains = _names(args.degradations)
     for chain in chains or ():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from spacedg.commands.sizes import image_size, pixel_budget
 from spacedg.errors import ParameterError
 
 
@@ -42,9 +43,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                                                         "when available, else cpu)")
     parser.add_argument("--dtype", default="auto", choices=("auto", "float32", "bfloat16", "float16"),
                         help="weights dtype (default auto: bfloat16 on CUDA, float32 on CPU)")
-    parser.add_argument("--min-pixels", type=int, default=None, help="image budget: fewest pixels per image after resizing")
-    parser.add_argument("--max-pixels", type=int, default=None, help="image budget: most pixels per image after resizing")
-    parser.add_argument("--image-size", default=None, help="--scenes only: WxH to render at (default: the views' size)")
+    parser.add_argument("--min-pixels", type=pixel_budget, default=None, help="image budget: fewest pixels per image after resizing")
+    parser.add_argument("--max-pixels", type=pixel_budget, default=None, help="image budget: most pixels per image after resizing")
+    parser.add_argument("--image-size", type=image_size, default=None, help="--scenes only: WxH to render at (default: the views' size)")
     parser.add_argument("--max-questions", type=int, default=None, help="--scenes only: at most N questions")
     parser.add_argument("--seed", type=int, default=0, help="--scenes only: dataset seed (default 0)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -72,7 +73,6 @@ def run(args: argparse.Namespace) -> int:
 
     import os
 
-    from spacedg.commands.export import _size
     from spacedg.data.export import parse_shard, shard_from_env
     from spacedg.eval.predict import bench_source, dataset_source, predict, shard_path
 
@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         from spacedg.data.dataset import SpaceDGDataset
 
-        dataset = SpaceDGDataset(split="bench", scenes=args.scenes, image_size=_size(args.image_size), seed=args.seed,
+        dataset = SpaceDGDataset(split="bench", scenes=args.scenes, image_size=args.image_size, seed=args.seed,
                                  max_questions=args.max_questions)
         source = dataset_source(dataset)
     shard = shard_from_env(os.environ) if args.shard == "env" else parse_shard(args.shard)

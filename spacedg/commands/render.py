@@ -12,10 +12,12 @@ import cv2
 import numpy as np
 
 from spacedg.commands import _args
+from spacedg.commands.sizes import image_side
 from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.limits import MAX_IMAGE_SIDE, check_image_size
 
-#: Largest image side accepted by --width / --height, pixels.
-MAX_SIDE = 16384
+#: Largest image side accepted by --width / --height, pixels (the size policy, :mod:`spacedg.limits`).
+MAX_SIDE = MAX_IMAGE_SIDE
 #: Smallest share of covered pixels (alpha > ½) of a render that is not "empty".
 MIN_COVERAGE = 0.001
 #: Depth PNG unit: millimetres, so uint16 covers 0–65.535 m.
@@ -39,8 +41,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--out", type=Path, help="PNG file to write (8-bit sRGB)")
     render.add_argument("--depth-out", type=Path, default=None,
                         help="also write expected depth as a 16-bit PNG in millimetres (0 = no coverage)")
-    render.add_argument("--width", type=int, default=None, help="render width, pixels (default: the view's)")
-    render.add_argument("--height", type=int, default=None,
+    render.add_argument("--width", type=image_side, default=None, help="render width, pixels (default: the view's)")
+    render.add_argument("--height", type=image_side, default=None,
                         help="render height, pixels (default: the view's; one of the two keeps the aspect ratio)")
     render.add_argument("--defocus", metavar="APERTURE_PX,FOCUS_M", default=None,
                         help="thin-lens defocus: CoC radius in pixels at infinity, focus distance in metres")
@@ -94,6 +96,7 @@ def _size(camera_w: int, camera_h: int, width: int | None, height: int | None) -
         width = max(1, round(camera_w * height / camera_h))
     if height is None:
         height = max(1, round(camera_h * width / camera_w))
+    check_image_size(int(width), int(height), "--width/--height", "render smaller", ParameterError)
     return int(width), int(height)
 
 
@@ -166,6 +169,8 @@ def _render(args: argparse.Namespace) -> int:
     elif args.sub_steps is not None or args.fast_motion:
         raise ParameterError("--sub-steps and --fast-motion apply to motion blur; pass --motion TX,TY,TZ,RX,RY,RZ too")
     backend, _ = resolve_backend(args.backend, args.device)
+    if args.width is not None and args.height is not None:
+        _size(args.width, args.height, args.width, args.height)  # the size policy, before the scene is read
 
     scene = load_scene(args.scene)
     if args.list_views:

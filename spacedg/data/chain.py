@@ -39,6 +39,8 @@ anything. :meth:`Chain.scales_with_depth` says whether a chain needs D.
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -284,6 +286,8 @@ class Chain:
         Raises :class:`ParameterError` (or :class:`UnknownPluginError`) for an unknown name, unknown
         preset, unknown parameter, a value outside its hard limits, or one degradation twice.
         """
+        if scene_depth is not None and not (isinstance(scene_depth, (int, float, np.floating, np.integer)) and math.isfinite(scene_depth) and scene_depth > 0):
+            raise ParameterError(f"scene_depth must be a finite positive number of metres, got {scene_depth!r}")
         resolved: list[ResolvedDegradation] = []
         seen: set[str] = set()
         for choice in self.choices(mixture_preset):

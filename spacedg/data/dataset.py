@@ -28,10 +28,9 @@ renders them.
 - **Workers**: the dataset object holds only paths and small records, so it pickles cheaply.
   Scenes load lazily inside each worker into a byte-bounded LRU cache. Construction never
   renders (indexes are built in a separate Python process), so no numba or CUDA state exists
-  before a DataLoader forks. If the main process renders first (``dataset[0]`` before the
-  DataLoader), forked workers cannot use numba's OpenMP threads: the worker raises a clear
-  error asking for ``multiprocessing_context="forkserver"`` (or GNU OpenMP kills it before it
-  gets there: "worker exited unexpectedly"). With ``forkserver`` it works.
+  before a DataLoader forks. Rendering in the main process first (``dataset[0]`` before the
+  DataLoader) is fine too: a worker forked after numba's OpenMP threads started runs
+  spacedg's kernels serially (:mod:`spacedg.render.threads`) and gives the same bytes.
 - **Bench split**: ``severity`` does not apply (the protocol is the ``bench`` preset); use
   ``degradations=["haze:3", ...]`` for other levels. With several workers, batch sizes that
   are multiples of ``len(chains) + 1`` keep a question's variants in one worker, where they
@@ -158,7 +157,6 @@ class SpaceDGDataset(Dataset):
         # shared memory: set_epoch() in the main process reaches persistent DataLoader workers
         self._epoch = torch.zeros((), dtype=torch.int64).share_memory_()
         self._cache_bytes = int(cache)
-        self._checked_pid = -1  # the process whose fork safety was checked (forked workers inherit it)
         self._scenes: ByteLRU | None = None  # created lazily in each worker
 
     # ------------------------------------------------------------ construction
@@ -254,27 +252,7 @@ class SpaceDGDataset(Dataset):
         folder = self.scene_dirs[scene_id]
         return self._cache().get(("scene", scene_id), lambda: load_scene(folder))
 
-    def _check_fork_safety(self) -> None:
-        """In a DataLoader worker, fail clearly if it was forked from a process whose numba
-        OpenMP threads were running (GNU OpenMP is not fork-safe: the worker would abort)."""
-        self._checked_pid = os.getpid()
-        if torch.utils.data.get_worker_info() is None:
-            return
-        try:
-            import numba
-            from numba.np.ufunc import parallel
-        except ImportError:  # pragma: no cover - numba is a dependency
-            return
-        if getattr(parallel, "_is_initialized", False) and numba.threading_layer() == "omp":
-            raise ParameterError(
-                "this DataLoader worker was forked after the main process had rendered (numba's OpenMP threads were "
-                "running), which is not fork-safe. Create the DataLoader with multiprocessing_context='forkserver' "
-                "(or 'spawn'); the dataset pickles small. Or set NUMBA_THREADING_LAYER=workqueue before importing spacedg"
-            )
-
     def __getitem__(self, index: int) -> dict[str, Any]:
-        if self._checked_pid != os.getpid():
-            self._check_fork_safety()
         record, chain, name = self.plan(index)
         scene = self._scene(record.scene_id)
         result = degrade(scene, record.views, chain, seed=self._sample_seed(record, name), options=self.options, render_cache=self._cache())
@@ -300,37 +278,7 @@ class SpaceDGDataset(Dataset):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_scenes"] = None  # each worker builds its own cache
-        state["_checked_pid"] = -1
         return state
-
-
-_FORK_HINT = (
-    "spacedg: this process forks (e.g. DataLoader workers) after numba's OpenMP threads started rendering; "
-    "GNU OpenMP is not fork-safe, so the children may fail. Use DataLoader(..., multiprocessing_context='forkserver')."
-)
-_fork_warned = False
-
-
-def _warn_before_unsafe_fork() -> None:
-    """``os.register_at_fork`` hook: say why forked workers may die, once, on stderr."""
-    global _fork_warned
-    if _fork_warned:
-        return
-    try:
-        import numba
-        from numba.np.ufunc import parallel
-
-        unsafe = bool(getattr(parallel, "_is_initialized", False)) and numba.threading_layer() == "omp"
-    except Exception:  # noqa: BLE001 - a warning hook must never break a fork
-        return
-    if unsafe:
-        _fork_warned = True
-        import sys
-
-        sys.stderr.write(_FORK_HINT + "\n")
-
-
-os.register_at_fork(before=_warn_before_unsafe_fork)
 
 
 def _spread_subset(records: list[QARecord], n: int, seed: int) -> list[QARecord]:

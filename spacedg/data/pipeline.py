@@ -52,7 +52,8 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from spacedg.data.chain import Chain, ResolvedDegradation
-from spacedg.errors import ParameterError, PluginError
+from spacedg.errors import InvalidDataError, ParameterError, PluginError
+from spacedg.limits import check_image_size
 from spacedg.plugins.degradations.common import check_display_image, surface_far_depth
 from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.specs import Stage
@@ -85,7 +86,8 @@ class PipelineOptions:
         default_preset: preset for degradations named without one (``"bench"`` = the paper's table).
         mixture_preset: preset of the auxiliary degradations of a mixture recipe.
         motion: ``"fast"`` (renderer's fast sub-step choice) or ``"reference"`` (exact ``sub_steps``).
-        image_size: ``(width, height)`` to render at (intrinsics scaled), or ``None`` for the views' own.
+        image_size: ``(width, height)`` to render at (intrinsics scaled), or ``None`` for the views' own;
+            within the size policy of :mod:`spacedg.limits`.
         backend, device, settings: passed to :func:`spacedg.render.render`.
     """
 
@@ -105,6 +107,7 @@ class PipelineOptions:
             if len(size) != 2 or any(isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1 for v in size):
                 raise ParameterError(f"PipelineOptions.image_size must be (width, height) positive integers, got {self.image_size!r}")
             object.__setattr__(self, "image_size", (int(size[0]), int(size[1])))
+            check_image_size(*self.image_size, "PipelineOptions.image_size", "render smaller", ParameterError)
 
 
 @dataclass
@@ -219,13 +222,34 @@ def _render_group(
     return frames
 
 
+def _first_non_finite(image: np.ndarray) -> str | None:
+    """``None`` if every value of ``image`` is finite, else how many are not and where the first is.
+
+    A float64 sum is the fast test (NaN and ±inf survive it; finite float32 values cannot
+    overflow it); the full scan runs only to describe a failure.
+    """
+    if np.isfinite(np.sum(image, dtype=np.float64)):
+        return None
+    bad = ~np.isfinite(image)
+    first = tuple(int(i) for i in np.argwhere(bad)[0])
+    return f"{int(bad.sum())} of {image.size} values are NaN or ±inf (first at (row, column, channel) {first}: {image[first]})"
+
+
 def _run_linear(rgb: np.ndarray, aux: Mapping[str, Any], steps: Sequence[ResolvedDegradation], index: int) -> np.ndarray:
+    """Run the linear-light chain; every step must return finite float32 light of the input's shape."""
     for step in steps:
         with plugin_call("degradation", step.spec, "apply"):
             out = step.spec.apply(rgb, aux, step.params, step.view_rng(index))
         if not isinstance(out, np.ndarray) or out.dtype != np.float32 or out.shape != rgb.shape:
             got = f"{out.dtype} {out.shape}" if isinstance(out, np.ndarray) else type(out).__name__
             raise PluginError(f"linear degradation {step.name!r} must return float32 {rgb.shape}, got {got}")
+        problem = _first_non_finite(out)
+        if problem is not None:
+            raise PluginError(
+                f"linear degradation {step.name!r} (params {step.params}) returned non-finite light: {problem}; "
+                "a linear-stage degradation must return finite values (it would be encoded as black pixels). "
+                "Fix the plugin, or report it with these parameters and the seed"
+            )
         rgb = out
     return rgb
 
@@ -321,6 +345,13 @@ def degrade_variants(
         t0 = time.perf_counter()
         frames = _render_group(scene, cameras, raster, needs, options, views, render_cache)
         render_ms = (time.perf_counter() - t0) * 1e3
+        for view, frame in zip(views, frames):
+            problem = _first_non_finite(frame.rgb)
+            if problem is not None:  # a renderer bug: never write it out as black pixels
+                raise InvalidDataError(
+                    f"scene {scene.id}, view {view!r}: the render holds non-finite light: {problem}; "
+                    "please report this with the scene and the chain"
+                )
         far_depth = max(surface_far_depth(f.depth, f.alpha) for f in frames) if "depth" in needs else None
         for i in members:
             chain = resolved[i]
@@ -356,6 +387,44 @@ def frames_nbytes(frames: Sequence[Frame]) -> int:
     return total
 
 
+def _image_input(value: Any, shape: tuple[int, ...], name: str, rule: str) -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=np.float32)
+    except (TypeError, ValueError) as err:
+        raise InvalidDataError(f"degrade_image: {name} must be a numeric (H, W) array ({rule}), got {type(value).__name__}: {err}") from None
+    if array.shape != tuple(shape):
+        raise InvalidDataError(f"degrade_image: {name} has shape {array.shape}, but the image is {tuple(shape)}; pass one value per pixel ({rule})")
+    return array
+
+
+def _depth_input(depth: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """``depth`` as float32 (H, W); negative values (−inf included) are refused, 0 / NaN / +inf mean no surface."""
+    rule = "metres along the optical axis, >= 0; 0, NaN or +inf = no surface"
+    array = _image_input(depth, shape, "depth", rule)
+    negative = array < 0
+    if negative.any():
+        first = tuple(int(i) for i in np.argwhere(negative)[0])
+        raise InvalidDataError(
+            f"degrade_image: depth holds {int(negative.sum())} negative value(s) (first at (row, column) {first}: {array[first]}); "
+            f"depth is {rule}. Fix the depth map (a disparity or an inverted sign?)"
+        )
+    return array
+
+
+def _alpha_input(alpha: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """``alpha`` as float32 (H, W) in [0, 1] (NaN refused)."""
+    rule = "coverage in [0, 1]"
+    array = _image_input(alpha, shape, "alpha", rule)
+    bad = ~((array >= 0) & (array <= 1))
+    if bad.any():
+        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise InvalidDataError(
+            f"degrade_image: alpha holds {int(bad.sum())} value(s) outside [0, 1] or NaN (first at (row, column) {first}: {array[first]}); "
+            "alpha is the pixel's coverage in [0, 1]"
+        )
+    return array
+
+
 def degrade_image(
     image: np.ndarray,
     degradations: Any,
@@ -374,8 +443,11 @@ def degrade_image(
         degradations: one chain (see :class:`~spacedg.data.chain.Chain`); raster-stage degradations are refused
             (they change how the scene is rendered, which needs the Gaussians).
         seed: the sample's seed.
-        depth, alpha: (H, W) metric depth (metres) and coverage for depth-hungry degradations
-            such as haze; alpha defaults to 1 (every pixel a surface).
+        depth, alpha: (H, W) metric depth (metres along the optical axis, >= 0) and coverage in
+            [0, 1] for depth-hungry degradations such as haze. A depth of 0, NaN or +inf means
+            "no surface" (haze gives it the far depth's airlight, as for a render's empty pixels);
+            a negative depth is refused. alpha defaults to 1 where the depth is a surface and 0
+            where it is not.
         scene_depth: the scene depth (metres) depth-relative presets are resolved at; default:
             the median of ``depth`` where covered, else the reference depth (2 m).
 
@@ -385,11 +457,16 @@ def degrade_image(
     from spacedg.render.colour_cpu import decode_srgb, encode_srgb_u8  # numba: compiled on first use
 
     image = check_display_image(image, "degrade_image")
+    aux: dict[str, Any] = {}
+    if depth is not None:
+        aux["depth"] = _depth_input(depth, image.shape[:2])
+        surface = np.isfinite(aux["depth"]) & (aux["depth"] > 0)
+        aux["alpha"] = surface.astype(np.float32) if alpha is None else _alpha_input(alpha, image.shape[:2])
+    elif alpha is not None:
+        raise ParameterError("degrade_image: alpha without depth means nothing to any degradation; pass depth= too (metres)")
     if scene_depth is None and depth is not None:
-        d = np.asarray(depth, dtype=np.float64)
-        cover = np.ones(d.shape, bool) if alpha is None else np.asarray(alpha) > 0.5
-        ok = cover & np.isfinite(d) & (d > 0)
-        scene_depth = float(np.median(d[ok])) if np.any(ok) else None
+        covered = np.isfinite(aux["depth"]) & (aux["depth"] > 0) & (aux["alpha"] > 0.5)
+        scene_depth = float(np.median(aux["depth"][covered])) if np.any(covered) else None
     parsed = Chain.parse(degradations)
     chain = parsed.resolve(seed, default_preset, mixture_preset, scene_depth if parsed.scales_with_depth(default_preset, mixture_preset) else None)
     raster = _by_stage(chain, Stage.RASTER)
@@ -400,10 +477,6 @@ def degrade_image(
         )
     linear, display = _by_stage(chain, Stage.LINEAR), _by_stage(chain, Stage.DISPLAY)
     if linear:
-        aux: dict[str, Any] = {}
-        if depth is not None:
-            aux["depth"] = np.asarray(depth, dtype=np.float32)
-            aux["alpha"] = np.ones(image.shape[:2], np.float32) if alpha is None else np.asarray(alpha, dtype=np.float32)
         rgb = decode_srgb(image.astype(np.float32) / np.float32(255.0))
         image = encode_srgb_u8(_run_linear(rgb, aux, linear, 0))
     return _run_display(image, display, 0), [step.provenance() for step in chain]

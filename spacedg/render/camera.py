@@ -26,8 +26,9 @@ from typing import Any
 import numpy as np
 
 from spacedg._checks import finite_float, require_homogeneous, require_rotation
-from spacedg.render.gaussians import quat_from_matrix
 from spacedg.errors import InvalidDataError
+from spacedg.limits import check_image_size
+from spacedg.render.gaussians import quat_from_matrix
 
 _SOURCE = "Camera"
 
@@ -118,7 +119,8 @@ class Camera:
     Attributes:
         fx, fy: focal lengths, pixels (> 0).
         cx, cy: principal point, pixels (pixel centres at +0.5).
-        width, height: image size, pixels.
+        width, height: image size, pixels, within the size policy of :mod:`spacedg.limits`
+            (at most 16384 a side and 2²⁵ pixels in all).
         cam_to_world: (4, 4) rigid transform, OpenCV camera axes, metres.
         fisheye: ``None`` for a pinhole camera, else the equidistant lens.
     """
@@ -142,6 +144,10 @@ class Camera:
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or int(value) < 1:
                 raise InvalidDataError(f"{_SOURCE}: {name} must be a positive integer number of pixels, got {value!r}")
             object.__setattr__(self, name, int(value))
+        check_image_size(
+            self.width, self.height, _SOURCE,
+            "resize the camera (scale fx, fy, cx, cy with width and height, e.g. Camera.resized) or render smaller",
+        )
         pose = np.array(self.cam_to_world, dtype=np.float64)
         if pose.shape != (4, 4):
             raise InvalidDataError(f"{_SOURCE}: cam_to_world must be 4×4, got shape {pose.shape}")

@@ -21,6 +21,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from spacedg.render.threads import fork_safe
+
 __all__ = ["decode_srgb", "encode_srgb_u8", "encode_thresholds"]
 
 _DECODE_BINS = 4096
@@ -58,6 +60,7 @@ def _tables() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 _DECODE_LUT, _ENCODE_BASE, _ENCODE_NEXT, _THRESHOLDS = _tables()
 
 
+@fork_safe
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _decode_kernel(flat: np.ndarray, lut: np.ndarray, out: np.ndarray) -> None:
     scale = (lut.shape[0] - 1) / (1.0 - _TOE)
@@ -76,6 +79,7 @@ def _decode_kernel(flat: np.ndarray, lut: np.ndarray, out: np.ndarray) -> None:
             out[i] = ((x + 0.055) / 1.055) ** 2.4
 
 
+@fork_safe
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _encode_kernel(flat: np.ndarray, base: np.ndarray, nxt: np.ndarray, out: np.ndarray) -> None:
     n_bins = base.shape[0]

@@ -1,9 +1,10 @@
 """One composite of a set of Gaussians for one camera (no camera motion), and its :class:`Frame`.
 
 :func:`composite_view` projects and composites on the compiled CPU path (numba tiles) or the
-torch path and returns numpy images (the colour still sRGB-encoded, as 3DGS stores it);
-:func:`frame_from_images` decodes the colour to linear light and masks pixels outside a fisheye
-image circle (:func:`lens_valid_mask`). :func:`spacedg.render.render` and the motion-blur path
+torch path and returns numpy images, the colour decoded to linear light (3DGS mixes
+sRGB-encoded colour; under defocus the mix of :mod:`spacedg.render.defocus`);
+:func:`frame_from_images` wraps them and masks pixels outside a fisheye image circle
+(:func:`lens_valid_mask`). :func:`spacedg.render.render` and the motion-blur path
 (:mod:`spacedg.render.motion`) both build on these two.
 """
 
@@ -54,55 +55,76 @@ def composite_view(
     settings: RasterSettings,
     defocus: Defocus | None,
 ) -> tuple[dict[str, np.ndarray], dict[str, float]]:
-    """One render (no camera motion): sRGB-encoded composite plus depth/id images, as numpy arrays."""
+    """One render (no camera motion) as numpy arrays; ``rgb`` is **linear** light.
+
+    Without blur the composite is the sRGB-encoded mix of 3DGS, decoded once here; under
+    defocus with anything blurred, the two passes of :mod:`spacedg.render.defocus`.
+    """
     want_color = "rgb" in outputs
     want_depth = "depth" in outputs
     want_ids = "median_depth" in outputs or "instance_ids" in outputs
     stats: dict[str, float] = {}
     t0 = time.perf_counter()
+    tight = settings.tight_tiles and settings.opacity_extent
     if backend == "cpu":
+        from spacedg.render import defocus as defocus_model
         from spacedg.render import project_cpu, raster_cpu  # numba kernels: compiled on first render, not with spacedg
+        from spacedg.render.colour_cpu import decode_srgb
 
+        ids = gaussians.instance_ids if gaussians.instance_ids is not None else np.full(len(gaussians), -1, np.int32)
         packed, rects = project_cpu.project_view(gaussians, camera, settings, defocus, want_color)
         t1 = time.perf_counter()
-        ids = gaussians.instance_ids if gaussians.instance_ids is not None else np.full(len(gaussians), -1, np.int32)
-        images = raster_cpu.rasterize(
-            packed, rects, ids, camera.width, camera.height, settings.alpha_max,
-            want_color, want_depth, want_ids, settings.tight_tiles and settings.opacity_extent,
-        )
+        if defocus is not None and defocus_model.has_blur(packed, rects):
+            images = defocus_model.render_cpu(
+                gaussians, camera, settings, packed, rects, ids, want_color, want_depth, want_ids
+            )
+        else:
+            images = raster_cpu.rasterize(
+                packed, rects, ids, camera.width, camera.height, settings.alpha_max,
+                want_color, want_depth, want_ids, tight,
+            )
+            if want_color:
+                images["rgb"] = decode_srgb(images["rgb"])
         stats["visible"] = int(images.pop("n_visible"))
         stats["pairs"] = int(images.pop("n_pairs"))
     else:
         import torch  # heavy: only the torch backend needs it
 
-        from spacedg.render import project, raster_torch
+        from spacedg.render import defocus_torch, project, raster_torch
+        from spacedg.render.colour_cpu import decode_srgb
 
         gs = project.GaussianTensors.of(gaussians, device, torch.float32)
         with torch.no_grad():
             proj = project.project(gs, camera, settings, defocus, want_color)
             t1 = time.perf_counter()
-            offsets, gauss = raster_torch.bin_tiles(proj, camera.width, camera.height, settings.tight_tiles and settings.opacity_extent)
-            result = raster_torch.composite(
-                proj, offsets, gauss, gs.instance_ids, camera.width, camera.height, settings.alpha_max,
-                want_color, want_depth, want_ids,
-            )
+            blurred = defocus is not None and defocus_torch.has_blur(proj)
+            if blurred:
+                result = defocus_torch.render_torch(gs, camera, settings, proj, want_color, want_depth, want_ids)
+                stats["pairs"] = int(result.pop("n_pairs"))
+            else:
+                offsets, gauss = raster_torch.bin_tiles(proj, camera.width, camera.height, tight)
+                result = raster_torch.composite(
+                    proj, offsets, gauss, gs.instance_ids, camera.width, camera.height, settings.alpha_max,
+                    want_color, want_depth, want_ids,
+                )
+                stats["pairs"] = int(gauss.numel())
         images = {k: v.cpu().numpy() for k, v in result.items()}
+        if want_color and blurred:
+            images["rgb"] = decode_srgb(images.pop("enc")) + images.pop("lin")
+        elif want_color:
+            images["rgb"] = decode_srgb(images["rgb"])
         stats["visible"] = int(proj.visible.sum())
-        stats["pairs"] = int(gauss.numel())
     t2 = time.perf_counter()
     stats["project_ms"] = (t1 - t0) * 1e3
     stats["raster_ms"] = (t2 - t1) * 1e3
     return images, stats
 
 
-def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: frozenset[str], linear_rgb: bool = False) -> Frame:
-    """Wrap composite images into a :class:`Frame` (decoding sRGB unless ``linear_rgb``), masking the lens."""
+def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: frozenset[str]) -> Frame:
+    """Wrap composite images (``rgb`` in linear light, as :func:`composite_view` returns it) into a
+    :class:`Frame`, masking pixels outside a fisheye image circle."""
     valid = lens_valid_mask(camera)
     rgb = images.get("rgb") if "rgb" in wanted else None
-    if rgb is not None and not linear_rgb:
-        from spacedg.render.colour_cpu import decode_srgb  # numba: imported on first render, not with spacedg
-
-        rgb = decode_srgb(rgb)
     frame = Frame(
         rgb=rgb,
         alpha=images["alpha"],

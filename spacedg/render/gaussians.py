@@ -8,9 +8,10 @@ Conventions (the whole engine uses these; readers convert file conventions once)
   (activated: ``exp`` already applied to the log-scales of 3DGS files).
 - ``opacities``  (N,)   float32 in [0, 1] (activated: ``sigmoid`` already applied).
 - ``sh``         (N, K, 3) float32 SH coefficients per colour channel, K = (degree+1)²,
-  degree 0–3, ordered as in the original 3DGS code. The colour seen along unit direction
-  ``d`` (from the camera centre to the Gaussian) is ``0.5 + Σ_k sh[:, k] · Y_k(d)``; the
-  renderer clamps it at 0. For a degree-0 scene that is ``0.5 + SH_C0 · sh[:, 0]``.
+  degree 0–3, ordered as in the original 3DGS code, each within ±:data:`SH_MAX`. The colour
+  seen along unit direction ``d`` (from the camera centre to the Gaussian) is
+  ``0.5 + Σ_k sh[:, k] · Y_k(d)``; the renderer clamps it at 0. For a degree-0 scene that is
+  ``0.5 + SH_C0 · sh[:, 0]``.
 - ``instance_ids`` (N,) int32, the :class:`~spacedg.scene.model.Instance` id a Gaussian
   belongs to, or -1 for none (walls, clutter). Optional.
 
@@ -55,6 +56,12 @@ _SH_C3 = (
 SH_COEFFS = {0: 1, 1: 4, 2: 9, 3: 16}
 #: Tolerance on | ||q|| - 1 | for a quaternion to count as unit (float32 data).
 QUAT_UNIT_TOL = 1e-4
+#: Largest |SH coefficient| accepted. The colour ``0.5 + Σ sh·Y`` then stays below ~10⁵
+#: (sRGB-encoded; |Y_k| < 0.6 for the 16 basis functions), i.e. at most ~10¹² × diffuse white
+#: in linear light (the sun's disc is ~10⁷ × white paper): every stage after the render
+#: (exposure gains, noise, haze) stays finite in float32. A larger coefficient is a corrupt
+#: file, not light, and is refused with the file and field named rather than rendered as NaN.
+SH_MAX = 1e4
 
 
 def sh_degree_of(num_coeffs: int) -> int:
@@ -232,7 +239,10 @@ class Gaussians:
     Construction validates everything and raises :class:`InvalidDataError` naming the
     ``source`` (a file path or ``"<memory>"``), the field, the number of bad entries and the
     first bad index: NaN/Inf, zero or non-unit quaternions, negative scales, opacities outside
-    [0, 1], instance ids below -1, mismatched lengths, an SH count that is not a degree 0–3.
+    [0, 1], SH coefficients beyond ±:data:`SH_MAX`, instance ids below -1, mismatched lengths,
+    an SH count that is not a degree 0–3. Any finite non-negative scale is accepted: both
+    render backends project covariances in float64, so a Gaussian metres or light-years wide
+    covers the view the same way in both.
     """
 
     means: np.ndarray
@@ -303,6 +313,11 @@ class Gaussians:
         require_range(
             self.scales, 0.0, None, "scales", src,
             "Scales are activated standard deviations in metres; log-scales from a 3DGS file must be exponentiated (read_ply does this).",
+        )
+        require_range(
+            self.sh, -SH_MAX, SH_MAX, "sh", src,
+            f"SH coefficients (f_dc_*, f_rest_* in a 3DGS PLY) beyond ±{SH_MAX:g} would be light brighter than "
+            "10¹² × diffuse white: the file is corrupt or not 3DGS data; repair or drop those Gaussians.",
         )
         require_range(
             self.opacities, 0.0, 1.0, "opacities", src,

@@ -105,8 +105,6 @@ def render_motion(
     defocus: Defocus | None,
 ) -> Frame:
     """Render a motion-blurred frame (see the module docstring)."""
-    from spacedg.render.colour_cpu import decode_srgb  # numba: compiled on first render, not with spacedg
-
     t0 = time.perf_counter()
     translation, rotation = np.array(motion.translation), np.array(motion.rotation)
     if motion.fast:
@@ -128,7 +126,7 @@ def render_motion(
         pairs += stats["pairs"]
         alpha += images["alpha"]
         if rgb is not None:
-            rgb += decode_srgb(images["rgb"])
+            rgb += images["rgb"]
         if depth_sum is not None:
             depth_sum += images["depth"] * images["alpha"]
     images = {"alpha": (alpha / count).astype(np.float32)}
@@ -139,7 +137,7 @@ def render_motion(
     if wanted & {"median_depth", "instance_ids"}:
         sharp, _ = composite_view(gaussians, camera, frozenset({"instance_ids"}), backend, device, settings, defocus)
         images["median_depth"], images["instance_ids"] = sharp["median_depth"], sharp["instance_ids"]
-    frame = frame_from_images(images, camera, wanted, linear_rgb=True)
+    frame = frame_from_images(images, camera, wanted)
     frame.stats = {
         "sub_steps": count,
         "displacement_px": displacement,

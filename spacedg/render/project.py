@@ -16,7 +16,7 @@ import torch
 
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians, quat_to_matrix, sh_basis
-from spacedg.render.settings import ALPHA_MIN, TILE_SIZE, Defocus, RasterSettings
+from spacedg.render.settings import ALPHA_MIN, FOOTPRINT_CAP, TILE_SIZE, Defocus, RasterSettings
 
 _TENSOR_CACHE: "weakref.WeakKeyDictionary[Gaussians, dict]" = weakref.WeakKeyDictionary()
 
@@ -63,6 +63,8 @@ class Projected:
         depths: (N,) camera z, metres.
         radii: (N, 2) int32 footprint half-extent in pixels; (0, 0) = culled.
         rects: (N, 4) int32 tile rectangle ``x0, x1, y0, y1`` (exclusive ends).
+        coc: (N,) defocus circle-of-confusion radius, pixels (0 = sharp; all 0 without defocus;
+            ``None`` in records built by hand).
     """
 
     means2d: torch.Tensor
@@ -73,6 +75,7 @@ class Projected:
     radii: torch.Tensor
     rects: torch.Tensor
     alpha_floor: torch.Tensor
+    coc: torch.Tensor | None = None
 
     @property
     def visible(self) -> torch.Tensor:
@@ -85,15 +88,16 @@ def quat_scale_to_covariance(quats: torch.Tensor, scales: torch.Tensor) -> torch
     return m @ m.transpose(-1, -2)
 
 
-def pinhole_jacobian(cam: torch.Tensor, camera: Camera) -> torch.Tensor:
+def pinhole_jacobian(cam: torch.Tensor, camera: Camera, reach: float = 0.0) -> torch.Tensor:
     """(N, 2, 3) Jacobian of ``(fx x/z + cx, fy y/z + cy)``, x/z and y/z clamped to the frustum
-    widened by 0.3·tan(fov/2) (as gsplat, so off-screen Gaussians do not explode)."""
+    widened by 0.3·tan(fov/2) (as gsplat, so off-screen Gaussians do not explode) and by
+    ``reach`` pixels (how far a blurred footprint reaches into the view under defocus)."""
     x, y, z = cam.unbind(-1)
     fx, fy, cx, cy, w, h = camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height
-    lim_x_pos = (w - cx) / fx + 0.3 * (0.5 * w / fx)
-    lim_x_neg = cx / fx + 0.3 * (0.5 * w / fx)
-    lim_y_pos = (h - cy) / fy + 0.3 * (0.5 * h / fy)
-    lim_y_neg = cy / fy + 0.3 * (0.5 * h / fy)
+    lim_x_pos = (w - cx + reach) / fx + 0.3 * (0.5 * w / fx)
+    lim_x_neg = (cx + reach) / fx + 0.3 * (0.5 * w / fx)
+    lim_y_pos = (h - cy + reach) / fy + 0.3 * (0.5 * h / fy)
+    lim_y_neg = (cy + reach) / fy + 0.3 * (0.5 * h / fy)
     tx = z * torch.clamp(x / z, -lim_x_neg, lim_x_pos)
     ty = z * torch.clamp(y / z, -lim_y_neg, lim_y_pos)
     zero = torch.zeros_like(z)
@@ -138,6 +142,11 @@ def fisheye_jacobian(cam: torch.Tensor, camera: Camera) -> tuple[torch.Tensor, t
     return uv, jac, theta
 
 
+def _wide_dtype(dtype: torch.dtype, device: torch.device) -> torch.dtype:
+    """float64 for the covariance algebra where the device has it (Apple's MPS has not)."""
+    return dtype if device.type == "mps" else torch.float64
+
+
 def project(
     gs: GaussianTensors,
     camera: Camera,
@@ -145,8 +154,16 @@ def project(
     defocus: Defocus | None = None,
     want_color: bool = True,
 ) -> Projected:
-    """Project every Gaussian into ``camera`` (see the module docstring of ``project_cpu``)."""
+    """Project every Gaussian into ``camera`` (see the module docstring of ``project_cpu``).
+
+    Means and colours are computed in the tensors' dtype; the covariances (3D, 2D, their
+    determinants, the compensations and conics) in float64, as the compiled path does: a
+    Gaussian kilometres wide seen from close by has a 2D covariance whose determinant
+    overflows float32 (its conic would be NaN and the Gaussian culled), and both paths must
+    render it the same way.
+    """
     dtype, device = gs.means.dtype, gs.means.device
+    wide = _wide_dtype(dtype, device)
     view = torch.tensor(camera.world_to_cam, dtype=dtype, device=device)
     rot, trans = view[:3, :3], view[:3, 3]
     cam = gs.means @ rot.T + trans
@@ -154,28 +171,35 @@ def project(
     in_range = (z > settings.near) & (z < settings.far)
     # keep the maths finite for culled entries: project them as if at z = 1
     cam_safe = torch.where(in_range[:, None], cam, torch.tensor([0.0, 0.0, 1.0], dtype=dtype, device=device))
-    cov_cam = rot @ quat_scale_to_covariance(gs.quats, gs.scales) @ rot.T
+    rot_w = rot.to(wide)
+    cov_cam = rot_w @ quat_scale_to_covariance(gs.quats.to(wide), gs.scales.to(wide)) @ rot_w.T
     if camera.fisheye is None:
         zs = cam_safe[:, 2:3]
         means2d = cam_safe[:, :2] / zs * torch.tensor([camera.fx, camera.fy], dtype=dtype, device=device) + torch.tensor(
             [camera.cx, camera.cy], dtype=dtype, device=device
         )
-        jac = pinhole_jacobian(cam_safe, camera)
+        reach = 0.0
+        if defocus is not None and defocus.aperture > 0:
+            reach = float(defocus.max_radius) * (settings.defocus_extent if settings.defocus_extent is not None else 3.33)
+        jac = pinhole_jacobian(cam_safe, camera, reach)
         lens_ok = torch.ones_like(in_range)
     else:
         means2d, jac, theta = fisheye_jacobian(cam_safe, camera)
         lens_ok = theta <= camera.fisheye.effective_max_theta
+    jac = jac.to(wide)
     cov2d = jac @ cov_cam @ jac.transpose(-1, -2)
     sxx, sxy, syy = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
     det_raw = sxx * syy - sxy * sxy
     sxx, syy = sxx + settings.eps2d, syy + settings.eps2d
     det = sxx * syy - sxy * sxy
-    opacity = gs.opacities
+    opacity = gs.opacities.to(wide)
     alpha_floor = torch.full_like(opacity, ALPHA_MIN)
+    coc = torch.zeros_like(opacity)
     if settings.antialiased:
         opacity = opacity * torch.sqrt(torch.clamp(det_raw / det, min=0.0))
     if defocus is not None and defocus.aperture > 0:
-        coc = torch.clamp(defocus.aperture * torch.abs(cam_safe[:, 2] - defocus.focus) / cam_safe[:, 2], max=defocus.max_radius)
+        z_w = cam_safe[:, 2].to(wide)
+        coc = torch.clamp(defocus.aperture * torch.abs(z_w - defocus.focus) / z_w, max=defocus.max_radius)
         sxx, syy = sxx + coc * coc, syy + coc * coc
         det_blur = sxx * syy - sxy * sxy
         compensation = torch.sqrt(torch.clamp(det / det_blur, min=0.0))
@@ -196,8 +220,9 @@ def project(
     else:
         opaque_enough = torch.ones_like(in_range)
         extent = torch.full_like(opacity, 3.33)
-    radii = torch.stack([torch.ceil(extent * torch.sqrt(sxx)), torch.ceil(extent * torch.sqrt(syy))], dim=-1)
+    radii = torch.ceil(torch.clamp(torch.stack([extent * torch.sqrt(sxx), extent * torch.sqrt(syy)], dim=-1), max=FOOTPRINT_CAP))
     finite = torch.isfinite(means2d).all(-1) & torch.isfinite(conics).all(-1) & torch.isfinite(radii).all(-1)
+    finite = finite & torch.isfinite(det) & torch.isfinite(opacity)
     on_screen = (
         (means2d[:, 0] + radii[:, 0] > 0) & (means2d[:, 0] - radii[:, 0] < camera.width)
         & (means2d[:, 1] + radii[:, 1] > 0) & (means2d[:, 1] - radii[:, 1] < camera.height)
@@ -205,9 +230,9 @@ def project(
     keep = in_range & lens_ok & opaque_enough & finite & on_screen & (radii > 0).all(-1)
     tiles_x = (camera.width + TILE_SIZE - 1) // TILE_SIZE
     tiles_y = (camera.height + TILE_SIZE - 1) // TILE_SIZE
-    lo = torch.floor((means2d - radii) / TILE_SIZE)
-    hi = torch.ceil((means2d + radii) / TILE_SIZE)
-    limits = torch.tensor([tiles_x, tiles_y], dtype=dtype, device=device)
+    lo = torch.floor((means2d.to(wide) - radii) / TILE_SIZE)
+    hi = torch.ceil((means2d.to(wide) + radii) / TILE_SIZE)
+    limits = torch.tensor([tiles_x, tiles_y], dtype=wide, device=device)
     lo = torch.minimum(torch.clamp(torch.nan_to_num(lo), min=0), limits)
     hi = torch.minimum(torch.clamp(torch.nan_to_num(hi), min=0), limits)
     keep = keep & (hi > lo).all(-1)
@@ -221,4 +246,7 @@ def project(
         degree = int(round(math.sqrt(gs.sh.shape[1]))) - 1
         basis = sh_basis(degree, dirs)
         colors = torch.clamp(torch.einsum("nk,nkc->nc", basis, gs.sh) + 0.5, min=0.0)
-    return Projected(means2d, conics, opacity, colors, z, radii, rects, alpha_floor)
+    return Projected(
+        means2d, conics.to(dtype), opacity.to(dtype), colors, z, radii, rects, alpha_floor.to(dtype),
+        torch.where(keep, coc, torch.zeros_like(coc)).to(dtype),
+    )

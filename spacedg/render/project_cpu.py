@@ -6,21 +6,24 @@ against gsplat's torch reference and against float64 finite differences):
 1. world → camera (OpenCV axes); cull ``z <= near`` or ``z >= far``.
 2. 3D covariance ``Σ = R S Sᵀ Rᵀ`` from the wxyz quaternion and scales, rotated into the camera.
 3. 2D covariance ``J Σ Jᵀ`` with the exact Jacobian ``J`` of the lens map at the mean:
-   pinhole (x/z, y/z clamped to the frustum widened by 0.3·tan(fov/2), as gsplat), or
+   pinhole (x/z, y/z clamped to the frustum widened by 0.3·tan(fov/2), as gsplat, and under
+   defocus also by the reach of the widest blurred footprint, ``defocus_extent · max_radius``
+   px: a Gaussian outside the view whose blur reaches into it needs its true footprint), or
    equidistant fisheye with k1..k4 (rays beyond the lens's effective max θ are culled).
 4. ``+ eps2d·I`` dilation; optional antialiasing compensation; optional defocus
    (``+ r_CoC²·I`` with the sqrt-det opacity compensation taken after the dilation).
 5. alpha floor ``f = 1/255``, times the defocus compensation under defocus (a blurred
    Gaussian then keeps the same fraction of its energy as the sharp one; with a fixed 1/255
    a small Gaussian spread over a large CoC would lose its tails or vanish); cull
-   ``opacity < f``; footprint radius ``ceil(extent·sqrt(Σ_ii))`` per axis with
+   ``opacity < f``; footprint radius ``ceil(extent·sqrt(Σ_ii))`` per axis (capped at
+   ``FOOTPRINT_CAP`` = 2³⁰ px) with
    ``extent = min(3.33, sqrt(2 ln(o / f)))``; cull footprints outside the image. A defocused
    Gaussian (CoC > 1 px) is truncated at ``settings.defocus_extent`` σ instead, its opacity
    divided by the mass kept (``f = max(f, o e^(−E²/2))``), so its energy is unchanged.
 6. colour from SH along the camera-centre → mean direction, ``max(0, 0.5 + Σ sh·Y)``.
 
 Everything is computed in float64 and stored in float32. The result is a packed
-``(N, PACKED)`` float32 array (one cache line per Gaussian for the compositor) and an
+``(N, PACKED)`` float32 array (one 64-byte cache line per Gaussian for the compositor) and an
 ``(N, 4)`` int32 tile rectangle ``[x0, x1) × [y0, y1)``, all zero for a culled Gaussian.
 """
 
@@ -34,15 +37,17 @@ import numba
 import numpy as np
 
 from spacedg.render.gaussians import _SH_C1, _SH_C2, _SH_C3, SH_C0
+from spacedg.render.settings import FOOTPRINT_CAP
+from spacedg.render.threads import fork_safe
 
 if TYPE_CHECKING:
     from spacedg.render.camera import Camera
     from spacedg.render.gaussians import Gaussians
     from spacedg.render.settings import Defocus, RasterSettings
 
-#: Columns of the packed per-Gaussian record.
-PX, PY, CA, CB, CC, OPA, CR, CG, CBL, DEPTH, RADX, RADY, AMIN = range(13)
-PACKED = 13
+#: Columns of the packed per-Gaussian record (``COC``: the defocus blur radius, pixels; 0 = sharp).
+PX, PY, CA, CB, CC, OPA, CR, CG, CBL, DEPTH, RADX, RADY, AMIN, COC = range(14)
+PACKED = 14
 
 _C1 = _SH_C1
 _C20, _C21, _C22, _C23, _C24 = _SH_C2
@@ -103,6 +108,7 @@ def _fisheye_terms(x, y, z, k1, k2, k3, k4):
     return theta, rho, g, drho_dz
 
 
+@fork_safe
 @numba.njit(parallel=True, cache=True)
 def project_gaussians(
     means, quats, scales, opacities, sh, degree, want_color,
@@ -117,10 +123,12 @@ def project_gaussians(
     n = means.shape[0]
     tiles_x = (width + 15) // 16
     tiles_y = (height + 15) // 16
-    lim_x_pos = (width - cx) / fx + 0.3 * (0.5 * width / fx)
-    lim_x_neg = cx / fx + 0.3 * (0.5 * width / fx)
-    lim_y_pos = (height - cy) / fy + 0.3 * (0.5 * height / fy)
-    lim_y_neg = cy / fy + 0.3 * (0.5 * height / fy)
+    # the Jacobian's frustum, widened by how far a blurred footprint reaches into the view
+    reach = max_coc * (defocus_extent if defocus_extent > 0.0 else 3.33) if aperture > 0.0 else 0.0
+    lim_x_pos = (width - cx + reach) / fx + 0.3 * (0.5 * width / fx)
+    lim_x_neg = (cx + reach) / fx + 0.3 * (0.5 * width / fx)
+    lim_y_pos = (height - cy + reach) / fy + 0.3 * (0.5 * height / fy)
+    lim_y_neg = (cy + reach) / fy + 0.3 * (0.5 * height / fy)
     # alpha at the truncation per unit opacity, and 1 / the mass kept inside defocus_extent σ
     defocus_tail = math.exp(-0.5 * defocus_extent * defocus_extent) if defocus_extent > 0.0 else 0.0
     defocus_boost = 1.0 / (1.0 - defocus_tail)
@@ -201,6 +209,7 @@ def project_gaussians(
         alpha_floor = 1.0 / 255.0
         if antialiased:
             opacity *= math.sqrt(max(det_raw / max(det, 1e-300), 0.0))
+        coc = 0.0
         if aperture > 0.0:
             coc = min(aperture * abs(z - focus) / z, max_coc)
             coc2 = coc * coc
@@ -223,8 +232,8 @@ def project_gaussians(
             extent = min(3.33, math.sqrt(2.0 * math.log(opacity / alpha_floor)))
         else:
             extent = 3.33
-        rad_x = math.ceil(extent * math.sqrt(sxx))
-        rad_y = math.ceil(extent * math.sqrt(syy))
+        rad_x = math.ceil(min(extent * math.sqrt(sxx), FOOTPRINT_CAP))
+        rad_y = math.ceil(min(extent * math.sqrt(syy), FOOTPRINT_CAP))
         ok = (
             math.isfinite(u) and math.isfinite(v) and math.isfinite(det)
             and math.isfinite(rad_x) and math.isfinite(rad_y) and rad_x > 0 and rad_y > 0
@@ -251,6 +260,7 @@ def project_gaussians(
         packed[i, DEPTH] = z
         packed[i, RADX] = rad_x
         packed[i, RADY] = rad_y
+        packed[i, COC] = coc
         if want_color:
             dx = wx - cam_center[0]
             dy = wy - cam_center[1]

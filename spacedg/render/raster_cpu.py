@@ -27,6 +27,7 @@ import numba
 import numpy as np
 
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, CR, DEPTH, OPA, PX, PY, RADY
+from spacedg.render.threads import fork_safe
 
 @numba.njit(cache=True, inline="always")
 def _exp_neg(s):
@@ -125,6 +126,7 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
 _T, _LIVE, _R, _G, _B, _D, _MED, _ID = (np.uint64(256 * k) for k in range(8))
 
 
+@fork_safe
 @numba.njit(parallel=True, fastmath=True, cache=True)
 def composite(
     offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
@@ -250,15 +252,20 @@ def depth_order(visible, depths):  # pragma: no cover - compiled
     return order
 
 
-def rasterize(packed: np.ndarray, rects: np.ndarray, instance_ids: np.ndarray, width: int, height: int,
-              alpha_max: float, want_color: bool, want_depth: bool, want_ids: bool, tight: bool) -> dict[str, np.ndarray]:
-    """Sort, bin and composite projected Gaussians; returns the requested float32/int32 images."""
+def bin_visible(packed: np.ndarray, rects: np.ndarray, width: int, height: int, tight: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Depth-sort the visible Gaussians and bin them into tiles: ``(offsets, gauss)`` (see :func:`bin_tiles`)."""
     tiles_x, tiles_y = (width + 15) // 16, (height + 15) // 16
     visible = np.flatnonzero(rects[:, 1] > rects[:, 0])
     order = depth_order(visible, np.ascontiguousarray(packed[:, DEPTH]))
     areas = (rects[order, 1] - rects[order, 0]).astype(np.int64) * (rects[order, 3] - rects[order, 2])
-    capacity = int(areas.sum())
-    offsets, gauss = bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capacity)
+    return bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, int(areas.sum()))
+
+
+def rasterize(packed: np.ndarray, rects: np.ndarray, instance_ids: np.ndarray, width: int, height: int,
+              alpha_max: float, want_color: bool, want_depth: bool, want_ids: bool, tight: bool) -> dict[str, np.ndarray]:
+    """Sort, bin and composite projected Gaussians; returns the requested float32/int32 images."""
+    tiles_x = (width + 15) // 16
+    offsets, gauss = bin_visible(packed, rects, width, height, tight)
     out = {
         "alpha": np.zeros((height, width), np.float32),
         "rgb": np.zeros((height, width, 3) if want_color else (1, 1, 3), np.float32),
@@ -272,5 +279,5 @@ def rasterize(packed: np.ndarray, rects: np.ndarray, instance_ids: np.ndarray, w
         out["rgb"], out["alpha"], out["depth"], out["median_depth"], out["instance_ids"],
     )
     out["n_pairs"] = np.int64(gauss.shape[0])
-    out["n_visible"] = np.int64(visible.shape[0])
+    out["n_visible"] = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
     return out

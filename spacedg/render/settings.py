@@ -23,6 +23,14 @@ TILE_SIZE = 16
 ALPHA_MIN = 1.0 / 255.0
 #: Compositing stops *before* the Gaussian that would take transmittance to or below this.
 TRANSMITTANCE_MIN = 1e-4
+#: Footprint radii are capped at this many pixels: wider than any image the size policy allows
+#: (16384 px), so the cap changes no pixel, and it keeps the radii exact integers in both
+#: backends for Gaussians of any finite size (a Gaussian 10²⁰ m wide seen from 1 m away).
+FOOTPRINT_CAP = float(1 << 30)
+#: Depth slabs of the defocus model (:mod:`spacedg.render.defocus`): Gaussians whose camera
+#: depths fall in one bin of ``⌊ln z / ln(1 + DEFOCUS_SLAB)⌋`` (10 % of the depth) count as
+#: one surface.
+DEFOCUS_SLAB = 0.1
 
 
 def _finite(name: str, value: object, low: float | None = None, high: float | None = None, *, open_low: bool = False) -> float:
@@ -100,7 +108,8 @@ class Defocus:
     ``r = aperture · |d − focus| / d`` pixels (at the rendered resolution), clamped to
     ``max_radius``; ``r² I`` is added to its 2D covariance (after the ``eps2d`` dilation) and
     its opacity is multiplied by ``sqrt(det Σ / det(Σ + r² I))`` so its integrated alpha is
-    unchanged. ``aperture = 0`` is the sharp render, bit for bit.
+    unchanged; the view keeps its light through the two passes of :mod:`spacedg.render.defocus`.
+    ``aperture = 0``, or every visible Gaussian in focus, is the sharp render, bit for bit.
 
     Attributes:
         aperture: CoC radius in pixels for a point at infinity (the thin-lens a·f/N scaled to pixels).

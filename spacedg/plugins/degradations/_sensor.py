@@ -65,6 +65,8 @@ from statistics import NormalDist
 import numba
 import numpy as np
 
+from spacedg.render.threads import fork_safe
+
 try:  # LLVM ctlz: used to find the octave of a uniform in the normal-quantile table
     from numba.cpython.unsafe.numbers import leading_zeros as _leading_zeros
 except ImportError:  # pragma: no cover - older/newer numba without the intrinsic
@@ -328,6 +330,7 @@ def _poisson_ptrs(rate: float, keys: np.ndarray, key_mix: np.uint64, offset: np.
             return n
 
 
+@fork_safe
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _sensor_kernel(
     x: np.ndarray,

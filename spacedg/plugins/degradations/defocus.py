@@ -4,10 +4,13 @@ Model: the paper's "Defocus". A Gaussian at camera depth ``d`` (metres, along th
 gets a circle of confusion of radius ``r = aperture · |d − depth| / d`` pixels, where ``depth``
 is the focus distance; ``r² I`` is added to its projected 2D covariance (after the 0.3 px²
 low-pass dilation) and its opacity is multiplied by ``sqrt(det Σ / det(Σ + r² I))``, so its
-integrated alpha — its energy — is unchanged (:class:`spacedg.render.Defocus`). Because the blur
-happens per Gaussian before compositing, occlusion boundaries blur the way a real lens blurs
-them (a sharp foreground edge over a blurred background), which an image-space blur of a
-depth map cannot do.
+integrated alpha is unchanged (:class:`spacedg.render.Defocus`). So that the *view* keeps its
+light, a sharp pass first measures each Gaussian's share of its surface's coverage and its
+visible decoded colour, and blurred Gaussians add their light in linear light
+(:mod:`spacedg.render.defocus`: a wall keeps its mean radiance and coverage within 1 % at
+every aperture). Because the blur happens per Gaussian before compositing, occlusion
+boundaries blur the way a real lens blurs them (a sharp foreground edge over a blurred
+background), which an image-space blur of a depth map cannot do.
 
 Units and decisions:
 
@@ -76,7 +79,7 @@ SPEC = DegradationSpec(
         "5": {"aperture": (12.0, 15.0), "depth": _FOCUS_RANGE},
     },
     apply=apply,
-    description="Thin-lens defocus in the rasterizer: r = aperture·|d − depth|/d px added to each Gaussian's 2D covariance, energy-conserving.",
+    description="Thin-lens defocus in the rasterizer: r = aperture·|d − depth|/d px added to each Gaussian's 2D covariance; the view keeps its light.",
     order=20.0,
 )
 

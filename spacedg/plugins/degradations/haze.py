@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from spacedg.errors import InvalidDataError
 from spacedg.plugins.degradations.common import aux_image, check_linear_rgb, surface_far_depth
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
@@ -76,7 +77,8 @@ def haze(
 
     Args:
         rgb: (H, W, 3) float32 linear light, premultiplied by alpha.
-        depth: (H, W) rendered depth, metres (0 / NaN / ∞ where there is no surface).
+        depth: (H, W) rendered depth, metres (0 / NaN / +∞ where there is no surface; negative
+            values are refused).
         alpha: (H, W) coverage in [0, 1].
         density: optical depth at the normalisation depth (β · D).
         airlight: A, linear light.
@@ -84,6 +86,13 @@ def haze(
         far_depth: the sample's far surface depth (metres); ``None`` = this view's.
     """
     rgb = check_linear_rgb(rgb, "haze")
+    negative = np.asarray(depth) < 0
+    if negative.any():
+        first = tuple(int(i) for i in np.argwhere(negative)[0])
+        raise InvalidDataError(
+            f"haze: depth holds {int(negative.sum())} negative value(s) (first at (row, column) {first}); depth is metres "
+            "along the optical axis, >= 0 (0, NaN or +inf = no surface, given the far depth's airlight)"
+        )
     if density == 0.0:
         return rgb.copy()
     if far_depth is None:

@@ -83,6 +83,7 @@ from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins.degradations.common import check_linear_rgb
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamSpec, Stage
+from spacedg.render.threads import fork_safe
 
 __all__ = [
     "SPEC",
@@ -150,6 +151,7 @@ class DropletField:
 
 
 # ------------------------------------------------------------------ compiled kernels
+@fork_safe
 @numba.njit(parallel=True, cache=True)
 def _field_kernel(
     height: int,
@@ -223,6 +225,7 @@ def _field_kernel(
             transmission[i, j] = nz
 
 
+@fork_safe
 @numba.njit(parallel=True, cache=True)
 def _composite_kernel(
     rgb: np.ndarray, seen: np.ndarray, alpha: np.ndarray, highlight: np.ndarray, k_s: float,

@@ -308,7 +308,10 @@ def read_colmap(
     dropped: list[str] = []
     for image_id in sorted(int(i) for i in recon.images.keys()):
         image = recon.images[image_id]
-        name = str(image.name)
+        try:
+            name = str(image.name)
+        except UnicodeDecodeError as err:
+            raise FileFormatError(f"{folder}: image {image_id}: its name is not UTF-8 text ({err.reason} at byte {err.start}); the model is corrupt") from None
         if not getattr(image, "has_pose", True):
             unposed.append(name)
             continue

@@ -46,7 +46,10 @@ def _entry(p: object, data: Any, scene: str | None) -> tuple[list[Any], dict[str
     categories: dict[str, int] = {}
     if isinstance(data, dict) and "data_list" in data:
         meta = data.get("metainfo", {})
-        categories = dict(meta.get("categories", {})) if isinstance(meta, dict) else {}
+        raw = meta.get("categories", {}) if isinstance(meta, dict) else {}
+        if not isinstance(raw, dict):
+            raise FileFormatError(f"{p}: 'metainfo.categories' must be an object (label → class index), got {type(raw).__name__}")
+        categories = dict(raw)
         entries = data["data_list"]
         if not isinstance(entries, list) or not entries:
             raise FileFormatError(f"{p}: 'data_list' must be a non-empty list")

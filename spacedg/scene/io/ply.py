@@ -79,6 +79,8 @@ _TYPES = {
 _F_REST_COUNTS = {0: 0, 9: 1, 24: 2, 45: 3}
 _F_REST = re.compile(r"^f_rest_(\d+)$")
 _COUNT = re.compile(r"^[0-9]+$")
+#: Longest element count (digits) read from a header: 10¹⁸ records exceed any file already.
+_MAX_COUNT_DIGITS = 18
 _REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
              "rot_0", "rot_1", "rot_2", "rot_3")
 
@@ -174,7 +176,13 @@ def _parse_header(path: Path, head: bytes, file_size: int) -> _Header:
             fmt = tokens[1]
         elif key == "element":
             if len(tokens) != 3 or not _COUNT.match(tokens[2]):
-                raise _fail(path, f"header line {lineno}: expected 'element <name> <count>' with a non-negative integer count, got {line!r}")
+                raise _fail(path, f"header line {lineno}: expected 'element <name> <count>' with a non-negative integer count, got {line[:120]!r}")
+            if len(tokens[2]) > _MAX_COUNT_DIGITS:
+                raise _fail(
+                    path,
+                    f"header line {lineno}: element {tokens[1][:60]!r} declares a count of {len(tokens[2]):,} digits; "
+                    f"no file holds more than 10^{_MAX_COUNT_DIGITS} records: the header is corrupt or hostile",
+                )
             if any(e[0] == tokens[1] for e in elements):
                 raise _fail(path, f"header line {lineno}: element {tokens[1]!r} is declared twice")
             elements.append((tokens[1], int(tokens[2]), [], lineno))
@@ -209,7 +217,11 @@ def _vertex_layout(path: Path, vertex: _Element) -> _Layout:
     missing = [name for name in _REQUIRED if name not in props]
     if missing:
         raise _fail(path, f"element 'vertex' lacks the 3DGS properties {missing}; is this a mesh or point cloud rather than a 3DGS file?")
-    rest = sorted((int(m.group(1)), name) for name in props if (m := _F_REST.match(name)))
+    rest_names = [name for name in props if _F_REST.match(name)]
+    long_index = [name for name in rest_names if len(name) > len("f_rest_") + 4]
+    if long_index:
+        raise _fail(path, f"property {long_index[0][:40]!r}… ({len(long_index[0]):,} characters) is not an f_rest_<0..44> name; the header is corrupt")
+    rest = sorted((int(name[len("f_rest_"):]), name) for name in rest_names)
     if [i for i, _ in rest] != list(range(len(rest))):
         raise _fail(path, f"f_rest properties are not numbered 0..{len(rest) - 1} without gaps (found {[n for _, n in rest][:8]}...)")
     if len(rest) not in _F_REST_COUNTS:

@@ -109,8 +109,12 @@ def decode_compressed(path: Path, elements: dict[str, np.ndarray]) -> Gaussians:
         if len(names) not in _SH_FOR_REST or sh_rec.shape[0] != n:
             raise FileFormatError(f"{path}: element 'sh' must hold 0/9/24/45 f_rest properties for each of the {n} vertices")
         degree = _SH_FOR_REST[len(names)]
+        expected = {f"f_rest_{i}" for i in range(len(names))}
+        if set(names) != expected:
+            odd = sorted(set(names) - expected)[0]
+            raise FileFormatError(f"{path}: element 'sh' property {odd[:40]!r} is not one of f_rest_0..f_rest_{len(names) - 1}")
         if degree:
-            names = sorted(names, key=lambda s: int(s.split("_")[-1]))
+            names = sorted(names, key=lambda s: int(s[len("f_rest_"):]))
             rest = np.stack([sh_rec[name].astype(np.float64) for name in names], axis=1) * (8.0 / 255.0) - 4.0
     k = SH_COEFFS[degree]
     sh = np.zeros((n, k, 3), dtype=np.float32)

@@ -123,8 +123,11 @@ def read_segments_anno(path: PathLike) -> list[Instance]:
         label = group.get("label")
         if not isinstance(label, str) or not label.strip():
             raise FileValueError(f"{where} (id {raw_id}): 'label' must be a non-empty string, got {label!r}")
+        segments = group.get("segments", [])
+        if not isinstance(segments, list):
+            raise FileFormatError(f"{where} (id {raw_id}): 'segments' must be a list of segment ids, got {type(segments).__name__}")
         out.append(Instance(raw_id, label.strip(), "", _box(f"{where} (id {raw_id})", group["obb"]),
-                            attributes={"source": "scannetpp", "segments": len(group.get("segments", []))}))
+                            attributes={"source": "scannetpp", "segments": len(segments)}))
     if skipped:
         warnings.warn(f"{p}: {skipped} segment group(s) without an 'obb' were skipped", stacklevel=2)
     return out

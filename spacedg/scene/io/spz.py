@@ -48,11 +48,17 @@ _COLOR_SCALE = 0.15
 MAX_BYTES = 8 << 30
 
 
-def _decompress(path: object, raw: bytes) -> bytes:
+#: deflate cannot compress better than ~1032:1, so a stream claiming more bytes than this many
+#: times the file's size (plus slack) is corrupt or a decompression bomb.
+_MAX_RATIO = 1100
+
+
+def _read_gzip(path: object, handle: gzip.GzipFile, size: int, what: str) -> bytes:
+    """At most ``size`` decompressed bytes of ``handle`` (never more: a bomb cannot fill memory)."""
     try:
-        return gzip.decompress(raw)
+        return handle.read(size)
     except (OSError, EOFError, zlib.error) as err:
-        raise FileFormatError(f"{path}: not a gzip stream ({err}); .spz files are gzip-compressed") from None
+        raise FileFormatError(f"{path}: not a valid gzip stream while reading {what} ({err}); .spz files are gzip-compressed") from None
 
 
 def read_spz(path: PathLike, *, axes: Literal["rdf", "file"] = "rdf") -> Gaussians:
@@ -64,11 +70,24 @@ def read_spz(path: PathLike, *, axes: Literal["rdf", "file"] = "rdf") -> Gaussia
     if axes not in ("rdf", "file"):
         raise InvalidDataError(f"read_spz: axes must be 'rdf' or 'file', got {axes!r}")
     p = as_path(path, ".spz file")
-    require_file(p, ".spz file")
-    data = _decompress(p, p.read_bytes())
-    if len(data) < 16:
-        raise FileFormatError(f"{p}: {len(data)} bytes after gzip; an spz header alone is 16 bytes")
-    magic, version, count, degree, frac_bits, _flags, _reserved = struct.unpack_from("<IIIBBBB", data, 0)
+    file_size = require_file(p, ".spz file")
+    with open(p, "rb") as raw, gzip.GzipFile(fileobj=raw, mode="rb") as stream:
+        head = _read_gzip(p, stream, 16, "the header")
+        if len(head) < 16:
+            raise FileFormatError(f"{p}: {len(head)} bytes after gzip; an spz header alone is 16 bytes")
+        magic, version, count, degree, frac_bits, _flags, _reserved = struct.unpack_from("<IIIBBBB", head, 0)
+        if magic == SPZ_MAGIC and version in (2, 3) and degree <= 3:
+            per_point = 9 + 1 + 3 + 3 + (4 if version >= 3 else 3) + (SH_COEFFS[degree] - 1) * 3
+            need = 16 + count * per_point
+            if need > MAX_BYTES or need > _MAX_RATIO * file_size + 4096:
+                raise FileFormatError(
+                    f"{p}: header declares {count} points ({need} bytes) but the {file_size}-byte file cannot hold them "
+                    "(deflate compresses at most ~1000:1); the file is truncated or corrupt"
+                )
+            body = _read_gzip(p, stream, need - 16, "the points")
+        else:
+            body = b""
+    data = head + body
     if magic != SPZ_MAGIC:
         raise FileFormatError(f"{p}: magic 0x{magic:08x} is not 'NGSP' (0x{SPZ_MAGIC:08x}); not an spz file")
     if version not in (2, 3):

@@ -10,7 +10,6 @@ top, without interpenetration.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,7 +17,8 @@ import numpy as np
 
 from spacedg.scene.synthetic.appearance import nearest_colour_name
 from spacedg.scene.synthetic.catalogue import ObjectModel
-from spacedg.errors import InvalidDataError
+from spacedg.errors import FileFormatError, InvalidDataError
+from spacedg.files import read_json
 from spacedg.render.gaussians import Gaussians
 
 _AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0)}
@@ -82,10 +82,9 @@ class ExternalObject:
         meta: dict = {}
         meta_path = path.parent / "meta.json"
         if meta_path.is_file():
-            try:
-                meta = json.loads(meta_path.read_text())
-            except json.JSONDecodeError as err:
-                raise InvalidDataError(f"{meta_path}: invalid JSON ({err})") from err
+            meta = read_json(meta_path, "meta.json")
+            if not isinstance(meta, dict):
+                raise FileFormatError(f"{meta_path}: expected a JSON object (id, geometry.up_axis, license, ...), got {type(meta).__name__}")
         up_axis = str(meta.get("geometry", {}).get("up_axis", "+z"))
         attrs = {"source_file": path.name}
         for key in ("license", "author", "title"):

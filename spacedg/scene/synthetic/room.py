@@ -262,6 +262,8 @@ def _world_transform(config: RoomConfig, rng: np.random.Generator) -> tuple[str,
 def generate_room(seed: int, config: RoomConfig | None = None, scene_id: str | None = None) -> Scene:
     """Generate one furnished room (see module docstring); same seed and config → same bytes."""
     config = config or RoomConfig()
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InvalidDataError(f"generate_room: seed must be an integer >= 0, got {seed!r}")
     root = np.random.SeedSequence(int(seed))
     rng_layout, rng_look, rng_surf, rng_traj, rng_world, rng_budget = (np.random.default_rng(s) for s in root.spawn(6))
     externals = [(ext.model(), ext.placement) for ext in config.external]

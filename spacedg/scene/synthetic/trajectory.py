@@ -19,14 +19,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from spacedg.errors import InvalidDataError
+from spacedg.limits import check_image_size
 from spacedg.scene.synthetic.layout import RoomShape, loop_path
 from spacedg.scene.synthetic.textures import value_noise
 from spacedg.render.camera import Camera
 
 
+#: Most views one synthetic capture takes (a walk of ~10⁴ m at 6–20 cm per view).
+MAX_VIEWS = 100_000
+
+
 @dataclass(frozen=True)
 class CaptureConfig:
-    """Image size in pixels and how many views to take (sampled in ``[min_views, max_views]``)."""
+    """Image size in pixels (within :mod:`spacedg.limits`) and how many views to take (sampled in
+    ``[min_views, max_views]``, 1 ≤ min_views ≤ max_views ≤ :data:`MAX_VIEWS`)."""
 
     width: int = 640
     height: int = 480
@@ -34,13 +40,15 @@ class CaptureConfig:
     max_views: int = 120
 
     def __post_init__(self) -> None:
-        for name, low, high in (("width", 8, 16384), ("height", 8, 16384), ("min_views", 1, 100_000), ("max_views", 1, 100_000)):
+        for name in ("width", "height", "min_views", "max_views"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= value <= high:
-                raise InvalidDataError(f"CaptureConfig: {name} must be an integer in [{low}, {high}], got {value!r}")
-        if self.min_views > self.max_views:
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise InvalidDataError(f"CaptureConfig: {name} must be a positive integer, got {value!r}")
+        check_image_size(self.width, self.height, "CaptureConfig", "capture smaller views")
+        if not self.min_views <= self.max_views <= MAX_VIEWS:
             raise InvalidDataError(
-                f"CaptureConfig: min_views {self.min_views} is more than max_views {self.max_views}; pass min_views <= max_views"
+                f"CaptureConfig: views must satisfy 1 <= min_views <= max_views <= {MAX_VIEWS}, "
+                f"got min_views={self.min_views}, max_views={self.max_views}"
             )
 
 

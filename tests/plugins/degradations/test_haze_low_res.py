@@ -54,7 +54,7 @@ def test_haze_uses_the_sample_far_depth_for_multi_view_consistency() -> None:
 
 def test_haze_no_surface_and_bad_depths_are_far_and_finite() -> None:
     rgb, depth, alpha = _scene_light()
-    depth[0, :4] = [0.0, np.nan, np.inf, -1.0]
+    depth[0, :4] = [0.0, np.nan, np.inf, np.inf]
     depth[1, 0] = 1e30
     alpha[2, :3] = [0.0, 0.5, np.nan]
     for density in (1e-6, 4.0, 100.0):
@@ -67,6 +67,9 @@ def test_haze_no_surface_and_bad_depths_are_far_and_finite() -> None:
     expected = rgb[0, 0] * np.exp(-2.0) + 0.8 * (1 - np.exp(-2.0))
     np.testing.assert_allclose(out[0, 0], expected, rtol=1e-5)
     assert far > 0
+    depth[0, 3] = -1.0  # negative depth is invalid input (SPEC), not "no surface"
+    with pytest.raises(InvalidDataError, match="negative"):
+        haze.haze(rgb, depth, alpha, 2.0, 0.8)
 
 
 def test_haze_partial_coverage_blends_background_airlight() -> None:

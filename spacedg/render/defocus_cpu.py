@@ -1,0 +1,345 @@
+"""Compiled (numba) defocus compositing: the sharp measurement pass and the blurred composite.
+
+The model (see :mod:`spacedg.render.defocus`) renders defocus in two passes:
+
+1. :func:`measure_sharp` composites the **sharp** view exactly as the sharp render does and, for
+   every (tile, Gaussian) pair, sums over the tile's pixels
+
+   - ``M = Σ α`` — alpha composited,
+   - ``S = Σ α·T_slab`` — alpha not hidden by earlier Gaussians of the **same depth slab**
+     (``T_slab``: transmittance through the Gaussians of the Gaussian's slab in front of it;
+     slabs are the bins of ``⌊ln z / ln(1 + DEFOCUS_SLAB)⌋`` and every pixel of a tile changes
+     slab together, as the tile's list is depth-sorted),
+   - ``W = Σ w`` — the visible weight ``w = α·T``,
+   - ``U_c = Σ w·ρ_c`` per channel, with ``ρ_c = decode(C_c) / Σ w·decode(c_c)`` the pixel's
+     ratio of its sRGB-decoded composite to the linear-light mix of the same splats (a second
+     sweep over the list, once the pixel's composite is final).
+
+2. :func:`composite_defocus` composites the blurred projection front to back. A Gaussian in
+   focus (``COC = 0``) follows the sharp rules exactly (``α``, ``T ← T(1 − α)``, stop before
+   ``T ≤ 10⁻⁴``) into the sRGB-encoded accumulator; a blurred one **adds** its weight
+   ``w = min(α·T_f, T)`` (``T_f``: transmittance through the in-focus Gaussians in front) into
+   the linear-light accumulator until the pixel saturates. Its colour is already linear and
+   its opacity already scaled by its same-slab visibility ``S / M`` (done between the passes).
+
+Both kernels keep one flat float32 state buffer per tile, indexed with unsigned integers so
+that LLVM vectorises the 16-pixel rows, like :func:`spacedg.render.raster_cpu.composite`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from spacedg.render.colour_cpu import _DECODE_LUT, _TOE
+from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADY
+from spacedg.render.raster_cpu import _exp_neg
+from spacedg.render.threads import fork_safe
+
+__all__ = ["composite_defocus", "measure_sharp", "PAIR_M", "PAIR_S", "PAIR_W", "PAIR_U", "PAIR_COLUMNS"]
+
+#: Columns of :func:`measure_sharp`'s per-pair sums: M, S, W, then U for r, g, b.
+PAIR_M, PAIR_S, PAIR_W, PAIR_U = 0, 1, 2, 3
+PAIR_COLUMNS = 6
+
+
+@numba.njit(cache=True, inline="always")
+def _decode(x, lut):
+    """sRGB-encoded value → linear light (negative → 0), float64: the table of
+    :func:`spacedg.render.colour_cpu.decode_srgb` on [0.04045, 1), the exact curve elsewhere."""
+    if not x > 0.0:
+        return 0.0
+    if x <= _TOE:
+        return x / 12.92
+    if x < 1.0:
+        s = (x - _TOE) * ((lut.shape[0] - 1) / (1.0 - _TOE))
+        j = min(int(s), lut.shape[0] - 2)
+        return lut[j] + (s - j) * (lut[j + 1] - lut[j])
+    return ((x + 0.055) / 1.055) ** 2.4
+
+
+# state planes of measure_sharp (256 floats each)
+_MT, _MLIVE, _ER, _EG, _EB, _LR, _LG, _LB, _TS = (np.uint64(256 * k) for k in range(9))
+
+
+@numba.njit(cache=True, inline="always")
+def _pair_rows(packed, g, x0, y0):
+    """Row range and the tile-local conic of Gaussian ``g`` (the compositor's set-up)."""
+    gx = packed[g, PX] - np.float32(x0 + 0.5)
+    gy = packed[g, PY] - np.float32(y0 + 0.5)
+    ry = packed[g, RADY]
+    r0 = max(int(math.ceil(gy - ry)), 0)
+    r1 = min(int(math.floor(gy + ry)) + 1, 16)
+    return gx, gy, r0, r1
+
+
+@numba.njit(cache=True, inline="always")
+def _measure_sweep1(state, packed, lin, g, x0, y0, amax, pair_out, k):
+    """Composite Gaussian ``g`` into one tile's state (sharp rules); add its M, S, W and the two colour mixes."""
+    t_min = np.float32(1e-4)
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    gx, gy, r0, r1 = _pair_rows(packed, g, x0, y0)
+    ca = np.float32(0.5) * packed[g, CA]
+    cb = packed[g, CB]
+    cc = np.float32(0.5) * packed[g, CC]
+    opa = packed[g, OPA]
+    amin = packed[g, AMIN]
+    cr, cg, cbl = packed[g, CR], packed[g, CG], packed[g, CBL]
+    lr, lg, lb = lin[g, 0], lin[g, 1], lin[g, 2]
+    m_sum = zero
+    s_sum = zero
+    w_sum = zero
+    for row in range(r0, r1):
+        dy = np.float32(row) - gy
+        cdy = cc * dy * dy
+        bdy = cb * dy
+        base = np.uint64(row * 16)
+        for col in range(16):
+            p = base + np.uint64(col)
+            dx = np.float32(col) - gx
+            sigma = ca * dx * dx + bdy * dx + cdy
+            alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
+            alpha = alpha if (sigma >= zero and alpha >= amin) else zero
+            alpha = alpha * state[p + _MLIVE]
+            t_before = state[p + _MT]
+            t_after = t_before * (one - alpha)
+            take = zero if t_after <= t_min else one
+            a_taken = alpha * take
+            w = a_taken * t_before
+            m_sum += a_taken
+            s_sum += a_taken * state[p + _TS]
+            w_sum += w
+            state[p + _TS] = state[p + _TS] * (one - a_taken)
+            state[p + _ER] += w * cr
+            state[p + _EG] += w * cg
+            state[p + _EB] += w * cbl
+            state[p + _LR] += w * lr
+            state[p + _LG] += w * lg
+            state[p + _LB] += w * lb
+            state[p + _MT] = t_after if take > zero else t_before
+            state[p + _MLIVE] *= take
+    pair_out[k, 0] += m_sum
+    pair_out[k, 1] += s_sum
+    pair_out[k, 2] += w_sum
+
+
+@numba.njit(cache=True, inline="always")
+def _measure_sweep2(state, packed, g, x0, y0, amax, pair_out, k):
+    """The same composite again, once every pixel's ρ is known (in the linear-mix planes); add ``U = Σ w·ρ``."""
+    t_min = np.float32(1e-4)
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    gx, gy, r0, r1 = _pair_rows(packed, g, x0, y0)
+    ca = np.float32(0.5) * packed[g, CA]
+    cb = packed[g, CB]
+    cc = np.float32(0.5) * packed[g, CC]
+    opa = packed[g, OPA]
+    amin = packed[g, AMIN]
+    ur = zero
+    ug = zero
+    ub = zero
+    for row in range(r0, r1):
+        dy = np.float32(row) - gy
+        cdy = cc * dy * dy
+        bdy = cb * dy
+        base = np.uint64(row * 16)
+        for col in range(16):
+            p = base + np.uint64(col)
+            dx = np.float32(col) - gx
+            sigma = ca * dx * dx + bdy * dx + cdy
+            alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
+            alpha = alpha if (sigma >= zero and alpha >= amin) else zero
+            alpha = alpha * state[p + _MLIVE]
+            t_before = state[p + _MT]
+            t_after = t_before * (one - alpha)
+            take = zero if t_after <= t_min else one
+            w = alpha * take * t_before
+            ur += w * state[p + _LR]
+            ug += w * state[p + _LG]
+            ub += w * state[p + _LB]
+            state[p + _MT] = t_after if take > zero else t_before
+            state[p + _MLIVE] *= take
+    pair_out[k, 3] += ur
+    pair_out[k, 4] += ug
+    pair_out[k, 5] += ub
+
+
+@numba.njit(cache=True, inline="always")
+def _all_dead(state):
+    live = np.float32(0.0)
+    for p in range(256):
+        live += state[256 + p]
+    return live == np.float32(0.0)
+
+
+@fork_safe
+@numba.njit(parallel=True, fastmath=True, cache=True)
+def measure_sharp(offsets, gauss, packed, lin, slab, tiles_x, alpha_max, pair_out, lut=_DECODE_LUT):  # pragma: no cover - compiled
+    """Fill ``pair_out`` (pairs, :data:`PAIR_COLUMNS`) float32 with each pair's sums (see the module docstring).
+
+    Args:
+        offsets, gauss: the sharp projection's tile lists (:func:`spacedg.render.raster_cpu.bin_tiles`).
+        packed: the sharp projection (:func:`spacedg.render.project_cpu.project_view`, no defocus).
+        lin: (N, 3) float32 linear-light colours (the sRGB decode of the packed colours).
+        slab: (N,) int64 depth slab of every Gaussian.
+    """
+    n_tiles = offsets.shape[0] - 1
+    amax = np.float32(alpha_max)
+    for tile in numba.prange(n_tiles):
+        start, end = offsets[tile], offsets[tile + 1]
+        if end == start:
+            continue
+        ty = tile // tiles_x
+        tx = tile - ty * tiles_x
+        x0 = tx * 16
+        y0 = ty * 16
+        state = np.zeros(256 * 9, np.float32)
+        state[:512] = 1.0
+        state[2048:] = 1.0
+        stop = end
+        for k in range(start, end):
+            g = gauss[k]
+            if k > start and slab[g] != slab[gauss[k - 1]]:
+                state[2048:] = 1.0  # a new depth slab starts for every pixel of the tile
+            _measure_sweep1(state, packed, lin, g, x0, y0, amax, pair_out, k)
+            if (k - start) % 32 == 31 and _all_dead(state):
+                stop = k + 1
+                break
+        # ρ_c per pixel: decoded composite over the linear mix of the same splats
+        for p in range(256):
+            for c in range(3):
+                mix = np.float64(state[1280 + 256 * c + p])
+                if mix > 0.0:
+                    state[1280 + 256 * c + p] = np.float32(_decode(np.float64(state[512 + 256 * c + p]), lut) / mix)
+                else:
+                    state[1280 + 256 * c + p] = np.float32(1.0)
+            state[p] = 1.0
+            state[256 + p] = 1.0
+        for k in range(start, stop):
+            _measure_sweep2(state, packed, gauss[k], x0, y0, amax, pair_out, k)
+
+
+# state planes of composite_defocus (256 floats each)
+_T, _LIVE, _ER2, _EG2, _EB2, _LR2, _LG2, _LB2, _D, _MED, _ID, _TF = (np.uint64(256 * k) for k in range(12))
+
+
+@fork_safe
+@numba.njit(parallel=True, fastmath=True, cache=True)
+def composite_defocus(
+    offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
+    want_color, want_depth, want_ids,
+    out_enc, out_lin, out_alpha, out_depth, out_median, out_ids,
+):  # pragma: no cover - compiled; covered through render() and the oracle tests
+    """Composite the blurred projection (see the module docstring); writes the images in place.
+
+    ``out_enc`` receives the sRGB-encoded mix of the in-focus Gaussians, ``out_lin`` the
+    linear-light light of the blurred ones; the caller decodes the first and adds the second.
+    """
+    n_tiles = offsets.shape[0] - 1
+    amax = np.float32(alpha_max)
+    t_min = np.float32(1e-4)
+    half = np.float32(0.5)
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    for tile in numba.prange(n_tiles):
+        start, end = offsets[tile], offsets[tile + 1]
+        ty = tile // tiles_x
+        tx = tile - ty * tiles_x
+        x0 = tx * 16
+        y0 = ty * 16
+        state = np.zeros(256 * 12, np.float32)
+        state[:512] = 1.0
+        state[2560:2816] = -1.0
+        state[2816:] = 1.0
+        for k in range(start, end):
+            g = gauss[k]
+            gx = packed[g, PX] - np.float32(x0 + 0.5)
+            gy = packed[g, PY] - np.float32(y0 + 0.5)
+            ca = np.float32(0.5) * packed[g, CA]
+            cb = packed[g, CB]
+            cc = np.float32(0.5) * packed[g, CC]
+            opa = packed[g, OPA]
+            amin = packed[g, AMIN]
+            cr, cg, cbl = packed[g, CR], packed[g, CG], packed[g, CBL]
+            z = packed[g, DEPTH]
+            gid = np.float32(instance_ids[g])
+            blurred = packed[g, COC] > zero
+            ry = packed[g, RADY]
+            r0 = max(int(math.ceil(gy - ry)), 0)
+            r1 = min(int(math.floor(gy + ry)) + 1, 16)
+            for row in range(r0, r1):
+                dy = np.float32(row) - gy
+                cdy = cc * dy * dy
+                bdy = cb * dy
+                base = np.uint64(row * 16)
+                if blurred:
+                    for col in range(16):
+                        p = base + np.uint64(col)
+                        dx = np.float32(col) - gx
+                        sigma = ca * dx * dx + bdy * dx + cdy
+                        alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
+                        alpha = alpha if (sigma >= zero and alpha >= amin) else zero
+                        alpha = alpha * state[p + _LIVE]
+                        t_before = state[p]
+                        w = min(alpha * state[p + _TF], t_before)
+                        t_after = t_before - w
+                        if want_color:
+                            state[p + _LR2] += w * cr
+                            state[p + _LG2] += w * cg
+                            state[p + _LB2] += w * cbl
+                        if want_depth:
+                            state[p + _D] += w * z
+                        if want_ids:
+                            hit = w > zero and t_before > half
+                            state[p + _MED] = z if hit else state[p + _MED]
+                            state[p + _ID] = gid if hit else state[p + _ID]
+                        state[p] = t_after
+                        state[p + _LIVE] *= zero if t_after <= t_min else one
+                else:
+                    for col in range(16):
+                        p = base + np.uint64(col)
+                        dx = np.float32(col) - gx
+                        sigma = ca * dx * dx + bdy * dx + cdy
+                        alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
+                        alpha = alpha if (sigma >= zero and alpha >= amin) else zero
+                        alpha = alpha * state[p + _LIVE]
+                        t_before = state[p]
+                        t_after = t_before * (one - alpha)
+                        take = zero if t_after <= t_min else one
+                        w = alpha * t_before * take
+                        if want_color:
+                            state[p + _ER2] += w * cr
+                            state[p + _EG2] += w * cg
+                            state[p + _EB2] += w * cbl
+                        if want_depth:
+                            state[p + _D] += w * z
+                        if want_ids:
+                            hit = w > zero and t_before > half
+                            state[p + _MED] = z if hit else state[p + _MED]
+                            state[p + _ID] = gid if hit else state[p + _ID]
+                        state[p] = t_after if take > zero else t_before
+                        state[p + _TF] = state[p + _TF] * (one - alpha * take)
+                        state[p + _LIVE] *= take
+            if (k - start) % 32 == 31 and _all_dead(state):
+                break
+        for row in range(min(16, height - y0)):
+            for col in range(min(16, width - x0)):
+                p = row * 16 + col
+                py, px = y0 + row, x0 + col
+                a = one - state[p]
+                out_alpha[py, px] = a
+                if want_color:
+                    out_enc[py, px, 0] = state[512 + p]
+                    out_enc[py, px, 1] = state[768 + p]
+                    out_enc[py, px, 2] = state[1024 + p]
+                    out_lin[py, px, 0] = state[1280 + p]
+                    out_lin[py, px, 1] = state[1536 + p]
+                    out_lin[py, px, 2] = state[1792 + p]
+                if want_depth:
+                    out_depth[py, px] = state[2048 + p] / a if a > zero else zero
+                if want_ids:
+                    out_median[py, px] = state[2304 + p]
+                    out_ids[py, px] = np.int32(state[2560 + p]) if state[p] <= half else -1

@@ -1,0 +1,313 @@
+"""Readable torch twin of the defocus model (:mod:`spacedg.render.defocus`, :mod:`spacedg.render.defocus_cpu`).
+
+Same two passes, as whole-tensor operations over batches of tiles, ``chunk`` Gaussians at a time:
+
+- :func:`measure_sharp` — the sharp composite of :func:`spacedg.render.raster_torch.composite`
+  (cumulative products of ``1 − α``), plus per-pair sums ``M, S, W, U_r, U_g, U_b``. The
+  transmittance through a Gaussian's own depth slab is ``T_before / T_slab_start`` (slabs are
+  contiguous in the depth-sorted list, and start at the same list position for every pixel of
+  a tile). A second sweep over the chunks adds ``U`` once each pixel's ``ρ`` is known.
+- :func:`composite_defocus` — in-focus Gaussians by the sharp rules, blurred ones adding
+  ``w = min(α·T_f, T)``. A chunk of only blurred Gaussians is closed-form
+  (``T_k = max(T₀ − T_f·Σ_{j≤k} α_j, 0)``); a chunk with an in-focus one is walked Gaussian
+  by Gaussian.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import torch
+
+from spacedg.render.camera import Camera
+from spacedg.render.colour import srgb_to_linear
+from spacedg.render.project import GaussianTensors, Projected, project
+from spacedg.render.raster_torch import bin_tiles
+from spacedg.render.settings import DEFOCUS_SLAB, TILE_SIZE, TRANSMITTANCE_MIN, RasterSettings
+
+__all__ = ["composite_defocus", "has_blur", "match_factors", "measure_sharp", "render_torch"]
+
+
+def has_blur(proj: Projected) -> bool:
+    """Whether any visible Gaussian of a defocused projection has a circle of confusion > 0."""
+    return proj.coc is not None and bool((proj.coc[proj.visible] > 0).any())
+
+
+def _slab(depths: torch.Tensor) -> torch.Tensor:
+    return torch.floor(torch.log(torch.clamp(depths.double(), min=1e-30)) / math.log1p(DEFOCUS_SLAB)).long()
+
+
+def _tile_grid(tiles: torch.Tensor, tiles_x: int, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+    grid = torch.arange(TILE_SIZE, device=tiles.device, dtype=dtype) + 0.5
+    px = (tiles % tiles_x).to(dtype)[:, None] * TILE_SIZE + grid.repeat(TILE_SIZE)
+    py = (tiles // tiles_x).to(dtype)[:, None] * TILE_SIZE + grid.repeat_interleave(TILE_SIZE)
+    return px, py
+
+
+def _alphas(proj: Projected, g: torch.Tensor, px: torch.Tensor, py: torch.Tensor, in_list: torch.Tensor,
+            alive: torch.Tensor, alpha_max: float) -> torch.Tensor:
+    """(B, 256, C) alpha of the chunk's Gaussians at the batch's pixels (0 where skipped)."""
+    dx = px[:, :, None] - proj.means2d[g, 0][:, None, :]
+    dy = py[:, :, None] - proj.means2d[g, 1][:, None, :]
+    a, bb, c = (proj.conics[g, k][:, None, :] for k in range(3))
+    sigma = 0.5 * (a * dx * dx + c * dy * dy) + bb * dx * dy
+    alpha = torch.clamp(proj.opacities[g][:, None, :] * torch.exp(-sigma), max=alpha_max)
+    ok = (sigma >= 0) & (alpha >= proj.alpha_floor[g][:, None, :]) & in_list[:, None, :] & alive[:, :, None]
+    return torch.where(ok, alpha, torch.zeros_like(alpha))
+
+
+def _chunks(offsets: torch.Tensor, gauss: torch.Tensor, width: int, height: int, chunk: int, max_elements: int):
+    """Yield ``(tiles, start, count)`` batches of non-empty tiles."""
+    n_pix = TILE_SIZE * TILE_SIZE
+    lengths = offsets[1:] - offsets[:-1]
+    active = torch.nonzero(lengths > 0).squeeze(1)
+    batch = max(1, max_elements // (n_pix * chunk))
+    for b0 in range(0, active.numel(), batch):
+        tiles = active[b0 : b0 + batch]
+        yield tiles, offsets[tiles], lengths[tiles]
+
+
+def measure_sharp(
+    proj: Projected, offsets: torch.Tensor, gauss: torch.Tensor, slab: torch.Tensor, width: int, height: int,
+    alpha_max: float, chunk: int = 32, max_elements: int = 1 << 22,
+) -> torch.Tensor:
+    """Per-pair sums ``(pairs, 6)``: M, S, W, U_r, U_g, U_b (see the module docstring)."""
+    device, dtype = proj.means2d.device, proj.means2d.dtype
+    tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
+    out = torch.zeros(gauss.numel(), 6, dtype=dtype, device=device)
+    steps = torch.arange(chunk, device=device)
+    colors = proj.colors if proj.colors is not None else torch.zeros(proj.means2d.shape[0], 3, dtype=dtype, device=device)
+    linear = srgb_to_linear(colors)
+    last_index = max(gauss.numel() - 1, 0)
+    for tiles, start, count in _chunks(offsets, gauss, width, height, chunk, max_elements):
+        px, py = _tile_grid(tiles, tiles_x, dtype)
+        rho = None
+        for sweep in (1, 2):
+            trans = torch.ones_like(px)
+            alive = torch.ones_like(px, dtype=torch.bool)
+            enc = torch.zeros(*px.shape, 3, dtype=dtype, device=device)
+            mix = torch.zeros_like(enc)
+            t_start = torch.ones_like(px)  # transmittance where the current slab started
+            slab_prev = torch.full((tiles.numel(),), torch.iinfo(torch.int64).min, dtype=torch.long, device=device)
+            for c0 in range(0, int(count.max()), chunk):
+                pos = c0 + steps
+                in_list = pos[None, :] < count[:, None]
+                pair = torch.clamp(start[:, None] + pos[None, :], max=last_index)
+                g = torch.where(in_list, gauss[pair], torch.zeros_like(pair))
+                alpha = _alphas(proj, g, px, py, in_list, alive, alpha_max)
+                kept = torch.cumprod(1.0 - alpha, dim=-1)
+                t_after = trans[:, :, None] * kept
+                t_before = trans[:, :, None] * torch.cat([torch.ones_like(kept[..., :1]), kept[..., :-1]], dim=-1)
+                take = t_after > TRANSMITTANCE_MIN
+                taken = alpha * take
+                weight = taken * t_before
+                if sweep == 1:
+                    s = torch.where(in_list, slab[g], slab_prev[:, None])
+                    previous = torch.cat([slab_prev[:, None], s[:, :-1]], dim=1)
+                    new = (s != previous) & in_list
+                    marks = torch.where(new, steps[None, :].expand_as(s), torch.full_like(s, -1))
+                    last = torch.cummax(marks, dim=1).values  # (B, C) list position of the slab's start, -1 = before the chunk
+                    at = torch.gather(t_before, 2, torch.clamp(last, min=0)[:, None, :].expand(-1, px.shape[1], -1))
+                    t_slab_start = torch.where((last >= 0)[:, None, :], at, t_start[:, :, None])
+                    t_slab = t_before / torch.clamp(t_slab_start, min=1e-30)
+                    sums = torch.stack([taken.sum(1), (taken * t_slab).sum(1), weight.sum(1)], dim=-1)  # (B, C, 3)
+                    out[pair[in_list], :3] += sums[in_list]
+                    enc = enc + torch.einsum("bpc,bck->bpk", weight, colors[g])
+                    mix = mix + torch.einsum("bpc,bck->bpk", weight, linear[g])
+                    t_start = torch.where((last[:, -1] >= 0)[:, None], at[:, :, -1], t_start)
+                    slab_prev = s[:, -1]
+                else:
+                    u = torch.einsum("bpc,bpk->bck", weight, rho)
+                    out[pair[in_list], 3:] += u[in_list]
+                n_take = take.sum(-1)
+                t_last = torch.gather(t_after, 2, torch.clamp(n_take - 1, min=0)[..., None])[..., 0]
+                trans = torch.where(n_take > 0, t_last, trans)
+                alive = alive & take.all(-1)
+                if not bool(alive.any()):
+                    break
+            if sweep == 1:
+                rho = torch.where(mix > 0, srgb_to_linear(enc) / torch.clamp(mix, min=1e-30), torch.ones_like(mix))
+    return out
+
+
+def measurement_margin(proj: Projected, width: int, height: int) -> int:
+    """As :func:`spacedg.render.defocus.measurement_margin`, from a torch projection."""
+    from spacedg.limits import image_size_problem
+
+    visible = proj.visible
+    if not bool(visible.any()):
+        return 0
+    wanted = float(proj.radii[visible].max())
+    margin = int(min(math.ceil(wanted), max(width, height) // 2))
+    while margin > 0 and image_size_problem(width + 2 * margin, height + 2 * margin) is not None:
+        margin //= 2
+    return margin
+
+
+def inside_fraction(proj: Projected, width: int, height: int) -> torch.Tensor:
+    """(N,) share of each Gaussian's footprint box inside the frame, as :func:`spacedg.render.defocus.inside_fraction`."""
+    u, v = proj.means2d[:, 0].double(), proj.means2d[:, 1].double()
+    rx = torch.clamp(proj.radii[:, 0].double(), min=0.5)
+    ry = torch.clamp(proj.radii[:, 1].double(), min=0.5)
+    fx = torch.clamp(torch.clamp(u + rx, max=width) - torch.clamp(u - rx, min=0.0), min=0.0) / (2.0 * rx)
+    fy = torch.clamp(torch.clamp(v + ry, max=height) - torch.clamp(v - ry, min=0.0), min=0.0) / (2.0 * ry)
+    return fx * fy
+
+
+def match_factors(sums: torch.Tensor, inside: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-Gaussian ``(κ (N,), ρ (N, 3))`` from per-Gaussian sums (N, 6), as :func:`spacedg.render.defocus.match_factors`."""
+    sums = sums.double()
+    m, s, w, u = sums[:, 0], sums[:, 1], sums[:, 2], sums[:, 3:6]
+    kappa_mean = float(s.sum() / m.sum()) if float(m.sum()) > 0 else 1.0
+    rho_mean = u.sum(0) / w.sum() if float(w.sum()) > 0 else torch.ones(3, dtype=sums.dtype, device=sums.device)
+    share = torch.ones_like(m) if inside is None else torch.clamp(inside.double(), 0.0, 1.0)
+    kappa = torch.where(m > 0, share * (s / torch.where(m > 0, m, torch.ones_like(m))) + (1 - share) * kappa_mean,
+                        torch.full_like(m, kappa_mean))
+    rho = torch.where(
+        (w > 0)[:, None],
+        share[:, None] * (u / torch.where(w > 0, w, torch.ones_like(w))[:, None]) + (1 - share[:, None]) * rho_mean[None, :],
+        rho_mean[None, :].expand_as(u),
+    )
+    kappa = torch.clamp(torch.nan_to_num(kappa, nan=kappa_mean), 0.0, 1.0)
+    rho = torch.clamp(torch.nan_to_num(rho, nan=1.0, posinf=1.0), min=0.0)
+    return kappa, rho
+
+
+def apply_match(proj: Projected, kappa: torch.Tensor, rho: torch.Tensor) -> Projected:
+    """The blurred projection with the measured factors applied (see :func:`spacedg.render.defocus.apply_match`)."""
+    blurred = proj.coc > 0
+    scale = torch.where(blurred, kappa.to(proj.opacities.dtype), torch.ones_like(proj.opacities))
+    gone = blurred & (kappa <= 0)
+    colors = proj.colors
+    if colors is not None:
+        colors = torch.where(blurred[:, None], srgb_to_linear(colors) * rho.to(colors.dtype), colors)
+    return replace(
+        proj, opacities=proj.opacities * scale, alpha_floor=proj.alpha_floor * scale, colors=colors,
+        radii=torch.where(gone[:, None], torch.zeros_like(proj.radii), proj.radii),
+        rects=torch.where(gone[:, None], torch.zeros_like(proj.rects), proj.rects),
+    )
+
+
+def composite_defocus(
+    proj: Projected, offsets: torch.Tensor, gauss: torch.Tensor, instance_ids: torch.Tensor, width: int, height: int,
+    alpha_max: float, want_color: bool = True, want_depth: bool = False, want_ids: bool = False,
+    chunk: int = 32, max_elements: int = 1 << 22,
+) -> dict[str, torch.Tensor]:
+    """Composite the blurred projection: ``alpha``, ``enc`` (in-focus mix, sRGB-encoded), ``lin``
+    (blurred light, linear) and the requested depth/id images, each (H, W[, 3])."""
+    device, dtype = proj.means2d.device, proj.means2d.dtype
+    tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
+    tiles_y = (height + TILE_SIZE - 1) // TILE_SIZE
+    n_pix = TILE_SIZE * TILE_SIZE
+    n_tiles = tiles_x * tiles_y
+    trans_all = torch.ones(n_tiles, n_pix, dtype=dtype, device=device)
+    enc_all = torch.zeros(n_tiles, n_pix, 3, dtype=dtype, device=device)
+    lin_all = torch.zeros(n_tiles, n_pix, 3, dtype=dtype, device=device)
+    depth_all = torch.zeros(n_tiles, n_pix, dtype=dtype, device=device)
+    median_all = torch.zeros(n_tiles, n_pix, dtype=dtype, device=device)
+    ids_all = torch.full((n_tiles, n_pix), -1, dtype=torch.int32, device=device)
+    colors = proj.colors if (want_color and proj.colors is not None) else torch.zeros(proj.means2d.shape[0], 3, dtype=dtype, device=device)
+    steps = torch.arange(chunk, device=device)
+    last_index = max(gauss.numel() - 1, 0)
+    for tiles, start, count in _chunks(offsets, gauss, width, height, chunk, max_elements):
+        px, py = _tile_grid(tiles, tiles_x, dtype)
+        trans = torch.ones_like(px)
+        t_focus = torch.ones_like(px)
+        alive = torch.ones_like(px, dtype=torch.bool)
+        enc = torch.zeros(*px.shape, 3, dtype=dtype, device=device)
+        lin = torch.zeros_like(enc)
+        depth = torch.zeros_like(px)
+        median = torch.zeros_like(px)
+        ids = torch.full(px.shape, -1, dtype=torch.int32, device=device)
+        for c0 in range(0, int(count.max()), chunk):
+            pos = c0 + steps
+            in_list = pos[None, :] < count[:, None]
+            g = torch.where(in_list, gauss[torch.clamp(start[:, None] + pos[None, :], max=last_index)], torch.zeros_like(pos)[None, :])
+            alpha = _alphas(proj, g, px, py, in_list, alive, alpha_max)
+            blurred = proj.coc[g] > 0  # (B, C)
+            if bool((blurred | ~in_list).all()):
+                # only blurred Gaussians: the saturating sum in closed form
+                t_after = torch.clamp(trans[:, :, None] - torch.cumsum(alpha * t_focus[:, :, None], dim=-1), min=0.0)
+                t_before = torch.cat([trans[:, :, None], t_after[..., :-1]], dim=-1)
+                live = t_before > TRANSMITTANCE_MIN
+                weight = (t_before - t_after) * live
+                trans = trans - weight.sum(-1)
+                alive = alive & (trans > TRANSMITTANCE_MIN)
+                enc_w = torch.zeros_like(weight)
+                lin_w = weight
+            else:
+                enc_w = torch.zeros_like(alpha)
+                lin_w = torch.zeros_like(alpha)
+                t_before = torch.zeros_like(alpha)
+                for k in range(alpha.shape[-1]):
+                    a = alpha[..., k] * alive  # a pixel that stopped takes nothing more
+                    t_before[..., k] = trans
+                    w_blur = torch.minimum(a * t_focus, trans)
+                    after_sharp = trans * (1.0 - a)
+                    take = after_sharp > TRANSMITTANCE_MIN
+                    w_sharp = a * trans * take
+                    is_blur = blurred[:, k][:, None]
+                    lin_w[..., k] = torch.where(is_blur, w_blur, torch.zeros_like(a))
+                    enc_w[..., k] = torch.where(is_blur, torch.zeros_like(a), w_sharp)
+                    new_trans = torch.where(is_blur, trans - w_blur, torch.where(take, after_sharp, trans))
+                    t_focus = torch.where(is_blur, t_focus, t_focus * (1.0 - a * take))
+                    alive = alive & torch.where(is_blur, new_trans > TRANSMITTANCE_MIN, take)
+                    trans = new_trans
+                weight = enc_w + lin_w
+            if want_color:
+                enc = enc + torch.einsum("bpc,bck->bpk", enc_w, colors[g])
+                lin = lin + torch.einsum("bpc,bck->bpk", lin_w, colors[g])
+            if want_depth:
+                depth = depth + (weight * proj.depths[g][:, None, :]).sum(-1)
+            if want_ids:
+                hit = (weight > 0) & (t_before > 0.5)
+                last = (hit * (steps + 1)).amax(-1)
+                has = last > 0
+                pick = torch.gather(g[:, None, :].expand(-1, px.shape[1], -1), 2, torch.clamp(last - 1, min=0)[..., None])[..., 0]
+                median = torch.where(has, proj.depths[pick], median)
+                ids = torch.where(has, instance_ids[pick], ids)
+            if not bool(alive.any()):
+                break
+        trans_all[tiles], enc_all[tiles], lin_all[tiles], depth_all[tiles] = trans, enc, lin, depth
+        median_all[tiles], ids_all[tiles] = median, ids
+
+    def to_image(t: torch.Tensor) -> torch.Tensor:
+        tail = t.shape[2:]
+        img = t.reshape(tiles_y, tiles_x, TILE_SIZE, TILE_SIZE, *tail).transpose(1, 2)
+        return img.reshape(tiles_y * TILE_SIZE, tiles_x * TILE_SIZE, *tail)[:height, :width]
+
+    alpha_img = 1.0 - to_image(trans_all)
+    out = {"alpha": alpha_img}
+    if want_color:
+        out["enc"], out["lin"] = to_image(enc_all), to_image(lin_all)
+    if want_depth:
+        d = to_image(depth_all)
+        out["depth"] = torch.where(alpha_img > 0, d / torch.clamp(alpha_img, min=1e-30), torch.zeros_like(d))
+    if want_ids:
+        out["median_depth"] = to_image(median_all)
+        out["instance_ids"] = torch.where(to_image(trans_all) <= 0.5, to_image(ids_all), torch.full_like(to_image(ids_all), -1))
+    return out
+
+
+def render_torch(
+    gs: GaussianTensors, camera: Camera, settings: RasterSettings, proj: Projected,
+    want_color: bool, want_depth: bool, want_ids: bool,
+) -> dict[str, torch.Tensor]:
+    """Both passes on the torch path: ``alpha``, ``enc`` + ``lin`` (when colour is wanted), depth/ids, ``n_pairs``."""
+    from spacedg.render.defocus import measurement_camera
+
+    tight = settings.tight_tiles and settings.opacity_extent
+    width, height = camera.width, camera.height
+    wide = measurement_camera(camera, measurement_margin(proj, width, height))
+    sharp = project(gs, wide, settings, None, want_color)
+    offsets, gauss = bin_tiles(sharp, wide.width, wide.height, tight)
+    pairs = measure_sharp(sharp, offsets, gauss, _slab(sharp.depths), wide.width, wide.height, settings.alpha_max)
+    sums = torch.zeros(proj.means2d.shape[0], 6, dtype=torch.float64, device=pairs.device)
+    sums.index_add_(0, gauss.long(), pairs.double())
+    kappa, rho = match_factors(sums, inside_fraction(sharp, wide.width, wide.height))
+    blurred = apply_match(proj, kappa, rho)
+    offsets, gauss = bin_tiles(blurred, width, height, tight)
+    out = composite_defocus(blurred, offsets, gauss, gs.instance_ids, width, height, settings.alpha_max, want_color, want_depth, want_ids)
+    out["n_pairs"] = torch.tensor(gauss.numel())
+    return out
