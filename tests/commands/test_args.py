@@ -73,7 +73,7 @@ def test_every_out_is_checked_before_work(capsys, tmp_path: Path, a_file: Path, 
 
 
 @pytest.mark.parametrize(("argv", "needles"), [
-    (["scenes", "preview", "S", "--out", "x.png", "--columns", "0"], ["--columns must be at least 1, got 0"]),
+    (["scenes", "preview", "S", "--out", "x.png", "--columns", "0"], ["--columns must be from 1 to 64 floor plans per row, got 0"]),
     (["qa", "preview", "S", "--out", "x.png", "--seed", "-2"], ["--seed must be a non-negative integer"]),
     (["qa", "build", "S", "--per-sub-type", "0"], ["--per-sub-type must be at least 1"]),
     (["gallery", "S", "--out", "x.png", "--seed", "-1"], ["--seed must be a non-negative integer"]),
