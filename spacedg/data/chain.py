@@ -40,7 +40,6 @@ anything. :meth:`Chain.scales_with_depth` says whether a chain needs D.
 from __future__ import annotations
 
 import math
-
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any

@@ -52,13 +52,24 @@ import torch
 from torch.utils.data import Dataset
 
 from spacedg.data.chain import BENCH_DEGRADATIONS, SEVERITIES, Chain
-from spacedg.data.pipeline import PipelineOptions, degrade, frames_nbytes
+from spacedg.data.pipeline import (
+    PipelineOptions,
+    degrade,
+    frames_nbytes,
+    sample_scene_depth,
+)
 from spacedg.data.qa_index import QABuildConfig, ensure_indexes, index_paths, read_index
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.registry import get_question_family, list_degradations
 from spacedg.scene.io import load_scene
-from spacedg.scene.store import SPLITS, ByteLRU, assign_splits, builtin_scene_dirs, scene_dirs_of
+from spacedg.scene.store import (
+    SPLITS,
+    ByteLRU,
+    assign_splits,
+    builtin_scene_dirs,
+    scene_dirs_of,
+)
 from spacedg.seeding import derive_seed
 
 __all__ = ["SpaceDGDataset"]
@@ -229,7 +240,6 @@ class SpaceDGDataset(Dataset):
         every part of a mixture with its parameters), computed without rendering (a chain whose
         presets scale with the scene reads its Gaussians for the scene depth,
         :func:`~spacedg.data.pipeline.sample_scene_depth`)."""
-        from spacedg.data.pipeline import sample_scene_depth
 
         record, chain, name = self.plan(index)
         parsed = Chain.parse(chain)

@@ -71,9 +71,9 @@ from spacedg.data.chain import CLEAN
 from spacedg.data.chat import ANSWER_PROMPT
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.public_format import PUBLIC_BENCH_NAME, public_fields, public_mismatch
-from spacedg.plugins.answers import answer_text
-from spacedg.files import atomic_write_bytes, remove_stale_temps
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
+from spacedg.files import atomic_write_bytes, remove_stale_temps
+from spacedg.plugins.answers import answer_text
 
 __all__ = [
     "DEFAULT_SHARD_SIZE",

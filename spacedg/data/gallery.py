@@ -16,10 +16,15 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from spacedg.scene.floorplan import contact_sheet
-from spacedg.data.pipeline import DegradedViews, PipelineOptions, degrade_variants, sample_scene_depth
+from spacedg.data.pipeline import (
+    DegradedViews,
+    PipelineOptions,
+    degrade_variants,
+    sample_scene_depth,
+)
 from spacedg.plugins.registry import get_degradation, list_degradations
 from spacedg.plugins.specs import SEVERITY_PRESETS
+from spacedg.scene.floorplan import contact_sheet
 
 if TYPE_CHECKING:
     from spacedg.scene.model import Scene

@@ -63,8 +63,8 @@ from spacedg.render.settings import RasterSettings
 if TYPE_CHECKING:
     import torch
 
-    from spacedg.scene.model import Scene
     from spacedg.render.frame import Frame
+    from spacedg.scene.model import Scene
 
 __all__ = [
     "DegradedViews",
@@ -454,7 +454,10 @@ def degrade_image(
     Returns:
         ``(uint8 image, provenance list)``.
     """
-    from spacedg.render.colour_cpu import decode_srgb, encode_srgb_u8  # numba: compiled on first use
+    from spacedg.render.colour_cpu import (  # numba: compiled on first use
+        decode_srgb,
+        encode_srgb_u8,
+    )
 
     image = check_display_image(image, "degrade_image")
     aux: dict[str, Any] = {}

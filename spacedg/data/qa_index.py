@@ -57,11 +57,27 @@ from typing import Any
 
 import numpy as np
 
+from spacedg.data.judge import DescriptionJudge
+from spacedg.errors import FileFormatError, ParameterError, SpaceDGError
+from spacedg.files import atomic_write_bytes
+from spacedg.plugins import get_question_family, list_question_families
+from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.qa_record import QARecord
-from spacedg.scene.model import Scene
-from spacedg.errors import FileFormatError, ParameterError
 from spacedg.plugins.specs import NAME_PATTERN, AnswerType
+from spacedg.scene.covisibility import with_covisibility
+from spacedg.scene.frame_check import require_frame
+from spacedg.scene.io import load_scene
+from spacedg.scene.labelling import ensure_instance_ids
+from spacedg.scene.lexicon import default_lexicon
+from spacedg.scene.model import Scene
+from spacedg.scene.store import run_isolated
+from spacedg.scene.visibility import (
+    compute_visibility,
+    load_or_compute_visibility,
+    with_visibility,
+)
+from spacedg.seeding import derive_seed
 
 __all__ = [
     "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "prepare_scene", "generate_records", "select_records", "deal_letters", "with_letter",
@@ -136,7 +152,6 @@ class SceneQA:
 
 # ------------------------------------------------------------------ building
 def _families(names: Sequence[str]) -> list[Any]:
-    from spacedg.plugins import get_question_family, list_question_families
 
     if not names:
         return list_question_families()
@@ -156,10 +171,6 @@ def prepare_scene(
 
     First the scene's frame is checked (a scene whose cameras see nothing is refused, naming the
     cause) and Gaussians without instance ids get them by box containment (with a warning)."""
-    from spacedg.scene.covisibility import with_covisibility
-    from spacedg.scene.frame_check import require_frame
-    from spacedg.scene.labelling import ensure_instance_ids
-    from spacedg.scene.visibility import compute_visibility, load_or_compute_visibility, with_visibility
 
     require_frame(scene, backend=backend)
     scene = ensure_instance_ids(scene)
@@ -373,7 +384,6 @@ def select_records(
 def with_letter(record: QARecord, slot: int) -> QARecord:
     """``record`` (MCQ) with its correct option moved to letter ``slot`` (0–3), the other options
     keeping their order: the same question and answer text, another letter."""
-    from spacedg.plugins.answers import MCQ_LETTERS
 
     texts = [line[3:] for line in record.options]
     k = MCQ_LETTERS.index(str(record.answer))
@@ -426,8 +436,6 @@ def generate_records(
     ``dropped`` receives per-family counts of records the judge removed; ``selection_stats``
     receives per ``question_type/sub_question_type`` the counts of :func:`select_records`.
     """
-    from spacedg.data.judge import DescriptionJudge
-    from spacedg.seeding import derive_seed
 
     if judge is not None and not isinstance(judge, DescriptionJudge):
         judge = DescriptionJudge(scene, judge)
@@ -505,7 +513,6 @@ def _index_key(scene_json: Path, config: QABuildConfig, families: Iterable[Any],
     for fam in families:
         origin = fam.origin
         fams.append([fam.name, getattr(origin, "distribution", None), getattr(origin, "version", None), _module_digest(fam)])
-    from spacedg.scene.lexicon import default_lexicon
 
     judge_name = None if judge is None else getattr(judge, "__name__", type(judge).__name__)
     head = {
@@ -557,8 +564,6 @@ def build_scene_index(
 ) -> SceneQA:
     """Build (or reuse) the question index of one native scene folder (see the module docstring):
     the full index, or with ``config.families`` the selection index beside it (:func:`index_paths`)."""
-    from spacedg.scene.io import load_scene
-    from spacedg.files import atomic_write_bytes
 
     scene_dir = Path(scene_dir)
     scene = load_scene(scene_dir)
@@ -596,7 +601,6 @@ def _is_current(jsonl: Path, meta_path: Path, key: str) -> bool:
 def index_is_current(scene_dir: str | Path, config: QABuildConfig = QABuildConfig(), out_dir: str | Path | None = None) -> bool:
     """Whether ``build_scene_index(scene_dir, config, out_dir=out_dir)`` would reuse its index
     (reads ``scene.json`` and the meta file only: nothing is rendered)."""
-    from spacedg.scene.io import load_scene
 
     scene_dir = Path(scene_dir)
     scene_json = scene_dir / "scene.json" if scene_dir.is_dir() else scene_dir
@@ -629,7 +633,6 @@ def _build_indexes(payload: dict[str, Any]) -> dict[str, str]:
     ``folder → error message`` for the scenes that failed."""
     from tqdm import tqdm
 
-    from spacedg.errors import SpaceDGError
 
     config = payload["config"]
     cfg = QABuildConfig(**{**config, "families": tuple(config["families"]), "visibility_size": tuple(config["visibility_size"]),
@@ -648,8 +651,6 @@ def ensure_indexes(dirs: Sequence[Path], config: QABuildConfig) -> dict[str, str
     separate Python process** (:func:`~spacedg.scene.store.run_isolated`: the caller never starts
     numba or CUDA threads before a DataLoader forks its workers); returns ``folder → error`` for
     scenes that could not be read or indexed."""
-    from spacedg.errors import SpaceDGError
-    from spacedg.scene.store import run_isolated
 
     failed: dict[str, str] = {}
     stale = []

@@ -17,10 +17,11 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from spacedg.scene.floorplan import contact_sheet
+from spacedg.data.pipeline import PipelineOptions, degrade
 from spacedg.plugins.qa_record import QARecord
-from spacedg.scene.model import Scene
 from spacedg.render.camera import Camera
+from spacedg.scene.floorplan import contact_sheet
+from spacedg.scene.model import Scene
 
 __all__ = ["render_thumbnail", "record_panel", "qa_sheet", "ascii_text"]
 
@@ -64,7 +65,6 @@ def _text_block(lines: Sequence[str], width: int) -> np.ndarray:
 def render_thumbnail(scene: Scene, view: str, width: int, backend: str = "auto") -> tuple[np.ndarray, Camera]:
     """The clean sRGB view at ``width`` px wide (uint8 H×W×3, the sample pipeline's clean render)
     and the camera it was rendered with."""
-    from spacedg.data.pipeline import PipelineOptions, degrade
 
     full = scene.camera(view)
     height = max(1, round(full.height * width / full.width))

@@ -29,7 +29,13 @@ from typing import Any
 
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.questions.camera_rotation import MIN_ROTATION_DEG
+from spacedg.plugins.questions.geometry import gravity_rotation
+from spacedg.plugins.questions.object_size_comparison import thresholds_for
 from spacedg.plugins.specs import AnswerType
+from spacedg.render.camera import Camera
+from spacedg.scene.lexicon import default_lexicon
+from spacedg.scene.visibility_classes import VisibilityClass, classify
 
 __all__ = ["count_table", "answer_balance", "blind_baseline", "format_table", "record_subject", "repeat_rate", "ambiguities"]
 
@@ -199,7 +205,6 @@ def _size_ambiguous(record: QARecord) -> bool:
     values = g.get("values")
     if not values or len(values) != 2:
         return False
-    from spacedg.plugins.questions.object_size_comparison import thresholds_for
 
     same, different = thresholds_for(str(g.get("quantity", "longest_side")), values)
     delta = abs(round(float(values[0]) - float(values[1]), 9))
@@ -210,9 +215,6 @@ def _size_ambiguous(record: QARecord) -> bool:
 def _rotation_imperceptible(record: QARecord) -> bool:
     import numpy as np
 
-    from spacedg.plugins.questions.camera_rotation import MIN_ROTATION_DEG
-    from spacedg.plugins.questions.geometry import gravity_rotation
-    from spacedg.render.camera import Camera
 
     g = record.geometry
     try:
@@ -234,8 +236,6 @@ def ambiguities(records: Iterable[QARecord], scenes: Mapping[str, Any] | None = 
     books on a bookshelf counted apart as ``label_shown_unannotated``), ``size_undecidable``,
     ``rotation_imperceptible``; ``checked_label_only`` says how many label-only records were
     checked against a scene."""
-    from spacedg.scene.lexicon import default_lexicon
-    from spacedg.scene.visibility_classes import VisibilityClass, classify
 
     lexicon = default_lexicon()
     out = {"label_related": 0, "label_shown_unannotated": 0, "size_undecidable": 0, "rotation_imperceptible": 0, "checked_label_only": 0}

@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+from spacedg.eval.bench import Bench, BenchRow, load_bench
 from spacedg.eval.parsing import (
     extract_answer_text,
     parse_count,
@@ -18,7 +19,6 @@ from spacedg.eval.parsing import (
     parse_size_list,
     parse_yes_no,
 )
-from spacedg.eval.bench import Bench, BenchRow, load_bench
 from spacedg.eval.predictions import PredictionSet, read_predictions
 from spacedg.eval.report import Report, build_report, write_report
 from spacedg.eval.scoring import (

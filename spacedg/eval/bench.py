@@ -25,8 +25,8 @@ from typing import Any
 
 from spacedg.data.chain import CLEAN
 from spacedg.errors import FileFormatError, InvalidDataError
-from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.eval.scoring import route
+from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.specs import AnswerType
 
 __all__ = ["CLEAN", "Bench", "BenchRow", "bench_table", "cell_text", "load_bench", "read_table", "row_from_mapping"]

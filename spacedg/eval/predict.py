@@ -37,11 +37,18 @@ import numpy as np
 
 from spacedg.data.chat import item_images
 from spacedg.data.public_format import public_fields
-from spacedg.files import atomic_write_bytes, exclusive_lock, read_rgb
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
 from spacedg.eval.bench import Bench, BenchRow, row_from_mapping
 from spacedg.eval.predictions import meta_path
-from spacedg.eval.prompts import VARIANTS, conversation, cot_followup, known_degradations, parse_degradation_guess, prompt_texts
+from spacedg.eval.prompts import (
+    VARIANTS,
+    conversation,
+    cot_followup,
+    known_degradations,
+    parse_degradation_guess,
+    prompt_texts,
+)
+from spacedg.files import atomic_write_bytes, exclusive_lock, read_rgb
 
 __all__ = ["PredictSummary", "Source", "bench_source", "dataset_source", "predict", "shard_path"]
 

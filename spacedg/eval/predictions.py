@@ -23,7 +23,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from spacedg.errors import FileFormatError, InvalidDataError, ParameterError, SpaceDGWarning
+from spacedg.errors import (
+    FileFormatError,
+    InvalidDataError,
+    ParameterError,
+    SpaceDGWarning,
+)
 from spacedg.eval.bench import BenchRow, cell_text, read_table, row_from_mapping
 from spacedg.eval.prompts import VARIANTS
 

@@ -30,9 +30,11 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from spacedg.eval.bench import CLEAN, BenchRow
 from spacedg.data.chain import Chain
 from spacedg.data.chat import ANSWER_FORMATS, ANSWER_PROMPT, chat_messages
+from spacedg.errors import UnknownPluginError
+from spacedg.eval.bench import CLEAN, BenchRow
+from spacedg.plugins.registry import degradation_names, get_degradation
 
 __all__ = [
     "COT_STAGE1_PROMPT",
@@ -85,7 +87,6 @@ _ALIASES: dict[str, str] = {
 
 def known_degradations() -> list[str]:
     """Names of the loaded degradation plugins (sorted), the choices of ``cot`` stage 1."""
-    from spacedg.plugins.registry import degradation_names
 
     return degradation_names()  # names only: a clash between two plugins is not an error here
 
@@ -95,8 +96,6 @@ def _number(value: float) -> str:
 
 
 def _ranges_text(name: str, preset: str) -> str:
-    from spacedg.errors import UnknownPluginError
-    from spacedg.plugins.registry import get_degradation
 
     try:
         spec = get_degradation(name)

@@ -32,16 +32,33 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from spacedg.files import atomic_write_bytes
 from spacedg.errors import InvalidDataError
-from spacedg.eval.aggregate import AVG, SLICE_KINDS, Cell, ItemScore, condition_order, mean, score_set, slice_table
+from spacedg.eval import plots  # matplotlib itself is imported on the first plot
+from spacedg.eval.aggregate import (
+    AVG,
+    SLICE_KINDS,
+    Cell,
+    ItemScore,
+    condition_order,
+    mean,
+    score_set,
+    slice_table,
+)
 from spacedg.eval.bench import CLEAN, Bench
-from spacedg.eval.labels import degradation_label
 from spacedg.eval.correlation import MIN_MODELS, degradation_correlation
+from spacedg.eval.labels import degradation_label
 from spacedg.eval.predictions import PredictionSet, merge_shards
 from spacedg.eval.prompts import known_degradations, parse_degradation_guess
 from spacedg.eval.scoring import SCORER
-from spacedg.eval.tables import Table, csv_bytes, fmt_corr, fmt_delta, fmt_pct, is_number
+from spacedg.eval.tables import (
+    Table,
+    csv_bytes,
+    fmt_corr,
+    fmt_delta,
+    fmt_pct,
+    is_number,
+)
+from spacedg.files import atomic_write_bytes
 
 __all__ = ["Report", "build_report", "write_report"]
 
@@ -288,8 +305,6 @@ def _summary(report: Report) -> dict[str, Any]:
 
 
 def _plots(report: Report, folder: Path) -> dict[str, Path]:
-    from spacedg.eval import plots
-
     runs = [s for s in report.sets if s.variant != "no_image"]
     if not runs:
         return {}

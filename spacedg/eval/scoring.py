@@ -42,7 +42,6 @@ from typing import Any
 
 from spacedg.data.chat import ANSWER_FORMATS, ANSWER_PROMPT  # noqa: F401  (re-exported: the prompt the scorer's answers follow)
 from spacedg.data.public_format import internal_answer_type, public_answer_type
-from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.eval.parsing import (
     parse_count,
     parse_mcq,
@@ -50,6 +49,7 @@ from spacedg.eval.parsing import (
     parse_size_list,
     parse_yes_no,
 )
+from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.specs import AnswerType
 
 __all__ = [

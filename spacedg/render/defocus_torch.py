@@ -20,11 +20,17 @@ from dataclasses import replace
 
 import torch
 
+from spacedg.limits import image_size_problem
 from spacedg.render.camera import Camera
 from spacedg.render.colour import srgb_to_linear
 from spacedg.render.project import GaussianTensors, Projected, project
 from spacedg.render.raster_torch import bin_tiles
-from spacedg.render.settings import DEFOCUS_SLAB, TILE_SIZE, TRANSMITTANCE_MIN, RasterSettings
+from spacedg.render.settings import (
+    DEFOCUS_SLAB,
+    TILE_SIZE,
+    TRANSMITTANCE_MIN,
+    RasterSettings,
+)
 
 __all__ = ["composite_defocus", "has_blur", "match_factors", "measure_sharp", "render_torch"]
 
@@ -133,7 +139,6 @@ def measure_sharp(
 
 def measurement_margin(proj: Projected, width: int, height: int) -> int:
     """As :func:`spacedg.render.defocus.measurement_margin`, from a torch projection."""
-    from spacedg.limits import image_size_problem
 
     visible = proj.visible
     if not bool(visible.any()):

@@ -20,12 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-from spacedg.scene.derived_cache import read_npz_entry, views_key, write_npz_entry
-from spacedg.scene.model import Scene, ViewCovisibility
 from spacedg.errors import ParameterError
 from spacedg.render.camera import Camera
-from spacedg.scene.visibility import check_size, reduced_camera, view_names
 from spacedg.render.gaussians import Gaussians
+from spacedg.render.renderer import render
+from spacedg.scene.derived_cache import read_npz_entry, views_key, write_npz_entry
+from spacedg.scene.model import Scene, ViewCovisibility
+from spacedg.scene.visibility import check_size, reduced_camera, view_names
 
 __all__ = [
     "COVISIBILITY_IMAGE_SIZE", "COVISIBILITY_VERSION", "covisibility_matrix", "symmetrize", "covisibility_key",
@@ -71,7 +72,6 @@ def _pixel_rays(camera: Camera, rows: np.ndarray, cols: np.ndarray) -> tuple[np.
 
 def _depth_view(gaussians: Gaussians, camera: Camera, stride: int, backend: str) -> _DepthView:
     """Render expected depth and lift the valid pixels (alpha > 0.5, every ``stride``-th row/column)."""
-    from spacedg.render.renderer import render
 
     frame = render(gaussians, camera, outputs="depth", backend=backend)
     assert frame.depth is not None

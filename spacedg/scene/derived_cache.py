@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from spacedg.files import atomic_write_bytes
 from spacedg.scene.model import Scene
 
 __all__ = ["views_key", "read_npz_entry", "write_npz_entry"]
@@ -55,7 +56,6 @@ def read_npz_entry(path: Path, key: str) -> dict[str, np.ndarray] | None:
 
 def write_npz_entry(path: Path, key: str, arrays: Mapping[str, np.ndarray]) -> None:
     """Write ``arrays`` and ``key`` to ``path`` atomically (temporary file + rename)."""
-    from spacedg.files import atomic_write_bytes
 
     buffer = io.BytesIO()
     np.savez(buffer, key=np.array(key), **arrays)

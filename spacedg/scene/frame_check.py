@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from spacedg.errors import InvalidDataError
+from spacedg.render.renderer import render
 from spacedg.scene.model import Scene
 
 __all__ = [
@@ -129,7 +130,6 @@ def check_frame(scene: Scene, *, renders: int = 4, render_width: int = 64, backe
         boxes = held / len(scene.instances)
     coverage: list[float] = []
     if renders > 0:
-        from spacedg.render.renderer import render
 
         for name in [names[i] for i in _even(len(names), renders)]:
             cam = scene.views[name]

@@ -39,14 +39,40 @@ from spacedg.errors import FileFormatError, ParameterError
 from spacedg.files import PathLike, read_json
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
-from spacedg.scene.frame_check import FrameReport, check_frame, diagnose, generic_corrections, normalised_hint
-from spacedg.scene.io import estimate_up, read_gaussians, read_instances, read_views, save_scene
+from spacedg.scene.frame_check import (
+    FrameReport,
+    check_frame,
+    diagnose,
+    generic_corrections,
+    normalised_hint,
+)
+from spacedg.scene.io import (
+    estimate_up,
+    read_gaussians,
+    read_instances,
+    read_views,
+    save_scene,
+)
 from spacedg.scene.io._assemble import GAUSSIAN_SUFFIXES
 from spacedg.scene.io.colmap import read_colmap
 from spacedg.scene.io.embodiedscan import read_embodiedscan_boxes
-from spacedg.scene.io.inria import is_inria_output, latest_point_cloud, read_cfg_args, read_inria_cameras
-from spacedg.scene.io.nerfstudio import denormalising_similarity, read_applied_transform, read_dataparser_transforms, read_transforms
-from spacedg.scene.io.scannetpp import is_scannetpp_scene, read_segments_anno, scannetpp_cameras
+from spacedg.scene.io.inria import (
+    is_inria_output,
+    latest_point_cloud,
+    read_cfg_args,
+    read_inria_cameras,
+)
+from spacedg.scene.io.nerfstudio import (
+    denormalising_similarity,
+    read_applied_transform,
+    read_dataparser_transforms,
+    read_transforms,
+)
+from spacedg.scene.io.scannetpp import (
+    is_scannetpp_scene,
+    read_segments_anno,
+    scannetpp_cameras,
+)
 from spacedg.scene.labelling import AssignmentReport, assign_instances
 from spacedg.scene.model import Instance, Scene
 

@@ -41,6 +41,7 @@ import numpy as np
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
+from spacedg.render.renderer import render
 from spacedg.scene.box import OrientedBox
 from spacedg.scene.model import Instance, Scene
 
@@ -215,7 +216,6 @@ def _assign_by_masks(
 ) -> np.ndarray:
     from tqdm import tqdm
 
-    from spacedg.render.renderer import render
 
     by_view = {v: m for v, m in _masks_of(scene.instances).items() if v in scene.views}
     if not by_view:
@@ -272,7 +272,6 @@ def _assign_by_masks(
 def _mask_ious(
     scene: Scene, gaussians: Gaussians, masks_root: str | Path | None, iou_views: int, backend: str
 ) -> dict[int, float]:
-    from spacedg.render.renderer import render
 
     by_view = _masks_of(scene.instances)
     wanted: dict[int, list[tuple[str, str]]] = {}

@@ -25,11 +25,11 @@ from typing import Any
 import numpy as np
 
 from spacedg._checks import require_rotation
-from spacedg.scene.box import OrientedBox
-from spacedg.scene.language import strip_article
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
+from spacedg.scene.box import OrientedBox
+from spacedg.scene.language import strip_article
 
 _ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 

@@ -19,6 +19,8 @@ from pathlib import Path
 from typing import Any
 
 from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.scene.io import save_scene
+from spacedg.scene.synthetic import generate_room
 
 __all__ = ["SPLITS", "spacedg_home", "builtin_scene_dirs", "assign_splits", "run_isolated", "ByteLRU", "scene_dirs_of"]
 
@@ -35,8 +37,6 @@ def _generate_rooms(payload: dict[str, Any]) -> dict[str, str]:
     """Child side of :func:`builtin_scene_dirs`: generate the rooms ``payload["seeds"]`` into ``payload["root"]``."""
     from tqdm import tqdm
 
-    from spacedg.scene.io import save_scene
-    from spacedg.scene.synthetic import generate_room
 
     root, seeds = payload["root"], payload["seeds"]
     for seed in tqdm(seeds, desc="built-in rooms (first use)", unit="room"):

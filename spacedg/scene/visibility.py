@@ -19,11 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.scene.model import InstanceVisibility, Scene
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
-
+from spacedg.render.renderer import render
+from spacedg.scene.derived_cache import read_npz_entry, views_key, write_npz_entry
+from spacedg.scene.model import InstanceVisibility, Scene
 
 __all__ = [
     "compute_visibility", "with_visibility", "unbounded_canvas", "VISIBILITY_IMAGE_SIZE", "load_or_compute_visibility",
@@ -157,7 +158,6 @@ def compute_visibility(
     """
     from tqdm import tqdm
 
-    from spacedg.render.renderer import render
 
     names = view_names(scene, views, "compute_visibility")
     size = check_size(image_size, "compute_visibility")
@@ -237,7 +237,6 @@ def load_or_compute_visibility(
     (:func:`~spacedg.scene.derived_cache.views_key`) covers the method version, parameters,
     cameras, Gaussian count and the instance ids, so it is reused only for the same scene.
     """
-    from spacedg.scene.derived_cache import read_npz_entry, views_key, write_npz_entry
 
     names = list(scene.views)
     size = check_size(image_size, "load_or_compute_visibility")

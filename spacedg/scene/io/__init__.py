@@ -12,8 +12,13 @@ hold values breaking a convention raise :class:`FileValueError` (both a ``FileFo
 and an ``InvalidDataError``); every message names the file and the record.
 """
 
-from spacedg.scene.io._assemble import estimate_up, read_gaussians, read_views, scene_from_files
 from spacedg.files import FileValueError
+from spacedg.scene.io._assemble import (
+    estimate_up,
+    read_gaussians,
+    read_views,
+    scene_from_files,
+)
 from spacedg.scene.io.colmap import read_colmap
 from spacedg.scene.io.instances import read_instances, write_instances
 from spacedg.scene.io.native import load_scene, save_scene

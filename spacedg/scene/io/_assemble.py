@@ -11,7 +11,10 @@ from typing import Any, Literal
 
 import numpy as np
 
+from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.files import PathLike, as_path, require_file
+from spacedg.render.camera import Camera
+from spacedg.render.gaussians import Gaussians
 from spacedg.scene.io.colmap import read_colmap
 from spacedg.scene.io.inria import read_inria_cameras
 from spacedg.scene.io.instances import read_instances
@@ -20,9 +23,6 @@ from spacedg.scene.io.ply import read_ply
 from spacedg.scene.io.splat import read_splat
 from spacedg.scene.io.spz import read_spz
 from spacedg.scene.model import Instance, Scene
-from spacedg.errors import FileFormatError, InvalidDataError
-from spacedg.render.camera import Camera
-from spacedg.render.gaussians import Gaussians
 
 #: Smallest length of the mean camera −y axis accepted as an up estimate (1 = all agree).
 MIN_UP_AGREEMENT = 0.5

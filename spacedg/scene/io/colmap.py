@@ -40,8 +40,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from spacedg.files import FileValueError, PathLike, as_path
 from spacedg.errors import FileFormatError, InvalidDataError, error_context
+from spacedg.files import FileValueError, PathLike, as_path
 from spacedg.render.camera import Camera, FisheyeLens
 from spacedg.render.gaussians import quat_to_matrix
 from spacedg.scene.io.colmap_check import check_text_model, pycolmap_message

@@ -39,11 +39,18 @@ from typing import Any
 
 import numpy as np
 
+from spacedg.errors import FileFormatError, InvalidDataError
+from spacedg.files import (
+    FileValueError,
+    PathLike,
+    as_path,
+    atomic_write,
+    dump_json,
+    read_json,
+)
 from spacedg.scene.box import OrientedBox
-from spacedg.files import FileValueError, PathLike, as_path, atomic_write, dump_json, read_json
 from spacedg.scene.io.fields import instance_list, matrix_field
 from spacedg.scene.model import Instance, InstanceVisibility
-from spacedg.errors import FileFormatError, InvalidDataError
 
 _CORNER_KEYS = ("corners", "bbox_corners", "obb_corners", "bounding_box")
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".npy")

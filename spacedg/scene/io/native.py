@@ -27,6 +27,7 @@ import os
 from pathlib import Path
 from typing import Any, Literal
 
+from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.files import (
     FileValueError,
     PathLike,
@@ -36,11 +37,10 @@ from spacedg.files import (
     sha256_of,
     write_temp_sibling,
 )
-from spacedg.scene.io.ply import read_ply, write_ply
-from spacedg.scene.model import Instance, Scene
-from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
+from spacedg.scene.io.ply import read_ply, write_ply
+from spacedg.scene.model import Instance, Scene
 
 FORMAT = "spacedg-scene"
 #: Newest scene.json version this code reads and the one it writes.

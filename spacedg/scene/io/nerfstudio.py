@@ -41,11 +41,11 @@ from typing import Any, Literal
 import numpy as np
 
 from spacedg._checks import require_homogeneous
+from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.files import FileValueError, PathLike, as_path, read_json
+from spacedg.render.camera import Camera, FisheyeLens
 from spacedg.scene.io.colmap import DEFAULT_FISHEYE_MAX_THETA
 from spacedg.scene.io.fields import named_record
-from spacedg.errors import FileFormatError, InvalidDataError
-from spacedg.render.camera import Camera, FisheyeLens
 
 _INTRINSIC_KEYS = (
     "fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model", "camera_angle_x", "camera_angle_y",

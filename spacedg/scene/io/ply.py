@@ -56,10 +56,15 @@ from typing import Literal
 
 import numpy as np
 
-from spacedg.files import FileValueError, PathLike, as_path, atomic_write, require_file
 from spacedg.errors import FileFormatError, InvalidDataError
+from spacedg.files import FileValueError, PathLike, as_path, atomic_write, require_file
 from spacedg.render.gaussians import QUAT_UNIT_TOL, SH_COEFFS, Gaussians
-from spacedg.scene.io.ply_variants import apply_filter_3d, decode_colour_points, decode_compressed, is_compressed
+from spacedg.scene.io.ply_variants import (
+    apply_filter_3d,
+    decode_colour_points,
+    decode_compressed,
+    is_compressed,
+)
 
 #: The header (from ``ply`` to ``end_header``) must fit in this many bytes.
 MAX_HEADER_BYTES = 64 * 1024

@@ -22,8 +22,8 @@ from typing import Literal
 
 import numpy as np
 
-from spacedg.files import FileValueError, PathLike, as_path, atomic_write, require_file
 from spacedg.errors import FileFormatError, InvalidDataError
+from spacedg.files import FileValueError, PathLike, as_path, atomic_write, require_file
 from spacedg.render.gaussians import SH_C0, Gaussians
 
 #: Bytes per Gaussian.

@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from spacedg.render.gaussians import Gaussians
 from spacedg.scene.synthetic import primitives as prim
 from spacedg.scene.synthetic.primitives import Surfels
-from spacedg.render.gaussians import Gaussians
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from spacedg.scene.synthetic.appearance import nearest_colour_name
-from spacedg.scene.synthetic.catalogue import ObjectModel
 from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.files import read_json
 from spacedg.render.gaussians import Gaussians
+from spacedg.scene.io.splat import read_splat
+from spacedg.scene.synthetic.appearance import nearest_colour_name
+from spacedg.scene.synthetic.catalogue import ObjectModel
 
 _AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0)}
 
@@ -76,7 +77,6 @@ class ExternalObject:
     def from_splat(cls, path: str | Path, *, label: str | None = None, description: str | None = None,
                    size_m: float = 0.3, placement: str = "support") -> ExternalObject:
         """Load a ``.splat`` object; label (meta ``id``), up axis and credits come from a ``meta.json`` beside it if present."""
-        from spacedg.scene.io.splat import read_splat
 
         path = Path(path)
         meta: dict = {}

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spacedg.scene.synthetic.textures import fbm
 from spacedg.render.gaussians import quats_from_matrices
+from spacedg.scene.synthetic.textures import fbm
 
 TANGENT_SIGMA = 0.6  # × spacing
 NORMAL_SIGMA = 0.1  # × spacing, capped at MAX_NORMAL_SIGMA

@@ -20,18 +20,29 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from spacedg.errors import InvalidDataError
+from spacedg.render.gaussians import SH_C0, Gaussians
 from spacedg.scene.box import OrientedBox
 from spacedg.scene.io.ply import quantize_for_ply
 from spacedg.scene.model import Instance, Scene
 from spacedg.scene.synthetic.appearance import Appearance, all_appearances
 from spacedg.scene.synthetic.catalogue import VOCABULARY
 from spacedg.scene.synthetic.external import ExternalObject
-from spacedg.scene.synthetic.layout import Layout, Placement, RoomShape, choose_room_shape, fill_room
-from spacedg.scene.synthetic.primitives import Surfels, frames_to_quats, rectangle, surfel_scales
+from spacedg.scene.synthetic.layout import (
+    Layout,
+    Placement,
+    RoomShape,
+    choose_room_shape,
+    fill_room,
+)
+from spacedg.scene.synthetic.primitives import (
+    Surfels,
+    frames_to_quats,
+    rectangle,
+    surfel_scales,
+)
 from spacedg.scene.synthetic.textures import TEXTURES
 from spacedg.scene.synthetic.trajectory import CaptureConfig, handheld_trajectory
-from spacedg.errors import InvalidDataError
-from spacedg.render.gaussians import SH_C0, Gaussians
 
 #: ``metadata["generator"]`` of every built-in room. A stable identifier, not a module path: it
 #: stays ``"spacedg.data.synthetic"`` (where the generator first lived) so that rooms written

@@ -20,10 +20,9 @@ import numpy as np
 
 from spacedg.errors import InvalidDataError
 from spacedg.limits import check_image_size
+from spacedg.render.camera import Camera
 from spacedg.scene.synthetic.layout import RoomShape, loop_path
 from spacedg.scene.synthetic.textures import value_noise
-from spacedg.render.camera import Camera
-
 
 #: Most views one synthetic capture takes (a walk of ~10⁴ m at 6–20 cm per view).
 MAX_VIEWS = 100_000
