@@ -20,26 +20,18 @@ from __future__ import annotations
 
 import argparse
 import time
+import sys
+from pathlib import Path
 
 import numpy as np
 
 import spacedg
 from spacedg.render import Camera, Defocus, Gaussians, render
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from tests.render_helpers import uniform_wall  # noqa: E402 - the wall the energy tests use
+
 APERTURES = (2.0, 5.0, 10.0, 15.0, 50.0, 200.0, 1000.0)
-
-
-def wall(extent_px: float, focal: float = 40.0, depth: float = 3.0, sigma_px: float = 5.0) -> Gaussians:
-    """Opaque uniform grey wall at ``depth`` m spanning ±``extent_px`` pixels of a camera of focal ``focal``."""
-    metres_per_px = depth / focal
-    spacing = 1.6 * sigma_px * metres_per_px
-    half = extent_px * metres_per_px
-    axis = np.arange(-half, half + spacing, spacing)
-    grid = np.stack(np.meshgrid(axis, axis), -1).reshape(-1, 2)
-    n = grid.shape[0]
-    means = np.column_stack([grid, np.full(n, depth)])
-    scales = np.tile([sigma_px * metres_per_px, sigma_px * metres_per_px, 1e-4], (n, 1))
-    return Gaussians.from_colors(means, np.tile([1.0, 0, 0, 0], (n, 1)), scales, np.ones(n), np.full((n, 3), 0.45))
 
 
 def ratios(gaussians: Gaussians, camera: Camera, defocus: Defocus, backend: str, margin: int) -> tuple[float, float, float]:
@@ -62,7 +54,7 @@ def main() -> None:
     camera = Camera(40.0, 40.0, 32.0, 24.0, 64, 48, np.eye(4))
     for aperture in apertures:
         r = aperture / 2.0
-        g = wall(32.0 + 2.6 * r + 16.0)
+        g = uniform_wall(32.0 + 2.6 * r + 16.0)
         rad, cov, sec = ratios(g, camera, Defocus(aperture, 1.5), args.backend, 0)
         print(f"wall  aperture {aperture:6.0f} px (r {r:5.0f} px, {len(g):7,} splats): {rad:.3f} / {cov:.3f}  {sec:6.2f} s", flush=True)
     room = spacedg.generate_room(seed=0)
