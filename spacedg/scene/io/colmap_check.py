@@ -76,6 +76,8 @@ class _Line:
         token = self._next(field)
         if not re.fullmatch(r"[+-]?\d+", token):
             raise self.fail(f"{field} is {token[:40]!r}, not a whole number")
+        if len(token.lstrip("+-")) > 19:  # COLMAP ids are 32/64-bit; int() of 5,000 digits raises
+            raise self.fail(f"{field} has {len(token):,} digits, more than any 64-bit id")
         return int(token)
 
     def number(self, field: str) -> float:

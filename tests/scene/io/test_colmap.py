@@ -215,6 +215,7 @@ def _replace(path: Path, old: str, new: str) -> None:
     ("rigs.txt", "1 1 CAMERA 1", "1 1 CAMERA 5", r"rigs.txt:\d+: rig 1 lists camera 5, which cameras.txt does not define"),
     ("frames.txt", "CAMERA 1 2\n", "CAMERA 1 9\n", r"frames.txt:\d+: frame 2 lists image 9, which images.txt does not define"),
     ("frames.txt", "CAMERA 1 2\n", "CAMERA 1\n", r"frames.txt:\d+: the line ends before DATA_ID"),
+    ("images.txt", " 1 img_001.jpg", " " + "9" * 5000 + " img_001.jpg", r"images.txt:\d+: CAMERA_ID has 5,000 digits, more than any 64-bit id"),
 ])
 def test_text_model_errors_name_file_line_and_fix(tmp_path: Path, name: str, old: str, new: str, match: str) -> None:
     """The finding: pycolmap's "Rig with ID 7 does not exist" and "Check failed: line_stream1 >> …"."""
