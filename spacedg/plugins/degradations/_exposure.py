@@ -33,7 +33,13 @@ from spacedg.plugins.degradations._sensor import (
     sensor_capture,
 )
 from spacedg.plugins.degradations.common import check_linear_rgb, stream_key
-from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
+from spacedg.plugins.specs import (
+    Category,
+    DegradationSpec,
+    ParamRange,
+    ParamSpec,
+    Stage,
+)
 
 __all__ = ["EXPOSURE_ORDER", "SENSOR_PARAMS", "SENSOR_PRESET", "SensorExposure"]
 

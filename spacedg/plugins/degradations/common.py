@@ -17,8 +17,9 @@ from collections.abc import Mapping
 import numpy as np
 
 from spacedg.errors import InvalidDataError
+from spacedg.plugins.specs import ParamRange
 
-__all__ = ["FAR_PERCENTILE", "check_linear_rgb", "check_display_image", "aux_image", "stream_key", "surface_far_depth"]
+__all__ = ["FAR_PERCENTILE", "severity_ladder", "check_linear_rgb", "check_display_image", "aux_image", "stream_key", "surface_far_depth"]
 
 
 def _describe(value: object) -> str:
@@ -106,3 +107,13 @@ def surface_far_depth(depth: np.ndarray, alpha: np.ndarray) -> float:
     if covered.size == 0:
         return 0.0
     return float(np.percentile(covered, FAR_PERCENTILE))
+
+
+def severity_ladder(param: str, levels: tuple[tuple[float, float], ...], bench: int = 5) -> dict[str, dict[str, ParamRange]]:
+    """Presets of a one-parameter degradation: severities ``"1"``–``"5"`` from ``levels`` (five
+    ``(low, high)`` ranges of ``param``, mildest first) and ``"bench"``, the paper's range, equal
+    to severity ``bench``."""
+    if len(levels) != 5:
+        raise ValueError(f"severity_ladder({param!r}): give 5 ranges (severities 1-5), got {len(levels)}")
+    presets = {str(level): {param: ParamRange(*bounds)} for level, bounds in enumerate(levels, start=1)}
+    return {"bench": dict(presets[str(bench)]), **presets}

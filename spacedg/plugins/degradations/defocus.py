@@ -44,7 +44,13 @@ from typing import Any
 import numpy as np
 
 from spacedg.plugins.hookspecs import registering
-from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
+from spacedg.plugins.specs import (
+    Category,
+    DegradationSpec,
+    ParamRange,
+    ParamSpec,
+    Stage,
+)
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import Defocus
 

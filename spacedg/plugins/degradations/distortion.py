@@ -39,7 +39,13 @@ from typing import Any
 import numpy as np
 
 from spacedg.plugins.hookspecs import registering
-from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
+from spacedg.plugins.specs import (
+    Category,
+    DegradationSpec,
+    ParamRange,
+    ParamSpec,
+    Stage,
+)
 from spacedg.render.camera import Camera, FisheyeLens
 from spacedg.render.request import RenderRequest
 

@@ -52,9 +52,19 @@ from typing import Any
 import numpy as np
 
 from spacedg.errors import InvalidDataError
-from spacedg.plugins.degradations.common import aux_image, check_linear_rgb, surface_far_depth
+from spacedg.plugins.degradations.common import (
+    aux_image,
+    check_linear_rgb,
+    surface_far_depth,
+)
 from spacedg.plugins.hookspecs import registering
-from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
+from spacedg.plugins.specs import (
+    Category,
+    DegradationSpec,
+    ParamRange,
+    ParamSpec,
+    Stage,
+)
 
 __all__ = ["SPEC", "haze", "VISIBILITY_DENSITY", "SCALED_DEPTH_REF_M"]
 

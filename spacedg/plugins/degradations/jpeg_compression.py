@@ -38,9 +38,14 @@ import cv2
 import numpy as np
 
 from spacedg.errors import InvalidDataError
-from spacedg.plugins.degradations.common import check_display_image
+from spacedg.plugins.degradations.common import check_display_image, severity_ladder
 from spacedg.plugins.hookspecs import registering
-from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
+from spacedg.plugins.specs import (
+    Category,
+    DegradationSpec,
+    ParamSpec,
+    Stage,
+)
 
 __all__ = ["SPEC", "jpeg_compress"]
 
@@ -77,14 +82,7 @@ def apply(image: np.ndarray, params: Mapping[str, Any], rng: np.random.Generator
 SPEC = DegradationSpec(
     name="jpeg_compression", category=Category.DIGITAL, stage=Stage.DISPLAY,
     params=(QUALITY,),
-    presets={
-        "bench": {"quality": ParamRange(2, 5)},
-        "1": {"quality": ParamRange(60, 80)},
-        "2": {"quality": ParamRange(30, 50)},
-        "3": {"quality": ParamRange(15, 25)},
-        "4": {"quality": ParamRange(8, 12)},
-        "5": {"quality": ParamRange(2, 5)},
-    },
+    presets=severity_ladder("quality", ((60, 80), (30, 50), (15, 25), (8, 12), (2, 5))),
     apply=apply,
     description="JPEG encode/decode of the 8-bit sRGB image at libjpeg quality q (OpenCV, 4:2:0); blocking and ringing.",
     order=20.0,

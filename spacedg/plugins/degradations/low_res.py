@@ -24,9 +24,14 @@ from typing import Any
 import cv2
 import numpy as np
 
-from spacedg.plugins.degradations.common import check_display_image
+from spacedg.plugins.degradations.common import check_display_image, severity_ladder
 from spacedg.plugins.hookspecs import registering
-from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
+from spacedg.plugins.specs import (
+    Category,
+    DegradationSpec,
+    ParamSpec,
+    Stage,
+)
 
 __all__ = ["SPEC", "low_res", "reduced_size"]
 
@@ -55,14 +60,7 @@ def apply(image: np.ndarray, params: Mapping[str, Any], rng: np.random.Generator
 SPEC = DegradationSpec(
     name="low_res", category=Category.DIGITAL, stage=Stage.DISPLAY,
     params=(ParamSpec("scale", "1", "Linear size factor of the reduced image.", low=1e-6, high=1.0, harsher="lower"),),
-    presets={
-        "bench": {"scale": ParamRange(0.02, 0.05)},
-        "1": {"scale": ParamRange(0.5, 0.7)},
-        "2": {"scale": ParamRange(0.3, 0.45)},
-        "3": {"scale": ParamRange(0.15, 0.25)},
-        "4": {"scale": ParamRange(0.07, 0.12)},
-        "5": {"scale": ParamRange(0.02, 0.05)},
-    },
+    presets=severity_ladder("scale", ((0.5, 0.7), (0.3, 0.45), (0.15, 0.25), (0.07, 0.12), (0.02, 0.05))),
     apply=apply,
     description="Area-downsample the 8-bit image by scale s to max(1, round(W·s)) × max(1, round(H·s)), bilinear upsample back.",
     order=10.0,
