@@ -55,10 +55,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "beside a related label or an object showing the label, undecidable size comparisons, imperceptible rotations; the "
         "label checks read the scenes' cached visibility: scene folders beside the indexes, or --scenes).",
     )
-    stats.add_argument("paths", type=Path, nargs="+", help="*.qa.jsonl files, or folders holding them (scene folders work)")
-    stats.add_argument("--families", default="",
-                       help="in folders, read the selection indexes that `qa build --families` wrote with these names "
-                       "(default: the full indexes <scene id>.qa.jsonl)")
+    _add_index_inputs(stats)
     stats.add_argument("--scenes", type=Path, nargs="*", default=[],
                        help="scene folders (or folders of them) for the label ambiguity check when the indexes were written elsewhere")
     stats.add_argument("--no-blind", action="store_true", help="skip the blind stress test")
@@ -72,8 +69,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "scenes and scored on the held-out one; prints accuracy (MRA for metric answers), chance, and how many items the "
         "blind models solve. Needs indexes of at least two scenes.",
     )
-    audit.add_argument("paths", type=Path, nargs="+", help="*.qa.jsonl files, or folders holding them (scene folders work)")
-    audit.add_argument("--families", default="", help="read these selection indexes instead of the full ones")
+    _add_index_inputs(audit)
     audit.add_argument("--solved", type=Path, default=None, help="write the ids of the records the blind models solve (JSONL)")
     audit.add_argument("--show", type=int, default=0, help="print this many solved questions per sub type")
     audit.add_argument("--no-learned", action="store_true", help="skip the logistic model (count-based priors only)")
@@ -264,6 +260,14 @@ def _pick(records: list, n: int, types: set[str], seed: int) -> list:
             if queue and len(picked) < n:
                 picked.append(queue.pop())
     return picked
+
+
+def _add_index_inputs(parser: argparse.ArgumentParser) -> None:
+    """The question indexes a reading subcommand takes: paths, and ``--families`` for selection indexes."""
+    parser.add_argument("paths", type=Path, nargs="+", help="*.qa.jsonl files, or folders holding them (scene folders work)")
+    parser.add_argument("--families", default="",
+                        help="in folders, read the selection indexes that `qa build --families` wrote with these names "
+                        "(default: the full indexes <scene id>.qa.jsonl)")
 
 
 def _preview(args: argparse.Namespace) -> int:
