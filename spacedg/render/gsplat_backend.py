@@ -85,7 +85,7 @@ __all__ = [
 #: gsplat 1.5.3's compositor caps one Gaussian's alpha at this (hard-coded in its CUDA kernel).
 GSPLAT_ALPHA_MAX = 0.999
 #: Motion blur: sub-steps per batched call are chosen so that sub-steps × Gaussians stays below this.
-BATCH_ELEMENTS = 1 << 24
+BATCH_ELEMENTS = 1 << 23
 
 
 @dataclass(frozen=True)
