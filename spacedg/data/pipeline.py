@@ -403,7 +403,7 @@ def _finish_device(
 
     def on_device(name: str) -> torch.Tensor:
         kept = (frame.tensors or {}).get(name)
-        if kept is not None and kept.device == device:
+        if kept is not None and kept.device.type == device.type and device.index in (None, kept.device.index):
             return kept
         return as_tensor(getattr(frame, name), device)
 

@@ -5,7 +5,9 @@ implementations" in :mod:`spacedg.plugins.specs`): same parameters (validated by
 the same numpy ``rng`` consumed the same way, the result on the input's device. kornia is used
 where it has the operation, our own torch code where it has not (or where kornia's border rule
 or resampling is not the CPU model's). Imported lazily: torch and kornia load on the first
-device-path call, never with ``import spacedg``.
+device-path call, never with ``import spacedg``. The functions take validated numbers (each
+plugin's ``apply_torch`` validates with its spec and passes its constants), so this module
+imports no plugin module (the plugins import it).
 
 Tolerances against the numpy path, measured on CPU tensors on a 160×120 textured HDR image at
 the ``bench`` preset, seeds 0–2 (``tests/plugins/degradations/test_device.py`` asserts the bounds
@@ -58,8 +60,10 @@ __all__ = [
     "haze_torch",
     "jpeg_torch",
     "low_res_torch",
+    "sensor_apply",
     "sensor_torch",
-    "water_droplets_torch",
+    "droplet_composite_torch",
+    "gaussian_blur_reflect",
 ]
 
 
@@ -98,10 +102,10 @@ def decode_srgb_torch(encoded: torch.Tensor) -> torch.Tensor:
 
 # ------------------------------------------------------------------ haze
 def haze_torch(rgb: torch.Tensor, depth: torch.Tensor, alpha: torch.Tensor, density: float, airlight: float,
-               depth_ref: float = 0.0, far_depth: float | None = None) -> torch.Tensor:
-    """:func:`spacedg.plugins.degradations.haze.haze` on tensors (same formula, float32)."""
+               depth_ref: float = 0.0, far_depth: float | None = None, depth_cap: float = 1e12) -> torch.Tensor:
+    """:func:`spacedg.plugins.degradations.haze.haze` on tensors (same formula, float32; ``depth_cap``
+    is the plugin's clamp on depth before the exponential)."""
     from spacedg.plugins.degradations.common import surface_far_depth
-    from spacedg.plugins.degradations.haze import _DEPTH_CAP
 
     if bool((depth < 0).any()):
         raise InvalidDataError("haze: depth holds negative values; depth is metres along the optical axis, >= 0")
@@ -112,20 +116,11 @@ def haze_torch(rgb: torch.Tensor, depth: torch.Tensor, alpha: torch.Tensor, dens
     far = float(far_depth) if far_depth and math.isfinite(far_depth) and far_depth > 0 else (depth_ref or 1.0)
     beta = float(np.float32(density / (depth_ref if depth_ref > 0 else far)))
     cover = torch.clamp(torch.nan_to_num(alpha.float(), nan=0.0), 0.0, 1.0)
-    d = torch.where((depth > 0) & torch.isfinite(depth), torch.clamp(depth, max=_DEPTH_CAP), torch.full_like(depth, far)).float()
+    d = torch.where((depth > 0) & torch.isfinite(depth), torch.clamp(depth, max=depth_cap), torch.full_like(depth, far)).float()
     t_surface = torch.exp(-beta * d)
     t_background = float(np.float32(np.exp(-float(beta) * far)))
     air = cover * (1.0 - t_surface) + (1.0 - cover) * (1.0 - t_background)
     return rgb * t_surface[:, :, None] + float(np.float32(airlight)) * air[:, :, None]
-
-
-def haze_apply(rgb: torch.Tensor, aux: Mapping[str, Any], params: Mapping[str, Any], rng: np.random.Generator) -> torch.Tensor:
-    from spacedg.plugins.degradations.haze import SPEC
-
-    p = SPEC.validate_params(params)
-    far = aux.get("far_depth")
-    return haze_torch(rgb, as_tensor(aux["depth"], rgb.device), as_tensor(aux["alpha"], rgb.device),
-                      p["density"], p["airlight"], p["depth_ref"], None if far is None else float(far))
 
 
 # ------------------------------------------------------------------ sensor (low light, over-exposure)
@@ -208,23 +203,20 @@ def gaussian_blur_reflect(image: torch.Tensor, size: int, sigma: float) -> torch
     return chw[:, 0].permute(1, 2, 0).contiguous()
 
 
-def water_droplets_torch(rgb: torch.Tensor, scale: float, radius: float, strength: float, blur_sigma: float, blur_kernel: int,
-                         rng: np.random.Generator, *, specular: float | None = None, rim: float | None = None) -> torch.Tensor:
-    """:func:`spacedg.plugins.degradations.water_droplets.water_droplets` on tensors (same drops from ``rng``)."""
-    from spacedg.plugins.degradations import water_droplets as wd
-
-    params = wd._check_params(scale, radius, strength, blur_sigma, blur_kernel)
-    specular = wd.SPECULAR_INTENSITY if specular is None else specular
-    rim = wd.RIM_DARKENING if rim is None else rim
-    if not bool(torch.isfinite(rgb).all()):
-        raise InvalidDataError(f"{wd.NAME}: rgb has non-finite values; fix the render (linear light must be finite)")
-    if params["scale"] == 0.0 or params["radius"] == 0.0:
-        return rgb.clone()
+def droplet_composite_torch(
+    rgb: torch.Tensor, drops: tuple[np.ndarray, ...], strength: float, blur_sigma: float, blur_kernel: int, *,
+    specular: float, rim: float, edge: float, light: tuple[float, float, float], shininess_log2: int,
+) -> torch.Tensor:
+    """The per-pixel part of :func:`spacedg.plugins.degradations.water_droplets.water_droplets` on
+    tensors: ``drops`` as its ``_draw_drops`` returns them (drawn from ``rng`` on the host, the same
+    numbers as the CPU path), then the drop field (float64 geometry, as the numba kernel), the
+    refracted view (``grid_sample``, reflection border = OpenCV's ``BORDER_REFLECT``), the in-drop
+    blur and the composite; untouched outside drops."""
+    cells, n_cols, n_rows, offsets, cx, cy, rr = drops
     height, width = rgb.shape[:2]
-    cells, n_cols, n_rows, offsets, cx, cy, rr = wd._draw_drops((height, width), params["scale"], params["radius"], rng)
     device = rgb.device
     f64 = torch.float64
-    cx_t, cy_t, rr_t = (torch.from_numpy(a).to(device, f64) for a in (cx, cy, rr))
+    cx_t, cy_t, rr_t = (torch.from_numpy(np.ascontiguousarray(a)).to(device, f64) for a in (cx, cy, rr))
     y = torch.arange(height, device=device, dtype=f64)[:, None] + 0.5
     x = torch.arange(width, device=device, dtype=f64)[None, :] + 0.5
     best_h = torch.full((height, width), -1.0, device=device, dtype=f64)
@@ -248,11 +240,11 @@ def water_droplets_torch(rgb: torch.Tensor, scale: float, radius: float, strengt
         best_r = torch.where(better, r, best_r)
     drop = best_h >= 0.0
     nx, ny, nz = best_dx / best_r, best_dy / best_r, torch.clamp(best_h, min=0.0) / best_r
-    t = torch.clamp((1.0 - torch.sqrt(nx * nx + ny * ny)) / wd.EDGE_WIDTH, max=1.0)
+    t = torch.clamp((1.0 - torch.sqrt(nx * nx + ny * ny)) / edge, max=1.0)
     a = torch.where(drop, t * t * (3.0 - 2.0 * t), torch.zeros_like(t)).float()
-    lx, ly, lz = wd.LIGHT_DIRECTION
+    lx, ly, lz = light
     spec = torch.clamp(2.0 * (nx * lx + ny * ly + nz * lz) * nz - lz, min=0.0)
-    for _ in range(wd.SHININESS_LOG2):
+    for _ in range(shininess_log2):
         spec = spec * spec
     highlight = (a.double() * spec).float()
     trans = torch.where(drop, nz, torch.ones_like(nz)).float()
@@ -262,19 +254,11 @@ def water_droplets_torch(rgb: torch.Tensor, scale: float, radius: float, strengt
     grid = torch.stack([(map_x.double() + 0.5) / width * 2 - 1, (map_y.double() + 0.5) / height * 2 - 1], dim=-1).float()
     seen = F.grid_sample(rgb.permute(2, 0, 1)[None], grid[None], mode="bilinear", padding_mode="reflection", align_corners=False)
     seen = seen[0].permute(1, 2, 0)
-    k, sigma = params["blur_kernel"], params["blur_sigma"]
-    if k > 1 and sigma > 0.0:
-        seen = gaussian_blur_reflect(seen, k, sigma)
+    if blur_kernel > 1 and blur_sigma > 0.0:
+        seen = gaussian_blur_reflect(seen, blur_kernel, blur_sigma)
     through = a * (1.0 - float(rim) * (1.0 - trans))
     composite = (1.0 - a)[..., None] * rgb + through[..., None] * seen + (float(specular) * highlight)[..., None]
     return torch.where((a > 0)[..., None], composite, rgb)
-
-
-def water_droplets_apply(rgb: torch.Tensor, aux: Mapping[str, Any], params: Mapping[str, Any], rng: np.random.Generator) -> torch.Tensor:
-    from spacedg.plugins.degradations.water_droplets import SPEC
-
-    p = SPEC.validate_params(params)
-    return water_droplets_torch(rgb, p["scale"], p["radius"], p["strength"], p["blur_sigma"], p["blur_kernel"], rng)
 
 
 # ------------------------------------------------------------------ low resolution
@@ -290,14 +274,12 @@ def _area_matrix(src: int, dst: int) -> np.ndarray:
     return m / m.sum(axis=1, keepdims=True)
 
 
-def low_res_torch(image: torch.Tensor, scale: float) -> torch.Tensor:
-    """:func:`spacedg.plugins.degradations.low_res.low_res` on a uint8 (H, W, 3) tensor."""
+def low_res_torch(image: torch.Tensor, small_w: int, small_h: int) -> torch.Tensor:
+    """:func:`spacedg.plugins.degradations.low_res.low_res` on a uint8 (H, W, 3) tensor, reduced to
+    ``small_w × small_h`` (the plugin's ``reduced_size``) and enlarged back."""
     from kornia.geometry.transform import resize
 
-    from spacedg.plugins.degradations.low_res import reduced_size
-
     height, width = image.shape[:2]
-    small_w, small_h = reduced_size(width, height, scale)
     if (small_w, small_h) == (width, height):
         return image.clone()
     device = image.device
@@ -309,12 +291,6 @@ def low_res_torch(image: torch.Tensor, scale: float) -> torch.Tensor:
     return torch.round(up).clamp(0, 255).to(torch.uint8).permute(1, 2, 0).contiguous()
 
 
-def low_res_apply(image: torch.Tensor, params: Mapping[str, Any], rng: np.random.Generator) -> torch.Tensor:
-    from spacedg.plugins.degradations.low_res import SPEC
-
-    return low_res_torch(image, SPEC.validate_params(params)["scale"])
-
-
 # ------------------------------------------------------------------ JPEG
 def jpeg_torch(image: torch.Tensor, quality: int) -> torch.Tensor:
     """JPEG at ``quality`` by ``kornia.enhance.jpeg_codec_differentiable`` on a uint8 (H, W, 3) tensor."""
@@ -324,9 +300,3 @@ def jpeg_torch(image: torch.Tensor, quality: int) -> torch.Tensor:
     q = torch.tensor([float(quality)], device=image.device)
     out = jpeg_codec_differentiable(x, q)
     return torch.round(out[0] * 255.0).clamp(0, 255).to(torch.uint8).permute(1, 2, 0).contiguous()
-
-
-def jpeg_apply(image: torch.Tensor, params: Mapping[str, Any], rng: np.random.Generator) -> torch.Tensor:
-    from spacedg.plugins.degradations.jpeg_compression import SPEC
-
-    return jpeg_torch(image, SPEC.validate_params(params)["quality"])

@@ -131,7 +131,12 @@ def apply_torch(rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng
     """Device twin of :func:`apply` on torch tensors (:mod:`spacedg.plugins.degradations.device`, imported here lazily)."""
     from spacedg.plugins.degradations import device
 
-    return device.haze_apply(rgb, aux, params, rng)
+    p = SPEC.validate_params(params)
+    far = aux.get("far_depth")
+    return device.haze_torch(
+        rgb, device.as_tensor(aux["depth"], rgb.device), device.as_tensor(aux["alpha"], rgb.device),
+        p["density"], p["airlight"], p["depth_ref"], None if far is None else float(far), _DEPTH_CAP,
+    )
 
 SPEC = DegradationSpec(
     name="haze", category=Category.METEOROLOGICAL, stage=Stage.LINEAR,

@@ -79,7 +79,7 @@ def apply_torch(image: Any, params: Mapping[str, Any], rng: np.random.Generator)
     """Device twin of :func:`apply` on a uint8 torch tensor (:mod:`spacedg.plugins.degradations.device`, imported here lazily)."""
     from spacedg.plugins.degradations import device
 
-    return device.jpeg_apply(image, params, rng)
+    return device.jpeg_torch(image, SPEC.validate_params(params)["quality"])
 
 SPEC = DegradationSpec(
     name="jpeg_compression", category=Category.DIGITAL, stage=Stage.DISPLAY,
