@@ -125,9 +125,8 @@ class SensorExposure:
         return self.capture(rgb, key=stream_key(rng), **p)
 
     def apply_torch(self, rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng: np.random.Generator) -> Any:
-        """Device twin of :meth:`apply` on a torch tensor: the same ``stream_key(rng)`` draw seeds the
-        device's generator (:func:`spacedg.plugins.degradations.device.sensor_torch`: same model,
-        statistically equal noise, not the CPU kernel's draws)."""
+        """Device twin of :meth:`apply` on a torch tensor: the same ``stream_key(rng)`` draw, the same
+        counter-based noise (:func:`spacedg.plugins.degradations.device.sensor_torch`: the same bytes)."""
         from spacedg.plugins.degradations import device
 
         p = self.spec.validate_params(params)
