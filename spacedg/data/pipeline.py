@@ -521,13 +521,16 @@ def degrade(
 
 
 def frames_nbytes(frames: Sequence[Frame]) -> int:
-    """Bytes held by the arrays of ``frames`` (for byte-bounded render caches)."""
+    """Bytes held by the arrays of ``frames`` (for byte-bounded render caches), device copies
+    (``Frame.tensors``, e.g. GPU memory) included."""
     total = 0
     for frame in frames:
         for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids", "valid"):
             array = getattr(frame, name, None)
             if isinstance(array, np.ndarray):
                 total += array.nbytes
+        for tensor in (getattr(frame, "tensors", None) or {}).values():
+            total += int(tensor.numel()) * int(tensor.element_size())
     return total
 
 
