@@ -619,3 +619,11 @@ def test_device_dataset_refuses_to_render_in_a_worker(rooms, monkeypatch: pytest
         dataset[0]
     deferred = make(rooms, "bench", ["haze"], device="cuda:0", defer_render=True)
     assert "question" in deferred[0]  # planning in a worker is fine
+
+
+def test_export_fingerprint_records_device_degradations(rooms) -> None:
+    from spacedg.data.export import dataset_fingerprint
+
+    cpu = dataset_fingerprint(make(rooms, "bench", ["jpeg_compression"]))
+    assert dataset_fingerprint(make(rooms, "bench", ["jpeg_compression"], device="cpu")) == cpu  # a CPU device: the numpy path
+    assert dataset_fingerprint(make(rooms, "bench", ["jpeg_compression"], device="cuda:0")) != cpu  # kornia's JPEG on the GPU

@@ -139,3 +139,16 @@ def test_third_party_without_apply_torch_falls_back_to_the_host(third_party, sma
         dev = degrade(small_room, views, "vignetting:5+low_res:1", seed=13, options=DEVICE)
     assert dev.stats["host_fallbacks"] == 1.0
     assert np.abs(host.images.astype(int) - dev.images).max() <= 2  # low_res on the device: ≤ 2 codes
+
+
+def test_where_the_chains_run() -> None:
+    from spacedg.data.pipeline import degrade_device
+    from spacedg.errors import ParameterError
+
+    assert degrade_device(PipelineOptions()) is None
+    assert degrade_device(PipelineOptions(device="cpu")) is None  # auto: a CPU device keeps the numpy path
+    assert degrade_device(PipelineOptions(degrade_on="device")) == torch.device("cpu")
+    assert degrade_device(PipelineOptions(device="cuda:1")) == torch.device("cuda:1")  # no CUDA needed to decide
+    assert degrade_device(PipelineOptions(device="cuda", degrade_on="host")) is None
+    with pytest.raises(ParameterError, match="degrade_on"):
+        PipelineOptions(degrade_on="gpu")
