@@ -120,3 +120,13 @@ def test_backend_resolution_and_refusals() -> None:
     with pytest.raises(ParameterError, match="0.999"):
         render(scene(0, 20), camera(16, 16), backend="gsplat", device="cpu", settings=RasterSettings(alpha_max=0.9995))
     assert reference_ops().name == "torch-reference"
+
+
+def test_auto_picks_gsplat_on_cuda_when_its_extension_loads(monkeypatch: pytest.MonkeyPatch) -> None:
+    import spacedg.render.gsplat_backend as backend
+
+    monkeypatch.setattr(backend, "gsplat_cuda_available", lambda: True)
+    assert resolve_backend("auto", "cuda")[0] == "gsplat"
+    monkeypatch.setattr(backend, "gsplat_cuda_available", lambda: False)
+    assert resolve_backend("auto", "cuda")[0] == "torch"
+    assert resolve_backend("auto", "mps")[0] == "torch"
