@@ -156,7 +156,10 @@ def render_table(device: str, sizes: list[int], runs: int) -> None:
 def bench_question_table(dataset_factory: Callable[..., Any], device: str, questions: int) -> None:
     """ms per bench question (clean + the nine degradations = 10 items, rendered in this process)
     on ``device`` and on the CPU path, with the share of render / linear / encode / display."""
-    print(f"\nBench items per question (clean + nine degradations), rendered in this process; {device_line(device)}")
+    from spacedg.render.renderer import resolve_backend
+
+    print(f"\nBench items per question (clean + nine degradations), rendered in this process; {device_line(device)}; "
+          f"renders: backend auto -> {resolve_backend('auto', device)[0]} on {device}, degradations as torch tensors there")
     print("   ms per question = sum over its 10 items of dataset[i] (median over questions after 1 warm-up question); "
           "goal on an H100: <= 30 ms")
     header = f"{'path':<28} {'ms / question':>13} {'render %':>8} {'linear %':>8} {'encode %':>8} {'display %':>9}"
