@@ -38,6 +38,10 @@ Goal check ("a clean 2-view sample costs ≤ 1.2× its two renders"): for clean 
 same views at the same size, interleaved, medians over ``--repeats``, kernels compiled and the
 scene loaded. The same with the renders left in the cache is printed for reference.
 
+``--device cuda`` (or ``cpu``): only the device table (``benchmarks/device_paths.py``): ms per bench
+question (clean + nine degradations, 10 items) rendered and degraded on the device in this
+process (no workers: CUDA stays in the process that owns it), beside the CPU path.
+
 Timings are wall clock on whatever else the machine is doing: the first line prints the load
 average and CPU count.
 """
@@ -304,6 +308,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--ratio-samples", type=int, default=None, help="2-view items for the goal check (default 12)")
     parser.add_argument("--repeats", type=int, default=None, help="repeats per item in the goal check (default 5)")
     parser.add_argument("--only", default=None, help="comma-separated configurations (clean, a degradation, bench)")
+    parser.add_argument("--device", default=None, help="only the device table: bench questions rendered on this torch device")
+    parser.add_argument("--questions", type=int, default=None, help="bench questions timed by the device table (default 8; quick 3)")
     args = parser.parse_args(argv)
     if args.quick:
         args.small = True
@@ -316,9 +322,19 @@ def main(argv: Sequence[str] | None = None) -> None:
 
     t_start = time.perf_counter()
     print(machine_line())
+    if args.device is not None:
+        import device_paths
+
+        if not device_paths.device_ready(args.device):
+            return
     dirs = scene_folders(args)
     config = QABuildConfig(seed=0, per_sub_type=per_sub_type)
     common = {"scenes": dirs, "image_size": size, "qa_config": config}
+    if args.device is not None:
+        device_paths.bench_question_table(lambda **kw: SpaceDGDataset("bench", None, **common, **kw), args.device,
+                                          args.questions or (3 if args.quick else 8))
+        print(f"total {time.perf_counter() - t_start:.1f} s")
+        return
     t0 = time.perf_counter()
     datasets = {"clean": SpaceDGDataset("train", None, clean_prob=1.0, **common)}
     for name in BENCH_DEGRADATIONS:

@@ -5,6 +5,8 @@ Prints tables only (never part of the test run). All renders are 640×480.
     .venv/bin/python benchmarks/render.py            # full run (a few minutes)
     .venv/bin/python benchmarks/render.py --quick    # 10k/100k scenes only (about a minute)
     .venv/bin/python benchmarks/render.py --torch-device cuda   # torch path on a GPU
+    .venv/bin/python benchmarks/render.py --device cuda   # only the device table (gsplat backend vs gsplat's own, …)
+    .venv/bin/python benchmarks/render.py --device cpu --sizes 10000   # the same code paths on a CPU (stand-ins)
 
 Timings are wall-clock (``time.perf_counter``) on whatever else the machine is doing: the
 machine line prints the load average, run on an idle machine for numbers worth quoting.
@@ -189,7 +191,18 @@ def main() -> None:
                         help="10k/100k scenes only (no 300k), one timed torch run, fewer plant motion rows (about a minute)")
     parser.add_argument("--torch-device", default="cpu", help="torch device for the torch path (default cpu)")
     parser.add_argument("--room-seed", type=int, default=0, help="seed of the synthetic room (default 0)")
+    parser.add_argument("--device", default=None,
+                        help="run only the device table (benchmarks/device_paths.py): our gsplat backend vs "
+                             "gsplat.rasterization vs our torch backend on this device vs our CPU path")
+    parser.add_argument("--sizes", default="100000,1000000", help="Gaussian counts of the device table (default 100000,1000000)")
+    parser.add_argument("--runs", type=int, default=5, help="timed runs per cell of the device table (default 5)")
     args = parser.parse_args()
+    if args.device is not None:
+        import device_paths
+
+        if device_paths.device_ready(args.device):
+            device_paths.render_table(args.device, [int(v) for v in args.sizes.split(",")], args.runs)
+        return
 
     print(machine_line(args.torch_device))
     start = time.perf_counter()

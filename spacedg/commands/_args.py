@@ -27,11 +27,14 @@ __all__ = ["add_backend_arguments", "at_least", "fraction", "in_range", "output_
 
 def add_backend_arguments(parser: argparse.ArgumentParser, what: str = "renderer", device: bool = True) -> None:
     """``--backend`` (one of :data:`spacedg.render.renderer.BACKENDS`, default ``auto``) and, with
-    ``device``, ``--device`` (a torch device for the torch backend); ``what`` names what renders."""
+    ``device``, ``--device`` (a torch device for the torch and gsplat backends); ``what`` names what renders."""
     parser.add_argument("--backend", choices=BACKENDS, default="auto",
-                        help=f"{what}: auto (default: the compiled CPU path, or torch on a non-CPU --device), cpu or torch")
+                        help=f"{what}: auto (default: the compiled CPU path; on --device cuda gsplat's CUDA compositor "
+                             "when it loads, else torch), cpu, torch or gsplat")
     if device:
-        parser.add_argument("--device", default=None, help="torch device for the torch backend, e.g. cuda or cuda:1 (default: CPU)")
+        parser.add_argument("--device", default=None,
+                            help="torch device for the torch and gsplat backends, e.g. cuda or cuda:1 (default: CPU); "
+                                 "with a non-CPU device the degradations run there too")
 
 #: Largest seed accepted (numpy's SeedSequence takes any non-negative integer; 2**63 keeps it an int64).
 MAX_SEED = 2**63 - 1

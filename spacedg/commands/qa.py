@@ -35,7 +35,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     build.add_argument("--per-sub-type", type=int, default=25, help="records per sub_question_type and family per scene (default 25)")
     build.add_argument("--force", action="store_true", help="rebuild even when the index is up to date")
-    _args.add_backend_arguments(build, "renderer of visibility and covisibility", device=False)
+    _args.add_backend_arguments(build, "renderer of visibility and covisibility")
     build.set_defaults(func=_build)
 
     preview = sub.add_parser("preview", help="PNG sheet of a scene's questions: views, named objects' boxes, text")
@@ -90,7 +90,7 @@ def _build(args: argparse.Namespace) -> int:
     total = 0
     start = time.perf_counter()
     for folder in tqdm(_scene_dirs(args.scenes), desc="qa build", unit="scene"):
-        result = build_scene_index(folder, config, out_dir=args.out, force=args.force, backend=args.backend)
+        result = build_scene_index(folder, config, out_dir=args.out, force=args.force, backend=args.backend, device=args.device)
         s = result.seconds
         gen = s.get("generate_s", 0.0)
         rate = f"{len(result.records) / gen:,.0f}" if gen > 0 and not result.reused else "-"

@@ -31,6 +31,12 @@ renders them.
   before a DataLoader forks. Rendering in the main process first (``dataset[0]`` before the
   DataLoader) is fine too: a worker forked after numba's OpenMP threads started runs
   spacedg's kernels serially (:mod:`spacedg.render.threads`) and gives the same bytes.
+- **GPU** (``device="cuda"``): renders (``backend="auto"`` → gsplat's CUDA compositor when it
+  loads) and degrades on the GPU in the process that owns it. DataLoader workers must not touch
+  CUDA (a forked child cannot, and one CUDA context per worker wastes memory), so ``__getitem__``
+  in a worker refuses with the fix: either ``num_workers=0``, or ``defer_render=True`` — workers
+  then return items without ``images`` (planning, question text, provenance) and the main process
+  renders each batch with :meth:`render_batch` (``collate_fn=list`` keeps the items as dicts).
 - **Bench split**: ``severity`` does not apply (the protocol is the ``bench`` preset); use
   ``degradations=["haze:3", ...]`` for other levels. With several workers, batch sizes that
   are multiples of ``len(chains) + 1`` keep a question's variants in one worker, where they
@@ -102,7 +108,10 @@ class SpaceDGDataset(Dataset):
             changing the augmentation seed never moves a scene between splits).
         on_bad_scene: ``"raise"`` (default) or ``"skip"`` a scene that cannot be read or indexed
             (skipped scenes are named in a warning and in :attr:`skipped`).
-        backend, device: renderer backend and device (``"auto"``, ``"cpu"``, ``"torch"``).
+        backend, device: renderer backend (``"auto"``, ``"cpu"``, ``"torch"``, ``"gsplat"``) and torch
+            device; a non-CPU device renders and degrades there, in the main process only (module docstring).
+        defer_render: items come without ``images``, ``degradation`` and ``stats``; :meth:`render_batch` renders
+            them, in the process that owns the GPU.
         builtin_rooms: how many built-in rooms when ``scenes`` is not given.
         max_questions: keep at most this many questions, spread over question types
             round-robin in a seeded order (a small bench or a quick run); ``None`` keeps all.
@@ -128,6 +137,7 @@ class SpaceDGDataset(Dataset):
         device: str | None = None,
         builtin_rooms: int = 16,
         max_questions: int | None = None,
+        defer_render: bool = False,
     ) -> None:
         if split not in SPLITS:
             raise ParameterError(f"SpaceDGDataset: split must be one of {list(SPLITS)}, got {split!r}")
@@ -139,6 +149,8 @@ class SpaceDGDataset(Dataset):
             raise ParameterError(f"SpaceDGDataset: on_bad_scene must be 'raise' or 'skip', got {on_bad_scene!r}")
         self.split, self.severity, self.clean_prob, self.seed = split, severity, float(clean_prob), int(seed)
         self.options = PipelineOptions(image_size=tuple(image_size) if image_size else None, backend=backend, device=device)
+        self.defer_render = bool(defer_render)
+        self._on_device = device is not None and str(device) != "cpu" and not str(device).startswith("cpu:")
         self.chains = self._chains(degradations)
         self.qa_config = qa_config or QABuildConfig()
         dirs = scene_dirs_of(scenes) if scenes is not None else builtin_scene_dirs(builtin_rooms)
@@ -263,12 +275,42 @@ class SpaceDGDataset(Dataset):
         return self._cache().get(("scene", scene_id), lambda: load_scene(folder))
 
     def __getitem__(self, index: int) -> dict[str, Any]:
-        record, chain, name = self.plan(index)
+        item = self._item(index)
+        if self.defer_render:
+            return item
+        return self._render_item(item)
+
+    def _render_item(self, item: dict[str, Any]) -> dict[str, Any]:
+        if self._on_device:
+            from torch.utils.data import get_worker_info
+
+            if get_worker_info() is not None:
+                raise ParameterError(
+                    f"SpaceDGDataset(device={self.options.device!r}) renders on the GPU in the process that owns it, not in "
+                    "DataLoader worker processes: use num_workers=0, or SpaceDGDataset(..., defer_render=True) with "
+                    "DataLoader(..., collate_fn=list) and render each batch in the main process with dataset.render_batch(batch)"
+                )
+        record, chain, name = self.plan(item["index"])
         scene = self._scene(record.scene_id)
         result = degrade(scene, record.views, chain, seed=self._sample_seed(record, name), options=self.options, render_cache=self._cache())
         images = torch.from_numpy(np.ascontiguousarray(result.images.transpose(0, 3, 1, 2)))
+        return {"images": images, **item, "degradation": result.degradations, "stats": dict(result.stats)}
+
+    def render_batch(self, items: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+        """Render items returned with ``defer_render=True`` (in this process: the one owning the GPU).
+
+        Items are rendered one after another (a sample's chains share their render); each comes
+        back with ``images``, ``degradation`` (provenance) and ``stats``: the same item
+        ``dataset[index]`` gives without deferral (same epoch).
+        """
+        if isinstance(items, dict):
+            raise ParameterError("render_batch takes a list of items; build the DataLoader with collate_fn=list")
+        return [item if "images" in item else self._render_item(item) for item in items]
+
+    def _item(self, index: int) -> dict[str, Any]:
+        """Item ``index`` without its images (no rendering)."""
+        record, chain, name = self.plan(index)
         return {
-            "images": images,
             "question": record.question,
             "options": list(record.options),
             "answer": list(record.answer) if isinstance(record.answer, tuple) else record.answer,
@@ -276,13 +318,11 @@ class SpaceDGDataset(Dataset):
             "sub_question_type": record.sub_question_type,
             "task_group": record.task_group.value,
             "answer_type": record.answer_type.value,
-            "degradation": result.degradations,
             "degradation_type": name,
             "scene_id": record.scene_id,
             "views": list(record.views),
             "record_id": record.id,
             "index": int(index),
-            "stats": dict(result.stats),
         }
 
     def __getstate__(self) -> dict[str, Any]:

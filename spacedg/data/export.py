@@ -212,13 +212,20 @@ def _chunk_range(k: int, shard_size: int, total: int) -> range:
 def dataset_fingerprint(dataset: SpaceDGDataset) -> str:
     """SHA-256 (16 hex) of what decides the exported content: split, chains, seeds, image size,
     severity, clean probability, and every question record (id, text, options, answer, views).
-    The renderer backend is not part of it."""
+    The renderer backend is not part of it (backends agree to float precision); where the
+    degradations run is, when they run on a torch device (its JPEG codec and its noise draws are
+    not the CPU path's: shards of one export must not mix them), as ``"torch:<device type>"``."""
+    from spacedg.data.pipeline import degrade_device
+
     digest = hashlib.sha256()
-    settings = {
+    settings: dict[str, Any] = {
         "split": dataset.split, "chains": list(dataset.chains), "seed": dataset.seed, "severity": dataset.severity,
         "clean_prob": dataset.clean_prob, "epoch": dataset.epoch,
         "image_size": list(dataset.options.image_size) if dataset.options.image_size else None,
     }
+    device = degrade_device(dataset.options)
+    if device is not None:
+        settings["degradations_on"] = f"torch:{device.type}"
     digest.update(json.dumps(settings, sort_keys=True).encode())
     for record in dataset.records:
         digest.update(json.dumps([record.id, record.question, list(record.options), answer_text(record.answer), list(record.views)]).encode())

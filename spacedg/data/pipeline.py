@@ -35,6 +35,16 @@ Mixtures. The six recipes of the paper (:data:`spacedg.data.chain.MIXTURES`) are
 name: the primary degradation at the chain's default preset (``bench``) and the others at the
 milder ``mixture_preset`` (severity ``"2"`` by default).
 
+Device. With a non-CPU torch ``device`` (``PipelineOptions(device="cuda")``) the render and the
+degradations stay on it: the linear chain, the lens mask, the exact 8-bit sRGB encode and the
+display chain run on torch tensors (each degradation's ``apply_torch``,
+:mod:`spacedg.plugins.degradations.device`, with the same parameters, seeds and ``rng`` draws as the
+CPU path and the per-degradation tolerances stated there); only the uint8 images come back to the
+host. A degradation without ``apply_torch`` (a third-party plugin, typically) runs its numpy
+``apply`` on the host, its image copied off the device and back, with a warning naming it once per
+process. ``degrade_on="device"`` forces this path (on the CPU when ``device`` is ``None``: what the
+CPU tests exercise); ``"host"`` keeps the numpy path whatever the device.
+
 Motion blur. ``motion="fast"`` (default) renders with the renderer's fast path (fewer
 sub-steps chosen from the on-screen displacement; > 40 dB PSNR against N = 80 on the measured
 scenes); ``motion="reference"`` renders the degradation's ``sub_steps`` exactly. The counts
@@ -70,6 +80,7 @@ __all__ = [
     "DegradedViews",
     "PipelineOptions",
     "degrade",
+    "degrade_device",
     "degrade_image",
     "degrade_variants",
     "frames_nbytes",
@@ -89,6 +100,9 @@ class PipelineOptions:
         image_size: ``(width, height)`` to render at (intrinsics scaled), or ``None`` for the views' own;
             within the size policy of :mod:`spacedg.limits`.
         backend, device, settings: passed to :func:`spacedg.render.render`.
+        degrade_on: where the linear and display chains run: ``"auto"`` (on ``device`` when it is a
+            non-CPU torch device, else the numpy path), ``"device"`` (torch tensors on ``device``,
+            the CPU when it is ``None``) or ``"host"`` (numpy always). See the module docstring.
     """
 
     default_preset: str = "bench"
@@ -98,8 +112,11 @@ class PipelineOptions:
     backend: str = "auto"
     device: str | torch.device | None = None
     settings: RasterSettings | None = None
+    degrade_on: Literal["auto", "device", "host"] = "auto"
 
     def __post_init__(self) -> None:
+        if self.degrade_on not in ("auto", "device", "host"):
+            raise ParameterError(f"PipelineOptions.degrade_on must be 'auto', 'device' or 'host', got {self.degrade_on!r}")
         if self.motion not in ("fast", "reference"):
             raise ParameterError(f"PipelineOptions.motion must be 'fast' or 'reference', got {self.motion!r}")
         if self.image_size is not None:
@@ -296,6 +313,129 @@ def _finish(
     return image
 
 
+# ----------------------------------------------------------------- device path
+_HOST_FALLBACK_WARNED: set[str] = set()
+
+
+def degrade_device(options: PipelineOptions) -> torch.device | None:
+    """The torch device the linear and display chains run on, or ``None`` for the numpy path."""
+    if options.degrade_on == "host" or (options.device is None and options.degrade_on == "auto"):
+        return None
+    import torch
+
+    if options.device is None:
+        return torch.device("cpu")
+    try:
+        dev = torch.device(options.device)
+    except (RuntimeError, TypeError) as err:
+        raise ParameterError(f"unknown torch device {options.device!r}: {err}") from None
+    if options.degrade_on == "auto" and dev.type == "cpu":
+        return None
+    return dev
+
+
+def _host_fallback(step: ResolvedDegradation, device: torch.device) -> None:
+    if step.name not in _HOST_FALLBACK_WARNED:
+        _HOST_FALLBACK_WARNED.add(step.name)
+        import warnings
+
+        warnings.warn(
+            f"degradation {step.name!r} has no apply_torch: its numpy apply runs on the host, the image copied off "
+            f"{device} and back (give its DegradationSpec an apply_torch to keep it on the device)",
+            stacklevel=4,
+        )
+
+
+def _run_linear_device(rgb: torch.Tensor, aux: Mapping[str, Any], host_aux: Any, steps: Sequence[ResolvedDegradation], index: int,
+                       timer: dict[str, float]) -> torch.Tensor:
+    """The linear chain on a device tensor; same contract as :func:`_run_linear` (float32, shape, finite)."""
+    import torch
+
+    for step in steps:
+        with plugin_call("degradation", step.spec, "apply"):
+            if step.spec.apply_torch is not None:
+                out = step.spec.apply_torch(rgb, aux, step.params, step.view_rng(index))
+            else:
+                _host_fallback(step, rgb.device)
+                timer["host_fallbacks"] = timer.get("host_fallbacks", 0.0) + 1.0
+                host = step.spec.apply(rgb.cpu().numpy(), host_aux(), step.params, step.view_rng(index))
+                out = torch.from_numpy(np.array(host)).to(rgb.device) if isinstance(host, np.ndarray) else host
+        if not isinstance(out, torch.Tensor) or out.dtype != torch.float32 or tuple(out.shape) != tuple(rgb.shape):
+            got = f"{out.dtype} {tuple(out.shape)}" if isinstance(out, (torch.Tensor, np.ndarray)) else type(out).__name__
+            raise PluginError(f"linear degradation {step.name!r} must return float32 {tuple(rgb.shape)}, got {got}")
+        if not bool(torch.isfinite(out).all()):
+            problem = _first_non_finite(out.cpu().numpy())
+            raise PluginError(
+                f"linear degradation {step.name!r} (params {step.params}) returned non-finite light on {out.device}: {problem}; "
+                "a linear-stage degradation must return finite values. Fix the plugin, or report it with these parameters and the seed"
+            )
+        rgb = out
+    return rgb
+
+
+def _run_display_device(image: torch.Tensor, steps: Sequence[ResolvedDegradation], index: int, timer: dict[str, float]) -> torch.Tensor:
+    import torch
+
+    for step in steps:
+        with plugin_call("degradation", step.spec, "apply"):
+            if step.spec.apply_torch is not None:
+                out = step.spec.apply_torch(image, step.params, step.view_rng(index))
+            else:
+                _host_fallback(step, image.device)
+                timer["host_fallbacks"] = timer.get("host_fallbacks", 0.0) + 1.0
+                host = step.spec.apply(image.cpu().numpy(), step.params, step.view_rng(index))
+                out = torch.from_numpy(np.array(host)).to(image.device) if isinstance(host, np.ndarray) and host.dtype == np.uint8 else host
+        if not isinstance(out, torch.Tensor) or out.dtype != torch.uint8 or tuple(out.shape) != tuple(image.shape):
+            got = f"{out.dtype} {tuple(out.shape)}" if isinstance(out, (torch.Tensor, np.ndarray)) else type(out).__name__
+            raise PluginError(f"display degradation {step.name!r} must return uint8 {tuple(image.shape)}, got {got}")
+        image = out
+    return image
+
+
+def _finish_device(
+    frame: Frame, linear: Sequence[ResolvedDegradation], display: Sequence[ResolvedDegradation],
+    index: int, far_depth: float | None, timer: dict[str, float], device: torch.device,
+) -> np.ndarray:
+    """:func:`_finish` on torch tensors on ``device`` (the frame's device copies when it has them)."""
+    import torch
+
+    from spacedg.plugins.degradations.device import as_tensor, encode_srgb_u8_torch
+
+    def on_device(name: str) -> torch.Tensor:
+        kept = (frame.tensors or {}).get(name)
+        if kept is not None and kept.device.type == device.type and device.index in (None, kept.device.index):
+            return kept
+        return as_tensor(getattr(frame, name), device)
+
+    t0 = time.perf_counter()
+    rgb = on_device("rgb")
+    if linear:
+        names = {name for step in linear for name in step.spec.needs}
+        aux: dict[str, Any] = {name: on_device(name) for name in names}
+
+        def host_aux() -> dict[str, Any]:
+            out: dict[str, Any] = {name: getattr(frame, name) for name in names}
+            if far_depth is not None:
+                out["far_depth"] = far_depth
+            return out
+
+        if far_depth is not None:
+            aux["far_depth"] = far_depth
+        rgb = _run_linear_device(rgb, aux, host_aux, linear, index, timer)
+        if frame.valid is not None:
+            rgb = torch.where(as_tensor(frame.valid, device)[:, :, None], rgb, torch.zeros_like(rgb))
+    t1 = time.perf_counter()
+    image = encode_srgb_u8_torch(rgb)
+    t2 = time.perf_counter()
+    image = _run_display_device(image, display, index, timer)
+    out = image.cpu().numpy()  # synchronises: the times below include the device's work
+    t3 = time.perf_counter()
+    timer["linear_ms"] += (t1 - t0) * 1e3
+    timer["encode_ms"] += (t2 - t1) * 1e3
+    timer["display_ms"] += (t3 - t2) * 1e3
+    return out
+
+
 def degrade_variants(
     scene: Scene,
     views: Sequence[str],
@@ -323,6 +463,7 @@ def degrade_variants(
         One :class:`DegradedViews` per chain, in order.
     """
     options = options or PipelineOptions()
+    device = degrade_device(options)
     views = (views,) if isinstance(views, str) else tuple(views)
     cameras = _cameras(scene, views, options)
     parsed = [Chain.parse(c) for c in chains]
@@ -357,7 +498,10 @@ def degrade_variants(
             chain = resolved[i]
             timer = {"render_ms": render_ms, "linear_ms": 0.0, "encode_ms": 0.0, "display_ms": 0.0}
             linear, display = _by_stage(chain, Stage.LINEAR), _by_stage(chain, Stage.DISPLAY)
-            images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
+            if device is not None:
+                images = [_finish_device(frame, linear, display, v, far_depth, timer, device) for v, frame in enumerate(frames)]
+            else:
+                images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
             results[i] = DegradedViews(
                 images=np.stack(images),
                 views=views,
@@ -377,13 +521,16 @@ def degrade(
 
 
 def frames_nbytes(frames: Sequence[Frame]) -> int:
-    """Bytes held by the arrays of ``frames`` (for byte-bounded render caches)."""
+    """Bytes held by the arrays of ``frames`` (for byte-bounded render caches), device copies
+    (``Frame.tensors``, e.g. GPU memory) included."""
     total = 0
     for frame in frames:
         for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids", "valid"):
             array = getattr(frame, name, None)
             if isinstance(array, np.ndarray):
                 total += array.nbytes
+        for tensor in (getattr(frame, "tensors", None) or {}).values():
+            total += int(tensor.numel()) * int(tensor.element_size())
     return total
 
 

@@ -166,6 +166,7 @@ def prepare_scene(
     backend: str = "auto",
     progress: bool = True,
     timings: dict[str, float] | None = None,
+    device: str | None = None,
 ) -> Scene:
     """``scene`` with visibility and covisibility attached (cached under ``cache_dir`` if given).
 
@@ -176,12 +177,12 @@ def prepare_scene(
     scene = ensure_instance_ids(scene)
     t0 = time.perf_counter()
     if cache_dir is None:
-        table = compute_visibility(scene, image_size=config.visibility_size, backend=backend, progress=progress)
+        table = compute_visibility(scene, image_size=config.visibility_size, backend=backend, progress=progress, device=device)
     else:
-        table = load_or_compute_visibility(scene, cache_dir, image_size=config.visibility_size, backend=backend, progress=progress)
+        table = load_or_compute_visibility(scene, cache_dir, image_size=config.visibility_size, backend=backend, progress=progress, device=device)
     scene = with_visibility(scene, table)
     t1 = time.perf_counter()
-    scene = with_covisibility(scene, cache_dir, image_size=config.covisibility_size, backend=backend, progress=progress)
+    scene = with_covisibility(scene, cache_dir, image_size=config.covisibility_size, backend=backend, progress=progress, device=device)
     if timings is not None:
         timings["visibility_s"] = t1 - t0
         timings["covisibility_s"] = time.perf_counter() - t1
@@ -561,6 +562,7 @@ def build_scene_index(
     force: bool = False,
     backend: str = "auto",
     progress: bool = True,
+    device: str | None = None,
 ) -> SceneQA:
     """Build (or reuse) the question index of one native scene folder (see the module docstring):
     the full index, or with ``config.families`` the selection index beside it (:func:`index_paths`)."""
@@ -574,7 +576,7 @@ def build_scene_index(
         meta = _read_meta(meta_path) or {}
         return SceneQA(scene.id, jsonl, read_index(jsonl), reused=True, seconds=dict(meta.get("seconds", {})))
     timings: dict[str, float] = {}
-    prepared = prepare_scene(scene, scene_json.parent / "cache", config, backend=backend, progress=progress, timings=timings)
+    prepared = prepare_scene(scene, scene_json.parent / "cache", config, backend=backend, progress=progress, timings=timings, device=device)
     dropped: dict[str, int] = {}
     selection: dict[str, dict[str, int]] = {}
     t0 = time.perf_counter()

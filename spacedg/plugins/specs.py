@@ -36,6 +36,17 @@ only from ``rng`` (a :class:`numpy.random.Generator`), never from global state.
     uint8 (H, W, 3), RGB channel order. Returns uint8 of the same shape. A display stage
     receives no render outputs, so its ``needs`` must be empty.
 
+Device implementations (optional, :attr:`DegradationSpec.apply_torch`)
+----------------------------------------------------------------------
+
+A linear or display degradation may also give ``apply_torch`` with the same signature on torch
+tensors on the render's device (linear: ``rgb`` float32 (H, W, 3), ``aux`` tensors plus the
+``far_depth`` float; display: uint8 (H, W, 3)), the same ``params`` and the same numpy ``rng``
+(it draws the same numbers from it; noise fields may be drawn on the device from a key taken
+from ``rng``). The pipeline uses it when it degrades on a torch device
+(:mod:`spacedg.data.pipeline`); a degradation without one runs its numpy ``apply`` there, the
+image copied to the host and back. Its tolerance against ``apply`` is the plugin's to state.
+
 Parameters and presets
 ----------------------
 
@@ -391,6 +402,8 @@ class DegradationSpec:
         needs: render outputs ``apply`` reads (subset of :data:`RENDER_OUTPUTS`).
         description: the model in a few sentences, with units.
         order: physical position within the stage (see :data:`ORDER_GUIDE`); lower runs first.
+        apply_torch: optional twin of ``apply`` on torch tensors (see "Device implementations"
+            in the module docstring); ``None`` = the pipeline's device path runs ``apply`` on the host.
         origin: set by the registry: which plugin registered the spec.
     """
 
@@ -403,6 +416,7 @@ class DegradationSpec:
     needs: frozenset[str] = frozenset()
     description: str = ""
     order: float = 50.0
+    apply_torch: Callable[..., Any] | None = field(default=None, compare=False, repr=False)
     origin: PluginOrigin | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -421,6 +435,10 @@ class DegradationSpec:
         object.__setattr__(self, "params", params)
         if not callable(self.apply):
             raise PluginError(f"{where}: apply must be callable, got {type(self.apply).__name__}")
+        if self.apply_torch is not None and not callable(self.apply_torch):
+            raise PluginError(f"{where}: apply_torch must be callable or None, got {type(self.apply_torch).__name__}")
+        if self.apply_torch is not None and self.stage is Stage.RASTER:
+            raise PluginError(f"{where}: a raster-stage degradation edits the render request; it has no apply_torch (the render itself runs on the device)")
         needs = frozenset(self.needs)
         unknown = sorted(needs - RENDER_OUTPUTS)
         if unknown:

@@ -27,6 +27,9 @@ class Frame:
         camera: the camera rendered (the mid-exposure camera under motion blur).
         stats: counters and timings (``visible``: Gaussians projected into the image,
             ``pairs``: Gaussian–tile pairs composited, ``sub_steps``, ``ms`` per stage).
+        tensors: the same images as torch tensors on the render's device, where the backend
+            kept them there (``backend="gsplat"``); ``None`` otherwise. The degradation
+            pipeline's device path reads them instead of copying the numpy images back.
     """
 
     rgb: np.ndarray | None
@@ -37,6 +40,7 @@ class Frame:
     camera: Camera
     valid: np.ndarray | None = None
     stats: dict[str, Any] = field(default_factory=dict)
+    tensors: dict[str, Any] | None = None
 
     @property
     def height(self) -> int:

@@ -20,12 +20,15 @@ from spacedg.render.settings import Defocus, MotionBlur, RasterSettings, parse_o
 if TYPE_CHECKING:
     import torch
 
-BACKENDS = ("auto", "cpu", "torch")
+BACKENDS = ("auto", "cpu", "torch", "gsplat")
 _DEFAULT_SETTINGS = RasterSettings()
 
 
 def resolve_backend(backend: str, device: str | torch.device | None) -> tuple[str, torch.device | None]:
-    """``auto`` → the compiled CPU path unless a non-CPU torch device is asked for.
+    """``auto`` → the compiled CPU path unless a non-CPU torch device is asked for; on a CUDA
+    device, ``gsplat`` when gsplat's CUDA extension loads, else ``torch``. ``gsplat`` without a
+    device renders on CUDA when there is one, else on the CPU with gsplat's torch stand-ins
+    (slow: for tests; see :mod:`spacedg.render.gsplat_backend`).
 
     torch is imported here, not at module import, so ``import spacedg`` stays light.
     """
@@ -35,6 +38,8 @@ def resolve_backend(backend: str, device: str | torch.device | None) -> tuple[st
         return "cpu", None  # the compiled path never touches torch
     import torch
 
+    if device is None and backend == "gsplat":
+        device = "cuda" if torch.cuda.is_available() else "cpu"
     try:
         dev = torch.device(device) if device is not None else torch.device("cpu")
     except (RuntimeError, TypeError) as err:
@@ -42,7 +47,12 @@ def resolve_backend(backend: str, device: str | torch.device | None) -> tuple[st
     if backend == "cpu" and dev.type != "cpu":
         raise ParameterError(f"backend 'cpu' (compiled) renders on the CPU only; use backend='torch' for device {dev}")
     if backend == "auto":
-        backend = "cpu" if dev.type == "cpu" else "torch"
+        if dev.type == "cpu":
+            backend = "cpu"
+        else:
+            from spacedg.render.gsplat_backend import gsplat_cuda_available
+
+            backend = "gsplat" if dev.type == "cuda" and gsplat_cuda_available() else "torch"
     return backend, dev
 
 
@@ -66,8 +76,10 @@ def render(
         motion: camera motion during the exposure (sub-step renders averaged in linear light).
         outputs: any of ``rgb, alpha, depth, median_depth, instance_ids`` (comma string or
             list, or ``"all"``); only these are computed (``alpha`` always is, it is free).
-        backend: ``"cpu"`` (compiled numba tiles), ``"torch"`` (any device), ``"auto"``.
-        device: torch device for the torch backend (``"cuda"`` selects it under ``auto``).
+        backend: ``"cpu"`` (compiled numba tiles), ``"torch"`` (any device), ``"gsplat"`` (our
+            projection on gsplat's CUDA tiles and compositor; :mod:`spacedg.render.gsplat_backend`),
+            ``"auto"`` (CPU → ``cpu``; CUDA → ``gsplat`` if its extension loads, else ``torch``).
+        device: torch device for the torch and gsplat backends (``"cuda"`` under ``auto`` selects one of them).
         settings: rasterizer constants (near/far, ``alpha_max`` = 0.99, dilation, …).
 
     Returns:
@@ -86,6 +98,10 @@ def render(
     settings = settings or _DEFAULT_SETTINGS
     if defocus is not None and defocus.aperture == 0:
         defocus = None
+    if backend == "gsplat":
+        from spacedg.render.gsplat_backend import render_gsplat  # torch and gsplat: imported on first use
+
+        return render_gsplat(gaussians, camera, wanted, dev, settings, defocus, motion)
     if motion is not None and not motion.is_static:
         return render_motion(gaussians, camera, motion, wanted, backend, dev, settings, defocus)
     t0 = time.perf_counter()

@@ -70,10 +70,10 @@ def _pixel_rays(camera: Camera, rows: np.ndarray, cols: np.ndarray) -> tuple[np.
     return np.stack([x * scale, y * scale, np.ones_like(x)], axis=1), valid
 
 
-def _depth_view(gaussians: Gaussians, camera: Camera, stride: int, backend: str) -> _DepthView:
+def _depth_view(gaussians: Gaussians, camera: Camera, stride: int, backend: str, device: str | None = None) -> _DepthView:
     """Render expected depth and lift the valid pixels (alpha > 0.5, every ``stride``-th row/column)."""
 
-    frame = render(gaussians, camera, outputs="depth", backend=backend)
+    frame = render(gaussians, camera, outputs="depth", backend=backend, device=device)
     assert frame.depth is not None
     depth = np.where((frame.alpha > 0.5) & (frame.depth > 0), frame.depth, 0.0).astype(np.float64)
     sub = depth[::stride, ::stride]
@@ -148,6 +148,7 @@ def covisibility_matrix(
     backend: str = "auto",
     progress: bool = True,
     timings: dict[str, float] | None = None,
+    device: str | None = None,
 ) -> tuple[list[str], np.ndarray]:
     """MapAnything-style covisibility of views, from rendered depth.
 
@@ -175,6 +176,7 @@ def covisibility_matrix(
             resolution); 1 uses every pixel.
         backend: render backend.
         progress: tqdm progress bars.
+        device: torch device of the renders (``"cuda"``: gsplat's CUDA compositor under ``auto``).
         timings: if given, receives ``render_s`` and ``matrix_s`` (wall-clock seconds).
 
     Returns:
@@ -191,7 +193,7 @@ def covisibility_matrix(
     gaussians = scene.gaussians
     t0 = time.perf_counter()
     dviews = [
-        _depth_view(gaussians, reduced_camera(scene.views[n], size), int(stride), backend)
+        _depth_view(gaussians, reduced_camera(scene.views[n], size), int(stride), backend, device)
         for n in tqdm(names, desc=f"covisibility depth {scene.id}", unit="view", disable=not progress)
     ]
     t1 = time.perf_counter()
@@ -263,6 +265,7 @@ def load_or_compute_covisibility(
     stride: int = 1,
     backend: str = "auto",
     progress: bool = True,
+    device: str | None = None,
 ) -> tuple[list[str], np.ndarray]:
     """:func:`covisibility_matrix`, cached on disk per scene.
 
@@ -284,7 +287,7 @@ def load_or_compute_covisibility(
         if matrix.shape == (len(names), len(names)):
             return names, matrix
     names, matrix = covisibility_matrix(
-        scene, names, image_size=size, rel_threshold=rel_threshold, stride=stride, backend=backend, progress=progress
+        scene, names, image_size=size, rel_threshold=rel_threshold, stride=stride, backend=backend, progress=progress, device=device
     )
     params = {"image_size": list(size), "rel_threshold": float(rel_threshold), "stride": int(stride),
               "version": COVISIBILITY_VERSION, "symmetrised": False}
@@ -301,7 +304,7 @@ def with_covisibility(
 
     With ``cache_dir`` the matrix goes through :func:`load_or_compute_covisibility`, else it
     is computed. ``kwargs`` go to the computation (``image_size``, ``rel_threshold``,
-    ``stride``, ``backend``, ``progress``).
+    ``stride``, ``backend``, ``device``, ``progress``).
     """
     if cache_dir is not None:
         names, matrix = load_or_compute_covisibility(scene, cache_dir, **kwargs)  # type: ignore[arg-type]

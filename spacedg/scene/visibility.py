@@ -118,6 +118,7 @@ def compute_visibility(
     backend: str = "auto",
     canvas_scale: int = 3,
     progress: bool = True,
+    device: str | None = None,
 ) -> dict[str, dict[int, InstanceVisibility]]:
     """Per-view, per-instance visibility read from rendered instance-id maps.
 
@@ -144,7 +145,8 @@ def compute_visibility(
         views: view names (default: all of the scene's views).
         image_size: reduced render size ``(width, height)`` in pixels; intrinsics are scaled
             with :meth:`Camera.resized`; a view smaller than this renders at its own size.
-        backend: render backend (``"auto"``, ``"cpu"``, ``"torch"``).
+        backend: render backend (``"auto"``, ``"cpu"``, ``"torch"``, ``"gsplat"``).
+        device: torch device of the render (``"cuda"``: gsplat's CUDA compositor under ``auto``).
         canvas_scale: odd enlargement factor of the own-projection canvas (3: one frame of
             margin on every side).
         progress: show a tqdm progress bar over views.
@@ -169,7 +171,7 @@ def compute_visibility(
     for name in tqdm(names, desc=f"visibility {scene.id}", unit="view", disable=not progress):
         full = scene.views[name]
         cam = reduced_camera(full, size)
-        ids = render(gaussians, cam, outputs="instance_ids", backend=backend).instance_ids
+        ids = render(gaussians, cam, outputs="instance_ids", backend=backend, device=device).instance_ids
         assert ids is not None
         present = ids[ids >= 0]
         counts = np.bincount(present, minlength=1) if present.size else np.zeros(1, np.int64)
@@ -183,7 +185,7 @@ def compute_visibility(
                 continue
             if iid not in subsets:
                 subsets[iid] = gaussians.subset(members[iid])
-            own_ids = render(subsets[iid], canvas, outputs="instance_ids", backend=backend).instance_ids
+            own_ids = render(subsets[iid], canvas, outputs="instance_ids", backend=backend, device=device).instance_ids
             own = int(np.count_nonzero(own_ids == iid))
             fraction = min(1.0, visible / own) if own > 0 else 1.0
             row[iid] = InstanceVisibility(int(round(visible * area_ratio)), fraction)
@@ -230,6 +232,7 @@ def load_or_compute_visibility(
     canvas_scale: int = 3,
     backend: str = "auto",
     progress: bool = True,
+    device: str | None = None,
 ) -> dict[str, dict[int, InstanceVisibility]]:
     """:func:`compute_visibility` of every view, cached as ``<cache_dir>/<scene id>.visibility.npz``.
 
@@ -251,7 +254,7 @@ def load_or_compute_visibility(
             view: {iid: InstanceVisibility(int(pixels[v, k]), float(fractions[v, k])) for k, iid in enumerate(ids)}
             for v, view in enumerate(names)
         }
-    table = compute_visibility(scene, names, image_size=size, canvas_scale=canvas_scale, backend=backend, progress=progress)
+    table = compute_visibility(scene, names, image_size=size, canvas_scale=canvas_scale, backend=backend, progress=progress, device=device)
     pixels = np.array([[table[v][i].visible_pixels for i in ids] for v in names], dtype=np.int64).reshape(len(names), len(ids))
     fractions = np.array([[table[v][i].visible_fraction for i in ids] for v in names], dtype=np.float64).reshape(len(names), len(ids))
     write_npz_entry(path, key, {"views": np.array(names, dtype=str), "ids": np.array(ids, dtype=np.int64), "pixels": pixels, "fractions": fractions})

@@ -244,6 +244,11 @@ def run(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     lengths = token_lengths(train_data, processor)
     budgeted = BudgetedDataset(train_data, lengths, data.max_length)
     val_items = data.val_items()
+    if data.render_device not in (None, "cpu") and args.dataloader_num_workers > 0:
+        raise ParameterError(
+            f"data.render_device={data.render_device} renders on the GPU in the training process; DataLoader workers must not "
+            f"touch CUDA: set train.dataloader_num_workers=0 (got {args.dataloader_num_workers})"
+        )
     if args.dataloader_num_workers > 0:
         # The main process has rendered (val items): numba's OpenMP threads are not fork-safe, so workers start
         # from a fork server (the datasets pickle small).

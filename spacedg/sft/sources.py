@@ -14,7 +14,9 @@ training and evaluation alike (the dataset's own ``None`` means clean only for `
 from the training ones) with the training ``scenes``, ``builtin_rooms``, ``image_size``,
 ``severity`` and ``seed`` -- whatever the training source: with ``source: jsonl`` the evaluation
 still renders the ``val`` split of ``scenes`` (the built-in rooms when null); ``val.samples: 0``
-turns it off.
+turns it off. ``render_device: cuda`` renders and degrades the online samples on each rank's own
+GPU (``cuda:$LOCAL_RANK``) in the training process (``train.dataloader_num_workers`` must then
+be 0: CUDA stays in the process that owns it); ``null`` renders on the CPU in DataLoader workers.
 """
 
 from __future__ import annotations
@@ -94,6 +96,7 @@ class DataOptions:
     max_questions: int | None
     seed: int
     max_length: int
+    render_device: str | None
     val: ValOptions
 
     def __post_init__(self) -> None:
@@ -113,7 +116,18 @@ class DataOptions:
             split, list(BENCH_DEGRADATIONS) if degradations is None else degradations, scenes=self.scenes,
             question_types=self.question_types, severity=self.severity, clean_prob=clean_prob,
             image_size=self.image_size, seed=self.seed, max_questions=max_questions, builtin_rooms=self.builtin_rooms,
+            device=self.rank_render_device(),
         )
+
+    def rank_render_device(self) -> str | None:
+        """``render_device`` for this process: ``"cuda"`` becomes ``cuda:$LOCAL_RANK`` (each rank renders on its own GPU)."""
+        import os
+
+        if self.render_device in (None, "cpu"):
+            return None
+        if self.render_device == "cuda":
+            return f"cuda:{int(os.environ.get('LOCAL_RANK', '0'))}"
+        return str(self.render_device)
 
     def train_data(self) -> OnlineSFTDataset | ChatJsonlDataset:
         """The unbudgeted training samples: the ``train`` split rendered online, or the JSONL's."""

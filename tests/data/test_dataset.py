@@ -593,3 +593,37 @@ def test_default_scenes_are_the_builtin_rooms_made_on_first_use(tmp_path, monkey
     assert len(ds.scene_dirs) == 1 and len(ds) == 2 * len(ds.records) and ds[0]["images"].dtype == torch.uint8
     again = SpaceDGDataset("bench", builtin_rooms=3, qa_config=config, image_size=SIZE, degradations=["low_res"])
     assert "first use" not in capfd.readouterr().err and [r.id for r in again.records] == [r.id for r in ds.records]
+
+
+# ------------------------------------------------------------------ device: who renders
+def test_deferred_items_render_in_the_main_process(rooms) -> None:
+    plain = make(rooms, "bench", ["haze", "low_res"])
+    deferred = make(rooms, "bench", ["haze", "low_res"], defer_render=True)
+    planned = [deferred[i] for i in range(3)]
+    assert all("images" not in item and "degradation" not in item for item in planned)
+    rendered = deferred.render_batch(planned)
+    for i, item in enumerate(rendered):
+        expected = plain[i]
+        assert torch.equal(item["images"], expected["images"])
+        assert item["degradation"] == expected["degradation"] and item["question"] == expected["question"]
+    with pytest.raises(ParameterError, match="collate_fn=list"):
+        deferred.render_batch(planned[0])
+
+
+def test_device_dataset_refuses_to_render_in_a_worker(rooms, monkeypatch: pytest.MonkeyPatch) -> None:
+    import torch.utils.data
+
+    dataset = make(rooms, "bench", ["haze"], device="cuda:0")  # construction never touches CUDA
+    monkeypatch.setattr(torch.utils.data, "get_worker_info", lambda: object())
+    with pytest.raises(ParameterError, match="num_workers=0.*defer_render=True"):
+        dataset[0]
+    deferred = make(rooms, "bench", ["haze"], device="cuda:0", defer_render=True)
+    assert "question" in deferred[0]  # planning in a worker is fine
+
+
+def test_export_fingerprint_records_device_degradations(rooms) -> None:
+    from spacedg.data.export import dataset_fingerprint
+
+    cpu = dataset_fingerprint(make(rooms, "bench", ["jpeg_compression"]))
+    assert dataset_fingerprint(make(rooms, "bench", ["jpeg_compression"], device="cpu")) == cpu  # a CPU device: the numpy path
+    assert dataset_fingerprint(make(rooms, "bench", ["jpeg_compression"], device="cuda:0")) != cpu  # kornia's JPEG on the GPU

@@ -88,6 +88,7 @@ class SensorExposure:
             params=(exposure, *SENSOR_PARAMS),
             presets={preset: {"exposure": ParamRange(low, high), **SENSOR_PRESET} for preset, (low, high) in presets.items()},
             apply=self.apply,
+            apply_torch=self.apply_torch,
             needs=frozenset(),
             description=description,
             order=EXPOSURE_ORDER,
@@ -128,3 +129,11 @@ class SensorExposure:
         """Linear-stage ``apply``: ``params`` checked against :attr:`spec`; ``aux`` is unused; one ``stream_key(rng)`` draw."""
         p = self.spec.validate_params(params)
         return self.capture(rgb, key=stream_key(rng), **p)
+
+    def apply_torch(self, rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng: np.random.Generator) -> Any:
+        """Device twin of :meth:`apply` on a torch tensor: the same ``stream_key(rng)`` draw, the same
+        counter-based noise (:func:`spacedg.plugins.degradations.device.sensor_torch`: the same bytes)."""
+        from spacedg.plugins.degradations import device
+
+        p = self.spec.validate_params(params)
+        return device.sensor_apply(rgb, p, stream_key(rng), self.clip)

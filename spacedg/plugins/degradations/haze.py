@@ -136,6 +136,18 @@ def _preset(density: tuple[float, float], depth_ref: float = SCALED_DEPTH_REF_M,
     return {"density": ParamRange(*density), "airlight": _AIRLIGHT, "depth_ref": ParamRange(depth_ref, depth_ref, per_depth=per_depth)}
 
 
+
+def apply_torch(rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng: np.random.Generator) -> Any:
+    """Device twin of :func:`apply` on torch tensors (:mod:`spacedg.plugins.degradations.device`, imported here lazily)."""
+    from spacedg.plugins.degradations import device
+
+    p = SPEC.validate_params(params)
+    far = aux.get("far_depth")
+    return device.haze_torch(
+        rgb, device.as_tensor(aux["depth"], rgb.device), device.as_tensor(aux["alpha"], rgb.device),
+        p["density"], p["airlight"], p["depth_ref"], None if far is None else float(far), _DEPTH_CAP,
+    )
+
 SPEC = DegradationSpec(
     name="haze", category=Category.METEOROLOGICAL, stage=Stage.LINEAR,
     params=(
@@ -154,6 +166,7 @@ SPEC = DegradationSpec(
         "smoke_5m": _preset((VISIBILITY_DENSITY, VISIBILITY_DENSITY), 5.0, per_depth=False),
     },
     apply=apply,
+    apply_torch=apply_torch,
     needs=frozenset({"depth", "alpha"}),
     description="Koschmieder haze I = J·exp(−βd) + A(1 − exp(−βd)) on rendered depth; β = density / depth_ref m (presets: 4 m at a 2.5 m scene, scaled with its depth; 0 = far depth).",
     order=10.0,

@@ -79,11 +79,19 @@ def apply(image: np.ndarray, params: Mapping[str, Any], rng: np.random.Generator
     return jpeg_compress(image, SPEC.validate_params(params)["quality"])
 
 
+
+def apply_torch(image: Any, params: Mapping[str, Any], rng: np.random.Generator) -> Any:
+    """Device twin of :func:`apply` on a uint8 torch tensor (:mod:`spacedg.plugins.degradations.device`, imported here lazily)."""
+    from spacedg.plugins.degradations import device
+
+    return device.jpeg_torch(image, SPEC.validate_params(params)["quality"])
+
 SPEC = DegradationSpec(
     name="jpeg_compression", category=Category.DIGITAL, stage=Stage.DISPLAY,
     params=(QUALITY,),
     presets=severity_ladder("quality", ((60, 80), (30, 50), (15, 25), (8, 12), (2, 5))),
     apply=apply,
+    apply_torch=apply_torch,
     description="JPEG encode/decode of the 8-bit sRGB image at libjpeg quality q (OpenCV, 4:2:0); blocking and ringing.",
     order=20.0,
 )

@@ -57,11 +57,20 @@ def apply(image: np.ndarray, params: Mapping[str, Any], rng: np.random.Generator
     return low_res(image, SPEC.validate_params(params)["scale"])
 
 
+
+def apply_torch(image: Any, params: Mapping[str, Any], rng: np.random.Generator) -> Any:
+    """Device twin of :func:`apply` on a uint8 torch tensor (:mod:`spacedg.plugins.degradations.device`, imported here lazily)."""
+    from spacedg.plugins.degradations import device
+
+    height, width = image.shape[:2]
+    return device.low_res_torch(image, *reduced_size(width, height, SPEC.validate_params(params)["scale"]))
+
 SPEC = DegradationSpec(
     name="low_res", category=Category.DIGITAL, stage=Stage.DISPLAY,
     params=(ParamSpec("scale", "1", "Linear size factor of the reduced image.", low=1e-6, high=1.0, harsher="lower"),),
     presets=severity_ladder("scale", ((0.5, 0.7), (0.3, 0.45), (0.15, 0.25), (0.07, 0.12), (0.02, 0.05))),
     apply=apply,
+    apply_torch=apply_torch,
     description="Area-downsample the 8-bit image by scale s to max(1, round(W·s)) × max(1, round(H·s)), bilinear upsample back.",
     order=10.0,
 )

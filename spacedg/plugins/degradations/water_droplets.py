@@ -380,6 +380,24 @@ def apply(rgb: np.ndarray, aux: Mapping[str, np.ndarray], params: Mapping[str, A
     return water_droplets(rgb, p["scale"], p["radius"], p["strength"], p["blur_sigma"], p["blur_kernel"], rng)
 
 
+
+def apply_torch(rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng: np.random.Generator) -> Any:
+    """Device twin of :func:`apply` on torch tensors (:mod:`spacedg.plugins.degradations.device`, imported here lazily)."""
+    import torch
+
+    from spacedg.plugins.degradations import device
+
+    p = _check_params(**SPEC.validate_params(params))
+    if not bool(torch.isfinite(rgb).all()):
+        raise InvalidDataError(f"{NAME}: rgb has non-finite values; fix the render (linear light must be finite)")
+    if p["scale"] == 0.0 or p["radius"] == 0.0:
+        return rgb.clone()
+    drops = _draw_drops(tuple(rgb.shape[:2]), p["scale"], p["radius"], rng)  # the CPU path's numbers, from the same rng
+    return device.droplet_composite_torch(
+        rgb, drops, p["strength"], p["blur_sigma"], p["blur_kernel"], specular=SPECULAR_INTENSITY, rim=RIM_DARKENING,
+        edge=EDGE_WIDTH, light=LIGHT_DIRECTION, shininess_log2=SHININESS_LOG2,
+    )
+
 SPEC = DegradationSpec(
     name=NAME, category=Category.METEOROLOGICAL, stage=Stage.LINEAR,
     params=(SCALE, RADIUS, STRENGTH, BLUR_SIGMA, BLUR_KERNEL),
@@ -392,6 +410,7 @@ SPEC = DegradationSpec(
         "5": {"scale": (2.5, 4.0), "radius": (0.7, 0.9), "strength": (0.5, 0.7), "blur_sigma": (2.5, 3.0), "blur_kernel": 11},
     },
     apply=apply,
+    apply_torch=apply_torch,
     needs=frozenset(),
     description=(
         "Drops on the lens: 3-layer hemispherical height map (scale = cells across the shorter side, radius = "
