@@ -73,6 +73,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     audit.add_argument("--solved", type=Path, default=None, help="write the ids of the records the blind models solve (JSONL)")
     audit.add_argument("--show", type=int, default=0, help="print this many solved questions per sub type")
     audit.add_argument("--no-learned", action="store_true", help="skip the logistic model (count-based priors only)")
+    audit.add_argument("--null", type=int, default=0, metavar="RUNS",
+                       help="also audit RUNS times with truths drawn independently of the text, and print the mean and 95th "
+                            "percentile of the best excess over chance that chance alone gives at each sub type's n")
     audit.add_argument("--json", action="store_true", help="print JSON instead of tables")
     audit.set_defaults(func=_audit)
 
@@ -219,6 +222,10 @@ def _audit(args: argparse.Namespace) -> int:
                                "other scenes and scored on a held-out one, so give at least two")
     start = time.perf_counter()
     report = blind_audit(by_scene, learned=not args.no_learned)
+    if args.null > 0:
+        from spacedg.data.qa_audit import null_audit, with_null
+
+        report = with_null(report, null_audit(by_scene, args.null, learned=not args.no_learned))
     seconds = time.perf_counter() - start
     if args.solved is not None:
         from spacedg.files import atomic_write_bytes

@@ -70,6 +70,7 @@ import numpy as np
 from spacedg.data.chain import CLEAN
 from spacedg.data.chat import ANSWER_PROMPT
 from spacedg.data.dataset import SpaceDGDataset
+from spacedg.data.pipeline import degrade_device
 from spacedg.data.public_format import PUBLIC_BENCH_NAME, public_fields, public_mismatch
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
 from spacedg.files import atomic_write_bytes, remove_stale_temps
@@ -215,7 +216,6 @@ def dataset_fingerprint(dataset: SpaceDGDataset) -> str:
     The renderer backend is not part of it (backends agree to float precision); where the
     degradations run is, when they run on a torch device (its JPEG codec and its noise draws are
     not the CPU path's: shards of one export must not mix them), as ``"torch:<device type>"``."""
-    from spacedg.data.pipeline import degrade_device
 
     digest = hashlib.sha256()
     settings: dict[str, Any] = {

@@ -50,6 +50,16 @@ pools MCQ, YN and COUNT records with each sub type's best predictor.
 
 A record is **solved** when its sub type's best predictor answers it correctly while that
 predictor beats chance on the sub type; :attr:`AuditReport.solved` lists those ids.
+
+**Null band** (:func:`null_audit`, ``spacedg qa audit --null RUNS``): ``best`` is chosen on
+the held-out scores, so it beats chance even when the text says nothing about the truth, by
+more the fewer records a sub type has (at 20 records, typically 5–10 points). The null audit
+runs the same audit on the same records with every discrete truth drawn again independently
+of the text (uniformly among the live options, yes/no, the question type's counts), ``RUNS``
+times, and reports per sub type the mean and 95th percentile of that excess: an excess inside
+the band is what chance alone gives at that ``n``; one above its 95th percentile is a bias the
+text carries. (The draws are independent, not balanced per cell as the index's rounds are, so
+the band is if anything wide.)
 """
 
 from __future__ import annotations
@@ -58,7 +68,7 @@ import math
 import re
 from collections import Counter, defaultdict
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -73,6 +83,8 @@ __all__ = [
     "AuditRow",
     "AuditReport",
     "blind_audit",
+    "null_audit",
+    "with_null",
     "mra",
     "record_labels",
     "template_signature",
@@ -476,6 +488,8 @@ class AuditRow:
     best: str
     best_score: float
     solved: int
+    null_mean: float | None = None
+    null_p95: float | None = None
 
     @property
     def excess(self) -> float | None:
@@ -487,6 +501,7 @@ class AuditRow:
             "question_type": self.question_type, "sub_question_type": self.sub_question_type, "answer_type": self.answer_type,
             "n": self.n, "chance": self.chance, **self.scores, "best": self.best, "best_score": self.best_score,
             "excess": self.excess, "solved": self.solved,
+            **({"null_mean": self.null_mean, "null_p95": self.null_p95} if self.null_p95 is not None else {}),
         }
 
 
@@ -517,6 +532,14 @@ def _live_roles(records: Sequence[QARecord]) -> dict[tuple[str, str], set[str]]:
     return live
 
 
+def _distinct_counts(records: Sequence[QARecord]) -> dict[str, int]:
+    """Per question type, how many distinct counts its COUNT records answer."""
+    return {
+        q: len({str(r.answer) for r in records if r.question_type == q and r.answer_type is AnswerType.COUNT})
+        for q in {r.question_type for r in records}
+    }
+
+
 def _chance(record: QARecord, live: Mapping[tuple[str, str], set[str]], counts: Mapping[str, int]) -> float | None:
     if record.answer_type is AnswerType.MCQ:
         roles = [option_role(record, option_text(record, k)) for k in MCQ_LETTERS]
@@ -538,10 +561,7 @@ def blind_audit(records_by_scene: Mapping[str, Sequence[QARecord]], *, learned: 
     scenes = [s for s in records_by_scene if records_by_scene[s]]
     every = [r for s in scenes for r in records_by_scene[s]]
     live = _live_roles(every)
-    distinct_counts = {
-        q: len({str(r.answer) for r in every if r.question_type == q and r.answer_type is AnswerType.COUNT})
-        for q in {r.question_type for r in every}
-    }
+    distinct_counts = _distinct_counts(every)
     per_record: dict[str, dict[str, float]] = {}
     if len(scenes) >= 2:
         for held in scenes:
@@ -625,9 +645,79 @@ def blind_audit(records_by_scene: Mapping[str, Sequence[QARecord]], *, learned: 
     return AuditReport(rows, overall, solved, per_record)
 
 
+def _null_records(records_by_scene: Mapping[str, Sequence[QARecord]], rng: np.random.Generator) -> dict[str, list[QARecord]]:
+    """The records with every discrete truth drawn again, independently of the text: an MCQ's
+    uniformly among its live options (:func:`_chance`'s), a yes/no or count among the answers of
+    its question type in these records."""
+    every = [r for rs in records_by_scene.values() for r in rs]
+    live = _live_roles(every)
+    answers: dict[tuple[str, AnswerType], list[str]] = defaultdict(list)
+    for r in every:
+        if r.answer_type in (AnswerType.YN, AnswerType.COUNT):
+            answers[(r.question_type, r.answer_type)].append(str(r.answer))
+    pools = {k: sorted(set(v)) for k, v in answers.items()}
+    out: dict[str, list[QARecord]] = {}
+    for scene, rs in records_by_scene.items():
+        drawn = []
+        for r in rs:
+            if r.answer_type is AnswerType.MCQ:
+                roles = [option_role(r, option_text(r, k)) for k in MCQ_LETTERS]
+                letters = [k for k, role in zip(MCQ_LETTERS, roles) if ("object" if role.startswith("object:") else role) in live[_wording(r)]]
+                r = replace(r, answer=letters[int(rng.integers(len(letters)))]) if letters else r
+            elif r.answer_type in (AnswerType.YN, AnswerType.COUNT):
+                pool = pools[(r.question_type, r.answer_type)]
+                value = pool[int(rng.integers(len(pool)))]
+                r = replace(r, answer=int(value) if r.answer_type is AnswerType.COUNT else value)
+            drawn.append(r)
+        out[scene] = drawn
+    return out
+
+
+def null_audit(
+    records_by_scene: Mapping[str, Sequence[QARecord]], runs: int = 20, seed: int = 0, *, learned: bool = True,
+) -> dict[tuple[str, str], tuple[float, float]]:
+    """What the blind stress test reports when nothing can be learnt: :func:`blind_audit` on
+    the same records (questions, options, labels, sub types and scenes) with their truths drawn
+    independently of the text (:func:`_null_records`), ``runs`` times; per discrete
+    ``(question_type, sub_question_type)`` the mean and the 95th percentile of the best
+    predictor's excess over chance, in points. The best of five predictors chosen on the
+    held-out scores is biased upwards, the more so the fewer the records: an excess inside this
+    band is what chance alone gives at that ``n``, an excess above its 95th percentile is a
+    bias the text carries. Seeded by ``seed``."""
+    if runs < 1:
+        raise ValueError(f"null_audit: runs must be at least 1, got {runs}")
+    # chance as the real audit states it (the draws are uniform over exactly those options; a
+    # run's own chance would count an option no draw happened to pick as never correct)
+    every = [r for rs in records_by_scene.values() for r in rs]
+    live = _live_roles(every)
+    counts = _distinct_counts(every)
+    chances: dict[tuple[str, str], list[float]] = defaultdict(list)
+    for r in every:
+        c = _chance(r, live, counts)
+        if c is not None:
+            chances[(r.question_type, r.sub_question_type)].append(100.0 * c)
+    rng = np.random.default_rng(seed)
+    excess: dict[tuple[str, str], list[float]] = defaultdict(list)
+    for _ in range(runs):
+        for row in blind_audit(_null_records(records_by_scene, rng), learned=learned).rows:
+            key = (row.question_type, row.sub_question_type)
+            if row.excess is not None and key in chances:
+                excess[key].append(row.best_score - float(np.mean(chances[key])))
+    return {k: (float(np.mean(v)), float(np.percentile(v, 95))) for k, v in excess.items()}
+
+
+def with_null(report: AuditReport, null: Mapping[tuple[str, str], tuple[float, float]]) -> AuditReport:
+    """``report`` with each row's ``null_mean`` / ``null_p95`` from :func:`null_audit`."""
+    rows = [replace(r, null_mean=null[(r.question_type, r.sub_question_type)][0], null_p95=null[(r.question_type, r.sub_question_type)][1])
+            if (r.question_type, r.sub_question_type) in null else r for r in report.rows]
+    return replace(report, rows=rows)
+
+
 def format_audit(report: AuditReport) -> str:
     """The report as a Markdown table (one row per sub type, then ``ALL``)."""
+    nulls = any(r.null_p95 is not None for r in report.rows)
     cols = ["question_type", "sub_question_type", "type", "n", "chance", *PREDICTORS, "best", "excess", "solved"]
+    cols += ["null excess (mean / p95)"] if nulls else []
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
 
     def cell(v: Any) -> str:
@@ -638,10 +728,12 @@ def format_audit(report: AuditReport) -> str:
     for row in report.rows:
         values = [row.question_type, row.sub_question_type, row.answer_type, row.n, row.chance,
                   *(row.scores.get(p) for p in PREDICTORS), f"{row.best} {row.best_score:.1f}", row.excess, row.solved]
+        if nulls:
+            values.append(f"{row.null_mean:.1f} / {row.null_p95:.1f}" if row.null_p95 is not None and row.null_mean is not None else None)
         lines.append("| " + " | ".join(cell(v) for v in values) + " |")
     o = report.overall
     if o.get("n"):
         values = ["ALL (MCQ+YN+COUNT)", "", "", o["n"], o["chance"], *([None] * len(PREDICTORS)),
-                  f"best/sub type {o['best_per_sub_type']:.1f}", o.get("excess"), len(report.solved)]
+                  f"best/sub type {o['best_per_sub_type']:.1f}", o.get("excess"), len(report.solved), *([None] if nulls else [])]
         lines.append("| " + " | ".join(cell(v) for v in values) + " |")
     return "\n".join(lines)

@@ -7,14 +7,19 @@ Building one scene (:func:`build_scene_index`):
 2. for every selected family (sorted by name), run ``family.generate(scene, rng)`` with
    ``rng = default_rng(derive_seed(seed, scene_id, family))``: the records are seeded per
    (scene, family), so adding a family never changes another family's records;
-3. pool up to ``pool_factor × per_sub_type`` candidates per ``sub_question_type`` (no more
-   than ``max_scan`` per family) and take up to ``per_sub_type`` of them per sub type with the
+3. pool up to ``pool_factor × per_sub_type`` distinct subjects per ``sub_question_type``
+   (each with at most :data:`ALTERNATES` records; no more than ``max_scan`` candidates per
+   family) and take up to ``per_sub_type`` of them per sub type with the
    **debiased selection** (:func:`select_records`): a subject (an object, a pair, a view and
    label: the ``selection`` entry of the record's geometry block) is asked at most once per
    sub type; within each *cell* (what a text-only model can tell about the question: its
    labels, its option set, the axes it names) records are taken in whole rounds, one per live
    *role* (answer), so in every scene no function of what the text shows beats chance (the
-   blind stress test :mod:`spacedg.data.qa_audit` measures what is left); records without a
+   blind stress test :mod:`spacedg.data.qa_audit` measures what is left); each role of a round
+   is filled with the candidate whose ``features`` (the labels a size comparison names, by
+   position) that role has had least, so no label wins more often than it loses; the
+   distractors of sector-label questions are dealt again (:func:`deal_distractors`) so every
+   label is offered equally often, then the correct letters (:func:`deal_letters`); records without a
    ``selection`` entry (third-party families) are taken round-robin over their correct
    answers as before. An optional judge (:class:`~spacedg.data.judge.DescriptionJudge`) drops
    records whose descriptions it finds ambiguous (asked only about records being taken);
@@ -48,6 +53,7 @@ import dataclasses
 import hashlib
 import importlib.util
 import json
+import math
 import time
 from collections import Counter
 from collections.abc import Iterable, Sequence
@@ -80,13 +86,21 @@ from spacedg.scene.visibility import (
 from spacedg.seeding import derive_seed
 
 __all__ = [
-    "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "prepare_scene", "generate_records", "select_records", "deal_letters", "with_letter",
+    "QA_INDEX_VERSION", "ALTERNATES", "QABuildConfig", "SceneQA", "prepare_scene", "generate_records", "select_records", "deal_distractors", "deal_letters", "with_letter",
     "MAX_SELECTION_CHARS", "selection_name", "index_paths", "build_scene_index", "read_index", "truth_key", "index_is_current", "ensure_indexes",
 ]
 
 #: Bump when the index layout or the build procedure changes (part of the key).
 #: 3: debiased selection (subjects once per sub type, whole rounds per cell), lexicon in the key.
-QA_INDEX_VERSION = 3
+#: 4: pools count distinct subjects (:data:`ALTERNATES` records each); rounds balance the
+#: selection entries' ``features`` across roles; distractors of sector-label MCQs dealt evenly.
+QA_INDEX_VERSION = 4
+
+#: A subject is pooled with at most this many records (other views of the same question: a
+#: compass or direction question's answer changes with the view, so a subject can fill one of
+#: several roles, and the judge may drop one); the pool's size counts distinct subjects, so a
+#: family whose subjects recur in many views (size comparisons) pools every pair it finds.
+ALTERNATES = 8
 
 
 @dataclass(frozen=True)
@@ -227,6 +241,13 @@ def _selection(record: QARecord) -> dict[str, Any] | None:
     return entry if isinstance(entry, dict) and "subject" in entry else None
 
 
+def _features(record: QARecord) -> list[str]:
+    """The ``features`` of the record's selection entry (what its text names: labels by position)."""
+    entry = _selection(record)
+    features = entry.get("features") if entry is not None else None
+    return [str(f) for f in features] if isinstance(features, list) else []
+
+
 def select_records(
     records: Sequence[QARecord], per_sub_type: int, keep: Any = None, stats: dict[str, Counter[str]] | None = None,
 ) -> list[QARecord]:
@@ -242,6 +263,10 @@ def select_records(
       that ``keep`` accepts); a round is taken only while every sub type it touches has room, and a
       cell stops at its first incomplete round. Cells are visited round-robin in the order of
       their first record, one round per visit, until no cell can give a round;
+    - a role of a round is filled, among the free candidates of that role, with the one whose
+      selection ``features`` the role has had least so far in the sub type (greedy: the sum
+      over its features of the role's count minus the mean count over the cell's roles;
+      ties, and records without features: generation order);
     - records without a ``cell`` (metric answers) are taken in generation order;
     - a sub type whose ``per_sub_type`` is smaller than every round of its cells (e.g. 1) takes
       its first free candidates in generation order instead, so a small index is not empty.
@@ -302,6 +327,43 @@ def select_records(
             room[r.sub_question_type] -= 1
     # balanced cells: whole rounds, round-robin over cells
     cursors = {cell: {role: 0 for role in roles} for cell, roles in cell_roles.items()}
+    # feature balance: (sub type, feature) → role → records taken (features: what the text names)
+    balance: dict[tuple[str, str], Counter[str]] = {}
+
+    def cost(i: int, role: str, roles: Sequence[str]) -> float:
+        """How over-represented record i's features already are in ``role`` (greedy chi-square)."""
+        sub = records[i].sub_question_type
+        total = 0.0
+        for f in _features(records[i]):
+            row = balance.get((sub, f))
+            if row:
+                total += row[role] - sum(row[r] for r in roles) / len(roles)
+        return total
+
+    def pick(cell: str, role: str, used: set[tuple[str, str]]) -> int | None:
+        """The candidate of ``role`` in ``cell`` for the next round: free subject, accepted by the
+        judge; among them the least over-represented features (ties: generation order)."""
+        queue = cells[cell].get(role, [])
+        k = cursors[cell][role]
+        while k < len(queue) and (subject(queue[k]) in subjects or records[queue[k]].id in judged_out):
+            k += 1  # never usable again
+        cursors[cell][role] = k
+        while True:
+            best, best_cost = None, math.inf
+            for i in queue[k:]:
+                if subject(i) in subjects or subject(i) in used or records[i].id in judged_out:
+                    continue
+                c = cost(i, role, cell_roles[cell]) if featured[cell] else 0.0
+                if c < best_cost:
+                    best, best_cost = i, c
+                    if not featured[cell]:
+                        break
+            if best is None:
+                return None
+            if accept(records[best]):
+                return best
+
+    featured = {cell: any(_features(records[i]) for q in by_role.values() for i in q) for cell, by_role in cells.items()}
     # a cell needs two roles at least: a one-role cell would be answered by its text alone
     open_cells = [c for c in cells if len(cell_roles[c]) >= 2 and all(cells[c].get(role) for role in cell_roles[c])]
     while open_cells:
@@ -312,28 +374,22 @@ def select_records(
             need: Counter[str] = Counter()
             complete = True
             for role in cell_roles[cell]:
-                queue = cells[cell].get(role, [])
-                k = cursors[cell][role]
-                while k < len(queue):
-                    i = queue[k]
-                    k += 1
-                    if subject(i) in subjects or subject(i) in used or not accept(records[i]):
-                        continue
-                    round_.append(i)
-                    used.add(subject(i))
-                    need[records[i].sub_question_type] += 1
-                    break
-                else:
+                i = pick(cell, role, used)
+                if i is None:
                     complete = False
-                cursors[cell][role] = k
-                if not complete:
                     break
+                round_.append(i)
+                used.add(subject(i))
+                need[records[i].sub_question_type] += 1
             if not complete or any(room[sub] < n for sub, n in need.items()):
                 continue  # the cell is exhausted, or a sub type it needs is full
             for i in round_:
                 taken.add(i)
                 subjects.add(subject(i))
                 room[records[i].sub_question_type] -= 1
+                role = str(_selection(records[i])["role"])  # type: ignore[index]
+                for f in _features(records[i]):
+                    balance.setdefault((records[i].sub_question_type, f), Counter())[role] += 1
             still.append(cell)
         open_cells = still
     # a sub type whose quota is smaller than every round of its cells (a tiny per_sub_type, e.g.
@@ -395,6 +451,41 @@ def with_letter(record: QARecord, slot: int) -> QARecord:
     )
 
 
+def deal_distractors(records: Sequence[QARecord], rng: np.random.Generator) -> list[QARecord]:
+    """The MCQ ``records`` whose selection entry lists ``distractors`` (the texts that may be one)
+    with their three distractors dealt again, per sub type: the truths stay, and the
+    distractors of each record (visited in an order drawn from ``rng``) are the allowed texts
+    offered least often so far in the sub type (ties broken by ``rng``), in an ``rng`` order. So
+    every text is offered about equally often, and, the truths being balanced by the rounds,
+    is right about as often as any other when offered (a text offered more often than the others
+    would be right less often, which a blind model learns). The correct option keeps its letter
+    (:func:`deal_letters` deals the letters afterwards); other records are returned unchanged."""
+
+    out = list(records)
+    by_sub: dict[str, list[int]] = {}
+    for k, r in enumerate(out):
+        sel = _selection(r)
+        if r.answer_type is AnswerType.MCQ and sel is not None and isinstance(sel.get("distractors"), list):
+            by_sub.setdefault(r.sub_question_type, []).append(k)
+    for sub in sorted(by_sub):
+        ks = by_sub[sub]
+        offered: Counter[str] = Counter(truth_key(out[k]) for k in ks)
+        for j in rng.permutation(len(ks)):
+            r = out[ks[int(j)]]
+            truth = str(truth_key(r))
+            allowed = sorted({str(t) for t in _selection(r)["distractors"]} - {truth})  # type: ignore[index]
+            if len(allowed) < 3:
+                continue
+            ties = rng.random(len(allowed))
+            picked = [allowed[i] for i in sorted(range(len(allowed)), key=lambda i: (offered[allowed[i]], ties[i]))[:3]]
+            picked = [picked[i] for i in rng.permutation(3)]
+            offered.update(picked)
+            slot = MCQ_LETTERS.index(str(r.answer))
+            texts = picked[:slot] + [truth] + picked[slot:]
+            out[ks[int(j)]] = dataclasses.replace(r, options=tuple(f"{MCQ_LETTERS[i]}. {t}" for i, t in enumerate(texts)))
+    return out
+
+
 def deal_letters(records: Sequence[QARecord], rng: np.random.Generator) -> list[QARecord]:
     """The MCQ ``records`` with their correct letters dealt again, per sub type in the given
     order, from shuffled A–D blocks of ``rng``: the letters of each sub type of a scene's index
@@ -425,11 +516,13 @@ def generate_records(
 ) -> list[QARecord]:
     """Records of every selected family for a prepared scene (see the module docstring).
 
-    Per family, candidates are pooled (up to ``pool_factor × per_sub_type`` per sub type,
-    ``max_scan`` in all); then :func:`select_records` takes up to ``per_sub_type`` per sub
-    type: each subject once, whole rounds of every cell's roles (no answer is predictable from
-    what the text shows), metric answers in generation order; the kept MCQ records get their
-    correct letters dealt again per sub type (:func:`deal_letters`, seeded by
+    Per family, candidates are pooled (up to ``pool_factor × per_sub_type`` distinct subjects
+    per sub type, :data:`ALTERNATES` records each, ``max_scan`` candidates in all); then
+    :func:`select_records` takes up to ``per_sub_type`` per sub type: each subject once, whole
+    rounds of every cell's roles (no answer is predictable from what the text shows), metric
+    answers in generation order; the kept sector-label MCQs get their distractors dealt again
+    (:func:`deal_distractors`, seeded by ``derive_seed(seed, scene, family, "distractors")``)
+    and the kept MCQ records their correct letters (:func:`deal_letters`, seeded by
     ``derive_seed(seed, scene, family, "letters")``), so letters are uniform per sub type.
 
     ``judge``: a callable ``judge(image, label, description) -> "KEEP"/"DROP"`` or a
@@ -445,16 +538,23 @@ def generate_records(
     for family in _families(config.families):
         rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
         pools: dict[str, list[QARecord]] = {}
+        distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
         order: dict[int, int] = {}  # id(record) → scan position
         with plugin_call("question family", family, "generate"):
             for scanned, record in enumerate(family.generate(scene, rng)):
                 if scanned >= config.max_scan:
                     break
                 pool = pools.setdefault(record.sub_question_type, [])
-                if len(pool) < want:
+                seen = distinct.setdefault(record.sub_question_type, Counter())
+                sel = _selection(record)
+                subject = str(sel["subject"]) if sel is not None else f"record:{record.id}"
+                if seen[subject] >= ALTERNATES:
+                    continue  # a subject already pooled (another view of the same question)
+                if subject in seen or len(seen) < want:
+                    seen[subject] += 1
                     pool.append(record)
                     order[id(record)] = scanned
-                elif all(len(pools.get(s, ())) >= want for s in family.sub_question_types):
+                elif all(len(distinct.get(s, ())) >= want for s in family.sub_question_types):
                     break
 
         def keep(record: QARecord, family_name: str = family.name) -> bool:
@@ -467,6 +567,7 @@ def generate_records(
         pooled = sorted((r for pool in pools.values() for r in pool), key=lambda r: order[id(r)])
         stats: dict[str, Counter[str]] = {}
         chosen = select_records(pooled, config.per_sub_type, keep, stats)
+        chosen = deal_distractors(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "distractors")))
         chosen = deal_letters(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "letters")))
         by_sub: dict[str, list[QARecord]] = {}
         for r in chosen:

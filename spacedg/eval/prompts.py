@@ -35,6 +35,7 @@ from spacedg.data.chat import ANSWER_FORMATS, ANSWER_PROMPT, chat_messages
 from spacedg.errors import UnknownPluginError
 from spacedg.eval.bench import CLEAN, BenchRow
 from spacedg.plugins.registry import degradation_names, get_degradation
+from spacedg.plugins.specs import REFERENCE_DEPTH_M
 
 __all__ = [
     "COT_STAGE1_PROMPT",
@@ -92,10 +93,24 @@ def known_degradations() -> list[str]:
 
 
 def _number(value: float) -> str:
-    return f"{value:g}"
+    return f"{value:.4g}"
 
 
-def _ranges_text(name: str, preset: str) -> str:
+#: Units written after a range in the preamble (dimensionless and linear-light values go bare).
+_SHOWN_UNITS = frozenset({"m", "px", "rad", "deg"})
+
+
+def _ranges_text(name: str, preset: str, scene_depth: float | None = None, provenance: bool = True) -> str:
+    """``"param in [low, high] unit, …"`` of ``preset``: the ranges the bench was rendered from.
+
+    Depth-relative ranges (``ParamRange(per_depth=True)``: metres stated at
+    :data:`~spacedg.plugins.specs.REFERENCE_DEPTH_M`) are given as resolved for the sample:
+    scaled by ``scene_depth / REFERENCE_DEPTH_M`` and clamped to the hard limits exactly as
+    :meth:`~spacedg.plugins.specs.DegradationSpec.sample_params` does, followed by the reference
+    numbers. ``scene_depth=None`` with ``provenance``: the row was resolved at the reference (its
+    ranges are the written ones); without ``provenance`` (a foreign bench) the scene depth is not
+    known, and the text says the ranges hold at the reference depth and scale with the scene's.
+    """
 
     try:
         spec = get_degradation(name)
@@ -103,10 +118,27 @@ def _ranges_text(name: str, preset: str) -> str:
         return ""
     if preset not in spec.presets:
         return ""
+    units = {p.name: p for p in spec.params}
     parts = []
     for param, span in spec.presets[preset].items():
-        value = f"= {_number(span.low)}" if span.fixed else f"in [{_number(span.low)}, {_number(span.high)}]"
-        parts.append(f"{param} {value}")
+        info = units.get(param)
+        unit = f" {info.unit}" if info is not None and info.unit in _SHOWN_UNITS else ""
+
+        def bounds(low: float, high: float) -> str:
+            return f"= {_number(low)}{unit}" if low == high else f"in [{_number(low)}, {_number(high)}]{unit}"
+
+        text = f"{param} {bounds(span.low, span.high)}"
+        if span.per_depth and scene_depth is not None:
+            low, high = (span.scaled(v, scene_depth) for v in (span.low, span.high))
+            if info is not None:
+                low, high = (v if info.low is None else max(v, float(info.low)) for v in (low, high))
+                low, high = (v if info.high is None else min(v, float(info.high)) for v in (low, high))
+            written = f"{_number(span.low)}{unit}" if span.fixed else f"[{_number(span.low)}, {_number(span.high)}]{unit}"
+            text = (f"{param} {bounds(low, high)} (scaled to the scene depth of {_number(float(scene_depth))} m; "
+                    f"{written} at {_number(REFERENCE_DEPTH_M)} m)")
+        elif span.per_depth and not provenance:
+            text += f" at a scene depth of {_number(REFERENCE_DEPTH_M)} m, scaled with the scene's depth"
+        parts.append(text)
     return ", ".join(parts)
 
 
@@ -115,22 +147,37 @@ def degradation_info(row: BenchRow) -> str:
 
     Each degradation of the row's chain is named with its preset's parameter ranges, e.g.
     ``"The images are degraded by haze (severity given as the rendering parameter ranges:
-    density in [3.5, 6], airlight in [0.7, 0.9], depth_ref = 0)."``. The chain and presets come
-    from the row's ``degradation`` provenance; a row without it (a foreign bench) uses its
-    ``degradation_type`` and the ``bench`` preset. A degradation whose plugin is not loaded is
-    named without ranges.
+    density in [3.5, 6], airlight in [0.7, 0.9], depth_ref = 4.8 m (scaled to the scene depth of
+    3 m; 4 m at 2.5 m))."``. The chain, presets and scene depth (``scene_depth_m``) come from the
+    row's ``degradation`` provenance: metres of scale-aware presets (defocus ``depth``, motion
+    ``trans``, haze ``depth_ref``) are the ranges resolved at that depth, as rendered. A row
+    without provenance (a foreign bench) uses its ``degradation_type`` and the ``bench`` preset,
+    its metres stated at the reference depth. A degradation whose plugin is not loaded is named
+    without ranges.
     """
     if row.is_clean:
         return ""
-    steps = [(str(d.get("name", "")), str(d.get("preset") or "bench")) for d in row.degradation if d.get("name")]
+    steps = [
+        (str(d.get("name", "")), str(d.get("preset") or "bench"), _depth(d.get("scene_depth_m")), True)
+        for d in row.degradation if d.get("name")
+    ]
     if not steps:  # a foreign bench without provenance: its degradation_type, mixtures expanded
-        steps = [(c.name, c.preset or "bench") for c in Chain.parse(row.degradation_type).choices()]
+        steps = [(c.name, c.preset or "bench", None, False) for c in Chain.parse(row.degradation_type).choices()]
     described = []
-    for name, preset in steps:
-        ranges = _ranges_text(name, preset)
+    for name, preset, depth, known in steps:
+        ranges = _ranges_text(name, preset, depth, known)
         label = name.replace("_", " ")
         described.append(f"{label} (severity given as the rendering parameter ranges: {ranges})" if ranges else label)
     return "The images are degraded by " + " and ".join(described) + ".\n"
+
+
+def _depth(value: Any) -> float | None:
+    """A provenance ``scene_depth_m`` as a positive number of metres, else ``None``."""
+    try:
+        depth = float(value)
+    except (TypeError, ValueError):
+        return None
+    return depth if depth > 0 and depth == depth and depth != float("inf") else None
 
 
 def conversation(row: BenchRow, variant: str, n_images: int | None = None) -> list[dict[str, Any]]:

@@ -45,7 +45,8 @@ Geometry-block entries (JSON; world metres)
     - :func:`visibility_entry`: visible pixels, visible fraction and class of each object in each view.
     - :func:`visibility_thresholds`: the "clearly visible" thresholds, ``min_pixels`` scaled to each view's image size.
     - :func:`objects_block`: the usual head of an object question's block: ``up``, ``cameras``, ``objects``, ``refs``, ``visibility``, ``visibility_thresholds``.
-    - :func:`selection_entry`: the block's ``selection`` entry: the subject (asked once per sub type and scene), the cell (what the text tells a blind model), the record's role and the cell's roles; the question index takes whole rounds of a cell's roles, so nothing the text shows predicts the answer.
+    - :func:`selection_entry`: the block's ``selection`` entry: the subject (asked once per sub type and scene), the cell (what the text tells a blind model), the record's role and the cell's roles; the question index takes whole rounds of a cell's roles, so nothing the text shows predicts the answer; optional ``features`` (the labels the text names, :func:`label_features`) are balanced across the roles.
+    - :func:`label_features`: the selection features of the labels a question names, by position.
 
 Seeded order (all lazy: nothing is drawn before the first ``next``)
     - :func:`child_rngs`: ``n`` independent child generators, so skipping one candidate never shifts another's draws.
@@ -200,6 +201,7 @@ from spacedg.plugins.questions.records import (
     round_robin_views,
     seeded_order,
     selection_entry,
+    label_features,
     visibility_entry,
     visibility_thresholds,
 )
@@ -242,7 +244,7 @@ __all__ = [
     # records and geometry blocks
     "QARecord", "make_record", "make_record_id", "json_ready",
     "object_entry", "ref_entry", "camera_entry", "pair_geometry", "visibility_entry", "visibility_thresholds", "objects_block",
-    "selection_entry",
+    "selection_entry", "label_features",
     # seeded order
     "child_rngs", "seeded_order", "lazy_permutation", "round_robin", "round_robin_views", "round_robin_pairs",
     # objects and wording

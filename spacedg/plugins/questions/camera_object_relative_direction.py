@@ -399,7 +399,10 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
                 "intersect_tol_m": INTERSECT_TOL_M,
             },
             "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
-            "selection": selection_entry(f"objects:{ids[0]}|{ids[1]}|{ids[2]}", RELPOS, truth, RELPOS_SECTORS.labels),
+            "selection": selection_entry(
+                f"objects:{ids[0]}|{ids[1]}|{ids[2]}", RELPOS, truth, RELPOS_SECTORS.labels,
+                distractors=[t for t in RELPOS_SECTORS.labels if t != truth and t not in banned],
+            ),
         }
         yield _record(scene, index, RELPOS, views, objs, list(zip(objs, ref_views)), question, options, letter, 0, extra)
 

@@ -102,7 +102,15 @@ from spacedg.plugins.questions.geometry import (
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import object_pairs, pair_family
 from spacedg.plugins.questions.geometry import COMPASS_SECTORS
-from spacedg.plugins.questions.records import compass_question, make_record, objects_block, phrase, phrase_key, selection_entry
+from spacedg.plugins.questions.records import (
+    compass_distractors,
+    compass_question,
+    make_record,
+    objects_block,
+    phrase,
+    phrase_key,
+    selection_entry,
+)
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -153,6 +161,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             "pair_rules": rules.to_dict(),
             "selection": selection_entry(
                 f"objects:{one.id}|{two.id}", f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
+                distractors=compass_distractors(compass),
             ),
         }
         yield make_record(

@@ -99,6 +99,7 @@ from spacedg.plugins.questions.geometry import (
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import pair_family
 from spacedg.plugins.questions.records import (
+    compass_distractors,
     compass_question,
     lazy_permutation,
     make_record,
@@ -200,6 +201,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             "pair_rules": rules.to_dict(),
             "selection": selection_entry(
                 "objects:" + "|".join(str(o.id) for o in objs), f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
+                distractors=compass_distractors(compass),
             ),
         }
         yield make_record(

@@ -75,7 +75,9 @@ __all__ = [
     "camera_entry",
     "child_rngs",
     "compass_block",
+    "compass_distractors",
     "compass_question",
+    "label_features",
     "lazy_permutation",
     "make_record",
     "object_entry",
@@ -296,8 +298,16 @@ def compass_question(reference: np.ndarray, query: np.ndarray, up: np.ndarray, r
     return assumed, options, letter, block
 
 
+def compass_distractors(block: dict[str, Any]) -> list[str]:
+    """The compass labels that may be distractors of a compass question (:func:`compass_block`'s
+    ``block``): all but the truth and a banned neighbour, for :func:`selection_entry`."""
+    banned = set(block.get("banned_labels", ())) | {block["sector_label"]}
+    return [t for t in COMPASS_SECTORS.labels if t not in banned]
+
+
 def selection_entry(
     subject: str, cell: str | None = None, role: str | None = None, roles: Sequence[str] = (), *, all_roles: bool = True,
+    features: Sequence[str] = (), distractors: Sequence[str] = (),
 ) -> dict[str, Any]:
     """The ``selection`` entry of a geometry block (module docstring, "Selection").
 
@@ -309,7 +319,16 @@ def selection_entry(
     taking whole rounds; a cell missing a role gives no records). ``all_roles=False``: the
     rounds go over the roles the scene offers in the cell (at least two), for cells whose
     options name directions the geometry rarely or never produces ("Up" of an object seen
-    from a camera at eye height).
+    from a camera at eye height). ``features``: what else the text tells a blind model, beyond
+    the cell, that may go with the answer (the labels it names, by position: ``"anchor:chair"``);
+    the index fills each role of a round with the candidate whose features that role has had
+    least so far in the sub type, so no label names a role more often than the others
+    (:func:`~spacedg.data.qa_index.select_records`). ``distractors``: for a question whose three
+    distractors are any of a fixed set of texts (sector labels), every text that may be one
+    (the truth and a banned neighbour left out); the index deals the distractors of the records
+    it keeps again so that every text is offered equally often in a sub type
+    (:func:`~spacedg.data.qa_index.deal_distractors`): a text offered more often than others
+    would be right less often when offered, and a blind model could learn that.
     """
     out: dict[str, Any] = {"subject": str(subject)}
     if cell is not None:
@@ -318,7 +337,22 @@ def selection_entry(
         out.update({"cell": str(cell), "role": str(role), "roles": [str(r) for r in roles]})
         if not all_roles:
             out["all_roles"] = False
+        if features:
+            out["features"] = [str(f) for f in features]
+        if distractors:
+            if len(set(distractors)) < 3:
+                raise ValueError(f"selection_entry: distractors must hold at least 3 texts, got {list(distractors)}")
+            out["distractors"] = [str(d) for d in distractors]
     return out
+
+
+def label_features(*, plain: bool = True, **named: str) -> list[str]:
+    """Selection features of the labels a question names: ``"<position>:<label>"`` for each
+    (``anchor="chair"`` → ``"anchor:chair"``) and, with ``plain``, each label alone
+    (``"label:chair"``); labels compared as :func:`~spacedg.scene.lexicon.label_key` does."""
+    keys = {pos: " ".join(str(label).replace("_", " ").lower().split()) for pos, label in named.items()}
+    out = [f"{pos}:{key}" for pos, key in keys.items()]
+    return out + sorted({f"label:{key}" for key in keys.values()}) if plain else out
 
 
 # ------------------------------------------------------------------ records
