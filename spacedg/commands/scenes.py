@@ -14,6 +14,7 @@ import numpy as np
 from tqdm import tqdm
 
 from spacedg.commands import _args
+from spacedg.commands.sizes import image_side
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.scene.importer import LAYOUTS
 from spacedg.scene.synthetic.room import RoomConfig
@@ -30,8 +31,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     synth.add_argument("--gaussians", type=int, default=None, help="target Gaussians per room (default: 150k–300k by seed)")
     synth.add_argument("--min-views", type=int, default=48, help="fewest views per room (default 48)")
     synth.add_argument("--max-views", type=int, default=120, help="most views per room, >= --min-views (default 120)")
-    synth.add_argument("--width", type=int, default=640, help="image width of the views, pixels")
-    synth.add_argument("--height", type=int, default=480, help="image height of the views, pixels")
+    synth.add_argument("--width", type=image_side, default=640, help="image width of the views, pixels")
+    synth.add_argument("--height", type=image_side, default=480, help="image height of the views, pixels")
     synth.add_argument("--splat", type=Path, action="append", default=[],
                        help="a .splat object to place in every room (repeatable; label and up axis from its meta.json)")
     synth.add_argument("--splat-size", type=float, default=0.35, help="longest side of placed .splat objects, metres")

@@ -40,7 +40,7 @@ SYNTH = ["scenes", "synth", "--n", "1", "--gaussians", "10000", "--width", "64",
     (["--min-views", "10", "--max-views", "2"], ["--min-views 10 is more than --max-views 2"]),
     (["--min-views", "0"], ["--min-views must be at least 1, got 0"]),
     (["--seed", "-3"], ["--seed must be a non-negative integer"]),
-    (["--width", "0"], ["--width must be from 8 to 16384 pixels, got 0"]),
+    (["--width", "4"], ["--width must be from 8 to 16384 pixels, got 4"]),
     (["--splat-size", "nan"], ["--splat-size must be a finite number > 0"]),
     (["--gaussians", "5"], ["gaussians must be in [10000, 5000000], got 5"]),
 ])
