@@ -183,18 +183,161 @@ def motion_table(title: str, g: Gaussians, cam: Camera, motion: tuple, counts: l
               f"{fmt_db(psnr(frame.rgb, reference.rgb)):>8} {disp_s:>11}", flush=True)
 
 
+# ------------------------------------------------------------------ motion blur by severity (keyframes vs sub-steps)
+def object_scene(path: Path, distance_scale: float = 1.0) -> tuple[Gaussians, Camera]:
+    """A mesh-derived splat object (longest axis 2 units, up -y unknown: seen along +z), filling ~90 % of the frame."""
+    from spacedg.scene.io import read_splat
+
+    g = read_splat(path)
+    lo, hi = np.percentile(g.means, 0.5, axis=0), np.percentile(g.means, 99.5, axis=0)
+    centre, extent = 0.5 * (lo + hi), hi - lo
+    direction = np.array([0.3, -0.3, 1.0])
+    direction /= np.linalg.norm(direction)
+    distance = distance_scale * (0.5 * float(extent.max()) * FOCAL / (0.45 * HEIGHT) + 0.5 * float(extent.max()))
+    return g, intrinsics(look_at(centre + distance * direction, centre, np.array([0.0, -1.0, 0.0])))
+
+
+def median_depth(g: Gaussians, cam: Camera) -> float:
+    frame = render(g, cam, outputs="depth,alpha", backend="cpu")
+    covered = frame.alpha > 0.5
+    return float(np.median(frame.depth[covered])) if covered.any() else 1.0
+
+
+def severity_motion(severity: str, depth_m: float, seed: int, scale: float = 1.0) -> tuple[tuple, tuple]:
+    """The motion-blur preset's mid-range ``trans`` (scaled by the scene depth as the plugin does)
+    and ``rot`` along fixed random directions (``seed``); ``scale`` multiplies both (close-ups)."""
+    from spacedg.plugins.degradations.motion_blur import SPEC, random_unit_vector
+    from spacedg.plugins.specs import REFERENCE_DEPTH_M
+
+    preset = SPEC.presets[severity]
+    trans = 0.5 * (preset["trans"].low + preset["trans"].high) * depth_m / REFERENCE_DEPTH_M * scale
+    rot = min(0.5 * (preset["rot"].low + preset["rot"].high) * scale, math.pi)
+    rng = np.random.default_rng(seed)
+    direction, axis = random_unit_vector(rng), random_unit_vector(rng)
+    return tuple(trans * direction), tuple(rot * axis)
+
+
+def ghosting(image: np.ndarray, reference: np.ndarray, sharp: np.ndarray) -> float:
+    """Ghosting (%): ``100 · mean |∇(E(I) − E(R))| / mean |∇E(S)|`` with E the clipped sRGB encode,
+    ∇ forward differences along x and y (L1, all channels), R the N = 256 render, S the sharp
+    mid-exposure render.
+
+    Stroboscopic copies are spurious edges: the error has strong gradients where a continuous
+    smear has none, so the error's gradient energy, relative to the scene's own edges, grows
+    with ghosting: 0 = identical to N = 256; ~100 = as much false edge as the scene has edges."""
+    e = encoded(image) - encoded(reference)
+    r = encoded(sharp)
+    num = np.abs(np.diff(e, axis=0)).mean() + np.abs(np.diff(e, axis=1)).mean()
+    den = np.abs(np.diff(r, axis=0)).mean() + np.abs(np.diff(r, axis=1)).mean()
+    return float(100.0 * num / max(den, 1e-12))
+
+
+def motion_severity_table(cases: list[tuple[str, Gaussians, Camera, list[tuple[str, float]]]], runs: int) -> None:
+    from spacedg.render.motion import render_motion_keyframes, render_motion_substeps
+    from spacedg.render.settings import RasterSettings
+
+    settings = RasterSettings()
+    rgb = frozenset({"rgb"})
+    print("\n4. Motion blur by scene and severity, 640x480, compiled CPU path: today's sub-step fast path vs the keyframe path")
+    print("   motion: the motion_blur preset's mid-range trans (scaled by the view's median depth / 2.5 m, as the plugin "
+          "does) and rot, along fixed random directions; 'close' = 4x the bench motion (paths of hundreds of pixels)")
+    print(f"   time: median of {runs} runs, alternating with clean renders (x clean = median / median clean); "
+          "PSNR on clip(linear_to_srgb(rgb), 0, 1) against N = 80 and N = 256 sub-steps")
+    print("   work: renders made (N = sub-steps; K = keyframes, each on a canvas widened by the path, plus the gathers)")
+    print("   ghost % = 100 * mean|grad(E(I) - E(N256))| / mean|grad E(sharp)| (E = sRGB encode: the error's edges, i.e. "
+          "stroboscopic copies, against the scene's own edges; the N = 80 reference's own value is in the last column)")
+    header = (f"{'scene':<16} {'sev':<5} {'path px':>7} {'clean ms':>8} | {'sub-step work':>13} {'x clean':>7} {'dB v80':>6} "
+              f"{'dB v256':>7} {'ghost%':>6} | {'keyframe work':>13} {'x clean':>7} {'dB v80':>6} {'dB v256':>7} {'ghost%':>6} "
+              f"| {'N80 ghost%':>10}")
+    print(header)
+    print("-" * len(header))
+    summary: list[tuple[float, float, float]] = []
+    for name, g, cam, severities in cases:
+        depth = median_depth(g, cam)
+        for severity, scale in severities:
+            translation, rotation = severity_motion(severity if severity != "close" else "bench", depth, seed=7, scale=scale)
+            blur = MotionBlur(translation, rotation, sub_steps=80, fast=True)
+            ref80 = render(g, cam, motion=MotionBlur(translation, rotation, sub_steps=80), backend="cpu")
+            ref256 = render(g, cam, motion=MotionBlur(translation, rotation, sub_steps=256), backend="cpu")
+            fns = {
+                "clean": lambda: render(g, cam, backend="cpu"),
+                "sub": lambda: render_motion_substeps(g, cam, blur, rgb, "cpu", None, settings, None, fast=True),
+                "key": lambda: render_motion_keyframes(g, cam, blur, rgb, "cpu", None, settings, None),
+            }
+            times: dict[str, list[float]] = {k: [] for k in fns}
+            frames: dict[str, Frame] = {}
+            for k, fn in fns.items():  # warm-up (JIT)
+                frames[k] = fn()
+            for _ in range(runs):
+                for k, fn in fns.items():
+                    t0 = time.perf_counter()
+                    frames[k] = fn()
+                    times[k].append(time.perf_counter() - t0)
+            t_clean = float(np.median(times["clean"]))
+            sharp = frames["clean"].rgb
+            cells = []
+            for k in ("sub", "key"):
+                f = frames[k]
+                work = f"N = {int(f.stats['sub_steps'])}" if k == "sub" else f"K = {int(f.stats['keyframes'])}"
+                ratio = float(np.median(times[k])) / t_clean
+                p80, p256, gh = psnr(f.rgb, ref80.rgb), psnr(f.rgb, ref256.rgb), ghosting(f.rgb, ref256.rgb, sharp)
+                cells.append(f"{work:>13} {ratio:>7.2f} {fmt_db(p80):>6} {fmt_db(p256):>7} {gh:>6.2f}")
+                if k == "key":
+                    summary.append((ratio, p80, p256))
+            path = float(frames["key"].stats["displacement_px"])
+            print(f"{name:<16} {severity:<5} {path:>7.0f} {t_clean * 1e3:>8.1f} | {cells[0]} | {cells[1]} | "
+                  f"{ghosting(ref80.rgb, ref256.rgb, sharp):>10.2f}", flush=True)
+    if summary:
+        arr = np.array(summary)
+        print(f"keyframe path over {len(summary)} cases: x clean median {np.median(arr[:, 0]):.2f}, max {arr[:, 0].max():.2f}; "
+              f"dB vs N=80 min {arr[:, 1].min():.2f}; dB vs N=256 min {arr[:, 2].min():.2f}")
+
+
+def severity_section(room_seed: int, quick: bool) -> None:
+    severities = [("1", 1.0), ("3", 1.0), ("bench", 1.0)] if quick else [("1", 1.0), ("2", 1.0), ("3", 1.0), ("4", 1.0), ("bench", 1.0)]
+    cases = []
+    for seed in ([room_seed] if quick else [room_seed, room_seed + 1]):
+        room = generate_room(seed)
+        names = sorted(room.views)
+        cases.append((f"room {seed}", room.gaussians, room.views[names[len(names) // 2]].resized(WIDTH, HEIGHT), severities))
+    if PLANT.is_file():
+        g, cam = plant_scene()
+        cases.append(("plant", g, cam, severities + [("close", 4.0)]))
+        for name in ("teapot", "cat") if not quick else ("teapot",):
+            path = SHARED / name / f"{name}_10k.splat"
+            if path.is_file():
+                g, cam = object_scene(path)
+                cases.append((f"{name} 10k", g, cam, [("1", 1.0), ("bench", 1.0), ("close", 4.0)]))
+    else:
+        print(f"\n(plant and mesh objects skipped: {SHARED} not found)")
+    motion_severity_table(cases, runs=3)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
                         help="10k/100k scenes only (no 300k), one timed torch run, fewer plant motion rows (about a minute)")
     parser.add_argument("--torch-device", default="cpu", help="torch device for the torch path (default cpu)")
     parser.add_argument("--room-seed", type=int, default=0, help="seed of the synthetic room (default 0)")
+    parser.add_argument("--only", choices=["renderer", "motion", "severity"], default=None,
+                        help="run one part: renderer (table 1), motion (tables 2-3) or severity (table 4)")
+    parser.add_argument("--threads", type=int, default=None, help="numba threads (default: numba's)")
     args = parser.parse_args()
+    if args.threads:
+        import numba
+
+        numba.set_num_threads(args.threads)
 
     print(machine_line(args.torch_device))
     start = time.perf_counter()
     sizes = [10_000, 100_000] if args.quick else [10_000, 100_000, 300_000]
-    renderer_table(sizes, degree=1, with_plant=True, torch_device=args.torch_device, torch_runs=1 if args.quick else 2)
+    if args.only in (None, "renderer"):
+        renderer_table(sizes, degree=1, with_plant=True, torch_device=args.torch_device, torch_runs=1 if args.quick else 2)
+    if args.only in (None, "severity"):
+        severity_section(args.room_seed, args.quick)
+    if args.only not in (None, "motion"):
+        print(f"\ntotal {time.perf_counter() - start:.0f} s")
+        return
 
     room = generate_room(args.room_seed)
     names = sorted(room.views)

@@ -31,6 +31,10 @@ renders them.
   before a DataLoader forks. Rendering in the main process first (``dataset[0]`` before the
   DataLoader) is fine too: a worker forked after numba's OpenMP threads started runs
   spacedg's kernels serially (:mod:`spacedg.render.threads`) and gives the same bytes.
+  :attr:`SpaceDGDataset.workers` is a worker count chosen from the machine
+  (:mod:`spacedg.data.workers`: ``min(8, cores // 2)``), for
+  ``DataLoader(dataset, num_workers=dataset.workers)``; each worker renders with
+  :attr:`SpaceDGDataset.render_threads` numba threads (``cores // (workers + 1)``).
 - **Bench split**: ``severity`` does not apply (the protocol is the ``bench`` preset); use
   ``degradations=["haze:3", ...]`` for other levels. With several workers, batch sizes that
   are multiples of ``len(chains) + 1`` keep a question's variants in one worker, where they
@@ -54,6 +58,7 @@ from torch.utils.data import Dataset
 from spacedg.data.chain import BENCH_DEGRADATIONS, SEVERITIES, Chain
 from spacedg.data.pipeline import PipelineOptions, degrade, frames_nbytes
 from spacedg.data.qa_index import QABuildConfig, ensure_indexes, index_paths, read_index
+from spacedg.data.workers import loader_plan
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.registry import get_question_family, list_degradations
@@ -95,6 +100,12 @@ class SpaceDGDataset(Dataset):
         builtin_rooms: how many built-in rooms when ``scenes`` is not given.
         max_questions: keep at most this many questions, spread over question types
             round-robin in a seeded order (a small bench or a quick run); ``None`` keeps all.
+        workers: DataLoader workers to use with this dataset (:attr:`workers`, for
+            ``DataLoader(dataset, num_workers=dataset.workers)``); ``None``: chosen from the
+            machine by :func:`~spacedg.data.workers.loader_plan` (``min(8, cores // 2)``).
+        render_threads: numba threads each DataLoader worker renders with (set in the worker
+            on its first item); ``None``: ``cores // (workers + 1)`` for the DataLoader's
+            actual worker count. The main process (``workers = 0``) keeps numba's default.
     """
 
     def __init__(
@@ -117,6 +128,8 @@ class SpaceDGDataset(Dataset):
         device: str | None = None,
         builtin_rooms: int = 16,
         max_questions: int | None = None,
+        workers: int | None = None,
+        render_threads: int | None = None,
     ) -> None:
         if split not in SPLITS:
             raise ParameterError(f"SpaceDGDataset: split must be one of {list(SPLITS)}, got {split!r}")
@@ -127,6 +140,11 @@ class SpaceDGDataset(Dataset):
         if on_bad_scene not in ("raise", "skip"):
             raise ParameterError(f"SpaceDGDataset: on_bad_scene must be 'raise' or 'skip', got {on_bad_scene!r}")
         self.split, self.severity, self.clean_prob, self.seed = split, severity, float(clean_prob), int(seed)
+        plan = loader_plan(workers=workers, render_threads=render_threads)
+        #: DataLoader workers suggested for this dataset and numba threads per worker (see spacedg.data.workers).
+        self.workers, self.render_threads = plan.workers, plan.render_threads
+        self._threads_given = render_threads is not None
+        self._threads_set = False
         self.options = PipelineOptions(image_size=tuple(image_size) if image_size else None, backend=backend, device=device)
         self.chains = self._chains(degradations)
         self.qa_config = qa_config or QABuildConfig()
@@ -252,7 +270,20 @@ class SpaceDGDataset(Dataset):
         folder = self.scene_dirs[scene_id]
         return self._cache().get(("scene", scene_id), lambda: load_scene(folder))
 
+    def _set_worker_threads(self) -> None:
+        """In a DataLoader worker, once: numba threads = ``render_threads`` as given, else the
+        plan's for the DataLoader's actual worker count."""
+        self._threads_set = True
+        info = torch.utils.data.get_worker_info()
+        if info is not None:
+            from spacedg.render.threads import set_render_threads
+
+            threads = self.render_threads if self._threads_given else loader_plan(workers=info.num_workers).render_threads
+            set_render_threads(threads)
+
     def __getitem__(self, index: int) -> dict[str, Any]:
+        if not self._threads_set:
+            self._set_worker_threads()
         record, chain, name = self.plan(index)
         scene = self._scene(record.scene_id)
         result = degrade(scene, record.views, chain, seed=self._sample_seed(record, name), options=self.options, render_cache=self._cache())
@@ -278,6 +309,7 @@ class SpaceDGDataset(Dataset):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_scenes"] = None  # each worker builds its own cache
+        state["_threads_set"] = False  # and sets its own thread count
         return state
 
 

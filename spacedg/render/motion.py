@@ -193,12 +193,14 @@ def render_motion_substeps(
 
 
 #: Keyframe path: largest on-screen path (pixels) one keyframe interval may cover …
-KEYFRAME_PATH_PX = 120.0
+KEYFRAME_PATH_PX = 90.0
 #: … and the keyframe count's bounds.
 MIN_KEYFRAMES, MAX_KEYFRAMES = 1, 6
-#: Box-doubling passes before the path gather: each halves the samples the gather takes
-#: (and adds one bilinear resampling, ~1 dB on the plant's fine texture).
-DOUBLING_PASSES = 3
+#: Most box-doubling passes before the path gather: each halves the samples the gather takes
+#: and costs about two of them (and adds one bilinear resampling, ~1 dB on the plant's fine
+#: texture); an interval whose longest path is L px gets ``round(log2(0.35 L))`` passes
+#: (the minimum of ``2 P + L / 2^P``), at most this many.
+DOUBLING_PASSES = 4
 #: Largest distance (pixels) between two of the path's samples (the gather walks ``2^-passes``
 #: of each path at this spacing; the passes replicate its samples along the rest).
 PATH_SPACING_PX = 1.0
@@ -226,12 +228,14 @@ def render_motion_keyframes(
     """Motion blur from ``K`` keyframes and depth-reprojected path gathers (:mod:`spacedg.render.motion_warp`).
 
     ``keyframes``, ``passes`` and ``spacing`` (pixels) override :func:`choose_keyframes`,
-    :data:`DOUBLING_PASSES` and :data:`PATH_SPACING_PX` (for benchmarks and tests). Pinhole
+    the pass count (default: adaptive, at most :data:`DOUBLING_PASSES`) and
+    :data:`PATH_SPACING_PX` (for benchmarks and tests). Pinhole
     cameras only. Deterministic: no random numbers, every kernel writes each element in one order.
     """
     from spacedg.render import motion_warp
 
     t0 = time.perf_counter()
+    passes_given = passes is not None
     passes = DOUBLING_PASSES if passes is None else passes
     spacing = PATH_SPACING_PX if spacing is None else spacing
     translation, rotation = np.array(motion.translation), np.array(motion.rotation)
@@ -264,11 +268,13 @@ def render_motion_keyframes(
         motion_warp.flow_field(geometry, camera.fx, camera.fy, canvas.cx, canvas.cy,
                                motion_warp.relative_transform(end_poses[k], pose),
                                motion_warp.relative_transform(end_poses[k + 1], pose), field)
+        longest = float(np.sqrt(field[..., 2] ** 2 + field[..., 3] ** 2).max())
+        n_passes = passes if passes_given else int(min(max(round(math.log2(max(0.35 * longest, 1.0))), 0), passes))
         dst = np.empty_like(src)
-        for j in range(passes):
+        for j in range(n_passes):
             motion_warp.doubling_pass(src, field, np.float32(0.25 / 2**j), dst)
             src, dst = dst, src
-        motion_warp.gather(src, field, margin, 1.0 / 2**passes, spacing, acc)
+        motion_warp.gather(src, field, margin, 1.0 / 2**n_passes, spacing, acc)
     acc /= count
     images = {"alpha": np.ascontiguousarray(acc[..., 3])}
     if "rgb" in wanted:

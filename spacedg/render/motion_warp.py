@@ -75,6 +75,11 @@ def gather(src, field, margin, length, spacing, out):  # pragma: no cover - comp
     """
     hc, wc = src.shape[0], src.shape[1]
     want_extra = src.shape[2] > 4
+    # flat buffer, unsigned indices: numba's negative-index wraparound checks stay out of the loop
+    flat = src.reshape(-1)
+    nc = np.uint64(src.shape[2])
+    row = np.uint64(wc) * nc
+    c1, c2, c3, c4 = np.uint64(1), np.uint64(2), np.uint64(3), np.uint64(4)
     scale = np.float32(length)
     height, width = out.shape[0], out.shape[1]
     xmax = np.float32(wc - 1.001)
@@ -111,20 +116,22 @@ def gather(src, field, margin, length, spacing, out):  # pragma: no cover - comp
             a3 = zero
             a4 = zero
             for _ in range(count):
-                x0 = int(x)
-                y0 = int(y)
+                x0 = np.uint64(x)
+                y0 = np.uint64(y)
                 ax = x - np.float32(x0)
                 ay = y - np.float32(y0)
                 w00 = (one - ax) * (one - ay)
                 w01 = ax * (one - ay)
                 w10 = (one - ax) * ay
                 w11 = ax * ay
-                a0 += w00 * src[y0, x0, 0] + w01 * src[y0, x0 + 1, 0] + w10 * src[y0 + 1, x0, 0] + w11 * src[y0 + 1, x0 + 1, 0]
-                a1 += w00 * src[y0, x0, 1] + w01 * src[y0, x0 + 1, 1] + w10 * src[y0 + 1, x0, 1] + w11 * src[y0 + 1, x0 + 1, 1]
-                a2 += w00 * src[y0, x0, 2] + w01 * src[y0, x0 + 1, 2] + w10 * src[y0 + 1, x0, 2] + w11 * src[y0 + 1, x0 + 1, 2]
-                a3 += w00 * src[y0, x0, 3] + w01 * src[y0, x0 + 1, 3] + w10 * src[y0 + 1, x0, 3] + w11 * src[y0 + 1, x0 + 1, 3]
+                p00 = y0 * row + x0 * nc
+                p10 = p00 + row
+                a0 += w00 * flat[p00] + w01 * flat[p00 + nc] + w10 * flat[p10] + w11 * flat[p10 + nc]
+                a1 += w00 * flat[p00 + c1] + w01 * flat[p00 + nc + c1] + w10 * flat[p10 + c1] + w11 * flat[p10 + nc + c1]
+                a2 += w00 * flat[p00 + c2] + w01 * flat[p00 + nc + c2] + w10 * flat[p10 + c2] + w11 * flat[p10 + nc + c2]
+                a3 += w00 * flat[p00 + c3] + w01 * flat[p00 + nc + c3] + w10 * flat[p10 + c3] + w11 * flat[p10 + nc + c3]
                 if want_extra:
-                    a4 += w00 * src[y0, x0, 4] + w01 * src[y0, x0 + 1, 4] + w10 * src[y0 + 1, x0, 4] + w11 * src[y0 + 1, x0 + 1, 4]
+                    a4 += w00 * flat[p00 + c4] + w01 * flat[p00 + nc + c4] + w10 * flat[p10 + c4] + w11 * flat[p10 + nc + c4]
                 x += su
                 y += sv
             out[i, j, 0] += a0 * step
@@ -164,17 +171,14 @@ def flow_field(depth, fx, fy, kcx, kcy, from_a, from_b, field):  # pragma: no co
 
 
 @numba.njit(cache=True, inline="always")
-def _tap(src, x, y, xmax, ymax, c):
-    """Bilinear sample of channel ``c`` at array-index coordinates (x, y) clamped to the canvas."""
+def _corner(x, y, xmax, ymax, row, nc):
+    """Bilinear tap at array-index (x, y) clamped to the canvas: flat index of its top-left
+    texel and the two fractions."""
     x = min(max(x, np.float32(0.0)), xmax)
     y = min(max(y, np.float32(0.0)), ymax)
-    x0 = int(x)
-    y0 = int(y)
-    ax = x - np.float32(x0)
-    ay = y - np.float32(y0)
-    top = src[y0, x0, c] + ax * (src[y0, x0 + 1, c] - src[y0, x0, c])
-    bottom = src[y0 + 1, x0, c] + ax * (src[y0 + 1, x0 + 1, c] - src[y0 + 1, x0, c])
-    return top + ay * (bottom - top)
+    x0 = np.uint64(x)
+    y0 = np.uint64(y)
+    return y0 * row + x0 * nc, x - np.float32(x0), y - np.float32(y0)
 
 
 @fork_safe
@@ -186,12 +190,29 @@ def doubling_pass(src, field, scale, dst):  # pragma: no cover - compiled
     xmax = np.float32(wc - 1.001)
     ymax = np.float32(hc - 1.001)
     half = np.float32(0.5)
+    one = np.float32(1.0)
     s = np.float32(scale)
+    flat = src.reshape(-1)
+    out = dst.reshape(-1)
+    nc = np.uint64(n_ch)
+    row = np.uint64(wc) * nc
     for i in numba.prange(hc):
         for j in range(wc):
             su = s * field[i, j, 2]
             sv = s * field[i, j, 3]
-            xa, ya = np.float32(j) - su, np.float32(i) - sv
-            xb, yb = np.float32(j) + su, np.float32(i) + sv
+            pa, ax, ay = _corner(np.float32(j) - su, np.float32(i) - sv, xmax, ymax, row, nc)
+            pb, bx, by = _corner(np.float32(j) + su, np.float32(i) + sv, xmax, ymax, row, nc)
+            wa00 = half * (one - ax) * (one - ay)
+            wa01 = half * ax * (one - ay)
+            wa10 = half * (one - ax) * ay
+            wa11 = half * ax * ay
+            wb00 = half * (one - bx) * (one - by)
+            wb01 = half * bx * (one - by)
+            wb10 = half * (one - bx) * by
+            wb11 = half * bx * by
+            base = (np.uint64(i) * np.uint64(wc) + np.uint64(j)) * nc
             for c in range(n_ch):
-                dst[i, j, c] = half * (_tap(src, xa, ya, xmax, ymax, c) + _tap(src, xb, yb, xmax, ymax, c))
+                k = np.uint64(c)
+                out[base + k] = (wa00 * flat[pa + k] + wa01 * flat[pa + nc + k] + wa10 * flat[pa + row + k]
+                                 + wa11 * flat[pa + row + nc + k] + wb00 * flat[pb + k] + wb01 * flat[pb + nc + k]
+                                 + wb10 * flat[pb + row + k] + wb11 * flat[pb + row + nc + k])

@@ -593,3 +593,30 @@ def test_default_scenes_are_the_builtin_rooms_made_on_first_use(tmp_path, monkey
     assert len(ds.scene_dirs) == 1 and len(ds) == 2 * len(ds.records) and ds[0]["images"].dtype == torch.uint8
     again = SpaceDGDataset("bench", builtin_rooms=3, qa_config=config, image_size=SIZE, degradations=["low_res"])
     assert "first use" not in capfd.readouterr().err and [r.id for r in again.records] == [r.id for r in ds.records]
+
+
+def test_worker_defaults_come_from_the_machine_and_set_worker_threads(rooms, monkeypatch):
+    """``ds.workers`` / ``ds.render_threads`` follow :func:`loader_plan`; in a worker the first item
+    sets numba's threads for the DataLoader's actual worker count (or the given count)."""
+    import types
+
+    import numba
+    import torch.utils.data
+
+    from spacedg.data.workers import loader_plan
+
+    monkeypatch.delenv("SPACEDG_WORKERS", raising=False)
+    monkeypatch.delenv("SPACEDG_RENDER_THREADS", raising=False)
+    ds = make(rooms, "val")
+    plan = loader_plan()
+    assert (ds.workers, ds.render_threads) == (plan.workers, plan.render_threads)
+    assert make(rooms, "val", workers=3, render_threads=1).workers == 3
+    before = numba.get_num_threads()
+    seen = []
+    monkeypatch.setattr("spacedg.render.threads.set_render_threads", lambda n: seen.append(n) or n)
+    monkeypatch.setattr(torch.utils.data, "get_worker_info", lambda: types.SimpleNamespace(num_workers=1, id=0))
+    ds._set_worker_threads()
+    given = make(rooms, "val", render_threads=1)
+    given._set_worker_threads()
+    assert seen == [loader_plan(workers=1).render_threads, 1]
+    assert numba.get_num_threads() == before  # (the setter was replaced: the test process keeps its threads)
