@@ -193,7 +193,7 @@ def render_motion_substeps(
 
 
 #: Keyframe path: largest on-screen path (pixels) one keyframe interval may cover …
-KEYFRAME_PATH_PX = 90.0
+KEYFRAME_PATH_PX = 75.0
 #: … and the keyframe count's bounds.
 MIN_KEYFRAMES, MAX_KEYFRAMES = 1, 6
 #: Most box-doubling passes before the path gather: each halves the samples the gather takes
