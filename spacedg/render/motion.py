@@ -13,9 +13,11 @@ centre); sub-exposure k of K is centred at time ``s_k = (k + ½)/K − ½``.
   (:func:`motion_extent`); each interval's centre pose is rendered once (with depth, on a canvas
   widened by the path so what the camera sweeps in is rendered) and every output pixel
   averages the keyframe along the segment it sees during the interval, sampled every ≤ 1 px
-  (``DOUBLING_PASSES`` box-doubling passes, then a gather every ``PATH_SPACING_PX``). The smear
+  (a box-doubling pass for long paths, then a gather every ``PATH_SPACING_PX``; segments over
+  empty canvas are skipped). The smear
   is integrated continuously, so there are no stroboscopic copies at any path length; the cost
-  is ``K`` renders plus ~2–4 render-equivalents of gathers (``benchmarks/render.py`` prints
+  is ``K`` canvas renders plus ~1–2 render-equivalents of warping per keyframe on a 165k-Gaussian
+  room (more, relative, on cheap scenes: the warp costs per pixel) (``benchmarks/render.py`` prints
   time, PSNR vs N = 80 and N = 256, and a ghosting measure per scene and severity). Where the
   approximation is inexact: the depth of what a pixel sees during an interval is taken from the
   keyframe at that pixel (off in a band of the interval's parallax around depth edges), and
@@ -196,11 +198,12 @@ def render_motion_substeps(
 KEYFRAME_PATH_PX = 75.0
 #: … and the keyframe count's bounds.
 MIN_KEYFRAMES, MAX_KEYFRAMES = 1, 6
-#: Most box-doubling passes before the path gather: each halves the samples the gather takes
-#: and costs about two of them (and adds one bilinear resampling, ~1 dB on the plant's fine
-#: texture); an interval whose longest path is L px gets ``round(log2(0.35 L))`` passes
-#: (the minimum of ``2 P + L / 2^P``), at most this many.
-DOUBLING_PASSES = 4
+#: Box-doubling passes before the path gather when an interval's longest path exceeds
+#: ``DOUBLING_FROM_PX``: each halves the samples the gather takes but reads the whole canvas
+#: twice and resamples it once (~1 dB on the plant's fine texture). Measured (640×480, one
+#: thread): 0 → 1 pass 2–8 % faster on rooms and the plant at bench, more passes slower.
+DOUBLING_PASSES = 1
+DOUBLING_FROM_PX = 24.0
 #: Largest distance (pixels) between two of the path's samples (the gather walks ``2^-passes``
 #: of each path at this spacing; the passes replicate its samples along the rest).
 PATH_SPACING_PX = 1.0
@@ -228,7 +231,8 @@ def render_motion_keyframes(
     """Motion blur from ``K`` keyframes and depth-reprojected path gathers (:mod:`spacedg.render.motion_warp`).
 
     ``keyframes``, ``passes`` and ``spacing`` (pixels) override :func:`choose_keyframes`,
-    the pass count (default: adaptive, at most :data:`DOUBLING_PASSES`) and
+    the pass count (default: :data:`DOUBLING_PASSES` where the interval's longest path exceeds
+    :data:`DOUBLING_FROM_PX`, else 0) and
     :data:`PATH_SPACING_PX` (for benchmarks and tests). Pinhole
     cameras only. Deterministic: no random numbers, every kernel writes each element in one order.
     """
@@ -269,12 +273,12 @@ def render_motion_keyframes(
                                motion_warp.relative_transform(end_poses[k], pose),
                                motion_warp.relative_transform(end_poses[k + 1], pose), field)
         longest = float(np.sqrt(field[..., 2] ** 2 + field[..., 3] ** 2).max())
-        n_passes = passes if passes_given else int(min(max(round(math.log2(max(0.35 * longest, 1.0))), 0), passes))
+        n_passes = passes if passes_given else (passes if longest > DOUBLING_FROM_PX else 0)
         dst = np.empty_like(src)
         for j in range(n_passes):
-            motion_warp.doubling_pass(src, field, np.float32(0.25 / 2**j), dst)
+            motion_warp.doubling_pass(src, field, np.float32(0.25 / 2**j), motion_warp.occupancy(src), dst)
             src, dst = dst, src
-        motion_warp.gather(src, field, margin, 1.0 / 2**n_passes, spacing, acc)
+        motion_warp.gather(src, field, margin, 1.0 / 2**n_passes, spacing, motion_warp.occupancy(src), acc)
     acc /= count
     images = {"alpha": np.ascontiguousarray(acc[..., 3])}
     if "rgb" in wanted:

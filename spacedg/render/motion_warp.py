@@ -60,7 +60,7 @@ def _project(m, x, y, z, fx, fy, cx, cy):
 
 @fork_safe
 @numba.njit(parallel=True, fastmath=True, cache=True)
-def gather(src, field, margin, length, spacing, out):  # pragma: no cover - compiled
+def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover - compiled
     """Add one keyframe interval's path average to ``out`` (in place).
 
     Args:
@@ -71,6 +71,7 @@ def gather(src, field, margin, length, spacing, out):  # pragma: no cover - comp
         length: fraction of each segment walked (1; ``2^-p`` after ``p`` :func:`doubling_pass` es,
             whose samples already average the rest).
         spacing: largest distance (pixels) between two samples along the walked segment.
+        sat: :func:`occupancy` of ``src``: a segment over empty texels adds nothing and is skipped.
         out: (H, W, C) float32 accumulators.
     """
     hc, wc = src.shape[0], src.shape[1]
@@ -102,6 +103,8 @@ def gather(src, field, margin, length, spacing, out):  # pragma: no cover - comp
             va = min(max(v0 - half * dv, zero), ymax)
             ub = min(max(u0 + half * du, zero), xmax)
             vb = min(max(v0 + half * dv, zero), ymax)
+            if _empty(sat, ua, ub, va, vb):
+                continue
             du = ub - ua
             dv = vb - va
             count = max(1, int(math.ceil(math.sqrt(du * du + dv * dv) * inv_spacing)))
@@ -170,6 +173,26 @@ def flow_field(depth, fx, fy, kcx, kcy, from_a, from_b, field):  # pragma: no co
             field[i, j, 3] = vb - va
 
 
+def occupancy(src: np.ndarray) -> np.ndarray:
+    """(Hc + 1, Wc + 1) int32 summed-area table of ``alpha > 0`` (channel 3) of a canvas: a
+    premultiplied pixel with alpha 0 is 0 in every channel, so a region it counts 0 in is empty."""
+    sat = np.zeros((src.shape[0] + 1, src.shape[1] + 1), np.int32)
+    np.cumsum(np.cumsum(src[..., 3] > 0, axis=0, dtype=np.int32), axis=1, out=sat[1:, 1:])
+    return sat
+
+
+@numba.njit(cache=True, inline="always")
+def _empty(sat, xa, xb, ya, yb):
+    """Whether the canvas texels a bilinear read anywhere in [xa, xb] × [ya, yb] (array-index
+    coordinates, clamped like the reads) can touch are all empty."""
+    hc, wc = sat.shape[0] - 1, sat.shape[1] - 1
+    x0 = min(max(int(math.floor(min(xa, xb))), 0), wc - 1)
+    x1 = min(max(int(math.floor(max(xa, xb))) + 2, 1), wc)
+    y0 = min(max(int(math.floor(min(ya, yb))), 0), hc - 1)
+    y1 = min(max(int(math.floor(max(ya, yb))) + 2, 1), hc)
+    return sat[y1, x1] - sat[y0, x1] - sat[y1, x0] + sat[y0, x0] == 0
+
+
 @numba.njit(cache=True, inline="always")
 def _corner(x, y, xmax, ymax, row, nc):
     """Bilinear tap at array-index (x, y) clamped to the canvas: flat index of its top-left
@@ -183,9 +206,10 @@ def _corner(x, y, xmax, ymax, row, nc):
 
 @fork_safe
 @numba.njit(parallel=True, fastmath=True, cache=True)
-def doubling_pass(src, field, scale, dst):  # pragma: no cover - compiled
+def doubling_pass(src, field, scale, sat, dst):  # pragma: no cover - compiled
     """``dst(q) = ½ [src(q − s·d(q)) + src(q + s·d(q))]`` with ``s = scale``: one box-length doubling
-    (a box of length ℓ along ``d`` becomes two of them ``2 s |d|`` apart)."""
+    (a box of length ℓ along ``d`` becomes two of them ``2 s |d|`` apart). ``sat``:
+    :func:`occupancy` of ``src``; pixels whose two reads fall on empty texels are set to 0."""
     hc, wc, n_ch = src.shape
     xmax = np.float32(wc - 1.001)
     ymax = np.float32(hc - 1.001)
@@ -200,6 +224,11 @@ def doubling_pass(src, field, scale, dst):  # pragma: no cover - compiled
         for j in range(wc):
             su = s * field[i, j, 2]
             sv = s * field[i, j, 3]
+            base = (np.uint64(i) * np.uint64(wc) + np.uint64(j)) * nc
+            if _empty(sat, np.float32(j) - su, np.float32(j) + su, np.float32(i) - sv, np.float32(i) + sv):
+                for c in range(n_ch):
+                    out[base + np.uint64(c)] = np.float32(0.0)
+                continue
             pa, ax, ay = _corner(np.float32(j) - su, np.float32(i) - sv, xmax, ymax, row, nc)
             pb, bx, by = _corner(np.float32(j) + su, np.float32(i) + sv, xmax, ymax, row, nc)
             wa00 = half * (one - ax) * (one - ay)
@@ -210,7 +239,6 @@ def doubling_pass(src, field, scale, dst):  # pragma: no cover - compiled
             wb01 = half * bx * (one - by)
             wb10 = half * (one - bx) * by
             wb11 = half * bx * by
-            base = (np.uint64(i) * np.uint64(wc) + np.uint64(j)) * nc
             for c in range(n_ch):
                 k = np.uint64(c)
                 out[base + k] = (wa00 * flat[pa + k] + wa01 * flat[pa + nc + k] + wa10 * flat[pa + row + k]
