@@ -181,11 +181,17 @@ def occupancy(src: np.ndarray) -> np.ndarray:
     return sat
 
 
+#: Stand-in occupancy table of a canvas with no empty pixel: :func:`_empty` never skips.
+FULL = np.zeros((1, 1), np.int32)
+
+
 @numba.njit(cache=True, inline="always")
 def _empty(sat, xa, xb, ya, yb):
     """Whether the canvas texels a bilinear read anywhere in [xa, xb] × [ya, yb] (array-index
     coordinates, clamped like the reads) can touch are all empty."""
     hc, wc = sat.shape[0] - 1, sat.shape[1] - 1
+    if hc < 1 or wc < 1:
+        return False  # FULL: nothing is empty
     x0 = min(max(int(math.floor(min(xa, xb))), 0), wc - 1)
     x1 = min(max(int(math.floor(max(xa, xb))) + 2, 1), wc)
     y0 = min(max(int(math.floor(min(ya, yb))), 0), hc - 1)
