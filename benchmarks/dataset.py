@@ -243,7 +243,8 @@ def mixture_table(common: dict[str, Any], samples: int, worker_counts: list[int]
     export_bench(online, out, progress=False)
     export_s = time.perf_counter() - t0
     jsonl = ChatJsonlDataset(out / "train.jsonl")
-    print(f"\nDefault training mixture (train split, the nine at bench, clean_prob 0.1), {len(online)} items; "
+    print(f"\nDefault training mixture (train split, the nine at bench, clean_prob 0.1), {len(online)} items "
+          f"(the first quarter a warm-up); "
           f"exported in {export_s:.1f} s ({len(online) / export_s:.2f} samples/s, 0 workers); cores {cores}; "
           f"worker plan (auto): {plan.workers} workers x {plan.render_threads} render threads")
     head = f"{'source':<22} {'workers':>7} {'samples/s':>9} {'per core':>8}"
@@ -257,7 +258,8 @@ def mixture_table(common: dict[str, Any], samples: int, worker_counts: list[int]
             loader = DataLoader(pickle_copy(data) if label == "online" else data, batch_size=1, shuffle=False,
                                 num_workers=workers, collate_fn=_as_list, **kwargs)
             iterator = iter(loader)
-            next(iterator)  # warm-up: workers started, kernels loaded
+            for _ in range(max(1, len(data) // 4)):  # warm-up: workers started, kernels and scenes loaded
+                next(iterator)
             t0 = time.perf_counter()
             n = sum(1 for _ in iterator)
             wall = time.perf_counter() - t0
@@ -368,6 +370,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--only", default=None, help="comma-separated configurations (clean, a degradation, bench)")
     parser.add_argument("--no-mixture", dest="mixture", action="store_false",
                         help="skip the training-mixture table (online vs exported JSONL)")
+    parser.add_argument("--mixture-samples", type=int, default=32, help="items of the training-mixture table (default 32)")
+    parser.add_argument("--mixture-only", action="store_true", help="only the training-mixture table")
     args = parser.parse_args(argv)
     if args.quick:
         args.small = True
@@ -406,6 +410,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     print(f"{samples} samples per configuration after a warm-up; numba threads per worker: "
           f"{args.worker_threads or 'default (all CPUs)'}; shares are of the time inside dataset[i]")
 
+    if args.mixture_only:
+        mixture_table(common, args.mixture_samples, worker_counts, Path(args.root) if args.root else spacedg_home() / "benchmark-rooms")
+        print(f"total {time.perf_counter() - t_start:.1f} s")
+        return
     plans = {}
     for name, ds in datasets.items():
         plans[name] = plan_items(ds, samples, max(worker_counts), first=(name == "bench mix"))
@@ -421,7 +429,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                     f" high-water mark)", results)
         goal_line(results)
     if args.mixture:
-        mixture_table(common, samples, worker_counts, Path(args.root) if args.root else spacedg_home() / "benchmark-rooms")
+        mixture_table(common, args.mixture_samples, worker_counts, Path(args.root) if args.root else spacedg_home() / "benchmark-rooms")
     if "clean" in datasets:
         clean_vs_renders(pickle_copy(datasets["clean"]), ratio_samples, repeats, size)
     me = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

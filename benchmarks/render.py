@@ -5,6 +5,7 @@ Prints tables only (never part of the test run). All renders are 640×480.
     .venv/bin/python benchmarks/render.py            # full run (a few minutes)
     .venv/bin/python benchmarks/render.py --quick    # 10k/100k scenes only (about a minute)
     .venv/bin/python benchmarks/render.py --torch-device cuda   # torch path on a GPU
+    .venv/bin/python benchmarks/render.py --only severity --threads 1   # table 4 (about 4 minutes)
 
 Timings are wall-clock (``time.perf_counter``) on whatever else the machine is doing: the
 machine line prints the load average, run on an idle machine for numbers worth quoting.
@@ -17,6 +18,12 @@ machine line prints the load average, run on an idle machine for numbers worth q
 2. Motion blur on a built-in synthetic room (and on the plant): N = 80 reference, then fixed
    N sub-steps and the fast path, timed and scored by PSNR against the reference on the
    sRGB-encoded image clipped to [0, 1].
+4. Motion blur by scene and severity (``--only severity``; two built-in rooms, the plant, two
+   mesh-derived 10k objects; presets 1–4 and bench at their mid-range, plus "close" = 4× the
+   bench motion): today's sub-step fast path beside the keyframe path — work, time × a clean
+   render (alternating runs, medians), PSNR against N = 80 and N = 256, and a ghosting
+   measure (:func:`ghosting`: the ripple of a probe point's smear). ``--threads 1`` for one
+   numba thread.
 """
 
 from __future__ import annotations

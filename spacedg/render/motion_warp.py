@@ -7,13 +7,14 @@ by ``margin``) so that what the moving camera sweeps in is rendered too. Per int
 
 1. :func:`flow_field`: for every canvas pixel ``p``, the point the cameras at the interval's
    ends see at ``p`` (depth = the keyframe's depth at ``p``) is projected into the keyframe:
-   ``q_a``, ``q_b``. During the interval ``p`` sees the keyframe along the segment
-   ``q_a → q_b`` (a rotation's arc over ≤ 1/K of the exposure is straight to < 0.1 px).
+   ``q_a``, ``q_b``. During the interval ``p`` sees the keyframe along the parabola from
+   ``q_a`` through ``p`` itself (the keyframe's pose is the interval's centre) to ``q_b``.
 2. ``P`` :func:`doubling_pass` es: ``B(q) = ½[B(q − s·d) + B(q + s·d)]`` with ``s = ¼, ⅛, …``:
    each pass replaces every sample by two, ``2 s |d|`` apart along the pixel's own segment.
-3. :func:`gather`: each output pixel averages ``B`` along the central ``2^-P`` of its segment,
-   every ``spacing`` pixels: in all ``|d| / spacing`` evenly spaced samples of the keyframe
-   along the whole segment for ``|d| / (2^P spacing) + 2P`` bilinear taps.
+3. :func:`gather`: each output pixel averages ``B`` along the central ``2^-P`` of its path
+   (times evenly spaced, ≤ ``spacing`` pixels apart along the chord): in all ``|d| / spacing``
+   samples of the keyframe along the whole path for ``|d| / (2^P spacing) + 2P`` bilinear
+   taps (the passes shift along the chord ``d``: exact for a straight path).
 
 The exposure average is the mean over intervals. Sampling every ≤ 1 px along the path
 integrates the smear continuously: no stroboscopic copies however long the path is.
@@ -93,32 +94,34 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
         ci = i + margin
         for j in range(width):
             cj = j + margin
-            du = scale * field[ci, cj, 2]
-            dv = scale * field[ci, cj, 3]
-            # segment ends in array-index coordinates (pixel centres at integers), clamped inside
-            # the canvas: a segment is convex, so every sample between two inside ends is inside
-            u0 = np.float32(cj) + field[ci, cj, 0]
-            v0 = np.float32(ci) + field[ci, cj, 1]
-            ua = min(max(u0 - half * du, zero), xmax)
-            va = min(max(v0 - half * dv, zero), ymax)
-            ub = min(max(u0 + half * du, zero), xmax)
-            vb = min(max(v0 + half * dv, zero), ymax)
-            if _empty(sat, ua, ub, va, vb):
+            # the path through the keyframe, array-index coordinates (pixel centres at integers):
+            # the parabola q(t) = A + t·d − 4t(1−t)·c from A = P + c − d/2 (t = 0) through the
+            # pixel itself P (t = ½, the keyframe's own pose) to B = P + c + d/2 (t = 1); the
+            # gather walks t ∈ ½ ± length/2 (the doubling passes cover the rest)
+            cu = field[ci, cj, 0]
+            cv = field[ci, cj, 1]
+            fu = field[ci, cj, 2]
+            fv = field[ci, cj, 3]
+            pu = np.float32(cj)
+            pv = np.float32(ci)
+            if _empty(sat, min(pu + cu - half * abs(fu), pu - cu), max(pu + cu + half * abs(fu), pu - cu),
+                      min(pv + cv - half * abs(fv), pv - cv), max(pv + cv + half * abs(fv), pv - cv)):
                 continue
-            du = ub - ua
-            dv = vb - va
-            count = max(1, int(math.ceil(math.sqrt(du * du + dv * dv) * inv_spacing)))
-            step = one / np.float32(count)
-            su = du * step
-            sv = dv * step
-            x = ua + half * su
-            y = va + half * sv
+            au = pu + cu - half * fu
+            av = pv + cv - half * fv
+            count = max(1, int(math.ceil(scale * math.sqrt(fu * fu + fv * fv) * inv_spacing)))
+            step = scale / np.float32(count)
+            t = half - half * scale + half * step
             a0 = zero
             a1 = zero
             a2 = zero
             a3 = zero
             a4 = zero
             for _ in range(count):
+                bend = np.float32(4.0) * t * (one - t)
+                x = min(max(au + t * fu - bend * cu, zero), xmax)
+                y = min(max(av + t * fv - bend * cv, zero), ymax)
+                t += step
                 x0 = np.uint64(x)
                 y0 = np.uint64(y)
                 ax = x - np.float32(x0)
@@ -135,14 +138,13 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
                 a3 += w00 * flat[p00 + c3] + w01 * flat[p00 + nc + c3] + w10 * flat[p10 + c3] + w11 * flat[p10 + nc + c3]
                 if want_extra:
                     a4 += w00 * flat[p00 + c4] + w01 * flat[p00 + nc + c4] + w10 * flat[p10 + c4] + w11 * flat[p10 + nc + c4]
-                x += su
-                y += sv
-            out[i, j, 0] += a0 * step
-            out[i, j, 1] += a1 * step
-            out[i, j, 2] += a2 * step
-            out[i, j, 3] += a3 * step
+            norm = one / np.float32(count)
+            out[i, j, 0] += a0 * norm
+            out[i, j, 1] += a1 * norm
+            out[i, j, 2] += a2 * norm
+            out[i, j, 3] += a3 * norm
             if want_extra:
-                out[i, j, 4] += a4 * step
+                out[i, j, 4] += a4 * norm
 
 
 @fork_safe

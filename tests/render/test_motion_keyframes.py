@@ -93,8 +93,9 @@ def _bilinear(src: np.ndarray, x: float, y: float) -> np.ndarray:
 
 
 def test_gather_and_doubling_match_a_python_path_average() -> None:
-    """The compiled kernels against a plain loop: the mean of ``2^P · M`` evenly spaced bilinear
-    reads along each pixel's segment; pixels whose segment crosses only empty canvas stay 0."""
+    """The compiled kernels against a plain loop: the mean of ``2^P · M`` bilinear reads along
+    each pixel's path (a parabola through the pixel); pixels whose path crosses only empty
+    canvas stay 0."""
     from spacedg.render import motion_warp
 
     rng = np.random.default_rng(5)
@@ -116,16 +117,19 @@ def test_gather_and_doubling_match_a_python_path_average() -> None:
         motion_warp.gather(current, field, margin, 1.0 / 2**passes, 1.0, motion_warp.occupancy(current), acc)
         for i, j in [(0, 0), (5, 7), (10, 20), (19, 29), (12, 3)]:
             ci, cj = i + margin, j + margin
-            c, d = field[ci, cj, :2], field[ci, cj, 2:] / 2**passes
-            ua, va = cj + c[0] - 0.5 * d[0], ci + c[1] - 0.5 * d[1]
-            count = int(np.ceil(np.hypot(*d)))
+            c, d = field[ci, cj, :2].astype(np.float64), field[ci, cj, 2:].astype(np.float64)
+            scale = 1.0 / 2**passes
+            count = int(np.ceil(scale * np.hypot(*d)))
+            times = 0.5 - 0.5 * scale + (np.arange(count) + 0.5) * scale / count
+            # the parabola from A = P + c − d/2 through P (t = ½) to B = P + c + d/2
+            points = [(cj + c[0] - d[0] / 2 + t * d[0] - 4 * t * (1 - t) * c[0],
+                       ci + c[1] - d[1] / 2 + t * d[1] - 4 * t * (1 - t) * c[1]) for t in times]
             reference = src
             if passes:  # one pass, in plain Python: each texel the mean of two reads ±¼ of the segment apart
                 e = 0.25 * field[0, 0, 2:]
                 reference = np.array([[0.5 * (_bilinear(src, x - e[0], y - e[1]) + _bilinear(src, x + e[0], y + e[1]))
                                        for x in range(wc)] for y in range(hc)], np.float32)
-            expected = np.mean([_bilinear(reference, ua + (k + 0.5) / count * d[0], va + (k + 0.5) / count * d[1])
-                                for k in range(count)], axis=0)
+            expected = np.mean([_bilinear(reference, x, y) for x, y in points], axis=0)
             np.testing.assert_allclose(acc[i, j], expected, atol=2e-5, err_msg=f"pixel {(i, j)}, {passes} passes")
         assert np.all(acc[0, 0] == 0.0)  # its segment stays over empty canvas
         assert acc.max() > 0.05
