@@ -244,26 +244,28 @@ def mixture_table(common: dict[str, Any], samples: int, worker_counts: list[int]
     export_s = time.perf_counter() - t0
     jsonl = ChatJsonlDataset(out / "train.jsonl")
     print(f"\nDefault training mixture (train split, the nine at bench, clean_prob 0.1), {len(online)} items "
-          f"(the first quarter a warm-up); "
+          f"(timed: the second epoch, new draws, after a warm-up epoch); "
           f"exported in {export_s:.1f} s ({len(online) / export_s:.2f} samples/s, 0 workers); cores {cores}; "
           f"worker plan (auto): {plan.workers} workers x {plan.render_threads} render threads")
     head = f"{'source':<22} {'workers':>7} {'samples/s':>9} {'per core':>8}"
     print(head)
     print("-" * len(head))
     counts = sorted({plan.workers, *worker_counts}, reverse=True)
-    # the export rendered in this process: forked workers run spacedg's serial kernel twins (fork-safe, 1 thread)
     for workers in counts:
         for label, data in (("online", online), ("exported JSONL", jsonl)):
-            kwargs: dict[str, Any] = {"persistent_workers": True, "prefetch_factor": 2} if workers else {}
-            loader = DataLoader(pickle_copy(data) if label == "online" else data, batch_size=1, shuffle=False,
-                                num_workers=workers, collate_fn=_as_list, **kwargs)
-            iterator = iter(loader)
-            for _ in range(max(1, len(data) // 4)):  # warm-up: workers started, kernels and scenes loaded
-                next(iterator)
+            # workers from a fork server, as the SFT app starts them (this process has rendered)
+            kwargs: dict[str, Any] = ({"persistent_workers": True, "prefetch_factor": 2, "multiprocessing_context": "forkserver"}
+                                      if workers else {})
+            source = pickle_copy(data) if label == "online" else data
+            loader = DataLoader(source, batch_size=1, shuffle=False, num_workers=workers, collate_fn=_as_list, **kwargs)
+            for _ in loader:  # warm-up epoch: workers started, every kernel and scene loaded
+                pass
+            if label == "online":
+                source.set_epoch(1)  # new degradation draws (shared memory: persistent workers see it)
             t0 = time.perf_counter()
-            n = sum(1 for _ in iterator)
+            n = sum(1 for _ in loader)
             wall = time.perf_counter() - t0
-            del iterator, loader
+            del loader
             tag = f"{workers}{' (auto)' if workers == plan.workers else ''}"
             print(f"{label + (' (rendered)' if label == 'online' else ' (PNG)'):<22} {tag:>7} {n / wall:>9.2f} "
                   f"{n / wall / cores:>8.2f}", flush=True)
