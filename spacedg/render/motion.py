@@ -209,7 +209,9 @@ MIN_KEYFRAMES, MAX_KEYFRAMES = 1, 6
 DOUBLING_PASSES = 1
 DOUBLING_FROM_PX = 24.0
 #: Largest distance (pixels) between two of the path's samples (the gather walks ``2^-passes``
-#: of each path at this spacing; the passes replicate its samples along the rest).
+#: of each path at this spacing; the passes replicate its samples along the rest). Measured on
+#: the room at bench (K = 3): 1.5 px is ~20 % faster at the same PSNR (45.6 dB), but the streak
+#: of a sub-pixel point then ripples −15/+23 % (1.25 px: −4/+12 %; 1 px: ±2 %).
 PATH_SPACING_PX = 1.0
 
 
