@@ -42,6 +42,17 @@ scene loaded. The same with the renders left in the cache is printed for referen
 question (clean + nine degradations, 10 items) rendered and degraded on the device in this
 process (no workers: CUDA stays in the process that owns it), beside the CPU path.
 
+Training mixture, online vs exported (``--mixture``, on by default): the default SFT training
+data (``SpaceDGDataset("train")`` over the nine at ``bench``, ``clean_prob`` 0.1, as
+``conf/data/online.yaml``) read online, and the same items exported once by ``spacedg export``
+(PNG + chat JSONL) then read back by the SFT JSONL source (:class:`spacedg.sft.data.ChatJsonlDataset`,
+PNG decode), both through ``DataLoader`` with the worker plan of :mod:`spacedg.data.workers`
+(``auto``, printed) and with 0 workers; samples/s and samples/s per core (÷ the cores this
+process may use) side by side.
+
+Goal line ("mean over the nine degradations ≤ 2× a clean sample"): mean ms/sample of the nine
+single-degradation configurations ÷ the clean configuration's, per worker count.
+
 Timings are wall clock on whatever else the machine is doing: the first line prints the load
 average and CPU count.
 """
@@ -209,6 +220,61 @@ def pickle_copy(ds: SpaceDGDataset) -> SpaceDGDataset:
     return pickle.loads(pickle.dumps(ds))
 
 
+def goal_line(results: dict[str, dict[str, float]]) -> None:
+    nine = [results[name]["ms"] for name in BENCH_DEGRADATIONS if name in results]
+    if "clean" in results and nine:
+        ratio = float(np.mean(nine)) / results["clean"]["ms"]
+        worst = max((results[n]["ms"] / results["clean"]["ms"], n) for n in BENCH_DEGRADATIONS if n in results)
+        print(f"goal: mean ms/sample over the {len(nine)} degradations = {ratio:.2f}x clean (goal <= 2); "
+              f"slowest {worst[1]} {worst[0]:.2f}x")
+
+
+def mixture_table(common: dict[str, Any], samples: int, worker_counts: list[int], root: Path) -> None:
+    """The default training mixture online vs its JSONL export, samples/s and per core, side by side."""
+    from torch.utils.data import DataLoader
+
+    from spacedg.data.export import export_bench
+    from spacedg.data.workers import available_cores, loader_plan
+    from spacedg.sft.data import ChatJsonlDataset
+
+    cores = available_cores()
+    plan = loader_plan()
+    online = SpaceDGDataset("train", list(BENCH_DEGRADATIONS), clean_prob=0.1, max_questions=samples, **common)
+    out = root / "mixture-export"
+    if out.exists():
+        shutil.rmtree(out)
+    t0 = time.perf_counter()
+    export_bench(online, out, progress=False)
+    export_s = time.perf_counter() - t0
+    jsonl = ChatJsonlDataset(out / "train.jsonl")
+    print(f"\nDefault training mixture (train split, the nine at bench, clean_prob 0.1), {len(online)} items "
+          f"(timed: the second epoch, new draws, after a warm-up epoch); "
+          f"exported in {export_s:.1f} s ({len(online) / export_s:.2f} samples/s, 0 workers); cores {cores}; "
+          f"worker plan (auto): {plan.workers} workers x {plan.render_threads} render threads")
+    head = f"{'source':<22} {'workers':>7} {'samples/s':>9} {'per core':>8}"
+    print(head)
+    print("-" * len(head))
+    counts = sorted({plan.workers, *worker_counts}, reverse=True)
+    for workers in counts:
+        for label, data in (("online", online), ("exported JSONL", jsonl)):
+            # workers from a fork server, as the SFT app starts them (this process has rendered)
+            kwargs: dict[str, Any] = ({"persistent_workers": True, "prefetch_factor": 2, "multiprocessing_context": "forkserver"}
+                                      if workers else {})
+            source = pickle_copy(data) if label == "online" else data
+            loader = DataLoader(source, batch_size=1, shuffle=False, num_workers=workers, collate_fn=_as_list, **kwargs)
+            for _ in loader:  # warm-up epoch: workers started, every kernel and scene loaded
+                pass
+            if label == "online":
+                source.set_epoch(1)  # new degradation draws (shared memory: persistent workers see it)
+            t0 = time.perf_counter()
+            n = sum(1 for _ in loader)
+            wall = time.perf_counter() - t0
+            del loader
+            tag = f"{workers}{' (auto)' if workers == plan.workers else ''}"
+            print(f"{label + (' (rendered)' if label == 'online' else ' (PNG)'):<22} {tag:>7} {n / wall:>9.2f} "
+                  f"{n / wall / cores:>8.2f}", flush=True)
+
+
 def print_table(title: str, results: dict[str, dict[str, float]]) -> None:
     print(f"\n{title}")
     head = f"{'configuration':<16} {'n':>4} {'views':>5} {'samples/s':>9} {'ms/sample':>9} {'render':>7} {'linear':>7} " \
@@ -310,6 +376,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--only", default=None, help="comma-separated configurations (clean, a degradation, bench)")
     parser.add_argument("--device", default=None, help="only the device table: bench questions rendered on this torch device")
     parser.add_argument("--questions", type=int, default=None, help="bench questions timed by the device table (default 8; quick 3)")
+    parser.add_argument("--no-mixture", dest="mixture", action="store_false",
+                        help="skip the training-mixture table (online vs exported JSONL)")
+    parser.add_argument("--mixture-samples", type=int, default=32, help="items of the training-mixture table (default 32)")
+    parser.add_argument("--mixture-only", action="store_true", help="only the training-mixture table")
     args = parser.parse_args(argv)
     if args.quick:
         args.small = True
@@ -358,6 +428,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     print(f"{samples} samples per configuration after a warm-up; numba threads per worker: "
           f"{args.worker_threads or 'default (all CPUs)'}; shares are of the time inside dataset[i]")
 
+    if args.mixture_only:
+        mixture_table(common, args.mixture_samples, worker_counts, Path(args.root) if args.root else spacedg_home() / "benchmark-rooms")
+        print(f"total {time.perf_counter() - t_start:.1f} s")
+        return
     plans = {}
     for name, ds in datasets.items():
         plans[name] = plan_items(ds, samples, max(worker_counts), first=(name == "bench mix"))
@@ -371,6 +445,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         results = measure(datasets, plans, workers, args.worker_threads)
         print_table(f"{workers} workers (DataLoader batch_size=1; RSS = {'largest worker' if workers else 'this process'}"
                     f" high-water mark)", results)
+        goal_line(results)
+    if args.mixture:
+        mixture_table(common, args.mixture_samples, worker_counts, Path(args.root) if args.root else spacedg_home() / "benchmark-rooms")
     if "clean" in datasets:
         clean_vs_renders(pickle_copy(datasets["clean"]), ratio_samples, repeats, size)
     me = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

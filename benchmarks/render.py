@@ -7,6 +7,7 @@ Prints tables only (never part of the test run). All renders are 640×480.
     .venv/bin/python benchmarks/render.py --torch-device cuda   # torch path on a GPU
     .venv/bin/python benchmarks/render.py --device cuda   # only the device table (gsplat backend vs gsplat's own, …)
     .venv/bin/python benchmarks/render.py --device cpu --sizes 10000   # the same code paths on a CPU (stand-ins)
+    .venv/bin/python benchmarks/render.py --only severity --threads 1   # table 4 (about 4 minutes)
 
 Timings are wall-clock (``time.perf_counter``) on whatever else the machine is doing: the
 machine line prints the load average, run on an idle machine for numbers worth quoting.
@@ -19,6 +20,12 @@ machine line prints the load average, run on an idle machine for numbers worth q
 2. Motion blur on a built-in synthetic room (and on the plant): N = 80 reference, then fixed
    N sub-steps and the fast path, timed and scored by PSNR against the reference on the
    sRGB-encoded image clipped to [0, 1].
+4. Motion blur by scene and severity (``--only severity``; two built-in rooms, the plant, two
+   mesh-derived 10k objects; presets 1–4 and bench at their mid-range, plus "close" = 4× the
+   bench motion): today's sub-step fast path beside the keyframe path — work, time × a clean
+   render (alternating runs, medians), PSNR against N = 80 and N = 256, and a ghosting
+   measure (:func:`ghosting`: the ripple of a probe point's smear). ``--threads 1`` for one
+   numba thread.
 """
 
 from __future__ import annotations
@@ -185,6 +192,160 @@ def motion_table(title: str, g: Gaussians, cam: Camera, motion: tuple, counts: l
               f"{fmt_db(psnr(frame.rgb, reference.rgb)):>8} {disp_s:>11}", flush=True)
 
 
+# ------------------------------------------------------------------ motion blur by severity (keyframes vs sub-steps)
+def object_scene(path: Path, distance_scale: float = 1.0) -> tuple[Gaussians, Camera]:
+    """A mesh-derived splat object (longest axis 2 units, up -y unknown: seen along +z), filling ~90 % of the frame."""
+    from spacedg.scene.io import read_splat
+
+    g = read_splat(path)
+    lo, hi = np.percentile(g.means, 0.5, axis=0), np.percentile(g.means, 99.5, axis=0)
+    centre, extent = 0.5 * (lo + hi), hi - lo
+    direction = np.array([0.3, -0.3, 1.0])
+    direction /= np.linalg.norm(direction)
+    distance = distance_scale * (0.5 * float(extent.max()) * FOCAL / (0.45 * HEIGHT) + 0.5 * float(extent.max()))
+    return g, intrinsics(look_at(centre + distance * direction, centre, np.array([0.0, -1.0, 0.0])))
+
+
+def median_depth(g: Gaussians, cam: Camera) -> float:
+    frame = render(g, cam, outputs="depth,alpha", backend="cpu")
+    covered = frame.alpha > 0.5
+    return float(np.median(frame.depth[covered])) if covered.any() else 1.0
+
+
+def severity_motion(severity: str, depth_m: float, seed: int, scale: float = 1.0) -> tuple[tuple, tuple]:
+    """The motion-blur preset's mid-range ``trans`` (scaled by the scene depth as the plugin does)
+    and ``rot`` along fixed random directions (``seed``); ``scale`` multiplies both (close-ups)."""
+    from spacedg.plugins.degradations.motion_blur import SPEC, random_unit_vector
+    from spacedg.plugins.specs import REFERENCE_DEPTH_M
+
+    preset = SPEC.presets[severity]
+    trans = 0.5 * (preset["trans"].low + preset["trans"].high) * depth_m / REFERENCE_DEPTH_M * scale
+    rot = min(0.5 * (preset["rot"].low + preset["rot"].high) * scale, math.pi)
+    rng = np.random.default_rng(seed)
+    direction, axis = random_unit_vector(rng), random_unit_vector(rng)
+    return tuple(trans * direction), tuple(rot * axis)
+
+
+def ghosting(g: Gaussians, cam: Camera, translation: tuple, rotation: tuple, depth_m: float, method: str, work: int) -> float:
+    """Ghosting (%) of a method on a probe: one small bright Gaussian (σ = 1.5 px on screen) on the
+    optical axis at the scene's median depth, rendered alone with the same motion and the same
+    work (``N`` sub-steps, or ``K`` keyframes). Its smear is read (alpha, bilinear) along its
+    exact on-screen path (400 points over the exposure) where it is at least 4.5 px (3 σ) from
+    either end (``nan`` when the path is under 15 px), divided by its
+    linear trend (zoom and speed change slowly): ``ghost = 100 · (1 − min / max)``. The
+    bilinear read-out itself leaves ~4 % (N = 256 scores 3–5 %). A continuous smear is flat (≈ 0); stroboscopic copies
+    leave gaps between them (→ 100 when the copies do not touch)."""
+    from scipy.ndimage import map_coordinates
+
+    from spacedg.render.camera import exposure_poses
+    from spacedg.render.motion import render_motion_keyframes, render_motion_substeps
+    from spacedg.render.settings import RasterSettings
+
+    point = cam.center + depth_m * cam.forward
+    size = 1.5 * depth_m / cam.fx
+    probe = Gaussians(point[None], [[1.0, 0, 0, 0]], [[size, size, size]], [0.9], np.ones((1, 1, 3)))
+    blur = MotionBlur(translation, rotation, sub_steps=work, fast=True)
+    if method == "sub":
+        frame = render_motion_substeps(probe, cam, blur, frozenset({"rgb"}), "cpu", None, RasterSettings(), None, fast=False)
+    else:
+        frame = render_motion_keyframes(probe, cam, blur, frozenset({"rgb"}), "cpu", None, RasterSettings(), None, keyframes=work)
+    poses = exposure_poses(cam, np.array(translation), np.array(rotation), np.linspace(-0.5, 0.5, 400))
+    uv = np.array([cam.with_pose(p).project(point[None])[0][0] for p in poses])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(uv, axis=0), axis=1))])
+    # away from the smear's ends by 3 σ of the probe (its own width rounds them)
+    inside = (arc >= 4.5) & (arc <= arc[-1] - 4.5)
+    inside &= (uv[:, 0] > 2) & (uv[:, 0] < cam.width - 2) & (uv[:, 1] > 2) & (uv[:, 1] < cam.height - 2)
+    if arc[-1] < 15.0 or inside.sum() < 10:
+        return math.nan  # too short a smear to tell copies from its ends
+    values = map_coordinates(frame.alpha.astype(np.float64), [uv[inside, 1] - 0.5, uv[inside, 0] - 0.5], order=1)
+    t = np.arange(values.size, dtype=np.float64)
+    values = values / np.maximum(np.polyval(np.polyfit(t, values, 1), t), 1e-12)  # a slow trend (zoom, speed) is no ghost
+    return float(100.0 * (1.0 - values.min() / max(values.max(), 1e-12)))
+
+
+def motion_severity_table(cases: list[tuple[str, Gaussians, Camera, list[tuple[str, float]]]], runs: int) -> None:
+    from spacedg.render.motion import render_motion_keyframes, render_motion_substeps
+    from spacedg.render.settings import RasterSettings
+
+    settings = RasterSettings()
+    rgb = frozenset({"rgb"})
+    print("\n4. Motion blur by scene and severity, 640x480, compiled CPU path: today's sub-step fast path vs the keyframe path")
+    print("   motion: the motion_blur preset's mid-range trans (scaled by the view's median depth / 2.5 m, as the plugin "
+          "does) and rot, along fixed random directions; 'close' = 4x the bench motion (paths of hundreds of pixels)")
+    print(f"   time: median of {runs} runs, alternating with clean renders (x clean = median / median clean); "
+          "PSNR on clip(linear_to_srgb(rgb), 0, 1) against N = 80 and N = 256 sub-steps")
+    print("   work: renders made (N = sub-steps; K = keyframes, each on a canvas widened by the path, plus the gathers)")
+    print("   ghost % = 100 * (1 - min/max) of the smear of a probe point (sigma 1.5 px, on the optical axis at the scene's "
+          "median depth) rendered alone with the same motion and work, read along its exact path >= 4.5 px from its "
+          "ends, over its linear trend (nan: path < 15 px) (read-out floor ~4 %): 0 = continuous smear, 100 = separate copies (N = 80's own value in the last column)")
+    header = (f"{'scene':<16} {'sev':<5} {'path px':>7} {'clean ms':>8} | {'sub-step work':>13} {'x clean':>7} {'dB v80':>6} "
+              f"{'dB v256':>7} {'ghost%':>6} | {'keyframe work':>13} {'x clean':>7} {'dB v80':>6} {'dB v256':>7} {'ghost%':>6} "
+              f"| {'N80 ghost%':>10}")
+    print(header)
+    print("-" * len(header))
+    summary: list[tuple[float, float, float]] = []
+    for name, g, cam, severities in cases:
+        depth = median_depth(g, cam)
+        for severity, scale in severities:
+            translation, rotation = severity_motion(severity if severity != "close" else "bench", depth, seed=7, scale=scale)
+            blur = MotionBlur(translation, rotation, sub_steps=80, fast=True)
+            ref80 = render(g, cam, motion=MotionBlur(translation, rotation, sub_steps=80), backend="cpu")
+            ref256 = render(g, cam, motion=MotionBlur(translation, rotation, sub_steps=256), backend="cpu")
+            fns = {
+                "clean": lambda: render(g, cam, backend="cpu"),
+                "sub": lambda: render_motion_substeps(g, cam, blur, rgb, "cpu", None, settings, None, fast=True),
+                "key": lambda: render_motion_keyframes(g, cam, blur, rgb, "cpu", None, settings, None),
+            }
+            times: dict[str, list[float]] = {k: [] for k in fns}
+            frames: dict[str, Frame] = {}
+            for k, fn in fns.items():  # warm-up (JIT)
+                frames[k] = fn()
+            for _ in range(runs):
+                for k, fn in fns.items():
+                    t0 = time.perf_counter()
+                    frames[k] = fn()
+                    times[k].append(time.perf_counter() - t0)
+            t_clean = float(np.median(times["clean"]))
+            cells = []
+            for k in ("sub", "key"):
+                f = frames[k]
+                work = f"N = {int(f.stats['sub_steps'])}" if k == "sub" else f"K = {int(f.stats['keyframes'])}"
+                ratio = float(np.median(times[k])) / t_clean
+                used = int(f.stats["sub_steps"]) if k == "sub" else int(f.stats["keyframes"])
+                p80, p256 = psnr(f.rgb, ref80.rgb), psnr(f.rgb, ref256.rgb)
+                gh = ghosting(g, cam, translation, rotation, depth, k, used)
+                cells.append(f"{work:>13} {ratio:>7.2f} {fmt_db(p80):>6} {fmt_db(p256):>7} {gh:>6.2f}")
+                if k == "key":
+                    summary.append((ratio, p80, p256))
+            path = float(frames["key"].stats["displacement_px"])
+            print(f"{name:<16} {severity:<5} {path:>7.0f} {t_clean * 1e3:>8.1f} | {cells[0]} | {cells[1]} | "
+                  f"{ghosting(g, cam, translation, rotation, depth, 'sub', 80):>10.2f}", flush=True)
+    if summary:
+        arr = np.array(summary)
+        print(f"keyframe path over {len(summary)} cases: x clean median {np.median(arr[:, 0]):.2f}, max {arr[:, 0].max():.2f}; "
+              f"dB vs N=80 min {arr[:, 1].min():.2f}; dB vs N=256 min {arr[:, 2].min():.2f}")
+
+
+def severity_section(room_seed: int, quick: bool) -> None:
+    severities = [("1", 1.0), ("3", 1.0), ("bench", 1.0)] if quick else [("1", 1.0), ("2", 1.0), ("3", 1.0), ("4", 1.0), ("bench", 1.0)]
+    cases = []
+    for seed in ([room_seed] if quick else [room_seed, room_seed + 1]):
+        room = generate_room(seed)
+        names = sorted(room.views)
+        cases.append((f"room {seed}", room.gaussians, room.views[names[len(names) // 2]].resized(WIDTH, HEIGHT), severities))
+    if PLANT.is_file():
+        g, cam = plant_scene()
+        cases.append(("plant", g, cam, severities + [("close", 4.0)]))
+        for name in ("teapot", "cat") if not quick else ("teapot",):
+            path = SHARED / name / f"{name}_10k.splat"
+            if path.is_file():
+                g, cam = object_scene(path)
+                cases.append((f"{name} 10k", g, cam, [("1", 1.0), ("bench", 1.0), ("close", 4.0)]))
+    else:
+        print(f"\n(plant and mesh objects skipped: {SHARED} not found)")
+    motion_severity_table(cases, runs=3)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
@@ -196,7 +357,14 @@ def main() -> None:
                              "gsplat.rasterization vs our torch backend on this device vs our CPU path")
     parser.add_argument("--sizes", default="100000,1000000", help="Gaussian counts of the device table (default 100000,1000000)")
     parser.add_argument("--runs", type=int, default=5, help="timed runs per cell of the device table (default 5)")
+    parser.add_argument("--only", choices=["renderer", "motion", "severity"], default=None,
+                        help="run one part: renderer (table 1), motion (tables 2-3) or severity (table 4)")
+    parser.add_argument("--threads", type=int, default=None, help="numba threads (default: numba's)")
     args = parser.parse_args()
+    if args.threads:
+        import numba
+
+        numba.set_num_threads(args.threads)
     if args.device is not None:
         import device_paths
 
@@ -207,7 +375,13 @@ def main() -> None:
     print(machine_line(args.torch_device))
     start = time.perf_counter()
     sizes = [10_000, 100_000] if args.quick else [10_000, 100_000, 300_000]
-    renderer_table(sizes, degree=1, with_plant=True, torch_device=args.torch_device, torch_runs=1 if args.quick else 2)
+    if args.only in (None, "renderer"):
+        renderer_table(sizes, degree=1, with_plant=True, torch_device=args.torch_device, torch_runs=1 if args.quick else 2)
+    if args.only in (None, "severity"):
+        severity_section(args.room_seed, args.quick)
+    if args.only not in (None, "motion"):
+        print(f"\ntotal {time.perf_counter() - start:.0f} s")
+        return
 
     room = generate_room(args.room_seed)
     names = sorted(room.views)

@@ -54,7 +54,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--sub-steps", type=int, default=None,
                         help="motion blur sub-exposures (default 80; with --fast-motion the upper bound)")
     render.add_argument("--fast-motion", action="store_true",
-                        help="choose fewer sub-steps from the on-screen motion (the renderer's fast path)")
+                        help="the renderer's fast path: a few keyframes (from the on-screen motion) with each "
+                        "pixel's path integrated through them (sub-steps on fisheye lenses)")
     _args.add_backend_arguments(render)
     render.add_argument("--allow-empty", action="store_true",
                         help="write the PNG even when the view renders (almost) nothing (default: exit non-zero)")
@@ -203,7 +204,9 @@ def _render(args: argparse.Namespace) -> int:
     visible = f"{stats['visible']:,}" if "visible" in stats else "n/a"
     print(
         f"view {args.view}  {frame.width}x{frame.height}  backend {backend}  visible {visible} Gaussians  "
-        f"{stats.get('ms', float('nan')):.1f} ms  sub-steps {stats.get('sub_steps', 1)}  -> {args.out}"
+        f"{stats.get('ms', float('nan')):.1f} ms  "
+        + (f"keyframes {stats['keyframes']}" if "keyframes" in stats else f"sub-steps {stats.get('sub_steps', 1)}")
+        + f"  -> {args.out}"
     )
     if want_depth:
         depth_mm = encode_depth_mm(frame.depth)

@@ -31,6 +31,10 @@ renders them.
   before a DataLoader forks. Rendering in the main process first (``dataset[0]`` before the
   DataLoader) is fine too: a worker forked after numba's OpenMP threads started runs
   spacedg's kernels serially (:mod:`spacedg.render.threads`) and gives the same bytes.
+  :attr:`SpaceDGDataset.workers` is a worker count chosen from the machine
+  (:mod:`spacedg.data.workers`: ``min(8, cores // 2)``), for
+  ``DataLoader(dataset, num_workers=dataset.workers)``; each worker renders with
+  :attr:`SpaceDGDataset.render_threads` numba threads (``cores // (workers + 1)``).
 - **GPU** (``device="cuda"``): renders (``backend="auto"`` → gsplat's CUDA compositor when it
   loads) and degrades on the GPU in the process that owns it. DataLoader workers must not touch
   CUDA (a forked child cannot, and one CUDA context per worker wastes memory), so ``__getitem__``
@@ -65,6 +69,7 @@ from spacedg.data.pipeline import (
     sample_scene_depth,
 )
 from spacedg.data.qa_index import QABuildConfig, ensure_indexes, index_paths, read_index
+from spacedg.data.workers import loader_plan
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.registry import get_question_family, list_degradations
@@ -115,6 +120,12 @@ class SpaceDGDataset(Dataset):
         builtin_rooms: how many built-in rooms when ``scenes`` is not given.
         max_questions: keep at most this many questions, spread over question types
             round-robin in a seeded order (a small bench or a quick run); ``None`` keeps all.
+        workers: DataLoader workers to use with this dataset (:attr:`workers`, for
+            ``DataLoader(dataset, num_workers=dataset.workers)``); ``None``: chosen from the
+            machine by :func:`~spacedg.data.workers.loader_plan` (``min(8, cores // 2)``).
+        render_threads: numba threads each DataLoader worker renders with (set in the worker
+            on its first item); ``None``: ``cores // (workers + 1)`` for the DataLoader's
+            actual worker count. The main process (``workers = 0``) keeps numba's default.
     """
 
     def __init__(
@@ -138,6 +149,8 @@ class SpaceDGDataset(Dataset):
         builtin_rooms: int = 16,
         max_questions: int | None = None,
         defer_render: bool = False,
+        workers: int | None = None,
+        render_threads: int | None = None,
     ) -> None:
         if split not in SPLITS:
             raise ParameterError(f"SpaceDGDataset: split must be one of {list(SPLITS)}, got {split!r}")
@@ -148,6 +161,11 @@ class SpaceDGDataset(Dataset):
         if on_bad_scene not in ("raise", "skip"):
             raise ParameterError(f"SpaceDGDataset: on_bad_scene must be 'raise' or 'skip', got {on_bad_scene!r}")
         self.split, self.severity, self.clean_prob, self.seed = split, severity, float(clean_prob), int(seed)
+        plan = loader_plan(workers=workers, render_threads=render_threads)
+        #: DataLoader workers suggested for this dataset and numba threads per worker (see spacedg.data.workers).
+        self.workers, self.render_threads = plan.workers, plan.render_threads
+        self._threads_given = render_threads is not None
+        self._threads_set = False
         self.options = PipelineOptions(image_size=tuple(image_size) if image_size else None, backend=backend, device=device)
         self.defer_render = bool(defer_render)
         self._on_device = device is not None and str(device) != "cpu" and not str(device).startswith("cpu:")
@@ -274,7 +292,20 @@ class SpaceDGDataset(Dataset):
         folder = self.scene_dirs[scene_id]
         return self._cache().get(("scene", scene_id), lambda: load_scene(folder))
 
+    def _set_worker_threads(self) -> None:
+        """In a DataLoader worker, once: numba threads = ``render_threads`` as given, else the
+        plan's for the DataLoader's actual worker count."""
+        self._threads_set = True
+        info = torch.utils.data.get_worker_info()
+        if info is not None:
+            from spacedg.render.threads import set_render_threads
+
+            threads = self.render_threads if self._threads_given else loader_plan(workers=info.num_workers).render_threads
+            set_render_threads(threads)
+
     def __getitem__(self, index: int) -> dict[str, Any]:
+        if not self._threads_set:
+            self._set_worker_threads()
         item = self._item(index)
         if self.defer_render:
             return item
@@ -328,6 +359,7 @@ class SpaceDGDataset(Dataset):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_scenes"] = None  # each worker builds its own cache
+        state["_threads_set"] = False  # and sets its own thread count
         return state
 
 

@@ -6,16 +6,32 @@ centre); sub-exposure k of K is centred at time ``s_k = (k + ½)/K − ½``.
 
 - Reference (``MotionBlur(fast=False)``): K = ``sub_steps`` sharp renders (80 is the
   paper's reference), averaged.
-- Fast (``fast=True``): K is chosen from the largest on-screen path length D (pixels) of
+- Fast (``fast=True``, pinhole cameras): ``K`` keyframes and depth-reprojected path gathers
+  (:func:`render_motion_keyframes`, kernels in :mod:`spacedg.render.motion_warp`). The
+  exposure is cut into ``K = clamp(ceil(D / KEYFRAME_PATH_PX), 1, MAX_KEYFRAMES)`` (2 at least
+  past ``SINGLE_KEYFRAME_PX``) equal
+  intervals, D the largest on-screen path (pixels) of the visible Gaussians
+  (:func:`motion_extent`); each interval's centre pose is rendered once (with depth, on a canvas
+  widened by the path so what the camera sweeps in is rendered) and every output pixel
+  averages the keyframe along the segment it sees during the interval, sampled every ≤ 1 px
+  (a box-doubling pass for long paths, then a gather every ``PATH_SPACING_PX``; segments over
+  empty canvas are skipped). The smear
+  is integrated continuously, so there are no stroboscopic copies at any path length; the cost
+  is ``K`` canvas renders plus ~1–2 render-equivalents of warping per keyframe on a 165k-Gaussian
+  room (more, relative, on cheap scenes: the warp costs per pixel) (``benchmarks/render.py`` prints
+  time, PSNR vs N = 80 and N = 256, and a ghosting measure per scene and severity). Where the
+  approximation is inexact: the depth of what a pixel sees during an interval is taken from the
+  keyframe at that pixel (off in a band of the interval's parallax around depth edges), and
+  view-dependent colour is that of the keyframe's pose.
+- Fast on a fisheye camera (no closed-form reprojection here): the sub-step fast path below
+  (:func:`choose_sub_steps`), the previous default.
+
+  Sub-step fast path: K is chosen from the largest on-screen path length D (pixels) of
   the scene's visible Gaussians during the exposure and the scene's feature size: ghosts
   between sub-steps vanish once the step is small against the footprints being swept, so
   ``step = clamp(STEP_SIGMAS · σ_med, MIN_STEP_PX, MAX_STEP_PX)`` with σ_med the median
   on-screen standard deviation of the visible Gaussians, and ``K = ceil(D / step)`` clamped
-  to [1, sub_steps]. ``benchmarks/render.py`` measures time and PSNR against N = 80.
-  The 5 px cap is what the real plant capture needs for > 40 dB (its texture is finer than
-  its Gaussians: 8 sub-steps over 75 px gave 35.6 dB, 16 gave 43.7 dB); the procedural
-  rooms are smoother (8 sub-steps over 143 px already gave 43 dB), so the cap costs them
-  time. Measuring texture instead of footprint size would let smooth scenes use fewer steps.
+  to [1, sub_steps]. It needed 16–35 renders for 40 dB against N = 80.
 
   Tried and dropped: stretching each Gaussian along its own on-screen sweep inside a
   sub-exposure (covariance ``+ d dᵀ/12``, energy-compensated) to stand in for the missing
@@ -105,9 +121,42 @@ def render_motion(
     defocus: Defocus | None,
 ) -> Frame:
     """Render a motion-blurred frame (see the module docstring)."""
+    if motion.fast and camera.fisheye is None and _canvas_fits(camera):
+        return render_motion_keyframes(gaussians, camera, motion, wanted, backend, device, settings, defocus)
+    return render_motion_substeps(gaussians, camera, motion, wanted, backend, device, settings, defocus)
+
+
+def _canvas_fits(camera: Camera) -> bool:
+    """Whether the widest keyframe canvas (half the longer side on every edge) is within the size policy."""
+    from spacedg.limits import image_size_problem
+
+    margin = max(camera.width, camera.height) // 2
+    return image_size_problem(camera.width + 2 * margin, camera.height + 2 * margin) is None
+
+
+def _sharp_labels(gaussians, camera, backend, device, settings, defocus) -> dict[str, np.ndarray]:  # type: ignore[no-untyped-def]
+    """Median depth and instance ids of the mid-exposure pose (a sharp render)."""
+    sharp, _ = composite_view(gaussians, camera, frozenset({"instance_ids"}), backend, device, settings, defocus)
+    return {"median_depth": sharp["median_depth"], "instance_ids": sharp["instance_ids"]}
+
+
+def render_motion_substeps(
+    gaussians: Gaussians,
+    camera: Camera,
+    motion: MotionBlur,
+    wanted: frozenset[str],
+    backend: str,
+    device: torch.device | None,
+    settings: RasterSettings,
+    defocus: Defocus | None,
+    fast: bool | None = None,
+) -> Frame:
+    """Average of sub-exposure renders: ``motion.sub_steps`` of them, or with ``fast`` (default
+    ``motion.fast``) the count of :func:`choose_sub_steps`."""
     t0 = time.perf_counter()
+    fast = motion.fast if fast is None else fast
     translation, rotation = np.array(motion.translation), np.array(motion.rotation)
-    if motion.fast:
+    if fast:
         displacement, feature = motion_extent(gaussians, camera, motion)
         count = choose_sub_steps(displacement, feature, motion.sub_steps)
     else:
@@ -135,11 +184,122 @@ def render_motion(
     if depth_sum is not None:
         images["depth"] = np.where(alpha > 0, depth_sum / np.maximum(alpha, 1e-30), 0.0).astype(np.float32)
     if wanted & {"median_depth", "instance_ids"}:
-        sharp, _ = composite_view(gaussians, camera, frozenset({"instance_ids"}), backend, device, settings, defocus)
-        images["median_depth"], images["instance_ids"] = sharp["median_depth"], sharp["instance_ids"]
+        images.update(_sharp_labels(gaussians, camera, backend, device, settings, defocus))
     frame = frame_from_images(images, camera, wanted)
     frame.stats = {
         "sub_steps": count,
+        "displacement_px": displacement,
+        "pairs": pairs,
+        "ms": (time.perf_counter() - t0) * 1e3,
+    }
+    return frame
+
+
+#: Keyframe path: largest on-screen path (pixels) one keyframe interval may cover …
+KEYFRAME_PATH_PX = 90.0
+#: … but two keyframes at least once D exceeds this (one keyframe over the plant's 88 px bench
+#: path gave 40.5 dB against N = 80, two 47.5 dB).
+SINGLE_KEYFRAME_PX = 60.0
+#: … and the keyframe count's bounds.
+MIN_KEYFRAMES, MAX_KEYFRAMES = 1, 6
+#: Box-doubling passes before the path gather when an interval's longest path exceeds
+#: ``DOUBLING_FROM_PX``: each halves the samples the gather takes but reads the whole canvas
+#: twice and resamples it once (~1 dB on the plant's fine texture). Measured (640×480, one
+#: thread): 0 → 1 pass 2–8 % faster on rooms and the plant at bench, more passes slower.
+DOUBLING_PASSES = 1
+DOUBLING_FROM_PX = 24.0
+#: Largest distance (pixels) between two of the path's samples (the gather walks ``2^-passes``
+#: of each path at this spacing; the passes replicate its samples along the rest). Measured on
+#: the room at bench (K = 3): 1.5 px is ~20 % faster at the same PSNR (45.6 dB), but the streak
+#: of a sub-pixel point then ripples −15/+23 % (1.25 px: −4/+12 %; 1 px: ±2 %).
+PATH_SPACING_PX = 1.0
+
+
+def choose_keyframes(displacement_px: float, max_steps: int) -> int:
+    """Keyframe count for a largest on-screen path of ``displacement_px`` pixels."""
+    count = max(math.ceil(displacement_px / KEYFRAME_PATH_PX), 2 if displacement_px > SINGLE_KEYFRAME_PX else 1)
+    return int(min(max(count, MIN_KEYFRAMES), MAX_KEYFRAMES, max_steps))
+
+
+def render_motion_keyframes(
+    gaussians: Gaussians,
+    camera: Camera,
+    motion: MotionBlur,
+    wanted: frozenset[str],
+    backend: str,
+    device: torch.device | None,
+    settings: RasterSettings,
+    defocus: Defocus | None,
+    keyframes: int | None = None,
+    passes: int | None = None,
+    spacing: float | None = None,
+) -> Frame:
+    """Motion blur from ``K`` keyframes and depth-reprojected path gathers (:mod:`spacedg.render.motion_warp`).
+
+    ``keyframes``, ``passes`` and ``spacing`` (pixels) override :func:`choose_keyframes`,
+    the pass count (default: :data:`DOUBLING_PASSES` where the interval's longest path exceeds
+    :data:`DOUBLING_FROM_PX`, else 0) and
+    :data:`PATH_SPACING_PX` (for benchmarks and tests). Pinhole
+    cameras only. Deterministic: no random numbers, every kernel writes each element in one order.
+    """
+    from spacedg.render import motion_warp
+
+    t0 = time.perf_counter()
+    passes_given = passes is not None
+    passes = DOUBLING_PASSES if passes is None else passes
+    spacing = PATH_SPACING_PX if spacing is None else spacing
+    translation, rotation = np.array(motion.translation), np.array(motion.rotation)
+    displacement, _ = motion_extent(gaussians, camera, motion)
+    count = keyframes or choose_keyframes(displacement, motion.sub_steps)
+    margin = int(min(math.ceil(0.6 * displacement / count) + 2, max(camera.width, camera.height) // 2))
+    canvas = Camera(camera.fx, camera.fy, camera.cx + margin, camera.cy + margin,
+                    camera.width + 2 * margin, camera.height + 2 * margin, camera.cam_to_world)
+    want_depth = "depth" in wanted
+    edges = np.linspace(-0.5, 0.5, count + 1)
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    key_poses = exposure_poses(camera, translation, rotation, centres)
+    end_poses = exposure_poses(camera, translation, rotation, edges)
+    channels = 5 if want_depth else 4
+    acc = np.zeros((camera.height, camera.width, channels), np.float32)
+    pairs = 0
+    for k, pose in enumerate(key_poses):
+        images, stats = composite_view(gaussians, canvas.with_pose(pose), frozenset({"rgb", "depth"}), backend, device, settings, defocus)
+        pairs += stats["pairs"]
+        alpha, depth = images["alpha"], images["depth"]
+        src = np.empty((canvas.height, canvas.width, channels), np.float32)
+        src[..., :3] = images["rgb"]
+        src[..., 3] = alpha
+        if want_depth:
+            src[..., 4] = depth * alpha
+        covered = alpha > 1e-3
+        fill = float(np.sum(depth * alpha) / max(float(alpha.sum()), 1e-30)) if covered.any() else 1.0
+        geometry = np.where(covered, depth, np.float32(fill)).astype(np.float32)
+        field = np.empty((canvas.height, canvas.width, 4), np.float32)
+        motion_warp.flow_field(geometry, camera.fx, camera.fy, canvas.cx, canvas.cy,
+                               motion_warp.relative_transform(end_poses[k], pose),
+                               motion_warp.relative_transform(end_poses[k + 1], pose), field)
+        longest = float(np.sqrt(np.max(field[..., 2] ** 2 + field[..., 3] ** 2)))
+        n_passes = passes if passes_given else (passes if longest > DOUBLING_FROM_PX else 0)
+        dst = np.empty_like(src)
+        covered_all = bool(alpha.min() > 0.0)  # nothing to skip (a room): no occupancy tables
+        for j in range(n_passes):
+            sat = motion_warp.FULL if covered_all else motion_warp.occupancy(src)
+            motion_warp.doubling_pass(src, field, np.float32(0.25 / 2**j), sat, dst)
+            src, dst = dst, src
+        sat = motion_warp.FULL if covered_all else motion_warp.occupancy(src)
+        motion_warp.gather(src, field, margin, 1.0 / 2**n_passes, spacing, sat, acc)
+    acc /= count
+    images = {"alpha": np.ascontiguousarray(acc[..., 3])}
+    if "rgb" in wanted:
+        images["rgb"] = np.ascontiguousarray(acc[..., :3])
+    if want_depth:
+        images["depth"] = np.where(acc[..., 3] > 0, acc[..., 4] / np.maximum(acc[..., 3], 1e-30), 0.0).astype(np.float32)
+    if wanted & {"median_depth", "instance_ids"}:
+        images.update(_sharp_labels(gaussians, camera, backend, device, settings, defocus))
+    frame = frame_from_images(images, camera, wanted)
+    frame.stats = {
+        "sub_steps": count,  # renders made (the keyframes)
+        "keyframes": count,
         "displacement_px": displacement,
         "pairs": pairs,
         "ms": (time.perf_counter() - t0) * 1e3,

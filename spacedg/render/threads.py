@@ -31,7 +31,7 @@ import os
 import types
 from typing import Any
 
-__all__ = ["ForkSafeKernel", "fork_safe", "serial_mode"]
+__all__ = ["ForkSafeKernel", "fork_safe", "serial_mode", "set_render_threads"]
 
 _serial = False
 
@@ -100,3 +100,14 @@ class ForkSafeKernel:
 def fork_safe(dispatcher: Any) -> ForkSafeKernel:
     """Decorator form: ``@fork_safe`` above ``@numba.njit(parallel=True, ...)``."""
     return ForkSafeKernel(dispatcher)
+
+
+def set_render_threads(count: int) -> int:
+    """Use ``count`` numba threads for this process's parallel kernels (clamped to
+    ``[1, NUMBA_NUM_THREADS]``); returns the count set. Imports numba (the compiled path's
+    runtime); call it in the process that renders, e.g. a DataLoader worker."""
+    import numba
+
+    count = max(1, min(int(count), int(numba.config.NUMBA_NUM_THREADS)))
+    numba.set_num_threads(count)
+    return count

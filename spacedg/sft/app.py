@@ -46,6 +46,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from transformers import TrainingArguments
 
+from spacedg.data.workers import loader_plan
 from spacedg.errors import ParameterError, SpaceDGError
 from spacedg.sft.collator import SFTCollator
 from spacedg.sft.config import build
@@ -76,11 +77,15 @@ SPACEDG_TRAIN_KEYS = ("loss",)
 
 def training_arguments(train: Mapping[str, Any], output_dir: Path, seed: int, evaluate: bool) -> TrainingArguments:
     """``TrainingArguments`` from the ``train`` group (keys set to null are left to transformers'
-    defaults; ``bf16: auto`` is on where the device supports it; spacedg's own keys,
+    defaults; ``bf16: auto`` is on where the device supports it; ``dataloader_num_workers: auto``
+    is :func:`spacedg.data.workers.loader_plan`'s ``min(8, cores // 2)`` per process; spacedg's own keys,
     :data:`SPACEDG_TRAIN_KEYS`, are left out); an unknown key is one clear error. Under torchrun
     the process group is initialised here (before the model loads, so sharded launches can load it
     sharded)."""
     options = {k: v for k, v in train.items() if v is not None and k not in SPACEDG_TRAIN_KEYS}
+    if options.get("dataloader_num_workers") == "auto":
+        # rendering workers from this process's share of the node's cores (spacedg.data.workers)
+        options["dataloader_num_workers"] = loader_plan().workers
     if "bf16" in options:
         options["bf16"] = _bf16(options["bf16"])
     cpu_deepspeed = not torch.cuda.is_available() and bool(options.get("deepspeed"))

@@ -611,10 +611,13 @@ def test_deferred_items_render_in_the_main_process(rooms) -> None:
 
 
 def test_device_dataset_refuses_to_render_in_a_worker(rooms, monkeypatch: pytest.MonkeyPatch) -> None:
+    import types
+
     import torch.utils.data
 
     dataset = make(rooms, "bench", ["haze"], device="cuda:0")  # construction never touches CUDA
-    monkeypatch.setattr(torch.utils.data, "get_worker_info", lambda: object())
+    monkeypatch.setattr("spacedg.render.threads.set_render_threads", lambda n: n)  # (the test process keeps its threads)
+    monkeypatch.setattr(torch.utils.data, "get_worker_info", lambda: types.SimpleNamespace(num_workers=2, id=0))
     with pytest.raises(ParameterError, match="num_workers=0.*defer_render=True"):
         dataset[0]
     deferred = make(rooms, "bench", ["haze"], device="cuda:0", defer_render=True)
@@ -627,3 +630,30 @@ def test_export_fingerprint_records_device_degradations(rooms) -> None:
     cpu = dataset_fingerprint(make(rooms, "bench", ["jpeg_compression"]))
     assert dataset_fingerprint(make(rooms, "bench", ["jpeg_compression"], device="cpu")) == cpu  # a CPU device: the numpy path
     assert dataset_fingerprint(make(rooms, "bench", ["jpeg_compression"], device="cuda:0")) != cpu  # kornia's JPEG on the GPU
+
+
+def test_worker_defaults_come_from_the_machine_and_set_worker_threads(rooms, monkeypatch):
+    """``ds.workers`` / ``ds.render_threads`` follow :func:`loader_plan`; in a worker the first item
+    sets numba's threads for the DataLoader's actual worker count (or the given count)."""
+    import types
+
+    import numba
+    import torch.utils.data
+
+    from spacedg.data.workers import loader_plan
+
+    monkeypatch.delenv("SPACEDG_WORKERS", raising=False)
+    monkeypatch.delenv("SPACEDG_RENDER_THREADS", raising=False)
+    ds = make(rooms, "val")
+    plan = loader_plan()
+    assert (ds.workers, ds.render_threads) == (plan.workers, plan.render_threads)
+    assert make(rooms, "val", workers=3, render_threads=1).workers == 3
+    before = numba.get_num_threads()
+    seen = []
+    monkeypatch.setattr("spacedg.render.threads.set_render_threads", lambda n: seen.append(n) or n)
+    monkeypatch.setattr(torch.utils.data, "get_worker_info", lambda: types.SimpleNamespace(num_workers=1, id=0))
+    ds._set_worker_threads()
+    given = make(rooms, "val", render_threads=1)
+    given._set_worker_threads()
+    assert seen == [loader_plan(workers=1).render_threads, 1]
+    assert numba.get_num_threads() == before  # (the setter was replaced: the test process keeps its threads)
