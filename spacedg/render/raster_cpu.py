@@ -122,102 +122,147 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
     return counts, gauss
 
 
-# offsets of the per-pixel state planes inside one tile's flat buffer (256 floats each)
-_T, _LIVE, _R, _G, _B, _D, _MED, _ID = (np.uint64(256 * k) for k in range(8))
+# offsets of the per-pixel state planes inside one tile's flat buffer (256 floats each); the
+# transmittance plane's sign is the live flag (a saturated pixel keeps -T)
+_T, _R, _G, _B, _D, _MED, _ID = (np.uint64(256 * k) for k in range(7))
+#: Gaussians gathered per batch before compositing them (also the saturation-check period)
+_BATCH = 32
+# columns of the per-batch gathered parameters (one row of _BATCH floats each)
+_GX, _GY, _CA, _CB, _CC, _OPA, _AMIN, _CR, _CG, _CBL, _Z, _GID = range(12)
 
 
-@fork_safe
-@numba.njit(parallel=True, fastmath=True, cache=True)
+def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
+    """The compositing kernel with the output flags compiled in as constants (one specialisation each)."""
+
+    @fork_safe
+    @numba.njit(parallel=True, fastmath=True, cache=True)
+    def composite_tiles(
+        offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
+        out_rgb, out_alpha, out_depth, out_median, out_ids,
+    ):  # pragma: no cover - compiled; covered through render() and the oracle tests
+        n_tiles = offsets.shape[0] - 1
+        amax = np.float32(alpha_max)
+        t_min = np.float32(1e-4)
+        half = np.float32(0.5)
+        zero = np.float32(0.0)
+        one = np.float32(1.0)
+        for tile in numba.prange(n_tiles):
+            start, end = offsets[tile], offsets[tile + 1]
+            ty = tile // tiles_x
+            tx = tile - ty * tiles_x
+            x0 = tx * 16
+            y0 = ty * 16
+            state = np.zeros(256 * 7, np.float32)
+            state[:256] = 1.0
+            state[1536:] = -1.0
+            par = np.empty((12, _BATCH), np.float32)
+            rows = np.empty((2, _BATCH), np.int64)
+            for b0 in range(start, end, _BATCH):
+                nb = min(_BATCH, end - b0)
+                for j in range(nb):  # gather: independent loads, so their cache misses overlap
+                    g = gauss[b0 + j]
+                    gy = packed[g, PY] - np.float32(y0 + 0.5)
+                    ry = packed[g, RADY]
+                    par[_GX, j] = packed[g, PX] - np.float32(x0 + 0.5)
+                    par[_GY, j] = gy
+                    par[_CA, j] = np.float32(0.5) * packed[g, CA]
+                    par[_CB, j] = packed[g, CB]
+                    par[_CC, j] = np.float32(0.5) * packed[g, CC]
+                    par[_OPA, j] = packed[g, OPA]
+                    par[_AMIN, j] = packed[g, AMIN]
+                    if want_color:
+                        par[_CR, j] = packed[g, CR]
+                        par[_CG, j] = packed[g, CG]
+                        par[_CBL, j] = packed[g, CBL]
+                    if want_depth or want_ids:
+                        par[_Z, j] = packed[g, DEPTH]
+                    if want_ids:
+                        par[_GID, j] = np.float32(instance_ids[g])
+                    rows[0, j] = max(int(math.ceil(gy - ry)), 0)
+                    rows[1, j] = min(int(math.floor(gy + ry)) + 1, 16)
+                for j in range(nb):
+                    gx, gy = par[_GX, j], par[_GY, j]
+                    ca, cb, cc = par[_CA, j], par[_CB, j], par[_CC, j]
+                    opa, amin = par[_OPA, j], par[_AMIN, j]
+                    cr, cg, cbl = par[_CR, j], par[_CG, j], par[_CBL, j]
+                    z, gid = par[_Z, j], par[_GID, j]
+                    for row in range(rows[0, j], rows[1, j]):
+                        dy = np.float32(row) - gy
+                        cdy = cc * dy * dy
+                        bdy = cb * dy
+                        base = np.uint64(row * 16)
+                        for col in range(16):
+                            p = base + np.uint64(col)
+                            dx = np.float32(col) - gx
+                            sigma = ca * dx * dx + bdy * dx + cdy
+                            alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
+                            alpha = alpha if (sigma >= zero and alpha >= amin) else zero
+                            t_before = state[p]
+                            t_after = t_before * (one - alpha)
+                            take = t_after > t_min  # false for a saturated pixel (negative T)
+                            w = alpha * t_before if take else zero
+                            if want_color:
+                                state[p + _R] += w * cr
+                                state[p + _G] += w * cg
+                                state[p + _B] += w * cbl
+                            if want_depth:
+                                state[p + _D] += w * z
+                            if want_ids:
+                                hit = w > zero and t_before > half
+                                state[p + _MED] = z if hit else state[p + _MED]
+                                state[p + _ID] = gid if hit else state[p + _ID]
+                            state[p] = t_after if take else -abs(t_before)
+                if nb == _BATCH:
+                    live = 0
+                    for p in range(256):
+                        live += 1 if state[p] > zero else 0
+                    if live == 0:
+                        break
+            for row in range(min(16, height - y0)):
+                for col in range(min(16, width - x0)):
+                    p = row * 16 + col
+                    py, px = y0 + row, x0 + col
+                    t = abs(state[p])
+                    a = one - t
+                    out_alpha[py, px] = a
+                    if want_color:
+                        out_rgb[py, px, 0] = state[256 + p]
+                        out_rgb[py, px, 1] = state[512 + p]
+                        out_rgb[py, px, 2] = state[768 + p]
+                    if want_depth:
+                        out_depth[py, px] = state[1024 + p] / a if a > zero else zero
+                    if want_ids:
+                        out_median[py, px] = state[1280 + p]
+                        out_ids[py, px] = np.int32(state[1536 + p]) if t <= half else -1
+
+    return composite_tiles
+
+
+_COMPOSITE_KERNELS: dict[tuple[bool, bool, bool], object] = {}
+
+
 def composite(
     offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
     want_color, want_depth, want_ids,
     out_rgb, out_alpha, out_depth, out_median, out_ids,
-):  # pragma: no cover - compiled; covered through render() and the oracle tests
+):
     """Composite every tile front to back into the output images (in place).
 
-    One flat float32 buffer holds the tile's 8 state planes (transmittance, live flag,
-    r, g, b, Σw·z, median z, median id) and is indexed with unsigned integers: signed
-    indices make numba emit wraparound checks that stop LLVM from vectorising the row.
+    Per tile: one flat float32 buffer holds its state planes (transmittance, whose sign is the
+    live flag, r, g, b, Σw·z, median z, median id), indexed with unsigned integers (signed
+    indices make numba emit wraparound checks that stop LLVM from vectorising the row). The
+    tile's list is walked in batches of 32: each batch's parameters are first gathered into a
+    small contiguous buffer, then composited; the tile stops after a batch that left every
+    pixel saturated. The output flags select a specialisation compiled with them as constants.
     """
-    n_tiles = offsets.shape[0] - 1
-    amax = np.float32(alpha_max)
-    t_min = np.float32(1e-4)
-    half = np.float32(0.5)
-    zero = np.float32(0.0)
-    one = np.float32(1.0)
-    for tile in numba.prange(n_tiles):
-        start, end = offsets[tile], offsets[tile + 1]
-        ty = tile // tiles_x
-        tx = tile - ty * tiles_x
-        x0 = tx * 16
-        y0 = ty * 16
-        state = np.zeros(256 * 8, np.float32)
-        state[:512] = 1.0
-        state[1792:] = -1.0
-        for k in range(start, end):
-            g = gauss[k]
-            gx = packed[g, PX] - np.float32(x0 + 0.5)
-            gy = packed[g, PY] - np.float32(y0 + 0.5)
-            ca = np.float32(0.5) * packed[g, CA]
-            cb = packed[g, CB]
-            cc = np.float32(0.5) * packed[g, CC]
-            opa = packed[g, OPA]
-            amin = packed[g, AMIN]
-            cr, cg, cbl = packed[g, CR], packed[g, CG], packed[g, CBL]
-            z = packed[g, DEPTH]
-            gid = np.float32(instance_ids[g])
-            ry = packed[g, RADY]
-            r0 = max(int(math.ceil(gy - ry)), 0)
-            r1 = min(int(math.floor(gy + ry)) + 1, 16)
-            for row in range(r0, r1):
-                dy = np.float32(row) - gy
-                cdy = cc * dy * dy
-                bdy = cb * dy
-                base = np.uint64(row * 16)
-                for col in range(16):
-                    p = base + np.uint64(col)
-                    dx = np.float32(col) - gx
-                    sigma = ca * dx * dx + bdy * dx + cdy
-                    alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
-                    alpha = alpha if (sigma >= zero and alpha >= amin) else zero
-                    alpha = alpha * state[p + _LIVE]
-                    t_before = state[p]
-                    t_after = t_before * (one - alpha)
-                    take = zero if t_after <= t_min else one
-                    w = alpha * t_before * take
-                    if want_color:
-                        state[p + _R] += w * cr
-                        state[p + _G] += w * cg
-                        state[p + _B] += w * cbl
-                    if want_depth:
-                        state[p + _D] += w * z
-                    if want_ids:
-                        hit = w > zero and t_before > half
-                        state[p + _MED] = z if hit else state[p + _MED]
-                        state[p + _ID] = gid if hit else state[p + _ID]
-                    state[p] = t_after if take > zero else t_before
-                    state[p + _LIVE] *= take
-            if (k - start) % 32 == 31:
-                live = zero
-                for p in range(256):
-                    live += state[256 + p]
-                if live == zero:
-                    break
-        for row in range(min(16, height - y0)):
-            for col in range(min(16, width - x0)):
-                p = row * 16 + col
-                py, px = y0 + row, x0 + col
-                a = one - state[p]
-                out_alpha[py, px] = a
-                if want_color:
-                    out_rgb[py, px, 0] = state[512 + p]
-                    out_rgb[py, px, 1] = state[768 + p]
-                    out_rgb[py, px, 2] = state[1024 + p]
-                if want_depth:
-                    out_depth[py, px] = state[1280 + p] / a if a > zero else zero
-                if want_ids:
-                    out_median[py, px] = state[1536 + p]
-                    out_ids[py, px] = np.int32(state[1792 + p]) if state[p] <= half else -1
+    key = (bool(want_color), bool(want_depth), bool(want_ids))
+    kernel = _COMPOSITE_KERNELS.get(key)
+    if kernel is None:
+        kernel = _COMPOSITE_KERNELS[key] = _make_composite(*key)
+    kernel(
+        offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
+        out_rgb, out_alpha, out_depth, out_median, out_ids,
+    )
 
 
 @numba.njit(cache=True)
