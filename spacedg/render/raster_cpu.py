@@ -92,6 +92,15 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
         u, v = float(packed[g, PX]), float(packed[g, PY])
         a, b, c = float(packed[g, CA]), float(packed[g, CB]), float(packed[g, CC])
         limit = math.log(max(float(packed[g, OPA]), 1e-30) / float(packed[g, AMIN])) + 1e-3
+        # cheap sure answers before the exact test, which they never contradict: the tile is outside
+        # the ellipse's bounding box (dropped) or sigma at its point nearest the mean is below the
+        # limit (kept), each by a margin (1e-6 relative) far above the rounding error of a conic
+        # whose det > 1e-9 a c (others always take the exact edge test)
+        det = a * c - b * b
+        box = det > 1e-9 * a * c and a > 0.0 and c > 0.0
+        x_ext = math.sqrt(2.0 * limit * c / det) * (1.0 + 1e-6) + 1e-6 if box else math.inf
+        y_ext = math.sqrt(2.0 * limit * a / det) * (1.0 + 1e-6) + 1e-6 if box else math.inf
+        sure = limit * (1.0 - 1e-6) if box else -math.inf
         for ty in range(ty0, ty1):
             y_lo = ty * 16 + 0.5 - v
             y_hi = min(ty * 16 + 16, height) - 0.5 - v
@@ -100,6 +109,17 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
                     x_lo = tx * 16 + 0.5 - u
                     x_hi = min(tx * 16 + 16, width) - 0.5 - u
                     if not (x_lo <= 0.0 <= x_hi and y_lo <= 0.0 <= y_hi) and a > 0.0 and c > 0.0:
+                        if x_lo > x_ext or x_hi < -x_ext or y_lo > y_ext or y_hi < -y_ext:
+                            continue
+                        px = min(max(0.0, x_lo), x_hi)
+                        py = min(max(0.0, y_lo), y_hi)
+                        if 0.5 * (a * px * px + c * py * py) + b * px * py <= sure:
+                            t = ty * tiles_x + tx
+                            pair_tile[n_pairs] = t
+                            pair_gauss[n_pairs] = g
+                            counts[t + 1] += 1
+                            n_pairs += 1
+                            continue
                         best = min(
                             min(_edge_min(a, b, c, x_lo, y_lo, y_hi, True), _edge_min(a, b, c, x_hi, y_lo, y_hi, True)),
                             min(_edge_min(a, b, c, y_lo, x_lo, x_hi, False), _edge_min(a, b, c, y_hi, x_lo, x_hi, False)),
@@ -302,8 +322,17 @@ def bin_visible(packed: np.ndarray, rects: np.ndarray, width: int, height: int, 
     tiles_x, tiles_y = (width + 15) // 16, (height + 15) // 16
     visible = np.flatnonzero(rects[:, 1] > rects[:, 0])
     order = depth_order(visible, np.ascontiguousarray(packed[:, DEPTH]))
-    areas = (rects[order, 1] - rects[order, 0]).astype(np.int64) * (rects[order, 3] - rects[order, 2])
-    return bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, int(areas.sum()))
+    return bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, pair_capacity(order, rects))
+
+
+@numba.njit(cache=True)
+def pair_capacity(order, rects):  # pragma: no cover - compiled
+    """The sum of the tile rectangles' areas of the Gaussians ``order``: an upper bound on the pairs."""
+    total = 0
+    for k in range(order.shape[0]):
+        g = order[k]
+        total += (rects[g, 1] - rects[g, 0]) * np.int64(rects[g, 3] - rects[g, 2])
+    return total
 
 
 def rasterize(packed: np.ndarray, rects: np.ndarray, instance_ids: np.ndarray, width: int, height: int,
