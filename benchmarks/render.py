@@ -33,7 +33,8 @@ machine line prints the load average, run on an idle machine for numbers worth q
    default, old and new renders alternating (median of 11 each), rgb+alpha and all outputs:
    ms, speed-up, G Gaussian·pixel evaluations per second per thread (pairs * 256 / s /
    threads) and the mean |Δ| of rgb / alpha / depth between the two images (median depth and
-   instance ids must match exactly).
+   instance ids must match exactly). Then the stages alone on the same input: binning (depth
+   sort + tiles) and compositing (rgb+alpha, all outputs), with "same" = bit-identical results.
 """
 
 from __future__ import annotations
@@ -438,6 +439,62 @@ def kernel_table(rev: str) -> None:
                       f"{pairs * TILE_PIXELS / to / threads / 1e9:>13.2f} {pairs * TILE_PIXELS / tn / threads / 1e9:>13.2f} "
                       f"{mean_diff(f_old.rgb, f_new.rgb):>11} {mean_diff(f_old.alpha, f_new.alpha):>9} "
                       f"{mean_diff(f_old.depth, f_new.depth):>9} {same:>4}", flush=True)
+        numba.set_num_threads(default_threads)
+    stage_table(cases, old, default_threads)
+
+
+def stage_table(cases: list, old, default_threads: int) -> None:
+    """The stages of one render alone, old vs new on the same input: binning (sort + bin) and compositing."""
+    import numba
+
+    from spacedg.render import project_cpu, raster_cpu
+    from spacedg.render.settings import RasterSettings
+
+    settings = RasterSettings()
+    print("\n   stages alone (same projection; binning = depth sort + tile binning; compositing on the same "
+          "tile lists; rgb+alpha / all outputs), old/new alternating, median of 11:")
+    header = (f"{'scene':<11} {'stage':<15} {'thr':>3} {'old ms':>7} {'new ms':>7} {'x':>5} "
+              f"{'old Gev/s/thr':>13} {'new Gev/s/thr':>13} {'same':>5}")
+    print(header)
+    print("-" * len(header))
+    for name, make in cases:
+        g, cam = make()
+        ids = (np.arange(len(g)) % 13).astype(np.int32)
+        w, h = cam.width, cam.height
+        packed, rects = project_cpu.project_view(g, cam, settings)
+        offsets, gauss = raster_cpu.bin_visible(packed, rects, w, h, True)
+        pairs = gauss.shape[0]
+
+        def binning(module):
+            return module.bin_visible(packed, rects, w, h, True)
+
+        def compositing(module, flags):
+            shape = (h, w)
+            out = [np.zeros((*shape, 3), np.float32), np.zeros(shape, np.float32), np.zeros(shape, np.float32),
+                   np.zeros(shape, np.float32), np.full(shape, -1, np.int32)]
+            module.composite(offsets, gauss, packed, ids, w, h, (w + 15) // 16, settings.alpha_max, *flags, *out)
+            return out
+
+        stages = [("binning", binning),
+                  ("composite rgb", lambda m: compositing(m, (True, False, False))),
+                  ("composite all", lambda m: compositing(m, (True, True, True)))]
+        for stage, fn in stages:
+            for threads in sorted({1, default_threads}):
+                numba.set_num_threads(threads)
+                a, b = fn(old), fn(raster_cpu)
+                same = all(np.array_equal(x, y) for x, y in zip(a, b))
+                t_old, t_new = [], []
+                for _ in range(11):
+                    start = time.perf_counter()
+                    fn(old)
+                    t_old.append(time.perf_counter() - start)
+                    start = time.perf_counter()
+                    fn(raster_cpu)
+                    t_new.append(time.perf_counter() - start)
+                to, tn = float(np.median(t_old)), float(np.median(t_new))
+                print(f"{name:<11} {stage:<15} {threads:>3} {to * 1e3:>7.1f} {tn * 1e3:>7.1f} {to / tn:>4.2f}x "
+                      f"{pairs * TILE_PIXELS / to / threads / 1e9:>13.2f} {pairs * TILE_PIXELS / tn / threads / 1e9:>13.2f} "
+                      f"{'yes' if same else 'NO':>5}", flush=True)
         numba.set_num_threads(default_threads)
 
 

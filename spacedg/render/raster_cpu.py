@@ -6,11 +6,14 @@ Pipeline (see :func:`rasterize`):
 2. counting-sort binning into 16×16 tiles in that order, so every tile's list comes out
    already depth-sorted (no 64-bit keys, no per-tile sort). With ``tight`` binning a tile is
    kept only if the Gaussian's ``alpha >= f`` ellipse (its alpha floor, 1/255 when sharp) reaches one of its pixel centres;
-3. compositing, parallel over tiles: each tile keeps one flat state buffer (transmittance,
-   live flag, accumulators) for its 256 pixels, walks its depth-ordered list front to back,
-   and for every Gaussian updates only the tile rows its footprint covers, 16 pixels at a
-   time with branch-free selects and a polynomial exp so LLVM vectorises the row. A tile
-   stops when all its pixels are saturated.
+3. compositing, parallel over tiles, in a kernel compiled once per combination of requested
+   outputs (the flags are constants, so unused planes cost nothing): each tile keeps one flat
+   state buffer (transmittance, whose sign is the live flag, and the accumulators) for its 256
+   pixels and walks its depth-ordered list front to back in batches of 32 Gaussians, first
+   gathering a batch's parameters into a small contiguous buffer (independent loads, so their
+   cache misses overlap), then updating for every Gaussian only the tile rows its footprint
+   covers, 16 pixels at a time with branch-free selects and a polynomial exp so LLVM
+   vectorises the row. A tile stops after a batch that left all its pixels saturated.
 
 Compositing rules (3DGS / gsplat): pixel centres at (j + ½, i + ½); ``σ = ½(a dx² + c dy²)
 + b dx dy``; ``α = min(alpha_max, o·e^(−σ))``; skip ``σ < 0`` or ``α < f`` (the Gaussian's alpha floor); stop before the
