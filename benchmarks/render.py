@@ -447,7 +447,6 @@ def stage_table(cases: list, old, default_threads: int) -> None:
     """The stages of one render alone, old vs new on the same input: binning (sort + bin) and compositing."""
     import numba
 
-    from spacedg.render import project_cpu, raster_cpu
     from spacedg.render.settings import RasterSettings
 
     settings = RasterSettings()
@@ -458,44 +457,52 @@ def stage_table(cases: list, old, default_threads: int) -> None:
     print(header)
     print("-" * len(header))
     for name, make in cases:
-        g, cam = make()
-        ids = (np.arange(len(g)) % 13).astype(np.int32)
-        w, h = cam.width, cam.height
-        packed, rects = project_cpu.project_view(g, cam, settings)
-        offsets, gauss = raster_cpu.bin_visible(packed, rects, w, h, True)
-        pairs = gauss.shape[0]
+        stage_rows(name, *make(), old, default_threads, settings)
+    numba.set_num_threads(default_threads)
 
-        def binning(module):
-            return module.bin_visible(packed, rects, w, h, True)
 
-        def compositing(module, flags):
-            shape = (h, w)
-            out = [np.zeros((*shape, 3), np.float32), np.zeros(shape, np.float32), np.zeros(shape, np.float32),
-                   np.zeros(shape, np.float32), np.full(shape, -1, np.int32)]
-            module.composite(offsets, gauss, packed, ids, w, h, (w + 15) // 16, settings.alpha_max, *flags, *out)
-            return out
+def stage_rows(name: str, g: Gaussians, cam: Camera, old, default_threads: int, settings) -> None:
+    """One scene's rows of :func:`stage_table`."""
+    import numba
 
-        stages = [("binning", binning),
-                  ("composite rgb", lambda m: compositing(m, (True, False, False))),
-                  ("composite all", lambda m: compositing(m, (True, True, True)))]
-        for stage, fn in stages:
-            for threads in sorted({1, default_threads}):
-                numba.set_num_threads(threads)
-                a, b = fn(old), fn(raster_cpu)
-                same = all(np.array_equal(x, y) for x, y in zip(a, b))
-                t_old, t_new = [], []
-                for _ in range(11):
-                    start = time.perf_counter()
-                    fn(old)
-                    t_old.append(time.perf_counter() - start)
-                    start = time.perf_counter()
-                    fn(raster_cpu)
-                    t_new.append(time.perf_counter() - start)
-                to, tn = float(np.median(t_old)), float(np.median(t_new))
-                print(f"{name:<11} {stage:<15} {threads:>3} {to * 1e3:>7.1f} {tn * 1e3:>7.1f} {to / tn:>4.2f}x "
-                      f"{pairs * TILE_PIXELS / to / threads / 1e9:>13.2f} {pairs * TILE_PIXELS / tn / threads / 1e9:>13.2f} "
-                      f"{'yes' if same else 'NO':>5}", flush=True)
-        numba.set_num_threads(default_threads)
+    from spacedg.render import project_cpu, raster_cpu
+
+    ids = (np.arange(len(g)) % 13).astype(np.int32)
+    w, h = cam.width, cam.height
+    packed, rects = project_cpu.project_view(g, cam, settings)
+    offsets, gauss = raster_cpu.bin_visible(packed, rects, w, h, True)
+    pairs = gauss.shape[0]
+
+    def binning(module):
+        return module.bin_visible(packed, rects, w, h, True)
+
+    def compositing(module, flags):
+        shape = (h, w)
+        out = [np.zeros((*shape, 3), np.float32), np.zeros(shape, np.float32), np.zeros(shape, np.float32),
+               np.zeros(shape, np.float32), np.full(shape, -1, np.int32)]
+        module.composite(offsets, gauss, packed, ids, w, h, (w + 15) // 16, settings.alpha_max, *flags, *out)
+        return out
+
+    stages = [("binning", binning),
+              ("composite rgb", lambda m: compositing(m, (True, False, False))),
+              ("composite all", lambda m: compositing(m, (True, True, True)))]
+    for stage, fn in stages:
+        for threads in sorted({1, default_threads}):
+            numba.set_num_threads(threads)
+            a, b = fn(old), fn(raster_cpu)
+            same = all(np.array_equal(x, y) for x, y in zip(a, b))
+            t_old, t_new = [], []
+            for _ in range(11):
+                start = time.perf_counter()
+                fn(old)
+                t_old.append(time.perf_counter() - start)
+                start = time.perf_counter()
+                fn(raster_cpu)
+                t_new.append(time.perf_counter() - start)
+            to, tn = float(np.median(t_old)), float(np.median(t_new))
+            print(f"{name:<11} {stage:<15} {threads:>3} {to * 1e3:>7.1f} {tn * 1e3:>7.1f} {to / tn:>4.2f}x "
+                  f"{pairs * TILE_PIXELS / to / threads / 1e9:>13.2f} {pairs * TILE_PIXELS / tn / threads / 1e9:>13.2f} "
+                  f"{'yes' if same else 'NO':>5}", flush=True)
 
 
 def main() -> None:

@@ -147,11 +147,11 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
 
 # offsets of the per-pixel state planes inside one tile's flat buffer (256 floats each); the
 # transmittance plane's sign is the live flag (a saturated pixel keeps -T)
-_T, _R, _G, _B, _D, _MED, _ID = (np.uint64(256 * k) for k in range(7))
+_T, _R, _G, _B, _D = (np.uint64(256 * k) for k in range(5))
 #: Gaussians gathered per batch before compositing them (also the saturation-check period)
 _BATCH = 32
 # columns of the per-batch gathered parameters (one row of _BATCH floats each)
-_GX, _GY, _CA, _CB, _CC, _OPA, _AMIN, _CR, _CG, _CBL, _Z, _GID = range(12)
+_GX, _GY, _CA, _CB, _CC, _OPA, _AMIN, _CR, _CG, _CBL, _Z = range(11)
 
 
 def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
@@ -175,10 +175,10 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
             tx = tile - ty * tiles_x
             x0 = tx * 16
             y0 = ty * 16
-            state = np.zeros(256 * 7, np.float32)
+            state = np.zeros(256 * 5, np.float32)
             state[:256] = 1.0
-            state[1536:] = -1.0
-            par = np.empty((12, _BATCH), np.float32)
+            last = np.full(256 if want_ids else 1, -1, np.int32)  # list position of the median Gaussian
+            par = np.empty((11, _BATCH), np.float32)
             rows = np.empty((2, _BATCH), np.int64)
             for b0 in range(start, end, _BATCH):
                 nb = min(_BATCH, end - b0)
@@ -199,8 +199,6 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
                         par[_CBL, j] = packed[g, CBL]
                     if want_depth or want_ids:
                         par[_Z, j] = packed[g, DEPTH]
-                    if want_ids:
-                        par[_GID, j] = np.float32(instance_ids[g])
                     rows[0, j] = max(int(math.ceil(gy - ry)), 0)
                     rows[1, j] = min(int(math.floor(gy + ry)) + 1, 16)
                 for j in range(nb):
@@ -208,7 +206,8 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
                     ca, cb, cc = par[_CA, j], par[_CB, j], par[_CC, j]
                     opa, amin = par[_OPA, j], par[_AMIN, j]
                     cr, cg, cbl = par[_CR, j], par[_CG, j], par[_CBL, j]
-                    z, gid = par[_Z, j], par[_GID, j]
+                    z = par[_Z, j]
+                    at = np.int32(b0 + j - start)
                     for row in range(rows[0, j], rows[1, j]):
                         dy = np.float32(row) - gy
                         cdy = cc * dy * dy
@@ -232,8 +231,7 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
                                 state[p + _D] += w * z
                             if want_ids:
                                 hit = w > zero and t_before > half
-                                state[p + _MED] = z if hit else state[p + _MED]
-                                state[p + _ID] = gid if hit else state[p + _ID]
+                                last[p] = at if hit else last[p]
                             state[p] = t_after if take else -abs(t_before)
                 if nb == _BATCH:
                     live = 0
@@ -255,8 +253,13 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
                     if want_depth:
                         out_depth[py, px] = state[1024 + p] / a if a > zero else zero
                     if want_ids:
-                        out_median[py, px] = state[1280 + p]
-                        out_ids[py, px] = np.int32(state[1536 + p]) if t <= half else -1
+                        if last[p] >= 0:
+                            g = gauss[start + last[p]]
+                            out_median[py, px] = packed[g, DEPTH]
+                            out_ids[py, px] = np.int32(np.float32(instance_ids[g])) if t <= half else -1
+                        else:
+                            out_median[py, px] = zero
+                            out_ids[py, px] = -1
 
     return composite_tiles
 
@@ -272,7 +275,8 @@ def composite(
     """Composite every tile front to back into the output images (in place).
 
     Per tile: one flat float32 buffer holds its state planes (transmittance, whose sign is the
-    live flag, r, g, b, Σw·z, median z, median id), indexed with unsigned integers (signed
+    live flag, r, g, b, Σw·z; with ids, an int32 plane holds the list position of each pixel's
+    median Gaussian, whose depth and id are read at the end), indexed with unsigned integers (signed
     indices make numba emit wraparound checks that stop LLVM from vectorising the row). The
     tile's list is walked in batches of 32: each batch's parameters are first gathered into a
     small contiguous buffer, then composited; the tile stops after a batch that left every
