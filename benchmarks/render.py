@@ -58,6 +58,8 @@ from spacedg.render.gaussians import Gaussians
 from spacedg.render.renderer import render
 from spacedg.render.settings import MotionBlur
 
+from device_paths import random_scene  # noqa: E402 - benchmarks/ is on sys.path when run as a script
+
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "splats"
 PLANT = SHARED / "plant" / "plant.splat"
 WIDTH, HEIGHT, FOCAL = 640, 480, 500.0
@@ -72,20 +74,6 @@ PLANT_MOTION = ((0.0625, 0.0125, 0.025), (0.02, 0.08, 0.01))
 # ------------------------------------------------------------------ scenes and cameras
 def intrinsics(pose: np.ndarray) -> Camera:
     return Camera(FOCAL, FOCAL, WIDTH / 2, HEIGHT / 2, WIDTH, HEIGHT, pose)
-
-
-def random_scene(n: int, degree: int, seed: int) -> tuple[Gaussians, Camera]:
-    """``n`` Gaussians in a box 2–6 m in front of an identity camera, sized to fill its view."""
-    rng = np.random.default_rng(seed)
-    half_w, half_h = 4.0 * (WIDTH / 2) / FOCAL, 4.0 * (HEIGHT / 2) / FOCAL  # frustum at the mid depth 4 m
-    means = np.column_stack([rng.uniform(-half_w, half_w, n), rng.uniform(-half_h, half_h, n), rng.uniform(2.0, 6.0, n)])
-    quats = rng.normal(size=(n, 4))
-    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
-    scales = np.exp(rng.uniform(math.log(0.005), math.log(0.05), (n, 3)))
-    opacities = rng.uniform(0.05, 1.0, n)
-    sh = rng.normal(0.0, 0.3, (n, (degree + 1) ** 2, 3))
-    pose = look_at(np.zeros(3), np.array([0.0, 0.0, 1.0]), np.array([0.0, -1.0, 0.0]))
-    return Gaussians(means, quats, scales, opacities, sh), intrinsics(pose)
 
 
 def plant_scene() -> tuple[Gaussians, Camera]:
@@ -156,7 +144,7 @@ def renderer_table(sizes: list[int], degree: int, with_plant: bool, torch_device
     print(header)
     print("-" * len(header))
     cases: list[tuple[str, Callable[[], tuple[Gaussians, Camera]]]] = [
-        (f"random {n // 1000}k, SH {degree}", lambda n=n: random_scene(n, degree, seed=n)) for n in sizes
+        (f"random {n // 1000}k, SH {degree}", lambda n=n: random_scene(n, seed=n, degree=degree)) for n in sizes
     ]
     if with_plant:
         if PLANT.is_file():

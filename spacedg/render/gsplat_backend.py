@@ -198,6 +198,8 @@ def rasterize_to_pixels_torch(
     """
     import torch
 
+    from spacedg.render.raster_torch import advance_transmittance, chunk_of_lists
+
     image_dims = means2d.shape[:-2]
     count = math.prod(image_dims)
     n = means2d.shape[-2]
@@ -230,9 +232,7 @@ def rasterize_to_pixels_torch(
         s0, cnt = start[tiles], length[tiles]
         for c0 in range(0, int(cnt.max()), chunk):
             pos = c0 + steps
-            in_list = pos[None, :] < cnt[:, None]
-            g = gauss[torch.clamp(s0[:, None] + pos[None, :], max=max(gauss.numel() - 1, 0))]
-            g = torch.where(in_list, g, torch.zeros_like(g))
+            in_list, g = chunk_of_lists(gauss, s0, cnt, pos)
             dx = m2[g, 0][:, None, :] - px[:, :, None]
             dy = m2[g, 1][:, None, :] - py[:, :, None]
             a, b, c = (cn[g, k][:, None, :] for k in range(3))
@@ -246,11 +246,8 @@ def rasterize_to_pixels_torch(
             take = t_after > TRANSMITTANCE_MIN
             weight = alpha * t_before * take
             acc = acc + torch.einsum("bpc,bck->bpk", weight, col[g])
-            n_take = take.sum(-1)
-            t_last = torch.gather(t_after, 2, torch.clamp(n_take - 1, min=0)[..., None])[..., 0]
-            trans = torch.where(n_take > 0, t_last, trans)
-            alive = alive & take.all(-1)
-            if not bool(alive.any()):
+            trans, alive, open_ = advance_transmittance(trans, alive, t_after, take)
+            if not open_:
                 break
         out_c[tiles], out_t[tiles] = acc, trans
 
@@ -277,6 +274,8 @@ def median_pass(
     """
     import torch
 
+    from spacedg.render.raster_torch import chunk_of_lists
+
     device, dtype = proj.means2d.device, proj.means2d.dtype
     tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
     tiles_y = (height + TILE_SIZE - 1) // TILE_SIZE
@@ -299,9 +298,7 @@ def median_pass(
         s0, cnt = start[tiles], length[tiles]
         for c0 in range(0, int(cnt.max()), chunk):
             pos = c0 + steps
-            in_list = pos[None, :] < cnt[:, None]
-            g = gauss[torch.clamp(s0[:, None] + pos[None, :], max=max(gauss.numel() - 1, 0))]
-            g = torch.where(in_list, g, torch.zeros_like(g))
+            in_list, g = chunk_of_lists(gauss, s0, cnt, pos)
             dx = px[:, :, None] - proj.means2d[g, 0][:, None, :]
             dy = py[:, :, None] - proj.means2d[g, 1][:, None, :]
             a, b, c = (proj.conics[g, k][:, None, :] for k in range(3))

@@ -80,6 +80,26 @@ def bin_tiles(proj: Projected, width: int, height: int, tight: bool) -> tuple[to
     return offsets, g[perm]
 
 
+def chunk_of_lists(gauss: torch.Tensor, start: torch.Tensor, count: torch.Tensor, pos: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Positions ``pos`` (C,) of each tile's Gaussian list (``start``/``count`` per tile, B): ``(in_list
+    (B, C) bool, ids (B, C))``, ids 0 past a list's end (masked by ``in_list``)."""
+    in_list = pos[None, :] < count[:, None]
+    g = gauss[torch.clamp(start[:, None] + pos[None, :], max=max(gauss.numel() - 1, 0))]
+    return in_list, torch.where(in_list, g, torch.zeros_like(g))
+
+
+def advance_transmittance(
+    trans: torch.Tensor, alive: torch.Tensor, t_after: torch.Tensor, take: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor, bool]:
+    """After a chunk: each pixel's transmittance after its last composited Gaussian, whether it is
+    still open (every Gaussian of the chunk taken), and whether any pixel is (else stop)."""
+    n_take = take.sum(-1)
+    t_last = torch.gather(t_after, 2, torch.clamp(n_take - 1, min=0)[..., None])[..., 0]
+    trans = torch.where(n_take > 0, t_last, trans)
+    alive = alive & take.all(-1)
+    return trans, alive, bool(alive.any())
+
+
 def composite(
     proj: Projected,
     offsets: torch.Tensor,
@@ -127,9 +147,7 @@ def composite(
         start, count = offsets[tiles], lengths[tiles]
         for c0 in range(0, int(count.max()), chunk):
             pos = c0 + steps  # (C,)
-            in_list = pos[None, :] < count[:, None]  # (B, C)
-            g = gauss[torch.clamp(start[:, None] + pos[None, :], max=max(gauss.numel() - 1, 0))]
-            g = torch.where(in_list, g, torch.zeros_like(g))
+            in_list, g = chunk_of_lists(gauss, start, count, pos)  # (B, C)
             dx = px[:, :, None] - proj.means2d[g, 0][:, None, :]  # (B, 256, C)
             dy = py[:, :, None] - proj.means2d[g, 1][:, None, :]
             a, bb, c = (proj.conics[g, k][:, None, :] for k in range(3))
@@ -153,11 +171,8 @@ def composite(
                 pick = torch.gather(g[:, None, :].expand(-1, px.shape[1], -1), 2, torch.clamp(last - 1, min=0)[..., None])[..., 0]
                 median = torch.where(has, proj.depths[pick], median)
                 ids = torch.where(has, instance_ids[pick], ids)
-            n_take = take.sum(-1)
-            t_last = torch.gather(t_after, 2, torch.clamp(n_take - 1, min=0)[..., None])[..., 0]
-            trans = torch.where(n_take > 0, t_last, trans)
-            alive = alive & take.all(-1)
-            if not bool(alive.any()):
+            trans, alive, open_ = advance_transmittance(trans, alive, t_after, take)
+            if not open_:
                 break
         trans_all[tiles], rgb_all[tiles], depth_all[tiles] = trans, rgb, depth
         median_all[tiles], ids_all[tiles] = median, ids

@@ -245,7 +245,8 @@ from spacedg.data.qa_index import QABuildConfig
 from spacedg.render import threads
 
 def serial_flag(_):
-    print("WORKER serial", threads.serial_mode(), flush=True)
+    sys.stdout.write(f"WORKER serial {threads.serial_mode()}\n")  # one write: the two workers' lines never interleave
+    sys.stdout.flush()
 
 if __name__ == "__main__":  # forkserver / spawn re-import this file in their workers
     args = json.loads(sys.argv[1])
