@@ -386,7 +386,7 @@ def kernel_table(rev: str) -> None:
               f"{'old Gev/s/thr':>13} {'new Gev/s/thr':>13} {'rgb mean|Δ|':>11} {'a mean|Δ|':>9} {'d mean|Δ|':>9} {'ids':>4}")
     print(header)
     print("-" * len(header))
-    cases = [("random 100k", lambda: random_scene(100_000, 1, seed=100_000))]
+    cases = [("random 100k", lambda: random_scene(100_000, seed=100_000, degree=1))]
     if PLANT.is_file():
         cases.append(("plant 114k", plant_scene))
     else:
