@@ -8,6 +8,7 @@ Prints tables only (never part of the test run). All renders are 640×480.
     .venv/bin/python benchmarks/render.py --device cuda   # only the device table (gsplat backend vs gsplat's own, …)
     .venv/bin/python benchmarks/render.py --device cpu --sizes 10000   # the same code paths on a CPU (stand-ins)
     .venv/bin/python benchmarks/render.py --only severity --threads 1   # table 4 (about 4 minutes)
+    .venv/bin/python benchmarks/render.py --only kernel --baseline main   # table 5: this checkout's CPU raster vs REV's
 
 Timings are wall-clock (``time.perf_counter``) on whatever else the machine is doing: the
 machine line prints the load average, run on an idle machine for numbers worth quoting.
@@ -26,11 +27,20 @@ machine line prints the load average, run on an idle machine for numbers worth q
    render (alternating runs, medians), PSNR against N = 80 and N = 256, and a ghosting
    measure (:func:`ghosting`: the ripple of a probe point's smear). ``--threads 1`` for one
    numba thread.
+5. CPU raster kernel, this checkout vs ``--baseline REV`` (``--only kernel``; default ``main``):
+   REV's ``spacedg/render/raster_cpu.py`` is loaded from git beside this one and swapped in
+   for the old renders; 100k random Gaussians and the plant at 1 numba thread and numba's
+   default, old and new renders alternating (median of 11 each), rgb+alpha and all outputs:
+   ms, speed-up, G Gaussian·pixel evaluations per second per thread (pairs * 256 / s /
+   threads) and the mean |Δ| of rgb / alpha / depth between the two images (median depth and
+   instance ids must match exactly). Then the stages alone on the same input: binning (depth
+   sort + tiles) and compositing (rgb+alpha, all outputs), with "same" = bit-identical results.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import platform
@@ -334,6 +344,155 @@ def severity_section(room_seed: int, quick: bool) -> None:
     motion_severity_table(cases, runs=3)
 
 
+def load_baseline_raster(rev: str):
+    """REV's ``spacedg/render/raster_cpu.py`` as a separate module (compiled into a temporary cache)."""
+    import importlib.util
+    import subprocess
+    import sys
+    import tempfile
+
+    root = Path(__file__).resolve().parents[1]
+    source = subprocess.run(["git", "show", f"{rev}:spacedg/render/raster_cpu.py"], cwd=root, check=True,
+                            capture_output=True, text=True).stdout
+    commit = subprocess.run(["git", "rev-parse", "--short", rev], cwd=root, check=True,
+                            capture_output=True, text=True).stdout.strip()
+    folder = Path(tempfile.gettempdir()) / f"spacedg_baseline_{commit}"
+    folder.mkdir(exist_ok=True)
+    path = folder / "baseline_raster_cpu.py"
+    if not path.is_file() or path.read_text() != source:
+        path.write_text(source)
+    spec = importlib.util.spec_from_file_location("baseline_raster_cpu", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["baseline_raster_cpu"] = module  # numba's cache pickles refer to the module by name
+    spec.loader.exec_module(module)
+    return module, commit
+
+
+def kernel_table(rev: str) -> None:
+    import numba
+
+    from spacedg.render import raster_cpu
+
+    old, commit = load_baseline_raster(rev)
+    new_rasterize = raster_cpu.rasterize
+    default_threads = int(numba.config.NUMBA_NUM_THREADS)
+    print(f"\n5. CPU raster kernel, {WIDTH}x{HEIGHT}: this checkout (new) vs {rev} = {commit} (old), whole render() "
+          "with the same projection; old/new alternating, median of 11 each after a warm-up")
+    print("   Gev/s/thr = Gaussian-pixel evaluations per second per numba thread: pairs * 256 / s / threads.")
+    print("   mean|Δ| = mean absolute difference of the new image from the old (rgb, alpha, depth); "
+          "ids = median depth and instance ids identical.")
+    header = (f"{'scene':<11} {'outputs':<9} {'thr':>3} {'pairs':>7} {'old ms':>7} {'new ms':>7} {'x':>5} "
+              f"{'old Gev/s/thr':>13} {'new Gev/s/thr':>13} {'rgb mean|Δ|':>11} {'a mean|Δ|':>9} {'d mean|Δ|':>9} {'ids':>4}")
+    print(header)
+    print("-" * len(header))
+    cases = [("random 100k", lambda: random_scene(100_000, seed=100_000, degree=1))]
+    if PLANT.is_file():
+        cases.append(("plant 114k", plant_scene))
+    else:
+        print(f"(plant capture skipped: {PLANT} not found)")
+
+    def run(g: Gaussians, cam: Camera, outputs: str, module) -> Frame:
+        raster_cpu.rasterize = module.rasterize
+        try:
+            return render(g, cam, outputs=outputs, backend="cpu")
+        finally:
+            raster_cpu.rasterize = new_rasterize
+
+    for name, make in cases:
+        g, cam = make()
+        g = dataclasses.replace(g, instance_ids=(np.arange(len(g)) % 13).astype(np.int32))
+        for outputs, label in (("rgb,alpha", "rgb"), ("rgb,alpha,depth,median_depth,instance_ids", "all")):
+            for threads in sorted({1, default_threads}):
+                numba.set_num_threads(threads)
+                f_old, f_new = run(g, cam, outputs, old), run(g, cam, outputs, raster_cpu)
+                t_old, t_new = [], []
+                for _ in range(11):
+                    start = time.perf_counter()
+                    run(g, cam, outputs, old)
+                    t_old.append(time.perf_counter() - start)
+                    start = time.perf_counter()
+                    run(g, cam, outputs, raster_cpu)
+                    t_new.append(time.perf_counter() - start)
+                to, tn = float(np.median(t_old)), float(np.median(t_new))
+                pairs = int(f_new.stats["pairs"])
+
+                def mean_diff(a: np.ndarray | None, b: np.ndarray | None) -> str:
+                    return "-" if a is None or b is None else f"{np.abs(a.astype(np.float64) - b).mean():.1e}"
+
+                same = "-" if label == "rgb" else (
+                    "yes" if np.array_equal(f_old.instance_ids, f_new.instance_ids)
+                    and np.array_equal(f_old.median_depth, f_new.median_depth) else "NO")
+                print(f"{name:<11} {label:<9} {threads:>3} {pairs:>7} {to * 1e3:>7.1f} {tn * 1e3:>7.1f} {to / tn:>4.2f}x "
+                      f"{pairs * TILE_PIXELS / to / threads / 1e9:>13.2f} {pairs * TILE_PIXELS / tn / threads / 1e9:>13.2f} "
+                      f"{mean_diff(f_old.rgb, f_new.rgb):>11} {mean_diff(f_old.alpha, f_new.alpha):>9} "
+                      f"{mean_diff(f_old.depth, f_new.depth):>9} {same:>4}", flush=True)
+        numba.set_num_threads(default_threads)
+    stage_table(cases, old, default_threads)
+
+
+def stage_table(cases: list, old, default_threads: int) -> None:
+    """The stages of one render alone, old vs new on the same input: binning (sort + bin) and compositing."""
+    import numba
+
+    from spacedg.render.settings import RasterSettings
+
+    settings = RasterSettings()
+    print("\n   stages alone (same projection; binning = depth sort + tile binning; compositing on the same "
+          "tile lists; rgb+alpha / all outputs), old/new alternating, median of 11:")
+    header = (f"{'scene':<11} {'stage':<15} {'thr':>3} {'old ms':>7} {'new ms':>7} {'x':>5} "
+              f"{'old Gev/s/thr':>13} {'new Gev/s/thr':>13} {'same':>5}")
+    print(header)
+    print("-" * len(header))
+    for name, make in cases:
+        stage_rows(name, *make(), old, default_threads, settings)
+    numba.set_num_threads(default_threads)
+
+
+def stage_rows(name: str, g: Gaussians, cam: Camera, old, default_threads: int, settings) -> None:
+    """One scene's rows of :func:`stage_table`."""
+    import numba
+
+    from spacedg.render import project_cpu, raster_cpu
+
+    ids = (np.arange(len(g)) % 13).astype(np.int32)
+    w, h = cam.width, cam.height
+    packed, rects = project_cpu.project_view(g, cam, settings)
+    offsets, gauss = raster_cpu.bin_visible(packed, rects, w, h, True)
+    pairs = gauss.shape[0]
+
+    def binning(module):
+        return module.bin_visible(packed, rects, w, h, True)
+
+    def compositing(module, flags):
+        shape = (h, w)
+        out = [np.zeros((*shape, 3), np.float32), np.zeros(shape, np.float32), np.zeros(shape, np.float32),
+               np.zeros(shape, np.float32), np.full(shape, -1, np.int32)]
+        module.composite(offsets, gauss, packed, ids, w, h, (w + 15) // 16, settings.alpha_max, *flags, *out)
+        return out
+
+    stages = [("binning", binning),
+              ("composite rgb", lambda m: compositing(m, (True, False, False))),
+              ("composite all", lambda m: compositing(m, (True, True, True)))]
+    for stage, fn in stages:
+        for threads in sorted({1, default_threads}):
+            numba.set_num_threads(threads)
+            a, b = fn(old), fn(raster_cpu)
+            same = all(np.array_equal(x, y) for x, y in zip(a, b))
+            t_old, t_new = [], []
+            for _ in range(11):
+                start = time.perf_counter()
+                fn(old)
+                t_old.append(time.perf_counter() - start)
+                start = time.perf_counter()
+                fn(raster_cpu)
+                t_new.append(time.perf_counter() - start)
+            to, tn = float(np.median(t_old)), float(np.median(t_new))
+            print(f"{name:<11} {stage:<15} {threads:>3} {to * 1e3:>7.1f} {tn * 1e3:>7.1f} {to / tn:>4.2f}x "
+                  f"{pairs * TILE_PIXELS / to / threads / 1e9:>13.2f} {pairs * TILE_PIXELS / tn / threads / 1e9:>13.2f} "
+                  f"{'yes' if same else 'NO':>5}", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
@@ -345,8 +504,11 @@ def main() -> None:
                              "gsplat.rasterization vs our torch backend on this device vs our CPU path")
     parser.add_argument("--sizes", default="100000,1000000", help="Gaussian counts of the device table (default 100000,1000000)")
     parser.add_argument("--runs", type=int, default=5, help="timed runs per cell of the device table (default 5)")
-    parser.add_argument("--only", choices=["renderer", "motion", "severity"], default=None,
-                        help="run one part: renderer (table 1), motion (tables 2-3) or severity (table 4)")
+    parser.add_argument("--only", choices=["renderer", "motion", "severity", "kernel"], default=None,
+                        help="run one part: renderer (table 1), motion (tables 2-3), severity (table 4) or "
+                             "kernel (table 5, this checkout's CPU raster vs --baseline)")
+    parser.add_argument("--baseline", default="main",
+                        help="git revision whose raster_cpu.py table 5 compares against (default main)")
     parser.add_argument("--threads", type=int, default=None, help="numba threads (default: numba's)")
     args = parser.parse_args()
     if args.threads:
@@ -367,6 +529,8 @@ def main() -> None:
         renderer_table(sizes, degree=1, with_plant=True, torch_device=args.torch_device, torch_runs=1 if args.quick else 2)
     if args.only in (None, "severity"):
         severity_section(args.room_seed, args.quick)
+    if args.only in (None, "kernel"):
+        kernel_table(args.baseline)
     if args.only not in (None, "motion"):
         print(f"\ntotal {time.perf_counter() - start:.0f} s")
         return

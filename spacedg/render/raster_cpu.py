@@ -6,11 +6,14 @@ Pipeline (see :func:`rasterize`):
 2. counting-sort binning into 16×16 tiles in that order, so every tile's list comes out
    already depth-sorted (no 64-bit keys, no per-tile sort). With ``tight`` binning a tile is
    kept only if the Gaussian's ``alpha >= f`` ellipse (its alpha floor, 1/255 when sharp) reaches one of its pixel centres;
-3. compositing, parallel over tiles: each tile keeps one flat state buffer (transmittance,
-   live flag, accumulators) for its 256 pixels, walks its depth-ordered list front to back,
-   and for every Gaussian updates only the tile rows its footprint covers, 16 pixels at a
-   time with branch-free selects and a polynomial exp so LLVM vectorises the row. A tile
-   stops when all its pixels are saturated.
+3. compositing, parallel over tiles, in a kernel compiled once per combination of requested
+   outputs (the flags are constants, so unused planes cost nothing): each tile keeps one flat
+   state buffer (transmittance, whose sign is the live flag, and the accumulators) for its 256
+   pixels and walks its depth-ordered list front to back in batches of 32 Gaussians, first
+   gathering a batch's parameters into a small contiguous buffer (independent loads, so their
+   cache misses overlap), then updating for every Gaussian only the tile rows its footprint
+   covers, 16 pixels at a time with branch-free selects and a polynomial exp so LLVM
+   vectorises the row. A tile stops after a batch that left all its pixels saturated.
 
 Compositing rules (3DGS / gsplat): pixel centres at (j + ½, i + ½); ``σ = ½(a dx² + c dy²)
 + b dx dy``; ``α = min(alpha_max, o·e^(−σ))``; skip ``σ < 0`` or ``α < f`` (the Gaussian's alpha floor); stop before the
@@ -92,6 +95,15 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
         u, v = float(packed[g, PX]), float(packed[g, PY])
         a, b, c = float(packed[g, CA]), float(packed[g, CB]), float(packed[g, CC])
         limit = math.log(max(float(packed[g, OPA]), 1e-30) / float(packed[g, AMIN])) + 1e-3
+        # cheap sure answers before the exact test, which they never contradict: the tile is outside
+        # the ellipse's bounding box (dropped) or sigma at its point nearest the mean is below the
+        # limit (kept), each by a margin (1e-6 relative) far above the rounding error of a conic
+        # whose det > 1e-9 a c (others always take the exact edge test)
+        det = a * c - b * b
+        box = det > 1e-9 * a * c and a > 0.0 and c > 0.0
+        x_ext = math.sqrt(2.0 * limit * c / det) * (1.0 + 1e-6) + 1e-6 if box else math.inf
+        y_ext = math.sqrt(2.0 * limit * a / det) * (1.0 + 1e-6) + 1e-6 if box else math.inf
+        sure = limit * (1.0 - 1e-6) if box else -math.inf
         for ty in range(ty0, ty1):
             y_lo = ty * 16 + 0.5 - v
             y_hi = min(ty * 16 + 16, height) - 0.5 - v
@@ -100,6 +112,17 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
                     x_lo = tx * 16 + 0.5 - u
                     x_hi = min(tx * 16 + 16, width) - 0.5 - u
                     if not (x_lo <= 0.0 <= x_hi and y_lo <= 0.0 <= y_hi) and a > 0.0 and c > 0.0:
+                        if x_lo > x_ext or x_hi < -x_ext or y_lo > y_ext or y_hi < -y_ext:
+                            continue
+                        px = min(max(0.0, x_lo), x_hi)
+                        py = min(max(0.0, y_lo), y_hi)
+                        if 0.5 * (a * px * px + c * py * py) + b * px * py <= sure:
+                            t = ty * tiles_x + tx
+                            pair_tile[n_pairs] = t
+                            pair_gauss[n_pairs] = g
+                            counts[t + 1] += 1
+                            n_pairs += 1
+                            continue
                         best = min(
                             min(_edge_min(a, b, c, x_lo, y_lo, y_hi, True), _edge_min(a, b, c, x_hi, y_lo, y_hi, True)),
                             min(_edge_min(a, b, c, y_lo, x_lo, x_hi, False), _edge_min(a, b, c, y_hi, x_lo, x_hi, False)),
@@ -122,102 +145,151 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
     return counts, gauss
 
 
-# offsets of the per-pixel state planes inside one tile's flat buffer (256 floats each)
-_T, _LIVE, _R, _G, _B, _D, _MED, _ID = (np.uint64(256 * k) for k in range(8))
+# offsets of the per-pixel state planes inside one tile's flat buffer (256 floats each); the
+# transmittance plane's sign is the live flag (a saturated pixel keeps -T)
+_T, _R, _G, _B, _D = (np.uint64(256 * k) for k in range(5))
+#: Gaussians gathered per batch before compositing them (also the saturation-check period)
+_BATCH = 32
+# columns of the per-batch gathered parameters (one row of _BATCH floats each)
+_GX, _GY, _CA, _CB, _CC, _OPA, _AMIN, _CR, _CG, _CBL, _Z = range(11)
 
 
-@fork_safe
-@numba.njit(parallel=True, fastmath=True, cache=True)
+def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
+    """The compositing kernel with the output flags compiled in as constants (one specialisation each)."""
+
+    @fork_safe
+    @numba.njit(parallel=True, fastmath=True, cache=True)
+    def composite_tiles(
+        offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
+        out_rgb, out_alpha, out_depth, out_median, out_ids,
+    ):  # pragma: no cover - compiled; covered through render() and the oracle tests
+        n_tiles = offsets.shape[0] - 1
+        amax = np.float32(alpha_max)
+        t_min = np.float32(1e-4)
+        half = np.float32(0.5)
+        zero = np.float32(0.0)
+        one = np.float32(1.0)
+        for tile in numba.prange(n_tiles):
+            start, end = offsets[tile], offsets[tile + 1]
+            ty = tile // tiles_x
+            tx = tile - ty * tiles_x
+            x0 = tx * 16
+            y0 = ty * 16
+            state = np.zeros(256 * 5, np.float32)
+            state[:256] = 1.0
+            last = np.full(256 if want_ids else 1, -1, np.int32)  # list position of the median Gaussian
+            par = np.empty((11, _BATCH), np.float32)
+            rows = np.empty((2, _BATCH), np.int64)
+            for b0 in range(start, end, _BATCH):
+                nb = min(_BATCH, end - b0)
+                for j in range(nb):  # gather: independent loads, so their cache misses overlap
+                    g = gauss[b0 + j]
+                    gy = packed[g, PY] - np.float32(y0 + 0.5)
+                    ry = packed[g, RADY]
+                    par[_GX, j] = packed[g, PX] - np.float32(x0 + 0.5)
+                    par[_GY, j] = gy
+                    par[_CA, j] = np.float32(0.5) * packed[g, CA]
+                    par[_CB, j] = packed[g, CB]
+                    par[_CC, j] = np.float32(0.5) * packed[g, CC]
+                    par[_OPA, j] = packed[g, OPA]
+                    par[_AMIN, j] = packed[g, AMIN]
+                    if want_color:
+                        par[_CR, j] = packed[g, CR]
+                        par[_CG, j] = packed[g, CG]
+                        par[_CBL, j] = packed[g, CBL]
+                    if want_depth or want_ids:
+                        par[_Z, j] = packed[g, DEPTH]
+                    rows[0, j] = max(int(math.ceil(gy - ry)), 0)
+                    rows[1, j] = min(int(math.floor(gy + ry)) + 1, 16)
+                for j in range(nb):
+                    gx, gy = par[_GX, j], par[_GY, j]
+                    ca, cb, cc = par[_CA, j], par[_CB, j], par[_CC, j]
+                    opa, amin = par[_OPA, j], par[_AMIN, j]
+                    cr, cg, cbl = par[_CR, j], par[_CG, j], par[_CBL, j]
+                    z = par[_Z, j]
+                    at = np.int32(b0 + j - start)
+                    for row in range(rows[0, j], rows[1, j]):
+                        dy = np.float32(row) - gy
+                        cdy = cc * dy * dy
+                        bdy = cb * dy
+                        base = np.uint64(row * 16)
+                        for col in range(16):
+                            p = base + np.uint64(col)
+                            dx = np.float32(col) - gx
+                            sigma = ca * dx * dx + bdy * dx + cdy
+                            alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
+                            alpha = alpha if (sigma >= zero and alpha >= amin) else zero
+                            t_before = state[p]
+                            t_after = t_before * (one - alpha)
+                            take = t_after > t_min  # false for a saturated pixel (negative T)
+                            w = alpha * t_before if take else zero
+                            if want_color:
+                                state[p + _R] += w * cr
+                                state[p + _G] += w * cg
+                                state[p + _B] += w * cbl
+                            if want_depth:
+                                state[p + _D] += w * z
+                            if want_ids:
+                                hit = w > zero and t_before > half
+                                last[p] = at if hit else last[p]
+                            state[p] = t_after if take else -abs(t_before)
+                if nb == _BATCH:
+                    live = 0
+                    for p in range(256):
+                        live += 1 if state[p] > zero else 0
+                    if live == 0:
+                        break
+            for row in range(min(16, height - y0)):
+                for col in range(min(16, width - x0)):
+                    p = row * 16 + col
+                    py, px = y0 + row, x0 + col
+                    t = abs(state[p])
+                    a = one - t
+                    out_alpha[py, px] = a
+                    if want_color:
+                        out_rgb[py, px, 0] = state[256 + p]
+                        out_rgb[py, px, 1] = state[512 + p]
+                        out_rgb[py, px, 2] = state[768 + p]
+                    if want_depth:
+                        out_depth[py, px] = state[1024 + p] / a if a > zero else zero
+                    if want_ids:
+                        if last[p] >= 0:
+                            g = gauss[start + last[p]]
+                            out_median[py, px] = packed[g, DEPTH]
+                            out_ids[py, px] = np.int32(np.float32(instance_ids[g])) if t <= half else -1
+                        else:
+                            out_median[py, px] = zero
+                            out_ids[py, px] = -1
+
+    return composite_tiles
+
+
+_COMPOSITE_KERNELS: dict[tuple[bool, bool, bool], object] = {}
+
+
 def composite(
     offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
     want_color, want_depth, want_ids,
     out_rgb, out_alpha, out_depth, out_median, out_ids,
-):  # pragma: no cover - compiled; covered through render() and the oracle tests
+):
     """Composite every tile front to back into the output images (in place).
 
-    One flat float32 buffer holds the tile's 8 state planes (transmittance, live flag,
-    r, g, b, Σw·z, median z, median id) and is indexed with unsigned integers: signed
-    indices make numba emit wraparound checks that stop LLVM from vectorising the row.
+    Per tile: one flat float32 buffer holds its state planes (transmittance, whose sign is the
+    live flag, r, g, b, Σw·z; with ids, an int32 plane holds the list position of each pixel's
+    median Gaussian, whose depth and id are read at the end), indexed with unsigned integers (signed
+    indices make numba emit wraparound checks that stop LLVM from vectorising the row). The
+    tile's list is walked in batches of 32: each batch's parameters are first gathered into a
+    small contiguous buffer, then composited; the tile stops after a batch that left every
+    pixel saturated. The output flags select a specialisation compiled with them as constants.
     """
-    n_tiles = offsets.shape[0] - 1
-    amax = np.float32(alpha_max)
-    t_min = np.float32(1e-4)
-    half = np.float32(0.5)
-    zero = np.float32(0.0)
-    one = np.float32(1.0)
-    for tile in numba.prange(n_tiles):
-        start, end = offsets[tile], offsets[tile + 1]
-        ty = tile // tiles_x
-        tx = tile - ty * tiles_x
-        x0 = tx * 16
-        y0 = ty * 16
-        state = np.zeros(256 * 8, np.float32)
-        state[:512] = 1.0
-        state[1792:] = -1.0
-        for k in range(start, end):
-            g = gauss[k]
-            gx = packed[g, PX] - np.float32(x0 + 0.5)
-            gy = packed[g, PY] - np.float32(y0 + 0.5)
-            ca = np.float32(0.5) * packed[g, CA]
-            cb = packed[g, CB]
-            cc = np.float32(0.5) * packed[g, CC]
-            opa = packed[g, OPA]
-            amin = packed[g, AMIN]
-            cr, cg, cbl = packed[g, CR], packed[g, CG], packed[g, CBL]
-            z = packed[g, DEPTH]
-            gid = np.float32(instance_ids[g])
-            ry = packed[g, RADY]
-            r0 = max(int(math.ceil(gy - ry)), 0)
-            r1 = min(int(math.floor(gy + ry)) + 1, 16)
-            for row in range(r0, r1):
-                dy = np.float32(row) - gy
-                cdy = cc * dy * dy
-                bdy = cb * dy
-                base = np.uint64(row * 16)
-                for col in range(16):
-                    p = base + np.uint64(col)
-                    dx = np.float32(col) - gx
-                    sigma = ca * dx * dx + bdy * dx + cdy
-                    alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
-                    alpha = alpha if (sigma >= zero and alpha >= amin) else zero
-                    alpha = alpha * state[p + _LIVE]
-                    t_before = state[p]
-                    t_after = t_before * (one - alpha)
-                    take = zero if t_after <= t_min else one
-                    w = alpha * t_before * take
-                    if want_color:
-                        state[p + _R] += w * cr
-                        state[p + _G] += w * cg
-                        state[p + _B] += w * cbl
-                    if want_depth:
-                        state[p + _D] += w * z
-                    if want_ids:
-                        hit = w > zero and t_before > half
-                        state[p + _MED] = z if hit else state[p + _MED]
-                        state[p + _ID] = gid if hit else state[p + _ID]
-                    state[p] = t_after if take > zero else t_before
-                    state[p + _LIVE] *= take
-            if (k - start) % 32 == 31:
-                live = zero
-                for p in range(256):
-                    live += state[256 + p]
-                if live == zero:
-                    break
-        for row in range(min(16, height - y0)):
-            for col in range(min(16, width - x0)):
-                p = row * 16 + col
-                py, px = y0 + row, x0 + col
-                a = one - state[p]
-                out_alpha[py, px] = a
-                if want_color:
-                    out_rgb[py, px, 0] = state[512 + p]
-                    out_rgb[py, px, 1] = state[768 + p]
-                    out_rgb[py, px, 2] = state[1024 + p]
-                if want_depth:
-                    out_depth[py, px] = state[1280 + p] / a if a > zero else zero
-                if want_ids:
-                    out_median[py, px] = state[1536 + p]
-                    out_ids[py, px] = np.int32(state[1792 + p]) if state[p] <= half else -1
+    key = (bool(want_color), bool(want_depth), bool(want_ids))
+    kernel = _COMPOSITE_KERNELS.get(key)
+    if kernel is None:
+        kernel = _COMPOSITE_KERNELS[key] = _make_composite(*key)
+    kernel(
+        offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
+        out_rgb, out_alpha, out_depth, out_median, out_ids,
+    )
 
 
 @numba.njit(cache=True)
@@ -257,8 +329,17 @@ def bin_visible(packed: np.ndarray, rects: np.ndarray, width: int, height: int, 
     tiles_x, tiles_y = (width + 15) // 16, (height + 15) // 16
     visible = np.flatnonzero(rects[:, 1] > rects[:, 0])
     order = depth_order(visible, np.ascontiguousarray(packed[:, DEPTH]))
-    areas = (rects[order, 1] - rects[order, 0]).astype(np.int64) * (rects[order, 3] - rects[order, 2])
-    return bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, int(areas.sum()))
+    return bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, pair_capacity(order, rects))
+
+
+@numba.njit(cache=True)
+def pair_capacity(order, rects):  # pragma: no cover - compiled
+    """The sum of the tile rectangles' areas of the Gaussians ``order``: an upper bound on the pairs."""
+    total = 0
+    for k in range(order.shape[0]):
+        g = order[k]
+        total += (rects[g, 1] - rects[g, 0]) * np.int64(rects[g, 3] - rects[g, 2])
+    return total
 
 
 def rasterize(packed: np.ndarray, rects: np.ndarray, instance_ids: np.ndarray, width: int, height: int,

@@ -50,6 +50,35 @@ def test_compiled_compositor_matches_brute_force(seed: int, tight: bool) -> None
     assert (got["instance_ids"] >= 0).any() and (got["alpha"] > 0.5).mean() > 0.3 and (got["alpha"] > 0.99).any()
 
 
+@pytest.mark.parametrize("flags", [(c, d, i) for c in (True, False) for d in (True, False) for i in (True, False)])
+def test_every_output_specialisation_matches_brute_force(flags: tuple[bool, bool, bool]) -> None:
+    """Each compiled specialisation of the compositor (output flags as constants) against the brute force:
+    the tiles hold more than one gathered batch of Gaussians and saturate, so batching and the
+    early exit are exercised; outputs not asked for are left untouched."""
+    want_color, want_depth, want_ids = flags
+    gaussians, cam, packed, rects = scene_and_projection(7, 1500, 40, 30, scale=(0.05, 0.5), opacity=(0.5, 1.0))
+    ids = gaussians.instance_ids
+    offsets, _ = raster_cpu.bin_visible(packed, rects, cam.width, cam.height, True)
+    assert np.diff(offsets).max() > 2 * 32
+    oracle = brute_force_composite(packed, rects, ids, cam.width, cam.height, SETTINGS.alpha_max)
+    got = raster_cpu.rasterize(packed, rects, ids, cam.width, cam.height, SETTINGS.alpha_max, *flags, True)
+    np.testing.assert_allclose(got["alpha"], oracle["alpha"], atol=1e-5)
+    assert (got["alpha"] > 0.999).mean() > 0.5  # most pixels saturate: the early exit is taken
+    if want_color:
+        np.testing.assert_allclose(got["rgb"], oracle["rgb"], atol=1e-5)
+    else:
+        assert got["rgb"].shape == (1, 1, 3) and not got["rgb"].any()
+    if want_depth:
+        np.testing.assert_allclose(got["depth"], oracle["depth"], rtol=1e-5, atol=1e-5)
+    else:
+        assert got["depth"].shape == (1, 1) and not got["depth"].any()
+    if want_ids:
+        np.testing.assert_array_equal(got["median_depth"], oracle["median_depth"].astype(np.float32))
+        np.testing.assert_array_equal(got["instance_ids"], oracle["instance_ids"])
+    else:
+        assert got["instance_ids"].shape == (1, 1) and (got["instance_ids"] == -1).all()
+
+
 @pytest.mark.parametrize("seed", [3, 4])
 def test_torch_compositor_matches_brute_force(seed: int) -> None:
     gaussians, cam, packed, rects = scene_and_projection(seed, 200, 29, 23, scale=(0.05, 0.5), opacity=(0.3, 1.0))
