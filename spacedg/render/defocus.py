@@ -71,7 +71,7 @@ from spacedg.render.colour import srgb_to_linear
 from spacedg.render.project_cpu import AMIN, CBL, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 from spacedg.render.settings import DEFOCUS_SLAB
 
-__all__ = ["apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "slab_of"]
+__all__ = ["MEASURE_SCALE", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of"]
 
 
 def slab_of(depths: np.ndarray) -> np.ndarray:
@@ -168,10 +168,23 @@ def measurement_camera(camera: Any, margin: int, scale: float | None = None) -> 
         camera = replace(camera, cx=camera.cx + margin, cy=camera.cy + margin, width=camera.width + 2 * margin, height=camera.height + 2 * margin)
     if scale == 1.0:
         return camera
+    # whole tiles, grown evenly on both sides: the pass composites every pixel of a tile (also those
+    # past the frame's edge), and a frame cut inside a tile would measure the Gaussians on its right
+    # and bottom edges more fully than those on its left and top (on an opaque wall, 2 % more light)
+    width, height = max(1, math.ceil(camera.width * scale)), max(1, math.ceil(camera.height * scale))
+    grow_x, grow_y = -width % 16, -height % 16
     return replace(
-        camera, fx=camera.fx * scale, fy=camera.fy * scale, cx=camera.cx * scale, cy=camera.cy * scale,
-        width=max(1, math.ceil(camera.width * scale)), height=max(1, math.ceil(camera.height * scale)),
+        camera, fx=camera.fx * scale, fy=camera.fy * scale,
+        cx=camera.cx * scale + grow_x // 2, cy=camera.cy * scale + grow_y // 2, width=width + grow_x, height=height + grow_y,
     )
+
+
+def measurement_settings(settings: Any, scale: float | None = None) -> Any:
+    """``settings`` for the sharp pass at ``scale`` (default :data:`MEASURE_SCALE`): the ``eps2d``
+    dilation × scale², so that every measured footprint is the full-resolution one scaled (the
+    ratios the pass yields then do not depend on the scale but through pixel sampling)."""
+    scale = MEASURE_SCALE if scale is None else float(scale)
+    return settings if scale == 1.0 else replace(settings, eps2d=settings.eps2d * scale * scale)
 
 
 def render_cpu(
@@ -188,7 +201,7 @@ def render_cpu(
     # pass 1: the sharp view, widened by a margin, measured
     margin = measurement_margin(packed, rects, width, height)
     wide = measurement_camera(camera, margin)
-    sharp, sharp_rects = project_cpu.project_view(gaussians, wide, settings, None, want_color)  # type: ignore[arg-type]
+    sharp, sharp_rects = project_cpu.project_view(gaussians, wide, measurement_settings(settings), None, want_color)  # type: ignore[arg-type]
     offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, wide.width, wide.height, tight)
     pair_out = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
     lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)

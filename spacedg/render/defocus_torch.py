@@ -300,12 +300,12 @@ def render_torch(
     want_color: bool, want_depth: bool, want_ids: bool,
 ) -> dict[str, torch.Tensor]:
     """Both passes on the torch path: ``alpha``, ``enc`` + ``lin`` (when colour is wanted), depth/ids, ``n_pairs``."""
-    from spacedg.render.defocus import measurement_camera
+    from spacedg.render.defocus import measurement_camera, measurement_settings
 
     tight = settings.tight_tiles and settings.opacity_extent
     width, height = camera.width, camera.height
     wide = measurement_camera(camera, measurement_margin(proj, width, height))
-    sharp = project(gs, wide, settings, None, want_color)
+    sharp = project(gs, wide, measurement_settings(settings), None, want_color)
     offsets, gauss = bin_tiles(sharp, wide.width, wide.height, tight)
     pairs = measure_sharp(sharp, offsets, gauss, _slab(sharp.depths), wide.width, wide.height, settings.alpha_max)
     sums = torch.zeros(proj.means2d.shape[0], 6, dtype=torch.float64, device=pairs.device)
