@@ -68,10 +68,10 @@ import numpy as np
 
 from spacedg.limits import image_size_problem
 from spacedg.render.colour import srgb_to_linear
-from spacedg.render.project_cpu import AMIN, CBL, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
+from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 from spacedg.render.settings import DEFOCUS_SLAB
 
-__all__ = ["MEASURE_SCALE", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of"]
+__all__ = ["MEASURE_SCALE", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of", "composite_factor", "coarse_view", "upsample"]
 
 
 def slab_of(depths: np.ndarray) -> np.ndarray:
@@ -208,6 +208,12 @@ def render_cpu(
     defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pair_out)  # type: ignore[attr-defined]
     # pass 2: the blurred view, with the factors of match_factors / apply_match (compiled)
     packed, rects = defocus_cpu.match_and_apply(gauss, pair_out, sharp, wide.width, wide.height, packed, rects, want_color)
+    n_visible = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
+    factor = composite_factor(packed, rects, width, height)
+    if factor > 1:  # every visible Gaussian blurred by >= COMPOSITE_MIN_COC px: composite on a coarser grid
+        full = (width, height)
+        packed, rects, width, height = coarse_view(packed, rects, width, height, factor)
+        tiles_x = (width + 15) // 16
     offsets, gauss = raster_cpu.bin_visible(packed, rects, width, height, tight)
     out = {
         "alpha": np.zeros((height, width), np.float32),
@@ -223,7 +229,93 @@ def render_cpu(
         out["enc"], out["lin"], out["alpha"], out["depth"], out["median_depth"], out["instance_ids"],
     )
     enc, lin = out.pop("enc"), out.pop("lin")
-    out["rgb"] = decode_srgb(enc) + lin
+    out["rgb"] = decode_srgb(enc) + lin if want_color else enc
+    if factor > 1:
+        out = upsample(out, factor, *full, want_color, want_depth, want_ids)
     out["n_pairs"] = np.int64(gauss.shape[0])
-    out["n_visible"] = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
+    out["n_visible"] = n_visible
     return out
+
+
+#: Smallest circle of confusion (px) for which the blurred view is composited on a coarser grid: when
+#: every visible Gaussian is blurred by at least this much, the image has no detail finer than a
+#: Gaussian of that standard deviation and is composited at 1/factor of the resolution (factor 2 from
+#: 4 px, 4 from 8 px: at least 2 px of blur on the coarse grid) and upsampled bilinearly.
+COMPOSITE_MIN_COC = 4.0
+COMPOSITE_MAX_FACTOR = 4
+
+
+def composite_factor(packed: np.ndarray, rects: np.ndarray, width: int, height: int) -> int:
+    """1, 2 or 4: the coarsening of the blurred composite (see :data:`COMPOSITE_MIN_COC`); 1 unless
+    every visible Gaussian's circle of confusion is at least ``COMPOSITE_MIN_COC`` px and the coarse
+    grid keeps at least 16 px on each side."""
+    visible = rects[:, 1] > rects[:, 0]
+    if COMPOSITE_MIN_COC <= 0 or not visible.any():
+        return 1
+    smallest = float(packed[visible, COC].min())
+    factor = 1
+    while (
+        factor < COMPOSITE_MAX_FACTOR and smallest >= COMPOSITE_MIN_COC * factor
+        and min(width, height) >= 16 * 2 * factor
+    ):
+        factor *= 2
+    return factor
+
+
+def coarse_view(packed: np.ndarray, rects: np.ndarray, width: int, height: int, factor: int) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """The blurred projection seen on a grid ``factor`` times coarser: ``(packed, rects, width, height)``.
+
+    Means and footprint radii ÷ factor, conics × factor² (the same footprint in coarse pixels),
+    opacity and alpha floor unchanged; tile rectangles from the scaled footprints."""
+
+    f = float(factor)
+    w2, h2 = -(-width // factor), -(-height // factor)
+    packed = packed.copy()
+    packed[:, [PX, PY]] /= np.float32(f)
+    packed[:, [CA, CB, CC]] *= np.float32(f * f)
+    packed[:, [RADX, RADY]] = np.ceil(packed[:, [RADX, RADY]] / np.float32(f))
+    visible = rects[:, 1] > rects[:, 0]
+    tiles = np.array([(w2 + 15) // 16, (h2 + 15) // 16], np.float64)
+    mean = packed[:, [PX, PY]].astype(np.float64)
+    rad = packed[:, [RADX, RADY]].astype(np.float64)
+    lo = np.minimum(np.clip(np.floor((mean - rad) / 16.0), 0, None), tiles)
+    hi = np.minimum(np.clip(np.ceil((mean + rad) / 16.0), 0, None), tiles)
+    keep = visible & (hi > lo).all(axis=1)
+    rects = (np.stack([lo[:, 0], hi[:, 0], lo[:, 1], hi[:, 1]], axis=1) * keep[:, None]).astype(rects.dtype)
+    return packed, rects, w2, h2
+
+
+def _bilinear_axis(n_out: int, n_in: int, factor: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Indices ``i0, i1`` and weight ``t`` of the coarse samples around each fine pixel centre (edge-clamped)."""
+    x = (np.arange(n_out) + 0.5) / factor - 0.5
+    i0 = np.floor(x).astype(np.int64)
+    t = (x - i0).astype(np.float32)
+    return np.clip(i0, 0, n_in - 1), np.clip(i0 + 1, 0, n_in - 1), t
+
+
+def _bilinear(image: np.ndarray, factor: int, width: int, height: int) -> np.ndarray:
+    y0, y1, ty = _bilinear_axis(height, image.shape[0], factor)
+    x0, x1, tx = _bilinear_axis(width, image.shape[1], factor)
+    shape = (-1, 1) + (1,) * (image.ndim - 2)
+    rows = image[y0] * (1 - ty.reshape(shape)) + image[y1] * ty.reshape(shape)
+    shape = (1, -1) + (1,) * (image.ndim - 2)
+    return (rows[:, x0] * (1 - tx.reshape(shape)) + rows[:, x1] * tx.reshape(shape)).astype(np.float32)
+
+
+def upsample(out: dict[str, np.ndarray], factor: int, width: int, height: int, want_color: bool, want_depth: bool, want_ids: bool) -> dict[str, np.ndarray]:
+    """Coarse composite images → the view's size (new dict): colour, alpha and depth bilinear (depth as
+    Σw·z over alpha, so uncovered pixels do not pull it to 0), median depth and ids nearest; images not
+    wanted are passed through as they are."""
+    alpha = out["alpha"]
+    result = dict(out)
+    result["alpha"] = _bilinear(alpha, factor, width, height)
+    if want_color:
+        result["rgb"] = _bilinear(out["rgb"], factor, width, height)
+    if want_depth:
+        weighted = _bilinear(out["depth"] * alpha, factor, width, height)
+        result["depth"] = np.where(result["alpha"] > 0, weighted / np.maximum(result["alpha"], 1e-30), 0.0).astype(np.float32)
+    if want_ids:
+        rows, cols = (np.arange(height) // factor)[:, None], (np.arange(width) // factor)[None, :]
+        for name in ("median_depth", "instance_ids"):
+            result[name] = out[name][rows, cols]
+    return result
