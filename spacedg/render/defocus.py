@@ -52,7 +52,7 @@ every pixel of a tile); the factors are gathered and applied in one compiled pas
 (:func:`spacedg.render.defocus_cpu.match_and_apply`). When every visible Gaussian is blurred by at
 least :data:`COMPOSITE_MIN_COC` px, the image holds no detail finer than that and the blurred view
 is composited on a 2× (from 4 px) or 4× (from 8 px) coarser grid and upsampled bilinearly
-(median depth and ids: nearest). Against the full-resolution model: PSNR 47–53 dB on the built-in
+(median depth and ids: nearest). Against the full-resolution model: PSNR 45–53 dB on the built-in
 rooms and the plant capture at presets 1–5 and bench; a wall keeps its light within 0.5 %. Consequences, tested in ``tests/render/test_defocus.py``:
 
 - a uniform wall keeps its mean radiance and coverage within 1 % at every aperture up to the
