@@ -98,9 +98,11 @@ def composite_view(
             proj = project.project(gs, camera, settings, defocus, want_color)
             t1 = time.perf_counter()
             blurred = defocus is not None and defocus_torch.has_blur(proj)
+            factor = 1
             if blurred:
                 result = defocus_torch.render_torch(gs, camera, settings, proj, want_color, want_depth, want_ids)
                 stats["pairs"] = int(result.pop("n_pairs"))
+                factor = int(result.pop("factor"))
             else:
                 offsets, gauss = raster_torch.bin_tiles(proj, camera.width, camera.height, tight)
                 result = raster_torch.composite(
@@ -113,6 +115,10 @@ def composite_view(
             images["rgb"] = decode_srgb(images.pop("enc")) + images.pop("lin")
         elif want_color:
             images["rgb"] = decode_srgb(images["rgb"])
+        if factor > 1:  # the blurred view was composited on a coarser grid
+            from spacedg.render.defocus import upsample
+
+            images = upsample(images, factor, camera.width, camera.height, want_color, want_depth, want_ids)
         stats["visible"] = int(proj.visible.sum())
     t2 = time.perf_counter()
     stats["project_ms"] = (t1 - t0) * 1e3

@@ -43,7 +43,17 @@ are measured whole; a Gaussian whose sharp footprint still leaves the measured f
 factors blended with the view's means in proportion to the part left out (a footprint cut by
 the frame would otherwise be judged by its cut side alone), and Gaussians the sharp pass never
 reached (farther out, or behind opaque surfaces) take the means. With nothing blurred in the view (every visible ``r = 0``) the
-sharp render is returned, bit for bit. Consequences, tested in ``tests/render/test_defocus.py``:
+sharp render is returned, bit for bit.
+
+Cost (issue 21 part 3; ``benchmarks/defocus_speed.py``). The pass yields ratios only, so it runs at
+half the view's resolution (:data:`MEASURE_SCALE`; the ``eps2d`` dilation × ¼ so every footprint is
+the full-resolution one scaled; the frame grown evenly to whole tiles, since the pass composites
+every pixel of a tile); the factors are gathered and applied in one compiled pass
+(:func:`spacedg.render.defocus_cpu.match_and_apply`). When every visible Gaussian is blurred by at
+least :data:`COMPOSITE_MIN_COC` px, the image holds no detail finer than that and the blurred view
+is composited on a 2× (from 4 px) or 4× (from 8 px) coarser grid and upsampled bilinearly
+(median depth and ids: nearest). Against the full-resolution model: PSNR 45–53 dB on the built-in
+rooms and the plant capture at presets 1–5 and bench; a wall keeps its light within 0.5 %. Consequences, tested in ``tests/render/test_defocus.py``:
 
 - a uniform wall keeps its mean radiance and coverage within 1 % at every aperture up to the
   hard limit (the wall is wider than the blur, so light enters the frame as much as leaves
@@ -68,10 +78,10 @@ import numpy as np
 
 from spacedg.limits import image_size_problem
 from spacedg.render.colour import srgb_to_linear
-from spacedg.render.project_cpu import AMIN, CBL, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
+from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 from spacedg.render.settings import DEFOCUS_SLAB
 
-__all__ = ["apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "slab_of"]
+__all__ = ["MEASURE_SCALE", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of", "composite_factor", "coarse_view", "upsample"]
 
 
 def slab_of(depths: np.ndarray) -> np.ndarray:
@@ -152,11 +162,39 @@ def apply_match(
     return packed, rects
 
 
-def measurement_camera(camera: Any, margin: int) -> Any:
-    """``camera`` with its image widened by ``margin`` pixels on every side (same pose and lens)."""
-    if margin <= 0:
+#: Resolution of the sharp measurement pass relative to the view (see :func:`measurement_camera`).
+#: The pass only yields per-Gaussian ratios (``κ = S/M``, ``ρ = U/W``), which do not depend on the
+#: pixel size, so it runs at half the view's resolution: a quarter of the pixels (the pass was 44 %
+#: of a defocus render). 1.0 measures at full resolution (the model before issue 21).
+MEASURE_SCALE = 0.5
+
+
+def measurement_camera(camera: Any, margin: int, scale: float | None = None) -> Any:
+    """``camera`` with its image widened by ``margin`` pixels on every side (same pose and lens),
+    then imaged at ``scale`` (default :data:`MEASURE_SCALE`) of its resolution: intrinsics × scale,
+    sides ``ceil((side + 2·margin)·scale)``."""
+    scale = MEASURE_SCALE if scale is None else float(scale)
+    if margin > 0:
+        camera = replace(camera, cx=camera.cx + margin, cy=camera.cy + margin, width=camera.width + 2 * margin, height=camera.height + 2 * margin)
+    if scale == 1.0:
         return camera
-    return replace(camera, cx=camera.cx + margin, cy=camera.cy + margin, width=camera.width + 2 * margin, height=camera.height + 2 * margin)
+    # whole tiles, grown evenly on both sides: the pass composites every pixel of a tile (also those
+    # past the frame's edge), and a frame cut inside a tile would measure the Gaussians on its right
+    # and bottom edges more fully than those on its left and top (on an opaque wall, 2 % more light)
+    width, height = max(1, math.ceil(camera.width * scale)), max(1, math.ceil(camera.height * scale))
+    grow_x, grow_y = -width % 16, -height % 16
+    return replace(
+        camera, fx=camera.fx * scale, fy=camera.fy * scale,
+        cx=camera.cx * scale + grow_x // 2, cy=camera.cy * scale + grow_y // 2, width=width + grow_x, height=height + grow_y,
+    )
+
+
+def measurement_settings(settings: Any, scale: float | None = None) -> Any:
+    """``settings`` for the sharp pass at ``scale`` (default :data:`MEASURE_SCALE`): the ``eps2d``
+    dilation × scale², so that every measured footprint is the full-resolution one scaled (the
+    ratios the pass yields then do not depend on the scale but through pixel sampling)."""
+    scale = MEASURE_SCALE if scale is None else float(scale)
+    return settings if scale == 1.0 else replace(settings, eps2d=settings.eps2d * scale * scale)
 
 
 def render_cpu(
@@ -173,16 +211,19 @@ def render_cpu(
     # pass 1: the sharp view, widened by a margin, measured
     margin = measurement_margin(packed, rects, width, height)
     wide = measurement_camera(camera, margin)
-    sharp, sharp_rects = project_cpu.project_view(gaussians, wide, settings, None, want_color)  # type: ignore[arg-type]
+    sharp, sharp_rects = project_cpu.project_view(gaussians, wide, measurement_settings(settings), None, want_color)  # type: ignore[arg-type]
     offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, wide.width, wide.height, tight)
     pair_out = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
     lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
     defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pair_out)  # type: ignore[attr-defined]
-    n = packed.shape[0]
-    sums = np.stack([np.bincount(gauss, weights=pair_out[:, j], minlength=n) for j in range(pair_out.shape[1])], axis=1)
-    kappa, rho = match_factors(sums, inside_fraction(sharp, wide.width, wide.height))
-    # pass 2: the blurred view
-    packed, rects = apply_match(packed, rects, kappa, rho, want_color)
+    # pass 2: the blurred view, with the factors of match_factors / apply_match (compiled)
+    packed, rects = defocus_cpu.match_and_apply(gauss, pair_out, sharp, wide.width, wide.height, packed, rects, want_color)
+    n_visible = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
+    factor = composite_factor(packed, rects, width, height)
+    if factor > 1:  # every visible Gaussian blurred by >= COMPOSITE_MIN_COC px: composite on a coarser grid
+        full = (width, height)
+        packed, rects, width, height = coarse_view(packed, rects, width, height, factor)
+        tiles_x = (width + 15) // 16
     offsets, gauss = raster_cpu.bin_visible(packed, rects, width, height, tight)
     out = {
         "alpha": np.zeros((height, width), np.float32),
@@ -198,7 +239,93 @@ def render_cpu(
         out["enc"], out["lin"], out["alpha"], out["depth"], out["median_depth"], out["instance_ids"],
     )
     enc, lin = out.pop("enc"), out.pop("lin")
-    out["rgb"] = decode_srgb(enc) + lin
+    out["rgb"] = decode_srgb(enc) + lin if want_color else enc
+    if factor > 1:
+        out = upsample(out, factor, *full, want_color, want_depth, want_ids)
     out["n_pairs"] = np.int64(gauss.shape[0])
-    out["n_visible"] = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
+    out["n_visible"] = n_visible
     return out
+
+
+#: Smallest circle of confusion (px) for which the blurred view is composited on a coarser grid: when
+#: every visible Gaussian is blurred by at least this much, the image has no detail finer than a
+#: Gaussian of that standard deviation and is composited at 1/factor of the resolution (factor 2 from
+#: 4 px, 4 from 8 px: at least 2 px of blur on the coarse grid) and upsampled bilinearly.
+COMPOSITE_MIN_COC = 4.0
+COMPOSITE_MAX_FACTOR = 4
+
+
+def composite_factor(packed: np.ndarray, rects: np.ndarray, width: int, height: int) -> int:
+    """1, 2 or 4: the coarsening of the blurred composite (see :data:`COMPOSITE_MIN_COC`); 1 unless
+    every visible Gaussian's circle of confusion is at least ``COMPOSITE_MIN_COC`` px and the coarse
+    grid keeps at least 16 px on each side."""
+    visible = rects[:, 1] > rects[:, 0]
+    if COMPOSITE_MIN_COC <= 0 or not visible.any():
+        return 1
+    smallest = float(packed[visible, COC].min())
+    factor = 1
+    while (
+        factor < COMPOSITE_MAX_FACTOR and smallest >= COMPOSITE_MIN_COC * factor
+        and min(width, height) >= 16 * 2 * factor
+    ):
+        factor *= 2
+    return factor
+
+
+def coarse_view(packed: np.ndarray, rects: np.ndarray, width: int, height: int, factor: int) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """The blurred projection seen on a grid ``factor`` times coarser: ``(packed, rects, width, height)``.
+
+    Means and footprint radii ÷ factor, conics × factor² (the same footprint in coarse pixels),
+    opacity and alpha floor unchanged; tile rectangles from the scaled footprints."""
+
+    f = float(factor)
+    w2, h2 = -(-width // factor), -(-height // factor)
+    packed = packed.copy()
+    packed[:, [PX, PY]] /= np.float32(f)
+    packed[:, [CA, CB, CC]] *= np.float32(f * f)
+    packed[:, [RADX, RADY]] = np.ceil(packed[:, [RADX, RADY]] / np.float32(f))
+    visible = rects[:, 1] > rects[:, 0]
+    tiles = np.array([(w2 + 15) // 16, (h2 + 15) // 16], np.float64)
+    mean = packed[:, [PX, PY]].astype(np.float64)
+    rad = packed[:, [RADX, RADY]].astype(np.float64)
+    lo = np.minimum(np.clip(np.floor((mean - rad) / 16.0), 0, None), tiles)
+    hi = np.minimum(np.clip(np.ceil((mean + rad) / 16.0), 0, None), tiles)
+    keep = visible & (hi > lo).all(axis=1)
+    rects = (np.stack([lo[:, 0], hi[:, 0], lo[:, 1], hi[:, 1]], axis=1) * keep[:, None]).astype(rects.dtype)
+    return packed, rects, w2, h2
+
+
+def _bilinear_axis(n_out: int, n_in: int, factor: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Indices ``i0, i1`` and weight ``t`` of the coarse samples around each fine pixel centre (edge-clamped)."""
+    x = (np.arange(n_out) + 0.5) / factor - 0.5
+    i0 = np.floor(x).astype(np.int64)
+    t = (x - i0).astype(np.float32)
+    return np.clip(i0, 0, n_in - 1), np.clip(i0 + 1, 0, n_in - 1), t
+
+
+def _bilinear(image: np.ndarray, factor: int, width: int, height: int) -> np.ndarray:
+    y0, y1, ty = _bilinear_axis(height, image.shape[0], factor)
+    x0, x1, tx = _bilinear_axis(width, image.shape[1], factor)
+    shape = (-1, 1) + (1,) * (image.ndim - 2)
+    rows = image[y0] * (1 - ty.reshape(shape)) + image[y1] * ty.reshape(shape)
+    shape = (1, -1) + (1,) * (image.ndim - 2)
+    return (rows[:, x0] * (1 - tx.reshape(shape)) + rows[:, x1] * tx.reshape(shape)).astype(np.float32)
+
+
+def upsample(out: dict[str, np.ndarray], factor: int, width: int, height: int, want_color: bool, want_depth: bool, want_ids: bool) -> dict[str, np.ndarray]:
+    """Coarse composite images → the view's size (new dict): colour, alpha and depth bilinear (depth as
+    Σw·z over alpha, so uncovered pixels do not pull it to 0), median depth and ids nearest; images not
+    wanted are passed through as they are."""
+    alpha = out["alpha"]
+    result = dict(out)
+    result["alpha"] = _bilinear(alpha, factor, width, height)
+    if want_color:
+        result["rgb"] = _bilinear(out["rgb"], factor, width, height)
+    if want_depth:
+        weighted = _bilinear(out["depth"] * alpha, factor, width, height)
+        result["depth"] = np.where(result["alpha"] > 0, weighted / np.maximum(result["alpha"], 1e-30), 0.0).astype(np.float32)
+    if want_ids:
+        rows, cols = (np.arange(height) // factor)[:, None], (np.arange(width) // factor)[None, :]
+        for name in ("median_depth", "instance_ids"):
+            result[name] = out[name][rows, cols]
+    return result

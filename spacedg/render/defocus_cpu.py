@@ -34,11 +34,11 @@ import numba
 import numpy as np
 
 from spacedg.render.colour_cpu import _DECODE_LUT, _TOE
-from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADY
+from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 from spacedg.render.raster_cpu import _exp_neg
 from spacedg.render.threads import fork_safe
 
-__all__ = ["composite_defocus", "measure_sharp", "PAIR_M", "PAIR_S", "PAIR_W", "PAIR_U", "PAIR_COLUMNS"]
+__all__ = ["composite_defocus", "match_and_apply", "measure_sharp", "PAIR_M", "PAIR_S", "PAIR_W", "PAIR_U", "PAIR_COLUMNS"]
 
 #: Columns of :func:`measure_sharp`'s per-pair sums: M, S, W, then U for r, g, b.
 PAIR_M, PAIR_S, PAIR_W, PAIR_U = 0, 1, 2, 3
@@ -343,3 +343,67 @@ def composite_defocus(
                 if want_ids:
                     out_median[py, px] = state[2304 + p]
                     out_ids[py, px] = np.int32(state[2560 + p]) if state[p] <= half else -1
+
+
+@numba.njit(cache=True)
+def match_and_apply(gauss, pair_out, sharp, mwidth, mheight, packed, rects, want_color):  # pragma: no cover - compiled
+    """:func:`spacedg.render.defocus.match_factors` and :func:`~spacedg.render.defocus.apply_match` in one
+    compiled pass (the numpy versions took as long as the blurred composite at 448×336).
+
+    Sums each pair's row of ``pair_out`` into its Gaussian (in pair order, as ``np.bincount``),
+    takes every Gaussian's share of its footprint box inside the measured frame
+    (``mwidth`` × ``mheight``, from the ``sharp`` projection), and returns the blurred projection
+    ``(packed, rects)`` (copies) with κ and ρ applied. Means are over float64 totals; κ and ρ are
+    rounded to float32 before they are applied, as the numpy path does.
+    """
+    n = packed.shape[0]
+    sums = np.zeros((n, PAIR_COLUMNS), np.float64)
+    for k in range(gauss.shape[0]):
+        g = gauss[k]
+        for j in range(PAIR_COLUMNS):
+            sums[g, j] += np.float64(pair_out[k, j])
+    tot = np.zeros(PAIR_COLUMNS, np.float64)
+    for g in range(n):
+        for j in range(PAIR_COLUMNS):
+            tot[j] += sums[g, j]
+    kappa_mean = tot[1] / tot[0] if tot[0] > 0.0 else 1.0
+    rho_mean = np.ones(3, np.float64)
+    if tot[2] > 0.0:
+        for c in range(3):
+            rho_mean[c] = tot[3 + c] / tot[2]
+    out = packed.copy()
+    out_rects = rects.copy()
+    for g in range(n):
+        if not packed[g, COC] > 0.0:
+            continue
+        # share of the sharp footprint box inside the measured frame
+        u, v = np.float64(sharp[g, PX]), np.float64(sharp[g, PY])
+        rx = max(np.float64(sharp[g, RADX]), 0.5)
+        ry = max(np.float64(sharp[g, RADY]), 0.5)
+        fx = max(min(u + rx, np.float64(mwidth)) - max(u - rx, 0.0), 0.0) / (2.0 * rx)
+        fy = max(min(v + ry, np.float64(mheight)) - max(v - ry, 0.0), 0.0) / (2.0 * ry)
+        share = min(max(fx * fy, 0.0), 1.0)
+        m, s, w = sums[g, 0], sums[g, 1], sums[g, 2]
+        kappa = share * (s / m) + (1.0 - share) * kappa_mean if m > 0.0 else kappa_mean
+        if kappa != kappa:
+            kappa = kappa_mean
+        kappa32 = np.float32(min(max(kappa, 0.0), 1.0))
+        out[g, OPA] = packed[g, OPA] * kappa32
+        out[g, AMIN] = packed[g, AMIN] * kappa32
+        if kappa32 <= 0.0:
+            out_rects[g, 0] = 0
+            out_rects[g, 1] = 0
+            out_rects[g, 2] = 0
+            out_rects[g, 3] = 0
+        if want_color:
+            for c in range(3):
+                rho = share * (sums[g, 3 + c] / w) + (1.0 - share) * rho_mean[c] if w > 0.0 else rho_mean[c]
+                if rho != rho:
+                    rho = 1.0
+                elif rho == np.inf:
+                    rho = 1.0
+                rho32 = np.float32(max(rho, 0.0))
+                x = max(np.float64(packed[g, CR + c]), 0.0)
+                lin = x / 12.92 if x <= 0.04045 else ((x + 0.055) / 1.055) ** 2.4
+                out[g, CR + c] = np.float32(lin * np.float64(rho32))
+    return out, out_rects

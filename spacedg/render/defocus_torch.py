@@ -300,19 +300,54 @@ def render_torch(
     want_color: bool, want_depth: bool, want_ids: bool,
 ) -> dict[str, torch.Tensor]:
     """Both passes on the torch path: ``alpha``, ``enc`` + ``lin`` (when colour is wanted), depth/ids, ``n_pairs``."""
-    from spacedg.render.defocus import measurement_camera
+    from spacedg.render.defocus import measurement_camera, measurement_settings
 
     tight = settings.tight_tiles and settings.opacity_extent
     width, height = camera.width, camera.height
     wide = measurement_camera(camera, measurement_margin(proj, width, height))
-    sharp = project(gs, wide, settings, None, want_color)
+    sharp = project(gs, wide, measurement_settings(settings), None, want_color)
     offsets, gauss = bin_tiles(sharp, wide.width, wide.height, tight)
     pairs = measure_sharp(sharp, offsets, gauss, _slab(sharp.depths), wide.width, wide.height, settings.alpha_max)
     sums = torch.zeros(proj.means2d.shape[0], 6, dtype=torch.float64, device=pairs.device)
     sums.index_add_(0, gauss.long(), pairs.double())
     kappa, rho = match_factors(sums, inside_fraction(sharp, wide.width, wide.height))
     blurred = apply_match(proj, kappa, rho)
+    factor = composite_factor(blurred, width, height)
+    if factor > 1:  # as the compiled path: every visible Gaussian blurred by >= COMPOSITE_MIN_COC px
+        blurred, width, height = coarse_view(blurred, width, height, factor)
     offsets, gauss = bin_tiles(blurred, width, height, tight)
     out = composite_defocus(blurred, offsets, gauss, gs.instance_ids, width, height, settings.alpha_max, want_color, want_depth, want_ids)
     out["n_pairs"] = torch.tensor(gauss.numel())
+    out["factor"] = torch.tensor(factor)  # the caller upsamples (spacedg.render.defocus.upsample)
     return out
+
+
+def composite_factor(proj: Projected, width: int, height: int) -> int:
+    """As :func:`spacedg.render.defocus.composite_factor`, from a torch projection."""
+    from spacedg.render.defocus import COMPOSITE_MAX_FACTOR, COMPOSITE_MIN_COC
+
+    visible = proj.visible
+    if COMPOSITE_MIN_COC <= 0 or proj.coc is None or not bool(visible.any()):
+        return 1
+    smallest = float(proj.coc[visible].min())
+    factor = 1
+    while factor < COMPOSITE_MAX_FACTOR and smallest >= COMPOSITE_MIN_COC * factor and min(width, height) >= 16 * 2 * factor:
+        factor *= 2
+    return factor
+
+
+def coarse_view(proj: Projected, width: int, height: int, factor: int) -> tuple[Projected, int, int]:
+    """As :func:`spacedg.render.defocus.coarse_view`: the projection on a grid ``factor`` times coarser."""
+    f = float(factor)
+    w2, h2 = -(-width // factor), -(-height // factor)
+    visible = proj.visible
+    means2d = proj.means2d / f
+    radii = torch.ceil(proj.radii.to(means2d.dtype) / f)
+    wide = torch.float64 if means2d.device.type != "mps" else means2d.dtype
+    limits = torch.tensor([(w2 + TILE_SIZE - 1) // TILE_SIZE, (h2 + TILE_SIZE - 1) // TILE_SIZE], dtype=wide, device=means2d.device)
+    lo = torch.minimum(torch.clamp(torch.floor((means2d.to(wide) - radii.to(wide)) / TILE_SIZE), min=0), limits)
+    hi = torch.minimum(torch.clamp(torch.ceil((means2d.to(wide) + radii.to(wide)) / TILE_SIZE), min=0), limits)
+    keep = visible & (hi > lo).all(-1)
+    rects = torch.stack([lo[:, 0], hi[:, 0], lo[:, 1], hi[:, 1]], dim=-1).to(torch.int32) * keep[:, None]
+    radii = torch.where(keep[:, None], radii, torch.zeros_like(radii)).to(torch.int32)
+    return replace(proj, means2d=means2d, conics=proj.conics * (f * f), radii=radii, rects=rects), w2, h2

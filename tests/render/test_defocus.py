@@ -107,3 +107,80 @@ def test_backends_agree_on_huge_gaussians(scale: float) -> None:
         np.testing.assert_allclose(cpu.alpha, torch_.alpha, atol=1e-5)
         np.testing.assert_allclose(cpu.rgb, torch_.rgb, atol=1e-5)
         assert cpu.alpha.min() > 0.5  # it covers the view (from afar, most of it)
+
+
+# ---------------------------------------------------------------- issue 21 part 3: the cheaper passes
+def test_the_compiled_factors_are_the_numpy_factors_bit_for_bit() -> None:
+    """defocus_cpu.match_and_apply = match_factors + inside_fraction + apply_match (the numpy reference)."""
+    from spacedg.render import defocus as model
+    from spacedg.render import defocus_cpu, project_cpu, raster_cpu
+    from spacedg.render.colour import srgb_to_linear
+    from spacedg.render.project_cpu import CBL, CG, CR, DEPTH
+    from spacedg.render.settings import RasterSettings
+
+    g = random_gaussians(3000, np.random.default_rng(3))
+    cam, settings = camera(96, 72), RasterSettings()
+    packed, rects = project_cpu.project_view(g, cam, settings, Defocus(12.0, 3.0), True)
+    wide = model.measurement_camera(cam, model.measurement_margin(packed, rects, 96, 72))
+    sharp, sharp_rects = project_cpu.project_view(g, wide, model.measurement_settings(settings), None, True)
+    offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, wide.width, wide.height, True)
+    pairs = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
+    lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
+    defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, model.slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pairs)
+    sums = np.stack([np.bincount(gauss, weights=pairs[:, j], minlength=len(g)) for j in range(pairs.shape[1])], axis=1)
+    kappa, rho = model.match_factors(sums, model.inside_fraction(sharp, wide.width, wide.height))
+    want = model.apply_match(packed, rects, kappa, rho, True)
+    got = defocus_cpu.match_and_apply(gauss, pairs, sharp, wide.width, wide.height, packed, rects, True)
+    np.testing.assert_array_equal(got[1], want[1])
+    np.testing.assert_allclose(got[0], want[0], rtol=2e-7, atol=0)  # the view's means: float64 totals summed in another order
+
+
+def test_the_measurement_frame_is_half_the_view_in_whole_tiles_centred() -> None:
+    from spacedg.render.defocus import MEASURE_SCALE, measurement_camera
+
+    cam = Camera(100.0, 90.0, 224.0, 168.0, 448, 336, np.eye(4))
+    wide = measurement_camera(cam, 63)
+    assert MEASURE_SCALE == 0.5 and (wide.width, wide.height) == (288, 240)  # ceil(574 / 2) = 287 → 288; 231 → 240
+    assert (wide.fx, wide.fy) == (50.0, 45.0)
+    assert wide.cx == pytest.approx((224.0 + 63) * 0.5 + 0) and wide.cy == pytest.approx((168.0 + 63) * 0.5 + 4)
+    assert measurement_camera(cam, 63, 1.0).width == 574  # full resolution: the frame as it was
+
+
+@pytest.mark.parametrize("backend", ["cpu", "torch"])
+def test_a_view_blurred_everywhere_is_composited_coarse_with_its_light(room_views, backend: str) -> None:
+    """Every visible Gaussian blurred by >= COMPOSITE_MIN_COC px: the blurred view is composited on a 2× or 4×
+    coarser grid and upsampled; it keeps its light and is within 1/255 mean of the full-resolution composite."""
+    from spacedg.render import defocus as model
+
+    gaussians, cams = room_views
+    cam = cams[1]
+    defocus = Defocus(40.0, 30.0)  # focus far behind the room: everything blurred by >= 25 px
+    coarse = render(gaussians, cam, defocus=defocus, backend=backend, outputs="rgb,depth")
+    saved = model.COMPOSITE_MIN_COC
+    model.COMPOSITE_MIN_COC = 0.0  # full-resolution composite (the model before)
+    try:
+        full = render(gaussians, cam, defocus=defocus, backend=backend, outputs="rgb,depth")
+    finally:
+        model.COMPOSITE_MIN_COC = saved
+    assert coarse.stats["pairs"] < 0.4 * full.stats["pairs"]
+    assert coarse.rgb.mean() == pytest.approx(full.rgb.mean(), rel=0.005)
+    assert coarse.alpha.mean() == pytest.approx(full.alpha.mean(), rel=0.005)
+    assert np.abs(coarse.rgb - full.rgb).mean() < 1.0 / 255
+    covered = full.alpha > 0.5
+    assert np.abs(coarse.depth - full.depth)[covered].mean() < 0.01 * full.depth[covered].mean()
+
+
+def test_the_backends_agree_on_a_coarse_composite() -> None:
+    g = random_gaussians(3000, np.random.default_rng(0))
+    cam = camera(96, 72)
+    from spacedg.render import defocus as model
+    from spacedg.render import project_cpu
+    from spacedg.render.settings import RasterSettings
+
+    for defocus in (Defocus(30.0, 0.5), Defocus(60.0, 0.3)):
+        assert model.composite_factor(*project_cpu.project_view(g, cam, RasterSettings(), defocus, True), 96, 72) == 4
+        compiled = render(g, cam, defocus=defocus, backend="cpu", outputs="all")
+        reference = render(g, cam, defocus=defocus, backend="torch", outputs="all")
+        assert np.abs(compiled.rgb - reference.rgb).max() < 1e-3
+        assert np.abs(compiled.alpha - reference.alpha).max() < 1e-4
+        np.testing.assert_array_equal(compiled.instance_ids, reference.instance_ids)

@@ -1,0 +1,171 @@
+"""Defocus cost and error by scene and severity: the model before issue 21 part 3 beside today's.
+
+Prints one table (never part of the test run). Per scene (built-in rooms 0 and 1, the shared plant
+capture when ``../shared/data/splats/plant`` exists), defocus preset (1–5 and bench, mid-range
+aperture) and focus (``near``: the low end of the preset's focus range, 1 m at the 2.5 m reference
+depth, i.e. 0.4 × the view's median depth; ``far``: the high end, 8 m → 3.2 × the median depth;
+the foreground is then the most blurred), at 448×336 on the compiled CPU path:
+
+- ``clean ms``: a sharp render (median);
+- ``old ×`` / ``new ×``: a defocus render's time over the clean render's, old and new timed
+  alternately in one process (medians of ``--runs``). **old** is the model as it was (sharp
+  measurement pass at full resolution, factors in numpy: :func:`old_render_cpu`, a verbatim copy);
+  **new** is :func:`spacedg.render.defocus.render_cpu`;
+- ``PSNR`` (dB, sRGB-encoded, clipped to [0, 1]) and ``mean|Δ|`` (linear light) of new against old;
+- ``energy``: mean linear radiance / mean alpha of the defocus render over the sharp render's,
+  old then new (the model keeps a view's light; see :mod:`spacedg.render.defocus`).
+
+    .venv/bin/python benchmarks/defocus_speed.py [--threads 1] [--runs 5] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from spacedg.render import Defocus, render  # noqa: E402
+from spacedg.render import defocus as model  # noqa: E402
+from spacedg.render.colour import linear_to_srgb, srgb_to_linear  # noqa: E402
+from spacedg.render.project_cpu import CBL, CG, CR, DEPTH  # noqa: E402
+from spacedg.scene.synthetic import generate_room  # noqa: E402
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "splats"
+PLANT = SHARED / "plant" / "plant.splat"
+WIDTH, HEIGHT = 448, 336
+SEVERITIES = ("1", "2", "3", "4", "5", "bench")
+
+
+def old_render_cpu(gaussians, camera, settings, packed, rects, instance_ids, want_color, want_depth, want_ids):  # type: ignore[no-untyped-def]
+    """The defocus driver before issue 21 part 3 (full-resolution measurement, numpy factors), verbatim."""
+    from spacedg.render import defocus_cpu, project_cpu, raster_cpu
+    from spacedg.render.colour_cpu import decode_srgb
+
+    width, height = camera.width, camera.height
+    tight = settings.tight_tiles and settings.opacity_extent
+    tiles_x = (width + 15) // 16
+    margin = model.measurement_margin(packed, rects, width, height)
+    wide = model.measurement_camera(camera, margin, 1.0)
+    sharp, sharp_rects = project_cpu.project_view(gaussians, wide, settings, None, want_color)
+    offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, wide.width, wide.height, tight)
+    pair_out = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
+    lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
+    defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, model.slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pair_out)
+    n = packed.shape[0]
+    sums = np.stack([np.bincount(gauss, weights=pair_out[:, j], minlength=n) for j in range(pair_out.shape[1])], axis=1)
+    kappa, rho = model.match_factors(sums, model.inside_fraction(sharp, wide.width, wide.height))
+    packed, rects = model.apply_match(packed, rects, kappa, rho, want_color)
+    offsets, gauss = raster_cpu.bin_visible(packed, rects, width, height, tight)
+    out = {
+        "alpha": np.zeros((height, width), np.float32),
+        "enc": np.zeros((height, width, 3) if want_color else (1, 1, 3), np.float32),
+        "lin": np.zeros((height, width, 3) if want_color else (1, 1, 3), np.float32),
+        "depth": np.zeros((height, width) if want_depth else (1, 1), np.float32),
+        "median_depth": np.zeros((height, width) if want_ids else (1, 1), np.float32),
+        "instance_ids": np.full((height, width) if want_ids else (1, 1), -1, np.int32),
+    }
+    defocus_cpu.composite_defocus(
+        offsets, gauss, packed, instance_ids, width, height, tiles_x, settings.alpha_max,
+        want_color, want_depth, want_ids,
+        out["enc"], out["lin"], out["alpha"], out["depth"], out["median_depth"], out["instance_ids"],
+    )
+    enc, lin = out.pop("enc"), out.pop("lin")
+    out["rgb"] = decode_srgb(enc) + lin
+    out["n_pairs"] = np.int64(gauss.shape[0])
+    out["n_visible"] = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
+    return out
+
+
+NEW_RENDER_CPU = model.render_cpu
+
+
+def scenes(quick: bool) -> list[tuple[str, object, object]]:
+    out = []
+    for seed in (0,) if quick else (0, 1):
+        room = generate_room(seed=seed)
+        names = sorted(room.views)
+        out.append((f"room {seed}", room.gaussians, room.views[names[len(names) // 2]].resized(WIDTH, HEIGHT)))
+    if PLANT.exists():
+        from benchmarks.render import plant_scene
+
+        g, cam = plant_scene()
+        out.append(("plant", g, cam.resized(WIDTH, HEIGHT)))
+    else:
+        print(f"(plant skipped: {PLANT} not found)")
+    return out
+
+
+def median_depth(g, cam) -> float:  # type: ignore[no-untyped-def]
+    frame = render(g, cam, outputs="depth,alpha")
+    covered = frame.alpha > 0.5
+    return float(np.median(frame.depth[covered])) if covered.any() else 1.0
+
+
+def encoded(rgb: np.ndarray) -> np.ndarray:
+    return np.clip(linear_to_srgb(rgb.astype(np.float64)), 0.0, 1.0)
+
+
+def psnr(image: np.ndarray, reference: np.ndarray) -> float:
+    mse = float(np.mean((encoded(image) - encoded(reference)) ** 2))
+    return math.inf if mse == 0.0 else 10.0 * math.log10(1.0 / mse)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--threads", type=int, default=None, help="numba threads (default: numba's)")
+    parser.add_argument("--runs", type=int, default=5, help="alternating timed runs per cell (default 5)")
+    parser.add_argument("--quick", action="store_true", help="room 0 and the plant, severities 1, 3, 5")
+    args = parser.parse_args()
+    import numba
+
+    from spacedg.plugins.degradations.defocus import SPEC
+    from spacedg.plugins.specs import REFERENCE_DEPTH_M
+
+    if args.threads:
+        numba.set_num_threads(args.threads)
+    print(f"numba threads {numba.get_num_threads()}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; "
+          f"{WIDTH}x{HEIGHT}, compiled CPU path, medians of {args.runs} alternating runs")
+    print(f"{'scene':<8} {'sev':<5} {'focus':<9} {'aper':>5} {'clean ms':>8} | {'old ms':>7} {'new ms':>7} | "
+          f"{'old ×':>6} {'new ×':>6} | {'PSNR':>6} {'mean|Δ|':>8} | energy old rad/cov  new rad/cov")
+    severities = ("1", "3", "5") if args.quick else SEVERITIES
+    for name, g, cam in scenes(args.quick):
+        depth = median_depth(g, cam)
+        for severity in severities:
+            preset = SPEC.presets[severity]
+            aperture = 0.5 * (preset["aperture"].low + preset["aperture"].high)
+            focus_range = preset["depth"]
+            for label, focus_m in (("near", focus_range.low), ("far", focus_range.high)):
+                focus = focus_m * depth / REFERENCE_DEPTH_M
+                defocus = Defocus(aperture, focus)
+                sharp = render(g, cam)
+                frames = {}
+                times: dict[str, list[float]] = {"clean": [], "old": [], "new": []}
+                for i in range(args.runs + 1):
+                    for which in ("clean", "old", "new"):
+                        model.render_cpu = old_render_cpu if which == "old" else NEW_RENDER_CPU
+                        start = time.perf_counter()
+                        frame = render(g, cam) if which == "clean" else render(g, cam, defocus=defocus)
+                        if i > 0:
+                            times[which].append(time.perf_counter() - start)
+                        frames[which] = frame
+                model.render_cpu = NEW_RENDER_CPU
+                ms = {k: 1e3 * float(np.median(v)) for k, v in times.items()}
+                old, new = frames["old"], frames["new"]
+                diff = float(np.abs(new.rgb - old.rgb).mean())
+                energy = "  ".join(
+                    f"{f.rgb.mean() / sharp.rgb.mean():.3f}/{f.alpha.mean() / sharp.alpha.mean():.3f}" for f in (old, new)
+                )
+                print(f"{name:<8} {severity:<5} {label} {focus:4.2f} {aperture:5.1f} {ms['clean']:8.1f} | {ms['old']:7.1f} {ms['new']:7.1f} | "
+                      f"{ms['old'] / ms['clean']:6.2f} {ms['new'] / ms['clean']:6.2f} | {psnr(new.rgb, old.rgb):6.2f} {diff:8.5f} | "
+                      f"      {energy}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
