@@ -24,7 +24,7 @@ from spacedg.limits import image_size_problem
 from spacedg.render.camera import Camera
 from spacedg.render.colour import srgb_to_linear
 from spacedg.render.project import GaussianTensors, Projected, project
-from spacedg.render.raster_torch import bin_tiles
+from spacedg.render.raster_torch import advance_transmittance, bin_tiles, median_update
 from spacedg.render.settings import (
     DEFOCUS_SLAB,
     TILE_SIZE,
@@ -126,11 +126,8 @@ def measure_sharp(
                 else:
                     u = torch.einsum("bpc,bpk->bck", weight, rho)
                     out[pair[in_list], 3:] += u[in_list]
-                n_take = take.sum(-1)
-                t_last = torch.gather(t_after, 2, torch.clamp(n_take - 1, min=0)[..., None])[..., 0]
-                trans = torch.where(n_take > 0, t_last, trans)
-                alive = alive & take.all(-1)
-                if not bool(alive.any()):
+                trans, alive, open_ = advance_transmittance(trans, alive, t_after, take)
+                if not open_:
                     break
             if sweep == 1:
                 rho = torch.where(mix > 0, srgb_to_linear(enc) / torch.clamp(mix, min=1e-30), torch.ones_like(mix))
@@ -266,12 +263,7 @@ def composite_defocus(
             if want_depth:
                 depth = depth + (weight * proj.depths[g][:, None, :]).sum(-1)
             if want_ids:
-                hit = (weight > 0) & (t_before > 0.5)
-                last = (hit * (steps + 1)).amax(-1)
-                has = last > 0
-                pick = torch.gather(g[:, None, :].expand(-1, px.shape[1], -1), 2, torch.clamp(last - 1, min=0)[..., None])[..., 0]
-                median = torch.where(has, proj.depths[pick], median)
-                ids = torch.where(has, instance_ids[pick], ids)
+                median, ids = median_update(((weight > 0) & (t_before > 0.5)), g, steps, proj.depths, instance_ids, median, ids)
             if not bool(alive.any()):
                 break
         trans_all[tiles], enc_all[tiles], lin_all[tiles], depth_all[tiles] = trans, enc, lin, depth

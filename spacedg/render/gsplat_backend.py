@@ -274,7 +274,7 @@ def median_pass(
     """
     import torch
 
-    from spacedg.render.raster_torch import chunk_of_lists
+    from spacedg.render.raster_torch import chunk_of_lists, median_update
 
     device, dtype = proj.means2d.device, proj.means2d.dtype
     tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
@@ -308,12 +308,7 @@ def median_pass(
             alpha = torch.where(ok, alpha, torch.zeros_like(alpha))
             kept = torch.cumprod(1.0 - alpha, dim=-1)
             t_before = trans[:, :, None] * torch.cat([torch.ones_like(kept[..., :1]), kept[..., :-1]], dim=-1)
-            hit = (alpha > 0) & (t_before > 0.5)
-            last = (hit * (steps + 1)).amax(-1)
-            has = last > 0
-            pick = torch.gather(g[:, None, :].expand(-1, px.shape[1], -1), 2, torch.clamp(last - 1, min=0)[..., None])[..., 0]
-            median = torch.where(has, proj.depths[pick], median)
-            ids = torch.where(has, instance_ids[pick], ids)
+            median, ids = median_update(((alpha > 0) & (t_before > 0.5)), g, steps, proj.depths, instance_ids, median, ids)
             trans = trans * kept[..., -1]
             if not bool((trans > 0.5).any()):
                 break
@@ -397,7 +392,6 @@ def _project(gs, camera: Camera, settings: RasterSettings, want_color: bool):  #
 
 def _sharp_ids(gs, camera: Camera, settings: RasterSettings, proj, ops: GsplatOps, offsets=None, flatten_ids=None):  # type: ignore[no-untyped-def]
     """Median depth and ids of one image from gsplat's tile lists (computed here if not given)."""
-    import torch
 
     if offsets is None:
         tiles_x = (camera.width + TILE_SIZE - 1) // TILE_SIZE

@@ -100,6 +100,18 @@ def advance_transmittance(
     return trans, alive, bool(alive.any())
 
 
+def median_update(
+    hit: torch.Tensor, g: torch.Tensor, steps: torch.Tensor, depths: torch.Tensor, instance_ids: torch.Tensor,
+    median: torch.Tensor, ids: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Median depth and instance id per pixel after a chunk: the chunk's last Gaussian ``hit``
+    (B, P, C: composited while the transmittance before it was > ½) replaces the running values."""
+    last = (hit * (steps + 1)).amax(-1)  # 1-based index of the last hit, 0 = none
+    has = last > 0
+    pick = torch.gather(g[:, None, :].expand(-1, hit.shape[1], -1), 2, torch.clamp(last - 1, min=0)[..., None])[..., 0]
+    return torch.where(has, depths[pick], median), torch.where(has, instance_ids[pick], ids)
+
+
 def composite(
     proj: Projected,
     offsets: torch.Tensor,
@@ -165,12 +177,7 @@ def composite(
             if want_depth:
                 depth = depth + (weight * proj.depths[g][:, None, :]).sum(-1)
             if want_ids:
-                hit = (weight > 0) & (t_before > 0.5)
-                last = (hit * (steps + 1)).amax(-1)  # 1-based index of the last hit, 0 = none
-                has = last > 0
-                pick = torch.gather(g[:, None, :].expand(-1, px.shape[1], -1), 2, torch.clamp(last - 1, min=0)[..., None])[..., 0]
-                median = torch.where(has, proj.depths[pick], median)
-                ids = torch.where(has, instance_ids[pick], ids)
+                median, ids = median_update(((weight > 0) & (t_before > 0.5)), g, steps, proj.depths, instance_ids, median, ids)
             trans, alive, open_ = advance_transmittance(trans, alive, t_after, take)
             if not open_:
                 break
