@@ -127,9 +127,13 @@ def render_motion(
 
 
 def _canvas_fits(camera: Camera) -> bool:
-    """Whether the widest keyframe canvas (half the longer side on every edge) is within the size policy."""
+    """Whether the keyframe path can take this camera: at least 2 × 2 pixels (a bilinear tap
+    reads a 2 × 2 block) and the widest keyframe canvas (half the longer side on every edge)
+    within the size policy."""
     from spacedg.limits import image_size_problem
 
+    if camera.width < 2 or camera.height < 2:
+        return False
     margin = max(camera.width, camera.height) // 2
     return image_size_problem(camera.width + 2 * margin, camera.height + 2 * margin) is None
 
@@ -278,6 +282,10 @@ def render_motion_keyframes(
         motion_warp.flow_field(geometry, camera.fx, camera.fy, canvas.cx, canvas.cy,
                                motion_warp.relative_transform(end_poses[k], pose),
                                motion_warp.relative_transform(end_poses[k + 1], pose), field)
+        # a path longer than the canvas reads clamped texels anyway; a non-finite one (a surface at
+        # the camera centre, metres of motion at 1e3) is no path: both bound the gather's work and reads
+        reach = np.float32(2 * (canvas.width + canvas.height))
+        np.clip(np.nan_to_num(field, copy=False, nan=0.0, posinf=0.0, neginf=0.0), -reach, reach, out=field)
         longest = float(np.sqrt(np.max(field[..., 2] ** 2 + field[..., 3] ** 2)))
         n_passes = passes if passes_given else (passes if longest > DOUBLING_FROM_PX else 0)
         dst = np.empty_like(src)
@@ -289,9 +297,10 @@ def render_motion_keyframes(
         sat = motion_warp.FULL if covered_all else motion_warp.occupancy(src)
         motion_warp.gather(src, field, margin, 1.0 / 2**n_passes, spacing, sat, acc)
     acc /= count
-    images = {"alpha": np.ascontiguousarray(acc[..., 3])}
+    # bilinear weights of a float32 path average may overshoot the keyframes' range by rounding
+    images = {"alpha": np.ascontiguousarray(np.clip(acc[..., 3], 0.0, 1.0))}
     if "rgb" in wanted:
-        images["rgb"] = np.ascontiguousarray(acc[..., :3])
+        images["rgb"] = np.ascontiguousarray(np.maximum(acc[..., :3], 0.0))
     if want_depth:
         images["depth"] = np.where(acc[..., 3] > 0, acc[..., 4] / np.maximum(acc[..., 3], 1e-30), 0.0).astype(np.float32)
     if wanted & {"median_depth", "instance_ids"}:

@@ -133,3 +133,16 @@ def test_gather_and_doubling_match_a_python_path_average() -> None:
             np.testing.assert_allclose(acc[i, j], expected, atol=2e-5, err_msg=f"pixel {(i, j)}, {passes} passes")
         assert np.all(acc[0, 0] == 0.0)  # its segment stays over empty canvas
         assert acc.max() > 0.05
+
+
+def test_degenerate_inputs_stay_in_range() -> None:
+    """Found by the long fuzz run: a 1 × 1 view and kilometres of motion used to read outside the
+    keyframe canvas (alpha 1.8e25, rgb -2.3e13); paths are now bounded and tiny views take the
+    sub-step path."""
+    import numpy as np
+
+    from tests.fuzz_cases import FAMILIES, case_render
+
+    for seed in (2000769, 2001442, 2001359, 2002319):
+        run = case_render(np.random.default_rng([FAMILIES.index("render"), seed]), None, None)  # type: ignore[arg-type]
+        run()  # check_frame: finite, alpha in [0, 1], rgb >= 0
