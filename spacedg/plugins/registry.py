@@ -731,9 +731,13 @@ def _sigint_watch() -> Iterator[dict[str, bool]]:
     """Tell a Ctrl+C apart from a ``KeyboardInterrupt`` raised by plugin code: ``state["sigint"]``
     becomes true when SIGINT arrives. Only in the main thread with Python's default handler
     (``state["watched"]``); otherwise the handlers are left alone (``state["main"]``: in the
-    main thread, where an unwatched ``KeyboardInterrupt`` may be the user's; elsewhere it cannot)."""
+    main thread with SIGINT not ignored, where an unwatched ``KeyboardInterrupt`` may be the
+    user's; elsewhere it cannot)."""
     main = threading.current_thread() is threading.main_thread()
-    state = {"sigint": False, "watched": False, "main": main}
+    # SIGINT ignored (a process started in the background by a non-interactive shell): no Ctrl+C
+    # can arrive, so a KeyboardInterrupt is the plugin's own
+    user_can_interrupt = main and signal.getsignal(signal.SIGINT) is not signal.SIG_IGN
+    state = {"sigint": False, "watched": False, "main": user_can_interrupt}
     if not main or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         yield state
         return
