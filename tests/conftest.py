@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import os
 import shutil
+import signal
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -139,3 +140,19 @@ def family_plugin(installed_family: Path, clean_env: pytest.MonkeyPatch):
     reset_registry()
     yield clean_env
     reset_registry()
+
+
+def ctrl_c_reaches_child() -> None:
+    """``preexec_fn`` of a subprocess a test sends SIGINT to: SIGINT back to its default, so the
+    child's Python installs its Ctrl+C handler even when the test run itself ignores SIGINT (a
+    background job of a non-interactive shell does)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+@pytest.fixture
+def ctrl_c_handler():
+    """Python's own SIGINT handler in this process for one test (restored afterwards), for a test
+    that delivers SIGINT to itself while the test run ignores SIGINT."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)

@@ -32,7 +32,7 @@ from spacedg.plugins import (
     registry as registry_module,
     reset_registry,
 )
-from tests.conftest import REPO_ROOT
+from tests.conftest import REPO_ROOT, ctrl_c_reaches_child
 
 SPACEDG_SCRIPT = Path(sys.executable).parent / "spacedg"
 PRESETS = {k: {"x": (0.1, 0.1)} for k in ("bench", "1", "2", "3", "4", "5")}
@@ -175,7 +175,7 @@ def test_ctrl_c_during_a_plugin_import_exits_130_naming_it(tmp_path: Path) -> No
     """A real SIGINT while a (slow) plugin imports: the slow note names it, then one line and exit 130."""
     (tmp_path / "sleepy_plugin.py").write_text("import time\ntime.sleep(60)\n")
     process = subprocess.Popen([str(SPACEDG_SCRIPT), "plugins"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               env=_env(tmp_path, "sleepy_plugin"))
+                               env=_env(tmp_path, "sleepy_plugin"), preexec_fn=ctrl_c_reaches_child)
     try:
         first = process.stderr.readline()  # blocks until the slow-import note (after 2 s)
         assert first.startswith("spacedg: warning: importing plugin module 'sleepy_plugin'"), first
@@ -189,7 +189,7 @@ def test_ctrl_c_during_a_plugin_import_exits_130_naming_it(tmp_path: Path) -> No
     assert rest.strip() == "spacedg: interrupted while importing plugin module 'sleepy_plugin' from SPACEDG_PLUGINS", rest
 
 
-def test_ctrl_c_in_process_raises_plugin_import_interrupted(clean_env, tmp_path: Path) -> None:
+def test_ctrl_c_in_process_raises_plugin_import_interrupted(clean_env, ctrl_c_handler, tmp_path: Path) -> None:
     (tmp_path / "sigint_plugin.py").write_text("import os, signal, time\nos.kill(os.getpid(), signal.SIGINT)\ntime.sleep(5)\n")
     clean_env.syspath_prepend(str(tmp_path))
     clean_env.setenv(AUTOLOAD_ENV, "1")

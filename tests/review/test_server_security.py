@@ -21,7 +21,7 @@ import pytest
 from spacedg.errors import FileFormatError, ParameterError
 from spacedg.review import server as server_module
 from spacedg.review.server import MAX_CONNECTIONS, make_server, serve_in_thread
-from tests.conftest import REPO_ROOT
+from tests.conftest import REPO_ROOT, ctrl_c_reaches_child
 from tests.eval_fixtures import write_bench
 from tests.review.http_raw import SECURITY_HEADERS, Response, request, send
 
@@ -358,7 +358,8 @@ def test_cli_bad_arguments_write_nothing(bench: Path, args: list[str], needle: s
 def test_cli_prints_the_tokened_url(bench: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
     process = subprocess.Popen([str(SPACEDG_SCRIPT), "review", str(bench), "--port", "0", "--reviewer", "cy"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                               preexec_fn=ctrl_c_reaches_child)
     try:
         lines = [process.stdout.readline() for _ in range(3)]
         url = lines[2].split()[1]
