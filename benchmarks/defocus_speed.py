@@ -9,7 +9,7 @@ the foreground is then the most blurred), at 448×336 on the compiled CPU path:
 - ``clean ms``: a sharp render (median);
 - ``old ×`` / ``new ×``: a defocus render's time over the clean render's, old and new timed
   alternately in one process (medians of ``--runs``). **old** is the model as it was (sharp
-  measurement pass at full resolution, factors in numpy: :func:`old_render_cpu`, a verbatim copy);
+  measurement pass at full resolution, no coarse composite: :func:`old_render_cpu`, today's driver with those two switched off);
   **new** is :func:`spacedg.render.defocus.render_cpu`;
 - ``PSNR`` (dB, sRGB-encoded, clipped to [0, 1]) and ``mean|Δ|`` (linear light) of new against old;
 - ``energy``: mean linear radiance / mean alpha of the defocus render over the sharp render's,
@@ -33,8 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from spacedg.render import Defocus, render  # noqa: E402
 from spacedg.render import defocus as model  # noqa: E402
-from spacedg.render.colour import linear_to_srgb, srgb_to_linear  # noqa: E402
-from spacedg.render.project_cpu import CBL, CG, CR, DEPTH  # noqa: E402
+from spacedg.render.colour import linear_to_srgb  # noqa: E402
 from spacedg.scene.synthetic import generate_room  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "splats"
@@ -43,47 +42,19 @@ WIDTH, HEIGHT = 448, 336
 SEVERITIES = ("1", "2", "3", "4", "5", "bench")
 
 
-def old_render_cpu(gaussians, camera, settings, packed, rects, instance_ids, want_color, want_depth, want_ids):  # type: ignore[no-untyped-def]
-    """The defocus driver before issue 21 part 3 (full-resolution measurement, numpy factors), verbatim."""
-    from spacedg.render import defocus_cpu, project_cpu, raster_cpu
-    from spacedg.render.colour_cpu import decode_srgb
-
-    width, height = camera.width, camera.height
-    tight = settings.tight_tiles and settings.opacity_extent
-    tiles_x = (width + 15) // 16
-    margin = model.measurement_margin(packed, rects, width, height)
-    wide = model.measurement_camera(camera, margin, 1.0)
-    sharp, sharp_rects = project_cpu.project_view(gaussians, wide, settings, None, want_color)
-    offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, wide.width, wide.height, tight)
-    pair_out = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
-    lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
-    defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, model.slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pair_out)
-    n = packed.shape[0]
-    sums = np.stack([np.bincount(gauss, weights=pair_out[:, j], minlength=n) for j in range(pair_out.shape[1])], axis=1)
-    kappa, rho = model.match_factors(sums, model.inside_fraction(sharp, wide.width, wide.height))
-    packed, rects = model.apply_match(packed, rects, kappa, rho, want_color)
-    offsets, gauss = raster_cpu.bin_visible(packed, rects, width, height, tight)
-    out = {
-        "alpha": np.zeros((height, width), np.float32),
-        "enc": np.zeros((height, width, 3) if want_color else (1, 1, 3), np.float32),
-        "lin": np.zeros((height, width, 3) if want_color else (1, 1, 3), np.float32),
-        "depth": np.zeros((height, width) if want_depth else (1, 1), np.float32),
-        "median_depth": np.zeros((height, width) if want_ids else (1, 1), np.float32),
-        "instance_ids": np.full((height, width) if want_ids else (1, 1), -1, np.int32),
-    }
-    defocus_cpu.composite_defocus(
-        offsets, gauss, packed, instance_ids, width, height, tiles_x, settings.alpha_max,
-        want_color, want_depth, want_ids,
-        out["enc"], out["lin"], out["alpha"], out["depth"], out["median_depth"], out["instance_ids"],
-    )
-    enc, lin = out.pop("enc"), out.pop("lin")
-    out["rgb"] = decode_srgb(enc) + lin
-    out["n_pairs"] = np.int64(gauss.shape[0])
-    out["n_visible"] = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
-    return out
-
-
 NEW_RENDER_CPU = model.render_cpu
+
+
+def old_render_cpu(*args):  # type: ignore[no-untyped-def]
+    """The model before issue 21 part 3: today's driver with the sharp measurement at full
+    resolution (``MEASURE_SCALE = 1``) and no coarse composite (``COMPOSITE_MIN_COC = 0``). Its
+    numpy factors then gave the bytes the compiled ones give (``tests/render/test_defocus.py``)."""
+    saved = model.MEASURE_SCALE, model.COMPOSITE_MIN_COC
+    model.MEASURE_SCALE, model.COMPOSITE_MIN_COC = 1.0, 0.0
+    try:
+        return NEW_RENDER_CPU(*args)
+    finally:
+        model.MEASURE_SCALE, model.COMPOSITE_MIN_COC = saved
 
 
 def scenes(quick: bool) -> list[tuple[str, object, object]]:
