@@ -76,8 +76,10 @@ def _pair_rows(packed, g, x0, y0):
 
 
 @numba.njit(cache=True, inline="always")
-def _measure_sweep1(state, packed, lin, g, x0, y0, amax, pair_out, k):
-    """Composite Gaussian ``g`` into one tile's state (sharp rules); add its M, S, W and the two colour mixes."""
+def _measure_sweep(state, packed, lin, g, x0, y0, amax, pair_out, k, second):
+    """Composite Gaussian ``g`` into one tile's state (sharp rules). Sweep 1 (``second`` false): add
+    its M, S, W and the two colour mixes. Sweep 2, once every pixel's ρ is known (in the
+    linear-mix planes): the same composite again, adding ``U = Σ w·ρ``."""
     t_min = np.float32(1e-4)
     zero = np.float32(0.0)
     one = np.float32(1.0)
@@ -89,56 +91,10 @@ def _measure_sweep1(state, packed, lin, g, x0, y0, amax, pair_out, k):
     amin = packed[g, AMIN]
     cr, cg, cbl = packed[g, CR], packed[g, CG], packed[g, CBL]
     lr, lg, lb = lin[g, 0], lin[g, 1], lin[g, 2]
-    m_sum = zero
+    m_sum = zero  # sweep 1: M, S, W
     s_sum = zero
     w_sum = zero
-    for row in range(r0, r1):
-        dy = np.float32(row) - gy
-        cdy = cc * dy * dy
-        bdy = cb * dy
-        base = np.uint64(row * 16)
-        for col in range(16):
-            p = base + np.uint64(col)
-            dx = np.float32(col) - gx
-            sigma = ca * dx * dx + bdy * dx + cdy
-            alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
-            alpha = alpha if (sigma >= zero and alpha >= amin) else zero
-            alpha = alpha * state[p + _MLIVE]
-            t_before = state[p + _MT]
-            t_after = t_before * (one - alpha)
-            take = zero if t_after <= t_min else one
-            a_taken = alpha * take
-            w = a_taken * t_before
-            m_sum += a_taken
-            s_sum += a_taken * state[p + _TS]
-            w_sum += w
-            state[p + _TS] = state[p + _TS] * (one - a_taken)
-            state[p + _ER] += w * cr
-            state[p + _EG] += w * cg
-            state[p + _EB] += w * cbl
-            state[p + _LR] += w * lr
-            state[p + _LG] += w * lg
-            state[p + _LB] += w * lb
-            state[p + _MT] = t_after if take > zero else t_before
-            state[p + _MLIVE] *= take
-    pair_out[k, 0] += m_sum
-    pair_out[k, 1] += s_sum
-    pair_out[k, 2] += w_sum
-
-
-@numba.njit(cache=True, inline="always")
-def _measure_sweep2(state, packed, g, x0, y0, amax, pair_out, k):
-    """The same composite again, once every pixel's ρ is known (in the linear-mix planes); add ``U = Σ w·ρ``."""
-    t_min = np.float32(1e-4)
-    zero = np.float32(0.0)
-    one = np.float32(1.0)
-    gx, gy, r0, r1 = _pair_rows(packed, g, x0, y0)
-    ca = np.float32(0.5) * packed[g, CA]
-    cb = packed[g, CB]
-    cc = np.float32(0.5) * packed[g, CC]
-    opa = packed[g, OPA]
-    amin = packed[g, AMIN]
-    ur = zero
+    ur = zero  # sweep 2: U
     ug = zero
     ub = zero
     for row in range(r0, r1):
@@ -156,15 +112,33 @@ def _measure_sweep2(state, packed, g, x0, y0, amax, pair_out, k):
             t_before = state[p + _MT]
             t_after = t_before * (one - alpha)
             take = zero if t_after <= t_min else one
-            w = alpha * take * t_before
-            ur += w * state[p + _LR]
-            ug += w * state[p + _LG]
-            ub += w * state[p + _LB]
+            a_taken = alpha * take
+            w = a_taken * t_before
+            if second:
+                ur += w * state[p + _LR]
+                ug += w * state[p + _LG]
+                ub += w * state[p + _LB]
+            else:
+                m_sum += a_taken
+                s_sum += a_taken * state[p + _TS]
+                w_sum += w
+                state[p + _TS] = state[p + _TS] * (one - a_taken)
+                state[p + _ER] += w * cr
+                state[p + _EG] += w * cg
+                state[p + _EB] += w * cbl
+                state[p + _LR] += w * lr
+                state[p + _LG] += w * lg
+                state[p + _LB] += w * lb
             state[p + _MT] = t_after if take > zero else t_before
             state[p + _MLIVE] *= take
-    pair_out[k, 3] += ur
-    pair_out[k, 4] += ug
-    pair_out[k, 5] += ub
+    if second:
+        pair_out[k, 3] += ur
+        pair_out[k, 4] += ug
+        pair_out[k, 5] += ub
+    else:
+        pair_out[k, 0] += m_sum
+        pair_out[k, 1] += s_sum
+        pair_out[k, 2] += w_sum
 
 
 @numba.njit(cache=True, inline="always")
@@ -204,7 +178,7 @@ def measure_sharp(offsets, gauss, packed, lin, slab, tiles_x, alpha_max, pair_ou
             g = gauss[k]
             if k > start and slab[g] != slab[gauss[k - 1]]:
                 state[2048:] = 1.0  # a new depth slab starts for every pixel of the tile
-            _measure_sweep1(state, packed, lin, g, x0, y0, amax, pair_out, k)
+            _measure_sweep(state, packed, lin, g, x0, y0, amax, pair_out, k, False)
             if (k - start) % 32 == 31 and _all_dead(state):
                 stop = k + 1
                 break
@@ -219,7 +193,7 @@ def measure_sharp(offsets, gauss, packed, lin, slab, tiles_x, alpha_max, pair_ou
             state[p] = 1.0
             state[256 + p] = 1.0
         for k in range(start, stop):
-            _measure_sweep2(state, packed, gauss[k], x0, y0, amax, pair_out, k)
+            _measure_sweep(state, packed, lin, gauss[k], x0, y0, amax, pair_out, k, True)
 
 
 # state planes of composite_defocus (256 floats each)
