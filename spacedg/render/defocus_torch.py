@@ -24,7 +24,7 @@ from spacedg.limits import image_size_problem
 from spacedg.render.camera import Camera
 from spacedg.render.colour import srgb_to_linear
 from spacedg.render.project import GaussianTensors, Projected, project
-from spacedg.render.raster_torch import advance_transmittance, bin_tiles, median_update
+from spacedg.render.raster_torch import advance_transmittance, bin_tiles, median_update, tiles_to_image
 from spacedg.render.settings import (
     DEFOCUS_SLAB,
     TILE_SIZE,
@@ -270,9 +270,7 @@ def composite_defocus(
         median_all[tiles], ids_all[tiles] = median, ids
 
     def to_image(t: torch.Tensor) -> torch.Tensor:
-        tail = t.shape[2:]
-        img = t.reshape(tiles_y, tiles_x, TILE_SIZE, TILE_SIZE, *tail).transpose(1, 2)
-        return img.reshape(tiles_y * TILE_SIZE, tiles_x * TILE_SIZE, *tail)[:height, :width]
+        return tiles_to_image(t, tiles_y, tiles_x, height, width)
 
     alpha_img = 1.0 - to_image(trans_all)
     out = {"alpha": alpha_img}

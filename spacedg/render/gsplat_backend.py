@@ -274,7 +274,7 @@ def median_pass(
     """
     import torch
 
-    from spacedg.render.raster_torch import chunk_of_lists, median_update
+    from spacedg.render.raster_torch import chunk_of_lists, median_update, tiles_to_image
 
     device, dtype = proj.means2d.device, proj.means2d.dtype
     tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
@@ -315,8 +315,7 @@ def median_pass(
         median_all[tiles], ids_all[tiles], done_all[tiles] = median, ids, trans <= 0.5
 
     def to_image(t: torch.Tensor) -> torch.Tensor:
-        img = t.reshape(tiles_y, tiles_x, TILE_SIZE, TILE_SIZE).transpose(1, 2)
-        return img.reshape(tiles_y * TILE_SIZE, tiles_x * TILE_SIZE)[:height, :width]
+        return tiles_to_image(t, tiles_y, tiles_x, height, width)
 
     ids_img = torch.where(to_image(done_all), to_image(ids_all), torch.full_like(to_image(ids_all), -1))
     return to_image(median_all), ids_img

@@ -112,6 +112,13 @@ def median_update(
     return torch.where(has, depths[pick], median), torch.where(has, instance_ids[pick], ids)
 
 
+def tiles_to_image(t: torch.Tensor, tiles_y: int, tiles_x: int, height: int, width: int) -> torch.Tensor:
+    """Per-tile planes ``t`` (tiles_y·tiles_x, TILE_SIZE², …) laid out as an image (height, width, …)."""
+    tail = t.shape[2:]
+    img = t.reshape(tiles_y, tiles_x, TILE_SIZE, TILE_SIZE, *tail).transpose(1, 2)
+    return img.reshape(tiles_y * TILE_SIZE, tiles_x * TILE_SIZE, *tail)[:height, :width]
+
+
 def composite(
     proj: Projected,
     offsets: torch.Tensor,
@@ -185,9 +192,7 @@ def composite(
         median_all[tiles], ids_all[tiles] = median, ids
 
     def to_image(t: torch.Tensor) -> torch.Tensor:
-        tail = t.shape[2:]
-        img = t.reshape(tiles_y, tiles_x, TILE_SIZE, TILE_SIZE, *tail).transpose(1, 2)
-        return img.reshape(tiles_y * TILE_SIZE, tiles_x * TILE_SIZE, *tail)[:height, :width]
+        return tiles_to_image(t, tiles_y, tiles_x, height, width)
 
     alpha_img = 1.0 - to_image(trans_all)
     out = {"alpha": alpha_img}
