@@ -32,6 +32,14 @@ import numpy as np
 WIDTH, HEIGHT, FOCAL = 640, 480, 500.0
 
 
+def print_table_head(*lines: str, columns: str) -> None:
+    """Print a benchmark table's explanation ``lines``, its ``columns`` header and a rule of its width."""
+    for line in lines:
+        print(line)
+    print(columns)
+    print("-" * len(columns))
+
+
 def device_ready(device: str) -> bool:
     """False (with a clear message) when ``device`` is a CUDA device and there is none."""
     import torch
@@ -130,10 +138,10 @@ def render_table(device: str, sizes: list[int], runs: int) -> None:
     print(f"   ms per frame, median of {runs} after 1 warm-up; ratio = ours gsplat / gsplat own (goal on an H100: <= 1.2)")
     print("   |Δ| cpu: ours gsplat vs our compiled CPU path, linear rgb (max / mean); |Δ| own: vs gsplat.rasterization, "
           "encoded rgb (mean)")
-    header = (f"{'scene':<14} {'visible':>8} {'ours gsplat':>11} {'gsplat own':>10} {'ratio':>6} {'ours torch':>10} "
-              f"{'ours cpu':>9} {'|Δ| cpu max':>11} {'|Δ| cpu mean':>12} {'|Δ| own':>8}")
-    print(header)
-    print("-" * len(header))
+    print_table_head(
+        columns=(f"{'scene':<14} {'visible':>8} {'ours gsplat':>11} {'gsplat own':>10} {'ratio':>6} {'ours torch':>10} "
+                 f"{'ours cpu':>9} {'|Δ| cpu max':>11} {'|Δ| cpu mean':>12} {'|Δ| own':>8}"),
+    )
     for n in sizes:
         g, cam = random_scene(n, seed=n)
         t_ours, f_ours = timed(lambda: render(g, cam, outputs="rgb,alpha", backend="gsplat", device=device), device, runs)
@@ -162,9 +170,9 @@ def bench_question_table(dataset_factory: Callable[..., Any], device: str, quest
           f"renders: backend auto -> {resolve_backend('auto', device)[0]} on {device}, degradations as torch tensors there")
     print("   ms per question = sum over its 10 items of dataset[i] (median over questions after 1 warm-up question); "
           "goal on an H100: <= 30 ms")
-    header = f"{'path':<28} {'ms / question':>13} {'render %':>8} {'linear %':>8} {'encode %':>8} {'display %':>9}"
-    print(header)
-    print("-" * len(header))
+    print_table_head(
+        columns=f"{'path':<28} {'ms / question':>13} {'render %':>8} {'linear %':>8} {'encode %':>8} {'display %':>9}",
+    )
     for label, kwargs in ((f"device {device}", {"device": device}), ("cpu (compiled + numpy)", {})):
         ds = dataset_factory(**kwargs)
         per_item = len(ds.chains) + 1

@@ -58,7 +58,7 @@ from spacedg.render.gaussians import Gaussians
 from spacedg.render.renderer import render
 from spacedg.render.settings import MotionBlur
 
-from device_paths import random_scene  # noqa: E402 - benchmarks/ is on sys.path when run as a script
+from device_paths import print_table_head, random_scene  # noqa: E402 - benchmarks/ is on sys.path when run as a script
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "splats"
 PLANT = SHARED / "plant" / "plant.splat"
@@ -138,11 +138,11 @@ def renderer_table(sizes: list[int], degree: int, with_plant: bool, torch_device
     print("   speed-up = torch ms / cpu ms (how many times faster the compiled path is).")
     print("   Gpix/s = Gaussian-pixel evaluations per second of the compiled path, counted as 256 pixels per "
           "composited Gaussian-tile pair: pairs * 256 / seconds.")
-    print("   |Δ| = absolute difference between the two paths' linear rgb / alpha, max and mean over pixels.")
-    header = (f"{'scene':<22} {'visible':>8} {'pairs':>9} {'cpu ms':>8} {'torch ms':>9} {'speed-up':>8} {'Gpix/s':>7} "
-              f"{'rgb max|Δ|':>10} {'rgb mean|Δ|':>11} {'a max|Δ|':>9} {'a mean|Δ|':>9}")
-    print(header)
-    print("-" * len(header))
+    print_table_head(
+        "   |Δ| = absolute difference between the two paths' linear rgb / alpha, max and mean over pixels.",
+        columns=(f"{'scene':<22} {'visible':>8} {'pairs':>9} {'cpu ms':>8} {'torch ms':>9} {'speed-up':>8} {'Gpix/s':>7} "
+                 f"{'rgb max|Δ|':>10} {'rgb mean|Δ|':>11} {'a max|Δ|':>9} {'a mean|Δ|':>9}"),
+    )
     cases: list[tuple[str, Callable[[], tuple[Gaussians, Camera]]]] = [
         (f"random {n // 1000}k, SH {degree}", lambda n=n: random_scene(n, seed=n, degree=degree)) for n in sizes
     ]
@@ -176,9 +176,9 @@ def motion_table(title: str, g: Gaussians, cam: Camera, motion: tuple, counts: l
           f"{int(clean.stats['pairs'])} pairs; N = 80 reference took {t_ref * 1e3:.0f} ms")
     print("   time: median of 3 runs for N <= 8 and the fast path, else 1 run; "
           "PSNR vs N = 80 on clip(linear_to_srgb(rgb), 0, 1)")
-    header = f"{'sub-steps':<14} {'chosen N':>8} {'ms':>9} {'x clean':>8} {'PSNR dB':>8} {'max disp px':>11}"
-    print(header)
-    print("-" * len(header))
+    print_table_head(
+        columns=f"{'sub-steps':<14} {'chosen N':>8} {'ms':>9} {'x clean':>8} {'PSNR dB':>8} {'max disp px':>11}",
+    )
     rows: list[tuple[str, MotionBlur]] = [(f"N = {n}", MotionBlur(translation, rotation, sub_steps=n)) for n in counts]
     rows.append(("fast (<= 80)", MotionBlur(translation, rotation, sub_steps=80, fast=True)))
     for label, blur in rows:
@@ -276,11 +276,11 @@ def motion_severity_table(cases: list[tuple[str, Gaussians, Camera, list[tuple[s
     print("   ghost % = 100 * (1 - min/max) of the smear of a probe point (sigma 1.5 px, on the optical axis at the scene's "
           "median depth) rendered alone with the same motion and work, read along its exact path >= 4.5 px from its "
           "ends, over its linear trend (nan: path < 15 px) (read-out floor ~4 %): 0 = continuous smear, 100 = separate copies (N = 80's own value in the last column)")
-    header = (f"{'scene':<16} {'sev':<5} {'path px':>7} {'clean ms':>8} | {'sub-step work':>13} {'x clean':>7} {'dB v80':>6} "
-              f"{'dB v256':>7} {'ghost%':>6} | {'keyframe work':>13} {'x clean':>7} {'dB v80':>6} {'dB v256':>7} {'ghost%':>6} "
-              f"| {'N80 ghost%':>10}")
-    print(header)
-    print("-" * len(header))
+    print_table_head(
+        columns=(f"{'scene':<16} {'sev':<5} {'path px':>7} {'clean ms':>8} | {'sub-step work':>13} {'x clean':>7} {'dB v80':>6} "
+                 f"{'dB v256':>7} {'ghost%':>6} | {'keyframe work':>13} {'x clean':>7} {'dB v80':>6} {'dB v256':>7} {'ghost%':>6} "
+                 f"| {'N80 ghost%':>10}"),
+    )
     summary: list[tuple[float, float, float]] = []
     for name, g, cam, severities in cases:
         depth = median_depth(g, cam)
@@ -382,10 +382,10 @@ def kernel_table(rev: str) -> None:
     print("   Gev/s/thr = Gaussian-pixel evaluations per second per numba thread: pairs * 256 / s / threads.")
     print("   mean|Δ| = mean absolute difference of the new image from the old (rgb, alpha, depth); "
           "ids = median depth and instance ids identical.")
-    header = (f"{'scene':<11} {'outputs':<9} {'thr':>3} {'pairs':>7} {'old ms':>7} {'new ms':>7} {'x':>5} "
-              f"{'old Gev/s/thr':>13} {'new Gev/s/thr':>13} {'rgb mean|Δ|':>11} {'a mean|Δ|':>9} {'d mean|Δ|':>9} {'ids':>4}")
-    print(header)
-    print("-" * len(header))
+    print_table_head(
+        columns=(f"{'scene':<11} {'outputs':<9} {'thr':>3} {'pairs':>7} {'old ms':>7} {'new ms':>7} {'x':>5} "
+                 f"{'old Gev/s/thr':>13} {'new Gev/s/thr':>13} {'rgb mean|Δ|':>11} {'a mean|Δ|':>9} {'d mean|Δ|':>9} {'ids':>4}"),
+    )
     cases = [("random 100k", lambda: random_scene(100_000, seed=100_000, degree=1))]
     if PLANT.is_file():
         cases.append(("plant 114k", plant_scene))
@@ -440,10 +440,10 @@ def stage_table(cases: list, old, default_threads: int) -> None:
     settings = RasterSettings()
     print("\n   stages alone (same projection; binning = depth sort + tile binning; compositing on the same "
           "tile lists; rgb+alpha / all outputs), old/new alternating, median of 11:")
-    header = (f"{'scene':<11} {'stage':<15} {'thr':>3} {'old ms':>7} {'new ms':>7} {'x':>5} "
-              f"{'old Gev/s/thr':>13} {'new Gev/s/thr':>13} {'same':>5}")
-    print(header)
-    print("-" * len(header))
+    print_table_head(
+        columns=(f"{'scene':<11} {'stage':<15} {'thr':>3} {'old ms':>7} {'new ms':>7} {'x':>5} "
+                 f"{'old Gev/s/thr':>13} {'new Gev/s/thr':>13} {'same':>5}"),
+    )
     for name, make in cases:
         stage_rows(name, *make(), old, default_threads, settings)
     numba.set_num_threads(default_threads)
