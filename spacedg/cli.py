@@ -1,6 +1,7 @@
 """``spacedg`` command line: parse, call a module, print. Each subcommand lives in
 ``spacedg/commands/<name>.py`` and exposes ``add_parser(subparsers)``, which registers its
-parser and sets ``func`` (called with the parsed namespace, returns an exit code)."""
+parser with :func:`spacedg.commands._args.add_command`: the handler (``args.func``, called with the
+parsed namespace, returns an exit code) and, as the ``--help`` description, the handler's docstring."""
 
 from __future__ import annotations
 

@@ -2,6 +2,8 @@
 :class:`~spacedg.errors.ParameterError` s that name the flag, the value and what is accepted.
 
 - numbers: :func:`at_least`, :func:`in_range`, :func:`seed`, :func:`fraction`, :func:`positive_number`;
+- subcommands: :func:`add_command` registers one (its parser, its handler, its description:
+  the handler's docstring);
 - the renderer: :func:`add_backend_arguments` declares ``--backend`` / ``--device`` once for every
   command that renders;
 - outputs: :func:`output_folder` / :func:`output_file`: the path (or its nearest existing
@@ -14,15 +16,34 @@
 from __future__ import annotations
 
 import argparse
+import inspect
 import math
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 from spacedg.errors import ParameterError
 from spacedg.render.renderer import BACKENDS
 
-__all__ = ["add_backend_arguments", "at_least", "fraction", "in_range", "output_file", "output_folder", "positive_number", "seed"]
+__all__ = ["add_backend_arguments", "add_command", "at_least", "fraction", "in_range", "output_file", "output_folder", "positive_number", "seed"]
+
+
+def add_command(
+    subparsers: argparse._SubParsersAction,
+    name: str,
+    handler: Callable[[argparse.Namespace], int],
+    *,
+    help: str,
+    description: str | None = None,
+) -> argparse.ArgumentParser:
+    """Register subcommand ``name``: its parser, with ``help`` (the one-line summary in the parent's
+    list) and ``description`` (its own ``--help``; default: ``handler``'s docstring, else ``help``), and
+    ``handler``, called with the parsed namespace and returning the exit code (``args.func``)."""
+    text = description or inspect.getdoc(handler) or help
+    parser = subparsers.add_parser(name, help=help, description=text)
+    parser.set_defaults(func=handler)
+    return parser
 
 
 def add_backend_arguments(parser: argparse.ArgumentParser, what: str = "renderer", device: bool = True) -> None:

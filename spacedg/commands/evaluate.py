@@ -5,15 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from spacedg.commands import _args
+
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "eval", help="score prediction files and write tables (CSV + Markdown), correlations and plots",
-        description="Score one or more prediction files (spacedg predict's .jsonl, or VLMEvalKit's .xlsx/.tsv/.csv/.json "
-                    "with a 'prediction' column) and write the paper's tables: model x degradation, per task group, "
-                    "question type and answer type, the clean-to-degraded drop, the point-biserial |r| across models, "
-                    "and plots. Name a file's model with LABEL=PATH, and its prompt variant with LABEL@VARIANT=PATH "
-                    "(variants: default, no_image, degradation_info, cot).",
+    parser = _args.add_command(
+        subparsers, "eval", run, help="score prediction files and write tables (CSV + Markdown), correlations and plots",
     )
     parser.add_argument("predictions", nargs="+", help="prediction files: PATH, LABEL=PATH or LABEL@VARIANT=PATH")
     parser.add_argument("--bench", type=Path, default=None,
@@ -23,10 +20,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="bench items without a prediction: error (default), score them as wrong, or skip them "
                              "(score only the answered items, e.g. a subset)")
     parser.add_argument("--no-plots", action="store_true", help="tables only")
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    """Score one or more prediction files (spacedg predict's .jsonl, or VLMEvalKit's .xlsx/.tsv/.csv/.json
+    with a 'prediction' column) and write the paper's tables: model x degradation, per task group,
+    question type and answer type, the clean-to-degraded drop, the point-biserial |r| across models, and
+    plots. Name a file's model with LABEL=PATH, and its prompt variant with LABEL@VARIANT=PATH
+    (variants: default, no_image, degradation_info, cot).
+    """
     from spacedg.commands._args import output_folder
     from spacedg.eval.bench import load_bench
     from spacedg.eval.predictions import read_predictions

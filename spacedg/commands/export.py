@@ -12,13 +12,8 @@ from spacedg.errors import ParameterError
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "export", help="render a split to PNGs + a VLMEvalKit TSV + chat JSONL (resumable, --shard i/n)",
-        description="Render every item of a split and write images/, <split>.tsv (the public SpaceDG bench's format: "
-                    "its columns, names and lettered existence options; for --split bench also spacedg_bench.tsv, so the "
-                    "folder is VLMEvalKit's LMUData for --data spacedg_bench), <split>.jsonl (chat format) and "
-                    "summary.json. Finished chunks are skipped on a rerun; "
-                    "--shard i/n splits the chunks across processes or machines (see docs/distributed-export.md).",
+    parser = _args.add_command(
+        subparsers, "export", run, help="render a split to PNGs + a VLMEvalKit TSV + chat JSONL (resumable, --shard i/n)",
     )
     parser.add_argument("--split", default="bench", choices=("train", "val", "bench"))
     parser.add_argument("--out", type=Path, required=True, help="output folder (shared by every shard)")
@@ -42,7 +37,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--skip-bad-scenes", action="store_true", help="skip scenes that cannot be read (they are named)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     _args.add_backend_arguments(parser)
-    parser.set_defaults(func=run)
 
 
 def _fractions(args: argparse.Namespace) -> tuple[float, float]:
@@ -66,6 +60,12 @@ def _names(text: str | None) -> list[str] | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Render every item of a split and write images/, <split>.tsv (the public SpaceDG bench's format: its
+    columns, names and lettered existence options; for --split bench also spacedg_bench.tsv, so the
+    folder is VLMEvalKit's LMUData for --data spacedg_bench), <split>.jsonl (chat format) and
+    summary.json. Finished chunks are skipped on a rerun; --shard i/n splits the chunks across processes
+    or machines (see docs/distributed-export.md).
+    """
     from spacedg.data.chain import Chain
     from spacedg.data.dataset import SpaceDGDataset
     from spacedg.data.export import (

@@ -10,11 +10,8 @@ from spacedg.errors import ParameterError
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    gallery = subparsers.add_parser(
-        "gallery",
-        help="contact sheet of one view: clean + each degradation at severities 1-5 and bench",
-        description="Render one view of a native scene folder clean and under every registered degradation "
-        "(third-party plugins included) at severities 1-5 and the paper's bench preset, labelled, as one PNG.",
+    gallery = _args.add_command(
+        subparsers, "gallery", _gallery, help="contact sheet of one view: clean + each degradation at severities 1-5 and bench",
     )
     gallery.add_argument("scene", type=Path, metavar="SCENE", help="native scene folder (holds scene.json)")
     gallery.add_argument("--view", default=None, help="view name (default: the scene's first view)")
@@ -26,10 +23,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     gallery.add_argument("--motion", choices=("fast", "reference"), default="fast",
                          help="motion blur sub-steps: renderer's fast choice (default) or the exact sub_steps")
     _args.add_backend_arguments(gallery)
-    gallery.set_defaults(func=_gallery)
 
 
 def _gallery(args: argparse.Namespace) -> int:
+    """Render one view of a native scene folder clean and under every registered degradation (third-party
+    plugins included) at severities 1-5 and the paper's bench preset, labelled, as one PNG.
+    """
     from spacedg.commands.render import _pick_view, write_png_atomic
     from spacedg.data.gallery import gallery_sheet
     from spacedg.scene.io import load_scene

@@ -13,22 +13,19 @@ import json
 import sys
 from typing import Any
 
+from spacedg.commands import _args
 from spacedg.plugins.registry import AUTOLOAD_ENV, PLUGINS_ENV, SLOW_IMPORT_SECONDS, Registry, get_registry
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Register the ``plugins`` subcommand on ``subparsers``."""
-    parser = subparsers.add_parser(
-        "plugins",
-        help="list installed plugins (degradations, question families) and broken ones",
-        description=(
-            "List every plugin found through the 'spacedg' entry-point group, with its distribution, version and "
-            f"what it provides, and the plugins that failed to load. Environment: {AUTOLOAD_ENV}=1 loads only the "
-            f"built-ins; {PLUGINS_ENV}=pkg.mod,... loads extra modules."
-        ),
+    parser = _args.add_command(
+        subparsers, "plugins", run, help="list installed plugins (degradations, question families) and broken ones",
+        description=f"List every plugin found through the 'spacedg' entry-point group, with its distribution, version "
+                    f"and what it provides, and the plugins that failed to load. Environment: {AUTOLOAD_ENV}=1 loads only "
+                    f"the built-ins; {PLUGINS_ENV}=pkg.mod,... loads extra modules.",
     )
     parser.add_argument("--json", action="store_true", help="print a machine-readable JSON document instead of text")
-    parser.set_defaults(func=run)
     return parser
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from spacedg.commands import _args
 from spacedg.commands.sizes import image_size, pixel_budget
 from spacedg.errors import ParameterError
 
@@ -12,11 +13,8 @@ from spacedg.errors import ParameterError
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     from spacedg.eval.prompts import VARIANTS
 
-    parser = subparsers.add_parser(
-        "predict", help="run a local transformers VLM over a bench (batched, resumable)",
-        description="Answer every item of an exported bench (--bench) or of SpaceDGDataset(split='bench') rendered online "
-                    "(--scenes) with a local transformers VLM (Qwen2-VL, Qwen2.5-VL, Qwen3-VL, InternVL, ...). Answers are "
-                    "appended to --out after each batch; a rerun skips answered items.",
+    parser = _args.add_command(
+        subparsers, "predict", run, help="run a local transformers VLM over a bench (batched, resumable)",
     )
     parser.add_argument("--model", type=Path, required=True, help="model folder (config.json + weights + processor files)")
     source = parser.add_mutually_exclusive_group(required=True)
@@ -49,13 +47,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--max-questions", type=int, default=None, help="--scenes only: at most N questions")
     parser.add_argument("--seed", type=int, default=0, help="--scenes only: dataset seed (default 0)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.set_defaults(func=run)
 
 
 def _check(args: argparse.Namespace) -> None:
     """Every flag of ``predict``, before the bench, the dataset or the model is loaded."""
-    from spacedg.commands import _args
-
     _args.at_least("--limit", args.limit, 1)
     _args.at_least("--batch-size", args.batch_size, 1)
     _args.in_range("--max-new-tokens", args.max_new_tokens, 1, 1_000_000)
@@ -69,6 +64,10 @@ def _check(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Answer every item of an exported bench (--bench) or of SpaceDGDataset(split='bench') rendered online
+    (--scenes) with a local transformers VLM (Qwen2-VL, Qwen2.5-VL, Qwen3-VL, InternVL, ...). Answers
+    are appended to --out after each batch; a rerun skips answered items.
+    """
     import torch
 
     import os

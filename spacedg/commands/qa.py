@@ -18,13 +18,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     qa = subparsers.add_parser("qa", help="build question indexes of scenes and summarise them")
     sub = qa.add_subparsers(dest="qa_command", required=True, metavar="ACTION")
 
-    build = sub.add_parser(
-        "build", help="generate every family's questions for scenes (JSONL per scene)",
-        description="Build each scene's question index. Without --families: the full index <scene id>.qa.jsonl "
-        "(every registered family), the one SpaceDGDataset, export and review read. With --families a,b: a selection "
-        "index <scene id>.qa.a+b.jsonl (names sorted, joined by '+') written beside the full index, which is never "
-        "replaced; its records equal that selection's records in a full index built with the same settings.",
-    )
+    build = _args.add_command(sub, "build", _build, help="generate every family's questions for scenes (JSONL per scene)")
     build.add_argument("scenes", type=Path, nargs="+", help="native scene folders, or folders of them")
     build.add_argument("--out", type=Path, default=None, help="folder for the index files (default: next to each scene)")
     build.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
@@ -36,9 +30,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     build.add_argument("--per-sub-type", type=int, default=25, help="records per sub_question_type and family per scene (default 25)")
     build.add_argument("--force", action="store_true", help="rebuild even when the index is up to date")
     _args.add_backend_arguments(build, "renderer of visibility and covisibility")
-    build.set_defaults(func=_build)
 
-    preview = sub.add_parser("preview", help="PNG sheet of a scene's questions: views, named objects' boxes, text")
+    preview = _args.add_command(
+        sub, "preview", _preview, help="PNG sheet of a scene's questions: views, named objects' boxes, text",
+    )
     preview.add_argument("scene", type=Path, help="a native scene folder (its index is built first if missing)")
     preview.add_argument("--out", type=Path, required=True, help="PNG file to write")
     preview.add_argument("--n", type=int, default=8, help="number of questions (default 8, spread over question types)")
@@ -46,28 +41,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     preview.add_argument("--seed", type=int, default=0, help="which questions are picked (default 0)")
     preview.add_argument("--thumb-width", type=int, default=256, help="width of each view, pixels")
     _args.add_backend_arguments(preview, device=False)
-    preview.set_defaults(func=_preview)
 
-    stats = sub.add_parser(
-        "stats", help="counts per question type, answer balance, blind stress test, repeats, ambiguities",
-        description="Counts, correct-letter and yes/no balance, the blind stress test (as `qa audit`), the repeat rate "
-        "(records re-asking a subject already asked in the scene and sub type) and ambiguity counts (label-only questions "
-        "beside a related label or an object showing the label, undecidable size comparisons, imperceptible rotations; the "
-        "label checks read the scenes' cached visibility: scene folders beside the indexes, or --scenes).",
+    stats = _args.add_command(
+        sub, "stats", _stats, help="counts per question type, answer balance, blind stress test, repeats, ambiguities",
     )
     _add_index_inputs(stats)
     stats.add_argument("--scenes", type=Path, nargs="*", default=[],
                        help="scene folders (or folders of them) for the label ambiguity check when the indexes were written elsewhere")
     stats.add_argument("--no-blind", action="store_true", help="skip the blind stress test")
     stats.add_argument("--json", action="store_true", help="print JSON instead of tables")
-    stats.set_defaults(func=_stats)
 
-    audit = sub.add_parser(
-        "audit", help="blind stress test: what text-only models answer without the images, per sub type",
-        description="Leave-one-scene-out text-only predictors (majority letter, majority answer per template, option-text "
-        "prior, per-label priors incl. mean size per label, a logistic model on the question text) trained on the other "
-        "scenes and scored on the held-out one; prints accuracy (MRA for metric answers), chance, and how many items the "
-        "blind models solve. Needs indexes of at least two scenes.",
+    audit = _args.add_command(
+        sub, "audit", _audit, help="blind stress test: what text-only models answer without the images, per sub type",
     )
     _add_index_inputs(audit)
     audit.add_argument("--solved", type=Path, default=None, help="write the ids of the records the blind models solve (JSONL)")
@@ -77,10 +62,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                        help="also audit RUNS times with truths drawn independently of the text, and print the mean and 95th "
                             "percentile of the best excess over chance that chance alone gives at each sub type's n")
     audit.add_argument("--json", action="store_true", help="print JSON instead of tables")
-    audit.set_defaults(func=_audit)
 
 
 def _build(args: argparse.Namespace) -> int:
+    """Build each scene's question index. Without --families: the full index <scene id>.qa.jsonl (every
+    registered family), the one SpaceDGDataset, export and review read. With --families a,b: a selection
+    index <scene id>.qa.a+b.jsonl (names sorted, joined by '+') written beside the full index, which is
+    never replaced; its records equal that selection's records in a full index built with the same
+    settings.
+    """
     from spacedg.commands.scenes import _scene_dirs
     from spacedg.data.qa_index import QABuildConfig, build_scene_index
 
@@ -172,6 +162,12 @@ def _scenes_with_visibility(by_scene: dict[str, list], paths: list[Path], extra:
 
 
 def _stats(args: argparse.Namespace) -> int:
+    """Counts, correct-letter and yes/no balance, the blind stress test (as `qa audit`), the repeat rate
+    (records re-asking a subject already asked in the scene and sub type) and ambiguity counts (label-
+    only questions beside a related label or an object showing the label, undecidable size comparisons,
+    imperceptible rotations; the label checks read the scenes' cached visibility: scene folders beside
+    the indexes, or --scenes).
+    """
     from spacedg.data.qa_audit import blind_audit, format_audit
     from spacedg.data.qa_stats import ambiguities, answer_balance, blind_baseline, count_table, format_table, repeat_rate
 
@@ -214,6 +210,11 @@ def _stats(args: argparse.Namespace) -> int:
 
 
 def _audit(args: argparse.Namespace) -> int:
+    """Leave-one-scene-out text-only predictors (majority letter, majority answer per template, option-text
+    prior, per-label priors incl. mean size per label, a logistic model on the question text) trained on
+    the other scenes and scored on the held-out one; prints accuracy (MRA for metric answers), chance,
+    and how many items the blind models solve. Needs indexes of at least two scenes.
+    """
     from spacedg.data.qa_audit import blind_audit, format_audit
 
     by_scene = _records_by_scene(args.paths, args.families)

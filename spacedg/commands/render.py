@@ -25,12 +25,7 @@ DEPTH_SCALE = 1000.0
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    render = subparsers.add_parser(
-        "render",
-        help="render one view of a scene to a PNG",
-        description="Render one named view of a native scene folder (from `spacedg scenes synth`) to an "
-        "8-bit sRGB PNG, optionally with defocus, a fisheye lens and camera motion blur.",
-    )
+    render = _args.add_command(subparsers, "render", _render, help="render one view of a scene to a PNG")
     # Let comma lists that start with a minus ("--fisheye -0.2,0,0,0") be values, not options:
     # argparse before 3.13 only recognises plain negative numbers ("-0.2") as values.
     if hasattr(render, "_negative_number_matcher"):
@@ -59,7 +54,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _args.add_backend_arguments(render)
     render.add_argument("--allow-empty", action="store_true",
                         help="write the PNG even when the view renders (almost) nothing (default: exit non-zero)")
-    render.set_defaults(func=_render)
 
 
 def parse_numbers(flag: str, text: str, names: tuple[str, ...], optional: int = 0) -> list[float]:
@@ -131,6 +125,9 @@ def encode_depth_mm(depth_m: np.ndarray) -> np.ndarray:
 
 
 def _render(args: argparse.Namespace) -> int:
+    """Render one named view of a native scene folder (from `spacedg scenes synth`) to an 8-bit sRGB PNG,
+    optionally with defocus, a fisheye lens and camera motion blur.
+    """
     from spacedg.scene.io import load_scene
     from spacedg.render import Defocus, FisheyeLens, MotionBlur, render
     from spacedg.render.renderer import resolve_backend

@@ -5,14 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from spacedg.commands import _args
+
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "review", help="serve a local page to inspect, filter, edit and drop bench items (edits go to a new file + log)",
-        description="Serve a review page for an exported bench on 127.0.0.1. Each item shows its images (with a clean vs "
-                    "degraded toggle), question, answer, metadata and the record's geometry; reviewers filter by question "
-                    "type, task group, degradation or keyword, edit questions, answers and options, and drop items. Every "
-                    "change is validated, then written atomically to a new TSV (never the original) with an edit log.",
+    parser = _args.add_command(
+        subparsers, "review", run, help="serve a local page to inspect, filter, edit and drop bench items (edits go to a new file + log)",
     )
     parser.add_argument("bench", type=Path, help="exported bench folder (spacedg export) or its .tsv")
     parser.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1, 0-65535 (default 8765; 0 = any free port)")
@@ -21,7 +19,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                                                         "server (default: the login name)")
     parser.add_argument("--scenes", type=Path, nargs="+", default=None, help="scene folders, to show each record's geometry")
     parser.add_argument("--verbose", action="store_true", help="log every request")
-    parser.set_defaults(func=run)
 
 
 def _login_name() -> str:
@@ -34,6 +31,11 @@ def _login_name() -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Serve a review page for an exported bench on 127.0.0.1. Each item shows its images (with a clean vs
+    degraded toggle), question, answer, metadata and the record's geometry; reviewers filter by question
+    type, task group, degradation or keyword, edit questions, answers and options, and drop items. Every
+    change is validated, then written atomically to a new TSV (never the original) with an edit log.
+    """
     from spacedg.review.server import check_port, check_reviewer, make_server
 
     check_port(args.port)  # before anything is opened or written

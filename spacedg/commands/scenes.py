@@ -24,7 +24,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     scenes = subparsers.add_parser("scenes", help="build, inspect and preview scenes")
     sub = scenes.add_subparsers(dest="scenes_command", required=True, metavar="ACTION")
 
-    synth = sub.add_parser("synth", help="generate procedural indoor rooms into native scene folders")
+    synth = _args.add_command(sub, "synth", _synth, help="generate procedural indoor rooms into native scene folders")
     synth.add_argument("--n", type=int, required=True, help="number of rooms")
     synth.add_argument("--out", type=Path, required=True, help="folder that receives one sub-folder per room")
     synth.add_argument("--seed", type=int, default=0, help="seed of the first room; room i uses seed + i (default 0)")
@@ -37,12 +37,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                        help="a .splat object to place in every room (repeatable; label and up axis from its meta.json)")
     synth.add_argument("--splat-size", type=float, default=0.35, help="longest side of placed .splat objects, metres")
     synth.add_argument("--overwrite", action="store_true", help="regenerate rooms whose folder already exists")
-    synth.set_defaults(func=_synth)
 
-    imp = sub.add_parser(
-        "import", help="turn a real capture (INRIA / COLMAP / nerfstudio / ScanNet++ + boxes) into a native scene folder",
-        description="Detect the layout of SRC, read Gaussians, cameras and instance boxes, check that they share one frame, "
-        "give the Gaussians instance ids, and write a native scene folder (scene.json + gaussians.ply).",
+    imp = _args.add_command(
+        sub, "import", _import, help="turn a real capture (INRIA / COLMAP / nerfstudio / ScanNet++ + boxes) into a native scene folder",
     )
     # let "--up -y" (an axis with a minus) be a value, not an option
     if hasattr(imp, "_negative_number_matcher"):
@@ -72,18 +69,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     imp.add_argument("--allow-frame-mismatch", action="store_true", help="write the scene even if the frame check fails")
     imp.add_argument("--overwrite", action="store_true", help="replace an existing scene folder")
     imp.add_argument("--json", action="store_true", help="print the report as JSON")
-    imp.set_defaults(func=_import)
 
-    info = sub.add_parser("info", help="counts, bounds and instances per label of scenes")
+    info = _args.add_command(sub, "info", _info, help="counts, bounds and instances per label of scenes")
     info.add_argument("paths", type=Path, nargs="+", help="native scene folders, or folders of them")
     info.add_argument("--json", action="store_true", help="print JSON instead of text")
-    info.set_defaults(func=_info)
 
-    preview = sub.add_parser("preview", help="draw top-down floor plans of scenes into one PNG")
+    preview = _args.add_command(sub, "preview", _preview, help="draw top-down floor plans of scenes into one PNG")
     preview.add_argument("paths", type=Path, nargs="+", help="native scene folders, or folders of them")
     preview.add_argument("--out", type=Path, required=True, help="PNG file to write")
     preview.add_argument("--columns", type=int, default=2, help="floor plans per row (default 2)")
-    preview.set_defaults(func=_preview)
 
 
 def _scene_dirs(paths: list[Path]) -> list[Path]:
@@ -170,6 +164,10 @@ def _config_record(config: RoomConfig) -> dict:
 
 
 def _import(args: argparse.Namespace) -> int:
+    """Detect the layout of SRC, read Gaussians, cameras and instance boxes, check that they share one
+    frame, give the Gaussians instance ids, and write a native scene folder (scene.json +
+    gaussians.ply).
+    """
     from spacedg.scene.importer import import_scene
 
     _, report = import_scene(

@@ -4,12 +4,15 @@ written."""
 
 from __future__ import annotations
 
+import argparse
+import inspect
 import json
 from pathlib import Path
 
 import pytest
 
-from spacedg.cli import main
+from spacedg.cli import build_parser, main
+from spacedg.commands import _args
 from tests.eval_fixtures import write_bench
 
 UNWRITABLE = "/proc/spacedg-cannot-write-here"  # not even root can create files in /proc
@@ -140,3 +143,47 @@ def test_a_second_predict_on_one_out_fails_naming_the_first(tmp_path: Path) -> N
         with pytest.raises(ParameterError, match=r"preds.jsonl is being written by another spacedg predict \(pid \d+"):
             predict(("model", "processor"), source, out, progress=False)
     assert not out.exists() and not (tmp_path / "preds.jsonl.meta.json").exists()
+
+
+def _leaf_commands() -> list[tuple[str, argparse.ArgumentParser]]:
+    """Every runnable ``spacedg`` subcommand (``"qa build"``, ``"render"``, …) and its parser."""
+    found: list[tuple[str, argparse.ArgumentParser]] = []
+
+    def walk(parser: argparse.ArgumentParser, path: str) -> None:
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, child in action.choices.items():
+                    if child.get_default("func") is not None:
+                        found.append((f"{path} {name}".strip(), child))
+                    walk(child, f"{path} {name}")
+
+    walk(build_parser(), "")
+    return found
+
+
+def test_every_subcommand_has_a_handler_and_its_docstring_as_description() -> None:
+    leaves = dict(_leaf_commands())
+    assert {"scenes synth", "scenes import", "render", "gallery", "qa build", "qa audit", "export", "predict", "eval",
+            "review", "plugins"} <= set(leaves)
+    for name, parser in leaves.items():
+        handler = parser.get_default("func")
+        assert callable(handler), name
+        doc = inspect.getdoc(handler)
+        if doc:  # the handler's docstring is what `spacedg NAME --help` describes
+            assert parser.description == doc, name
+        assert parser.description, f"{name} has no description"
+
+
+def test_add_command_registers_parser_handler_and_description() -> None:
+    def handler(args: argparse.Namespace) -> int:
+        """Does the thing."""
+        return 0
+
+    root = argparse.ArgumentParser()
+    sub = root.add_subparsers(dest="command")
+    parser = _args.add_command(sub, "thing", handler, help="short")
+    assert parser.description == "Does the thing."
+    assert root.parse_args(["thing"]).func is handler
+    explicit = _args.add_command(sub, "other", lambda args: 0, help="short", description="long text")
+    assert explicit.description == "long text"
+    assert _args.add_command(sub, "bare", lambda args: 0, help="short only").description == "short only"
