@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import random
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -89,6 +90,13 @@ def _near_valid(rng: random.Random, port: int) -> tuple[bytes, dict]:
     return raw, {"method": method, "path": path, "version": "HTTP/1.1", "headers": headers, "body": body, "raw": raw}
 
 
+def _pick(rng: random.Random, cases: list[tuple[float, Callable[[], list[str]]]]) -> list[str]:
+    """The headers of the first case whose cumulative probability ``upto`` exceeds one uniform draw
+    (none past the last): ``cases`` = [(upto, make headers), …] in increasing ``upto``."""
+    draw = rng.random()
+    return next((make() for upto, make in cases if draw < upto), [])
+
+
 def _request(rng: random.Random, port: int) -> tuple[bytes, dict]:
     """One hostile request and what it claims (to tell valid authenticated writes apart)."""
     if rng.random() < 0.35:
@@ -98,38 +106,32 @@ def _request(rng: random.Random, port: int) -> tuple[bytes, dict]:
     version = rng.choice(VERSIONS)
     line = " ".join(p for p in (method, path, version) if p)
     headers: list[str] = []
-    host_kind = rng.random()
-    if host_kind < 0.75:
-        headers.append(f"Host: 127.0.0.1:{port}")
-    elif host_kind < 0.8:
-        headers.append(f"Host: localhost:{port}")
-    elif host_kind < 0.9:
-        headers.append(rng.choice(["Host: attacker.example", f"Host: attacker.example:{port}", "Host:", f"Host: 127.0.0.1:{port + 1}"]))
-    elif host_kind < 0.95:
-        headers += [f"Host: 127.0.0.1:{port}", "Host: attacker.example"]
+    headers += _pick(rng, [
+        (0.75, lambda: [f"Host: 127.0.0.1:{port}"]),
+        (0.8, lambda: [f"Host: localhost:{port}"]),
+        (0.9, lambda: [rng.choice(["Host: attacker.example", f"Host: attacker.example:{port}", "Host:", f"Host: 127.0.0.1:{port + 1}"])]),
+        (0.95, lambda: [f"Host: 127.0.0.1:{port}", "Host: attacker.example"]),
+    ])
     origin = rng.choice(ORIGINS)
     if origin is not None:
         headers.append("Origin: " + (f"http://127.0.0.1:{port}" if origin == "own" else origin.replace("PORT", str(port))))
-    token_kind = rng.random()
-    if token_kind < 0.5:
-        headers.append(f"X-SpaceDG-Token: {TOKEN}")
-    elif token_kind < 0.7:
-        headers.append(f"X-SpaceDG-Token: {rng.choice(['', 'wrong', TOKEN + 'x', TOKEN[:-1], TOKEN.upper()])}")
-    elif token_kind < 0.75:
-        headers += [f"X-SpaceDG-Token: {TOKEN}", "X-SpaceDG-Token: other"]
+    headers += _pick(rng, [
+        (0.5, lambda: [f"X-SpaceDG-Token: {TOKEN}"]),
+        (0.7, lambda: [f"X-SpaceDG-Token: {rng.choice(['', 'wrong', TOKEN + 'x', TOKEN[:-1], TOKEN.upper()])}"]),
+        (0.75, lambda: [f"X-SpaceDG-Token: {TOKEN}", "X-SpaceDG-Token: other"]),
+    ])
     if rng.random() < 0.7:
         headers.append("Content-Type: " + rng.choice(CONTENT_TYPES))
     if rng.random() < 0.2:
         headers.append("Sec-Fetch-Site: " + rng.choice(["same-origin", "same-site", "cross-site", "none", "weird"]))
     body = _body(rng) if rng.random() < 0.8 else b""
-    length_kind = rng.random()
-    if length_kind < 0.7:
-        headers.append(f"Content-Length: {len(body)}")
-    elif length_kind < 0.9:
-        headers.append("Content-Length: " + rng.choice(["-1", "abc", "99999999999", "1e3", " 5", "0x10", str(len(body) + 50),
-                                                        str(max(len(body) - 3, 0)), "", "18446744073709551617"]))
-    elif length_kind < 0.95:
-        headers += [f"Content-Length: {len(body)}", "Content-Length: 0"]
+    bad_lengths = ["-1", "abc", "99999999999", "1e3", " 5", "0x10", str(len(body) + 50), str(max(len(body) - 3, 0)), "",
+                   "18446744073709551617"]
+    headers += _pick(rng, [
+        (0.7, lambda: [f"Content-Length: {len(body)}"]),
+        (0.9, lambda: ["Content-Length: " + rng.choice(bad_lengths)]),
+        (0.95, lambda: [f"Content-Length: {len(body)}", "Content-Length: 0"]),
+    ])
     if rng.random() < 0.1:
         headers.append("Transfer-Encoding: chunked")
     for _ in range(rng.choice([0, 0, 0, 1, 3, 150])):
