@@ -4,9 +4,9 @@
   3D and projected into view j, land inside j, in front of it, and agree with j's rendered depth
   within a relative threshold (raw, asymmetric; diagonal 1).
 - :func:`symmetrize`: ``min(M, Mᵀ)`` (default) or the mean.
-- :func:`load_or_compute_covisibility`: the matrix cached as ``<cache_dir>/<scene id>.covisibility.npz``,
-  reused only when its key (method version, parameters, Gaussian count, every view's intrinsics,
-  lens and pose) matches.
+- with ``cache_dir``, :func:`covisibility_matrix` (or its alias :func:`load_or_compute_covisibility`)
+  caches the matrix as ``<cache_dir>/<scene id>.covisibility.npz``, reused only when its key
+  (method version, parameters, Gaussian count, every view's intrinsics, lens and pose) matches.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -29,8 +30,14 @@ from spacedg.scene.model import Scene, ViewCovisibility
 from spacedg.scene.visibility import check_size, reduced_camera, view_names
 
 __all__ = [
-    "COVISIBILITY_IMAGE_SIZE", "COVISIBILITY_VERSION", "covisibility_matrix", "symmetrize", "covisibility_key",
-    "covisibility_cache_path", "load_or_compute_covisibility", "with_covisibility",
+    "COVISIBILITY_IMAGE_SIZE",
+    "COVISIBILITY_VERSION",
+    "covisibility_cache_path",
+    "covisibility_key",
+    "covisibility_matrix",
+    "load_or_compute_covisibility",
+    "symmetrize",
+    "with_covisibility",
 ]
 
 #: Default reduced render size (width, height) of :func:`covisibility_matrix`, pixels.
@@ -149,8 +156,9 @@ def covisibility_matrix(
     progress: bool = True,
     timings: dict[str, float] | None = None,
     device: str | None = None,
+    cache_dir: str | os.PathLike[str] | None = None,
 ) -> tuple[list[str], np.ndarray]:
-    """MapAnything-style covisibility of views, from rendered depth.
+    """MapAnything-style covisibility of views, from rendered depth, cached on disk with ``cache_dir``.
 
     For every view, expected depth is rendered at a reduced size (intrinsics scaled with
     :meth:`Camera.resized`); pixels with alpha > 0.5 are *valid*. The valid pixels of view i
@@ -177,23 +185,52 @@ def covisibility_matrix(
         backend: render backend.
         progress: tqdm progress bars.
         device: torch device of the renders (``"cuda"``: gsplat's CUDA compositor under ``auto``).
-        timings: if given, receives ``render_s`` and ``matrix_s`` (wall-clock seconds).
+        timings: if given, receives ``render_s`` and ``matrix_s`` (wall-clock seconds) of a
+            computation (untouched when the cache answers).
+        cache_dir: folder of the cache file (:func:`covisibility_cache_path`), an ``.npz`` with
+            ``names``, ``matrix`` (raw, asymmetric, float32), ``params`` (JSON) and ``key``
+            (:func:`covisibility_key`). It is reused only when the key matches (same views, poses,
+            intrinsics, Gaussian count and parameters); otherwise, or when unreadable, the matrix
+            is computed and the file replaced atomically (temporary file + ``os.replace``). The
+            backend is not part of the key (backends agree to float precision). None: no cache.
 
     Returns:
         ``(names, M)``: the view names (row/column order) and a float32 (V, V) matrix.
     """
-    from tqdm import tqdm
-
     names = view_names(scene, views, "covisibility_matrix")
     size = check_size(image_size, "covisibility_matrix")
     if isinstance(rel_threshold, bool) or not isinstance(rel_threshold, (int, float)) or not 0.0 < rel_threshold < 1.0:
         raise ParameterError(f"covisibility_matrix: rel_threshold must be in (0, 1) (relative depth tolerance), got {rel_threshold!r}")
     if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1:
         raise ParameterError(f"covisibility_matrix: stride must be an integer >= 1 (pixels), got {stride!r}")
+    if cache_dir is None:
+        return names, _compute_matrix(scene, names, size, float(rel_threshold), int(stride), backend, device, progress, timings)
+    key = covisibility_key(scene, names, image_size=size, rel_threshold=rel_threshold, stride=stride)
+    path = covisibility_cache_path(scene, cache_dir)
+    cached = read_npz_entry(path, key)
+    if cached is not None and "names" in cached and "matrix" in cached:
+        cached_names = [str(n) for n in cached["names"]]
+        matrix = cached["matrix"].astype(np.float32)
+        if matrix.shape == (len(cached_names), len(cached_names)):
+            return cached_names, matrix
+    matrix = _compute_matrix(scene, names, size, float(rel_threshold), int(stride), backend, device, progress, timings)
+    params = {"image_size": list(size), "rel_threshold": float(rel_threshold), "stride": int(stride),
+              "version": COVISIBILITY_VERSION, "symmetrised": False}
+    write_npz_entry(path, key, {"names": np.array(names, dtype=str), "matrix": matrix, "params": np.array(json.dumps(params))})
+    return names, matrix
+
+
+def _compute_matrix(
+    scene: Scene, names: list[str], size: tuple[int, int], rel_threshold: float, stride: int, backend: str,
+    device: str | None, progress: bool, timings: dict[str, float] | None,
+) -> np.ndarray:
+    """The matrix of :func:`covisibility_matrix` over checked arguments (no cache)."""
+    from tqdm import tqdm
+
     gaussians = scene.gaussians
     t0 = time.perf_counter()
     dviews = [
-        _depth_view(gaussians, reduced_camera(scene.views[n], size), int(stride), backend, device)
+        _depth_view(gaussians, reduced_camera(scene.views[n], size), stride, backend, device)
         for n in tqdm(names, desc=f"covisibility depth {scene.id}", unit="view", disable=not progress)
     ]
     t1 = time.perf_counter()
@@ -207,16 +244,16 @@ def covisibility_matrix(
         if pts.shape[0] == 0:
             continue
         hits = np.zeros(count, dtype=np.int64)
-        hits[pinhole] = pin_targets.count(pts, float(rel_threshold))
+        hits[pinhole] = pin_targets.count(pts, rel_threshold)
         for k in fisheye:
-            hits[k] = _agreeing(pts, dviews[k], float(rel_threshold))
+            hits[k] = _agreeing(pts, dviews[k], rel_threshold)
         matrix[i] = hits / pts.shape[0]
     np.clip(matrix, 0.0, 1.0, out=matrix)
     np.fill_diagonal(matrix, 1.0)
     if timings is not None:
         timings["render_s"] = t1 - t0
         timings["matrix_s"] = time.perf_counter() - t1
-    return names, matrix
+    return matrix
 
 
 def symmetrize(matrix: np.ndarray, mode: str = "min") -> np.ndarray:
@@ -256,43 +293,12 @@ def covisibility_cache_path(scene: Scene, cache_dir: str | os.PathLike[str]) -> 
 
 
 def load_or_compute_covisibility(
-    scene: Scene,
-    cache_dir: str | os.PathLike[str],
-    views: Iterable[str] | None = None,
-    *,
-    image_size: tuple[int, int] = COVISIBILITY_IMAGE_SIZE,
-    rel_threshold: float = 0.05,
-    stride: int = 1,
-    backend: str = "auto",
-    progress: bool = True,
-    device: str | None = None,
+    scene: Scene, cache_dir: str | os.PathLike[str], views: Iterable[str] | None = None, **options: Any,
 ) -> tuple[list[str], np.ndarray]:
-    """:func:`covisibility_matrix`, cached on disk per scene.
-
-    The cache file (:func:`covisibility_cache_path`) is an ``.npz`` with ``names``,
-    ``matrix`` (raw, asymmetric, float32), ``params`` (JSON) and ``key``
-    (:func:`covisibility_key`). It is reused only when the key matches (same views, poses,
-    intrinsics, Gaussian count and parameters); otherwise, or when unreadable, it is
-    recomputed and replaced atomically (temporary file + ``os.replace``). The backend is not
-    part of the key (backends agree to float precision).
-    """
-    names = view_names(scene, views, "load_or_compute_covisibility")
-    size = check_size(image_size, "load_or_compute_covisibility")
-    key = covisibility_key(scene, names, image_size=size, rel_threshold=rel_threshold, stride=stride)
-    path = covisibility_cache_path(scene, cache_dir)
-    cached = read_npz_entry(path, key)
-    if cached is not None and "names" in cached and "matrix" in cached:
-        names = [str(n) for n in cached["names"]]
-        matrix = cached["matrix"].astype(np.float32)
-        if matrix.shape == (len(names), len(names)):
-            return names, matrix
-    names, matrix = covisibility_matrix(
-        scene, names, image_size=size, rel_threshold=rel_threshold, stride=stride, backend=backend, progress=progress, device=device
-    )
-    params = {"image_size": list(size), "rel_threshold": float(rel_threshold), "stride": int(stride),
-              "version": COVISIBILITY_VERSION, "symmetrised": False}
-    write_npz_entry(path, key, {"names": np.array(names, dtype=str), "matrix": matrix, "params": np.array(json.dumps(params))})
-    return names, matrix
+    """:func:`covisibility_matrix` cached in ``cache_dir`` (its ``cache_dir`` argument); ``options``
+    are its keyword arguments (``image_size``, ``rel_threshold``, ``stride``, ``backend``,
+    ``progress``, ``device``, ``timings``)."""
+    return covisibility_matrix(scene, views, cache_dir=cache_dir, **options)
 
 
 def with_covisibility(
@@ -302,12 +308,8 @@ def with_covisibility(
 ) -> Scene:
     """``scene`` with :attr:`Scene.covisibility` attached (all views; raw asymmetric matrix).
 
-    With ``cache_dir`` the matrix goes through :func:`load_or_compute_covisibility`, else it
-    is computed. ``kwargs`` go to the computation (``image_size``, ``rel_threshold``,
-    ``stride``, ``backend``, ``device``, ``progress``).
+    With ``cache_dir`` the matrix is cached there (:func:`covisibility_matrix`). ``kwargs`` go to
+    the computation (``image_size``, ``rel_threshold``, ``stride``, ``backend``, ``device``, ``progress``).
     """
-    if cache_dir is not None:
-        names, matrix = load_or_compute_covisibility(scene, cache_dir, **kwargs)  # type: ignore[arg-type]
-    else:
-        names, matrix = covisibility_matrix(scene, **kwargs)  # type: ignore[arg-type]
+    names, matrix = covisibility_matrix(scene, cache_dir=cache_dir, **kwargs)  # type: ignore[arg-type]
     return scene.with_covisibility(ViewCovisibility(tuple(names), matrix))

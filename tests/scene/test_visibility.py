@@ -175,13 +175,13 @@ def test_small_room_matrix_finite(small_room: Scene) -> None:
 
 def test_cache_round_trip_and_invalidation(room_views: Scene, tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:
     calls = []
-    real = covisibility.covisibility_matrix
+    real = covisibility._compute_matrix  # the computation behind the cache
 
     def counting(*args, **kwargs):
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(covisibility, "covisibility_matrix", counting)
+    monkeypatch.setattr(covisibility, "_compute_matrix", counting)
     names, m = load_or_compute_covisibility(room_views, tmp_path, progress=False)
     assert covisibility_cache_path(room_views, tmp_path).is_file() and len(calls) == 1
     names2, m2 = load_or_compute_covisibility(room_views, tmp_path, progress=False)
