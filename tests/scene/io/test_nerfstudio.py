@@ -145,12 +145,3 @@ def test_errors(tmp_path: Path, data: Any, error: type, match: str) -> None:
     with pytest.raises(error, match=match) as info:
         read_transforms(path)
     assert str(path) in str(info.value)
-
-
-def test_bad_json_names_line_and_column(tmp_path: Path) -> None:
-    path = tmp_path / "t.json"
-    path.write_text('{\n  "fl_x": 400,\n  "frames": [,]\n}')
-    with pytest.raises(FileFormatError, match="line 3, column 14"):
-        read_transforms(path)
-    with pytest.raises(FileFormatError, match="not found"):
-        read_transforms(tmp_path / "missing.json")
