@@ -28,14 +28,14 @@ that LLVM vectorises the 16-pixel rows, like :func:`spacedg.render.raster_cpu.co
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 
 from spacedg.render.colour_cpu import _DECODE_LUT, _TOE
-from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
-from spacedg.render.raster_cpu import _exp_neg
+from spacedg.render.project_cpu import AMIN, CBL, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
+from spacedg.render.raster_cpu import (
+    _accumulate, _add_rgb, _conic, _f32_constants, _gauss_alpha, _pair_rows, _put_pixel, _put_rgb, _row_terms, _tile_span, _tile_state,
+)
 from spacedg.render.threads import fork_safe
 
 __all__ = ["composite_defocus", "match_and_apply", "measure_sharp", "PAIR_M", "PAIR_S", "PAIR_W", "PAIR_U", "PAIR_COLUMNS"]
@@ -65,14 +65,19 @@ _MT, _MLIVE, _ER, _EG, _EB, _LR, _LG, _LB, _TS = (np.uint64(256 * k) for k in ra
 
 
 @numba.njit(cache=True, inline="always")
-def _pair_rows(packed, g, x0, y0):
-    """Row range and the tile-local conic of Gaussian ``g`` (the compositor's set-up)."""
-    gx = packed[g, PX] - np.float32(x0 + 0.5)
-    gy = packed[g, PY] - np.float32(y0 + 0.5)
-    ry = packed[g, RADY]
-    r0 = max(int(math.ceil(gy - ry)), 0)
-    r1 = min(int(math.floor(gy + ry)) + 1, 16)
-    return gx, gy, r0, r1
+def _sharp_step(alpha, t_before, t_min, zero, one):
+    """The sharp rule at one pixel: transmittance after a Gaussian of alpha ``alpha`` and whether it
+    is taken (``one``, or ``zero`` where it would take ``T`` to ``<= t_min``), float32."""
+    t_after = t_before * (one - alpha)
+    return t_after, zero if t_after <= t_min else one
+
+
+@numba.njit(cache=True, inline="always")
+def _median_hit(state, p, w, t_before, z, gid, zero, half):
+    """Keep Gaussian ``z, gid`` as pixel ``p``'s median while it adds weight with ``T > ½`` before it."""
+    hit = w > zero and t_before > half
+    state[p + _MED] = z if hit else state[p + _MED]
+    state[p + _ID] = gid if hit else state[p + _ID]
 
 
 @numba.njit(cache=True, inline="always")
@@ -80,15 +85,9 @@ def _measure_sweep(state, packed, lin, g, x0, y0, amax, pair_out, k, second):
     """Composite Gaussian ``g`` into one tile's state (sharp rules). Sweep 1 (``second`` false): add
     its M, S, W and the two colour mixes. Sweep 2, once every pixel's ρ is known (in the
     linear-mix planes): the same composite again, adding ``U = Σ w·ρ``."""
-    t_min = np.float32(1e-4)
-    zero = np.float32(0.0)
-    one = np.float32(1.0)
+    _, t_min, _, zero, one = _f32_constants(amax)
     gx, gy, r0, r1 = _pair_rows(packed, g, x0, y0)
-    ca = np.float32(0.5) * packed[g, CA]
-    cb = packed[g, CB]
-    cc = np.float32(0.5) * packed[g, CC]
-    opa = packed[g, OPA]
-    amin = packed[g, AMIN]
+    ca, cb, cc, opa, amin = _conic(packed, g)
     cr, cg, cbl = packed[g, CR], packed[g, CG], packed[g, CBL]
     lr, lg, lb = lin[g, 0], lin[g, 1], lin[g, 2]
     m_sum = zero  # sweep 1: M, S, W
@@ -98,20 +97,12 @@ def _measure_sweep(state, packed, lin, g, x0, y0, amax, pair_out, k, second):
     ug = zero
     ub = zero
     for row in range(r0, r1):
-        dy = np.float32(row) - gy
-        cdy = cc * dy * dy
-        bdy = cb * dy
-        base = np.uint64(row * 16)
+        bdy, cdy, base = _row_terms(row, gy, cb, cc)
         for col in range(16):
             p = base + np.uint64(col)
-            dx = np.float32(col) - gx
-            sigma = ca * dx * dx + bdy * dx + cdy
-            alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
-            alpha = alpha if (sigma >= zero and alpha >= amin) else zero
-            alpha = alpha * state[p + _MLIVE]
+            alpha = _gauss_alpha(col, gx, ca, bdy, cdy, opa, amin, amax, zero) * state[p + _MLIVE]
             t_before = state[p + _MT]
-            t_after = t_before * (one - alpha)
-            take = zero if t_after <= t_min else one
+            t_after, take = _sharp_step(alpha, t_before, t_min, zero, one)
             a_taken = alpha * take
             w = a_taken * t_before
             if second:
@@ -123,12 +114,8 @@ def _measure_sweep(state, packed, lin, g, x0, y0, amax, pair_out, k, second):
                 s_sum += a_taken * state[p + _TS]
                 w_sum += w
                 state[p + _TS] = state[p + _TS] * (one - a_taken)
-                state[p + _ER] += w * cr
-                state[p + _EG] += w * cg
-                state[p + _EB] += w * cbl
-                state[p + _LR] += w * lr
-                state[p + _LG] += w * lg
-                state[p + _LB] += w * lb
+                _add_rgb(state, p + _ER, w, cr, cg, cbl)
+                _add_rgb(state, p + _LR, w, lr, lg, lb)
             state[p + _MT] = t_after if take > zero else t_before
             state[p + _MLIVE] *= take
     if second:
@@ -163,15 +150,10 @@ def measure_sharp(offsets, gauss, packed, lin, slab, tiles_x, alpha_max, pair_ou
     n_tiles = offsets.shape[0] - 1
     amax = np.float32(alpha_max)
     for tile in numba.prange(n_tiles):
-        start, end = offsets[tile], offsets[tile + 1]
+        start, end, x0, y0 = _tile_span(offsets, tile, tiles_x)
         if end == start:
             continue
-        ty = tile // tiles_x
-        tx = tile - ty * tiles_x
-        x0 = tx * 16
-        y0 = ty * 16
-        state = np.zeros(256 * 9, np.float32)
-        state[:512] = 1.0
+        state = _tile_state(9, 2)
         state[2048:] = 1.0
         stop = end
         for k in range(start, end):
@@ -213,87 +195,44 @@ def composite_defocus(
     linear-light light of the blurred ones; the caller decodes the first and adds the second.
     """
     n_tiles = offsets.shape[0] - 1
-    amax = np.float32(alpha_max)
-    t_min = np.float32(1e-4)
-    half = np.float32(0.5)
-    zero = np.float32(0.0)
-    one = np.float32(1.0)
+    amax, t_min, half, zero, one = _f32_constants(alpha_max)
     for tile in numba.prange(n_tiles):
-        start, end = offsets[tile], offsets[tile + 1]
-        ty = tile // tiles_x
-        tx = tile - ty * tiles_x
-        x0 = tx * 16
-        y0 = ty * 16
-        state = np.zeros(256 * 12, np.float32)
-        state[:512] = 1.0
+        start, end, x0, y0 = _tile_span(offsets, tile, tiles_x)
+        state = _tile_state(12, 2)
         state[2560:2816] = -1.0
         state[2816:] = 1.0
         for k in range(start, end):
             g = gauss[k]
-            gx = packed[g, PX] - np.float32(x0 + 0.5)
-            gy = packed[g, PY] - np.float32(y0 + 0.5)
-            ca = np.float32(0.5) * packed[g, CA]
-            cb = packed[g, CB]
-            cc = np.float32(0.5) * packed[g, CC]
-            opa = packed[g, OPA]
-            amin = packed[g, AMIN]
+            gx, gy, r0, r1 = _pair_rows(packed, g, x0, y0)
+            ca, cb, cc, opa, amin = _conic(packed, g)
             cr, cg, cbl = packed[g, CR], packed[g, CG], packed[g, CBL]
             z = packed[g, DEPTH]
             gid = np.float32(instance_ids[g])
             blurred = packed[g, COC] > zero
-            ry = packed[g, RADY]
-            r0 = max(int(math.ceil(gy - ry)), 0)
-            r1 = min(int(math.floor(gy + ry)) + 1, 16)
             for row in range(r0, r1):
-                dy = np.float32(row) - gy
-                cdy = cc * dy * dy
-                bdy = cb * dy
-                base = np.uint64(row * 16)
+                bdy, cdy, base = _row_terms(row, gy, cb, cc)
                 if blurred:
                     for col in range(16):
                         p = base + np.uint64(col)
-                        dx = np.float32(col) - gx
-                        sigma = ca * dx * dx + bdy * dx + cdy
-                        alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
-                        alpha = alpha if (sigma >= zero and alpha >= amin) else zero
-                        alpha = alpha * state[p + _LIVE]
+                        alpha = _gauss_alpha(col, gx, ca, bdy, cdy, opa, amin, amax, zero) * state[p + _LIVE]
                         t_before = state[p]
                         w = min(alpha * state[p + _TF], t_before)
                         t_after = t_before - w
-                        if want_color:
-                            state[p + _LR2] += w * cr
-                            state[p + _LG2] += w * cg
-                            state[p + _LB2] += w * cbl
-                        if want_depth:
-                            state[p + _D] += w * z
+                        _accumulate(state, p, w, _LR2, cr, cg, cbl, _D, z, want_color, want_depth)
                         if want_ids:
-                            hit = w > zero and t_before > half
-                            state[p + _MED] = z if hit else state[p + _MED]
-                            state[p + _ID] = gid if hit else state[p + _ID]
+                            _median_hit(state, p, w, t_before, z, gid, zero, half)
                         state[p] = t_after
                         state[p + _LIVE] *= zero if t_after <= t_min else one
                 else:
                     for col in range(16):
                         p = base + np.uint64(col)
-                        dx = np.float32(col) - gx
-                        sigma = ca * dx * dx + bdy * dx + cdy
-                        alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
-                        alpha = alpha if (sigma >= zero and alpha >= amin) else zero
-                        alpha = alpha * state[p + _LIVE]
+                        alpha = _gauss_alpha(col, gx, ca, bdy, cdy, opa, amin, amax, zero) * state[p + _LIVE]
                         t_before = state[p]
-                        t_after = t_before * (one - alpha)
-                        take = zero if t_after <= t_min else one
+                        t_after, take = _sharp_step(alpha, t_before, t_min, zero, one)
                         w = alpha * t_before * take
-                        if want_color:
-                            state[p + _ER2] += w * cr
-                            state[p + _EG2] += w * cg
-                            state[p + _EB2] += w * cbl
-                        if want_depth:
-                            state[p + _D] += w * z
+                        _accumulate(state, p, w, _ER2, cr, cg, cbl, _D, z, want_color, want_depth)
                         if want_ids:
-                            hit = w > zero and t_before > half
-                            state[p + _MED] = z if hit else state[p + _MED]
-                            state[p + _ID] = gid if hit else state[p + _ID]
+                            _median_hit(state, p, w, t_before, z, gid, zero, half)
                         state[p] = t_after if take > zero else t_before
                         state[p + _TF] = state[p + _TF] * (one - alpha * take)
                         state[p + _LIVE] *= take
@@ -303,17 +242,9 @@ def composite_defocus(
             for col in range(min(16, width - x0)):
                 p = row * 16 + col
                 py, px = y0 + row, x0 + col
-                a = one - state[p]
-                out_alpha[py, px] = a
+                _put_pixel(state, p, py, px, state[p], 512, 2048, out_alpha, out_enc, out_depth, want_color, want_depth, zero, one)
                 if want_color:
-                    out_enc[py, px, 0] = state[512 + p]
-                    out_enc[py, px, 1] = state[768 + p]
-                    out_enc[py, px, 2] = state[1024 + p]
-                    out_lin[py, px, 0] = state[1280 + p]
-                    out_lin[py, px, 1] = state[1536 + p]
-                    out_lin[py, px, 2] = state[1792 + p]
-                if want_depth:
-                    out_depth[py, px] = state[2048 + p] / a if a > zero else zero
+                    _put_rgb(out_lin, py, px, state, 1280 + p)
                 if want_ids:
                     out_median[py, px] = state[2304 + p]
                     out_ids[py, px] = np.int32(state[2560 + p]) if state[p] <= half else -1
