@@ -236,17 +236,17 @@ def ghosting(g: Gaussians, cam: Camera, translation: tuple, rotation: tuple, dep
     from scipy.ndimage import map_coordinates
 
     from spacedg.render.camera import exposure_poses
-    from spacedg.render.motion import render_motion_keyframes, render_motion_substeps
-    from spacedg.render.settings import RasterSettings
+    from spacedg.render.motion import MotionJob, render_motion_keyframes, render_motion_substeps
 
     point = cam.center + depth_m * cam.forward
     size = 1.5 * depth_m / cam.fx
     probe = Gaussians(point[None], [[1.0, 0, 0, 0]], [[size, size, size]], [0.9], np.ones((1, 1, 3)))
     blur = MotionBlur(translation, rotation, sub_steps=work, fast=True)
+    job = MotionJob(probe, cam, blur, frozenset({"rgb"}))
     if method == "sub":
-        frame = render_motion_substeps(probe, cam, blur, frozenset({"rgb"}), "cpu", None, RasterSettings(), None, fast=False)
+        frame = render_motion_substeps(job, fast=False)
     else:
-        frame = render_motion_keyframes(probe, cam, blur, frozenset({"rgb"}), "cpu", None, RasterSettings(), None, keyframes=work)
+        frame = render_motion_keyframes(job, keyframes=work)
     poses = exposure_poses(cam, np.array(translation), np.array(rotation), np.linspace(-0.5, 0.5, 400))
     uv = np.array([cam.with_pose(p).project(point[None])[0][0] for p in poses])
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(uv, axis=0), axis=1))])
@@ -262,10 +262,8 @@ def ghosting(g: Gaussians, cam: Camera, translation: tuple, rotation: tuple, dep
 
 
 def motion_severity_table(cases: list[tuple[str, Gaussians, Camera, list[tuple[str, float]]]], runs: int) -> None:
-    from spacedg.render.motion import render_motion_keyframes, render_motion_substeps
-    from spacedg.render.settings import RasterSettings
+    from spacedg.render.motion import MotionJob, render_motion_keyframes, render_motion_substeps
 
-    settings = RasterSettings()
     rgb = frozenset({"rgb"})
     print("\n4. Motion blur by scene and severity, 640x480, compiled CPU path: today's sub-step fast path vs the keyframe path")
     print("   motion: the motion_blur preset's mid-range trans (scaled by the view's median depth / 2.5 m, as the plugin "
@@ -286,13 +284,13 @@ def motion_severity_table(cases: list[tuple[str, Gaussians, Camera, list[tuple[s
         depth = median_depth(g, cam)
         for severity, scale in severities:
             translation, rotation = severity_motion(severity if severity != "close" else "bench", depth, seed=7, scale=scale)
-            blur = MotionBlur(translation, rotation, sub_steps=80, fast=True)
+            job = MotionJob(g, cam, MotionBlur(translation, rotation, sub_steps=80, fast=True), rgb)
             ref80 = render(g, cam, motion=MotionBlur(translation, rotation, sub_steps=80), backend="cpu")
             ref256 = render(g, cam, motion=MotionBlur(translation, rotation, sub_steps=256), backend="cpu")
             fns = {
                 "clean": lambda: render(g, cam, backend="cpu"),
-                "sub": lambda: render_motion_substeps(g, cam, blur, rgb, "cpu", None, settings, None, fast=True),
-                "key": lambda: render_motion_keyframes(g, cam, blur, rgb, "cpu", None, settings, None),
+                "sub": lambda: render_motion_substeps(job, fast=True),
+                "key": lambda: render_motion_keyframes(job),
             }
             times: dict[str, list[float]] = {k: [] for k in fns}
             frames: dict[str, Frame] = {}

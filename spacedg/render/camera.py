@@ -33,6 +33,20 @@ from spacedg.render.gaussians import quat_from_matrix
 _SOURCE = "Camera"
 
 
+def equidistant_theta_d(theta: Any, k1: float, k2: float, k3: float, k4: float) -> Any:
+    """``θ_d(θ) = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)``: the fisheye lens polynomial, once, for
+    floats, numpy arrays and torch tensors alike (:class:`FisheyeLens`, the torch projection) and
+    compiled by numba for the CPU projection (:mod:`spacedg.render.project_cpu`)."""
+    t2 = theta * theta
+    return theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+
+
+def equidistant_theta_d_slope(theta: Any, k1: float, k2: float, k3: float, k4: float) -> Any:
+    """``dθ_d/dθ = 1 + 3 k1 θ² + 5 k2 θ⁴ + 7 k3 θ⁶ + 9 k4 θ⁸`` (as :func:`equidistant_theta_d`)."""
+    t2 = theta * theta
+    return 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))
+
+
 @dataclass(frozen=True)
 class FisheyeLens:
     """Equidistant fisheye distortion (OpenCV fisheye model).
@@ -64,13 +78,11 @@ class FisheyeLens:
 
     def distort_theta(self, theta: np.ndarray) -> np.ndarray:
         """``θ_d(θ)`` for ray angles θ (radians)."""
-        t2 = theta * theta
-        return theta * (1.0 + t2 * (self.k1 + t2 * (self.k2 + t2 * (self.k3 + t2 * self.k4))))
+        return equidistant_theta_d(theta, self.k1, self.k2, self.k3, self.k4)
 
     def distort_theta_derivative(self, theta: np.ndarray) -> np.ndarray:
         """``dθ_d/dθ = 1 + 3 k1 θ² + 5 k2 θ⁴ + 7 k3 θ⁶ + 9 k4 θ⁸``."""
-        t2 = theta * theta
-        return 1.0 + t2 * (3.0 * self.k1 + t2 * (5.0 * self.k2 + t2 * (7.0 * self.k3 + t2 * 9.0 * self.k4)))
+        return equidistant_theta_d_slope(theta, self.k1, self.k2, self.k3, self.k4)
 
     def undistort_theta(self, theta_d: np.ndarray) -> np.ndarray:
         """Ray angles θ (radians) with ``θ_d(θ) = theta_d``, on the one-to-one range [0, effective max θ].

@@ -24,7 +24,7 @@ from spacedg.limits import image_size_problem
 from spacedg.render.camera import Camera
 from spacedg.render.colour import srgb_to_linear
 from spacedg.render.project import GaussianTensors, Projected, project
-from spacedg.render.raster_torch import advance_transmittance, bin_tiles, median_update, tiles_to_image
+from spacedg.render.raster_torch import advance_transmittance, bin_tiles, images_from_tiles, median_update
 from spacedg.render.settings import (
     DEFOCUS_SLAB,
     TILE_SIZE,
@@ -268,21 +268,10 @@ def composite_defocus(
                 break
         trans_all[tiles], enc_all[tiles], lin_all[tiles], depth_all[tiles] = trans, enc, lin, depth
         median_all[tiles], ids_all[tiles] = median, ids
-
-    def to_image(t: torch.Tensor) -> torch.Tensor:
-        return tiles_to_image(t, tiles_y, tiles_x, height, width)
-
-    alpha_img = 1.0 - to_image(trans_all)
-    out = {"alpha": alpha_img}
-    if want_color:
-        out["enc"], out["lin"] = to_image(enc_all), to_image(lin_all)
-    if want_depth:
-        d = to_image(depth_all)
-        out["depth"] = torch.where(alpha_img > 0, d / torch.clamp(alpha_img, min=1e-30), torch.zeros_like(d))
-    if want_ids:
-        out["median_depth"] = to_image(median_all)
-        out["instance_ids"] = torch.where(to_image(trans_all) <= 0.5, to_image(ids_all), torch.full_like(to_image(ids_all), -1))
-    return out
+    return images_from_tiles(
+        tiles_y, tiles_x, height, width, trans_all, {"enc": enc_all, "lin": lin_all} if want_color else {},
+        depth_all if want_depth else None, (median_all, ids_all) if want_ids else None,
+    )
 
 
 def render_torch(

@@ -424,7 +424,9 @@ def render_gsplat(
     t0 = time.perf_counter()
     if defocus is not None:  # the defocus model's compositing rules are not gsplat's: the torch twin renders it
         if motion is not None and not motion.is_static:
-            frame = motion_model.render_motion(gaussians, camera, motion, wanted, "torch", device, settings, defocus)
+            frame = motion_model.render_motion(
+                motion_model.MotionJob(gaussians, camera, motion, wanted, "torch", device, settings, defocus)
+            )
         else:
             images, stats = composite_view(gaussians, camera, wanted, "torch", device, settings, defocus)
             frame = frame_from_images(images, camera, wanted)

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -110,20 +111,46 @@ def choose_sub_steps(displacement_px: float, feature_px: float, max_steps: int) 
     return int(min(max(math.ceil(displacement_px / step), 1), max_steps))
 
 
-def render_motion(
-    gaussians: Gaussians,
-    camera: Camera,
-    motion: MotionBlur,
-    wanted: frozenset[str],
-    backend: str,
-    device: torch.device | None,
-    settings: RasterSettings,
-    defocus: Defocus | None,
-) -> Frame:
+@dataclass(frozen=True, eq=False)
+class MotionJob:
+    """One motion-blurred view to render: the scene, the **mid-exposure** camera, the motion and
+    the outputs wanted, and how each sub-exposure is composited (backend, torch device,
+    rasterizer settings, defocus), as :func:`spacedg.render.render` resolved them. Built once by
+    the caller; every path of this module reads it."""
+
+    gaussians: Gaussians
+    camera: Camera
+    motion: MotionBlur
+    wanted: frozenset[str]
+    backend: str = "cpu"
+    device: torch.device | None = None
+    settings: RasterSettings = field(default_factory=RasterSettings)
+    defocus: Defocus | None = None
+
+    def composite(self, camera: Camera, outputs: frozenset[str]) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+        """One sub-exposure (or keyframe canvas) render of the scene from ``camera``."""
+        return composite_view(self.gaussians, camera, outputs, self.backend, self.device, self.settings, self.defocus)
+
+    def poses(self, times: np.ndarray) -> list[np.ndarray]:
+        """The camera's poses at ``times`` (fractions of the exposure in [-½, ½])."""
+        return exposure_poses(self.camera, np.array(self.motion.translation), np.array(self.motion.rotation), times)
+
+    def frame(self, images: dict[str, np.ndarray], t0: float, stats: dict[str, float]) -> Frame:
+        """The blurred ``images`` as a :class:`Frame`, with the median depth and instance ids of the
+        mid-exposure pose (a sharp render) where wanted, and ``stats`` plus the time since ``t0``."""
+        if self.wanted & {"median_depth", "instance_ids"}:
+            sharp, _ = self.composite(self.camera, frozenset({"instance_ids"}))
+            images.update({"median_depth": sharp["median_depth"], "instance_ids": sharp["instance_ids"]})
+        frame = frame_from_images(images, self.camera, self.wanted)
+        frame.stats = {**stats, "ms": (time.perf_counter() - t0) * 1e3}
+        return frame
+
+
+def render_motion(job: MotionJob) -> Frame:
     """Render a motion-blurred frame (see the module docstring)."""
-    if motion.fast and camera.fisheye is None and _canvas_fits(camera):
-        return render_motion_keyframes(gaussians, camera, motion, wanted, backend, device, settings, defocus)
-    return render_motion_substeps(gaussians, camera, motion, wanted, backend, device, settings, defocus)
+    if job.motion.fast and job.camera.fisheye is None and _canvas_fits(job.camera):
+        return render_motion_keyframes(job)
+    return render_motion_substeps(job)
 
 
 def _canvas_fits(camera: Camera) -> bool:
@@ -138,44 +165,25 @@ def _canvas_fits(camera: Camera) -> bool:
     return image_size_problem(camera.width + 2 * margin, camera.height + 2 * margin) is None
 
 
-def _sharp_labels(gaussians, camera, backend, device, settings, defocus) -> dict[str, np.ndarray]:  # type: ignore[no-untyped-def]
-    """Median depth and instance ids of the mid-exposure pose (a sharp render)."""
-    sharp, _ = composite_view(gaussians, camera, frozenset({"instance_ids"}), backend, device, settings, defocus)
-    return {"median_depth": sharp["median_depth"], "instance_ids": sharp["instance_ids"]}
-
-
-def render_motion_substeps(
-    gaussians: Gaussians,
-    camera: Camera,
-    motion: MotionBlur,
-    wanted: frozenset[str],
-    backend: str,
-    device: torch.device | None,
-    settings: RasterSettings,
-    defocus: Defocus | None,
-    fast: bool | None = None,
-) -> Frame:
+def render_motion_substeps(job: MotionJob, fast: bool | None = None) -> Frame:
     """Average of sub-exposure renders: ``motion.sub_steps`` of them, or with ``fast`` (default
     ``motion.fast``) the count of :func:`choose_sub_steps`."""
     t0 = time.perf_counter()
+    camera, motion, wanted = job.camera, job.motion, job.wanted
     fast = motion.fast if fast is None else fast
-    translation, rotation = np.array(motion.translation), np.array(motion.rotation)
     if fast:
-        displacement, feature = motion_extent(gaussians, camera, motion)
+        displacement, feature = motion_extent(job.gaussians, camera, motion)
         count = choose_sub_steps(displacement, feature, motion.sub_steps)
     else:
         displacement, count = math.nan, motion.sub_steps
-    times = sub_exposure_times(count)
-    poses = exposure_poses(camera, translation, rotation, times)
+    poses = job.poses(sub_exposure_times(count))
     blur_outputs = frozenset(wanted & {"rgb", "depth"})
     rgb = np.zeros((camera.height, camera.width, 3), np.float64) if "rgb" in wanted else None
     alpha = np.zeros((camera.height, camera.width), np.float64)
     depth_sum = np.zeros((camera.height, camera.width), np.float64) if "depth" in wanted else None
     pairs = 0
     for pose in poses:
-        images, stats = composite_view(
-            gaussians, camera.with_pose(pose), blur_outputs or frozenset({"alpha"}), backend, device, settings, defocus
-        )
+        images, stats = job.composite(camera.with_pose(pose), blur_outputs or frozenset({"alpha"}))
         pairs += stats["pairs"]
         alpha += images["alpha"]
         if rgb is not None:
@@ -187,16 +195,7 @@ def render_motion_substeps(
         images["rgb"] = (rgb / count).astype(np.float32)
     if depth_sum is not None:
         images["depth"] = np.where(alpha > 0, depth_sum / np.maximum(alpha, 1e-30), 0.0).astype(np.float32)
-    if wanted & {"median_depth", "instance_ids"}:
-        images.update(_sharp_labels(gaussians, camera, backend, device, settings, defocus))
-    frame = frame_from_images(images, camera, wanted)
-    frame.stats = {
-        "sub_steps": count,
-        "displacement_px": displacement,
-        "pairs": pairs,
-        "ms": (time.perf_counter() - t0) * 1e3,
-    }
-    return frame
+    return job.frame(images, t0, {"sub_steps": count, "displacement_px": displacement, "pairs": pairs})
 
 
 #: Keyframe path: largest on-screen path (pixels) one keyframe interval may cover …
@@ -226,17 +225,7 @@ def choose_keyframes(displacement_px: float, max_steps: int) -> int:
 
 
 def render_motion_keyframes(
-    gaussians: Gaussians,
-    camera: Camera,
-    motion: MotionBlur,
-    wanted: frozenset[str],
-    backend: str,
-    device: torch.device | None,
-    settings: RasterSettings,
-    defocus: Defocus | None,
-    keyframes: int | None = None,
-    passes: int | None = None,
-    spacing: float | None = None,
+    job: MotionJob, keyframes: int | None = None, passes: int | None = None, spacing: float | None = None,
 ) -> Frame:
     """Motion blur from ``K`` keyframes and depth-reprojected path gathers (:mod:`spacedg.render.motion_warp`).
 
@@ -249,11 +238,11 @@ def render_motion_keyframes(
     from spacedg.render import motion_warp
 
     t0 = time.perf_counter()
+    camera, motion, wanted = job.camera, job.motion, job.wanted
     passes_given = passes is not None
     passes = DOUBLING_PASSES if passes is None else passes
     spacing = PATH_SPACING_PX if spacing is None else spacing
-    translation, rotation = np.array(motion.translation), np.array(motion.rotation)
-    displacement, _ = motion_extent(gaussians, camera, motion)
+    displacement, _ = motion_extent(job.gaussians, camera, motion)
     count = keyframes or choose_keyframes(displacement, motion.sub_steps)
     margin = int(min(math.ceil(0.6 * displacement / count) + 2, max(camera.width, camera.height) // 2))
     canvas = Camera(camera.fx, camera.fy, camera.cx + margin, camera.cy + margin,
@@ -261,13 +250,13 @@ def render_motion_keyframes(
     want_depth = "depth" in wanted
     edges = np.linspace(-0.5, 0.5, count + 1)
     centres = 0.5 * (edges[:-1] + edges[1:])
-    key_poses = exposure_poses(camera, translation, rotation, centres)
-    end_poses = exposure_poses(camera, translation, rotation, edges)
+    key_poses = job.poses(centres)
+    end_poses = job.poses(edges)
     channels = 5 if want_depth else 4
     acc = np.zeros((camera.height, camera.width, channels), np.float32)
     pairs = 0
     for k, pose in enumerate(key_poses):
-        images, stats = composite_view(gaussians, canvas.with_pose(pose), frozenset({"rgb", "depth"}), backend, device, settings, defocus)
+        images, stats = job.composite(canvas.with_pose(pose), frozenset({"rgb", "depth"}))
         pairs += stats["pairs"]
         alpha, depth = images["alpha"], images["depth"]
         src = np.empty((canvas.height, canvas.width, channels), np.float32)
@@ -303,14 +292,5 @@ def render_motion_keyframes(
         images["rgb"] = np.ascontiguousarray(np.maximum(acc[..., :3], 0.0))
     if want_depth:
         images["depth"] = np.where(acc[..., 3] > 0, acc[..., 4] / np.maximum(acc[..., 3], 1e-30), 0.0).astype(np.float32)
-    if wanted & {"median_depth", "instance_ids"}:
-        images.update(_sharp_labels(gaussians, camera, backend, device, settings, defocus))
-    frame = frame_from_images(images, camera, wanted)
-    frame.stats = {
-        "sub_steps": count,  # renders made (the keyframes)
-        "keyframes": count,
-        "displacement_px": displacement,
-        "pairs": pairs,
-        "ms": (time.perf_counter() - t0) * 1e3,
-    }
-    return frame
+    # sub_steps: renders made (the keyframes)
+    return job.frame(images, t0, {"sub_steps": count, "keyframes": count, "displacement_px": displacement, "pairs": pairs})

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from spacedg.render.camera import Camera
+from spacedg.render.camera import Camera, equidistant_theta_d, equidistant_theta_d_slope
 from spacedg.render.gaussians import Gaussians, quat_to_matrix, sh_basis
 from spacedg.render.settings import ALPHA_MIN, FOOTPRINT_CAP, TILE_SIZE, Defocus, RasterSettings
 
@@ -117,9 +117,8 @@ def fisheye_terms(cam: torch.Tensor, k: tuple[float, float, float, float]) -> tu
     r = torch.sqrt(r2)
     rz2 = r2 + z * z
     theta = torch.atan2(r, z)
-    t2 = theta * theta
-    theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
-    dtheta_d = 1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
+    theta_d = equidistant_theta_d(theta, k1, k2, k3, k4)
+    dtheta_d = equidistant_theta_d_slope(theta, k1, k2, k3, k4)
     near_axis = r < 1e-4 * z
     r_safe = torch.where(near_axis, torch.ones_like(r), r)
     rho = torch.where(near_axis, (1 + (k1 - 1 / 3) * r2 / (z * z)) / z, theta_d / r_safe)

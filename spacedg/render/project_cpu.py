@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING
 import numba
 import numpy as np
 
+from spacedg.render.camera import equidistant_theta_d, equidistant_theta_d_slope
 from spacedg.render.gaussians import _SH_C1, _SH_C2, _SH_C3, SH_C0
 from spacedg.render.settings import FOOTPRINT_CAP
 from spacedg.render.threads import fork_safe
@@ -82,6 +83,10 @@ def _sh_channel(sh, i, ch, degree, x, y, z):
     return value
 
 
+_theta_d = numba.njit(cache=True, inline="always")(equidistant_theta_d)
+_theta_d_slope = numba.njit(cache=True, inline="always")(equidistant_theta_d_slope)
+
+
 @numba.njit(cache=True, inline="always")
 def _fisheye_terms(x, y, z, k1, k2, k3, k4):
     """Equidistant lens at camera point (x, y, z), z > 0.
@@ -94,9 +99,8 @@ def _fisheye_terms(x, y, z, k1, k2, k3, k4):
     r = math.sqrt(r2)
     rz2 = r2 + z * z
     theta = math.atan2(r, z)
-    t2 = theta * theta
-    theta_d = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
-    dtheta_d = 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))
+    theta_d = _theta_d(theta, k1, k2, k3, k4)
+    dtheta_d = _theta_d_slope(theta, k1, k2, k3, k4)
     drho_dz = -dtheta_d / rz2
     if r < 1e-4 * z:
         # θ = t − t³/3 + …, θ_d = θ + k1 θ³ + …  with t = r/z  ⇒  rho = (1 + (k1 − 1/3) t²)/z

@@ -119,6 +119,32 @@ def tiles_to_image(t: torch.Tensor, tiles_y: int, tiles_x: int, height: int, wid
     return img.reshape(tiles_y * TILE_SIZE, tiles_x * TILE_SIZE, *tail)[:height, :width]
 
 
+def images_from_tiles(
+    tiles_y: int, tiles_x: int, height: int, width: int, trans: torch.Tensor, colour: dict[str, torch.Tensor],
+    depth: torch.Tensor | None, labels: tuple[torch.Tensor, torch.Tensor] | None,
+) -> dict[str, torch.Tensor]:
+    """A tile compositor's per-tile planes (tiles, TILE_SIZE², …) as (H, W[, …]) images: ``alpha``
+    (1 − the final transmittance ``trans``), each of ``colour`` under its name, ``depth`` (the
+    weighted depth sum over alpha, 0 where nothing was composited) and, from ``labels`` = (median
+    depth, instance ids), ``median_depth`` and ``instance_ids`` (−1 where the transmittance ends above ½)."""
+
+    def to_image(t: torch.Tensor) -> torch.Tensor:
+        return tiles_to_image(t, tiles_y, tiles_x, height, width)
+
+    alpha_img = 1.0 - to_image(trans)
+    out = {"alpha": alpha_img}
+    for name, planes in colour.items():
+        out[name] = to_image(planes)
+    if depth is not None:
+        d = to_image(depth)
+        out["depth"] = torch.where(alpha_img > 0, d / torch.clamp(alpha_img, min=1e-30), torch.zeros_like(d))
+    if labels is not None:
+        median, ids = labels
+        out["median_depth"] = to_image(median)
+        out["instance_ids"] = torch.where(to_image(trans) <= 0.5, to_image(ids), torch.full_like(to_image(ids), -1))
+    return out
+
+
 def composite(
     proj: Projected,
     offsets: torch.Tensor,
@@ -190,18 +216,7 @@ def composite(
                 break
         trans_all[tiles], rgb_all[tiles], depth_all[tiles] = trans, rgb, depth
         median_all[tiles], ids_all[tiles] = median, ids
-
-    def to_image(t: torch.Tensor) -> torch.Tensor:
-        return tiles_to_image(t, tiles_y, tiles_x, height, width)
-
-    alpha_img = 1.0 - to_image(trans_all)
-    out = {"alpha": alpha_img}
-    if want_color:
-        out["rgb"] = to_image(rgb_all)
-    if want_depth:
-        d = to_image(depth_all)
-        out["depth"] = torch.where(alpha_img > 0, d / torch.clamp(alpha_img, min=1e-30), torch.zeros_like(d))
-    if want_ids:
-        out["median_depth"] = to_image(median_all)
-        out["instance_ids"] = torch.where(to_image(trans_all) <= 0.5, to_image(ids_all), torch.full_like(to_image(ids_all), -1))
-    return out
+    return images_from_tiles(
+        tiles_y, tiles_x, height, width, trans_all, {"rgb": rgb_all} if want_color else {},
+        depth_all if want_depth else None, (median_all, ids_all) if want_ids else None,
+    )

@@ -14,7 +14,7 @@ from spacedg.render.camera import Camera
 from spacedg.render.composite import composite_view, frame_from_images
 from spacedg.render.frame import Frame
 from spacedg.render.gaussians import Gaussians
-from spacedg.render.motion import render_motion
+from spacedg.render.motion import MotionJob, render_motion
 from spacedg.render.settings import Defocus, MotionBlur, RasterSettings, parse_outputs
 
 if TYPE_CHECKING:
@@ -103,7 +103,7 @@ def render(
 
         return render_gsplat(gaussians, camera, wanted, dev, settings, defocus, motion)
     if motion is not None and not motion.is_static:
-        return render_motion(gaussians, camera, motion, wanted, backend, dev, settings, defocus)
+        return render_motion(MotionJob(gaussians, camera, motion, wanted, backend, dev, settings, defocus))
     t0 = time.perf_counter()
     images, stats = composite_view(gaussians, camera, wanted, backend, dev, settings, defocus)
     frame = frame_from_images(images, camera, wanted)

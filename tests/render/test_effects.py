@@ -12,7 +12,7 @@ from spacedg.errors import ParameterError
 from spacedg.render import Defocus, MotionBlur, RasterSettings, render
 from spacedg.render.camera import exposure_poses, interpolate_pose, look_at, matrix_to_rotvec, rotvec_to_matrix
 from spacedg.render.gaussians import Gaussians
-from spacedg.render.motion import choose_sub_steps, motion_extent, render_motion_substeps, sub_exposure_times
+from spacedg.render.motion import MotionJob, choose_sub_steps, motion_extent, render_motion_substeps, sub_exposure_times
 
 
 def one_gaussian(z: float = 2.0, scale: float = 0.01, opacity: float = 0.5) -> Gaussians:
@@ -128,7 +128,7 @@ def test_sub_step_fast_path_chooses_sub_steps_from_displacement_and_matches_the_
     motion = dict(translation=(0.2, 0.05, 0.0), rotation=(0.0, 0.05, 0.0))
     displacement, feature = motion_extent(g, cam, MotionBlur(**motion))
     assert 10 < displacement < 60 and 0.5 < feature < 5  # ~0.2 m at 2–6 m and 0.05 rad at f ≈ 77 px
-    fast = render_motion_substeps(g, cam, MotionBlur(**motion, fast=True), frozenset({"rgb"}), "cpu", None, RasterSettings(), None)
+    fast = render_motion_substeps(MotionJob(g, cam, MotionBlur(**motion, fast=True), frozenset({"rgb"})))
     assert fast.stats["sub_steps"] == choose_sub_steps(displacement, feature, 80) < 40
     reference = render(g, cam, motion=MotionBlur(**motion, sub_steps=80))
     assert reference.stats["sub_steps"] == 80

@@ -8,11 +8,11 @@ import math
 import numpy as np
 
 from tests.render_helpers import camera, random_gaussians
-from spacedg.render import MotionBlur, RasterSettings, render
+from spacedg.render import MotionBlur, render
 from spacedg.render.camera import look_at
 from spacedg.render.colour import linear_to_srgb
 from spacedg.render.gaussians import Gaussians
-from spacedg.render.motion import render_motion_keyframes, render_motion_substeps
+from spacedg.render.motion import MotionJob, render_motion_keyframes, render_motion_substeps
 
 
 def psnr(image: np.ndarray, reference: np.ndarray) -> float:
@@ -59,7 +59,7 @@ def test_keyframe_path_matches_many_sub_steps_on_a_textured_scene() -> None:
     cam = camera(80, 60, focal=70.0)
     blur = MotionBlur(**MOTION, sub_steps=96)
     reference = render(g, cam, motion=blur)
-    fast = render_motion_keyframes(g, cam, blur, frozenset({"rgb"}), "cpu", None, RasterSettings(), None, keyframes=2)
+    fast = render_motion_keyframes(MotionJob(g, cam, blur, frozenset({"rgb"})), keyframes=2)
     assert psnr(fast.rgb, reference.rgb) > 45.0
     # the sharp image is far from both: the test measures the blur, not a still frame
     assert psnr(render(g, cam).rgb, reference.rgb) < 30.0
@@ -71,8 +71,8 @@ def test_a_moving_point_leaves_a_continuous_smear_not_copies() -> None:
     g = Gaussians([[0.0, 0.0, 2.0]], [[1.0, 0, 0, 0]], [[0.003, 0.003, 0.003]], [0.9], np.full((1, 1, 3), 1.0))
     cam = camera(96, 32, focal=100.0)
     blur = MotionBlur(translation=(1.2, 0.0, 0.0), sub_steps=4, fast=True)  # 100 px/m · 1.2 m / 2 m = 60 px
-    smear = render_motion_keyframes(g, cam, blur, frozenset({"rgb"}), "cpu", None, RasterSettings(), None, keyframes=1)
-    strobe = render_motion_substeps(g, cam, blur, frozenset({"rgb"}), "cpu", None, RasterSettings(), None, fast=False)
+    smear = render_motion_keyframes(MotionJob(g, cam, blur, frozenset({"rgb"})), keyframes=1)
+    strobe = render_motion_substeps(MotionJob(g, cam, blur, frozenset({"rgb"})), fast=False)
     row_smear = smear.alpha[16, 25:71]  # the interior of the 48 → −12 px path through centre 48
     row_strobe = strobe.alpha[16, 25:71]
     assert row_smear.min() > 0.6 * row_smear.mean()  # flat streak
