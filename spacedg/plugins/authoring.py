@@ -55,6 +55,8 @@ Seeded order (all lazy: nothing is drawn before the first ``next``)
     - :func:`round_robin`: one item from each iterator in turn until all are exhausted.
     - :func:`round_robin_views`: the scene's views in a seeded order, one record of each view's stream ``stream(scene, index, view, rng)`` in turn.
     - :func:`round_robin_pairs`: the same over the view pairs of :func:`sample_pairs` (``stream(scene, index, pair, rules, rng)``).
+    - :func:`role_rounds`: whole rounds of each key's roles (``key → [candidates of role 0, role 1, …]``), keys and candidates in a seeded order: a family balanced per key, e.g. a label asked once with each answer per round.
+    - :func:`round_robin_sub_types`: a family asking in one image and in two: its single-view stream and each ``(rules, stream)`` pair stream, one child generator each, one record of each sub type in turn.
 
 Objects a question may name
     - :func:`referable`: clearly visible in the view, and no other same-label instance with the same description is seen there.
@@ -89,6 +91,7 @@ View pairs and object rules
     - :func:`description_clash`: the view shows another same-label instance with the same description (drop the question).
     - :func:`same_label_neighbours`: other instances of the same label that a view shows.
     - :func:`confusable`: two labels a person may take for one another (the label lexicon: ``"armchair"`` ⊂ ``"chair"``, ``"monitor"`` / ``"tv"``, one head noun).
+    - :class:`SceneLabel`, :func:`scene_labels`: the labels a label-only question may ask about (the instances' labels and the scene vocabulary's other words, grouped by :func:`label_key`, with their spelling, source and instances).
     - :func:`label_ambiguous`: the instances a view shows that make a label-only question ambiguous (a related label, or a bookshelf for "book").
     - :class:`Lexicon`, :func:`default_lexicon`: label relations (synonyms, kinds, related pairs, objects showing unannotated ones, typical sizes), extensible by JSON (``SPACEDG_LEXICON``).
     - :func:`label_key`, :func:`description_key`, :func:`head_noun`: how labels and descriptions compare (case, spaces, ``_``).
@@ -100,6 +103,7 @@ Options (MCQ) and balance
 
 Poses, directions and the ground plane
     - :func:`camera_center`: a camera's centre in world metres.
+    - :func:`camera_distance`: straight-line distance from a camera's centre to a world point (an object's box centre), metres.
     - :func:`point_in_camera`: a world point in a camera's frame (OpenCV axes, metres).
     - :func:`relative_rotation`: ``R_a^T R_b``, view B's axes in view A's camera frame.
     - :func:`relative_translation`: ``R_a^T (t_b − t_a)``, B's centre in A's camera frame (metres).
@@ -157,6 +161,7 @@ from spacedg.plugins.questions.geometry import (
     build_mcq,
     camera_attitude,
     camera_center,
+    camera_distance,
     compass_answer,
     compass_frame,
     dominant_parts,
@@ -196,8 +201,10 @@ from spacedg.plugins.questions.records import (
     ref_entry,
     referable,
     referable_ids,
+    role_rounds,
     round_robin,
     round_robin_pairs,
+    round_robin_sub_types,
     round_robin_views,
     seeded_order,
     selection_entry,
@@ -213,6 +220,7 @@ from spacedg.plugins.questions.view_sampling import (
     TRANSLATION_PAIRS,
     Lexicon,
     PairRules,
+    SceneLabel,
     ViewPair,
     VisibilityIndex,
     confusable,
@@ -224,6 +232,7 @@ from spacedg.plugins.questions.view_sampling import (
     label_key,
     same_label_neighbours,
     sample_pairs,
+    scene_labels,
     split_across_views,
 )
 from spacedg.plugins.specs import AnswerType, TaskGroup
@@ -246,7 +255,7 @@ __all__ = [
     "object_entry", "ref_entry", "camera_entry", "pair_geometry", "visibility_entry", "visibility_thresholds", "objects_block",
     "selection_entry", "label_features",
     # seeded order
-    "child_rngs", "seeded_order", "lazy_permutation", "round_robin", "round_robin_views", "round_robin_pairs",
+    "child_rngs", "seeded_order", "lazy_permutation", "role_rounds", "round_robin", "round_robin_views", "round_robin_pairs", "round_robin_sub_types",
     # objects and wording
     "referable", "referable_ids", "phrase", "phrase_key",
     "object_phrase", "find_in_image", "count_phrase", "label_text", "plural", "indefinite_article", "with_articles", "IMAGE_NAMES",
@@ -256,11 +265,11 @@ __all__ = [
     "PairRules", "ViewPair", "sample_pairs",
     "TRANSLATION_PAIRS", "ROTATION_PAIRS", "OBJECT_PAIRS", "OBJECT_DIRECTION_PAIRS", "LOW_COVIS_DIRECTION_PAIRS",
     "split_across_views", "description_clash", "same_label_neighbours", "confusable", "label_key", "description_key", "head_noun",
-    "label_ambiguous", "Lexicon", "default_lexicon",
+    "label_ambiguous", "SceneLabel", "scene_labels", "Lexicon", "default_lexicon",
     # options
     "build_mcq", "BalancedDeck", "MCQ_LETTERS",
     # poses, directions, ground plane
-    "camera_center", "point_in_camera", "relative_rotation", "relative_translation", "euler_yaw_pitch_roll", "ROTATION_WORDS",
+    "camera_center", "camera_distance", "point_in_camera", "relative_rotation", "relative_translation", "euler_yaw_pitch_roll", "ROTATION_WORDS",
     "gravity_rotation", "camera_attitude",
     "dominant_parts", "parts_label", "flipped_labels", "single_word_pool", "CAMERA_MOTION_WORDS", "BODY_DIRECTION_WORDS",
     "TAN30", "MAX_PARTS", "horizontal", "vertical_dominates", "ground_angle", "ground_leg", "MIN_HORIZONTAL_M", "VERTICAL_FACTOR",

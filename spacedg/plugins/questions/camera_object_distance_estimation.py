@@ -40,8 +40,8 @@ two views ``pair`` (covisibility, translation_m, rotation_deg) and ``pair_rules`
 (subject = the measuring view and the object).
 
 Order (decision): ``generate`` splits ``rng`` into one child generator per sub type and
-interleaves the sub types round-robin (so a caller taking the first ``n`` records gets both
-kinds). Within ``single_view`` the views are visited round-robin in a seeded order, each view's
+interleaves the sub types round-robin, so a caller taking the first ``n`` records gets both
+kinds (:func:`~spacedg.plugins.questions.records.round_robin_sub_types`). Within ``single_view`` the views are visited round-robin in a seeded order, each view's
 objects in a seeded order; within ``bbox_center_distance`` the pairs of
 :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` (its seeded anchor round-robin) are visited
 round-robin, each pair's objects in a seeded order. Everything is lazy: a caller that stops
@@ -68,21 +68,10 @@ from spacedg.plugins.questions.view_sampling import (
 )
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import registering
-from spacedg.plugins.questions.geometry import camera_center
+from spacedg.plugins.questions.geometry import camera_center, camera_distance
 from spacedg.plugins.questions.language import find_in_image, label_text
-from spacedg.plugins.questions.records import (
-    child_rngs,
-    make_record,
-    objects_block,
-    phrase,
-    referable,
-    round_robin,
-    round_robin_pairs,
-    round_robin_views,
-    seeded_order,
-    selection_entry,
-)
-from spacedg.plugins.question_family import FamilyFactory
+from spacedg.plugins.questions.records import make_record, objects_block, phrase, referable, round_robin_sub_types, seeded_order, selection_entry
+from spacedg.plugins.questions.pairs import view_and_pair_family
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -115,10 +104,10 @@ TWO_VIEW_TEMPLATE = (
 # ------------------------------------------------------------------ records
 def _distance(scene: Scene, view: str, inst: Instance) -> float | None:
     """Camera centre → box centre in metres, or ``None`` when the camera is inside the box."""
-    centre = camera_center(scene.views[view])
-    if bool(inst.box.contains(centre[None, :])[0]):
+    camera = scene.views[view]
+    if bool(inst.box.contains(camera_center(camera)[None, :])[0]):
         return None
-    return float(np.linalg.norm(inst.box.center - centre))
+    return camera_distance(camera, inst.box.center)
 
 
 def _record(
@@ -175,20 +164,14 @@ def generate(
 
     See the module docstring for the rules, the geometry block and the order.
     """
-    index = VisibilityIndex(scene, thresholds)
-    rng_single, rng_pair = child_rngs(rng, 2)
-    # generator functions: nothing runs (not even pair sampling) before the first ``next``
-    yield from round_robin([
-        round_robin_views(scene, index, rng_single, _single_view_stream),
-        round_robin_pairs(scene, index, pair_rules, rng_pair, _pair_stream),
-    ])
+    # a generator function: nothing runs (not even pair sampling) before the first ``next``
+    yield from round_robin_sub_types(scene, VisibilityIndex(scene, thresholds), rng, _single_view_stream, (pair_rules, _pair_stream))
 
 
 #: ``make_family(thresholds, pair_rules)``: this family with other visibility thresholds / pair rules
-#: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
-make_family = FamilyFactory(
+#: (:func:`~spacedg.plugins.questions.pairs.view_and_pair_family`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = view_and_pair_family(
     generate, name=NAME, task_group=TaskGroup.CAMERA_OBJECT, answer_types={AnswerType.NA}, sub_question_types=SUB_QUESTION_TYPES,
-    num_views=(1, 2), needs={"visibility", "covisibility"},
     description="Metric distance from a camera centre to an object's box centre (single view, or camera B of a pair).",
 )
 FAMILY = make_family()

@@ -139,20 +139,17 @@ from spacedg.plugins.questions.geometry import (
 )
 from spacedg.plugins.questions.language import find_in_image, label_text
 from spacedg.plugins.questions.records import (
-    child_rngs,
     make_record,
     objects_block,
     phrase,
     phrase_key,
     referable,
     referable_ids,
-    round_robin,
-    round_robin_pairs,
-    round_robin_views,
+    round_robin_sub_types,
     seeded_order,
     selection_entry,
 )
-from spacedg.plugins.question_family import FamilyFactory
+from spacedg.plugins.questions.pairs import view_and_pair_family
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -415,20 +412,15 @@ def generate(
     relpos_rules: PairRules = OBJECT_DIRECTION_PAIRS,
 ) -> Iterator[QARecord]:
     """Every valid camera–object direction question of ``scene``, lazily, in a seeded order (see the module docstring)."""
-    index = VisibilityIndex(scene, thresholds)
-    rng_single, rng_bbox, rng_relpos = child_rngs(rng, 3)
-    yield from round_robin([
-        round_robin_views(scene, index, rng_single, _single_view_stream),
-        round_robin_pairs(scene, index, bbox_rules, rng_bbox, _bbox_stream),
-        round_robin_pairs(scene, index, relpos_rules, rng_relpos, _relpos_stream),
-    ])
+    yield from round_robin_sub_types(
+        scene, VisibilityIndex(scene, thresholds), rng, _single_view_stream, (bbox_rules, _bbox_stream), (relpos_rules, _relpos_stream),
+    )
 
 
 #: ``make_family(thresholds, bbox_rules, relpos_rules)``: this family with other visibility thresholds / pair rules
-#: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
-make_family = FamilyFactory(
+#: (:func:`~spacedg.plugins.questions.pairs.view_and_pair_family`); :data:`FAMILY`, the registered one, uses the defaults.
+make_family = view_and_pair_family(
     generate, name=NAME, task_group=TaskGroup.CAMERA_OBJECT, answer_types={AnswerType.MCQ}, sub_question_types=SUB_QUESTION_TYPES,
-    num_views=(1, 2), needs={"visibility", "covisibility"},
     description="Direction of an object relative to another in one view, to camera B, or to a person at A facing B.",
 )
 FAMILY = make_family()

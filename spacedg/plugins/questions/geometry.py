@@ -58,7 +58,7 @@ from spacedg.render.camera import Camera
 
 __all__ = [
     "TAN30", "MAX_PARTS", "BOUNDARY_GUARD_DEG", "CAMERA_MOTION_WORDS", "BODY_DIRECTION_WORDS",
-    "relative_rotation", "relative_translation", "camera_center", "point_in_camera",
+    "relative_rotation", "relative_translation", "camera_center", "camera_distance", "point_in_camera",
     "dominant_parts", "parts_label", "flipped_labels", "single_word_pool", "build_mcq", "BalancedDeck",
     "horizontal", "ground_angle", "vertical_dominates",
     "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS",
@@ -99,6 +99,11 @@ ROTATION_WORDS: dict[str, tuple[str, str]] = {
 def camera_center(camera: Camera) -> np.ndarray:
     """Camera centre in world metres."""
     return np.asarray(camera.cam_to_world, dtype=np.float64)[:3, 3].copy()
+
+
+def camera_distance(camera: Camera, point: np.ndarray) -> float:
+    """Straight-line distance from ``camera``'s centre to the world ``point`` (an object's box centre), metres."""
+    return float(np.linalg.norm(np.asarray(point, dtype=np.float64) - camera_center(camera)))
 
 
 def relative_rotation(cam_a: Camera, cam_b: Camera) -> np.ndarray:

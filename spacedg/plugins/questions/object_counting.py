@@ -25,7 +25,8 @@ index is not empty. ``counts=None`` yields every valid candidate instead (any co
 unbalanced.
 
 Labels are grouped case- and underscore-insensitively (``"Chair"``, ``"chair"`` and
-``"chair "`` are one label); the question uses the first spelling in id order.
+``"chair "`` are one label); the question uses the first spelling in id order (the labels are
+:func:`~spacedg.plugins.questions.view_sampling.scene_labels`, as for existence).
 
 Templates (the paper's appendix "Question Templates", object counting), chosen per record by
 the seeded ``rng``:
@@ -51,12 +52,13 @@ the label and the template, roles = ``counts``).
 Order: every (view, label) candidate is built first (views in scene order, labels in key
 order). Balanced: the labels with a view for every count are visited in the order of one
 ``rng.permutation``; each label's candidates of each count are shuffled (``rng.permutation``,
-counts in ascending order); the stream goes round-robin over the labels, one round (one view
-per count, counts in the order of an ``rng.permutation`` per round) per visit. Each round
-draws one template (``rng.integers``, before its permutation) for all its records, so its
-questions read word for word the same. Unbalanced (``counts=None``): all
-candidates in the order of one ``rng.permutation`` with templates drawn up front. The same
-seed gives the same records in the same order, and a caller may stop after any number.
+counts in ascending order: :func:`~spacedg.plugins.questions.records.role_rounds`); the stream
+goes round-robin over the labels, one round (one view per count, counts in the order of an
+``rng.permutation`` per round) per visit. Each round draws one template (``rng.integers``,
+before its permutation) for all its records, so its questions read word for word the same.
+Unbalanced (``counts=None``): all candidates in the order of one ``rng.permutation`` with
+templates drawn up front. The same seed gives the same records in the same order, and a caller
+may stop after any number.
 """
 
 from __future__ import annotations
@@ -69,11 +71,11 @@ import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
-from spacedg.plugins.questions.view_sampling import VisibilityIndex, label_ambiguous
+from spacedg.plugins.questions.view_sampling import VisibilityIndex, label_ambiguous, scene_labels
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.language import label_text, plural
-from spacedg.plugins.questions.records import make_record, selection_entry
+from spacedg.plugins.questions.records import make_record, role_rounds, round_robin, selection_entry
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -109,35 +111,20 @@ class _Candidate:
     min_pixels: float
 
 
-def _label_key(label: str) -> str:
-    return label_text(label).lower()
-
-
 def _candidates(scene: Scene, index: VisibilityIndex) -> list[_Candidate]:
-    groups: dict[str, list[Instance]] = {}
-    spelling: dict[str, str] = {}
-    for inst in sorted(scene.instances, key=lambda i: i.id):
-        key = _label_key(inst.label)
-        groups.setdefault(key, []).append(inst)
-        spelling.setdefault(key, inst.label)
-    for word in scene.vocabulary:
-        key = _label_key(word)
-        if key and key not in groups:
-            groups[key] = []
-            spelling[key] = word
+    labels = scene_labels(scene)
     out: list[_Candidate] = []
     for view, cam in scene.views.items():
         area = cam.width * cam.height
-        for key in sorted(groups):
-            members = groups[key]
-            classes = [index.cls(view, inst.id) for inst in members]
+        for label in labels:
+            classes = [index.cls(view, inst.id) for inst in label.members]
             if VisibilityClass.PARTIAL in classes:
                 continue  # grey zone: the count is ambiguous
-            if label_ambiguous(index, view, spelling[key]):
+            if label_ambiguous(index, view, label.text):
                 continue  # counting "chair" beside an armchair, "book" beside a full bookshelf: ambiguous
-            counted = tuple(inst for inst, c in zip(members, classes) if c is VisibilityClass.VISIBLE)
-            hidden = tuple(inst for inst, c in zip(members, classes) if c is VisibilityClass.HIDDEN)
-            out.append(_Candidate(view, key, spelling[key], counted, hidden, (cam.width, cam.height), index.thresholds.pixels_for(area)))
+            counted = tuple(inst for inst, c in zip(label.members, classes) if c is VisibilityClass.VISIBLE)
+            hidden = tuple(inst for inst, c in zip(label.members, classes) if c is VisibilityClass.HIDDEN)
+            out.append(_Candidate(view, label.key, label.text, counted, hidden, (cam.width, cam.height), index.thresholds.pixels_for(area)))
     return out
 
 
@@ -203,24 +190,17 @@ def generate(
             yield _record(scene, candidates[idx], int(templates[idx]), thresholds, None)
         return
     counts = tuple(sorted({int(c) for c in counts}))
-    by_key: dict[str, dict[int, list[_Candidate]]] = {}
+    by_key: dict[str, list[list[_Candidate]]] = {}
     for cand in candidates:
-        by_key.setdefault(cand.key, {}).setdefault(len(cand.counted), []).append(cand)
-    keys = sorted(k for k, per in by_key.items() if all(per.get(c) for c in counts))
-    keys = [keys[i] for i in rng.permutation(len(keys))]
-    queues: list[list[list[_Candidate]]] = []
-    for key in keys:
-        per = [by_key[key][c] for c in counts]
-        per = [[group[i] for i in rng.permutation(len(group))] for group in per]
-        queues.append([list(r) for r in zip(*per)])
+        by_key.setdefault(cand.key, [[] for _ in counts])
+        if len(cand.counted) in counts:
+            by_key[cand.key][counts.index(len(cand.counted))].append(cand)
     used: set[int] = set()
-    for rank in range(max((len(q) for q in queues), default=0)):
-        for queue in queues:
-            if rank < len(queue):
-                template = int(rng.integers(0, len(TEMPLATES)))  # one wording per round: the text tells nothing
-                for k in rng.permutation(len(counts)):
-                    used.add(id(queue[rank][int(k)]))
-                    yield _record(scene, queue[rank][int(k)], template, thresholds, counts)
+    for round_ in round_robin([iter(rounds) for rounds in role_rounds(by_key, rng)]):
+        template = int(rng.integers(0, len(TEMPLATES)))  # one wording per round: the text tells nothing
+        for k in rng.permutation(len(counts)):
+            used.add(id(round_[int(k)]))
+            yield _record(scene, round_[int(k)], template, thresholds, counts)
     # then the other candidates with an asked count, in a seeded order: their cell never completes
     # a round, so the question index takes them only to fill a quota too small for any round
     rest = [c for c in candidates if id(c) not in used and len(c.counted) in counts]

@@ -18,8 +18,9 @@ Labels are grouped by :func:`~spacedg.plugins.questions.view_sampling.label_key`
 underscore insensitive). Candidate labels are the scene's instance labels (question text: the
 first spelling in instance-id order; ``label_source = "scene"``) plus the labels of
 ``Scene.vocabulary`` that no instance carries (first spelling in vocabulary order;
-``label_source = "vocabulary"``). So negatives use labels present elsewhere in the scene or in
-the scene's category vocabulary; positives are always scene labels. Limitation: a vocabulary
+``label_source = "vocabulary"``; together
+:func:`~spacedg.plugins.questions.view_sampling.scene_labels`). So negatives use labels present
+elsewhere in the scene or in the scene's category vocabulary; positives are always scene labels. Limitation: a vocabulary
 word that names an unannotated or differently-labelled object ("couch" for an annotated
 "sofa") cannot be detected here; the vocabulary must use the annotation's label words.
 
@@ -40,7 +41,8 @@ Balance (exact 50/50 **per label**, so the label tells a blind model nothing): a
 and negative (view, label) candidates are listed (views in scene order, labels in key order)
 and grouped by label; only labels with both a "yes" and a "no" view are asked. The labels
 are visited in the order of one ``rng.permutation``; each label's positives and then its
-negatives are shuffled by ``rng.permutation`` (in that label order); a fair coin
+negatives are shuffled by ``rng.permutation`` (in that label order;
+:func:`~spacedg.plugins.questions.records.role_rounds`); a fair coin
 ``rng.random() < 0.5`` chooses whether each label's pair starts with "yes" or "no". The stream
 then goes round-robin over the labels, one (yes, no) pair of the label per visit, until a
 label runs out of either. It yields ``2 · Σ_label min(#yes, #no)`` records, and **every
@@ -67,11 +69,11 @@ import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
-from spacedg.plugins.questions.view_sampling import VisibilityIndex, label_ambiguous, label_key
+from spacedg.plugins.questions.view_sampling import VisibilityIndex, label_ambiguous, scene_labels
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.language import indefinite_article, label_text
-from spacedg.plugins.questions.records import make_record, selection_entry
+from spacedg.plugins.questions.records import make_record, role_rounds, round_robin, selection_entry
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -113,39 +115,20 @@ class _Candidate:
     answer: str
 
 
-def _labels(scene: Scene) -> list[tuple[str, str, str, tuple[Instance, ...]]]:
-    """``(key, text, source, members)`` of every candidate label, in key order."""
-    members: dict[str, list[Instance]] = {}
-    text: dict[str, str] = {}
-    for inst in sorted(scene.instances, key=lambda i: i.id):
-        key = label_key(inst.label)
-        if key:
-            members.setdefault(key, []).append(inst)
-            text.setdefault(key, inst.label)
-    vocab: dict[str, str] = {}
-    for word in scene.vocabulary:
-        key = label_key(word)
-        if key and key not in members:
-            vocab.setdefault(key, word)
-    out = [(k, text[k], "scene", tuple(members[k])) for k in members]
-    out += [(k, w, "vocabulary", ()) for k, w in vocab.items()]
-    return sorted(out, key=lambda item: item[0])
-
-
 def candidates(scene: Scene, index: VisibilityIndex) -> tuple[list[_Candidate], list[_Candidate]]:
     """``(positives, negatives)`` in a fixed order (views in scene order, labels in key order); grey zone dropped."""
-    labels = _labels(scene)
+    labels = [label for label in scene_labels(scene) if label.key]
     pos: list[_Candidate] = []
     neg: list[_Candidate] = []
     for view in scene.views:
-        for key, text, source, members in labels:
-            classes = [index.cls(view, inst.id) for inst in members]
+        for label in labels:
+            classes = [index.cls(view, inst.id) for inst in label.members]
             if VisibilityClass.VISIBLE in classes:
-                pos.append(_Candidate(view, key, text, source, members, "yes"))
+                pos.append(_Candidate(view, label.key, label.text, label.source, label.members, "yes"))
             elif all(c is VisibilityClass.HIDDEN for c in classes):
-                if label_ambiguous(index, view, text):
+                if label_ambiguous(index, view, label.text):
                     continue  # "no chair" beside an armchair, "no book" beside a full bookshelf: ambiguous
-                neg.append(_Candidate(view, key, text, source, members, "no"))
+                neg.append(_Candidate(view, label.key, label.text, label.source, label.members, "no"))
             # else: grey zone (some partial, none clearly visible) → skipped
     return pos, neg
 
@@ -177,25 +160,19 @@ def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThres
     """Existence questions of ``scene``, yes/no balanced per label, round-robin over labels in a seeded order (module docstring)."""
     index = VisibilityIndex(scene, thresholds)
     pos, neg = candidates(scene, index)
-    keys = sorted({c.key for c in pos} & {c.key for c in neg})
-    if not keys:
+    by_key: dict[str, tuple[list[_Candidate], list[_Candidate]]] = {}
+    for answer, group in enumerate((pos, neg)):
+        for cand in group:
+            by_key.setdefault(cand.key, ([], []))[answer].append(cand)
+    queues = role_rounds(by_key, rng)
+    if not queues:
         return
-    keys = [keys[i] for i in rng.permutation(len(keys))]
-    queues = []
-    for key in keys:
-        yes = [c for c in pos if c.key == key]
-        no = [c for c in neg if c.key == key]
-        yes = [yes[i] for i in rng.permutation(len(yes))]
-        no = [no[i] for i in rng.permutation(len(no))]
-        queues.append(list(zip(yes, no)))
     yes_first = rng.random() < 0.5
-    for rank in range(max(len(q) for q in queues)):
-        for queue in queues:
-            if rank < len(queue):
-                a, b = queue[rank] if yes_first else queue[rank][::-1]
-                template = int(rng.integers(0, len(TEMPLATES)))  # one wording for both: the text tells nothing
-                yield _record(scene, index, a, template)
-                yield _record(scene, index, b, template)
+    for yes, no in round_robin([iter(rounds) for rounds in queues]):
+        a, b = (yes, no) if yes_first else (no, yes)
+        template = int(rng.integers(0, len(TEMPLATES)))  # one wording for both: the text tells nothing
+        yield _record(scene, index, a, template)
+        yield _record(scene, index, b, template)
 
 
 #: ``make_family(thresholds)``: this family with other visibility thresholds

@@ -20,6 +20,11 @@ and lives here:
   :func:`pair_records` of the stream; its options are the visibility ``thresholds`` and the
   ``pair_rules`` (default :data:`~spacedg.plugins.questions.view_sampling.OBJECT_PAIRS`:
   covisibility > 0.25, baseline >= 0.2 m).
+- :func:`view_and_pair_family`: the declaration of a family that asks in one image and in two
+  (``camera_object_distance_estimation``, ``camera_object_relative_direction``): its own
+  ``generate`` interleaves a single-view sub type with two-view ones
+  (:func:`~spacedg.plugins.questions.records.round_robin_sub_types`); one or two views, needs
+  :data:`PAIR_NEEDS`.
 - :func:`object_pairs`: the candidates of the families that name object 1 in image A and
   object 2 in image B (both :func:`~spacedg.plugins.questions.records.referable` there),
   in a lazily drawn seeded order.
@@ -28,7 +33,8 @@ and lives here:
 from __future__ import annotations
 
 import functools
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -36,11 +42,10 @@ from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.questions.records import PairStream, lazy_permutation, referable_ids, round_robin_pairs
 from spacedg.plugins.questions.view_sampling import OBJECT_PAIRS, PairRules, ViewPair, VisibilityIndex
-from spacedg.plugins.specs import AnswerType, TaskGroup
 from spacedg.scene.model import Instance, Scene
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
 
-__all__ = ["PAIR_NEEDS", "object_pairs", "pair_family", "pair_records"]
+__all__ = ["PAIR_NEEDS", "object_pairs", "pair_family", "pair_records", "view_and_pair_family"]
 
 #: What a pair family reads from the scene: per-view instance visibility and view covisibility.
 PAIR_NEEDS: frozenset[str] = frozenset({"visibility", "covisibility"})
@@ -58,31 +63,27 @@ def pair_records(
     yield from round_robin_pairs(scene, VisibilityIndex(scene, thresholds), pair_rules, rng, stream)
 
 
-def pair_family(
-    stream: PairStream,
-    *,
-    name: str,
-    task_group: TaskGroup,
-    answer_types: Iterable[AnswerType],
-    sub_question_types: tuple[str, ...],
-    description: str,
-) -> FamilyFactory:
-    """The factory of the two-view family ``name`` whose ``generate`` is :func:`pair_records` of ``stream``.
+def pair_family(stream: PairStream, **declaration: Any) -> FamilyFactory:
+    """The factory of the two-view family whose ``generate`` is :func:`pair_records` of ``stream``.
 
-    Num views ``(2,)``, needs :data:`PAIR_NEEDS`; the options are :func:`pair_records`'
-    ``thresholds`` and ``pair_rules``: ``make_family = pair_family(...)``, ``FAMILY =
-    make_family()`` (the defaults), ``make_family(thresholds, pair_rules)``.
+    ``declaration``: ``name``, ``task_group``, ``answer_types``, ``sub_question_types`` and
+    ``description``, as :class:`~spacedg.plugins.question_family.FamilyFactory`. Num views
+    ``(2,)``, needs :data:`PAIR_NEEDS`; the options are :func:`pair_records`' ``thresholds`` and
+    ``pair_rules``: ``make_family = pair_family(...)``, ``FAMILY = make_family()`` (the
+    defaults), ``make_family(thresholds, pair_rules)``.
     """
-    return FamilyFactory(
-        functools.partial(pair_records, stream=stream),
-        name=name,
-        task_group=task_group,
-        answer_types=answer_types,
-        sub_question_types=sub_question_types,
-        num_views=(2,),
-        needs=PAIR_NEEDS,
-        description=description,
-    )
+    return FamilyFactory(functools.partial(pair_records, stream=stream), num_views=(2,), needs=PAIR_NEEDS, **declaration)
+
+
+def view_and_pair_family(generate: Callable[..., Iterator[QARecord]], **declaration: Any) -> FamilyFactory:
+    """The factory of the family whose ``generate`` asks in one image and in two (:func:`~spacedg.plugins.questions.records.round_robin_sub_types`).
+
+    ``declaration`` as :func:`pair_family`'s. Num views ``(1, 2)``, needs :data:`PAIR_NEEDS`; the
+    options are ``generate``'s own (its visibility thresholds and the rules of each two-view sub
+    type): ``make_family = view_and_pair_family(generate, ...)``, ``FAMILY = make_family()`` (the
+    defaults).
+    """
+    return FamilyFactory(generate, num_views=(1, 2), needs=PAIR_NEEDS, **declaration)
 
 
 def object_pairs(index: VisibilityIndex, pair: ViewPair, rng: np.random.Generator) -> Iterator[tuple[Instance, Instance]]:

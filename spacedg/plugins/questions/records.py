@@ -13,9 +13,12 @@ the same records in the same order; everything that can be lazy is):
 - :func:`round_robin`, :func:`round_robin_views`, :func:`round_robin_pairs`: one record from
   each stream in turn (views in a seeded order; pairs in
   :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` order), so a caller that stops after ``n``
-  records gets them spread over as many views or pairs as possible;
+  records gets them spread over as many views or pairs as possible; :func:`round_robin_sub_types`:
+  the same over the sub types of a family with one single-view and some two-view sub types;
 - :func:`seeded_order` (one ``rng.permutation`` of a small list) and :func:`lazy_permutation`
-  (a huge candidate space walked in a random order drawn lazily).
+  (a huge candidate space walked in a random order drawn lazily);
+- :func:`role_rounds`: whole rounds of each key's roles in a seeded order (a label asked once
+  with each answer per round: counting, existence).
 
 Objects: :func:`referable` is the one rule for naming an object in a view (clearly visible
 there and no :func:`~spacedg.plugins.questions.view_sampling.description_clash`); :func:`phrase` and
@@ -43,7 +46,7 @@ cell (one record of every role), so within a scene no function of the cell beats
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import Any, TypeVar
 
 import numpy as np
@@ -88,8 +91,10 @@ __all__ = [
     "ref_entry",
     "referable",
     "referable_ids",
+    "role_rounds",
     "round_robin",
     "round_robin_pairs",
+    "round_robin_sub_types",
     "round_robin_views",
     "seeded_order",
     "selection_entry",
@@ -134,6 +139,24 @@ def seeded_order(items: Sequence[T], rng: np.random.Generator) -> Iterator[T]:
         yield items[int(i)]
 
 
+def role_rounds(roles_by_key: Mapping[str, Sequence[Sequence[T]]], rng: np.random.Generator) -> list[list[tuple[T, ...]]]:
+    """Whole rounds of each key's roles, for a family balanced per key (a label asked equally often with each answer).
+
+    ``roles_by_key``: key → its candidates of each role, in role order. Only the keys with a
+    candidate of every role are kept: in sorted order, then in the order of one
+    ``rng.permutation``; each such key's candidates of each role (roles in order) are shuffled by
+    one ``rng.permutation``, and its round ``k`` is its ``k``-th candidate of every role (as many
+    rounds as its scarcest role has candidates). Visit the keys with
+    ``round_robin(iter(rounds) for rounds in ...)``: one round of each key in turn.
+    """
+    keys = sorted(key for key, roles in roles_by_key.items() if all(roles))
+    out: list[list[tuple[T, ...]]] = []
+    for i in rng.permutation(len(keys)):
+        shuffled = [[group[int(j)] for j in rng.permutation(len(group))] for group in roles_by_key[keys[int(i)]]]
+        out.append(list(zip(*shuffled)))
+    return out
+
+
 def lazy_permutation(n: int, rng: np.random.Generator, batch: int = 256) -> Iterator[int]:
     """The integers ``0 … n−1`` in a uniformly random order drawn lazily (Fisher–Yates with a sparse swap map).
 
@@ -169,6 +192,24 @@ def round_robin_pairs(scene: Scene, index: VisibilityIndex, rules: PairRules, rn
     """
     pairs = sample_pairs(scene, rules, rng)
     yield from round_robin([stream(scene, index, pair, rules, rng) for pair in pairs])
+
+
+def round_robin_sub_types(
+    scene: Scene, index: VisibilityIndex, rng: np.random.Generator, view_stream: ViewStream, *pair_streams: tuple[PairRules, PairStream],
+) -> Iterator[QARecord]:
+    """A family with a single-view sub type and two-view ones: its sub types interleaved, one record of each in turn.
+
+    ``view_stream`` is the single-view sub type (:func:`round_robin_views`); each ``(rules, stream)``
+    of ``pair_streams`` a two-view one (:func:`round_robin_pairs` under its own ``rules``). Each sub
+    type gets its own child generator (:func:`child_rngs` of ``rng``, single view first, then the
+    pair streams in order), so one sub type's draws never shift another's. Lazy: nothing is
+    drawn, and no pair sampled, before the first ``next``.
+    """
+    view_rng, *pair_rngs = child_rngs(rng, 1 + len(pair_streams))
+    yield from round_robin([
+        round_robin_views(scene, index, view_rng, view_stream),
+        *(round_robin_pairs(scene, index, rules, pair_rng, stream) for (rules, stream), pair_rng in zip(pair_streams, pair_rngs)),
+    ])
 
 
 # ------------------------------------------------------------------ objects

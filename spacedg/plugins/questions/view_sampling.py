@@ -8,6 +8,8 @@
 - :func:`split_across_views`: the three-object rule (the two views together show the three
   objects; neither view shows all three).
 - :func:`description_clash` / :func:`same_label_neighbours`: the description ambiguity filter.
+- :func:`scene_labels`: the labels a label-only question (counting, existence) may ask about:
+  the scene's instance labels and its vocabulary words, grouped by :func:`label_key`.
 - :func:`confusable`: two labels a person may take for one another (the scene lexicon,
   :mod:`spacedg.scene.lexicon`: synonyms, kinds such as armchair ⊂ chair, debatable pairs
   such as stool / chair, and one head noun such as "lamp" / "floor lamp");
@@ -43,6 +45,7 @@ from spacedg.errors import InvalidDataError, ParameterError
 __all__ = [
     "VisibilityIndex", "PairRules", "ViewPair", "sample_pairs", "split_across_views",
     "description_key", "label_key", "head_noun", "confusable", "label_ambiguous", "same_label_neighbours", "description_clash",
+    "SceneLabel", "scene_labels",
     "Lexicon", "default_lexicon",
     "TRANSLATION_PAIRS", "ROTATION_PAIRS", "OBJECT_PAIRS", "OBJECT_DIRECTION_PAIRS", "LOW_COVIS_DIRECTION_PAIRS",
 ]
@@ -214,6 +217,47 @@ def split_across_views(index: VisibilityIndex, view_a: str, view_b: str, ids: tu
     if not set(ids) <= visible or len(set(ids)) < 3:
         return False
     return not (set(ids) <= set(index.seen[view_a]) or set(ids) <= set(index.seen[view_b]))
+
+
+@dataclass(frozen=True)
+class SceneLabel:
+    """A label a label-only question may ask about (:func:`scene_labels`).
+
+    Attributes:
+        key: its :func:`label_key` (how labels are grouped and compared).
+        text: the label as the question writes it: the first spelling among the instances in id
+            order, else among the vocabulary words in their order.
+        source: ``"scene"`` (some instance carries it) or ``"vocabulary"`` (only ``Scene.vocabulary`` has it).
+        members: the instances of the label, in id order (none for a vocabulary label).
+    """
+
+    key: str
+    text: str
+    source: str
+    members: tuple[Instance, ...]
+
+
+def scene_labels(scene: Scene) -> list[SceneLabel]:
+    """The scene's instance labels and the words of ``Scene.vocabulary`` that no instance carries,
+    grouped by :func:`label_key`, in key order (the candidates of counting and existence questions).
+
+    A vocabulary word whose key is empty is dropped; an instance label whose key is empty (only
+    underscores) stays a group of key ``""``, which a family may skip.
+    """
+    members: dict[str, list[Instance]] = {}
+    text: dict[str, str] = {}
+    for inst in sorted(scene.instances, key=lambda i: i.id):
+        key = label_key(inst.label)
+        members.setdefault(key, []).append(inst)
+        text.setdefault(key, inst.label)
+    vocabulary: dict[str, str] = {}
+    for word in scene.vocabulary:
+        key = label_key(word)
+        if key and key not in members:
+            vocabulary.setdefault(key, word)
+    labels = [SceneLabel(k, text[k], "scene", tuple(members[k])) for k in members]
+    labels += [SceneLabel(k, w, "vocabulary", ()) for k, w in vocabulary.items()]
+    return sorted(labels, key=lambda label: label.key)
 
 
 def label_ambiguous(index: VisibilityIndex, view: str, label: str, lexicon: Lexicon | None = None) -> list[Instance]:

@@ -4,8 +4,8 @@
 Written only against the public authoring API (:mod:`spacedg.plugins.authoring`).
 
 The question names four objects seen in one image; the answer is the one whose box centre is
-nearest to the camera centre (Euclidean distance, world metres, the convention of
-``camera_object_distance_estimation``). Rules:
+nearest to the camera centre (:func:`~spacedg.plugins.authoring.camera_distance`: Euclidean,
+world metres, the measure of ``camera_object_distance_estimation``). Rules:
 
 - every named object is *referable* in the view (clearly visible, no same-label instance with
   the same description in the image), and the four phrases differ;
@@ -40,7 +40,7 @@ from spacedg.plugins.authoring import (
     TaskGroup,
     VisibilityIndex,
     build_mcq,
-    camera_center,
+    camera_distance,
     hookimpl,
     make_record,
     objects_block,
@@ -62,7 +62,7 @@ QUESTION = "Which of these objects is closest to the camera that took this image
 
 def distance_m(scene: Scene, view: str, inst: Instance) -> float:
     """Distance from the centre of ``view``'s camera to the centre of ``inst``'s box, metres."""
-    return float(np.linalg.norm(np.asarray(inst.box.center, dtype=np.float64) - camera_center(scene.views[view])))
+    return camera_distance(scene.views[view], inst.box.center)
 
 
 def namable(index: VisibilityIndex, view: str) -> list[Instance]:
