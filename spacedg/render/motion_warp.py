@@ -48,6 +48,16 @@ def relative_transform(pose_from: np.ndarray, pose_to: np.ndarray) -> np.ndarray
     return np.concatenate([r.reshape(9), t]).astype(np.float64)
 
 
+#: fast-math flags of :func:`gather` and :func:`doubling_pass`: ``fastmath=True`` less ``reassoc``.
+#: With ``reassoc`` LLVM may re-associate their float sums differently when a parallel kernel is
+#: compiled fresh (its parfor gufunc optimised on its own, then linked into the caller) than when
+#: the same kernel is loaded from numba's on-disk cache (the linked copy): the first process on a
+#: machine rendered other bits than later ones. Without it the sums keep the source order; FMA
+#: contraction (``contract``) stays and was measured to give identical bits both ways
+#: (``benchmarks/numba_cache_determinism.py``).
+_FASTMATH = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
+
+
 @numba.njit(cache=True, inline="always")
 def _project(m, x, y, z, fx, fy, cx, cy):
     """Point ``(x, y, z)`` in the source camera → keyframe pixel ``(u, v, depth)``."""
@@ -60,7 +70,7 @@ def _project(m, x, y, z, fx, fy, cx, cy):
 
 
 @fork_safe
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@numba.njit(parallel=True, fastmath=_FASTMATH, cache=True)
 def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover - compiled
     """Add one keyframe interval's path average to ``out`` (in place).
 
@@ -213,7 +223,7 @@ def _corner(x, y, xmax, ymax, row, nc):
 
 
 @fork_safe
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@numba.njit(parallel=True, fastmath=_FASTMATH, cache=True)
 def doubling_pass(src, field, scale, sat, dst):  # pragma: no cover - compiled
     """``dst(q) = ½ [src(q − s·d(q)) + src(q + s·d(q))]`` with ``s = scale``: one box-length doubling
     (a box of length ℓ along ``d`` becomes two of them ``2 s |d|`` apart). ``sat``:
