@@ -211,6 +211,13 @@ class Camera:
         sx, sy = width / self.width, height / self.height
         return replace(self, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy, width=width, height=height)
 
+    def widened(self, margin: int) -> Camera:
+        """The same camera with its image grown by ``margin`` pixels on every side (principal point
+        shifted by ``margin``; same focal lengths, pose and lens)."""
+        return replace(
+            self, cx=self.cx + margin, cy=self.cy + margin, width=self.width + 2 * margin, height=self.height + 2 * margin
+        )
+
     # ------------------------------------------------------------ projection
     def to_camera(self, points_world: np.ndarray) -> np.ndarray:
         """(N, 3) world points → (N, 3) camera coordinates (float64)."""

@@ -78,10 +78,11 @@ import numpy as np
 
 from spacedg.limits import image_size_problem
 from spacedg.render.colour import srgb_to_linear
+from spacedg.render.frame import expected_depth
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 from spacedg.render.settings import DEFOCUS_SLAB
 
-__all__ = ["MEASURE_SCALE", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of", "composite_factor", "coarse_view", "upsample"]
+__all__ = ["MEASURE_SCALE", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of", "composite_factor", "coarse_view", "factor_for_coc", "upsample"]
 
 
 def slab_of(depths: np.ndarray) -> np.ndarray:
@@ -175,7 +176,7 @@ def measurement_camera(camera: Any, margin: int, scale: float | None = None) -> 
     sides ``ceil((side + 2·margin)·scale)``."""
     scale = MEASURE_SCALE if scale is None else float(scale)
     if margin > 0:
-        camera = replace(camera, cx=camera.cx + margin, cy=camera.cy + margin, width=camera.width + 2 * margin, height=camera.height + 2 * margin)
+        camera = camera.widened(margin)
     if scale == 1.0:
         return camera
     # whole tiles, grown evenly on both sides: the pass composites every pixel of a tile (also those
@@ -262,7 +263,12 @@ def composite_factor(packed: np.ndarray, rects: np.ndarray, width: int, height: 
     visible = rects[:, 1] > rects[:, 0]
     if COMPOSITE_MIN_COC <= 0 or not visible.any():
         return 1
-    smallest = float(packed[visible, COC].min())
+    return factor_for_coc(float(packed[visible, COC].min()), width, height)
+
+
+def factor_for_coc(smallest: float, width: int, height: int) -> int:
+    """:func:`composite_factor` given the smallest visible circle of confusion ``smallest`` (px);
+    shared by both backends."""
     factor = 1
     while (
         factor < COMPOSITE_MAX_FACTOR and smallest >= COMPOSITE_MIN_COC * factor
@@ -323,7 +329,7 @@ def upsample(out: dict[str, np.ndarray], factor: int, width: int, height: int, w
         result["rgb"] = _bilinear(out["rgb"], factor, width, height)
     if want_depth:
         weighted = _bilinear(out["depth"] * alpha, factor, width, height)
-        result["depth"] = np.where(result["alpha"] > 0, weighted / np.maximum(result["alpha"], 1e-30), 0.0).astype(np.float32)
+        result["depth"] = expected_depth(weighted, result["alpha"])
     if want_ids:
         rows, cols = (np.arange(height) // factor)[:, None], (np.arange(width) // factor)[None, :]
         for name in ("median_depth", "instance_ids"):

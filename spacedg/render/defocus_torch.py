@@ -303,16 +303,12 @@ def render_torch(
 
 def composite_factor(proj: Projected, width: int, height: int) -> int:
     """As :func:`spacedg.render.defocus.composite_factor`, from a torch projection."""
-    from spacedg.render.defocus import COMPOSITE_MAX_FACTOR, COMPOSITE_MIN_COC
+    from spacedg.render import defocus
 
     visible = proj.visible
-    if COMPOSITE_MIN_COC <= 0 or proj.coc is None or not bool(visible.any()):
+    if defocus.COMPOSITE_MIN_COC <= 0 or proj.coc is None or not bool(visible.any()):
         return 1
-    smallest = float(proj.coc[visible].min())
-    factor = 1
-    while factor < COMPOSITE_MAX_FACTOR and smallest >= COMPOSITE_MIN_COC * factor and min(width, height) >= 16 * 2 * factor:
-        factor *= 2
-    return factor
+    return defocus.factor_for_coc(float(proj.coc[visible].min()), width, height)
 
 
 def coarse_view(proj: Projected, width: int, height: int, factor: int) -> tuple[Projected, int, int]:

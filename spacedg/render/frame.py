@@ -49,3 +49,8 @@ class Frame:
     @property
     def width(self) -> int:
         return int(self.alpha.shape[1])
+
+
+def expected_depth(weighted: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """``Σ w·z / α`` as float32: the expected depth image from a weighted depth sum, 0 where ``α`` is 0."""
+    return np.where(alpha > 0, weighted / np.maximum(alpha, 1e-30), 0.0).astype(np.float32)

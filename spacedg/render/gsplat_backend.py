@@ -118,10 +118,7 @@ def cuda_ops() -> GsplatOps:
     """gsplat's CUDA kernels (``gsplat.cuda._wrapper``)."""
     from gsplat.cuda._wrapper import isect_offset_encode, isect_tiles, rasterize_to_pixels
 
-    def raster(means2d, conics, colors, opacities, width, height, tile_size, offsets, flatten_ids):  # type: ignore[no-untyped-def]
-        return rasterize_to_pixels(means2d, conics, colors, opacities, width, height, tile_size, offsets, flatten_ids)
-
-    return GsplatOps("cuda", isect_tiles, isect_offset_encode, raster)
+    return GsplatOps("cuda", isect_tiles, isect_offset_encode, rasterize_to_pixels)
 
 
 def reference_ops() -> GsplatOps:
@@ -346,22 +343,27 @@ def _channels(proj: Projected, want_color: bool, want_depth: bool) -> torch.Tens
     return torch.cat([p.to(torch.float32) for p in parts], dim=-1)
 
 
+def _isect(means2d, radii, depths, camera: Camera, ops: GsplatOps):  # type: ignore[no-untyped-def]
+    """gsplat's tile intersection of ``[S, N, …]`` stacks for ``camera``'s tile grid: ``(offsets, flatten_ids)``."""
+    tiles_x = (camera.width + TILE_SIZE - 1) // TILE_SIZE
+    tiles_y = (camera.height + TILE_SIZE - 1) // TILE_SIZE
+    _, isect_ids, flatten_ids = ops.isect_tiles(means2d, radii, depths, TILE_SIZE, tiles_x, tiles_y)
+    return ops.isect_offset_encode(isect_ids, means2d.shape[0], tiles_x, tiles_y), flatten_ids
+
+
 def _composite_batch(
     projs: list[Projected], camera: Camera, settings: RasterSettings, ops: GsplatOps, want_color: bool, want_depth: bool,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """gsplat's tiles + compositor on a stack of projections: ``(channels [S,H,W,C], alpha [S,H,W], offsets, flatten_ids)``."""
     import torch
 
-    tiles_x = (camera.width + TILE_SIZE - 1) // TILE_SIZE
-    tiles_y = (camera.height + TILE_SIZE - 1) // TILE_SIZE
     means2d = torch.stack([p.means2d for p in projs]).float().contiguous()
     conics = torch.stack([p.conics for p in projs]).float().contiguous()
     opac = torch.stack([_gsplat_opacities(p, settings) for p in projs]).float().contiguous()
     colors = torch.stack([_channels(p, want_color, want_depth) for p in projs]).contiguous()
     radii = torch.stack([p.radii for p in projs]).int().contiguous()
     depths = torch.stack([p.depths for p in projs]).float().contiguous()
-    _, isect_ids, flatten_ids = ops.isect_tiles(means2d, radii, depths, TILE_SIZE, tiles_x, tiles_y)
-    offsets = ops.isect_offset_encode(isect_ids, len(projs), tiles_x, tiles_y)
+    offsets, flatten_ids = _isect(means2d, radii, depths, camera, ops)
     rendered, alphas = ops.rasterize_to_pixels(
         means2d, conics, colors, opac, camera.width, camera.height, TILE_SIZE, offsets, flatten_ids
     )
@@ -369,17 +371,14 @@ def _composite_batch(
 
 
 def _split(rendered: torch.Tensor, alpha: torch.Tensor, want_color: bool, want_depth: bool) -> dict[str, torch.Tensor]:
-    import torch
-
+    """gsplat's channels by name: ``alpha``, linear ``rgb``, ``depth_weighted`` (``Σ w·z``)."""
     from spacedg.render.colour import srgb_to_linear
 
     out = {"alpha": alpha}
     if want_color:
         out["rgb"] = srgb_to_linear(rendered[..., :3])
     if want_depth:
-        weighted = rendered[..., -1]
-        out["depth_weighted"] = weighted
-        out["depth"] = torch.where(alpha > 0, weighted / torch.clamp(alpha, min=1e-30), torch.zeros_like(weighted))
+        out["depth_weighted"] = rendered[..., -1]
     return out
 
 
@@ -391,15 +390,11 @@ def _project(gs, camera: Camera, settings: RasterSettings, want_color: bool):  #
 
 def _sharp_ids(gs, camera: Camera, settings: RasterSettings, proj, ops: GsplatOps, offsets=None, flatten_ids=None):  # type: ignore[no-untyped-def]
     """Median depth and ids of one image from gsplat's tile lists (computed here if not given)."""
-
     if offsets is None:
-        tiles_x = (camera.width + TILE_SIZE - 1) // TILE_SIZE
-        tiles_y = (camera.height + TILE_SIZE - 1) // TILE_SIZE
-        _, isect_ids, flatten_ids = ops.isect_tiles(
+        offsets, flatten_ids = _isect(
             proj.means2d[None].float().contiguous(), proj.radii[None].int().contiguous(), proj.depths[None].float().contiguous(),
-            TILE_SIZE, tiles_x, tiles_y,
+            camera, ops,
         )
-        offsets = ops.isect_offset_encode(isect_ids, 1, tiles_x, tiles_y)
     start, length = _tile_lists(offsets, flatten_ids.numel())
     return median_pass(proj, start, length, flatten_ids.long(), gs.instance_ids, camera.width, camera.height, settings.alpha_max)
 
@@ -420,6 +415,7 @@ def render_gsplat(
 
     from spacedg.render import motion as motion_model
     from spacedg.render import project
+    from spacedg.render.raster_torch import expected_depth
 
     t0 = time.perf_counter()
     if defocus is not None:  # the defocus model's compositing rules are not gsplat's: the torch twin renders it
@@ -445,19 +441,16 @@ def render_gsplat(
             t1 = time.perf_counter()
             rendered, alpha, offsets, flatten_ids = _composite_batch([proj], camera, settings, ops, want_color, want_depth)
             tensors = _split(rendered[0], alpha[0], want_color, want_depth)
-            tensors.pop("depth_weighted", None)
+            if want_depth:
+                tensors["depth"] = expected_depth(tensors.pop("depth_weighted"), tensors["alpha"])
             if want_ids:
                 tensors["median_depth"], tensors["instance_ids"] = _sharp_ids(gs, camera, settings, proj, ops, offsets, flatten_ids)
             stats.update(visible=int(proj.visible.sum()), pairs=int(flatten_ids.numel()), sub_steps=1)
             stats["project_ms"] = (t1 - t0) * 1e3
         else:
-            translation, rotation = np.array(motion.translation), np.array(motion.rotation)
-            if motion.fast:
-                displacement, feature = motion_model.motion_extent(gaussians, camera, motion)
-                count = motion_model.choose_sub_steps(displacement, feature, motion.sub_steps)
-            else:
-                displacement, count = math.nan, motion.sub_steps
-            poses = exposure_poses(camera, translation, rotation, motion_model.sub_exposure_times(count))
+            displacement, count = motion_model.sub_step_plan(gaussians, camera, motion, motion.fast)
+            times = motion_model.sub_exposure_times(count)
+            poses = exposure_poses(camera, np.array(motion.translation), np.array(motion.rotation), times)
             per_call = max(1, BATCH_ELEMENTS // max(len(gaussians), 1))
             sums: dict[str, torch.Tensor] = {}
             pairs = 0
@@ -465,18 +458,14 @@ def render_gsplat(
                 projs = [_project(gs, camera.with_pose(p), settings, want_color) for p in poses[b0 : b0 + per_call]]
                 rendered, alpha, _, flatten_ids = _composite_batch(projs, camera, settings, ops, want_color, want_depth)
                 pairs += int(flatten_ids.numel())
-                part = _split(rendered, alpha, want_color, want_depth)
-                for name in ("alpha", "rgb", "depth_weighted"):
-                    if name in part:
-                        total = part[name].sum(0)
-                        sums[name] = sums[name] + total if name in sums else total
+                for name, value in _split(rendered, alpha, want_color, want_depth).items():
+                    total = value.sum(0)
+                    sums[name] = sums[name] + total if name in sums else total
             tensors = {"alpha": sums["alpha"] / count}
             if want_color:
                 tensors["rgb"] = sums["rgb"] / count
             if want_depth:
-                tensors["depth"] = torch.where(
-                    sums["alpha"] > 0, sums["depth_weighted"] / torch.clamp(sums["alpha"], min=1e-30), torch.zeros_like(sums["alpha"])
-                )
+                tensors["depth"] = expected_depth(sums["depth_weighted"], sums["alpha"])
             if want_ids:
                 proj = _project(gs, camera, settings, False)
                 tensors["median_depth"], tensors["instance_ids"] = _sharp_ids(gs, camera, settings, proj, ops)

@@ -54,7 +54,7 @@ import numpy as np
 
 from spacedg.render.camera import Camera, exposure_poses
 from spacedg.render.composite import composite_view, frame_from_images
-from spacedg.render.frame import Frame
+from spacedg.render.frame import Frame, expected_depth
 from spacedg.render.gaussians import Gaussians
 from spacedg.render.settings import Defocus, MotionBlur, RasterSettings
 
@@ -165,17 +165,21 @@ def _canvas_fits(camera: Camera) -> bool:
     return image_size_problem(camera.width + 2 * margin, camera.height + 2 * margin) is None
 
 
+def sub_step_plan(gaussians: Gaussians, camera: Camera, motion: MotionBlur, fast: bool) -> tuple[float, int]:
+    """``(displacement_px, count)`` of a sub-step render: with ``fast`` the largest on-screen path
+    (:func:`motion_extent`) and :func:`choose_sub_steps`' count, else NaN and ``motion.sub_steps``."""
+    if not fast:
+        return math.nan, motion.sub_steps
+    displacement, feature = motion_extent(gaussians, camera, motion)
+    return displacement, choose_sub_steps(displacement, feature, motion.sub_steps)
+
+
 def render_motion_substeps(job: MotionJob, fast: bool | None = None) -> Frame:
     """Average of sub-exposure renders: ``motion.sub_steps`` of them, or with ``fast`` (default
     ``motion.fast``) the count of :func:`choose_sub_steps`."""
     t0 = time.perf_counter()
     camera, motion, wanted = job.camera, job.motion, job.wanted
-    fast = motion.fast if fast is None else fast
-    if fast:
-        displacement, feature = motion_extent(job.gaussians, camera, motion)
-        count = choose_sub_steps(displacement, feature, motion.sub_steps)
-    else:
-        displacement, count = math.nan, motion.sub_steps
+    displacement, count = sub_step_plan(job.gaussians, camera, motion, motion.fast if fast is None else fast)
     poses = job.poses(sub_exposure_times(count))
     blur_outputs = frozenset(wanted & {"rgb", "depth"})
     rgb = np.zeros((camera.height, camera.width, 3), np.float64) if "rgb" in wanted else None
@@ -194,7 +198,7 @@ def render_motion_substeps(job: MotionJob, fast: bool | None = None) -> Frame:
     if rgb is not None:
         images["rgb"] = (rgb / count).astype(np.float32)
     if depth_sum is not None:
-        images["depth"] = np.where(alpha > 0, depth_sum / np.maximum(alpha, 1e-30), 0.0).astype(np.float32)
+        images["depth"] = expected_depth(depth_sum, alpha)
     return job.frame(images, t0, {"sub_steps": count, "displacement_px": displacement, "pairs": pairs})
 
 
@@ -245,8 +249,7 @@ def render_motion_keyframes(
     displacement, _ = motion_extent(job.gaussians, camera, motion)
     count = keyframes or choose_keyframes(displacement, motion.sub_steps)
     margin = int(min(math.ceil(0.6 * displacement / count) + 2, max(camera.width, camera.height) // 2))
-    canvas = Camera(camera.fx, camera.fy, camera.cx + margin, camera.cy + margin,
-                    camera.width + 2 * margin, camera.height + 2 * margin, camera.cam_to_world)
+    canvas = camera.widened(margin)
     want_depth = "depth" in wanted
     edges = np.linspace(-0.5, 0.5, count + 1)
     centres = 0.5 * (edges[:-1] + edges[1:])
@@ -291,6 +294,6 @@ def render_motion_keyframes(
     if "rgb" in wanted:
         images["rgb"] = np.ascontiguousarray(np.maximum(acc[..., :3], 0.0))
     if want_depth:
-        images["depth"] = np.where(acc[..., 3] > 0, acc[..., 4] / np.maximum(acc[..., 3], 1e-30), 0.0).astype(np.float32)
+        images["depth"] = expected_depth(acc[..., 4], acc[..., 3])
     # sub_steps: renders made (the keyframes)
     return job.frame(images, t0, {"sub_steps": count, "keyframes": count, "displacement_px": displacement, "pairs": pairs})

@@ -119,6 +119,11 @@ def tiles_to_image(t: torch.Tensor, tiles_y: int, tiles_x: int, height: int, wid
     return img.reshape(tiles_y * TILE_SIZE, tiles_x * TILE_SIZE, *tail)[:height, :width]
 
 
+def expected_depth(weighted: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
+    """``Σ w·z / α``: the expected depth from the weighted depth sum, 0 where nothing was composited."""
+    return torch.where(alpha > 0, weighted / torch.clamp(alpha, min=1e-30), torch.zeros_like(weighted))
+
+
 def images_from_tiles(
     tiles_y: int, tiles_x: int, height: int, width: int, trans: torch.Tensor, colour: dict[str, torch.Tensor],
     depth: torch.Tensor | None, labels: tuple[torch.Tensor, torch.Tensor] | None,
@@ -136,8 +141,7 @@ def images_from_tiles(
     for name, planes in colour.items():
         out[name] = to_image(planes)
     if depth is not None:
-        d = to_image(depth)
-        out["depth"] = torch.where(alpha_img > 0, d / torch.clamp(alpha_img, min=1e-30), torch.zeros_like(d))
+        out["depth"] = expected_depth(to_image(depth), alpha_img)
     if labels is not None:
         median, ids = labels
         out["median_depth"] = to_image(median)
