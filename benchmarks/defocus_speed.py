@@ -21,7 +21,6 @@ the foreground is then the most blurred), at 448×336 on the compiled CPU path:
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 import time
@@ -33,11 +32,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from spacedg.render import Defocus, render  # noqa: E402
 from spacedg.render import defocus as model  # noqa: E402
-from spacedg.render.colour import linear_to_srgb  # noqa: E402
 from spacedg.scene.synthetic import generate_room  # noqa: E402
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "splats"
-PLANT = SHARED / "plant" / "plant.splat"
+from benchmarks.render import PLANT, median_depth, plant_scene, psnr  # noqa: E402 - the render benchmark's scenes and PSNR
+
 WIDTH, HEIGHT = 448, 336
 SEVERITIES = ("1", "2", "3", "4", "5", "bench")
 
@@ -64,28 +62,11 @@ def scenes(quick: bool) -> list[tuple[str, object, object]]:
         names = sorted(room.views)
         out.append((f"room {seed}", room.gaussians, room.views[names[len(names) // 2]].resized(WIDTH, HEIGHT)))
     if PLANT.exists():
-        from benchmarks.render import plant_scene
-
         g, cam = plant_scene()
         out.append(("plant", g, cam.resized(WIDTH, HEIGHT)))
     else:
         print(f"(plant skipped: {PLANT} not found)")
     return out
-
-
-def median_depth(g, cam) -> float:  # type: ignore[no-untyped-def]
-    frame = render(g, cam, outputs="depth,alpha")
-    covered = frame.alpha > 0.5
-    return float(np.median(frame.depth[covered])) if covered.any() else 1.0
-
-
-def encoded(rgb: np.ndarray) -> np.ndarray:
-    return np.clip(linear_to_srgb(rgb.astype(np.float64)), 0.0, 1.0)
-
-
-def psnr(image: np.ndarray, reference: np.ndarray) -> float:
-    mse = float(np.mean((encoded(image) - encoded(reference)) ** 2))
-    return math.inf if mse == 0.0 else 10.0 * math.log10(1.0 / mse)
 
 
 def main() -> None:
