@@ -37,7 +37,7 @@ from spacedg.render.camera import Camera
 from spacedg.scene.lexicon import default_lexicon
 from spacedg.scene.visibility_classes import VisibilityClass, classify
 
-__all__ = ["count_table", "answer_balance", "blind_baseline", "format_table", "record_subject", "repeat_rate", "ambiguities"]
+__all__ = ["count_table", "answer_balance", "blind_baseline", "format_table", "option_text", "record_subject", "repeat_rate", "ambiguities"]
 
 
 def count_table(records: Iterable[QARecord]) -> list[dict[str, Any]]:
@@ -70,7 +70,8 @@ def answer_balance(records: Iterable[QARecord]) -> dict[str, Any]:
     }
 
 
-def _option_text(record: QARecord, letter: str) -> str:
+def option_text(record: QARecord, letter: str) -> str:
+    """The text of option ``letter`` (``""`` when missing)."""
     for line in record.options:
         if line.startswith(f"{letter}. "):
             return line[3:]
@@ -100,7 +101,7 @@ def blind_baseline(records_by_scene: Mapping[str, Sequence[QARecord]]) -> list[d
                 k = (r.question_type, r.sub_question_type)
                 answer_prior[k][str(r.answer)] += 1
                 if r.answer_type is AnswerType.MCQ:
-                    text_prior[k][_option_text(r, str(r.answer))] += 1
+                    text_prior[k][option_text(r, str(r.answer))] += 1
         for r in records_by_scene[held]:
             k = (r.question_type, r.sub_question_type)
             if k not in keys:
@@ -111,7 +112,7 @@ def blind_baseline(records_by_scene: Mapping[str, Sequence[QARecord]]) -> list[d
             guess = answer_prior[k].most_common(1)[0][0] if answer_prior[k] else ("A" if r.answer_type is AnswerType.MCQ else "yes")
             row[1] += guess == str(r.answer)
             if r.answer_type is AnswerType.MCQ:
-                texts = [(_option_text(r, letter), letter) for letter in MCQ_LETTERS]
+                texts = [(option_text(r, letter), letter) for letter in MCQ_LETTERS]
                 best = max(texts, key=lambda tl: text_prior[k][tl[0]])[1]
                 row[2] += best == str(r.answer)
             else:
