@@ -544,14 +544,12 @@ def generate_records(
     want = config.per_sub_type * config.pool_factor
     for family in _families(config.families):
         rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
-        pools: dict[str, list[QARecord]] = {}
+        pooled: list[QARecord] = []  # in scan order
         distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
-        order: dict[int, int] = {}  # id(record) → scan position
         with plugin_call("question family", family, "generate"):
             for scanned, record in enumerate(family.generate(scene, rng)):
                 if scanned >= config.max_scan:
                     break
-                pool = pools.setdefault(record.sub_question_type, [])
                 seen = distinct.setdefault(record.sub_question_type, Counter())
                 sel = _selection(record)
                 subject = str(sel["subject"]) if sel is not None else f"record:{record.id}"
@@ -559,8 +557,7 @@ def generate_records(
                     continue  # a subject already pooled (another view of the same question)
                 if subject in seen or len(seen) < want:
                     seen[subject] += 1
-                    pool.append(record)
-                    order[id(record)] = scanned
+                    pooled.append(record)
                 elif all(len(distinct.get(s, ())) >= want for s in family.sub_question_types):
                     break
 
@@ -571,7 +568,6 @@ def generate_records(
                 dropped[family_name] = dropped.get(family_name, 0) + 1
             return False
 
-        pooled = sorted((r for pool in pools.values() for r in pool), key=lambda r: order[id(r)])
         stats: dict[str, Counter[str]] = {}
         chosen = select_records(pooled, config.per_sub_type, keep, stats)
         chosen = deal_distractors(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "distractors")))

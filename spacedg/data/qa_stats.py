@@ -27,6 +27,8 @@ from collections import Counter, defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.questions.camera_rotation import MIN_ROTATION_DEG
@@ -214,9 +216,6 @@ def _size_ambiguous(record: QARecord) -> bool:
 
 
 def _rotation_imperceptible(record: QARecord) -> bool:
-    import numpy as np
-
-
     g = record.geometry
     try:
         poses = [np.asarray(g["cam_to_world_a"], dtype=np.float64), np.asarray(g["cam_to_world_b"], dtype=np.float64)]
