@@ -458,7 +458,7 @@ class _Priors:
                 if len(sizes) == 2 and all(self.size_sum.get((sig, lab), (0, 0))[1] for lab, _ in sizes):
                     means = [self.size_sum[(sig, lab)][0] / self.size_sum[(sig, lab)][1] for lab, _ in sizes]
                     which = 0 if means[0] >= means[1] else 1
-                    phrase = [o for o in (record.geometry.get("objects") or [])][which]
+                    phrase = (record.geometry.get("objects") or [])[which]
                     wanted = object_phrase(str(phrase.get("label", "")), str(phrase.get("description", "")))
                     for k in MCQ_LETTERS:
                         if " ".join(option_text(record, k).lower().split()) == " ".join(wanted.lower().split()):
