@@ -211,6 +211,12 @@ def _lookup(name: str) -> DegradationSpec:
 
 
 # ------------------------------------------------------------------ the chain
+def _reads_depth(spec: DegradationSpec, preset: str, choice: DegradationChoice) -> bool:
+    """Whether ``preset`` of ``spec`` has a depth-relative range that ``choice`` does not set explicitly."""
+    explicit = choice.params or {}
+    return any(r.per_depth and name not in explicit for name, r in spec.presets.get(preset, {}).items())
+
+
 @dataclass(frozen=True)
 class Chain:
     """One degradation chain (see the module docstring). Build it with :meth:`parse`.
@@ -267,13 +273,7 @@ class Chain:
     def scales_with_depth(self, default_preset: str = "bench", mixture_preset: str = "2") -> bool:
         """Whether resolving this chain reads the scene depth (a preset with a ``per_depth`` range
         whose parameters are not all given explicitly)."""
-        for choice in self.choices(mixture_preset):
-            spec = _lookup(choice.name)
-            explicit = set(choice.params or ())
-            ranges = spec.presets.get(choice.preset or default_preset, {})
-            if any(r.per_depth and name not in explicit for name, r in ranges.items()):
-                return True
-        return False
+        return any(_reads_depth(_lookup(c.name), c.preset or default_preset, c) for c in self.choices(mixture_preset))
 
     def resolve(
         self, seed: int, default_preset: str = "bench", mixture_preset: str = "2", scene_depth: float | None = None,
@@ -301,9 +301,7 @@ class Chain:
             preset = choice.preset or default_preset
             if preset not in spec.presets:
                 spec.sample_params(preset, np.random.default_rng(deg_seed))  # the unknown-preset error
-            scaled = scene_depth is not None and any(
-                r.per_depth and name not in (choice.params or {}) for name, r in spec.presets[preset].items()
-            )
+            scaled = scene_depth is not None and _reads_depth(spec, preset, choice)
             params = spec.sample_params(preset, np.random.default_rng(deg_seed), scene_depth if scaled else None)
             if choice.params:
                 params.update(spec.validate_params(choice.params, partial=True))

@@ -459,9 +459,10 @@ def merge_parts(out_dir: str | Path, *, verbose: bool = False) -> MergeResult:
                 if why:
                     mismatches.setdefault(f"{row['question_type']}/{row['sub_question_type']}", why)
     table = {q: dict(sorted(c.items(), key=lambda kv: (kv[0] != CLEAN, kv[0]))) for q, c in sorted(counts.items())}
-    atomic_write_bytes(out / f"{split}.tsv", b"".join(tsv_chunks))
+    tsv = b"".join(tsv_chunks)
+    atomic_write_bytes(out / f"{split}.tsv", tsv)
     if split == "bench":  # VLMEvalKit's SpaceDGBench reads $LMUData/spacedg_bench.tsv: this folder is its LMUData
-        atomic_write_bytes(out / f"{PUBLIC_BENCH_NAME}.tsv", b"".join(tsv_chunks))
+        atomic_write_bytes(out / f"{PUBLIC_BENCH_NAME}.tsv", tsv)
     atomic_write_bytes(out / f"{split}.jsonl", b"".join(jsonl_chunks))
     by_degradation: Counter[str] = Counter()
     for row in table.values():

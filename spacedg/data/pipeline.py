@@ -334,7 +334,9 @@ def degrade_device(options: PipelineOptions) -> torch.device | None:
     return dev
 
 
-def _host_fallback(step: ResolvedDegradation, device: torch.device) -> None:
+def _host_fallback(step: ResolvedDegradation, device: torch.device, timer: dict[str, float]) -> None:
+    """Count a numpy ``apply`` run on the host for a device image; warn once per degradation."""
+    timer["host_fallbacks"] = timer.get("host_fallbacks", 0.0) + 1.0
     if step.name not in _HOST_FALLBACK_WARNED:
         _HOST_FALLBACK_WARNED.add(step.name)
         import warnings
@@ -356,8 +358,7 @@ def _run_linear_device(rgb: torch.Tensor, aux: Mapping[str, Any], host_aux: Any,
             if step.spec.apply_torch is not None:
                 out = step.spec.apply_torch(rgb, aux, step.params, step.view_rng(index))
             else:
-                _host_fallback(step, rgb.device)
-                timer["host_fallbacks"] = timer.get("host_fallbacks", 0.0) + 1.0
+                _host_fallback(step, rgb.device, timer)
                 host = step.spec.apply(rgb.cpu().numpy(), host_aux(), step.params, step.view_rng(index))
                 out = torch.from_numpy(np.array(host)).to(rgb.device) if isinstance(host, np.ndarray) else host
         if not isinstance(out, torch.Tensor) or out.dtype != torch.float32 or tuple(out.shape) != tuple(rgb.shape):
@@ -381,8 +382,7 @@ def _run_display_device(image: torch.Tensor, steps: Sequence[ResolvedDegradation
             if step.spec.apply_torch is not None:
                 out = step.spec.apply_torch(image, step.params, step.view_rng(index))
             else:
-                _host_fallback(step, image.device)
-                timer["host_fallbacks"] = timer.get("host_fallbacks", 0.0) + 1.0
+                _host_fallback(step, image.device, timer)
                 host = step.spec.apply(image.cpu().numpy(), step.params, step.view_rng(index))
                 out = torch.from_numpy(np.array(host)).to(image.device) if isinstance(host, np.ndarray) and host.dtype == np.uint8 else host
         if not isinstance(out, torch.Tensor) or out.dtype != torch.uint8 or tuple(out.shape) != tuple(image.shape):

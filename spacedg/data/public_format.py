@@ -52,6 +52,7 @@ __all__ = [
     "PUBLIC_SUB_TYPES",
     "PUBLIC_TSV_COLUMNS",
     "PUBLIC_YN_SUB_TYPES",
+    "cell_text",
     "existence_options",
     "format_question",
     "from_public",
@@ -118,8 +119,8 @@ def format_question(question: str, options: Sequence[str]) -> str:
     return question if not options else question + "\n" + "\n".join(options)
 
 
-def _name(value: Any) -> str:
-    """A name cell as text: ``None`` and NaN (pandas' empty cell) are ``""``; spaces stripped."""
+def cell_text(value: Any) -> str:
+    """A name (or any table) cell as text: ``None`` and NaN (pandas' empty cell) are ``""``; spaces stripped."""
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return ""
     return str(value).strip()
@@ -127,14 +128,14 @@ def _name(value: Any) -> str:
 
 def to_public(question_type: str, sub_question_type: str) -> tuple[str, str]:
     """``(question_type, sub_question_type)`` as the public bench names them (see :data:`PUBLIC_SUB_TYPES`)."""
-    qtype, sub = _name(question_type), _name(sub_question_type)
+    qtype, sub = cell_text(question_type), cell_text(sub_question_type)
     return qtype, PUBLIC_SUB_TYPES.get((qtype, sub), sub)
 
 
 def from_public(question_type: str, sub_question_type: str) -> tuple[str, str]:
     """The inverse of :func:`to_public`: public names back to our internal ones (internal names,
     and names of neither kind, are returned unchanged)."""
-    qtype, sub = _name(question_type), _name(sub_question_type)
+    qtype, sub = cell_text(question_type), cell_text(sub_question_type)
     return qtype, _FROM_PUBLIC.get((qtype, sub), sub)
 
 
@@ -147,7 +148,7 @@ def public_answer_type(question_type: Any, sub_question_type: Any) -> AnswerType
         InvalidDataError: an empty sub type with a question type the public table does not know
             (the public evaluator raises too).
     """
-    qtype, sub = _name(question_type), _name(sub_question_type)
+    qtype, sub = cell_text(question_type), cell_text(sub_question_type)
     if not sub:
         if qtype not in PUBLIC_EMPTY_SUB_ROUTES:
             raise InvalidDataError(
@@ -166,7 +167,7 @@ def public_answer_type(question_type: Any, sub_question_type: Any) -> AnswerType
 def internal_answer_type(question_type: Any, sub_question_type: Any) -> AnswerType | None:
     """The answer type of one of our internal names that the public bench renames (``None`` for
     any other pair: those route the same under both rules)."""
-    return INTERNAL_ANSWER_TYPES.get((_name(question_type), _name(sub_question_type)))
+    return INTERNAL_ANSWER_TYPES.get((cell_text(question_type), cell_text(sub_question_type)))
 
 
 def existence_options(record_id: str, answer: str) -> tuple[tuple[str, str], str]:

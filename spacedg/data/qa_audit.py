@@ -73,10 +73,12 @@ from typing import Any
 
 import numpy as np
 
+from spacedg.data.qa_stats import option_text
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.questions.language import object_phrase, plural
 from spacedg.plugins.specs import AnswerType
+from spacedg.scene.lexicon import label_key
 
 __all__ = [
     "PREDICTORS",
@@ -115,14 +117,6 @@ def _tokens(text: str) -> list[str]:
     return [_number_bin(w) if _NUMBER.match(w) else w for w in _words(text)]
 
 
-def option_text(record: QARecord, letter: str) -> str:
-    """The text of option ``letter`` (``""`` when missing)."""
-    for line in record.options:
-        if line.startswith(f"{letter}. "):
-            return line[3:]
-    return ""
-
-
 def truth_text(record: QARecord) -> str:
     """The correct answer as text: the correct option's text (MCQ) or ``str(answer)``."""
     if record.answer_type is AnswerType.MCQ:
@@ -137,11 +131,11 @@ def record_labels(record: QARecord) -> tuple[str, ...]:
     g = record.geometry
     refs = g.get("refs") or []
     if refs:
-        return tuple(" ".join(str(r.get("label", "")).replace("_", " ").lower().split()) for r in refs)
+        return tuple(label_key(r.get("label", "")) for r in refs)
     found = []
     for value in (g.get("label"), (g.get("object") or {}).get("label") if isinstance(g.get("object"), Mapping) else None):
         if isinstance(value, str):
-            label = " ".join(value.replace("_", " ").lower().split())
+            label = label_key(value)
             if label and label in record.question.lower():  # only a label the question states
                 found.append(label)
     return tuple(found[:1])
@@ -222,8 +216,8 @@ def _record_features(record: QARecord, frequent: frozenset[str]) -> list[str]:
     return feats
 
 
-def _option_features(record: QARecord, text: str, frequent: frozenset[str]) -> list[str]:
-    sig = template_signature(record, frequent)
+def _option_features(record: QARecord, text: str, sig: str) -> list[str]:
+    """Features of one option of ``record``, whose template signature is ``sig``."""
     role = option_role(record, text)
     feats = [f"o:{role}", f"s:{sig}|o:{role}"]
     feats += [f"ow:{t}" for t in set(_tokens(text))]
@@ -309,7 +303,8 @@ class _ConditionalLogit:
         self.w = _adam(grad, np.zeros(len(self.vocab.index))) if len(train) else np.zeros(0)
 
     def _docs(self, record: QARecord) -> list[list[str]]:
-        return [_option_features(record, option_text(record, k), self.frequent) for k in MCQ_LETTERS]
+        sig = template_signature(record, self.frequent)
+        return [_option_features(record, option_text(record, k), sig) for k in MCQ_LETTERS]
 
     def predict(self, record: QARecord) -> str:
         scores = self.vocab.matrix(self._docs(record)).dot(self.w)
@@ -463,7 +458,7 @@ class _Priors:
                 if len(sizes) == 2 and all(self.size_sum.get((sig, lab), (0, 0))[1] for lab, _ in sizes):
                     means = [self.size_sum[(sig, lab)][0] / self.size_sum[(sig, lab)][1] for lab, _ in sizes]
                     which = 0 if means[0] >= means[1] else 1
-                    phrase = [o for o in (record.geometry.get("objects") or [])][which]
+                    phrase = (record.geometry.get("objects") or [])[which]
                     wanted = object_phrase(str(phrase.get("label", "")), str(phrase.get("description", "")))
                     for k in MCQ_LETTERS:
                         if " ".join(option_text(record, k).lower().split()) == " ".join(wanted.lower().split()):
@@ -523,13 +518,23 @@ def _wording(record: QARecord) -> tuple[str, str]:
     return record.question_type, " ".join(sorted(w for w in _template_words(record) if not _NUMBER.match(w)))
 
 
+def _role_kind(role: str) -> str:
+    """An option role with every named object as one kind (``"object"``)."""
+    return "object" if role.startswith("object:") else role
+
+
 def _live_roles(records: Sequence[QARecord]) -> dict[tuple[str, str], set[str]]:
     live: dict[tuple[str, str], set[str]] = defaultdict(set)
     for r in records:
         if r.answer_type is AnswerType.MCQ:
-            role = option_role(r, truth_text(r))
-            live[_wording(r)].add("object" if role.startswith("object:") else role)
+            live[_wording(r)].add(_role_kind(option_role(r, truth_text(r))))
     return live
+
+
+def _live_letters(record: QARecord, live: Mapping[tuple[str, str], set[str]]) -> list[str]:
+    """The letters of the MCQ ``record`` whose options can be correct (:func:`_live_roles`)."""
+    allowed = live[_wording(record)]
+    return [k for k in MCQ_LETTERS if _role_kind(option_role(record, option_text(record, k))) in allowed]
 
 
 def _distinct_counts(records: Sequence[QARecord]) -> dict[str, int]:
@@ -542,9 +547,7 @@ def _distinct_counts(records: Sequence[QARecord]) -> dict[str, int]:
 
 def _chance(record: QARecord, live: Mapping[tuple[str, str], set[str]], counts: Mapping[str, int]) -> float | None:
     if record.answer_type is AnswerType.MCQ:
-        roles = [option_role(record, option_text(record, k)) for k in MCQ_LETTERS]
-        n = sum(("object" if r.startswith("object:") else r) in live[_wording(record)] for r in roles)
-        return 1.0 / max(1, n)
+        return 1.0 / max(1, len(_live_letters(record, live)))
     if record.answer_type is AnswerType.YN:
         return 0.5
     if record.answer_type is AnswerType.COUNT:
@@ -661,8 +664,7 @@ def _null_records(records_by_scene: Mapping[str, Sequence[QARecord]], rng: np.ra
         drawn = []
         for r in rs:
             if r.answer_type is AnswerType.MCQ:
-                roles = [option_role(r, option_text(r, k)) for k in MCQ_LETTERS]
-                letters = [k for k, role in zip(MCQ_LETTERS, roles) if ("object" if role.startswith("object:") else role) in live[_wording(r)]]
+                letters = _live_letters(r, live)
                 r = replace(r, answer=letters[int(rng.integers(len(letters)))]) if letters else r
             elif r.answer_type in (AnswerType.YN, AnswerType.COUNT):
                 pool = pools[(r.question_type, r.answer_type)]

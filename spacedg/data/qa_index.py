@@ -299,8 +299,11 @@ def select_records(
     cells: dict[str, dict[str, list[int]]] = {}
     cell_roles: dict[str, list[str]] = {}
     partial: set[str] = set()
+    selections = [_selection(r) for r in records]
+    features_of = [_features(r) for r in records]
+    subject_of = [None if sel is None else (r.sub_question_type, str(sel["subject"])) for r, sel in zip(records, selections)]
     for i, r in enumerate(records):
-        sel = _selection(r)
+        sel = selections[i]
         if sel is None:
             plain.setdefault(r.sub_question_type, []).append(i)
         elif "cell" not in sel:
@@ -316,7 +319,7 @@ def select_records(
         cell_roles[cell] = offered if len(offered) >= 2 else []
 
     def subject(i: int) -> tuple[str, str]:
-        return (records[i].sub_question_type, str(_selection(records[i])["subject"]))  # type: ignore[index]
+        return subject_of[i]  # type: ignore[return-value]
 
     # metric answers: generation order, subjects once
     for i in metric:
@@ -334,7 +337,7 @@ def select_records(
         """How over-represented record i's features already are in ``role`` (greedy chi-square)."""
         sub = records[i].sub_question_type
         total = 0.0
-        for f in _features(records[i]):
+        for f in features_of[i]:
             row = balance.get((sub, f))
             if row:
                 total += row[role] - sum(row[r] for r in roles) / len(roles)
@@ -363,7 +366,7 @@ def select_records(
             if accept(records[best]):
                 return best
 
-    featured = {cell: any(_features(records[i]) for q in by_role.values() for i in q) for cell, by_role in cells.items()}
+    featured = {cell: any(features_of[i] for q in by_role.values() for i in q) for cell, by_role in cells.items()}
     # a cell needs two roles at least: a one-role cell would be answered by its text alone
     open_cells = [c for c in cells if len(cell_roles[c]) >= 2 and all(cells[c].get(role) for role in cell_roles[c])]
     while open_cells:
@@ -387,8 +390,8 @@ def select_records(
                 taken.add(i)
                 subjects.add(subject(i))
                 room[records[i].sub_question_type] -= 1
-                role = str(_selection(records[i])["role"])  # type: ignore[index]
-                for f in _features(records[i]):
+                role = str(selections[i]["role"])  # type: ignore[index]
+                for f in features_of[i]:
                     balance.setdefault((records[i].sub_question_type, f), Counter())[role] += 1
             still.append(cell)
         open_cells = still
@@ -412,14 +415,18 @@ def select_records(
             room[sub] -= 1
     # records of families without selection entries
     for sub, ix in plain.items():
+        first: dict[str, int] = {}
+        for i in ix:
+            first.setdefault(records[i].id, i)
         for r in _select_balanced([records[i] for i in ix], per_sub_type, accept):
-            taken.add(ix[[records[i].id for i in ix].index(r.id)])
-    def _round_size(r: QARecord) -> int:
-        sel = _selection(r)
+            taken.add(first[r.id])
+
+    def _round_size(i: int) -> int:
+        sel, r = selections[i], records[i]
         if sel is None or "cell" not in sel:
             return 1
         roles = cell_roles.get(f"{r.question_type}|{sel['cell']}") or sel.get("roles", [])
-        return max(1, sum(1 for role in roles))
+        return max(1, len(roles))
 
     if stats is not None:
         for i, r in enumerate(records):
@@ -429,9 +436,9 @@ def select_records(
                 row["taken"] += 1
             elif r.id in judged_out:
                 row["judge"] += 1
-            elif _selection(r) is not None and subject(i) in subjects:
+            elif selections[i] is not None and subject(i) in subjects:
                 row["repeat"] += 1
-            elif room[r.sub_question_type] < _round_size(r):
+            elif room[r.sub_question_type] < _round_size(i):
                 row["quota"] += 1  # no room for another round of its cell
             else:
                 row["unbalanced"] += 1
@@ -537,14 +544,12 @@ def generate_records(
     want = config.per_sub_type * config.pool_factor
     for family in _families(config.families):
         rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
-        pools: dict[str, list[QARecord]] = {}
+        pooled: list[QARecord] = []  # in scan order
         distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
-        order: dict[int, int] = {}  # id(record) → scan position
         with plugin_call("question family", family, "generate"):
             for scanned, record in enumerate(family.generate(scene, rng)):
                 if scanned >= config.max_scan:
                     break
-                pool = pools.setdefault(record.sub_question_type, [])
                 seen = distinct.setdefault(record.sub_question_type, Counter())
                 sel = _selection(record)
                 subject = str(sel["subject"]) if sel is not None else f"record:{record.id}"
@@ -552,8 +557,7 @@ def generate_records(
                     continue  # a subject already pooled (another view of the same question)
                 if subject in seen or len(seen) < want:
                     seen[subject] += 1
-                    pool.append(record)
-                    order[id(record)] = scanned
+                    pooled.append(record)
                 elif all(len(distinct.get(s, ())) >= want for s in family.sub_question_types):
                     break
 
@@ -564,7 +568,6 @@ def generate_records(
                 dropped[family_name] = dropped.get(family_name, 0) + 1
             return False
 
-        pooled = sorted((r for pool in pools.values() for r in pool), key=lambda r: order[id(r)])
         stats: dict[str, Counter[str]] = {}
         chosen = select_records(pooled, config.per_sub_type, keep, stats)
         chosen = deal_distractors(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "distractors")))

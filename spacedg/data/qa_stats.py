@@ -27,6 +27,8 @@ from collections import Counter, defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.questions.camera_rotation import MIN_ROTATION_DEG
@@ -37,7 +39,7 @@ from spacedg.render.camera import Camera
 from spacedg.scene.lexicon import default_lexicon
 from spacedg.scene.visibility_classes import VisibilityClass, classify
 
-__all__ = ["count_table", "answer_balance", "blind_baseline", "format_table", "record_subject", "repeat_rate", "ambiguities"]
+__all__ = ["count_table", "answer_balance", "blind_baseline", "format_table", "option_text", "record_subject", "repeat_rate", "ambiguities"]
 
 
 def count_table(records: Iterable[QARecord]) -> list[dict[str, Any]]:
@@ -70,7 +72,8 @@ def answer_balance(records: Iterable[QARecord]) -> dict[str, Any]:
     }
 
 
-def _option_text(record: QARecord, letter: str) -> str:
+def option_text(record: QARecord, letter: str) -> str:
+    """The text of option ``letter`` (``""`` when missing)."""
     for line in record.options:
         if line.startswith(f"{letter}. "):
             return line[3:]
@@ -100,7 +103,7 @@ def blind_baseline(records_by_scene: Mapping[str, Sequence[QARecord]]) -> list[d
                 k = (r.question_type, r.sub_question_type)
                 answer_prior[k][str(r.answer)] += 1
                 if r.answer_type is AnswerType.MCQ:
-                    text_prior[k][_option_text(r, str(r.answer))] += 1
+                    text_prior[k][option_text(r, str(r.answer))] += 1
         for r in records_by_scene[held]:
             k = (r.question_type, r.sub_question_type)
             if k not in keys:
@@ -111,7 +114,7 @@ def blind_baseline(records_by_scene: Mapping[str, Sequence[QARecord]]) -> list[d
             guess = answer_prior[k].most_common(1)[0][0] if answer_prior[k] else ("A" if r.answer_type is AnswerType.MCQ else "yes")
             row[1] += guess == str(r.answer)
             if r.answer_type is AnswerType.MCQ:
-                texts = [(_option_text(r, letter), letter) for letter in MCQ_LETTERS]
+                texts = [(option_text(r, letter), letter) for letter in MCQ_LETTERS]
                 best = max(texts, key=lambda tl: text_prior[k][tl[0]])[1]
                 row[2] += best == str(r.answer)
             else:
@@ -213,9 +216,6 @@ def _size_ambiguous(record: QARecord) -> bool:
 
 
 def _rotation_imperceptible(record: QARecord) -> bool:
-    import numpy as np
-
-
     g = record.geometry
     try:
         poses = [np.asarray(g["cam_to_world_a"], dtype=np.float64), np.asarray(g["cam_to_world_b"], dtype=np.float64)]

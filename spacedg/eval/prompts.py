@@ -26,6 +26,7 @@ in every prediction file's sidecar, so a result always states the exact prompt i
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -177,7 +178,7 @@ def _depth(value: Any) -> float | None:
         depth = float(value)
     except (TypeError, ValueError):
         return None
-    return depth if depth > 0 and depth == depth and depth != float("inf") else None
+    return depth if math.isfinite(depth) and depth > 0 else None
 
 
 def conversation(row: BenchRow, variant: str, n_images: int | None = None) -> list[dict[str, Any]]:

@@ -41,7 +41,7 @@ from decimal import Decimal, localcontext
 from typing import Any
 
 from spacedg.data.chat import ANSWER_FORMATS, ANSWER_PROMPT  # noqa: F401  (re-exported: the prompt the scorer's answers follow)
-from spacedg.data.public_format import internal_answer_type, public_answer_type
+from spacedg.data.public_format import cell_text, internal_answer_type, public_answer_type
 from spacedg.eval.parsing import (
     parse_count,
     parse_mcq,
@@ -94,13 +94,6 @@ class ScoreResult:
 
 
 # ------------------------------------------------------------------ routing
-def _cell(value: Any) -> str:
-    """A table cell as stripped text: ``None`` and NaN (an empty pandas / xlsx cell) are ``""``."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return ""
-    return str(value).strip()
-
-
 def route(question_type: str | None, sub_question_type: str | None = None) -> AnswerType:
     """The answer type of a question, routed exactly as the public SpaceDG evaluator routes it.
 
@@ -128,7 +121,7 @@ def route(question_type: str | None, sub_question_type: str | None = None) -> An
     exported name is lower case). An empty sub type with a question type outside the table above
     raises :class:`~spacedg.errors.InvalidDataError`, as the public evaluator raises.
     """
-    qtype, sub = _cell(question_type).lower(), _cell(sub_question_type).lower()
+    qtype, sub = cell_text(question_type).lower(), cell_text(sub_question_type).lower()
     internal = internal_answer_type(qtype, sub)
     return internal if internal is not None else public_answer_type(qtype, sub)
 
@@ -192,7 +185,7 @@ def _field(source: Any, name: str, default: Any = None) -> Any:
 def _answer_type_of(source: Any) -> AnswerType:
     kind = _field(source, "answer_type")
     # pandas reads the answer type "NA" (and an empty cell) as NaN: route those by name
-    if isinstance(kind, AnswerType) or _cell(kind).upper() not in ("", "NAN", "NONE"):
+    if isinstance(kind, AnswerType) or cell_text(kind).upper() not in ("", "NAN", "NONE"):
         try:
             return AnswerType(kind if isinstance(kind, AnswerType) else str(kind).strip().upper())
         except ValueError:
@@ -215,7 +208,7 @@ def _options_of(source: Any) -> Sequence[str] | Mapping[str, Any] | None:
     if options:
         return options
     if isinstance(source, Mapping):  # VLMEvalKit TSV rows carry options as columns A…D
-        columns = {k: source[k] for k in MCQ_LETTERS if k in source and _cell(source[k])}
+        columns = {k: source[k] for k in MCQ_LETTERS if k in source and cell_text(source[k])}
         return columns or None
     return None
 

@@ -54,6 +54,7 @@ from pathlib import Path
 from typing import Any
 
 from spacedg.errors import FileFormatError
+from spacedg.scene.language import label_text
 
 __all__ = ["BUILTIN", "LEXICON_ENV", "Lexicon", "default_lexicon", "head_noun", "label_key", "load_lexicon"]
 
@@ -63,7 +64,7 @@ LEXICON_ENV = "SPACEDG_LEXICON"
 
 def label_key(label: str) -> str:
     """Labels compare case-, space- and underscore-insensitively (``"Coffee_table"`` = ``"coffee table"``)."""
-    return " ".join(str(label).replace("_", " ").lower().split())
+    return label_text(label).lower()
 
 
 def head_noun(label: str) -> str:
