@@ -29,12 +29,11 @@ def run(args: argparse.Namespace) -> int:
     plots. Name a file's model with LABEL=PATH, and its prompt variant with LABEL@VARIANT=PATH
     (variants: default, no_image, degradation_info, cot).
     """
-    from spacedg.commands._args import output_folder
     from spacedg.eval.bench import load_bench
     from spacedg.eval.predictions import read_predictions
     from spacedg.eval.report import build_report, write_report
 
-    output_folder("--out", args.out)
+    _args.output_folder("--out", args.out)
     bench = load_bench(args.bench) if args.bench is not None else None
     sets = [read_predictions(source) for source in args.predictions]
     report = build_report(sets, bench, missing=args.missing)

@@ -56,7 +56,6 @@ from spacedg.errors import InvalidDataError
 
 __all__ = [
     "as_tensor",
-    "decode_srgb_torch",
     "encode_srgb_u8_torch",
     "haze_torch",
     "jpeg_torch",
@@ -92,13 +91,6 @@ def encode_srgb_u8_torch(linear: torch.Tensor) -> torch.Tensor:
     code = torch.where(x > 0, code, torch.zeros_like(code))
     code = torch.where(x >= 1.0, torch.full_like(code, 255), code)
     return code.to(torch.uint8)
-
-
-def decode_srgb_torch(encoded: torch.Tensor) -> torch.Tensor:
-    """sRGB-encoded → linear light (exact curve, float32)."""
-    from spacedg.render.colour import srgb_to_linear
-
-    return srgb_to_linear(encoded.to(torch.float32))
 
 
 # ------------------------------------------------------------------ haze
@@ -355,7 +347,6 @@ def gaussian_blur_reflect(image: torch.Tensor, size: int, sigma: float) -> torch
     """Separable Gaussian blur of (H, W, C) float32 with OpenCV's kernel and ``BORDER_REFLECT``."""
     kernel = torch.from_numpy(_gaussian_kernel(size, sigma).astype(np.float32)).to(image.device)
     chw = _symmetric_pad(image.permute(2, 0, 1), size // 2)[:, None]
-    channels = chw.shape[0]
     chw = F.conv2d(chw, kernel.view(1, 1, 1, size))
     chw = F.conv2d(chw, kernel.view(1, 1, size, 1))
     return chw[:, 0].permute(1, 2, 0).contiguous()

@@ -136,7 +136,6 @@ def _preset(density: tuple[float, float], depth_ref: float = SCALED_DEPTH_REF_M,
     return {"density": ParamRange(*density), "airlight": _AIRLIGHT, "depth_ref": ParamRange(depth_ref, depth_ref, per_depth=per_depth)}
 
 
-
 def apply_torch(rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng: np.random.Generator) -> Any:
     """Device twin of :func:`apply` on torch tensors (:mod:`spacedg.plugins.degradations.device`, imported here lazily)."""
     from spacedg.plugins.degradations import device
@@ -147,6 +146,7 @@ def apply_torch(rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng
         rgb, device.as_tensor(aux["depth"], rgb.device), device.as_tensor(aux["alpha"], rgb.device),
         p["density"], p["airlight"], p["depth_ref"], None if far is None else float(far), _DEPTH_CAP,
     )
+
 
 SPEC = DegradationSpec(
     name="haze", category=Category.METEOROLOGICAL, stage=Stage.LINEAR,

@@ -79,12 +79,12 @@ def apply(image: np.ndarray, params: Mapping[str, Any], rng: np.random.Generator
     return jpeg_compress(image, SPEC.validate_params(params)["quality"])
 
 
-
 def apply_torch(image: Any, params: Mapping[str, Any], rng: np.random.Generator) -> Any:
     """Device twin of :func:`apply` on a uint8 torch tensor (:mod:`spacedg.plugins.degradations.device`, imported here lazily)."""
     from spacedg.plugins.degradations import device
 
     return device.jpeg_torch(image, SPEC.validate_params(params)["quality"])
+
 
 SPEC = DegradationSpec(
     name="jpeg_compression", category=Category.DIGITAL, stage=Stage.DISPLAY,

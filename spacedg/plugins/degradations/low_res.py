@@ -57,13 +57,13 @@ def apply(image: np.ndarray, params: Mapping[str, Any], rng: np.random.Generator
     return low_res(image, SPEC.validate_params(params)["scale"])
 
 
-
 def apply_torch(image: Any, params: Mapping[str, Any], rng: np.random.Generator) -> Any:
     """Device twin of :func:`apply` on a uint8 torch tensor (:mod:`spacedg.plugins.degradations.device`, imported here lazily)."""
     from spacedg.plugins.degradations import device
 
     height, width = image.shape[:2]
     return device.low_res_torch(image, *reduced_size(width, height, SPEC.validate_params(params)["scale"]))
+
 
 SPEC = DegradationSpec(
     name="low_res", category=Category.DIGITAL, stage=Stage.DISPLAY,

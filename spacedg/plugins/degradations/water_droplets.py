@@ -380,7 +380,6 @@ def apply(rgb: np.ndarray, aux: Mapping[str, np.ndarray], params: Mapping[str, A
     return water_droplets(rgb, p["scale"], p["radius"], p["strength"], p["blur_sigma"], p["blur_kernel"], rng)
 
 
-
 def apply_torch(rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng: np.random.Generator) -> Any:
     """Device twin of :func:`apply` on torch tensors (:mod:`spacedg.plugins.degradations.device`, imported here lazily)."""
     import torch
@@ -397,6 +396,7 @@ def apply_torch(rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng
         rgb, drops, p["strength"], p["blur_sigma"], p["blur_kernel"], specular=SPECULAR_INTENSITY, rim=RIM_DARKENING,
         edge=EDGE_WIDTH, light=LIGHT_DIRECTION, shininess_log2=SHININESS_LOG2,
     )
+
 
 SPEC = DegradationSpec(
     name=NAME, category=Category.METEOROLOGICAL, stage=Stage.LINEAR,

@@ -302,8 +302,7 @@ def _rare_bbox_direction(vec_camera: np.ndarray) -> bool:
     happens to offer them, they would make the rest predictable. The options still show them.
     Also skipped: a label whose option set leaves fewer than two answers that are asked."""
     parts = dominant_parts(vec_camera)
-    words = parts_label(parts, BODY_DIRECTION_WORDS).split("-")
-    if {"Back", "Up"} & set(words):
+    if _rare_bbox_label(parts_label(parts, BODY_DIRECTION_WORDS)):
         return True
     if len(parts) == 2:  # the four sign combinations of two axes: at least two must be askable
         axes = {axis for axis, _ in parts}

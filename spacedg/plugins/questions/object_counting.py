@@ -128,12 +128,6 @@ def _candidates(scene: Scene, index: VisibilityIndex) -> list[_Candidate]:
     return out
 
 
-def inst_vis_pixels(inst: Instance, view: str) -> int:
-    """Visible pixels of ``inst`` in ``view`` (0 without a record)."""
-    vis = inst.visibility.get(view)
-    return 0 if vis is None else vis.visible_pixels
-
-
 def _vis_entry(inst: Instance, view: str) -> dict[str, Any]:
     vis = inst.visibility.get(view)
     return {

@@ -58,6 +58,7 @@ from spacedg.plugins.questions.view_sampling import (
     ViewPair,
     VisibilityIndex,
     description_clash,
+    label_key,
     sample_pairs,
 )
 from spacedg.plugins.questions.geometry import (
@@ -391,7 +392,7 @@ def label_features(*, plain: bool = True, **named: str) -> list[str]:
     """Selection features of the labels a question names: ``"<position>:<label>"`` for each
     (``anchor="chair"`` → ``"anchor:chair"``) and, with ``plain``, each label alone
     (``"label:chair"``); labels compared as :func:`~spacedg.scene.lexicon.label_key` does."""
-    keys = {pos: " ".join(str(label).replace("_", " ").lower().split()) for pos, label in named.items()}
+    keys = {pos: label_key(label) for pos, label in named.items()}
     out = [f"{pos}:{key}" for pos, key in keys.items()]
     return out + sorted({f"label:{key}" for key in keys.values()}) if plain else out
 
