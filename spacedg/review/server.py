@@ -44,7 +44,7 @@ import threading
 import time
 import traceback
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
@@ -436,7 +436,7 @@ class ReviewServer:
     token: str
     store: ReviewStore
     httpd: _Server
-    thread: threading.Thread | None = field(default=None)
+    thread: threading.Thread | None = None
 
     def close(self) -> None:
         if self.thread is not None:

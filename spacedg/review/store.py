@@ -250,7 +250,7 @@ class ReviewStore:
                     f"{self.table}:{n + 2}: {len(self.header) - len(short)} of {len(self.header)} fields (no "
                     f"{', '.join(short[:3])}{' …' if len(short) > 3 else ''}); the file looks truncated: copy or export it again"
                 )
-            row = {k: (v if v is not None else "") for k, v in raw.items()}
+            row = dict(raw)  # every value is text: short rows were refused above
             try:
                 index = int(float(row["index"].strip()))
             except (ValueError, OverflowError):

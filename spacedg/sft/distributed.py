@@ -257,17 +257,18 @@ def without_zero3() -> Iterator[None]:
 
 
 def full_state_dict(trainer: Any) -> dict[str, torch.Tensor] | None:
-    """The full weights of ``trainer``'s model, gathered to rank 0 (collective: call on every rank).
+    """The full weights of ``trainer``'s model (an :class:`~spacedg.sft.trainer.SFTTrainer`), gathered
+    to rank 0 (collective: call on every rank).
 
     ``None`` when the launch does not shard parameters (every rank holds the whole model: use it
     directly); else rank 0 gets ``{name: cpu tensor}`` in the unwrapped model's own names (a peft
     model's ``base_model.model.…`` names included) and the other ranks ``{}``.
     """
+    if not trainer.shards_parameters:
+        return None
     if trainer.is_fsdp_enabled:
         return _fsdp_full_state(trainer.model_wrapped, trainer.accelerator.state.fsdp_plugin.fsdp_version)
-    if trainer.is_deepspeed_enabled and trainer.accelerator.state.deepspeed_plugin.zero_stage == 3:
-        return _zero3_full_state(trainer.model_wrapped)
-    return None
+    return _zero3_full_state(trainer.model_wrapped)
 
 
 # ----------------------------------------------------------------------------------------------

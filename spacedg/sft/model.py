@@ -64,7 +64,7 @@ import json
 import re
 import sys
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -479,9 +479,7 @@ def rebuild_with_state(options: ModelOptions, state: dict[str, torch.Tensor]) ->
     state dict). Used by rank 0 to write ``final/`` of a sharded run; costs about two models'
     memory on the host while it runs.
     """
-    import dataclasses
-
-    plain = dataclasses.replace(options, dtype="float32", gradient_checkpointing=False)
+    plain = replace(options, dtype="float32", gradient_checkpointing=False)
     model, _ = prepare_model(plain)
     model.load_state_dict(state, strict=True)  # copied (and cast) into the float32 model
     return model.eval()

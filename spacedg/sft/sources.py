@@ -21,6 +21,7 @@ be 0: CUDA stays in the process that owns it); ``null`` renders on the CPU in Da
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -121,8 +122,6 @@ class DataOptions:
 
     def rank_render_device(self) -> str | None:
         """``render_device`` for this process: ``"cuda"`` becomes ``cuda:$LOCAL_RANK`` (each rank renders on its own GPU)."""
-        import os
-
         if self.render_device in (None, "cpu"):
             return None
         if self.render_device == "cuda":

@@ -43,6 +43,7 @@ import torch
 from peft import PeftModel, set_peft_model_state_dict
 from safetensors.torch import load_file
 from transformers import Trainer, TrainerCallback
+from transformers.trainer import TRAINER_STATE_NAME
 from transformers.trainer_utils import TrainOutput
 
 from spacedg.eval.scoring import score
@@ -58,7 +59,6 @@ ValItem = dict  # {"conversation" (without the assistant turn), "images", "degra
 
 #: Key of spacedg's record in ``trainer_state.json``'s ``stateful_callbacks``.
 STATE_KEY = "SpaceDGRun"
-_TRAINER_STATE = "trainer_state.json"
 
 
 class SaveProcessorCallback(TrainerCallback):
@@ -314,7 +314,7 @@ def _fsdp_checkpoint_keys(path: Path) -> set[str]:
 def _loss_so_far(folder: Path) -> tuple[float, int]:
     """``(sum of the per-step losses, global step)`` recorded in a checkpoint; from its logged
     losses when it predates the record (exact when checkpoints fall on logging steps)."""
-    file = folder / _TRAINER_STATE
+    file = folder / TRAINER_STATE_NAME
     if not file.is_file():
         return 0.0, 0
     state = json.loads(file.read_text())
@@ -333,7 +333,7 @@ def _loss_so_far(folder: Path) -> tuple[float, int]:
 def is_complete(folder: str | os.PathLike[str]) -> bool:
     """Whether a ``checkpoint-N`` folder was completely written (the Trainer writes
     ``trainer_state.json`` last, after every rank's weights, optimizer and RNG files)."""
-    return (Path(folder) / _TRAINER_STATE).is_file()
+    return (Path(folder) / TRAINER_STATE_NAME).is_file()
 
 
 def latest_checkpoint(output_dir: str | os.PathLike[str]) -> Path | None:

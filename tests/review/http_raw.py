@@ -64,9 +64,7 @@ def send(port: int, data: bytes, *, timeout: float = 15.0, half_close: bool = Tr
         while time.monotonic() < deadline:
             try:
                 chunk = sock.recv(65536)
-            except TimeoutError:
-                break
-            except OSError:
+            except OSError:  # a timeout included
                 break
             if not chunk:
                 break
