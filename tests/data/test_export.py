@@ -28,6 +28,7 @@ from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.data.public_format import to_public
 from spacedg.data.qa_index import QABuildConfig
 from spacedg.errors import InvalidDataError, ParameterError
+from tests.conftest import private_copies
 
 CONFIG = QABuildConfig(seed=0, per_sub_type=1, families=("object_counting", "camera_translation", "object_size_comparison"))
 SIZE = (64, 48)
@@ -37,10 +38,7 @@ REQUIRED = ["index", "question", "answer", "image_path", "question_type", "sub_q
 @pytest.fixture(scope="module")
 def rooms(qa_room_dirs, tmp_path_factory):
     """A private copy of the four session rooms (this module's indexes do not touch the originals)."""
-    root = tmp_path_factory.mktemp("export_rooms")
-    for d in qa_room_dirs:
-        shutil.copytree(d, root / d.name, ignore=shutil.ignore_patterns("*.qa.*"))
-    return sorted(root.iterdir())
+    return private_copies(qa_room_dirs, tmp_path_factory.mktemp("export_rooms"))
 
 
 @pytest.fixture(scope="module")

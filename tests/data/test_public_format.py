@@ -36,6 +36,7 @@ from spacedg.errors import InvalidDataError
 from spacedg.eval import load_bench, route, score
 from spacedg.plugins import list_question_families
 from spacedg.plugins.specs import AnswerType
+from tests.conftest import private_copies
 
 # ------------------------------------------------------------------ the public rules, as read
 #: ``_QT_WHEN_EMPTY_SQT``: an empty sub type routes by question type (any other type raises there).
@@ -104,10 +105,8 @@ SIZE = (32, 24)
 
 @pytest.fixture(scope="module")
 def exported(qa_room_dirs, tmp_path_factory):
-    rooms = tmp_path_factory.mktemp("public_rooms")
-    for d in qa_room_dirs:
-        shutil.copytree(d, rooms / d.name, ignore=shutil.ignore_patterns("*.qa.*"))
-    dataset = SpaceDGDataset("bench", ["low_res"], scenes=sorted(rooms.iterdir()), image_size=SIZE, qa_config=ALL)
+    rooms = private_copies(qa_room_dirs, tmp_path_factory.mktemp("public_rooms"))
+    dataset = SpaceDGDataset("bench", ["low_res"], scenes=rooms, image_size=SIZE, qa_config=ALL)
     out = tmp_path_factory.mktemp("public_bench")
     summary = export_bench(dataset, out, shard_size=64, progress=False)
     assert summary.merged

@@ -14,7 +14,6 @@ from __future__ import annotations
 import ast
 import csv
 import json
-import shutil
 from pathlib import Path
 
 import pandas as pd
@@ -28,6 +27,7 @@ from spacedg.data.qa_index import QABuildConfig
 from spacedg.eval import load_bench, read_predictions, score
 from spacedg.eval.aggregate import score_set
 from spacedg.plugins.specs import AnswerType
+from tests.conftest import private_copies
 
 CONFIG = QABuildConfig(seed=5, per_sub_type=1)
 
@@ -35,10 +35,8 @@ CONFIG = QABuildConfig(seed=5, per_sub_type=1)
 @pytest.fixture(scope="module")
 def bench_dir(qa_room_dirs, tmp_path_factory) -> Path:
     """A real export of every built-in family (clean + one degradation, tiny images)."""
-    rooms = tmp_path_factory.mktemp("compat_rooms")
-    for d in qa_room_dirs:
-        shutil.copytree(d, rooms / d.name, ignore=shutil.ignore_patterns("*.qa.*"))
-    dataset = SpaceDGDataset("bench", ["haze"], scenes=sorted(rooms.iterdir()), image_size=(32, 24), qa_config=CONFIG)
+    rooms = private_copies(qa_room_dirs, tmp_path_factory.mktemp("compat_rooms"))
+    dataset = SpaceDGDataset("bench", ["haze"], scenes=rooms, image_size=(32, 24), qa_config=CONFIG)
     out = tmp_path_factory.mktemp("compat_bench")
     assert export_bench(dataset, out, progress=False).merged
     return out

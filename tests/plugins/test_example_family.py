@@ -7,7 +7,6 @@ distribution (pip, its own target folder): listed by ``spacedg plugins``, built 
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 import sys
 from collections import Counter
@@ -78,7 +77,7 @@ def test_generation_is_seeded_balanced_and_rederivable(family_plugin, rooms) -> 
 
 def test_qa_build_families_writes_beside_the_full_index(family_plugin, qa_room_dirs, tmp_path, capsys) -> None:
     """`qa build --families` writes a selection index, validated records; the full index is never replaced."""
-    rooms = [Path(shutil.copytree(d, tmp_path / d.name, ignore=shutil.ignore_patterns("*.qa.*"))) for d in qa_room_dirs]
+    rooms = private_copies(qa_room_dirs, tmp_path)
     argv = ["qa", "build", *map(str, rooms), "--families", NAME, "--per-sub-type", str(CONFIG.per_sub_type)]
     assert main(argv) == 0
     assert f".qa.{NAME}.jsonl" in capsys.readouterr().out
