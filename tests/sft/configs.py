@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from functools import cache
+from pathlib import Path
 from typing import Any
 
 from hydra import compose, initialize_config_module
@@ -27,3 +28,9 @@ def _tiny() -> ModelOptions:
 def model_options(path: str = "tiny:qwen2_5_vl", **changes: Any) -> ModelOptions:
     """``conf/model/tiny.yaml`` as :class:`ModelOptions`, with ``path`` and ``changes`` (validated again)."""
     return dataclasses.replace(_tiny(), path=path, **changes)
+
+
+#: The repository root (``python -m spacedg.sft`` runs from there).
+ROOT = Path(__file__).resolve().parents[2]
+#: Overrides that make a recipe run take seconds: 4 steps, saves and evaluations every 2, 4 val samples.
+FAST = ["train.max_steps=4", "train.save_steps=2", "train.eval_steps=2", "data.val.samples=4", "data.max_questions=16"]

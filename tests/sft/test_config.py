@@ -21,10 +21,8 @@ from spacedg.sft.data import ChatJsonlDataset
 from spacedg.sft.model import ModelOptions
 from spacedg.sft.sources import DataOptions, ValOptions
 from spacedg.data.public_format import public_fields
-from tests.sft.configs import compose_sft
-from tests.conftest import private_copies
+from tests.sft.configs import ROOT, compose_sft
 
-ROOT = Path(__file__).resolve().parents[2]
 CONF = ROOT / "conf"
 SFT = Path(spacedg.sft.__file__).parent
 
@@ -119,13 +117,6 @@ def test_configs_override_only_what_differs() -> None:
 
 
 # ------------------------------------------------------------------ the instantiated data config
-
-
-@pytest.fixture(scope="module")
-def rooms(qa_room_dirs, tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("config_rooms")
-    private_copies(qa_room_dirs, root)
-    return root
 
 
 def _same(built: SpaceDGDataset, expected: SpaceDGDataset, indices: list[int]) -> None:

@@ -20,17 +20,7 @@ from pathlib import Path
 import pytest
 import torch
 from safetensors.torch import load_file
-from tests.conftest import private_copies
-
-ROOT = Path(__file__).resolve().parents[2]
-FAST = ["train.max_steps=4", "train.save_steps=2", "train.eval_steps=2", "data.val.samples=4", "data.max_questions=16"]
-
-
-@pytest.fixture(scope="module")
-def rooms(qa_room_dirs, tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("sft_dist_rooms")
-    private_copies(qa_room_dirs, root)
-    return root
+from tests.sft.configs import ROOT, FAST
 
 
 def _port() -> int:

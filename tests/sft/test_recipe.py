@@ -26,18 +26,7 @@ from spacedg.sft.data import BudgetedDataset, token_lengths
 from spacedg.sft.model import prepare_model
 from spacedg.sft.trainer import SFTTrainer
 from spacedg.vlm import load_vlm
-from tests.sft.configs import compose_sft, model_options
-from tests.conftest import private_copies
-
-ROOT = Path(__file__).resolve().parents[2]
-FAST = ["train.max_steps=4", "train.save_steps=2", "train.eval_steps=2", "data.val.samples=4", "data.max_questions=16"]
-
-
-@pytest.fixture(scope="module")
-def rooms(qa_room_dirs, tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("sft_rooms")
-    private_copies(qa_room_dirs, root)
-    return root
+from tests.sft.configs import FAST, ROOT, compose_sft, model_options
 
 
 def _config(rooms: Path, out: Path, *overrides: str):
