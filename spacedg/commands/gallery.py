@@ -18,8 +18,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     gallery.add_argument("--out", type=Path, required=True, help="PNG file to write")
     gallery.add_argument("--degradations", default=None, metavar="NAME[,NAME…]",
                          help="rows to show, comma-separated (default: every registered degradation)")
-    gallery.add_argument("--seed", type=int, default=0, help="sample seed for parameters and noise (default 0)")
-    gallery.add_argument("--thumb-width", type=int, default=256, help="thumbnail width in pixels (default 256)")
+    gallery.add_argument("--seed", type=_args.SEED, default=0, help="sample seed for parameters and noise (default 0)")
+    gallery.add_argument("--thumb-width", type=_args.whole(64, 2048, "pixels"), default=256, help="thumbnail width in pixels (default 256)")
     gallery.add_argument("--motion", choices=("fast", "reference"), default="fast",
                          help="motion blur sub-steps: renderer's fast choice (default) or the exact sub_steps")
     _args.add_backend_arguments(gallery)
@@ -34,9 +34,6 @@ def _gallery(args: argparse.Namespace) -> int:
     from spacedg.scene.io import load_scene
     from spacedg.data.pipeline import PipelineOptions
 
-    if not 64 <= args.thumb_width <= 2048:
-        raise ParameterError(f"--thumb-width must be in [64, 2048] pixels, got {args.thumb_width}")
-    _args.seed("--seed", args.seed)
     _args.output_file("--out", args.out, (".png",))
     names = [n.strip() for n in args.degradations.split(",") if n.strip()] if args.degradations else None
     scene = load_scene(args.scene)
