@@ -62,11 +62,11 @@ def test_frame_mismatch_exits_non_zero_with_the_cause(tmp_path: Path, capsys) ->
     ply, dataparser = cl.write_splatfacto(tmp_path / "outputs" / "r" / "splatfacto" / "t", room, cl.APPLIED)
     lone = tmp_path / "splat.ply"
     lone.write_bytes(ply.read_bytes())
-    assert main(["scenes", "import", str(data), "--gaussians", str(lone), "--out", str(tmp_path / "bad")]) == 2
+    assert main(["scenes", "import", str(data), "--gaussians-file", str(lone), "--out", str(tmp_path / "bad")]) == 2
     err = capsys.readouterr().err
     assert "the Gaussians and the cameras disagree" in err and "normalised frame" in err and "--dataparser-transforms" in err
     assert not (tmp_path / "bad" / "scene.json").exists()
-    assert main(["scenes", "import", str(data), "--gaussians", str(lone), "--dataparser-transforms", str(dataparser),
+    assert main(["scenes", "import", str(data), "--gaussians-file", str(lone), "--dataparser-transforms", str(dataparser),
                  "--out", str(tmp_path / "good")]) == 0
 
 
