@@ -157,13 +157,14 @@ def test_qa_preview_sheet_and_cli(qa_room_dirs, tmp_path, capsys):
     room = tmp_path / "room"
     shutil.copytree(qa_room_dirs[1], room)
     out = tmp_path / "qa.png"
-    assert main(["qa", "preview", str(room), "--out", str(out), "--n", "3", "--types",
+    assert main(["qa", "preview", str(room), "--out", str(out)]) == 2  # preview reads the index, never builds it
+    assert f"spacedg qa build {room}" in capsys.readouterr().err
+    index = build_scene_index(room, progress=False)
+    assert main(["qa", "preview", str(room), "--out", str(out), "--n", "3", "--families",
                  "inter_object_distance,object_counting", "--thumb-width", "96"]) == 0
     assert "3 questions" in capsys.readouterr().out
     image = cv2.imread(str(out))
     assert image is not None and image.shape[1] >= 2 * 96
-    index = build_scene_index(room, progress=False)  # reused: built by the preview
-    assert index.reused
     record = next(r for r in index.records if r.question_type == "inter_object_distance")
     scene = load_scene(room)
     sheet = qa_sheet(scene, [record], thumb_width=96, progress=False)
@@ -173,7 +174,7 @@ def test_qa_preview_sheet_and_cli(qa_room_dirs, tmp_path, capsys):
     red, blue = sheet[drawn][:, 0].astype(int), sheet[drawn][:, 2].astype(int)
     assert np.mean(np.abs(red - blue) > 60) > 0.5  # drawn in red (object 1) and blue (object 2)
     assert ascii_text("15° – ×") == "15 deg - x"
-    assert main(["qa", "preview", str(room), "--out", str(out), "--types", "no_such_type"]) == 2
+    assert main(["qa", "preview", str(room), "--out", str(out), "--families", "no_such_type"]) == 2
     assert "no questions of type" in capsys.readouterr().err
 
 
