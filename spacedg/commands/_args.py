@@ -6,8 +6,7 @@ flag, the value and what is accepted.
   and exits 2, instead of argparse's usage block;
 - numbers as argparse types (checked at parse time, so ``--null -1`` is refused at the call):
   :func:`whole` (an integer in a range), :func:`real` (a finite number in a range), :data:`SEED`;
-  and, inside handlers, :func:`at_least`, :func:`in_range`, :func:`seed`, :func:`fraction`,
-  :func:`positive_number` for values computed from several flags;
+  and, inside handlers, :func:`in_range` and :func:`seed` for values computed from several flags;
 - devices: :func:`device_option`, the argparse type of every ``--device`` (a torch device that
   exists here: :func:`spacedg.devices.resolve_device`);
 - sizes: :func:`image_size_of` maps the deprecated ``--width`` / ``--height`` onto ``--image-size``;
@@ -40,8 +39,8 @@ from spacedg.limits import MAX_IMAGE_SIDE, check_image_size
 from spacedg.render.renderer import BACKENDS
 
 __all__ = [
-    "SEED", "CommandParser", "add_backend_arguments", "add_command", "at_least", "device_option", "fraction",
-    "image_size_of", "in_range", "output_file", "output_folder", "positive_number", "real", "seed", "usage_error", "whole",
+    "SEED", "CommandParser", "Ranged", "add_backend_arguments", "add_command", "add_device_argument", "device_option",
+    "image_size_of", "in_range", "output_file", "output_folder", "real", "seed", "usage_error", "whole",
 ]
 
 #: Namespace attribute holding the ``prog`` of the deepest parser that ran (``"spacedg qa audit"``).
@@ -132,7 +131,7 @@ def _shown(text: str) -> str:
     return repr(cleaned) if len(cleaned) <= _SHOWN else f"{cleaned[:_SHOWN]!r}… ({len(cleaned):,} characters)"
 
 
-class _Ranged:
+class Ranged:
     """An argparse type: a number in ``[low, high]`` (``high`` ``None``: no upper bound), else an
     :class:`argparse.ArgumentTypeError` saying what is accepted. ``low`` / ``high`` / ``accepts``
     are public so tests can read the range of every numeric option."""
@@ -169,27 +168,27 @@ def _parse_finite(text: str) -> float:
     return value
 
 
-def whole(low: int, high: int | None = None, unit: str = "") -> _Ranged:
+def whole(low: int, high: int | None = None, unit: str = "") -> Ranged:
     """argparse type: an integer in ``[low, high]`` (no upper bound when ``high`` is ``None``)."""
     suffix = f" {unit}" if unit else ""
     accepts = f"a whole number >= {low}{suffix}" if high is None else f"a whole number from {low} to {high}{suffix}"
-    return _Ranged(low, high, accepts, _parse_int)
+    return Ranged(low, high, accepts, _parse_int)
 
 
-def real(low: float, high: float | None = None, *, above: bool = False, unit: str = "") -> _Ranged:
+def real(low: float, high: float | None = None, *, above: bool = False, unit: str = "") -> Ranged:
     """argparse type: a finite number in ``[low, high]`` (``above``: ``> low``, for a positive size)."""
     suffix = f" {unit}" if unit else ""
     if above:
         accepts = f"a finite number > {low:g}{suffix}"
-        ranged = _Ranged(low, high, accepts, _parse_finite)
+        ranged = Ranged(low, high, accepts, _parse_finite)
         ranged.low = math.nextafter(low, math.inf)
         return ranged
     accepts = (f"a finite number >= {low:g}{suffix}" if high is None else f"a number from {low:g} to {high:g}{suffix}")
-    return _Ranged(low, high, accepts, _parse_finite)
+    return Ranged(low, high, accepts, _parse_finite)
 
 
 #: argparse type of every ``--seed``: a non-negative integer (at most 2**63 - 1).
-SEED = _Ranged(0, MAX_SEED, "a non-negative integer (at most 2**63 - 1)", _parse_int)
+SEED = Ranged(0, MAX_SEED, "a non-negative integer (at most 2**63 - 1)", _parse_int)
 
 
 def image_size_of(args: argparse.Namespace, default: tuple[int, int] | None = None, min_side: int = 8) -> tuple[int, int] | None:
@@ -217,11 +216,6 @@ def image_size_of(args: argparse.Namespace, default: tuple[int, int] | None = No
     return int(width), int(height)
 
 
-def at_least(flag: str, value: int | None, low: int) -> None:
-    """``value`` (when given) must be an integer >= ``low``."""
-    if value is not None and value < low:
-        raise ParameterError(f"{flag} must be at least {low}, got {value}")
-
 
 def in_range(flag: str, value: int | None, low: int, high: int, unit: str = "") -> None:
     """``value`` (when given) must be an integer in ``[low, high]``."""
@@ -235,16 +229,6 @@ def seed(flag: str, value: int | None) -> None:
         raise ParameterError(f"{flag} must be a non-negative integer (at most 2**63 - 1), got {value}")
 
 
-def positive_number(flag: str, value: float | None) -> None:
-    """``value`` (when given) must be a finite number > 0."""
-    if value is not None and not (math.isfinite(value) and value > 0):
-        raise ParameterError(f"{flag} must be a finite number > 0, got {value}")
-
-
-def fraction(flag: str, value: float | None) -> None:
-    """``value`` (when given) must be a finite number in [0, 1]."""
-    if value is not None and not (math.isfinite(value) and 0.0 <= value <= 1.0):
-        raise ParameterError(f"{flag} must be a number from 0 to 1, got {value}")
 
 
 def _writable_ancestor(flag: str, path: Path) -> Path:

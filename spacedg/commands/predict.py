@@ -77,9 +77,9 @@ def run(args: argparse.Namespace) -> int:
     (--scenes) with a local transformers VLM (Qwen2-VL, Qwen2.5-VL, Qwen3-VL, InternVL, ...). Answers
     are appended to --out after each batch; a rerun skips answered items.
     """
-    import torch
-
     import os
+
+    import torch
 
     from spacedg.data.export import parse_shard, shard_from_env
     from spacedg.eval.predict import bench_source, dataset_source, predict, shard_path

@@ -66,7 +66,7 @@ def _bad_values(action: argparse.Action) -> list[str]:
     kind = action.type
     if action.choices is not None:
         return ["nope"]
-    if isinstance(kind, _args._Ranged):
+    if isinstance(kind, _args.Ranged):
         low = int(kind.low) - 1 if kind.accepts.startswith(("a whole", "a non-")) else -1
         values = ["abc", str(low), "1e400" if "finite" in kind.accepts or "number from" in kind.accepts else "1.5"]
         if kind.high is not None:

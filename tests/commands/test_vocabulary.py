@@ -103,7 +103,7 @@ def test_every_number_has_a_range(path: str) -> None:
     for option, action in _options(LEAVES[path]).items():
         if action.type in (int, float):
             assert (path, option) in NUMBERS_CHECKED_ELSEWHERE, f"spacedg {path} {option}: a bare {action.type.__name__}"
-        if isinstance(action.type, _args._Ranged):
+        if isinstance(action.type, _args.Ranged):
             assert action.type.low is not None and action.type.accepts.startswith(("a whole number", "a finite", "a number", "a non-"))
 
 
