@@ -6,7 +6,7 @@ The vocabulary (held by ``tests/commands/test_vocabulary.py``, which walks every
 - ``--image-size WxH``: image sizes in pixels (old: ``--width`` / ``--height`` of ``render`` and
   ``scenes synth``; ``--thumb-width`` is the width of a contact sheet's thumbnails, another concept);
 - ``--device``: a torch device only (``cpu``, ``cuda``, ``cuda:N``, ``mps``; checked by
-  :func:`spacedg.devices.resolve_device`); ``scenes import --camera dslr|iphone`` picks a ScanNet++
+  :func:`spacedg.devices.resolve_device`); ``scenes import --scannetpp-camera dslr|iphone`` picks a ScanNet++
   camera (old: ``scenes import --device``);
 - ``--num-gaussians N`` (``scenes synth``) is a count, ``--gaussians-file PATH`` (``scenes import``)
   a file (old: ``--gaussians`` for both);
@@ -53,7 +53,7 @@ DEPRECATED: tuple[Alias, ...] = (
     Alias("scenes synth", "--width", "--image-size", "--image-size WxH"),
     Alias("scenes synth", "--height", "--image-size", "--image-size WxH"),
     Alias("scenes import", "--gaussians", "--gaussians-file", "--gaussians-file PATH"),
-    Alias("scenes import", "--device", "--camera", "--camera dslr|iphone"),
+    Alias("scenes import", "--device", "--scannetpp-camera", "--scannetpp-camera dslr|iphone"),
     Alias("render", "--width", "--image-size", "--image-size WxH"),
     Alias("render", "--height", "--image-size", "--image-size WxH"),
 )

@@ -75,7 +75,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     imp.add_argument("--masks", type=Path, default=None, help="folder of Holi-Spatial masks <image stem>/<label>.png")
     imp.add_argument("--assign", default="auto", choices=("auto", "boxes", "masks", "none"),
                      help="instance ids when the Gaussians carry none (default auto = boxes; masks votes with Holi-Spatial masks)")
-    imp.add_argument("--camera", default="dslr", choices=("dslr", "iphone"),
+    imp.add_argument("--scannetpp-camera", default="dslr", choices=("dslr", "iphone"),
                      help="which ScanNet++ capture's cameras to read: dslr (default) or iphone")
     imp.add_argument("--embodiedscan-scene", default=None, help="scan to take from a multi-scan EmbodiedScan JSON")
     imp.add_argument("--drop-distortion", action="store_true", help="render distorted OPENCV cameras as ideal pinholes")
@@ -183,7 +183,7 @@ def _import(args: argparse.Namespace) -> int:
         args.src, args.out, instances=args.instances, format=args.format, name=args.name, up=args.up,
         metres_per_unit=args.metres_per_unit, gaussians=args.gaussians_file, cameras=args.cameras,
         dataparser_transforms=args.dataparser_transforms, undo_applied_transform=args.undo_applied_transform,
-        masks=args.masks, assign=args.assign, device=args.camera, embodiedscan_scene=args.embodiedscan_scene,
+        masks=args.masks, assign=args.assign, device=args.scannetpp_camera, embodiedscan_scene=args.embodiedscan_scene,
         opencv_distortion="drop" if args.drop_distortion else "error",
         frame_check="warn" if args.allow_frame_mismatch else "error", overwrite=args.overwrite, progress=not args.json,
     )

@@ -22,7 +22,7 @@ CONCEPTS: dict[str, tuple[re.Pattern[str], set[str]]] = {
     "image size": (re.compile(r"^--(width|height|size|resolution|image-.*|img.*|.*-(width|height|resolution))$"),
                    {"--image-size", "--thumb-width"}),
     "torch device": (re.compile(r"device|gpu|cuda"), {"--device"}),
-    "ScanNet++ camera": (re.compile(r"^--camera$|scannet|dslr|iphone"), {"--camera"}),
+    "ScanNet++ camera": (re.compile(r"^--camera$|scannet|dslr|iphone"), {"--scannetpp-camera"}),
     "Gaussians": (re.compile(r"gaussian"), {"--num-gaussians", "--gaussians-file"}),
     "seed": (re.compile(r"seed"), {"--seed"}),
     "output": (re.compile(r"^--(out|output|outdir|out-dir|output-dir|dest)$"), {"--out"}),
@@ -125,7 +125,7 @@ EXAMPLES = {
     ("scenes synth", "--width"): (["--width", "160"], ["--image-size", f"160x{SYNTH_SIZE[1]}"]),
     ("scenes synth", "--height"): (["--height", "120"], ["--image-size", f"{SYNTH_SIZE[0]}x120"]),
     ("scenes import", "--gaussians"): (["--gaussians", "g.ply"], ["--gaussians-file", "g.ply"]),
-    ("scenes import", "--device"): (["--device", "iphone"], ["--camera", "iphone"]),
+    ("scenes import", "--device"): (["--device", "iphone"], ["--scannetpp-camera", "iphone"]),
     ("render", "--width"): (["--width", "80", "--height", "60"], ["--image-size", "80x60"]),
     ("render", "--height"): (["--height", "60", "--width", "80"], ["--image-size", "80x60"]),
 }
