@@ -72,7 +72,8 @@ def _build(args: argparse.Namespace) -> int:
     settings.
     """
     from spacedg.commands.scenes import _scene_dirs
-    from spacedg.data.qa_index import QABuildConfig, build_scene_index
+    from spacedg.qa.build import build_scene_index
+    from spacedg.qa.index import QABuildConfig
 
     _args.seed("--seed", args.seed)
     _args.at_least("--per-sub-type", args.per_sub_type, 1)
@@ -102,7 +103,7 @@ def _family_names(text: str) -> tuple[str, ...]:
 def _index_files(paths: list[Path], families: tuple[str, ...] = ()) -> list[Path]:
     """Index files named by ``paths``: files as given; in folders (or their sub-folders) the full
     indexes ``*.qa.jsonl``, or with ``families`` that selection's ``*.qa.<selection>.jsonl``."""
-    from spacedg.data.qa_index import selection_name
+    from spacedg.qa.index import selection_name
 
     selection = selection_name(families)
     pattern = f"*.qa.{selection}.jsonl" if selection else "*.qa.jsonl"
@@ -123,7 +124,7 @@ def _index_files(paths: list[Path], families: tuple[str, ...] = ()) -> list[Path
 
 
 def _records_by_scene(paths: list[Path], families: str) -> dict[str, list]:
-    from spacedg.data.qa_index import read_index
+    from spacedg.qa.index import read_index
 
     by_scene: dict[str, list] = {}
     for file in _index_files(paths, _family_names(families)):
@@ -136,7 +137,7 @@ def _records_by_scene(paths: list[Path], families: str) -> dict[str, list]:
 def _scenes_with_visibility(by_scene: dict[str, list], paths: list[Path], extra: list[Path]) -> dict[str, object]:
     """Scene id → scene with its cached visibility, for the scene folders found beside the
     indexes or under ``extra`` (missing scenes are left out)."""
-    from spacedg.data.qa_index import QABuildConfig
+    from spacedg.qa.index import QABuildConfig
     from spacedg.errors import SpaceDGError
     from spacedg.scene.io import load_scene
     from spacedg.scene.visibility import load_or_compute_visibility, with_visibility
@@ -168,8 +169,8 @@ def _stats(args: argparse.Namespace) -> int:
     imperceptible rotations; the label checks read the scenes' cached visibility: scene folders beside
     the indexes, or --scenes).
     """
-    from spacedg.data.qa_audit import blind_audit, format_audit
-    from spacedg.data.qa_stats import ambiguities, answer_balance, blind_baseline, count_table, format_table, repeat_rate
+    from spacedg.qa.audit import blind_audit, format_audit
+    from spacedg.qa.stats import ambiguities, answer_balance, blind_baseline, count_table, format_table, repeat_rate
 
     by_scene = _records_by_scene(args.paths, args.families)
     every = [r for rs in by_scene.values() for r in rs]
@@ -215,7 +216,7 @@ def _audit(args: argparse.Namespace) -> int:
     the other scenes and scored on the held-out one; prints accuracy (MRA for metric answers), chance,
     and how many items the blind models solve. Needs indexes of at least two scenes.
     """
-    from spacedg.data.qa_audit import blind_audit, format_audit
+    from spacedg.qa.audit import blind_audit, format_audit
 
     by_scene = _records_by_scene(args.paths, args.families)
     if len(by_scene) < 2:
@@ -224,7 +225,7 @@ def _audit(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     report = blind_audit(by_scene, learned=not args.no_learned)
     if args.null > 0:
-        from spacedg.data.qa_audit import null_audit, with_null
+        from spacedg.qa.audit import null_audit, with_null
 
         report = with_null(report, null_audit(by_scene, args.null, learned=not args.no_learned))
     seconds = time.perf_counter() - start
@@ -281,8 +282,8 @@ def _add_index_inputs(parser: argparse.ArgumentParser) -> None:
 def _preview(args: argparse.Namespace) -> int:
     from spacedg.commands.render import write_png_atomic
     from spacedg.scene.io import load_scene
-    from spacedg.data.qa_index import build_scene_index
-    from spacedg.data.qa_preview import qa_sheet
+    from spacedg.qa.build import build_scene_index
+    from spacedg.qa.preview import qa_sheet
 
     if args.n < 1 or args.thumb_width < 32:
         raise InvalidDataError(f"--n must be >= 1 and --thumb-width >= 32, got {args.n} and {args.thumb_width}")

@@ -13,7 +13,9 @@ question states them verbatim, so this is text, not geometry). It never sees the
 axis, i.e. the answer) nor the images. Predictors are trained per ``question_type`` (the
 wording identifies it) and reported per ``(question_type, sub_question_type)``.
 
-Predictors (all fitted on the training scenes only):
+Predictors (all fitted on the training scenes only; the count-based ones are
+:mod:`spacedg.qa.audit_priors`, the learned one :mod:`spacedg.qa.audit_model`, what they read
+:mod:`spacedg.qa.audit_text`):
 
 ``letter``
     the most frequent correct letter (MCQ).
@@ -34,7 +36,8 @@ Predictors (all fitted on the training scenes only):
     words, numbers binned by magnitude, labels, the template and its crossings with option
     words and labels): a conditional logit over the four options (MCQ), a multinomial logit
     (yes/no, counts) or ridge regression on log values (metric answers). Plain numpy on sparse
-    binary features, 200 Adam steps from zero (deterministic): seconds per 10k records.
+    binary features, 200 Adam steps from zero (deterministic): seconds per 10k records
+    (:mod:`spacedg.qa.audit_model`).
 
 Scores: accuracy (MCQ, YN, COUNT) or mean relative accuracy (NA, SIZE_LIST: MRA over
 θ ∈ {0.50, …, 0.95}, the bench's metric). ``chance`` is what uniform guessing gets: MCQ 1 / the
@@ -64,8 +67,6 @@ the band is if anything wide.)
 
 from __future__ import annotations
 
-import math
-import re
 from collections import Counter, defaultdict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -73,12 +74,13 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.data.qa_stats import option_text
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.qa_record import QARecord
-from spacedg.plugins.questions.language import object_phrase, plural
 from spacedg.plugins.specs import AnswerType
-from spacedg.scene.lexicon import label_key
+from spacedg.qa.audit_model import fit_learned
+from spacedg.qa.audit_priors import Priors
+from spacedg.qa.audit_text import NUMBER, frequent_words, option_role, record_labels, template_signature, template_words, truth_text
+from spacedg.qa.stats import option_text
 
 __all__ = [
     "PREDICTORS",
@@ -96,93 +98,6 @@ __all__ = [
 #: Predictor names, in report order.
 PREDICTORS: tuple[str, ...] = ("letter", "majority", "option_text", "label", "learned")
 _DISCRETE = (AnswerType.MCQ, AnswerType.YN, AnswerType.COUNT)
-_WORD = re.compile(r"[a-z]+|\d+(?:\.\d+)?")
-_NUMBER = re.compile(r"^\d+(?:\.\d+)?$")
-#: A word is a template word of a question type when at least this share of its questions use it.
-TEMPLATE_DF = 0.2
-
-
-# ------------------------------------------------------------------ text helpers
-def _words(text: str) -> list[str]:
-    return _WORD.findall(str(text).lower())
-
-
-def _number_bin(token: str) -> str:
-    value = float(token)
-    return "n:0" if value <= 0 else f"n:{round(2 * math.log2(value))}"
-
-
-def _tokens(text: str) -> list[str]:
-    """Words of ``text``; numbers become magnitude bins (half-octaves)."""
-    return [_number_bin(w) if _NUMBER.match(w) else w for w in _words(text)]
-
-
-def truth_text(record: QARecord) -> str:
-    """The correct answer as text: the correct option's text (MCQ) or ``str(answer)``."""
-    if record.answer_type is AnswerType.MCQ:
-        return option_text(record, str(record.answer))
-    return str(record.answer)
-
-
-def record_labels(record: QARecord) -> tuple[str, ...]:
-    """The labels the question names, in question order: the ``refs`` of its geometry block, else
-    its ``label`` (existence, counting) or ``object`` (size); lower case. The question text
-    states them, so a text-only model knows them too."""
-    g = record.geometry
-    refs = g.get("refs") or []
-    if refs:
-        return tuple(label_key(r.get("label", "")) for r in refs)
-    found = []
-    for value in (g.get("label"), (g.get("object") or {}).get("label") if isinstance(g.get("object"), Mapping) else None):
-        if isinstance(value, str):
-            label = label_key(value)
-            if label and label in record.question.lower():  # only a label the question states
-                found.append(label)
-    return tuple(found[:1])
-
-
-def _named_objects(record: QARecord) -> dict[str, str]:
-    """Phrase (lower case) → label of every object the question names."""
-    out: dict[str, str] = {}
-    for ref in record.geometry.get("refs") or []:
-        phrase = object_phrase(str(ref.get("label", "")), str(ref.get("description", ""))).lower()
-        out.setdefault(" ".join(phrase.split()), str(ref.get("label", "")).lower())
-    return out
-
-
-def option_role(record: QARecord, text: str) -> str:
-    """How an option reads to a blind model: ``"object:<label>"`` when it names an object of the
-    question, else its text (lower case)."""
-    key = " ".join(text.lower().split())
-    label = _named_objects(record).get(key)
-    return f"object:{label}" if label is not None else key
-
-
-def _template_words(record: QARecord) -> set[str]:
-    """The question's words without the objects and labels it names (and their plurals)."""
-    text = " ".join(record.question.lower().split())
-    for phrase in sorted(_named_objects(record), key=len, reverse=True):
-        text = text.replace(phrase, " ")
-    named: set[str] = set()
-    for label in record_labels(record):
-        named.update(_words(label))
-        named.update(_words(plural(label)))
-    return {w for w in _words(text) if w not in named}
-
-
-def template_signature(record: QARecord, frequent: frozenset[str]) -> str:
-    """The question's template words: its words (objects and labels it names left out) that
-    are in ``frequent`` (used by at least :data:`TEMPLATE_DF` of the question type's training
-    questions), sorted."""
-    return " ".join(sorted(w for w in _template_words(record) if w in frequent))
-
-
-def _frequent_words(records: Sequence[QARecord]) -> frozenset[str]:
-    df: Counter[str] = Counter()
-    for r in records:
-        df.update(_template_words(r))
-    n = max(1, len(records))
-    return frozenset(w for w, c in df.items() if c / n >= TEMPLATE_DF and not _NUMBER.match(w))
 
 
 def mra(prediction: float, truth: float) -> float:
@@ -201,272 +116,6 @@ def _score(record: QARecord, prediction: Any) -> float:
     if record.answer_type is AnswerType.SIZE_LIST:
         return float(np.mean([mra(p, t) for p, t in zip(prediction, record.answer)]))
     return float(str(prediction) == str(record.answer))
-
-
-# ------------------------------------------------------------------ learned models
-def _record_features(record: QARecord, frequent: frozenset[str]) -> list[str]:
-    sig = template_signature(record, frequent)
-    labels = record_labels(record)
-    feats = ["bias", f"s:{sig}"]
-    feats += [f"q:{t}" for t in set(_tokens(record.question))]
-    feats += [f"l:{lab}" for lab in labels]
-    feats += [f"s:{sig}|l{k}:{lab}" for k, lab in enumerate(labels)]
-    if len(labels) > 1:
-        feats.append(f"s:{sig}|ls:{'|'.join(labels)}")
-    return feats
-
-
-def _option_features(record: QARecord, text: str, sig: str) -> list[str]:
-    """Features of one option of ``record``, whose template signature is ``sig``."""
-    role = option_role(record, text)
-    feats = [f"o:{role}", f"s:{sig}|o:{role}"]
-    feats += [f"ow:{t}" for t in set(_tokens(text))]
-    feats += [f"s:{sig}|ow:{t}" for t in set(_tokens(text))]
-    key = " ".join(text.lower().split())
-    question = " ".join(record.question.lower().split())
-    pos = question.find(key) if key else -1
-    if pos >= 0:
-        order = sorted(question.find(k) for k in _named_objects(record) if question.find(k) >= 0)
-        rank = order.index(pos) if pos in order else 0
-        feats += ["r:named", f"s:{sig}|r:mention{rank}"]
-    for lab in record_labels(record):
-        feats.append(f"l:{lab}|o:{role}")
-    return feats
-
-
-class _Vocab:
-    """Feature name → column, for features seen at least ``min_count`` times (at most ``cap``)."""
-
-    def __init__(self, docs: Sequence[Sequence[str]], min_count: int = 2, cap: int = 4000) -> None:
-        counts: Counter[str] = Counter(f for doc in docs for f in set(doc))
-        kept = [f for f, c in counts.most_common() if c >= min_count][:cap]
-        self.index = {f: i for i, f in enumerate(sorted(kept))}
-
-    def matrix(self, docs: Sequence[Sequence[str]]) -> _Sparse:
-        return _Sparse([[self.index[f] for f in set(doc) if f in self.index] for doc in docs], len(self.index))
-
-
-class _Sparse:
-    """A binary sparse matrix (rows of active columns): ``X @ w`` and ``X.T @ c`` in O(non-zeros)."""
-
-    def __init__(self, rows: Sequence[Sequence[int]], width: int) -> None:
-        self.n, self.width = len(rows), width
-        self.cols = np.fromiter((c for r in rows for c in r), dtype=np.int64)
-        self.rows = np.repeat(np.arange(len(rows)), [len(r) for r in rows])
-
-    def dot(self, w: np.ndarray) -> np.ndarray:
-        """``X @ w`` for ``w`` of shape (F,) or (F, C)."""
-        if w.ndim == 1:
-            return np.bincount(self.rows, weights=w[self.cols], minlength=self.n)
-        return np.stack([np.bincount(self.rows, weights=w[self.cols, c], minlength=self.n) for c in range(w.shape[1])], axis=1)
-
-    def tdot(self, c: np.ndarray) -> np.ndarray:
-        """``X.T @ c`` for ``c`` of shape (n,) or (n, C)."""
-        if c.ndim == 1:
-            return np.bincount(self.cols, weights=c[self.rows], minlength=self.width)
-        return np.stack([np.bincount(self.cols, weights=c[self.rows, k], minlength=self.width) for k in range(c.shape[1])], axis=1)
-
-
-def _adam(grad_fn: Any, w: np.ndarray, steps: int = 200, lr: float = 0.1) -> np.ndarray:
-    m = np.zeros_like(w)
-    v = np.zeros_like(w)
-    for t in range(1, steps + 1):
-        g = grad_fn(w)
-        m = 0.9 * m + 0.1 * g
-        v = 0.999 * v + 0.001 * g * g
-        w = w - lr * (m / (1 - 0.9**t)) / (np.sqrt(v / (1 - 0.999**t)) + 1e-8)
-    return w
-
-
-def _softmax(z: np.ndarray) -> np.ndarray:
-    z = z - z.max(axis=1, keepdims=True)
-    e = np.exp(z)
-    return e / e.sum(axis=1, keepdims=True)
-
-
-class _ConditionalLogit:
-    """Scores each option ``w · f(option)``; softmax over the four options; L2 ``l2``."""
-
-    def __init__(self, train: Sequence[QARecord], frequent: frozenset[str], l2: float = 1e-2) -> None:
-        self.frequent = frequent
-        docs = [doc for r in train for doc in self._docs(r)]  # 4 rows per record
-        self.vocab = _Vocab(docs)
-        x = self.vocab.matrix(docs)
-        y = np.array([MCQ_LETTERS.index(str(r.answer)) for r in train])
-        n = max(1, len(train))
-
-        def grad(w: np.ndarray) -> np.ndarray:
-            p = _softmax(x.dot(w).reshape(-1, 4))
-            p[np.arange(len(y)), y] -= 1.0
-            return x.tdot(p.ravel()) / n + l2 * w
-
-        self.w = _adam(grad, np.zeros(len(self.vocab.index))) if len(train) else np.zeros(0)
-
-    def _docs(self, record: QARecord) -> list[list[str]]:
-        sig = template_signature(record, self.frequent)
-        return [_option_features(record, option_text(record, k), sig) for k in MCQ_LETTERS]
-
-    def predict(self, record: QARecord) -> str:
-        scores = self.vocab.matrix(self._docs(record)).dot(self.w)
-        return MCQ_LETTERS[int(np.argmax(scores))]
-
-
-class _MultinomialLogit:
-    """Multinomial logistic regression over the training answers (yes/no, counts)."""
-
-    def __init__(self, train: Sequence[QARecord], frequent: frozenset[str], l2: float = 1e-2) -> None:
-        self.frequent = frequent
-        self.classes = sorted({str(r.answer) for r in train})
-        docs = [_record_features(r, frequent) for r in train]
-        self.vocab = _Vocab(docs)
-        x = self.vocab.matrix(docs)
-        y = np.array([self.classes.index(str(r.answer)) for r in train])
-        n = max(1, len(train))
-        shape = (len(self.vocab.index), max(1, len(self.classes)))
-
-        def grad(w: np.ndarray) -> np.ndarray:
-            p = _softmax(x.dot(w))
-            p[np.arange(len(y)), y] -= 1.0
-            return x.tdot(p) / n + l2 * w
-
-        self.w = _adam(grad, np.zeros(shape)) if len(train) else None
-
-    def predict(self, record: QARecord) -> str | None:
-        if self.w is None:
-            return None
-        scores = self.vocab.matrix([_record_features(record, self.frequent)]).dot(self.w)
-        return self.classes[int(np.argmax(scores[0]))]
-
-
-class _Ridge:
-    """Ridge regression of log answers (one output per answer element), by gradient steps."""
-
-    def __init__(self, train: Sequence[QARecord], frequent: frozenset[str], l2: float = 1e-3) -> None:
-        self.frequent = frequent
-        docs = [_record_features(r, frequent) for r in train]
-        self.vocab = _Vocab(docs)
-        x = self.vocab.matrix(docs)
-        y = np.log(np.maximum(np.array([np.atleast_1d(np.asarray(r.answer, dtype=np.float64)) for r in train]), 1e-3))
-        self.mean = y.mean(axis=0) if len(train) else np.zeros(1)
-        n = max(1, len(train))
-        centred = y - self.mean
-
-        def grad(w: np.ndarray) -> np.ndarray:
-            return x.tdot(x.dot(w) - centred) / n + l2 * w
-
-        self.w = _adam(grad, np.zeros((len(self.vocab.index), y.shape[1] if y.ndim == 2 else 1)), lr=0.05)
-
-    def predict(self, record: QARecord) -> Any:
-        x = self.vocab.matrix([_record_features(record, self.frequent)])
-        pred = np.exp(x.dot(self.w)[0] + self.mean)
-        return float(pred[0]) if pred.size == 1 else tuple(float(v) for v in np.sort(pred))
-
-
-# ------------------------------------------------------------------ count-based predictors
-def _majority(counter: Counter[str] | None) -> str | None:
-    if not counter:
-        return None
-    return sorted(counter.items(), key=lambda kv: (-kv[1], kv[0]))[0][0]
-
-
-def _best_option(record: QARecord, *counters: Counter[str] | None) -> str:
-    """The option whose role was correct most often in the first counter that knows any of the
-    record's options (later counters break ties and fill in); ties → the earlier letter."""
-    roles = [option_role(record, option_text(record, k)) for k in MCQ_LETTERS]
-    keys = []
-    for k, role in enumerate(roles):
-        keys.append((tuple((c or {}).get(role, 0) for c in counters), -k))
-    return MCQ_LETTERS[max(range(4), key=lambda k: keys[k])]
-
-
-def _size_values(record: QARecord) -> list[tuple[str, float]]:
-    g = record.geometry
-    objs, values = g.get("objects") or [], g.get("values") or []
-    return [(str(o.get("label", "")).lower(), float(v)) for o, v in zip(objs, values)]
-
-
-class _Priors:
-    """The count-based predictors of one question type, fitted on training records."""
-
-    def __init__(self, train: Sequence[QARecord], frequent: frozenset[str]) -> None:
-        self.frequent = frequent
-        self.letters: Counter[str] = Counter()
-        self.by_sig: dict[str, Counter[str]] = defaultdict(Counter)
-        self.overall: Counter[str] = Counter()
-        self.text_hits: Counter[str] = Counter()
-        self.text_seen: Counter[str] = Counter()
-        self.by_labels: dict[tuple[str, ...], Counter[str]] = defaultdict(Counter)
-        self.size_sum: dict[tuple[str, str], list[float]] = defaultdict(lambda: [0.0, 0.0])
-        self.metric: dict[tuple[str, ...], list[np.ndarray]] = defaultdict(list)
-        self.metric_all: list[np.ndarray] = []
-        for r in train:
-            sig = template_signature(r, frequent)
-            if r.answer_type is AnswerType.MCQ:
-                self.letters[str(r.answer)] += 1
-                truth = option_role(r, truth_text(r))
-                for k in MCQ_LETTERS:
-                    self.text_seen[option_role(r, option_text(r, k))] += 1
-                self.text_hits[truth] += 1
-                self.by_sig[sig][truth] += 1
-                self.overall[truth] += 1
-                self.by_labels[(sig, *record_labels(r))][truth] += 1
-                for label, value in _size_values(r):
-                    acc = self.size_sum[(sig, label)]
-                    acc[0] += value
-                    acc[1] += 1
-            elif r.answer_type in (AnswerType.YN, AnswerType.COUNT):
-                self.by_sig[sig][str(r.answer)] += 1
-                self.overall[str(r.answer)] += 1
-                self.by_labels[(sig, *record_labels(r))][str(r.answer)] += 1
-                self.by_labels[record_labels(r)][str(r.answer)] += 1
-            else:
-                value = np.log(np.maximum(np.atleast_1d(np.asarray(r.answer, dtype=np.float64)), 1e-3))
-                self.metric[record_labels(r)].append(value)
-                self.metric_all.append(value)
-
-    def predict(self, name: str, record: QARecord) -> Any:
-        sig = template_signature(record, self.frequent)
-        kind = record.answer_type
-        if kind in (AnswerType.NA, AnswerType.SIZE_LIST):
-            if name == "majority":
-                values = self.metric_all
-            elif name == "label":
-                values = self.metric.get(record_labels(record)) or self.metric_all
-            else:
-                return None
-            if not values:
-                return None
-            mean = np.exp(np.mean(values, axis=0))
-            return float(mean[0]) if kind is AnswerType.NA else tuple(float(v) for v in np.sort(mean))
-        if name == "letter":
-            return _majority(self.letters) if kind is AnswerType.MCQ else None
-        if name == "majority":
-            if kind is AnswerType.MCQ:
-                return _best_option(record, self.by_sig.get(sig), self.overall)
-            return _majority(self.by_sig.get(sig)) or _majority(self.overall)
-        if name == "option_text":
-            if kind is not AnswerType.MCQ:
-                return None
-            rates = []
-            for k in MCQ_LETTERS:
-                role = option_role(record, option_text(record, k))
-                rates.append(((self.text_hits[role] + 0.5) / (self.text_seen[role] + 2.0), -MCQ_LETTERS.index(k), k))
-            return max(rates)[2]
-        if name == "label":
-            if kind is AnswerType.MCQ:
-                sizes = _size_values(record)
-                if len(sizes) == 2 and all(self.size_sum.get((sig, lab), (0, 0))[1] for lab, _ in sizes):
-                    means = [self.size_sum[(sig, lab)][0] / self.size_sum[(sig, lab)][1] for lab, _ in sizes]
-                    which = 0 if means[0] >= means[1] else 1
-                    phrase = (record.geometry.get("objects") or [])[which]
-                    wanted = object_phrase(str(phrase.get("label", "")), str(phrase.get("description", "")))
-                    for k in MCQ_LETTERS:
-                        if " ".join(option_text(record, k).lower().split()) == " ".join(wanted.lower().split()):
-                            return k
-                return _best_option(record, self.by_labels.get((sig, *record_labels(record))), self.by_sig.get(sig), self.overall)
-            guess = _majority(self.by_labels.get((sig, *record_labels(record)))) or _majority(self.by_labels.get(record_labels(record)))
-            return guess or _majority(self.by_sig.get(sig)) or _majority(self.overall)
-        return None
 
 
 # ------------------------------------------------------------------ the audit
@@ -515,7 +164,7 @@ class AuditReport:
 
 def _wording(record: QARecord) -> tuple[str, str]:
     """The question type and its wording without the objects, labels and numbers it names."""
-    return record.question_type, " ".join(sorted(w for w in _template_words(record) if not _NUMBER.match(w)))
+    return record.question_type, " ".join(sorted(w for w in template_words(record) if not NUMBER.match(w)))
 
 
 def _role_kind(role: str) -> str:
@@ -555,56 +204,82 @@ def _chance(record: QARecord, live: Mapping[tuple[str, str], set[str]], counts: 
     return None
 
 
-def blind_audit(records_by_scene: Mapping[str, Sequence[QARecord]], *, learned: bool = True) -> AuditReport:
-    """Leave-one-scene-out blind predictors over ``records_by_scene`` (see the module docstring).
 
-    Needs at least two scenes (with one, nothing is held out and the report is empty).
-    ``learned=False`` skips the logistic models (the count-based priors only).
-    """
-    scenes = [s for s in records_by_scene if records_by_scene[s]]
-    every = [r for s in scenes for r in records_by_scene[s]]
-    live = _live_roles(every)
-    distinct_counts = _distinct_counts(every)
+# ------------------------------------------------------------------ held-out scores
+def _record_scores(record: QARecord, priors: Priors, models: Mapping[AnswerType, Any]) -> dict[str, float]:
+    """Each predictor's score on ``record`` (1/0, or MRA); a predictor with no answer for its
+    kind is left out (``majority`` and ``label`` score 0 instead)."""
+    scores: dict[str, float] = {}
+    for name in PREDICTORS:
+        if name == "learned":
+            model = models.get(record.answer_type)
+            if model is None:
+                continue
+            scores[name] = _score(record, model.predict(record))
+        else:
+            pred = priors.predict(name, record)
+            if pred is None and not (name in ("majority", "label")):
+                continue
+            scores[name] = _score(record, pred)
+    return scores
+
+
+def _score_question_type(train: Sequence[QARecord], tests: Sequence[QARecord], learned: bool) -> dict[str, dict[str, float]]:
+    """Record id → predictor scores for the held-out ``tests`` of one question type, the
+    predictors fitted on ``train`` (the same question type in the other scenes)."""
+    frequent = frequent_words(train)
+    priors = Priors(train, frequent)
+    models: dict[AnswerType, Any] = {}
+    for kind in {r.answer_type for r in tests}:
+        kind_train = [r for r in train if r.answer_type is kind]
+        if learned and kind_train:
+            models[kind] = fit_learned(kind, kind_train, frequent)
+    return {r.id: _record_scores(r, priors, models) for r in tests}
+
+
+def _held_out_scores(
+    records_by_scene: Mapping[str, Sequence[QARecord]], scenes: Sequence[str], learned: bool,
+) -> dict[str, dict[str, float]]:
+    """Record id → predictor scores, every scene held out once (leave-one-scene-out)."""
     per_record: dict[str, dict[str, float]] = {}
-    if len(scenes) >= 2:
-        for held in scenes:
-            train_by_type: dict[str, list[QARecord]] = defaultdict(list)
-            for s in scenes:
-                if s != held:
-                    for r in records_by_scene[s]:
-                        train_by_type[r.question_type].append(r)
-            test_by_type: dict[str, list[QARecord]] = defaultdict(list)
-            for r in records_by_scene[held]:
-                test_by_type[r.question_type].append(r)
-            for qtype, tests in test_by_type.items():
-                train = train_by_type.get(qtype, [])
-                frequent = _frequent_words(train)
-                priors = _Priors(train, frequent)
-                models: dict[AnswerType, Any] = {}
-                for kind in {r.answer_type for r in tests}:
-                    kind_train = [r for r in train if r.answer_type is kind]
-                    if not learned or not kind_train:
-                        continue
-                    if kind is AnswerType.MCQ:
-                        models[kind] = _ConditionalLogit(kind_train, frequent)
-                    elif kind in (AnswerType.YN, AnswerType.COUNT):
-                        models[kind] = _MultinomialLogit(kind_train, frequent)
-                    else:
-                        models[kind] = _Ridge(kind_train, frequent)
-                for r in tests:
-                    scores: dict[str, float] = {}
-                    for name in PREDICTORS:
-                        if name == "learned":
-                            model = models.get(r.answer_type)
-                            if model is None:
-                                continue
-                            scores[name] = _score(r, model.predict(r))
-                        else:
-                            pred = priors.predict(name, r)
-                            if pred is None and not (name in ("majority", "label")):
-                                continue
-                            scores[name] = _score(r, pred)
-                    per_record[r.id] = scores
+    for held in scenes:
+        train_by_type: dict[str, list[QARecord]] = defaultdict(list)
+        for s in scenes:
+            if s != held:
+                for r in records_by_scene[s]:
+                    train_by_type[r.question_type].append(r)
+        test_by_type: dict[str, list[QARecord]] = defaultdict(list)
+        for r in records_by_scene[held]:
+            test_by_type[r.question_type].append(r)
+        for qtype, tests in test_by_type.items():
+            per_record.update(_score_question_type(train_by_type.get(qtype, []), tests, learned))
+    return per_record
+
+
+# ------------------------------------------------------------------ the report
+def _row(
+    key: tuple[str, str, str], rs: Sequence[QARecord], per_record: Mapping[str, Mapping[str, float]],
+    live: Mapping[tuple[str, str], set[str]], counts: Mapping[str, int],
+) -> tuple[AuditRow, list[str], list[float | None]]:
+    """One sub type's row, the ids its best predictor solves, and each record's chance."""
+    kind = rs[0].answer_type
+    names = [p for p in PREDICTORS if all(p in per_record[r.id] for r in rs)]
+    scores = {p: 100.0 * float(np.mean([per_record[r.id][p] for r in rs])) for p in names}
+    chances = [_chance(r, live, counts) for r in rs]
+    chance = None if chances[0] is None else 100.0 * float(np.mean(chances))
+    best = max(names, key=lambda p: (scores[p], -PREDICTORS.index(p))) if names else ""
+    best_score = scores.get(best, 0.0)
+    solved: list[str] = []
+    if best and kind in _DISCRETE and chance is not None and best_score > chance:
+        solved = [r.id for r in rs if per_record[r.id][best] >= 1.0]
+    return AuditRow(key[0], key[1], key[2], len(rs), chance, scores, best, best_score, len(solved)), solved, chances
+
+
+def _report(
+    every: Sequence[QARecord], per_record: dict[str, dict[str, float]], live: Mapping[tuple[str, str], set[str]],
+    counts: Mapping[str, int], n_scenes: int,
+) -> AuditReport:
+    """The rows per sub type (sorted) and the ``ALL`` figures pooled over discrete sub types."""
     groups: dict[tuple[str, str, str], list[QARecord]] = defaultdict(list)
     for r in every:
         if r.id in per_record:
@@ -614,38 +289,36 @@ def blind_audit(records_by_scene: Mapping[str, Sequence[QARecord]], *, learned: 
     pooled_n = 0
     pooled_hits = 0.0
     pooled_chance = 0.0
-    pooled_by_predictor: Counter[str] = Counter()
     for key in sorted(groups):
         rs = groups[key]
-        kind = rs[0].answer_type
-        names = [p for p in PREDICTORS if all(p in per_record[r.id] for r in rs)]
-        scores = {p: 100.0 * float(np.mean([per_record[r.id][p] for r in rs])) for p in names}
-        chances = [_chance(r, live, distinct_counts) for r in rs]
-        chance = None if chances[0] is None else 100.0 * float(np.mean(chances))
-        best = max(names, key=lambda p: (scores[p], -PREDICTORS.index(p))) if names else ""
-        best_score = scores.get(best, 0.0)
-        n_solved = 0
-        if best and kind in _DISCRETE and chance is not None and best_score > chance:
-            for r in rs:
-                if per_record[r.id][best] >= 1.0:
-                    solved.append(r.id)
-                    n_solved += 1
-        rows.append(AuditRow(key[0], key[1], key[2], len(rs), chance, scores, best, best_score, n_solved))
-        if kind in _DISCRETE and best:
+        row, ids, chances = _row(key, rs, per_record, live, counts)
+        rows.append(row)
+        solved.extend(ids)
+        if rs[0].answer_type in _DISCRETE and row.best:
             pooled_n += len(rs)
-            pooled_hits += sum(per_record[r.id][best] for r in rs)
+            pooled_hits += sum(per_record[r.id][row.best] for r in rs)
             pooled_chance += sum(chances)  # type: ignore[arg-type]
-            for p in names:
-                pooled_by_predictor[p] += sum(per_record[r.id][p] for r in rs)
     overall = {
         "n": pooled_n,
         "chance": 100.0 * pooled_chance / pooled_n if pooled_n else None,
         "best_per_sub_type": 100.0 * pooled_hits / pooled_n if pooled_n else None,
-        "scenes": len(scenes),
+        "scenes": n_scenes,
     }
     if overall["chance"] is not None:
         overall["excess"] = overall["best_per_sub_type"] - overall["chance"]
     return AuditReport(rows, overall, solved, per_record)
+
+
+def blind_audit(records_by_scene: Mapping[str, Sequence[QARecord]], *, learned: bool = True) -> AuditReport:
+    """Leave-one-scene-out blind predictors over ``records_by_scene`` (see the module docstring).
+
+    Needs at least two scenes (with one, nothing is held out and the report is empty).
+    ``learned=False`` skips the logistic models (the count-based priors only).
+    """
+    scenes = [s for s in records_by_scene if records_by_scene[s]]
+    every = [r for s in scenes for r in records_by_scene[s]]
+    per_record = _held_out_scores(records_by_scene, scenes, learned) if len(scenes) >= 2 else {}
+    return _report(every, per_record, _live_roles(every), _distinct_counts(every), len(scenes))
 
 
 def _null_records(records_by_scene: Mapping[str, Sequence[QARecord]], rng: np.random.Generator) -> dict[str, list[QARecord]]:
