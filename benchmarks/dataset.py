@@ -75,7 +75,7 @@ import numpy as np
 
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.chain import BENCH_DEGRADATIONS
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 from spacedg.scene.store import builtin_scene_dirs, spacedg_home
 
 STAGES = ("render_ms", "linear_ms", "encode_ms", "display_ms")

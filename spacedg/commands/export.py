@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         parse_shard,
         shard_from_env,
     )
-    from spacedg.data.qa_index import QABuildConfig
+    from spacedg.qa.index import QABuildConfig
 
     # every flag is checked before the (slow) dataset construction
     shard = shard_from_env(os.environ) if args.shard.strip().lower() == "env" else parse_shard(args.shard)

@@ -77,7 +77,8 @@ def _build(args: argparse.Namespace) -> int:
     settings.
     """
     from spacedg.commands.scenes import _scene_dirs
-    from spacedg.data.qa_index import QABuildConfig, build_scene_index
+    from spacedg.qa.build import build_scene_index
+    from spacedg.qa.index import QABuildConfig
 
     if args.out is not None:
         _args.output_folder("--out", args.out)
@@ -105,7 +106,7 @@ def _family_names(text: str) -> tuple[str, ...]:
 def _index_files(paths: list[Path], families: tuple[str, ...] = ()) -> list[Path]:
     """Index files named by ``paths``: files as given; in folders (or their sub-folders) the full
     indexes ``*.qa.jsonl``, or with ``families`` that selection's ``*.qa.<selection>.jsonl``."""
-    from spacedg.data.qa_index import selection_name
+    from spacedg.qa.index import selection_name
 
     selection = selection_name(families)
     pattern = f"*.qa.{selection}.jsonl" if selection else "*.qa.jsonl"
@@ -126,7 +127,7 @@ def _index_files(paths: list[Path], families: tuple[str, ...] = ()) -> list[Path
 
 
 def _records_by_scene(paths: list[Path], families: str) -> dict[str, list]:
-    from spacedg.data.qa_index import read_index
+    from spacedg.qa.index import read_index
 
     by_scene: dict[str, list] = {}
     for file in _index_files(paths, _family_names(families)):
@@ -139,7 +140,7 @@ def _records_by_scene(paths: list[Path], families: str) -> dict[str, list]:
 def _scenes_with_visibility(by_scene: dict[str, list], paths: list[Path], extra: list[Path]) -> dict[str, object]:
     """Scene id → scene with its cached visibility, for the scene folders found beside the
     indexes or under ``extra`` (missing scenes are left out)."""
-    from spacedg.data.qa_index import QABuildConfig
+    from spacedg.qa.index import QABuildConfig
     from spacedg.errors import SpaceDGError
     from spacedg.scene.io import load_scene
     from spacedg.scene.visibility import load_or_compute_visibility, with_visibility
@@ -171,8 +172,8 @@ def _stats(args: argparse.Namespace) -> int:
     imperceptible rotations; the label checks read the scenes' cached visibility: scene folders beside
     the indexes, or --scenes).
     """
-    from spacedg.data.qa_audit import blind_audit, format_audit
-    from spacedg.data.qa_stats import ambiguities, answer_balance, blind_baseline, count_table, format_table, repeat_rate
+    from spacedg.qa.audit import blind_audit, format_audit
+    from spacedg.qa.stats import ambiguities, answer_balance, blind_baseline, count_table, format_table, repeat_rate
 
     by_scene = _records_by_scene(args.paths, args.families)
     every = [r for rs in by_scene.values() for r in rs]
@@ -218,7 +219,7 @@ def _audit(args: argparse.Namespace) -> int:
     the other scenes and scored on the held-out one; prints accuracy (MRA for metric answers), chance,
     and how many items the blind models solve. Needs indexes of at least two scenes.
     """
-    from spacedg.data.qa_audit import blind_audit, format_audit
+    from spacedg.qa.audit import blind_audit, format_audit
 
     by_scene = _records_by_scene(args.paths, args.families)
     if len(by_scene) < 2:
@@ -227,7 +228,7 @@ def _audit(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     report = blind_audit(by_scene, learned=not args.no_learned)
     if args.null > 0:
-        from spacedg.data.qa_audit import null_audit, with_null
+        from spacedg.qa.audit import null_audit, with_null
 
         report = with_null(report, null_audit(by_scene, args.null, learned=not args.no_learned))
     seconds = time.perf_counter() - start
@@ -288,8 +289,8 @@ def _preview(args: argparse.Namespace) -> int:
     index <scene id>.qa.jsonl that `spacedg qa build SCENE` writes beside the scene; writes only --out.
     """
     from spacedg.commands.render import write_png_atomic
-    from spacedg.data.qa_index import index_paths, read_index
-    from spacedg.data.qa_preview import qa_sheet
+    from spacedg.qa.index import index_paths, read_index
+    from spacedg.qa.preview import qa_sheet
     from spacedg.scene.io import load_scene
 
     _args.output_file("--out", args.out, (".png",))

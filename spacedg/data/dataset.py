@@ -8,7 +8,7 @@ renders them.
   rooms (:func:`~spacedg.scene.store.builtin_scene_dirs`, generated on first use). Each
   scene goes to one split (:func:`~spacedg.scene.store.assign_splits`), so ``train``,
   ``val`` and ``bench`` never share a scene.
-- **Questions**: each scene's question index (:mod:`spacedg.data.qa_index`), built on first use
+- **Questions**: each scene's question index (:mod:`spacedg.qa.build`, :mod:`spacedg.qa.index`), built on first use
   in a *spawned* process; optionally restricted to ``question_types``.
 - **Degradations**:
   - ``train`` / ``val``: one item per question. The item is clean with probability
@@ -68,7 +68,8 @@ from spacedg.data.pipeline import (
     frames_nbytes,
     sample_scene_depth,
 )
-from spacedg.data.qa_index import QABuildConfig, ensure_indexes, index_paths, read_index
+from spacedg.qa.build import ensure_indexes
+from spacedg.qa.index import QABuildConfig, index_paths, read_index
 from spacedg.data.workers import loader_plan
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins.qa_record import QARecord
@@ -106,7 +107,7 @@ class SpaceDGDataset(Dataset):
         qa_config: how the question indexes are built (default: ``QABuildConfig()``, seed 0:
             each scene's full index ``<scene id>.qa.jsonl``, shared by every dataset over the
             same folders; a config naming ``families`` reads that selection's own index file,
-            :func:`~spacedg.data.qa_index.index_paths`).
+            :func:`~spacedg.qa.index.index_paths`).
         split_fractions: ``(val, bench)`` share of scenes; ``(0, 1)`` puts every scene (even one) in
             ``bench`` (see :func:`~spacedg.scene.store.assign_splits`).
         split_seed: seed of the scene → split assignment (kept apart from ``seed`` so that

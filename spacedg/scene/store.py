@@ -4,7 +4,7 @@
   (``$SPACEDG_HOME/rooms``, default ``~/.cache/spacedg/rooms``) with a progress bar.
 - :func:`assign_splits`: scenes → ``train`` / ``val`` / ``bench``, disjoint, deterministic.
 - :func:`run_isolated`: run a function in a fresh Python interpreter (the built-in rooms here;
-  question indexes in :func:`spacedg.data.qa_index.ensure_indexes`), so the calling process never
+  question indexes in :func:`spacedg.qa.build.ensure_indexes`), so the calling process never
   starts numba or CUDA threads before a DataLoader forks its workers.
 - :class:`ByteLRU`: a least-recently-used cache bounded by a byte budget (Gaussians, clean renders).
 """

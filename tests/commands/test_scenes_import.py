@@ -91,7 +91,8 @@ def test_scene_without_ids_warns_and_still_builds(tmp_path: Path, capsys) -> Non
     assert main(["scenes", "info", str(folder)]) == 0
     assert "carry no instance ids" in capsys.readouterr().out
     with pytest.warns(UserWarning, match="assigned .* by box"):
-        from spacedg.data.qa_index import QABuildConfig, build_scene_index
+        from spacedg.qa.build import build_scene_index
+        from spacedg.qa.index import QABuildConfig
 
         qa = build_scene_index(folder, QABuildConfig(per_sub_type=2), progress=False)
     assert qa.counts().get("object_counting", 0) + qa.counts().get("inter_object_distance", 0) > 0

@@ -31,7 +31,7 @@ from spacedg.data.public_format import public_fields
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.scene.io import load_scene
 from spacedg.data.chain import BENCH_DEGRADATIONS
-from spacedg.data.qa_index import QABuildConfig, index_paths, read_index
+from spacedg.qa.index import QABuildConfig, index_paths, read_index
 from spacedg.errors import InvalidDataError, ParameterError, UnknownPluginError
 from spacedg.eval.scoring import ANSWER_PROMPT, score
 
@@ -172,7 +172,7 @@ import torch
 from numba.np.ufunc import parallel
 from torch.utils.data import DataLoader
 from spacedg.data.dataset import SpaceDGDataset
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 
 args = json.loads(sys.argv[1])
 config = QABuildConfig(**args["config"])
@@ -241,7 +241,7 @@ import hashlib, json, sys
 import numba
 from torch.utils.data import DataLoader, get_worker_info
 from spacedg.data.dataset import SpaceDGDataset
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 from spacedg.render import threads
 
 def serial_flag(_):

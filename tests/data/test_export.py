@@ -26,7 +26,7 @@ from spacedg.data.export import (
 )
 from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.data.public_format import to_public
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 from spacedg.errors import InvalidDataError, ParameterError
 from tests.conftest import private_copies
 

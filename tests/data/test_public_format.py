@@ -31,7 +31,7 @@ from spacedg.data.public_format import (
     public_fields,
     to_public,
 )
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 from spacedg.errors import InvalidDataError
 from spacedg.eval import load_bench, route, score
 from spacedg.plugins import list_question_families

@@ -17,7 +17,7 @@ from spacedg.cli import main
 from spacedg.data.chat import chat_collate
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.export import export_bench
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.eval.bench import load_bench
 from spacedg.eval.predict import bench_source, dataset_source, predict

@@ -8,7 +8,8 @@ import pytest
 
 from tests.qa_scenes import random_rigid
 from spacedg.scene.io import load_scene
-from spacedg.data.qa_index import QABuildConfig, generate_records, prepare_scene
+from spacedg.qa.build import generate_records, prepare_scene
+from spacedg.qa.index import QABuildConfig
 from spacedg.plugins import list_question_families
 from spacedg.plugins.specs import AnswerType
 
@@ -98,7 +99,7 @@ def test_answer_balance_and_blind_baseline(records_by_scene):
     """Correct letter uniform over A–D within ±4 points, yes/no 50 ± 4, and a blind model that
     always gives the most frequent answer of the sub type (learnt on the other rooms) is no
     better than chance + 5 points."""
-    from spacedg.data.qa_stats import answer_balance, blind_baseline
+    from spacedg.qa.stats import answer_balance, blind_baseline
 
     every = [r for rs in records_by_scene.values() for r in rs]
     balance = answer_balance(every)

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from spacedg.scene.io import load_scene
-from spacedg.data.qa_index import QABuildConfig, generate_records, prepare_scene
+from spacedg.qa.build import generate_records, prepare_scene
+from spacedg.qa.index import QABuildConfig
 
 CONFIG = QABuildConfig(seed=11, per_sub_type=12)
 LETTERS = "ABCD"
@@ -304,7 +305,7 @@ def test_index_selection_is_debiased(scenes_and_records):
     within one block of four."""
     from collections import Counter, defaultdict
 
-    from spacedg.data.qa_stats import record_subject
+    from spacedg.qa.stats import record_subject
 
     for _, records in scenes_and_records:
         subjects = Counter((r.sub_question_type, record_subject(r)) for r in records)
