@@ -279,7 +279,7 @@ def _add_index_inputs(parser: argparse.ArgumentParser) -> None:
 
 
 def _preview(args: argparse.Namespace) -> int:
-    from spacedg.commands.render import write_png_atomic
+    from spacedg.files import write_png
     from spacedg.scene.io import load_scene
     from spacedg.data.qa_index import build_scene_index
     from spacedg.data.qa_preview import qa_sheet
@@ -297,6 +297,6 @@ def _preview(args: argparse.Namespace) -> int:
         raise InvalidDataError(f"{args.scene}: no questions of type(s) {sorted(types)}; the index has {known}")
     scene = load_scene(args.scene)
     sheet = qa_sheet(scene, records, thumb_width=args.thumb_width, backend=args.backend)
-    write_png_atomic(args.out, sheet[:, :, ::-1], "--out")
+    write_png(args.out, sheet, "--out", compression=9)
     print(f"wrote {args.out} ({len(records)} questions, {sheet.shape[1]}x{sheet.shape[0]} px)")
     return 0

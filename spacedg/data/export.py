@@ -73,7 +73,7 @@ from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.pipeline import degrade_device
 from spacedg.data.public_format import PUBLIC_BENCH_NAME, public_fields, public_mismatch
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
-from spacedg.files import atomic_write_bytes, remove_stale_temps
+from spacedg.files import atomic_write_bytes, remove_stale_temps, write_png
 from spacedg.plugins.answers import answer_text
 
 __all__ = [
@@ -317,14 +317,6 @@ def _rows(item: dict[str, Any], paths: list[str], system: str) -> tuple[dict[str
     return tsv, chat
 
 
-def _write_png(path: Path, rgb: np.ndarray) -> None:
-    """Write an H×W×3 uint8 RGB image as PNG, atomically (encoded in memory, then one rename)."""
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(rgb[:, :, ::-1]))
-    if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
-        raise OSError(f"could not encode {path}")
-    atomic_write_bytes(path, data.tobytes())
-
-
 def _item(dataset: SpaceDGDataset, index: int) -> dict[str, Any]:
     """``dataset[index]``, with an error that names the item's scene folder if it fails."""
     try:
@@ -356,7 +348,7 @@ def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, s
         paths = []
         for v, image in enumerate(item["images"]):
             rel = f"images/{index:07d}_{v}.png"
-            _write_png(out / rel, image.permute(1, 2, 0).numpy())
+            write_png(out / rel, image.permute(1, 2, 0).numpy(), "image")
             paths.append(rel)
         tsv, chat = _rows(item, paths, system)
         chat["geometry"] = dataset.plan(index)[0].geometry  # what the answer was computed from (spacedg review shows it)
