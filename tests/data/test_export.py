@@ -15,9 +15,8 @@ import spacedg.data.export as export_module
 from spacedg.cli import main
 from spacedg.data.chain import CLEAN
 from spacedg.data.dataset import SpaceDGDataset
+from spacedg.data.bench_table import TSV_COLUMNS, tsv_bytes
 from spacedg.data.export import (
-    TSV_COLUMNS,
-    tsv_bytes,
     chunk_ids,
     export_bench,
     merge_parts,
