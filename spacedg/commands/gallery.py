@@ -29,7 +29,8 @@ def _gallery(args: argparse.Namespace) -> int:
     """Render one view of a native scene folder clean and under every registered degradation (third-party
     plugins included) at severities 1-5 and the paper's bench preset, labelled, as one PNG.
     """
-    from spacedg.commands.render import _pick_view, write_png_atomic
+    from spacedg.commands.render import _pick_view
+    from spacedg.files import write_png
     from spacedg.data.gallery import gallery_sheet
     from spacedg.scene.io import load_scene
     from spacedg.data.pipeline import PipelineOptions
@@ -43,6 +44,6 @@ def _gallery(args: argparse.Namespace) -> int:
     _pick_view(scene, view)
     options = PipelineOptions(motion=args.motion, backend=args.backend, device=args.device)
     sheet = gallery_sheet(scene, view, names, seed=args.seed, thumb_width=args.thumb_width, options=options, progress=True)
-    write_png_atomic(args.out, sheet[:, :, ::-1], "--out")
+    write_png(args.out, sheet, "--out", compression=9)
     print(f"wrote {args.out} ({sheet.shape[1]}x{sheet.shape[0]}): view {view}, {len(names) if names else 'all'} degradations")
     return 0

@@ -288,7 +288,7 @@ def _preview(args: argparse.Namespace) -> int:
     renders), the boxes of the objects it names, the question, options and answer. Reads the full
     index <scene id>.qa.jsonl that `spacedg qa build SCENE` writes beside the scene; writes only --out.
     """
-    from spacedg.commands.render import write_png_atomic
+    from spacedg.files import write_png
     from spacedg.qa.index import index_paths, read_index
     from spacedg.qa.preview import qa_sheet
     from spacedg.scene.io import load_scene
@@ -306,6 +306,6 @@ def _preview(args: argparse.Namespace) -> int:
         known = sorted({r.question_type for r in records})
         raise InvalidDataError(f"{args.scene}: no questions of types {sorted(families)} in {index}; it has the families {known}")
     sheet = qa_sheet(scene, picked, thumb_width=args.thumb_width, backend=args.backend)
-    write_png_atomic(args.out, sheet[:, :, ::-1], "--out")
+    write_png(args.out, sheet, "--out", compression=9)
     print(f"wrote {args.out} ({len(picked)} questions, {sheet.shape[1]}x{sheet.shape[0]} px)")
     return 0

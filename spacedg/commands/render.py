@@ -8,12 +8,12 @@ import re
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from spacedg.commands import _args, _vocabulary
 from spacedg.commands.sizes import image_side, image_size
 from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.files import write_png
 from spacedg.limits import MAX_IMAGE_SIDE, check_image_size
 
 #: Largest image side accepted by --image-size (and the deprecated --width / --height), pixels (:mod:`spacedg.limits`).
@@ -114,17 +114,6 @@ def _check_png(flag: str, path: Path) -> None:
         raise ParameterError(f"{flag} {path}: write a .png file")
 
 
-def write_png_atomic(path: Path, image: np.ndarray, flag: str) -> None:
-    """Write ``image`` (BGR or single channel) as PNG atomically (encoded in memory, then one rename)."""
-    from spacedg.files import atomic_write_bytes
-
-    ok, data = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
-    if not ok:
-        raise ParameterError(f"{flag} {path}: could not encode the image as PNG")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(path, data.tobytes())
-
-
 def encode_depth_mm(depth_m: np.ndarray) -> np.ndarray:
     """Depth in metres → uint16 millimetres (clipped to 65535; 0 stays 0 = no coverage)."""
     mm = np.round(np.nan_to_num(depth_m, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float64) * DEPTH_SCALE)
@@ -200,7 +189,7 @@ def _render(args: argparse.Namespace) -> int:
             f"view {args.view} of {args.scene} renders empty ({covered:.2%} of the pixels covered): the Gaussians and this "
             "camera do not meet (a frame mismatch? see `spacedg scenes info`); pass --allow-empty to write it anyway"
         )
-    write_png_atomic(args.out, encode_srgb_u8(frame.rgb)[:, :, ::-1], "--out")
+    write_png(args.out, encode_srgb_u8(frame.rgb), "--out", compression=9)
     stats = frame.stats
     visible = f"{stats['visible']:,}" if "visible" in stats else "n/a"
     print(
@@ -211,7 +200,7 @@ def _render(args: argparse.Namespace) -> int:
     )
     if want_depth:
         depth_mm = encode_depth_mm(frame.depth)
-        write_png_atomic(args.depth_out, depth_mm, "--depth-out")
+        write_png(args.depth_out, depth_mm, "--depth-out", compression=9)
         covered = frame.depth > 0
         if covered.any():
             d = frame.depth[covered]

@@ -9,13 +9,13 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-import cv2
 import numpy as np
 from tqdm import tqdm
 
 from spacedg.commands import _args, _vocabulary
 from spacedg.commands.sizes import image_side, image_size
 from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.files import write_png
 from spacedg.scene.importer import LAYOUTS
 from spacedg.scene.synthetic.room import RoomConfig
 
@@ -237,8 +237,6 @@ def _preview(args: argparse.Namespace) -> int:
 
     _args.output_file("--out", args.out, (".png",))
     images = [floorplan(load_scene(folder)) for folder in tqdm(_scene_dirs(args.paths), desc="floor plans", unit="scene")]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(args.out), contact_sheet(images, columns=args.columns)[:, :, ::-1]):
-        raise InvalidDataError(f"{args.out}: could not write the PNG")
+    write_png(args.out, contact_sheet(images, columns=args.columns), "--out")
     print(f"wrote {args.out} ({len(images)} floor plan(s))")
     return 0

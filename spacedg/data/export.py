@@ -25,11 +25,12 @@ the settings: a shard started with other arguments on the same folder fails inst
 two exports.
 
 **TSV** (what the public SpaceDG evaluator and VLMEvalKit read with
-``pandas.read_csv(path, sep="\\t")``), in the public bench's format
-(:mod:`spacedg.data.public_format`): ``index`` (the dataset index, int), ``question`` (with
-the option lines for MCQ), ``answer`` (letter, yes/no, integer, number, ``[a, b, c]``),
-``image_path`` (a Python list literal of relative paths, ``"['images/0000000_0.png', ...]"``,
-which VLMEvalKit's ``toliststr`` evaluates; the public class finds them under ``$LMUData``),
+``pandas.read_csv(path, sep="\\t")``), in the public bench's format (names:
+:mod:`spacedg.data.public_format`; columns and dialect: :mod:`spacedg.data.bench_table`):
+``index`` (the dataset index, int), ``question`` (with the option lines for MCQ), ``answer``
+(letter, yes/no, integer, number, ``[a, b, c]``), ``image_path`` (a Python list literal of
+relative paths, ``"['images/0000000_0.png', ...]"``, which VLMEvalKit's ``toliststr`` evaluates;
+the public class finds them under ``$LMUData``),
 ``question_type``, ``sub_question_type`` (the public names: **empty** for single-view distance,
 counting, bounding size and existence, ``inter_object_distance`` for the inter-object distance),
 ``task_group``, ``degradation_type`` (``ori`` for clean): the eight columns the public loader
@@ -52,34 +53,28 @@ geometry block (poses, boxes, visibility: what the answer was computed from).
 
 from __future__ import annotations
 
-import csv
 import hashlib
-import io
 import json
 import math
 import time
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cv2
-import numpy as np
-
+from spacedg.data.bench_table import tsv_bytes
 from spacedg.data.chain import CLEAN
 from spacedg.data.chat import ANSWER_PROMPT
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.pipeline import degrade_device
 from spacedg.data.public_format import PUBLIC_BENCH_NAME, public_fields, public_mismatch
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
-from spacedg.files import atomic_write_bytes, remove_stale_temps
+from spacedg.files import atomic_write_bytes, remove_stale_temps, write_png
 from spacedg.plugins.answers import answer_text
 
 __all__ = [
     "DEFAULT_SHARD_SIZE",
-    "TSV_COLUMNS",
-    "tsv_bytes",
     "ExportSummary",
     "MergeResult",
     "chunk_ids",
@@ -92,11 +87,6 @@ __all__ = [
     "shard_from_env",
 ]
 
-#: Column order of the TSV: the evaluator's eight first, then options and provenance.
-TSV_COLUMNS: tuple[str, ...] = (
-    "index", "question", "answer", "image_path", "question_type", "sub_question_type", "task_group", "degradation_type",
-    "answer_type", "A", "B", "C", "D", "scene_id", "record_id", "degradation",
-)
 #: Items per chunk (the unit of resuming and of sharding) unless told otherwise.
 DEFAULT_SHARD_SIZE = 256
 #: Version of the exported format (2: the public bench's names and existence as lettered options).
@@ -281,17 +271,6 @@ def _chunk_done(out: Path, chunk: int) -> bool:
     return all(p.is_file() for p in _part_paths(out, chunk))
 
 
-def tsv_bytes(rows: Sequence[Mapping[str, Any]], header: bool = True, columns: Sequence[str] = TSV_COLUMNS) -> bytes:
-    """Rows as the bench's TSV dialect (UTF-8, ``\\n`` line ends, CSV quoting of fields with tabs,
-    newlines or quotes) under ``columns`` (default: the export's); also used for reviewed benches."""
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(columns), delimiter="\t", lineterminator="\n", quoting=csv.QUOTE_MINIMAL)
-    if header:
-        writer.writeheader()
-    writer.writerows(rows)
-    return buffer.getvalue().encode("utf-8")
-
-
 def _rows(item: dict[str, Any], paths: list[str], system: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """The TSV row and the chat JSONL row of one dataset item whose images are at ``paths``, in the
     public bench's format (:func:`~spacedg.data.public_format.public_fields`: public names, existence
@@ -315,14 +294,6 @@ def _rows(item: dict[str, Any], paths: list[str], system: str) -> tuple[dict[str
         **meta, "views": list(item["views"]),
     }
     return tsv, chat
-
-
-def _write_png(path: Path, rgb: np.ndarray) -> None:
-    """Write an H×W×3 uint8 RGB image as PNG, atomically (encoded in memory, then one rename)."""
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(rgb[:, :, ::-1]))
-    if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
-        raise OSError(f"could not encode {path}")
-    atomic_write_bytes(path, data.tobytes())
 
 
 def _item(dataset: SpaceDGDataset, index: int) -> dict[str, Any]:
@@ -356,7 +327,7 @@ def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, s
         paths = []
         for v, image in enumerate(item["images"]):
             rel = f"images/{index:07d}_{v}.png"
-            _write_png(out / rel, image.permute(1, 2, 0).numpy())
+            write_png(out / rel, image.permute(1, 2, 0).numpy(), "image")
             paths.append(rel)
         tsv, chat = _rows(item, paths, system)
         chat["geometry"] = dataset.plan(index)[0].geometry  # what the answer was computed from (spacedg review shows it)
@@ -445,8 +416,8 @@ def merge_parts(out_dir: str | Path, *, verbose: bool = False) -> MergeResult:
     mismatches: dict[str, str] = {}
     for k in range(chunks):
         tsv_path, jsonl_path = _part_paths(out, k)
-        tsv_bytes = tsv_path.read_bytes()
-        tsv_chunks.append(tsv_bytes if k == 0 else tsv_bytes.split(b"\n", 1)[1])
+        part = tsv_path.read_bytes()
+        tsv_chunks.append(part if k == 0 else part.split(b"\n", 1)[1])
         jsonl = jsonl_path.read_bytes()
         jsonl_chunks.append(jsonl)
         rows = [json.loads(line) for line in jsonl.decode("utf-8").splitlines()]

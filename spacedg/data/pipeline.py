@@ -399,7 +399,8 @@ def _finish_device(
     """:func:`_finish` on torch tensors on ``device`` (the frame's device copies when it has them)."""
     import torch
 
-    from spacedg.plugins.degradations.device import as_tensor, encode_srgb_u8_torch
+    from spacedg.plugins.degradations.device import as_tensor
+    from spacedg.render import colour_torch
 
     def on_device(name: str) -> torch.Tensor:
         kept = (frame.tensors or {}).get(name)
@@ -425,7 +426,7 @@ def _finish_device(
         if frame.valid is not None:
             rgb = torch.where(as_tensor(frame.valid, device)[:, :, None], rgb, torch.zeros_like(rgb))
     t1 = time.perf_counter()
-    image = encode_srgb_u8_torch(rgb)
+    image = colour_torch.encode_srgb_u8(rgb)
     t2 = time.perf_counter()
     image = _run_display_device(image, display, index, timer)
     out = image.cpu().numpy()  # synchronises: the times below include the device's work

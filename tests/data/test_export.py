@@ -15,9 +15,8 @@ import spacedg.data.export as export_module
 from spacedg.cli import main
 from spacedg.data.chain import CLEAN
 from spacedg.data.dataset import SpaceDGDataset
+from spacedg.data.bench_table import TSV_COLUMNS, tsv_bytes
 from spacedg.data.export import (
-    TSV_COLUMNS,
-    tsv_bytes,
     chunk_ids,
     export_bench,
     merge_parts,
@@ -151,18 +150,18 @@ def test_shards_are_disjoint_complete_and_byte_identical(bench, exported, tmp_pa
 
 def test_interrupted_export_resumes_without_duplicates(bench, exported, tmp_path, monkeypatch):
     out = tmp_path / "interrupted"
-    real, calls = export_module._write_png, []
+    real, calls = export_module.write_png, []
 
-    def crash_after_25(path, image):
+    def crash_after_25(path, image, what, **kwargs):
         calls.append(path)
         if len(calls) > 25:
             raise KeyboardInterrupt("killed")
-        real(path, image)
+        real(path, image, what, **kwargs)
 
-    monkeypatch.setattr(export_module, "_write_png", crash_after_25)
+    monkeypatch.setattr(export_module, "write_png", crash_after_25)
     with pytest.raises(KeyboardInterrupt):
         export_bench(bench, out, shard_size=7, progress=False)
-    monkeypatch.setattr(export_module, "_write_png", real)
+    monkeypatch.setattr(export_module, "write_png", real)
     done = sorted(p.name for p in (out / "parts").glob("part-*"))
     assert done and not (out / "bench.tsv").exists() and not list(out.rglob(".*.tmp"))
     resumed = export_bench(bench, out, shard_size=7, progress=False)
