@@ -176,6 +176,6 @@ def index_geometry(path: Path) -> dict[str, Any]:
     Raises:
         FileFormatError: the file cannot be read, or a line is not a question record (file and line named).
     """
-    from spacedg.data.qa_index import read_index  # the record loader (and its scene imports) only when asked
+    from spacedg.qa.index import read_index  # the record loader (and its scene imports) only when asked
 
     return {record.id: record.geometry for record in read_index(path)}
