@@ -70,7 +70,7 @@ import numpy as np
 from spacedg.data.chain import CLEAN
 from spacedg.data.chat import ANSWER_PROMPT
 from spacedg.data.dataset import SpaceDGDataset
-from spacedg.data.pipeline import degrade_device
+from spacedg.data.pipeline import ItemPlan, degrade_device
 from spacedg.data.public_format import PUBLIC_BENCH_NAME, public_fields, public_mismatch
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
 from spacedg.files import atomic_write_bytes, remove_stale_temps
@@ -219,7 +219,7 @@ def dataset_fingerprint(dataset: SpaceDGDataset) -> str:
 
     digest = hashlib.sha256()
     settings: dict[str, Any] = {
-        "split": dataset.split, "chains": list(dataset.chains), "seed": dataset.seed, "severity": dataset.severity,
+        "split": dataset.split, "chains": [chain.text for chain in dataset.chains], "seed": dataset.seed, "severity": dataset.severity,
         "clean_prob": dataset.clean_prob, "epoch": dataset.epoch,
         "image_size": list(dataset.options.image_size) if dataset.options.image_size else None,
     }
@@ -325,14 +325,14 @@ def _write_png(path: Path, rgb: np.ndarray) -> None:
     atomic_write_bytes(path, data.tobytes())
 
 
-def _item(dataset: SpaceDGDataset, index: int) -> dict[str, Any]:
-    """``dataset[index]``, with an error that names the item's scene folder if it fails."""
+def _item(dataset: SpaceDGDataset, plan: ItemPlan) -> dict[str, Any]:
+    """The item of ``plan`` (``dataset[plan.index]``), with an error that names its scene folder if it fails."""
     try:
-        return dataset[index]
+        return dataset.sample(plan)
     except (SpaceDGError, OSError) as err:
-        record, _, name = dataset.plan(index)
+        record = plan.record
         folder = dataset.scene_dirs.get(record.scene_id, record.scene_id)
-        raise InvalidDataError(f"item {index} ({name} of {record.id}) failed: scene {folder}: {err}") from err
+        raise InvalidDataError(f"item {plan.index} ({plan.degradation_type} of {record.id}) failed: scene {folder}: {err}") from err
 
 
 def _remove_chunk_temps(out: Path, k: int, shard_size: int, total: int) -> None:
@@ -352,14 +352,15 @@ def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, s
     _remove_chunk_temps(out, k, shard_size, len(dataset))
     tsv_rows, chat_rows = [], []
     for index in _chunk_range(k, shard_size, len(dataset)):
-        item = _item(dataset, index)
+        plan = dataset.plan(index)
+        item = _item(dataset, plan)
         paths = []
         for v, image in enumerate(item["images"]):
             rel = f"images/{index:07d}_{v}.png"
             _write_png(out / rel, image.permute(1, 2, 0).numpy())
             paths.append(rel)
         tsv, chat = _rows(item, paths, system)
-        chat["geometry"] = dataset.plan(index)[0].geometry  # what the answer was computed from (spacedg review shows it)
+        chat["geometry"] = plan.record.geometry  # what the answer was computed from (spacedg review shows it)
         tsv_rows.append(tsv)
         chat_rows.append(chat)
         bar.update(1)
