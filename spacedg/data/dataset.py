@@ -44,7 +44,7 @@ renders them.
   loads) and degrades on the GPU in the process that owns it. DataLoader workers must not touch
   CUDA (a forked child cannot, and one CUDA context per worker wastes memory), so ``__getitem__``
   in a worker refuses with the fix: either ``num_workers=0``, or ``defer_render=True`` — workers
-  then return items without ``images`` (planning, question text, provenance) and the main process
+  then return items without ``images`` (question text and the item's ``plan``) and the main process
   renders each batch with :meth:`render_batch` (``collate_fn=list`` keeps the items as dicts).
 - **Bench split**: ``severity`` does not apply (the protocol is the ``bench`` preset); use
   ``degradations=["haze:3", ...]`` for other levels. With several workers, batch sizes that
@@ -88,8 +88,10 @@ from spacedg.data.qa_index import QABuildConfig, ensure_indexes, index_paths, re
 from spacedg.data.workers import loader_plan
 from spacedg.devices import resolve_device
 from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.limits import check_image_size as check_size_limit
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.registry import get_question_family, list_degradations
+from spacedg.render.renderer import BACKENDS
 from spacedg.scene.io import load_scene
 from spacedg.scene.store import (
     SPLITS,
@@ -141,8 +143,8 @@ class SpaceDGDataset(Dataset):
         backend, device: renderer backend (``"auto"``, ``"cpu"``, ``"torch"``, ``"gsplat"``) and torch
             device (:func:`spacedg.devices.resolve_device`); a non-CPU device renders and degrades
             there, in the main process only (module docstring).
-        defer_render: items come without ``images``, ``degradation`` and ``stats``; :meth:`render_batch` renders
-            them, in the process that owns the GPU.
+        defer_render: items come without ``images``, ``degradation`` and ``stats`` but with their ``plan``
+            (:class:`~spacedg.data.pipeline.ItemPlan`); :meth:`render_batch` renders them, in the process that owns the GPU.
         builtin_rooms: how many built-in rooms when ``scenes`` is not given.
         max_questions: keep at most this many questions, spread over question types
             round-robin in a seeded order (a small bench or a quick run); ``None`` keeps all.
@@ -195,7 +197,10 @@ class SpaceDGDataset(Dataset):
             raise ParameterError(f"{_WHERE}: qa_config must be a QABuildConfig or None, got {short_repr(qa_config)}")
         self.qa_config = qa_config or QABuildConfig()
         resolve_device(device, f"{_WHERE}: device")  # malformed, CUDA without CUDA, a missing index: now
-        self.options = PipelineOptions(image_size=check_image_size(image_size, f"{_WHERE}: image_size"), backend=backend, device=device)
+        size = check_image_size(image_size, f"{_WHERE}: image_size")
+        if size is not None:
+            check_size_limit(*size, f"{_WHERE}: image_size", "render smaller", ParameterError)
+        self.options = PipelineOptions(image_size=size, backend=check_choice(backend, f"{_WHERE}: backend", BACKENDS), device=device)
         plan = loader_plan(workers=_optional_count(workers, "workers", 0), render_threads=_optional_count(render_threads, "render_threads", 1))
         #: DataLoader workers suggested for this dataset and numba threads per worker (see spacedg.data.workers).
         self.workers, self.render_threads = plan.workers, plan.render_threads
@@ -350,7 +355,7 @@ class SpaceDGDataset(Dataset):
             self._set_worker_threads()
         item = self._item(plan)
         if self.defer_render:
-            return item
+            return {**item, "plan": plan}  # the plan travels with the item to render_batch (no second plan())
         return self._render_item(item, plan)
 
     def _render_item(self, item: dict[str, Any], plan: ItemPlan) -> dict[str, Any]:
@@ -371,13 +376,23 @@ class SpaceDGDataset(Dataset):
     def render_batch(self, items: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         """Render items returned with ``defer_render=True`` (in this process: the one owning the GPU).
 
-        Items are rendered one after another (a sample's chains share their render); each comes
-        back with ``images``, ``degradation`` (provenance) and ``stats``: the same item
-        ``dataset[index]`` gives without deferral (same epoch).
+        Items are rendered one after another (a sample's chains share their render), each from the
+        :class:`~spacedg.data.pipeline.ItemPlan` it carries (``item["plan"]``, made where the item was
+        planned, e.g. a DataLoader worker); each comes back with ``images``, ``degradation``
+        (provenance) and ``stats`` and without ``plan``: the same item ``dataset[index]`` gives
+        without deferral (same epoch).
         """
         if isinstance(items, dict) or not isinstance(items, (list, tuple)):
             raise ParameterError(f"render_batch takes a list of items; build the DataLoader with collate_fn=list (got {short_repr(items)})")
-        return [item if "images" in item else self._render_item(item, self.plan(item["index"])) for item in items]
+        out = []
+        for item in items:
+            if "images" in item:
+                out.append(item)
+                continue
+            fields = {k: v for k, v in item.items() if k != "plan"}
+            plan = item.get("plan")
+            out.append(self._render_item(fields, plan if isinstance(plan, ItemPlan) else self.plan(fields["index"])))
+        return out
 
     def _item(self, plan: ItemPlan) -> dict[str, Any]:
         """The item of ``plan`` without its images (no rendering)."""

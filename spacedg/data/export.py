@@ -61,12 +61,14 @@ import time
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from os import PathLike
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
+from spacedg._checks import check_bool, check_int, short_repr
 from spacedg.data.chain import CLEAN
 from spacedg.data.chat import ANSWER_PROMPT
 from spacedg.data.dataset import SpaceDGDataset
@@ -398,7 +400,7 @@ def export_bench(
     from tqdm import tqdm
 
     started = time.perf_counter()
-    out = Path(out_dir)
+    out = _check_export_arguments(dataset, out_dir, shard, progress)
     mine = chunk_ids(len(dataset), shard_size, shard)
     (out / "images").mkdir(parents=True, exist_ok=True)
     (out / "parts").mkdir(parents=True, exist_ok=True)
@@ -414,6 +416,20 @@ def export_bench(
     summary.merge = merge_parts(out)
     summary.seconds = time.perf_counter() - started
     return summary
+
+
+def _check_export_arguments(dataset: Any, out_dir: Any, shard: Any, progress: Any) -> Path:
+    """``out_dir`` as a Path, after checking every argument of :func:`export_bench` (ParameterError naming it)."""
+    if not isinstance(dataset, SpaceDGDataset):
+        raise ParameterError(f"export_bench: dataset must be a SpaceDGDataset, got {short_repr(dataset)}")
+    if not isinstance(out_dir, (str, PathLike)) or not str(out_dir).strip():
+        raise ParameterError(f"export_bench: out_dir must be a folder path, got {short_repr(out_dir)}")
+    if isinstance(shard, (str, bytes)) or not isinstance(shard, (tuple, list)) or len(shard) != 2:
+        raise ParameterError(f"export_bench: shard must be (i, n) with 0 <= i < n, e.g. (0, 1); got {short_repr(shard)}")
+    n = check_int(shard[1], "export_bench: shard n", minimum=1)
+    check_int(shard[0], "export_bench: shard i", minimum=0, maximum=n - 1)
+    check_bool(progress, "export_bench: progress")
+    return Path(out_dir)
 
 
 #: The same function; the name reads better for ``train``/``val`` exports.

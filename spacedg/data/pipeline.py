@@ -703,6 +703,8 @@ def degrade_image(
     )
 
     image = check_display_image(image, "degrade_image")
+    check_int(seed, "degrade_image: seed")
+    PipelineOptions(default_preset=default_preset, mixture_preset=mixture_preset)  # the preset names' check
     aux: dict[str, Any] = {}
     if depth is not None:
         aux["depth"] = _depth_input(depth, image.shape[:2])
