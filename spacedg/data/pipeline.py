@@ -17,6 +17,11 @@ seed, :func:`degrade_variants` does the least work that produces every chain's i
    fisheye image circle set back to black, clip + exact 8-bit sRGB encode, then the display
    chain on the uint8 image.
 
+Objects, not text. A chain arrives as a frozen :class:`~spacedg.data.chain.Chain` (a dataset item
+as an :class:`ItemPlan`: record, chain, seed; :func:`degrade_plan`) and is used as is: text is
+parsed only where a user wrote text. :func:`replay` renders a recorded provenance list (every
+parameter and seed as recorded, nothing drawn again), which gives the sample's bytes.
+
 Seeds. ``seed`` is the sample's seed. Each degradation of a chain gets
 ``derive_seed(seed, name)``, so a degradation draws the same parameters in every chain of the
 sample. Its parameters are drawn from ``np.random.default_rng(deg_seed)`` (preset ranges, in
