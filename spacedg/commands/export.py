@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     summary.json. Finished chunks are skipped on a rerun; --shard i/n splits the chunks across processes
     or machines (see docs/distributed-export.md).
     """
-    from spacedg.data.chain import Chain
+    from spacedg.data.chain import Chain, split_chains
     from spacedg.data.dataset import SpaceDGDataset
     from spacedg.data.export import (
         DEFAULT_SHARD_SIZE,
@@ -96,12 +96,12 @@ def run(args: argparse.Namespace) -> int:
     shard_size = DEFAULT_SHARD_SIZE if args.shard_size is None else args.shard_size
     size = args.image_size
     fractions = _fractions(args)
-    chains = _names(args.degradations)
+    chains = None if args.degradations is None else [t.strip() for t in split_chains(args.degradations) if t.strip()]
     for chain in chains or ():
         Chain.parse(chain).check()  # an unknown name or preset fails now, with suggestions
     _args.output_folder("--out", args.out)
     dataset = SpaceDGDataset(
-        args.split, chains, scenes=args.scenes, question_types=_names(args.families),
+        args.split, chains, scenes=args.scenes, families=_names(args.families),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,
         qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type),
         on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device, max_questions=args.max_questions,

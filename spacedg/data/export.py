@@ -60,14 +60,16 @@ import time
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from os import PathLike
 from pathlib import Path
 from typing import Any
 
+from spacedg._checks import check_bool, check_int, short_repr
 from spacedg.data.bench_table import tsv_bytes
 from spacedg.data.chain import CLEAN
 from spacedg.data.chat import ANSWER_PROMPT
 from spacedg.data.dataset import SpaceDGDataset
-from spacedg.data.pipeline import degrade_device
+from spacedg.data.pipeline import ItemPlan, degrade_device
 from spacedg.data.public_format import PUBLIC_BENCH_NAME, public_fields, public_mismatch
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
 from spacedg.files import atomic_write_bytes, remove_stale_temps, write_png
@@ -209,7 +211,7 @@ def dataset_fingerprint(dataset: SpaceDGDataset) -> str:
 
     digest = hashlib.sha256()
     settings: dict[str, Any] = {
-        "split": dataset.split, "chains": list(dataset.chains), "seed": dataset.seed, "severity": dataset.severity,
+        "split": dataset.split, "chains": [chain.text for chain in dataset.chains], "seed": dataset.seed, "severity": dataset.severity,
         "clean_prob": dataset.clean_prob, "epoch": dataset.epoch,
         "image_size": list(dataset.options.image_size) if dataset.options.image_size else None,
     }
@@ -296,14 +298,14 @@ def _rows(item: dict[str, Any], paths: list[str], system: str) -> tuple[dict[str
     return tsv, chat
 
 
-def _item(dataset: SpaceDGDataset, index: int) -> dict[str, Any]:
-    """``dataset[index]``, with an error that names the item's scene folder if it fails."""
+def _item(dataset: SpaceDGDataset, plan: ItemPlan) -> dict[str, Any]:
+    """The item of ``plan`` (``dataset[plan.index]``), with an error that names its scene folder if it fails."""
     try:
-        return dataset[index]
+        return dataset.sample(plan)
     except (SpaceDGError, OSError) as err:
-        record, _, name = dataset.plan(index)
+        record = plan.record
         folder = dataset.scene_dirs.get(record.scene_id, record.scene_id)
-        raise InvalidDataError(f"item {index} ({name} of {record.id}) failed: scene {folder}: {err}") from err
+        raise InvalidDataError(f"item {plan.index} ({plan.degradation_type} of {record.id}) failed: scene {folder}: {err}") from err
 
 
 def _remove_chunk_temps(out: Path, k: int, shard_size: int, total: int) -> None:
@@ -323,14 +325,15 @@ def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, s
     _remove_chunk_temps(out, k, shard_size, len(dataset))
     tsv_rows, chat_rows = [], []
     for index in _chunk_range(k, shard_size, len(dataset)):
-        item = _item(dataset, index)
+        plan = dataset.plan(index)
+        item = _item(dataset, plan)
         paths = []
         for v, image in enumerate(item["images"]):
             rel = f"images/{index:07d}_{v}.png"
             write_png(out / rel, image.permute(1, 2, 0).numpy(), "image")
             paths.append(rel)
         tsv, chat = _rows(item, paths, system)
-        chat["geometry"] = dataset.plan(index)[0].geometry  # what the answer was computed from (spacedg review shows it)
+        chat["geometry"] = plan.record.geometry  # what the answer was computed from (spacedg review shows it)
         tsv_rows.append(tsv)
         chat_rows.append(chat)
         bar.update(1)
@@ -368,7 +371,7 @@ def export_bench(
     from tqdm import tqdm
 
     started = time.perf_counter()
-    out = Path(out_dir)
+    out = _check_export_arguments(dataset, out_dir, shard, progress)
     mine = chunk_ids(len(dataset), shard_size, shard)
     (out / "images").mkdir(parents=True, exist_ok=True)
     (out / "parts").mkdir(parents=True, exist_ok=True)
@@ -384,6 +387,20 @@ def export_bench(
     summary.merge = merge_parts(out)
     summary.seconds = time.perf_counter() - started
     return summary
+
+
+def _check_export_arguments(dataset: Any, out_dir: Any, shard: Any, progress: Any) -> Path:
+    """``out_dir`` as a Path, after checking every argument of :func:`export_bench` (ParameterError naming it)."""
+    if not isinstance(dataset, SpaceDGDataset):
+        raise ParameterError(f"export_bench: dataset must be a SpaceDGDataset, got {short_repr(dataset)}")
+    if not isinstance(out_dir, (str, PathLike)) or not str(out_dir).strip():
+        raise ParameterError(f"export_bench: out_dir must be a folder path, got {short_repr(out_dir)}")
+    if isinstance(shard, (str, bytes)) or not isinstance(shard, (tuple, list)) or len(shard) != 2:
+        raise ParameterError(f"export_bench: shard must be (i, n) with 0 <= i < n, e.g. (0, 1); got {short_repr(shard)}")
+    n = check_int(shard[1], "export_bench: shard n", minimum=1)
+    check_int(shard[0], "export_bench: shard i", minimum=0, maximum=n - 1)
+    check_bool(progress, "export_bench: progress")
+    return Path(out_dir)
 
 
 #: The same function; the name reads better for ``train``/``val`` exports.

@@ -68,7 +68,8 @@ def test_tsv_loads_with_pandas_and_matches_the_dataset(bench, exported):
     assert table["index"].dtype.kind == "i"
     assert set(table["degradation_type"]) == {CLEAN, *BENCH_DEGRADATIONS}
     for row in table.itertuples():
-        record, _, name = bench.plan(row.index)
+        plan = bench.plan(row.index)
+        record, name = plan.record, plan.degradation_type
         assert row.degradation_type == name and row.record_id == record.id and row.question_type == record.question_type
         public_sub = to_public(record.question_type, record.sub_question_type)[1]  # "" for counting: pandas reads NaN
         assert (pd.isna(row.sub_question_type) and public_sub == "") or row.sub_question_type == public_sub
@@ -124,7 +125,7 @@ def test_chat_jsonl(bench, exported):
         assert assistant["content"] == f"<answer>{tsv.answer}</answer>" or float(assistant["content"][8:-9]) == pytest.approx(float(tsv.answer))
         assert row["images"] == ast.literal_eval(tsv.image_path) and row["degradation_type"] == tsv.degradation_type
         assert "<answer>" in row["system"]
-        assert row["geometry"] == bench.plan(row["index"])[0].geometry  # the audit block travels with the bench
+        assert row["geometry"] == bench.plan(row["index"]).record.geometry  # the audit block travels with the bench
     from spacedg.review import ReviewStore
 
     store = ReviewStore(out, out=out.parent / "reviewed.tsv")  # the review page shows it without --scenes

@@ -135,14 +135,19 @@ def test_third_party_without_apply_torch_falls_back_to_the_host(third_party, sma
     assert np.abs(host.images.astype(int) - dev.images).max() <= 2  # low_res on the device: ≤ 2 codes
 
 
-def test_where_the_chains_run() -> None:
+def test_where_the_chains_run(monkeypatch: pytest.MonkeyPatch) -> None:
     from spacedg.data.pipeline import degrade_device
     from spacedg.errors import ParameterError
 
     assert degrade_device(PipelineOptions()) is None
     assert degrade_device(PipelineOptions(device="cpu")) is None  # auto: a CPU device keeps the numpy path
     assert degrade_device(PipelineOptions(degrade_on="device")) == torch.device("cpu")
-    assert degrade_device(PipelineOptions(device="cuda:1")) == torch.device("cuda:1")  # no CUDA needed to decide
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    with pytest.raises(ParameterError, match="asks for CUDA"):  # checked when the options are made
+        PipelineOptions(device="cuda:1")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)  # two GPUs (never touched: deciding needs none)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
+    assert degrade_device(PipelineOptions(device="cuda:1")) == torch.device("cuda:1")
     assert degrade_device(PipelineOptions(device="cuda", degrade_on="host")) is None
     with pytest.raises(ParameterError, match="degrade_on"):
         PipelineOptions(degrade_on="gpu")
