@@ -34,6 +34,7 @@ from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.qa.index import QABuildConfig, index_paths, read_index
 from spacedg.errors import InvalidDataError, ParameterError, UnknownPluginError
 from spacedg.eval.scoring import ANSWER_PROMPT, score
+from tests.conftest import private_copies
 
 SIZE = (64, 48)  # (width, height)
 #: one-view COUNT, two-view MCQ (camera_rotation), two-view NA (inter_object_distance), SIZE_LIST
@@ -55,9 +56,10 @@ def digest(item: dict) -> str:
 
 @pytest.fixture(scope="module")
 def rooms(qa_room_dirs, tmp_path_factory) -> list[Path]:
-    """Copies of the four session rooms (the dataset writes indexes into scene folders), indexed once."""
+    """Copies of the four session rooms (the dataset writes indexes into scene folders), indexed
+    once; their visibility caches come along (``loader_run`` builds everything afresh)."""
     root = tmp_path_factory.mktemp("dataset_rooms")
-    dirs = [Path(shutil.copytree(d, root / d.name, ignore=INDEX_FILES)) for d in qa_room_dirs]
+    dirs = private_copies(qa_room_dirs, root)
     make(dirs)  # builds the four question indexes (in a separate interpreter)
     return dirs
 

@@ -15,22 +15,15 @@ import re
 import numpy as np
 import pytest
 
-from spacedg.scene.io import load_scene
-from spacedg.qa.build import generate_records, prepare_scene
-from spacedg.qa.index import QABuildConfig
 
-CONFIG = QABuildConfig(seed=11, per_sub_type=12)
 LETTERS = "ABCD"
 
 
 @pytest.fixture(scope="module")
-def scenes_and_records(qa_room_dirs, tmp_path_factory):
-    cache = tmp_path_factory.mktemp("recompute_cache")
-    out = []
-    for folder in qa_room_dirs:
-        scene = prepare_scene(load_scene(folder), cache, CONFIG, progress=False)
-        out.append((scene, generate_records(scene, CONFIG)))
-    return out
+def scenes_and_records(room_records):
+    """The four session rooms and their records (every family, 15 per sub type, seed 7),
+    generated once per session and shared with test_families.py."""
+    return room_records
 
 
 # ------------------------------------------------------------- own geometry
