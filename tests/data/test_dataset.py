@@ -618,6 +618,7 @@ def test_deferred_items_render_in_the_main_process(rooms) -> None:
 @pytest.fixture
 def fake_cuda(monkeypatch: pytest.MonkeyPatch) -> None:
     """torch reports one CUDA device (construction checks the device; these tests never reach CUDA)."""
+    monkeypatch.setattr(torch.version, "cuda", "12.8")
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
     monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
 

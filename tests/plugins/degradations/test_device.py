@@ -142,8 +142,9 @@ def test_where_the_chains_run(monkeypatch: pytest.MonkeyPatch) -> None:
     assert degrade_device(PipelineOptions()) is None
     assert degrade_device(PipelineOptions(device="cpu")) is None  # auto: a CPU device keeps the numpy path
     assert degrade_device(PipelineOptions(degrade_on="device")) == torch.device("cpu")
+    monkeypatch.setattr(torch.version, "cuda", "12.8")  # a CUDA build of torch that sees no GPU
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
-    with pytest.raises(ParameterError, match="asks for CUDA"):  # checked when the options are made
+    with pytest.raises(ParameterError, match="no CUDA device is visible"):  # checked when the options are made
         PipelineOptions(device="cuda:1")
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)  # two GPUs (never touched: deciding needs none)
     monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
