@@ -132,3 +132,30 @@ def test_make_record_id() -> None:
 def test_json_ready_rejects_with_path() -> None:
     with pytest.raises(InvalidDataError, match=r"key\.a\[0\] is nan"):
         json_ready({"a": [float("nan")]}, "key")
+
+
+def test_json_ready_fast_path_equals_the_full_walk() -> None:
+    """The plain-types fast path gives exactly the full walk's result (values and types), and
+    anything it cannot take (numpy, subclasses, NaN, bad keys) still goes through the walk."""
+    import enum
+    import json
+
+    import numpy as np
+
+    from spacedg.plugins import qa_record
+
+    class Level(enum.IntEnum):
+        HIGH = 2
+
+    rng = np.random.default_rng(0)
+    leaves = [None, True, 0, -7, 1.5, "a", np.float32(0.25), np.int64(3), np.bool_(False), Level.HIGH,
+              np.arange(3), (1, 2.0)]
+    for _ in range(200):
+        value = {f"k{i}": [leaves[int(j)] for j in rng.integers(0, len(leaves), 3)] for i in range(3)}
+        fast = qa_record.json_ready(value)
+        walked = qa_record._json_ready_walk(value, "geometry")
+        assert fast == walked and json.dumps(fast) == json.dumps(walked)
+        assert [type(x) for row in fast.values() for x in row] == [type(x) for row in walked.values() for x in row]
+    for bad, where in (({"a": [1.0, float("nan")]}, r"geometry\.a\[1\] is nan"), ({"a": {3: 1}}, "has key 3")):
+        with pytest.raises(InvalidDataError, match=where):
+            qa_record.json_ready(bad)
