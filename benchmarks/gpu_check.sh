@@ -68,7 +68,7 @@ step() {
     printf '%s\tskipped\t-\t0\t%s\n' "$name" "$cap" >> "$WORK/steps.tsv"
     return
   fi
-  say "=== $name (timeout ${limit} s): $cmd"
+  say "=== $name (timeout ${limit} s): ${SHOW:-$cmd}"
   t0=$(date +%s)
   timeout -k 10 "$limit" bash -c "$cmd" > "$WORK/logs/$name.log" 2>&1
   rc=$?
@@ -102,7 +102,8 @@ for name in ("numpy", "numba", "gsplat", "kornia", "transformers", "accelerate",
         print(f"  {name}: NOT IMPORTABLE ({type(err).__name__}: {err})")
 from spacedg.plugins.registry import get_registry
 registry = get_registry()
-print(f"  spacedg plugins: {len(registry.degradations)} degradations, {len(registry.families)} families; broken: {registry.broken}")
+print(f"  spacedg plugins: {len(registry.degradation_names())} degradations, {len(registry.question_family_names())} families; "
+      f"broken: {[b.to_dict() for b in registry.broken]}")
 EOF
   nvcc --version | tail -1 || true
 }
@@ -132,9 +133,9 @@ EOF
 
 # ------------------------------------------------------------------ the steps
 RENDER_CMD="$PY benchmarks/render.py --device $DEV --sizes $SIZES --runs $RUNS"
-ROOMS_CMD="$PY benchmarks/gpu_rooms.py $ROOMS"
-QA_CMD="$PY -m spacedg qa build $ROOMS --device $DEV --per-sub-type 4 --seed 0"
-DATASET_CMD="$PY benchmarks/dataset.py --device $DEV --small --root $WORK/bench --size $BENCH_SIZE --questions $QUESTIONS"
+ROOMS_CMD="$PY benchmarks/gpu_rooms.py $ROOMS ${ROOM_GAUSSIANS:-30000}"
+QA_CMD="$PY -m spacedg qa build $ROOMS --device $DEV"
+DATASET_CMD="$PY benchmarks/dataset.py --device $DEV --small --root $WORK/bench --per-sub-type 25 --size $BENCH_SIZE --questions $QUESTIONS"
 TEST_RENDER_CMD="$PY -m pytest -q -rs -p no:cacheprovider tests/render/test_cuda.py"
 TEST_DEGRADE_CMD="$PY -m pytest -q -rs -s -p no:cacheprovider tests/plugins/degradations/test_device_cuda.py"
 SFT_FAST="train.max_steps=2 train.save_steps=2 train.eval_steps=2 data.val.samples=2 data.max_questions=16"
@@ -145,9 +146,9 @@ SFT_RENDER_CMD="$PY -m spacedg.sft +experiment=tiny 'data.scenes=[$ROOMS]' data.
 
 say "spacedg GPU check: $(date -u +%FT%TZ), device $DEV, budget ${BUDGET_S} s, repo $REPO ($(git rev-parse --short HEAD 2>/dev/null || echo '?'))"
 export DRY PY SITE PYTHONPATH=$SITE:$REPO${PYTHONPATH:+:$PYTHONPATH}
-TAIL=40 step setup 120 "$(declare -f setup); setup"
+SHOW="install .whl into $SITE, spacedg's dist-info, versions" TAIL=40 step setup 120 "$(declare -f setup); setup"
 if [ $DRY = 0 ]; then
-  TAIL=6 step gsplat_ext 300 "$(declare -f gsplat_ext); gsplat_ext"
+  SHOW="prebuilt .whl/gsplat_csrc_sm90.so, else gsplat's JIT build" TAIL=6 step gsplat_ext 300 "$(declare -f gsplat_ext); gsplat_ext"
 fi
 TAIL=14 step render 150 "$RENDER_CMD"
 TAIL=3 step rooms 90 "$ROOMS_CMD"
