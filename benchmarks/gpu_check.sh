@@ -15,6 +15,7 @@
 # all under one deadline (BUDGET_S, default 400 s; a step that would start with under 20 s left is
 # skipped). Logs: $OUT/gpu_check.log (all output), $OUT/logs.tgz (one log per step),
 # $OUT/summary.txt (the table printed at the end, with the README GPU table's numbers).
+# ONLY="fsdp export" runs those steps alone (with setup, gsplat_ext and rooms, which they need).
 #
 #   setup        versions, nvidia-smi, wheels, spacedg, gsplat extension
 #   render       benchmarks/render.py --device cuda: ours (gsplat) vs gsplat.rasterization vs ours torch vs CPU, 100k and 1M
@@ -61,6 +62,10 @@ left() { echo $(( BUDGET_S - ($(date +%s) - START) )); }
 TAIL=${TAIL:-12}
 step() {
   local name=$1 cap=$2 cmd=$3 rest t0 rc secs limit
+  case " setup gsplat_ext rooms ${ONLY:-$name} " in
+    *" $name "*) ;;
+    *) say "=== $name: not in ONLY"; return ;;
+  esac
   rest=$(left)
   limit=$(( cap < rest - 5 ? cap : rest - 5 ))
   if [ "$limit" -lt 20 ]; then

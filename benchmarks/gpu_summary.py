@@ -49,6 +49,13 @@ def tests_line(log: str) -> str:
     return found[-1] if found else ""
 
 
+def failure_line(log: str) -> str:
+    """The last line of a failed step's log that names an error, else its last non-empty line (100 chars)."""
+    lines = [line.strip() for line in log.splitlines() if line.strip() and not set(line.strip()) <= set("=-")]
+    named = [line for line in lines if re.search(r"Error|error:|FAILED|assert|Traceback|Killed", line)]
+    return (named or lines or [""])[-1][:100]
+
+
 def main(steps_tsv: str, log_dir: str, total: str) -> None:
     logs = Path(log_dir)
     lines = ["", "SUMMARY (benchmarks/gpu_check.sh)", f"{'step':<13} {'status':<8} {'rc':>4} {'s':>5} {'limit':>5}  note", "-" * 72]
@@ -56,8 +63,7 @@ def main(steps_tsv: str, log_dir: str, total: str) -> None:
         name, status, rc, secs, limit = raw.split("\t")
         note = tests_line(read(logs / f"{name}.log")) if name.startswith("test_") else ""
         if status not in ("ok", "skipped") and not note:
-            tail = [l for l in read(logs / f"{name}.log").splitlines() if l.strip()][-1:]
-            note = tail[0][:100] if tail else ""
+            note = failure_line(read(logs / f"{name}.log"))
         lines.append(f"{name:<13} {status:<8} {rc:>4} {secs:>5} {limit:>5}  {note}")
     lines.append(f"total {total} s")
     setup = read(logs / "setup.log")

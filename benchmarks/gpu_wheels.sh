@@ -13,6 +13,10 @@
 #   kornia, kornia_rs                 spacedg.plugins.degradations.device (resize, JPEG on the GPU)
 #   hydra-core, omegaconf, antlr4     spacedg.sft (the FSDP launch) and tests/sft
 #   gsplat (1.5.3, pinned in [test])  backend="gsplat" and benchmarks/render.py's gsplat column
+#   transformers 5.24.0               the image has 5.17, whose processor apply_chat_template refuses
+#                                     images in processor_kwargs (spacedg.vlm.encode_chats) and computes
+#                                     assistant masks off by the left padding (fixed in 5.24): the SFT
+#                                     steps need the version this repository is tested with
 #
 # Not carried: pycolmap (COLMAP import only), openpyxl (eval .xlsx only), plyfile / playwright /
 # import-linter (tests not run there). antlr4-python3-runtime 4.9.3 is published as a source
@@ -36,6 +40,7 @@ BINARY=(
   "hydra-core==1.3.8"
   "omegaconf==2.3.1"
   "gsplat==1.5.3"
+  "transformers==5.24.0"
 )
 SOURCE_ONLY=(
   "antlr4-python3-runtime==4.9.3"
