@@ -39,6 +39,7 @@ WORK=${WORK:-/tmp/spacedg-gpu-check}
 BUDGET_S=${BUDGET_S:-400}
 SITE=${SITE:-/tmp/site}   # the carried wheels and spacedg's dist-info (PYTHONPATH)
 mkdir -p "$OUT" "$WORK/logs"
+rm -f "$WORK"/logs/*.log
 LOG=$OUT/gpu_check.log
 SUMMARY=$OUT/summary.txt
 : > "$LOG"
@@ -141,11 +142,11 @@ RENDER_CMD="$PY benchmarks/render.py --device $DEV --sizes $SIZES --runs $RUNS"
 ROOMS_CMD="$PY benchmarks/gpu_rooms.py $ROOMS ${ROOM_GAUSSIANS:-30000}"
 QA_CMD="$PY -m spacedg qa build $ROOMS --device $DEV"
 DATASET_CMD="$PY benchmarks/dataset.py --device $DEV --small --root $WORK/bench --per-sub-type 25 --size $BENCH_SIZE --questions $QUESTIONS"
-TEST_RENDER_CMD="$PY -m pytest -q -rs -p no:cacheprovider tests/render/test_cuda.py"
-TEST_DEGRADE_CMD="$PY -m pytest -q -rs -s -p no:cacheprovider tests/plugins/degradations/test_device_cuda.py"
+TEST_RENDER_CMD="$PY -m pytest -q -p no:cacheprovider tests/render/test_cuda.py"
+TEST_DEGRADE_CMD="$PY -m pytest -q -s -p no:cacheprovider tests/plugins/degradations/test_device_cuda.py"
 SFT_FAST="train.max_steps=2 train.save_steps=2 train.eval_steps=2 data.val.samples=2 data.max_questions=16"
 FSDP_CMD="$PY -m torch.distributed.run --nproc_per_node 1 --master_port 29517 -m spacedg.sft +experiment=tiny train=fsdp 'data.scenes=[$ROOMS]' output_dir=$WORK/sft-fsdp hydra.run.dir=$WORK/sft-fsdp/hydra $SFT_FAST && $PY -c \"import json; s = json.load(open('$WORK/sft-fsdp/train_summary.json')); print('fsdp summary:', {k: s.get(k) for k in ('global_step', 'losses', 'distributed')})\""
-EXPORT_CMD="$PY -m spacedg export --split bench --scenes $ROOMS --out $WORK/bench-export --image-size 320x240 --max-questions 12 --device $DEV && cat $WORK/bench-export/summary.json | head -c 1500"
+EXPORT_CMD="$PY -m spacedg export --split bench --scenes $ROOMS --out $WORK/bench-export --image-size 320x240 --max-questions 12 --device $DEV && head -c 1500 $WORK/bench-export/summary.json; echo"
 DEFER_CMD="$PY benchmarks/gpu_defer.py $ROOMS $DEV"
 SFT_RENDER_CMD="$PY -m spacedg.sft +experiment=tiny 'data.scenes=[$ROOMS]' data.render_device=$DEV output_dir=$WORK/sft-render hydra.run.dir=$WORK/sft-render/hydra $SFT_FAST"
 

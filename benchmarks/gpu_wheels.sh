@@ -23,7 +23,7 @@
 # archive only: it is built here into a pure-Python wheel.
 #
 # gsplat's PyPI wheel compiles its CUDA extension at first import (ninja + nvcc, minutes). A
-# prebuilt extension (`--csrc PATH`, made by benchmarks/gpu_build_gsplat.sh against torch 2.11.0 /
+# prebuilt extension (`--csrc PATH`, made by benchmarks/gpu_build_gsplat.py against torch 2.11.0 /
 # CUDA 13.0 for sm_90) is copied to .whl/gsplat_csrc_sm90.so; benchmarks/gpu_check.sh installs it
 # as gsplat/csrc.so and falls back to the JIT build when it does not import.
 set -euo pipefail
