@@ -75,7 +75,7 @@ import numpy as np
 
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.chain import BENCH_DEGRADATIONS
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 from spacedg.scene.store import builtin_scene_dirs, spacedg_home
 
 STAGES = ("render_ms", "linear_ms", "encode_ms", "display_ms")
@@ -159,7 +159,7 @@ def plan_items(ds: SpaceDGDataset, n: int, workers: int, first: bool, seed: int 
     the split, in scene-major order (round-robin dispatch gives each worker one per scene)."""
     by_scene: dict[str, list[int]] = {}
     for i in range(len(ds)):
-        by_scene.setdefault(ds.plan(i)[0].scene_id, []).append(i)
+        by_scene.setdefault(ds.plan(i).record.scene_id, []).append(i)
     per = max(workers, 1)
     warm: list[int] = []
     for indices in by_scene.values():

@@ -146,7 +146,8 @@ def main() -> None:
                 out = write_capture(tmp_path / "plant", scene, boxes)
                 run_import("plant (real capture, CC-BY-4.0 Marcel Padilla)", tmp_path / "plant", out, None)
         if not args.skip_synthetic:
-            from spacedg.data.qa_index import QABuildConfig, prepare_scene
+            from spacedg.qa.build import prepare_scene
+            from spacedg.qa.index import QABuildConfig
             from spacedg.scene.synthetic import CaptureConfig, RoomConfig, generate_room
 
             t0 = time.perf_counter()

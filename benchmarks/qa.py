@@ -7,7 +7,7 @@ Prints numbers only (never part of the test run).
 
 For each room (``generate_room(seed)``, default size: 150k–300k Gaussians, 48–120 views at
 640×480): the time to attach instance visibility and covisibility (no cache), then the time to
-generate the question index (:func:`spacedg.data.qa_index.generate_records`, all eleven
+generate the question index (:func:`spacedg.qa.build.generate_records`, all eleven
 families) and its rate in questions per second. Then, per family, the rate measured by
 generating that family alone (every room). Finally the balance table on all rooms: correct
 letter over A–D, yes/no share, and the leave-one-room-out blind baseline (most frequent answer
@@ -21,8 +21,9 @@ import os
 import platform
 import time
 
-from spacedg.data.qa_index import QABuildConfig, generate_records, prepare_scene
-from spacedg.data.qa_stats import answer_balance, blind_baseline, count_table, format_table
+from spacedg.qa.build import generate_records, prepare_scene
+from spacedg.qa.index import QABuildConfig
+from spacedg.qa.stats import answer_balance, blind_baseline, count_table, format_table
 from spacedg.scene.synthetic import RoomConfig, generate_room
 from spacedg.plugins import list_question_families
 

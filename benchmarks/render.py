@@ -455,7 +455,7 @@ def stage_rows(name: str, g: Gaussians, cam: Camera, old, default_threads: int, 
 
     ids = (np.arange(len(g)) % 13).astype(np.int32)
     w, h = cam.width, cam.height
-    packed, rects = project_cpu.project_view(g, cam, settings)
+    packed, rects = project_cpu.project_gaussians(g, cam, settings)
     offsets, gauss = raster_cpu.bin_visible(packed, rects, w, h, True)
     pairs = gauss.shape[0]
 

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from spacedg.errors import InvalidDataError
+from spacedg.errors import InvalidDataError, ParameterError
 
 
 def _where(source: str, field: str) -> str:
@@ -129,3 +129,93 @@ def require_homogeneous(matrix: np.ndarray, what: str, error: type[Exception] = 
         raise error(f"{what} holds NaN or Inf")
     if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
         raise error(f"{what} last row must be [0, 0, 0, 1], got {matrix[3].tolist()}")
+
+
+# ------------------------------------------------------------------ arguments of public calls
+# Each raises ``error`` (ParameterError by default) with "<argument> must be <what it accepts>,
+# got <what it got>"; ``argument`` names the call too, e.g. "SpaceDGDataset: split_fractions".
+def short_repr(value: object, limit: int = 80) -> str:
+    """``repr(value)`` cut to ``limit`` characters (for error messages)."""
+    return _short(value, limit)
+
+
+def check_choice(value: object, argument: str, choices: tuple[str, ...] | list[str], error: type[Exception] | None = None) -> str:
+    """``value`` if it is one of ``choices`` (strings), else ``error``."""
+    if not isinstance(value, str) or value not in choices:
+        raise (error or ParameterError)(f"{argument} must be one of {list(choices)}, got {_short(value)}")
+    return value
+
+
+def check_int(
+    value: object, argument: str, *, minimum: int | None = None, maximum: int | None = None, error: type[Exception] | None = None,
+) -> int:
+    """``value`` as an ``int`` (a Python or numpy integer, not a bool) within ``[minimum, maximum]``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise (error or ParameterError)(f"{argument} must be an integer{_bounds(minimum, maximum)}, got {_short(value)}")
+    number = int(value)
+    if (minimum is not None and number < minimum) or (maximum is not None and number > maximum):
+        raise (error or ParameterError)(f"{argument} must be an integer{_bounds(minimum, maximum)}, got {_short(value)}")
+    return number
+
+
+def check_number(
+    value: object, argument: str, *, low: float | None = None, high: float | None = None, error: type[Exception] | None = None,
+) -> float:
+    """``value`` as a finite ``float`` (an int, float or numpy number, not a bool) within ``[low, high]``."""
+    kind = error or ParameterError
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise kind(f"{argument} must be a number{_bounds(low, high)}, got {_short(value)}")
+    number = finite_float(value, argument, kind)
+    if (low is not None and number < low) or (high is not None and number > high):
+        raise kind(f"{argument} must be a number{_bounds(low, high)}, got {_short(value)}")
+    return number
+
+
+def check_bool(value: object, argument: str, error: type[Exception] | None = None) -> bool:
+    """``value`` if it is ``True`` or ``False`` (numpy bools too)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise (error or ParameterError)(f"{argument} must be True or False, got {_short(value)}")
+    return bool(value)
+
+
+def check_names(value: object, argument: str, error: type[Exception] | None = None) -> tuple[str, ...]:
+    """A non-empty list (or tuple, set) of non-empty strings; a lone string is refused (it would be read letter by letter)."""
+    kind = error or ParameterError
+    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, set, frozenset)):
+        raise kind(f"{argument} must be a list of names, e.g. [{_short(value)}], got {_short(value)}")
+    names = tuple(value)
+    if not names or any(not isinstance(n, str) or not n.strip() for n in names):
+        raise kind(f"{argument} must be a non-empty list of non-empty strings, got {_short(value)}")
+    return names
+
+
+def check_image_size(value: object, argument: str, error: type[Exception] | None = None) -> tuple[int, int] | None:
+    """``None`` or ``(width, height)`` as two positive integers (pixels)."""
+    if value is None:
+        return None
+    kind = error or ParameterError
+    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise kind(f"{argument} must be (width, height) in pixels, two positive integers, or None; got {_short(value)}")
+    width, height = (check_int(v, f"{argument} {side}", minimum=1, error=kind) for v, side in zip(value, ("width", "height")))
+    return width, height
+
+
+def check_fractions(value: object, argument: str, error: type[Exception] | None = None) -> tuple[float, float]:
+    """``(val, bench)``: two numbers in [0, 1] whose sum is at most 1."""
+    kind = error or ParameterError
+    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise kind(f"{argument} must be (val, bench): two fractions in [0, 1] summing to at most 1, e.g. (0.1, 0.1); got {_short(value)}")
+    val, bench = (check_number(v, f"{argument} {side}", low=0.0, high=1.0, error=kind) for v, side in zip(value, ("val", "bench")))
+    if val + bench > 1.0 + 1e-9:
+        raise kind(f"{argument} (val, bench) must sum to at most 1, got {_short(value)} (sum {val + bench:g})")
+    return val, bench
+
+
+def _bounds(low: float | None, high: float | None) -> str:
+    if low is not None and high is not None:
+        return f" in [{low:g}, {high:g}]"
+    if low is not None:
+        return f" >= {low:g}"
+    if high is not None:
+        return f" <= {high:g}"
+    return ""

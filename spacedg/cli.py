@@ -15,9 +15,12 @@ from spacedg.errors import SpaceDGError, SpaceDGWarning
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``spacedg`` parser and every sub-command's (a :class:`~spacedg.commands._args.CommandParser`:
+    usage errors are one line naming the command, exit status 2)."""
     from spacedg.commands import evaluate, export, gallery, plugins, predict, qa, render, review, scenes
+    from spacedg.commands._args import CommandParser
 
-    parser = argparse.ArgumentParser(
+    parser = CommandParser(
         prog="spacedg",
         description="Degradation-aware spatial QA data from 3D Gaussian Splatting scenes.",
     )
@@ -37,8 +40,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``spacedg`` console script; returns the process exit code.
 
-    Exit status 2 with one line ``spacedg: error: …`` for bad input (any
-    :class:`~spacedg.errors.SpaceDGError`), 130 with one line for Ctrl+C (naming the plugin
+    Exit status 2 with one line for bad input: ``spacedg <command>: error: … (see `spacedg <command>
+    --help`)`` for a usage error (unknown option, bad choice, missing or malformed value: raised as
+    ``SystemExit(2)`` by the parser), ``spacedg: error: …`` for any
+    :class:`~spacedg.errors.SpaceDGError` of the handler; 130 with one line for Ctrl+C (naming the plugin
     being imported when that is where it landed); warnings of spacedg
     (:class:`~spacedg.errors.SpaceDGWarning`: plugin clashes, slow plugin imports, ...) print as
     one line ``spacedg: warning: …`` on stderr.

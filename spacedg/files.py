@@ -2,6 +2,8 @@
 
 - :func:`atomic_write`: write a file through a temporary sibling and ``os.replace``, so a
   reader never sees a half-written file (the old file stays until the new one is complete).
+- :func:`write_png`: the one PNG writer (RGB or single-channel, encoded in memory, written
+  atomically); :func:`read_rgb` reads an image back as RGB.
 - :func:`read_json`: parse a JSON file and turn a syntax error into a
   :class:`~spacedg.errors.FileFormatError` naming the line and column.
 - :func:`exclusive_lock`: one writer per output file (``fcntl.flock`` on ``<file>.lock``); a
@@ -292,6 +294,39 @@ def dump_json(data: Any) -> str:
         raise InvalidDataError(f"cannot write JSON: {err} (NaN/Inf values are not valid JSON)") from err
     except TypeError as err:
         raise InvalidDataError(f"cannot write JSON: {err}; metadata and attributes must be JSON-serialisable") from err
+
+
+def write_png(path: PathLike, image: Any, what: str, *, compression: int | None = None) -> None:
+    """Write ``image`` as a PNG file at ``path``, atomically (encoded in memory, then one rename).
+
+    Args:
+        path: the ``.png`` file; its folder is created when missing.
+        image: an H×W×3 **RGB** array (uint8 or uint16) or an H×W single-channel one (e.g. uint16
+            depth in millimetres); channels are reordered to OpenCV's BGR here, never by the caller.
+        what: how messages name the file (a command-line flag such as ``"--out"``, or ``"image"``).
+        compression: zlib level 0-9 (``cv2.IMWRITE_PNG_COMPRESSION``); ``None`` = OpenCV's default.
+
+    Raises:
+        ParameterError: ``image`` is not an H×W or H×W×3 uint8/uint16 array, or ``compression``
+            is outside 0-9.
+        InvalidDataError: OpenCV could not encode the image.
+    """
+    import cv2
+    import numpy as np
+
+    shape, dtype = getattr(image, "shape", None), getattr(image, "dtype", None)
+    if shape is None or not (len(shape) == 2 or (len(shape) == 3 and shape[2] == 3)) or dtype not in (np.uint8, np.uint16):
+        raise ParameterError(f"{what} {path}: image must be an H×W or H×W×3 uint8/uint16 array, got {dtype} {shape}")
+    if compression is not None and (isinstance(compression, bool) or compression not in range(10)):
+        raise ParameterError(f"{what} {path}: compression must be an integer 0-9, got {compression!r}")
+    pixels = image[:, :, ::-1] if len(shape) == 3 else image
+    params = [] if compression is None else [cv2.IMWRITE_PNG_COMPRESSION, int(compression)]
+    ok, data = cv2.imencode(".png", np.ascontiguousarray(pixels), params)
+    if not ok:  # pragma: no cover - OpenCV encodes any uint8/uint16 image
+        raise InvalidDataError(f"{what} {path}: OpenCV could not encode the image as PNG")
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(target, data.tobytes())
 
 
 def read_rgb(path: PathLike) -> Any:

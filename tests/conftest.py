@@ -42,18 +42,24 @@ def small_room():
     return generate_room(7, RoomConfig(gaussians=30_000))
 
 
-def private_copies(dirs: list[Path], root: Path) -> list[Path]:
-    """Copies of scene folders under ``root``, with their visibility caches and without question
-    indexes (tests that build indexes write into the scene folders)."""
-    return [Path(shutil.copytree(d, root / d.name, ignore=shutil.ignore_patterns("*.qa.*"))) for d in dirs]
+def private_copies(dirs: list[Path], root: Path, *, indexes: bool = False) -> list[Path]:
+    """Copies of scene folders under ``root``, with their visibility caches and, unless
+    ``indexes``, without question indexes (tests that build indexes write into the scene folders)."""
+    ignore = None if indexes else shutil.ignore_patterns("*.qa.*")
+    return [Path(shutil.copytree(d, root / d.name, ignore=ignore)) for d in dirs]
 
 
 @pytest.fixture(scope="session")
 def qa_room_dirs(tmp_path_factory) -> list[Path]:
     """Four small synthetic rooms (30k Gaussians, 24–32 views at 320×240, random world frames)
-    saved as native scene folders, for question-index tests."""
-    from spacedg.scene.io import save_scene
+    saved as native scene folders, for question-index tests.
+
+    Each folder's ``cache/`` holds its visibility and covisibility at the default sizes (what
+    ``qa build`` computes first), computed once here: every copy of the rooms reuses them (the
+    entries are keyed by scene, cameras and parameters, so a stale one is never read)."""
+    from spacedg.scene.io import load_scene, save_scene
     from spacedg.scene.synthetic import CaptureConfig, RoomConfig, generate_room
+    from tests.room_qa import prepare_room
 
     root = tmp_path_factory.mktemp("qa_rooms")
     dirs = []
@@ -61,8 +67,36 @@ def qa_room_dirs(tmp_path_factory) -> list[Path]:
         config = RoomConfig(gaussians=30_000, capture=CaptureConfig(320, 240, 24, 32))
         folder = root / f"room-{seed:06d}"
         save_scene(generate_room(seed, config, scene_id=folder.name), folder)
+        prepare_room(load_scene(folder), folder / "cache")
         dirs.append(folder)
     return dirs
+
+
+@pytest.fixture(scope="session")
+def indexed_room_dirs(qa_room_dirs, tmp_path_factory) -> list[Path]:
+    """Copies of the four session rooms with their full default question index
+    (``QABuildConfig()``, what a dataset without ``qa_config`` builds), built once per session;
+    copy them with ``private_copies(..., indexes=True)`` before building anything else into them."""
+    from spacedg.data.dataset import SpaceDGDataset
+
+    dirs = private_copies(qa_room_dirs, tmp_path_factory.mktemp("indexed_rooms"))
+    SpaceDGDataset("train", scenes=dirs)  # builds the four default indexes (in a separate interpreter)
+    return dirs
+
+
+@pytest.fixture(scope="session")
+def room_records(qa_room_dirs) -> list[tuple[object, list[object]]]:
+    """The four session rooms prepared for questions (visibility from their caches) with every
+    family's records at :data:`tests.room_qa.ROOM_CONFIG`, generated once per session:
+    ``[(scene, records), ...]`` in room order (read-only: tests must not change them)."""
+    from spacedg.scene.io import load_scene
+    from tests.room_qa import ROOM_CONFIG, generate, prepare_room
+
+    out = []
+    for folder in qa_room_dirs:
+        scene = prepare_room(load_scene(folder), folder / "cache")
+        out.append((scene, generate(scene, ROOM_CONFIG)))
+    return out
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from spacedg.errors import FileFormatError, ParameterError
-from spacedg.files import atomic_write_bytes, exclusive_lock, remove_stale_temps, require_file, temp_target
+from spacedg.files import atomic_write_bytes, exclusive_lock, read_rgb, remove_stale_temps, require_file, temp_target, write_png
 from tests.conftest import REPO_ROOT
 
 
@@ -90,3 +90,23 @@ def test_remove_stale_temps_touches_only_our_pattern(tmp_path: Path) -> None:
     assert remove_stale_temps(tmp_path, lambda target: target.startswith("0000008")) == [tmp_path / ".0000008_0.png.abcdefgh.tmp"]
     atomic_write_bytes(tmp_path / "a.bin", b"1")  # a completed write leaves no temporary file
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".a.bin.")]
+
+
+def test_write_png_round_trips_rgb_and_refuses_other_arrays(tmp_path: Path) -> None:
+    """The one PNG writer takes RGB (it reorders to OpenCV's BGR), 16-bit single channel too, and
+    leaves no temporary file; a float image or a bad compression level is refused naming the argument."""
+    import cv2
+    import numpy as np
+
+    rgb = np.random.default_rng(0).integers(0, 256, (9, 13, 3), dtype=np.uint8)
+    write_png(tmp_path / "sub" / "a.png", rgb, "--out", compression=9)
+    assert np.array_equal(read_rgb(tmp_path / "sub" / "a.png"), rgb)
+    depth = np.arange(9 * 13, dtype=np.uint16).reshape(9, 13) * 500
+    write_png(tmp_path / "d.png", depth, "--depth-out")
+    assert np.array_equal(cv2.imread(str(tmp_path / "d.png"), cv2.IMREAD_UNCHANGED), depth)
+    assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == ["a.png", "d.png"]
+    with pytest.raises(ParameterError, match=r"--out .*uint8/uint16 array, got float32"):
+        write_png(tmp_path / "f.png", rgb.astype(np.float32), "--out")
+    with pytest.raises(ParameterError, match="compression must be an integer 0-9, got 10"):
+        write_png(tmp_path / "f.png", rgb, "--out", compression=10)
+    assert not (tmp_path / "f.png").exists()

@@ -1,7 +1,15 @@
-"""Argument checks shared by the subcommands, run before any work: one-line
-:class:`~spacedg.errors.ParameterError` s that name the flag, the value and what is accepted.
+"""Argument checks shared by the subcommands, run before any work: one-line errors that name the
+flag, the value and what is accepted.
 
-- numbers: :func:`at_least`, :func:`in_range`, :func:`seed`, :func:`fraction`, :func:`positive_number`;
+- the parser: :class:`CommandParser` prints every usage error (unknown option, bad choice, missing
+  or malformed value) as one line ``spacedg <command>: error: … (see `spacedg <command> --help`)``
+  and exits 2, instead of argparse's usage block;
+- numbers as argparse types (checked at parse time, so ``--null -1`` is refused at the call):
+  :func:`whole` (an integer in a range), :func:`real` (a finite number in a range), :data:`SEED`;
+  and, inside handlers, :func:`in_range` and :func:`seed` for values computed from several flags;
+- devices: :func:`device_option`, the argparse type of every ``--device`` (a torch device that
+  exists here: :func:`spacedg.devices.resolve_device`);
+- sizes: :func:`image_size_of` maps the deprecated ``--width`` / ``--height`` onto ``--image-size``;
 - subcommands: :func:`add_command` registers one (its parser, its handler, its description:
   the handler's docstring);
 - the renderer: :func:`add_backend_arguments` declares ``--backend`` / ``--device`` once for every
@@ -19,14 +27,52 @@ import argparse
 import inspect
 import math
 import os
+import re
+import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any, NoReturn
 
 from spacedg.errors import ParameterError
+from spacedg.limits import MAX_IMAGE_SIDE, check_image_size
 from spacedg.render.renderer import BACKENDS
 
-__all__ = ["add_backend_arguments", "add_command", "at_least", "fraction", "in_range", "output_file", "output_folder", "positive_number", "seed"]
+__all__ = [
+    "SEED", "CommandParser", "Ranged", "add_backend_arguments", "add_command", "add_device_argument", "device_option",
+    "image_size_of", "in_range", "output_file", "output_folder", "real", "seed", "usage_error", "whole",
+]
+
+#: Namespace attribute holding the ``prog`` of the deepest parser that ran (``"spacedg qa audit"``).
+PROG_KEY = "_spacedg_prog"
+
+
+def usage_error(prog: str, message: str) -> NoReturn:
+    """Print ``<prog>: error: <message> (see `<prog> --help`)`` as one line on stderr and exit 2."""
+    text = " ".join(str(message).split())
+    sys.stderr.write(f"{prog}: error: {text} (see `{prog} --help`)\n")
+    sys.stderr.flush()
+    raise SystemExit(2)
+
+
+class CommandParser(argparse.ArgumentParser):
+    """An :class:`argparse.ArgumentParser` whose usage errors are one line naming the command
+    (:func:`usage_error`); its sub-parsers are of this class too."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.set_defaults(**{PROG_KEY: self.prog})
+
+    def parse_args(self, args: Sequence[str] | None = None, namespace: Any = None) -> Any:  # type: ignore[override]
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:  # argparse reports a sub-command's unknown options from the top parser: name the sub-command
+            shown = " ".join(extras)
+            shown = shown if len(shown) <= 200 else f"{shown[:200]}…"
+            usage_error(getattr(parsed, PROG_KEY, self.prog), f"unrecognized arguments: {shown}")
+        return parsed
+
+    def error(self, message: str) -> NoReturn:
+        usage_error(self.prog, message)
 
 
 def add_command(
@@ -53,18 +99,122 @@ def add_backend_arguments(parser: argparse.ArgumentParser, what: str = "renderer
                         help=f"{what}: auto (default: the compiled CPU path; on --device cuda gsplat's CUDA compositor "
                              "when it loads, else torch), cpu, torch or gsplat")
     if device:
-        parser.add_argument("--device", default=None,
-                            help="torch device for the torch and gsplat backends, e.g. cuda or cuda:1 (default: CPU); "
-                                 "with a non-CPU device the degradations run there too")
+        add_device_argument(parser, "torch device for the torch and gsplat backends: cpu, cuda or cuda:N (default: CPU); "
+                                    "with a non-CPU device the degradations run there too")
+
+
+def add_device_argument(parser: argparse.ArgumentParser, help: str) -> None:
+    """``--device``: a torch device that exists on this machine (:func:`device_option`), default ``None``."""
+    parser.add_argument("--device", type=device_option, default=None, metavar="DEVICE", help=help)
+
+
+def device_option(text: str) -> str:
+    """argparse type of ``--device``: the name of a torch device this machine has (``cpu``, ``cuda``,
+    ``cuda:N``, ``mps``), normalised (``"CUDA:0 "`` → ``"cuda:0"``); torch is imported only when
+    the option is given."""
+    from spacedg.devices import resolve_device
+
+    try:
+        return str(resolve_device(text, argument=""))
+    except ParameterError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
 
 #: Largest seed accepted (numpy's SeedSequence takes any non-negative integer; 2**63 keeps it an int64).
 MAX_SEED = 2**63 - 1
+_INTEGER = re.compile(r"[+-]?\d{1,19}")
+_SHOWN = 40
 
 
-def at_least(flag: str, value: int | None, low: int) -> None:
-    """``value`` (when given) must be an integer >= ``low``."""
-    if value is not None and value < low:
-        raise ParameterError(f"{flag} must be at least {low}, got {value}")
+def _shown(text: str) -> str:
+    cleaned = text.strip()
+    return repr(cleaned) if len(cleaned) <= _SHOWN else f"{cleaned[:_SHOWN]!r}… ({len(cleaned):,} characters)"
+
+
+class Ranged:
+    """An argparse type: a number in ``[low, high]`` (``high`` ``None``: no upper bound), else an
+    :class:`argparse.ArgumentTypeError` saying what is accepted. ``low`` / ``high`` / ``accepts``
+    are public so tests can read the range of every numeric option."""
+
+    def __init__(self, low: float, high: float | None, accepts: str, parse: Callable[[str], float]) -> None:
+        self.low, self.high, self.accepts, self._parse = low, high, accepts, parse
+        self.__name__ = accepts  # argparse names a type by its __name__
+
+    def __call__(self, text: str) -> Any:
+        try:
+            value = self._parse(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {self.accepts}, got {_shown(text)}") from None
+        if not (self.low <= value and (self.high is None or value <= self.high)):
+            raise argparse.ArgumentTypeError(f"must be {self.accepts}, got {text.strip()}")
+        return value
+
+    def __repr__(self) -> str:
+        return f"<{self.accepts}>"
+
+
+def _parse_int(text: str) -> int:
+    if not _INTEGER.fullmatch(text.strip()):
+        raise ValueError(text)
+    return int(text)
+
+
+def _parse_finite(text: str) -> float:
+    if len(text) > 64:
+        raise ValueError(text)
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(text)
+    return value
+
+
+def whole(low: int, high: int | None = None, unit: str = "") -> Ranged:
+    """argparse type: an integer in ``[low, high]`` (no upper bound when ``high`` is ``None``)."""
+    suffix = f" {unit}" if unit else ""
+    accepts = f"a whole number >= {low}{suffix}" if high is None else f"a whole number from {low} to {high}{suffix}"
+    return Ranged(low, high, accepts, _parse_int)
+
+
+def real(low: float, high: float | None = None, *, above: bool = False, unit: str = "") -> Ranged:
+    """argparse type: a finite number in ``[low, high]`` (``above``: ``> low``, for a positive size)."""
+    suffix = f" {unit}" if unit else ""
+    if above:
+        accepts = f"a finite number > {low:g}{suffix}"
+        ranged = Ranged(low, high, accepts, _parse_finite)
+        ranged.low = math.nextafter(low, math.inf)
+        return ranged
+    accepts = (f"a finite number >= {low:g}{suffix}" if high is None else f"a number from {low:g} to {high:g}{suffix}")
+    return Ranged(low, high, accepts, _parse_finite)
+
+
+#: argparse type of every ``--seed``: a non-negative integer (at most 2**63 - 1).
+SEED = Ranged(0, MAX_SEED, "a non-negative integer (at most 2**63 - 1)", _parse_int)
+
+
+def image_size_of(args: argparse.Namespace, default: tuple[int, int] | None = None, min_side: int = 8) -> tuple[int, int] | None:
+    """``--image-size`` as ``(width, height)`` pixels, or the deprecated ``--width`` / ``--height``
+    mapped onto it (a side left out is ``default``'s); ``default`` when neither is given. With no
+    ``default``, a lone ``--width`` or ``--height`` gives ``None`` (the caller keeps an aspect ratio).
+
+    Raises:
+        ParameterError: both spellings given, a side under ``min_side`` pixels, or over the size policy.
+    """
+    width, height = getattr(args, "width", None), getattr(args, "height", None)
+    given = getattr(args, "image_size", None)
+    if width is None and height is None:
+        return given if given is not None else default
+    if given is not None:
+        raise ParameterError("--image-size and the deprecated --width/--height are alternatives; pass --image-size WxH")
+    if width is None or height is None:
+        if default is None:
+            return None
+        width = default[0] if width is None else width
+        height = default[1] if height is None else height
+    in_range("--width", width, min_side, MAX_IMAGE_SIDE, "pixels")
+    in_range("--height", height, min_side, MAX_IMAGE_SIDE, "pixels")
+    check_image_size(int(width), int(height), "--width/--height", "render smaller", ParameterError)
+    return int(width), int(height)
+
 
 
 def in_range(flag: str, value: int | None, low: int, high: int, unit: str = "") -> None:
@@ -79,16 +229,6 @@ def seed(flag: str, value: int | None) -> None:
         raise ParameterError(f"{flag} must be a non-negative integer (at most 2**63 - 1), got {value}")
 
 
-def positive_number(flag: str, value: float | None) -> None:
-    """``value`` (when given) must be a finite number > 0."""
-    if value is not None and not (math.isfinite(value) and value > 0):
-        raise ParameterError(f"{flag} must be a finite number > 0, got {value}")
-
-
-def fraction(flag: str, value: float | None) -> None:
-    """``value`` (when given) must be a finite number in [0, 1]."""
-    if value is not None and not (math.isfinite(value) and 0.0 <= value <= 1.0):
-        raise ParameterError(f"{flag} must be a number from 0 to 1, got {value}")
 
 
 def _writable_ancestor(flag: str, path: Path) -> Path:

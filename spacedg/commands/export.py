@@ -5,10 +5,14 @@ from __future__ import annotations
 import argparse
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from spacedg.commands import _args
+from spacedg.commands import _args, _vocabulary
 from spacedg.commands.sizes import image_size
 from spacedg.errors import ParameterError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from spacedg.files import ExclusiveLock
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -19,16 +23,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, required=True, help="output folder (shared by every shard)")
     parser.add_argument("--scenes", type=Path, nargs="+", default=None, help="scene folders or folders of them (default: the built-in rooms)")
     parser.add_argument("--degradations", default=None, help="comma-separated chains (default: the nine for bench, clean for train/val)")
-    parser.add_argument("--question-types", default=None, help="comma-separated question types (default: all)")
+    parser.add_argument("--families", default=None, help="comma-separated question families (default: all)")
     parser.add_argument("--image-size", type=image_size, default=None,
                         help="WxH in pixels to render at, e.g. 640x480 (default: the views' own size)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the questions and of the degradations (default 0)")
-    parser.add_argument("--per-sub-type", type=int, default=25, help="questions per sub type and scene when indexes are built (default 25)")
-    parser.add_argument("--clean-prob", type=float, default=0.1, help="share of clean items, train/val only (default 0.1)")
-    parser.add_argument("--max-questions", type=int, default=None, help="keep at most N questions, spread over question types")
+    parser.add_argument("--seed", type=_args.SEED, default=0, help="seed of the questions and of the degradations (default 0)")
+    parser.add_argument("--per-sub-type", type=_args.whole(1), default=25, help="questions per sub type and scene when indexes are built (default 25)")
+    parser.add_argument("--clean-prob", type=_args.real(0.0, 1.0), default=0.1, help="share of clean items, train/val only (default 0.1)")
+    parser.add_argument("--max-questions", type=_args.whole(1), default=None, help="keep at most N questions, spread over question types")
     parser.add_argument("--shard", default="0/1", help="i/n: export the chunks k with k %% n == i; 'env' reads RANK/WORLD_SIZE "
                                                        "(torchrun) or SLURM_ARRAY_TASK_ID/COUNT (default 0/1)")
-    parser.add_argument("--shard-size", "--chunk-size", dest="shard_size", type=int, default=None,
+    parser.add_argument("--shard-size", type=_args.whole(1), default=None,
                         help="items per resumable chunk; the same in every shard (default 256)")
     parser.add_argument("--all-bench", action="store_true",
                         help="put every scene in the bench split (works from one scene); same as --split-fractions 0,1")
@@ -37,6 +41,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--skip-bad-scenes", action="store_true", help="skip scenes that cannot be read (they are named)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     _args.add_backend_arguments(parser)
+    _vocabulary.add_deprecated(parser, "export")
 
 
 def _fractions(args: argparse.Namespace) -> tuple[float, float]:
@@ -55,6 +60,16 @@ def _fractions(args: argparse.Namespace) -> tuple[float, float]:
     return val, bench
 
 
+def _shard_lock(out: Path, shard: tuple[int, int]) -> ExclusiveLock:
+    """An exclusive lock on ``out/.shard-<i>-of-<n>.lock`` while this process writes shard i/n (freed on
+    exit, even by ``kill -9``): a second run of the same shard fails at once, naming the first."""
+    from spacedg.files import exclusive_lock
+
+    out.mkdir(parents=True, exist_ok=True)
+    i, n = shard
+    return exclusive_lock(out / f".shard-{i}-of-{n}.lock", f"shard {i}/{n} of {out} is being written by another process")
+
+
 def _names(text: str | None) -> list[str] | None:
     return None if text is None else [t.strip() for t in text.split(",") if t.strip()]
 
@@ -66,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     summary.json. Finished chunks are skipped on a rerun; --shard i/n splits the chunks across processes
     or machines (see docs/distributed-export.md).
     """
-    from spacedg.data.chain import Chain
+    from spacedg.data.chain import Chain, split_chains
     from spacedg.data.dataset import SpaceDGDataset
     from spacedg.data.export import (
         DEFAULT_SHARD_SIZE,
@@ -74,25 +89,19 @@ def run(args: argparse.Namespace) -> int:
         parse_shard,
         shard_from_env,
     )
-    from spacedg.data.qa_index import QABuildConfig
+    from spacedg.qa.index import QABuildConfig
 
     # every flag is checked before the (slow) dataset construction
     shard = shard_from_env(os.environ) if args.shard.strip().lower() == "env" else parse_shard(args.shard)
     shard_size = DEFAULT_SHARD_SIZE if args.shard_size is None else args.shard_size
-    if shard_size < 1:
-        raise ParameterError(f"--shard-size must be >= 1, got {shard_size}")
-    _args.seed("--seed", args.seed)
-    _args.at_least("--per-sub-type", args.per_sub_type, 1)
-    _args.fraction("--clean-prob", args.clean_prob)
-    _args.at_least("--max-questions", args.max_questions, 1)
     size = args.image_size
     fractions = _fractions(args)
-    chains = _names(args.degradations)
+    chains = None if args.degradations is None else [t.strip() for t in split_chains(args.degradations) if t.strip()]
     for chain in chains or ():
         Chain.parse(chain).check()  # an unknown name or preset fails now, with suggestions
     _args.output_folder("--out", args.out)
     dataset = SpaceDGDataset(
-        args.split, chains, scenes=args.scenes, question_types=_names(args.question_types),
+        args.split, chains, scenes=args.scenes, families=_names(args.families),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,
         qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type),
         on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device, max_questions=args.max_questions,
@@ -106,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
                              "pass --all-bench or --split-fractions to put scenes there, or check the scenes' questions (spacedg qa stats)")
     for folder, error in dataset.skipped.items():
         print(f"skipped scene {folder}: {error}")
-    summary = export_bench(dataset, args.out, shard=shard, shard_size=shard_size, progress=not args.no_progress)
+    with _shard_lock(args.out, shard):
+        summary = export_bench(dataset, args.out, shard=shard, shard_size=shard_size, progress=not args.no_progress)
     print(f"{len(dataset)} items in {summary.chunks_total} chunk(s) of {shard_size}; shard {shard[0]}/{shard[1]} wrote "
           f"{len(summary.chunks_written)} chunk(s) ({summary.items_written} items) in {summary.seconds:.1f} s, "
           f"skipped {len(summary.chunks_skipped)} finished")

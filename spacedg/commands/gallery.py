@@ -18,8 +18,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     gallery.add_argument("--out", type=Path, required=True, help="PNG file to write")
     gallery.add_argument("--degradations", default=None, metavar="NAME[,NAME…]",
                          help="rows to show, comma-separated (default: every registered degradation)")
-    gallery.add_argument("--seed", type=int, default=0, help="sample seed for parameters and noise (default 0)")
-    gallery.add_argument("--thumb-width", type=int, default=256, help="thumbnail width in pixels (default 256)")
+    gallery.add_argument("--seed", type=_args.SEED, default=0, help="sample seed for parameters and noise (default 0)")
+    gallery.add_argument("--thumb-width", type=_args.whole(64, 2048, "pixels"), default=256, help="thumbnail width in pixels (default 256)")
     gallery.add_argument("--motion", choices=("fast", "reference"), default="fast",
                          help="motion blur sub-steps: renderer's fast choice (default) or the exact sub_steps")
     _args.add_backend_arguments(gallery)
@@ -29,14 +29,12 @@ def _gallery(args: argparse.Namespace) -> int:
     """Render one view of a native scene folder clean and under every registered degradation (third-party
     plugins included) at severities 1-5 and the paper's bench preset, labelled, as one PNG.
     """
-    from spacedg.commands.render import _pick_view, write_png_atomic
+    from spacedg.commands.render import _pick_view
+    from spacedg.files import write_png
     from spacedg.data.gallery import gallery_sheet
     from spacedg.scene.io import load_scene
     from spacedg.data.pipeline import PipelineOptions
 
-    if not 64 <= args.thumb_width <= 2048:
-        raise ParameterError(f"--thumb-width must be in [64, 2048] pixels, got {args.thumb_width}")
-    _args.seed("--seed", args.seed)
     _args.output_file("--out", args.out, (".png",))
     names = [n.strip() for n in args.degradations.split(",") if n.strip()] if args.degradations else None
     scene = load_scene(args.scene)
@@ -46,6 +44,6 @@ def _gallery(args: argparse.Namespace) -> int:
     _pick_view(scene, view)
     options = PipelineOptions(motion=args.motion, backend=args.backend, device=args.device)
     sheet = gallery_sheet(scene, view, names, seed=args.seed, thumb_width=args.thumb_width, options=options, progress=True)
-    write_png_atomic(args.out, sheet[:, :, ::-1], "--out")
+    write_png(args.out, sheet, "--out", compression=9)
     print(f"wrote {args.out} ({sheet.shape[1]}x{sheet.shape[0]}): view {view}, {len(names) if names else 'all'} degradations")
     return 0

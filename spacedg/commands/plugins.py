@@ -14,7 +14,8 @@ import sys
 from typing import Any
 
 from spacedg.commands import _args
-from spacedg.plugins.registry import AUTOLOAD_ENV, PLUGINS_ENV, SLOW_IMPORT_SECONDS, Registry, get_registry
+from spacedg.plugins.origin import PLUGINS_ENV
+from spacedg.plugins.registry import AUTOLOAD_ENV, SLOW_IMPORT_SECONDS, Registry, get_registry
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:

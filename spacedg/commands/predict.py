@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from spacedg.commands import _args
 from spacedg.commands.sizes import image_size, pixel_budget
 from spacedg.errors import ParameterError
+
+#: Most tokens --max-new-tokens may ask for.
+MAX_NEW_TOKENS = 1_000_000
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -31,36 +35,41 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     variant.add_argument("--variant", dest="variant", choices=VARIANTS, help="the prompt variant by name")
     parser.set_defaults(variant="default")
     parser.add_argument("--name", default=None, help="model name in reports (default: the model folder's name)")
-    parser.add_argument("--batch-size", type=int, default=8, help="conversations per generate call (default 8)")
-    parser.add_argument("--max-new-tokens", type=int, default=None, help="generation budget, >= 1 (default 32; cot 512)")
-    parser.add_argument("--limit", type=int, default=None, help="answer at most N pending items (smoke runs)")
+    parser.add_argument("--batch-size", type=_args.whole(1), default=8, help="conversations per generate call (default 8)")
+    parser.add_argument("--max-new-tokens", type=_args.whole(1, MAX_NEW_TOKENS), default=None, help="generation budget, >= 1 (default 32; cot 512)")
+    parser.add_argument("--limit", type=_args.whole(1), default=None, help="answer at most N pending items (smoke runs)")
     parser.add_argument("--shard", default="0/1", help="i/n: answer every n-th item starting at i, into OUT with .shard{i}of{n} "
                                                        "before .jsonl; 'env' reads RANK/WORLD_SIZE (torchrun) or SLURM "
                                                        "variables (default 0/1); spacedg eval merges the shards")
-    parser.add_argument("--device", default=None, help="torch device (default: cuda, or cuda:LOCAL_RANK under a launcher, "
-                                                        "when available, else cpu)")
+    _args.add_device_argument(parser, "torch device: cpu, cuda or cuda:N (default: cuda, or cuda:LOCAL_RANK under a "
+                                      "launcher, when available, else cpu)")
     parser.add_argument("--dtype", default="auto", choices=("auto", "float32", "bfloat16", "float16"),
                         help="weights dtype (default auto: bfloat16 on CUDA, float32 on CPU)")
     parser.add_argument("--min-pixels", type=pixel_budget, default=None, help="image budget: fewest pixels per image after resizing")
     parser.add_argument("--max-pixels", type=pixel_budget, default=None, help="image budget: most pixels per image after resizing")
     parser.add_argument("--image-size", type=image_size, default=None, help="--scenes only: WxH to render at (default: the views' size)")
-    parser.add_argument("--max-questions", type=int, default=None, help="--scenes only: at most N questions")
-    parser.add_argument("--seed", type=int, default=0, help="--scenes only: dataset seed (default 0)")
+    parser.add_argument("--max-questions", type=_args.whole(1), default=None, help="--scenes only: at most N questions")
+    parser.add_argument("--seed", type=_args.SEED, default=0, help="--scenes only: dataset seed (default 0)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def _check(args: argparse.Namespace) -> None:
-    """Every flag of ``predict``, before the bench, the dataset or the model is loaded."""
-    _args.at_least("--limit", args.limit, 1)
-    _args.at_least("--batch-size", args.batch_size, 1)
-    _args.in_range("--max-new-tokens", args.max_new_tokens, 1, 1_000_000)
-    _args.at_least("--min-pixels", args.min_pixels, 1)
-    _args.at_least("--max-pixels", args.max_pixels, 1)
+    """The flags of ``predict`` that argparse cannot check alone, before the bench, the dataset
+    or the model is loaded."""
     if args.min_pixels is not None and args.max_pixels is not None and args.min_pixels > args.max_pixels:
         raise ParameterError(f"--min-pixels {args.min_pixels} is more than --max-pixels {args.max_pixels}; pass min <= max")
-    _args.at_least("--max-questions", args.max_questions, 1)
-    _args.seed("--seed", args.seed)
     _args.output_file("--out", args.out, (".jsonl",))
+
+
+def _default_device(torch: Any) -> str:
+    """cuda:LOCAL_RANK (cuda:0 without a launcher) when CUDA is available, else cpu; checked."""
+    import os
+
+    from spacedg.devices import resolve_device
+
+    if not torch.cuda.is_available():
+        return "cpu"
+    return str(resolve_device(f"cuda:{os.environ.get('LOCAL_RANK', '0')}", "the default device cuda:LOCAL_RANK"))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -68,9 +77,9 @@ def run(args: argparse.Namespace) -> int:
     (--scenes) with a local transformers VLM (Qwen2-VL, Qwen2.5-VL, Qwen3-VL, InternVL, ...). Answers
     are appended to --out after each batch; a rerun skips answered items.
     """
-    import torch
-
     import os
+
+    import torch
 
     from spacedg.data.export import parse_shard, shard_from_env
     from spacedg.eval.predict import bench_source, dataset_source, predict, shard_path
@@ -87,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
                                  max_questions=args.max_questions)
         source = dataset_source(dataset)
     shard = shard_from_env(os.environ) if args.shard == "env" else parse_shard(args.shard)
-    device = args.device or (f"cuda:{os.environ.get('LOCAL_RANK', '0')}" if torch.cuda.is_available() else "cpu")
+    device = args.device or _default_device(torch)
     summary = predict(
         args.model, source, shard_path(args.out, shard), variant=args.variant, model_name=args.name,
         batch_size=args.batch_size, max_new_tokens=args.max_new_tokens, limit=args.limit, shard=shard, device=device,

@@ -10,8 +10,11 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from spacedg.commands import _args
+from spacedg.commands import _args, _vocabulary
 from spacedg.errors import InvalidDataError
+
+#: Most null audits `qa audit --null` runs (each is a full blind audit).
+MAX_NULL_RUNS = 10_000
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -21,26 +24,28 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     build = _args.add_command(sub, "build", _build, help="generate every family's questions for scenes (JSONL per scene)")
     build.add_argument("scenes", type=Path, nargs="+", help="native scene folders, or folders of them")
     build.add_argument("--out", type=Path, default=None, help="folder for the index files (default: next to each scene)")
-    build.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
+    build.add_argument("--seed", type=_args.SEED, default=0, help="master seed (default 0)")
     build.add_argument(
         "--families", default="",
         help="comma-separated family names: write them to their own <scene id>.qa.<a+b>.jsonl beside the full index, "
         "which stays untouched (default: all registered families, written to <scene id>.qa.jsonl)",
     )
-    build.add_argument("--per-sub-type", type=int, default=25, help="records per sub_question_type and family per scene (default 25)")
+    build.add_argument("--per-sub-type", type=_args.whole(1), default=25, help="records per sub_question_type and family per scene (default 25)")
     build.add_argument("--force", action="store_true", help="rebuild even when the index is up to date")
     _args.add_backend_arguments(build, "renderer of visibility and covisibility")
 
     preview = _args.add_command(
-        sub, "preview", _preview, help="PNG sheet of a scene's questions: views, named objects' boxes, text",
+        sub, "preview", _preview, help="PNG sheet of a scene's questions (from its index): views, named objects' boxes, text",
     )
-    preview.add_argument("scene", type=Path, help="a native scene folder (its index is built first if missing)")
+    preview.add_argument("scene", type=Path, help="a native scene folder whose index `spacedg qa build` wrote beside it")
     preview.add_argument("--out", type=Path, required=True, help="PNG file to write")
-    preview.add_argument("--n", type=int, default=8, help="number of questions (default 8, spread over question types)")
-    preview.add_argument("--types", default="", help="comma-separated question types to show (default: all)")
-    preview.add_argument("--seed", type=int, default=0, help="which questions are picked (default 0)")
-    preview.add_argument("--thumb-width", type=int, default=256, help="width of each view, pixels")
+    preview.add_argument("--n", type=_args.whole(1, 1000, "questions"), default=8,
+                         help="number of questions (default 8, spread over question families)")
+    preview.add_argument("--families", default="", help="comma-separated question families to show (default: all)")
+    preview.add_argument("--seed", type=_args.SEED, default=0, help="which questions are picked (default 0)")
+    preview.add_argument("--thumb-width", type=_args.whole(32, 4096, "pixels"), default=256, help="width of each view, pixels")
     _args.add_backend_arguments(preview, device=False)
+    _vocabulary.add_deprecated(preview, "qa preview")
 
     stats = _args.add_command(
         sub, "stats", _stats, help="counts per question type, answer balance, blind stress test, repeats, ambiguities",
@@ -56,9 +61,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     _add_index_inputs(audit)
     audit.add_argument("--solved", type=Path, default=None, help="write the ids of the records the blind models solve (JSONL)")
-    audit.add_argument("--show", type=int, default=0, help="print this many solved questions per sub type")
+    audit.add_argument("--show", type=_args.whole(0), default=0, metavar="N", help="print this many solved questions per sub type")
     audit.add_argument("--no-learned", action="store_true", help="skip the logistic model (count-based priors only)")
-    audit.add_argument("--null", type=int, default=0, metavar="RUNS",
+    audit.add_argument("--null", type=_args.whole(0, MAX_NULL_RUNS, "runs"), default=0, metavar="RUNS",
                        help="also audit RUNS times with truths drawn independently of the text, and print the mean and 95th "
                             "percentile of the best excess over chance that chance alone gives at each sub type's n")
     audit.add_argument("--json", action="store_true", help="print JSON instead of tables")
@@ -72,10 +77,9 @@ def _build(args: argparse.Namespace) -> int:
     settings.
     """
     from spacedg.commands.scenes import _scene_dirs
-    from spacedg.data.qa_index import QABuildConfig, build_scene_index
+    from spacedg.qa.build import build_scene_index
+    from spacedg.qa.index import QABuildConfig
 
-    _args.seed("--seed", args.seed)
-    _args.at_least("--per-sub-type", args.per_sub_type, 1)
     if args.out is not None:
         _args.output_folder("--out", args.out)
     config = QABuildConfig(seed=args.seed, families=_family_names(args.families), per_sub_type=args.per_sub_type)
@@ -102,7 +106,7 @@ def _family_names(text: str) -> tuple[str, ...]:
 def _index_files(paths: list[Path], families: tuple[str, ...] = ()) -> list[Path]:
     """Index files named by ``paths``: files as given; in folders (or their sub-folders) the full
     indexes ``*.qa.jsonl``, or with ``families`` that selection's ``*.qa.<selection>.jsonl``."""
-    from spacedg.data.qa_index import selection_name
+    from spacedg.qa.index import selection_name
 
     selection = selection_name(families)
     pattern = f"*.qa.{selection}.jsonl" if selection else "*.qa.jsonl"
@@ -123,7 +127,7 @@ def _index_files(paths: list[Path], families: tuple[str, ...] = ()) -> list[Path
 
 
 def _records_by_scene(paths: list[Path], families: str) -> dict[str, list]:
-    from spacedg.data.qa_index import read_index
+    from spacedg.qa.index import read_index
 
     by_scene: dict[str, list] = {}
     for file in _index_files(paths, _family_names(families)):
@@ -136,7 +140,7 @@ def _records_by_scene(paths: list[Path], families: str) -> dict[str, list]:
 def _scenes_with_visibility(by_scene: dict[str, list], paths: list[Path], extra: list[Path]) -> dict[str, object]:
     """Scene id → scene with its cached visibility, for the scene folders found beside the
     indexes or under ``extra`` (missing scenes are left out)."""
-    from spacedg.data.qa_index import QABuildConfig
+    from spacedg.qa.index import QABuildConfig
     from spacedg.errors import SpaceDGError
     from spacedg.scene.io import load_scene
     from spacedg.scene.visibility import load_or_compute_visibility, with_visibility
@@ -168,8 +172,8 @@ def _stats(args: argparse.Namespace) -> int:
     imperceptible rotations; the label checks read the scenes' cached visibility: scene folders beside
     the indexes, or --scenes).
     """
-    from spacedg.data.qa_audit import blind_audit, format_audit
-    from spacedg.data.qa_stats import ambiguities, answer_balance, blind_baseline, count_table, format_table, repeat_rate
+    from spacedg.qa.audit import blind_audit, format_audit
+    from spacedg.qa.stats import ambiguities, answer_balance, blind_baseline, count_table, format_table, repeat_rate
 
     by_scene = _records_by_scene(args.paths, args.families)
     every = [r for rs in by_scene.values() for r in rs]
@@ -215,7 +219,7 @@ def _audit(args: argparse.Namespace) -> int:
     the other scenes and scored on the held-out one; prints accuracy (MRA for metric answers), chance,
     and how many items the blind models solve. Needs indexes of at least two scenes.
     """
-    from spacedg.data.qa_audit import blind_audit, format_audit
+    from spacedg.qa.audit import blind_audit, format_audit
 
     by_scene = _records_by_scene(args.paths, args.families)
     if len(by_scene) < 2:
@@ -224,7 +228,7 @@ def _audit(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     report = blind_audit(by_scene, learned=not args.no_learned)
     if args.null > 0:
-        from spacedg.data.qa_audit import null_audit, with_null
+        from spacedg.qa.audit import null_audit, with_null
 
         report = with_null(report, null_audit(by_scene, args.null, learned=not args.no_learned))
     seconds = time.perf_counter() - start
@@ -253,7 +257,8 @@ def _audit(args: argparse.Namespace) -> int:
 
 
 def _pick(records: list, n: int, types: set[str], seed: int) -> list:
-    """Up to ``n`` records, one question type after another (types in name order), seeded."""
+    """Up to ``n`` records of the families ``types`` (all when empty), one family after another
+    (in name order), seeded."""
     import numpy as np
 
     by_type: dict[str, list] = {}
@@ -279,24 +284,28 @@ def _add_index_inputs(parser: argparse.ArgumentParser) -> None:
 
 
 def _preview(args: argparse.Namespace) -> int:
-    from spacedg.commands.render import write_png_atomic
+    """Draw a PNG sheet of questions from a scene's question index: per question its views (real
+    renders), the boxes of the objects it names, the question, options and answer. Reads the full
+    index <scene id>.qa.jsonl that `spacedg qa build SCENE` writes beside the scene; writes only --out.
+    """
+    from spacedg.files import write_png
+    from spacedg.qa.index import index_paths, read_index
+    from spacedg.qa.preview import qa_sheet
     from spacedg.scene.io import load_scene
-    from spacedg.data.qa_index import build_scene_index
-    from spacedg.data.qa_preview import qa_sheet
 
-    if args.n < 1 or args.thumb_width < 32:
-        raise InvalidDataError(f"--n must be >= 1 and --thumb-width >= 32, got {args.n} and {args.thumb_width}")
-    _args.in_range("--thumb-width", args.thumb_width, 32, 4096, "pixels")
-    _args.seed("--seed", args.seed)
     _args.output_file("--out", args.out, (".png",))
-    types = {t.strip() for t in args.types.split(",") if t.strip()}
-    index = build_scene_index(args.scene, backend=args.backend)
-    records = _pick(index.records, args.n, types, args.seed)
-    if not records:
-        known = sorted({r.question_type for r in index.records})
-        raise InvalidDataError(f"{args.scene}: no questions of type(s) {sorted(types)}; the index has {known}")
+    families = set(_family_names(args.families))
     scene = load_scene(args.scene)
-    sheet = qa_sheet(scene, records, thumb_width=args.thumb_width, backend=args.backend)
-    write_png_atomic(args.out, sheet[:, :, ::-1], "--out")
-    print(f"wrote {args.out} ({len(records)} questions, {sheet.shape[1]}x{sheet.shape[0]} px)")
+    index, _ = index_paths(scene.id, args.scene if args.scene.is_dir() else args.scene.parent)
+    if not index.is_file():
+        raise InvalidDataError(f"{args.scene}: no question index {index.name} beside the scene; build it first with "
+                               f"`spacedg qa build {args.scene}` (qa preview only reads indexes)")
+    records = read_index(index)
+    picked = _pick(records, args.n, families, args.seed)
+    if not picked:
+        known = sorted({r.question_type for r in records})
+        raise InvalidDataError(f"{args.scene}: no questions of types {sorted(families)} in {index}; it has the families {known}")
+    sheet = qa_sheet(scene, picked, thumb_width=args.thumb_width, backend=args.backend)
+    write_png(args.out, sheet, "--out", compression=9)
+    print(f"wrote {args.out} ({len(picked)} questions, {sheet.shape[1]}x{sheet.shape[0]} px)")
     return 0

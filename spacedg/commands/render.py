@@ -8,16 +8,18 @@ import re
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from spacedg.commands import _args
-from spacedg.commands.sizes import image_side
+from spacedg.commands import _args, _vocabulary
+from spacedg.commands.sizes import image_side, image_size
 from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.files import write_png
 from spacedg.limits import MAX_IMAGE_SIDE, check_image_size
 
-#: Largest image side accepted by --width / --height, pixels (the size policy, :mod:`spacedg.limits`).
+#: Largest image side accepted by --image-size (and the deprecated --width / --height), pixels (:mod:`spacedg.limits`).
 MAX_SIDE = MAX_IMAGE_SIDE
+#: Most motion-blur sub-exposures (--sub-steps).
+MAX_SUB_STEPS = 4096
 #: Smallest share of covered pixels (alpha > ½) of a render that is not "empty".
 MIN_COVERAGE = 0.001
 #: Depth PNG unit: millimetres, so uint16 covers 0–65.535 m.
@@ -36,9 +38,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--out", type=Path, help="PNG file to write (8-bit sRGB)")
     render.add_argument("--depth-out", type=Path, default=None,
                         help="also write expected depth as a 16-bit PNG in millimetres (0 = no coverage)")
-    render.add_argument("--width", type=image_side, default=None, help="render width, pixels (default: the view's)")
-    render.add_argument("--height", type=image_side, default=None,
-                        help="render height, pixels (default: the view's; one of the two keeps the aspect ratio)")
+    render.add_argument("--image-size", type=image_size, default=None, metavar="WxH",
+                        help="render size in pixels, e.g. 640x480 (default: the view's own)")
     render.add_argument("--defocus", metavar="APERTURE_PX,FOCUS_M", default=None,
                         help="thin-lens defocus: CoC radius in pixels at infinity, focus distance in metres")
     render.add_argument("--fisheye", metavar="K1,K2,K3,K4[,MAX_THETA]", default=None,
@@ -46,7 +47,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--motion", metavar="TX,TY,TZ,RX,RY,RZ", default=None,
                         help="camera motion over the exposure: translation in metres then axis-angle rotation "
                         "in radians, both in the camera frame (x right, y down, z forward)")
-    render.add_argument("--sub-steps", type=int, default=None,
+    render.add_argument("--sub-steps", type=_args.whole(1, MAX_SUB_STEPS), default=None,
                         help="motion blur sub-exposures (default 80; with --fast-motion the upper bound)")
     render.add_argument("--fast-motion", action="store_true",
                         help="the renderer's fast path: a few keyframes (from the on-screen motion) with each "
@@ -54,6 +55,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _args.add_backend_arguments(render)
     render.add_argument("--allow-empty", action="store_true",
                         help="write the PNG even when the view renders (almost) nothing (default: exit non-zero)")
+    # the old --width / --height (one alone keeps the view's aspect ratio until they go)
+    _vocabulary.add_deprecated(render, "render", **{
+        "--width": dict(dest="width", type=image_side, metavar="W"), "--height": dict(dest="height", type=image_side, metavar="H"),
+    })
 
 
 def parse_numbers(flag: str, text: str, names: tuple[str, ...], optional: int = 0) -> list[float]:
@@ -80,11 +85,13 @@ def parse_numbers(flag: str, text: str, names: tuple[str, ...], optional: int = 
     return values
 
 
-def _size(camera_w: int, camera_h: int, width: int | None, height: int | None) -> tuple[int, int]:
-    """Render size from --width/--height; one alone keeps the view's aspect ratio."""
-    for flag, value in (("--width", width), ("--height", height)):
-        if value is not None and not 1 <= value <= MAX_SIDE:
-            raise ParameterError(f"{flag} must be in [1, {MAX_SIDE}] pixels, got {value}")
+def _size(camera_w: int, camera_h: int, args: argparse.Namespace) -> tuple[int, int]:
+    """Render size: --image-size, else the view's; the deprecated --width or --height alone keeps
+    the view's aspect ratio."""
+    size = _args.image_size_of(args, min_side=1)
+    if size is not None:
+        return size
+    width, height = getattr(args, "width", None), getattr(args, "height", None)
     if width is None and height is None:
         return camera_w, camera_h
     if width is None:
@@ -105,17 +112,6 @@ def _pick_view(scene, name: str):  # type: ignore[no-untyped-def]
 def _check_png(flag: str, path: Path) -> None:
     if path.suffix.lower() != ".png":
         raise ParameterError(f"{flag} {path}: write a .png file")
-
-
-def write_png_atomic(path: Path, image: np.ndarray, flag: str) -> None:
-    """Write ``image`` (BGR or single channel) as PNG atomically (encoded in memory, then one rename)."""
-    from spacedg.files import atomic_write_bytes
-
-    ok, data = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
-    if not ok:
-        raise ParameterError(f"{flag} {path}: could not encode the image as PNG")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(path, data.tobytes())
 
 
 def encode_depth_mm(depth_m: np.ndarray) -> np.ndarray:
@@ -143,8 +139,6 @@ def _render(args: argparse.Namespace) -> int:
             _args.output_file("--depth-out", args.depth_out, (".png",))
             if args.depth_out.resolve() == args.out.resolve():
                 raise ParameterError("--depth-out must be another file than --out")
-    if args.sub_steps is not None:
-        _args.in_range("--sub-steps", args.sub_steps, 1, 4096)
     defocus = None
     if args.defocus is not None:
         aperture, focus = parse_numbers("--defocus", args.defocus, ("APERTURE_PX", "FOCUS_M"))
@@ -167,8 +161,7 @@ def _render(args: argparse.Namespace) -> int:
     elif args.sub_steps is not None or args.fast_motion:
         raise ParameterError("--sub-steps and --fast-motion apply to motion blur; pass --motion TX,TY,TZ,RX,RY,RZ too")
     backend, _ = resolve_backend(args.backend, args.device)
-    if args.width is not None and args.height is not None:
-        _size(args.width, args.height, args.width, args.height)  # the size policy, before the scene is read
+    _args.image_size_of(args, min_side=1)  # the size policy, before the scene is read
 
     scene = load_scene(args.scene)
     if args.list_views:
@@ -177,7 +170,7 @@ def _render(args: argparse.Namespace) -> int:
             print(f"{name}  {cam.width}x{cam.height}  {model}")
         return 0
     camera = _pick_view(scene, args.view)
-    width, height = _size(camera.width, camera.height, args.width, args.height)
+    width, height = _size(camera.width, camera.height, args)
     if (width, height) != (camera.width, camera.height):
         camera = camera.resized(width, height)
     if lens is not None:
@@ -196,7 +189,7 @@ def _render(args: argparse.Namespace) -> int:
             f"view {args.view} of {args.scene} renders empty ({covered:.2%} of the pixels covered): the Gaussians and this "
             "camera do not meet (a frame mismatch? see `spacedg scenes info`); pass --allow-empty to write it anyway"
         )
-    write_png_atomic(args.out, encode_srgb_u8(frame.rgb)[:, :, ::-1], "--out")
+    write_png(args.out, encode_srgb_u8(frame.rgb), "--out", compression=9)
     stats = frame.stats
     visible = f"{stats['visible']:,}" if "visible" in stats else "n/a"
     print(
@@ -207,7 +200,7 @@ def _render(args: argparse.Namespace) -> int:
     )
     if want_depth:
         depth_mm = encode_depth_mm(frame.depth)
-        write_png_atomic(args.depth_out, depth_mm, "--depth-out")
+        write_png(args.depth_out, depth_mm, "--depth-out", compression=9)
         covered = frame.depth > 0
         if covered.any():
             d = frame.depth[covered]

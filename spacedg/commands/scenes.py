@@ -9,15 +9,20 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-import cv2
 import numpy as np
 from tqdm import tqdm
 
-from spacedg.commands import _args
-from spacedg.commands.sizes import image_side
+from spacedg.commands import _args, _vocabulary
+from spacedg.commands.sizes import image_side, image_size
 from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.files import write_png
 from spacedg.scene.importer import LAYOUTS
 from spacedg.scene.synthetic.room import RoomConfig
+
+#: Image size of a synthetic room's views unless --image-size says otherwise, pixels.
+SYNTH_SIZE = (640, 480)
+#: Range of --num-gaussians (RoomConfig's own check).
+MIN_GAUSSIANS, MAX_GAUSSIANS = 10_000, 5_000_000
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -25,18 +30,23 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     sub = scenes.add_subparsers(dest="scenes_command", required=True, metavar="ACTION")
 
     synth = _args.add_command(sub, "synth", _synth, help="generate procedural indoor rooms into native scene folders")
-    synth.add_argument("--n", type=int, required=True, help="number of rooms")
+    synth.add_argument("--n", type=_args.whole(1), required=True, help="number of rooms")
     synth.add_argument("--out", type=Path, required=True, help="folder that receives one sub-folder per room")
-    synth.add_argument("--seed", type=int, default=0, help="seed of the first room; room i uses seed + i (default 0)")
-    synth.add_argument("--gaussians", type=int, default=None, help="target Gaussians per room (default: 150k–300k by seed)")
-    synth.add_argument("--min-views", type=int, default=48, help="fewest views per room (default 48)")
-    synth.add_argument("--max-views", type=int, default=120, help="most views per room, >= --min-views (default 120)")
-    synth.add_argument("--width", type=image_side, default=640, help="image width of the views, pixels")
-    synth.add_argument("--height", type=image_side, default=480, help="image height of the views, pixels")
+    synth.add_argument("--seed", type=_args.SEED, default=0, help="seed of the first room; room i uses seed + i (default 0)")
+    synth.add_argument("--num-gaussians", type=_args.whole(MIN_GAUSSIANS, MAX_GAUSSIANS), default=None, metavar="N",
+                       help="target Gaussians per room (default: 150k–300k by seed)")
+    synth.add_argument("--min-views", type=_args.whole(1), default=48, help="fewest views per room (default 48)")
+    synth.add_argument("--max-views", type=_args.whole(1), default=120, help="most views per room, >= --min-views (default 120)")
+    synth.add_argument("--image-size", type=image_size, default=None, metavar="WxH",
+                       help=f"image size of the views, pixels (default {SYNTH_SIZE[0]}x{SYNTH_SIZE[1]})")
     synth.add_argument("--splat", type=Path, action="append", default=[],
                        help="a .splat object to place in every room (repeatable; label and up axis from its meta.json)")
-    synth.add_argument("--splat-size", type=float, default=0.35, help="longest side of placed .splat objects, metres")
+    synth.add_argument("--splat-size", type=_args.real(0, above=True, unit="metres"), default=0.35,
+                       help="longest side of placed .splat objects, metres")
     synth.add_argument("--overwrite", action="store_true", help="regenerate rooms whose folder already exists")
+    _vocabulary.add_deprecated(synth, "scenes synth", **{
+        "--width": dict(dest="width", type=image_side, metavar="W"), "--height": dict(dest="height", type=image_side, metavar="H"),
+    })
 
     imp = _args.add_command(
         sub, "import", _import, help="turn a real capture (INRIA / COLMAP / nerfstudio / ScanNet++ + boxes) into a native scene folder",
@@ -53,8 +63,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     imp.add_argument("--format", default="auto", choices=LAYOUTS, help="layout of SRC (default: detect)")
     imp.add_argument("--name", default=None, help="scene id (default: the folder or file name)")
     imp.add_argument("--up", default="auto", help="world up in the files' frame: auto (default), +z, -y, ... or x,y,z")
-    imp.add_argument("--metres-per-unit", type=float, default=1.0, help="metres per file unit, applied to every part (default 1)")
-    imp.add_argument("--gaussians", type=Path, default=None, help="Gaussians file (overrides what the layout picks)")
+    imp.add_argument("--metres-per-unit", type=_args.real(0, above=True, unit="metres"), default=1.0,
+                     help="metres per file unit, applied to every part (default 1)")
+    imp.add_argument("--gaussians-file", type=Path, default=None, metavar="PATH",
+                     help="Gaussians file, .ply/.splat/.spz (overrides what the layout picks)")
     imp.add_argument("--cameras", type=Path, default=None, help="COLMAP model folder, transforms.json or INRIA cameras.json")
     imp.add_argument("--dataparser-transforms", type=Path, default=None,
                      help="splatfacto's dataparser_transforms.json (found next to the ply when not given)")
@@ -63,12 +75,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     imp.add_argument("--masks", type=Path, default=None, help="folder of Holi-Spatial masks <image stem>/<label>.png")
     imp.add_argument("--assign", default="auto", choices=("auto", "boxes", "masks", "none"),
                      help="instance ids when the Gaussians carry none (default auto = boxes; masks votes with Holi-Spatial masks)")
-    imp.add_argument("--device", default="dslr", choices=("dslr", "iphone"), help="ScanNet++ cameras (default dslr)")
+    imp.add_argument("--scannetpp-camera", default="dslr", choices=("dslr", "iphone"),
+                     help="which ScanNet++ capture's cameras to read: dslr (default) or iphone")
     imp.add_argument("--embodiedscan-scene", default=None, help="scan to take from a multi-scan EmbodiedScan JSON")
     imp.add_argument("--drop-distortion", action="store_true", help="render distorted OPENCV cameras as ideal pinholes")
     imp.add_argument("--allow-frame-mismatch", action="store_true", help="write the scene even if the frame check fails")
     imp.add_argument("--overwrite", action="store_true", help="replace an existing scene folder")
     imp.add_argument("--json", action="store_true", help="print the report as JSON")
+    _vocabulary.add_deprecated(imp, "scenes import")
 
     info = _args.add_command(sub, "info", _info, help="counts, bounds and instances per label of scenes")
     info.add_argument("paths", type=Path, nargs="+", help="native scene folders, or folders of them")
@@ -77,7 +91,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     preview = _args.add_command(sub, "preview", _preview, help="draw top-down floor plans of scenes into one PNG")
     preview.add_argument("paths", type=Path, nargs="+", help="native scene folders, or folders of them")
     preview.add_argument("--out", type=Path, required=True, help="PNG file to write")
-    preview.add_argument("--columns", type=int, default=2, help="floor plans per row (default 2)")
+    preview.add_argument("--columns", type=_args.whole(1, 64, "floor plans per row"), default=2, help="floor plans per row (default 2)")
 
 
 def _scene_dirs(paths: list[Path]) -> list[Path]:
@@ -91,11 +105,11 @@ def _synth(args: argparse.Namespace) -> int:
     from spacedg.scene.io import load_scene, save_scene
     from spacedg.scene.synthetic import CaptureConfig, ExternalObject, generate_room
 
-    _check_synth(args)
+    width, height = _check_synth(args)
     externals = tuple(ExternalObject.from_splat(p, size_m=args.splat_size) for p in args.splat)
     config = RoomConfig(
-        gaussians=args.gaussians,
-        capture=CaptureConfig(args.width, args.height, args.min_views, args.max_views),
+        gaussians=args.num_gaussians,
+        capture=CaptureConfig(width, height, args.min_views, args.max_views),
         external=externals,
     )
     args.out.mkdir(parents=True, exist_ok=True)
@@ -128,23 +142,18 @@ def _synth(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_synth(args: argparse.Namespace) -> None:
-    """Every flag of ``scenes synth``, before any room is generated."""
-    _args.at_least("--n", args.n, 1)
-    _args.seed("--seed", args.seed)
+def _check_synth(args: argparse.Namespace) -> tuple[int, int]:
+    """The flags of ``scenes synth`` that argparse cannot check alone, before any room is
+    generated; returns the views' ``(width, height)``, pixels."""
     _args.seed("--seed + --n - 1 (the last room's seed)", args.seed + args.n - 1)
-    RoomConfig(gaussians=args.gaussians)  # its own range check ("gaussians must be in [10000, 5000000]")
-    _args.at_least("--min-views", args.min_views, 1)
-    _args.at_least("--max-views", args.max_views, 1)
     if args.min_views > args.max_views:
         raise ParameterError(
             f"--min-views {args.min_views} is more than --max-views {args.max_views}; each room takes between the two: "
             "pass --min-views <= --max-views"
         )
-    _args.in_range("--width", args.width, 8, 16384, "pixels")
-    _args.in_range("--height", args.height, 8, 16384, "pixels")
-    _args.positive_number("--splat-size", args.splat_size)
+    size = _args.image_size_of(args, SYNTH_SIZE)
     _args.output_folder("--out", args.out)
+    return size if size is not None else SYNTH_SIZE
 
 
 def _config_record(config: RoomConfig) -> dict:
@@ -172,9 +181,9 @@ def _import(args: argparse.Namespace) -> int:
 
     _, report = import_scene(
         args.src, args.out, instances=args.instances, format=args.format, name=args.name, up=args.up,
-        metres_per_unit=args.metres_per_unit, gaussians=args.gaussians, cameras=args.cameras,
+        metres_per_unit=args.metres_per_unit, gaussians=args.gaussians_file, cameras=args.cameras,
         dataparser_transforms=args.dataparser_transforms, undo_applied_transform=args.undo_applied_transform,
-        masks=args.masks, assign=args.assign, device=args.device, embodiedscan_scene=args.embodiedscan_scene,
+        masks=args.masks, assign=args.assign, device=args.scannetpp_camera, embodiedscan_scene=args.embodiedscan_scene,
         opencv_distortion="drop" if args.drop_distortion else "error",
         frame_check="warn" if args.allow_frame_mismatch else "error", overwrite=args.overwrite, progress=not args.json,
     )
@@ -226,11 +235,8 @@ def _preview(args: argparse.Namespace) -> int:
     from spacedg.scene.floorplan import contact_sheet, floorplan
     from spacedg.scene.io import load_scene
 
-    _args.in_range("--columns", args.columns, 1, 64, "floor plans per row")
     _args.output_file("--out", args.out, (".png",))
     images = [floorplan(load_scene(folder)) for folder in tqdm(_scene_dirs(args.paths), desc="floor plans", unit="scene")]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(args.out), contact_sheet(images, columns=args.columns)[:, :, ::-1]):
-        raise InvalidDataError(f"{args.out}: could not write the PNG")
+    write_png(args.out, contact_sheet(images, columns=args.columns), "--out")
     print(f"wrote {args.out} ({len(images)} floor plan(s))")
     return 0

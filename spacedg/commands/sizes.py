@@ -1,9 +1,9 @@
 """argparse types for image sizes: one rule (:mod:`spacedg.limits`) and one message for every command.
 
-``--width`` / ``--height`` (``render``, ``scenes synth``), ``--image-size WxH`` (``export``,
-``predict``) and ``--min-pixels`` / ``--max-pixels`` (``predict``) parse with these, so a size
-over the policy is a usage error (exit 2) that says what the limit is and why, before any
-scene is read.
+``--image-size WxH`` (``render``, ``scenes synth``, ``export``, ``predict``), the deprecated
+``--width`` / ``--height`` (``render``, ``scenes synth``) and ``--min-pixels`` / ``--max-pixels``
+(``predict``) parse with these, so a size over the policy is a usage error (exit 2) that says what
+the limit is and why, before any scene is read.
 """
 
 from __future__ import annotations

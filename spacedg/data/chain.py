@@ -9,9 +9,16 @@ name of a mixture recipe (``"night_capture"``, no preset)::
     "night_capture"                   a mixture: low_light at the default preset, motion_blur and
                                       low_res at the mixture preset (severity "2")
 
-In Python an item may also be a mapping ``{"name", "preset", "params"}`` (explicit parameters; the
-others are sampled from the preset), a :class:`DegradationChoice`, ``(name, params)`` or
-``(name, preset)``, and a chain a list of items.
+An item may carry explicit parameters (the others are sampled from the preset): in Python a
+mapping ``{"name", "preset", "params"}``, a :class:`DegradationChoice`, ``(name, params)`` or
+``(name, preset)``; as text ``name(key=value, …)`` or ``name:preset(key=value, …)``
+(``"haze:bench(density=3.5)"``; values as Python writes numbers, ``repr``, so they read back
+exactly). A chain is one item, ``+``-joined items, or a list of these. Every chain has exactly
+one canonical text (:attr:`Chain.text`) and ``Chain.parse(chain.text) == chain`` for every chain.
+
+A :class:`Chain` is a frozen, hashable, picklable value: it is what travels from the dataset to
+DataLoader workers and the pipeline. Text is for display and the command line only; nothing
+downstream parses it again.
 
 What a chain is used for, each in exactly one place:
 
@@ -24,7 +31,8 @@ What a chain is used for, each in exactly one place:
 - :meth:`Chain.resolve` draws concrete parameters from a seed, in the physical order
   (raster → linear → display, then each stage's ``order``), as :class:`ResolvedDegradation` objects;
 - :meth:`Chain.provenance` is what a sample records: ``[{name, params, seed, preset}, …]``, which
-  reproduces its bytes.
+  reproduces its bytes (:meth:`ResolvedDegradation.from_provenance` reads an entry back;
+  :func:`spacedg.data.pipeline.replay` renders it).
 
 Seeds: each degradation of a chain draws its parameters from ``derive_seed(sample_seed, name)``, so
 one degradation draws the same parameters in every chain of a sample.
@@ -40,7 +48,9 @@ anything. :meth:`Chain.scales_with_depth` says whether a chain needs D.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+import numbers
+import re
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -59,9 +69,11 @@ __all__ = [
     "Chain",
     "DegradationChoice",
     "Mixture",
+    "Params",
     "ResolvedDegradation",
     "parse_chain",
     "resolve_chain",
+    "split_chains",
 ]
 
 #: ``degradation_type`` of a clean sample (the VLMEvalKit / SpaceDG convention).
@@ -97,30 +109,106 @@ MIXTURES: Mapping[str, Mixture] = {
 }
 
 
+#: What a degradation name, a preset name and a parameter key look like in a chain.
+_TOKEN = r"[A-Za-z0-9_][A-Za-z0-9_.-]*"
+_TOKEN_RE = re.compile(_TOKEN)
+
+
+class Params(Mapping[str, "int | float"]):
+    """Explicit parameter values of a chain item: a read-only, hashable, picklable mapping
+    ``name → int | float`` (insertion order kept for display; equal to a ``dict`` with the same items)."""
+
+    __slots__ = ("_items",)
+
+    def __init__(self, values: Mapping[str, Any]) -> None:
+        if not isinstance(values, Mapping):
+            raise ParameterError(f"a degradation's params must be a mapping name → number, got {type(values).__name__}: {values!r}")
+        self._items = tuple((_param_key(k), _param_value(k, v)) for k, v in values.items())
+
+    def __getitem__(self, key: str) -> int | float:
+        for name, value in self._items:
+            if name == key:
+                return value
+        raise KeyError(key)
+
+    def __iter__(self) -> Iterator[str]:
+        return (name for name, _ in self._items)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __hash__(self) -> int:
+        return hash(frozenset(self._items))
+
+    def __repr__(self) -> str:
+        return f"Params({dict(self._items)!r})"
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return Params, (dict(self._items),)
+
+    def text(self) -> str:
+        """``key=value, …`` with each value's ``repr`` (reads back exactly)."""
+        return ", ".join(f"{k}={v!r}" for k, v in self._items)
+
+
+def _param_key(key: object) -> str:
+    if not isinstance(key, str) or not _TOKEN_RE.fullmatch(key):
+        raise ParameterError(f"a degradation parameter name must be a name such as 'density', got {key!r}")
+    return key
+
+
+def _param_value(key: str, value: object) -> int | float:
+    """``value`` as a plain ``int`` or finite ``float`` (numpy numbers too; bools refused)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ParameterError(f"degradation parameter {key!r} must be a finite number, got {value!r}")
+    number: int | float = int(value) if isinstance(value, numbers.Integral) else float(value)
+    if not math.isfinite(number):
+        raise ParameterError(f"degradation parameter {key!r} must be a finite number, got {value!r}")
+    return number
+
+
 @dataclass(frozen=True)
 class DegradationChoice:
-    """One item of a chain as a user asks for it.
+    """One item of a chain as a user asks for it (frozen, hashable, picklable).
 
     Attributes:
         name: a registered degradation name, or (before :meth:`Chain.choices`) a mixture name.
         preset: preset to sample parameters from (``None`` = the chain's default preset).
-        params: explicit parameter values; parameters not given are sampled from the preset.
+        params: explicit parameter values (:class:`Params`, ``None`` for none); parameters not
+            given are sampled from the preset. A mixture takes neither a preset nor params.
     """
 
     name: str
     preset: str | None = None
     params: Mapping[str, float] | None = None
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not _TOKEN_RE.fullmatch(self.name):
+            raise ParameterError(f"a degradation name must be a name such as 'haze' or 'night_capture', got {self.name!r}")
+        preset = self.preset
+        if isinstance(preset, int) and not isinstance(preset, bool):
+            preset = str(preset)
+        if preset is not None and (not isinstance(preset, str) or not _TOKEN_RE.fullmatch(preset)):
+            raise ParameterError(f"degradation {self.name!r}: a preset must be a name such as 'bench' or '3', got {self.preset!r}")
+        params = None if self.params is None or len(self.params) == 0 else Params(self.params)  # type: ignore[arg-type]
+        object.__setattr__(self, "preset", preset)
+        object.__setattr__(self, "params", params)
+        if self.name in MIXTURES and (preset is not None or params is not None):
+            raise ParameterError(
+                f"mixture {self.name!r} takes no preset or params ({self.text()!r}); its primary uses the default preset "
+                "and the others the mixture preset"
+            )
+
     @property
     def is_mixture(self) -> bool:
         return self.name in MIXTURES
 
     def text(self) -> str:
-        """``name`` or ``name:preset``; explicit parameters are shown as ``name(key=value, …)``
-        (display only: text cannot carry parameters)."""
+        """``name``, ``name:preset``, and explicit parameters as ``name:preset(key=value, …)``
+        (``Chain.parse`` reads it back to an equal item)."""
         out = self.name if self.preset is None else f"{self.name}:{self.preset}"
         if self.params:
-            out += "(" + ", ".join(f"{k}={v}" for k, v in self.params.items()) + ")"
+            out += f"({self.params.text()})" if isinstance(self.params, Params) else f"({Params(self.params).text()})"
         return out
 
 
@@ -154,8 +242,51 @@ class ResolvedDegradation:
             out["scene_depth_m"] = self.scene_depth
         return out
 
+    @classmethod
+    def from_provenance(cls, entry: Mapping[str, Any]) -> ResolvedDegradation:
+        """The degradation one provenance entry (:meth:`provenance`) records: its name, every
+        parameter, its seed, preset and scene depth, checked; applying it gives the same bytes."""
+        if not isinstance(entry, Mapping) or not {"name", "params", "seed"} <= set(entry) or set(entry) - _PROVENANCE_KEYS:
+            raise ParameterError(
+                f"a provenance entry is a mapping with 'name', 'params', 'seed' (and optionally 'preset', 'scene_depth_m'), "
+                f"got {entry!r}"
+            )
+        spec = _lookup(str(entry["name"]))
+        seed = entry["seed"]
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ParameterError(f"provenance of {spec.name!r}: seed must be an integer >= 0, got {seed!r}")
+        depth = entry.get("scene_depth_m")
+        if depth is not None and not (isinstance(depth, (int, float)) and math.isfinite(depth) and depth > 0):
+            raise ParameterError(f"provenance of {spec.name!r}: scene_depth_m must be a positive number of metres, got {depth!r}")
+        preset = entry.get("preset")
+        return cls(spec, spec.validate_params(entry["params"]), int(seed), None if preset is None else str(preset),
+                   None if depth is None else float(depth))
+
+
+_PROVENANCE_KEYS = frozenset({"name", "params", "seed", "preset", "scene_depth_m"})
+
 
 # ------------------------------------------------------------------ parsing
+_ITEM_RE = re.compile(rf"\s*(?P<name>{_TOKEN})\s*(?::\s*(?P<preset>{_TOKEN})?\s*)?(?:\((?P<params>[^()]*)\)\s*)?")
+_INT_RE = re.compile(r"[+-]?\d+")
+
+
+def split_chains(text: str, sep: str = ",") -> list[str]:
+    """``text`` split at ``sep`` outside parentheses (``"haze(a=1, b=2),low_res"`` → two chains):
+    how a comma-separated list of chains on the command line is read."""
+    parts, depth, start = [], 0, 0
+    for i, char in enumerate(text):
+        depth += (char == "(") - (char == ")")
+        if depth < 0:
+            break
+        if char == sep and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    if depth != 0:
+        raise ParameterError(f"unbalanced parentheses in degradation chain(s) {text!r}")
+    return [*parts, text[start:]]
+
+
 def _item_from_mapping(item: Mapping[str, Any]) -> DegradationChoice:
     unknown = sorted(set(item) - {"name", "preset", "params"})
     if unknown or "name" not in item:
@@ -163,18 +294,31 @@ def _item_from_mapping(item: Mapping[str, Any]) -> DegradationChoice:
             f"a degradation given as a mapping needs 'name' and may have 'preset' and 'params'; got keys {sorted(item)}"
         )
     preset = item.get("preset")
-    return DegradationChoice(str(item["name"]), None if preset is None else str(preset), item.get("params"))
+    return DegradationChoice(item["name"], None if preset is None else str(preset), item.get("params"))
+
+
+def _params_from_text(text: str, item: str) -> dict[str, int | float]:
+    out: dict[str, int | float] = {}
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        key, eq, value = (x.strip() for x in part.partition("="))
+        if not eq or key in out:
+            raise ParameterError(f"degradation {item!r}: parameters are written key=value, each once (e.g. 'haze(density=3.5)'), got {part!r}")
+        try:
+            out[key] = int(value) if _INT_RE.fullmatch(value) else float(value)
+        except ValueError:
+            raise ParameterError(f"degradation {item!r}: parameter {key!r} must be a number, got {value!r}") from None
+    return out
 
 
 def _item_from_text(text: str) -> DegradationChoice:
-    name, _, preset = text.strip().partition(":")
-    name, preset = name.strip(), preset.strip()
-    if name in MIXTURES and preset:
+    match = _ITEM_RE.fullmatch(text)
+    if match is None:
         raise ParameterError(
-            f"mixture {name!r} takes no preset ({text.strip()!r}); its primary uses the default preset and the others "
-            "the mixture preset"
+            f"cannot read a degradation from {text.strip()!r}: write name, name:preset or name:preset(key=value, …), "
+            "e.g. 'haze', 'haze:3', 'haze:bench(density=3.5)'"
         )
-    return DegradationChoice(name, preset or None)
+    params = match["params"]
+    return DegradationChoice(match["name"], match["preset"], None if params is None else _params_from_text(params, text.strip()))
 
 
 def _items(value: Any) -> tuple[DegradationChoice, ...]:
@@ -185,7 +329,7 @@ def _items(value: Any) -> tuple[DegradationChoice, ...]:
     if isinstance(value, str):
         if value.strip() in ("", "clean"):
             return ()
-        return tuple(_item_from_text(part) for part in value.split("+"))
+        return tuple(_item_from_text(part) for part in split_chains(value, "+"))
     if isinstance(value, DegradationChoice):
         return (value,)
     if isinstance(value, Mapping):
@@ -193,7 +337,7 @@ def _items(value: Any) -> tuple[DegradationChoice, ...]:
     if isinstance(value, tuple) and len(value) == 2 and isinstance(value[0], str) and isinstance(value[1], (Mapping, str, int)):
         name, extra = value
         return (DegradationChoice(name, params=extra) if isinstance(extra, Mapping) else DegradationChoice(name, str(extra)),)
-    if isinstance(value, Iterable):
+    if isinstance(value, Iterable) and not isinstance(value, (bytes, bytearray)):
         return tuple(item for part in value for item in _items(part))
     raise ParameterError(
         f"cannot read a degradation from {value!r}; give a name ('haze', 'haze:3'), a mixture "
@@ -226,6 +370,12 @@ class Chain:
     """
 
     items: tuple[DegradationChoice, ...] = ()
+
+    def __post_init__(self) -> None:
+        items = tuple(self.items)
+        if not all(isinstance(item, DegradationChoice) for item in items):
+            raise ParameterError(f"Chain(items) takes DegradationChoice objects (use Chain.parse for other forms), got {self.items!r}")
+        object.__setattr__(self, "items", items)
 
     @classmethod
     def parse(cls, value: Any) -> Chain:
@@ -304,7 +454,7 @@ class Chain:
             scaled = scene_depth is not None and _reads_depth(spec, preset, choice)
             params = spec.sample_params(preset, np.random.default_rng(deg_seed), scene_depth if scaled else None)
             if choice.params:
-                params.update(spec.validate_params(choice.params, partial=True))
+                params.update(spec.validate_params(dict(choice.params), partial=True))
                 if set(choice.params) == set(spec.param_map):
                     preset = None  # every value explicit: no preset involved
             depth = float(scene_depth) if scaled else None  # type: ignore[arg-type]

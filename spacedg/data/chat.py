@@ -21,7 +21,9 @@ from typing import Any
 
 import numpy as np
 
+from spacedg._checks import check_bool, check_int, short_repr
 from spacedg.data.public_format import format_question, public_fields
+from spacedg.errors import ParameterError
 
 __all__ = ["ANSWER_FORMATS", "ANSWER_PROMPT", "format_question", "chat_messages", "item_images", "chat_collate"]
 
@@ -44,6 +46,12 @@ def chat_messages(question: str, n_images: int, *, system: str = ANSWER_PROMPT, 
     """A system turn, a user turn (``n_images`` image entries, then ``question``) and, when
     ``answer`` is given, the assistant turn: the one conversation layout of prediction,
     evaluation during training, and training samples."""
+    if not isinstance(question, str):
+        raise ParameterError(f"chat_messages: question must be a string, got {short_repr(question)}")
+    check_int(n_images, "chat_messages: n_images", minimum=0)
+    for name, value in (("system", system), ("answer", answer)):
+        if value is not None and not isinstance(value, str):
+            raise ParameterError(f"chat_messages: {name} must be a string, got {short_repr(value)}")
     user: list[dict[str, Any]] = [{"type": "image"} for _ in range(n_images)]
     user.append({"type": "text", "text": question})
     messages = [{"role": "system", "content": [{"type": "text", "text": system}]}, {"role": "user", "content": user}]
@@ -68,6 +76,11 @@ def chat_collate(batch: Sequence[dict[str, Any]], *, system_prompt: str | None =
     with one ``{"type": "image"}`` entry per view followed by the question (options included),
     and with ``with_answer`` the assistant turn ``<answer>…</answer>``.
     """
+    if isinstance(batch, dict) or not isinstance(batch, Sequence) or not all(isinstance(item, dict) for item in batch):
+        raise ParameterError(f"chat_collate: batch must be a list of dataset items (dicts), got {short_repr(batch)}")
+    check_bool(with_answer, "chat_collate: with_answer")
+    if system_prompt is not None and not isinstance(system_prompt, str):
+        raise ParameterError(f"chat_collate: system_prompt must be a string or None, got {short_repr(system_prompt)}")
     prompt = ANSWER_PROMPT if system_prompt is None else system_prompt
     messages, images, answers = [], [], []
     for item in batch:

@@ -8,8 +8,8 @@ renders them.
   rooms (:func:`~spacedg.scene.store.builtin_scene_dirs`, generated on first use). Each
   scene goes to one split (:func:`~spacedg.scene.store.assign_splits`), so ``train``,
   ``val`` and ``bench`` never share a scene.
-- **Questions**: each scene's question index (:mod:`spacedg.data.qa_index`), built on first use
-  in a *spawned* process; optionally restricted to ``question_types``.
+- **Questions**: each scene's question index (:mod:`spacedg.qa.build`, :mod:`spacedg.qa.index`), built on first use
+  in a *spawned* process; optionally restricted to ``families``.
 - **Degradations**:
   - ``train`` / ``val``: one item per question. The item is clean with probability
     ``clean_prob``, otherwise one chain drawn uniformly from ``degradations``. Names without a
@@ -19,8 +19,13 @@ renders them.
   - ``bench``: every question under clean and under each chain of ``degradations`` (default:
     the paper's nine at ``bench``), i.e. ``questions × 10`` items.
   - ``degradations`` also accepts ``"all"`` (every registered degradation, third-party
-    included), mixture recipes (``"night_capture"``), presets (``"haze:3"``) and chains
-    (``"haze+low_res"``).
+    included), mixture recipes (``"night_capture"``), presets (``"haze:3"``), chains
+    (``"haze+low_res"``) and mappings with explicit parameters (``{"name": "haze", "params":
+    {"density": 3.5}}``).
+- **Plans**: :meth:`SpaceDGDataset.plan` decides an item once (record, frozen
+  :class:`~spacedg.data.chain.Chain`, sample seed: an :class:`~spacedg.data.pipeline.ItemPlan`) and
+  the pipeline renders that object (:func:`~spacedg.data.pipeline.degrade_plan`); the chain is never
+  turned into text and parsed again on the way.
 - **Item**: a dict with ``images`` (uint8 tensor ``V×3×H×W``, RGB), ``question``, ``options``,
   ``answer``, ``question_type``, ``sub_question_type``, ``task_group``, ``answer_type``,
   ``degradation`` (provenance list), ``degradation_type`` (``"ori"`` for clean, else the chain's
@@ -39,7 +44,7 @@ renders them.
   loads) and degrades on the GPU in the process that owns it. DataLoader workers must not touch
   CUDA (a forked child cannot, and one CUDA context per worker wastes memory), so ``__getitem__``
   in a worker refuses with the fix: either ``num_workers=0``, or ``defer_render=True`` — workers
-  then return items without ``images`` (planning, question text, provenance) and the main process
+  then return items without ``images`` (question text and the item's ``plan``) and the main process
   renders each batch with :meth:`render_batch` (``collate_fn=list`` keeps the items as dicts).
 - **Bench split**: ``severity`` does not apply (the protocol is the ``bench`` preset); use
   ``degradations=["haze:3", ...]`` for other levels. With several workers, batch sizes that
@@ -53,7 +58,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -61,18 +66,33 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from spacedg.data.chain import BENCH_DEGRADATIONS, SEVERITIES, Chain
+from spacedg._checks import (
+    check_bool,
+    check_choice,
+    check_fractions,
+    check_image_size,
+    check_int,
+    check_names,
+    check_number,
+    short_repr,
+)
+from spacedg.data.chain import BENCH_DEGRADATIONS, SEVERITIES, Chain, DegradationChoice
 from spacedg.data.pipeline import (
+    ItemPlan,
     PipelineOptions,
-    degrade,
+    degrade_plan,
     frames_nbytes,
     sample_scene_depth,
 )
-from spacedg.data.qa_index import QABuildConfig, ensure_indexes, index_paths, read_index
+from spacedg.qa.build import ensure_indexes
+from spacedg.qa.index import QABuildConfig, index_paths, read_index
 from spacedg.data.workers import loader_plan
+from spacedg.devices import resolve_device
 from spacedg.errors import InvalidDataError, ParameterError
+from spacedg.limits import check_image_size as check_size_limit
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.registry import get_question_family, list_degradations
+from spacedg.render.renderer import BACKENDS
 from spacedg.scene.io import load_scene
 from spacedg.scene.store import (
     SPLITS,
@@ -83,20 +103,28 @@ from spacedg.scene.store import (
 )
 from spacedg.seeding import derive_seed
 
-__all__ = ["SpaceDGDataset"]
+__all__ = ["ItemPlan", "SpaceDGDataset"]
 
 _SEVERITIES = (*SEVERITIES, "random")
+_WHERE = "SpaceDGDataset"
 
 
 class SpaceDGDataset(Dataset):
     """Online degraded SpaceDG samples (see the module docstring).
 
+    Every argument is checked at the call: a bad one raises a
+    :class:`~spacedg.errors.ParameterError` (an unknown degradation or family an
+    :class:`~spacedg.errors.UnknownPluginError`) naming it, before any scene is read.
+
     Args:
         split: ``"train"``, ``"val"`` or ``"bench"``.
-        degradations: chains (names, ``name:preset``, mixtures, ``a+b``), or ``"all"``; ``None``
-            means the nine paper degradations for ``bench`` and clean only for ``train``/``val``.
-        scenes: scene folders (or folders of them); default: the built-in rooms.
-        question_types: keep only these families (default: all).
+        degradations: one chain or a list of chains, each any form :class:`~spacedg.data.chain.Chain`
+            reads (names, ``name:preset``, mixtures, ``a+b``, ``{"name", "preset", "params"}`` mappings,
+            ``Chain`` objects), or ``"all"``; ``None`` means the nine paper degradations for ``bench``
+            and clean only for ``train``/``val``.
+        scenes: a scene folder or a list of them (or of folders of them); default: the built-in rooms.
+        families: keep only these question families (default: all).
+        question_types: the old name of ``families`` (deprecated; kept for one release).
         severity: preset for chains named without one: ``"bench"``, ``"1"``–``"5"`` or ``"random"``.
         clean_prob: probability of a clean item in ``train``/``val`` (ignored by ``bench``).
         image_size: ``(width, height)`` to render at, or ``None`` for the views' own size.
@@ -106,7 +134,7 @@ class SpaceDGDataset(Dataset):
         qa_config: how the question indexes are built (default: ``QABuildConfig()``, seed 0:
             each scene's full index ``<scene id>.qa.jsonl``, shared by every dataset over the
             same folders; a config naming ``families`` reads that selection's own index file,
-            :func:`~spacedg.data.qa_index.index_paths`).
+            :func:`~spacedg.qa.index.index_paths`).
         split_fractions: ``(val, bench)`` share of scenes; ``(0, 1)`` puts every scene (even one) in
             ``bench`` (see :func:`~spacedg.scene.store.assign_splits`).
         split_seed: seed of the scene → split assignment (kept apart from ``seed`` so that
@@ -114,9 +142,10 @@ class SpaceDGDataset(Dataset):
         on_bad_scene: ``"raise"`` (default) or ``"skip"`` a scene that cannot be read or indexed
             (skipped scenes are named in a warning and in :attr:`skipped`).
         backend, device: renderer backend (``"auto"``, ``"cpu"``, ``"torch"``, ``"gsplat"``) and torch
-            device; a non-CPU device renders and degrades there, in the main process only (module docstring).
-        defer_render: items come without ``images``, ``degradation`` and ``stats``; :meth:`render_batch` renders
-            them, in the process that owns the GPU.
+            device (:func:`spacedg.devices.resolve_device`); a non-CPU device renders and degrades
+            there, in the main process only (module docstring).
+        defer_render: items come without ``images``, ``degradation`` and ``stats`` but with their ``plan``
+            (:class:`~spacedg.data.pipeline.ItemPlan`); :meth:`render_batch` renders them, in the process that owns the GPU.
         builtin_rooms: how many built-in rooms when ``scenes`` is not given.
         max_questions: keep at most this many questions, spread over question types
             round-robin in a seeded order (a small bench or a quick run); ``None`` keeps all.
@@ -133,7 +162,8 @@ class SpaceDGDataset(Dataset):
         split: str = "train",
         degradations: Any = None,
         *,
-        scenes: Sequence[str | os.PathLike[str]] | None = None,
+        scenes: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | None = None,
+        families: Sequence[str] | None = None,
         question_types: Sequence[str] | None = None,
         severity: str = "bench",
         clean_prob: float = 0.1,
@@ -152,33 +182,53 @@ class SpaceDGDataset(Dataset):
         workers: int | None = None,
         render_threads: int | None = None,
     ) -> None:
-        if split not in SPLITS:
-            raise ParameterError(f"SpaceDGDataset: split must be one of {list(SPLITS)}, got {split!r}")
-        if severity not in _SEVERITIES:
-            raise ParameterError(f"SpaceDGDataset: severity must be one of {list(_SEVERITIES)}, got {severity!r}")
-        if isinstance(clean_prob, bool) or not isinstance(clean_prob, (int, float)) or not 0.0 <= float(clean_prob) <= 1.0:
-            raise ParameterError(f"SpaceDGDataset: clean_prob must be in [0, 1], got {clean_prob!r}")
-        if on_bad_scene not in ("raise", "skip"):
-            raise ParameterError(f"SpaceDGDataset: on_bad_scene must be 'raise' or 'skip', got {on_bad_scene!r}")
-        self.split, self.severity, self.clean_prob, self.seed = split, severity, float(clean_prob), int(seed)
-        plan = loader_plan(workers=workers, render_threads=render_threads)
+        self.split = check_choice(split, f"{_WHERE}: split", SPLITS)
+        self.severity = check_choice(severity, f"{_WHERE}: severity", _SEVERITIES)
+        self.clean_prob = check_number(clean_prob, f"{_WHERE}: clean_prob", low=0.0, high=1.0)
+        self.seed = check_int(seed, f"{_WHERE}: seed")
+        check_choice(on_bad_scene, f"{_WHERE}: on_bad_scene", ("raise", "skip"))
+        fractions = check_fractions(split_fractions, f"{_WHERE}: split_fractions")
+        split_seed = check_int(split_seed, f"{_WHERE}: split_seed")
+        wanted = _families(families, question_types)
+        if max_questions is not None:
+            max_questions = check_int(max_questions, f"{_WHERE}: max_questions", minimum=1)
+        self._cache_bytes = check_int(cache, f"{_WHERE}: cache (bytes)", minimum=0)
+        self.defer_render = check_bool(defer_render, f"{_WHERE}: defer_render")
+        if qa_config is not None and not isinstance(qa_config, QABuildConfig):
+            raise ParameterError(f"{_WHERE}: qa_config must be a QABuildConfig or None, got {short_repr(qa_config)}")
+        self.qa_config = qa_config or QABuildConfig()
+        resolve_device(device, f"{_WHERE}: device")  # malformed, CUDA without CUDA, a missing index: now
+        size = check_image_size(image_size, f"{_WHERE}: image_size")
+        if size is not None:
+            check_size_limit(*size, f"{_WHERE}: image_size", "render smaller", ParameterError)
+        self.options = PipelineOptions(image_size=size, backend=check_choice(backend, f"{_WHERE}: backend", BACKENDS), device=device)
+        plan = loader_plan(workers=_optional_count(workers, "workers", 0), render_threads=_optional_count(render_threads, "render_threads", 1))
         #: DataLoader workers suggested for this dataset and numba threads per worker (see spacedg.data.workers).
         self.workers, self.render_threads = plan.workers, plan.render_threads
         self._threads_given = render_threads is not None
         self._threads_set = False
-        self.options = PipelineOptions(image_size=tuple(image_size) if image_size else None, backend=backend, device=device)
-        self.defer_render = bool(defer_render)
         self._on_device = device is not None and str(device) != "cpu" and not str(device).startswith("cpu:")
-        self.chains = self._chains(degradations)
-        self.qa_config = qa_config or QABuildConfig()
-        dirs = scene_dirs_of(scenes) if scenes is not None else builtin_scene_dirs(builtin_rooms)
+        #: The chains of this dataset (frozen :class:`~spacedg.data.chain.Chain` objects, severity applied).
+        self.chains: list[Chain] = self._chains(degradations)
+        dirs = _scene_dirs(scenes, builtin_rooms)
+        self._load(dirs, on_bad_scene, fractions, split_seed, wanted)
+        if max_questions is not None:
+            self.records = _spread_subset(self.records, max_questions, derive_seed(split_seed, "subset", self.split))
+        # shared memory: set_epoch() in the main process reaches persistent DataLoader workers
+        self._epoch = torch.zeros((), dtype=torch.int64).share_memory_()
+        self._scenes: ByteLRU | None = None  # created lazily in each worker
+
+    # ------------------------------------------------------------ construction
+    def _load(self, dirs: list[Path], on_bad_scene: str, fractions: tuple[float, float], split_seed: int,
+              wanted: set[str] | None) -> None:
+        """Build missing question indexes, assign scenes to splits and keep this split's records."""
         self.skipped: dict[str, str] = {}
         failed = ensure_indexes(dirs, self.qa_config)
         if failed:
             listing = "; ".join(f"{d}: {e}" for d, e in failed.items())
             if on_bad_scene == "raise":
                 raise InvalidDataError(f"{len(failed)} scene(s) cannot be used: {listing}. Fix or remove them, or pass on_bad_scene='skip'")
-            warnings.warn(f"SpaceDGDataset: skipping {len(failed)} scene(s): {listing}", stacklevel=2)
+            warnings.warn(f"SpaceDGDataset: skipping {len(failed)} scene(s): {listing}", stacklevel=3)
             self.skipped = dict(failed)
         all_dirs = list(dirs)
         dirs = [d for d in dirs if str(d) not in failed]
@@ -186,31 +236,28 @@ class SpaceDGDataset(Dataset):
         ids = {d: recs[0].scene_id if recs else d.name for d, recs in records_by_dir.items()}
         # skipped scenes keep their place in the assignment, so skipping never moves another scene
         every_id = [ids.get(d, d.name) for d in all_dirs]
-        splits = assign_splits(every_id, split_fractions, seed=int(split_seed))
+        splits = assign_splits(every_id, fractions, seed=split_seed)
         self.scene_splits: dict[str, str] = dict(splits)  # every scene id → its split (what went where)
-        self.scene_dirs: dict[str, Path] = {ids[d]: d for d in dirs if splits[ids[d]] == split}
-        wanted = self._question_types(question_types)
+        self.scene_dirs: dict[str, Path] = {ids[d]: d for d in dirs if splits[ids[d]] == self.split}
         self.records: list[QARecord] = [
-            r for d in dirs if splits[ids[d]] == split for r in records_by_dir[d] if wanted is None or r.question_type in wanted
+            r for d in dirs if splits[ids[d]] == self.split for r in records_by_dir[d] if wanted is None or r.question_type in wanted
         ]
-        if max_questions is not None:
-            self.records = _spread_subset(self.records, int(max_questions), derive_seed(int(split_seed), "subset", split))
-        # shared memory: set_epoch() in the main process reaches persistent DataLoader workers
-        self._epoch = torch.zeros((), dtype=torch.int64).share_memory_()
-        self._cache_bytes = int(cache)
-        self._scenes: ByteLRU | None = None  # created lazily in each worker
 
-    # ------------------------------------------------------------ construction
-    def _chains(self, degradations: Any) -> list[str]:
-        """Canonical chain texts; unknown names, presets and repeats fail here, with suggestions."""
+    def _chains(self, degradations: Any) -> list[Chain]:
+        """The dataset's chains, severity applied; unknown names, presets and repeats fail here, with suggestions."""
         if degradations is None:
             items: list[Any] = list(BENCH_DEGRADATIONS) if self.split == "bench" else []
         elif isinstance(degradations, str) and degradations == "all":
             items = [spec.name for spec in list_degradations()]
-        elif isinstance(degradations, (str, Chain)):
-            items = [degradations]
-        else:
+        elif isinstance(degradations, (str, Chain, DegradationChoice, Mapping)):
+            items = [degradations]  # one chain
+        elif isinstance(degradations, (list, tuple)):
             items = list(degradations)
+        else:
+            raise ParameterError(
+                f"{_WHERE}: degradations must be a chain ('haze', 'haze:3+low_res', 'night_capture', "
+                f"{{'name': 'haze', 'params': {{...}}}}), a list of chains, 'all' or None; got {short_repr(degradations)}"
+            )
         random_levels = self.severity == "random" and self.split != "bench"
         chains = []
         for item in items:
@@ -218,20 +265,14 @@ class SpaceDGDataset(Dataset):
             if self.severity != "random":
                 chain = chain.with_severity(self.severity)
             chain.check(SEVERITIES[1:] if random_levels else (None,))
-            chains.append(chain.text)
+            chains.append(chain)
         if len(set(chains)) != len(chains):
-            raise ParameterError(f"SpaceDGDataset: degradations repeat a chain: {chains}")
+            raise ParameterError(f"{_WHERE}: degradations repeat a chain: {[c.text for c in chains]}")
         return chains
 
     def _records(self, folder: Path) -> list[QARecord]:
         jsonl, _ = index_paths(load_scene(folder).id, folder, self.qa_config.families)
         return read_index(jsonl)
-
-    @staticmethod
-    def _question_types(question_types: Sequence[str] | None) -> set[str] | None:
-        if question_types is None:
-            return None
-        return {get_question_family(name).name for name in question_types}  # unknown names fail with suggestions
 
     # ------------------------------------------------------------ indexing
     def __len__(self) -> int:
@@ -244,39 +285,42 @@ class SpaceDGDataset(Dataset):
     def set_epoch(self, epoch: int) -> None:
         """Redraw the train/val degradation choices for ``epoch`` (like ``DistributedSampler.set_epoch``);
         the value lives in shared memory, so persistent DataLoader workers see it too."""
-        self._epoch.fill_(int(epoch))
+        self._epoch.fill_(int(check_number(epoch, f"{_WHERE}.set_epoch: epoch", low=0)))
 
-    def plan(self, index: int) -> tuple[QARecord, str | None, str]:
-        """``(record, chain or None for clean, degradation_type)`` of item ``index`` (no rendering)."""
+    def plan(self, index: int) -> ItemPlan:
+        """What item ``index`` renders (no rendering): its record, its :class:`~spacedg.data.chain.Chain`
+        (empty for a clean item) and its sample seed, as an :class:`~spacedg.data.pipeline.ItemPlan`."""
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
+            raise TypeError(f"SpaceDGDataset indices must be integers, got {type(index).__name__}")
+        index = int(index)
         if not 0 <= index < len(self):
             raise IndexError(f"SpaceDGDataset index {index} out of range [0, {len(self)})")
+        chain = Chain()
         if self.split == "bench":
             record = self.records[index // (len(self.chains) + 1)]
             k = index % (len(self.chains) + 1)
-            chain = None if k == 0 else self.chains[k - 1]
+            if k:
+                chain = self.chains[k - 1]
         else:
             record = self.records[index]
             rng = np.random.default_rng(derive_seed(self.seed, "choice", self.epoch, record.id))
-            chain = None if (not self.chains or rng.random() < self.clean_prob) else self.chains[int(rng.integers(len(self.chains)))]
-            if chain is not None and self.severity == "random":
-                chain = Chain.parse(chain).with_severity(str(int(rng.integers(1, 6)))).text
-        return record, chain, Chain.parse(chain).name
-
-    def _sample_seed(self, record: QARecord, name: str) -> int:
-        return derive_seed(self.seed, "sample", record.id, name, self.epoch if self.split != "bench" else 0)
+            if self.chains and not rng.random() < self.clean_prob:
+                chain = self.chains[int(rng.integers(len(self.chains)))]
+                if self.severity == "random":
+                    chain = chain.with_severity(str(int(rng.integers(1, 6))))
+        seed = derive_seed(self.seed, "sample", record.id, chain.name, self.epoch if self.split != "bench" else 0)
+        return ItemPlan(index, record, chain, seed)
 
     def provenance(self, index: int) -> list[dict[str, Any]]:
         """The degradation provenance item ``index`` records (``[{name, params, seed, preset}, …]``,
         every part of a mixture with its parameters), computed without rendering (a chain whose
         presets scale with the scene reads its Gaussians for the scene depth,
         :func:`~spacedg.data.pipeline.sample_scene_depth`)."""
-
-        record, chain, name = self.plan(index)
-        parsed = Chain.parse(chain)
+        plan = self.plan(index)
         depth = None
-        if parsed.scales_with_depth(self.options.default_preset, self.options.mixture_preset):
-            depth = sample_scene_depth(self._scene(record.scene_id), record.views)
-        return parsed.provenance(self._sample_seed(record, name), self.options.default_preset, self.options.mixture_preset, depth)
+        if plan.chain.scales_with_depth(self.options.default_preset, self.options.mixture_preset):
+            depth = sample_scene_depth(self._scene(plan.record.scene_id), plan.views)
+        return plan.chain.provenance(plan.seed, self.options.default_preset, self.options.mixture_preset, depth)
 
     # ------------------------------------------------------------ items
     def _cache(self) -> ByteLRU:
@@ -304,14 +348,18 @@ class SpaceDGDataset(Dataset):
             set_render_threads(threads)
 
     def __getitem__(self, index: int) -> dict[str, Any]:
+        return self.sample(self.plan(index))
+
+    def sample(self, plan: ItemPlan) -> dict[str, Any]:
+        """The item of ``plan`` (:meth:`plan`): ``dataset[index]`` is ``dataset.sample(dataset.plan(index))``."""
         if not self._threads_set:
             self._set_worker_threads()
-        item = self._item(index)
+        item = self._item(plan)
         if self.defer_render:
-            return item
-        return self._render_item(item)
+            return {**item, "plan": plan}  # the plan travels with the item to render_batch (no second plan())
+        return self._render_item(item, plan)
 
-    def _render_item(self, item: dict[str, Any]) -> dict[str, Any]:
+    def _render_item(self, item: dict[str, Any], plan: ItemPlan) -> dict[str, Any]:
         if self._on_device:
             from torch.utils.data import get_worker_info
 
@@ -321,26 +369,35 @@ class SpaceDGDataset(Dataset):
                     "DataLoader worker processes: use num_workers=0, or SpaceDGDataset(..., defer_render=True) with "
                     "DataLoader(..., collate_fn=list) and render each batch in the main process with dataset.render_batch(batch)"
                 )
-        record, chain, name = self.plan(item["index"])
-        scene = self._scene(record.scene_id)
-        result = degrade(scene, record.views, chain, seed=self._sample_seed(record, name), options=self.options, render_cache=self._cache())
+        scene = self._scene(plan.record.scene_id)
+        result = degrade_plan(scene, plan, self.options, render_cache=self._cache())
         images = torch.from_numpy(np.ascontiguousarray(result.images.transpose(0, 3, 1, 2)))
         return {"images": images, **item, "degradation": result.degradations, "stats": dict(result.stats)}
 
     def render_batch(self, items: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         """Render items returned with ``defer_render=True`` (in this process: the one owning the GPU).
 
-        Items are rendered one after another (a sample's chains share their render); each comes
-        back with ``images``, ``degradation`` (provenance) and ``stats``: the same item
-        ``dataset[index]`` gives without deferral (same epoch).
+        Items are rendered one after another (a sample's chains share their render), each from the
+        :class:`~spacedg.data.pipeline.ItemPlan` it carries (``item["plan"]``, made where the item was
+        planned, e.g. a DataLoader worker); each comes back with ``images``, ``degradation``
+        (provenance) and ``stats`` and without ``plan``: the same item ``dataset[index]`` gives
+        without deferral (same epoch).
         """
-        if isinstance(items, dict):
-            raise ParameterError("render_batch takes a list of items; build the DataLoader with collate_fn=list")
-        return [item if "images" in item else self._render_item(item) for item in items]
+        if isinstance(items, dict) or not isinstance(items, (list, tuple)):
+            raise ParameterError(f"render_batch takes a list of items; build the DataLoader with collate_fn=list (got {short_repr(items)})")
+        out = []
+        for item in items:
+            if "images" in item:
+                out.append(item)
+                continue
+            fields = {k: v for k, v in item.items() if k != "plan"}
+            plan = item.get("plan")
+            out.append(self._render_item(fields, plan if isinstance(plan, ItemPlan) else self.plan(fields["index"])))
+        return out
 
-    def _item(self, index: int) -> dict[str, Any]:
-        """Item ``index`` without its images (no rendering)."""
-        record, chain, name = self.plan(index)
+    def _item(self, plan: ItemPlan) -> dict[str, Any]:
+        """The item of ``plan`` without its images (no rendering)."""
+        record = plan.record
         return {
             "question": record.question,
             "options": list(record.options),
@@ -349,11 +406,11 @@ class SpaceDGDataset(Dataset):
             "sub_question_type": record.sub_question_type,
             "task_group": record.task_group.value,
             "answer_type": record.answer_type.value,
-            "degradation_type": name,
+            "degradation_type": plan.degradation_type,
             "scene_id": record.scene_id,
             "views": list(record.views),
             "record_id": record.id,
-            "index": int(index),
+            "index": plan.index,
         }
 
     def __getstate__(self) -> dict[str, Any]:
@@ -361,6 +418,34 @@ class SpaceDGDataset(Dataset):
         state["_scenes"] = None  # each worker builds its own cache
         state["_threads_set"] = False  # and sets its own thread count
         return state
+
+
+def _optional_count(value: Any, name: str, minimum: int) -> int | None:
+    return None if value is None else check_int(value, f"{_WHERE}: {name}", minimum=minimum)
+
+
+def _families(families: Any, question_types: Any) -> set[str] | None:
+    """The question families to keep (``None``: all); ``question_types`` is the deprecated name."""
+    if question_types is not None:
+        if families is not None:
+            raise ParameterError(f"{_WHERE}: give families= only (question_types= is its old name), not both")
+        warnings.warn(f"{_WHERE}: question_types= is deprecated, use families= (the same names)", DeprecationWarning, stacklevel=3)
+        families = question_types
+    if families is None:
+        return None
+    names = check_names(families, f"{_WHERE}: families")
+    return {get_question_family(name).name for name in names}  # unknown names fail with suggestions
+
+
+def _scene_dirs(scenes: Any, builtin_rooms: Any) -> list[Path]:
+    """Scene folders of ``scenes`` (a path or a list of paths), or of the built-in rooms when ``None``."""
+    if scenes is None:
+        return builtin_scene_dirs(check_int(builtin_rooms, f"{_WHERE}: builtin_rooms", minimum=3))
+    if isinstance(scenes, (str, os.PathLike)):
+        scenes = [scenes]
+    if not isinstance(scenes, (list, tuple)) or not scenes or not all(isinstance(p, (str, os.PathLike)) for p in scenes):
+        raise ParameterError(f"{_WHERE}: scenes must be a scene folder or a non-empty list of folders (paths), got {short_repr(scenes)}")
+    return scene_dirs_of(scenes)
 
 
 def _spread_subset(records: list[QARecord], n: int, seed: int) -> list[QARecord]:

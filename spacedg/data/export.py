@@ -25,11 +25,12 @@ the settings: a shard started with other arguments on the same folder fails inst
 two exports.
 
 **TSV** (what the public SpaceDG evaluator and VLMEvalKit read with
-``pandas.read_csv(path, sep="\\t")``), in the public bench's format
-(:mod:`spacedg.data.public_format`): ``index`` (the dataset index, int), ``question`` (with
-the option lines for MCQ), ``answer`` (letter, yes/no, integer, number, ``[a, b, c]``),
-``image_path`` (a Python list literal of relative paths, ``"['images/0000000_0.png', ...]"``,
-which VLMEvalKit's ``toliststr`` evaluates; the public class finds them under ``$LMUData``),
+``pandas.read_csv(path, sep="\\t")``), in the public bench's format (names:
+:mod:`spacedg.data.public_format`; columns and dialect: :mod:`spacedg.data.bench_table`):
+``index`` (the dataset index, int), ``question`` (with the option lines for MCQ), ``answer``
+(letter, yes/no, integer, number, ``[a, b, c]``), ``image_path`` (a Python list literal of
+relative paths, ``"['images/0000000_0.png', ...]"``, which VLMEvalKit's ``toliststr`` evaluates;
+the public class finds them under ``$LMUData``),
 ``question_type``, ``sub_question_type`` (the public names: **empty** for single-view distance,
 counting, bounding size and existence, ``inter_object_distance`` for the inter-object distance),
 ``task_group``, ``degradation_type`` (``ori`` for clean): the eight columns the public loader
@@ -52,34 +53,30 @@ geometry block (poses, boxes, visibility: what the answer was computed from).
 
 from __future__ import annotations
 
-import csv
 import hashlib
-import io
 import json
 import math
 import time
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from os import PathLike
 from pathlib import Path
 from typing import Any
 
-import cv2
-import numpy as np
-
+from spacedg._checks import check_bool, check_int, short_repr
+from spacedg.data.bench_table import tsv_bytes
 from spacedg.data.chain import CLEAN
 from spacedg.data.chat import ANSWER_PROMPT
 from spacedg.data.dataset import SpaceDGDataset
-from spacedg.data.pipeline import degrade_device
+from spacedg.data.pipeline import ItemPlan, degrade_device
 from spacedg.data.public_format import PUBLIC_BENCH_NAME, public_fields, public_mismatch
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
-from spacedg.files import atomic_write_bytes, remove_stale_temps
+from spacedg.files import atomic_write_bytes, remove_stale_temps, write_png
 from spacedg.plugins.answers import answer_text
 
 __all__ = [
     "DEFAULT_SHARD_SIZE",
-    "TSV_COLUMNS",
-    "tsv_bytes",
     "ExportSummary",
     "MergeResult",
     "chunk_ids",
@@ -92,11 +89,6 @@ __all__ = [
     "shard_from_env",
 ]
 
-#: Column order of the TSV: the evaluator's eight first, then options and provenance.
-TSV_COLUMNS: tuple[str, ...] = (
-    "index", "question", "answer", "image_path", "question_type", "sub_question_type", "task_group", "degradation_type",
-    "answer_type", "A", "B", "C", "D", "scene_id", "record_id", "degradation",
-)
 #: Items per chunk (the unit of resuming and of sharding) unless told otherwise.
 DEFAULT_SHARD_SIZE = 256
 #: Version of the exported format (2: the public bench's names and existence as lettered options).
@@ -219,7 +211,7 @@ def dataset_fingerprint(dataset: SpaceDGDataset) -> str:
 
     digest = hashlib.sha256()
     settings: dict[str, Any] = {
-        "split": dataset.split, "chains": list(dataset.chains), "seed": dataset.seed, "severity": dataset.severity,
+        "split": dataset.split, "chains": [chain.text for chain in dataset.chains], "seed": dataset.seed, "severity": dataset.severity,
         "clean_prob": dataset.clean_prob, "epoch": dataset.epoch,
         "image_size": list(dataset.options.image_size) if dataset.options.image_size else None,
     }
@@ -281,17 +273,6 @@ def _chunk_done(out: Path, chunk: int) -> bool:
     return all(p.is_file() for p in _part_paths(out, chunk))
 
 
-def tsv_bytes(rows: Sequence[Mapping[str, Any]], header: bool = True, columns: Sequence[str] = TSV_COLUMNS) -> bytes:
-    """Rows as the bench's TSV dialect (UTF-8, ``\\n`` line ends, CSV quoting of fields with tabs,
-    newlines or quotes) under ``columns`` (default: the export's); also used for reviewed benches."""
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(columns), delimiter="\t", lineterminator="\n", quoting=csv.QUOTE_MINIMAL)
-    if header:
-        writer.writeheader()
-    writer.writerows(rows)
-    return buffer.getvalue().encode("utf-8")
-
-
 def _rows(item: dict[str, Any], paths: list[str], system: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """The TSV row and the chat JSONL row of one dataset item whose images are at ``paths``, in the
     public bench's format (:func:`~spacedg.data.public_format.public_fields`: public names, existence
@@ -317,22 +298,14 @@ def _rows(item: dict[str, Any], paths: list[str], system: str) -> tuple[dict[str
     return tsv, chat
 
 
-def _write_png(path: Path, rgb: np.ndarray) -> None:
-    """Write an H×W×3 uint8 RGB image as PNG, atomically (encoded in memory, then one rename)."""
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(rgb[:, :, ::-1]))
-    if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
-        raise OSError(f"could not encode {path}")
-    atomic_write_bytes(path, data.tobytes())
-
-
-def _item(dataset: SpaceDGDataset, index: int) -> dict[str, Any]:
-    """``dataset[index]``, with an error that names the item's scene folder if it fails."""
+def _item(dataset: SpaceDGDataset, plan: ItemPlan) -> dict[str, Any]:
+    """The item of ``plan`` (``dataset[plan.index]``), with an error that names its scene folder if it fails."""
     try:
-        return dataset[index]
+        return dataset.sample(plan)
     except (SpaceDGError, OSError) as err:
-        record, _, name = dataset.plan(index)
+        record = plan.record
         folder = dataset.scene_dirs.get(record.scene_id, record.scene_id)
-        raise InvalidDataError(f"item {index} ({name} of {record.id}) failed: scene {folder}: {err}") from err
+        raise InvalidDataError(f"item {plan.index} ({plan.degradation_type} of {record.id}) failed: scene {folder}: {err}") from err
 
 
 def _remove_chunk_temps(out: Path, k: int, shard_size: int, total: int) -> None:
@@ -352,14 +325,15 @@ def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, s
     _remove_chunk_temps(out, k, shard_size, len(dataset))
     tsv_rows, chat_rows = [], []
     for index in _chunk_range(k, shard_size, len(dataset)):
-        item = _item(dataset, index)
+        plan = dataset.plan(index)
+        item = _item(dataset, plan)
         paths = []
         for v, image in enumerate(item["images"]):
             rel = f"images/{index:07d}_{v}.png"
-            _write_png(out / rel, image.permute(1, 2, 0).numpy())
+            write_png(out / rel, image.permute(1, 2, 0).numpy(), "image")
             paths.append(rel)
         tsv, chat = _rows(item, paths, system)
-        chat["geometry"] = dataset.plan(index)[0].geometry  # what the answer was computed from (spacedg review shows it)
+        chat["geometry"] = plan.record.geometry  # what the answer was computed from (spacedg review shows it)
         tsv_rows.append(tsv)
         chat_rows.append(chat)
         bar.update(1)
@@ -397,7 +371,7 @@ def export_bench(
     from tqdm import tqdm
 
     started = time.perf_counter()
-    out = Path(out_dir)
+    out = _check_export_arguments(dataset, out_dir, shard, progress)
     mine = chunk_ids(len(dataset), shard_size, shard)
     (out / "images").mkdir(parents=True, exist_ok=True)
     (out / "parts").mkdir(parents=True, exist_ok=True)
@@ -413,6 +387,20 @@ def export_bench(
     summary.merge = merge_parts(out)
     summary.seconds = time.perf_counter() - started
     return summary
+
+
+def _check_export_arguments(dataset: Any, out_dir: Any, shard: Any, progress: Any) -> Path:
+    """``out_dir`` as a Path, after checking every argument of :func:`export_bench` (ParameterError naming it)."""
+    if not isinstance(dataset, SpaceDGDataset):
+        raise ParameterError(f"export_bench: dataset must be a SpaceDGDataset, got {short_repr(dataset)}")
+    if not isinstance(out_dir, (str, PathLike)) or not str(out_dir).strip():
+        raise ParameterError(f"export_bench: out_dir must be a folder path, got {short_repr(out_dir)}")
+    if isinstance(shard, (str, bytes)) or not isinstance(shard, (tuple, list)) or len(shard) != 2:
+        raise ParameterError(f"export_bench: shard must be (i, n) with 0 <= i < n, e.g. (0, 1); got {short_repr(shard)}")
+    n = check_int(shard[1], "export_bench: shard n", minimum=1)
+    check_int(shard[0], "export_bench: shard i", minimum=0, maximum=n - 1)
+    check_bool(progress, "export_bench: progress")
+    return Path(out_dir)
 
 
 #: The same function; the name reads better for ``train``/``val`` exports.
@@ -445,8 +433,8 @@ def merge_parts(out_dir: str | Path, *, verbose: bool = False) -> MergeResult:
     mismatches: dict[str, str] = {}
     for k in range(chunks):
         tsv_path, jsonl_path = _part_paths(out, k)
-        tsv_bytes = tsv_path.read_bytes()
-        tsv_chunks.append(tsv_bytes if k == 0 else tsv_bytes.split(b"\n", 1)[1])
+        part = tsv_path.read_bytes()
+        tsv_chunks.append(part if k == 0 else part.split(b"\n", 1)[1])
         jsonl = jsonl_path.read_bytes()
         jsonl_chunks.append(jsonl)
         rows = [json.loads(line) for line in jsonl.decode("utf-8").splitlines()]

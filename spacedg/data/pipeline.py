@@ -17,6 +17,11 @@ seed, :func:`degrade_variants` does the least work that produces every chain's i
    fisheye image circle set back to black, clip + exact 8-bit sRGB encode, then the display
    chain on the uint8 image.
 
+Objects, not text. A chain arrives as a frozen :class:`~spacedg.data.chain.Chain` (a dataset item
+as an :class:`ItemPlan`: record, chain, seed; :func:`degrade_plan`) and is used as is: text is
+parsed only where a user wrote text. :func:`replay` renders a recorded provenance list (every
+parameter and seed as recorded, nothing drawn again), which gives the sample's bytes.
+
 Seeds. ``seed`` is the sample's seed. Each degradation of a chain gets
 ``derive_seed(seed, name)``, so a degradation draws the same parameters in every chain of the
 sample. Its parameters are drawn from ``np.random.default_rng(deg_seed)`` (preset ranges, in
@@ -55,35 +60,43 @@ from __future__ import annotations
 
 import time
 from collections import OrderedDict
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+from spacedg._checks import check_bool, check_choice, check_int, short_repr
+from spacedg._checks import check_image_size as check_size_argument
 from spacedg.data.chain import Chain, ResolvedDegradation
+from spacedg.devices import resolve_device
 from spacedg.errors import InvalidDataError, ParameterError, PluginError
 from spacedg.limits import check_image_size
 from spacedg.plugins.degradations.common import check_display_image, surface_far_depth
 from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.specs import Stage
+from spacedg.render.renderer import BACKENDS
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import RasterSettings
 
 if TYPE_CHECKING:
     import torch
 
+    from spacedg.plugins.qa_record import QARecord
     from spacedg.render.frame import Frame
     from spacedg.scene.model import Scene
 
 __all__ = [
     "DegradedViews",
+    "ItemPlan",
     "PipelineOptions",
     "degrade",
     "degrade_device",
+    "degrade_plan",
     "degrade_image",
     "degrade_variants",
     "frames_nbytes",
+    "replay",
     "sample_scene_depth",
     "view_depth",
 ]
@@ -115,16 +128,20 @@ class PipelineOptions:
     degrade_on: Literal["auto", "device", "host"] = "auto"
 
     def __post_init__(self) -> None:
-        if self.degrade_on not in ("auto", "device", "host"):
-            raise ParameterError(f"PipelineOptions.degrade_on must be 'auto', 'device' or 'host', got {self.degrade_on!r}")
-        if self.motion not in ("fast", "reference"):
-            raise ParameterError(f"PipelineOptions.motion must be 'fast' or 'reference', got {self.motion!r}")
+        check_choice(self.degrade_on, "PipelineOptions.degrade_on", ("auto", "device", "host"))
+        check_choice(self.motion, "PipelineOptions.motion", ("fast", "reference"))
+        check_choice(self.backend, "PipelineOptions.backend", BACKENDS)
+        for name in ("default_preset", "mixture_preset"):
+            value = getattr(self, name)
+            if not isinstance(value, str) or not value:
+                raise ParameterError(f"PipelineOptions.{name} must be a preset name such as 'bench' or '2', got {short_repr(value)}")
+        if self.settings is not None and not isinstance(self.settings, RasterSettings):
+            raise ParameterError(f"PipelineOptions.settings must be a RasterSettings or None, got {short_repr(self.settings)}")
+        resolve_device(self.device, "PipelineOptions.device")  # malformed, CUDA without CUDA, a missing index: now
         if self.image_size is not None:
-            size = tuple(self.image_size)
-            if len(size) != 2 or any(isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1 for v in size):
-                raise ParameterError(f"PipelineOptions.image_size must be (width, height) positive integers, got {self.image_size!r}")
-            object.__setattr__(self, "image_size", (int(size[0]), int(size[1])))
-            check_image_size(*self.image_size, "PipelineOptions.image_size", "render smaller", ParameterError)
+            size = check_size_argument(self.image_size, "PipelineOptions.image_size")
+            object.__setattr__(self, "image_size", size)
+            check_image_size(*size, "PipelineOptions.image_size", "render smaller", ParameterError)
 
 
 @dataclass
@@ -399,7 +416,8 @@ def _finish_device(
     """:func:`_finish` on torch tensors on ``device`` (the frame's device copies when it has them)."""
     import torch
 
-    from spacedg.plugins.degradations.device import as_tensor, encode_srgb_u8_torch
+    from spacedg.plugins.degradations.device import as_tensor
+    from spacedg.render import colour_torch
 
     def on_device(name: str) -> torch.Tensor:
         kept = (frame.tensors or {}).get(name)
@@ -425,7 +443,7 @@ def _finish_device(
         if frame.valid is not None:
             rgb = torch.where(as_tensor(frame.valid, device)[:, :, None], rgb, torch.zeros_like(rgb))
     t1 = time.perf_counter()
-    image = encode_srgb_u8_torch(rgb)
+    image = colour_torch.encode_srgb_u8(rgb)
     t2 = time.perf_counter()
     image = _run_display_device(image, display, index, timer)
     out = image.cpu().numpy()  # synchronises: the times below include the device's work
@@ -434,6 +452,43 @@ def _finish_device(
     timer["encode_ms"] += (t2 - t1) * 1e3
     timer["display_ms"] += (t3 - t2) * 1e3
     return out
+
+
+@dataclass(frozen=True)
+class ItemPlan:
+    """What one dataset item renders, decided once per item (frozen, picklable; no rendering).
+
+    Attributes:
+        index: the dataset index.
+        record: the question record (its ``scene_id`` and ``views``).
+        chain: the degradation chain (an empty :class:`~spacedg.data.chain.Chain` for a clean item).
+        seed: the sample seed the chain's parameters and noise are drawn from (module docstring).
+    """
+
+    index: int
+    record: QARecord
+    chain: Chain
+    seed: int
+
+    @property
+    def views(self) -> tuple[str, ...]:
+        return tuple(self.record.views)
+
+    @property
+    def degradation_type(self) -> str:
+        """``"ori"`` for a clean item, else the chain's name (:attr:`Chain.name <spacedg.data.chain.Chain.name>`)."""
+        return self.chain.name
+
+
+def _check_call(views: Any, seed: Any, options: Any, where: str) -> tuple[tuple[str, ...], int, PipelineOptions]:
+    """``views`` as a tuple of names, ``seed`` as an int and ``options`` (default ones for ``None``), or a ParameterError."""
+    views = (views,) if isinstance(views, str) else tuple(views) if isinstance(views, Iterable) else views
+    if not isinstance(views, tuple) or not views or not all(isinstance(v, str) for v in views):
+        raise ParameterError(f"{where}: views must be a view name or a list of view names (give at least one view name), got {short_repr(views)}")
+    check_int(seed, f"{where}: seed")
+    if options is not None and not isinstance(options, PipelineOptions):
+        raise ParameterError(f"{where}: options must be a PipelineOptions or None, got {short_repr(options)}")
+    return tuple(views), int(seed), options or PipelineOptions()
 
 
 def degrade_variants(
@@ -450,9 +505,10 @@ def degrade_variants(
     Args:
         scene: the scene (its Gaussians load on first use).
         views: view names of the sample, e.g. the two views of a two-view question.
-        chains: one entry per variant, each anything :meth:`Chain.parse <spacedg.data.chain.Chain.parse>`
-            accepts (``None`` or ``"clean"`` = no degradation), e.g. ``["clean", "haze", "night_capture"]``.
-        seed: the sample's seed (see the module docstring).
+        chains: one entry per variant: a :class:`~spacedg.data.chain.Chain` (used as is) or anything
+            :meth:`Chain.parse <spacedg.data.chain.Chain.parse>` accepts (``None`` or ``"clean"`` = no
+            degradation), e.g. ``["clean", "haze", "night_capture"]``.
+        seed: the sample's seed, an integer (see the module docstring).
         options: rendering and resolving options.
         progress: show a progress bar over the render groups (for long runs such as a gallery).
         render_cache: optional cache with ``get(key, make)`` (e.g.
@@ -462,20 +518,30 @@ def degrade_variants(
     Returns:
         One :class:`DegradedViews` per chain, in order.
     """
-    options = options or PipelineOptions()
-    device = degrade_device(options)
-    views = (views,) if isinstance(views, str) else tuple(views)
-    cameras = _cameras(scene, views, options)
+    views, seed, options = _check_call(views, seed, options, "degrade")
+    if isinstance(chains, (str, Chain)) or not isinstance(chains, Sequence):
+        raise ParameterError(f"degrade_variants: chains must be a list of chains, e.g. ['clean', 'haze'], got {short_repr(chains)}")
+    check_bool(progress, "degrade_variants: progress")
     parsed = [Chain.parse(c) for c in chains]
     depth = None
     if any(c.scales_with_depth(options.default_preset, options.mixture_preset) for c in parsed):
         depth = sample_scene_depth(scene, views)
     resolved = [c.resolve(seed, options.default_preset, options.mixture_preset, depth) for c in parsed]
+    return _run_chains(scene, views, resolved, options, progress, render_cache)
+
+
+def _run_chains(
+    scene: Scene, views: tuple[str, ...], resolved: Sequence[Sequence[ResolvedDegradation]], options: PipelineOptions,
+    progress: bool = False, render_cache: Any = None,
+) -> list[DegradedViews]:
+    """Render and degrade ``views`` under each resolved chain, chains with the same raster steps sharing one render."""
+    device = degrade_device(options)
+    cameras = _cameras(scene, views, options)
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i, chain in enumerate(resolved):
         groups.setdefault(tuple(step.key() for step in _by_stage(chain, Stage.RASTER)), []).append(i)
     results: list[DegradedViews | None] = [None] * len(resolved)
-    group_list = list(groups.values())
+    group_list: Any = list(groups.values())
     if progress:
         from tqdm import tqdm
 
@@ -486,30 +552,41 @@ def degrade_variants(
         t0 = time.perf_counter()
         frames = _render_group(scene, cameras, raster, needs, options, views, render_cache)
         render_ms = (time.perf_counter() - t0) * 1e3
-        for view, frame in zip(views, frames):
-            problem = _first_non_finite(frame.rgb)
-            if problem is not None:  # a renderer bug: never write it out as black pixels
-                raise InvalidDataError(
-                    f"scene {scene.id}, view {view!r}: the render holds non-finite light: {problem}; "
-                    "please report this with the scene and the chain"
-                )
+        _check_renders(scene, views, frames)
         far_depth = max(surface_far_depth(f.depth, f.alpha) for f in frames) if "depth" in needs else None
         for i in members:
-            chain = resolved[i]
-            timer = {"render_ms": render_ms, "linear_ms": 0.0, "encode_ms": 0.0, "display_ms": 0.0}
-            linear, display = _by_stage(chain, Stage.LINEAR), _by_stage(chain, Stage.DISPLAY)
-            if device is not None:
-                images = [_finish_device(frame, linear, display, v, far_depth, timer, device) for v, frame in enumerate(frames)]
-            else:
-                images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
-            results[i] = DegradedViews(
-                images=np.stack(images),
-                views=views,
-                degradations=[step.provenance() for step in chain],
-                sub_steps=[int(f.stats.get("sub_steps", 1)) for f in frames],
-                stats=timer,
-            )
+            results[i] = _finish_chain(frames, views, resolved[i], far_depth, render_ms, device)
     return [r for r in results if r is not None]
+
+
+def _check_renders(scene: Scene, views: Sequence[str], frames: Sequence[Frame]) -> None:
+    for view, frame in zip(views, frames):
+        problem = _first_non_finite(frame.rgb)
+        if problem is not None:  # a renderer bug: never write it out as black pixels
+            raise InvalidDataError(
+                f"scene {scene.id}, view {view!r}: the render holds non-finite light: {problem}; "
+                "please report this with the scene and the chain"
+            )
+
+
+def _finish_chain(
+    frames: Sequence[Frame], views: tuple[str, ...], chain: Sequence[ResolvedDegradation], far_depth: float | None,
+    render_ms: float, device: torch.device | None,
+) -> DegradedViews:
+    """The linear chain, encode and display chain of one resolved chain over its group's frames."""
+    timer = {"render_ms": render_ms, "linear_ms": 0.0, "encode_ms": 0.0, "display_ms": 0.0}
+    linear, display = _by_stage(chain, Stage.LINEAR), _by_stage(chain, Stage.DISPLAY)
+    if device is not None:
+        images = [_finish_device(frame, linear, display, v, far_depth, timer, device) for v, frame in enumerate(frames)]
+    else:
+        images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
+    return DegradedViews(
+        images=np.stack(images),
+        views=views,
+        degradations=[step.provenance() for step in chain],
+        sub_steps=[int(f.stats.get("sub_steps", 1)) for f in frames],
+        stats=timer,
+    )
 
 
 def degrade(
@@ -518,6 +595,31 @@ def degrade(
 ) -> DegradedViews:
     """Images of ``views`` under one chain of ``degradations`` (see :func:`degrade_variants`)."""
     return degrade_variants(scene, views, [degradations], seed, options, render_cache=render_cache)[0]
+
+
+def degrade_plan(scene: Scene, plan: ItemPlan, options: PipelineOptions | None = None, render_cache: Any = None) -> DegradedViews:
+    """Images of one dataset item: ``plan.record.views`` of ``scene`` under ``plan.chain`` at ``plan.seed``
+    (what :class:`~spacedg.data.dataset.SpaceDGDataset` renders; the chain object is used as is)."""
+    if not isinstance(plan, ItemPlan):
+        raise ParameterError(f"degrade_plan: plan must be an ItemPlan (SpaceDGDataset.plan(index)), got {short_repr(plan)}")
+    return degrade(scene, plan.views, plan.chain, plan.seed, options, render_cache)
+
+
+def replay(
+    scene: Scene, views: Sequence[str], provenance: Sequence[Mapping[str, Any]], options: PipelineOptions | None = None,
+    render_cache: Any = None,
+) -> DegradedViews:
+    """Images of ``views`` under the degradations a sample recorded (its ``degradation`` provenance
+    list): each entry's parameters, seed and preset as recorded, nothing drawn again. With the
+    item's image size and device options this gives the item's bytes; an empty list is the clean render."""
+    views, _, options = _check_call(views, 0, options, "replay")
+    if isinstance(provenance, (str, Mapping)) or not isinstance(provenance, Sequence):
+        raise ParameterError(f"replay: provenance must be a list of {{name, params, seed, preset}} entries, got {short_repr(provenance)}")
+    steps = [ResolvedDegradation.from_provenance(entry) for entry in provenance]
+    names = [step.name for step in steps]
+    if len(set(names)) != len(names):
+        raise ParameterError(f"replay: provenance names a degradation twice: {names}")
+    return _run_chains(scene, views, [sorted(steps, key=lambda r: r.spec.sort_key)], options, False, render_cache)[0]
 
 
 def frames_nbytes(frames: Sequence[Frame]) -> int:
@@ -607,6 +709,8 @@ def degrade_image(
     )
 
     image = check_display_image(image, "degrade_image")
+    check_int(seed, "degrade_image: seed")
+    PipelineOptions(default_preset=default_preset, mixture_preset=mixture_preset)  # the preset names' check
     aux: dict[str, Any] = {}
     if depth is not None:
         aux["depth"] = _depth_input(depth, image.shape[:2])

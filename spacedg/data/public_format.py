@@ -28,17 +28,19 @@ the letter. :func:`public_fields` gives every field of an exported row (TSV, cha
 and every answer it is scored against come from one function.
 
 :func:`public_answer_type` is the public routing rule above, used by the compatibility tests and by
-:func:`spacedg.eval.scoring.route`, which scores an exported row exactly as the public evaluator
-routes it (and still reads older exports that carry our internal names).
+:func:`route`, which routes an exported row exactly as the public evaluator does (and still reads
+older exports that carry our internal names); :func:`row_answer_type` is the answer type of a
+bench table row (its ``answer_type`` cell, else :func:`route`). The table's own format (columns,
+cells, reading and writing) is :mod:`spacedg.data.bench_table`'s.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from spacedg.errors import InvalidDataError
+from spacedg.data.bench_table import cell_text
+from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.plugins.answers import answer_text
 from spacedg.plugins.specs import AnswerType
 from spacedg.seeding import derive_seed
@@ -50,9 +52,7 @@ __all__ = [
     "PUBLIC_EMPTY_SUB_ROUTES",
     "PUBLIC_NA_SUB_TYPES",
     "PUBLIC_SUB_TYPES",
-    "PUBLIC_TSV_COLUMNS",
     "PUBLIC_YN_SUB_TYPES",
-    "cell_text",
     "existence_options",
     "format_question",
     "from_public",
@@ -60,17 +60,14 @@ __all__ = [
     "public_answer_type",
     "public_fields",
     "public_mismatch",
+    "route",
+    "row_answer_type",
     "to_public",
 ]
 
 #: The dataset name VLMEvalKit knows the public bench by (``--data spacedg_bench``); the class reads
 #: ``$LMUData/spacedg_bench.tsv`` and resolves ``image_path`` entries under ``$LMUData``.
 PUBLIC_BENCH_NAME = "spacedg_bench"
-
-#: Columns the public loader requires (it refuses a TSV without any of them; others are carried along).
-PUBLIC_TSV_COLUMNS: tuple[str, ...] = (
-    "index", "question", "answer", "image_path", "question_type", "sub_question_type", "task_group", "degradation_type",
-)
 
 #: Public rule 1: the answer type of a row whose ``sub_question_type`` is empty, by ``question_type``
 #: (``_QT_WHEN_EMPTY_SQT`` of the public evaluator, including its short aliases).
@@ -119,13 +116,6 @@ def format_question(question: str, options: Sequence[str]) -> str:
     return question if not options else question + "\n" + "\n".join(options)
 
 
-def cell_text(value: Any) -> str:
-    """A name (or any table) cell as text: ``None`` and NaN (pandas' empty cell) are ``""``; spaces stripped."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return ""
-    return str(value).strip()
-
-
 def to_public(question_type: str, sub_question_type: str) -> tuple[str, str]:
     """``(question_type, sub_question_type)`` as the public bench names them (see :data:`PUBLIC_SUB_TYPES`)."""
     qtype, sub = cell_text(question_type), cell_text(sub_question_type)
@@ -168,6 +158,55 @@ def internal_answer_type(question_type: Any, sub_question_type: Any) -> AnswerTy
     """The answer type of one of our internal names that the public bench renames (``None`` for
     any other pair: those route the same under both rules)."""
     return INTERNAL_ANSWER_TYPES.get((cell_text(question_type), cell_text(sub_question_type)))
+
+
+def route(question_type: str | None, sub_question_type: str | None = None) -> AnswerType:
+    """The answer type of a question, routed exactly as the public SpaceDG evaluator routes it.
+
+    The rule (:func:`public_answer_type`, read from the public evaluator's ``infer_eval_task``):
+
+    ==============================================================  ===========
+    empty ``sub_question_type``, by ``question_type``:
+    ``camera_object_distance_estimation`` (``distance_estimation``)  NA
+    ``object_existence_estimation`` (``existence_estimation``)      MCQ
+    ``object_counting``                                             COUNT
+    ``object_bounding_size_estimation`` (``size_estimation``)       SIZE_LIST
+    ``sub_question_type == "distance_threshold"``                   YN
+    ``sub_question_type`` in ``distance_exact``,
+    ``bbox_center_distance``, ``inter_object_distance``             NA
+    any other ``sub_question_type``                                 MCQ
+    ==============================================================  ===========
+
+    Our internal names, which records and exports made before the public format carry
+    (:data:`INTERNAL_ANSWER_TYPES`: ``single_view`` distance → NA, ``count`` → COUNT,
+    ``extent_list`` → SIZE_LIST, ``existence`` → YN, ``two_view`` → NA), route to their own answer
+    type first, so those files keep scoring as they were written.
+
+    Names are compared lower-cased and stripped (the public evaluator compares them exactly; every
+    exported name is lower case). An empty sub type with a question type outside the table above
+    raises :class:`~spacedg.errors.InvalidDataError`, as the public evaluator raises.
+    """
+    qtype, sub = cell_text(question_type).lower(), cell_text(sub_question_type).lower()
+    internal = internal_answer_type(qtype, sub)
+    return internal if internal is not None else public_answer_type(qtype, sub)
+
+
+def row_answer_type(fields: Mapping[str, Any], where: str) -> AnswerType:
+    """The answer type of a bench table row: its ``answer_type`` cell (any case), or :func:`route`
+    by its names when the cell is blank (pandas writes the answer type ``"NA"`` back as ``NaN``).
+
+    Raises:
+        FileFormatError: the cell holds another value (``where`` names the row).
+        InvalidDataError: a blank cell whose names :func:`route` cannot route.
+    """
+    kind = cell_text(fields.get("answer_type")).upper()
+    if kind in ("", "NAN", "NONE"):
+        return route(fields.get("question_type"), fields.get("sub_question_type"))
+    try:
+        return AnswerType(kind)
+    except ValueError:
+        allowed = ", ".join(a.value for a in AnswerType)
+        raise FileFormatError(f"{where}: answer_type {kind!r} is not one of {allowed}") from None
 
 
 def existence_options(record_id: str, answer: str) -> tuple[tuple[str, str], str]:

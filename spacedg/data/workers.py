@@ -26,6 +26,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
+from spacedg._checks import check_int
 from spacedg.errors import ParameterError
 
 __all__ = ["LoaderPlan", "available_cores", "loader_plan", "MAX_WORKERS"]
@@ -69,9 +70,10 @@ def loader_plan(cores: int | None = None, processes: int | None = None, workers:
     """The default plan (module docstring) for ``cores`` CPUs shared by ``processes`` training
     processes (default: this process's affinity, ``LOCAL_WORLD_SIZE`` or 1); ``workers`` and
     ``render_threads`` (or ``SPACEDG_WORKERS`` / ``SPACEDG_RENDER_THREADS``) override the choice."""
+    for name, value, low in (("cores", cores, 1), ("processes", processes, 1), ("workers", workers, 0), ("render_threads", render_threads, 1)):
+        if value is not None:
+            check_int(value, f"loader_plan: {name}", minimum=low)
     total = available_cores() if cores is None else int(cores)
-    if total < 1:
-        raise ParameterError(f"loader_plan: cores must be >= 1, got {cores}")
     if processes is None:
         processes = _env_int("LOCAL_WORLD_SIZE") or 1
     share = max(1, total // max(1, int(processes)))

@@ -1,10 +1,11 @@
 """Reading an exported benchmark (``spacedg export``) for prediction and scoring.
 
-A bench folder holds ``<split>.tsv`` (VLMEvalKit columns, see :mod:`spacedg.data.export`) and
-``images/``. :func:`load_bench` reads the TSV with the standard ``csv`` module, **every field as
-text**: pandas' default reader turns the answer type ``"NA"`` (numerical answer) and an answer
-``"None"`` into missing values, which is why the answer type is also re-derived by
-:func:`~spacedg.eval.scoring.route` when a row lacks it.
+A bench folder holds ``<split>.tsv`` (VLMEvalKit columns; the table's format is
+:mod:`spacedg.data.bench_table`'s) and ``images/``. :func:`load_bench` reads the TSV
+(:func:`~spacedg.data.bench_table.read_table`), **every field as text**: pandas' default reader
+turns the answer type ``"NA"`` (numerical answer) and an answer ``"None"`` into missing values,
+which is why the answer type is also re-derived by :func:`~spacedg.data.public_format.route` when
+a row lacks it (:func:`~spacedg.data.public_format.row_answer_type`).
 
 Rows are :class:`BenchRow` s; their :meth:`BenchRow.scoring_fields` is what
 :func:`~spacedg.eval.scoring.score` takes.
@@ -12,31 +13,24 @@ Rows are :class:`BenchRow` s; their :meth:`BenchRow.scoring_fields` is what
 
 from __future__ import annotations
 
-import ast
-import csv
 import hashlib
-import json
 import re
-import sys
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from spacedg.data.bench_table import SCORING_COLUMNS, cell_text, find_table, list_cell, read_table
 from spacedg.data.chain import CLEAN
+from spacedg.data.public_format import row_answer_type
 from spacedg.errors import FileFormatError, InvalidDataError
-from spacedg.eval.scoring import route
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.specs import AnswerType
 
-__all__ = ["CLEAN", "Bench", "BenchRow", "bench_table", "cell_text", "load_bench", "read_table", "row_from_mapping"]
+__all__ = ["CLEAN", "Bench", "BenchRow", "load_bench", "row_from_mapping"]
 
 #: ``"A. "`` … ``"D. "`` in front of an option written as a line.
 _OPTION_PREFIX = re.compile(r"^\s*[A-D][.)]\s+")
-#: Columns without which a row cannot be scored.
-_REQUIRED = ("index", "question", "answer", "question_type")
-
-csv.field_size_limit(min(sys.maxsize, 2**31 - 1))
 
 
 @dataclass(frozen=True)
@@ -131,53 +125,13 @@ class Bench:
 
 
 # ------------------------------------------------------------------ reading
-def cell_text(value: Any) -> str:
-    """A table cell as text: ``None`` and a pandas/openpyxl NaN become ``""``."""
-    if value is None:
-        return ""
-    if isinstance(value, float) and value != value:  # NaN from a pandas-written file
-        return ""
-    return str(value)
-
-
-def _listish(value: Any, what: str, where: str) -> list[Any]:
-    if isinstance(value, (list, tuple)):
-        return list(value)
-    text = cell_text(value).strip()
-    if not text:
-        return []
-    try:
-        parsed = json.loads(text)
-    except json.JSONDecodeError:
-        try:
-            parsed = ast.literal_eval(text)
-        except (ValueError, SyntaxError):
-            parsed = text  # one bare path
-    if isinstance(parsed, str):
-        return [parsed]
-    if not isinstance(parsed, (list, tuple)):
-        raise FileFormatError(f"{where}: {what} must be a list, got {text[:80]!r}")
-    return list(parsed)
-
-
-def _answer_type(fields: Mapping[str, Any], where: str) -> AnswerType:
-    kind = cell_text(fields.get("answer_type")).strip().upper()
-    if kind in ("", "NAN", "NONE"):
-        return route(cell_text(fields.get("question_type")), cell_text(fields.get("sub_question_type")))
-    try:
-        return AnswerType(kind)
-    except ValueError:
-        allowed = ", ".join(a.value for a in AnswerType)
-        raise FileFormatError(f"{where}: answer_type {kind!r} is not one of {allowed}") from None
-
-
 def _options(fields: Mapping[str, Any]) -> tuple[str, ...]:
     given = fields.get("options")
     if isinstance(given, Mapping):
-        return tuple(cell_text(given[k]) for k in MCQ_LETTERS if cell_text(given.get(k)).strip())
+        return tuple(cell_text(given[k], strip=False) for k in MCQ_LETTERS if cell_text(given.get(k)))
     if isinstance(given, (list, tuple)) and given:
-        return tuple(_OPTION_PREFIX.sub("", cell_text(o), count=1) for o in given)
-    texts = [cell_text(fields.get(k)).strip() for k in MCQ_LETTERS]
+        return tuple(_OPTION_PREFIX.sub("", cell_text(o, strip=False), count=1) for o in given)
+    texts = [cell_text(fields.get(k)) for k in MCQ_LETTERS]
     return tuple(t for t in texts if t)
 
 
@@ -187,75 +141,38 @@ def row_from_mapping(fields: Mapping[str, Any], where: str) -> BenchRow:
     ``where`` names the row in errors (``"bench.tsv:12"``). Missing optional columns default
     to empty; ``answer_type`` falls back to routing by question type.
     """
-    missing = [c for c in _REQUIRED if not cell_text(fields.get(c)).strip()]
+    missing = [c for c in SCORING_COLUMNS if not cell_text(fields.get(c))]
     if missing:
         raise FileFormatError(f"{where}: missing {', '.join(missing)} (needed to score a row)")
     try:
-        index = int(float(cell_text(fields["index"]).strip()))
+        index = int(float(cell_text(fields["index"])))
     except ValueError:
         raise FileFormatError(f"{where}: index {fields['index']!r} is not an integer") from None
     answer = fields["answer"]
     if isinstance(answer, (list, tuple)):
         answer = "[" + ", ".join(str(v) for v in answer) + "]"
-    degradation = [d for d in _listish(fields.get("degradation"), "degradation", where) if isinstance(d, Mapping)]
+    degradation = [d for d in list_cell(fields.get("degradation"), "degradation", where) if isinstance(d, Mapping)]
     return BenchRow(
         index=index,
-        question=cell_text(fields["question"]),
-        answer=cell_text(answer).strip(),
-        answer_type=_answer_type(fields, where),
-        question_type=cell_text(fields["question_type"]).strip(),
-        sub_question_type=cell_text(fields.get("sub_question_type")).strip(),
-        task_group=cell_text(fields.get("task_group")).strip(),
-        degradation_type=cell_text(fields.get("degradation_type")).strip() or CLEAN,
+        question=cell_text(fields["question"], strip=False),
+        answer=cell_text(answer),
+        answer_type=row_answer_type(fields, where),
+        question_type=cell_text(fields["question_type"]),
+        sub_question_type=cell_text(fields.get("sub_question_type")),
+        task_group=cell_text(fields.get("task_group")),
+        degradation_type=cell_text(fields.get("degradation_type")) or CLEAN,
         options=_options(fields),
-        image_paths=tuple(str(p) for p in _listish(fields.get("image_path", fields.get("image_paths")), "image_path", where)),
-        scene_id=cell_text(fields.get("scene_id")),
-        record_id=cell_text(fields.get("record_id")),
+        image_paths=tuple(str(p) for p in list_cell(fields.get("image_path", fields.get("image_paths")), "image_path", where)),
+        scene_id=cell_text(fields.get("scene_id"), strip=False),
+        record_id=cell_text(fields.get("record_id"), strip=False),
         degradation=tuple(degradation),
     )
-
-
-def read_table(path: Path) -> list[dict[str, str]]:
-    """Rows of a TSV (``.tsv``) or CSV (``.csv``) file as text dicts (quoted fields understood)."""
-    delimiter = "," if path.suffix.lower() == ".csv" else "\t"
-    try:
-        with path.open(newline="", encoding="utf-8") as handle:
-            reader = csv.DictReader(handle, delimiter=delimiter)
-            rows = list(reader)
-    except UnicodeDecodeError as err:
-        raise FileFormatError(f"{path}: not UTF-8 text ({err.reason} at byte {err.start})") from None
-    except csv.Error as err:
-        raise FileFormatError(f"{path}: malformed {'CSV' if delimiter == ',' else 'TSV'} ({err})") from None
-    if reader.fieldnames is None:
-        raise FileFormatError(f"{path}: empty file (expected a header row)")
-    return rows
-
-
-def bench_table(path: Path) -> Path:
-    """The TSV of a bench: ``path`` itself, or ``bench.tsv`` / ``spacedg_bench.tsv`` (a VLMEvalKit ``LMUData``
-    folder) / ``val.tsv`` / ``train.tsv`` / the one ``.tsv`` in the folder."""
-    if path.is_file():
-        return path
-    if not path.is_dir():
-        raise InvalidDataError(f"bench {path} does not exist; pass the folder written by `spacedg export` (or its .tsv)")
-    for name in ("bench.tsv", "spacedg_bench.tsv", "val.tsv", "train.tsv"):
-        if (path / name).is_file():
-            return path / name
-    tables = sorted(path.glob("*.tsv"))
-    if len(tables) == 1:
-        return tables[0]
-    if not tables:
-        raise InvalidDataError(
-            f"bench {path} has no .tsv; export one with `spacedg export --split bench --out {path}` "
-            "(an interrupted export writes bench.tsv only once every chunk exists: rerun it to finish)"
-        )
-    raise InvalidDataError(f"bench {path} has several tables ({', '.join(t.name for t in tables)}); pass the .tsv to use")
 
 
 def load_bench(path: str | Path) -> Bench:
     """Read an exported bench: a folder with ``bench.tsv`` (or ``val.tsv``/``train.tsv``, or
     one ``.tsv``), or the TSV itself. Errors name the file and line."""
-    table = bench_table(Path(path))
+    table = find_table(Path(path))
     data = table.read_bytes()
     rows = [row_from_mapping(fields, f"{table}:{n + 2}") for n, fields in enumerate(read_table(table))]
     if not rows:

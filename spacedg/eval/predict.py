@@ -98,7 +98,8 @@ def dataset_source(dataset: Any) -> Source:
     from spacedg.data.export import dataset_fingerprint
 
     def row(index: int) -> BenchRow:
-        record, chain, name = dataset.plan(index)
+        plan = dataset.plan(index)
+        record, name = plan.record, plan.degradation_type
         fields = {  # the row the export writes for this item (public names, existence as lettered options)
             "index": index, **public_fields(record), "task_group": record.task_group.value,
             "degradation_type": name, "scene_id": record.scene_id, "record_id": record.id,

@@ -23,13 +23,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from spacedg.data.bench_table import cell_text, read_table
 from spacedg.errors import (
     FileFormatError,
     InvalidDataError,
     ParameterError,
     SpaceDGWarning,
 )
-from spacedg.eval.bench import BenchRow, cell_text, read_table, row_from_mapping
+from spacedg.eval.bench import BenchRow, row_from_mapping
 from spacedg.eval.prompts import VARIANTS
 
 __all__ = ["PredictionSet", "merge_shards", "meta_path", "parse_source", "read_predictions"]
@@ -211,7 +212,7 @@ def read_predictions(source: str | Path, *, model: str | None = None, variant: s
             index = int(float(str(fields["index"]).strip()))
         except ValueError:
             raise FileFormatError(f"{where}: index {fields['index']!r} is not an integer") from None
-        text = cell_text(fields["prediction"])
+        text = cell_text(fields["prediction"], strip=False)
         if index in out.predictions:
             if out.predictions[index] != text:
                 raise FileFormatError(f"{where}: index {index} has two different predictions; keep one line per index")

@@ -7,7 +7,7 @@ Pipeline for one prediction
 
 1. :func:`extract_answer_text`: the content of the first ``<answer>…</answer>`` (tags
    case-insensitive, content may span lines), else the whole text; stripped. ``None`` → ``""``.
-2. The answer type: the record's ``answer_type``, or :func:`route` from
+2. The answer type: the record's ``answer_type``, or :func:`~spacedg.data.public_format.route` from
    ``(question_type, sub_question_type)`` when a plain mapping has none (the public evaluator's
    routing rule: an exported row is scored as the same answer type by both).
 3. A type-specific parser (each one runs step 1 itself, so raw model text may be passed):
@@ -41,7 +41,8 @@ from decimal import Decimal, localcontext
 from typing import Any
 
 from spacedg.data.chat import ANSWER_FORMATS, ANSWER_PROMPT  # noqa: F401  (re-exported: the prompt the scorer's answers follow)
-from spacedg.data.public_format import cell_text, internal_answer_type, public_answer_type
+from spacedg.data.bench_table import cell_text
+from spacedg.data.public_format import route
 from spacedg.eval.parsing import (
     parse_count,
     parse_mcq,
@@ -91,39 +92,6 @@ class ScoreResult:
     parsed: str | int | float | tuple[float, ...] | None
     answer_type: AnswerType
     parse_ok: bool
-
-
-# ------------------------------------------------------------------ routing
-def route(question_type: str | None, sub_question_type: str | None = None) -> AnswerType:
-    """The answer type of a question, routed exactly as the public SpaceDG evaluator routes it.
-
-    The rule (:func:`spacedg.data.public_format.public_answer_type`, read from the public
-    evaluator's ``infer_eval_task``):
-
-    ==============================================================  ===========
-    empty ``sub_question_type``, by ``question_type``:
-    ``camera_object_distance_estimation`` (``distance_estimation``)  NA
-    ``object_existence_estimation`` (``existence_estimation``)      MCQ
-    ``object_counting``                                             COUNT
-    ``object_bounding_size_estimation`` (``size_estimation``)       SIZE_LIST
-    ``sub_question_type == "distance_threshold"``                   YN
-    ``sub_question_type`` in ``distance_exact``,
-    ``bbox_center_distance``, ``inter_object_distance``             NA
-    any other ``sub_question_type``                                 MCQ
-    ==============================================================  ===========
-
-    Our internal names, which records and exports made before the public format carry
-    (:data:`~spacedg.data.public_format.INTERNAL_ANSWER_TYPES`: ``single_view`` distance → NA,
-    ``count`` → COUNT, ``extent_list`` → SIZE_LIST, ``existence`` → YN, ``two_view`` → NA), route
-    to their own answer type first, so those files keep scoring as they were written.
-
-    Names are compared lower-cased and stripped (the public evaluator compares them exactly; every
-    exported name is lower case). An empty sub type with a question type outside the table above
-    raises :class:`~spacedg.errors.InvalidDataError`, as the public evaluator raises.
-    """
-    qtype, sub = cell_text(question_type).lower(), cell_text(sub_question_type).lower()
-    internal = internal_answer_type(qtype, sub)
-    return internal if internal is not None else public_answer_type(qtype, sub)
 
 
 # ------------------------------------------------------------------ MRA

@@ -22,10 +22,8 @@ here: it reaches into the question helpers, which this package's contracts do no
 from spacedg.plugins.hookspecs import ENTRY_POINT_GROUP, hookimpl, registering
 from spacedg.plugins.registry import (
     AUTOLOAD_ENV,
-    PLUGINS_ENV,
     BrokenPlugin,
     PluginClash,
-    PluginOrigin,
     PluginRecord,
     Registry,
     degradation_names,
@@ -37,6 +35,7 @@ from spacedg.plugins.registry import (
     question_family_names,
     reset_registry,
 )
+from spacedg.plugins.origin import PLUGINS_ENV, PluginOrigin
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.question_family import FamilyFactory, QuestionFamily
 from spacedg.plugins.specs import (

@@ -23,7 +23,7 @@ numpy scalars → Python numbers; NaN/Inf and non-string keys rejected), so
 ``QARecord.from_dict(record.to_dict()) == record`` and ``from_dict(d).to_dict() == d`` for any
 ``d`` produced by ``to_dict``.
 
-The per-scene question index (build, reuse, JSONL files) is :mod:`spacedg.data.qa_index`.
+The per-scene question index (build, reuse, JSONL files) is :mod:`spacedg.qa` (:mod:`spacedg.qa.build`, :mod:`spacedg.qa.index`).
 
 Record ids are deterministic: :func:`make_record_id` gives
 ``"{scene_id}/{question_type}/{sub_question_type}/{hash}"`` with ``hash`` the first 12 hex

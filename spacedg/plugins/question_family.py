@@ -25,7 +25,7 @@ from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import SUB_TYPE_PATTERN, AnswerType, TaskGroup, _check_name, _enum
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
-    from spacedg.plugins.registry import PluginOrigin
+    from spacedg.plugins.origin import PluginOrigin
     from spacedg.scene.model import Scene
 
 __all__ = ["SCENE_NEEDS", "FamilyFactory", "QuestionFamily", "QuestionGenerator"]

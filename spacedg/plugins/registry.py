@@ -66,7 +66,7 @@ import types
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import pluggy
@@ -79,14 +79,13 @@ from spacedg.errors import (
     UnknownPluginError,
 )
 from spacedg.plugins import hookspecs
+from spacedg.plugins.origin import PLUGINS_ENV, PluginOrigin
 from spacedg.plugins.question_family import QuestionFamily
 from spacedg.plugins.specs import DegradationSpec, suggest
 
 __all__ = [
     "AUTOLOAD_ENV",
-    "PLUGINS_ENV",
     "BUILTIN_DISTRIBUTION",
-    "PluginOrigin",
     "BrokenPlugin",
     "PluginRecord",
     "PluginClash",
@@ -103,10 +102,8 @@ __all__ = [
 ]
 
 AUTOLOAD_ENV = "SPACEDG_DISABLE_PLUGIN_AUTOLOAD"
-PLUGINS_ENV = "SPACEDG_PLUGINS"
 BUILTIN_DISTRIBUTION = "spacedg"
 
-Source = Literal["entry_point", "env", "programmatic"]
 _HOOKS = ("spacedg_register_degradations", "spacedg_register_question_families")
 _TRUE = {"1", "true", "yes", "on"}
 #: A plugin import still running after this many seconds is announced (a PluginWarning naming it).
@@ -117,48 +114,6 @@ _FALSE = {"", "0", "false", "no", "off"}
 def _canonical(dist_name: str) -> str:
     """PEP 503 normalised distribution name."""
     return re.sub(r"[-_.]+", "-", dist_name).lower()
-
-
-@dataclass(frozen=True)
-class PluginOrigin:
-    """Where a plugin came from.
-
-    Attributes:
-        name: entry-point name; the ``SPACEDG_PLUGINS`` item; or the name given to
-            :meth:`Registry.register_plugin`.
-        value: what was loaded: ``"module"`` or ``"module:attribute"`` (``repr`` for objects
-            registered in-process).
-        distribution: the installed distribution providing it (``None`` if unknown).
-        version: that distribution's version (``None`` if unknown).
-        builtin: provided by the ``spacedg`` distribution itself.
-        source: ``"entry_point"``, ``"env"`` (``SPACEDG_PLUGINS``) or ``"programmatic"``.
-    """
-
-    name: str
-    value: str
-    distribution: str | None
-    version: str | None
-    builtin: bool
-    source: Source
-
-    @property
-    def kind(self) -> str:
-        return "built-in" if self.builtin else "third-party"
-
-    def describe(self) -> str:
-        """``"entry point 'x' (module) of distribution d 1.0"``-style text for messages."""
-        what = {
-            "entry_point": f"entry point {self.name!r} ({self.value})",
-            "env": f"module {self.value!r} from {PLUGINS_ENV}",
-            "programmatic": f"plugin {self.name!r} registered in-process",
-        }[self.source]
-        if self.distribution:
-            what += f" of distribution {self.distribution} {self.version or '(unknown version)'}"
-        return what
-
-    def to_dict(self) -> dict[str, Any]:
-        """Every field, in declaration order (plain JSON types)."""
-        return asdict(self)
 
 
 @dataclass(frozen=True)

@@ -72,7 +72,7 @@ import numpy as np
 from spacedg.errors import ParameterError, PluginError
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
-    from spacedg.plugins.registry import PluginOrigin
+    from spacedg.plugins.origin import PluginOrigin
 
 __all__ = [
     "NAME_PATTERN",

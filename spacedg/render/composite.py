@@ -72,7 +72,7 @@ def composite_view(
         from spacedg.render.colour_cpu import decode_srgb
 
         ids = gaussians.instance_ids if gaussians.instance_ids is not None else np.full(len(gaussians), -1, np.int32)
-        packed, rects = project_cpu.project_view(gaussians, camera, settings, defocus, want_color)
+        packed, rects = project_cpu.project_gaussians(gaussians, camera, settings, defocus, want_color)
         t1 = time.perf_counter()
         if defocus is not None and defocus_model.has_blur(packed, rects):
             images = defocus_model.render_cpu(
@@ -90,12 +90,12 @@ def composite_view(
     else:
         import torch  # heavy: only the torch backend needs it
 
-        from spacedg.render import defocus_torch, project, raster_torch
+        from spacedg.render import defocus_torch, project_torch, raster_torch
         from spacedg.render.colour_cpu import decode_srgb
 
-        gs = project.GaussianTensors.of(gaussians, device, torch.float32)
+        gs = project_torch.GaussianTensors.of(gaussians, device, torch.float32)
         with torch.no_grad():
-            proj = project.project(gs, camera, settings, defocus, want_color)
+            proj = project_torch.project_gaussians(gs, camera, settings, defocus, want_color)
             t1 = time.perf_counter()
             blurred = defocus is not None and defocus_torch.has_blur(proj)
             factor = 1

@@ -212,7 +212,7 @@ def render_cpu(
     # pass 1: the sharp view, widened by a margin, measured
     margin = measurement_margin(packed, rects, width, height)
     wide = measurement_camera(camera, margin)
-    sharp, sharp_rects = project_cpu.project_view(gaussians, wide, measurement_settings(settings), None, want_color)  # type: ignore[arg-type]
+    sharp, sharp_rects = project_cpu.project_gaussians(gaussians, wide, measurement_settings(settings), None, want_color)  # type: ignore[arg-type]
     offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, wide.width, wide.height, tight)
     pair_out = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
     lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)

@@ -143,7 +143,7 @@ def measure_sharp(offsets, gauss, packed, lin, slab, tiles_x, alpha_max, pair_ou
 
     Args:
         offsets, gauss: the sharp projection's tile lists (:func:`spacedg.render.raster_cpu.bin_tiles`).
-        packed: the sharp projection (:func:`spacedg.render.project_cpu.project_view`, no defocus).
+        packed: the sharp projection (:func:`spacedg.render.project_cpu.project_gaussians`, no defocus).
         lin: (N, 3) float32 linear-light colours (the sRGB decode of the packed colours).
         slab: (N,) int64 depth slab of every Gaussian.
     """

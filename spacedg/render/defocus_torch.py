@@ -23,7 +23,7 @@ import torch
 from spacedg.limits import image_size_problem
 from spacedg.render.camera import Camera
 from spacedg.render.colour import srgb_to_linear
-from spacedg.render.project import GaussianTensors, Projected, project
+from spacedg.render.project_torch import GaussianTensors, Projected, project_gaussians
 from spacedg.render.raster_torch import advance_transmittance, bin_tiles, images_from_tiles, median_update
 from spacedg.render.settings import (
     DEFOCUS_SLAB,
@@ -284,7 +284,7 @@ def render_torch(
     tight = settings.tight_tiles and settings.opacity_extent
     width, height = camera.width, camera.height
     wide = measurement_camera(camera, measurement_margin(proj, width, height))
-    sharp = project(gs, wide, measurement_settings(settings), None, want_color)
+    sharp = project_gaussians(gs, wide, measurement_settings(settings), None, want_color)
     offsets, gauss = bin_tiles(sharp, wide.width, wide.height, tight)
     pairs = measure_sharp(sharp, offsets, gauss, _slab(sharp.depths), wide.width, wide.height, settings.alpha_max)
     sums = torch.zeros(proj.means2d.shape[0], 6, dtype=torch.float64, device=pairs.device)

@@ -2,7 +2,7 @@
 
 What runs where (gsplat 1.5.3 API, :mod:`gsplat.cuda._wrapper`):
 
-1. **Projection: ours.** :func:`spacedg.render.project.project` (the torch twin of the compiled
+1. **Projection: ours.** :func:`spacedg.render.project_torch.project_gaussians` (the torch twin of the compiled
    CPU projection: EWA with the exact fisheye Jacobian, culling, antialiasing, footprint radii)
    runs on the render's device. gsplat's own ``fully_fused_projection`` is not used: it has no
    exact fisheye Jacobian with k1..k4, no circle of confusion and not our culling rules.
@@ -66,7 +66,7 @@ from spacedg.render.settings import ALPHA_MIN, TILE_SIZE, TRANSMITTANCE_MIN, Def
 if TYPE_CHECKING:
     import torch
 
-    from spacedg.render.project import Projected
+    from spacedg.render.project_torch import Projected
 
 __all__ = [
     "BATCH_ELEMENTS",
@@ -383,9 +383,9 @@ def _split(rendered: torch.Tensor, alpha: torch.Tensor, want_color: bool, want_d
 
 
 def _project(gs, camera: Camera, settings: RasterSettings, want_color: bool):  # type: ignore[no-untyped-def]
-    from spacedg.render import project
+    from spacedg.render import project_torch
 
-    return project.project(gs, camera, settings, None, want_color)
+    return project_torch.project_gaussians(gs, camera, settings, None, want_color)
 
 
 def _sharp_ids(gs, camera: Camera, settings: RasterSettings, proj, ops: GsplatOps, offsets=None, flatten_ids=None):  # type: ignore[no-untyped-def]
@@ -414,7 +414,7 @@ def render_gsplat(
     import torch
 
     from spacedg.render import motion as motion_model
-    from spacedg.render import project
+    from spacedg.render import project_torch
     from spacedg.render.raster_torch import expected_depth
 
     t0 = time.perf_counter()
@@ -433,7 +433,7 @@ def render_gsplat(
     ops = ops or ops_for(device)
     want_color, want_depth = "rgb" in wanted, "depth" in wanted
     want_ids = bool(wanted & {"median_depth", "instance_ids"})
-    gs = project.GaussianTensors.of(gaussians, device, torch.float32)
+    gs = project_torch.GaussianTensors.of(gaussians, device, torch.float32)
     stats: dict[str, float] = {"ops": ops.name}  # type: ignore[dict-item]
     with torch.no_grad():
         if motion is None or motion.is_static:

@@ -1,6 +1,6 @@
 """Compiled (numba) projection: one fused pass per Gaussian, parallel over Gaussians.
 
-Same physics as the readable torch twin :mod:`spacedg.render.project` (tested against it,
+Same physics as the readable torch twin :mod:`spacedg.render.project_torch` (tested against it,
 against gsplat's torch reference and against float64 finite differences):
 
 1. world → camera (OpenCV axes); cull ``z <= near`` or ``z >= far``.
@@ -114,7 +114,7 @@ def _fisheye_terms(x, y, z, k1, k2, k3, k4):
 
 @fork_safe
 @numba.njit(parallel=True, cache=True)
-def project_gaussians(
+def _project_kernel(
     means, quats, scales, opacities, sh, degree, want_color,
     view_rot, view_trans, cam_center,
     fx, fy, cx, cy, width, height,
@@ -277,7 +277,7 @@ def project_gaussians(
             packed[i, CBL] = max(_sh_channel(sh, i, 2, degree, dx, dy, dz) + 0.5, 0.0)
 
 
-def project_view(
+def project_gaussians(
     gaussians: Gaussians,
     camera: Camera,
     settings: RasterSettings,
@@ -290,7 +290,7 @@ def project_view(
     rects = np.empty((n, 4), np.int32)
     lens = camera.fisheye
     view = camera.world_to_cam
-    project_gaussians(
+    _project_kernel(
         gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities, gaussians.sh,
         gaussians.sh_degree, want_color,
         np.ascontiguousarray(view[:3, :3]), np.ascontiguousarray(view[:3, 3]), np.array(camera.center),

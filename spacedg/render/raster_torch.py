@@ -13,7 +13,7 @@ import math
 
 import torch
 
-from spacedg.render.project import Projected
+from spacedg.render.project_torch import Projected
 from spacedg.render.settings import TILE_SIZE, TRANSMITTANCE_MIN
 
 

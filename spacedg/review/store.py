@@ -35,7 +35,7 @@ break, so a truncated copy is refused instead of being rewritten without its tai
 
 Edits (:meth:`ReviewStore.edit`) touch ``question``, ``answer`` and the option texts ``A``–``D``
 only, and the row is validated **after** the change by its answer type (the ``answer_type``
-column, or :func:`~spacedg.eval.scoring.route` when blank):
+column, or :func:`~spacedg.data.public_format.route` when blank):
 
 ========== ==========================================================================
 MCQ        answer a letter whose option is present; the options present in the original row
@@ -51,16 +51,16 @@ question, so the question a model sees and the option columns agree. A refused c
 :class:`ReviewError` (its message is shown in the page) and writes nothing.
 
 Geometry (the audit numbers an answer came from) is looked up, lazily and cached per scene,
-in the scene question indexes ``<scene>/<scene_id>.qa.jsonl`` under the ``scenes`` folders, or
-taken from a ``"geometry"`` field of the bench's chat JSONL (``<table stem>.jsonl``) when present.
+in the scene question indexes ``<scene>/<scene_id>.qa.jsonl`` under the ``scenes`` folders (read
+with the project's record loader, :func:`spacedg.data.bench_table.index_geometry`: a malformed
+index is an error naming its file and line), or taken from a ``"geometry"`` field of the bench's
+chat JSONL (``<table stem>.jsonl``) when present.
 
 Every public method holds one lock, so a threaded HTTP server may call it concurrently.
 """
 
 from __future__ import annotations
 
-import ast
-import csv
 import json
 import os
 import re
@@ -70,11 +70,20 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from spacedg.data.export import tsv_bytes
+from spacedg.data.bench_table import (
+    SCORING_COLUMNS,
+    find_table,
+    index_geometry,
+    list_cell,
+    read_table,
+    table_header,
+    tsv_bytes,
+)
+from spacedg.data.chain import CLEAN
+from spacedg.data.public_format import row_answer_type
 from spacedg.files import ExclusiveLock, exclusive_lock, remove_stale_temps, write_temp_sibling
 from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
-from spacedg.eval.bench import CLEAN, bench_table, read_table, row_from_mapping
-from spacedg.eval.scoring import route
+from spacedg.eval.bench import row_from_mapping
 from spacedg.plugins.answers import MCQ_LETTERS, answer_from_text
 from spacedg.plugins.specs import AnswerType
 
@@ -84,7 +93,6 @@ __all__ = ["EDITABLE", "ReviewError", "ReviewStore"]
 EDITABLE: tuple[str, ...] = ("question", "answer", "A", "B", "C", "D")
 _TITLE_CHARS = 120
 _OPTION_LINE = re.compile(r"^\s*([A-D])[.)]\s")
-_REQUIRED_COLUMNS = ("index", "question", "answer", "question_type")
 
 
 class ReviewError(InvalidDataError):
@@ -98,16 +106,6 @@ def _normalise_answer(kind: AnswerType, answer: str, options: Mapping[str, str])
         return answer_from_text(kind, answer, options)
     except InvalidDataError as err:
         raise ReviewError(str(err)) from None
-
-
-def _answer_type(row: Mapping[str, str]) -> AnswerType:
-    kind = (row.get("answer_type") or "").strip().upper()
-    if kind in ("", "NAN", "NONE"):
-        return route(row.get("question_type") or "", row.get("sub_question_type") or "")
-    try:
-        return AnswerType(kind)
-    except ValueError:
-        return route(row.get("question_type") or "", row.get("sub_question_type") or "")
 
 
 def _rewrite_option_line(question: str, letter: str, old: str, new: str) -> str:
@@ -130,24 +128,6 @@ def _rewrite_option_line(question: str, letter: str, old: str, new: str) -> str:
     prefix = _OPTION_LINE.match(lines[i])
     lines[i] = (prefix.group(0) if prefix else f"{letter}. ") + new
     return "\n".join(lines)
-
-
-def _image_paths(text: str) -> list[str]:
-    text = (text or "").strip()
-    if not text:
-        return []
-    try:
-        parsed: Any = json.loads(text)
-    except json.JSONDecodeError:
-        try:
-            parsed = ast.literal_eval(text)
-        except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
-            parsed = text
-    if isinstance(parsed, str):
-        return [parsed]
-    if isinstance(parsed, (list, tuple)):
-        return [str(p) for p in parsed]
-    return [text]
 
 
 def _now() -> str:
@@ -187,7 +167,7 @@ class ReviewStore:
                  scenes: Sequence[str | Path] | None = None, lock: bool = False) -> None:
         self._lock = threading.Lock()
         self._file_lock: ExclusiveLock | None = None
-        self.table: Path = bench_table(Path(bench))
+        self.table: Path = find_table(Path(bench))
         self.root: Path = self.table.parent
         self.out: Path = Path(out) if out is not None else self.table.with_name(f"{self.table.stem}.reviewed.tsv")
         if self.out.exists() and self.out.is_dir():
@@ -231,10 +211,8 @@ class ReviewStore:
                 "or export?); copy or export the bench again"
             )
         rows = read_table(self.table)
-        with self.table.open(newline="", encoding="utf-8") as handle:
-            header = next(csv.reader(handle, delimiter="\t"), None) or []
-        self.header: list[str] = list(header)
-        missing = [c for c in _REQUIRED_COLUMNS if c not in self.header]
+        self.header: list[str] = table_header(self.table)
+        missing = [c for c in SCORING_COLUMNS if c not in self.header]
         if missing:
             raise InvalidDataError(f"{self.table}: missing column(s) {', '.join(missing)}; is this a `spacedg export` TSV?")
         if not rows:
@@ -283,7 +261,7 @@ class ReviewStore:
         once each, in file order: what the review page may show."""
         seen: dict[str, None] = {}
         for row in self._original:
-            for path in _image_paths(row.get("image_path", "")):
+            for path in self._image_paths(row):
                 seen.setdefault(path, None)
         return list(seen)
 
@@ -301,7 +279,7 @@ class ReviewStore:
                     "sub_question_type": row.get("sub_question_type", ""),
                     "task_group": row.get("task_group", ""),
                     "degradation_type": row.get("degradation_type", "").strip() or CLEAN,
-                    "answer_type": _answer_type(row).value,
+                    "answer_type": self._answer_type(row).value,
                     "title": title,
                     # what the page's keyword box searches: the whole question (options included), the answer, the scene
                     "text": " ".join((row.get("question", ""), row.get("answer", ""), row.get("scene_id", ""))),
@@ -357,6 +335,16 @@ class ReviewStore:
             raise ReviewError(f"no item with index {key} in {self.table.name} ({len(self._original)} items)")
         return self._pos[key]
 
+    def _answer_type(self, row: Mapping[str, str]) -> AnswerType:
+        """The row's answer type (its ``answer_type`` cell, else routed by its names); every row
+        passed :func:`~spacedg.eval.bench.row_from_mapping` on opening and edits never touch it."""
+        return row_answer_type(row, f"{self.table}: index {row.get('index', '?')}")
+
+    def _image_paths(self, row: Mapping[str, str]) -> list[str]:
+        """The row's ``image_path`` list (relative to the bench folder)."""
+        where = f"{self.table}: index {row.get('index', '?')}"
+        return [str(p) for p in list_cell(row.get("image_path", ""), "image_path", where)]
+
     def _edited(self, n: int) -> bool:
         return any(self._current[n].get(f, "") != self._original[n].get(f, "") for f in EDITABLE)
 
@@ -374,7 +362,7 @@ class ReviewStore:
                 raise ReviewError(f"{name} must be text, got {type(value).__name__}")
         current = self._current[n]
         original = self._original[n]
-        kind = _answer_type(current)
+        kind = self._answer_type(current)
         row = dict(current)
         if "question" in changes:
             row["question"] = changes["question"].replace("\r\n", "\n").replace("\r", "\n")
@@ -544,9 +532,9 @@ class ReviewStore:
         index = self._indexes[n]
         item: dict[str, Any] = {k: row.get(k, "") for k in self.header}
         item["index"] = index
-        item["answer_type"] = _answer_type(row).value
+        item["answer_type"] = self._answer_type(row).value
         item["options"] = {k: row[k] for k in MCQ_LETTERS if row.get(k, "").strip()}
-        item["image_paths"] = _image_paths(row.get("image_path", ""))
+        item["image_paths"] = self._image_paths(row)
         item["dropped"] = self._dropped[n]
         item["edited"] = self._edited(n)
         item["history"] = [dict(e) for e in self._history[n]]
@@ -587,28 +575,11 @@ class ReviewStore:
         return self._jsonl_geometry
 
     def _scene_geometry(self, scene_id: str) -> dict[str, Any]:
-        if scene_id in self._scene_cache:
-            return self._scene_cache[scene_id]
-        found: dict[str, Any] = {}
-        name = f"{scene_id}.qa.jsonl"
-        for root in self._scene_roots:
-            candidates = [root / name, root / scene_id / name]
+        """``record id → geometry`` of the first ``<scene_id>.qa.jsonl`` under the scene roots
+        (each root itself, then its ``<scene_id>/`` folder), cached per scene."""
+        if scene_id not in self._scene_cache:
+            name = f"{scene_id}.qa.jsonl"
+            candidates = (c for root in self._scene_roots for c in (root / name, root / scene_id / name))
             path = next((c for c in candidates if c.is_file()), None)
-            if path is None:
-                continue
-            try:
-                with path.open(encoding="utf-8") as handle:
-                    for line in handle:
-                        if not line.strip():
-                            continue
-                        try:
-                            data = json.loads(line)
-                        except json.JSONDecodeError:
-                            continue
-                        if isinstance(data, dict) and "id" in data:
-                            found[str(data["id"])] = data.get("geometry")
-            except (OSError, UnicodeDecodeError):
-                continue
-            break
-        self._scene_cache[scene_id] = found
-        return found
+            self._scene_cache[scene_id] = index_geometry(path) if path is not None else {}
+        return self._scene_cache[scene_id]

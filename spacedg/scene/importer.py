@@ -47,26 +47,31 @@ from spacedg.scene.frame_check import (
     normalised_hint,
 )
 from spacedg.scene.io import (
+    GAUSSIAN_SUFFIXES,
     estimate_up,
     read_gaussians,
     read_instances,
-    read_views,
     save_scene,
 )
-from spacedg.scene.io._assemble import GAUSSIAN_SUFFIXES
-from spacedg.scene.io.colmap import read_colmap
+from spacedg.scene.io.capture import (
+    CameraFiles,
+    colmap_model,
+    find_cameras,
+    read_cameras,
+    scale_gaussians,
+    scale_instances,
+    scale_views,
+)
 from spacedg.scene.io.embodiedscan import read_embodiedscan_boxes
 from spacedg.scene.io.inria import (
     is_inria_output,
     latest_point_cloud,
     read_cfg_args,
-    read_inria_cameras,
 )
 from spacedg.scene.io.nerfstudio import (
     denormalising_similarity,
     read_applied_transform,
     read_dataparser_transforms,
-    read_transforms,
 )
 from spacedg.scene.io.scannetpp import (
     is_scannetpp_scene,
@@ -76,7 +81,7 @@ from spacedg.scene.io.scannetpp import (
 from spacedg.scene.labelling import AssignmentReport, assign_instances
 from spacedg.scene.model import Instance, Scene
 
-__all__ = ["LAYOUTS", "ImportReport", "import_scene", "detect_layout", "parse_up", "read_any_instances"]
+__all__ = ["LAYOUTS", "CaptureLayout", "ImportReport", "import_scene", "detect_layout", "detect_capture", "parse_up", "read_any_instances"]
 
 #: Layouts :func:`import_scene` knows (``format=``).
 LAYOUTS = ("auto", "inria", "colmap", "nerfstudio", "scannetpp", "gaussians")
@@ -148,24 +153,38 @@ class ImportReport:
 
 
 # --------------------------------------------------------------------------- detection
-def detect_layout(src: Path) -> str:
-    """The layout of ``src`` (see :data:`LAYOUTS`); :class:`FileFormatError` naming what was looked for."""
+@dataclass(frozen=True)
+class CaptureLayout:
+    """The layout of a capture, detected once (:func:`detect_capture`) and passed along.
+
+    Attributes:
+        name: one of :data:`LAYOUTS` other than ``"auto"``.
+        colmap: the COLMAP model folder found while detecting a ``"colmap"`` layout (``None`` otherwise).
+    """
+
+    name: str
+    colmap: Path | None = None
+
+
+def detect_capture(src: Path) -> CaptureLayout:
+    """The layout of ``src`` (see :data:`LAYOUTS`), inspecting it once; :class:`FileFormatError` naming what was looked for."""
     if src.is_file():
         if src.suffix.lower() in GAUSSIAN_SUFFIXES or src.suffix.lower() == ".ksplat":
-            return "gaussians"
+            return CaptureLayout("gaussians")
         if src.suffix.lower() == ".json":
-            return "nerfstudio"
+            return CaptureLayout("nerfstudio")
         raise FileFormatError(f"{src}: not a Gaussians file ({', '.join(GAUSSIAN_SUFFIXES)}) nor a transforms.json")
     if not src.is_dir():
         raise FileFormatError(f"{src}: no such file or folder")
     if is_inria_output(src):
-        return "inria"
+        return CaptureLayout("inria")
     if is_scannetpp_scene(src):
-        return "scannetpp"
+        return CaptureLayout("scannetpp")
     if (src / "transforms.json").is_file():
-        return "nerfstudio"
-    if _colmap_model(src) is not None:
-        return "colmap"
+        return CaptureLayout("nerfstudio")
+    model = colmap_model(src)
+    if model is not None:
+        return CaptureLayout("colmap", model)
     raise FileFormatError(
         f"{src}: no known layout: looked for an INRIA output (point_cloud/iteration_*/point_cloud.ply), a ScanNet++ scene "
         "(dslr/nerfstudio, scans/segments_anno.json), a nerfstudio transforms.json, a COLMAP model (sparse/0 or cameras.bin/txt); "
@@ -173,11 +192,9 @@ def detect_layout(src: Path) -> str:
     )
 
 
-def _colmap_model(folder: Path) -> Path | None:
-    for candidate in (folder, folder / "sparse" / "0", folder / "sparse"):
-        if any((candidate / f"cameras.{ext}").is_file() and (candidate / f"images.{ext}").is_file() for ext in ("bin", "txt")):
-            return candidate
-    return None
+def detect_layout(src: Path) -> str:
+    """The name of the layout of ``src`` (:func:`detect_capture`)."""
+    return detect_capture(src).name
 
 
 def _single_gaussians_file(folder: Path, what: str) -> Path:
@@ -223,35 +240,12 @@ def read_any_instances(path: PathLike, views: Any = None, *, embodiedscan_scene:
     return read_instances(p, views=views), "holi-spatial" if holi else "spacedg"
 
 
-def _count_test_frames(path: Path) -> int:
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return 0
-    frames = data.get("test_frames") if isinstance(data, dict) else None
-    return len(frames) if isinstance(frames, list) else 0
-
-
 def _scene_id(name: str | None, src: Path) -> str:
     raw = name if name is not None else (src.stem if src.is_file() else src.name)
     sid = _SAFE_ID.sub("-", raw).strip("-.") or "scene"
     if name is not None and sid != name:
         raise ParameterError(f"--name {name!r}: use letters, digits, '_', '.', '-' (e.g. {sid!r})")
     return sid if sid[0].isalnum() else "s" + sid
-
-
-def _scaled(views: dict[str, Camera], instances: list[Instance], gaussians: Gaussians, scale: float) -> tuple[dict[str, Camera], list[Instance], Gaussians]:
-    from dataclasses import replace
-
-    if scale == 1.0:
-        return views, instances, gaussians
-    out_views = {}
-    for name, cam in views.items():
-        pose = np.asarray(cam.cam_to_world, dtype=np.float64).copy()
-        pose[:3, 3] *= scale
-        out_views[name] = cam.with_pose(pose)
-    boxes = [replace(i, box=i.box.transformed(np.eye(3), np.zeros(3), scale)) for i in instances]
-    return out_views, boxes, gaussians.transformed(scale=scale)
 
 
 def _move_views(views: dict[str, Camera], matrix: np.ndarray) -> dict[str, Camera]:
@@ -264,8 +258,7 @@ def _move_views(views: dict[str, Camera], matrix: np.ndarray) -> dict[str, Camer
 class _Parts:
     layout: str
     gaussians_path: Path
-    cameras_path: Path
-    cameras_kind: str
+    cameras: CameraFiles
     instances_path: Path | None
     dataparser: Path | None
     applied_transform: np.ndarray | None
@@ -274,58 +267,45 @@ class _Parts:
     notes: list[str]
 
 
-def _inria_cameras(src: Path, notes: list[str]) -> tuple[Path, str]:
+def _inria_cameras(src: Path, notes: list[str]) -> CameraFiles:
     cfg = src / "cfg_args"
     if cfg.is_file():
         source = read_cfg_args(cfg).get("source_path")
         if isinstance(source, str) and source:
             for base in (Path(source), src / source, src.parent / source):
-                model = _colmap_model(base) if base.is_dir() else None
+                model = colmap_model(base) if base.is_dir() else None
                 if model is not None:
                     notes.append(f"cameras from the COLMAP model of cfg_args' source_path ({model})")
-                    return model, "colmap"
+                    return CameraFiles("colmap", model, model)
             notes.append(f"cfg_args' source_path {source!r} has no COLMAP model here; cameras from cameras.json (principal point at the image centre)")
     if (src / "cameras.json").is_file():
-        return src / "cameras.json", "inria"
+        return CameraFiles("inria", src / "cameras.json", src / "cameras.json")
     raise FileFormatError(f"{src}: INRIA output without cameras: neither cfg_args' source_path/sparse/0 nor cameras.json; pass --cameras")
 
 
-def _cameras_kind(path: Path) -> str:
-    if path.is_file() and path.name == "cameras.json":
-        return "inria"
-    if path.is_file() and path.suffix.lower() == ".json":
-        return "nerfstudio"
-    if path.is_dir() and (path / "transforms.json").is_file() and _colmap_model(path) is None:
-        return "nerfstudio"
-    return "colmap"
-
-
 def _resolve_parts(
-    src: Path, layout: str, gaussians: Path | None, cameras: Path | None, instances: Path | None,
+    src: Path, layout: CaptureLayout, gaussians: Path | None, cameras: Path | None, instances: Path | None,
     dataparser: Path | None, device: str,
 ) -> _Parts:
     notes: list[str] = []
     default_up, up_note = None, ""
-    cameras_kind = ""
-    if layout == "inria":
+    given = None if cameras is None else find_cameras(cameras)
+    if layout.name == "inria":
         gpath = gaussians or latest_point_cloud(src)
         if gaussians is None:
             notes.append(f"Gaussians of the latest iteration: {gpath.relative_to(src)}")
-        cpath, cameras_kind = (cameras, _cameras_kind(cameras)) if cameras else _inria_cameras(src, notes)
-    elif layout == "colmap":
-        model = _colmap_model(src)
-        if model is None and cameras is None:
+        files = given or _inria_cameras(src, notes)
+    elif layout.name == "colmap":
+        model = layout.colmap if layout.colmap is not None else colmap_model(src)
+        if model is None and given is None:
             raise FileFormatError(f"{src}: no COLMAP model (cameras + images .bin/.txt) here or in sparse/0")
-        cpath = cameras or model
-        cameras_kind = _cameras_kind(cpath)  # type: ignore[arg-type]
+        files = given or CameraFiles("colmap", model, model)  # type: ignore[arg-type]
         gpath = gaussians or _single_gaussians_file(src, "a COLMAP model")
-    elif layout == "nerfstudio":
-        cpath = cameras or (src if src.is_file() else src / "transforms.json")
-        cameras_kind = _cameras_kind(cpath)
+    elif layout.name == "nerfstudio":
+        files = given or find_cameras(src if src.is_file() else src / "transforms.json")
         gpath = gaussians or _single_gaussians_file(src if src.is_dir() else src.parent, "a nerfstudio transforms.json")
-    elif layout == "scannetpp":
-        cpath = cameras or scannetpp_cameras(src, device)
-        cameras_kind = _cameras_kind(cpath)
+    elif layout.name == "scannetpp":
+        files = given or find_cameras(scannetpp_cameras(src, device))
         if instances is None and (src / "scans" / "segments_anno.json").is_file():
             instances = src / "scans" / "segments_anno.json"
         if gaussians is None:
@@ -339,34 +319,17 @@ def _resolve_parts(
         else:
             gpath = gaussians
         default_up, up_note = np.array([0.0, 0.0, 1.0]), "ScanNet++ scan frame (z up)"
-    elif layout == "gaussians":
-        if cameras is None:
+    elif layout.name == "gaussians":
+        if given is None:
             raise ParameterError(f"{src}: a bare Gaussians file needs --cameras (a COLMAP model folder, a transforms.json or an INRIA cameras.json)")
-        gpath, cpath = gaussians or src, cameras
-        cameras_kind = _cameras_kind(cpath)
+        gpath, files = gaussians or src, given
     else:
-        raise ParameterError(f"--format {layout!r}: choose one of {', '.join(LAYOUTS)}")
+        raise ParameterError(f"--format {layout.name!r}: choose one of {', '.join(LAYOUTS)}")
     if dataparser is None and (gpath.parent / "dataparser_transforms.json").is_file():
         dataparser = gpath.parent / "dataparser_transforms.json"
         notes.append(f"found {dataparser.name} next to the Gaussians: they are a splatfacto export in nerfstudio's normalised frame")
-    applied = None
-    if cameras_kind == "nerfstudio":
-        json_path = cpath if cpath.is_file() else cpath / "transforms.json"
-        applied = read_applied_transform(json_path)
-    return _Parts(layout, Path(gpath), Path(cpath), cameras_kind, instances, dataparser, applied, default_up, up_note, notes)
-
-
-def _read_cameras(parts: _Parts, distortion: Literal["error", "drop"]) -> tuple[dict[str, Camera], int]:
-    path = parts.cameras_path
-    if parts.cameras_kind == "inria":
-        return read_inria_cameras(path), 0
-    if parts.cameras_kind == "nerfstudio":
-        json_path = path if path.is_file() else path / "transforms.json"
-        return read_transforms(json_path, opencv_distortion=distortion), _count_test_frames(json_path)
-    model = _colmap_model(path) if path.is_dir() else None
-    if model is None:
-        return read_views(path, distortion), 0
-    return read_colmap(model, opencv_distortion=distortion), 0
+    applied = read_applied_transform(files.read_path) if files.kind == "nerfstudio" else None
+    return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes)
 
 
 def import_scene(
@@ -440,7 +403,7 @@ def import_scene(
         raise ParameterError(f"--metres-per-unit must be a positive number, got {metres_per_unit!r}")
     if format not in LAYOUTS:
         raise ParameterError(f"--format {format!r}: choose one of {', '.join(LAYOUTS)}")
-    layout = detect_layout(src_path) if format == "auto" else format
+    layout = detect_capture(src_path) if format == "auto" else CaptureLayout(format)
     parts = _resolve_parts(
         src_path, layout, None if gaussians is None else Path(gaussians), None if cameras is None else Path(cameras),
         None if instances is None else Path(instances), None if dataparser_transforms is None else Path(dataparser_transforms), device,
@@ -448,7 +411,7 @@ def import_scene(
     notes = parts.notes
     gauss = read_gaussians(parts.gaussians_path)
     timings["read_gaussians"] = time.perf_counter() - t0
-    views, test_views = _read_cameras(parts, opencv_distortion)
+    views, test_views = read_cameras(parts.cameras, opencv_distortion), parts.cameras.test_frames()
     if parts.dataparser is not None:
         transform, scale = read_dataparser_transforms(parts.dataparser)
         rot, trans, k = denormalising_similarity(transform, scale)
@@ -472,10 +435,13 @@ def import_scene(
         up_vec, up_source = parts.default_up, parts.up_note
     else:
         up_vec, up_source = estimate_up(views), f"estimated from the -y axes of {len(views)} cameras"
-    views, found_instances, gauss = _scaled(views, found_instances, gauss, float(metres_per_unit))
+    scale = float(metres_per_unit)
+    if scale != 1.0:
+        views, found_instances = scale_views(views, scale), scale_instances(found_instances, scale)
+    gauss = scale_gaussians(gauss, scale)
     scene_id = _scene_id(name, src_path)
     metadata: dict[str, Any] = {
-        "source": {"layout": layout, "src": str(src_path), "gaussians": str(parts.gaussians_path), "cameras": str(parts.cameras_path),
+        "source": {"layout": parts.layout, "src": str(src_path), "gaussians": str(parts.gaussians_path), "cameras": str(parts.cameras.path),
                    "instances": None if parts.instances_path is None else str(parts.instances_path),
                    "instances_format": instances_format,
                    "dataparser_transforms": None if parts.dataparser is None else str(parts.dataparser)},
@@ -513,8 +479,8 @@ def import_scene(
         ids_source = f"assigned by {method} (the Gaussians file carried none)"
         scene.metadata["instance_assignment"] = {k: v for k, v in assignment.to_dict().items() if k != "instances"}
     report = ImportReport(
-        scene_id, layout, None, str(parts.gaussians_path), len(gauss), gauss.sh_degree, len(views), test_views,
-        str(parts.cameras_path), len(found_instances), None if parts.instances_path is None else str(parts.instances_path),
+        scene_id, parts.layout, None, str(parts.gaussians_path), len(gauss), gauss.sh_degree, len(views), test_views,
+        str(parts.cameras.path), len(found_instances), None if parts.instances_path is None else str(parts.instances_path),
         [float(v) for v in scene.up], up_source, float(metres_per_unit), report_frame, ids_source, assignment, notes,
     )
     if out is not None:

@@ -4,7 +4,7 @@
   (``$SPACEDG_HOME/rooms``, default ``~/.cache/spacedg/rooms``) with a progress bar.
 - :func:`assign_splits`: scenes → ``train`` / ``val`` / ``bench``, disjoint, deterministic.
 - :func:`run_isolated`: run a function in a fresh Python interpreter (the built-in rooms here;
-  question indexes in :func:`spacedg.data.qa_index.ensure_indexes`), so the calling process never
+  question indexes in :func:`spacedg.qa.build.ensure_indexes`), so the calling process never
   starts numba or CUDA threads before a DataLoader forks its workers.
 - :class:`ByteLRU`: a least-recently-used cache bounded by a byte budget (Gaussians, clean renders).
 """
@@ -18,6 +18,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from spacedg._checks import check_fractions, check_int, short_repr
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.scene.io import save_scene
 from spacedg.scene.synthetic import generate_room
@@ -60,6 +61,8 @@ def builtin_scene_dirs(n: int = 16, root: str | os.PathLike[str] | None = None) 
 
 def scene_dirs_of(paths: Sequence[str | os.PathLike[str]]) -> list[Path]:
     """Scene folders from folders, folders of folders, or ``scene.json`` paths (sorted, deduplicated)."""
+    if isinstance(paths, (str, bytes, os.PathLike)) or not all(isinstance(p, (str, os.PathLike)) for p in paths):
+        raise ParameterError(f"scene_dirs_of: paths must be a list of folder paths, got {short_repr(paths)}")
     found: list[Path] = []
     for raw in paths:
         path = Path(raw)
@@ -85,10 +88,11 @@ def assign_splits(scene_ids: Sequence[str], fractions: tuple[float, float] = (0.
     that needs as many scenes as non-empty splits. Adding a scene moves few others."""
     import math
 
+    if isinstance(scene_ids, (str, bytes)) or not all(isinstance(s, str) for s in scene_ids):
+        raise ParameterError(f"assign_splits: scene_ids must be a list of scene id strings, got {short_repr(scene_ids)}")
+    check_int(seed, "assign_splits: seed")
     ids = sorted(set(scene_ids))
-    val_f, bench_f = (float(f) for f in fractions)
-    if not (0.0 <= val_f <= 1.0 and 0.0 <= bench_f <= 1.0 and val_f + bench_f <= 1.0 + 1e-9):
-        raise InvalidDataError(f"split fractions (val, bench) must be in [0, 1] and sum to at most 1, got {fractions}")
+    val_f, bench_f = check_fractions(fractions, "assign_splits: fractions")
     wanted = (bench_f > 0) + (val_f > 0) + (val_f + bench_f < 1.0 - 1e-9)
     if len(ids) < max(1, wanted):
         raise InvalidDataError(
@@ -139,8 +143,9 @@ class ByteLRU:
     """
 
     def __init__(self, max_bytes: int, size_of: Callable[[Any], int]) -> None:
-        if max_bytes < 0:
-            raise ParameterError(f"ByteLRU: max_bytes must be >= 0, got {max_bytes}")
+        check_int(max_bytes, "ByteLRU: max_bytes", minimum=0)
+        if not callable(size_of):
+            raise ParameterError(f"ByteLRU: size_of must be a function value → bytes, got {short_repr(size_of)}")
         self.max_bytes = int(max_bytes)
         self.size_of = size_of
         self._items: OrderedDict[Any, tuple[Any, int]] = OrderedDict()

@@ -51,7 +51,7 @@ class OnlineSFTDataset(Dataset):
 
     def question(self, index: int) -> tuple[str, str, int, str]:
         """``(question, answer, views, key)`` of item ``index`` without rendering it."""
-        record, _, _ = self.dataset.plan(index)
+        record = self.dataset.plan(index).record
         fields = public_fields(record)  # the bench's form: existence as lettered options
         return fields["question"], f"<answer>{fields['answer']}</answer>", len(record.views), record.id
 

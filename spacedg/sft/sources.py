@@ -115,7 +115,7 @@ class DataOptions:
     def _dataset(self, split: str, degradations: Degradations, clean_prob: float, max_questions: int | None) -> SpaceDGDataset:
         return SpaceDGDataset(
             split, list(BENCH_DEGRADATIONS) if degradations is None else degradations, scenes=self.scenes,
-            question_types=self.question_types, severity=self.severity, clean_prob=clean_prob,
+            families=self.question_types, severity=self.severity, clean_prob=clean_prob,
             image_size=self.image_size, seed=self.seed, max_questions=max_questions, builtin_rooms=self.builtin_rooms,
             device=self.rank_render_device(),
         )

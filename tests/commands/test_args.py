@@ -1,6 +1,6 @@
 """Every subcommand checks its arguments before any work: bad numbers and unusable ``--out``
-paths are one line ``spacedg: error: …`` with exit status 2, never a traceback, and nothing is
-written."""
+paths are one line with exit status 2 (``spacedg <command>: error: …`` from the parser, ``spacedg:
+error: …`` from the handler), never a traceback, and nothing is written."""
 
 from __future__ import annotations
 
@@ -19,11 +19,15 @@ UNWRITABLE = "/proc/spacedg-cannot-write-here"  # not even root can create files
 
 
 def _fails(capsys: pytest.CaptureFixture[str], argv: list[str], *needles: str) -> str:
-    code = main(argv)
+    try:
+        code = main(argv)
+    except SystemExit as exit_:  # a usage error, raised by the parser
+        code = exit_.code
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if line.strip()]
     assert code == 2, err
-    assert len(lines) == 1 and lines[0].startswith("spacedg: error: "), err
+    assert len(lines) == 1 and lines[0].startswith(("spacedg: error: ", f"spacedg {argv[0]}")), err
+    assert "Traceback" not in err and "usage:" not in err, err
     for needle in needles:
         assert needle in lines[0], (needle, lines[0])
     return lines[0]
@@ -36,16 +40,18 @@ def a_file(tmp_path: Path) -> Path:
     return path
 
 
-SYNTH = ["scenes", "synth", "--n", "1", "--gaussians", "10000", "--width", "64", "--height", "48"]
+SYNTH = ["scenes", "synth", "--n", "1", "--num-gaussians", "10000", "--image-size", "64x48"]
 
 
 @pytest.mark.parametrize(("extra", "needles"), [
     (["--min-views", "10", "--max-views", "2"], ["--min-views 10 is more than --max-views 2"]),
-    (["--min-views", "0"], ["--min-views must be at least 1, got 0"]),
-    (["--seed", "-3"], ["--seed must be a non-negative integer"]),
-    (["--width", "4"], ["--width must be from 8 to 16384 pixels, got 4"]),
-    (["--splat-size", "nan"], ["--splat-size must be a finite number > 0"]),
-    (["--gaussians", "5"], ["gaussians must be in [10000, 5000000], got 5"]),
+    (["--min-views", "0"], ["argument --min-views: must be a whole number >= 1, got 0"]),
+    (["--seed", "-3"], ["argument --seed: must be a non-negative integer"]),
+    (["--seed", "9223372036854775807", "--n", "2"], ["--seed + --n - 1 (the last room's seed) must be a non-negative integer"]),
+    (["--image-size", "4x48"], ["argument --image-size: 4x48: width and height must be >= 8 pixels"]),
+    (["--splat-size", "nan"], ["argument --splat-size: must be a finite number > 0 metres, got 'nan'"]),
+    (["--splat-size", "0"], ["argument --splat-size: must be a finite number > 0 metres, got 0"]),
+    (["--num-gaussians", "5"], ["argument --num-gaussians: must be a whole number from 10000 to 5000000, got 5"]),
 ])
 def test_scenes_synth_numbers(capsys, tmp_path: Path, extra: list[str], needles: list[str]) -> None:
     out = tmp_path / "rooms"
@@ -76,17 +82,22 @@ def test_every_out_is_checked_before_work(capsys, tmp_path: Path, a_file: Path, 
 
 
 @pytest.mark.parametrize(("argv", "needles"), [
-    (["scenes", "preview", "S", "--out", "x.png", "--columns", "0"], ["--columns must be from 1 to 64 floor plans per row, got 0"]),
-    (["qa", "preview", "S", "--out", "x.png", "--seed", "-2"], ["--seed must be a non-negative integer"]),
-    (["qa", "build", "S", "--per-sub-type", "0"], ["--per-sub-type must be at least 1"]),
-    (["gallery", "S", "--out", "x.png", "--seed", "-1"], ["--seed must be a non-negative integer"]),
-    (["render", "S", "--view", "v", "--out", "x.png", "--motion", "0,0,0,0,0,0.1", "--sub-steps", "0"], ["--sub-steps must be from 1"]),
-    (["export", "--out", "o", "--clean-prob", "1.5"], ["--clean-prob must be a number from 0 to 1"]),
-    (["export", "--out", "o", "--clean-prob", "nan"], ["--clean-prob must be a number from 0 to 1"]),
-    (["export", "--out", "o", "--max-questions", "0"], ["--max-questions must be at least 1"]),
-    (["export", "--out", "o", "--per-sub-type", "0"], ["--per-sub-type must be at least 1"]),
-    (["export", "--out", "o", "--seed", "-1"], ["--seed must be a non-negative integer"]),
-    (["predict", "--model", "m", "--bench", "b", "--out", "p.jsonl", "--batch-size", "0"], ["--batch-size must be at least 1"]),
+    (["scenes", "preview", "S", "--out", "x.png", "--columns", "0"],
+     ["argument --columns: must be a whole number from 1 to 64 floor plans per row, got 0"]),
+    (["qa", "preview", "S", "--out", "x.png", "--seed", "-2"], ["argument --seed: must be a non-negative integer"]),
+    (["qa", "build", "S", "--per-sub-type", "0"], ["argument --per-sub-type: must be a whole number >= 1, got 0"]),
+    (["qa", "audit", "S", "--null", "-1"], ["argument --null: must be a whole number from 0 to 10000 runs, got -1"]),
+    (["qa", "audit", "S", "--show", "-3"], ["argument --show: must be a whole number >= 0, got -3"]),
+    (["gallery", "S", "--out", "x.png", "--seed", "-1"], ["argument --seed: must be a non-negative integer"]),
+    (["render", "S", "--view", "v", "--out", "x.png", "--motion", "0,0,0,0,0,0.1", "--sub-steps", "0"],
+     ["argument --sub-steps: must be a whole number from 1 to 4096"]),
+    (["export", "--out", "o", "--clean-prob", "1.5"], ["argument --clean-prob: must be a number from 0 to 1"]),
+    (["export", "--out", "o", "--clean-prob", "nan"], ["argument --clean-prob: must be a number from 0 to 1"]),
+    (["export", "--out", "o", "--max-questions", "0"], ["argument --max-questions: must be a whole number >= 1"]),
+    (["export", "--out", "o", "--per-sub-type", "0"], ["argument --per-sub-type: must be a whole number >= 1"]),
+    (["export", "--out", "o", "--seed", "-1"], ["argument --seed: must be a non-negative integer"]),
+    (["predict", "--model", "m", "--bench", "b", "--out", "p.jsonl", "--batch-size", "0"],
+     ["argument --batch-size: must be a whole number >= 1"]),
     (["predict", "--model", "m", "--bench", "b", "--out", "p.jsonl", "--min-pixels", "900", "--max-pixels", "10"],
      ["--min-pixels 900 is more than --max-pixels 10"]),
     (["predict", "--model", "m", "--bench", "b", "--out", "p.txt"], ["write a .jsonl file"]),
@@ -103,7 +114,7 @@ def test_predict_max_new_tokens_zero_writes_no_sidecar(capsys, tmp_path: Path) -
     bench = write_bench(tmp_path / "bench")
     out = tmp_path / "preds.jsonl"
     _fails(capsys, ["predict", "--model", str(tmp_path / "model"), "--bench", str(bench), "--out", str(out),
-                    "--max-new-tokens", "0"], "--max-new-tokens must be from 1")
+                    "--max-new-tokens", "0"], "argument --max-new-tokens: must be a whole number from 1")
     assert not out.exists() and not (tmp_path / "preds.jsonl.meta.json").exists()
 
 

@@ -42,6 +42,9 @@ def test_gallery_png_has_one_row_per_degradation(room_dir: Path, tmp_path: Path,
     ],
 )
 def test_gallery_bad_input(room_dir: Path, tmp_path: Path, capsys, args: list[str], message: str) -> None:
-    code = main(["gallery", str(room_dir), "--out", str(tmp_path / "x.png"), *args])
+    try:
+        code = main(["gallery", str(room_dir), "--out", str(tmp_path / "x.png"), *args])
+    except SystemExit as exit_:  # a usage error, from the parser
+        code = exit_.code
     assert code == 2 and message in capsys.readouterr().err
     assert not (tmp_path / "x.png").exists()

@@ -23,7 +23,7 @@ def scene_dir(tmp_path_factory):
 
 
 def _render(scene_dir, out, *extra):
-    return main(["render", str(scene_dir), "--view", "frame_0001", "--width", str(W), "--height", str(H),
+    return main(["render", str(scene_dir), "--view", "frame_0001", "--image-size", f"{W}x{H}",
                  "--backend", "cpu", "--out", str(out), *extra])
 
 
@@ -98,12 +98,27 @@ def test_bad_input_gives_one_clear_error(scene_dir, tmp_path, capsys, flags, mes
     assert not (tmp_path / "x.png").exists()
 
 
-@pytest.mark.parametrize("flags", [["--width", "0"], ["--height", "20000"], ["--width", "abc"]])
+@pytest.mark.parametrize("flags", [["--image-size", "0x0"], ["--image-size", "20000x10"], ["--image-size", "abc"],
+                                   ["--image-size", "160"], ["--width", "0"], ["--height", "20000"]])
 def test_bad_sizes_are_usage_errors(scene_dir, tmp_path, capsys, flags):
     """Sizes parse with the size policy's argparse type: a usage error (exit 2) before the scene is read."""
     with pytest.raises(SystemExit) as exit_:
         main(["render", str(scene_dir), "--view", "frame_0001", "--out", str(tmp_path / "x.png"), *flags])
     assert exit_.value.code == 2 and f"argument {flags[0]}:" in capsys.readouterr().err
+
+
+def test_deprecated_width_alone_keeps_the_aspect_ratio(scene_dir, tmp_path, capsys):
+    """The old --width (one release more) still renders, keeping the view's 4:3, with one warning line."""
+    out = tmp_path / "w.png"
+    with pytest.warns(DeprecationWarning, match="--width is deprecated"):
+        assert main(["render", str(scene_dir), "--view", "frame_0001", "--width", "80", "--backend", "cpu", "--out", str(out)]) == 0
+    warning = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert warning == ["spacedg render: warning: --width is deprecated and goes in the next release; use --image-size WxH"]
+    assert cv2.imread(str(out)).shape == (60, 80, 3)
+    with pytest.warns(DeprecationWarning):
+        assert main(["render", str(scene_dir), "--view", "frame_0001", "--width", "80", "--image-size", "80x60",
+                     "--out", str(out)]) == 2
+    assert "alternatives; pass --image-size WxH" in capsys.readouterr().err
 
 
 def test_missing_scene_and_wrong_suffix(tmp_path, capsys):

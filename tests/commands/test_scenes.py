@@ -13,7 +13,7 @@ from spacedg.scene.io import load_scene
 
 def test_synth_info_preview_round_trip(tmp_path, capsys):
     out = tmp_path / "scenes"
-    assert main(["scenes", "synth", "--n", "2", "--out", str(out), "--seed", "4", "--gaussians", "12000",
+    assert main(["scenes", "synth", "--n", "2", "--out", str(out), "--seed", "4", "--num-gaussians", "12000",
                  "--min-views", "40", "--max-views", "44"]) == 0
     text = capsys.readouterr().out
     assert "room-000004" in text and "room-000005" in text and "wrote 2 scene folder(s)" in text
@@ -36,10 +36,10 @@ def test_synth_info_preview_round_trip(tmp_path, capsys):
     assert image is not None and image.shape[0] > 100 and image.shape[1] > 200
 
     # a second run finds the rooms and keeps them; other settings are refused, not overwritten
-    assert main(["scenes", "synth", "--n", "2", "--out", str(out), "--seed", "4", "--gaussians", "12000",
+    assert main(["scenes", "synth", "--n", "2", "--out", str(out), "--seed", "4", "--num-gaussians", "12000",
                  "--min-views", "40", "--max-views", "44"]) == 0
     assert capsys.readouterr().out.count("exists") == 2
-    assert main(["scenes", "synth", "--n", "1", "--out", str(out), "--seed", "4", "--gaussians", "13000"]) == 2
+    assert main(["scenes", "synth", "--n", "1", "--out", str(out), "--seed", "4", "--num-gaussians", "13000"]) == 2
     assert "exists with other generation settings" in capsys.readouterr().err
 
 
@@ -47,11 +47,15 @@ def test_synth_info_preview_round_trip(tmp_path, capsys):
     "argv, message",
     [
         (["scenes", "info", "/nonexistent/scene"], "no such scene folder"),
-        (["scenes", "synth", "--n", "0", "--out", "x"], "--n must be at least 1"),
-        (["scenes", "synth", "--n", "1", "--out", "x", "--gaussians", "5"], "gaussians must be in"),
+        (["scenes", "synth", "--n", "0", "--out", "x"], "argument --n: must be a whole number >= 1"),
+        (["scenes", "synth", "--n", "1", "--out", "x", "--num-gaussians", "5"], "must be a whole number from 10000 to 5000000"),
     ],
 )
 def test_bad_input_gives_one_clear_error(argv, message, capsys):
-    assert main(argv) == 2
+    try:
+        code = main(argv)
+    except SystemExit as exit_:  # a usage error, from the parser
+        code = exit_.code
+    assert code == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err

@@ -62,11 +62,11 @@ def test_frame_mismatch_exits_non_zero_with_the_cause(tmp_path: Path, capsys) ->
     ply, dataparser = cl.write_splatfacto(tmp_path / "outputs" / "r" / "splatfacto" / "t", room, cl.APPLIED)
     lone = tmp_path / "splat.ply"
     lone.write_bytes(ply.read_bytes())
-    assert main(["scenes", "import", str(data), "--gaussians", str(lone), "--out", str(tmp_path / "bad")]) == 2
+    assert main(["scenes", "import", str(data), "--gaussians-file", str(lone), "--out", str(tmp_path / "bad")]) == 2
     err = capsys.readouterr().err
     assert "the Gaussians and the cameras disagree" in err and "normalised frame" in err and "--dataparser-transforms" in err
     assert not (tmp_path / "bad" / "scene.json").exists()
-    assert main(["scenes", "import", str(data), "--gaussians", str(lone), "--dataparser-transforms", str(dataparser),
+    assert main(["scenes", "import", str(data), "--gaussians-file", str(lone), "--dataparser-transforms", str(dataparser),
                  "--out", str(tmp_path / "good")]) == 0
 
 
@@ -91,7 +91,8 @@ def test_scene_without_ids_warns_and_still_builds(tmp_path: Path, capsys) -> Non
     assert main(["scenes", "info", str(folder)]) == 0
     assert "carry no instance ids" in capsys.readouterr().out
     with pytest.warns(UserWarning, match="assigned .* by box"):
-        from spacedg.data.qa_index import QABuildConfig, build_scene_index
+        from spacedg.qa.build import build_scene_index
+        from spacedg.qa.index import QABuildConfig
 
         qa = build_scene_index(folder, QABuildConfig(per_sub_type=2), progress=False)
     assert qa.counts().get("object_counting", 0) + qa.counts().get("inter_object_distance", 0) > 0

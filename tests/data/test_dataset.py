@@ -31,15 +31,16 @@ from spacedg.data.public_format import public_fields
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.scene.io import load_scene
 from spacedg.data.chain import BENCH_DEGRADATIONS
-from spacedg.data.qa_index import QABuildConfig, index_paths, read_index
+from spacedg.qa.index import QABuildConfig, index_paths, read_index
 from spacedg.errors import InvalidDataError, ParameterError, UnknownPluginError
 from spacedg.eval.scoring import ANSWER_PROMPT, score
+from tests.conftest import private_copies
 
 SIZE = (64, 48)  # (width, height)
 #: one-view COUNT, two-view MCQ (camera_rotation), two-view NA (inter_object_distance), SIZE_LIST
 FAMILIES = ("camera_rotation", "inter_object_distance", "object_bounding_size_estimation", "object_counting")
 CONFIG = QABuildConfig(seed=0, per_sub_type=2, families=FAMILIES)
-MIX = ["haze", "low_res:3", "jpeg_compression", "defocus", "water_droplets"]
+MIX = ["haze", "low_res:3", "jpeg_compression", "defocus", "water_droplets", {"name": "low_light", "params": {"exposure": 0.05}}]
 INDEX_FILES = shutil.ignore_patterns("*.qa.*", "cache")  # full and selection indexes
 
 
@@ -55,9 +56,10 @@ def digest(item: dict) -> str:
 
 @pytest.fixture(scope="module")
 def rooms(qa_room_dirs, tmp_path_factory) -> list[Path]:
-    """Copies of the four session rooms (the dataset writes indexes into scene folders), indexed once."""
+    """Copies of the four session rooms (the dataset writes indexes into scene folders), indexed
+    once; their visibility caches come along (``loader_run`` builds everything afresh)."""
     root = tmp_path_factory.mktemp("dataset_rooms")
-    dirs = [Path(shutil.copytree(d, root / d.name, ignore=INDEX_FILES)) for d in qa_room_dirs]
+    dirs = private_copies(qa_room_dirs, root)
     make(dirs)  # builds the four question indexes (in a separate interpreter)
     return dirs
 
@@ -99,7 +101,7 @@ def test_every_item_matches_its_index_record(splits, split):
     for i in indices:
         item = ds[i]
         record = by_id[item["record_id"]]
-        assert record is ds.plan(i)[0]
+        assert record is ds.plan(i).record
         assert item["question"] == record.question
         assert item["options"] == list(record.options)
         expected_answer = list(record.answer) if isinstance(record.answer, tuple) else record.answer
@@ -127,13 +129,14 @@ def test_out_of_range_index(splits):
 # ------------------------------------------------------------------ bench protocol
 def test_bench_split_is_every_question_under_clean_and_nine(splits):
     ds = splits["bench"]
-    assert [c.split(":")[0] for c in ds.chains] == list(BENCH_DEGRADATIONS)
+    assert [c.name for c in ds.chains] == list(BENCH_DEGRADATIONS)
     assert len(ds) == len(ds.records) * 10
     seen: dict[str, Counter] = defaultdict(Counter)
     for i in range(len(ds)):
-        record, chain, name = ds.plan(i)
+        plan = ds.plan(i)
+        record, name = plan.record, plan.degradation_type
         seen[record.id][name] += 1
-        assert (chain is None) == (name == CLEAN)
+        assert plan.chain.is_clean == (name == CLEAN) and plan.index == i
     assert set(seen) == {r.id for r in ds.records}
     for counts in seen.values():
         assert counts == Counter({CLEAN: 1, **{name: 1 for name in BENCH_DEGRADATIONS}})
@@ -157,7 +160,7 @@ def test_same_index_same_bytes_in_process(rooms):
     assert forward == backward
     assert [digest(a[i]) for i in range(n)] == forward  # second pass: renders from a's cache
     other = make(rooms, "train", MIX, clean_prob=0.3, split_fractions=(0.1, 0.1))
-    assert [other.plan(i)[1] for i in range(n)] == [a.plan(i)[1] for i in range(n)]
+    assert [other.plan(i).chain.text for i in range(n)] == [a.plan(i).chain.text for i in range(n)]
 
 
 def test_splits_do_not_follow_the_sample_seed(rooms, splits):
@@ -172,7 +175,7 @@ import torch
 from numba.np.ufunc import parallel
 from torch.utils.data import DataLoader
 from spacedg.data.dataset import SpaceDGDataset
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 
 args = json.loads(sys.argv[1])
 config = QABuildConfig(**args["config"])
@@ -212,7 +215,7 @@ def loader_run(rooms, tmp_path_factory) -> dict:
 
 def _in_process_table(ds: SpaceDGDataset, epoch: int) -> dict[str, list[str]]:
     ds.set_epoch(epoch)
-    return {str(i): [ds.plan(i)[2], digest(ds[i])] for i in range(len(ds))}
+    return {str(i): [ds.plan(i).degradation_type, digest(ds[i])] for i in range(len(ds))}
 
 
 def test_same_bytes_across_worker_counts_and_processes(rooms, loader_run):
@@ -223,6 +226,7 @@ def test_same_bytes_across_worker_counts_and_processes(rooms, loader_run):
     assert loader_run["workers0_epoch0"] == here
     assert loader_run["workers2_epoch0"] == here
     assert len({name for name, _ in here.values()}) >= 4  # a real mix of clean and degraded items
+    assert "low_light" in {name for name, _ in here.values()}  # the mapping with explicit params, rendered in workers
 
 
 def test_construction_starts_no_numba_threads_or_cuda(loader_run):
@@ -241,7 +245,7 @@ import hashlib, json, sys
 import numba
 from torch.utils.data import DataLoader, get_worker_info
 from spacedg.data.dataset import SpaceDGDataset
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 from spacedg.render import threads
 
 def serial_flag(_):
@@ -283,19 +287,19 @@ def test_dataloader_after_an_in_process_sample(rooms, tmp_path):
 def test_clean_prob_one_is_all_clean(rooms):
     ds = make(rooms, "train", ["haze", "low_res:3"], clean_prob=1.0)
     assert len(ds) == len(ds.records)
-    assert all(ds.plan(i)[1:] == (None, CLEAN) for i in range(len(ds)))
+    assert all(ds.plan(i).chain.is_clean and ds.plan(i).degradation_type == CLEAN for i in range(len(ds)))
     for i in range(0, len(ds), 5):
         item = ds[i]
         assert item["degradation_type"] == CLEAN and item["degradation"] == []
     # no degradations at all (the train default) is clean too
     default = make(rooms, "train")
-    assert default.chains == [] and all(default.plan(i)[2] == CLEAN for i in range(len(default)))
+    assert default.chains == [] and all(default.plan(i).degradation_type == CLEAN for i in range(len(default)))
 
 
 def test_clean_prob_zero_uses_only_the_given_degradations(rooms):
     ds = make(rooms, "train", ["haze", "low_res:3"], clean_prob=0.0)
-    assert ds.chains == ["haze:bench", "low_res:3"]
-    names = [ds.plan(i)[2] for i in range(len(ds))]
+    assert [c.text for c in ds.chains] == ["haze:bench", "low_res:3"]
+    names = [ds.plan(i).degradation_type for i in range(len(ds))]
     assert set(names) == {"haze", "low_res"}
     presets = {"haze": "bench", "low_res": "3"}
     for i in range(len(ds)):
@@ -310,7 +314,7 @@ def test_set_epoch_redraws_choices_deterministically(rooms):
 
     def plans(ds, epoch):
         ds.set_epoch(epoch)
-        return [ds.plan(i)[1] for i in range(len(ds))]
+        return [ds.plan(i).chain.text for i in range(len(ds))]
 
     e0, e1 = plans(a, 0), plans(a, 1)
     assert e0 != e1
@@ -332,16 +336,16 @@ def test_set_epoch_redraws_choices_deterministically(rooms):
 def test_val_split_is_one_item_per_question(splits, rooms):
     ds = make(rooms, "val", ["haze"], clean_prob=0.5)
     assert len(ds) == len(ds.records) == len(splits["val"].records)
-    assert {ds.plan(i)[2] for i in range(len(ds))} <= {CLEAN, "haze"}
+    assert {ds.plan(i).degradation_type for i in range(len(ds))} <= {CLEAN, "haze"}
 
 
 def test_severity_random_draws_a_level_per_item(rooms):
     ds = make(rooms, "train", ["haze", "low_res"], severity="random", clean_prob=0.0)
-    assert ds.chains == ["haze", "low_res"]
-    chains = [ds.plan(i)[1] for i in range(len(ds))]
+    assert [c.text for c in ds.chains] == ["haze", "low_res"]
+    chains = [ds.plan(i).chain.text for i in range(len(ds))]
     assert all(re.fullmatch(r"(haze|low_res):[1-5]", c) for c in chains), chains
     assert len({c.split(":")[1] for c in chains}) >= 3
-    assert [ds.plan(i)[1] for i in range(len(ds))] == chains
+    assert [ds.plan(i).chain.text for i in range(len(ds))] == chains
     item = ds[0]
     assert item["degradation_type"] == chains[0].split(":")[0]
     assert item["degradation"][0]["preset"] == chains[0].split(":")[1]
@@ -349,19 +353,19 @@ def test_severity_random_draws_a_level_per_item(rooms):
 
 def test_severity_level_applies_to_names_without_preset(rooms):
     ds = make(rooms, "train", ["haze", "jpeg_compression:5"], severity="2", clean_prob=0.0)
-    assert ds.chains == ["haze:2", "jpeg_compression:5"]
+    assert [c.text for c in ds.chains] == ["haze:2", "jpeg_compression:5"]
 
 
 def test_all_covers_the_nine_builtins(rooms):
     ds = make(rooms, "train", "all", clean_prob=0.0)
-    assert set(BENCH_DEGRADATIONS) <= {c.split(":")[0] for c in ds.chains}
+    assert set(BENCH_DEGRADATIONS) <= {c.name for c in ds.chains}
     bench = make(rooms, "bench", "all")
     assert len(bench) == len(bench.records) * (len(bench.chains) + 1)
 
 
 def test_all_includes_a_third_party_degradation(rooms, third_party):
     ds = make(rooms, "bench", "all")
-    names = [c.split(":")[0] for c in ds.chains]
+    names = [c.name for c in ds.chains]
     assert "vignetting" in names and set(BENCH_DEGRADATIONS) <= set(names)
     assert len(ds) == len(ds.records) * (len(names) + 1)
     k = names.index("vignetting") + 1  # offset of the vignetting item of each question
@@ -369,7 +373,7 @@ def test_all_includes_a_third_party_degradation(rooms, third_party):
     assert item["degradation_type"] == "vignetting" and [s["name"] for s in item["degradation"]] == ["vignetting"]
     assert not torch.equal(item["images"], ds[0]["images"])
     train = make(rooms, "train", ["vignetting"], clean_prob=0.0)
-    assert {train.plan(i)[2] for i in range(len(train))} == {"vignetting"}
+    assert {train.plan(i).degradation_type for i in range(len(train))} == {"vignetting"}
 
 
 def test_mixtures_and_chains_are_accepted(rooms):
@@ -385,7 +389,7 @@ def test_mixtures_and_chains_are_accepted(rooms):
 
 def test_degradation_type_of_a_chain_with_a_preset(rooms):
     ds = make(rooms, "bench", ["haze:3+low_res"])
-    assert ds.plan(1)[2] == "haze+low_res"
+    assert ds.plan(1).degradation_type == "haze+low_res"
 
 
 # ------------------------------------------------------------------ errors
@@ -410,8 +414,8 @@ def test_bad_arguments_raise_parameter_error(rooms, kwargs, match):
 
 def test_unknown_question_type_names_a_suggestion(rooms):
     with pytest.raises(UnknownPluginError, match=r"(?i)object_countin.*did you mean 'object_counting'"):
-        make(rooms, "train", question_types=["object_countin"])
-    ds = make(rooms, "train", question_types=["object_counting"])
+        make(rooms, "train", families=["object_countin"])
+    ds = make(rooms, "train", families=["object_counting"])
     assert ds.records and {r.question_type for r in ds.records} == {"object_counting"}
 
 
@@ -451,7 +455,7 @@ def test_distributed_sampler_ranks_partition_the_dataset(rooms, split, shuffle):
     # what each rank reads is what plan() says, whichever rank reads it
     i = ranks[1][0]
     item = ds[i]
-    assert item["index"] == i and item["record_id"] == ds.plan(i)[0].id and item["degradation_type"] == ds.plan(i)[2]
+    assert item["index"] == i and item["record_id"] == ds.plan(i).record.id and item["degradation_type"] == ds.plan(i).degradation_type
 
 
 # ------------------------------------------------------------------ chat_collate
@@ -465,7 +469,7 @@ def test_chat_collate_builds_messages(splits):
     ds = splits["bench"]
     wanted = {}
     for i in range(0, len(ds), 10):  # the clean item of each question
-        wanted.setdefault((ds.plan(i)[0].answer_type.value, len(ds.plan(i)[0].views)), i)
+        wanted.setdefault((ds.plan(i).record.answer_type.value, len(ds.plan(i).record.views)), i)
     assert {n for _, n in wanted} == {1, 2} and len({t for t, _ in wanted}) >= 3, wanted
     batch = [ds[i] for i in wanted.values()]
     out = chat_collate(batch)
@@ -611,7 +615,14 @@ def test_deferred_items_render_in_the_main_process(rooms) -> None:
         deferred.render_batch(planned[0])
 
 
-def test_device_dataset_refuses_to_render_in_a_worker(rooms, monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.fixture
+def fake_cuda(monkeypatch: pytest.MonkeyPatch) -> None:
+    """torch reports one CUDA device (construction checks the device; these tests never reach CUDA)."""
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+
+
+def test_device_dataset_refuses_to_render_in_a_worker(rooms, monkeypatch: pytest.MonkeyPatch, fake_cuda) -> None:
     import types
 
     import torch.utils.data
@@ -625,7 +636,7 @@ def test_device_dataset_refuses_to_render_in_a_worker(rooms, monkeypatch: pytest
     assert "question" in deferred[0]  # planning in a worker is fine
 
 
-def test_export_fingerprint_records_device_degradations(rooms) -> None:
+def test_export_fingerprint_records_device_degradations(rooms, fake_cuda) -> None:
     from spacedg.data.export import dataset_fingerprint
 
     cpu = dataset_fingerprint(make(rooms, "bench", ["jpeg_compression"]))
@@ -658,3 +669,77 @@ def test_worker_defaults_come_from_the_machine_and_set_worker_threads(rooms, mon
     given._set_worker_threads()
     assert seen == [loader_plan(workers=1).render_threads, 1]
     assert numba.get_num_threads() == before  # (the setter was replaced: the test process keeps its threads)
+
+
+# ------------------------------------------------------------------ chains as objects, end to end
+def _full(name: str, seed: int = 3) -> dict:
+    from spacedg.plugins.registry import get_degradation
+
+    return get_degradation(name).sample_params("bench", np.random.default_rng(seed))
+
+
+#: Every chain form over every built-in: explicit params (all nine; haze with one parameter, the
+#: README's headline call), name:preset, a mapping without params, a tuple, a DegradationChoice,
+#: a Chain object, mixtures, a ``+`` chain and a list.
+EVERY_FORM = [
+    {"name": "haze", "params": {"density": 3.5}},
+    *({"name": n, "params": _full(n)} for n in BENCH_DEGRADATIONS if n != "haze"),
+    "water_droplets:3", {"name": "low_light", "preset": "2"}, ("defocus", "4"),
+    "night_capture", "hazy_long_range", "compressed_portrait",
+    "haze:3+low_res", ["motion_blur:1", {"name": "jpeg_compression", "params": {"quality": 30}}],
+]
+
+
+def test_headline_mapping_with_explicit_params_renders(rooms) -> None:
+    """The README's headline call: a mapping with explicit params (failed on every item before chains were objects)."""
+    ds = SpaceDGDataset("train", scenes=rooms, degradations=[{"name": "haze", "params": {"density": 3.5}}],
+                        clean_prob=0.0, image_size=SIZE, qa_config=CONFIG)
+    item = ds[0]
+    (step,) = item["degradation"]
+    assert step["name"] == "haze" and step["params"]["density"] == 3.5 and step["preset"] == "bench"
+    assert item["degradation_type"] == "haze" and item["images"].shape[-2:] == (SIZE[1], SIZE[0])
+    assert ds.provenance(0) == item["degradation"]
+
+
+def test_every_chain_form_survives_workers_provenance_and_replay(rooms) -> None:
+    """Each chain form over every built-in: planned in forked DataLoader workers (from a pickled
+    dataset), the worker's plan rendered by the pipeline, its provenance equal to ``provenance(i)``,
+    and replaying the provenance gives the same bytes. (Rendering inside workers, a mapping with
+    explicit params included, is ``test_same_bytes_across_worker_counts_and_processes``: ``MIX``.)"""
+    from torch.utils.data import DataLoader
+
+    from spacedg.data.chain import Chain
+    from spacedg.data.pipeline import ItemPlan, replay
+
+    ds = make(rooms, "bench", EVERY_FORM, max_questions=1)
+    assert len(ds) == len(EVERY_FORM) + 1 and all(isinstance(c, Chain) for c in ds.chains)
+    assert {n for c in ds.chains for n in c.name.split("+")} >= set(BENCH_DEGRADATIONS)
+    deferred = pickle.loads(pickle.dumps(make(rooms, "bench", EVERY_FORM, max_questions=1, defer_render=True)))
+    assert deferred.chains == ds.chains
+    planned = [item for batch in DataLoader(deferred, batch_size=4, num_workers=2, collate_fn=list) for item in batch]
+    assert [item["plan"] for item in planned] == [ds.plan(i) for i in range(len(ds))]
+    assert all(isinstance(item["plan"], ItemPlan) for item in planned)
+    there = deferred.render_batch(planned)
+    scene = load_scene(ds.scene_dirs[there[0]["scene_id"]])
+    for i, b in enumerate(there):
+        a, plan = ds[i], ds.plan(i)
+        assert set(a) == set(b) and a["index"] == b["index"] == i and a["degradation_type"] == plan.degradation_type
+        assert torch.equal(a["images"], b["images"]) and a["degradation"] == b["degradation"] == ds.provenance(i)
+        assert {step["name"] for step in a["degradation"]} == {c.name for c in plan.chain.choices()}
+        replayed = replay(scene, a["views"], a["degradation"], ds.options)
+        assert np.array_equal(replayed.images, a["images"].permute(0, 2, 3, 1).numpy()), plan.chain.text
+        assert Chain.parse(plan.chain.text) == plan.chain
+    assert there[1]["degradation"][0]["params"]["density"] == 3.5
+
+
+def test_an_item_is_planned_once_and_its_chain_never_parsed_again(rooms, monkeypatch: pytest.MonkeyPatch) -> None:
+    from spacedg.data import chain as chain_module
+
+    ds = make(rooms, "train", ["haze:2+low_res", {"name": "defocus", "params": {"aperture": 2.0}}], clean_prob=0.0)
+    plans, texts = [], []
+    real_plan, real_text = SpaceDGDataset.plan, chain_module._item_from_text
+    monkeypatch.setattr(SpaceDGDataset, "plan", lambda self, index: plans.append(index) or real_plan(self, index))
+    monkeypatch.setattr(chain_module, "_item_from_text", lambda text: texts.append(text) or real_text(text))
+    for i in range(3):
+        ds[i]
+    assert plans == [0, 1, 2] and texts == []

@@ -15,9 +15,8 @@ import spacedg.data.export as export_module
 from spacedg.cli import main
 from spacedg.data.chain import CLEAN
 from spacedg.data.dataset import SpaceDGDataset
+from spacedg.data.bench_table import TSV_COLUMNS, tsv_bytes
 from spacedg.data.export import (
-    TSV_COLUMNS,
-    tsv_bytes,
     chunk_ids,
     export_bench,
     merge_parts,
@@ -26,7 +25,7 @@ from spacedg.data.export import (
 )
 from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.data.public_format import to_public
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 from spacedg.errors import InvalidDataError, ParameterError
 from tests.conftest import private_copies
 
@@ -69,7 +68,8 @@ def test_tsv_loads_with_pandas_and_matches_the_dataset(bench, exported):
     assert table["index"].dtype.kind == "i"
     assert set(table["degradation_type"]) == {CLEAN, *BENCH_DEGRADATIONS}
     for row in table.itertuples():
-        record, _, name = bench.plan(row.index)
+        plan = bench.plan(row.index)
+        record, name = plan.record, plan.degradation_type
         assert row.degradation_type == name and row.record_id == record.id and row.question_type == record.question_type
         public_sub = to_public(record.question_type, record.sub_question_type)[1]  # "" for counting: pandas reads NaN
         assert (pd.isna(row.sub_question_type) and public_sub == "") or row.sub_question_type == public_sub
@@ -125,7 +125,7 @@ def test_chat_jsonl(bench, exported):
         assert assistant["content"] == f"<answer>{tsv.answer}</answer>" or float(assistant["content"][8:-9]) == pytest.approx(float(tsv.answer))
         assert row["images"] == ast.literal_eval(tsv.image_path) and row["degradation_type"] == tsv.degradation_type
         assert "<answer>" in row["system"]
-        assert row["geometry"] == bench.plan(row["index"])[0].geometry  # the audit block travels with the bench
+        assert row["geometry"] == bench.plan(row["index"]).record.geometry  # the audit block travels with the bench
     from spacedg.review import ReviewStore
 
     store = ReviewStore(out, out=out.parent / "reviewed.tsv")  # the review page shows it without --scenes
@@ -151,18 +151,18 @@ def test_shards_are_disjoint_complete_and_byte_identical(bench, exported, tmp_pa
 
 def test_interrupted_export_resumes_without_duplicates(bench, exported, tmp_path, monkeypatch):
     out = tmp_path / "interrupted"
-    real, calls = export_module._write_png, []
+    real, calls = export_module.write_png, []
 
-    def crash_after_25(path, image):
+    def crash_after_25(path, image, what, **kwargs):
         calls.append(path)
         if len(calls) > 25:
             raise KeyboardInterrupt("killed")
-        real(path, image)
+        real(path, image, what, **kwargs)
 
-    monkeypatch.setattr(export_module, "_write_png", crash_after_25)
+    monkeypatch.setattr(export_module, "write_png", crash_after_25)
     with pytest.raises(KeyboardInterrupt):
         export_bench(bench, out, shard_size=7, progress=False)
-    monkeypatch.setattr(export_module, "_write_png", real)
+    monkeypatch.setattr(export_module, "write_png", real)
     done = sorted(p.name for p in (out / "parts").glob("part-*"))
     assert done and not (out / "bench.tsv").exists() and not list(out.rglob(".*.tmp"))
     resumed = export_bench(bench, out, shard_size=7, progress=False)

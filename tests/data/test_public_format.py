@@ -31,7 +31,7 @@ from spacedg.data.public_format import (
     public_fields,
     to_public,
 )
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 from spacedg.errors import InvalidDataError
 from spacedg.eval import load_bench, route, score
 from spacedg.plugins import list_question_families
@@ -123,7 +123,7 @@ def test_every_exported_row_routes_to_the_same_answer_type_under_the_public_rule
         series = pd.Series(row._asdict())
         public = public_eval_task(series)
         ours = bench.by_index[int(row.index)].answer_type.value
-        record = dataset.plan(int(row.index))[0]
+        record = dataset.plan(int(row.index)).record
         assert public == ours == route(row.question_type, series["sub_question_type"]).value, (row.question_type, row.sub_question_type)
         assert public == public_answer_type(row.question_type, series["sub_question_type"]).value
         assert public_truth_readable(public, row.answer), (public, row.answer)
@@ -147,7 +147,7 @@ def test_single_view_types_carry_an_empty_sub_type_and_existence_is_lettered(exp
     existence = table[table["question_type"] == "object_existence_estimation"]
     assert len(existence) > 0
     for row in existence.itertuples():
-        record = dataset.plan(row.index)[0]
+        record = dataset.plan(row.index).record
         assert record.answer_type is AnswerType.YN  # the record stays yes/no in substance
         assert {row.A, row.B} == {"yes", "no"} and pd.isna(row.C) and pd.isna(row.D)
         assert getattr(row, row.answer) == record.answer  # the answer letter names the record's answer
@@ -232,7 +232,7 @@ def test_existence_options_are_seeded_per_record_and_balanced():
 def test_public_fields_of_a_record_and_of_a_dataset_item_agree(exported):
     dataset, _, _ = exported
     for index in range(0, len(dataset), max(1, len(dataset) // 25)):
-        record = dataset.plan(index)[0]
+        record = dataset.plan(index).record
         item = {**{k: getattr(record, k) for k in ("question", "options", "answer", "question_type", "sub_question_type")},
                 "answer_type": record.answer_type.value, "record_id": record.id}
         assert public_fields(record) == public_fields(item)

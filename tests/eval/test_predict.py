@@ -17,7 +17,7 @@ from spacedg.cli import main
 from spacedg.data.chat import chat_collate
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.export import export_bench
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.eval.bench import load_bench
 from spacedg.eval.predict import bench_source, dataset_source, predict
@@ -227,7 +227,7 @@ def test_a_mixture_predicted_online_records_every_part_with_its_parameters(rooms
     dataset = SpaceDGDataset("bench", ["night_capture", "haze:3+low_res"], scenes=rooms, image_size=SIZE,
                              qa_config=CONFIG, max_questions=1)
     source = dataset_source(dataset)
-    mixture = next(i for i in source.indices if dataset.plan(i)[2] == "night_capture")
+    mixture = next(i for i in source.indices if dataset.plan(i).degradation_type == "night_capture")
     row = source.row(mixture)
     parts = {d["name"]: d for d in row.degradation}
     assert set(parts) == {"low_light", "motion_blur", "low_res"}
@@ -241,5 +241,5 @@ def test_a_mixture_predicted_online_records_every_part_with_its_parameters(rooms
     assert summary.answered == len(dataset)
     line = next(x for x in _lines(tmp_path / "mix.jsonl") if x["index"] == mixture)
     assert [d["name"] for d in line["degradation"]] == [d["name"] for d in row.degradation]
-    chained = next(i for i in source.indices if dataset.plan(i)[2] == "haze+low_res")
+    chained = next(i for i in source.indices if dataset.plan(i).degradation_type == "haze+low_res")
     assert {d["name"]: d["preset"] for d in source.row(chained).degradation} == {"haze": "3", "low_res": "bench"}

@@ -21,9 +21,10 @@ import pytest
 
 from spacedg.cli import main
 from spacedg.data.dataset import SpaceDGDataset
-from spacedg.data.export import TSV_COLUMNS, export_bench, tsv_bytes
+from spacedg.data.bench_table import TSV_COLUMNS, tsv_bytes
+from spacedg.data.export import export_bench
 from spacedg.data.public_format import from_public
-from spacedg.data.qa_index import QABuildConfig
+from spacedg.qa.index import QABuildConfig
 from spacedg.eval import load_bench, read_predictions, score
 from spacedg.eval.aggregate import score_set
 from spacedg.plugins.specs import AnswerType

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from spacedg.cli import main
-from spacedg.data.qa_index import QABuildConfig, index_is_current, index_paths, prepare_scene, read_index
+from spacedg.qa.build import prepare_scene
+from spacedg.qa.index import QABuildConfig, index_is_current, index_paths, read_index
 from spacedg.plugins import get_question_family, list_question_families
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.questions.language import object_phrase

@@ -101,7 +101,8 @@ def test_apply_error_names_plugin_and_distribution(boom_registry: Registry) -> N
 
 
 def test_generate_error_names_family_and_distribution(boom_registry: Registry) -> None:
-    from spacedg.data.qa_index import QABuildConfig, generate_records
+    from spacedg.qa.build import generate_records
+    from spacedg.qa.index import QABuildConfig
     from spacedg.render.gaussians import Gaussians
     from spacedg.scene.model import Scene
 

@@ -9,7 +9,7 @@ import torch
 from tests.render_helpers import brute_force_composite, camera, random_gaussians
 from spacedg.render import RasterSettings, render
 from spacedg.render import project_cpu, raster_cpu, raster_torch
-from spacedg.render.project import Projected
+from spacedg.render.project_torch import Projected
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 
 SETTINGS = RasterSettings()
@@ -30,7 +30,7 @@ def scene_and_projection(seed: int, n: int, width: int, height: int, **kw):
     rng = np.random.default_rng(seed)
     gaussians = random_gaussians(n, rng, **kw)
     cam = camera(width, height)
-    packed, rects = project_cpu.project_view(gaussians, cam, SETTINGS)
+    packed, rects = project_cpu.project_gaussians(gaussians, cam, SETTINGS)
     return gaussians, cam, packed, rects
 
 

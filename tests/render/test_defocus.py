@@ -120,9 +120,9 @@ def test_the_compiled_factors_are_the_numpy_factors_bit_for_bit() -> None:
 
     g = random_gaussians(3000, np.random.default_rng(3))
     cam, settings = camera(96, 72), RasterSettings()
-    packed, rects = project_cpu.project_view(g, cam, settings, Defocus(12.0, 3.0), True)
+    packed, rects = project_cpu.project_gaussians(g, cam, settings, Defocus(12.0, 3.0), True)
     wide = model.measurement_camera(cam, model.measurement_margin(packed, rects, 96, 72))
-    sharp, sharp_rects = project_cpu.project_view(g, wide, model.measurement_settings(settings), None, True)
+    sharp, sharp_rects = project_cpu.project_gaussians(g, wide, model.measurement_settings(settings), None, True)
     offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, wide.width, wide.height, True)
     pairs = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
     lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
@@ -178,7 +178,7 @@ def test_the_backends_agree_on_a_coarse_composite() -> None:
     from spacedg.render.settings import RasterSettings
 
     for defocus in (Defocus(30.0, 0.5), Defocus(60.0, 0.3)):
-        assert model.composite_factor(*project_cpu.project_view(g, cam, RasterSettings(), defocus, True), 96, 72) == 4
+        assert model.composite_factor(*project_cpu.project_gaussians(g, cam, RasterSettings(), defocus, True), 96, 72) == 4
         compiled = render(g, cam, defocus=defocus, backend="cpu", outputs="all")
         reference = render(g, cam, defocus=defocus, backend="torch", outputs="all")
         assert np.abs(compiled.rgb - reference.rgb).max() < 1e-3

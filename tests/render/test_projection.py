@@ -11,7 +11,7 @@ import torch
 
 from tests.render_helpers import random_gaussians
 from spacedg.render import RasterSettings
-from spacedg.render import project as torch_project
+from spacedg.render import project_torch
 from spacedg.render import project_cpu, raster_cpu
 from spacedg.render.camera import Camera, FisheyeLens, look_at
 from spacedg.render.project_cpu import CA, CB, CC, OPA, PX, PY, RADX, RADY
@@ -42,9 +42,9 @@ def gsplat_projection(g, cam: Camera, model: str, antialiased: bool):
 
 
 def our_projections(g, cam: Camera, settings: RasterSettings):
-    packed, rects = project_cpu.project_view(g, cam, settings)
-    gs = torch_project.GaussianTensors.of(g, "cpu", torch.float64)
-    proj = torch_project.project(gs, cam, settings)
+    packed, rects = project_cpu.project_gaussians(g, cam, settings)
+    gs = project_torch.GaussianTensors.of(g, "cpu", torch.float64)
+    proj = project_torch.project_gaussians(gs, cam, settings)
     return packed, rects, proj
 
 
@@ -78,7 +78,7 @@ def test_tile_intersections_match_gsplat_isect_tiles() -> None:
     tiles_per_gauss, isect_ids, flatten_ids = gsplat_ref._isect_tiles(
         torch.from_numpy(means2d)[None], torch.from_numpy(radii)[None], torch.from_numpy(depths)[None], 16, 20, 15
     )
-    packed, rects = project_cpu.project_view(g, cam, COMPAT)
+    packed, rects = project_cpu.project_gaussians(g, cam, COMPAT)
     visible = np.flatnonzero(rects[:, 1] > rects[:, 0])
     order = raster_cpu.depth_order(visible, np.ascontiguousarray(packed[:, project_cpu.DEPTH]))
     areas = (rects[:, 1] - rects[:, 0]).astype(np.int64) * (rects[:, 3] - rects[:, 2])
@@ -112,14 +112,14 @@ def test_fisheye_means_match_opencv(lens: FisheyeLens) -> None:
     uv, _, valid = cam.project(pts)
     assert valid.all()
     np.testing.assert_allclose(uv, ref, atol=1e-3)
-    uv_torch, _, _ = torch_project.fisheye_jacobian(torch.from_numpy(pts), cam)
+    uv_torch, _, _ = project_torch.fisheye_jacobian(torch.from_numpy(pts), cam)
     np.testing.assert_allclose(uv_torch.numpy(), ref, atol=1e-3)
     # the compiled kernel projects the same means
     from spacedg.render.gaussians import Gaussians
 
     n = len(pts)
     g = Gaussians(pts, np.tile([1.0, 0, 0, 0], (n, 1)), np.full((n, 3), 1e-3), np.ones(n), np.zeros((n, 1, 3)))
-    packed, rects = project_cpu.project_view(g, cam, COMPAT)
+    packed, rects = project_cpu.project_gaussians(g, cam, COMPAT)
     shown = rects[:, 1] > rects[:, 0]
     assert shown.mean() > 0.9
     np.testing.assert_allclose(packed[shown][:, [PX, PY]], ref[shown], atol=1e-3)
@@ -138,14 +138,14 @@ def test_fisheye_jacobian_matches_finite_differences(lens: FisheyeLens) -> None:
     pts = pts[theta < lens.effective_max_theta - 1e-3]
     cam = Camera(300.0, 310.0, 320.0, 240.0, 640, 480, np.eye(4), lens)
     x = torch.from_numpy(pts)
-    _, jac, _ = torch_project.fisheye_jacobian(x, cam)
+    _, jac, _ = project_torch.fisheye_jacobian(x, cam)
     h = 1e-6
     fd = np.zeros((len(pts), 2, 3))
     for k in range(3):
         step = torch.zeros(3, dtype=torch.float64)
         step[k] = h
-        plus, _, _ = torch_project.fisheye_jacobian(x + step, cam)
-        minus, _, _ = torch_project.fisheye_jacobian(x - step, cam)
+        plus, _, _ = project_torch.fisheye_jacobian(x + step, cam)
+        minus, _, _ = project_torch.fisheye_jacobian(x - step, cam)
         fd[:, :, k] = ((plus - minus) / (2 * h)).numpy()
     np.testing.assert_allclose(jac.numpy(), fd, rtol=1e-5, atol=1e-4)
 
@@ -175,7 +175,7 @@ def test_fold_is_the_effective_max_theta() -> None:
     theta = fold + 0.05
     p = np.array([[math.sin(theta), 0.0, math.cos(theta)]])
     g = Gaussians(p, [[1.0, 0, 0, 0]], [[0.01] * 3], [1.0], np.zeros((1, 1, 3)))
-    _, rects = project_cpu.project_view(g, Camera(200.0, 200.0, 320.0, 240.0, 640, 480, np.eye(4), bench), RasterSettings())
+    _, rects = project_cpu.project_gaussians(g, Camera(200.0, 200.0, 320.0, 240.0, 640, 480, np.eye(4), bench), RasterSettings())
     assert rects[0, 1] == rects[0, 0]
 
 
@@ -186,7 +186,7 @@ def test_sh_colour_matches_numpy_evaluation() -> None:
         rng = np.random.default_rng(degree)
         g = random_gaussians(300, rng, sh_degree=degree)
         cam = Camera(100.0, 100.0, 64.0, 48.0, 128, 96, look_at([0.2, 0.1, -0.5], [0, 0, 4], [0, -1, 0]))
-        packed, rects = project_cpu.project_view(g, cam, RasterSettings())
+        packed, rects = project_cpu.project_gaussians(g, cam, RasterSettings())
         dirs = g.means.astype(np.float64) - cam.center
         dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
         expected = np.maximum(eval_sh(g.sh.astype(np.float64), dirs), 0.0)

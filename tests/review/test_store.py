@@ -9,10 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from spacedg.errors import InvalidDataError, ParameterError
-from spacedg.eval.bench import load_bench, read_table
+from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
+from spacedg.plugins import AnswerType, TaskGroup
+from spacedg.data.bench_table import read_table
+from spacedg.eval.bench import load_bench
 from spacedg.review import ReviewError, ReviewStore
 from tests.eval_fixtures import write_bench
+from tests.qa_records import qa_record
 
 # index = 5 · condition + question; questions: 0 MCQ, 1 YN, 2 NA, 3 COUNT, 4 SIZE_LIST
 MCQ, YN, NA, COUNT, SIZE = 0, 1, 2, 3, 4
@@ -250,14 +253,27 @@ def test_geometry_from_scene_index(bench: Path, tmp_path: Path) -> None:
     scenes = tmp_path / "scenes"
     (scenes / "room").mkdir(parents=True)
     geometry = {"distance": 2.0, "camera": [0, 0, 0]}
-    lines = [{"id": "room/camera_object_distance_estimation/distance_exact/2", "geometry": geometry},
-             {"id": "room/other/x/9", "geometry": {"a": 1}}]
-    (scenes / "room" / "room.qa.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines), encoding="utf-8")
+    records = [  # read with the project's record loader: whole records, as `spacedg qa build` writes them
+        qa_record(id="room/camera_object_distance_estimation/distance_exact/2", question_type="camera_object_distance_estimation",
+                  sub_question_type="distance_exact", task_group=TaskGroup.CAMERA_OBJECT, answer_type=AnswerType.NA,
+                  views=("v0",), question="How far is the chair?", options=(), answer=2.0, geometry=geometry),
+        qa_record(id="room/camera_translation/main_dir/9", geometry={"a": 1}),
+    ]
+    (scenes / "room" / "room.qa.jsonl").write_text("".join(r.to_json() + "\n" for r in records), encoding="utf-8")
     for roots in ([scenes], [scenes / "room"]):
         store = ReviewStore(bench, scenes=roots)
         assert store.item(NA)["geometry"] == geometry
         assert store.item(10 + NA)["geometry"] == geometry  # same record under low_light
         assert store.item(MCQ)["geometry"] is None
+
+
+def test_geometry_from_a_malformed_scene_index_names_the_line(bench: Path, tmp_path: Path) -> None:
+    scenes = tmp_path / "scenes"
+    (scenes / "room").mkdir(parents=True)
+    (scenes / "room" / "room.qa.jsonl").write_text(qa_record().to_json() + "\n{not json\n", encoding="utf-8")
+    store = ReviewStore(bench, scenes=[scenes])
+    with pytest.raises(FileFormatError, match=r"room\.qa\.jsonl:2: not a question record"):
+        store.item(NA)
 
 
 def test_geometry_from_bench_jsonl(bench: Path) -> None:

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spacedg.data.qa_index import QABuildConfig, build_scene_index
+from spacedg.qa.build import build_scene_index
+from spacedg.qa.index import QABuildConfig
 from spacedg.errors import FileFormatError, ParameterError
 from spacedg.render import render
 from spacedg.scene.frame_check import FrameMismatchError

@@ -10,9 +10,10 @@ from tests.conftest import private_copies
 
 
 @pytest.fixture(scope="module")
-def rooms(qa_room_dirs, tmp_path_factory) -> Path:
-    """A folder of private copies of the four session rooms, one per test module (its question
-    indexes and training runs do not touch the originals)."""
+def rooms(indexed_room_dirs, tmp_path_factory) -> Path:
+    """A folder of private copies of the four session rooms, one per test module (its training
+    runs do not touch the originals), with the default question index every SFT run reads
+    (built once per session instead of once per module)."""
     root = tmp_path_factory.mktemp("sft_rooms")
-    private_copies(qa_room_dirs, root)
+    private_copies(indexed_room_dirs, root, indexes=True)
     return root

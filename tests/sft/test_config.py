@@ -139,7 +139,7 @@ def test_instantiated_data_builds_the_datasets_of_before(rooms) -> None:
               "image_size": (64, 48), "seed": 0, "builtin_rooms": 3}
     train = data.train_data().dataset
     expected = SpaceDGDataset("train", list(BENCH_DEGRADATIONS), max_questions=12, **common)
-    degraded = next(i for i in range(len(train)) if train.plan(i)[1] is not None)
+    degraded = next(i for i in range(len(train)) if not train.plan(i).chain.is_clean)
     _same(train, expected, [degraded])
     val = data.val_dataset()
     _same(val, SpaceDGDataset("val", list(BENCH_DEGRADATIONS), max_questions=None, **common), [])

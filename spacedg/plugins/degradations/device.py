@@ -56,7 +56,6 @@ from spacedg.errors import InvalidDataError
 
 __all__ = [
     "as_tensor",
-    "encode_srgb_u8_torch",
     "haze_torch",
     "jpeg_torch",
     "low_res_torch",
@@ -72,25 +71,6 @@ def as_tensor(value: Any, device: torch.device) -> torch.Tensor:
     if isinstance(value, torch.Tensor):
         return value.to(device)
     return torch.from_numpy(np.array(value)).to(device)
-
-
-# ------------------------------------------------------------------ colour
-_THRESHOLDS: dict[torch.device, torch.Tensor] = {}
-
-
-def encode_srgb_u8_torch(linear: torch.Tensor) -> torch.Tensor:
-    """Linear float32 → uint8 sRGB codes, exactly :func:`spacedg.render.colour_cpu.encode_srgb_u8`
-    (clip to [0, 1], ``round(255·encode(x))`` by float64 thresholds; NaN and negatives → 0)."""
-    from spacedg.render.colour_cpu import encode_thresholds
-
-    device = linear.device
-    if device not in _THRESHOLDS:
-        _THRESHOLDS[device] = torch.from_numpy(encode_thresholds()[1:].copy()).to(device)
-    x = linear.to(torch.float64)
-    code = torch.searchsorted(_THRESHOLDS[device], x.reshape(-1).contiguous(), right=True).reshape(x.shape)
-    code = torch.where(x > 0, code, torch.zeros_like(code))
-    code = torch.where(x >= 1.0, torch.full_like(code, 255), code)
-    return code.to(torch.uint8)
 
 
 # ------------------------------------------------------------------ haze

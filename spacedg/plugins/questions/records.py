@@ -365,11 +365,11 @@ def selection_entry(
     the cell, that may go with the answer (the labels it names, by position: ``"anchor:chair"``);
     the index fills each role of a round with the candidate whose features that role has had
     least so far in the sub type, so no label names a role more often than the others
-    (:func:`~spacedg.data.qa_index.select_records`). ``distractors``: for a question whose three
+    (:func:`~spacedg.qa.selection.select_records`). ``distractors``: for a question whose three
     distractors are any of a fixed set of texts (sector labels), every text that may be one
     (the truth and a banned neighbour left out); the index deals the distractors of the records
     it keeps again so that every text is offered equally often in a sub type
-    (:func:`~spacedg.data.qa_index.deal_distractors`): a text offered more often than others
+    (:func:`~spacedg.qa.deal.deal_distractors`): a text offered more often than others
     would be right less often when offered, and a blind model could learn that.
     """
     out: dict[str, Any] = {"subject": str(subject)}

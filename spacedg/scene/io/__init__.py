@@ -6,6 +6,8 @@
   (nerfstudio / Blender ``transforms.json``).
 - Instances: :func:`read_instances` / :func:`write_instances` (Holi-Spatial-style JSON).
 - Scenes: :func:`save_scene` / :func:`load_scene` (native folder), :func:`scene_from_files`.
+- Foreign captures: :mod:`spacedg.scene.io.capture` tells a camera source's format (one rule,
+  :func:`~spacedg.scene.io.capture.find_cameras`) and brings every part to metres once.
 
 Errors: malformed files raise :class:`~spacedg.errors.FileFormatError`; files that parse but
 hold values breaking a convention raise :class:`FileValueError` (both a ``FileFormatError``
@@ -14,6 +16,7 @@ and an ``InvalidDataError``); every message names the file and the record.
 
 from spacedg.files import FileValueError
 from spacedg.scene.io._assemble import (
+    GAUSSIAN_SUFFIXES,
     estimate_up,
     read_gaussians,
     read_views,
@@ -27,6 +30,7 @@ from spacedg.scene.io.ply import quantize_for_ply, read_ply, write_ply
 from spacedg.scene.io.splat import read_splat, write_splat
 
 __all__ = [
+    "GAUSSIAN_SUFFIXES",
     "FileValueError",
     "estimate_up",
     "load_scene",

@@ -5,7 +5,6 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -15,14 +14,12 @@ from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.files import PathLike, as_path, require_file
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
-from spacedg.scene.io.colmap import read_colmap
-from spacedg.scene.io.inria import read_inria_cameras
+from spacedg.scene.io.capture import find_cameras, read_cameras, scale_gaussians, scale_instances, scale_views
 from spacedg.scene.io.instances import read_instances
-from spacedg.scene.io.nerfstudio import read_transforms
 from spacedg.scene.io.ply import read_ply
 from spacedg.scene.io.splat import read_splat
 from spacedg.scene.io.spz import read_spz
-from spacedg.scene.model import Instance, Scene
+from spacedg.scene.model import Scene
 
 #: Smallest length of the mean camera −y axis accepted as an up estimate (1 = all agree).
 MIN_UP_AGREEMENT = 0.5
@@ -53,28 +50,16 @@ def read_gaussians(path: PathLike) -> Gaussians:
 
 def load_scaled_gaussians(path: str, scale: float) -> Gaussians:
     """Read Gaussians and scale them to metres (module-level so a partial of it pickles)."""
-    gaussians = read_gaussians(path)
-    return gaussians if scale == 1.0 else gaussians.transformed(scale=scale)
+    return scale_gaussians(read_gaussians(path), scale)
 
 
 def read_views(source: PathLike | Mapping[str, Camera], opencv_distortion: Literal["error", "drop"] = "error") -> dict[str, Camera]:
-    """Cameras from a COLMAP model folder, a ``transforms.json`` (or a folder holding one and
-    no COLMAP model), an INRIA ``cameras.json``, or a ready mapping name → Camera."""
+    """Cameras from a COLMAP model folder (or a project with ``sparse/0``), a ``transforms.json``
+    (or a folder holding one and no COLMAP model), an INRIA ``cameras.json``, or a ready mapping
+    name → Camera. The format is told by :func:`~spacedg.scene.io.capture.find_cameras`."""
     if isinstance(source, Mapping):
         return dict(source)
-    p = as_path(source, "views")
-    if p.is_file() and p.name == "cameras.json":
-        return read_inria_cameras(p)
-    if p.is_dir():
-        has_colmap = any((p / f"cameras.{ext}").is_file() for ext in ("bin", "txt"))
-        if not has_colmap and (p / "transforms.json").is_file():
-            return read_transforms(p / "transforms.json", opencv_distortion=opencv_distortion)
-        return read_colmap(p, opencv_distortion=opencv_distortion)
-    if p.suffix.lower() == ".json":
-        return read_transforms(p, opencv_distortion=opencv_distortion)
-    if not p.exists():
-        raise FileFormatError(f"{p}: views not found; pass a COLMAP model folder or a transforms.json")
-    raise FileFormatError(f"{p}: views must be a COLMAP model folder or a transforms.json file")
+    return read_cameras(find_cameras(as_path(source, "views")), opencv_distortion)
 
 
 def estimate_up(views: Mapping[str, Camera]) -> np.ndarray:
@@ -94,19 +79,6 @@ def estimate_up(views: Mapping[str, Camera]) -> np.ndarray:
             f"cannot estimate up: the {len(views)} cameras' up axes disagree (mean length {norm:.2f} < {MIN_UP_AGREEMENT}); pass up=(x, y, z)"
         )
     return mean / norm
-
-
-def _scale_views(views: Mapping[str, Camera], scale: float) -> dict[str, Camera]:
-    out = {}
-    for name, cam in views.items():
-        pose = cam.cam_to_world.copy()
-        pose[:3, 3] *= scale
-        out[name] = cam.with_pose(pose)
-    return out
-
-
-def _scale_instances(instances: Iterable[Instance], scale: float) -> list[Instance]:
-    return [replace(inst, box=inst.box.transformed(np.eye(3), np.zeros(3), scale)) for inst in instances]
 
 
 def scene_from_files(
@@ -152,8 +124,8 @@ def scene_from_files(
         up_vec = np.asarray(list(up), dtype=np.float64)
         up_source = "given"
     if scale != 1.0:
-        cameras = _scale_views(cameras, scale)
-        instances = _scale_instances(instances, scale)
+        cameras = scale_views(cameras, scale)
+        instances = scale_instances(instances, scale)
     meta: dict[str, Any] = dict(metadata or {})
     meta.update(
         source={

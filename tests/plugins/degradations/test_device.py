@@ -15,7 +15,7 @@ import torch
 from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.data.pipeline import PipelineOptions, degrade
 from spacedg.plugins.degradations import haze, jpeg_compression, low_light, low_res, over_exposure, water_droplets
-from spacedg.plugins.degradations.device import encode_srgb_u8_torch, sensor_torch
+from spacedg.plugins.degradations.device import sensor_torch
 from spacedg.render.colour_cpu import encode_srgb_u8
 
 H, W = 120, 160
@@ -42,12 +42,6 @@ def _linear(spec, seed: int) -> tuple[np.ndarray, np.ndarray]:
     dev = spec.apply_torch(torch.from_numpy(IMAGE), {k: torch.from_numpy(v) for k, v in aux.items()}, params, np.random.default_rng([seed, 0]))
     assert dev.dtype == torch.float32 and dev.shape == IMAGE.shape
     return host, dev.numpy()
-
-
-def test_encode_is_exact() -> None:
-    values = np.concatenate([np.linspace(-0.1, 1.2, 20011), [np.nan, np.inf, -np.inf, 0.0, 1.0]]).astype(np.float32)
-    np.testing.assert_array_equal(encode_srgb_u8_torch(torch.from_numpy(values)).numpy(), encode_srgb_u8(values))
-    np.testing.assert_array_equal(encode_srgb_u8_torch(torch.from_numpy(IMAGE)).numpy(), encode_srgb_u8(IMAGE))
 
 
 @pytest.mark.parametrize("spec, bound", [(haze.SPEC, 1e-5), (water_droplets.SPEC, 1e-4)], ids=["haze", "water_droplets"])
@@ -141,14 +135,19 @@ def test_third_party_without_apply_torch_falls_back_to_the_host(third_party, sma
     assert np.abs(host.images.astype(int) - dev.images).max() <= 2  # low_res on the device: ≤ 2 codes
 
 
-def test_where_the_chains_run() -> None:
+def test_where_the_chains_run(monkeypatch: pytest.MonkeyPatch) -> None:
     from spacedg.data.pipeline import degrade_device
     from spacedg.errors import ParameterError
 
     assert degrade_device(PipelineOptions()) is None
     assert degrade_device(PipelineOptions(device="cpu")) is None  # auto: a CPU device keeps the numpy path
     assert degrade_device(PipelineOptions(degrade_on="device")) == torch.device("cpu")
-    assert degrade_device(PipelineOptions(device="cuda:1")) == torch.device("cuda:1")  # no CUDA needed to decide
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    with pytest.raises(ParameterError, match="asks for CUDA"):  # checked when the options are made
+        PipelineOptions(device="cuda:1")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)  # two GPUs (never touched: deciding needs none)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
+    assert degrade_device(PipelineOptions(device="cuda:1")) == torch.device("cuda:1")
     assert degrade_device(PipelineOptions(device="cuda", degrade_on="host")) is None
     with pytest.raises(ParameterError, match="degrade_on"):
         PipelineOptions(degrade_on="gpu")

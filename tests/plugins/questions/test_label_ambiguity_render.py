@@ -15,7 +15,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spacedg.data.qa_index import QABuildConfig, prepare_scene
+from spacedg.qa.build import prepare_scene
+from spacedg.qa.index import QABuildConfig
 from spacedg.plugins.questions import object_counting, object_existence_estimation
 from spacedg.render import render
 from spacedg.scene.synthetic import CaptureConfig, RoomConfig, generate_room

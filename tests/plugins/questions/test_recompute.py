@@ -15,21 +15,15 @@ import re
 import numpy as np
 import pytest
 
-from spacedg.scene.io import load_scene
-from spacedg.data.qa_index import QABuildConfig, generate_records, prepare_scene
 
-CONFIG = QABuildConfig(seed=11, per_sub_type=12)
 LETTERS = "ABCD"
 
 
 @pytest.fixture(scope="module")
-def scenes_and_records(qa_room_dirs, tmp_path_factory):
-    cache = tmp_path_factory.mktemp("recompute_cache")
-    out = []
-    for folder in qa_room_dirs:
-        scene = prepare_scene(load_scene(folder), cache, CONFIG, progress=False)
-        out.append((scene, generate_records(scene, CONFIG)))
-    return out
+def scenes_and_records(room_records):
+    """The four session rooms and their records (every family, 15 per sub type, seed 7),
+    generated once per session and shared with test_families.py."""
+    return room_records
 
 
 # ------------------------------------------------------------- own geometry
@@ -304,7 +298,7 @@ def test_index_selection_is_debiased(scenes_and_records):
     within one block of four."""
     from collections import Counter, defaultdict
 
-    from spacedg.data.qa_stats import record_subject
+    from spacedg.qa.stats import record_subject
 
     for _, records in scenes_and_records:
         subjects = Counter((r.sub_question_type, record_subject(r)) for r in records)

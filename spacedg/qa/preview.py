@@ -17,8 +17,8 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from spacedg.data.pipeline import PipelineOptions, degrade
 from spacedg.plugins.qa_record import QARecord
+from spacedg.qa.views import render_clean_view
 from spacedg.render.camera import Camera
 from spacedg.scene.floorplan import contact_sheet
 from spacedg.scene.model import Scene
@@ -68,8 +68,7 @@ def render_thumbnail(scene: Scene, view: str, width: int, backend: str = "auto")
 
     full = scene.camera(view)
     height = max(1, round(full.height * width / full.width))
-    image = degrade(scene, [view], None, options=PipelineOptions(image_size=(width, height), backend=backend)).images[0]
-    return image, full.resized(width, height)
+    return render_clean_view(scene, view, (width, height), backend), full.resized(width, height)
 
 
 def _draw_box(image: np.ndarray, cam: Camera, corners: np.ndarray, colour: tuple[int, int, int], tag: str) -> None:

@@ -146,7 +146,7 @@ def _wide_dtype(dtype: torch.dtype, device: torch.device) -> torch.dtype:
     return dtype if device.type == "mps" else torch.float64
 
 
-def project(
+def project_gaussians(
     gs: GaussianTensors,
     camera: Camera,
     settings: RasterSettings,

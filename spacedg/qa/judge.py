@@ -29,7 +29,7 @@ from spacedg.plugins.questions.view_sampling import (
     VisibilityIndex,
     same_label_neighbours,
 )
-from spacedg.render import render
+from spacedg.qa.views import render_clean_view
 from spacedg.scene.model import Scene
 
 __all__ = ["JUDGE_PROMPT", "Judge", "parse_verdict", "DescriptionJudge", "render_clean_view"]
@@ -55,14 +55,6 @@ def parse_verdict(reply: object) -> bool:
         return False
     words = {m.group(1).lower() for m in _WORD.finditer(reply)}
     return words == {"keep"}
-
-
-def render_clean_view(scene: Scene, view: str) -> np.ndarray:
-    """The clean sRGB image of ``view`` at its full size, uint8 (H, W, 3): the same bytes as the
-    sample pipeline's clean image (render, then the exact 8-bit sRGB encode)."""
-    from spacedg.render.colour_cpu import encode_srgb_u8  # numba: compiled on first use
-
-    return encode_srgb_u8(render(scene.gaussians, scene.camera(view), outputs="rgb").rgb)
 
 
 class DescriptionJudge:

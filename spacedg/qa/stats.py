@@ -9,7 +9,7 @@
   frequent **option text** (a blind model that reads the options and picks the one that was
   most often right in the training scenes: catches text bias such as "forward" dominating).
   The full blind stress test (per-label priors, option-text priors, a learned text model) is
-  :func:`spacedg.data.qa_audit.blind_audit`.
+  :func:`spacedg.qa.audit.blind_audit`.
 - :func:`record_subject` / :func:`repeat_rate`: what a record asks about (read from its
   geometry, the same for every index version) and the share of records that re-ask a subject
   already asked in the same scene and sub type.

@@ -1,4 +1,4 @@
-"""The blind stress test (spacedg.data.qa_audit) on records whose blind answer is known by construction."""
+"""The blind stress test (spacedg.qa.audit) on records whose blind answer is known by construction."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from spacedg.cli import main
-from spacedg.data.qa_audit import blind_audit, format_audit, mra, record_labels
+from spacedg.qa.audit import blind_audit, format_audit, mra, record_labels
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -88,7 +88,7 @@ def test_null_audit_gives_the_excess_chance_alone_reaches(tmp_path, capsys) -> N
     """Truths drawn independently of the text: the best of the predictors still beats chance
     by a few points on small sets (chosen on the held-out scores), more on fewer records; a
     real bias stands far above that band."""
-    from spacedg.data.qa_audit import null_audit, with_null
+    from spacedg.qa.audit import null_audit, with_null
 
     rng = np.random.default_rng(0)
     small = {f"s{s}": [_size(f"s{s}", k, "sofa", lab, rng) for k, lab in enumerate(["cup", "chair", "lamp", "plant"] * 2)]

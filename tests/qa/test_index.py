@@ -1,4 +1,4 @@
-"""Question index per scene (spacedg.data.qa_index), the judge hook and `spacedg qa build/stats`."""
+"""Question index per scene (spacedg.qa.build, spacedg.qa.index), the judge hook and `spacedg qa build/stats`."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ import pytest
 
 from tests.qa_scenes import CLEAR, build, camera, obj
 from spacedg.cli import main
-from spacedg.data.judge import DescriptionJudge, parse_verdict
-from spacedg.data.qa_index import QABuildConfig, build_scene_index, index_paths, read_index
+from spacedg.qa.build import build_scene_index
+from spacedg.qa.index import QABuildConfig, index_paths, read_index
+from spacedg.qa.judge import DescriptionJudge, parse_verdict
 from spacedg.errors import FileFormatError, ParameterError
 
 
@@ -125,7 +126,7 @@ def test_judge_in_generation_drops_and_counts(qa_room_dirs, tmp_path):
     """A judge that answers DROP removes exactly the records naming an object whose image shows
     a same-label neighbour; one that answers KEEP changes nothing. Real renders feed the judge."""
     from spacedg.scene.io import load_scene
-    from spacedg.data.qa_index import generate_records, prepare_scene
+    from spacedg.qa.build import generate_records, prepare_scene
     from spacedg.plugins.questions.view_sampling import VisibilityIndex, same_label_neighbours
 
     config = QABuildConfig(seed=1, per_sub_type=6, families=("object_bounding_size_estimation", "inter_object_distance"))
@@ -152,18 +153,19 @@ def test_qa_preview_sheet_and_cli(qa_room_dirs, tmp_path, capsys):
     import cv2
 
     from spacedg.scene.io import load_scene
-    from spacedg.data.qa_preview import ascii_text, qa_sheet
+    from spacedg.qa.preview import ascii_text, qa_sheet
 
     room = tmp_path / "room"
     shutil.copytree(qa_room_dirs[1], room)
     out = tmp_path / "qa.png"
-    assert main(["qa", "preview", str(room), "--out", str(out), "--n", "3", "--types",
+    assert main(["qa", "preview", str(room), "--out", str(out)]) == 2  # preview reads the index, never builds it
+    assert f"spacedg qa build {room}" in capsys.readouterr().err
+    index = build_scene_index(room, progress=False)
+    assert main(["qa", "preview", str(room), "--out", str(out), "--n", "3", "--families",
                  "inter_object_distance,object_counting", "--thumb-width", "96"]) == 0
     assert "3 questions" in capsys.readouterr().out
     image = cv2.imread(str(out))
     assert image is not None and image.shape[1] >= 2 * 96
-    index = build_scene_index(room, progress=False)  # reused: built by the preview
-    assert index.reused
     record = next(r for r in index.records if r.question_type == "inter_object_distance")
     scene = load_scene(room)
     sheet = qa_sheet(scene, [record], thumb_width=96, progress=False)
@@ -173,12 +175,12 @@ def test_qa_preview_sheet_and_cli(qa_room_dirs, tmp_path, capsys):
     red, blue = sheet[drawn][:, 0].astype(int), sheet[drawn][:, 2].astype(int)
     assert np.mean(np.abs(red - blue) > 60) > 0.5  # drawn in red (object 1) and blue (object 2)
     assert ascii_text("15° – ×") == "15 deg - x"
-    assert main(["qa", "preview", str(room), "--out", str(out), "--types", "no_such_type"]) == 2
+    assert main(["qa", "preview", str(room), "--out", str(out), "--families", "no_such_type"]) == 2
     assert "no questions of type" in capsys.readouterr().err
 
 
 def test_selection_names_and_paths(tmp_path):
-    from spacedg.data.qa_index import MAX_SELECTION_CHARS, selection_name
+    from spacedg.qa.index import MAX_SELECTION_CHARS, selection_name
 
     assert selection_name(()) == "" and index_paths("room", tmp_path) == (tmp_path / "room.qa.jsonl", tmp_path / "room.qa.meta.json")
     assert selection_name(["object_counting", "camera_rotation", "object_counting"]) == "camera_rotation+object_counting"

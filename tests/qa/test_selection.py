@@ -6,7 +6,8 @@ from collections import Counter
 
 import numpy as np
 
-from spacedg.data.qa_index import deal_distractors, deal_letters, select_records, truth_key
+from spacedg.qa.deal import deal_distractors, deal_letters
+from spacedg.qa.selection import select_records, truth_key
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.questions.records import label_features, selection_entry

@@ -1,0 +1,276 @@
+"""Per-scene question index: every family's records for a scene, built from a seed, stored as JSONL.
+
+Building one scene (:func:`build_scene_index`):
+
+1. load the scene folder; attach per-view instance visibility and the view covisibility
+   matrix, both cached in ``<scene>/cache/`` (``*.visibility.npz``, ``*.covisibility.npz``);
+2. for every selected family (sorted by name), run ``family.generate(scene, rng)`` with
+   ``rng = default_rng(derive_seed(seed, scene_id, family))``: the records are seeded per
+   (scene, family), so adding a family never changes another family's records;
+3. pool up to ``pool_factor × per_sub_type`` distinct subjects per ``sub_question_type``
+   (each with at most :data:`ALTERNATES` records; no more than ``max_scan`` candidates per
+   family) and take up to ``per_sub_type`` of them per sub type with the
+   **debiased selection** (:func:`~spacedg.qa.selection.select_records`): a subject (an object, a pair, a view and
+   label: the ``selection`` entry of the record's geometry block) is asked at most once per
+   sub type; within each *cell* (what a text-only model can tell about the question: its
+   labels, its option set, the axes it names) records are taken in whole rounds, one per live
+   *role* (answer), so in every scene no function of what the text shows beats chance (the
+   blind stress test :mod:`spacedg.qa.audit` measures what is left); each role of a round
+   is filled with the candidate whose ``features`` (the labels a size comparison names, by
+   position) that role has had least, so no label wins more often than it loses; the
+   distractors of sector-label questions are dealt again (:func:`~spacedg.qa.deal.deal_distractors`) so every
+   label is offered equally often, then the correct letters (:func:`~spacedg.qa.deal.deal_letters`); records without a
+   ``selection`` entry (third-party families) are taken round-robin over their correct
+   answers as before. An optional judge (:class:`~spacedg.qa.judge.DescriptionJudge`) drops
+   records whose descriptions it finds ambiguous (asked only about records being taken);
+4. write ``<out>/<scene id>.qa.jsonl`` (one :class:`~spacedg.plugins.qa_record.QARecord` per line, families in name
+   order) and ``<out>/<scene id>.qa.meta.json`` (key, config, counts, timings) atomically.
+   ``out`` defaults to the scene folder itself.
+
+Where the files go and when an index is reused: :mod:`spacedg.qa.index`.
+"""
+from __future__ import annotations
+
+import functools
+import time
+from collections import Counter
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spacedg.errors import SpaceDGError
+from spacedg.plugins.guard import plugin_call
+from spacedg.plugins.qa_record import QARecord
+from spacedg.qa.deal import deal_distractors, deal_letters
+from spacedg.qa.index import (
+    QA_INDEX_VERSION,
+    QABuildConfig,
+    SceneQA,
+    index_is_current,
+    index_key,
+    index_paths,
+    is_current,
+    read_index,
+    read_meta,
+    scene_json_path,
+    selected_families,
+    write_index,
+)
+from spacedg.qa.judge import DescriptionJudge
+from spacedg.qa.selection import select_records, selection_of
+from spacedg.scene.covisibility import with_covisibility
+from spacedg.scene.frame_check import require_frame
+from spacedg.scene.io import load_scene
+from spacedg.scene.labelling import ensure_instance_ids
+from spacedg.scene.model import Scene
+from spacedg.scene.store import run_isolated
+from spacedg.scene.visibility import (
+    compute_visibility,
+    load_or_compute_visibility,
+    with_visibility,
+)
+from spacedg.seeding import derive_seed
+
+__all__ = ["ALTERNATES", "prepare_scene", "generate_records", "build_scene_index", "ensure_indexes"]
+
+#: A subject is pooled with at most this many records (other views of the same question: a
+#: compass or direction question's answer changes with the view, so a subject can fill one of
+#: several roles, and the judge may drop one); the pool's size counts distinct subjects, so a
+#: family whose subjects recur in many views (size comparisons) pools every pair it finds.
+ALTERNATES = 8
+
+
+def prepare_scene(
+    scene: Scene,
+    cache_dir: str | Path | None,
+    config: QABuildConfig = QABuildConfig(),
+    *,
+    backend: str = "auto",
+    progress: bool = True,
+    timings: dict[str, float] | None = None,
+    device: str | None = None,
+) -> Scene:
+    """``scene`` with visibility and covisibility attached (cached under ``cache_dir`` if given).
+
+    First the scene's frame is checked (a scene whose cameras see nothing is refused, naming the
+    cause) and Gaussians without instance ids get them by box containment (with a warning)."""
+
+    require_frame(scene, backend=backend)
+    scene = ensure_instance_ids(scene)
+    t0 = time.perf_counter()
+    if cache_dir is None:
+        table = compute_visibility(scene, image_size=config.visibility_size, backend=backend, progress=progress, device=device)
+    else:
+        table = load_or_compute_visibility(scene, cache_dir, image_size=config.visibility_size, backend=backend, progress=progress, device=device)
+    scene = with_visibility(scene, table)
+    t1 = time.perf_counter()
+    scene = with_covisibility(scene, cache_dir, image_size=config.covisibility_size, backend=backend, progress=progress, device=device)
+    if timings is not None:
+        timings["visibility_s"] = t1 - t0
+        timings["covisibility_s"] = time.perf_counter() - t1
+    return scene
+
+
+def _pool(family: Any, scene: Scene, config: QABuildConfig) -> list[QARecord]:
+    """A family's candidates in scan order: up to ``pool_factor × per_sub_type`` distinct subjects
+    per sub type, :data:`ALTERNATES` records each, ``max_scan`` candidates in all (seeded per
+    (scene, family))."""
+    rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
+    want = config.per_sub_type * config.pool_factor
+    pooled: list[QARecord] = []
+    distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
+    with plugin_call("question family", family, "generate"):
+        for scanned, record in enumerate(family.generate(scene, rng)):
+            if scanned >= config.max_scan:
+                break
+            seen = distinct.setdefault(record.sub_question_type, Counter())
+            sel = selection_of(record)
+            subject = str(sel["subject"]) if sel is not None else f"record:{record.id}"
+            if seen[subject] >= ALTERNATES:
+                continue  # a subject already pooled (another view of the same question)
+            if subject in seen or len(seen) < want:
+                seen[subject] += 1
+                pooled.append(record)
+            elif all(len(distinct.get(s, ())) >= want for s in family.sub_question_types):
+                break
+    return pooled
+
+
+def _judged(record: QARecord, judge: DescriptionJudge | None, dropped: dict[str, int] | None, family_name: str) -> bool:
+    """Whether ``judge`` keeps ``record`` (always without one); a drop is counted in ``dropped``."""
+    if judge is None or judge.keep(record):
+        return True
+    if dropped is not None:
+        dropped[family_name] = dropped.get(family_name, 0) + 1
+    return False
+
+
+def _family_records(
+    family: Any, scene: Scene, config: QABuildConfig, judge: DescriptionJudge | None,
+    dropped: dict[str, int] | None, selection_stats: dict[str, dict[str, int]] | None,
+) -> list[QARecord]:
+    """One family's records for the index: pooled, selected, dealt, in its sub-type order."""
+    keep = functools.partial(_judged, judge=judge, dropped=dropped, family_name=family.name)
+    stats: dict[str, Counter[str]] = {}
+    chosen = select_records(_pool(family, scene, config), config.per_sub_type, keep, stats)
+    chosen = deal_distractors(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "distractors")))
+    chosen = deal_letters(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "letters")))
+    by_sub: dict[str, list[QARecord]] = {}
+    for r in chosen:
+        by_sub.setdefault(r.sub_question_type, []).append(r)
+    if selection_stats is not None:
+        for sub, row in stats.items():
+            selection_stats[f"{family.name}/{sub}"] = dict(sorted(row.items()))
+    return [r for sub in family.sub_question_types for r in by_sub.get(sub, [])]
+
+
+def generate_records(
+    scene: Scene,
+    config: QABuildConfig = QABuildConfig(),
+    *,
+    judge: Any = None,
+    dropped: dict[str, int] | None = None,
+    selection_stats: dict[str, dict[str, int]] | None = None,
+) -> list[QARecord]:
+    """Records of every selected family for a prepared scene (see the module docstring).
+
+    Per family, candidates are pooled (up to ``pool_factor × per_sub_type`` distinct subjects
+    per sub type, :data:`ALTERNATES` records each, ``max_scan`` candidates in all); then
+    :func:`~spacedg.qa.selection.select_records` takes up to ``per_sub_type`` per sub type: each
+    subject once, whole rounds of every cell's roles (no answer is predictable from what the
+    text shows), metric answers in generation order; the kept sector-label MCQs get their
+    distractors dealt again (:func:`~spacedg.qa.deal.deal_distractors`, seeded by
+    ``derive_seed(seed, scene, family, "distractors")``) and the kept MCQ records their correct
+    letters (:func:`~spacedg.qa.deal.deal_letters`, seeded by ``derive_seed(seed, scene, family,
+    "letters")``), so letters are uniform per sub type.
+
+    ``judge``: a callable ``judge(image, label, description) -> "KEEP"/"DROP"`` or a
+    :class:`~spacedg.qa.judge.DescriptionJudge`, asked only about records being taken;
+    ``dropped`` receives per-family counts of records the judge removed; ``selection_stats``
+    receives per ``question_type/sub_question_type`` the counts of
+    :func:`~spacedg.qa.selection.select_records`.
+    """
+
+    if judge is not None and not isinstance(judge, DescriptionJudge):
+        judge = DescriptionJudge(scene, judge)
+    out: list[QARecord] = []
+    for family in selected_families(config.families):
+        out.extend(_family_records(family, scene, config, judge, dropped, selection_stats))
+    return out
+
+
+def build_scene_index(
+    scene_dir: str | Path,
+    config: QABuildConfig = QABuildConfig(),
+    *,
+    out_dir: str | Path | None = None,
+    judge: Any = None,
+    force: bool = False,
+    backend: str = "auto",
+    progress: bool = True,
+    device: str | None = None,
+) -> SceneQA:
+    """Build (or reuse) the question index of one native scene folder (see the module docstring):
+    the full index, or with ``config.families`` the selection index beside it
+    (:func:`~spacedg.qa.index.index_paths`)."""
+
+    scene_dir = Path(scene_dir)
+    scene = load_scene(scene_dir)
+    scene_json = scene_json_path(scene_dir)
+    key = index_key(scene_json, config, selected_families(config.families), judge)
+    jsonl, meta_path = index_paths(scene.id, out_dir if out_dir is not None else scene_json.parent, config.families)
+    if not force and is_current(jsonl, meta_path, key):
+        meta = read_meta(meta_path) or {}
+        return SceneQA(scene.id, jsonl, read_index(jsonl), reused=True, seconds=dict(meta.get("seconds", {})))
+    timings: dict[str, float] = {}
+    prepared = prepare_scene(scene, scene_json.parent / "cache", config, backend=backend, progress=progress, timings=timings, device=device)
+    dropped: dict[str, int] = {}
+    selection: dict[str, dict[str, int]] = {}
+    t0 = time.perf_counter()
+    records = generate_records(prepared, config, judge=judge, dropped=dropped, selection_stats=selection)
+    timings["generate_s"] = time.perf_counter() - t0
+    meta = {
+        "format": "spacedg-qa-index", "version": QA_INDEX_VERSION, "key": key, "scene_id": scene.id,
+        "config": config.to_dict(), "records": len(records),
+        "counts": dict(sorted(Counter(r.question_type for r in records).items())),
+        "dropped_by_judge": dropped, "selection": selection, "seconds": {k: round(v, 4) for k, v in timings.items()},
+    }
+    write_index(jsonl, meta_path, records, meta)
+    return SceneQA(scene.id, jsonl, records, reused=False, seconds=timings, dropped=dropped)
+
+
+# --------------------------------------------------------- many scenes, isolated
+def _build_indexes(payload: dict[str, Any]) -> dict[str, str]:
+    """Child side of :func:`ensure_indexes`: build the indexes of ``payload["dirs"]``; returns
+    ``folder → error message`` for the scenes that failed."""
+    from tqdm import tqdm
+
+    cfg = QABuildConfig.from_dict(payload["config"])
+    failed: dict[str, str] = {}
+    for folder in tqdm(payload["dirs"], desc="question indexes (first use)", unit="scene"):
+        try:
+            build_scene_index(folder, cfg, progress=False)
+        except (SpaceDGError, OSError, ValueError) as err:
+            failed[folder] = str(err)
+    return failed
+
+
+def ensure_indexes(dirs: Sequence[Path], config: QABuildConfig) -> dict[str, str]:
+    """Build the question index of each scene folder whose index is missing or stale, **in a
+    separate Python process** (:func:`~spacedg.scene.store.run_isolated`: the caller never starts
+    numba or CUDA threads before a DataLoader forks its workers); returns ``folder → error`` for
+    scenes that could not be read or indexed."""
+
+    failed: dict[str, str] = {}
+    stale = []
+    for d in dirs:
+        try:
+            if not index_is_current(d, config):
+                stale.append(str(d))
+        except (SpaceDGError, OSError, ValueError) as err:
+            failed[str(d)] = str(err)
+    if stale:
+        failed.update(run_isolated("spacedg.qa.build:_build_indexes", {"dirs": stale, "config": config.to_dict()}))
+    return failed

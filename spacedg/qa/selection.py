@@ -1,0 +1,348 @@
+"""The debiased selection: which of a family's pooled candidates a scene's question index keeps.
+
+:func:`select_records` takes up to ``per_sub_type`` records per sub type so that no function of
+what a question's text shows beats chance in the scene (the blind stress test
+:mod:`spacedg.qa.audit` measures what is left). It reads each candidate's ``selection`` entry
+(:func:`~spacedg.plugins.questions.records.selection_entry`): the *subject* (an object, a pair,
+a view and label), the *cell* (what a text-only model can tell about the question: its labels,
+its option set, the axes it names), the *role* (its answer), the cell's ``roles`` and the
+``features`` (the labels a size comparison names, by position). The steps, in this order:
+
+1. metric answers (an entry without a cell): generation order, each subject once
+   (:meth:`_Selection.take_metric`);
+2. cells: whole rounds, one record of every role, cells visited round-robin
+   (:meth:`_Selection.take_rounds`; a role is filled by :meth:`_Selection.pick`, which balances
+   features across roles with :meth:`_Selection.cost`);
+3. sub types whose quota is smaller than every round of their cells: their first free
+   candidates (:meth:`_Selection.take_small_quotas`);
+4. records without a ``selection`` entry (third-party families): round-robin over their
+   correct answers (:func:`select_balanced`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Callable, Container, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.specs import AnswerType
+
+__all__ = ["truth_key", "selection_of", "features_of", "select_balanced", "select_records"]
+
+Keep = Callable[[QARecord], bool]
+
+
+def truth_key(record: QARecord) -> str | None:
+    """What answer balancing groups by: the correct option's text (MCQ), the answer (YN, COUNT),
+    or ``None`` for metric answers (NA, SIZE_LIST), which are not balanced."""
+    if record.answer_type is AnswerType.MCQ:
+        letter = str(record.answer)
+        return next((o[3:] for o in record.options if o.startswith(letter + ". ")), letter)
+    if record.answer_type in (AnswerType.YN, AnswerType.COUNT):
+        return str(record.answer)
+    return None
+
+
+def selection_of(record: QARecord) -> dict[str, Any] | None:
+    """The record's ``selection`` entry (a mapping with a ``subject``), or ``None``."""
+    entry = record.geometry.get("selection")
+    return entry if isinstance(entry, dict) and "subject" in entry else None
+
+
+def features_of(record: QARecord) -> list[str]:
+    """The ``features`` of the record's selection entry (what its text names: labels by position)."""
+    entry = selection_of(record)
+    features = entry.get("features") if entry is not None else None
+    return [str(f) for f in features] if isinstance(features, list) else []
+
+
+def select_balanced(pool: list[QARecord], cap: int, keep: Keep) -> list[QARecord]:
+    """Up to ``cap`` records of one sub type, round-robin over truth buckets (first-seen order).
+
+    Each bucket is consumed in generation order; ``keep(record)`` (the judge) is asked only for
+    records about to be taken. The result is returned in generation order. (Records without a
+    ``selection`` entry: third-party families.)
+    """
+    buckets: dict[str | None, list[int]] = {}
+    for i, record in enumerate(pool):
+        buckets.setdefault(truth_key(record), []).append(i)
+    queues = [list(reversed(ix)) for ix in buckets.values()]
+    taken: list[int] = []
+    while len(taken) < cap and any(queues):
+        for queue in queues:
+            while queue and len(taken) < cap:
+                i = queue.pop()
+                if keep(pool[i]):
+                    taken.append(i)
+                    break
+    return [pool[i] for i in sorted(taken)]
+
+
+@dataclass
+class _Pool:
+    """The candidates, indexed by position (generation order), sorted into the kinds the steps treat."""
+
+    records: Sequence[QARecord]
+    selections: list[dict[str, Any] | None] = field(default_factory=list)
+    features: list[list[str]] = field(default_factory=list)
+    subjects: list[tuple[str, str] | None] = field(default_factory=list)
+    plain: dict[str, list[int]] = field(default_factory=dict)  # sub type → records without an entry
+    metric: list[int] = field(default_factory=list)  # entries without a cell
+    cells: dict[str, dict[str, list[int]]] = field(default_factory=dict)  # cell → role → records
+    cell_roles: dict[str, list[str]] = field(default_factory=dict)  # cell → the roles of a round
+
+    @classmethod
+    def of(cls, records: Sequence[QARecord]) -> _Pool:
+        pool = cls(records, [selection_of(r) for r in records], [features_of(r) for r in records])
+        pool.subjects = [None if sel is None else (r.sub_question_type, str(sel["subject"])) for r, sel in zip(records, pool.selections)]
+        partial: set[str] = set()
+        for i, r in enumerate(records):
+            sel = pool.selections[i]
+            if sel is None:
+                pool.plain.setdefault(r.sub_question_type, []).append(i)
+            elif "cell" not in sel:
+                pool.metric.append(i)
+            else:
+                cell = f"{r.question_type}|{sel['cell']}"
+                pool.cells.setdefault(cell, {}).setdefault(str(sel["role"]), []).append(i)
+                pool.cell_roles.setdefault(cell, [str(x) for x in sel.get("roles", [])])
+                if sel.get("all_roles", True) is False:
+                    partial.add(cell)
+        for cell in partial:  # rounds over the roles this scene offers in the cell (at least two)
+            offered = [role for role in pool.cell_roles[cell] if pool.cells[cell].get(role)]
+            pool.cell_roles[cell] = offered if len(offered) >= 2 else []
+        return pool
+
+    def subject(self, i: int) -> tuple[str, str]:
+        return self.subjects[i]  # type: ignore[return-value]
+
+    def sub(self, i: int) -> str:
+        return self.records[i].sub_question_type
+
+    def round_size(self, i: int) -> int:
+        """How many records a round of record ``i``'s cell takes (1 outside cells)."""
+        sel, r = self.selections[i], self.records[i]
+        if sel is None or "cell" not in sel:
+            return 1
+        roles = self.cell_roles.get(f"{r.question_type}|{sel['cell']}") or sel.get("roles", [])
+        return max(1, len(roles))
+
+
+class _Selection:
+    """The state of one :func:`select_records` call: what is taken, which subjects are asked,
+    the room left per sub type, and the features each role has had (see the module docstring)."""
+
+    def __init__(self, records: Sequence[QARecord], per_sub_type: int, keep: Keep | None) -> None:
+        self.pool = _Pool.of(records)
+        self.per_sub_type = per_sub_type
+        self.keep = keep or (lambda record: True)
+        self.judged_out: set[str] = set()
+        self.room: Counter[str] = Counter()
+        for r in records:
+            self.room[r.sub_question_type] = per_sub_type
+        self.taken: set[int] = set()
+        self.asked: set[tuple[str, str]] = set()
+        cells = self.pool.cells
+        self.cursors = {cell: {role: 0 for role in roles} for cell, roles in self.pool.cell_roles.items()}
+        # feature balance: (sub type, feature) → role → records taken (features: what the text names)
+        self.balance: dict[tuple[str, str], Counter[str]] = {}
+        self.featured = {cell: any(self.pool.features[i] for q in by_role.values() for i in q) for cell, by_role in cells.items()}
+
+    def accept(self, record: QARecord) -> bool:
+        """Whether the judge keeps ``record`` (asked once; a refusal is remembered)."""
+        if record.id in self.judged_out:
+            return False
+        if self.keep(record):
+            return True
+        self.judged_out.add(record.id)
+        return False
+
+    def take(self, i: int) -> None:
+        self.taken.add(i)
+        self.asked.add(self.pool.subject(i))
+        self.room[self.pool.sub(i)] -= 1
+
+    def take_metric(self) -> None:
+        """Metric answers: generation order, subjects once."""
+        pool = self.pool
+        for i in pool.metric:
+            if self.room[pool.sub(i)] > 0 and pool.subject(i) not in self.asked and self.accept(pool.records[i]):
+                self.take(i)
+
+    def cost(self, i: int, role: str, roles: Sequence[str]) -> float:
+        """How over-represented record i's features already are in ``role`` (greedy chi-square)."""
+        sub = self.pool.sub(i)
+        total = 0.0
+        for f in self.pool.features[i]:
+            row = self.balance.get((sub, f))
+            if row:
+                total += row[role] - sum(row[r] for r in roles) / len(roles)
+        return total
+
+    def _usable(self, i: int, used: Container[tuple[str, str]] = ()) -> bool:
+        """Whether record ``i``'s subject is free (not asked, not in ``used``) and the judge has not refused it."""
+        subject = self.pool.subject(i)
+        return subject not in self.asked and subject not in used and self.pool.records[i].id not in self.judged_out
+
+    def pick(self, cell: str, role: str, used: set[tuple[str, str]]) -> int | None:
+        """The candidate of ``role`` in ``cell`` for the next round: free subject, accepted by the
+        judge; among them the least over-represented features (ties: generation order)."""
+        queue = self.pool.cells[cell].get(role, [])
+        k = self.cursors[cell][role]
+        while k < len(queue) and not self._usable(queue[k]):
+            k += 1  # never usable again
+        self.cursors[cell][role] = k
+        featured = self.featured[cell]
+        while True:
+            best, best_cost = None, math.inf
+            for i in queue[k:]:
+                if not self._usable(i, used):
+                    continue
+                c = self.cost(i, role, self.pool.cell_roles[cell]) if featured else 0.0
+                if c < best_cost:
+                    best, best_cost = i, c
+                    if not featured:
+                        break
+            if best is None:
+                return None
+            if self.accept(self.pool.records[best]):
+                return best
+
+    def next_round(self, cell: str) -> list[int] | None:
+        """One record per role of ``cell`` (distinct subjects), or ``None`` when a role has no
+        candidate left or a sub type the round touches has no room for it."""
+        round_: list[int] = []
+        used: set[tuple[str, str]] = set()
+        need: Counter[str] = Counter()
+        for role in self.pool.cell_roles[cell]:
+            i = self.pick(cell, role, used)
+            if i is None:
+                return None
+            round_.append(i)
+            used.add(self.pool.subject(i))
+            need[self.pool.sub(i)] += 1
+        if any(self.room[sub] < n for sub, n in need.items()):
+            return None
+        return round_
+
+    def take_round(self, round_: Sequence[int]) -> None:
+        for i in round_:
+            self.take(i)
+            role = str(self.pool.selections[i]["role"])  # type: ignore[index]
+            for f in self.pool.features[i]:
+                self.balance.setdefault((self.pool.sub(i), f), Counter())[role] += 1
+
+    def take_rounds(self) -> None:
+        """Balanced cells: whole rounds, one per cell per visit, round-robin until none gives a round."""
+        cells, roles = self.pool.cells, self.pool.cell_roles
+        # a cell needs two roles at least: a one-role cell would be answered by its text alone
+        open_cells = [c for c in cells if len(roles[c]) >= 2 and all(cells[c].get(role) for role in roles[c])]
+        while open_cells:
+            still = []
+            for cell in open_cells:
+                round_ = self.next_round(cell)
+                if round_ is None:
+                    continue  # the cell is exhausted, or a sub type it needs is full
+                self.take_round(round_)
+                still.append(cell)
+            open_cells = still
+
+    def _smallest_rounds(self) -> dict[str, int]:
+        """Per sub type, the smallest round among its cells (cells of fewer than two roles: 10**9)."""
+        smallest: dict[str, int] = {}
+        for cell, by_role in self.pool.cells.items():
+            size = len(self.pool.cell_roles[cell])
+            for queue in by_role.values():
+                for i in queue:
+                    sub = self.pool.sub(i)
+                    smallest[sub] = min(smallest.get(sub, size), size) if size >= 2 else smallest.get(sub, 10**9)
+        return smallest
+
+    def take_small_quotas(self) -> None:
+        """A sub type whose quota is smaller than every round of its cells (a tiny per_sub_type,
+        e.g. 1) would stay empty: it takes its first free candidates in generation order instead
+        (too few to balance anyway)."""
+        pool = self.pool
+        got = Counter(pool.sub(i) for i in self.taken)
+        smallest = self._smallest_rounds()
+        for i in sorted(i for by_role in pool.cells.values() for queue in by_role.values() for i in queue):
+            sub = pool.sub(i)
+            if got[sub] == 0 and 0 < self.room[sub] < smallest.get(sub, 0) and pool.subject(i) not in self.asked \
+                    and self.accept(pool.records[i]):
+                self.take(i)
+
+    def take_plain(self) -> None:
+        """Records of families without selection entries: :func:`select_balanced` per sub type."""
+        records = self.pool.records
+        for ix in self.pool.plain.values():
+            first: dict[str, int] = {}
+            for i in ix:
+                first.setdefault(records[i].id, i)
+            for r in select_balanced([records[i] for i in ix], self.per_sub_type, self.accept):
+                self.taken.add(first[r.id])
+
+    def why(self, i: int) -> str:
+        """Why record ``i`` was (not) taken: a :func:`select_records` ``stats`` key."""
+        pool, r = self.pool, self.pool.records[i]
+        if i in self.taken:
+            return "taken"
+        if r.id in self.judged_out:
+            return "judge"
+        if pool.selections[i] is not None and pool.subject(i) in self.asked:
+            return "repeat"
+        if self.room[r.sub_question_type] < pool.round_size(i):
+            return "quota"  # no room for another round of its cell
+        return "unbalanced"
+
+    def stats(self) -> dict[str, Counter[str]]:
+        """Per sub type: ``pooled`` and the :meth:`why` counts."""
+        out: dict[str, Counter[str]] = {}
+        for i, r in enumerate(self.pool.records):
+            row = out.setdefault(r.sub_question_type, Counter())
+            row["pooled"] += 1
+            row[self.why(i)] += 1
+        return out
+
+
+def select_records(
+    records: Sequence[QARecord], per_sub_type: int, keep: Keep | None = None, stats: dict[str, Counter[str]] | None = None,
+) -> list[QARecord]:
+    """The debiased selection among one family's candidates (in generation order): up to
+    ``per_sub_type`` records per sub type, returned in generation order.
+
+    For records with a ``selection`` entry (:func:`~spacedg.plugins.questions.records.selection_entry`):
+
+    - a subject is taken at most once per sub type (``(sub type, subject)``);
+    - records with a ``cell`` are taken in **whole rounds**: one record of every role in the
+      cell's ``roles`` (or, for an entry with ``all_roles`` false, of the roles the candidates
+      offer, at least two), each the first in generation order whose subject is still free (and
+      that ``keep`` accepts); a round is taken only while every sub type it touches has room, and a
+      cell stops at its first incomplete round. Cells are visited round-robin in the order of
+      their first record, one round per visit, until no cell can give a round;
+    - a role of a round is filled, among the free candidates of that role, with the one whose
+      selection ``features`` the role has had least so far in the sub type (greedy: the sum
+      over its features of the role's count minus the mean count over the cell's roles;
+      ties, and records without features: generation order);
+    - records without a ``cell`` (metric answers) are taken in generation order;
+    - a sub type whose ``per_sub_type`` is smaller than every round of its cells (e.g. 1) takes
+      its first free candidates in generation order instead, so a small index is not empty.
+
+    Records without a ``selection`` entry are taken per sub type round-robin over their correct
+    answers (:func:`truth_key`), as before version 3.
+
+    ``stats`` (optional) receives per sub type: ``pooled``, ``taken``, and why the others were
+    not: ``repeat`` (subject already asked), ``quota`` (its sub type has no room for another
+    round of its cell), ``unbalanced`` (no complete round of its cell left), ``judge``.
+    """
+    selection = _Selection(records, per_sub_type, keep)
+    selection.take_metric()
+    selection.take_rounds()
+    selection.take_small_quotas()
+    selection.take_plain()
+    if stats is not None:
+        for sub, row in selection.stats().items():
+            stats.setdefault(sub, Counter()).update(row)
+    return [records[i] for i in sorted(selection.taken)]
