@@ -20,7 +20,8 @@ import torch
 from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.data.pipeline import PipelineOptions, degrade
 from spacedg.plugins.degradations import haze, jpeg_compression, low_light, low_res, over_exposure, water_droplets
-from spacedg.plugins.degradations.device import encode_srgb_u8_torch, sensor_torch
+from spacedg.plugins.degradations.device import sensor_torch
+from spacedg.render import colour_torch
 from spacedg.render.colour_cpu import encode_srgb_u8
 from tests.plugins.degradations.test_device import ALPHA, DEPTH, IMAGE, SIGNALS
 
@@ -44,8 +45,8 @@ def _linear(spec, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 def test_encode_is_exact_on_cuda() -> None:
     values = np.concatenate([np.linspace(-0.1, 1.2, 20011), [np.nan, np.inf, -np.inf, 0.0, 1.0]]).astype(np.float32)
-    np.testing.assert_array_equal(encode_srgb_u8_torch(_on_cuda(values)).cpu().numpy(), encode_srgb_u8(values))
-    np.testing.assert_array_equal(encode_srgb_u8_torch(_on_cuda(IMAGE)).cpu().numpy(), encode_srgb_u8(IMAGE))
+    np.testing.assert_array_equal(colour_torch.encode_srgb_u8(_on_cuda(values)).cpu().numpy(), encode_srgb_u8(values))
+    np.testing.assert_array_equal(colour_torch.encode_srgb_u8(_on_cuda(IMAGE)).cpu().numpy(), encode_srgb_u8(IMAGE))
 
 
 @pytest.mark.parametrize("spec, bound", [(haze.SPEC, 1e-5), (water_droplets.SPEC, 1e-4)], ids=["haze", "water_droplets"])
