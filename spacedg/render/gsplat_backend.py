@@ -430,6 +430,12 @@ def render_gsplat(
             frame.stats = stats
         frame.stats["delegated"] = "torch"
         return frame
+    if motion is not None and motion_model.uses_keyframes(motion, camera):
+        # the fast motion path is the keyframe warp on every backend (its sub-step count differs from
+        # choose_sub_steps'): the torch twin renders it, so gsplat, torch and cpu blur alike
+        frame = motion_model.render_motion(motion_model.MotionJob(gaussians, camera, motion, wanted, "torch", device, settings, None))
+        frame.stats["delegated"] = "torch"
+        return frame
     ops = ops or ops_for(device)
     want_color, want_depth = "rgb" in wanted, "depth" in wanted
     want_ids = bool(wanted & {"median_depth", "instance_ids"})

@@ -148,9 +148,15 @@ class MotionJob:
 
 def render_motion(job: MotionJob) -> Frame:
     """Render a motion-blurred frame (see the module docstring)."""
-    if job.motion.fast and job.camera.fisheye is None and _canvas_fits(job.camera):
+    if uses_keyframes(job.motion, job.camera):
         return render_motion_keyframes(job)
     return render_motion_substeps(job)
+
+
+def uses_keyframes(motion: MotionBlur, camera: Camera) -> bool:
+    """Whether ``motion`` renders through the keyframe warp (the fast path on a pinhole camera whose
+    keyframe canvas fits), the rule every backend follows; otherwise sub-exposure renders."""
+    return motion.fast and not motion.is_static and camera.fisheye is None and _canvas_fits(camera)
 
 
 def _canvas_fits(camera: Camera) -> bool:

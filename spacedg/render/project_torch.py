@@ -82,10 +82,17 @@ class Projected:
         return (self.radii > 0).all(dim=-1)
 
 
+def small_matmul(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """``a @ b`` for stacks of tiny matrices (2×3, 3×3, …; leading dimensions broadcast), written as
+    one broadcast product and one sum: batched GEMM on millions of 3×3 matrices is launch- and
+    occupancy-bound on a GPU (it was most of a 1M-Gaussian projection on an H200)."""
+    return (a.unsqueeze(-1) * b.unsqueeze(-3)).sum(-2)
+
+
 def quat_scale_to_covariance(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
     """(N, 3, 3) covariance ``R S Sᵀ Rᵀ`` from wxyz quaternions (normalised here) and scales (m)."""
     m = quat_to_matrix(quats / quats.norm(dim=-1, keepdim=True)) * scales[:, None, :]
-    return m @ m.transpose(-1, -2)
+    return small_matmul(m, m.transpose(-1, -2))
 
 
 def pinhole_jacobian(cam: torch.Tensor, camera: Camera, reach: float = 0.0) -> torch.Tensor:
@@ -171,7 +178,7 @@ def project_gaussians(
     # keep the maths finite for culled entries: project them as if at z = 1
     cam_safe = torch.where(in_range[:, None], cam, torch.tensor([0.0, 0.0, 1.0], dtype=dtype, device=device))
     rot_w = rot.to(wide)
-    cov_cam = rot_w @ quat_scale_to_covariance(gs.quats.to(wide), gs.scales.to(wide)) @ rot_w.T
+    cov_cam = small_matmul(small_matmul(rot_w, quat_scale_to_covariance(gs.quats.to(wide), gs.scales.to(wide))), rot_w.T)
     if camera.fisheye is None:
         zs = cam_safe[:, 2:3]
         means2d = cam_safe[:, :2] / zs * torch.tensor([camera.fx, camera.fy], dtype=dtype, device=device) + torch.tensor(
@@ -186,7 +193,7 @@ def project_gaussians(
         means2d, jac, theta = fisheye_jacobian(cam_safe, camera)
         lens_ok = theta <= camera.fisheye.effective_max_theta
     jac = jac.to(wide)
-    cov2d = jac @ cov_cam @ jac.transpose(-1, -2)
+    cov2d = small_matmul(small_matmul(jac, cov_cam), jac.transpose(-1, -2))
     sxx, sxy, syy = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
     det_raw = sxx * syy - sxy * sxy
     sxx, syy = sxx + settings.eps2d, syy + settings.eps2d
@@ -244,7 +251,7 @@ def project_gaussians(
         dirs = dirs / torch.clamp(dirs.norm(dim=-1, keepdim=True), min=1e-30)
         degree = int(round(math.sqrt(gs.sh.shape[1]))) - 1
         basis = sh_basis(degree, dirs)
-        colors = torch.clamp(torch.einsum("nk,nkc->nc", basis, gs.sh) + 0.5, min=0.0)
+        colors = torch.clamp((basis.unsqueeze(-1) * gs.sh).sum(-2) + 0.5, min=0.0)
     return Projected(
         means2d, conics.to(dtype), opacity.to(dtype), colors, z, radii, rects, alpha_floor.to(dtype),
         torch.where(keep, coc, torch.zeros_like(coc)).to(dtype),
