@@ -113,8 +113,9 @@ class SpaceDGDataset(Dataset):
             changing the augmentation seed never moves a scene between splits).
         on_bad_scene: ``"raise"`` (default) or ``"skip"`` a scene that cannot be read or indexed
             (skipped scenes are named in a warning and in :attr:`skipped`).
-        backend, device: renderer backend (``"auto"``, ``"cpu"``, ``"torch"``, ``"gsplat"``) and torch
-            device; a non-CPU device renders and degrades there, in the main process only (module docstring).
+        backend: renderer backend (``"auto"``, ``"cpu"``, ``"torch"``, ``"gsplat"``).
+        device: torch device; a non-CPU device renders and degrades there, in the main process only
+            (module docstring).
         defer_render: items come without ``images``, ``degradation`` and ``stats``; :meth:`render_batch` renders
             them, in the process that owns the GPU.
         builtin_rooms: how many built-in rooms when ``scenes`` is not given.
