@@ -56,7 +56,7 @@ def readme_run(tmp_path_factory) -> dict[tuple[str, int], dict[str, object]]:
     env = dict(os.environ, SPACEDG_HOME=str(root / "home"), PYTHONPATH=os.pathsep.join(
         [str(REPO_ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]))
     proc = subprocess.run([sys.executable, "-m", "tests.readme_runner", *map(_name, PAGES), str(work)], cwd=REPO_ROOT, env=env,
-                          capture_output=True, text=True, timeout=1500)
+                          capture_output=True, text=True, timeout=2400)
     results = {}
     for line in proc.stdout.splitlines():
         if line.startswith("{"):
