@@ -200,7 +200,7 @@ def run_blocks(blocks: list[Block], workdir: Path, timeout: float = 600.0) -> li
     namespace: dict[str, object] = {"__name__": "__readme__"}
     failed_at: int | None = None
     for block in blocks:
-        if failed_at is not None:
+        if failed_at is not None and block.directive != "skip":
             result: dict[str, object] = {"file": block.source, "line": block.line, "lang": block.lang, "seconds": 0.0,
                                          "status": "not-run", "output": f"block at {block.source} line {failed_at} failed"}
         else:
