@@ -1,37 +1,50 @@
-"""The README runs as written: every bash and Python block, in order, in a scratch checkout-like folder.
+"""The README and the documentation pages run as written: every bash and Python block, in order,
+in a scratch checkout-like folder.
 
-The blocks run as a reader runs them, top to bottom, each building on what the earlier ones made
-(``runs/demo/scenes`` from the Command line section, a bench from the Export section, …), through
-:mod:`tests.readme_runner` in a separate process. The scratch folder has the checkout's
-``benchmarks/`` and ``tests/`` (linked), ``../shared`` beside it when the real one exists, and its
-own ``docs/`` and ``runs/``. ``SPACEDG_HOME`` points into the scratch folder and is seeded with
-16 small built-in rooms (20k Gaussians, ≤ 16 views at 160×120), so the Dataset section's
-``SpaceDGDataset()`` with its default scenes runs in seconds instead of building 16 full rooms
-(the README states that first-use cost). Blocks that cannot run in a test say why in a
-``<!-- readme-test: … -->`` directive (the test suite itself, a hub model, a GPU, an external
-checkout); a hub-model block still runs up to the model load.
+The README's blocks run first, top to bottom, each building on what the earlier ones made (the
+tour's four small rooms in ``runs/demo/scenes``, its bench in ``runs/demo/bench``, its tiny VLM,
+…); then each ``docs/*.md`` page's blocks, which continue from the tour's files (each page in a
+fresh Python namespace). Everything runs through :mod:`tests.readme_runner` in one separate
+process. The scratch folder has the checkout's ``benchmarks/`` and ``tests/`` (linked),
+``../shared`` beside it when the real one exists, and its own ``docs/`` and ``runs/``;
+``SPACEDG_HOME`` points into it, so nothing touches the user's cache. The tour's rooms are small
+(20k Gaussians, 16 views at 160×120), which keeps the whole run short. Blocks that cannot run in
+a test say why in a ``<!-- readme-test: … -->`` directive (the test suite itself, a hub model, a
+GPU, a cluster, an external checkout); a hub-model block still runs up to the model load.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from tests.readme_runner import read_blocks
+from tests.readme_runner import Block, read_blocks
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 README = REPO_ROOT / "README.md"
+DOCS = REPO_ROOT / "docs"
 SHARED = REPO_ROOT.parent / "shared"
-BLOCKS = read_blocks(README.read_text(encoding="utf-8"))
+#: The README, then every documentation page (docs/api/ holds only generated reference pages).
+PAGES = [README, *sorted(DOCS.glob("*.md"))]
+#: What the issue allows the README to be: a guide, not a lab notebook.
+README_MAX_LINES = 350
+
+
+def _name(path: Path) -> str:
+    return path.relative_to(REPO_ROOT).as_posix()
+
+
+BLOCKS: list[Block] = [b for page in PAGES for b in read_blocks(page.read_text(encoding="utf-8"), _name(page))]
 
 
 @pytest.fixture(scope="module")
-def readme_run(tmp_path_factory) -> dict[int, dict[str, object]]:
+def readme_run(tmp_path_factory) -> dict[tuple[str, int], dict[str, object]]:
     root = tmp_path_factory.mktemp("readme")
     work = root / "main"
     work.mkdir()
@@ -42,33 +55,55 @@ def readme_run(tmp_path_factory) -> dict[int, dict[str, object]]:
         (root / "shared").symlink_to(SHARED)
     env = dict(os.environ, SPACEDG_HOME=str(root / "home"), PYTHONPATH=os.pathsep.join(
         [str(REPO_ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]))
-    spacedg = Path(sys.executable).with_name("spacedg")
-    subprocess.run([str(spacedg), "scenes", "synth", "--n", "16", "--gaussians", "20000", "--min-views", "12", "--max-views", "16",
-                    "--width", "160", "--height", "120", "--out", str(root / "home" / "rooms")],
-                   env=env, check=True, capture_output=True, timeout=600)
-    proc = subprocess.run([sys.executable, "-m", "tests.readme_runner", str(README), str(work)], cwd=REPO_ROOT, env=env,
-                          capture_output=True, text=True, timeout=1200)
+    proc = subprocess.run([sys.executable, "-m", "tests.readme_runner", *map(_name, PAGES), str(work)], cwd=REPO_ROOT, env=env,
+                          capture_output=True, text=True, timeout=2400)
     results = {}
     for line in proc.stdout.splitlines():
         if line.startswith("{"):
             result = json.loads(line)
-            results[int(result["line"])] = result
+            results[(str(result["file"]), int(result["line"]))] = result
     if not results:
-        pytest.fail(f"the README runner reported nothing (exit {proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+        pytest.fail(f"the runner reported nothing (exit {proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
     return results
 
 
-def test_the_readme_has_runnable_blocks() -> None:
-    assert sum(b.directive != "skip" for b in BLOCKS) >= 10
+def test_the_readme_is_a_guide() -> None:
+    lines = README.read_text(encoding="utf-8").count("\n")
+    assert lines <= README_MAX_LINES, f"README.md has {lines} lines; keep it a guide (≤ {README_MAX_LINES}) and move details to docs/"
+
+
+def test_the_pages_have_runnable_blocks() -> None:
+    assert sum(b.directive != "skip" for b in BLOCKS if b.source == "README.md") >= 10
     for block in BLOCKS:
         if block.directive in ("skip", "hub", "server", "file"):
-            assert block.argument, f"README line {block.line}: the {block.directive} directive needs its argument"
+            assert block.argument, f"{block.source} line {block.line}: the {block.directive} directive needs its argument"
 
 
-@pytest.mark.parametrize("block", BLOCKS, ids=[f"line{b.line}-{b.lang}" for b in BLOCKS])
-def test_readme_block(block, readme_run) -> None:
-    result = readme_run.get(block.line)
-    assert result is not None, f"README line {block.line}: the runner did not report this block"
+def test_files_written_by_several_pages_agree() -> None:
+    """A plugin file shown in the README and in docs/plugins.md is one file: the copies may not drift."""
+    by_name: dict[str, Block] = {}
+    for block in BLOCKS:
+        if block.directive == "file":
+            first = by_name.setdefault(block.argument, block)
+            assert first.code == block.code, f"{block.argument}: {first.source} line {first.line} and {block.source} line {block.line} differ"
+
+
+_LINK = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
+
+
+def test_the_readme_links_resolve() -> None:
+    """Every relative link and picture of the README names a file of the checkout (docs pages are
+    checked by ``mkdocs build --strict``, tests/test_docs_site.py)."""
+    for target in _LINK.findall(README.read_text(encoding="utf-8")):
+        if "://" not in target:
+            assert (REPO_ROOT / target).exists(), f"README.md links to {target}, which does not exist"
+
+
+@pytest.mark.parametrize("block", BLOCKS, ids=[f"{b.source}:{b.line}-{b.lang}" for b in BLOCKS])
+def test_block(block: Block, readme_run) -> None:
+    result = readme_run.get((block.source, block.line))
+    assert result is not None, f"{block.source} line {block.line}: the runner did not report this block"
     if result["status"] == "skipped":
-        pytest.skip(f"README line {block.line}: {result['output']}")
-    assert result["status"] == "ok", f"README line {block.line} ({block.lang}) {result['status']}:\n{block.code}\n--- output ---\n{result['output']}"
+        pytest.skip(f"{block.source} line {block.line}: {result['output']}")
+    assert result["status"] == "ok", (
+        f"{block.source} line {block.line} ({block.lang}) {result['status']}:\n{block.code}\n--- output ---\n{result['output']}")

@@ -141,8 +141,8 @@ class SpaceDGDataset(Dataset):
             changing the augmentation seed never moves a scene between splits).
         on_bad_scene: ``"raise"`` (default) or ``"skip"`` a scene that cannot be read or indexed
             (skipped scenes are named in a warning and in :attr:`skipped`).
-        backend, device: renderer backend (``"auto"``, ``"cpu"``, ``"torch"``, ``"gsplat"``) and torch
-            device (:func:`spacedg.devices.resolve_device`); a non-CPU device renders and degrades
+        backend: renderer backend (``"auto"``, ``"cpu"``, ``"torch"``, ``"gsplat"``).
+        device: torch device (:func:`spacedg.devices.resolve_device`); a non-CPU device renders and degrades
             there, in the main process only (module docstring).
         defer_render: items come without ``images``, ``degradation`` and ``stats`` but with their ``plan``
             (:class:`~spacedg.data.pipeline.ItemPlan`); :meth:`render_batch` renders them, in the process that owns the GPU.

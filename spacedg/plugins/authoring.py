@@ -9,7 +9,7 @@ never from the built-in family modules or their private helpers: the names below
 the built-ins are written with, re-exported (not copied), so a family written against this
 module generates records exactly as a built-in would, and keeps working while the built-ins'
 own layout changes. A complete example package (entry point, family, tests) is
-``tests/plugins/spacedg-nearest-object``; README "Writing a plugin" walks through it.
+``tests/plugins/spacedg-nearest-object``; docs/plugins.md ("Writing a plugin") walks through it.
 Degradation authors need only :mod:`spacedg.plugins` (``DegradationSpec``, ``ParamSpec``, …).
 
 Conventions (every name below follows them): world coordinates in **metres**; cameras are

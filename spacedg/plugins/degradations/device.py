@@ -11,7 +11,7 @@ imports no plugin module (the plugins import it).
 
 Tolerances against the numpy path, measured on CPU tensors on a 160×120 textured HDR image at
 the ``bench`` preset, seeds 0–2 (``tests/plugins/degradations/test_device.py`` asserts the bounds
-in brackets; README "Rendering on a GPU" repeats the table):
+in brackets; docs/rendering.md ("Backends") repeats the table):
 
 ================ ==================================================================================
 haze             same float32 formula: max |Δ| 1.2e-7 linear, 0 codes differ after encoding [1e-5].
