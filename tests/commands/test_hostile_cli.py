@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.commands.test_vocabulary import _parsers
 from spacedg.cli import build_parser, main
 from spacedg.commands import _args
 from spacedg.commands.sizes import image_side, image_size, pixel_budget
@@ -47,18 +48,8 @@ BAD_DEVICES = ["cuda:99", "tpu", "", "cuda:x", "cuda:-1", "gpu0"]
 
 
 def _leaves() -> dict[str, argparse.ArgumentParser]:
-    found: dict[str, argparse.ArgumentParser] = {}
-
-    def walk(parser: argparse.ArgumentParser, path: str) -> None:
-        if parser.get_default("func") is not None:
-            found[path] = parser
-        for action in parser._actions:
-            if isinstance(action, argparse._SubParsersAction):
-                for name, child in action.choices.items():
-                    walk(child, f"{path} {name}".strip())
-
-    walk(build_parser(), "")
-    return found
+    """The parsers of commands that run (those with a handler), by command path."""
+    return {path: parser for path, parser in _parsers().items() if parser.get_default("func") is not None}
 
 
 def _bad_values(action: argparse.Action) -> list[str]:

@@ -16,7 +16,8 @@ import torch
 
 from spacedg.render import FisheyeLens, MotionBlur, RasterSettings, render
 from spacedg.render.camera import Camera
-from tests.render_helpers import camera, random_gaussians
+from tests.render.test_gsplat_backend import assert_close, assert_ids_close, scene  # one scene recipe and one frame comparison
+from tests.render_helpers import camera
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 
@@ -31,26 +32,6 @@ def gsplat_cuda() -> None:
 
     if not gsplat_cuda_available():
         pytest.skip("gsplat's CUDA extension does not load")
-
-
-def scene(seed: int = 0, n: int = 300):
-    return random_gaussians(n, np.random.default_rng(seed), scale=(0.03, 0.3), opacity=(0.3, 1.0))
-
-
-def assert_close(got, ref, atol: float = 1e-4) -> None:
-    for name in ("rgb", "alpha", "depth"):
-        a, b = getattr(got, name), getattr(ref, name)
-        if a is not None:
-            np.testing.assert_allclose(a, b, atol=atol, rtol=1e-4, err_msg=name)
-    assert_ids_close(got, ref)
-
-
-def assert_ids_close(got, ref) -> None:
-    """Median depth and instance ids equal but for threshold flips at T = ½ (≤ 0.2 % of pixels)."""
-    for name in ("median_depth", "instance_ids"):
-        a, b = getattr(got, name), getattr(ref, name)
-        if a is not None:
-            assert (a != b).mean() <= 0.002, (name, (a != b).sum())
 
 
 def assert_on_cuda(frame) -> None:
