@@ -25,7 +25,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--degradations", default=None, help="comma-separated chains (default: the nine for bench, clean for train/val)")
     parser.add_argument("--families", default=None, help="comma-separated question families (default: all)")
     parser.add_argument("--image-size", type=image_size, default=None,
-                        help="WxH in pixels to render at, e.g. 640x480 (default: the views' own size)")
+                        help="WxH in pixels, a bounding box: each view renders at the largest size of its own aspect "
+                        "ratio within it, e.g. 640x480 (a 16:9 view at 320x240 renders 320x180; default: the views' own size)")
     parser.add_argument("--seed", type=_args.SEED, default=0, help="seed of the questions and of the degradations (default 0)")
     parser.add_argument("--per-sub-type", type=_args.whole(1), default=25, help="questions per sub type and scene when indexes are built (default 25)")
     parser.add_argument("--clean-prob", type=_args.real(0.0, 1.0), default=0.1, help="share of clean items, train/val only (default 0.1)")

@@ -47,7 +47,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="weights dtype (default auto: bfloat16 on CUDA, float32 on CPU)")
     parser.add_argument("--min-pixels", type=pixel_budget, default=None, help="image budget: fewest pixels per image after resizing")
     parser.add_argument("--max-pixels", type=pixel_budget, default=None, help="image budget: most pixels per image after resizing")
-    parser.add_argument("--image-size", type=image_size, default=None, help="--scenes only: WxH to render at (default: the views' size)")
+    parser.add_argument("--image-size", type=image_size, default=None, help="--scenes only: WxH to render within, keeping each view's aspect ratio (default: the views' size)")
     parser.add_argument("--max-questions", type=_args.whole(1), default=None, help="--scenes only: at most N questions")
     parser.add_argument("--seed", type=_args.SEED, default=0, help="--scenes only: dataset seed (default 0)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -39,7 +39,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--depth-out", type=Path, default=None,
                         help="also write expected depth as a 16-bit PNG in millimetres (0 = no coverage)")
     render.add_argument("--image-size", type=image_size, default=None, metavar="WxH",
-                        help="render size in pixels, e.g. 640x480 (default: the view's own)")
+                        help="largest render size in pixels, e.g. 640x480: the view keeps its aspect ratio and "
+                        "renders at the largest size of it that fits (a 16:9 view at 320x240 renders 320x180; "
+                        "default: the view's own size)")
     render.add_argument("--defocus", metavar="APERTURE_PX,FOCUS_M", default=None,
                         help="thin-lens defocus: CoC radius in pixels at infinity, focus distance in metres")
     render.add_argument("--fisheye", metavar="K1,K2,K3,K4[,MAX_THETA]", default=None,
@@ -86,8 +88,8 @@ def parse_numbers(flag: str, text: str, names: tuple[str, ...], optional: int = 
 
 
 def _size(camera_w: int, camera_h: int, args: argparse.Namespace) -> tuple[int, int]:
-    """Render size: --image-size, else the view's; the deprecated --width or --height alone keeps
-    the view's aspect ratio."""
+    """Requested render size (a bounding box, :meth:`Camera.fitted`): --image-size, else the
+    view's; the deprecated --width or --height alone keeps the view's aspect ratio."""
     size = _args.image_size_of(args, min_side=1)
     if size is not None:
         return size
@@ -171,8 +173,11 @@ def _render(args: argparse.Namespace) -> int:
         return 0
     camera = _pick_view(scene, args.view)
     width, height = _size(camera.width, camera.height, args)
-    if (width, height) != (camera.width, camera.height):
-        camera = camera.resized(width, height)
+    fitted = camera.fitted(width, height)  # never squeezed: the size is a bounding box
+    if (fitted.width, fitted.height) != (width, height):
+        print(f"view {args.view} is {camera.width}x{camera.height}: rendered at {fitted.width}x{fitted.height}, "
+              f"the largest size of its aspect ratio within {width}x{height}")
+    camera = fitted
     if lens is not None:
         camera = replace(camera, fisheye=lens)
 

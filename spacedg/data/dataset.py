@@ -127,7 +127,11 @@ class SpaceDGDataset(Dataset):
         question_types: the old name of ``families`` (deprecated; kept for one release).
         severity: preset for chains named without one: ``"bench"``, ``"1"``–``"5"`` or ``"random"``.
         clean_prob: probability of a clean item in ``train``/``val`` (ignored by ``bench``).
-        image_size: ``(width, height)`` to render at, or ``None`` for the views' own size.
+        image_size: ``(width, height)`` pixels, a bounding box, or ``None`` for the views' own size:
+            each view renders at the largest size of its own aspect ratio within the box (a 16:9 view
+            at ``(320, 240)`` is 320×180, a 4:3 one 320×240; intrinsics scaled, nothing cropped or
+            squeezed: :meth:`~spacedg.render.camera.Camera.fitted`). Items of captures of different
+            aspect ratios therefore have different shapes (``collate_fn=list`` keeps them apart).
         seed: seed of the degradation choices and their noise (not of the splits or questions).
         cache: byte budget of each worker's LRU cache of scenes (their Gaussians) and clean
             renders (shared by every chain without a raster step), default 2 GiB.

@@ -110,7 +110,9 @@ class PipelineOptions:
         default_preset: preset for degradations named without one (``"bench"`` = the paper's table).
         mixture_preset: preset of the auxiliary degradations of a mixture recipe.
         motion: ``"fast"`` (renderer's fast sub-step choice) or ``"reference"`` (exact ``sub_steps``).
-        image_size: ``(width, height)`` to render at (intrinsics scaled), or ``None`` for the views' own;
+        image_size: ``(width, height)`` bounding box to render in, or ``None`` for the views' own size:
+            each view renders at the largest size of its own aspect ratio that fits
+            (:meth:`~spacedg.render.camera.Camera.fitted`; intrinsics scaled, never squeezed);
             within the size policy of :mod:`spacedg.limits`.
         backend, device, settings: passed to :func:`spacedg.render.render`.
         degrade_on: where the linear and display chains run: ``"auto"`` (on ``device`` when it is a
@@ -223,8 +225,15 @@ def _cameras(scene: Scene, views: Sequence[str], options: PipelineOptions) -> li
     for name in views:
         camera = scene.camera(name)
         if options.image_size is not None:
-            camera = camera.resized(*options.image_size)
+            camera = camera.fitted(*options.image_size)  # a bounding box: the view's aspect is kept
         cameras.append(camera)
+    sizes = {(c.width, c.height) for c in cameras}
+    if len(sizes) > 1:  # the views of one sample are stacked into one array
+        shown = ", ".join(f"{v} {c.width}x{c.height}" for v, c in zip(views, cameras))
+        raise InvalidDataError(
+            f"scene {scene.id}: the views of one sample render at different sizes ({shown}); images are never "
+            "squeezed to one size, so a sample's views must share an aspect ratio (re-import the capture with one camera size)"
+        )
     return cameras
 
 

@@ -68,7 +68,7 @@ def render_thumbnail(scene: Scene, view: str, width: int, backend: str = "auto")
 
     full = scene.camera(view)
     height = max(1, round(full.height * width / full.width))
-    return render_clean_view(scene, view, (width, height), backend), full.resized(width, height)
+    return render_clean_view(scene, view, (width, height), backend), full.fitted(width, height)
 
 
 def _draw_box(image: np.ndarray, cam: Camera, corners: np.ndarray, colour: tuple[int, int, int], tag: str) -> None:

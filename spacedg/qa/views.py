@@ -19,8 +19,9 @@ __all__ = ["render_clean_view"]
 
 def render_clean_view(scene: Scene, view: str, image_size: tuple[int, int] | None = None, backend: str = "auto") -> np.ndarray:
     """The clean sRGB image of ``view``, uint8 (H, W, 3): rendered (``backend`` of
-    :func:`spacedg.render.render`) at ``image_size`` ``(width, height)`` px with the intrinsics
-    scaled (the view's own size when ``None``), then the exact 8-bit sRGB encode.
+    :func:`spacedg.render.render`) at the largest size of the view's aspect ratio within
+    ``image_size`` ``(width, height)`` px (:meth:`~spacedg.render.camera.Camera.fitted`, intrinsics
+    scaled, never squeezed; the view's own size when ``None``), then the exact 8-bit sRGB encode.
 
     Raises :class:`ParameterError` for a size beyond :mod:`spacedg.limits` and
     :class:`InvalidDataError` when the render holds non-finite light."""
@@ -29,7 +30,7 @@ def render_clean_view(scene: Scene, view: str, image_size: tuple[int, int] | Non
     camera = scene.camera(view)
     if image_size is not None:
         check_image_size(*image_size, "image_size", "render smaller", ParameterError)
-        camera = camera.resized(*image_size)
+        camera = camera.fitted(*image_size)
     rgb = render(scene.gaussians, camera, outputs="rgb", backend=backend).rgb
     if not np.isfinite(np.sum(rgb, dtype=np.float64)):  # a renderer bug: never write it out as black pixels
         raise InvalidDataError(f"scene {scene.id}, view {view!r}: the render holds non-finite light; please report this with the scene")

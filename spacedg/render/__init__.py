@@ -13,7 +13,7 @@ The package itself is callable: ``spacedg.render(gaussians, camera, ...)`` is
 import sys
 import types
 
-from spacedg.render.camera import Camera, FisheyeLens, exposure_poses, interpolate_pose, look_at
+from spacedg.render.camera import Camera, FisheyeLens, exposure_poses, fitted_size, interpolate_pose, look_at
 from spacedg.render.colour import linear_to_srgb, srgb_to_linear
 from spacedg.render.frame import Frame
 from spacedg.render.gaussians import Gaussians
@@ -33,6 +33,7 @@ __all__ = [
     "RasterSettings",
     "RenderRequest",
     "exposure_poses",
+    "fitted_size",
     "interpolate_pose",
     "linear_to_srgb",
     "look_at",

@@ -47,6 +47,25 @@ def equidistant_theta_d_slope(theta: Any, k1: float, k2: float, k3: float, k4: f
     return 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))
 
 
+def fitted_size(view_width: int, view_height: int, box_width: int, box_height: int) -> tuple[int, int]:
+    """``(width, height)`` pixels: the largest image of the view's aspect ratio
+    ``view_width : view_height`` inside the box ``box_width × box_height`` (pixels).
+
+    The side that binds takes the box's size; the other is the view's aspect times it, rounded,
+    at least 1 px. A side within one pixel of the box's keeps the box's size, so a view already
+    at the box's aspect (a 4:3 view asked at 4:3, a 1296×968 view at 320×240) keeps exactly the
+    size asked: the aspect then changes by under one pixel across the image, no more than rounding
+    does. The result may be larger than the view (a re-render, not an interpolation)."""
+    vw, vh, bw, bh = (int(v) for v in (view_width, view_height, box_width, box_height))
+    if min(vw, vh, bw, bh) < 1:
+        raise InvalidDataError(f"fitted_size: sizes must be positive pixels, got view {vw}x{vh}, box {bw}x{bh}")
+    if bw * vh <= bh * vw:  # the width binds
+        exact = vh * bw / vw
+        return bw, (bh if abs(bh - exact) <= 1.0 else min(bh, max(1, round(exact))))
+    exact = vw * bh / vh
+    return (bw if abs(bw - exact) <= 1.0 else min(bw, max(1, round(exact)))), bh
+
+
 @dataclass(frozen=True)
 class FisheyeLens:
     """Equidistant fisheye distortion (OpenCV fisheye model).
@@ -207,9 +226,23 @@ class Camera:
         return replace(self, cam_to_world=cam_to_world)
 
     def resized(self, width: int, height: int) -> Camera:
-        """The same camera imaging at another resolution (intrinsics scaled per axis)."""
+        """The same camera imaging at another resolution (intrinsics scaled per axis).
+
+        This changes the image's aspect ratio when ``width : height`` differs from the view's
+        (the picture is squeezed); a requested image size goes through :meth:`fitted` instead."""
         sx, sy = width / self.width, height / self.height
         return replace(self, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy, width=width, height=height)
+
+    def fitted(self, width: int, height: int) -> Camera:
+        """This camera at the largest image of its own aspect ratio that fits in ``width × height``
+        pixels (a bounding box): the one size policy of every command and API that takes an image
+        size (``--image-size``, ``SpaceDGDataset(image_size=...)``, ``export``, ``predict``, the QA
+        preview and judge renders). Nothing is cropped and no pixel is squeezed: a 1920×1080 view
+        asked at 320×240 renders at 320×180, a 640×480 view at 320×240 (see :func:`fitted_size`).
+        The intrinsics are scaled per axis with the rounded size (:meth:`resized`), so pixels and
+        intrinsics stay consistent. Returns ``self`` when the size is unchanged."""
+        size = fitted_size(self.width, self.height, width, height)
+        return self if size == (self.width, self.height) else self.resized(*size)
 
     def widened(self, margin: int) -> Camera:
         """The same camera with its image grown by ``margin`` pixels on every side (principal point

@@ -56,6 +56,8 @@ class OnlineSFTDataset(Dataset):
         return fields["question"], f"<answer>{fields['answer']}</answer>", len(record.views), record.id
 
     def image_size(self) -> tuple[int, int] | None:
+        """The requested size, a bounding box: views render at the largest size of their own
+        aspect within it (:meth:`~spacedg.render.camera.Camera.fitted`), never larger."""
         return self.dataset.options.image_size
 
     def __getitem__(self, index: int) -> dict[str, Any]:
@@ -139,7 +141,8 @@ class ChatJsonlDataset(Dataset):
 
 def token_lengths(dataset: OnlineSFTDataset | ChatJsonlDataset, processor: Any) -> list[int]:
     """Tokens of every sample (system + user with images + answer), measured once per distinct
-    question on blank images of the dataset's image size (image tokens depend only on size)."""
+    question on blank images of the dataset's image size (image tokens depend only on size; an
+    online dataset's size is a bounding box its views fit in, so the count is an upper bound)."""
     size = dataset.image_size()
     width, height = size if size is not None else (640, 480)
     blank = np.zeros((height, width, 3), np.uint8)
