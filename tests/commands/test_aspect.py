@@ -67,7 +67,7 @@ def test_fitted_render_is_the_full_view_scaled(rooms):
     small = render_clean_view(scene, "frame_0001", BOX, "cpu")
     assert small.shape == (180, 320, 3) and full.shape == (108, 192, 3)
     shrunk = cv2.resize(small, (192, 108), interpolation=cv2.INTER_AREA).astype(float)
-    assert np.median(np.abs(shrunk - full)) < 8  # the same picture (a squeeze would shift everything sideways)
+    assert np.median(np.abs(shrunk - full)) < 8  # the same picture, only finer
     cam = scene.camera("frame_0001")
     points = np.concatenate([inst.box.corners() for inst in scene.instances])
     uv_full, _, ok = cam.project(points)
@@ -132,3 +132,23 @@ def test_export_command_keeps_the_aspect(rooms, indexed, name, tmp_path):
         assert image.shape[:2] == expected[::-1] and _aspect_kept(image.shape, view_size)
     summary = json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else {}
     assert summary.get("image_size", list(BOX)) == list(BOX)
+
+
+def test_imported_wide_capture_renders_unsqueezed(tmp_path, capsys):
+    """A 16:9 capture in its published layout (INRIA output folder + COLMAP text model), imported
+    with ``scenes import``, renders at 320×180 when asked for 320x240, as its own-size view scaled."""
+    from tests.scene import capture_layouts as cl
+
+    room = spacedg.generate_room(5, spacedg.RoomConfig(gaussians=12_000, capture=CaptureConfig(192, 108, 4, 4), world_frame="z_up"))
+    out = cl.write_inria_output(tmp_path / "capture", room)
+    scene_dir = tmp_path / "scenes" / "wide"
+    assert main(["scenes", "import", str(out), "--out", str(scene_dir), "--name", "wide", "--metres-per-unit", "1"]) == 0
+    view = next(iter(load_scene(scene_dir).views))
+    png = tmp_path / "view.png"
+    assert main(["render", str(scene_dir), "--view", view, "--image-size", "320x240", "--backend", "cpu", "--out", str(png)]) == 0
+    assert "rendered at 320x180" in capsys.readouterr().out
+    image = cv2.imread(str(png), cv2.IMREAD_UNCHANGED)
+    assert image.shape == (180, 320, 3)
+    own = render_clean_view(load_scene(scene_dir), view, None, "cpu")
+    shrunk = cv2.resize(image[:, :, ::-1], (192, 108), interpolation=cv2.INTER_AREA).astype(float)
+    assert np.median(np.abs(shrunk - own)) < 8
