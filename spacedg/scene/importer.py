@@ -418,7 +418,8 @@ def import_scene(
             paths do not exist here.
         assign: instance ids when the Gaussians carry none: ``"auto"`` (= ``"boxes"``: every
             annotation has boxes; mask files, when found, still give the report's rendered-mask
-            IoU), ``"boxes"``, ``"masks"`` (vote with Holi-Spatial's masks), ``"none"``.
+            IoU; for a Holi-Spatial release scene = ``"masks"`` with its COCO RLE ``mask_encodings``),
+            ``"boxes"``, ``"masks"`` (vote with Holi-Spatial's masks: RLE, else the mask files), ``"none"``.
         device: ScanNet++ cameras, ``"dslr"`` or ``"iphone"``.
         embodiedscan_scene: the scan in a multi-scan EmbodiedScan JSON.
         opencv_distortion: non-zero OPENCV distortion: ``"error"`` or ``"drop"`` (ideal pinholes).

@@ -30,6 +30,7 @@ The mask files are not released: the RLE strings are the masks.
 
 from __future__ import annotations
 
+import re
 import warnings
 from collections.abc import Iterable, Mapping
 from pathlib import Path, PurePath
@@ -50,6 +51,8 @@ __all__ = [
 BOX_FOLDERS = ("3d_bounding_box_pp", "3d_bounding_box")
 #: The TSDF mesh PGSR's mesh step leaves in a scene folder.
 MESH_FILE = "mesh/tsdf_fusion_post.ply"
+#: Scene ids of the released datasets: ScanNet++ (10 hex digits), ScanNet v2 (``sceneNNNN_NN``).
+RELEASE_SCENE_ID = re.compile(r"[0-9a-f]{10}|scene\d{4}_\d{2}")
 #: Largest relative difference between a mask's and its view's aspect ratio.
 ASPECT_TOL = 0.01
 
@@ -66,8 +69,11 @@ def find_release_boxes(scene_dir: Path) -> Path | None:
 
 
 def is_release_scene(folder: Path) -> bool:
-    """A PGSR/INRIA output folder with the release's mesh or its box JSON beside it."""
-    return is_inria_output(folder) and ((folder / MESH_FILE).is_file() or find_release_boxes(folder) is not None)
+    """A PGSR/INRIA output folder with its box JSON beside it, or with the release's mesh and a ScanNet++ /
+    ScanNet v2 scene id (another PGSR output with a mesh stays an INRIA folder)."""
+    if not is_inria_output(folder):
+        return False
+    return find_release_boxes(folder) is not None or ((folder / MESH_FILE).is_file() and RELEASE_SCENE_ID.fullmatch(folder.name) is not None)
 
 
 # --------------------------------------------------------------------------- COCO RLE

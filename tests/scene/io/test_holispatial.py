@@ -128,5 +128,7 @@ def test_release_scene_without_its_boxes_says_where_it_looked(tmp_path: Path, tr
     assert detect_layout(folder) == "holi-spatial"  # the mesh says so
     with pytest.raises(FileFormatError, match=r"3d_bounding_box_pp/0a5c013435\.json.*--instances"):
         import_scene(folder, None, progress=False)
-    shutil.rmtree(folder / "mesh")
-    assert detect_layout(folder) == "inria"  # a plain PGSR/INRIA output stays one
+    kitchen = folder.rename(folder.parent / "kitchen")
+    assert detect_layout(kitchen) == "inria"  # someone's own PGSR output with a mesh stays an INRIA folder
+    shutil.rmtree(kitchen / "mesh")
+    assert detect_layout(kitchen.rename(folder)) == "inria"  # a plain PGSR/INRIA output stays one
