@@ -74,7 +74,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                      help="move transforms.json cameras back to the COLMAP frame (Gaussians trained on the COLMAP model)")
     imp.add_argument("--masks", type=Path, default=None, help="folder of Holi-Spatial masks <image stem>/<label>.png")
     imp.add_argument("--assign", default="auto", choices=("auto", "boxes", "masks", "none"),
-                     help="instance ids when the Gaussians carry none (default auto = boxes; masks votes with Holi-Spatial masks)")
+                     help="instance ids when the Gaussians carry none (default auto = boxes; a Holi-Spatial release scene: masks, "
+                          "its RLE mask_encodings; masks votes with Holi-Spatial masks)")
     imp.add_argument("--scannetpp-camera", default="dslr", choices=("dslr", "iphone"),
                      help="which ScanNet++ capture's cameras to read: dslr (default) or iphone")
     imp.add_argument("--embodiedscan-scene", default=None, help="scan to take from a multi-scan EmbodiedScan JSON")

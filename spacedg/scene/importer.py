@@ -9,7 +9,10 @@ What it does, in order (each step reported in :class:`ImportReport`):
    ``test_frames``) + a Gaussians file (a splatfacto export is brought back from nerfstudio's
    normalised frame with ``dataparser_transforms.json``, found next to the ply or given); a
    ScanNet++ scene folder (DSLR or iPhone nerfstudio JSON, ``scans/segments_anno.json`` boxes,
-   Gaussians given or found in an INRIA output below it); or a bare Gaussians file + cameras.
+   Gaussians given or found in an INRIA output below it); a Holi-Spatial released scene (a PGSR
+   output folder with ``mesh/tsdf_fusion_post.ply``, its boxes in ``3d_bounding_box[_pp]/<scene>.json``
+   beside it, their COCO RLE masks voting the instance ids: :mod:`spacedg.scene.io.holispatial`);
+   or a bare Gaussians file + cameras.
 2. **Read** the Gaussians (INRIA ply, PlayCanvas compressed ply, colour-only ply, Mip-Splatting
    ``filter_3D``, ``.splat``, ``.spz``), the cameras and the instances (spacedg / Holi-Spatial JSON,
    ScanNet++ ``segments_anno.json``, EmbodiedScan JSON), apply ``metres_per_unit`` once to all.
@@ -29,7 +32,7 @@ import math
 import re
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -63,6 +66,7 @@ from spacedg.scene.io.capture import (
     scale_views,
 )
 from spacedg.scene.io.embodiedscan import read_embodiedscan_boxes
+from spacedg.scene.io.holispatial import find_release_boxes, is_release_scene, rle_masks
 from spacedg.scene.io.inria import (
     is_inria_output,
     latest_point_cloud,
@@ -74,17 +78,18 @@ from spacedg.scene.io.nerfstudio import (
     read_dataparser_transforms,
 )
 from spacedg.scene.io.scannetpp import (
+    NERFSTUDIO_FROM_SCAN,
     is_scannetpp_scene,
     read_segments_anno,
     scannetpp_cameras,
 )
-from spacedg.scene.labelling import AssignmentReport, assign_instances
+from spacedg.scene.labelling import AssignmentReport, MaskSource, assign_instances, load_mask
 from spacedg.scene.model import Instance, Scene
 
 __all__ = ["LAYOUTS", "CaptureLayout", "ImportReport", "import_scene", "detect_layout", "detect_capture", "parse_up", "read_any_instances"]
 
 #: Layouts :func:`import_scene` knows (``format=``).
-LAYOUTS = ("auto", "inria", "colmap", "nerfstudio", "scannetpp", "gaussians")
+LAYOUTS = ("auto", "inria", "colmap", "nerfstudio", "scannetpp", "holi-spatial", "gaussians")
 _AXES = {"x": 0, "y": 1, "z": 2}
 _SAFE_ID = re.compile(r"[^A-Za-z0-9_.\-]+")
 
@@ -176,6 +181,8 @@ def detect_capture(src: Path) -> CaptureLayout:
         raise FileFormatError(f"{src}: not a Gaussians file ({', '.join(GAUSSIAN_SUFFIXES)}) nor a transforms.json")
     if not src.is_dir():
         raise FileFormatError(f"{src}: no such file or folder")
+    if is_release_scene(src):
+        return CaptureLayout("holi-spatial")
     if is_inria_output(src):
         return CaptureLayout("inria")
     if is_scannetpp_scene(src):
@@ -265,6 +272,8 @@ class _Parts:
     default_up: np.ndarray | None
     up_note: str
     notes: list[str]
+    #: (4×4 rigid world change, the parts it applies to: "views", "gaussians", "instances") into the scan frame.
+    to_scan: tuple[np.ndarray, frozenset[str]] | None = None
 
 
 def _inria_cameras(src: Path, notes: list[str]) -> CameraFiles:
@@ -289,6 +298,7 @@ def _resolve_parts(
 ) -> _Parts:
     notes: list[str] = []
     default_up, up_note = None, ""
+    to_scan: tuple[np.ndarray, frozenset[str]] | None = None
     given = None if cameras is None else find_cameras(cameras)
     if layout.name == "inria":
         gpath = gaussians or latest_point_cloud(src)
@@ -319,6 +329,20 @@ def _resolve_parts(
         else:
             gpath = gaussians
         default_up, up_note = np.array([0.0, 0.0, 1.0]), "ScanNet++ scan frame (z up)"
+        if given is None and files.kind == "nerfstudio":
+            to_scan = (NERFSTUDIO_FROM_SCAN, frozenset({"views", "gaussians"}))
+            notes.append("cameras and Gaussians taken from ScanNet++'s nerfstudio world (rows y, x, -z) back to the scan frame "
+                         "of the mesh and segments_anno.json")
+    elif layout.name == "holi-spatial":
+        gpath = gaussians or latest_point_cloud(src)
+        files = given or _inria_cameras(src, notes)
+        instances = instances or find_release_boxes(src)
+        if instances is None:
+            raise FileFormatError(
+                f"{src}: a Holi-Spatial scene folder without its boxes: looked for 3d_bounding_box_pp/{src.name}.json "
+                f"(ScanNet v2: 3d_bounding_box/{src.name}.json) next to the scene's parent folders; pass --instances FILE"
+            )
+        default_up, up_note, to_scan = _holi_frame(src, instances, notes)
     elif layout.name == "gaussians":
         if given is None:
             raise ParameterError(f"{src}: a bare Gaussians file needs --cameras (a COLMAP model folder, a transforms.json or an INRIA cameras.json)")
@@ -329,7 +353,23 @@ def _resolve_parts(
         dataparser = gpath.parent / "dataparser_transforms.json"
         notes.append(f"found {dataparser.name} next to the Gaussians: they are a splatfacto export in nerfstudio's normalised frame")
     applied = read_applied_transform(files.read_path) if files.kind == "nerfstudio" else None
-    return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes)
+    return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes, to_scan)
+
+
+def _holi_frame(src: Path, boxes: Path, notes: list[str]) -> tuple[np.ndarray | None, str, tuple[np.ndarray, frozenset[str]] | None]:
+    """Up, its reason and the world change of a Holi-Spatial release scene, by its dataset: ScanNet++
+    (``3d_bounding_box_pp``, 10-hex-digit ids) was trained on the nerfstudio JSON (world rows y, x, -z of the
+    scan frame), ScanNet v2 (``sceneNNNN_NN``) on the scan's own poses; both metric. Others: up from the cameras."""
+    if re.fullmatch(r"scene\d{4}_\d{2}", src.name) or boxes.parent.name == "3d_bounding_box":
+        notes.append("units: metres by construction (Holi-Spatial trains PGSR on ScanNet's metric poses, un-normalised)")
+        return np.array([0.0, 0.0, 1.0]), "Holi-Spatial ScanNet v2 scene: ScanNet's scan frame (z up)", None
+    if re.fullmatch(r"[0-9a-f]{10}", src.name) or boxes.parent.name == "3d_bounding_box_pp":
+        notes.append("units: metres by construction (Holi-Spatial trains PGSR on ScanNet++'s metric poses, un-normalised)")
+        notes.append("Gaussians, cameras and boxes taken from ScanNet++'s nerfstudio world (rows y, x, -z) back to its scan frame")
+        return (np.array([0.0, 0.0, 1.0]), "Holi-Spatial ScanNet++ scene: ScanNet++'s scan frame (z up)",
+                (NERFSTUDIO_FROM_SCAN, frozenset({"views", "gaussians", "instances"})))
+    notes.append("units: not known (neither a ScanNet++ nor a ScanNet v2 scene id): check them, or give --metres-per-unit")
+    return None, "", None
 
 
 def import_scene(
@@ -378,7 +418,8 @@ def import_scene(
             paths do not exist here.
         assign: instance ids when the Gaussians carry none: ``"auto"`` (= ``"boxes"``: every
             annotation has boxes; mask files, when found, still give the report's rendered-mask
-            IoU), ``"boxes"``, ``"masks"`` (vote with Holi-Spatial's masks), ``"none"``.
+            IoU; for a Holi-Spatial release scene = ``"masks"`` with its COCO RLE ``mask_encodings``),
+            ``"boxes"``, ``"masks"`` (vote with Holi-Spatial's masks: RLE, else the mask files), ``"none"``.
         device: ScanNet++ cameras, ``"dslr"`` or ``"iphone"``.
         embodiedscan_scene: the scan in a multi-scan EmbodiedScan JSON.
         opencv_distortion: non-zero OPENCV distortion: ``"error"`` or ``"drop"`` (ideal pinholes).
@@ -427,6 +468,9 @@ def import_scene(
     if parts.instances_path is not None:
         found_instances, instances_format = read_any_instances(parts.instances_path, views.keys(), embodiedscan_scene=embodiedscan_scene)
         notes.append(f"instances read as {instances_format}")
+    mask_source = _rle_source(parts, instances_format, found_instances, views, assign, masks, notes)
+    if parts.to_scan is not None:
+        views, gauss, found_instances = _to_scan(parts.to_scan, views, gauss, found_instances)
     timings["read"] = time.perf_counter() - t0
     up_vec = parse_up(up) if isinstance(up, (str, type(None))) else np.asarray(up, dtype=np.float64)
     if up_vec is not None:
@@ -472,9 +516,10 @@ def import_scene(
     elif assign == "none":
         ids_source = "none (assign='none'): qa build will assign them by boxes on the fly"
     else:
-        method = "boxes" if assign == "auto" else assign
+        method = assign if assign != "auto" else "masks" if mask_source is not None and parts.layout == "holi-spatial" else "boxes"
         t2 = time.perf_counter()
-        scene, assignment = assign_instances(scene, method, masks_root=masks, progress=progress, backend=backend)  # type: ignore[arg-type]
+        scene, assignment = assign_instances(scene, method, masks_root=masks, progress=progress, backend=backend,  # type: ignore[arg-type]
+                                             mask_source=mask_source)
         timings["assign_instances"] = time.perf_counter() - t2
         ids_source = f"assigned by {method} (the Gaussians file carried none)"
         scene.metadata["instance_assignment"] = {k: v for k, v in assignment.to_dict().items() if k != "instances"}
@@ -491,6 +536,41 @@ def import_scene(
     timings["total"] = time.perf_counter() - t0
     report.seconds = timings
     return scene, report
+
+
+def _to_scan(
+    change: tuple[np.ndarray, frozenset[str]], views: dict[str, Camera], gauss: Gaussians, instances: list[Instance],
+) -> tuple[dict[str, Camera], Gaussians, list[Instance]]:
+    """The parts named in ``change`` moved by its rigid world change (4×4)."""
+    matrix, parts = change
+    rot, trans = matrix[:3, :3], matrix[:3, 3]
+    if "views" in parts:
+        views = _move_views(views, matrix)
+    if "gaussians" in parts:
+        gauss = gauss.transformed(rot, trans)
+    if "instances" in parts:
+        instances = [replace(i, box=i.box.transformed(rot, trans)) for i in instances]
+    return views, gauss, instances
+
+
+def _rle_source(
+    parts: _Parts, instances_format: str | None, instances: list[Instance], views: dict[str, Camera], assign: str,
+    masks: PathLike | None, notes: list[str],
+) -> MaskSource | None:
+    """Holi-Spatial's RLE masks (``mask_encodings``) as a mask source, mask files where an instance has no RLE;
+    read (and every RLE checked) for the release layout, and for other layouts only when masks are asked for."""
+    if instances_format != "holi-spatial" or parts.instances_path is None or not (parts.layout == "holi-spatial" or assign == "masks"):
+        return None
+    rle = rle_masks(parts.instances_path, instances, views)
+    if rle.count == 0:
+        return None
+    notes.append(f"{rle.count} COCO RLE masks (mask_encodings) read from {parts.instances_path.name}")
+
+    def source(iid: int, path: str) -> np.ndarray | None:
+        mask = rle(iid, path)
+        return mask if mask is not None else load_mask(path, masks)
+
+    return source
 
 
 def _corrections(scene: Scene, parts: _Parts) -> dict[str, Callable[[Scene], Scene]]:
@@ -510,6 +590,10 @@ def _corrections(scene: Scene, parts: _Parts) -> dict[str, Callable[[Scene], Sce
         out["the Gaussians are in the COLMAP frame while the cameras are in nerfstudio's transforms.json frame: "
             "pass --undo-applied-transform (or --cameras <the COLMAP model>)"] = lambda s: Scene(
             s.id, s.gaussians, _move_views(dict(s.views), inv), s.instances, s.up, s.vocabulary, s.metadata)
+    if parts.layout == "scannetpp" and parts.to_scan is not None:
+        back = np.linalg.inv(parts.to_scan[0])
+        out["the Gaussians are already in ScanNet++'s scan frame (trained on dslr/colmap, not the nerfstudio JSON): "
+            "pass --cameras <scene>/dslr/colmap"] = with_gaussians(scene.gaussians.transformed(back[:3, :3], back[:3, 3]))
     out.update(generic_corrections(scene))
     return out
 

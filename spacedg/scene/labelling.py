@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal
@@ -56,6 +56,8 @@ STRUCTURAL_LABELS = frozenset({"wall", "floor", "ceiling", "room", "door frame",
 COVERAGE_GRID = 8
 #: Longest side of the renders used for mask IoU and mask voting, pixels.
 MASK_RENDER_WIDTH = 160
+#: ``(instance id, mask path as written) -> (H, W) bool mask or None``: where annotation masks come from.
+MaskSource = Callable[[int, str], "np.ndarray | None"]
 
 
 @dataclass(frozen=True)
@@ -210,8 +212,12 @@ def _masks_of(instances: Iterable[Instance]) -> dict[str, list[tuple[int, str]]]
     return out
 
 
+def _file_masks(masks_root: str | Path | None) -> MaskSource:
+    return lambda _iid, path: load_mask(path, masks_root)
+
+
 def _assign_by_masks(
-    scene: Scene, gaussians: Gaussians, masks_root: str | Path | None, min_votes: int, min_opacity: float,
+    scene: Scene, gaussians: Gaussians, source: MaskSource, min_votes: int, min_opacity: float,
     backend: str, progress: bool,
 ) -> np.ndarray:
     from tqdm import tqdm
@@ -230,7 +236,7 @@ def _assign_by_masks(
     found = 0
     for view, items in tqdm(sorted(by_view.items()), desc=f"mask votes {scene.id}", unit="view", disable=not progress):
         cam = _reduced(scene.views[view])
-        loaded = [(iid, load_mask(path, masks_root)) for iid, path in items]
+        loaded = [(iid, source(iid, path)) for iid, path in items]
         loaded = [(iid, _resize_mask(m, cam.width, cam.height)) for iid, m in loaded if m is not None]
         if not loaded:
             continue
@@ -270,7 +276,7 @@ def _assign_by_masks(
 
 
 def _mask_ious(
-    scene: Scene, gaussians: Gaussians, masks_root: str | Path | None, iou_views: int, backend: str
+    scene: Scene, gaussians: Gaussians, source: MaskSource, iou_views: int, backend: str
 ) -> dict[int, float]:
 
     by_view = _masks_of(scene.instances)
@@ -285,7 +291,7 @@ def _mask_ious(
     out: dict[int, list[float]] = {}
     for iid, items in wanted.items():
         for view, path in items:
-            mask = load_mask(path, masks_root)
+            mask = source(iid, path)
             if mask is None:
                 continue
             cam = _reduced(scene.views[view])
@@ -311,6 +317,7 @@ def assign_instances(
     iou_views: int = 3,
     backend: str = "auto",
     progress: bool = True,
+    mask_source: MaskSource | None = None,
 ) -> tuple[Scene, AssignmentReport]:
     """Give every Gaussian of ``scene`` an instance id (see the module docstring for the rules).
 
@@ -324,6 +331,9 @@ def assign_instances(
         iou_views: masks per instance used for the rendered-mask IoU of the report.
         backend: renderer backend for the mask work.
         progress: progress bar over views.
+        mask_source: where masks come from, ``(instance id, mask path) -> mask or None``
+            (e.g. Holi-Spatial's RLE, :class:`~spacedg.scene.io.holispatial.RleMasks`); default:
+            the mask files (:func:`load_mask` with ``masks_root``).
 
     Returns:
         ``(scene with Gaussians carrying instance_ids, report)``. Existing ids are replaced.
@@ -337,13 +347,14 @@ def assign_instances(
         raise InvalidDataError(f"assign_instances: scene {scene.id} has no annotated instances to assign Gaussians to")
     start = time.perf_counter()
     gaussians = scene.gaussians
+    source = mask_source if mask_source is not None else _file_masks(masks_root)
     if method == "boxes":
         ids = assign_by_boxes(gaussians, scene.instances, margin=margin, min_opacity=min_opacity)
     else:
-        ids = _assign_by_masks(scene, gaussians, masks_root, int(min_votes), min_opacity, backend, progress)
+        ids = _assign_by_masks(scene, gaussians, source, int(min_votes), min_opacity, backend, progress)
     labelled = replace(gaussians, instance_ids=ids)
     out = Scene(scene.id, labelled, scene.views, scene.instances, scene.up, scene.vocabulary, scene.metadata, scene.covisibility)
-    ious = _mask_ious(out, labelled, masks_root, iou_views, backend) if _masks_of(scene.instances) else {}
+    ious = _mask_ious(out, labelled, source, iou_views, backend) if _masks_of(scene.instances) else {}
     means = labelled.means.astype(np.float64)
     rows = []
     for inst in sorted(scene.instances, key=lambda i: i.id):

@@ -31,6 +31,8 @@ from spacedg.scene.model import Scene
 GL = np.diag([1.0, -1.0, -1.0, 1.0])
 #: nerfstudio's colmap_to_json world change: rows (x, z, y) with the last negated: p_json = A p_colmap.
 APPLIED = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
+#: ScanNet++'s nerfstudio JSON world (its toolkit's convert_frames): rows (y, x, -z) of the scan frame.
+SCANNETPP_JSON = np.array([[0, 1.0, 0, 0], [1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 0, 0, 1.0]])
 
 
 def truth_room(seed: int = 5, gaussians: int = 20_000, views: int = 10, shift: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Scene:
@@ -161,6 +163,14 @@ def render_masks(scene: Scene, mask_root: Path) -> dict[int, dict[str, Path]]:
     return out
 
 
+def _rle(png: str) -> dict:
+    """COCO RLE of a mask file, as Holi-Spatial stores it (pycocotools, counts decoded to str)."""
+    from pycocotools import mask as coco_mask
+
+    enc = coco_mask.encode(np.asfortranarray((cv2.imread(png, cv2.IMREAD_GRAYSCALE) > 0).astype(np.uint8)))
+    return {"size": [int(v) for v in enc["size"]], "counts": enc["counts"].decode("ascii")}
+
+
 def holi_spatial_json(scene: Scene, masks: dict[int, dict[str, Path]], *, world: np.ndarray = np.eye(4)) -> list[dict]:
     """Records as Holi-Spatial's 3d_bounding_instance_gs_rerun_da3.py writes them (+ the description step)."""
     out = []
@@ -177,7 +187,7 @@ def holi_spatial_json(scene: Scene, masks: dict[int, dict[str, Path]], *, world:
             "obb_extents": box.extents.tolist(),
             "images": paths,
             "highest_confidence_mask": paths[0] if paths else "",
-            "mask_encodings": [{"size": [120, 160], "counts": "PPYo1"} for _ in paths],
+            "mask_encodings": [_rle(p) for p in paths],
             "description": f"a {inst.description}" if inst.description else "",
         })
         if not paths:

@@ -117,16 +117,20 @@ def test_scannetpp_scene_folder(tmp_path: Path, room) -> None:
     scene_dir = tmp_path / "0a5c013435"
     ns = scene_dir / "dslr" / "nerfstudio"
     ns.mkdir(parents=True)
-    (ns / "transforms_undistorted.json").write_text(json.dumps(cl.transforms_json(room, applied=False, camera_model="PINHOLE")))
+    # the JSON's world is the scan frame with rows (y, x, -z), as ScanNet++ writes it; the boxes stay in the scan frame
+    (ns / "transforms_undistorted.json").write_text(json.dumps(cl.transforms_json(room, world=cl.SCANNETPP_JSON, applied=False,
+                                                                                  camera_model="PINHOLE")))
     (scene_dir / "scans").mkdir()
     (scene_dir / "scans" / "segments_anno.json").write_text(json.dumps(cl.segments_anno(room)))
     assert detect_layout(scene_dir) == "scannetpp"
     with pytest.raises(FileFormatError, match="ScanNet\\+\\+ ships no Gaussians"):
         import_scene(scene_dir, None, progress=False)
-    cl.write_inria_output(scene_dir / "gs", room, with_colmap=False)  # trained on the DSLR images, found below
-    _, report = import_scene(scene_dir, tmp_path / "scene", progress=False)
-    assert report.layout == "scannetpp" and report.up == [0.0, 0.0, 1.0] and report.test_views == 1
-    assert report.instances == len(room.instances)
+    in_json = room.transformed(cl.SCANNETPP_JSON[:3, :3], np.zeros(3))
+    cl.write_inria_output(scene_dir / "gs", in_json, with_colmap=False)  # trained on the DSLR JSON, found below
+    scene, report = import_scene(scene_dir, tmp_path / "scene", progress=False)
+    assert report.layout == "scannetpp" and report.up == [0.0, 0.0, 1.0] and report.test_views == 1 and report.frame.ok
+    assert report.instances == len(room.instances) and any("back to the scan frame" in n for n in report.notes)
+    np.testing.assert_allclose(scene.gaussians.means, room.gaussians.means, atol=1e-4)  # back in the scan frame
     _round_trip(tmp_path / "scene", len(room.instances))
 
 

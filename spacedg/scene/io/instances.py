@@ -22,7 +22,8 @@ instance is an object with:
   such mask paths are kept in ``attributes["masks"]`` (view → path as written).
 - ``best_image`` / ``best_view`` / ``highest_confidence_mask`` (optional): stored in
   ``attributes["best_image"]`` (resolved the same way).
-- ``mask_encodings`` (Holi-Spatial's COCO RLE masks) are not read: masks come from the files.
+- ``mask_encodings`` (Holi-Spatial's COCO RLE masks, one per ``images`` entry) are not read here:
+  :mod:`spacedg.scene.io.holispatial` reads and checks them for the importer's mask voting.
 - ``attributes`` (optional object) and ``visibility`` (optional, as written by
   :func:`write_instances`) are kept.
 

@@ -6,14 +6,21 @@ A ScanNet++ scene folder (as downloaded, v1/v2)::
       dslr/nerfstudio/transforms_undistorted.json   PINHOLE cameras of the undistorted DSLR images
       dslr/nerfstudio/transforms.json               OPENCV_FISHEYE cameras of the raw DSLR images
       dslr/resized_images/, dslr/resized_undistorted_images/, dslr/colmap/
-      iphone/nerfstudio/transforms.json             iPhone cameras (when exported), same JSON layout
+      iphone/nerfstudio/transforms.json             iPhone cameras, same JSON layout (one OPENCV camera:
+                                                    fl_x, fl_y, cx, cy, w, h, k1, k2, p1, p2 at the top level)
+      iphone/colmap/                                iPhone COLMAP text model (frame_NNNNNN.jpg), scan frame
+      iphone/rgb.mkv, rgb/, depth.bin, pose_intrinsic_imu.json, exif.json   video, frames, ARKit data
       scans/mesh_aligned_0.05.ply                   the laser-scan mesh (not Gaussians)
       scans/segments_anno.json                      annotated instances
 
-Both JSON files list ``frames`` and ``test_frames`` (one DSLR view in eight is held out) and
-are read by :func:`~spacedg.scene.io.nerfstudio.read_transforms`; their poses are in the scan's
-(mesh) frame, metres, z up, like the boxes. ScanNet++ ships no Gaussians: train them on the
-DSLR images (INRIA, gsplat or splatfacto) and pass the result.
+The nerfstudio JSON files list ``frames`` and ``test_frames`` (one DSLR view in eight is held out)
+and are read by :func:`~spacedg.scene.io.nerfstudio.read_transforms`. Their world is **not** the
+scan's: ScanNet++ converts its COLMAP poses (scan frame, metres, z up, like the mesh and the boxes)
+with nerfstudio's convention, world rows (y, x, −z) (``common/utils/nerfstudio.py``
+``convert_frames`` in the ScanNet++ toolkit; its issue #160), i.e. ``p_json = NERFSTUDIO_FROM_SCAN · p_scan``.
+The importer takes cameras, and Gaussians trained on these JSON files, back to the scan frame with
+:data:`NERFSTUDIO_FROM_SCAN` (an involution), so everything is metric and z up. ScanNet++ ships no
+Gaussians: train them on the DSLR images (INRIA, gsplat or splatfacto) and pass the result.
 
 ``segments_anno.json``: ``{"sceneId", "segGroups": [{"id", "objectId", "label", "segments",
 "obb": {"centroid": [3], "axesLengths": [3], "normalizedAxes": [9], "min", "max"}}]}``.
@@ -36,7 +43,11 @@ from spacedg.files import FileValueError, PathLike, as_path, read_json
 from spacedg.scene.box import OrientedBox
 from spacedg.scene.model import Instance
 
-__all__ = ["read_segments_anno", "scannetpp_cameras", "is_scannetpp_scene"]
+__all__ = ["NERFSTUDIO_FROM_SCAN", "read_segments_anno", "scannetpp_cameras", "is_scannetpp_scene"]
+
+#: World change of ScanNet++'s nerfstudio JSON (DSLR and iPhone): ``p_json = M p_scan`` (rows y, x, −z;
+#: a rotation, its own inverse).
+NERFSTUDIO_FROM_SCAN = np.array([[0.0, 1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 
 #: Largest |RᵀR − I| accepted for normalizedAxes (annotations are written with a few decimals).
 AXES_TOL = 1e-3
@@ -47,11 +58,13 @@ def is_scannetpp_scene(folder: Path) -> bool:
     return folder.is_dir() and (
         (folder / "scans" / "segments_anno.json").is_file()
         or any((folder / cam / "nerfstudio").is_dir() for cam in ("dslr", "iphone"))
+        or (folder / "iphone" / "pose_intrinsic_imu.json").is_file()
     )
 
 
 def scannetpp_cameras(folder: PathLike, device: str = "dslr") -> Path:
-    """The nerfstudio JSON of ``device`` (``"dslr"``: the undistorted one when present; ``"iphone"``)."""
+    """The cameras of ``device``: its nerfstudio JSON (``"dslr"``: the undistorted one when present), else
+    (iPhone) its COLMAP model ``iphone/colmap`` (already in the scan frame)."""
     root = as_path(folder, "ScanNet++ scene folder")
     if device not in ("dslr", "iphone"):
         raise InvalidDataError(f"ScanNet++ camera must be 'dslr' or 'iphone', got {device!r}")
@@ -60,8 +73,11 @@ def scannetpp_cameras(folder: PathLike, device: str = "dslr") -> Path:
         path = root / device / "nerfstudio" / name
         if path.is_file():
             return path
+    if device == "iphone" and (root / "iphone" / "colmap").is_dir():
+        return root / "iphone" / "colmap"
+    extra = " nor iphone/colmap" if device == "iphone" else ""
     raise FileFormatError(
-        f"{root}: no {device}/nerfstudio/{' or '.join(names)}; is this a ScanNet++ scene folder "
+        f"{root}: no {device}/nerfstudio/{' or '.join(names)}{extra}; is this a ScanNet++ scene folder "
         f"(<scene id>/{device}/nerfstudio/...)?"
     )
 
