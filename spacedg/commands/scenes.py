@@ -244,7 +244,7 @@ def _indented_up_evidence(record: dict) -> str:
     from spacedg.scene.up_evidence import evidence_report
 
     try:
-        return "\n".join("  " + line for line in evidence_report(record).splitlines())
+        return "\n".join(("  up check: " if k == 0 else "  ") + line for k, line in enumerate(evidence_report(record).splitlines()))
     except (KeyError, TypeError, ValueError) as err:
         return f"  up evidence: unreadable record in scene.json ({type(err).__name__}: {err})"
 

@@ -43,7 +43,9 @@ __all__ = [
 ]
 
 #: The six signed world axes, by name.
-AXES: dict[str, np.ndarray] = {f"{s}{a}": (1.0 if s == "+" else -1.0) * np.eye(3)[i] for a, i in (("x", 0), ("y", 1), ("z", 2)) for s in "+-"}
+AXES: dict[str, np.ndarray] = {
+    f"{s}{a}": (1.0 if s == "+" else -1.0) * np.eye(3)[i] for a, i in (("x", 0), ("y", 1), ("z", 2)) for s in "+-"
+}
 #: Cameras decide only when their image-up vectors' resultant length reaches this (same as estimate_up's).
 MIN_RESULTANT = 0.5
 #: Cameras support an up within this angle of their mean image-up, and contradict it beyond CONTRADICT_DEG, degrees.
@@ -235,7 +237,8 @@ def camera_evidence(views: Mapping[str, Camera], up: np.ndarray) -> CameraEviden
     angle = _angle(mean, up)
     nadir = float(np.mean(np.abs(forwards @ up) >= cos_within))
     if nadir >= 0.5:
-        verdict, reason = "undecided", f"{nadir:.0%} of the views look along the candidate up (a top-down capture): their image-up says nothing about it"
+        verdict = "undecided"
+        reason = f"{nadir:.0%} of the views look along the candidate up (a top-down capture): their image-up says nothing about it"
     elif resultant < MIN_RESULTANT:
         verdict, reason = "undecided", f"their image-up vectors point all over (resultant {resultant:.2f} < {MIN_RESULTANT})"
     elif angle <= SUPPORT_DEG:
@@ -423,8 +426,14 @@ def decide_up(
     if probe is not None and probe.resultant >= MIN_RESULTANT:
         up = _mean_up(views)
         ev = gather_up_evidence(views, instances, up, means=means, source=f"estimated from the -y axes of {len(views)} cameras")
-        if ev.cameras.verdict == "supports":
+        if ev.cameras.verdict == "supports" and ev.box_axes.verdict != "contradicts":
             return up, ev.source, ev
+        if ev.cameras.verdict == "supports":
+            raise UpUndecidedError(
+                f"{where}cannot decide up: the cameras' mean image-up is {axis_name(up)} (resultant {ev.cameras.resultant:.2f}) but "
+                f"the boxes' axes reject that axis ({ev.box_axes.reason}); a top-down capture has image-up vectors that say nothing "
+                f"about up. Pass --up with the axis that points up in the files (+{ev.box_axes.other_axis} or -{ev.box_axes.other_axis}?)",
+                ev)
     fallback = _fallback_up(views, instances, means)
     if fallback is not None:
         ev = gather_up_evidence(views, instances, fallback, means=means, source="estimated from the boxes (cameras undecided)")
@@ -467,7 +476,7 @@ def evidence_report(evidence: UpEvidence | Mapping[str, Any]) -> str:
         f"{shares or 'no axis'}",
         f"  floor    {floor['verdict']}: {floor['reason']}"
         + (f"; Gaussian slabs {floor['slab_low']:.1f}× (low) / {floor['slab_high']:.1f}× (high) uniform"
-           if floor.get("slab_low") is not None else "")
+           if floor.get("slab_low") is not None and floor["boxes"] >= 3 else "")
         + (f", {floor['cameras_above']:.0%} of cameras above the low slab" if floor.get("cameras_above") is not None else ""),
         f"  box axes {axes['verdict']}: {axes['reason']}",
     ]

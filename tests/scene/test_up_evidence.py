@@ -140,3 +140,22 @@ def test_rolled_cameras_undecidable(room, tmp_path: Path, capsys) -> None:
         import_scene(out, None, instances=tmp_path / "holi.json", up="-z", assign="none", progress=False)
     scene, _ = import_scene(out, None, up="-z", assign="none", progress=False)  # nothing decides: kept, unverified
     assert scene.metadata["up_evidence"]["decision"] == "unverified"
+
+
+def test_top_down_capture(room) -> None:
+    """Cameras looking straight down: their image-up (here +y) says nothing about up; the boxes judge instead."""
+    from spacedg.render.camera import look_at
+    from spacedg.scene.up_evidence import decide_up
+
+    centre = np.median(room.gaussians.means, axis=0)
+    views = {}
+    for k, cam in enumerate(room.views.values()):
+        eye = centre + np.array([0.3 * math.cos(k), 0.3 * math.sin(k), 0.0])
+        eye[2] = 2.3
+        views[f"v{k}"] = cam.with_pose(look_at(eye, eye - [0, 0, 2.0], np.array([0.0, 1.0, 0.0])))
+    with pytest.raises(UpUndecidedError, match=r"mean image-up is \+y .*boxes' axes reject .*--up"):
+        decide_up(views, room.instances, given=None)
+    up, _, ev = decide_up(views, room.instances, given=np.array([0.0, 0.0, 1.0]), means=room.gaussians.means)
+    assert ev.decision == "supported" and ev.decided_by == "floor" and ev.cameras.looking_along_up == 1.0
+    with pytest.raises(UpContradictedError, match=r"--up \+z"):
+        decide_up(views, room.instances, given=np.array([0.0, 0.0, -1.0]))
