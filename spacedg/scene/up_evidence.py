@@ -33,13 +33,14 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.errors import InvalidDataError
+from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
-from spacedg.scene.model import Instance
+from spacedg.scene.model import Instance, Scene
 
 __all__ = [
     "AXES", "BoxAxesEvidence", "CameraEvidence", "FloorEvidence", "UpContradictedError", "UpEvidence", "UpUndecidedError",
     "axis_name", "camera_evidence", "box_axes_evidence", "decide_up", "evidence_report", "floor_evidence", "gather_up_evidence",
+    "scene_up_evidence",
 ]
 
 #: The six signed world axes, by name.
@@ -319,7 +320,7 @@ def box_axes_evidence(instances: Sequence[Instance], up: np.ndarray) -> BoxAxesE
     others = [(share(np.eye(3)[i]), "xyz"[i]) for i in range(3) if abs(float(up[i])) < math.cos(math.radians(45.0))]
     along_other, other = max(others) if others else (0.0, None)
     n = len(instances)
-    reason = f"{along:.0%} of {n} boxes have an axis along it" + (f", {along_other:.0%} along {other}" if other else "")
+    reason = f"{along:.0%} of {n} boxes have an axis along its line (axis only, not the sign)" + (f", {along_other:.0%} along {other}" if other else "")
     if along >= 0.6 and along >= along_other + 0.3:
         verdict = "supports"
     elif along_other >= 0.6 and along <= 0.3:
@@ -363,6 +364,13 @@ def _note_conflicts(ev: UpEvidence) -> None:
         ev.notes.append(f"the floor {ev.floor.verdict} it ({ev.floor.reason}) against the {ev.decided_by}")
     if ev.decided_by != "box axes" and supported and ev.box_axes.verdict == "contradicts":
         ev.notes.append(f"the box axes contradict its axis ({ev.box_axes.reason}) against the {ev.decided_by}")
+
+
+def scene_up_evidence(scene: Scene, *, with_gaussians: bool = True) -> UpEvidence:
+    """The evidence about a loaded scene's own up (its views, boxes and, unless ``with_gaussians=False``, its
+    Gaussians' heights), e.g. for a benchmark to print with :func:`evidence_report`. Never raises on a contradiction."""
+    means = scene.gaussians.means if with_gaussians else None
+    return gather_up_evidence(scene.views, scene.instances, scene.up, means=means, source=str(scene.metadata.get("up_source", "the scene's up")))
 
 
 # --------------------------------------------------------------------------- deciding
@@ -414,6 +422,8 @@ def decide_up(
     """
     if given is not None or default is not None:
         up = np.asarray(given if given is not None else default, dtype=np.float64)
+        if up.shape != (3,) or not np.isfinite(up).all() or not np.linalg.norm(up) > 0:
+            raise ParameterError(f"{where}up {up.tolist()}: give three finite numbers, not all zero (e.g. 0,0,1)")
         source = "given" if given is not None else default_note
         ev = gather_up_evidence(views, instances, up, means=means, source=source)
         if ev.decision == "contradicted":

@@ -159,3 +159,17 @@ def test_top_down_capture(room) -> None:
     assert ev.decision == "supported" and ev.decided_by == "floor" and ev.cameras.looking_along_up == 1.0
     with pytest.raises(UpContradictedError, match=r"--up \+z"):
         decide_up(views, room.instances, given=np.array([0.0, 0.0, -1.0]))
+
+
+def test_scene_up_evidence_and_bad_vectors(room) -> None:
+    from spacedg.errors import ParameterError
+    from spacedg.scene.up_evidence import decide_up, scene_up_evidence
+
+    ev = scene_up_evidence(room)
+    assert ev.decision == "supported" and ev.source == "the scene's up"
+    first = ev.report().splitlines()[0]
+    assert first == "up +z (the scene's up): supported by the cameras"
+    with pytest.raises(ParameterError, match="three finite numbers"):
+        decide_up(room.views, room.instances, given=np.zeros(3))
+    with pytest.raises(UpUndecidedError, match="cannot decide up"):
+        decide_up({}, [], given=None)
