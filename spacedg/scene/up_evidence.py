@@ -320,7 +320,8 @@ def box_axes_evidence(instances: Sequence[Instance], up: np.ndarray) -> BoxAxesE
     others = [(share(np.eye(3)[i]), "xyz"[i]) for i in range(3) if abs(float(up[i])) < math.cos(math.radians(45.0))]
     along_other, other = max(others) if others else (0.0, None)
     n = len(instances)
-    reason = f"{along:.0%} of {n} boxes have an axis along its line (axis only, not the sign)" + (f", {along_other:.0%} along {other}" if other else "")
+    reason = f"{along:.0%} of {n} boxes have an axis along its line (axis only, not the sign)"
+    reason += f", {along_other:.0%} along {other}" if other else ""
     if along >= 0.6 and along >= along_other + 0.3:
         verdict = "supports"
     elif along_other >= 0.6 and along <= 0.3:
@@ -370,7 +371,8 @@ def scene_up_evidence(scene: Scene, *, with_gaussians: bool = True) -> UpEvidenc
     """The evidence about a loaded scene's own up (its views, boxes and, unless ``with_gaussians=False``, its
     Gaussians' heights), e.g. for a benchmark to print with :func:`evidence_report`. Never raises on a contradiction."""
     means = scene.gaussians.means if with_gaussians else None
-    return gather_up_evidence(scene.views, scene.instances, scene.up, means=means, source=str(scene.metadata.get("up_source", "the scene's up")))
+    source = str(scene.metadata.get("up_source", "the scene's up"))
+    return gather_up_evidence(scene.views, scene.instances, scene.up, means=means, source=source)
 
 
 # --------------------------------------------------------------------------- deciding
