@@ -81,6 +81,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     imp.add_argument("--embodiedscan-scene", default=None, help="scan to take from a multi-scan EmbodiedScan JSON")
     imp.add_argument("--drop-distortion", action="store_true", help="render distorted OPENCV cameras as ideal pinholes")
     imp.add_argument("--allow-frame-mismatch", action="store_true", help="write the scene even if the frame check fails")
+    imp.add_argument("--trust-up", action="store_true",
+                     help="write the scene with the given --up even if the capture's evidence (cameras, floor, boxes) contradicts it; "
+                          "scene.json records the override")
     imp.add_argument("--overwrite", action="store_true", help="replace an existing scene folder")
     imp.add_argument("--json", action="store_true", help="print the report as JSON")
     _vocabulary.add_deprecated(imp, "scenes import")
@@ -186,7 +189,8 @@ def _import(args: argparse.Namespace) -> int:
         dataparser_transforms=args.dataparser_transforms, undo_applied_transform=args.undo_applied_transform,
         masks=args.masks, assign=args.assign, device=args.scannetpp_camera, embodiedscan_scene=args.embodiedscan_scene,
         opencv_distortion="drop" if args.drop_distortion else "error",
-        frame_check="warn" if args.allow_frame_mismatch else "error", overwrite=args.overwrite, progress=not args.json,
+        frame_check="warn" if args.allow_frame_mismatch else "error", trust_up=args.trust_up, overwrite=args.overwrite,
+        progress=not args.json,
     )
     print(json.dumps(report.to_dict(), indent=2) if args.json else report.text())
     return 0
@@ -214,6 +218,8 @@ def _info(args: argparse.Namespace) -> int:
         summary["frame_check"] = frame.to_dict()
         if not frame.ok:
             warnings_.append("frame check failed: " + "; ".join(frame.problems))
+        if isinstance(scene.metadata.get("up_evidence"), dict):
+            summary["up_evidence"] = scene.metadata["up_evidence"]
         summary["warnings"] = warnings_
         summaries.append(summary)
     if args.json:
@@ -227,9 +233,21 @@ def _info(args: argparse.Namespace) -> int:
         labels = ", ".join(f"{label} ×{n}" for label, n in s["labels"].items())
         print(f"  instances per label: {labels or '(none)'}")
         print(f"  frame check: {'ok' if s['frame_check']['ok'] else 'MISMATCH'}")
+        if "up_evidence" in s:
+            print(_indented_up_evidence(s["up_evidence"]))
         for warning in s["warnings"]:
             print(f"  warning: {warning}")
     return 0
+
+
+def _indented_up_evidence(record: dict) -> str:
+    """The recorded up evidence of an imported scene, as ``scenes info`` prints it (or why it cannot)."""
+    from spacedg.scene.up_evidence import evidence_report
+
+    try:
+        return "\n".join(("  up check: " if k == 0 else "  ") + line for k, line in enumerate(evidence_report(record).splitlines()))
+    except (KeyError, TypeError, ValueError) as err:
+        return f"  up evidence: unreadable record in scene.json ({type(err).__name__}: {err})"
 
 
 def _preview(args: argparse.Namespace) -> int:

@@ -16,7 +16,9 @@ What it does, in order (each step reported in :class:`ImportReport`):
 2. **Read** the Gaussians (INRIA ply, PlayCanvas compressed ply, colour-only ply, Mip-Splatting
    ``filter_3D``, ``.splat``, ``.spz``), the cameras and the instances (spacedg / Holi-Spatial JSON,
    ScanNet++ ``segments_anno.json``, EmbodiedScan JSON), apply ``metres_per_unit`` once to all.
-3. **Up**: given (``"+z"``, ``"-y"``, ``"0,0,1"``), ScanNet++'s +z, or estimated from the cameras.
+3. **Up**: given (``"+z"``, ``"-y"``, ``"0,0,1"``), ScanNet++'s +z, or estimated from the cameras (else the
+   boxes), and verified against the capture's evidence (:mod:`spacedg.scene.up_evidence`): a contradicted up is
+   refused unless ``trust_up``; the evidence is kept in ``metadata.up_evidence``.
 4. **Frame check** (:mod:`spacedg.scene.frame_check`): refused with the disagreeing parts and the
    probable cause unless ``frame_check="warn"``.
 5. **Instance ids**: kept when the Gaussians carry them; otherwise assigned
@@ -51,7 +53,6 @@ from spacedg.scene.frame_check import (
 )
 from spacedg.scene.io import (
     GAUSSIAN_SUFFIXES,
-    estimate_up,
     read_gaussians,
     read_instances,
     save_scene,
@@ -85,6 +86,7 @@ from spacedg.scene.io.scannetpp import (
 )
 from spacedg.scene.labelling import AssignmentReport, MaskSource, assign_instances, load_mask
 from spacedg.scene.model import Instance, Scene
+from spacedg.scene.up_evidence import decide_up
 
 __all__ = ["LAYOUTS", "CaptureLayout", "ImportReport", "import_scene", "detect_layout", "detect_capture", "parse_up", "read_any_instances"]
 
@@ -391,6 +393,7 @@ def import_scene(
     embodiedscan_scene: str | None = None,
     opencv_distortion: Literal["error", "drop"] = "error",
     frame_check: Literal["error", "warn"] = "error",
+    trust_up: bool = False,
     overwrite: bool = False,
     progress: bool = True,
     backend: str = "auto",
@@ -424,6 +427,8 @@ def import_scene(
         embodiedscan_scene: the scan in a multi-scan EmbodiedScan JSON.
         opencv_distortion: non-zero OPENCV distortion: ``"error"`` or ``"drop"`` (ideal pinholes).
         frame_check: ``"error"`` refuses a frame mismatch; ``"warn"`` notes it and writes anyway.
+        trust_up: keep a given up that the capture's evidence contradicts (:mod:`spacedg.scene.up_evidence`;
+            recorded as ``"overridden"`` in ``metadata.up_evidence``) instead of refusing it.
         overwrite: replace an existing scene folder.
         progress: progress bars.
         backend: renderer backend of the checks and the mask work.
@@ -434,6 +439,7 @@ def import_scene(
     Raises:
         FileFormatError / FileValueError: unreadable parts (the file, the field and the fix named).
         FrameMismatchError: the parts disagree (with ``frame_check="error"``).
+        UpContradictedError / UpUndecidedError: the evidence contradicts the up used / cannot decide an auto up.
     """
     src_path = Path(src)
     timings: dict[str, float] = {}
@@ -472,13 +478,10 @@ def import_scene(
     if parts.to_scan is not None:
         views, gauss, found_instances = _to_scan(parts.to_scan, views, gauss, found_instances)
     timings["read"] = time.perf_counter() - t0
-    up_vec = parse_up(up) if isinstance(up, (str, type(None))) else np.asarray(up, dtype=np.float64)
-    if up_vec is not None:
-        up_source = "given"
-    elif parts.default_up is not None:
-        up_vec, up_source = parts.default_up, parts.up_note
-    else:
-        up_vec, up_source = estimate_up(views), f"estimated from the -y axes of {len(views)} cameras"
+    given_up = parse_up(up) if isinstance(up, (str, type(None))) else np.asarray(up, dtype=np.float64)
+    up_vec, up_source, up_evidence = decide_up(views, found_instances, given=given_up, default=parts.default_up, default_note=parts.up_note,
+                                               means=gauss.means, trust=trust_up, where=f"{src_path}: ")
+    notes.append(f"up evidence  {up_evidence.summary()}" + "".join(f"; {n}" for n in up_evidence.notes))
     scale = float(metres_per_unit)
     if scale != 1.0:
         views, found_instances = scale_views(views, scale), scale_instances(found_instances, scale)
@@ -489,7 +492,7 @@ def import_scene(
                    "instances": None if parts.instances_path is None else str(parts.instances_path),
                    "instances_format": instances_format,
                    "dataparser_transforms": None if parts.dataparser is None else str(parts.dataparser)},
-        "scale_to_metres": float(metres_per_unit), "up_source": up_source,
+        "scale_to_metres": float(metres_per_unit), "up_source": up_source, "up_evidence": up_evidence.to_dict(),
     }
     scene = Scene(scene_id, gauss, views, found_instances, up_vec.tolist(), None, metadata)
 
