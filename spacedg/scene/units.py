@@ -24,7 +24,8 @@ The evidence (:func:`estimate_units`, all in file units before any scaling):
   estimate is ``exp(median(log r_i))``; its spread is the factor ``exp(1.4826 · MAD(log r_i))``;
   an object *agrees* when its ``r_i`` is within :data:`AGREE_FACTOR` of the estimate. At least
   :data:`MIN_OBJECTS` objects are needed.
-- **Camera height**: the floor is the lowest box bottom along ``up``, found when at least
+- **Camera height**: the floor is the lowest box bottom along ``up`` (refined by the boxes' own
+  upright axes when they agree), found when at least
   :data:`MIN_FLOOR_BOXES` box bottoms lie within 10 % of the median box size of it; hand-held
   cameras are held :data:`CAMERA_HEIGHT_M` (1.2–1.7 m, centre 1.45 m) above it, so
   ``1.45 / median camera height (units)`` is a second estimate (reported; the objects decide).
@@ -216,10 +217,29 @@ def _sized_objects(instances: Iterable[Instance], lexicon: Lexicon) -> tuple[lis
     return found, sorted(ignored)
 
 
+def _boxes_up(instances: Sequence[Instance], up: np.ndarray) -> np.ndarray:
+    """``up`` refined by the boxes' own axes when they agree: annotated boxes stand upright, so each
+    has an axis along gravity (the one nearest ``up``); their mean is taken when it lies within 20°
+    of ``up`` and at least 60 % of those axes lie within 5° of it (an up estimated from a few cameras
+    can be off by 10°, which tilts a room's floor by tens of centimetres)."""
+    axes = []
+    for inst in instances:
+        dots = inst.box.rotation.T @ up
+        k = int(np.argmax(np.abs(dots)))
+        axes.append(inst.box.rotation[:, k] * math.copysign(1.0, dots[k]))
+    mean = np.sum(axes, axis=0)
+    if not np.linalg.norm(mean) > 0:
+        return up
+    mean /= np.linalg.norm(mean)
+    close = np.array(axes) @ mean >= math.cos(math.radians(5.0))
+    return mean if mean @ up >= math.cos(math.radians(20.0)) and close.mean() >= 0.6 else up
+
+
 def _camera_height(instances: Sequence[Instance], views: Mapping[str, Camera], up: np.ndarray) -> CameraHeightEvidence | None:
-    """The floor as the lowest box bottoms along ``up`` and the cameras' median height above it, or ``None``."""
+    """The floor as the lowest box bottoms along up (:func:`_boxes_up`) and the cameras' median height above it, or ``None``."""
     if len(instances) < MIN_FLOOR_BOXES or not views:
         return None
+    up = _boxes_up(instances, up)
     bottoms = np.array([inst.box.extent_along(up)[0] for inst in instances])
     sizes = np.array([float(np.max(inst.box.extents)) for inst in instances])
     tol = 0.1 * float(np.median(sizes))
