@@ -172,3 +172,18 @@ def test_decisions_without_files() -> None:
     assert unknown.implausible() and abs(unknown.ratio / MPU - 1) < 0.15
     assert not decide_units("gaussians", scene.instances, metres_per_unit=MPU).implausible()
     assert scene_units_line(tabletop()) == "metres (no import record: a scene made by spacedg)"
+
+
+def test_weak_or_overruled_evidence_warns_without_refusing() -> None:
+    def inst(k: int, label: str, size: float) -> Instance:
+        return Instance(k, label, "", OrientedBox(np.array([3.0 * k, 0, size / 2]), np.array([size, size / 2, size / 2]), np.eye(3)))
+
+    # four objects, two say ×0.1 and two say ×1: no majority agrees, so no refusal, but a warning
+    split = [inst(0, "chair", 9.0), inst(1, "table", 14.0), inst(2, "cup", 0.12), inst(3, "bowl", 0.22)]
+    d = decide_units("colmap", split)
+    assert d.estimate.available and not d.estimate.confident and not d.implausible()
+    # a unit the user gives is applied even against clear evidence, with the evidence shown
+    clear = [inst(0, "chair", 9.0), inst(1, "table", 14.0), inst(2, "cup", 1.2), inst(3, "bowl", 2.2)]
+    d = decide_units("colmap", clear, metres_per_unit=1.0)
+    assert d.kind == "given" and not d.implausible() and d.disagrees() and "WARNING: the objects suggest 0.1 m/unit" in d.text()
+    assert decide_units("colmap", clear).implausible()
