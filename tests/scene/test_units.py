@@ -106,6 +106,9 @@ def test_tabletop_capture_via_the_command_line(tmp_path: Path, capsys: pytest.Ca
     out = tmp_path / "scene"
     assert main(["scenes", "import", str(src), "--out", str(out), "--instances", str(src / "instances.json")]) == 2
     err = capsys.readouterr().err
+    assert main(["scenes", "import", str(src), "--out", str(out), "--instances", str(src / "instances.json"), "--units", "metric",
+                 "--metres-per-unit", "0.5"]) == 2
+    assert "contradict" in capsys.readouterr().err
     assert abs(_estimate_in(err) / MPU - 1) < 0.15 and "colmap" in err and " m (typically " in err
     assert not out.exists()
     given = _estimate_in(err)
@@ -128,6 +131,8 @@ def test_units_metric_overrides_and_contradictions(tmp_path: Path) -> None:
 
     with pytest.raises(ParameterError, match="contradict"):
         import_scene(src, None, instances=src / "instances.json", units="metric", metres_per_unit=0.5, progress=False)
+    with pytest.raises(ParameterError, match="--units 'feet'"):
+        import_scene(src, None, instances=src / "instances.json", units="feet", progress=False)  # type: ignore[arg-type]
 
 
 def test_metric_capture_with_unknown_units_is_accepted_and_says_why(tmp_path: Path) -> None:
@@ -172,6 +177,9 @@ def test_decisions_without_files() -> None:
     assert unknown.implausible() and abs(unknown.ratio / MPU - 1) < 0.15
     assert not decide_units("gaussians", scene.instances, metres_per_unit=MPU).implausible()
     assert scene_units_line(tabletop()) == "metres (no import record: a scene made by spacedg)"
+    before = tabletop()
+    before.metadata["scale_to_metres"] = 0.2  # imported before units were decided
+    assert "0.2 m per file unit (imported before units were checked: not verified" in scene_units_line(before)
 
 
 def test_weak_or_overruled_evidence_warns_without_refusing() -> None:
