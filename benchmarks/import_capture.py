@@ -92,6 +92,8 @@ def run_import(name: str, root: Path, out: Path, truth: np.ndarray | None) -> Sc
     print(f"  import {total:.2f} s = read {s.get('read', 0):.2f} + frame check {s.get('frame_check', 0):.2f} + "
           f"assign {s.get('assign_instances', 0):.2f} + save {s.get('save', 0):.2f}")
     print(f"  frame check: {report.frame.summary()}")
+    if report.units is not None:
+        print("  " + report.units.text().replace("\n", "\n  "))
     if a is not None:
         covered = [c.box_coverage for c in a.instances if c.gaussians]
         iou = a.mean_mask_iou()

@@ -63,8 +63,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     imp.add_argument("--format", default="auto", choices=LAYOUTS, help="layout of SRC (default: detect)")
     imp.add_argument("--name", default=None, help="scene id (default: the folder or file name)")
     imp.add_argument("--up", default="auto", help="world up in the files' frame: auto (default), +z, -y, ... or x,y,z")
-    imp.add_argument("--metres-per-unit", type=_args.real(0, above=True, unit="metres"), default=1.0,
-                     help="metres per file unit, applied to every part (default 1)")
+    imp.add_argument("--metres-per-unit", type=_args.real(0, above=True, unit="metres"), default=None, metavar="X",
+                     help="metres per file unit, applied to every part (default: metric layouts 1; otherwise 1 only when the "
+                          "labelled objects' sizes agree, else refused with their estimate)")
+    imp.add_argument("--units", default="auto", choices=("auto", "metric"),
+                     help="metric: the files are in metres (not checked); auto (default): decided from the layout and checked")
     imp.add_argument("--gaussians-file", type=Path, default=None, metavar="PATH",
                      help="Gaussians file, .ply/.splat/.spz (overrides what the layout picks)")
     imp.add_argument("--cameras", type=Path, default=None, help="COLMAP model folder, transforms.json or INRIA cameras.json")
@@ -185,7 +188,7 @@ def _import(args: argparse.Namespace) -> int:
 
     _, report = import_scene(
         args.src, args.out, instances=args.instances, format=args.format, name=args.name, up=args.up,
-        metres_per_unit=args.metres_per_unit, gaussians=args.gaussians_file, cameras=args.cameras,
+        metres_per_unit=args.metres_per_unit, units=args.units, gaussians=args.gaussians_file, cameras=args.cameras,
         dataparser_transforms=args.dataparser_transforms, undo_applied_transform=args.undo_applied_transform,
         masks=args.masks, assign=args.assign, device=args.scannetpp_camera, embodiedscan_scene=args.embodiedscan_scene,
         opencv_distortion="drop" if args.drop_distortion else "error",
@@ -199,6 +202,7 @@ def _import(args: argparse.Namespace) -> int:
 def _info(args: argparse.Namespace) -> int:
     from spacedg.scene.frame_check import check_frame
     from spacedg.scene.io import load_scene
+    from spacedg.scene.units import scene_units_line
 
     summaries = []
     for folder in _scene_dirs(args.paths):
@@ -216,6 +220,7 @@ def _info(args: argparse.Namespace) -> int:
                 warnings_.append(f"{len(empty)} instance(s) have no Gaussians (ids {empty[:8]}): their questions are skipped")
         frame = check_frame(scene, renders=2)
         summary["frame_check"] = frame.to_dict()
+        summary["units"] = scene_units_line(scene)
         if not frame.ok:
             warnings_.append("frame check failed: " + "; ".join(frame.problems))
         if isinstance(scene.metadata.get("up_evidence"), dict):
@@ -233,6 +238,7 @@ def _info(args: argparse.Namespace) -> int:
         labels = ", ".join(f"{label} ×{n}" for label, n in s["labels"].items())
         print(f"  instances per label: {labels or '(none)'}")
         print(f"  frame check: {'ok' if s['frame_check']['ok'] else 'MISMATCH'}")
+        print(f"  units: {s['units']}")
         if "up_evidence" in s:
             print(_indented_up_evidence(s["up_evidence"]))
         for warning in s["warnings"]:

@@ -16,6 +16,8 @@ What it does, in order (each step reported in :class:`ImportReport`):
 2. **Read** the Gaussians (INRIA ply, PlayCanvas compressed ply, colour-only ply, Mip-Splatting
    ``filter_3D``, ``.splat``, ``.spz``), the cameras and the instances (spacedg / Holi-Spatial JSON,
    ScanNet++ ``segments_anno.json``, EmbodiedScan JSON), apply ``metres_per_unit`` once to all.
+   **Units** (:mod:`spacedg.scene.units`): given, metric by construction, or unknown and checked
+   against the labelled objects' typical sizes (refused when implausible); recorded in ``metadata["units"]``.
 3. **Up**: given (``"+z"``, ``"-y"``, ``"0,0,1"``), ScanNet++'s +z, or estimated from the cameras (else the
    boxes), and verified against the capture's evidence (:mod:`spacedg.scene.up_evidence`): a contradicted up is
    refused unless ``trust_up``; the evidence is kept in ``metadata.up_evidence``.
@@ -87,6 +89,7 @@ from spacedg.scene.io.scannetpp import (
 from spacedg.scene.labelling import AssignmentReport, MaskSource, assign_instances, load_mask
 from spacedg.scene.model import Instance, Scene
 from spacedg.scene.up_evidence import decide_up
+from spacedg.scene.units import UnitDecision, decide_units
 
 __all__ = ["LAYOUTS", "CaptureLayout", "ImportReport", "import_scene", "detect_layout", "detect_capture", "parse_up", "read_any_instances"]
 
@@ -119,6 +122,7 @@ class ImportReport:
     assignment: AssignmentReport | None = None
     notes: list[str] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
+    units: UnitDecision | None = None
 
     def text(self) -> str:
         """Human-readable summary, one fact per line."""
@@ -130,6 +134,8 @@ class ImportReport:
             f"up           {[round(v, 4) for v in self.up]} ({self.up_source}); {self.metres_per_unit:g} m per file unit",
             f"frame check  {'ok' if self.frame.ok else 'MISMATCH'}: {self.frame.summary()}",
         ]
+        if self.units is not None:
+            lines.append(self.units.text())
         lines += [f"note         {n}" for n in self.notes]
         if self.assignment is not None:
             a = self.assignment
@@ -156,6 +162,7 @@ class ImportReport:
             "metres_per_unit": self.metres_per_unit, "frame_check": self.frame.to_dict(), "ids": self.ids,
             "assignment": None if self.assignment is None else self.assignment.to_dict(), "notes": list(self.notes),
             "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
+            "units": None if self.units is None else self.units.to_dict(),
         }
 
 
@@ -382,7 +389,8 @@ def import_scene(
     format: str = "auto",
     name: str | None = None,
     up: str | np.ndarray | None = "auto",
-    metres_per_unit: float = 1.0,
+    metres_per_unit: float | None = None,
+    units: Literal["auto", "metric"] = "auto",
     gaussians: PathLike | None = None,
     cameras: PathLike | None = None,
     dataparser_transforms: PathLike | None = None,
@@ -410,7 +418,10 @@ def import_scene(
         name: scene id (default: the folder or file name).
         up: ``"auto"`` (ScanNet++: +z; otherwise estimated from the cameras), an axis (``"+z"``,
             ``"-y"``) or three numbers, in the **files'** frame.
-        metres_per_unit: metres per file unit, applied once to Gaussians, cameras and boxes.
+        metres_per_unit: metres per file unit, applied once to Gaussians, cameras and boxes; ``None``
+            (not given): decided by :func:`~spacedg.scene.units.decide_units` (metric by construction,
+            or unknown and checked against the labelled objects' typical sizes).
+        units: ``"metric"`` states the files are in metres (not checked); ``"auto"`` decides as above.
         gaussians, cameras: override the Gaussians file / the cameras (COLMAP folder,
             ``transforms.json``, INRIA ``cameras.json``) the layout would pick.
         dataparser_transforms: splatfacto's ``dataparser_transforms.json`` (found next to the
@@ -440,13 +451,16 @@ def import_scene(
         FileFormatError / FileValueError: unreadable parts (the file, the field and the fix named).
         FrameMismatchError: the parts disagree (with ``frame_check="error"``).
         UpContradictedError / UpUndecidedError: the evidence contradicts the up used / cannot decide an auto up.
+        UnitsImplausibleError: units unknown and the labelled objects implausible at 1 m per unit
+            (the message gives the estimate and the option to pass).
     """
     src_path = Path(src)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     if out is not None and (Path(out) / "scene.json").is_file() and not overwrite:
         raise ParameterError(f"{out}: a scene folder already exists; pass --overwrite (overwrite=True) or choose another --out")
-    if isinstance(metres_per_unit, bool) or not isinstance(metres_per_unit, (int, float)) or not (math.isfinite(metres_per_unit) and metres_per_unit > 0):
+    if metres_per_unit is not None and (isinstance(metres_per_unit, bool) or not isinstance(metres_per_unit, (int, float))
+                                        or not (math.isfinite(metres_per_unit) and metres_per_unit > 0)):
         raise ParameterError(f"--metres-per-unit must be a positive number, got {metres_per_unit!r}")
     if format not in LAYOUTS:
         raise ParameterError(f"--format {format!r}: choose one of {', '.join(LAYOUTS)}")
@@ -482,7 +496,11 @@ def import_scene(
     up_vec, up_source, up_evidence = decide_up(views, found_instances, given=given_up, default=parts.default_up, default_note=parts.up_note,
                                                means=gauss.means, trust=trust_up, where=f"{src_path}: ")
     notes.append(f"up evidence  {up_evidence.summary()}" + "".join(f"; {n}" for n in up_evidence.notes))
-    scale = float(metres_per_unit)
+    decision = decide_units(parts.layout, found_instances, views, up_vec, instances_format=instances_format, units=units,
+                            metres_per_unit=metres_per_unit)
+    if decision.implausible():
+        raise decision.refusal(str(src_path), parts.layout)
+    scale = decision.metres_per_unit
     if scale != 1.0:
         views, found_instances = scale_views(views, scale), scale_instances(found_instances, scale)
     gauss = scale_gaussians(gauss, scale)
@@ -492,7 +510,7 @@ def import_scene(
                    "instances": None if parts.instances_path is None else str(parts.instances_path),
                    "instances_format": instances_format,
                    "dataparser_transforms": None if parts.dataparser is None else str(parts.dataparser)},
-        "scale_to_metres": float(metres_per_unit), "up_source": up_source, "up_evidence": up_evidence.to_dict(),
+        "scale_to_metres": scale, "up_source": up_source, "up_evidence": up_evidence.to_dict(), "units": decision.to_dict(),
     }
     scene = Scene(scene_id, gauss, views, found_instances, up_vec.tolist(), None, metadata)
 
@@ -529,7 +547,7 @@ def import_scene(
     report = ImportReport(
         scene_id, parts.layout, None, str(parts.gaussians_path), len(gauss), gauss.sh_degree, len(views), test_views,
         str(parts.cameras.path), len(found_instances), None if parts.instances_path is None else str(parts.instances_path),
-        [float(v) for v in scene.up], up_source, float(metres_per_unit), report_frame, ids_source, assignment, notes,
+        [float(v) for v in scene.up], up_source, scale, report_frame, ids_source, assignment, notes, units=decision,
     )
     if out is not None:
         t3 = time.perf_counter()

@@ -10,6 +10,10 @@
       "instances": [Instance.to_dict(), ...]
     }
 
+``units`` is always ``"m"``. An imported scene's ``metadata`` records where it came from
+(``source``, ``scale_to_metres``, ``up_source``) and how its scale was decided (``units``:
+:meth:`spacedg.scene.units.UnitDecision.to_dict`); scenes made by spacedg carry none of these.
+
 ``gaussians.ply`` is an INRIA 3DGS PLY (:func:`~spacedg.scene.io.ply.write_ply`) with an
 ``instance_id`` property when the Gaussians carry instance ids.
 
