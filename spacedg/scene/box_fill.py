@@ -167,6 +167,10 @@ class BoxFillReport:
             lines.append(f"... {len(rows) - limit} more")
         return "\n".join(lines)
 
+    def text(self, limit: int = 40) -> str:
+        """The summary line and the table (what a benchmark prints), from the same rows."""
+        return self.summary() + "\n" + self.table(limit)
+
     def to_dict(self) -> dict[str, object]:
         return {"held_share": None if self.held_share is None else round(self.held_share, 4), "holding": self.holding,
                 "boxes": len(self.rows), "rows": [r.to_dict() for r in self.rows]}

@@ -78,6 +78,8 @@ def test_summary_and_table_agree(room) -> None:
     assert f"boxes holding Gaussians {holding_in_table} of {len(rows)}" in summary
     assert report.holding == holding_in_table == len(room.instances) - 1
     assert report.table().splitlines()[1].split()[:2] == [str(CUP), "cup"]  # bad boxes come first
+    text = report.text(limit=5)
+    assert text.splitlines()[0] == summary and "... 19 more" in text and "empty" in text.splitlines()[2]
 
 
 def test_import_of_a_correct_capture_reports_consistent_fill(tmp_path: Path, capture: Path, room) -> None:
@@ -160,3 +162,15 @@ def test_import_with_a_2_to_70_id_is_a_clear_error(tmp_path: Path, capture: Path
     (tmp_path / "holi.json").write_text(json.dumps(records))
     with pytest.raises(FileValueError, match=r"holi.json: instance \[3\]: 'ins_id' .* out of range"):
         import_scene(capture, None, instances=tmp_path / "holi.json", up="+z", progress=False)
+
+
+def test_cli_exit_2_for_a_misplaced_box_and_info_prints_the_fill(tmp_path: Path, capture: Path, room, capsys) -> None:
+    from spacedg.cli import main
+
+    bad = _write_holi(tmp_path / "bad.json", _moved(room, {CUP}, SHIFT))
+    assert main(["scenes", "import", str(capture), "--out", str(tmp_path / "s"), "--instances", str(bad), "--up", "+z"]) == 2
+    assert "box 16 'cup' is misplaced" in capsys.readouterr().err
+    good = _write_holi(tmp_path / "good.json", room)
+    assert main(["scenes", "import", str(capture), "--out", str(tmp_path / "s"), "--instances", str(good), "--up", "+z"]) == 0
+    assert main(["scenes", "info", str(tmp_path / "s")]) == 0
+    assert f"box fill: boxes holding Gaussians {len(room.instances)} of {len(room.instances)} (100%), 0 empty" in capsys.readouterr().out
