@@ -174,3 +174,28 @@ def test_cli_exit_2_for_a_misplaced_box_and_info_prints_the_fill(tmp_path: Path,
     assert main(["scenes", "import", str(capture), "--out", str(tmp_path / "s"), "--instances", str(good), "--up", "+z"]) == 0
     assert main(["scenes", "info", str(tmp_path / "s")]) == 0
     assert f"box fill: boxes holding Gaussians {len(room.instances)} of {len(room.instances)} (100%), 0 empty" in capsys.readouterr().out
+
+
+def test_hostile_corners_and_other_annotation_formats(tmp_path: Path, room) -> None:
+    from spacedg.scene.io.embodiedscan import read_embodiedscan_boxes
+    from spacedg.scene.io.scannetpp import read_segments_anno
+
+    corners = (np.array(list(np.ndindex(2, 2, 2)), dtype=np.float64) * 1e308).tolist()
+    (tmp_path / "c.json").write_text(json.dumps([{"id": 1, "label": "cup", "corners": corners}]))
+    with pytest.raises(FileValueError, match=r"c.json: instance \[0\] \(id 1\): .corners. holds coordinates beyond 1e\+07"):
+        read_instances(tmp_path / "c.json")
+    anno = cl.segments_anno(room)
+    anno["segGroups"][2]["objectId"] = 2**70
+    (tmp_path / "segments_anno.json").write_text(json.dumps(anno))
+    with pytest.raises(FileValueError, match=r"segments_anno.json.*'objectId' a 22-digit number is out of range"):
+        read_segments_anno(tmp_path / "segments_anno.json")
+    anno = cl.segments_anno(room)
+    anno["segGroups"][1]["obb"]["axesLengths"] = [1e308, 1.0, 1.0]
+    (tmp_path / "segments_anno.json").write_text(json.dumps(anno))
+    with pytest.raises(FileValueError, match=r"segments_anno.json.*box side lengths .* out of range"):
+        read_segments_anno(tmp_path / "segments_anno.json")
+    infos = cl.embodiedscan_infos(room)
+    infos["data_list"][1]["instances"][0]["bbox_id"] = 2**70
+    (tmp_path / "es.json").write_text(json.dumps(infos))
+    with pytest.raises(FileValueError, match=r"es.json.*'bbox_id' a 22-digit number is out of range"):
+        read_embodiedscan_boxes(tmp_path / "es.json", room.id)

@@ -15,7 +15,7 @@ import numpy as np
 from spacedg.files import FileValueError
 from spacedg.scene.box import OrientedBox
 
-__all__ = ["MAX_INSTANCE_ID", "MAX_BOX_SIDE", "MAX_COORDINATE", "check_instance_id", "check_box_size"]
+__all__ = ["MAX_INSTANCE_ID", "MAX_BOX_SIDE", "MAX_COORDINATE", "check_instance_id", "check_box_size", "check_coordinates"]
 
 #: Largest instance id (int32, -1 reserved for "no instance").
 MAX_INSTANCE_ID = 2**31 - 1
@@ -50,3 +50,14 @@ def check_box_size(where: str, box: OrientedBox) -> OrientedBox:
             "check the annotation's frame and units"
         )
     return box
+
+
+def check_coordinates(where: str, key: str, points: np.ndarray) -> np.ndarray:
+    """``points`` if every coordinate is within :data:`MAX_COORDINATE` of the origin (box corners
+    before any arithmetic on them), else :class:`FileValueError`."""
+    if (np.abs(points) > MAX_COORDINATE).any():
+        raise FileValueError(
+            f"{where}: '{key}' holds coordinates beyond {MAX_COORDINATE:g} file units (largest {float(np.abs(points).max()):.3g}); "
+            "check the annotation's frame and units"
+        )
+    return points

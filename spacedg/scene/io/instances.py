@@ -50,7 +50,7 @@ from spacedg.files import (
 )
 from spacedg.scene.box import OrientedBox
 from spacedg.scene.io.fields import instance_list, matrix_field
-from spacedg.scene.io.annotation_limits import check_box_size, check_instance_id
+from spacedg.scene.io.annotation_limits import check_box_size, check_coordinates, check_instance_id
 from spacedg.scene.model import Instance, InstanceVisibility
 
 _CORNER_KEYS = ("corners", "bbox_corners", "obb_corners", "bounding_box")
@@ -91,7 +91,7 @@ def _box(where: str, item: Mapping[str, Any]) -> OrientedBox:
                     raw = [[c["x"], c["y"], c["z"]] for c in raw]
                 except KeyError:
                     raise FileFormatError(f"{where}: '{corner_key}' corners must each have 'x', 'y' and 'z'") from None
-            corners = matrix_field(where, corner_key, raw, (8, 3))
+            corners = check_coordinates(where, corner_key, matrix_field(where, corner_key, raw, (8, 3)))
             from_corners = OrientedBox.from_corners(corners)
             if box is None:
                 check_box_size(where, from_corners)
