@@ -199,3 +199,17 @@ def test_hostile_corners_and_other_annotation_formats(tmp_path: Path, room) -> N
     (tmp_path / "es.json").write_text(json.dumps(infos))
     with pytest.raises(FileValueError, match=r"es.json.*'bbox_id' a 22-digit number is out of range"):
         read_embodiedscan_boxes(tmp_path / "es.json", room.id)
+
+
+def test_native_scene_with_a_huge_id_or_box_is_a_clear_error(tmp_path: Path, room) -> None:
+    from spacedg.scene.io import load_scene, save_scene
+
+    save_scene(room, tmp_path / "s")
+    path = tmp_path / "s" / "scene.json"
+    original = json.loads(path.read_text())
+    for change, pattern in (({"id": 2**70}, r"scene.json.*instances\[0\].*id must be an integer in \[0, 2\*\*31 - 1\]"),):
+        record = json.loads(json.dumps(original))
+        record["instances"][0].update(change)
+        path.write_text(json.dumps(record))
+        with pytest.raises(FileValueError, match=pattern):
+            load_scene(tmp_path / "s")
