@@ -186,7 +186,9 @@ class BoxFillReport:
         if len(bad) > 8:
             parts.append(f"... and {len(bad) - 8} more")
         common = _common_shift(bad)
-        causes = layout_causes(layout, frame_wide=len(bad) >= max(2, len(self.rows) / 2) or common is not None, common=common)
+        far = any(r.status == "empty" and r.shift is None for r in bad)  # more than a box size from any Gaussian
+        frame_wide = len(bad) == len(self.rows) or len(bad) >= max(2, len(self.rows) / 2) or common is not None or far
+        causes = layout_causes(layout, frame_wide=frame_wide, common=common)
         return (f"{where}: {len(bad)} of {len(self.rows)} boxes do not hold their objects: " + "; ".join(parts)
                 + f". {causes} To write the scene anyway, pass --allow-frame-mismatch (questions about these boxes will be wrong).")
 
@@ -225,7 +227,7 @@ def layout_causes(layout: str, *, frame_wide: bool, common: np.ndarray | None = 
     ``frame_wide``: many boxes (or several with one shared shift) are off, which points at the
     frame of the whole annotation rather than at single boxes.
     """
-    single = "the annotation of these boxes is off: correct their position (obb_transform translation / corners) by the shift given, or drop them"
+    single = "the annotation of these boxes is off: correct their position (obb_transform translation / corners; by the shift given where there is one), or drop them"
     if not frame_wide:
         return f"Probable cause: {single}."
     offset = "" if common is None else f"they are all off by about ({common[0]:+.3f}, {common[1]:+.3f}, {common[2]:+.3f}): "

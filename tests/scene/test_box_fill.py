@@ -213,3 +213,17 @@ def test_native_scene_with_a_huge_id_or_box_is_a_clear_error(tmp_path: Path, roo
         path.write_text(json.dumps(record))
         with pytest.raises(FileValueError, match=pattern):
             load_scene(tmp_path / "s")
+
+
+@pytest.mark.parametrize("layout, expected, absent", [
+    ("inria", "every COLMAP / INRIA run", "dataparser"),
+    ("colmap", "every COLMAP run", "dataparser"),
+    ("nerfstudio", "--dataparser-transforms", "INRIA"),
+    ("scannetpp", "transforms_undistorted.json", "dataparser"),
+])
+def test_causes_fit_the_layout(layout: str, expected: str, absent: str) -> None:
+    from spacedg.scene.box_fill import layout_causes
+
+    text = layout_causes(layout, frame_wide=True, common=np.array([5.0, 0.0, 0.0]))
+    assert expected in text and absent not in text and "(+5.000, +0.000, +0.000)" in text
+    assert "dataparser" not in layout_causes(layout, frame_wide=False)
