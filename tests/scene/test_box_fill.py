@@ -116,8 +116,16 @@ def test_boxes_far_away_name_causes_of_the_layout(tmp_path: Path, capture: Path,
     assert "dataparser" not in message and "normalised" not in message
     assert "another reconstruction" in message and "COLMAP / INRIA" in message
     assert "of 24 boxes do not hold their objects" in message
-    # nerfstudio's normalised frame is never offered for an INRIA or COLMAP layout's own Gaussians
-    assert normalised_hint(room, layout="inria") is None and normalised_hint(room, layout="colmap") is None
+
+
+
+def test_normalised_frame_hint_only_where_a_splatfacto_export_can_be(room) -> None:
+    small = Scene(room.id, room.gaussians.transformed(scale=0.1), room.views, room.instances, room.up)
+    assert normalised_hint(room) is None
+    assert "normalised frame" in (normalised_hint(small) or "")
+    assert "normalised frame" in (normalised_hint(small, layout="nerfstudio") or "")
+    assert normalised_hint(small, layout="inria") is None and normalised_hint(small, layout="colmap") is None
+    assert "normalised frame" in (normalised_hint(small, layout="inria", gaussians_given=True) or "")
 
 
 # ----------------------------------------------------------------------------- hostile annotations
