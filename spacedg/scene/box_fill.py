@@ -59,6 +59,8 @@ __all__ = [
 
 #: Thickness of the "just outside" shell, share of the box's longest side, on every face.
 MARGIN_SHARE = 0.10
+#: Thinnest side a box is measured with, share of its longest side (flat boxes are allowed).
+MIN_THICKNESS = 0.02
 #: Cells per axis of the grid measuring how much of a box's volume its Gaussians fill.
 FILL_GRID = 8
 #: A box holding less than this share of what its best placement holds is misplaced.
@@ -241,8 +243,9 @@ def _scale(box: OrientedBox) -> float:
 
 
 def _half(box: OrientedBox) -> np.ndarray:
-    """Half side lengths in units of the longest side (the longest is ½)."""
-    return box.extents.astype(np.float64) / (2.0 * _scale(box))
+    """Half side lengths in units of the longest side (the longest is ½); a flat or nearly flat box
+    (a poster, a rug) counts as :data:`MIN_THICKNESS` of its longest side thick."""
+    return np.maximum(box.extents.astype(np.float64) / (2.0 * _scale(box)), MIN_THICKNESS / 2.0)
 
 
 def _candidates(sorted_means: np.ndarray, box: OrientedBox, reach: float) -> np.ndarray:
