@@ -200,6 +200,7 @@ def _import(args: argparse.Namespace) -> int:
 
 
 def _info(args: argparse.Namespace) -> int:
+    from spacedg.scene.box_fill import measure_box_fill
     from spacedg.scene.frame_check import check_frame
     from spacedg.scene.io import load_scene
     from spacedg.scene.units import scene_units_line
@@ -218,9 +219,13 @@ def _info(args: argparse.Namespace) -> int:
             empty = [inst.id for inst in scene.instances if inst.id not in present]
             if empty:
                 warnings_.append(f"{len(empty)} instance(s) have no Gaussians (ids {empty[:8]}): their questions are skipped")
-        frame = check_frame(scene, renders=2)
+        fill = measure_box_fill(scene.gaussians.means, scene.instances) if scene.instances else None
+        frame = check_frame(scene, renders=2, box_share=None if fill is None else fill.held_share)
         summary["frame_check"] = frame.to_dict()
         summary["units"] = scene_units_line(scene)
+        summary["box_fill"] = None if fill is None else {"summary": fill.summary(), **fill.to_dict()}
+        if fill is not None and fill.bad:
+            warnings_ += [f"box {r.id} '{r.label}' is {r.status}: best shift {r.shift_text()}" for r in fill.bad]
         if not frame.ok:
             warnings_.append("frame check failed: " + "; ".join(frame.problems))
         if isinstance(scene.metadata.get("up_evidence"), dict):
@@ -241,6 +246,8 @@ def _info(args: argparse.Namespace) -> int:
         print(f"  units: {s['units']}")
         if "up_evidence" in s:
             print(_indented_up_evidence(s["up_evidence"]))
+        if s["box_fill"] is not None:
+            print(f"  box fill: {s['box_fill']['summary']}")
         for warning in s["warnings"]:
             print(f"  warning: {warning}")
     return 0

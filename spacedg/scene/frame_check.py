@@ -36,7 +36,7 @@ from spacedg.scene.model import Scene
 
 __all__ = [
     "FrameMismatchError", "FrameReport", "check_frame", "diagnose", "require_frame", "generic_corrections", "normalised_hint",
-    "MIN_IN_VIEW", "MIN_VIEWS_SEEING", "MIN_COVERAGE", "MIN_BOXES",
+    "MIN_IN_VIEW", "BOX_PROBLEM", "MIN_VIEWS_SEEING", "MIN_COVERAGE", "MIN_BOXES",
 ]
 
 #: Fewest share of Gaussians inside some view's frustum.
@@ -47,6 +47,8 @@ MIN_VIEWS_SEEING = 0.5
 MIN_COVERAGE = 0.02
 #: Fewest share of boxes that hold Gaussians.
 MIN_BOXES = 0.5
+#: Start of the problem text about boxes (the importer's box fill check takes it over).
+BOX_PROBLEM = "the boxes and the Gaussians disagree"
 #: Gaussian centres sampled (evenly, deterministic) for the measures.
 SAMPLE = 20_000
 #: Views used for the frustum measures (evenly spread).
@@ -102,8 +104,13 @@ def _even(n: int, k: int) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, num=min(n, k)).round().astype(np.int64)) if n else np.zeros(0, np.int64)
 
 
-def check_frame(scene: Scene, *, renders: int = 4, render_width: int = 64, backend: str = "auto") -> FrameReport:
-    """Measure whether ``scene``'s parts share a frame (see the module docstring); never raises on a mismatch."""
+def check_frame(
+    scene: Scene, *, renders: int = 4, render_width: int = 64, backend: str = "auto", box_share: float | None = None
+) -> FrameReport:
+    """Measure whether ``scene``'s parts share a frame (see the module docstring); never raises on a mismatch.
+
+    ``box_share``: the share of boxes holding Gaussians already measured (the importer passes
+    :attr:`~spacedg.scene.box_fill.BoxFillReport.held_share`, so the summary and the fill table agree)."""
     gaussians = scene.gaussians
     names = list(scene.views)
     problems: list[str] = []
@@ -124,7 +131,9 @@ def check_frame(scene: Scene, *, renders: int = 4, render_width: int = 64, backe
     in_view = float(inside_any.mean())
     views_seeing = seeing / len(chosen)
     boxes = None
-    if scene.instances:
+    if scene.instances and box_share is not None:
+        boxes = box_share
+    elif scene.instances:
         big = gaussians.means[_even(len(gaussians), 10 * SAMPLE)].astype(np.float64)
         held = sum(bool(inst.box.contains(big, tol=0.05 * float(inst.box.extents.max()) + 1e-6).any()) for inst in scene.instances)
         boxes = held / len(scene.instances)
@@ -144,7 +153,7 @@ def check_frame(scene: Scene, *, renders: int = 4, render_width: int = 64, backe
     if coverage and max(coverage) < MIN_COVERAGE:
         problems.append(f"the cameras see (almost) nothing: the {len(coverage)} check renders cover at most {max(coverage):.1%} of their pixels")
     if boxes is not None and boxes < MIN_BOXES:
-        problems.append(f"the boxes and the Gaussians disagree: only {boxes:.0%} of the {len(scene.instances)} boxes hold any Gaussian")
+        problems.append(f"{BOX_PROBLEM}: only {boxes:.0%} of the {len(scene.instances)} boxes hold any Gaussian")
     return FrameReport(in_view, views_seeing, boxes, tuple(coverage), tuple(problems))
 
 
@@ -191,9 +200,15 @@ def generic_corrections(scene: Scene) -> dict[str, Callable[[Scene], Scene]]:
     }
 
 
-def normalised_hint(scene: Scene) -> str | None:
+def normalised_hint(scene: Scene, *, layout: str | None = None, gaussians_given: bool = False) -> str | None:
     """A hint when the Gaussians look like splatfacto's normalised frame (all within a cube of side ~2
-    while the cameras spread much wider), else ``None``."""
+    while the cameras spread much wider), else ``None``.
+
+    Only where a splatfacto export can be: a nerfstudio layout, a bare Gaussians file, or a
+    Gaussians file given explicitly (``gaussians_given``); never for the Gaussians of an INRIA
+    output, a COLMAP project or a ScanNet++ scene found by the layout (``layout`` ``None``: any)."""
+    if layout in ("inria", "colmap", "scannetpp") and not gaussians_given:
+        return None
     means = scene.gaussians.means.astype(np.float64)
     if len(means) == 0 or not scene.views:
         return None

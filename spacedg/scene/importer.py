@@ -23,6 +23,9 @@ What it does, in order (each step reported in :class:`ImportReport`):
    refused unless ``trust_up``; the evidence is kept in ``metadata.up_evidence``.
 4. **Frame check** (:mod:`spacedg.scene.frame_check`): refused with the disagreeing parts and the
    probable cause unless ``frame_check="warn"``.
+4b. **Box fill** (:mod:`spacedg.scene.box_fill`): every box must hold its object; an empty or
+   misplaced box is refused naming the box, the shift that fits it best and the causes that fit
+   the layout, unless ``frame_check="warn"``; the summary and the fill table share its numbers.
 5. **Instance ids**: kept when the Gaussians carry them; otherwise assigned
    (:func:`~spacedg.scene.labelling.assign_instances`, by boxes unless masks are asked for) and
    reported per instance (with the rendered-mask IoU where Holi-Spatial mask files are found).
@@ -46,7 +49,9 @@ from spacedg.errors import FileFormatError, ParameterError
 from spacedg.files import PathLike, read_json
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
+from spacedg.scene.box_fill import BoxFillError, BoxFillReport, measure_box_fill
 from spacedg.scene.frame_check import (
+    BOX_PROBLEM,
     FrameReport,
     check_frame,
     diagnose,
@@ -120,6 +125,7 @@ class ImportReport:
     frame: FrameReport
     ids: str
     assignment: AssignmentReport | None = None
+    box_fill: BoxFillReport | None = None
     notes: list[str] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
     units: UnitDecision | None = None
@@ -136,6 +142,8 @@ class ImportReport:
         ]
         if self.units is not None:
             lines.append(self.units.text())
+        if self.box_fill is not None:
+            lines += [f"box fill     {self.box_fill.summary()}", self.box_fill.table()]
         lines += [f"note         {n}" for n in self.notes]
         if self.assignment is not None:
             a = self.assignment
@@ -160,7 +168,8 @@ class ImportReport:
             "views": self.views, "test_views": self.test_views, "cameras_path": self.cameras_path,
             "instances": self.instances, "instances_path": self.instances_path, "up": self.up, "up_source": self.up_source,
             "metres_per_unit": self.metres_per_unit, "frame_check": self.frame.to_dict(), "ids": self.ids,
-            "assignment": None if self.assignment is None else self.assignment.to_dict(), "notes": list(self.notes),
+            "assignment": None if self.assignment is None else self.assignment.to_dict(),
+            "box_fill": None if self.box_fill is None else self.box_fill.to_dict(), "notes": list(self.notes),
             "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
             "units": None if self.units is None else self.units.to_dict(),
         }
@@ -515,17 +524,29 @@ def import_scene(
     scene = Scene(scene_id, gauss, views, found_instances, up_vec.tolist(), None, metadata)
 
     t1 = time.perf_counter()
-    report_frame = check_frame(scene, backend=backend)
+    fill = measure_box_fill(scene.gaussians.means, scene.instances) if scene.instances else None
+    report_frame = check_frame(scene, backend=backend, box_share=None if fill is None else fill.held_share)
+    if report_frame.problems and all(p.startswith(BOX_PROBLEM) for p in report_frame.problems) and fill is not None:
+        report_frame = FrameReport(report_frame.gaussians_in_view, report_frame.views_seeing, report_frame.boxes_with_gaussians,
+                                   report_frame.render_coverage)  # boxes only: the fill check below names them
     if not report_frame.ok:
         report_frame = diagnose(scene, report_frame, _corrections(scene, parts), backend=backend)
         if not report_frame.hints:
-            hint = normalised_hint(scene)
+            hint = normalised_hint(scene, layout=parts.layout, gaussians_given=gaussians is not None)
             if hint:
                 report_frame = FrameReport(report_frame.gaussians_in_view, report_frame.views_seeing, report_frame.boxes_with_gaussians,
                                            report_frame.render_coverage, report_frame.problems, (hint,))
         if frame_check == "error":
             report_frame.raise_if_bad(scene_id, where=f"{src_path}")
         notes.append("FRAME MISMATCH written anyway (frame_check='warn'): " + "; ".join(report_frame.problems))
+    if fill is not None:
+        try:
+            fill.raise_if_bad(f"{src_path}: {parts.instances_path}", parts.layout)
+        except BoxFillError:
+            if frame_check == "error":
+                raise
+            notes.append("BOXES NOT HOLDING THEIR OBJECTS written anyway (frame_check='warn'): " + fill.message("boxes", parts.layout))
+        scene.metadata["box_fill"] = fill.to_dict()
     timings["frame_check"] = time.perf_counter() - t1
     scene.metadata["frame_check"] = report_frame.to_dict()
 
@@ -547,7 +568,7 @@ def import_scene(
     report = ImportReport(
         scene_id, parts.layout, None, str(parts.gaussians_path), len(gauss), gauss.sh_degree, len(views), test_views,
         str(parts.cameras.path), len(found_instances), None if parts.instances_path is None else str(parts.instances_path),
-        [float(v) for v in scene.up], up_source, scale, report_frame, ids_source, assignment, notes, units=decision,
+        [float(v) for v in scene.up], up_source, scale, report_frame, ids_source, assignment, fill, notes, units=decision,
     )
     if out is not None:
         t3 = time.perf_counter()

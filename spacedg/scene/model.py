@@ -86,8 +86,8 @@ class Instance:
     attributes: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if isinstance(self.id, bool) or not isinstance(self.id, (int, np.integer)) or int(self.id) < 0:
-            raise InvalidDataError(f"Instance: id must be an integer >= 0, got {self.id!r}")
+        if isinstance(self.id, bool) or not isinstance(self.id, (int, np.integer)) or not 0 <= int(self.id) <= 2**31 - 1:
+            raise InvalidDataError(f"Instance: id must be an integer in [0, 2**31 - 1] (int32), got {self.id!r}")
         object.__setattr__(self, "id", int(self.id))
         if not isinstance(self.label, str) or not self.label.strip():
             raise InvalidDataError(f"Instance {self.id}: label must be a non-empty string, got {self.label!r}")

@@ -26,6 +26,7 @@ from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.files import FileValueError, PathLike, as_path, read_json
 from spacedg.scene.box import OrientedBox
 from spacedg.scene.io.fields import instance_list
+from spacedg.scene.io.annotation_limits import check_box_size, check_instance_id
 from spacedg.scene.model import Instance
 
 __all__ = ["read_embodiedscan_boxes", "euler_zxy_to_matrix"]
@@ -94,6 +95,7 @@ def read_embodiedscan_boxes(path: PathLike, scene: str | None = None) -> list[In
         iid = item.get("bbox_id", index)
         if isinstance(iid, bool) or not isinstance(iid, int) or iid < 0 or iid in seen:
             raise FileValueError(f"{where}: 'bbox_id' must be a unique integer >= 0, got {iid!r}")
+        check_instance_id(where, "bbox_id", iid)
         seen.add(iid)
         label = item.get("label")
         if not isinstance(label, str) or not label.strip():
@@ -105,5 +107,5 @@ def read_embodiedscan_boxes(path: PathLike, scene: str | None = None) -> list[In
             obb = OrientedBox(box[:3], box[3:6], euler_zxy_to_matrix(box[6:9]))
         except InvalidDataError as err:
             raise FileValueError(f"{where}: {err}") from err
-        out.append(Instance(iid, label.strip(), "", obb, attributes={"source": "embodiedscan"}))
+        out.append(Instance(iid, label.strip(), "", check_box_size(f"{where} (id {iid})", obb), attributes={"source": "embodiedscan"}))
     return out

@@ -51,6 +51,7 @@ from spacedg.files import (
 )
 from spacedg.scene.box import OrientedBox
 from spacedg.scene.io.fields import instance_list, matrix_field
+from spacedg.scene.io.annotation_limits import check_box_size, check_coordinates, check_instance_id
 from spacedg.scene.model import Instance, InstanceVisibility
 
 _CORNER_KEYS = ("corners", "bbox_corners", "obb_corners", "bounding_box")
@@ -91,9 +92,10 @@ def _box(where: str, item: Mapping[str, Any]) -> OrientedBox:
                     raw = [[c["x"], c["y"], c["z"]] for c in raw]
                 except KeyError:
                     raise FileFormatError(f"{where}: '{corner_key}' corners must each have 'x', 'y' and 'z'") from None
-            corners = matrix_field(where, corner_key, raw, (8, 3))
+            corners = check_coordinates(where, corner_key, matrix_field(where, corner_key, raw, (8, 3)))
             from_corners = OrientedBox.from_corners(corners)
             if box is None:
+                check_box_size(where, from_corners)
                 return from_corners
             diag = float(np.linalg.norm(box.extents)) or 1.0
             dist = np.linalg.norm(box.corners()[:, None, :] - corners[None, :, :], axis=2)
@@ -104,6 +106,7 @@ def _box(where: str, item: Mapping[str, Any]) -> OrientedBox:
                     f"(corners differ by {gap:.3g}); keep one of them"
                 )
         assert box is not None
+        check_box_size(where, box)
         return box
     except FileFormatError:
         raise
@@ -129,6 +132,7 @@ def _instance(where: str, item: Any) -> Instance:
         inst_id = int(inst_id.strip())
     if isinstance(inst_id, bool) or not isinstance(inst_id, int) or inst_id < 0:
         raise FileValueError(f"{where}: '{id_key}' must be an integer >= 0 (or a string of digits), got {inst_id!r}")
+    check_instance_id(where, id_key, inst_id)
     where = f"{where} (id {inst_id})"
     label_key = _first_key(item, ("label", "category"))
     if label_key is None:

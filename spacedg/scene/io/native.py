@@ -44,6 +44,7 @@ from spacedg.files import (
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
 from spacedg.scene.io.ply import read_ply, write_ply
+from spacedg.scene.io.annotation_limits import check_box_size
 from spacedg.scene.model import Instance, Scene
 
 FORMAT = "spacedg-scene"
@@ -201,9 +202,11 @@ def _instances(record: dict[str, Any], where: str) -> list[Instance]:
         if not isinstance(data, dict):
             raise FileFormatError(f"{where}: instances[{i}] must be an object, got {type(data).__name__}")
         try:
-            out.append(Instance.from_dict(data))
+            inst = Instance.from_dict(data)
         except (InvalidDataError, TypeError, ValueError, AttributeError) as err:
             raise FileValueError(f"{where}: instances[{i}]: {err}") from err
+        out.append(inst)
+        check_box_size(f"{where}: instances[{i}] (id {inst.id})", inst.box)
     return out
 
 

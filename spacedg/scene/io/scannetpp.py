@@ -41,6 +41,7 @@ import numpy as np
 from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.files import FileValueError, PathLike, as_path, read_json
 from spacedg.scene.box import OrientedBox
+from spacedg.scene.io.annotation_limits import check_box_size, check_instance_id
 from spacedg.scene.model import Instance
 
 __all__ = ["NERFSTUDIO_FROM_SCAN", "read_segments_anno", "scannetpp_cameras", "is_scannetpp_scene"]
@@ -133,6 +134,7 @@ def read_segments_anno(path: PathLike) -> list[Instance]:
         raw_id = group.get("objectId", group.get("id"))
         if isinstance(raw_id, bool) or not isinstance(raw_id, int) or raw_id < 0:
             raise FileValueError(f"{where}: 'objectId'/'id' must be an integer >= 0, got {raw_id!r}")
+        check_instance_id(where, "objectId", raw_id)
         if raw_id in seen:
             raise FileValueError(f"{where}: object id {raw_id} is used twice")
         seen.add(raw_id)
@@ -142,7 +144,7 @@ def read_segments_anno(path: PathLike) -> list[Instance]:
         segments = group.get("segments", [])
         if not isinstance(segments, list):
             raise FileFormatError(f"{where} (id {raw_id}): 'segments' must be a list of segment ids, got {type(segments).__name__}")
-        out.append(Instance(raw_id, label.strip(), "", _box(f"{where} (id {raw_id})", group["obb"]),
+        out.append(Instance(raw_id, label.strip(), "", check_box_size(f"{where} (id {raw_id})", _box(f"{where} (id {raw_id})", group["obb"])),
                             attributes={"source": "scannetpp", "segments": len(segments)}))
     if skipped:
         warnings.warn(f"{p}: {skipped} segment group(s) without an 'obb' were skipped", stacklevel=2)
