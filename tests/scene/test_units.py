@@ -159,10 +159,12 @@ def test_scannetpp_is_metric_by_construction_and_not_second_guessed(tmp_path: Pa
     scene_dir = tmp_path / "0a5c013435"
     ns = scene_dir / "dslr" / "nerfstudio"
     ns.mkdir(parents=True)
-    (ns / "transforms_undistorted.json").write_text(json.dumps(cl.transforms_json(odd, applied=False, camera_model="PINHOLE")))
+    # as ScanNet++ publishes it: the JSON's world is the scan frame with rows (y, x, -z), the boxes in the scan frame
+    (ns / "transforms_undistorted.json").write_text(json.dumps(cl.transforms_json(odd, world=cl.SCANNETPP_JSON, applied=False,
+                                                                                  camera_model="PINHOLE")))
     (scene_dir / "scans").mkdir()
     (scene_dir / "scans" / "segments_anno.json").write_text(json.dumps(cl.segments_anno(odd)))
-    cl.write_inria_output(scene_dir / "gs", odd, with_colmap=False)
+    cl.write_inria_output(scene_dir / "gs", odd.transformed(cl.SCANNETPP_JSON[:3, :3], np.zeros(3)), with_colmap=False)
     _, report = import_scene(scene_dir, tmp_path / "scene", progress=False)
     assert report.units.kind == "metric" and report.metres_per_unit == 1.0 and "ScanNet++" in report.units.how
     assert abs(report.units.estimate.metres_per_unit / 0.5 - 1) < 0.15 and "WARNING" in report.text()
