@@ -190,3 +190,20 @@ def ctrl_c_handler():
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     yield
     signal.signal(signal.SIGINT, previous)
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Start the README and docs runner (tests/test_readme.py) as soon as it is known to be needed:
+    it runs in its own process beside the rest of the suite (the machine has two cores), and its
+    test waits for it."""
+    if any(item.nodeid.startswith("tests/test_readme.py::test_block") for item in session.items):
+        from tests import test_readme
+
+        test_readme.launch()
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """Stop the README runner if the session ended before its test, and remove its scratch folder."""
+    module = sys.modules.get("tests.test_readme")
+    if module is not None:
+        module.close_launch()

@@ -18,8 +18,10 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -43,28 +45,73 @@ def _name(path: Path) -> str:
 BLOCKS: list[Block] = [b for page in PAGES for b in read_blocks(page.read_text(encoding="utf-8"), _name(page))]
 
 
+class Launch:
+    """The runner's process, started as soon as collection finishes (``tests/conftest.py``,
+    :func:`launch`) so that it runs beside the rest of the suite on the machine's second core;
+    :meth:`results` waits for it. Its scratch folder is removed when the session ends."""
+
+    def __init__(self) -> None:
+        self.root = Path(tempfile.mkdtemp(prefix="spacedg-readme-"))
+        work = self.root / "main"
+        work.mkdir()
+        for name in ("benchmarks", "tests"):
+            (work / name).symlink_to(REPO_ROOT / name)
+        (work / "docs").mkdir()
+        if SHARED.is_dir():
+            (self.root / "shared").symlink_to(SHARED)
+        env = dict(os.environ, SPACEDG_HOME=str(self.root / "home"), PYTHONPATH=os.pathsep.join(
+            [str(REPO_ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]))
+        self.stdout, self.stderr = (self.root / "runner.out").open("w+"), (self.root / "runner.err").open("w+")
+        self.proc = subprocess.Popen([sys.executable, "-m", "tests.readme_runner", *map(_name, PAGES), str(work)],
+                                     cwd=REPO_ROOT, env=env, stdout=self.stdout, stderr=self.stderr, text=True)
+
+    def results(self, timeout: float = 2400) -> dict[tuple[str, int], dict[str, object]]:
+        """Every block's result by (file, line), once the runner has finished."""
+        code = self.proc.wait(timeout=timeout)
+        self.stdout.seek(0)
+        out = self.stdout.read()
+        results = {}
+        for line in out.splitlines():
+            if line.startswith("{"):
+                result = json.loads(line)
+                results[(str(result["file"]), int(result["line"]))] = result
+        if not results:
+            self.stderr.seek(0)
+            pytest.fail(f"the runner reported nothing (exit {code}):\n{out[-3000:]}\n{self.stderr.read()[-3000:]}")
+        return results
+
+    def close(self) -> None:
+        """Stop the runner if it still runs (an aborted session) and remove its scratch folder."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.stdout.close()
+        self.stderr.close()
+        shutil.rmtree(self.root, ignore_errors=True)
+
+
+_LAUNCH: Launch | None = None
+
+
+def launch() -> Launch:
+    """Start the runner once per session (idempotent)."""
+    global _LAUNCH
+    if _LAUNCH is None:
+        _LAUNCH = Launch()
+    return _LAUNCH
+
+
+def close_launch() -> None:
+    """End of session: see :meth:`Launch.close`."""
+    global _LAUNCH
+    if _LAUNCH is not None:
+        _LAUNCH.close()
+        _LAUNCH = None
+
+
 @pytest.fixture(scope="module")
-def readme_run(tmp_path_factory) -> dict[tuple[str, int], dict[str, object]]:
-    root = tmp_path_factory.mktemp("readme")
-    work = root / "main"
-    work.mkdir()
-    for name in ("benchmarks", "tests"):
-        (work / name).symlink_to(REPO_ROOT / name)
-    (work / "docs").mkdir()
-    if SHARED.is_dir():
-        (root / "shared").symlink_to(SHARED)
-    env = dict(os.environ, SPACEDG_HOME=str(root / "home"), PYTHONPATH=os.pathsep.join(
-        [str(REPO_ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]))
-    proc = subprocess.run([sys.executable, "-m", "tests.readme_runner", *map(_name, PAGES), str(work)], cwd=REPO_ROOT, env=env,
-                          capture_output=True, text=True, timeout=2400)
-    results = {}
-    for line in proc.stdout.splitlines():
-        if line.startswith("{"):
-            result = json.loads(line)
-            results[(str(result["file"]), int(result["line"]))] = result
-    if not results:
-        pytest.fail(f"the runner reported nothing (exit {proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return results
+def readme_run() -> dict[tuple[str, int], dict[str, object]]:
+    return launch().results()
 
 
 def test_the_readme_is_a_guide() -> None:
