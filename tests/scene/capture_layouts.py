@@ -317,3 +317,16 @@ def write_spz(path: Path, g: Gaussians, *, version: int = 3, frac_bits: int = 12
     if k > 1:
         parts.append(np.clip(np.round(g.sh[:, 1:, :].astype(np.float64) * 128 + 128), 0, 255).astype(np.uint8).tobytes())
     path.write_bytes(gzip.compress(b"".join(parts)))
+
+
+def write_scannetpp_dslr(scene_dir: Path, scene: Scene) -> Path:
+    """A ScanNet++ scene folder as published (no Gaussians): ``dslr/nerfstudio/transforms_undistorted.json``,
+    whose world is the scan frame with rows (y, x, -z) (:data:`SCANNETPP_JSON`), and
+    ``scans/segments_anno.json`` with the boxes in the scan frame. Returns ``scene_dir``."""
+    ns = scene_dir / "dslr" / "nerfstudio"
+    ns.mkdir(parents=True)
+    (ns / "transforms_undistorted.json").write_text(json.dumps(transforms_json(scene, world=SCANNETPP_JSON, applied=False,
+                                                                               camera_model="PINHOLE")))
+    (scene_dir / "scans").mkdir()
+    (scene_dir / "scans" / "segments_anno.json").write_text(json.dumps(segments_anno(scene)))
+    return scene_dir

@@ -114,14 +114,7 @@ def test_nerfstudio_cameras_with_colmap_gaussians(tmp_path: Path, far_room) -> N
 
 
 def test_scannetpp_scene_folder(tmp_path: Path, room) -> None:
-    scene_dir = tmp_path / "0a5c013435"
-    ns = scene_dir / "dslr" / "nerfstudio"
-    ns.mkdir(parents=True)
-    # the JSON's world is the scan frame with rows (y, x, -z), as ScanNet++ writes it; the boxes stay in the scan frame
-    (ns / "transforms_undistorted.json").write_text(json.dumps(cl.transforms_json(room, world=cl.SCANNETPP_JSON, applied=False,
-                                                                                  camera_model="PINHOLE")))
-    (scene_dir / "scans").mkdir()
-    (scene_dir / "scans" / "segments_anno.json").write_text(json.dumps(cl.segments_anno(room)))
+    scene_dir = cl.write_scannetpp_dslr(tmp_path / "0a5c013435", room)  # as ScanNet++ publishes it
     assert detect_layout(scene_dir) == "scannetpp"
     with pytest.raises(FileFormatError, match="ScanNet\\+\\+ ships no Gaussians"):
         import_scene(scene_dir, None, progress=False)

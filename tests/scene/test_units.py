@@ -156,14 +156,7 @@ def test_too_few_labelled_objects_say_the_estimate_is_unavailable(tmp_path: Path
 
 def test_scannetpp_is_metric_by_construction_and_not_second_guessed(tmp_path: Path, room) -> None:
     odd = in_file_units(room, 0.5)  # a ScanNet++ folder whose boxes are twice too large: stated metric, still imported
-    scene_dir = tmp_path / "0a5c013435"
-    ns = scene_dir / "dslr" / "nerfstudio"
-    ns.mkdir(parents=True)
-    # as ScanNet++ publishes it: the JSON's world is the scan frame with rows (y, x, -z), the boxes in the scan frame
-    (ns / "transforms_undistorted.json").write_text(json.dumps(cl.transforms_json(odd, world=cl.SCANNETPP_JSON, applied=False,
-                                                                                  camera_model="PINHOLE")))
-    (scene_dir / "scans").mkdir()
-    (scene_dir / "scans" / "segments_anno.json").write_text(json.dumps(cl.segments_anno(odd)))
+    scene_dir = cl.write_scannetpp_dslr(tmp_path / "0a5c013435", odd)  # as ScanNet++ publishes it
     cl.write_inria_output(scene_dir / "gs", odd.transformed(cl.SCANNETPP_JSON[:3, :3], np.zeros(3)), with_colmap=False)
     _, report = import_scene(scene_dir, tmp_path / "scene", progress=False)
     assert report.units.kind == "metric" and report.metres_per_unit == 1.0 and "ScanNet++" in report.units.how
