@@ -67,15 +67,9 @@ def _shifted(boxes_json: Path, metres: float, unit: float) -> str:
 
 
 def room_and_tabletop(root: Path) -> None:
-    from tests.scene import capture_layouts as cl
-    from tests.scene.unit_captures import MPU, in_file_units, tabletop, write_colmap_project
+    from tests.scene.unit_captures import MPU, write_unit_fixtures
 
-    room = in_file_units(cl.truth_room(seed=5, gaussians=10_000, views=8))
-    src = cl.write_inria_output(root / "room", room)
-    (root / "room" / "holi.json").write_text(json.dumps(cl.holi_spatial_json(room, {})))
-    table = write_colmap_project(root / "table", in_file_units(tabletop()))
-    for name, folder, boxes in (("room (INRIA + COLMAP + Holi-Spatial JSON)", src, root / "room" / "holi.json"),
-                                ("object on a table (COLMAP project)", table, table / "instances.json")):
+    for name, folder, boxes in write_unit_fixtures(root):
         done = _attempt("correct (--metres-per-unit)", lambda: import_scene(folder, None, instances=boxes, metres_per_unit=MPU,
                                                                              progress=False))
         if done is not None:

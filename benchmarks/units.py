@@ -20,7 +20,6 @@ Prints numbers only (never part of the test run):
 from __future__ import annotations
 
 import argparse
-import json
 import re
 import sys
 import tempfile
@@ -69,17 +68,10 @@ def sweep(rooms: int) -> None:
 
 def fixtures() -> None:
     from spacedg.scene.importer import import_scene
-    from tests.scene import capture_layouts as cl
-    from tests.scene.unit_captures import MPU, in_file_units, tabletop, write_colmap_project
+    from tests.scene.unit_captures import MPU, write_unit_fixtures
 
     with tempfile.TemporaryDirectory(prefix="spacedg-bench-units-") as tmp:
-        root = Path(tmp)
-        room = in_file_units(cl.truth_room(seed=5, gaussians=10_000, views=8))
-        src = cl.write_inria_output(root / "room", room)
-        (root / "room" / "holi.json").write_text(json.dumps(cl.holi_spatial_json(room, {})))
-        table = write_colmap_project(root / "table", in_file_units(tabletop()))
-        for name, path, instances in (("room (INRIA + COLMAP + Holi-Spatial)", src, root / "room" / "holi.json"),
-                                      ("object on a table (COLMAP project)", table, table / "instances.json")):
+        for name, path, instances in write_unit_fixtures(Path(tmp)):
             print(f"\n[{name}] truth {MPU} m per unit")
             try:
                 import_scene(path, None, instances=instances, progress=False)

@@ -67,3 +67,15 @@ def write_colmap_project(root: Path, scene: Scene) -> Path:
     write_ply(root / "point_cloud.ply", cl.without_ids(scene.gaussians))
     (root / "instances.json").write_text(json.dumps(cl.holi_spatial_json(scene, {})))
     return root
+
+
+def write_unit_fixtures(root: Path, mpu: float = MPU) -> list[tuple[str, Path, Path]]:
+    """The two captures without metric scale (``mpu`` metres per file unit), written under ``root``:
+    a room (INRIA output + COLMAP model + Holi-Spatial JSON) and an object on a table (COLMAP
+    project). Returns ``(name, source folder, instances JSON)`` for each."""
+    room = in_file_units(cl.truth_room(seed=5, gaussians=10_000, views=8), mpu)
+    src = cl.write_inria_output(root / "room", room)
+    (root / "room" / "holi.json").write_text(json.dumps(cl.holi_spatial_json(room, {})))
+    table = write_colmap_project(root / "table", in_file_units(tabletop(), mpu))
+    return [("room (INRIA + COLMAP + Holi-Spatial JSON)", src, root / "room" / "holi.json"),
+            ("object on a table (COLMAP project)", table, table / "instances.json")]
