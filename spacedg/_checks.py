@@ -134,9 +134,8 @@ def require_homogeneous(matrix: np.ndarray, what: str, error: type[Exception] = 
 # ------------------------------------------------------------------ arguments of public calls
 # Each raises ``error`` (ParameterError by default) with "<argument> must be <what it accepts>,
 # got <what it got>"; ``argument`` names the call too, e.g. "SpaceDGDataset: split_fractions".
-def short_repr(value: object, limit: int = 80) -> str:
-    """``repr(value)`` cut to ``limit`` characters (for error messages)."""
-    return _short(value, limit)
+#: ``repr(value)`` cut to ``limit`` characters, for error messages (the public name of :func:`_short`).
+short_repr = _short
 
 
 def check_choice(value: object, argument: str, choices: tuple[str, ...] | list[str], error: type[Exception] | None = None) -> str:

@@ -351,10 +351,7 @@ def degrade_device(options: PipelineOptions) -> torch.device | None:
 
     if options.device is None:
         return torch.device("cpu")
-    try:
-        dev = torch.device(options.device)
-    except (RuntimeError, TypeError) as err:
-        raise ParameterError(f"unknown torch device {options.device!r}: {err}") from None
+    dev = torch.device(options.device)  # checked by PipelineOptions (spacedg.devices.resolve_device)
     if options.degrade_on == "auto" and dev.type == "cpu":
         return None
     return dev
@@ -497,7 +494,7 @@ def _check_call(views: Any, seed: Any, options: Any, where: str) -> tuple[tuple[
     check_int(seed, f"{where}: seed")
     if options is not None and not isinstance(options, PipelineOptions):
         raise ParameterError(f"{where}: options must be a PipelineOptions or None, got {short_repr(options)}")
-    return tuple(views), int(seed), options or PipelineOptions()
+    return views, int(seed), options or PipelineOptions()
 
 
 def degrade_variants(
