@@ -35,6 +35,7 @@ import numpy as np
 
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
+from spacedg.scene.io import MIN_UP_AGREEMENT, estimate_up
 from spacedg.scene.model import Instance, Scene
 
 __all__ = [
@@ -47,8 +48,8 @@ __all__ = [
 AXES: dict[str, np.ndarray] = {
     f"{s}{a}": (1.0 if s == "+" else -1.0) * np.eye(3)[i] for a, i in (("x", 0), ("y", 1), ("z", 2)) for s in "+-"
 }
-#: Cameras decide only when their image-up vectors' resultant length reaches this (same as estimate_up's).
-MIN_RESULTANT = 0.5
+#: Cameras decide only when their image-up vectors' resultant length reaches this (estimate_up's own threshold).
+MIN_RESULTANT = MIN_UP_AGREEMENT
 #: Cameras support an up within this angle of their mean image-up, and contradict it beyond CONTRADICT_DEG, degrees.
 SUPPORT_DEG, CONTRADICT_DEG = 30.0, 60.0
 #: A view is "within" an axis when its image-up is within this angle of it, degrees.
@@ -380,10 +381,10 @@ def _fallback_up(views: Mapping[str, Camera], instances: Sequence[Instance], mea
     """An up from the boxes alone when the cameras cannot tell: the axis most boxes have, the sign the floor gives."""
     if not instances:
         return None
+    _, _, centres = _image_ups(views)
     for axis in np.eye(3):
         if box_axes_evidence(instances, axis).verdict != "supports":
             continue
-        _, _, centres = _image_ups(views)
         for signed in (axis, -axis):
             if floor_evidence(instances, signed, means, centres).verdict == "supports":
                 return signed
@@ -436,7 +437,7 @@ def decide_up(
         return up, source, ev
     probe = camera_evidence(views, np.array([0.0, 0.0, 1.0])) if views else None
     if probe is not None and probe.resultant >= MIN_RESULTANT:
-        up = _mean_up(views)
+        up = estimate_up(views)
         ev = gather_up_evidence(views, instances, up, means=means, source=f"estimated from the -y axes of {len(views)} cameras")
         if ev.cameras.verdict == "supports" and ev.box_axes.verdict != "contradicts":
             return up, ev.source, ev
@@ -455,13 +456,6 @@ def decide_up(
         f"{where}cannot decide up: the cameras are undecided ({ev.cameras.reason}) and the boxes give no axis and sign "
         f"(box axes: {ev.box_axes.reason}; floor: {ev.floor.reason}). Pass --up with the axis that points up in the files "
         "(+z, -y, ... or x,y,z)", ev)
-
-
-def _mean_up(views: Mapping[str, Camera]) -> np.ndarray:
-    """The normalised mean image-up, computed as :func:`~spacedg.scene.io.estimate_up` does (same bytes)."""
-    axes = np.array([-cam.cam_to_world[:3, 1] for cam in views.values()])
-    mean = axes.mean(axis=0)
-    return mean / float(np.linalg.norm(mean))
 
 
 # --------------------------------------------------------------------------- reports

@@ -17,6 +17,7 @@ and an ``InvalidDataError``); every message names the file and the record.
 from spacedg.files import FileValueError
 from spacedg.scene.io._assemble import (
     GAUSSIAN_SUFFIXES,
+    MIN_UP_AGREEMENT,
     estimate_up,
     read_gaussians,
     read_views,
@@ -32,6 +33,7 @@ from spacedg.scene.io.splat import read_splat, write_splat
 __all__ = [
     "GAUSSIAN_SUFFIXES",
     "FileValueError",
+    "MIN_UP_AGREEMENT",
     "estimate_up",
     "load_scene",
     "quantize_for_ply",
