@@ -51,6 +51,7 @@ from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
 from spacedg.scene.lexicon import BUILTIN, LEXICON_ENV, Lexicon, head_noun, label_key, load_lexicon
 from spacedg.scene.model import Instance, Scene
+from spacedg.scene.up_evidence import box_up_axes
 
 __all__ = [
     "AGREE_FACTOR", "CAMERA_HEIGHT_M", "METRIC_INSTANCE_FORMATS", "METRIC_LAYOUTS", "MIN_FLOOR_BOXES", "MIN_OBJECTS",
@@ -219,19 +220,15 @@ def _sized_objects(instances: Iterable[Instance], lexicon: Lexicon) -> tuple[lis
 
 def _boxes_up(instances: Sequence[Instance], up: np.ndarray) -> np.ndarray:
     """``up`` refined by the boxes' own axes when they agree: annotated boxes stand upright, so each
-    has an axis along gravity (the one nearest ``up``); their mean is taken when it lies within 20°
-    of ``up`` and at least 60 % of those axes lie within 5° of it (an up estimated from a few cameras
-    can be off by 10°, which tilts a room's floor by tens of centimetres)."""
-    axes = []
-    for inst in instances:
-        dots = inst.box.rotation.T @ up
-        k = int(np.argmax(np.abs(dots)))
-        axes.append(inst.box.rotation[:, k] * math.copysign(1.0, dots[k]))
+    has an axis along gravity (the one nearest ``up``, :func:`~spacedg.scene.up_evidence.box_up_axes`);
+    their mean is taken when it lies within 20° of ``up`` and at least 60 % of those axes lie within 5°
+    of it (an up estimated from a few cameras can be off by 10°, which tilts a room's floor by tens of centimetres)."""
+    axes = box_up_axes(instances, up)
     mean = np.sum(axes, axis=0)
     if not np.linalg.norm(mean) > 0:
         return up
     mean /= np.linalg.norm(mean)
-    close = np.array(axes) @ mean >= math.cos(math.radians(5.0))
+    close = axes @ mean >= math.cos(math.radians(5.0))
     return mean if mean @ up >= math.cos(math.radians(20.0)) and close.mean() >= 0.6 else up
 
 

@@ -35,12 +35,11 @@ import numpy as np
 
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
-from spacedg.scene.io import MIN_UP_AGREEMENT, estimate_up
 from spacedg.scene.model import Instance, Scene
 
 __all__ = [
-    "AXES", "BoxAxesEvidence", "CameraEvidence", "FloorEvidence", "UpContradictedError", "UpEvidence", "UpUndecidedError",
-    "axis_name", "camera_evidence", "box_axes_evidence", "decide_up", "evidence_report", "floor_evidence", "gather_up_evidence",
+    "AXES", "MIN_UP_AGREEMENT", "BoxAxesEvidence", "CameraEvidence", "FloorEvidence", "UpContradictedError", "UpEvidence", "UpUndecidedError",
+    "axis_name", "camera_evidence", "box_axes_evidence", "box_up_axes", "estimate_up", "decide_up", "evidence_report", "floor_evidence", "gather_up_evidence",
     "scene_up_evidence",
 ]
 
@@ -48,6 +47,8 @@ __all__ = [
 AXES: dict[str, np.ndarray] = {
     f"{s}{a}": (1.0 if s == "+" else -1.0) * np.eye(3)[i] for a, i in (("x", 0), ("y", 1), ("z", 2)) for s in "+-"
 }
+#: Smallest length of the mean camera −y axis accepted as an up estimate (1 = all agree).
+MIN_UP_AGREEMENT = 0.5
 #: Cameras decide only when their image-up vectors' resultant length reaches this (estimate_up's own threshold).
 MIN_RESULTANT = MIN_UP_AGREEMENT
 #: Cameras support an up within this angle of their mean image-up, and contradict it beyond CONTRADICT_DEG, degrees.
@@ -307,15 +308,48 @@ def floor_evidence(
     return FloorEvidence(n, resting_up, resting_down, slab_low, slab_high, floor_h, above, verdict, reason)
 
 
+def estimate_up(views: Mapping[str, Camera]) -> np.ndarray:
+    """Up estimated as the normalised mean of the cameras' −y axes (image "up" in the world).
+
+    Photographs are mostly taken upright, so the image's up direction averages to gravity's.
+    Raises when there are no cameras or their up axes disagree (mean length <
+    :data:`MIN_UP_AGREEMENT`), e.g. for a camera looking straight down: pass ``up`` then.
+    """
+    if not views:
+        raise InvalidDataError("cannot estimate up without cameras; pass up=(x, y, z)")
+    axes = np.array([-cam.cam_to_world[:3, 1] for cam in views.values()])
+    mean = axes.mean(axis=0)
+    norm = float(np.linalg.norm(mean))
+    if norm < MIN_UP_AGREEMENT:
+        raise InvalidDataError(
+            f"cannot estimate up: the {len(views)} cameras' up axes disagree (mean length {norm:.2f} < {MIN_UP_AGREEMENT}); pass up=(x, y, z)"
+        )
+    return mean / norm
+
+
+def box_up_axes(instances: Sequence[Instance], up: np.ndarray) -> np.ndarray:
+    """(n, 3): every box's own axis nearest the line of ``up`` (a unit vector), signed to point along ``up``.
+
+    The one place the boxes' axes are matched to an up: :func:`box_axes_evidence` counts how many lie along
+    a line, :func:`spacedg.scene.units` refines a floor's up with their mean."""
+    if not instances:
+        return np.zeros((0, 3))
+    rotations = np.array([inst.box.rotation for inst in instances])  # (n, 3, 3), columns = box axes
+    dots = np.einsum("nij,i->nj", rotations, np.asarray(up, dtype=np.float64))
+    rows = np.arange(len(rotations))
+    nearest = np.argmax(np.abs(dots), axis=1)
+    signs = np.where(dots[rows, nearest] < 0.0, -1.0, 1.0)
+    return rotations[rows, :, nearest] * signs[:, None]
+
+
 def box_axes_evidence(instances: Sequence[Instance], up: np.ndarray) -> BoxAxesEvidence:
     """The boxes' own axes' verdict on the axis of ``up``; see :class:`BoxAxesEvidence`."""
     if not instances:
         return BoxAxesEvidence(0, 0.0, None, 0.0, "undecided", "no boxes")
     cos_along = math.cos(math.radians(BOX_AXIS_DEG))
-    rotations = np.array([inst.box.rotation for inst in instances])  # (n, 3, 3), columns = box axes
 
     def share(direction: np.ndarray) -> float:
-        return float(np.mean(np.abs(np.einsum("nij,i->nj", rotations, direction)).max(axis=1) >= cos_along))
+        return float(np.mean(box_up_axes(instances, direction) @ direction >= cos_along))
 
     along = share(up)
     others = [(share(np.eye(3)[i]), "xyz"[i]) for i in range(3) if abs(float(up[i])) < math.cos(math.radians(45.0))]
