@@ -90,6 +90,7 @@ from spacedg.scene.io.scannetpp import (
     read_segments_anno,
     scannetpp_cameras,
 )
+from spacedg.scene.io.scannetpp_iphone import POSE_FILE, arkit_agreement
 from spacedg.scene.labelling import AssignmentReport, MaskSource, assign_instances, load_mask
 from spacedg.scene.model import Instance, Scene
 from spacedg.scene.units import UnitDecision
@@ -270,6 +271,8 @@ class _Parts:
     notes: list[str]
     #: (4×4 rigid world change, the parts it applies to: "views", "gaussians", "instances") into the scan frame.
     to_scan: tuple[np.ndarray, frozenset[str]] | None = None
+    #: ScanNet++'s iPhone ARKit poses, compared with the (COLMAP-refined) cameras used when both exist.
+    arkit: Path | None = None
 
 
 def _inria_cameras(src: Path, notes: list[str]) -> CameraFiles:
@@ -295,6 +298,7 @@ def _resolve_parts(
     notes: list[str] = []
     default_up, up_note = None, ""
     to_scan: tuple[np.ndarray, frozenset[str]] | None = None
+    arkit: Path | None = None
     given = None if cameras is None else find_cameras(cameras)
     if layout.name == "inria":
         gpath = gaussians or latest_point_cloud(src)
@@ -311,24 +315,8 @@ def _resolve_parts(
         files = given or find_cameras(src if src.is_file() else src / "transforms.json")
         gpath = gaussians or _single_gaussians_file(src if src.is_dir() else src.parent, "a nerfstudio transforms.json")
     elif layout.name == "scannetpp":
-        files = given or find_cameras(scannetpp_cameras(src, device))
-        if instances is None and (src / "scans" / "segments_anno.json").is_file():
-            instances = src / "scans" / "segments_anno.json"
-        if gaussians is None:
-            found = sorted(src.glob("**/point_cloud/iteration_*/point_cloud.ply"))
-            if not found:
-                raise FileFormatError(
-                    f"{src}: ScanNet++ ships no Gaussians: train them on the DSLR images (INRIA, gsplat or splatfacto) and pass --gaussians FILE"
-                )
-            gpath = latest_point_cloud(found[-1].parents[2])
-            notes.append(f"Gaussians found in the scene folder: {gpath}")
-        else:
-            gpath = gaussians
+        files, gpath, instances, to_scan, arkit = _scannetpp_parts(src, given, gaussians, instances, device, notes)
         default_up, up_note = np.array([0.0, 0.0, 1.0]), "ScanNet++ scan frame (z up)"
-        if given is None and files.kind == "nerfstudio":
-            to_scan = (NERFSTUDIO_FROM_SCAN, frozenset({"views", "gaussians"}))
-            notes.append("cameras and Gaussians taken from ScanNet++'s nerfstudio world (rows y, x, -z) back to the scan frame "
-                         "of the mesh and segments_anno.json")
     elif layout.name == "holi-spatial":
         gpath = gaussians or latest_point_cloud(src)
         files = given or _inria_cameras(src, notes)
@@ -349,7 +337,34 @@ def _resolve_parts(
         dataparser = gpath.parent / "dataparser_transforms.json"
         notes.append(f"found {dataparser.name} next to the Gaussians: they are a splatfacto export in nerfstudio's normalised frame")
     applied = read_applied_transform(files.read_path) if files.kind == "nerfstudio" else None
-    return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes, to_scan)
+    return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes, to_scan, arkit)
+
+
+def _scannetpp_parts(
+    src: Path, given: CameraFiles | None, gaussians: Path | None, instances: Path | None, device: str, notes: list[str],
+) -> tuple[CameraFiles, Path, Path | None, tuple[np.ndarray, frozenset[str]] | None, Path | None]:
+    """A ScanNet++ scene folder's cameras, Gaussians, boxes, world change and ARKit file to compare."""
+    files = given or find_cameras(scannetpp_cameras(src, device))
+    if instances is None and (src / "scans" / "segments_anno.json").is_file():
+        instances = src / "scans" / "segments_anno.json"
+    if gaussians is None:
+        found = sorted(src.glob("**/point_cloud/iteration_*/point_cloud.ply"))
+        if not found:
+            raise FileFormatError(
+                f"{src}: ScanNet++ ships no Gaussians: train them on the DSLR images (INRIA, gsplat or splatfacto) and pass --gaussians FILE"
+            )
+        gaussians = latest_point_cloud(found[-1].parents[2])
+        notes.append(f"Gaussians found in the scene folder: {gaussians}")
+    to_scan = None
+    if given is None and files.kind == "nerfstudio":
+        to_scan = (NERFSTUDIO_FROM_SCAN, frozenset({"views", "gaussians"}))
+        notes.append("cameras and Gaussians taken from ScanNet++'s nerfstudio world (rows y, x, -z) back to the scan frame "
+                     "of the mesh and segments_anno.json")
+    arkit = src / "iphone" / POSE_FILE
+    if files.kind == "scannetpp-iphone":
+        notes.append(f"cameras: ARKit aligned_pose of {files.path} (scan frame, OpenCV axes); no iphone/nerfstudio or "
+                     "iphone/colmap (bundle-adjusted poses, preferred when present) here")
+    return files, gaussians, instances, to_scan, arkit if device == "iphone" and files.kind != "scannetpp-iphone" and arkit.is_file() else None
 
 
 def _holi_frame(src: Path, boxes: Path, notes: list[str]) -> tuple[np.ndarray | None, str, tuple[np.ndarray, frozenset[str]] | None]:
@@ -535,6 +550,8 @@ def _read_capture(
     mask_source = _rle_source(parts, instances_format, found, views, assign, masks, parts.notes)
     if parts.to_scan is not None:
         views, gauss, found = _to_scan(parts.to_scan, views, gauss, found)
+    if parts.arkit is not None:
+        parts.notes.append(arkit_agreement(views, parts.arkit))
     return _Capture(gauss, views, test_views, found, instances_format, mask_source, seconds)
 
 
