@@ -71,8 +71,9 @@ class QABuildConfig:
         max_scan: at most this many candidates examined per family.
         pool_factor: candidates pooled per sub type, as a multiple of ``per_sub_type``, for
             answer balancing (1 = no balancing: the first ``per_sub_type`` in seeded order).
-        visibility_size: reduced render size (width, height) px for instance visibility.
-        covisibility_size: reduced render size (width, height) px for covisibility.
+        visibility_size: reduced render size (width, height) px for instance visibility: a bounding box,
+            each view rendered at its own aspect inside it (16:9 views at 160×90).
+        covisibility_size: reduced render size (width, height) px for covisibility (a bounding box, likewise).
     """
 
     seed: int = 0
