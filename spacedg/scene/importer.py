@@ -197,6 +197,11 @@ def detect_capture(src: Path) -> CaptureLayout:
         raise FileFormatError(f"{src}: not a Gaussians file ({', '.join(GAUSSIAN_SUFFIXES)}) nor a transforms.json")
     if not src.is_dir():
         raise FileFormatError(f"{src}: no such file or folder")
+    if (src / "scene.json").is_file():
+        raise FileFormatError(
+            f"{src}: already a spacedg scene folder (scene.json + gaussians.ply): every command takes it as it is, there is "
+            f"nothing to import; `spacedg scenes info {src}` prints its units, up check and boxes"
+        )
     if is_release_scene(src):
         return CaptureLayout("holi-spatial")
     if is_inria_output(src):
@@ -210,7 +215,8 @@ def detect_capture(src: Path) -> CaptureLayout:
         return CaptureLayout("colmap", model)
     raise FileFormatError(
         f"{src}: no known layout: looked for an INRIA output (point_cloud/iteration_*/point_cloud.ply), a ScanNet++ scene "
-        "(dslr/nerfstudio, scans/segments_anno.json), a nerfstudio transforms.json, a COLMAP model (sparse/0 or cameras.bin/txt); "
+        "(dslr/nerfstudio, iphone/nerfstudio, iphone/pose_intrinsic_imu.json, scans/segments_anno.json), a Holi-Spatial released "
+        "scene (mesh/tsdf_fusion_post.ply), a nerfstudio transforms.json, a COLMAP model (sparse/0 or cameras.bin/txt); "
         "pass --format, or a Gaussians file with --cameras"
     )
 
