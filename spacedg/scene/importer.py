@@ -20,7 +20,8 @@ What it does, in order (each step reported in :class:`ImportReport`):
    against the labelled objects' typical sizes (refused when implausible); recorded in ``metadata["units"]``.
 3. **Up**: given (``"+z"``, ``"-y"``, ``"0,0,1"``), ScanNet++'s +z, or estimated from the cameras (else the
    boxes), and verified against the capture's evidence (:mod:`spacedg.scene.up_evidence`): a contradicted up is
-   refused unless ``trust_up``; the evidence is kept in ``metadata.up_evidence``.
+   refused unless ``trust_up``; the evidence is kept in ``metadata.up_evidence``. Up, units and the box fill
+   are decided by :mod:`spacedg.scene.capture_checks`, which :func:`~spacedg.scene.io.scene_from_files` runs too.
 4. **Frame check** (:mod:`spacedg.scene.frame_check`): refused with the disagreeing parts and the
    probable cause unless ``frame_check="warn"``.
 4b. **Box fill** (:mod:`spacedg.scene.box_fill`): every box must hold its object; an empty or
