@@ -77,10 +77,9 @@ def test_contradicted_up_refused_alike_and_trusted_alike(tmp_path: Path, room: S
     assert auto.metadata["units"]["kind"] == "unknown" and "not verified" in auto.metadata["units"]["how"] and not auto.gaussians_loaded
 
 
-def test_misplaced_box_refused_by_the_api_as_by_the_import(tmp_path: Path) -> None:
-    room = cl.truth_room(seed=5, gaussians=20_000, views=4)  # test_box_fill's room: its cup holds enough Gaussians
-    cup = 16  # a cup on the table of truth_room(seed=5)
-    moved = [replace(i, box=i.box.transformed(np.eye(3), np.array([0.0, -0.07, 0.0]))) if i.id == cup else i for i in room.instances]
+def test_misplaced_box_refused_by_the_api_as_by_the_import(tmp_path: Path, room: Scene) -> None:
+    cup = 16  # a cup on the table of truth_room(seed=5), moved off its object (15 cm: it holds few Gaussians at 10k)
+    moved = [replace(i, box=i.box.transformed(np.eye(3), np.array([0.0, -0.15, 0.0]))) if i.id == cup else i for i in room.instances]
     _, ply, colmap, _ = _write(tmp_path, room)
     holi = tmp_path / "moved.json"
     holi.write_text(json.dumps(cl.holi_spatial_json(Scene(room.id, room.gaussians, room.views, moved, room.up, None, {}), {})))
