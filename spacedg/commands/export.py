@@ -84,16 +84,12 @@ def run(args: argparse.Namespace) -> int:
     """
     from spacedg.data.chain import Chain, split_chains
     from spacedg.data.dataset import SpaceDGDataset
-    from spacedg.data.export import (
-        DEFAULT_SHARD_SIZE,
-        export_bench,
-        parse_shard,
-        shard_from_env,
-    )
+    from spacedg.data.export import DEFAULT_SHARD_SIZE, export_bench
+    from spacedg.data.shards import resolve_shard
     from spacedg.qa.index import QABuildConfig
 
     # every flag is checked before the (slow) dataset construction
-    shard = shard_from_env(os.environ) if args.shard.strip().lower() == "env" else parse_shard(args.shard)
+    shard = resolve_shard(args.shard, os.environ)
     shard_size = DEFAULT_SHARD_SIZE if args.shard_size is None else args.shard_size
     size = args.image_size
     fractions = _fractions(args)

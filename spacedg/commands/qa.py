@@ -32,6 +32,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     build.add_argument("--per-sub-type", type=_args.whole(1), default=25, help="records per sub_question_type and family per scene (default 25)")
     build.add_argument("--force", action="store_true", help="rebuild even when the index is up to date")
+    build.add_argument("--shard", default="0/1",
+                       help="i/n: build the scenes k (in sorted order) with k %% n == i, for n jobs on other machines; 'env' reads "
+                       "RANK/WORLD_SIZE (torchrun), SLURM_ARRAY_TASK_ID/SLURM_ARRAY_TASK_COUNT or SLURM_PROCID/SLURM_NTASKS (default 0/1)")
+    build.add_argument("--jobs", type=_args.whole(1), default=None,
+                       help="processes, one scene each (default: min(scenes, cores) on the CPU, 1 with --device cuda; "
+                       "1 = serially in this process); each renders with cores // jobs threads")
     _args.add_backend_arguments(build, "renderer of visibility and covisibility")
 
     preview = _args.add_command(
@@ -74,29 +80,46 @@ def _build(args: argparse.Namespace) -> int:
     registered family), the one SpaceDGDataset, export and review read. With --families a,b: a selection
     index <scene id>.qa.a+b.jsonl (names sorted, joined by '+') written beside the full index, which is
     never replaced; its records equal that selection's records in a full index built with the same
-    settings.
+    settings. --shard i/n builds this job's share of the scenes; --jobs N builds N scenes at once (one
+    process each); the index files are the same bytes whichever split (spacedg.qa.jobs).
     """
-    from spacedg.commands.scenes import _scene_dirs
-    from spacedg.qa.build import build_scene_index
-    from spacedg.qa.index import QABuildConfig
+    import os
 
+    from spacedg.commands.scenes import _scene_dirs
+    from spacedg.data.shards import chunk_ids, resolve_shard
+    from spacedg.data.workers import pool_plan
+    from spacedg.qa.index import QABuildConfig
+    from spacedg.qa.jobs import build_indexes
+
+    shard = resolve_shard(args.shard, os.environ)
     if args.out is not None:
         _args.output_folder("--out", args.out)
     config = QABuildConfig(seed=args.seed, families=_family_names(args.families), per_sub_type=args.per_sub_type)
+    every = _scene_dirs(args.scenes)
+    mine = [every[k] for k in chunk_ids(len(every), 1, shard)]
+    on_gpu = args.device not in (None, "cpu")
+    plan = pool_plan(len(mine), jobs=1 if on_gpu and args.jobs is None else args.jobs)
+    tqdm.write(f"shard {shard[0]}/{shard[1]}: {len(mine)} of {len(every)} scene(s); {plan.processes} process(es) x {plan.threads} thread(s)")
     tqdm.write(f"{'scene':<16} {'records':>8} {'visibility s':>12} {'covis s':>8} {'generate s':>10} {'q/s':>8}  index")
     total = 0
     start = time.perf_counter()
-    for folder in tqdm(_scene_dirs(args.scenes), desc="qa build", unit="scene"):
-        result = build_scene_index(folder, config, out_dir=args.out, force=args.force, backend=args.backend, device=args.device)
-        s = result.seconds
-        gen = s.get("generate_s", 0.0)
-        rate = f"{len(result.records) / gen:,.0f}" if gen > 0 and not result.reused else "-"
-        note = "reused" if result.reused else ""
-        tqdm.write(f"{result.scene_id:<16} {len(result.records):>8} {s.get('visibility_s', 0):>12.2f} {s.get('covisibility_s', 0):>8.2f} "
-              f"{gen:>10.3f} {rate:>8}  {result.path} {note}")
-        total += len(result.records)
+    rows = build_indexes(mine, config, out_dir=args.out, force=args.force, backend=args.backend, device=args.device,
+                         jobs=plan.processes, threads=plan.threads, progress=plan.processes == 1)
+    for row in tqdm(rows, total=len(mine), desc="qa build", unit="scene"):
+        _print_row(row)
+        total += row.records
     print(f"{total} records in {time.perf_counter() - start:.1f} s")
     return 0
+
+
+def _print_row(row) -> None:
+    """One line of the build table for a :class:`~spacedg.qa.jobs.BuildRow`."""
+    s = row.seconds
+    gen = s.get("generate_s", 0.0)
+    rate = f"{row.records / gen:,.0f}" if gen > 0 and not row.reused else "-"
+    note = "reused" if row.reused else ""
+    tqdm.write(f"{row.scene_id:<16} {row.records:>8} {s.get('visibility_s', 0):>12.2f} {s.get('covisibility_s', 0):>8.2f} "
+               f"{gen:>10.3f} {rate:>8}  {row.path} {note}")
 
 
 def _family_names(text: str) -> tuple[str, ...]:
