@@ -79,3 +79,19 @@ def test_qa_mode_passes_through_or_warns() -> None:
     assert made is None or made.mode == "train"
     with pytest.raises(ParameterError, match="data.qa_mode"):
         build(compose_sft("data.qa_mode=dense").data, "data")
+
+
+def test_memory_of_the_papers_run_per_gpu() -> None:
+    """The 8B models built from their config.json have their published sizes; the documented table's
+    state is 16 bytes per trained and 4 per frozen parameter over 8 GPUs, and the run fits 80 GB."""
+    from spacedg.sft.memory import counts
+    from spacedg.sft.paper_models import INTERNVL3_5_8B, QWEN3_VL_8B, internvl3_5_8b, paper_rows, qwen3_vl_8b
+
+    for build_model, config, published in ((qwen3_vl_8b, QWEN3_VL_8B, 8.77e9), (internvl3_5_8b, INTERNVL3_5_8B, 8.5e9)):
+        model = build_model()
+        c = counts(model, lora_rank=None)
+        assert abs(c["vision"] + c["merger"] + c["language"] - published) < 0.01 * published
+        small, large = paper_rows(model, config["text_config"], tokens=(12_000, 32_768))
+        state = small["weights"] + small["grads"] + small["optimizer"]
+        assert abs(state - (16 * small["trained"] + 4 * small["frozen"]) / 8e9) < 1e-6
+        assert small["total"] < large["total"] < 40
