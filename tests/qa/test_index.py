@@ -100,7 +100,7 @@ def test_judge_drops_only_judged_ambiguous_references():
 def test_cli_build_and_stats(qa_room_dirs, tmp_path, capsys):
     out = tmp_path / "qa"
     argv = ["qa", "build", str(qa_room_dirs[0]), str(qa_room_dirs[1]), "--out", str(out),
-            "--families", "object_counting,object_existence_estimation", "--per-sub-type", "6"]
+            "--families", "object_counting,object_existence_estimation", "--per-sub-type", "6", "--jobs", "1"]
     assert main(argv) == 0
     text = capsys.readouterr().out
     # a family selection has its own index beside the (absent) full one
