@@ -274,8 +274,7 @@ class ResolvedDegradation:
                 isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in size)):
             raise ParameterError(f"provenance of {spec.name!r}: image_size must be [width, height] in whole pixels >= 1, got {size!r}")
         preset = entry.get("preset")
-        params = {**spec.recorded_defaults(), **entry["params"]} if isinstance(entry["params"], Mapping) else entry["params"]
-        return cls(spec, spec.validate_params(params), int(seed), None if preset is None else str(preset),
+        return cls(spec, spec.validate_params(entry["params"]), int(seed), None if preset is None else str(preset),
                    None if depth is None else float(depth), None if size is None else (int(size[0]), int(size[1])))
 
 

@@ -259,9 +259,9 @@ class ParamSpec:
         harsher: ``"higher"`` if larger values degrade more, ``"lower"`` if smaller values do,
             ``None`` if neither (structural parameters such as a sub-step count). Used to check
             that the severity presets are monotone.
-        recorded_default: for a parameter added after samples were recorded: the value a
-            provenance entry without it stands for (the behaviour before it existed); ``None``
-            = every provenance must give it.
+        recorded_default: for a parameter added after callers and samples were written: the
+            value a params mapping (or provenance entry) without it stands for, the behaviour
+            before it existed; ``None`` = it must be given.
     """
 
     name: str
@@ -352,11 +352,15 @@ def image_scale(width: int, height: int) -> float:
     return min(w, h) / float(min(REFERENCE_IMAGE_SIZE))
 
 
-def scale_pixels(value: float, scale: float, integer: bool = False) -> int | float:
+def scale_pixels(value: float, scale: float, integer: bool = False, power: int = 1) -> int | float:
     """A length of ``value`` pixels at the reference size, at an image ``scale`` times larger
-    (:func:`image_scale`). An integer is a window size: an odd window stays odd (its half-width
-    ``(value - 1) / 2`` is scaled and rounded, so a kernel keeps a centre pixel; never below 1),
-    an even one is rounded (never below 1)."""
+    (:func:`image_scale`): ``value · scale``. With ``power = -1`` a fraction of the image whose
+    result is stated in reference pixels (low_res's size factor: the reduced image keeps its
+    pixel count): ``value / scale``. An integer is a window size: an odd window stays odd (its
+    half-width ``(value - 1) / 2`` is scaled and rounded, so a kernel keeps a centre pixel;
+    never below 1), an even one is rounded (never below 1)."""
+    if power == -1:
+        return float(value) / float(scale)
     if not integer:
         return float(value) * float(scale)
     value = int(value)
@@ -375,15 +379,17 @@ class ParamRange:
     alike); :meth:`DegradationSpec.sample_params` draws from the range, then multiplies by
     ``D / REFERENCE_DEPTH_M`` (clamped to the parameter's hard limits).
 
-    ``per_size=True``: a length in pixels stated at :data:`REFERENCE_IMAGE_SIZE` that scales with
-    the output image (:func:`image_scale`, :func:`scale_pixels`), so one preset degrades a
-    1920 × 1080 and a 640 × 360 render of the same view alike.
+    ``per_size=True`` (= 1): a length in pixels (unit ``"px"``) stated at
+    :data:`REFERENCE_IMAGE_SIZE` that scales with the output image (:func:`image_scale`,
+    :func:`scale_pixels`), so one preset degrades a 1920 × 1080 and a 640 × 360 render of the
+    same view alike. ``per_size=-1``: a fraction of the image (unit ``"1"``) whose result is a
+    pixel count stated at the reference, so it scales inversely (low_res's ``scale``).
     """
 
     low: float
     high: float
     per_depth: bool = False
-    per_size: bool = False
+    per_size: int = 0
 
     def __post_init__(self) -> None:
         for side in ("low", "high"):
@@ -438,7 +444,7 @@ class ParamRange:
         """``value`` drawn from this range, at an image of ``image_size = (width, height)`` pixels."""
         if not self.per_size or image_size is None:
             return value
-        return scale_pixels(value, image_scale(*image_size), integer)
+        return scale_pixels(value, image_scale(*image_size), integer, -1 if self.per_size == -1 else 1)
 
 
 # --------------------------------------------------------- degradations
@@ -540,8 +546,11 @@ class DegradationSpec:
                         raise PluginError(str(err)) from None
                 if rng_.per_depth and (spec.integer or spec.unit != "m"):
                     raise PluginError(f"{where}: preset {preset!r}: only a parameter in metres may scale with scene depth (per_depth), not {pname!r}")
-                if rng_.per_size and spec.unit != "px":
-                    raise PluginError(f"{where}: preset {preset!r}: only a parameter in pixels may scale with the image size (per_size), not {pname!r}")
+                if rng_.per_size not in (0, 1, -1) or (rng_.per_size == 1 and spec.unit != "px") or (rng_.per_size == -1 and spec.unit != "1"):
+                    raise PluginError(
+                        f"{where}: preset {preset!r}: only a parameter in pixels may scale with the image size (per_size=True), "
+                        f"and only a dimensionless fraction inversely (per_size=-1), not {pname!r} ({spec.unit}, per_size={rng_.per_size!r})"
+                    )
                 converted[pname] = (
                     ParamRange(int(rng_.low), int(rng_.high), per_size=rng_.per_size) if spec.integer
                     else ParamRange(float(rng_.low), float(rng_.high), rng_.per_depth, rng_.per_size)
@@ -588,7 +597,9 @@ class DegradationSpec:
 
         Raises :class:`ParameterError` for an unknown name (with close names suggested), a
         value that is not a finite number, a non-integer value for an integer parameter, a
-        value outside the hard limits, or (unless ``partial``) a missing parameter.
+        value outside the hard limits, or (unless ``partial``) a missing parameter. A missing
+        parameter with a ``recorded_default`` (one added after callers and records were written)
+        takes that value.
         """
         where = f"degradation {self.name!r}"
         if not isinstance(params, Mapping):
@@ -603,6 +614,7 @@ class DegradationSpec:
                 )
             out[key] = by_name[key].check(value, where)
         if not partial:
+            out.update({k: v for k, v in self.recorded_defaults().items() if k not in out})
             missing = [k for k in by_name if k not in out]
             if missing:
                 raise ParameterError(
@@ -615,9 +627,9 @@ class DegradationSpec:
         """Whether ``preset`` has a depth-relative range (``ParamRange(per_depth=True)``)."""
         return any(r.per_depth for r in self.presets.get(str(preset), {}).values())
 
-    def recorded_defaults(self) -> dict[str, float]:
-        """``{name: recorded_default}`` of the parameters that have one (:class:`ParamSpec`)."""
-        return {p.name: p.recorded_default for p in self.params if p.recorded_default is not None}
+    def recorded_defaults(self) -> dict[str, int | float]:
+        """``{name: recorded_default}`` of the parameters that have one (:class:`ParamSpec`), checked."""
+        return {p.name: p.check(p.recorded_default, f"degradation {self.name!r}") for p in self.params if p.recorded_default is not None}
 
     def scales_with_size(self, preset: str) -> bool:
         """Whether ``preset`` has a pixel range stated at the reference size (``ParamRange(per_size=True)``)."""

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 
-import cv2
 import numpy as np
 
 from spacedg.errors import ParameterError
@@ -65,6 +64,8 @@ def binned_capture(rgb: np.ndarray, *, pitch: float, exposure: float, clip: bool
     """
     if pitch == 1.0:
         return sensor_capture(rgb, exposure=exposure, key=key, clip=clip, **sensor)  # type: ignore[arg-type]
+    import cv2  # here: importing the plugin stays light (the entry point's import is timed)
+
     height, width = rgb.shape[:2]
     grid = photosite_grid(width, height, pitch)
     x = np.nan_to_num(np.asarray(rgb, dtype=np.float32), nan=0.0, posinf=SIGNAL_CAP, neginf=-SIGNAL_CAP)
