@@ -79,14 +79,15 @@ def psnr_u8(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def pixel_params(provenance: list[dict]) -> str:
-    """The pixel parameters a chain recorded (those scaled with the size), ``name.param=value``."""
+    """The parameters a chain recorded scaled with the image size (``param=value``; empty before
+    presets scaled with the size)."""
+    from spacedg.plugins import get_degradation
+
     out = []
     for entry in provenance:
         if "image_size" in entry:
-            from spacedg.plugins import get_degradation
-
-            units = {p.name: p.unit for p in get_degradation(entry["name"]).params}
-            out += [f"{k}={v:.3g}" for k, v in entry["params"].items() if units.get(k) == "px"]
+            ranges = get_degradation(entry["name"]).presets[entry["preset"]]
+            out += [f"{k}={v:.3g}" for k, v in entry["params"].items() if getattr(ranges[k], "per_size", 0)]
     return " ".join(out)
 
 
