@@ -103,6 +103,7 @@ __all__ = [
     "frames_nbytes",
     "replay",
     "sample_scene_depth",
+    "sample_image_size",
     "view_depth",
 ]
 
@@ -240,6 +241,13 @@ def _cameras(scene: Scene, views: Sequence[str], options: PipelineOptions) -> li
             "squeezed to one size, so a sample's views must share an aspect ratio (re-import the capture with one camera size)"
         )
     return cameras
+
+
+def sample_image_size(scene: Scene, views: Sequence[str], options: PipelineOptions) -> tuple[int, int]:
+    """``(width, height)`` pixels the views of a sample render at (they share one size): what
+    pixel presets stated at the reference size are resolved at. Reads cameras only."""
+    camera = _cameras(scene, views, options)[0]
+    return int(camera.width), int(camera.height)
 
 
 def _render_group(
@@ -537,8 +545,7 @@ def degrade_variants(
     depth = None
     if any(c.scales_with_depth(options.default_preset, options.mixture_preset) for c in parsed):
         depth = sample_scene_depth(scene, views)
-    camera = _cameras(scene, views, options)[0]  # the views of a sample share one size (checked there)
-    size = (int(camera.width), int(camera.height))
+    size = sample_image_size(scene, views, options)
     resolved = [c.resolve(seed, options.default_preset, options.mixture_preset, depth, size) for c in parsed]
     return _run_chains(scene, views, resolved, options, progress, render_cache)
 
