@@ -8,7 +8,7 @@ centre); sub-exposure k of K is centred at time ``s_k = (k + ½)/K − ½``.
   paper's reference), averaged.
 - Fast (``fast=True``, pinhole cameras): ``K`` keyframes and depth-reprojected path gathers
   (:func:`render_motion_keyframes`, kernels in :mod:`spacedg.render.motion_warp`). The
-  exposure is cut into ``K = clamp(max(ceil(D / KEYFRAME_PATH_PX), ceil(P / PARALLAX_PX)), 1,
+  exposure is cut into ``K = clamp(max(ceil(D / KEYFRAME_PATH_PX), ceil(sqrt(P / PARALLAX_PX))), 1,
   MAX_KEYFRAMES)`` (2 at least past ``SINGLE_KEYFRAME_PX``) equal
   intervals, D the largest on-screen path (pixels) of the visible Gaussians
   (:func:`motion_extent`) and P the translation parallax between near and far (:func:`motion_parallax`:
@@ -214,13 +214,16 @@ KEYFRAME_PATH_PX = 90.0
 #: … but two keyframes at least once D exceeds this (one keyframe over the plant's 88 px bench
 #: path gave 40.5 dB against N = 80, two 47.5 dB).
 SINGLE_KEYFRAME_PX = 60.0
-#: … and at most this much translation parallax (pixels) per interval: the spread of on-screen
-#: translation between the 10th and 90th percentile depths of the visible Gaussians
-#: (:func:`motion_parallax`). The warp takes what a pixel sees from its keyframe, so each depth
-#: edge leaves a band of the interval's parallax; on a close-up of the plant (0.25–0.6 units,
-#: bench motion) 2 keyframes at 11–14 px per interval gave 38.9–39.5 dB against N = 80 and one
-#: at 29 px 31.4 dB; 4 keyframes (5–7 px) gave 46–50 dB (``benchmarks/motion_closeup.py``).
-PARALLAX_PX = 9.0
+#: … and at least ``ceil(sqrt(P / PARALLAX_PX))`` keyframes for a translation parallax of P
+#: pixels: the spread of on-screen translation between the 10th and 90th percentile depths of
+#: the visible Gaussians (:func:`motion_parallax`). The warp takes what a pixel sees from its
+#: keyframe, so each depth edge leaves a band of the interval's parallax. Measured
+#: (``benchmarks/motion_closeup.py``, bench motion, 640×480): a close-up of the plant (P = 16–29
+#: px) gave 38.9–40.4 dB against N = 80 with 2 keyframes and 31.4 dB with one, 44–50 dB with 3–4;
+#: a room (P = 60–74 px, sparser depth edges) 38.5 dB with 2, 42.6–46.5 with 3, 47–50 with 4. A
+#: linear rule (one keyframe per 9 px) met both but gave rooms 7–8 keyframes (13–18× a clean
+#: render); the square root gives the plant 3 and rooms 5.
+PARALLAX_PX = 3.5
 #: … and the keyframe count's bounds (8 renders at most: the issue's budget).
 MIN_KEYFRAMES, MAX_KEYFRAMES = 1, 8
 #: Box-doubling passes before the path gather when an interval's longest path exceeds
@@ -240,8 +243,8 @@ def choose_keyframes(displacement_px: float, max_steps: int, parallax_px: float 
     """Keyframe count for a largest on-screen path of ``displacement_px`` pixels and a translation
     parallax of ``parallax_px`` pixels (:func:`motion_parallax`) over the exposure."""
     count = max(math.ceil(displacement_px / KEYFRAME_PATH_PX), 2 if displacement_px > SINGLE_KEYFRAME_PX else 1)
-    if math.isfinite(parallax_px):
-        count = max(count, math.ceil(parallax_px / PARALLAX_PX))
+    if math.isfinite(parallax_px) and parallax_px > 0:
+        count = max(count, math.ceil(math.sqrt(parallax_px / PARALLAX_PX)))
     return int(min(max(count, MIN_KEYFRAMES), MAX_KEYFRAMES, max_steps))
 
 

@@ -159,5 +159,5 @@ def test_parallax_asks_for_more_keyframes_on_a_close_up() -> None:
     parallax = motion_parallax(g, cam, sideways)
     assert motion_parallax(g, cam, MotionBlur(translation=(0.0, 0.0, 0.0), rotation=(0.0, 0.1, 0.0))) == 0.0
     assert 70.0 * 0.3 * (1 / 1.6 - 1 / 2.8) < parallax < 70.0 * 0.3 * (1 / 1.5 - 1 / 3.2)  # box 1.5–1.6 m, wall 2.8–3.2 m
-    assert choose_keyframes(44.0, 80) == 1 and choose_keyframes(44.0, 80, 28.7) == math.ceil(28.7 / PARALLAX_PX) == 4
+    assert choose_keyframes(44.0, 80) == 1 and choose_keyframes(44.0, 80, 28.7) == math.ceil(math.sqrt(28.7 / PARALLAX_PX)) == 3
     assert choose_keyframes(5000.0, 80, 5000.0) == MAX_KEYFRAMES == 8 and choose_keyframes(44.0, 2, 28.7) == 2
