@@ -36,6 +36,11 @@ degrade alike; at 2 m (:data:`~spacedg.plugins.specs.REFERENCE_DEPTH_M`, a ScanN
 presets are the paper's numbers. The provenance records the resolved metres and
 ``scene_depth_m``: it reproduces the bytes without measuring anything.
 
+Image size. Presets whose pixels are stated at the reference image size (1752 × 1168, a ScanNet++
+DSLR frame: ``ParamRange(per_size=True)``) are resolved at the sample's output size, so a
+1920 × 1080 render area-downsampled to 640 × 360 matches a 640 × 360 render
+(``benchmarks/resolution.py``); the provenance records the pixels used and ``image_size``.
+
 Mixtures. The six recipes of the paper (:data:`spacedg.data.chain.MIXTURES`) are available by
 name: the primary degradation at the chain's default preset (``bench``) and the others at the
 milder ``mixture_preset`` (severity ``"2"`` by default).
@@ -98,6 +103,7 @@ __all__ = [
     "frames_nbytes",
     "replay",
     "sample_scene_depth",
+    "sample_image_size",
     "view_depth",
 ]
 
@@ -235,6 +241,13 @@ def _cameras(scene: Scene, views: Sequence[str], options: PipelineOptions) -> li
             "squeezed to one size, so a sample's views must share an aspect ratio (re-import the capture with one camera size)"
         )
     return cameras
+
+
+def sample_image_size(scene: Scene, views: Sequence[str], options: PipelineOptions) -> tuple[int, int]:
+    """``(width, height)`` pixels the views of a sample render at (they share one size): what
+    pixel presets stated at the reference size are resolved at. Reads cameras only."""
+    camera = _cameras(scene, views, options)[0]
+    return int(camera.width), int(camera.height)
 
 
 def _render_group(
@@ -532,7 +545,8 @@ def degrade_variants(
     depth = None
     if any(c.scales_with_depth(options.default_preset, options.mixture_preset) for c in parsed):
         depth = sample_scene_depth(scene, views)
-    resolved = [c.resolve(seed, options.default_preset, options.mixture_preset, depth) for c in parsed]
+    size = sample_image_size(scene, views, options)
+    resolved = [c.resolve(seed, options.default_preset, options.mixture_preset, depth, size) for c in parsed]
     return _run_chains(scene, views, resolved, options, progress, render_cache)
 
 
@@ -728,7 +742,8 @@ def degrade_image(
         covered = np.isfinite(aux["depth"]) & (aux["depth"] > 0) & (aux["alpha"] > 0.5)
         scene_depth = float(np.median(aux["depth"][covered])) if np.any(covered) else None
     parsed = Chain.parse(degradations)
-    chain = parsed.resolve(seed, default_preset, mixture_preset, scene_depth if parsed.scales_with_depth(default_preset, mixture_preset) else None)
+    depth_at = scene_depth if parsed.scales_with_depth(default_preset, mixture_preset) else None
+    chain = parsed.resolve(seed, default_preset, mixture_preset, depth_at, (int(image.shape[1]), int(image.shape[0])))
     raster = _by_stage(chain, Stage.RASTER)
     if raster:
         raise ParameterError(

@@ -36,7 +36,7 @@ from spacedg.data.chat import ANSWER_FORMATS, ANSWER_PROMPT, chat_messages
 from spacedg.errors import UnknownPluginError
 from spacedg.eval.bench import CLEAN, BenchRow
 from spacedg.plugins.registry import degradation_names, get_degradation
-from spacedg.plugins.specs import REFERENCE_DEPTH_M
+from spacedg.plugins.specs import REFERENCE_DEPTH_M, REFERENCE_IMAGE_SIZE
 
 __all__ = [
     "COT_STAGE1_PROMPT",
@@ -139,6 +139,8 @@ def _ranges_text(name: str, preset: str, scene_depth: float | None = None, prove
                     f"{written} at {_number(REFERENCE_DEPTH_M)} m)")
         elif span.per_depth and not provenance:
             text += f" at a scene depth of {_number(REFERENCE_DEPTH_M)} m, scaled with the scene's depth"
+        if span.per_size:  # pixels stated at the reference frame (the provenance holds the pixels used)
+            text += f" at a {REFERENCE_IMAGE_SIZE[0]}×{REFERENCE_IMAGE_SIZE[1]} image, scaled with its size"
         parts.append(text)
     return ", ".join(parts)
 

@@ -50,4 +50,4 @@ def test_metres_at_the_reference_and_for_a_foreign_bench() -> None:
 def test_a_chain_scales_only_its_scale_aware_steps() -> None:
     text = degradation_info(_row("haze:3+low_res", 5.0))
     assert "depth_ref = 8 m (scaled to the scene depth of 5 m; 4 m at 2.5 m)" in text
-    assert "low res (severity given as the rendering parameter ranges: scale in [0.02, 0.05])" in text
+    assert "low res (severity given as the rendering parameter ranges: scale in [0.02, 0.05] at a 1752×1168 image, scaled with its size)" in text

@@ -5,9 +5,10 @@ Both multiply linear light by a gain ``exposure`` and capture it with the shared
 They differ only in their data: the name, the ``exposure`` parameter (hard limits, harsher
 direction), the clip, the presets and the description. This module holds the rest:
 
-- :data:`SENSOR_PARAMS` (``k``, ``sigma_read``, ``read_model``, ``read_lambda``, after
+- :data:`SENSOR_PARAMS` (``k``, ``sigma_read``, ``read_model``, ``read_lambda``, ``pitch``, after
   ``exposure`` in every spec) and :data:`SENSOR_PRESET` (every preset fixes them at the sensor's
-  defaults, Gaussian read noise);
+  defaults, Gaussian read noise, one photosite per pixel of the 1752 × 1168 reference image:
+  ``pitch`` = 1 px there, scaled with the output, :mod:`._photosites`);
 - :class:`SensorExposure`: one such degradation from its data. Its plain function is
   :meth:`SensorExposure.capture`; its :attr:`~SensorExposure.spec` is photometric, linear stage,
   order 30 (the sensor, after the optics), needs nothing from the render, and its ``apply``
@@ -24,13 +25,13 @@ from typing import Any
 
 import numpy as np
 
+from spacedg.plugins.degradations._photosites import binned_capture
 from spacedg.plugins.degradations._sensor import (
     K_DEFAULT,
     READ_GAUSSIAN,
     READ_LAMBDA_DEFAULT,
     READ_TUKEY,
     SIGMA_READ_DEFAULT,
-    sensor_capture,
 )
 from spacedg.plugins.degradations.common import check_linear_rgb, stream_key
 from spacedg.plugins.specs import (
@@ -52,6 +53,8 @@ SENSOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("sigma_read", "1", "Read-noise standard deviation in normalised linear units (full scale = 1); 0 disables read noise.", low=0.0, high=1.0, harsher="higher"),
     ParamSpec("read_model", "1", "Read-noise shape: 0 = Gaussian (the paper's formula), 1 = Tukey lambda scaled to unit variance (ELD).", low=READ_GAUSSIAN, high=READ_TUKEY, integer=True),
     ParamSpec("read_lambda", "1", "Tukey-lambda shape of the read noise (read_model = 1): 0.14 ≈ normal, < 0 heavy-tailed, 0 logistic.", low=-0.45, high=1.0),
+    ParamSpec("pitch", "px", "Photosite side in output pixels: the noise is drawn per photosite and averaged over each pixel "
+              "(1 = one photosite per pixel; presets: 1 px at 1752×1168, scaled with the image).", low=1e-4, high=1e4, recorded_default=1.0),
 )
 
 #: Fixed sensor ranges every preset of the exposure degradations uses.
@@ -60,6 +63,7 @@ SENSOR_PRESET: dict[str, ParamRange] = {
     "sigma_read": ParamRange(SIGMA_READ_DEFAULT, SIGMA_READ_DEFAULT),
     "read_model": ParamRange(READ_GAUSSIAN, READ_GAUSSIAN),
     "read_lambda": ParamRange(READ_LAMBDA_DEFAULT, READ_LAMBDA_DEFAULT),
+    "pitch": ParamRange(1.0, 1.0, per_size=True),
 }
 
 
@@ -103,6 +107,7 @@ class SensorExposure:
         sigma_read: float = SIGMA_READ_DEFAULT,
         read_model: int = READ_GAUSSIAN,
         read_lambda: float = READ_LAMBDA_DEFAULT,
+        pitch: float = 1.0,
     ) -> np.ndarray:
         """Expose linear light by ``exposure``, add the sensor's noise (and clip if :attr:`clip`); returns new float32 (H, W, 3).
 
@@ -111,6 +116,7 @@ class SensorExposure:
             exposure: the gain, within the ``exposure`` parameter's hard limits.
             key: 63-bit noise key (``stream_key(rng)``).
             k, sigma_read, read_model, read_lambda: the sensor (:mod:`._sensor`; defaults: its defaults).
+            pitch: photosite side in pixels (:mod:`._photosites`; 1 = one per pixel, the plain sensor).
 
         Raises:
             InvalidDataError: ``rgb`` is not float32 (H, W, 3).
@@ -118,10 +124,10 @@ class SensorExposure:
         """
         rgb = check_linear_rgb(rgb, self.spec.name)
         p = self.spec.validate_params(
-            {"exposure": exposure, "k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": read_lambda}
+            {"exposure": exposure, "k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": read_lambda, "pitch": pitch}
         )
-        return sensor_capture(
-            rgb, exposure=p["exposure"], k=p["k"], sigma_read=p["sigma_read"], key=key,
+        return binned_capture(
+            rgb, pitch=p["pitch"], exposure=p["exposure"], k=p["k"], sigma_read=p["sigma_read"], key=key,
             read_model=int(p["read_model"]), read_lambda=p["read_lambda"], clip=self.clip,
         )
 
@@ -136,4 +142,10 @@ class SensorExposure:
         from spacedg.plugins.degradations import device
 
         p = self.spec.validate_params(params)
-        return device.sensor_apply(rgb, p, stream_key(rng), self.clip)
+        key = stream_key(rng)
+        if p["pitch"] != 1.0:  # photosites off the pixel grid: the host's resampling, the same bytes
+            import torch
+
+            host = rgb.detach().cpu().numpy().astype(np.float32, copy=False)
+            return torch.from_numpy(self.capture(host, key=key, **p)).to(rgb.device)
+        return device.sensor_apply(rgb, p, key, self.clip)

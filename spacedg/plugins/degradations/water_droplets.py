@@ -66,6 +66,15 @@ Presets: ``bench`` = the paper's table (scale [2.5, 4], radius [0.25, 0.75], str
 [0.3, 0.5], blur_sigma [2, 2.5], blur_kernel 9). Severities ``1`` … ``5`` keep scale in
 [2.5, 4] and raise radius, strength, blur_sigma and blur_kernel (5, 7, 9, 9, 11); ``4`` is
 close to bench.
+
+**Size-invariant** (decision): the drop field is already defined relative to the image (cells
+across the shorter side, radii as fractions of a cell, the refraction offset proportional to
+the radius), and it is drawn per cell, so the same ``rng`` gives the same drops at every size.
+The presets' ``blur_sigma`` and ``blur_kernel`` are pixels of the reference image
+(:data:`~spacedg.plugins.specs.REFERENCE_IMAGE_SIZE`, 1752 × 1168) and scale with the output's
+shorter side (``ParamRange(per_size=True)``; the kernel's half-width is scaled, so it stays
+odd): at 640 × 360 the bench blur is σ ≈ 0.6–0.8 px in a 3 px kernel. The provenance records
+the pixels used. Explicit values are pixels of the output, as before.
 """
 
 from __future__ import annotations
@@ -82,7 +91,7 @@ import numpy as np
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins.degradations.common import check_linear_rgb
 from spacedg.plugins.hookspecs import registering
-from spacedg.plugins.specs import Category, DegradationSpec, ParamSpec, Stage
+from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 from spacedg.render.threads import fork_safe
 
 __all__ = [
@@ -398,16 +407,24 @@ def apply_torch(rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng
     )
 
 
+def _preset(radius: tuple[float, float], strength: tuple[float, float], sigma: tuple[float, float], kernel: int) -> dict[str, ParamRange]:
+    """One preset: scale in [2.5, 4]; the blur's pixels stated at the reference image size (``per_size``)."""
+    return {
+        "scale": ParamRange(2.5, 4.0), "radius": ParamRange(*radius), "strength": ParamRange(*strength),
+        "blur_sigma": ParamRange(*sigma, per_size=True), "blur_kernel": ParamRange(kernel, kernel, per_size=True),
+    }
+
+
 SPEC = DegradationSpec(
     name=NAME, category=Category.METEOROLOGICAL, stage=Stage.LINEAR,
     params=(SCALE, RADIUS, STRENGTH, BLUR_SIGMA, BLUR_KERNEL),
     presets={
-        "bench": {"scale": (2.5, 4.0), "radius": (0.25, 0.75), "strength": (0.3, 0.5), "blur_sigma": (2.0, 2.5), "blur_kernel": 9},
-        "1": {"scale": (2.5, 4.0), "radius": (0.15, 0.25), "strength": (0.1, 0.2), "blur_sigma": (0.5, 1.0), "blur_kernel": 5},
-        "2": {"scale": (2.5, 4.0), "radius": (0.25, 0.4), "strength": (0.2, 0.3), "blur_sigma": (1.0, 1.5), "blur_kernel": 7},
-        "3": {"scale": (2.5, 4.0), "radius": (0.35, 0.55), "strength": (0.3, 0.4), "blur_sigma": (1.5, 2.0), "blur_kernel": 9},
-        "4": {"scale": (2.5, 4.0), "radius": (0.5, 0.75), "strength": (0.4, 0.5), "blur_sigma": (2.0, 2.5), "blur_kernel": 9},
-        "5": {"scale": (2.5, 4.0), "radius": (0.7, 0.9), "strength": (0.5, 0.7), "blur_sigma": (2.5, 3.0), "blur_kernel": 11},
+        "bench": _preset((0.25, 0.75), (0.3, 0.5), (2.0, 2.5), 9),
+        "1": _preset((0.15, 0.25), (0.1, 0.2), (0.5, 1.0), 5),
+        "2": _preset((0.25, 0.4), (0.2, 0.3), (1.0, 1.5), 7),
+        "3": _preset((0.35, 0.55), (0.3, 0.4), (1.5, 2.0), 9),
+        "4": _preset((0.5, 0.75), (0.4, 0.5), (2.0, 2.5), 9),
+        "5": _preset((0.7, 0.9), (0.5, 0.7), (2.5, 3.0), 11),
     },
     apply=apply,
     apply_torch=apply_torch,
