@@ -109,6 +109,7 @@ def haze(
         far_depth = surface_far_depth(depth, alpha)
     far = float(far_depth) if far_depth and np.isfinite(far_depth) and far_depth > 0 else (depth_ref or 1.0)
     beta = np.float32(density / (depth_ref if depth_ref > 0 else far))
+    far = depth_ref if depth_ref > 0 else far  # no surface: at the normalisation depth D (module docstring)
     cover = np.clip(np.nan_to_num(alpha, nan=0.0), 0.0, 1.0).astype(np.float32)
     d = np.where((depth > 0) & np.isfinite(depth), np.minimum(depth, _DEPTH_CAP), far).astype(np.float32)
     t_surface = np.exp(-beta * d)
