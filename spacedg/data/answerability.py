@@ -3,7 +3,8 @@
 A bench item whose named objects cannot be seen measures priors, not robustness. For each
 object a question names, in the view where the question says to find it, this module measures
 the contrast of its pixels against their surround in the **displayed** image (the item's 8-bit
-sRGB image, decoded to relative luminance) and calls the object *discernible* when both hold:
+sRGB image decoded to linear light ``Y``: its relative luminance, and each of its three colour
+channels) and calls the object *discernible* when, in the luminance or in one channel, both hold:
 
 1. **Weber contrast** ``C = |Y_o − Y_s| / (Y_s + f)`` is at least :data:`WEBER_THRESHOLD`
    (2 %). ``Y_o`` is the mean luminance of the object's pixels within a band of width ``w``
@@ -20,6 +21,11 @@ sRGB image, decoded to relative luminance) and calls the object *discernible* wh
    least :data:`ROSE_K` (5), ``σ`` the image's pixel noise (Immerkær's Laplacian estimate on the
    luminance; texture inflates it, so the test errs towards "not discernible"), ``n_o``, ``n_s``
    the pixels averaged. A step buried in sensor noise is not seen however large its mean.
+
+Colour: a red teapot in front of a grey veil of the same luminance is plainly seen; eyes detect
+an isoluminant colour step at lower cone contrast than a luminance step, so holding each linear
+channel (a stand-in for the cone classes) to the same 2 % is conservative. The record keeps the
+signal the object stood out in.
 
 Where the object is: the instance-id map of a render with the item's own lens (distortion moves
 objects) but without its blur (defocus and motion blur spread an object's light, not its
@@ -71,6 +77,7 @@ SURROUND_RATIO = 0.28
 _MIN_BAND_PX = 2
 _CACHE_ITEMS = 64  # id-map sets an object_id_maps cache keeps
 _LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float64)  # Rec. 709 / sRGB relative luminance
+_SIGNAL_NAMES = ("luminance", "red", "green", "blue")
 
 
 @dataclass(frozen=True)
@@ -81,6 +88,7 @@ class ObjectContrast:
         id: instance id. view: the view name. pixels: the object's pixels in the id map.
         weber: Weber contrast with the viewing flare (>= 0). snr: the step over its noise (Rose).
         discernible: ``weber >= WEBER_THRESHOLD and snr >= ROSE_K`` (False for an object of no pixels).
+        signal: where the object stands out most: ``"luminance"``, or a colour channel (``"red"``, …).
     """
 
     id: int
@@ -89,10 +97,11 @@ class ObjectContrast:
     weber: float
     snr: float
     discernible: bool
+    signal: str = "luminance"
 
     def to_dict(self) -> dict[str, Any]:
         return {"id": self.id, "view": self.view, "pixels": self.pixels, "weber": round(self.weber, 5),
-                "snr": round(min(self.snr, 1e6), 2), "discernible": self.discernible}
+                "snr": round(min(self.snr, 1e6), 2), "signal": self.signal, "discernible": self.discernible}
 
 
 @dataclass(frozen=True)
@@ -129,12 +138,13 @@ def named_objects(record: QARecord) -> list[tuple[str, tuple[int, ...]]]:
     return [(str(view), visible)] if visible else []
 
 
-def _luminance(image: np.ndarray) -> np.ndarray:
-    """Relative display luminance (white = 1) of a uint8 (H, W, 3) sRGB image."""
+def _signals(image: np.ndarray) -> np.ndarray:
+    """(H, W, 4) float64: relative display luminance (white = 1) and the three linear channels of a
+    uint8 (H, W, 3) sRGB image (the signals whose contrast :func:`object_contrast` measures)."""
     from spacedg.render.colour_cpu import decode_srgb
 
-    linear = decode_srgb(np.asarray(image, dtype=np.float32) / np.float32(255.0))
-    return np.asarray(linear, dtype=np.float64) @ _LUMA
+    linear = np.asarray(decode_srgb(np.asarray(image, dtype=np.float32) / np.float32(255.0)), dtype=np.float64)
+    return np.concatenate([(linear @ _LUMA)[:, :, None], linear], axis=2)
 
 
 def noise_sigma(luma: np.ndarray) -> float:
@@ -150,34 +160,51 @@ def noise_sigma(luma: np.ndarray) -> float:
     return float(np.sqrt(np.pi / 2.0) * np.abs(response).sum() / (6.0 * (w - 2) * (h - 2)))
 
 
-def object_contrast(luma: np.ndarray, mask: np.ndarray, sigma: float, valid: np.ndarray | None = None) -> tuple[float, float, int]:
-    """``(weber, snr, pixels)`` of the object ``mask`` in the luminance image ``luma`` (module docstring).
+def _regions(mask: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(band, ring)``: the object's pixels within ``w`` of its outline and the pixels within ``w``
+    outside it (``w = max(2, 0.28·√n)``), the ring limited to ``valid``."""
+    import cv2
+
+    width = max(_MIN_BAND_PX, SURROUND_RATIO * np.sqrt(mask.sum()))
+    u8 = mask.astype(np.uint8)
+    band = mask & (cv2.distanceTransform(u8, cv2.DIST_L2, 3) <= width)
+    ring = ~mask & (cv2.distanceTransform(1 - u8, cv2.DIST_L2, 3) <= width)
+    if valid is not None:
+        ring &= np.asarray(valid, dtype=bool)
+    return band, ring
+
+
+def object_contrast(signal: np.ndarray, mask: np.ndarray, sigma: float, valid: np.ndarray | None = None) -> tuple[float, float, int]:
+    """``(weber, snr, pixels)`` of the object ``mask`` in one (H, W) signal (luminance or a linear
+    channel, white = 1) whose pixel noise is ``sigma`` (module docstring).
 
     ``valid`` (optional) excludes pixels from the surround (outside a fisheye's image circle).
     An empty mask, or one with no surround, gives ``(0, 0, pixels)``.
     """
-    import cv2
-
     mask = np.asarray(mask, dtype=bool)
     n = int(mask.sum())
     if n == 0:
         return 0.0, 0.0, 0
-    width = max(_MIN_BAND_PX, SURROUND_RATIO * np.sqrt(n))
-    u8 = mask.astype(np.uint8)
-    inside = cv2.distanceTransform(u8, cv2.DIST_L2, 3)
-    outside = cv2.distanceTransform(1 - u8, cv2.DIST_L2, 3)
-    band = mask & (inside <= width)
-    ring = ~mask & (outside <= width)
-    if valid is not None:
-        ring &= np.asarray(valid, dtype=bool)
+    band, ring = _regions(mask, valid)
     n_o, n_s = int(band.sum()), int(ring.sum())
     if n_o == 0 or n_s == 0:
         return 0.0, 0.0, n
-    y_o, y_s = float(luma[band].mean()), float(luma[ring].mean())
+    y_o, y_s = float(signal[band].mean()), float(signal[ring].mean())
     step = abs(y_o - y_s)
-    weber = step / (y_s + VIEWING_FLARE)
     spread = max(sigma, 1e-12) * np.sqrt(1.0 / n_o + 1.0 / n_s)
-    return float(weber), float(step / spread), n
+    return float(step / (y_s + VIEWING_FLARE)), float(step / spread), n
+
+
+def _best_signal(signals: np.ndarray, sigmas: Sequence[float], mask: np.ndarray, valid: np.ndarray) -> tuple[float, float, int, str]:
+    """The signal (luminance, red, green, blue) in which the object stands out most: ``(weber, snr,
+    pixels, name)`` of the one with the largest ``min(weber / WEBER_THRESHOLD, snr / ROSE_K)``."""
+    best = (0.0, 0.0, int(mask.sum()), "luminance")
+    score = -1.0
+    for k, name in enumerate(_SIGNAL_NAMES):
+        weber, snr, pixels = object_contrast(signals[:, :, k], mask, sigmas[k], valid)
+        if min(weber / WEBER_THRESHOLD, snr / ROSE_K) > score:
+            score, best = min(weber / WEBER_THRESHOLD, snr / ROSE_K), (weber, snr, pixels, name)
+    return best
 
 
 def object_id_maps(
@@ -247,22 +274,22 @@ def groups_answerability(
             f"item_answerability: need uint8 (V, H, W, 3) images and V id maps for the {len(views)} view(s) {list(views)}, "
             f"got images {images.shape} and {len(id_maps)} id map(s)"
         )
-    lumas: dict[int, tuple[np.ndarray, float]] = {}
+    decoded: dict[int, tuple[np.ndarray, list[float]]] = {}
     objects: list[ObjectContrast] = []
     answerable = True
     for view, ids in groups:
         v = views.index(view)
         if id_maps[v].shape != images.shape[1:3]:
             raise ParameterError(f"item_answerability: id map {id_maps[v].shape} does not match image {images.shape[1:3]} of view {view!r}")
-        if v not in lumas:
-            luma = _luminance(images[v])
-            lumas[v] = (luma, noise_sigma(luma))
-        luma, sigma = lumas[v]
+        if v not in decoded:
+            signals = _signals(images[v])
+            decoded[v] = (signals, [noise_sigma(signals[:, :, k]) for k in range(signals.shape[2])])
+        signals, sigmas = decoded[v]
         found = False
         for i in ids:
-            weber, snr, pixels = object_contrast(luma, id_maps[v] == i, sigma, id_maps[v] >= -1)
+            weber, snr, pixels, signal = _best_signal(signals, sigmas, id_maps[v] == i, id_maps[v] >= -1)
             ok = bool(pixels > 0 and weber >= WEBER_THRESHOLD and snr >= ROSE_K)
-            objects.append(ObjectContrast(int(i), view, pixels, float(weber), float(snr), ok))
+            objects.append(ObjectContrast(int(i), view, pixels, weber, snr, ok, signal))
             found |= ok
         answerable &= found
     return ItemAnswerability(answerable, tuple(objects), len(groups))

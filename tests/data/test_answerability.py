@@ -52,6 +52,7 @@ def test_one_code_step_in_the_dark_is_not_an_infinite_contrast():
     image[18:30, 24:40], ids[18:30, 24:40] = 1, 3
     luma = np.where(ids == 3, (1 / 255) / 12.92, 0.0)
     weber, snr, n = object_contrast(luma, ids == 3, sigma=0.0)
+    assert groups_answerability([("v", (3,))], image[None], [ids], ("v",)).objects[0].weber == pytest.approx(weber)
     assert weber == pytest.approx((1 / 255 / 12.92) / VIEWING_FLARE) and n == 192
 
 
@@ -63,6 +64,18 @@ def test_noise_hides_a_small_step():
     loud = groups_answerability([("v", (3,))], noisy[None], [ids], ("v",)).objects[0]
     assert quiet.discernible and quiet.weber >= WEBER_THRESHOLD
     assert not loud.discernible and loud.snr < ROSE_K
+
+
+def test_an_isoluminant_colour_step_is_seen_in_its_channel():
+    """A red object on a grey surround of the same luminance: no luminance step, a large red one."""
+    grey = 0.3
+    red = np.array([grey / 0.2126 * 0.5, grey * 0.5 / 0.7152, 0.0], np.float32)  # luminance = grey
+    linear = np.full((48, 64, 3), grey, np.float32)
+    linear[18:30, 24:40] = red
+    ids = np.full((48, 64), -1, np.int32)
+    ids[18:30, 24:40] = 3
+    (obj,) = groups_answerability([("v", (3,))], encode_srgb_u8(linear)[None], [ids], ("v",)).objects
+    assert obj.discernible and obj.signal in ("red", "blue") and obj.to_dict()["signal"] == obj.signal
 
 
 def test_noise_estimate_ignores_ramps_and_finds_white_noise():
