@@ -8,8 +8,8 @@ nothing and on a room rendered at two sizes (small PNG contact sheets under docs
   thumbnail shown at the same width): columns clean | severity 1 | bench at each size, so a
   parameter in pixels that does not scale with the image shows as a difference between the two.
 
-Each cell is captioned with the discernible share of that one image's named object (object
-sheet: the object; room sheet: the objects of the view's first object question) as ``ok``/``--``
+Each cell is captioned ``ok``/``--``: whether the named object (object sheet: the object; room
+sheet: the object covering most of the view, room surfaces aside) is discernible in that image
 by :mod:`spacedg.data.answerability`.
 
     PYTHONPATH=$PWD python benchmarks/physics_gallery.py [--out docs/images] [--thumb 120]
@@ -28,6 +28,7 @@ from spacedg.data.answerability import groups_answerability, object_id_maps
 from spacedg.data.pipeline import PipelineOptions, degrade_variants
 from spacedg.plugins.registry import list_degradations
 from spacedg.scene.floorplan import contact_sheet
+from spacedg.scene.labelling import STRUCTURAL_LABELS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import answerability as bench  # noqa: E402 - the object scene of the answerability benchmark
@@ -72,14 +73,25 @@ def object_sheet(name: str, width: int, seed: int = 3) -> np.ndarray:
     return contact_sheet(rows, columns=5, pad=3)
 
 
+def _largest_object(scene, view: str, options: PipelineOptions) -> int:
+    """The instance covering most of ``view`` that is not a room surface (wall, floor, ceiling, …)."""
+    (ids,) = object_id_maps(scene, [view], [], options)
+    surfaces = {inst.id for inst in scene.instances if inst.label in STRUCTURAL_LABELS}
+    counts = np.bincount(ids[ids >= 0].ravel())
+    counts[[i for i in surfaces if i < len(counts)]] = 0
+    return int(np.argmax(counts))
+
+
 def room_sheet(width: int, seed: int = 3) -> np.ndarray:
-    (scene, items), = bench.room_items(1, 40, 60_000)
-    views, record = next((v, r) for v, r in items if len(v) == 1 and r.geometry.get("refs"))
-    groups = [(ref["view"], (ref["id"],)) for ref in record.geometry["refs"]]
+    from spacedg.scene.synthetic import RoomConfig, generate_room
+
+    scene = generate_room(0, RoomConfig(gaussians=60_000))
+    view = list(scene.views)[len(scene.views) // 3]
+    groups = [(view, (_largest_object(scene, view, PipelineOptions(image_size=(640, 480))),))]
     rows = []
     for spec in list_degradations():
         chains = ["clean", f"{spec.name}:1", f"{spec.name}:bench"]
-        cells = [c for size in ((640, 480), (160, 120)) for c in _row(scene, views[0], groups, chains, PipelineOptions(image_size=size), width, seed)]
+        cells = [c for size in ((640, 480), (160, 120)) for c in _row(scene, view, groups, chains, PipelineOptions(image_size=size), width, seed)]
         rows += [_label(spec.name, cells[0]), *cells]
     return contact_sheet(rows, columns=7, pad=3)
 

@@ -296,10 +296,15 @@ def groups_answerability(
 
 
 def condition_of(degradation_type: str, provenance: Sequence[Mapping[str, Any]]) -> tuple[str, str]:
-    """``(degradation_type, severity)`` of an item: the preset of its primary degradation (the first
-    entry with a preset; ``"-"`` for clean or explicit parameters)."""
-    presets = [str(e["preset"]) for e in provenance if e.get("preset") is not None]
-    return degradation_type, presets[0] if presets else "-"
+    """``(degradation_type, severity)`` of an item: the preset of the degradation the type names, else
+    (a mixture) ``"bench"`` if its primary is there, else the first preset; ``"-"`` for clean or
+    explicit parameters."""
+    presets = {str(e["name"]): str(e["preset"]) for e in provenance if e.get("preset") is not None}
+    if degradation_type in presets:
+        return degradation_type, presets[degradation_type]
+    if "bench" in presets.values():
+        return degradation_type, "bench"
+    return degradation_type, next(iter(presets.values()), "-")
 
 
 def share_by_condition(rows: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, dict[str, float]]]:

@@ -10,6 +10,7 @@ from spacedg.data.answerability import (
     VIEWING_FLARE,
     WEBER_THRESHOLD,
     answerability_table,
+    condition_of,
     groups_answerability,
     item_answerability,
     named_objects,
@@ -115,6 +116,14 @@ def test_named_objects_of_every_family(room_records):
                 assert [ids for _, ids in groups] == [(ref["id"],) for ref in g["refs"]]
             seen.add(record.question_type)
     assert len(seen) >= 10
+
+
+def test_condition_of_an_item():
+    haze = [{"name": "haze", "params": {}, "seed": 1, "preset": "3"}]
+    night = [{"name": "motion_blur", "preset": "2"}, {"name": "low_light", "preset": "bench"}, {"name": "low_res", "preset": "2"}]
+    assert condition_of("haze", haze) == ("haze", "3") and condition_of("ori", []) == ("ori", "-")
+    assert condition_of("night_capture", night) == ("night_capture", "bench")
+    assert condition_of("haze", [{"name": "haze", "preset": None}]) == ("haze", "-")
 
 
 def test_share_table():
