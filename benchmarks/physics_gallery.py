@@ -8,6 +8,8 @@ nothing and on a room rendered at two sizes (small PNG contact sheets under docs
   thumbnail shown at the same width): columns clean | severity 1 | bench at each size, so a
   parameter in pixels that does not scale with the image shows as a difference between the two.
 
+Both are saved as 256-colour palette PNGs (a few hundred KB together).
+
 Each cell is captioned ``ok``/``--``: whether the named object (object sheet: the object; room
 sheet: the object covering most of the view, room surfaces aside) is discernible in that image
 by :mod:`spacedg.data.answerability`.
@@ -96,6 +98,13 @@ def room_sheet(width: int, seed: int = 3) -> np.ndarray:
     return contact_sheet(rows, columns=7, pad=3)
 
 
+def _save_small(sheet: np.ndarray, path: Path) -> None:
+    """A 256-colour palette PNG (median cut, no dithering): a third of the RGB PNG's bytes for the docs."""
+    from PIL import Image
+
+    Image.fromarray(sheet).quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(path, optimize=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("docs/images"))
@@ -105,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     for name, sheet in (("physics_object.png", object_sheet(args.object, args.thumb)), ("physics_room.png", room_sheet(args.thumb))):
         path = args.out / name
-        cv2.imwrite(str(path), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_PNG_COMPRESSION, 9])
+        _save_small(sheet, path)
         print(f"wrote {path} ({sheet.shape[1]}x{sheet.shape[0]}, {path.stat().st_size // 1024} KB)")
     return 0
 

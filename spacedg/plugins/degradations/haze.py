@@ -43,11 +43,12 @@ paper fixes the density, not the distance it is measured over; the choice is mad
 the objects a question names can still be seen (:mod:`spacedg.data.answerability`, Weber
 contrast ≥ 2 %, the same 2 % that defines the visibility here) and by the paper's people, who
 answered 55.5 % of haze items against 80.4 % clean and about a third blind, so most hazed
-items carried information. Measured at ``bench`` (``benchmarks/answerability.py``, 320×240):
-the former 1.6 × D (a room's far surfaces) kept the named objects discernible in 19 % of the
-built-in rooms' items and 0 % of an object filmed alone; 2.5 × D 46 %, 3.5 × 62 %, 4 × 73 %,
-5 × 77 % and 100 %, 6 × 81 %: 5 is the nearest round factor clearing 70 % with a margin
-(severity 1: 100 % of room items, 96 % of the object's views). ``depth_ref = 0`` (the sample's
+items carried information. Measured at ``bench`` on luminance contrast alone (2 built-in
+rooms × 30 questions and a teapot alone in 12–24 views, 320×240): the former 1.6 × D (a room's
+far surfaces) kept the named objects discernible in 19 % of the rooms' items and 0 % of the
+object's views; 2.5 × D 46 %, 3.5 × 62 %, 4 × 73 %, 5 × 77 % (object 100 %), 6 × 81 %: 5 is the
+round factor that clears 70 % with a margin. The final measure, which counts colour as well,
+is in ``docs/degradations-physics.md``. ``depth_ref = 0`` (the sample's
 far surface depth) stays available; ``fog_20m`` and ``smoke_5m`` are physical and never
 scaled. The provenance records the resolved metres.
 
