@@ -33,7 +33,7 @@ place): the object is where it is; the question is whether its light still stand
 Objects named: ``refs`` of the geometry block (each in its view), the counted objects of a
 counting question, the visible members of an existence question's label (any one of them
 suffices). Questions that name no visible object (camera motion, "is there a …?" answered no)
-have nothing to check: they count as answerable and are reported apart (``objects == 0``).
+have nothing to check: they count as answerable and the shares leave them out (``groups == 0``).
 """
 
 from __future__ import annotations
@@ -58,9 +58,11 @@ __all__ = [
     "ItemAnswerability",
     "ObjectContrast",
     "answerability_table",
+    "condition_of",
     "groups_answerability",
     "item_answerability",
     "named_objects",
+    "noise_sigma",
     "object_contrast",
     "object_id_maps",
     "share_by_condition",
@@ -278,6 +280,8 @@ def groups_answerability(
     objects: list[ObjectContrast] = []
     answerable = True
     for view, ids in groups:
+        if view not in views:
+            raise ParameterError(f"item_answerability: a named object is in view {view!r}, not one of the images' views {list(views)}")
         v = views.index(view)
         if id_maps[v].shape != images.shape[1:3]:
             raise ParameterError(f"item_answerability: id map {id_maps[v].shape} does not match image {images.shape[1:3]} of view {view!r}")

@@ -95,6 +95,8 @@ def test_an_absent_object_is_not_discernible_and_groups_need_one_member():
     assert groups_answerability([], image[None], [ids], ("v",)).answerable  # nothing named: nothing to see
     with pytest.raises(ParameterError, match="id map"):
         groups_answerability([("v", (3,))], image[None], [], ("v",))
+    with pytest.raises(ParameterError, match="view 'w'"):
+        groups_answerability([("w", (3,))], image[None], [ids], ("v",))
 
 
 def test_named_objects_of_every_family(room_records):
