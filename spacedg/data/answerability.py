@@ -176,18 +176,22 @@ def _regions(mask: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarray, np
     return band, ring
 
 
-def object_contrast(signal: np.ndarray, mask: np.ndarray, sigma: float, valid: np.ndarray | None = None) -> tuple[float, float, int]:
+def object_contrast(
+    signal: np.ndarray, mask: np.ndarray, sigma: float, valid: np.ndarray | None = None,
+    regions: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[float, float, int]:
     """``(weber, snr, pixels)`` of the object ``mask`` in one (H, W) signal (luminance or a linear
     channel, white = 1) whose pixel noise is ``sigma`` (module docstring).
 
-    ``valid`` (optional) excludes pixels from the surround (outside a fisheye's image circle).
-    An empty mask, or one with no surround, gives ``(0, 0, pixels)``.
+    ``valid`` (optional) excludes pixels from the surround (outside a fisheye's image circle);
+    ``regions`` the ``(band, ring)`` of ``mask`` when already computed. An empty mask, or one
+    with no surround, gives ``(0, 0, pixels)``.
     """
     mask = np.asarray(mask, dtype=bool)
     n = int(mask.sum())
     if n == 0:
         return 0.0, 0.0, 0
-    band, ring = _regions(mask, valid)
+    band, ring = _regions(mask, valid) if regions is None else regions
     n_o, n_s = int(band.sum()), int(ring.sum())
     if n_o == 0 or n_s == 0:
         return 0.0, 0.0, n
@@ -201,9 +205,11 @@ def _best_signal(signals: np.ndarray, sigmas: Sequence[float], mask: np.ndarray,
     """The signal (luminance, red, green, blue) in which the object stands out most: ``(weber, snr,
     pixels, name)`` of the one with the largest ``min(weber / WEBER_THRESHOLD, snr / ROSE_K)``."""
     best = (0.0, 0.0, int(mask.sum()), "luminance")
-    score = -1.0
+    if best[2] == 0:
+        return best
+    score, regions = -1.0, _regions(mask, valid)
     for k, name in enumerate(_SIGNAL_NAMES):
-        weber, snr, pixels = object_contrast(signals[:, :, k], mask, sigmas[k], valid)
+        weber, snr, pixels = object_contrast(signals[:, :, k], mask, sigmas[k], valid, regions)
         if min(weber / WEBER_THRESHOLD, snr / ROSE_K) > score:
             score, best = min(weber / WEBER_THRESHOLD, snr / ROSE_K), (weber, snr, pixels, name)
     return best
