@@ -80,6 +80,7 @@ _MIN_BAND_PX = 2
 _CACHE_ITEMS = 64  # id-map sets an object_id_maps cache keeps
 _LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float64)  # Rec. 709 / sRGB relative luminance
 _SIGNAL_NAMES = ("luminance", "red", "green", "blue")
+_DECODE: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -140,13 +141,21 @@ def named_objects(record: QARecord) -> list[tuple[str, tuple[int, ...]]]:
     return [(str(view), visible)] if visible else []
 
 
-def _signals(image: np.ndarray) -> np.ndarray:
-    """(H, W, 4) float64: relative display luminance (white = 1) and the three linear channels of a
-    uint8 (H, W, 3) sRGB image (the signals whose contrast :func:`object_contrast` measures)."""
+def _decode_table() -> np.ndarray:
+    """Linear light of the 256 8-bit sRGB codes (the exact decode, as a lookup table), float32."""
     from spacedg.render.colour_cpu import decode_srgb
 
-    linear = np.asarray(decode_srgb(np.asarray(image, dtype=np.float32) / np.float32(255.0)), dtype=np.float64)
-    return np.concatenate([(linear @ _LUMA)[:, :, None], linear], axis=2)
+    global _DECODE
+    if _DECODE is None:
+        _DECODE = np.asarray(decode_srgb(np.arange(256, dtype=np.float32) / np.float32(255.0)), dtype=np.float32)
+    return _DECODE
+
+
+def _signals(image: np.ndarray) -> np.ndarray:
+    """(H, W, 4) float32: relative display luminance (white = 1) and the three linear channels of a
+    uint8 (H, W, 3) sRGB image (the signals whose contrast :func:`object_contrast` measures)."""
+    linear = _decode_table()[np.asarray(image, dtype=np.uint8)]
+    return np.concatenate([(linear @ _LUMA.astype(np.float32))[:, :, None], linear], axis=2)
 
 
 def noise_sigma(luma: np.ndarray) -> float:
@@ -158,8 +167,8 @@ def noise_sigma(luma: np.ndarray) -> float:
     if h < 3 or w < 3:
         return 0.0
     kernel = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], dtype=np.float64)
-    response = cv2.filter2D(luma, cv2.CV_64F, kernel)[1:-1, 1:-1]
-    return float(np.sqrt(np.pi / 2.0) * np.abs(response).sum() / (6.0 * (w - 2) * (h - 2)))
+    response = cv2.filter2D(np.asarray(luma, dtype=np.float32), cv2.CV_32F, kernel.astype(np.float32))[1:-1, 1:-1]
+    return float(np.sqrt(np.pi / 2.0) * np.abs(response).sum(dtype=np.float64) / (6.0 * (w - 2) * (h - 2)))
 
 
 def _regions(mask: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -195,10 +204,19 @@ def object_contrast(
     n_o, n_s = int(band.sum()), int(ring.sum())
     if n_o == 0 or n_s == 0:
         return 0.0, 0.0, n
-    y_o, y_s = float(signal[band].mean()), float(signal[ring].mean())
+    y_o, y_s = float(signal[band].mean(dtype=np.float64)), float(signal[ring].mean(dtype=np.float64))
     step = abs(y_o - y_s)
     spread = max(sigma, 1e-12) * np.sqrt(1.0 / n_o + 1.0 / n_s)
     return float(step / (y_s + VIEWING_FLARE)), float(step / spread), n
+
+
+def _window(mask: np.ndarray, pixels: int) -> tuple[slice, slice]:
+    """The bounding box of ``mask`` grown by its ring width (+2 px), clipped to the image."""
+    margin = int(np.ceil(max(_MIN_BAND_PX, SURROUND_RATIO * np.sqrt(pixels)))) + 2
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    h, w = mask.shape
+    return (slice(max(0, rows[0] - margin), min(h, rows[-1] + margin + 1)),
+            slice(max(0, cols[0] - margin), min(w, cols[-1] + margin + 1)))
 
 
 def _best_signal(signals: np.ndarray, sigmas: Sequence[float], mask: np.ndarray, valid: np.ndarray) -> tuple[float, float, int, str]:
@@ -207,6 +225,8 @@ def _best_signal(signals: np.ndarray, sigmas: Sequence[float], mask: np.ndarray,
     best = (0.0, 0.0, int(mask.sum()), "luminance")
     if best[2] == 0:
         return best
+    window = _window(mask, best[2])  # the object and its ring: every measure is local
+    mask, valid, signals = mask[window], valid[window], signals[window]
     score, regions = -1.0, _regions(mask, valid)
     for k, name in enumerate(_SIGNAL_NAMES):
         weber, snr, pixels = object_contrast(signals[:, :, k], mask, sigmas[k], valid, regions)
