@@ -41,6 +41,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="share of scenes for val and bench, the rest train (default 0.1,0.1; 0 leaves a split empty)")
     parser.add_argument("--skip-bad-scenes", action="store_true", help="skip scenes that cannot be read (they are named)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--answerability", choices=("auto", "on", "off"), default="auto",
+                        help="measure whether each item's named objects are discernible in its images and print the share "
+                        "per degradation and severity (kept per item in summary.json); auto = for the bench split (default)")
     _args.add_backend_arguments(parser)
     _vocabulary.add_deprecated(parser, "export")
 
@@ -113,13 +116,18 @@ def run(args: argparse.Namespace) -> int:
     for folder, error in dataset.skipped.items():
         print(f"skipped scene {folder}: {error}")
     with _shard_lock(args.out, shard):
-        summary = export_bench(dataset, args.out, shard=shard, shard_size=shard_size, progress=not args.no_progress)
+        measure = None if args.answerability == "auto" else args.answerability == "on"
+        summary = export_bench(dataset, args.out, shard=shard, shard_size=shard_size, progress=not args.no_progress, answerability=measure)
     print(f"{len(dataset)} items in {summary.chunks_total} chunk(s) of {shard_size}; shard {shard[0]}/{shard[1]} wrote "
           f"{len(summary.chunks_written)} chunk(s) ({summary.items_written} items) in {summary.seconds:.1f} s, "
           f"skipped {len(summary.chunks_skipped)} finished")
     if summary.merged:
         print(f"wrote {args.out / (args.split + '.tsv')}, {args.out / (args.split + '.jsonl')} and {args.out / 'summary.json'}\n")
         print(summary.merge.table)
+        if summary.merge.answerability_table:
+            print("\nanswerability: share of items whose named objects are discernible (Weber contrast >= 2 % with 1 % "
+                  "viewing flare, SNR >= 5; spacedg.data.answerability), per degradation and severity:\n")
+            print(summary.merge.answerability_table)
         if args.split == "bench":
             print(f"\nVLMEvalKit (public SpaceDG evaluator): LMUData={args.out} run.py --data spacedg_bench")
         for names, why in summary.merge.mismatches.items():

@@ -150,8 +150,8 @@ def degradation_info(row: BenchRow) -> str:
 
     Each degradation of the row's chain is named with its preset's parameter ranges, e.g.
     ``"The images are degraded by haze (severity given as the rendering parameter ranges:
-    density in [3.5, 6], airlight in [0.7, 0.9], depth_ref = 4.8 m (scaled to the scene depth of
-    3 m; 4 m at 2.5 m))."``. The chain, presets and scene depth (``scene_depth_m``) come from the
+    density in [3.5, 6], airlight in [0.7, 0.9], depth_ref = 15 m (scaled to the scene depth of
+    3 m; 12.5 m at 2.5 m))."``. The chain, presets and scene depth (``scene_depth_m``) come from the
     row's ``degradation`` provenance: metres of scale-aware presets (defocus ``depth``, motion
     ``trans``, haze ``depth_ref``) are the ranges resolved at that depth, as rendered. A row
     without provenance (a foreign bench) uses its ``degradation_type`` and the ``bench`` preset,

@@ -18,7 +18,7 @@ ZERO_STRENGTH = {
     "motion_blur": {"trans": 0.0, "rot": 0.0, "sub_steps": 80},
     "haze": {"density": 0.0},
     "water_droplets": {"radius": 0.0},
-    "low_light": {"exposure": 1.0, "k": 0.0, "sigma_read": 0.0},
+    "low_light": {"exposure": 1.0, "k": 0.0, "sigma_read": 0.0, "gain": 1.0},
     "over_exposure": {"exposure": 1.0, "k": 0.0, "sigma_read": 0.0},
     "low_res": {"scale": 1.0},
 }

@@ -42,7 +42,7 @@ from spacedg.plugins.specs import (
     Stage,
 )
 
-__all__ = ["EXPOSURE_ORDER", "SENSOR_PARAMS", "SENSOR_PRESET", "SensorExposure"]
+__all__ = ["EXPOSURE_ORDER", "GAIN", "SENSOR_PARAMS", "SENSOR_PRESET", "SensorExposure"]
 
 #: Position of the sensor within the linear stage (:data:`~spacedg.plugins.specs.ORDER_GUIDE`).
 EXPOSURE_ORDER = 30.0
@@ -55,6 +55,12 @@ SENSOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("read_lambda", "1", "Tukey-lambda shape of the read noise (read_model = 1): 0.14 ≈ normal, < 0 heavy-tailed, 0 logistic.", low=-0.45, high=1.0),
     ParamSpec("pitch", "px", "Photosite side in output pixels: the noise is drawn per photosite and averaged over each pixel "
               "(1 = one photosite per pixel; presets: 1 px at 1752×1168, scaled with the image).", low=1e-4, high=1e4, recorded_default=1.0),
+)
+
+#: The camera's gain after read-out (ISO / digital gain), declared by ``low_light`` only.
+GAIN = ParamSpec(
+    "gain", "1", "Camera gain on the read-out signal (ISO / digital; the noise is amplified with the signal); 1 = none.",
+    low=1.0, high=1000.0, recorded_default=1.0,
 )
 
 #: Fixed sensor ranges every preset of the exposure degradations uses.
@@ -85,12 +91,17 @@ class SensorExposure:
         spec: the :class:`~spacedg.plugins.specs.DegradationSpec`; its ``apply`` is :meth:`apply`.
     """
 
-    def __init__(self, name: str, exposure: ParamSpec, *, clip: bool, presets: Mapping[str, tuple[float, float]], description: str) -> None:
+    def __init__(
+        self, name: str, exposure: ParamSpec, *, clip: bool, presets: Mapping[str, tuple[float, float]], description: str,
+        gains: Mapping[str, float] | None = None,
+    ) -> None:
         self.clip = clip
+        self.has_gain = gains is not None
+        gain = {preset: {"gain": ParamRange(gains[preset], gains[preset])} for preset in presets} if gains is not None else {}
         self.spec = DegradationSpec(
             name=name, category=Category.PHOTOMETRIC, stage=Stage.LINEAR,
-            params=(exposure, *SENSOR_PARAMS),
-            presets={preset: {"exposure": ParamRange(low, high), **SENSOR_PRESET} for preset, (low, high) in presets.items()},
+            params=(exposure, *SENSOR_PARAMS, *((GAIN,) if self.has_gain else ())),
+            presets={preset: {"exposure": ParamRange(low, high), **SENSOR_PRESET, **gain.get(preset, {})} for preset, (low, high) in presets.items()},
             apply=self.apply,
             apply_torch=self.apply_torch,
             needs=frozenset(),
@@ -108,8 +119,10 @@ class SensorExposure:
         read_model: int = READ_GAUSSIAN,
         read_lambda: float = READ_LAMBDA_DEFAULT,
         pitch: float = 1.0,
+        gain: float = 1.0,
     ) -> np.ndarray:
-        """Expose linear light by ``exposure``, add the sensor's noise (and clip if :attr:`clip`); returns new float32 (H, W, 3).
+        """Expose linear light by ``exposure``, add the sensor's noise, then the camera's ``gain`` (and
+        clip if :attr:`clip`); returns new float32 (H, W, 3).
 
         Args:
             rgb: float32 (H, W, 3) linear light, unclamped.
@@ -117,22 +130,27 @@ class SensorExposure:
             key: 63-bit noise key (``stream_key(rng)``).
             k, sigma_read, read_model, read_lambda: the sensor (:mod:`._sensor`; defaults: its defaults).
             pitch: photosite side in pixels (:mod:`._photosites`; 1 = one per pixel, the plain sensor).
+            gain: the camera's gain on the read-out signal (ISO / digital gain, noise amplified with
+                the signal); only for a degradation declared with ``gains``; 1 = none.
 
         Raises:
             InvalidDataError: ``rgb`` is not float32 (H, W, 3).
             ParameterError: a parameter outside its hard limits.
         """
         rgb = check_linear_rgb(rgb, self.spec.name)
-        p = self.spec.validate_params(
-            {"exposure": exposure, "k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": read_lambda, "pitch": pitch}
-        )
-        return binned_capture(
+        values = {"exposure": exposure, "k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": read_lambda, "pitch": pitch}
+        if self.has_gain or gain != 1.0:
+            values["gain"] = gain  # a degradation without the parameter refuses any other gain than 1
+        p = self.spec.validate_params(values)
+        out = binned_capture(
             rgb, pitch=p["pitch"], exposure=p["exposure"], k=p["k"], sigma_read=p["sigma_read"], key=key,
-            read_model=int(p["read_model"]), read_lambda=p["read_lambda"], clip=self.clip,
+            read_model=int(p["read_model"]), read_lambda=p["read_lambda"], clip=self.clip and not self.has_gain,
         )
+        return _apply_gain(out, p.get("gain", 1.0), self.clip and self.has_gain)
 
     def apply(self, rgb: np.ndarray, aux: Mapping[str, np.ndarray], params: Mapping[str, Any], rng: np.random.Generator) -> np.ndarray:
-        """Linear-stage ``apply``: ``params`` checked against :attr:`spec`; ``aux`` is unused; one ``stream_key(rng)`` draw."""
+        """Linear-stage ``apply``: ``params`` checked against :attr:`spec` (a missing ``gain`` is 1: the
+        model without gain); ``aux`` is unused; one ``stream_key(rng)`` draw."""
         p = self.spec.validate_params(params)
         return self.capture(rgb, key=stream_key(rng), **p)
 
@@ -148,4 +166,17 @@ class SensorExposure:
 
             host = rgb.detach().cpu().numpy().astype(np.float32, copy=False)
             return torch.from_numpy(self.capture(host, key=key, **p)).to(rgb.device)
-        return device.sensor_apply(rgb, p, key, self.clip)
+        gain = float(p.get("gain", 1.0))
+        out = device.sensor_apply(rgb, p, key, self.clip and not self.has_gain)
+        if gain != 1.0:
+            out = out * gain
+        return out.clamp(0.0, 1.0) if self.clip and self.has_gain else out
+
+
+def _apply_gain(rgb: np.ndarray, gain: float, clip: bool) -> np.ndarray:
+    """``rgb · gain`` (float32, in place on the new array ``rgb``), clipped to [0, 1] if ``clip``; ``rgb`` itself at gain 1."""
+    if gain != 1.0:
+        np.multiply(rgb, np.float32(gain), out=rgb)
+    if clip:
+        np.clip(rgb, 0.0, 1.0, out=rgb)
+    return rgb

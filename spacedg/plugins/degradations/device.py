@@ -88,6 +88,7 @@ def haze_torch(rgb: torch.Tensor, depth: torch.Tensor, alpha: torch.Tensor, dens
         far_depth = surface_far_depth(depth.cpu().numpy(), alpha.cpu().numpy())
     far = float(far_depth) if far_depth and math.isfinite(far_depth) and far_depth > 0 else (depth_ref or 1.0)
     beta = float(np.float32(density / (depth_ref if depth_ref > 0 else far)))
+    far = depth_ref if depth_ref > 0 else far  # no surface: at the normalisation depth D
     cover = torch.clamp(torch.nan_to_num(alpha.float(), nan=0.0), 0.0, 1.0)
     d = torch.where((depth > 0) & torch.isfinite(depth), torch.clamp(depth, max=depth_cap), torch.full_like(depth, far)).float()
     t_surface = torch.exp(-beta * d)
