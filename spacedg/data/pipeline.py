@@ -75,6 +75,7 @@ from spacedg.limits import check_image_size
 from spacedg.plugins.degradations.common import check_display_image, surface_far_depth
 from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.specs import Stage
+from spacedg.render.coverage import captured_share
 from spacedg.render.renderer import BACKENDS
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import RasterSettings
@@ -156,7 +157,9 @@ class DegradedViews:
         degradations: provenance ``{name, params, seed, preset}`` per degradation, pipeline order.
         sub_steps: renders averaged per view (1 without motion blur).
         stats: milliseconds spent (``render_ms`` — shared renders counted in every chain that
-            used them —, ``linear_ms``, ``encode_ms``, ``display_ms``).
+            used them —, ``linear_ms``, ``encode_ms``, ``display_ms``); under a lens change
+            (``distortion``) also ``captured_share``: the smallest share over the views of the
+            distorted frame that the clean view covers (:func:`~spacedg.render.coverage.captured_share`).
     """
 
     images: np.ndarray
@@ -257,6 +260,8 @@ def _render_group(
         if request.motion is not None and options.motion == "fast":
             request = replace(request, motion=replace(request.motion, fast=True))
         frame = request.render(scene.gaussians, backend=options.backend, device=options.device, settings=options.settings)
+        if request.camera.fisheye is not camera.fisheye:  # a lens change: how much of the new frame the capture covers
+            frame.stats["captured_share"] = captured_share(camera, request.camera)
         for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
             image = getattr(frame, name)
             if image is not None:
@@ -586,6 +591,9 @@ def _finish_chain(
         images = [_finish_device(frame, linear, display, v, far_depth, timer, device) for v, frame in enumerate(frames)]
     else:
         images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
+    shares = [f.stats["captured_share"] for f in frames if "captured_share" in f.stats]
+    if shares:
+        timer["captured_share"] = min(shares)
     return DegradedViews(
         images=np.stack(images),
         views=views,
