@@ -75,7 +75,7 @@ from spacedg.limits import check_image_size
 from spacedg.plugins.degradations.common import check_display_image, surface_far_depth
 from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.specs import Stage
-from spacedg.render.coverage import captured_share
+from spacedg.render.coverage import CoverageLostError, captured_share, coverage_problem
 from spacedg.render.renderer import BACKENDS
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import RasterSettings
@@ -262,6 +262,10 @@ def _render_group(
         frame = request.render(scene.gaussians, backend=options.backend, device=options.device, settings=options.settings)
         if request.camera.fisheye is not camera.fisheye:  # a lens change: how much of the new frame the capture covers
             frame.stats["captured_share"] = captured_share(camera, request.camera)
+        lost = coverage_problem(scene.gaussians, request.camera, frame.alpha, frame.valid, defocus=request.defocus,
+                                motion=request.motion, backend=options.backend, device=options.device, settings=options.settings)
+        if lost is not None:  # never a black image without an error
+            raise CoverageLostError(f"scene {scene.id}, view {views[index] if views else index!r}, {[s.name for s in raster]}: {lost}")
         for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
             image = getattr(frame, name)
             if image is not None:

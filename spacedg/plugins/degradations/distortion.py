@@ -84,7 +84,7 @@ def containing_zoom(camera: Camera, lens: FisheyeLens) -> float:
     radius = np.linspace(r_near, r_far, _BOUNDARY_SAMPLES)
     theta = _source_theta(camera, radius)
     edge = lens.effective_max_theta
-    reachable = theta <= edge
+    reachable = (theta <= edge) & (radius > 0.0)  # R = 0 (principal point on the frame's edge) bounds nothing
     if not reachable.any():  # even the nearest edge is beyond the fold: the image circle touches it
         return r_near / float(lens.distort_theta(np.float64(edge)))
     return float(np.max(radius[reachable] / lens.distort_theta(theta[reachable])))
