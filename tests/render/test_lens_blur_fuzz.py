@@ -94,3 +94,16 @@ def test_a_tiny_image_circle_under_a_large_blur_is_refused_with_its_cause(tiny) 
         degrade(tiny, [view], chain, options=PipelineOptions(image_size=(64, 48)))
     sharp = degrade(tiny, [view], chain[:1], options=PipelineOptions(image_size=(64, 48)))
     assert sharp.images.max() > 0 and 0.0 < sharp.stats["captured_share"] <= 1.0
+
+
+def test_render_command_names_the_blur_not_a_frame_mismatch(tiny, tmp_path, capsys) -> None:
+    from spacedg.cli import main
+    from spacedg.scene.io import save_scene
+
+    save_scene(tiny, tmp_path / "s")
+    png = tmp_path / "v.png"
+    argv = ["render", str(tmp_path / "s"), "--view", sorted(tiny.views)[0], "--out", str(png), "--fisheye", "0,0,0,0,0.2"]
+    assert main(argv + ["--defocus", "1000,7.5"]) == 2
+    err = capsys.readouterr().err
+    assert "circle of confusion" in err and "frame mismatch" not in err and not png.exists()
+    assert main(argv) == 0 and png.exists()  # the lens alone renders
