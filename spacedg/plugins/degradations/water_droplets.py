@@ -57,8 +57,8 @@ and it creates no light: over a black scene it stays black outside its highlight
   (1 at the centre, 0 at the grazing rim, so drops show a dark outline; the clean image already
   carries the lens's own surface losses at normal incidence). Averaged over a drop, weighted by
   its coverage, τ is 0.983: outside the highlights a drop carries 98.3 % of the light of the
-  refracted background it shows (98.3–98.4 % measured over whole drop fields, every preset, on a
-  textured frame; ``tests/plugins/degradations/test_water_droplets.py``).
+  refracted background it shows (98.2–98.4 % measured over whole drop fields, every preset, on
+  textured frames; ``benchmarks/drops_distortion.py``).
   ``rim`` weights this loss (1 = the Fresnel law, 0 = lossless).
 - Phong specular highlight, white, added in linear light: ``α · k_s · max(0, R·V)^shininess``
   with ``R = 2(n·L)n − L``, view ``V = (0, 0, 1)`` (towards the camera), light from the upper
