@@ -210,6 +210,11 @@ def _render(args: argparse.Namespace) -> int:
         + (f"keyframes {stats['keyframes']}" if "keyframes" in stats else f"sub-steps {stats.get('sub_steps', 1)}")
         + f"  -> {args.out}"
     )
+    if lens is not None:
+        from spacedg.render.coverage import captured_share
+
+        print(f"fisheye: the captured view covers {captured_share(fitted, camera):.1%} of the fisheye frame "
+              "(the rest shows what the captured view did not)")
     if want_depth:
         depth_mm = encode_depth_mm(frame.depth)
         write_png(args.depth_out, depth_mm, "--depth-out", compression=9)
