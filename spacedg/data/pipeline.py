@@ -157,9 +157,10 @@ class DegradedViews:
         degradations: provenance ``{name, params, seed, preset}`` per degradation, pipeline order.
         sub_steps: renders averaged per view (1 without motion blur).
         stats: milliseconds spent (``render_ms`` — shared renders counted in every chain that
-            used them —, ``linear_ms``, ``encode_ms``, ``display_ms``); under a lens change
-            (``distortion``) also ``captured_share``: the smallest share over the views of the
-            distorted frame that the clean view covers (:func:`~spacedg.render.coverage.captured_share`).
+            used them —, ``linear_ms``, ``encode_ms``, ``display_ms``).
+        captured_share: under a lens change (``distortion``), the smallest share over the views
+            of the distorted frame that the clean view covers
+            (:func:`~spacedg.render.coverage.captured_share`); ``None`` without one.
     """
 
     images: np.ndarray
@@ -167,6 +168,7 @@ class DegradedViews:
     degradations: list[dict[str, Any]]
     sub_steps: list[int]
     stats: dict[str, float] = field(default_factory=dict)
+    captured_share: float | None = None
 
 
 #: Cells of the coarse depth grid of :func:`view_depth` (columns, rows).
@@ -596,14 +598,13 @@ def _finish_chain(
     else:
         images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
     shares = [f.stats["captured_share"] for f in frames if "captured_share" in f.stats]
-    if shares:
-        timer["captured_share"] = min(shares)
     return DegradedViews(
         images=np.stack(images),
         views=views,
         degradations=[step.provenance() for step in chain],
         sub_steps=[int(f.stats.get("sub_steps", 1)) for f in frames],
         stats=timer,
+        captured_share=min(shares) if shares else None,
     )
 
 

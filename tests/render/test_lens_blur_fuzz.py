@@ -93,7 +93,7 @@ def test_a_tiny_image_circle_under_a_large_blur_is_refused_with_its_cause(tiny) 
     with pytest.raises(CoverageLostError, match=r"circle of confusion of up to 600 px.*image circle \(max θ 0.05 rad\)"):
         degrade(tiny, [view], chain, options=PipelineOptions(image_size=(64, 48)))
     sharp = degrade(tiny, [view], chain[:1], options=PipelineOptions(image_size=(64, 48)))
-    assert sharp.images.max() > 0 and 0.0 < sharp.stats["captured_share"] <= 1.0
+    assert sharp.images.max() > 0 and 0.0 < sharp.captured_share <= 1.0
 
 
 def test_render_command_names_the_blur_not_a_frame_mismatch(tiny, tmp_path, capsys) -> None:

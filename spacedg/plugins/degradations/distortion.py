@@ -17,7 +17,7 @@ Decisions the paper leaves open:
   lens compresses the view and content the clean view did not show enters the frame. The share
   of the distorted frame that the clean view covers — the part the capture is known to hold —
   is :func:`spacedg.render.coverage.captured_share`; the degradation pipeline records it per
-  chain (``DegradedViews.stats["captured_share"]``, the smallest over the views): 0.64 for the
+  chain (``DegradedViews.captured_share``, the smallest over the views): 0.64 for the
   bench lens on a 70° 4:3 view, 0.82 on a 50° 16:9 one (the corners gain the most). Rays the lens does not image (beyond ``max_theta`` or the fold)
   are invalid pixels (black).
 - **The contained variant** (before issue 29 the only one), :func:`distort_contained`: the
