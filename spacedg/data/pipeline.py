@@ -80,6 +80,7 @@ from spacedg.limits import check_image_size
 from spacedg.plugins.degradations.common import check_display_image, surface_far_depth
 from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.specs import Stage
+from spacedg.render.coverage import CoverageLostError, captured_share, coverage_problem
 from spacedg.render.renderer import BACKENDS
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import RasterSettings
@@ -163,6 +164,9 @@ class DegradedViews:
         sub_steps: renders averaged per view (1 without motion blur).
         stats: milliseconds spent (``render_ms`` — shared renders counted in every chain that
             used them —, ``linear_ms``, ``encode_ms``, ``display_ms``).
+        captured_share: under a lens change (``distortion``), the smallest share over the views
+            of the distorted frame that the clean view covers
+            (:func:`~spacedg.render.coverage.captured_share`); ``None`` without one.
     """
 
     images: np.ndarray
@@ -170,6 +174,7 @@ class DegradedViews:
     degradations: list[dict[str, Any]]
     sub_steps: list[int]
     stats: dict[str, float] = field(default_factory=dict)
+    captured_share: float | None = None
 
 
 #: Cells of the coarse depth grid of :func:`view_depth` (columns, rows).
@@ -270,6 +275,12 @@ def _render_group(
         if request.motion is not None and options.motion == "fast":
             request = replace(request, motion=replace(request.motion, fast=True))
         frame = request.render(scene.gaussians, backend=options.backend, device=options.device, settings=options.settings)
+        if request.camera.fisheye is not camera.fisheye:  # a lens change: how much of the new frame the capture covers
+            frame.stats["captured_share"] = captured_share(camera, request.camera)
+        lost = coverage_problem(scene.gaussians, request.camera, frame.alpha, frame.valid, defocus=request.defocus,
+                                motion=request.motion, backend=options.backend, device=options.device, settings=options.settings)
+        if lost is not None:  # never a black image without an error
+            raise CoverageLostError(f"scene {scene.id}, view {views[index] if views else index!r}, {[s.name for s in raster]}: {lost}")
         for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
             image = getattr(frame, name)
             if image is not None:
@@ -600,12 +611,14 @@ def _finish_chain(
         images = [_finish_device(frame, linear, display, v, far_depth, timer, device) for v, frame in enumerate(frames)]
     else:
         images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
+    shares = [f.stats["captured_share"] for f in frames if "captured_share" in f.stats]
     return DegradedViews(
         images=np.stack(images),
         views=views,
         degradations=[step.provenance() for step in chain],
         sub_steps=[int(f.stats.get("sub_steps", 1)) for f in frames],
         stats=timer,
+        captured_share=min(shares) if shares else None,
     )
 
 
