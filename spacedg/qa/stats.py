@@ -108,13 +108,13 @@ def blind_baseline(records_by_scene: Mapping[str, Sequence[QARecord]]) -> list[d
             k = (r.question_type, r.sub_question_type)
             if k not in keys:
                 continue
-            chance[k] = 25.0 if r.answer_type is AnswerType.MCQ else 50.0
+            chance[k] = 100.0 / len(r.options) if r.answer_type is AnswerType.MCQ else 50.0
             row = hits[k]
             row[0] += 1
             guess = answer_prior[k].most_common(1)[0][0] if answer_prior[k] else ("A" if r.answer_type is AnswerType.MCQ else "yes")
             row[1] += guess == str(r.answer)
             if r.answer_type is AnswerType.MCQ:
-                texts = [(option_text(r, letter), letter) for letter in MCQ_LETTERS]
+                texts = [(option_text(r, letter), letter) for letter in MCQ_LETTERS[:len(r.options)]]
                 best = max(texts, key=lambda tl: text_prior[k][tl[0]])[1]
                 row[2] += best == str(r.answer)
             else:
