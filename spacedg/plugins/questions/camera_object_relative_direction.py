@@ -80,8 +80,9 @@ Debiasing (the ``selection`` entry): the camera-frame sub types' **cell** is the
 template (``single_view``'s four wordings) and the option set (what the text tells: which
 axes), ``relpos_A_facing_B``'s is the sub type with the eight
 sector labels as roles; the question index takes whole rounds (one record per role) per cell,
-over the roles the scene offers in the camera-frame cells (an object above a camera at eye
-height, "Up", hardly ever occurs: those rounds go over the other three options).
+every role of the cell in each round, so every option a question shows is the truth of another
+question of the same scene (``single_view`` did rounds over the roles a scene offers before
+index version 5, which left rare options such as "Back-Up" shown but never right).
 Subjects: the view and the unordered object pair (``single_view``: "B relative to A" and "A
 relative to B" are one question), camera B's view and the object (``bbox_center_direction``),
 the ordered triplet (``relpos_A_facing_B``).
@@ -236,7 +237,7 @@ def _option_selection(subject: str, sub: str, template: int | None, truth: str, 
     """Selection entry whose cell is the sub type, template (if given) and option set (the roles are its four texts)."""
     texts = sorted(o[3:] for o in options)
     head = sub if template is None else f"{sub}|template:{template}"
-    return selection_entry(subject, f"{head}|options:" + "|".join(texts), truth, texts, all_roles=False)
+    return selection_entry(subject, f"{head}|options:" + "|".join(texts), truth, texts)
 
 
 def _body_geometry(view: str, world: np.ndarray, cam: np.ndarray, parts: list[tuple[int, int]], truth: str) -> dict[str, Any]:
