@@ -202,6 +202,9 @@ def _stats(args: argparse.Namespace) -> int:
     bal = report["balance"]
     letters = "  ".join(f"{k} {v:.1f}%" for k, v in bal["letters"].items())
     print(f"\nMCQ correct letter over {bal['mcq_n']} records: {letters}")
+    if bal["mcq3_n"]:
+        letters3 = "  ".join(f"{k} {v:.1f}%" for k, v in bal["letters3"].items())
+        print(f"3-option MCQ correct letter over {bal['mcq3_n']} records: {letters3}")
     print(f"YN over {bal['yn_n']} records: yes {bal['yes_pct']:.1f}%")
     if audit is not None:
         print("\nBlind stress test (leave-one-scene-out, text only; accuracy %, MRA % for metric answers):")
