@@ -24,9 +24,7 @@ the dataset as ``qa_config=QABuildConfig(mode=...)`` (:func:`qa_config_for`); ev
 
 from __future__ import annotations
 
-import dataclasses
 import os
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -62,18 +60,14 @@ def _check_degradations(degradations: Degradations, severity: str, where: str) -
             Chain.parse(chain).check(levels)
 
 
-#: The question-index selection modes ``data.qa_mode`` accepts (``spacedg.qa.index.MODES`` where it exists).
-QA_MODES: tuple[str, ...] = tuple(getattr(qa_index, "MODES", ("bench", "train")))
+#: The question-index selection modes ``data.qa_mode`` accepts.
+QA_MODES: tuple[str, ...] = qa_index.MODES
 
 
 def qa_config_for(mode: str | None) -> qa_index.QABuildConfig | None:
     """The :class:`~spacedg.qa.index.QABuildConfig` whose index trains for ``data.qa_mode``: ``None``
-    (the dataset's default) for ``None``, or where the index has no selection modes (a warning then)."""
+    (the dataset's default) for ``None``."""
     if mode is None:
-        return None
-    if "mode" not in {f.name for f in dataclasses.fields(qa_index.QABuildConfig)}:
-        warnings.warn(f"data.qa_mode={mode}: this spacedg's question indexes have no selection modes; the default index "
-                      "trains", stacklevel=2)
         return None
     return qa_index.QABuildConfig(mode=mode)
 

@@ -4,7 +4,6 @@ degradation category, and starts on tiny stand-ins up to and including the model
 
 from __future__ import annotations
 
-import warnings
 
 import pytest
 from omegaconf import OmegaConf
@@ -71,12 +70,9 @@ def test_paper_configs_start_up_to_the_model_load_on_tiny_stand_ins(name, family
     assert trained and not vision  # the vision tower frozen, the language model (and merger) trained
 
 
-def test_qa_mode_passes_through_or_warns() -> None:
+def test_qa_mode_passes_through() -> None:
     assert qa_config_for(None) is None
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        made = qa_config_for("train")
-    assert made is None or made.mode == "train"
+    assert qa_config_for("train").mode == "train" and qa_config_for("bench").mode == "bench"
     with pytest.raises(ParameterError, match="data.qa_mode"):
         build(compose_sft("data.qa_mode=dense").data, "data")
 
