@@ -51,7 +51,6 @@ from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
 from spacedg.scene.box_fill import BoxFillError, BoxFillReport, measure_box_fill
 from spacedg.scene.frame_check import (
-    BOX_PROBLEM,
     FrameReport,
     check_frame,
     diagnose,
@@ -249,11 +248,12 @@ def parse_up(text: str | None) -> np.ndarray | None:
     return vec / np.linalg.norm(vec)
 
 
-def read_any_instances(path: PathLike, views: Any = None, *, embodiedscan_scene: str | None = None) -> tuple[list[Instance], str]:
+def read_any_instances(path: PathLike, views: Any = None, *, embodiedscan_scene: str | None = None,
+                       data: Any = None) -> tuple[list[Instance], str]:
     """Instances from a spacedg / Holi-Spatial JSON, a ScanNet++ ``segments_anno.json`` or an
-    EmbodiedScan JSON (told apart by content); returns ``(instances, format name)``."""
+    EmbodiedScan JSON (told apart by content; ``data``: the file already parsed); returns ``(instances, format name)``."""
     p = Path(path)
-    data = read_json(p, "instance JSON")
+    data = read_json(p, "instance JSON") if data is None else data
     if isinstance(data, dict) and "segGroups" in data:
         return read_segments_anno(p), "scannetpp segments_anno"
     first = data[0] if isinstance(data, list) and data else None
@@ -262,7 +262,7 @@ def read_any_instances(path: PathLike, views: Any = None, *, embodiedscan_scene:
             or (isinstance(first, dict) and "bbox_3d" in first):
         return read_embodiedscan_boxes(p, embodiedscan_scene), "embodiedscan"
     holi = isinstance(first, dict) and ("ins_id" in first or "bounding_box" in first)
-    return read_instances(p, views=views), "holi-spatial" if holi else "spacedg"
+    return read_instances(p, views=views, data=data), "holi-spatial" if holi else "spacedg"
 
 
 def _scene_id(name: str | None, src: Path) -> str:
@@ -493,11 +493,13 @@ def import_scene(
         views = _move_views(views, np.linalg.inv(parts.applied_transform))
         notes.append("cameras moved back to the COLMAP frame (inverse of transforms.json's applied_transform)")
     found_instances: list[Instance] = []
-    instances_format = None
+    instances_format = boxes_json = None
     if parts.instances_path is not None:
-        found_instances, instances_format = read_any_instances(parts.instances_path, views.keys(), embodiedscan_scene=embodiedscan_scene)
+        boxes_json = read_json(parts.instances_path, "instance JSON")  # parsed once: the instances and their RLE masks
+        found_instances, instances_format = read_any_instances(parts.instances_path, views.keys(), embodiedscan_scene=embodiedscan_scene,
+                                                               data=boxes_json)
         notes.append(f"instances read as {instances_format}")
-    mask_source = _rle_source(parts, instances_format, found_instances, views, assign, masks, notes)
+    mask_source = _rle_source(parts, instances_format, found_instances, views, assign, masks, notes, boxes_json)
     if parts.to_scan is not None:
         views, gauss, found_instances = _to_scan(parts.to_scan, views, gauss, found_instances)
     timings["read"] = time.perf_counter() - t0
@@ -524,11 +526,11 @@ def import_scene(
     scene = Scene(scene_id, gauss, views, found_instances, up_vec.tolist(), None, metadata)
 
     t1 = time.perf_counter()
-    fill = measure_box_fill(scene.gaussians.means, scene.instances) if scene.instances else None
+    fill = measure_box_fill(scene.gaussians.means, scene.instances, instance_ids=gauss.instance_ids,
+                            metres_per_file_unit=scale) if scene.instances else None
     report_frame = check_frame(scene, backend=backend, box_share=None if fill is None else fill.held_share)
-    if report_frame.problems and all(p.startswith(BOX_PROBLEM) for p in report_frame.problems) and fill is not None:
-        report_frame = FrameReport(report_frame.gaussians_in_view, report_frame.views_seeing, report_frame.boxes_with_gaussians,
-                                   report_frame.render_coverage)  # boxes only: the fill check below names them
+    if fill is not None and report_frame.problems and set(report_frame.problem_kinds()) == {"boxes"}:
+        report_frame = report_frame.without("boxes")  # boxes only: the fill check below names them
     if not report_frame.ok:
         report_frame = diagnose(scene, report_frame, _corrections(scene, parts), backend=backend)
         if not report_frame.hints:
@@ -597,13 +599,13 @@ def _to_scan(
 
 def _rle_source(
     parts: _Parts, instances_format: str | None, instances: list[Instance], views: dict[str, Camera], assign: str,
-    masks: PathLike | None, notes: list[str],
+    masks: PathLike | None, notes: list[str], data: Any = None,
 ) -> MaskSource | None:
     """Holi-Spatial's RLE masks (``mask_encodings``) as a mask source, mask files where an instance has no RLE;
     read (and every RLE checked) for the release layout, and for other layouts only when masks are asked for."""
     if instances_format != "holi-spatial" or parts.instances_path is None or not (parts.layout == "holi-spatial" or assign == "masks"):
         return None
-    rle = rle_masks(parts.instances_path, instances, views)
+    rle = rle_masks(parts.instances_path, instances, views, data=data)
     if rle.count == 0:
         return None
     notes.append(f"{rle.count} COCO RLE masks (mask_encodings) read from {parts.instances_path.name}")

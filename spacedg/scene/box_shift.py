@@ -1,0 +1,171 @@
+"""Is a box shifted off its object? The per-axis **ends test**.
+
+A box annotated on its object reaches, along each of its axes, from the object's lowest point to
+its highest: the two *ends* of the object's Gaussian centres along the axis lie at the box's two
+faces. A box shifted by ``d`` along an axis moves both faces the same way: one end of the object
+sticks out of one face by ``d`` and the other end falls short of the opposite face by ``d``.
+Everything else that moves an end moves **one** end only, or the two ends apart:
+
+- a neighbour, a floor, a wall, a table top beside one face extends that end outwards only;
+- a loose box (drawn with some slack) has both ends inside, an object larger than its box both
+  outside (a scale or unit problem, not a shift);
+- a sparse end (a chair back's top) pulls one end inwards only.
+
+So an axis is **shifted** when both ends moved past their faces *the same way*, by at least
+:data:`MIN_SHIFT_SHARE` of the box's side along that axis; the shift that puts the box back is,
+per axis, the smaller of the two moves (the end the neighbours cannot have pushed). A plane
+lying across the box (a floor under a chair, seen along a horizontal axis) extends both ends
+outwards and so hides nothing but a shift along it; the columns are therefore taken through the
+inner :data:`CORE_SHARE` of the box's cross-section, away from the faces a support lies on.
+
+**The object's Gaussians** along axis ``a`` are the centres in the box's *column*: inside the
+inner :data:`CORE_SHARE` of the box's other two sides and within :data:`WINDOW_SHARE` of the
+box's longest side beyond each face along ``a``. Centres of *other* annotated objects (inside
+another box that does not enclose this one: a table's centres under a cup's box, a neighbouring
+vase) are left out first; where the Gaussians carry instance ids (labelled Gaussians, masks
+voted), only this instance's own centres are used. An end is the ``k``-th extreme centre with
+``k = max(1, ⌈END_SHARE · n⌉)`` (one stray centre does not make an end).
+
+Thresholds (why): :data:`MIN_SHIFT_SHARE` = 3 % of the side: correct boxes of the synthetic
+rooms (seeds 1–4, tuned on) never show both ends moved the same way by more than 1.2 % of the
+side, and 3 % keeps a 7 cm shift of a 1.8 m wardrobe (3.9 %) visible; ``benchmarks/box_fill.py``
+prints the detections and false alarms (also on seeds not tuned on).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from spacedg.scene.box import OrientedBox
+
+__all__ = ["ShiftEstimate", "estimate_shift", "foreign_points", "MIN_SHIFT_SHARE", "CORE_SHARE", "WINDOW_SHARE", "END_SHARE"]
+
+#: An axis is shifted when both ends moved the same way by at least this share of the box's side along it.
+MIN_SHIFT_SHARE = 0.03
+#: An end within this share of the side of its face is at the face (the centres' own spread).
+END_TOL = 0.01
+#: ... and by at least this share of the box's longest side (a flat box's thin side: the centres' own noise).
+MIN_SHIFT_LONGEST = 0.01
+#: ... with the end sticking out at most this many times further than the other falls short (more: a wall or a
+#: floor beyond, not the object's own continuation).
+MAX_END_RATIO = 3.0
+#: The columns run through this inner share of the box's other two sides (away from supports at the faces).
+CORE_SHARE = 1.0
+#: How far beyond each face the ends are sought, share of the box's longest side.
+WINDOW_SHARE = 0.5
+#: Centres within this share of another box's longest side of it belong to that box (centres on its faces).
+FOREIGN_TOL = 1e-6
+#: Half thickness of a face's band where a plane across the box is sought: this share of the side along the
+#: face's axis plus :data:`BAND_LONGEST` of the longest side.
+BAND_SHARE = 0.05
+BAND_LONGEST = 0.01
+#: A face band holds a plane when the ring around the footprint holds this share of the centres over it,
+PLANE_SHARE = 0.5
+#: ... and at least this many.
+PLANE_MIN = 3
+#: An end is the k-th extreme centre, k = max(1, ceil(END_SHARE * n)).
+END_SHARE = 0.01
+
+
+@dataclass(frozen=True)
+class ShiftEstimate:
+    """The ends test of one box (module docstring); lengths in scene units, box-local axes.
+
+    Attributes:
+        ends: (3, 2) how far the object's low / high end lies past the box's low / high face
+            (``end − face``: negative = lower along the axis), NaN on an axis without centres.
+        local: (3,) box-local translation putting the box on its object (0 on axes not shifted).
+        shifted: (3,) bool, the axes whose both ends moved the same way by >= :data:`MIN_SHIFT_SHARE` of the side.
+        counts: (3,) centres in each axis's column.
+    """
+
+    ends: np.ndarray
+    local: np.ndarray
+    shifted: np.ndarray
+    counts: np.ndarray
+
+    @property
+    def any(self) -> bool:
+        return bool(self.shifted.any())
+
+    def world(self, box: OrientedBox) -> np.ndarray:
+        """The translation in world axes (scene units)."""
+        return box.rotation @ self.local
+
+
+def _end(values: np.ndarray, high: bool) -> float:
+    """The ``k``-th lowest (highest) of ``values``, ``k = max(1, ⌈END_SHARE · n⌉)``: one stray centre is no end."""
+    k = max(1, int(np.ceil(END_SHARE * len(values))))
+    return float(-np.partition(-values, k - 1)[k - 1] if high else np.partition(values, k - 1)[k - 1])
+
+
+def _plane_bands(u: np.ndarray, half: np.ndarray, extents: np.ndarray) -> np.ndarray:
+    """(N, 3) bool: the centres in the band of a face of the box (per axis) where a plane lies across it
+    (a floor under a chair, a wall behind a wardrobe): as many centres in the band just around the box's
+    footprint (a ring of the footprint's area) as :data:`PLANE_SHARE` × those over the footprint."""
+    out = np.zeros(u.shape, dtype=bool)
+    ratio = np.abs(u) / np.maximum(half, 1e-12)
+    for c in range(3):
+        others = [b for b in range(3) if b != c]
+        spread = ratio[:, others].max(axis=1)
+        band = BAND_SHARE * float(extents[c]) + BAND_LONGEST * float(extents.max())
+        for side in (-1.0, 1.0):
+            in_band = np.abs(u[:, c] - side * half[c]) <= band
+            over, ring = int((in_band & (spread <= 1.0)).sum()), int((in_band & (spread > 1.0) & (spread <= np.sqrt(2.0))).sum())
+            if ring >= max(PLANE_MIN, PLANE_SHARE * over):
+                out[:, c] |= in_band
+    return out
+
+
+def _axis_shift(lo: float, hi: float) -> float:
+    """The move along one axis that puts the box on the object's ends ``lo`` / ``hi`` (``end − face``), 0 when
+    the ends do not show a shift (module docstring)."""
+    if lo * hi <= 0.0:  # both ends inside (a loose box), both outside, or one at its face: not a shift
+        return 0.0
+    retract, extend = (lo, hi) if lo > 0.0 else (-hi, -lo)
+    if extend < retract:  # the end sticking out is the nearer one: nothing beyond can have pushed it
+        return (lo + hi) / 2.0
+    return float(np.sign(lo)) * retract if extend <= MAX_END_RATIO * retract else 0.0
+
+
+def estimate_shift(local: np.ndarray, extents: np.ndarray) -> ShiftEstimate:
+    """The ends test on the object's centres ``local`` (N, 3), in the box's frame (scene units,
+    origin at the box centre, box axes), for a box of full sides ``extents``."""
+    u = np.asarray(local, dtype=np.float64).reshape(-1, 3)
+    half = np.asarray(extents, dtype=np.float64) / 2.0
+    inner = np.abs(u) <= CORE_SHARE * half
+    planes = _plane_bands(u, half, extents)
+    ends = np.full((3, 2), np.nan)
+    shift = np.zeros(3)
+    shifted = np.zeros(3, dtype=bool)
+    counts = np.zeros(3, dtype=np.int64)
+    for a in range(3):
+        others = [b for b in range(3) if b != a]
+        col = inner[:, others].all(axis=1) & ~planes[:, others].any(axis=1) & (np.abs(u[:, a]) <= half[a] + max(WINDOW_SHARE * float(extents.max()), float(extents[a])))
+        x = u[col, a]
+        counts[a] = len(x)
+        if len(x) == 0:
+            continue
+        lo, hi = _end(x, high=False) + half[a], _end(x, high=True) - half[a]
+        ends[a] = (lo, hi)
+        tol = END_TOL * float(extents[a])
+        shift[a] = _axis_shift(lo if abs(lo) > tol else 0.0, hi if abs(hi) > tol else 0.0)
+        shifted[a] = abs(shift[a]) >= max(MIN_SHIFT_SHARE * float(extents[a]), MIN_SHIFT_LONGEST * float(extents.max()))
+    return ShiftEstimate(ends, np.where(shifted, shift, 0.0), shifted, counts)
+
+
+def foreign_points(points: np.ndarray, box: OrientedBox, others: Sequence[OrientedBox]) -> np.ndarray:
+    """(N,) bool: ``points`` (world) inside one of ``others`` that does not enclose ``box`` (all its
+    corners inside): centres another annotated object claims (a table under a cup's box, a neighbouring
+    vase), not a shelf around its book. A centre on another box's face (within :data:`FOREIGN_TOL` of its
+    longest side: round-off) is that box's."""
+    out = np.zeros(len(points), dtype=bool)
+    corners = box.corners()
+    for other in others:
+        tol = FOREIGN_TOL * float(other.extents.max())
+        if len(points) and not other.contains(corners, tol=tol).all():
+            out |= other.contains(points, tol=tol)
+    return out
