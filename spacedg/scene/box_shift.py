@@ -41,7 +41,7 @@ import numpy as np
 
 from spacedg.scene.box import OrientedBox
 
-__all__ = ["ShiftEstimate", "estimate_shift", "foreign_points", "MIN_SHIFT_SHARE", "CORE_SHARE", "WINDOW_SHARE", "END_SHARE"]
+__all__ = ["ShiftEstimate", "estimate_shift", "foreign_points", "MIN_SHIFT_SHARE", "MIN_COLUMN", "WINDOW_SHARE", "END_SHARE"]
 
 #: An axis is shifted when both ends moved the same way by at least this share of the box's side along it.
 MIN_SHIFT_SHARE = 0.03
@@ -52,8 +52,8 @@ MIN_SHIFT_LONGEST = 0.01
 #: ... with the end sticking out at most this many times further than the other falls short (more: a wall or a
 #: floor beyond, not the object's own continuation).
 MAX_END_RATIO = 3.0
-#: The columns run through this inner share of the box's other two sides (away from supports at the faces).
-CORE_SHARE = 1.0
+#: Fewest centres in a column to judge its axis (one centre is no object).
+MIN_COLUMN = 2
 #: How far beyond each face the ends are sought, share of the box's longest side.
 WINDOW_SHARE = 0.5
 #: Centres within this share of another box's longest side of it belong to that box (centres on its faces).
@@ -67,7 +67,7 @@ PLANE_SHARE = 0.5
 #: ... and at least this many.
 PLANE_MIN = 3
 #: An end is the k-th extreme centre, k = max(1, ceil(END_SHARE * n)).
-END_SHARE = 0.01
+END_SHARE = 0.002
 
 
 @dataclass(frozen=True)
@@ -120,9 +120,11 @@ def _plane_bands(u: np.ndarray, half: np.ndarray, extents: np.ndarray) -> np.nda
     return out
 
 
-def _axis_shift(lo: float, hi: float) -> float:
+def _axis_shift(lo: float, hi: float, labelled: bool) -> float:
     """The move along one axis that puts the box on the object's ends ``lo`` / ``hi`` (``end − face``), 0 when
     the ends do not show a shift (module docstring)."""
+    if labelled and lo > 0.0 > hi:  # a loose box around its own (labelled) centres: off centre by the midpoint
+        return (lo + hi) / 2.0
     if lo * hi <= 0.0:  # both ends inside (a loose box), both outside, or one at its face: not a shift
         return 0.0
     retract, extend = (lo, hi) if lo > 0.0 else (-hi, -lo)
@@ -131,13 +133,16 @@ def _axis_shift(lo: float, hi: float) -> float:
     return float(np.sign(lo)) * retract if extend <= MAX_END_RATIO * retract else 0.0
 
 
-def estimate_shift(local: np.ndarray, extents: np.ndarray) -> ShiftEstimate:
+def estimate_shift(local: np.ndarray, extents: np.ndarray, *, labelled: bool = False) -> ShiftEstimate:
     """The ends test on the object's centres ``local`` (N, 3), in the box's frame (scene units,
-    origin at the box centre, box axes), for a box of full sides ``extents``."""
+    origin at the box centre, box axes), for a box of full sides ``extents``.
+
+    ``labelled``: the centres are the object's own (its instance id), nothing else: no plane is sought,
+    and a loose box (both ends inside) off centre by the ends' midpoint is shifted too."""
     u = np.asarray(local, dtype=np.float64).reshape(-1, 3)
     half = np.asarray(extents, dtype=np.float64) / 2.0
-    inner = np.abs(u) <= CORE_SHARE * half
-    planes = _plane_bands(u, half, extents)
+    inner = np.abs(u) <= half + END_TOL * np.asarray(extents, dtype=np.float64)  # centres on a face are in
+    planes = np.zeros(u.shape, dtype=bool) if labelled else _plane_bands(u, half, extents)
     ends = np.full((3, 2), np.nan)
     shift = np.zeros(3)
     shifted = np.zeros(3, dtype=bool)
@@ -147,12 +152,12 @@ def estimate_shift(local: np.ndarray, extents: np.ndarray) -> ShiftEstimate:
         col = inner[:, others].all(axis=1) & ~planes[:, others].any(axis=1) & (np.abs(u[:, a]) <= half[a] + max(WINDOW_SHARE * float(extents.max()), float(extents[a])))
         x = u[col, a]
         counts[a] = len(x)
-        if len(x) == 0:
+        if len(x) < MIN_COLUMN:
             continue
         lo, hi = _end(x, high=False) + half[a], _end(x, high=True) - half[a]
         ends[a] = (lo, hi)
         tol = END_TOL * float(extents[a])
-        shift[a] = _axis_shift(lo if abs(lo) > tol else 0.0, hi if abs(hi) > tol else 0.0)
+        shift[a] = _axis_shift(lo if abs(lo) > tol else 0.0, hi if abs(hi) > tol else 0.0, labelled)
         shifted[a] = abs(shift[a]) >= max(MIN_SHIFT_SHARE * float(extents[a]), MIN_SHIFT_LONGEST * float(extents.max()))
     return ShiftEstimate(ends, np.where(shifted, shift, 0.0), shifted, counts)
 
