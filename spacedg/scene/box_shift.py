@@ -58,6 +58,8 @@ MIN_COLUMN = 2
 WINDOW_SHARE = 0.5
 #: Centres within this share of another box's longest side of it belong to that box (centres on its faces).
 FOREIGN_TOL = 1e-6
+#: Past a face, an end stops at the first free stretch longer than this share of the side.
+GAP_SHARE = 0.2
 #: Half thickness of a face's band where a plane across the box is sought: this share of the side along the
 #: face's axis plus :data:`BAND_LONGEST` of the longest side.
 BAND_SHARE = 0.05
@@ -96,41 +98,52 @@ class ShiftEstimate:
         return box.rotation @ self.local
 
 
-def _end(values: np.ndarray, high: bool) -> float:
-    """The ``k``-th lowest (highest) of ``values``, ``k = max(1, ⌈END_SHARE · n⌉)``: one stray centre is no end."""
-    k = max(1, int(np.ceil(END_SHARE * len(values))))
-    return float(-np.partition(-values, k - 1)[k - 1] if high else np.partition(values, k - 1)[k - 1])
+def _end(values: np.ndarray, face: float, high: bool, gap: float) -> float:
+    """The object's end along one axis, as ``end − face`` (positive: higher): inside the box the ``k``-th
+    extreme centre (``k = max(1, ⌈END_SHARE · n⌉)``: one stray centre is no end); past the face, the last
+    centre reached from the face without a free stretch longer than ``gap`` (a wall beyond free space
+    is not the object's continuation)."""
+    x, f = (-values, -face) if high else (values, face)
+    k = max(1, int(np.ceil(END_SHARE * len(x))))
+    end = float(np.partition(x, k - 1)[k - 1])
+    if end < f:
+        beyond = np.sort(x[x < f])[::-1]
+        cut = np.flatnonzero(-np.diff(np.concatenate([[f], beyond])) > gap)
+        end = float(beyond[-1]) if len(cut) == 0 else f if cut[0] == 0 else float(beyond[cut[0] - 1])
+    return (f - end) if high else (end - f)
 
 
 def _plane_bands(u: np.ndarray, half: np.ndarray, extents: np.ndarray) -> np.ndarray:
     """(N, 3) bool: the centres in the band of a face of the box (per axis) where a plane lies across it
-    (a floor under a chair, a wall behind a wardrobe): as many centres in the band just around the box's
-    footprint (a ring of the footprint's area) as :data:`PLANE_SHARE` × those over the footprint."""
+    (a floor under a chair, a wall behind a wardrobe): the band just around the box's footprint (a ring
+    of the footprint's area) holds :data:`PLANE_SHARE` × the centres over the footprint, on both sides
+    along one of the face's axes (the object itself, moved off its box, lies on one side only)."""
     out = np.zeros(u.shape, dtype=bool)
-    ratio = np.abs(u) / np.maximum(half, 1e-12)
+    ratio = u / np.maximum(half, 1e-12)
     for c in range(3):
-        others = [b for b in range(3) if b != c]
-        spread = ratio[:, others].max(axis=1)
+        b, d = [a for a in range(3) if a != c]
+        spread = np.maximum(np.abs(ratio[:, b]), np.abs(ratio[:, d]))
         band = BAND_SHARE * float(extents[c]) + BAND_LONGEST * float(extents.max())
         for side in (-1.0, 1.0):
             in_band = np.abs(u[:, c] - side * half[c]) <= band
-            over, ring = int((in_band & (spread <= 1.0)).sum()), int((in_band & (spread > 1.0) & (spread <= np.sqrt(2.0))).sum())
-            if ring >= max(PLANE_MIN, PLANE_SHARE * over):
+            over = int((in_band & (spread <= 1.0)).sum())
+            ring = in_band & (spread > 1.0) & (spread <= np.sqrt(2.0))
+            need = max(PLANE_MIN, PLANE_SHARE * over) / 4.0  # a quarter of the ring on each side
+            both = any(int((ring & (ratio[:, a] < -1.0)).sum()) >= need and int((ring & (ratio[:, a] > 1.0)).sum()) >= need
+                       for a in (b, d))
+            if int(ring.sum()) >= max(PLANE_MIN, PLANE_SHARE * over) and both:
                 out[:, c] |= in_band
     return out
 
 
-def _axis_shift(lo: float, hi: float, labelled: bool) -> float:
-    """The move along one axis that puts the box on the object's ends ``lo`` / ``hi`` (``end − face``), 0 when
-    the ends do not show a shift (module docstring)."""
+def _axis_shift(lo: float, hi: float, labelled: bool) -> tuple[float, float]:
+    """``(move, evidence)`` along one axis from the object's ends ``lo`` / ``hi`` (``end − face``): the move
+    putting the box on the ends' midpoint, and how far both ends moved the same way (0: no shift)."""
     if labelled and lo > 0.0 > hi:  # a loose box around its own (labelled) centres: off centre by the midpoint
-        return (lo + hi) / 2.0
+        return (lo + hi) / 2.0, abs(lo + hi) / 2.0
     if lo * hi <= 0.0:  # both ends inside (a loose box), both outside, or one at its face: not a shift
-        return 0.0
-    retract, extend = (lo, hi) if lo > 0.0 else (-hi, -lo)
-    if extend < retract:  # the end sticking out is the nearer one: nothing beyond can have pushed it
-        return (lo + hi) / 2.0
-    return float(np.sign(lo)) * retract if extend <= MAX_END_RATIO * retract else 0.0
+        return 0.0, 0.0
+    return (lo + hi) / 2.0, min(abs(lo), abs(hi))
 
 
 def estimate_shift(local: np.ndarray, extents: np.ndarray, *, labelled: bool = False) -> ShiftEstimate:
@@ -154,11 +167,12 @@ def estimate_shift(local: np.ndarray, extents: np.ndarray, *, labelled: bool = F
         counts[a] = len(x)
         if len(x) < MIN_COLUMN:
             continue
-        lo, hi = _end(x, high=False) + half[a], _end(x, high=True) - half[a]
+        gap = GAP_SHARE * float(extents.max())
+        lo, hi = _end(x, -half[a], False, gap), _end(x, half[a], True, gap)
         ends[a] = (lo, hi)
         tol = END_TOL * float(extents[a])
-        shift[a] = _axis_shift(lo if abs(lo) > tol else 0.0, hi if abs(hi) > tol else 0.0, labelled)
-        shifted[a] = abs(shift[a]) >= max(MIN_SHIFT_SHARE * float(extents[a]), MIN_SHIFT_LONGEST * float(extents.max()))
+        shift[a], evidence = _axis_shift(lo if abs(lo) > tol else 0.0, hi if abs(hi) > tol else 0.0, labelled)
+        shifted[a] = evidence >= max(MIN_SHIFT_SHARE * float(extents[a]), MIN_SHIFT_LONGEST * float(extents.max()))
     return ShiftEstimate(ends, np.where(shifted, shift, 0.0), shifted, counts)
 
 
