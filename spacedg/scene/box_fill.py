@@ -348,31 +348,27 @@ def _best_placement(inst: Instance, u: np.ndarray) -> np.ndarray:
 
 
 def _one_box(
-    inst: Instance, near_u: np.ndarray, wide: Callable[[], np.ndarray], object_local: Callable[[], tuple[np.ndarray, bool]],
+    inst: Instance, near_u: np.ndarray, free: Callable[[], np.ndarray], unclaimed: Callable[[], np.ndarray],
+    object_local: Callable[[], tuple[np.ndarray, bool]],
 ) -> BoxFill:
     """Measures and verdict of one box from the free centres around it: ``near_u`` (box and shell, local
-    coordinates), ``wide()`` (the unclaimed centres within the search reach, fetched only when needed) and
+    coordinates), ``free()`` / ``unclaimed()`` (the free centres within the search reach / those no other box
+    claims, fetched only when needed) and
     ``object_local()`` (its object's centres for the ends test, box frame in scene units, and whether
     they are labelled)."""
     half = _half(inst.box)
     inside0, shell0 = _counts(near_u, np.zeros(3), half)
     n_in, n_near = int(inside0.sum()), int(shell0.sum())
     fill = _fill(near_u[inside0], half)
-    status, t = "ok", np.zeros(3)
-    if n_in or n_near:
-        local, labelled = object_local()
-        ends = estimate_shift(local, inst.box.extents, labelled=labelled)
-        if ends.any:
-            status, t = "shifted", ends.local / _scale(inst.box)
-        elif n_in == 0:
-            status = "loose"
-    else:
-        status = "empty"
-    if status in ("empty", "loose"):
-        t = _best_placement(inst, wide())
+    local, labelled = object_local()
+    ends = estimate_shift(local, inst.box.extents, labelled=labelled)
+    status = "empty" if n_in == 0 and n_near == 0 else "shifted" if ends.any else "loose" if n_in == 0 else "ok"
+    t = ends.local / _scale(inst.box) if ends.any else np.zeros(3)
+    if status in ("empty", "loose") and not ends.any:
+        t = _best_placement(inst, unclaimed())
     if not np.any(t != 0):
         return BoxFill(inst.id, inst.label, n_in, fill, n_near, status)
-    inside_t, shell_t = _counts(wide(), t, half)
+    inside_t, shell_t = _counts(free(), t, half)  # counted as ``inside`` is
     best_in = int(inside_t.sum())
     if status == "shifted" and best_in >= max(MIN_GROWTH * n_in, 1):
         status = "outside"  # the box holds less than half of what it holds once moved
@@ -423,7 +419,7 @@ def measure_box_fill(
 
     for k, inst in sorted(enumerate(instances), key=lambda ki: (ki[1].box.volume, ki[1].id)):
         idx, near_u = free_local(inst.box, MARGIN_SHARE)
-        rows[inst.id] = _one_box(inst, near_u, lambda k=k, box=inst.box: unclaimed_local(k, box),
+        rows[inst.id] = _one_box(inst, near_u, lambda box=inst.box: free_local(box, reach)[1], lambda k=k, box=inst.box: unclaimed_local(k, box),
                                  lambda k=k, inst=inst: object_local(k, inst))
         owned[idx[(np.abs(near_u) - _half(inst.box)).max(axis=1) <= 0.0]] = True
     return BoxFillReport(tuple(rows[k] for k in sorted(rows)), len(pts), metres_per_file_unit)

@@ -58,12 +58,16 @@ MIN_COLUMN = 2
 WINDOW_SHARE = 0.5
 #: Centres within this share of another box's longest side of it belong to that box (centres on its faces).
 FOREIGN_TOL = 1e-6
+#: Rounds of the ends test, the box moved by the shift found so far between rounds.
+ROUNDS = 3
 #: Past a face, an end stops at the first free stretch longer than this share of the side.
 GAP_SHARE = 0.2
 #: Half thickness of a face's band where a plane across the box is sought: this share of the side along the
 #: face's axis plus :data:`BAND_LONGEST` of the longest side.
 BAND_SHARE = 0.05
 BAND_LONGEST = 0.01
+#: The ring starts this share of the half sides beyond the box (the object's own centres on its sides are not a plane).
+RING_GAP = 0.05
 #: A face band holds a plane when the ring around the footprint holds this share of the centres over it,
 PLANE_SHARE = 0.5
 #: ... and at least this many.
@@ -98,19 +102,30 @@ class ShiftEstimate:
         return box.rotation @ self.local
 
 
-def _end(values: np.ndarray, face: float, high: bool, gap: float) -> float:
-    """The object's end along one axis, as ``end − face`` (positive: higher): inside the box the ``k``-th
-    extreme centre (``k = max(1, ⌈END_SHARE · n⌉)``: one stray centre is no end); past the face, the last
-    centre reached from the face without a free stretch longer than ``gap`` (a wall beyond free space
-    is not the object's continuation)."""
-    x, f = (-values, -face) if high else (values, face)
-    k = max(1, int(np.ceil(END_SHARE * len(x))))
-    end = float(np.partition(x, k - 1)[k - 1])
-    if end < f:
-        beyond = np.sort(x[x < f])[::-1]
-        cut = np.flatnonzero(-np.diff(np.concatenate([[f], beyond])) > gap)
-        end = float(beyond[-1]) if len(cut) == 0 else f if cut[0] == 0 else float(beyond[cut[0] - 1])
-    return (f - end) if high else (end - f)
+def _kth(values: np.ndarray, high: bool) -> float:
+    """The ``k``-th lowest (highest) value, ``k = max(1, ⌈END_SHARE · n⌉)``: one stray centre is no end."""
+    k = max(1, int(np.ceil(END_SHARE * len(values))))
+    return float(-np.partition(-values, k - 1)[k - 1] if high else np.partition(values, k - 1)[k - 1])
+
+
+def _walk(values: np.ndarray, face: float, high: bool, gap: float, first: float) -> float:
+    """How far past ``face`` (outwards, >= 0) the centres reach without a free stretch longer than ``gap``
+    (the first stretch, from the face, may be as long as ``first``): a wall beyond free space is not the
+    object's continuation, but an object moved wholly off its box starts beyond a free stretch."""
+    out = np.sort(values[values > face] - face) if high else np.sort(face - values[values < face])
+    if len(out) == 0 or out[0] > max(gap, first):
+        return 0.0
+    cut = np.flatnonzero(np.diff(out) > gap)
+    return float(out[cut[0]] if len(cut) else out[-1])
+
+
+def _ends(x: np.ndarray, half: float, gap: float) -> tuple[float, float]:
+    """``(lo, hi)``: the object's ends as ``end − face`` along one axis (module docstring)."""
+    low, high = _kth(x, False), _kth(x, True)
+    retract_lo, retract_hi = max(0.0, low + half), max(0.0, half - high)
+    lo = low + half if low >= -half else -_walk(x, -half, False, gap, retract_hi)
+    hi = high - half if high <= half else _walk(x, half, True, gap, retract_lo)
+    return lo, hi
 
 
 def _plane_bands(u: np.ndarray, half: np.ndarray, extents: np.ndarray) -> np.ndarray:
@@ -123,13 +138,13 @@ def _plane_bands(u: np.ndarray, half: np.ndarray, extents: np.ndarray) -> np.nda
     for c in range(3):
         b, d = [a for a in range(3) if a != c]
         spread = np.maximum(np.abs(ratio[:, b]), np.abs(ratio[:, d]))
-        band = BAND_SHARE * float(extents[c]) + BAND_LONGEST * float(extents.max())
+        band = min(BAND_SHARE * float(extents[c]) + BAND_LONGEST * float(extents.max()), float(extents[c]) / 4.0)
         for side in (-1.0, 1.0):
             in_band = np.abs(u[:, c] - side * half[c]) <= band
             over = int((in_band & (spread <= 1.0)).sum())
-            ring = in_band & (spread > 1.0) & (spread <= np.sqrt(2.0))
+            ring = in_band & (spread > 1.0 + RING_GAP) & (spread <= np.sqrt(2.0))  # not the centres on the box's sides
             need = max(PLANE_MIN, PLANE_SHARE * over) / 4.0  # a quarter of the ring on each side
-            both = any(int((ring & (ratio[:, a] < -1.0)).sum()) >= need and int((ring & (ratio[:, a] > 1.0)).sum()) >= need
+            both = any(int((ring & (ratio[:, a] < -1.0 - RING_GAP)).sum()) >= need and int((ring & (ratio[:, a] > 1.0 + RING_GAP)).sum()) >= need
                        for a in (b, d))
             if int(ring.sum()) >= max(PLANE_MIN, PLANE_SHARE * over) and both:
                 out[:, c] |= in_band
@@ -148,10 +163,28 @@ def _axis_shift(lo: float, hi: float, labelled: bool) -> tuple[float, float]:
 
 def estimate_shift(local: np.ndarray, extents: np.ndarray, *, labelled: bool = False) -> ShiftEstimate:
     """The ends test on the object's centres ``local`` (N, 3), in the box's frame (scene units,
-    origin at the box centre, box axes), for a box of full sides ``extents``.
+    origin at the box centre, box axes), for a box of full sides ``extents``; repeated (up to
+    :data:`ROUNDS` times) with the box moved by the shift found so far, since a box moved off its
+    object along one axis hides its other axes' ends (a doily's box lifted off it sees no doily
+    along x or y until it is put back down).
 
     ``labelled``: the centres are the object's own (its instance id), nothing else: no plane is sought,
     and a loose box (both ends inside) off centre by the ends' midpoint is shifted too."""
+    u = np.asarray(local, dtype=np.float64).reshape(-1, 3)
+    first = _estimate_once(u, extents, labelled)
+    total, found = first.local.copy(), first.shifted.copy()
+    for _ in range(ROUNDS - 1):
+        if not found.any():
+            break
+        more = _estimate_once(u - total, extents, labelled)
+        if not more.shifted.any():
+            break
+        total, found = total + more.local, found | more.shifted
+    return ShiftEstimate(first.ends, np.where(found, total, 0.0), found, first.counts)
+
+
+def _estimate_once(local: np.ndarray, extents: np.ndarray, labelled: bool) -> ShiftEstimate:
+    """One round of :func:`estimate_shift`."""
     u = np.asarray(local, dtype=np.float64).reshape(-1, 3)
     half = np.asarray(extents, dtype=np.float64) / 2.0
     inner = np.abs(u) <= half + END_TOL * np.asarray(extents, dtype=np.float64)  # centres on a face are in
@@ -168,7 +201,7 @@ def estimate_shift(local: np.ndarray, extents: np.ndarray, *, labelled: bool = F
         if len(x) < MIN_COLUMN:
             continue
         gap = GAP_SHARE * float(extents.max())
-        lo, hi = _end(x, -half[a], False, gap), _end(x, half[a], True, gap)
+        lo, hi = _ends(x, half[a], gap)
         ends[a] = (lo, hi)
         tol = END_TOL * float(extents[a])
         shift[a], evidence = _axis_shift(lo if abs(lo) > tol else 0.0, hi if abs(hi) > tol else 0.0, labelled)
