@@ -23,8 +23,8 @@ What it does, in order (each step reported in :class:`ImportReport`):
    refused unless ``trust_up``; the evidence is kept in ``metadata.up_evidence``.
 4. **Frame check** (:mod:`spacedg.scene.frame_check`): refused with the disagreeing parts and the
    probable cause unless ``frame_check="warn"``.
-4b. **Box fill** (:mod:`spacedg.scene.box_fill`): every box must hold its object; an empty or
-   misplaced box is refused naming the box, the shift that fits it best and the causes that fit
+4b. **Box fill** (:mod:`spacedg.scene.box_fill`): every box must hold its object; an empty, shifted or
+   mostly outside box is refused naming the box, the shift that fits it best and the causes that fit
    the layout, unless ``frame_check="warn"``; the summary and the fill table share its numbers.
 5. **Instance ids**: kept when the Gaussians carry them; otherwise assigned
    (:func:`~spacedg.scene.labelling.assign_instances`, by boxes unless masks are asked for) and
