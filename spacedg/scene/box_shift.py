@@ -132,9 +132,15 @@ def _walk(values: np.ndarray, face: float, high: bool, gap: float, first: float)
     return float(out[cut[0]] if len(cut) else out[-1])
 
 
-def _ends(x: np.ndarray, half: float, gap: float) -> tuple[float, float]:
-    """``(lo, hi)``: the object's ends as ``end − face`` along one axis (module docstring)."""
+def _ends(x: np.ndarray, half: float, gap: float, tol: float) -> tuple[float, float]:
+    """``(lo, hi)``: the object's ends as ``end − face`` along one axis (module docstring). An end inside the box
+    whose extreme centre touches the face (within ``tol``) is at the face: a sparse end (a plant's leaf tips)
+    has not moved off it."""
     low, high = _kth(x, False), _kth(x, True)
+    if low > -half and abs(float(x.min()) + half) <= tol:
+        low = -half
+    if high < half and abs(float(x.max()) - half) <= tol:
+        high = half
     retract_lo, retract_hi = max(0.0, low + half), max(0.0, half - high)
     lo = low + half if low >= -half else -_walk(x, -half, False, gap, retract_hi)
     hi = high - half if high <= half else _walk(x, half, True, gap, retract_lo)
@@ -215,9 +221,9 @@ def _estimate_once(local: np.ndarray, extents: np.ndarray, labelled: bool) -> Sh
         if len(x) < MIN_COLUMN:
             continue
         gap = GAP_SHARE * float(extents.max())
-        lo, hi = _ends(x, half[a], gap)
-        ends[a] = (lo, hi)
         tol = END_TOL * float(extents[a])
+        lo, hi = _ends(x, half[a], gap, tol)
+        ends[a] = (lo, hi)
         shift[a], evidence = _axis_shift(lo if abs(lo) > tol else 0.0, hi if abs(hi) > tol else 0.0, labelled)
         shifted[a] = evidence >= max(MIN_SHIFT_SHARE * float(extents[a]), MIN_SHIFT_LONGEST * float(extents.max()))
     return ShiftEstimate(ends, np.where(shifted, shift, 0.0), shifted, counts)
