@@ -145,22 +145,25 @@ def decide_frame(
 
 def check_box_fill(
     means: np.ndarray, instances: Sequence[Instance], *, where: str, layout: str, frame_check: str = "error",
-    fill: BoxFillReport | None = None,
+    fill: BoxFillReport | None = None, instance_ids: np.ndarray | None = None, metres_per_file_unit: float = 1.0,
 ) -> tuple[BoxFillReport | None, str | None]:
     """Whether every box holds its object (module docstring, step 2); metres, after scaling.
 
     Returns ``(report, note)``: the fill report (``None`` without boxes; ``fill`` when already measured) and,
     with ``frame_check="warn"``, the note on boxes that do not hold their objects (``None`` when all do).
+    ``instance_ids``: the Gaussians' instance ids where known (each box judged on its own object);
+    ``metres_per_file_unit``: the import's scale, to state a fitting shift in file units too.
 
     Raises:
-        BoxFillError: an empty or misplaced box, with ``frame_check="error"``.
+        BoxFillError: an empty, shifted or mostly outside box, with ``frame_check="error"``.
         ParameterError: ``frame_check`` not in :data:`FRAME_CHECKS`.
     """
     if frame_check not in FRAME_CHECKS:
         raise ParameterError(f"frame_check {frame_check!r}: choose one of {', '.join(FRAME_CHECKS)}")
     if not instances:
         return None, None
-    report = fill if fill is not None else measure_box_fill(means, instances)
+    report = fill if fill is not None else measure_box_fill(means, instances, instance_ids=instance_ids,
+                                                                 metres_per_file_unit=metres_per_file_unit)
     try:
         report.raise_if_bad(where, layout)
     except BoxFillError:

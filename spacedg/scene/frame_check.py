@@ -26,7 +26,7 @@ y-up/z-up swap, ...) and names the one that passes as the probable cause.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -36,7 +36,7 @@ from spacedg.scene.model import Scene
 
 __all__ = [
     "FrameMismatchError", "FrameReport", "check_frame", "diagnose", "require_frame", "generic_corrections", "normalised_hint",
-    "MIN_IN_VIEW", "BOX_PROBLEM", "MIN_VIEWS_SEEING", "MIN_COVERAGE", "MIN_BOXES",
+    "MIN_IN_VIEW", "BOX_PROBLEM", "PROBLEM_KINDS", "MIN_VIEWS_SEEING", "MIN_COVERAGE", "MIN_BOXES",
 ]
 
 #: Fewest share of Gaussians inside some view's frustum.
@@ -47,8 +47,10 @@ MIN_VIEWS_SEEING = 0.5
 MIN_COVERAGE = 0.02
 #: Fewest share of boxes that hold Gaussians.
 MIN_BOXES = 0.5
-#: Start of the problem text about boxes (the importer's box fill check takes it over).
+#: Start of the problem text about boxes.
 BOX_PROBLEM = "the boxes and the Gaussians disagree"
+#: The kinds of problem (:attr:`FrameReport.kinds`): Gaussians vs cameras, the check renders, the boxes.
+PROBLEM_KINDS = ("cameras", "coverage", "boxes")
 #: Gaussian centres sampled (evenly, deterministic) for the measures.
 SAMPLE = 20_000
 #: Views used for the frustum measures (evenly spread).
@@ -61,7 +63,10 @@ class FrameMismatchError(InvalidDataError):
 
 @dataclass(frozen=True)
 class FrameReport:
-    """Measures of :func:`check_frame` (module docstring) and the problems they show."""
+    """Measures of :func:`check_frame` (module docstring) and the problems they show.
+
+    ``kinds[i]`` is the kind (one of :data:`PROBLEM_KINDS`) of ``problems[i]`` (empty: all ``"cameras"``,
+    for reports made by hand)."""
 
     gaussians_in_view: float
     views_seeing: float
@@ -69,6 +74,16 @@ class FrameReport:
     render_coverage: tuple[float, ...]
     problems: tuple[str, ...] = ()
     hints: tuple[str, ...] = field(default=())
+    kinds: tuple[str, ...] = ()
+
+    def problem_kinds(self) -> tuple[str, ...]:
+        """The kind of each problem, in order."""
+        return self.kinds if len(self.kinds) == len(self.problems) else ("cameras",) * len(self.problems)
+
+    def without(self, kind: str) -> FrameReport:
+        """This report less its problems of ``kind`` (the importer's box fill check names bad boxes itself)."""
+        keep = [i for i, k in enumerate(self.problem_kinds()) if k != kind]
+        return replace(self, problems=tuple(self.problems[i] for i in keep), kinds=tuple(self.problem_kinds()[i] for i in keep))
 
     @property
     def ok(self) -> bool:
@@ -146,15 +161,20 @@ def check_frame(
             small = cam.resized(width, max(1, round(cam.height * width / cam.width)))
             frame = render(gaussians, small, outputs="alpha", backend=backend)
             coverage.append(float((frame.alpha > 0.5).mean()))
+    kinds: list[str] = []
     if in_view < MIN_IN_VIEW:
         problems.append(f"the Gaussians and the cameras disagree: only {in_view:.1%} of the Gaussians lie in any view")
+        kinds.append("cameras")
     elif views_seeing < MIN_VIEWS_SEEING:
         problems.append(f"the Gaussians and the cameras disagree: only {views_seeing:.0%} of the views see any Gaussians")
+        kinds.append("cameras")
     if coverage and max(coverage) < MIN_COVERAGE:
         problems.append(f"the cameras see (almost) nothing: the {len(coverage)} check renders cover at most {max(coverage):.1%} of their pixels")
+        kinds.append("coverage")
     if boxes is not None and boxes < MIN_BOXES:
         problems.append(f"{BOX_PROBLEM}: only {boxes:.0%} of the {len(scene.instances)} boxes hold any Gaussian")
-    return FrameReport(in_view, views_seeing, boxes, tuple(coverage), tuple(problems))
+        kinds.append("boxes")
+    return FrameReport(in_view, views_seeing, boxes, tuple(coverage), tuple(problems), kinds=tuple(kinds))
 
 
 def diagnose(
@@ -173,8 +193,7 @@ def diagnose(
         if trial.ok:
             found.append((trial.gaussians_in_view + trial.mean_coverage, message))
     hints = tuple(f"Probable cause: {m}." for _, m in sorted(found, reverse=True)[:2])
-    return FrameReport(report.gaussians_in_view, report.views_seeing, report.boxes_with_gaussians, report.render_coverage,
-                       report.problems, hints or report.hints)
+    return replace(report, hints=hints or report.hints)
 
 
 def generic_corrections(scene: Scene) -> dict[str, Callable[[Scene], Scene]]:
@@ -228,7 +247,6 @@ def require_frame(scene: Scene, *, backend: str = "auto") -> FrameReport:
         report = diagnose(scene, report, generic_corrections(scene), backend=backend)
         hint = normalised_hint(scene)
         if hint and not report.hints:
-            report = FrameReport(report.gaussians_in_view, report.views_seeing, report.boxes_with_gaussians,
-                                 report.render_coverage, report.problems, (hint,))
+            report = replace(report, hints=(hint,))
         report.raise_if_bad(scene.id)
     return report

@@ -24,8 +24,8 @@ What it does, in order (each step reported in :class:`ImportReport`):
    are decided by :mod:`spacedg.scene.capture_checks`, which :func:`~spacedg.scene.io.scene_from_files` runs too.
 4. **Frame check** (:mod:`spacedg.scene.frame_check`): refused with the disagreeing parts and the
    probable cause unless ``frame_check="warn"``.
-4b. **Box fill** (:mod:`spacedg.scene.box_fill`): every box must hold its object; an empty or
-   misplaced box is refused naming the box, the shift that fits it best and the causes that fit
+4b. **Box fill** (:mod:`spacedg.scene.box_fill`): every box must hold its object; an empty, shifted or
+   mostly outside box is refused naming the box, the shift that fits it best and the causes that fit
    the layout, unless ``frame_check="warn"``; the summary and the fill table share its numbers.
 5. **Instance ids**: kept when the Gaussians carry them; otherwise assigned
    (:func:`~spacedg.scene.labelling.assign_instances`, by boxes unless masks are asked for) and
@@ -34,6 +34,7 @@ What it does, in order (each step reported in :class:`ImportReport`):
 """
 
 from __future__ import annotations
+
 
 import re
 import time
@@ -51,7 +52,6 @@ from spacedg.render.gaussians import Gaussians
 from spacedg.scene.box_fill import BoxFillReport, measure_box_fill
 from spacedg.scene.capture_checks import FRAME_CHECKS, FrameDecision, check_box_fill, check_metres_per_unit, decide_frame, parse_up
 from spacedg.scene.frame_check import (
-    BOX_PROBLEM,
     FrameReport,
     check_frame,
     diagnose,
@@ -235,11 +235,12 @@ def _single_gaussians_file(folder: Path, what: str) -> Path:
     raise FileFormatError(f"{folder}: {what} needs a Gaussians file: pass --gaussians FILE (found {len(found)}: {listing})")
 
 
-def read_any_instances(path: PathLike, views: Any = None, *, embodiedscan_scene: str | None = None) -> tuple[list[Instance], str]:
+def read_any_instances(path: PathLike, views: Any = None, *, embodiedscan_scene: str | None = None,
+                       data: Any = None) -> tuple[list[Instance], str]:
     """Instances from a spacedg / Holi-Spatial JSON, a ScanNet++ ``segments_anno.json`` or an
-    EmbodiedScan JSON (told apart by content); returns ``(instances, format name)``."""
+    EmbodiedScan JSON (told apart by content; ``data``: the file already parsed); returns ``(instances, format name)``."""
     p = Path(path)
-    data = read_json(p, "instance JSON")
+    data = read_json(p, "instance JSON") if data is None else data
     if isinstance(data, dict) and "segGroups" in data:
         return read_segments_anno(p), "scannetpp segments_anno"
     first = data[0] if isinstance(data, list) and data else None
@@ -248,7 +249,7 @@ def read_any_instances(path: PathLike, views: Any = None, *, embodiedscan_scene:
             or (isinstance(first, dict) and "bbox_3d" in first):
         return read_embodiedscan_boxes(p, embodiedscan_scene), "embodiedscan"
     holi = isinstance(first, dict) and ("ins_id" in first or "bounding_box" in first)
-    return read_instances(p, views=views), "holi-spatial" if holi else "spacedg"
+    return read_instances(p, views=views, data=data), "holi-spatial" if holi else "spacedg"
 
 
 def _scene_id(name: str | None, src: Path) -> str:
@@ -550,11 +551,13 @@ def _read_capture(
         views = _move_views(views, np.linalg.inv(parts.applied_transform))
         parts.notes.append("cameras moved back to the COLMAP frame (inverse of transforms.json's applied_transform)")
     found: list[Instance] = []
-    instances_format = None
+    instances_format = boxes_json = None
     if parts.instances_path is not None:
-        found, instances_format = read_any_instances(parts.instances_path, views.keys(), embodiedscan_scene=embodiedscan_scene)
+        boxes_json = read_json(parts.instances_path, "instance JSON")  # parsed once: the instances and their RLE masks
+        found, instances_format = read_any_instances(parts.instances_path, views.keys(), embodiedscan_scene=embodiedscan_scene,
+                                                     data=boxes_json)
         parts.notes.append(f"instances read as {instances_format}")
-    mask_source = _rle_source(parts, instances_format, found, views, assign, masks, parts.notes)
+    mask_source = _rle_source(parts, instances_format, found, views, assign, masks, parts.notes, boxes_json)
     if parts.to_scan is not None:
         views, gauss, found = _to_scan(parts.to_scan, views, gauss, found)
     if parts.arkit is not None:
@@ -582,18 +585,17 @@ def _check_scene(
     scene: Scene, parts: _Parts, src: Path, *, frame_check: str, backend: str, gaussians_given: bool,
 ) -> tuple[FrameReport, BoxFillReport | None]:
     """Frame check then box fill (metres): refused with ``frame_check="error"``, else noted; both recorded in ``metadata``."""
-    fill = measure_box_fill(scene.gaussians.means, scene.instances) if scene.instances else None
+    fill = measure_box_fill(scene.gaussians.means, scene.instances, instance_ids=scene.gaussians.instance_ids,
+                            metres_per_file_unit=float(scene.metadata.get("scale_to_metres", 1.0))) if scene.instances else None
     report = check_frame(scene, backend=backend, box_share=None if fill is None else fill.held_share)
-    if report.problems and all(p.startswith(BOX_PROBLEM) for p in report.problems) and fill is not None:
-        report = FrameReport(report.gaussians_in_view, report.views_seeing, report.boxes_with_gaussians,
-                             report.render_coverage)  # boxes only: the fill check below names them
+    if fill is not None and report.problems and set(report.problem_kinds()) == {"boxes"}:
+        report = report.without("boxes")  # boxes only: the fill check below names them
     if not report.ok:
         report = diagnose(scene, report, _corrections(scene, parts), backend=backend)
         if not report.hints:
             hint = normalised_hint(scene, layout=parts.layout, gaussians_given=gaussians_given)
             if hint:
-                report = FrameReport(report.gaussians_in_view, report.views_seeing, report.boxes_with_gaussians,
-                                     report.render_coverage, report.problems, (hint,))
+                report = replace(report, hints=(hint,))
         if frame_check == "error":
             report.raise_if_bad(scene.id, where=f"{src}")
         parts.notes.append("FRAME MISMATCH written anyway (frame_check='warn'): " + "; ".join(report.problems))
@@ -641,13 +643,13 @@ def _to_scan(
 
 def _rle_source(
     parts: _Parts, instances_format: str | None, instances: list[Instance], views: dict[str, Camera], assign: str,
-    masks: PathLike | None, notes: list[str],
+    masks: PathLike | None, notes: list[str], data: Any = None,
 ) -> MaskSource | None:
     """Holi-Spatial's RLE masks (``mask_encodings``) as a mask source, mask files where an instance has no RLE;
     read (and every RLE checked) for the release layout, and for other layouts only when masks are asked for."""
     if instances_format != "holi-spatial" or parts.instances_path is None or not (parts.layout == "holi-spatial" or assign == "masks"):
         return None
-    rle = rle_masks(parts.instances_path, instances, views)
+    rle = rle_masks(parts.instances_path, instances, views, data=data)
     if rle.count == 0:
         return None
     notes.append(f"{rle.count} COCO RLE masks (mask_encodings) read from {parts.instances_path.name}")

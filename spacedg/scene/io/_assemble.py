@@ -121,7 +121,8 @@ def scene_from_files(
     if gauss is None:
         return Scene(id, functools.partial(load_scaled_gaussians, str(gpath), scale), cameras, instances, decided.up.tolist(), None, meta)
     gauss = scale_gaussians(gauss, scale)
-    fill, note = checks.check_box_fill(gauss.means, instances, where=str(instances_path), layout=layout, frame_check=frame_check)
+    fill, note = checks.check_box_fill(gauss.means, instances, where=str(instances_path), layout=layout, frame_check=frame_check,
+                                       instance_ids=gauss.instance_ids, metres_per_file_unit=scale)
     if fill is not None:
         meta["box_fill"] = fill.to_dict()
     if note:

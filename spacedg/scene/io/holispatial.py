@@ -160,14 +160,15 @@ def _encodings_of(where: str, item: Any) -> dict[str, Any]:
     return out
 
 
-def read_mask_encodings(path: PathLike) -> dict[int, dict[str, Any]]:
-    """Instance id → {mask path as written → COCO RLE}, every RLE checked (:func:`rle_run_lengths`).
+def read_mask_encodings(path: PathLike, data: Any = None) -> dict[int, dict[str, Any]]:
+    """Instance id → {mask path as written → COCO RLE}, every RLE checked (:func:`rle_run_lengths`);
+    ``data``: the box JSON already parsed (read from ``path`` when ``None``).
 
     Raises:
         FileValueError: a malformed RLE or a count mismatch, naming the file, the instance and the mask.
     """
     p = as_path(path, "Holi-Spatial box JSON")
-    data = read_json(p, "Holi-Spatial box JSON")
+    data = read_json(p, "Holi-Spatial box JSON") if data is None else data
     items = data.get("instances", []) if isinstance(data, dict) else data
     out: dict[int, dict[str, Any]] = {}
     for index, item in enumerate(items if isinstance(items, list) else []):
@@ -217,11 +218,12 @@ class RleMasks:
         return mask
 
 
-def rle_masks(path: PathLike, instances: Iterable[Any], views: Mapping[str, Any]) -> RleMasks:
-    """:class:`RleMasks` for the box JSON ``path`` and the read ``instances`` (with ``attributes["masks"]``)."""
+def rle_masks(path: PathLike, instances: Iterable[Any], views: Mapping[str, Any], *, data: Any = None) -> RleMasks:
+    """:class:`RleMasks` for the box JSON ``path`` (``data``: already parsed) and the read ``instances`` (with
+    ``attributes["masks"]``)."""
     view_of = {}
     for inst in instances:
         for view, ref in (inst.attributes.get("masks") or {}).items():
             view_of[str(ref)] = str(view)
     sizes = {name: (int(cam.width), int(cam.height)) for name, cam in views.items()}
-    return RleMasks(path, read_mask_encodings(path), sizes, view_of)
+    return RleMasks(path, read_mask_encodings(path, data), sizes, view_of)

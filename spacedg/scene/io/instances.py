@@ -243,21 +243,21 @@ def _resolve_views(path: str, instances: list[Instance], views: Iterable[str]) -
     return out
 
 
-def read_instances(path: PathLike, views: Iterable[str] | None = None) -> list[Instance]:
+def read_instances(path: PathLike, views: Iterable[str] | None = None, *, data: Any = None) -> list[Instance]:
     """Read annotated instances (see the module docstring for the accepted layout).
 
     Args:
         path: the JSON file.
         views: if given, the scene's view names; every image the annotation names must resolve
             to one of them (name, file name, stem, or a mask file's parent folder).
+        data: the file's JSON already parsed (the importer parses a box file once); read from ``path`` when ``None``.
 
     Raises:
         FileFormatError: bad JSON (line and column named), missing id/label/box, malformed
             fields, duplicate ids, image names not in ``views``.
     """
     p = as_path(path, "instance JSON")
-    data = read_json(p, "instance JSON")
-    data = instance_list(p, data, "a list of instances or an object with an 'instances' list")
+    data = instance_list(p, read_json(p, "instance JSON") if data is None else data, "a list of instances or an object with an 'instances' list")
     instances = [_instance(f"{p}: instance [{i}]", item) for i, item in enumerate(data)]
     dup = sorted(i for i, n in Counter(inst.id for inst in instances).items() if n > 1)
     if dup:
