@@ -83,7 +83,7 @@ def test_misplaced_box_refused_by_the_api_as_by_the_import(tmp_path: Path, room:
     _, ply, colmap, _ = _write(tmp_path, room)
     holi = tmp_path / "moved.json"
     holi.write_text(json.dumps(cl.holi_spatial_json(Scene(room.id, room.gaussians, room.views, moved, room.up, None, {}), {})))
-    with pytest.raises(BoxFillError, match=r"box 16 'cup' is misplaced.*--allow-frame-mismatch"):
+    with pytest.raises(BoxFillError, match=r"box 16 'cup' is (mostly outside its object|shifted off its object).*--allow-frame-mismatch"):
         scene_from_files("room", ply, colmap, holi, up="+z")
     scene = scene_from_files("room", ply, colmap, holi, up="+z", frame_check="warn")
     assert any("BOXES NOT HOLDING THEIR OBJECTS" in n for n in scene.metadata["notes"])
