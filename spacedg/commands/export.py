@@ -41,6 +41,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="share of scenes for val and bench, the rest train (default 0.1,0.1; 0 leaves a split empty)")
     parser.add_argument("--skip-bad-scenes", action="store_true", help="skip scenes that cannot be read (they are named)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--no-debias", action="store_true",
+                        help="bench: skip the blind pruning (by default the bench is oversampled, probed k-fold by scene with "
+                        "text-only models and pruned until every sub type is within chance + 3; see spacedg.data.bench_debias)")
     _args.add_backend_arguments(parser)
     _vocabulary.add_deprecated(parser, "export")
 
@@ -90,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
         parse_shard,
         shard_from_env,
     )
+    from spacedg.data.bench_debias import OVERSAMPLE, debias_dataset, write_debias_report
+    from spacedg.qa.debias import format_debias
     from spacedg.qa.index import QABuildConfig
 
     # every flag is checked before the (slow) dataset construction
@@ -101,13 +106,18 @@ def run(args: argparse.Namespace) -> int:
     for chain in chains or ():
         Chain.parse(chain).check()  # an unknown name or preset fails now, with suggestions
     _args.output_folder("--out", args.out)
+    debias = args.split == "bench" and not args.no_debias
+    factor = OVERSAMPLE if debias else 1  # candidates for the blind pruning, which trims back to the requested size
     dataset = SpaceDGDataset(
         args.split, chains, scenes=args.scenes, families=_names(args.families),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,
-        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type),
-        on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device, max_questions=args.max_questions,
-        split_fractions=fractions,
+        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type * factor),
+        on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device,
+        max_questions=None if args.max_questions is None else args.max_questions * factor, split_fractions=fractions,
     )
+    pruned = debias_dataset(dataset, args.per_sub_type, args.max_questions, args.seed) if debias else None
+    if pruned is not None:
+        print(format_debias(pruned) + "\n")
     counts = {name: sum(1 for s in dataset.scene_splits.values() if s == name) for name in ("train", "val", "bench")}
     print(f"scenes: {counts['bench']} bench, {counts['val']} val, {counts['train']} train; exporting split {args.split!r} "
           f"({len(dataset.scene_dirs)} scene(s), {len(dataset.records)} question(s))")
@@ -118,6 +128,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"skipped scene {folder}: {error}")
     with _shard_lock(args.out, shard):
         summary = export_bench(dataset, args.out, shard=shard, shard_size=shard_size, progress=not args.no_progress)
+        if pruned is not None:
+            write_debias_report(pruned, args.out)
     print(f"{len(dataset)} items in {summary.chunks_total} chunk(s) of {shard_size}; shard {shard[0]}/{shard[1]} wrote "
           f"{len(summary.chunks_written)} chunk(s) ({summary.items_written} items) in {summary.seconds:.1f} s, "
           f"skipped {len(summary.chunks_skipped)} finished")
