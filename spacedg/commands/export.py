@@ -44,6 +44,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--no-debias", action="store_true",
                         help="bench: skip the blind pruning (by default the bench is oversampled, probed k-fold by scene with "
                         "text-only models and pruned until every sub type is within chance + 3; see spacedg.data.bench_debias)")
+    parser.add_argument("--oversample", type=_args.whole(1), default=None,
+                        help="bench: candidates per requested record for the blind pruning, which trims back to the requested "
+                        "size (indexes are built at --per-sub-type x this; default 2; 1 prunes without oversampling)")
     _args.add_backend_arguments(parser)
     _vocabulary.add_deprecated(parser, "export")
 
@@ -107,7 +110,9 @@ def run(args: argparse.Namespace) -> int:
         Chain.parse(chain).check()  # an unknown name or preset fails now, with suggestions
     _args.output_folder("--out", args.out)
     debias = args.split == "bench" and not args.no_debias
-    factor = OVERSAMPLE if debias else 1  # candidates for the blind pruning, which trims back to the requested size
+    if args.oversample is not None and not debias:
+        raise ParameterError(f"--oversample {args.oversample} is for the blind pruning of --split bench, which this run skips")
+    factor = (OVERSAMPLE if args.oversample is None else args.oversample) if debias else 1  # trimmed back to the requested size
     dataset = SpaceDGDataset(
         args.split, chains, scenes=args.scenes, families=_names(args.families),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,

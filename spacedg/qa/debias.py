@@ -11,8 +11,8 @@ options shown) and, round after round, removes items the blind models solve, unt
 then trims every sub type to its target size (``targets``: what the bench would hold without
 pruning; the caller oversamples candidates so that the pruned bench keeps that size).
 
-**A round.** For a sub type over its bound (best ``a``, chance ``c``, aim ``t = bound − 1``; a sub
-type above ``overall_bound − 1`` while the pooled figure is over its bound aims at
+**A round.** For a sub type over its bound (best ``a``, chance ``c``, aim ``t = bound − 1``; when no
+sub type is over but the pooled figure is, the sub types above ``overall_bound − 1`` aim at
 ``overall_bound − 1.5``), it removes ``x = ⌈n (a − c − t) / (1 − c − t)⌉`` records (at least one,
 at most a quarter of the sub type, never below ``floor`` × its target): the number that brings the
 best predictor to the aim if it stayed as fitted. They are taken in order of blind solvability:
@@ -20,7 +20,8 @@ records the sub type's best predictor solves first, then by how many predictors 
 boosted model's probability of the truth, and a seeded hash (so the result is a pure function of
 the records and ``seed``). Then everything is probed again (the predictors refit on what remains)
 and the next round starts. **Trimming**: once no sub type is over, sub types above their target
-lose their surplus in the same order, and the probe runs again (a sub type pushed over its bound
+lose their surplus in a seeded random order (not the most solvable first: removing many of those
+plants the opposite bias, which the next probe learns), and the probe runs again (a sub type pushed over its bound
 goes back to pruning). At most ``max_rounds`` rounds.
 
 **Balance.** Records are removed whole: in a bench every record is asked under clean and under
@@ -110,13 +111,14 @@ def _order(records: Sequence[QARecord], pr: Probe, best: str, seed: int) -> list
     return sorted(records, key=key)
 
 
-def _aim(row: SubTypeBlind, pr: Probe, bound: float, overall_bound: float) -> float | None:
-    """The excess a sub type is pruned towards this round, or ``None`` when it needs no pruning."""
-    if row.excess > bound:
-        return bound - 1.0
-    if pr.overall.get("excess", 0.0) > overall_bound and row.excess > overall_bound - 1.0:
-        return overall_bound - 1.5
-    return None
+def _aims(pr: Probe, bound: float, overall_bound: float) -> dict[tuple[str, str], float]:
+    """The excess each sub type is pruned towards this round: the sub types over ``bound`` aim at
+    ``bound − 1``; only when none is, and the pooled figure is over ``overall_bound``, those above
+    ``overall_bound − 1`` aim at ``overall_bound − 1.5``."""
+    over = {row.key: bound - 1.0 for row in pr.rows if row.excess > bound}
+    if over or pr.overall.get("excess", 0.0) <= overall_bound:
+        return over
+    return {row.key: overall_bound - 1.5 for row in pr.rows if row.excess > overall_bound - 1.0}
 
 
 def _to_remove(row: SubTypeBlind, aim: float) -> int:
@@ -129,8 +131,9 @@ def _prune_round(by_key: dict[tuple[str, str], list[QARecord]], pr: Probe, floor
                  bound: float, overall_bound: float, seed: int) -> dict[str, int]:
     """Remove this round's records from ``by_key`` in place; returns ``"q/s" → removed``."""
     removed: dict[str, int] = {}
+    aims = _aims(pr, bound, overall_bound)
     for row in pr.rows:
-        aim = _aim(row, pr, bound, overall_bound)
+        aim = aims.get(row.key)
         rs = by_key.get(row.key, [])
         room = len(rs) - floors.get(row.key, 0)
         if aim is None or room <= 0:
@@ -142,14 +145,15 @@ def _prune_round(by_key: dict[tuple[str, str], list[QARecord]], pr: Probe, floor
     return removed
 
 
-def _trim_round(by_key: dict[tuple[str, str], list[QARecord]], pr: Probe, targets: Mapping[tuple[str, str], int], seed: int) -> dict[str, int]:
-    """Trim every sub type above its target to it (most blind-solvable first); returns ``"q/s" → removed``."""
+def _trim_round(by_key: dict[tuple[str, str], list[QARecord]], targets: Mapping[tuple[str, str], int], seed: int) -> dict[str, int]:
+    """Trim every sub type above its target to it, in a seeded order (a random subsample keeps the
+    answer distribution: trimming the most solvable first would plant the opposite bias); returns
+    ``"q/s" → removed``."""
     removed: dict[str, int] = {}
     for key, rs in by_key.items():
         surplus = len(rs) - targets.get(key, len(rs))
         if surplus > 0:
-            row = pr.row(key)
-            gone = {r.id for r in _order(rs, pr, row.best if row else "", seed)[:surplus]}
+            gone = {r.id for r in sorted(rs, key=lambda r: (stable_hash(seed, "trim", r.id), r.id))[:surplus]}
             by_key[key] = [r for r in rs if r.id not in gone]
             removed[f"{key[0]}/{key[1]}"] = surplus
     return removed
@@ -208,7 +212,7 @@ def debias(
         removed = _prune_round(by_key, current, floors, bound, overall_bound, seed)
         why = "blind models over the bound"
         if not removed:
-            removed, why = _trim_round(by_key, current, targets, seed), "trim to target size"
+            removed, why = _trim_round(by_key, targets, seed), "trim to target size"
         if not removed:
             break
         rounds.append({"round": number, "why": why, "removed": removed, "total": sum(removed.values())})
