@@ -129,3 +129,14 @@ def test_bad_arguments_are_named(kwargs) -> None:
     name = next(iter(kwargs))
     with pytest.raises(ParameterError, match=name):
         debias(_table(scenes=2, per_scene=2), **kwargs)
+
+
+def test_qa_audit_debias_prints_before_after_and_rounds(tmp_path, capsys) -> None:
+    from spacedg.cli import main
+
+    for record in _table(scenes=3, per_scene=16, planted=0.9, seed=6):
+        with open(tmp_path / f"{record.scene_id}.qa.jsonl", "a", encoding="utf-8") as f:
+            f.write(record.to_json() + "\n")
+    assert main(["qa", "audit", str(tmp_path), "--no-learned", "--debias"]) == 0
+    text = capsys.readouterr().out
+    assert "Blind pruning" in text and "round 1 (blind models over the bound)" in text and "| bbox_center_direction |" in text
