@@ -74,8 +74,9 @@ def main() -> None:
     scenes = len(plain.scene_dirs)
     check_plain = probe(plain.records, folds=scenes, seed=args.check_seed)
     check_debiased = probe(cand.records, folds=scenes, seed=args.check_seed)
-    print("Independent check (leave-one-scene-out, fold seed", args.check_seed, "; chance = 1 / options shown):")
-    print(_table(check_plain, check_debiased, result.removed))
+    print(f"Independent check (leave-one-scene-out, fold seed {args.check_seed}; chance = 1 / options shown; "
+          "pruned: removed as blind-solved, trimming not counted):")
+    print(_table(check_plain, check_debiased, result.pruned))
     if args.json:
         args.json.write_text(json.dumps({
             "scenes": sorted(plain.scene_dirs), "debias": result.to_dict(),

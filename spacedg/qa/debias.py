@@ -49,6 +49,8 @@ __all__ = ["DEFAULT_BOUND", "DEFAULT_OVERALL_BOUND", "OVERSAMPLE", "DebiasResult
 DEFAULT_BOUND = 3.0
 #: The pooled best-per-sub-type accuracy may exceed chance by this many points.
 DEFAULT_OVERALL_BOUND = 2.0
+_PRUNE = "blind models over the bound"
+_TRIM = "trim to target size"
 #: Candidates per target record a debiased bench export builds (``--per-sub-type`` × this).
 OVERSAMPLE = 2
 
@@ -68,10 +70,19 @@ class DebiasResult:
 
     @property
     def removed(self) -> dict[str, int]:
-        """Records removed per sub type over every round."""
+        """Records removed per sub type over every round (pruned and trimmed)."""
+        return self._removed(None)
+
+    @property
+    def pruned(self) -> dict[str, int]:
+        """Records removed per sub type because blind models solved them (not trimming)."""
+        return self._removed(_PRUNE)
+
+    def _removed(self, why: str | None) -> dict[str, int]:
         total: Counter[str] = Counter()
         for r in self.rounds:
-            total.update(r["removed"])
+            if why is None or r["why"] == why:
+                total.update(r["removed"])
         return dict(sorted(total.items()))
 
     @property
@@ -86,6 +97,7 @@ class DebiasResult:
         return {
             "bound": self.bound, "overall_bound": self.overall_bound, "within": self.within, "kept": len(self.kept),
             "before": table(self.before), "after": table(self.after), "rounds": self.rounds, "removed": self.removed,
+            "pruned": self.pruned,
             "targets": {f"{q}/{s}": n for (q, s), n in sorted(self.targets.items())},
         }
 
@@ -210,9 +222,9 @@ def debias(
     rounds: list[dict[str, Any]] = []
     for number in range(1, max_rounds + 1):
         removed = _prune_round(by_key, current, floors, bound, overall_bound, seed)
-        why = "blind models over the bound"
+        why = _PRUNE
         if not removed:
-            removed, why = _trim_round(by_key, targets, seed), "trim to target size"
+            removed, why = _trim_round(by_key, targets, seed), _TRIM
         if not removed:
             break
         rounds.append({"round": number, "why": why, "removed": removed, "total": sum(removed.values())})
@@ -223,26 +235,27 @@ def debias(
 
 
 def format_debias(result: DebiasResult) -> str:
-    """Before/after per sub type (n, best blind, chance, excess, target) and the records removed per round, as Markdown."""
+    """Before/after per sub type (n, best blind, chance, excess, target, records pruned as blind-solved and
+    trimmed to the target) and the records removed per round, as Markdown."""
     lines = [
         f"Blind pruning (k-fold by scene; chance = 1 / options shown; bound: sub type <= chance + {result.bound:g}, "
         f"overall <= chance + {result.overall_bound:g})",
-        "| question_type | sub_question_type | type | n before | best before | n after | best after | chance | excess before | excess after | target | removed |",
-        "|---|---|---|---:|---|---:|---|---:|---:|---:|---:|---:|",
+        "| question_type | sub_question_type | type | n before | best before | n after | best after | chance | excess before | excess after | target | pruned | trimmed |",
+        "|---|---|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
-    removed = result.removed
+    removed, pruned = result.removed, result.pruned
     for row in result.before.rows:
         after = result.after.row(row.key)
         name = f"{row.key[0]}/{row.key[1]}"
         a_n, a_best, a_excess = (after.n, f"{after.best} {after.best_score:.1f}", f"{after.excess:+.1f}") if after else (0, "", "")
         lines.append(f"| {row.question_type} | {row.sub_question_type} | {row.answer_type} | {row.n} | {row.best} {row.best_score:.1f} | "
                      f"{a_n} | {a_best} | {row.chance:.1f} | {row.excess:+.1f} | {a_excess} | {result.targets.get(row.key, row.n)} | "
-                     f"{removed.get(name, 0)} |")
+                     f"{pruned.get(name, 0)} | {removed.get(name, 0) - pruned.get(name, 0)} |")
     b, a = result.before.overall, result.after.overall
     if b.get("n"):
         lines.append(f"| ALL (MCQ+YN+COUNT) | | | {int(b['n'])} | {b['best']:.1f} | {int(a.get('n', 0))} | {a.get('best', 0.0):.1f} | "
                      f"{b['chance']:.1f} / {a.get('chance', 0.0):.1f} | {b['excess']:+.1f} | {a.get('excess', 0.0):+.1f} | "
-                     f"{sum(result.targets.values())} | {sum(removed.values())} |")
+                     f"{sum(result.targets.values())} | {sum(pruned.values())} | {sum(removed.values()) - sum(pruned.values())} |")
     for r in result.rounds:
         parts = ", ".join(f"{k} {v}" for k, v in sorted(r["removed"].items()))
         lines.append(f"round {r['round']} ({r['why']}): removed {r['total']}: {parts}")
