@@ -35,7 +35,7 @@ from spacedg.qa.audit_text import frequent_words
 from spacedg.qa.debias_gbm import BoostedChoice
 
 __all__ = [
-    "DISCRETE", "PROBES", "SubTypeBlind", "Probe", "count_chances", "probe", "scene_folds", "shown_chance", "stable_hash",
+    "DISCRETE", "PROBES", "SubTypeBlind", "Probe", "blind_rows", "count_chances", "probe", "scene_folds", "shown_chance", "stable_hash",
 ]
 
 #: The answer types the probe scores and the pruning acts on.
@@ -153,7 +153,10 @@ def _held_out(records: Sequence[QARecord], folds: list[list[str]], learned: bool
     return correct, prob
 
 
-def _rows(records: Sequence[QARecord], correct: Mapping[str, Mapping[str, float]], counts: Mapping[str, float]) -> tuple[list[SubTypeBlind], dict[str, float]]:
+def blind_rows(records: Sequence[QARecord], correct: Mapping[str, Mapping[str, float]], counts: Mapping[str, float],
+               names: Sequence[str] = PROBES) -> tuple[list[SubTypeBlind], dict[str, float]]:
+    """The rows per sub type and the pooled figures of ``records`` from their held-out 0/1
+    ``correct``, the best chosen among the predictors ``names``."""
     groups: dict[tuple[str, str, str], list[QARecord]] = defaultdict(list)
     for r in records:
         if r.id in correct:
@@ -162,9 +165,9 @@ def _rows(records: Sequence[QARecord], correct: Mapping[str, Mapping[str, float]
     hits = chance_sum = 0.0
     for key in sorted(groups):
         rs = groups[key]
-        names = [p for p in PROBES if all(p in correct[r.id] for r in rs)]
-        scores = {p: 100.0 * float(np.mean([correct[r.id][p] for r in rs])) for p in names}
-        best = max(names, key=lambda p: (scores[p], -PROBES.index(p))) if names else ""
+        usable = [p for p in names if all(p in correct[r.id] for r in rs)]
+        scores = {p: 100.0 * float(np.mean([correct[r.id][p] for r in rs])) for p in usable}
+        best = max(usable, key=lambda p: (scores[p], -PROBES.index(p))) if usable else ""
         chance = 100.0 * float(np.mean([shown_chance(r, counts) for r in rs]))
         rows.append(SubTypeBlind(*key, len(rs), best, scores.get(best, 0.0), chance))
         hits += scores.get(best, 0.0) * len(rs)
@@ -186,5 +189,5 @@ def probe(records: Sequence[QARecord], *, folds: int = 5, seed: int = 0, learned
     counts = count_chances(discrete) if counts is None else counts
     groups = scene_folds([r.scene_id for r in discrete], folds, seed)
     correct, prob = _held_out(discrete, groups, learned)
-    rows, overall = _rows(discrete, correct, counts)
+    rows, overall = blind_rows(discrete, correct, counts)
     return Probe(correct, prob, rows, overall)
