@@ -56,30 +56,31 @@ def _table(plain, debiased, removed) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--plain", type=Path, nargs="+", required=True, help="scene folders (or folders of them): indexes at --per-sub-type")
+    parser.add_argument("--plain", type=Path, nargs="+", default=None,
+                        help="scene folders (or folders of them): indexes at --per-sub-type (default: no plain bench, debiased only)")
     parser.add_argument("--candidates", type=Path, nargs="+", required=True, help="other folders of the same scenes: oversampled indexes")
     parser.add_argument("--per-sub-type", type=int, default=25)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--check-seed", type=int, default=1, help="fold seed of the independent check")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
-    plain = _bench(args.plain, args.per_sub_type, args.seed)
     cand = _bench(args.candidates, args.per_sub_type * OVERSAMPLE, args.seed)
+    plain = _bench(args.plain, args.per_sub_type, args.seed) if args.plain else None
     started = time.perf_counter()
     result = debias_dataset(cand, args.per_sub_type, None, args.seed)
     seconds = time.perf_counter() - started
-    print(f"{len(plain.scene_dirs)} scenes; plain bench {len(plain.records)} records; candidates {len(result.before.correct)} discrete "
+    scenes = len(cand.scene_dirs)
+    print(f"{scenes} scenes; plain bench {len(plain.records) if plain else '-'} records; candidates {len(result.before.correct)} discrete "
           f"-> debiased bench {len(cand.records)} records ({seconds:.0f} s, {len(result.rounds)} rounds)\n")
     print(format_debias(result) + "\n")
-    scenes = len(plain.scene_dirs)
-    check_plain = probe(plain.records, folds=scenes, seed=args.check_seed)
     check_debiased = probe(cand.records, folds=scenes, seed=args.check_seed)
+    check_plain = probe(plain.records, folds=scenes, seed=args.check_seed) if plain else check_debiased
     print(f"Independent check (leave-one-scene-out, fold seed {args.check_seed}; chance = 1 / options shown; "
           "pruned: removed as blind-solved, trimming not counted):")
     print(_table(check_plain, check_debiased, result.pruned))
     if args.json:
         args.json.write_text(json.dumps({
-            "scenes": sorted(plain.scene_dirs), "debias": result.to_dict(),
+            "scenes": sorted(cand.scene_dirs), "debias": result.to_dict(),
             "check_plain": [r.to_dict() for r in check_plain.rows], "check_plain_overall": check_plain.overall,
             "check_debiased": [r.to_dict() for r in check_debiased.rows], "check_debiased_overall": check_debiased.overall,
         }, indent=2))
