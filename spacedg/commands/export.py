@@ -47,6 +47,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--answerability", choices=("auto", "on", "off"), default="auto",
                         help="measure whether each item's named objects are discernible in its images and print the share "
                         "per degradation and severity (kept per item in summary.json); auto = for the bench split (default)")
+    parser.add_argument("--debias", action=argparse.BooleanOptionalAction, default=False,
+                        help="bench: blind pruning (oversampled, probed k-fold by scene with text-only models and pruned until every "
+                        "sub type is within chance + 3; see spacedg.data.bench_debias); off by default until it holds on held-out "
+                        "scenes (docs/question-audit.md)")
+    parser.add_argument("--oversample", type=_args.whole(1), default=None,
+                        help="bench: candidates per requested record for the blind pruning, which trims back to the requested "
+                        "size (indexes are built at --per-sub-type x this; default 2; 1 prunes without oversampling)")
     _args.add_backend_arguments(parser)
     _vocabulary.add_deprecated(parser, "export")
 
@@ -99,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
     from spacedg.data.dataset import SpaceDGDataset
     from spacedg.data.export import DEFAULT_SHARD_SIZE, export_bench
     from spacedg.data.shards import resolve_shard
+    from spacedg.data.bench_debias import OVERSAMPLE, debias_dataset, write_debias_report
+    from spacedg.qa.debias import format_debias
     from spacedg.qa.index import QABuildConfig
 
     # every flag is checked before the (slow) dataset construction
@@ -110,13 +119,20 @@ def run(args: argparse.Namespace) -> int:
     for chain in chains or ():
         Chain.parse(chain).check()  # an unknown name or preset fails now, with suggestions
     _args.output_folder("--out", args.out)
+    debias = args.split == "bench" and args.debias
+    if args.oversample is not None and not debias:
+        raise ParameterError(f"--oversample {args.oversample} is for the blind pruning of --split bench, which this run skips")
+    factor = (OVERSAMPLE if args.oversample is None else args.oversample) if debias else 1  # trimmed back to the requested size
     dataset = SpaceDGDataset(
         args.split, chains, scenes=args.scenes, families=_names(args.families),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,
-        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type, mode=_qa_mode(args)),
-        on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device, max_questions=args.max_questions,
-        split_fractions=fractions,
+        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type * factor, mode=_qa_mode(args)),
+        on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device,
+        max_questions=None if args.max_questions is None else args.max_questions * factor, split_fractions=fractions,
     )
+    pruned = debias_dataset(dataset, args.per_sub_type, args.max_questions, args.seed) if debias else None
+    if pruned is not None:
+        print(format_debias(pruned) + "\n")
     counts = {name: sum(1 for s in dataset.scene_splits.values() if s == name) for name in ("train", "val", "bench")}
     print(f"scenes: {counts['bench']} bench, {counts['val']} val, {counts['train']} train; exporting split {args.split!r} "
           f"({len(dataset.scene_dirs)} scene(s), {len(dataset.records)} question(s))")
@@ -128,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
     with _shard_lock(args.out, shard):
         measure = None if args.answerability == "auto" else args.answerability == "on"
         summary = export_bench(dataset, args.out, shard=shard, shard_size=shard_size, progress=not args.no_progress, answerability=measure)
+        if pruned is not None:
+            write_debias_report(pruned, args.out)
     print(f"{len(dataset)} items in {summary.chunks_total} chunk(s) of {shard_size}; shard {shard[0]}/{shard[1]} wrote "
           f"{len(summary.chunks_written)} chunk(s) ({summary.items_written} items) in {summary.seconds:.1f} s, "
           f"skipped {len(summary.chunks_skipped)} finished")

@@ -7,6 +7,7 @@ import argparse
 import json
 import time
 from pathlib import Path
+from typing import Any
 
 from tqdm import tqdm
 
@@ -79,6 +80,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                        help="also audit RUNS times with truths drawn independently of the text, and print the mean and 95th "
                             "percentile of the best excess over chance that chance alone gives at each sub type's n")
     audit.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    audit.add_argument("--debias", action="store_true",
+                       help="also pool the records, probe them k-fold by scene (chance = 1 / options shown) and prune what the "
+                       "blind models solve, as a bench export does; print before/after per sub type and each round's removals")
 
 
 def _build(args: argparse.Namespace) -> int:
@@ -302,19 +306,24 @@ def _audit(args: argparse.Namespace) -> int:
         from spacedg.qa.audit import null_audit, with_null
 
         report = with_null(report, null_audit(by_scene, args.null, learned=not args.no_learned))
+    pruned = _debias(by_scene, not args.no_learned) if args.debias else None
     seconds = time.perf_counter() - start
     if args.solved is not None:
         from spacedg.files import atomic_write_bytes
 
         atomic_write_bytes(args.solved, "".join(json.dumps({"id": i}) + "\n" for i in report.solved).encode("utf-8"))
     if args.json:
-        print(json.dumps({**report.to_dict(), "seconds": seconds}, indent=2))
+        print(json.dumps({**report.to_dict(), **({"debias": pruned.to_dict()} if pruned else {}), "seconds": seconds}, indent=2))
         return 0
     n = sum(len(v) for v in by_scene.values())
     print(f"Blind stress test over {n} records of {len(by_scene)} scenes ({seconds:.1f} s): text-only models trained on the "
           "other scenes, scored on the held-out one; accuracy % (MRA % for NA / SIZE_LIST); chance = uniform over the "
           "options that can be correct")
     print(format_audit(report))
+    if pruned is not None:
+        from spacedg.qa.debias import format_debias
+
+        print("\n" + format_debias(pruned))
     if args.show > 0:
         solved = set(report.solved)
         shown: dict[tuple[str, str], int] = {}
@@ -325,6 +334,13 @@ def _audit(args: argparse.Namespace) -> int:
                 options = "  ".join(r.options)
                 print(f"\n[{key[0]}/{key[1]}] {r.id}\n  {r.question}\n  {options}\n  answer: {r.answer}")
     return 0
+
+
+def _debias(by_scene: dict, learned: bool) -> Any:
+    """The bench-level blind pruning of every record of ``by_scene``, pooled (:func:`spacedg.qa.debias.debias`)."""
+    from spacedg.qa.debias import debias
+
+    return debias([r for rs in by_scene.values() for r in rs], learned=learned)
 
 
 def _pick(records: list, n: int, types: set[str], seed: int) -> list:

@@ -87,6 +87,7 @@ __all__ = [
     "AuditRow",
     "AuditReport",
     "blind_audit",
+    "held_out_scores",
     "null_audit",
     "with_null",
     "mra",
@@ -237,10 +238,12 @@ def _score_question_type(train: Sequence[QARecord], tests: Sequence[QARecord], l
     return {r.id: _record_scores(r, priors, models) for r in tests}
 
 
-def _held_out_scores(
+def held_out_scores(
     records_by_scene: Mapping[str, Sequence[QARecord]], scenes: Sequence[str], learned: bool,
 ) -> dict[str, dict[str, float]]:
-    """Record id → predictor scores, every scene held out once (leave-one-scene-out)."""
+    """Record id → predictor scores, every scene held out once (leave-one-scene-out). Keys may be
+    groups of scenes (folds): then each fold is held out once, trained on the others (k-fold by
+    scene, as :mod:`spacedg.qa.debias` probes a pooled bench)."""
     per_record: dict[str, dict[str, float]] = {}
     for held in scenes:
         train_by_type: dict[str, list[QARecord]] = defaultdict(list)
@@ -317,7 +320,7 @@ def blind_audit(records_by_scene: Mapping[str, Sequence[QARecord]], *, learned: 
     """
     scenes = [s for s in records_by_scene if records_by_scene[s]]
     every = [r for s in scenes for r in records_by_scene[s]]
-    per_record = _held_out_scores(records_by_scene, scenes, learned) if len(scenes) >= 2 else {}
+    per_record = held_out_scores(records_by_scene, scenes, learned) if len(scenes) >= 2 else {}
     return _report(every, per_record, _live_roles(every), _distinct_counts(every), len(scenes))
 
 

@@ -264,7 +264,7 @@ def test_a_scene_corrupted_after_indexing_is_named(bench, rooms, tmp_path):
 def test_cli_export_and_bad_scene(rooms, tmp_path, capsys, monkeypatch):
     out = tmp_path / "cli"
     argv = ["export", "--split", "bench", "--out", str(out), "--scenes", *map(str, rooms), "--image-size", "64x48",
-            "--per-sub-type", "1", "--question-types", "object_counting", "--shard-size", "50", "--no-progress"]
+            "--per-sub-type", "1", "--question-types", "object_counting", "--shard-size", "50", "--no-progress", "--no-debias"]
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "bench.tsv" in text and "| object_counting |" in text and "| total |" in text
@@ -302,3 +302,31 @@ def test_max_questions_spreads_over_types(rooms):
     assert [r.id for r in small.records] == [r.id for r in full.records if r in set(small.records)]  # original order
     with pytest.raises(ParameterError, match="max_questions"):
         SpaceDGDataset("train", scenes=rooms, image_size=SIZE, qa_config=CONFIG, max_questions=0)
+
+
+def test_cli_bench_debias_prunes_and_no_debias_skips_it(indexed_room_dirs, tmp_path, capsys):
+    # the session's default indexes (per sub type 25): --oversample 1 prunes them without building others
+    rooms = private_copies(indexed_room_dirs, tmp_path / "rooms", indexes=True)
+    common = ["export", "--split", "bench", "--all-bench", "--scenes", *map(str, rooms), "--image-size", "64x48",
+              "--families", "camera_object_relative_direction,object_existence_estimation", "--degradations", "haze",
+              "--max-questions", "40", "--shard-size", "64", "--no-progress"]
+    assert main([*common, "--out", str(tmp_path / "plain")]) == 0  # off by default (not yet held on held-out scenes)
+    assert "Blind pruning" not in capsys.readouterr().out
+    assert main([*common, "--out", str(tmp_path / "plain"), "--no-debias"]) == 0
+    assert "Blind pruning" not in capsys.readouterr().out and not (tmp_path / "plain" / "debias.json").exists()
+    assert main([*common, "--out", str(tmp_path / "debiased"), "--debias", "--oversample", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "Blind pruning" in text and "| object_existence_estimation | existence |" in text and "round 1" in text
+    plain = pd.read_csv(tmp_path / "plain" / "bench.tsv", sep="\t")
+    debiased = pd.read_csv(tmp_path / "debiased" / "bench.tsv", sep="\t")
+    report = json.loads((tmp_path / "debiased" / "debias.json").read_text())
+    assert set(debiased["record_id"]) < set(plain["record_id"])  # pruned
+    assert report["kept"] == debiased["record_id"].nunique() and sum(report["removed"].values()) > 0
+    for row in report["after"]["rows"]:
+        assert row["excess"] <= report["bound"] or row["n"] <= 0.5 * report["targets"][f"{row['question_type']}/{row['sub_question_type']}"] + 1
+    # every record keeps all its degradations: the degradation balance is untouched
+    assert set(debiased.groupby("record_id").size()) == {2} and (tmp_path / "debiased" / "debias.md").is_file()
+    assert main([*common, "--out", str(tmp_path / "debiased"), "--debias", "--oversample", "1"]) == 0  # deterministic: same manifest
+    assert "wrote 0 chunk(s)" in capsys.readouterr().out
+    assert main([*common, "--out", str(tmp_path / "x"), "--no-debias", "--oversample", "2"]) == 2
+    assert "--oversample" in capsys.readouterr().err

@@ -1,0 +1,90 @@
+"""Bench-level blind pruning (issue 30 item 1): what blind models get on a pooled bench, with and without it.
+
+Builds the bench records exactly as ``spacedg export --split bench --all-bench`` does before it
+renders (so no image is rendered here):
+
+- **plain**: ``--no-debias``: the indexes at ``--per-sub-type`` (read from ``--plain``);
+- **debiased**: the default: indexes at ``OVERSAMPLE × --per-sub-type`` (built in ``--candidates``,
+  which must be *other* folders of the same scenes, e.g. ``cp -al`` copies, because an index at
+  another size replaces the cached one), pruned by :func:`spacedg.data.bench_debias.debias_dataset`.
+
+Both are then probed by an **independent check**: the same predictors, but leave-one-scene-out
+(every scene its own fold, not the pruning's five folds) and another fold seed; chance = 1 / options
+shown. Prints the table per sub type (n, best blind, chance, excess, before and after), the
+records each round removed, and writes ``--json``.
+
+    .venv/bin/python benchmarks/debias_bench.py --plain rooms100 rooms200 --candidates cand100 cand200
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from spacedg.data.bench_debias import OVERSAMPLE, debias_dataset  # noqa: E402
+from spacedg.data.dataset import SpaceDGDataset  # noqa: E402
+from spacedg.qa.debias import format_debias  # noqa: E402
+from spacedg.qa.debias_probe import probe  # noqa: E402
+from spacedg.qa.index import QABuildConfig  # noqa: E402
+
+
+def _bench(scenes: list[Path], per_sub_type: int, seed: int) -> SpaceDGDataset:
+    return SpaceDGDataset("bench", scenes=scenes, split_fractions=(0.0, 1.0), seed=seed,
+                          qa_config=QABuildConfig(seed=seed, per_sub_type=per_sub_type))
+
+
+def _table(plain, debiased, removed) -> str:
+    lines = ["| sub type | type | n plain | best plain | chance | excess plain | n debiased | best debiased | excess debiased | pruned |",
+             "|---|---|---:|---|---:|---:|---:|---|---:|---:|"]
+    for row in plain.rows:
+        after = debiased.row(row.key)
+        name = f"{row.key[0]}/{row.key[1]}"
+        cells = (after.n, f"{after.best} {after.best_score:.1f}", f"{after.excess:+.1f}") if after else (0, "", "")
+        lines.append(f"| {name} | {row.answer_type} | {row.n} | {row.best} {row.best_score:.1f} | {row.chance:.1f} | {row.excess:+.1f} | "
+                     f"{cells[0]} | {cells[1]} | {cells[2]} | {removed.get(name, 0)} |")
+    p, d = plain.overall, debiased.overall
+    lines.append(f"| ALL (MCQ+YN+COUNT) | | {int(p['n'])} | {p['best']:.1f} | {p['chance']:.1f} / {d['chance']:.1f} | {p['excess']:+.1f} | "
+                 f"{int(d['n'])} | {d['best']:.1f} | {d['excess']:+.1f} | {sum(removed.values())} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--plain", type=Path, nargs="+", default=None,
+                        help="scene folders (or folders of them): indexes at --per-sub-type (default: no plain bench, debiased only)")
+    parser.add_argument("--candidates", type=Path, nargs="+", required=True, help="other folders of the same scenes: oversampled indexes")
+    parser.add_argument("--per-sub-type", type=int, default=25)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--check-seed", type=int, default=1, help="fold seed of the independent check")
+    parser.add_argument("--json", type=Path, default=None)
+    args = parser.parse_args()
+    cand = _bench(args.candidates, args.per_sub_type * OVERSAMPLE, args.seed)
+    plain = _bench(args.plain, args.per_sub_type, args.seed) if args.plain else None
+    started = time.perf_counter()
+    result = debias_dataset(cand, args.per_sub_type, None, args.seed)
+    seconds = time.perf_counter() - started
+    scenes = len(cand.scene_dirs)
+    print(f"{scenes} scenes; plain bench {len(plain.records) if plain else '-'} records; candidates {len(result.before.correct)} discrete "
+          f"-> debiased bench {len(cand.records)} records ({seconds:.0f} s, {len(result.rounds)} rounds)\n")
+    print(format_debias(result) + "\n")
+    check_debiased = probe(cand.records, folds=scenes, seed=args.check_seed)
+    check_plain = probe(plain.records, folds=scenes, seed=args.check_seed) if plain else check_debiased
+    print(f"Independent check (leave-one-scene-out, fold seed {args.check_seed}; chance = 1 / options shown; "
+          "pruned: removed as blind-solved, trimming not counted):")
+    print(_table(check_plain, check_debiased, result.pruned))
+    if args.json:
+        args.json.write_text(json.dumps({
+            "scenes": sorted(cand.scene_dirs), "debias": result.to_dict(),
+            "check_plain": [r.to_dict() for r in check_plain.rows], "check_plain_overall": check_plain.overall,
+            "check_debiased": [r.to_dict() for r in check_debiased.rows], "check_debiased_overall": check_debiased.overall,
+        }, indent=2))
+
+
+if __name__ == "__main__":
+    main()

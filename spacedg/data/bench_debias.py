@@ -1,0 +1,54 @@
+"""Blind pruning of a bench dataset before export (``spacedg export --split bench --debias``; off by default).
+
+The export builds its question indexes with :data:`~spacedg.qa.debias.OVERSAMPLE` × ``--per-sub-type``
+records per sub type and scene (and, with ``--max-questions N``, keeps ``OVERSAMPLE × N``
+candidates), then :func:`debias_dataset` pools the bench's records over all its scenes, prunes
+what the blind models solve (:func:`spacedg.qa.debias.debias`) and trims every sub type to the
+size the bench would have without pruning (:func:`bench_targets`), so the pruned bench keeps its
+requested size wherever the candidates allow. The result is a pure function of the records and
+the seed: every shard of a sharded export prunes the same way.
+
+Written beside the export: ``debias.json`` (:meth:`~spacedg.qa.debias.DebiasResult.to_dict`:
+before/after per sub type, records removed per round and sub type) and ``debias.md``
+(:func:`~spacedg.qa.debias.format_debias`).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from collections.abc import Sequence
+from pathlib import Path
+
+from spacedg.data.dataset import SpaceDGDataset
+from spacedg.files import atomic_write_bytes
+from spacedg.plugins.qa_record import QARecord
+from spacedg.qa.debias import OVERSAMPLE, DebiasResult, debias, format_debias, spread_targets
+
+__all__ = ["OVERSAMPLE", "bench_targets", "debias_dataset", "write_debias_report"]
+
+
+def bench_targets(records: Sequence[QARecord], per_sub_type: int, max_questions: int | None = None) -> dict[tuple[str, str], int]:
+    """Records wanted per ``(question_type, sub_question_type)`` from oversampled candidates:
+    per scene at most ``per_sub_type`` of each (what an index at ``per_sub_type`` holds at most),
+    summed over scenes; with ``max_questions``, that many in all, shared in proportion."""
+    per_scene = Counter((r.scene_id, r.question_type, r.sub_question_type) for r in records)
+    targets: Counter[tuple[str, str]] = Counter()
+    for (_, question_type, sub_type), n in per_scene.items():
+        targets[(question_type, sub_type)] += min(n, per_sub_type)
+    out = dict(sorted(targets.items()))
+    return spread_targets(out, max_questions) if max_questions is not None else out
+
+
+def debias_dataset(dataset: SpaceDGDataset, per_sub_type: int, max_questions: int | None = None, seed: int = 0) -> DebiasResult:
+    """Prune ``dataset.records`` in place (their order kept) and return what was done."""
+    result = debias(dataset.records, bench_targets(dataset.records, per_sub_type, max_questions), seed=seed)
+    dataset.records = result.kept
+    return result
+
+
+def write_debias_report(result: DebiasResult, out_dir: str | Path) -> None:
+    """``debias.json`` and ``debias.md`` in ``out_dir`` (atomic writes)."""
+    out = Path(out_dir)
+    atomic_write_bytes(out / "debias.json", (json.dumps(result.to_dict(), indent=2) + "\n").encode("utf-8"))
+    atomic_write_bytes(out / "debias.md", (format_debias(result) + "\n").encode("utf-8"))

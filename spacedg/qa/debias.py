@@ -1,0 +1,280 @@
+"""Bench-level blind pruning: remove what text-only models learn from a pooled bench, iteratively.
+
+A room has too few records per sub type to tell a small bias from noise; a bench pools many.
+:func:`debias` probes the pooled records k-fold by scene with every blind predictor
+(:func:`spacedg.qa.debias_probe.probe`: the stress test's five plus boosted trees, chance = 1 /
+options shown) and, round after round, removes items the blind models solve, until
+
+- every MCQ / YN / COUNT sub type's best blind accuracy is within ``chance + bound`` (3 points), and
+- the pooled figure (each sub type's best predictor) is within ``chance + overall_bound`` (2 points),
+
+then trims every sub type to its target size (``targets``: what the bench would hold without
+pruning; the caller oversamples candidates so that the pruned bench keeps that size).
+
+**A round.** For a sub type over its bound (best ``a``, chance ``c``, aim ``t = 0``: chance itself, since
+the probe that picks the records also scores them, and a probe with other folds finds part of
+the bias again (measured on 8 held-out rooms: +2.5 in the pruning's folds, +8.0 leave-one-scene-out
+when aiming at ``bound − 1``); when no
+sub type is over but the pooled figure is, the sub types above ``overall_bound − 1`` aim at
+``overall_bound − 1.5``), it removes ``x = ⌈n (a − c − t) / (1 − c − t)⌉`` records (at least one,
+at most a quarter of the sub type, never below ``floor`` × its target): the number that brings the
+best predictor to the aim if it stayed as fitted. They are taken in order of blind solvability:
+records the sub type's best predictor solves first, then by how many predictors solve them, the
+boosted model's probability of the truth, and a seeded hash (so the result is a pure function of
+the records and ``seed``). Then everything is probed again (the predictors refit on what remains)
+and the next round starts. **Trimming**: once no sub type is over, sub types above their target
+lose their surplus in a seeded random order (not the most solvable first: removing many of those
+plants the opposite bias, which the next probe learns), and the probe runs again (a sub type pushed over its bound
+goes back to pruning). At most ``max_rounds`` rounds.
+
+**Every predictor decides, the letter one included.** Where a sub type shows its options in a
+fixed order, an option-text bias is a letter bias, so the letter predictor must count. (Leaving it
+out was measured on 4 rooms of an unseen seed: three sub types ended at chance + 5.5 to + 6.3 by
+the letter predictor alone. Keeping it chases noise on small sub types: on 12 rooms a rotation
+sub type of 131 records was pruned to 75.)
+
+**Balance.** Records are removed whole: in a bench every record is asked under clean and under
+every degradation, so the degradation balance is untouched. Sub types are pruned on their own
+figures and trimmed to their targets, so their shares stay those of the unpruned bench except
+where a sub type needed more pruning than the oversampling allowed (its shortfall is reported).
+Metric records (NA, SIZE_LIST) are not probed; they are only trimmed to their targets (seeded order).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, defaultdict
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from spacedg.errors import ParameterError
+from spacedg.plugins.qa_record import QARecord
+from spacedg.qa.debias_probe import DISCRETE, PROBES, Probe, SubTypeBlind, blind_rows, count_chances, probe, stable_hash
+
+__all__ = ["DEFAULT_BOUND", "DEFAULT_OVERALL_BOUND", "OVERSAMPLE", "DebiasResult", "debias", "format_debias", "spread_targets"]
+
+#: A sub type's best blind accuracy may exceed chance by this many points.
+DEFAULT_BOUND = 3.0
+#: The pooled best-per-sub-type accuracy may exceed chance by this many points.
+DEFAULT_OVERALL_BOUND = 2.0
+#: The predictors whose figures decide the pruning (module docstring).
+DECIDING: tuple[str, ...] = PROBES
+_PRUNE = "blind models over the bound"
+_TRIM = "trim to target size"
+#: Candidates per target record a debiased bench export builds (``--per-sub-type`` × this).
+OVERSAMPLE = 2
+
+
+@dataclass
+class DebiasResult:
+    """:func:`debias`'s outcome: the records kept (input order), the probe before and after, and
+    per round the records removed per sub type (``"question_type/sub_question_type" → n``) and why."""
+
+    kept: list[QARecord]
+    before: Probe
+    after: Probe
+    rounds: list[dict[str, Any]] = field(default_factory=list)
+    targets: dict[tuple[str, str], int] = field(default_factory=dict)
+    bound: float = DEFAULT_BOUND
+    overall_bound: float = DEFAULT_OVERALL_BOUND
+
+    @property
+    def removed(self) -> dict[str, int]:
+        """Records removed per sub type over every round (pruned and trimmed)."""
+        return self._removed(None)
+
+    @property
+    def pruned(self) -> dict[str, int]:
+        """Records removed per sub type because blind models solved them (not trimming)."""
+        return self._removed(_PRUNE)
+
+    def _removed(self, why: str | None) -> dict[str, int]:
+        total: Counter[str] = Counter()
+        for r in self.rounds:
+            if why is None or r["why"] == why:
+                total.update(r["removed"])
+        return dict(sorted(total.items()))
+
+    @property
+    def within(self) -> bool:
+        """Whether the final probe meets both bounds."""
+        return all(r.excess <= self.bound + 1e-9 for r in self.after.rows) and self.after.overall.get("excess", 0.0) <= self.overall_bound + 1e-9
+
+    def to_dict(self) -> dict[str, Any]:
+        def table(p: Probe) -> dict[str, Any]:
+            return {"rows": [r.to_dict() for r in p.rows], "overall": p.overall}
+
+        return {
+            "bound": self.bound, "overall_bound": self.overall_bound, "within": self.within, "kept": len(self.kept),
+            "before": table(self.before), "after": table(self.after), "rounds": self.rounds, "removed": self.removed,
+            "pruned": self.pruned,
+            "targets": {f"{q}/{s}": n for (q, s), n in sorted(self.targets.items())},
+        }
+
+
+def spread_targets(counts: Mapping[tuple[str, str], int], total: int) -> dict[tuple[str, str], int]:
+    """``total`` records shared over sub types in proportion to ``counts`` (largest remainders; ties by key)."""
+    whole = sum(counts.values())
+    if whole <= total:
+        return dict(counts)
+    exact = {k: c * total / whole for k, c in counts.items()}
+    out = {k: math.floor(v) for k, v in exact.items()}
+    for k in sorted(exact, key=lambda k: (-(exact[k] - out[k]), k))[: total - sum(out.values())]:
+        out[k] += 1
+    return out
+
+
+def _order(records: Sequence[QARecord], pr: Probe, best: str, seed: int) -> list[QARecord]:
+    """``records`` most blind-solvable first (module docstring)."""
+    def key(r: QARecord) -> tuple[Any, ...]:
+        hits = pr.correct.get(r.id, {})
+        return (-hits.get(best, 0.0), -sum(hits.get(p, 0.0) for p in PROBES), -pr.truth_probability.get(r.id, 0.0),
+                stable_hash(seed, "prune", r.id))
+    return sorted(records, key=key)
+
+
+def _aims(pr: Probe, bound: float, overall_bound: float) -> dict[tuple[str, str], float]:
+    """The excess each sub type is pruned towards this round: the sub types over ``bound`` aim at
+    chance (0); only when none is, and the pooled figure is over ``overall_bound``, those above
+    ``overall_bound − 1`` aim at ``overall_bound − 1.5``."""
+    over = {row.key: 0.0 for row in pr.rows if row.excess > bound}
+    if over or pr.overall.get("excess", 0.0) <= overall_bound:
+        return over
+    return {row.key: overall_bound - 1.5 for row in pr.rows if row.excess > overall_bound - 1.0}
+
+
+def _to_remove(row: SubTypeBlind, aim: float) -> int:
+    a, c, t = row.best_score / 100.0, row.chance / 100.0, aim / 100.0
+    x = math.ceil(row.n * (a - c - t) / max(1e-6, 1.0 - c - t))
+    return max(1, min(x, row.n // 4 or 1))
+
+
+def _prune_round(by_key: dict[tuple[str, str], list[QARecord]], pr: Probe, floors: Mapping[tuple[str, str], int],
+                 bound: float, overall_bound: float, seed: int) -> dict[str, int]:
+    """Remove this round's records from ``by_key`` in place; returns ``"q/s" → removed``."""
+    removed: dict[str, int] = {}
+    aims = _aims(pr, bound, overall_bound)
+    for row in pr.rows:
+        aim = aims.get(row.key)
+        rs = by_key.get(row.key, [])
+        room = len(rs) - floors.get(row.key, 0)
+        if aim is None or room <= 0:
+            continue
+        x = min(_to_remove(row, aim), room)
+        gone = {r.id for r in _order(rs, pr, row.best, seed)[:x]}
+        by_key[row.key] = [r for r in rs if r.id not in gone]
+        removed[f"{row.key[0]}/{row.key[1]}"] = x
+    return removed
+
+
+def _trim_round(by_key: dict[tuple[str, str], list[QARecord]], targets: Mapping[tuple[str, str], int], seed: int) -> dict[str, int]:
+    """Trim every sub type above its target to it, in a seeded order (a random subsample keeps the
+    answer distribution: trimming the most solvable first would plant the opposite bias); returns
+    ``"q/s" → removed``."""
+    removed: dict[str, int] = {}
+    for key, rs in by_key.items():
+        surplus = len(rs) - targets.get(key, len(rs))
+        if surplus > 0:
+            gone = {r.id for r in sorted(rs, key=lambda r: (stable_hash(seed, "trim", r.id), r.id))[:surplus]}
+            by_key[key] = [r for r in rs if r.id not in gone]
+            removed[f"{key[0]}/{key[1]}"] = surplus
+    return removed
+
+
+def _deciding(pr: Probe, by_key: Mapping[tuple[str, str], list[QARecord]], counts: Mapping[str, float]) -> Probe:
+    """``pr`` with its rows and pooled figures over the :data:`DECIDING` predictors."""
+    rows, overall = blind_rows([r for rs in by_key.values() for r in rs], pr.correct, counts, DECIDING)
+    return Probe(pr.correct, pr.truth_probability, rows, overall)
+
+
+def _trim_metric(records: Sequence[QARecord], targets: Mapping[tuple[str, str], int], seed: int) -> set[str]:
+    """The ids of the metric ``records`` kept: per sub type its target (all without one), in a seeded order."""
+    by_key: dict[tuple[str, str], list[QARecord]] = defaultdict(list)
+    for r in records:
+        by_key[(r.question_type, r.sub_question_type)].append(r)
+    kept: set[str] = set()
+    for key, rs in by_key.items():
+        ordered = sorted(rs, key=lambda r: (stable_hash(seed, "trim", r.id), r.id))
+        kept.update(r.id for r in ordered[: targets.get(key, len(rs))])
+    return kept
+
+
+def _check(bound: float, overall_bound: float, folds: int, max_rounds: int, floor: float) -> None:
+    for name, value in (("bound", bound), ("overall_bound", overall_bound)):
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not 0.0 <= value <= 100.0:
+            raise ParameterError(f"debias: {name} must be a number of points in [0, 100], got {value!r}")
+    for name, value, low in (("folds", folds, 2), ("max_rounds", max_rounds, 0)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            raise ParameterError(f"debias: {name} must be an integer >= {low}, got {value!r}")
+    if not isinstance(floor, (int, float)) or isinstance(floor, bool) or not 0.0 <= floor <= 1.0:
+        raise ParameterError(f"debias: floor must be a share in [0, 1], got {floor!r}")
+
+
+def debias(
+    records: Sequence[QARecord], targets: Mapping[tuple[str, str], int] | None = None, *, bound: float = DEFAULT_BOUND,
+    overall_bound: float = DEFAULT_OVERALL_BOUND, folds: int = 5, seed: int = 0, max_rounds: int = 20,
+    floor: float = 0.5, learned: bool = True,
+) -> DebiasResult:
+    """Prune ``records`` (a pooled bench) until no blind model beats chance by more than the bounds (module docstring).
+
+    Args:
+        records: question records of many scenes (metric ones are only trimmed to their targets, in a seeded order).
+        targets: records wanted per ``(question_type, sub_question_type)``; default: as many as given.
+        bound / overall_bound: points over chance allowed per sub type / pooled.
+        folds: scene folds of the probe. seed: the folds and the order of equals.
+        max_rounds: probe-and-prune rounds at most. floor: never prune a sub type below this share of its target.
+        learned: include the logistic model in the probe.
+    """
+    _check(bound, overall_bound, folds, max_rounds, floor)
+    discrete = [r for r in records if r.answer_type in DISCRETE]
+    by_key: dict[tuple[str, str], list[QARecord]] = defaultdict(list)
+    for r in discrete:
+        by_key[(r.question_type, r.sub_question_type)].append(r)
+    metric = _trim_metric([r for r in records if r.answer_type not in DISCRETE], targets or {}, seed)
+    targets = {k: int(targets.get(k, len(v))) if targets else len(v) for k, v in by_key.items()}
+    floors = {k: math.ceil(floor * t) for k, t in targets.items()}
+    counts = count_chances(discrete)
+    current = before = probe(discrete, folds=folds, seed=seed, learned=learned, counts=counts)
+    rounds: list[dict[str, Any]] = []
+    for number in range(1, max_rounds + 1):
+        removed = _prune_round(by_key, _deciding(current, by_key, counts), floors, bound, overall_bound, seed)
+        why = _PRUNE
+        if not removed:
+            removed, why = _trim_round(by_key, targets, seed), _TRIM
+        if not removed:
+            break
+        rounds.append({"round": number, "why": why, "removed": removed, "total": sum(removed.values())})
+        current = probe([r for rs in by_key.values() for r in rs], folds=folds, seed=seed, learned=learned, counts=counts)
+    keep = {r.id for rs in by_key.values() for r in rs} | metric
+    kept = [r for r in records if r.id in keep]
+    return DebiasResult(kept, before, current, rounds, targets, float(bound), float(overall_bound))
+
+
+def format_debias(result: DebiasResult) -> str:
+    """Before/after per sub type (n, best blind, chance, excess, target, records pruned as blind-solved and
+    trimmed to the target) and the records removed per round, as Markdown."""
+    lines = [
+        f"Blind pruning (k-fold by scene; chance = 1 / options shown; bound: sub type <= chance + {result.bound:g}, "
+        f"overall <= chance + {result.overall_bound:g})",
+        "| question_type | sub_question_type | type | n before | best before | n after | best after | chance | excess before | excess after | target | pruned | trimmed |",
+        "|---|---|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    removed, pruned = result.removed, result.pruned
+    for row in result.before.rows:
+        after = result.after.row(row.key)
+        name = f"{row.key[0]}/{row.key[1]}"
+        a_n, a_best, a_excess = (after.n, f"{after.best} {after.best_score:.1f}", f"{after.excess:+.1f}") if after else (0, "", "")
+        lines.append(f"| {row.question_type} | {row.sub_question_type} | {row.answer_type} | {row.n} | {row.best} {row.best_score:.1f} | "
+                     f"{a_n} | {a_best} | {row.chance:.1f} | {row.excess:+.1f} | {a_excess} | {result.targets.get(row.key, row.n)} | "
+                     f"{pruned.get(name, 0)} | {removed.get(name, 0) - pruned.get(name, 0)} |")
+    b, a = result.before.overall, result.after.overall
+    if b.get("n"):
+        lines.append(f"| ALL (MCQ+YN+COUNT) | | | {int(b['n'])} | {b['best']:.1f} | {int(a.get('n', 0))} | {a.get('best', 0.0):.1f} | "
+                     f"{b['chance']:.1f} / {a.get('chance', 0.0):.1f} | {b['excess']:+.1f} | {a.get('excess', 0.0):+.1f} | "
+                     f"{sum(result.targets.values())} | {sum(pruned.values())} | {sum(removed.values()) - sum(pruned.values())} |")
+    for r in result.rounds:
+        parts = ", ".join(f"{k} {v}" for k, v in sorted(r["removed"].items()))
+        lines.append(f"round {r['round']} ({r['why']}): removed {r['total']}: {parts}")
+    lines.append("within the bounds" if result.within else "NOT within the bounds after the last round (see the table)")
+    return "\n".join(lines)

@@ -1,0 +1,142 @@
+"""Bench-level blind pruning (spacedg.qa.debias) on synthetic item tables with a planted bias."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+
+import numpy as np
+import pytest
+
+from spacedg.errors import ParameterError
+from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.specs import AnswerType, TaskGroup
+from spacedg.qa.debias import debias, format_debias, spread_targets
+from spacedg.qa.debias_gbm import BoostedChoice
+from spacedg.qa.debias_probe import probe, scene_folds, shown_chance
+
+DIRECTIONS = ("left", "right", "forward", "back")
+LABELS = ("chair", "lamp", "table", "cup")
+
+
+def _direction(scene: str, k: int, truth: str, rng: np.random.Generator) -> QARecord:
+    """A direction MCQ whose four options are shuffled; the truth is ``truth``."""
+    label = LABELS[int(rng.integers(len(LABELS)))]
+    order = [DIRECTIONS[i] for i in rng.permutation(4)]
+    return QARecord(
+        id=f"{scene}/camera_object_relative_direction/bbox_center_direction/{k:012x}", scene_id=scene,
+        question_type="camera_object_relative_direction", sub_question_type="bbox_center_direction",
+        task_group=TaskGroup.CAMERA_CENTRIC, answer_type=AnswerType.MCQ, views=(f"v{k}",),
+        question=f"Where is the {label} relative to the camera?", options=tuple(f"{'ABCD'[i]}. {t}" for i, t in enumerate(order)),
+        answer="ABCD"[order.index(truth)], geometry={"label": label, "refs": []},
+    )
+
+
+def _existence(scene: str, k: int, answer: str, rng: np.random.Generator) -> QARecord:
+    label = LABELS[int(rng.integers(len(LABELS)))]
+    return QARecord(
+        id=f"{scene}/object_existence_estimation/existence/{k:012x}", scene_id=scene, question_type="object_existence_estimation",
+        sub_question_type="existence", task_group=TaskGroup.OBJECT_CENTRIC, answer_type=AnswerType.YN, views=(f"v{k}",),
+        question=f"Is there a {label} visible in this image?", options=(), answer=answer, geometry={"label": label, "refs": []},
+    )
+
+
+def _distance(scene: str, k: int, rng: np.random.Generator) -> QARecord:
+    return QARecord(
+        id=f"{scene}/camera_object_distance/single/{k:012x}", scene_id=scene, question_type="camera_object_distance",
+        sub_question_type="single", task_group=TaskGroup.CAMERA_CENTRIC, answer_type=AnswerType.NA, views=(f"v{k}",),
+        question="How far is the chair from the camera, in metres?", options=(), answer=float(rng.uniform(1, 4)),
+        geometry={"label": "chair", "refs": []},
+    )
+
+
+def _table(scenes: int = 6, per_scene: int = 40, planted: float = 0.7, seed: int = 0) -> list[QARecord]:
+    """Per scene: ``per_scene`` direction MCQs whose truth is "forward" with probability ``planted``
+    (else uniform), ``per_scene`` balanced yes/no questions, and 4 metric ones."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for s in range(scenes):
+        scene = f"room-{s}"
+        for k in range(per_scene):
+            truth = "forward" if rng.random() < planted else DIRECTIONS[int(rng.integers(4))]
+            out.append(_direction(scene, k, truth, rng))
+            out.append(_existence(scene, 1000 + k, "yes" if k % 2 else "no", rng))
+        out.extend(_distance(scene, 2000 + k, rng) for k in range(4))
+    return out
+
+
+KEY = ("camera_object_relative_direction", "bbox_center_direction")
+YN_KEY = ("object_existence_estimation", "existence")
+TARGETS = {KEY: 75, YN_KEY: 75, ("camera_object_distance", "single"): 10}
+
+
+@pytest.fixture(scope="module")
+def planted() -> tuple[list[QARecord], object]:
+    """Five scenes of 30 + 30 + 4 records, "forward" planted in 70 % of the directions, pruned to half (the targets)."""
+    records = _table(scenes=5, per_scene=30)
+    return records, debias(records, TARGETS, learned=False)
+
+
+def test_a_planted_bias_is_pruned_to_the_bound_and_balance_is_kept(planted) -> None:
+    records, result = planted
+    before = result.before.row(KEY)
+    assert before is not None and before.chance == pytest.approx(25.0) and before.excess > 20  # the plant is found
+    assert result.within and all(r.excess <= 3.0 for r in result.after.rows) and result.after.overall["excess"] <= 2.0
+    kept = Counter((r.question_type, r.sub_question_type) for r in result.kept)
+    assert kept[("camera_object_distance", "single")] == 10  # metric records: trimmed to their target only
+    assert 0.8 * 75 <= kept[YN_KEY] <= 75  # the unbiased sub type keeps (about) its target (n = 75: noise is chased a little)
+    assert math.ceil(0.5 * 75) <= kept[KEY] <= 75  # the biased one: pruned, never below the floor (half its target)
+    assert result.removed[f"{KEY[0]}/{KEY[1]}"] == 150 - kept[KEY]
+    truths = Counter(r.answer for r in result.kept if r.answer_type is AnswerType.YN)
+    assert abs(truths["yes"] - truths["no"]) <= 0.2 * sum(truths.values())  # yes/no stays balanced
+    letters = Counter(r.answer for r in result.kept if r.answer_type is AnswerType.MCQ)
+    assert max(letters.values()) - min(letters.values()) <= 0.25 * sum(letters.values())
+    kept_ids = {r.id for r in result.kept}
+    assert [r.id for r in result.kept] == [r.id for r in records if r.id in kept_ids]  # input order
+    text = format_debias(result)
+    assert "round 1 (blind models over the bound)" in text and "within the bounds" in text
+
+
+def test_pruning_is_deterministic_and_leaves_an_unbiased_table_alone() -> None:
+    table = _table(scenes=4, per_scene=16, planted=0.0, seed=4)
+    one, two = debias(table, learned=False, seed=3), debias(list(table), learned=False, seed=3)
+    assert [r.id for r in one.kept] == [r.id for r in two.kept] and one.rounds == two.rounds
+    assert one.removed.get(f"{KEY[0]}/{KEY[1]}", 0) <= 0.25 * 64  # unbiased: at most noise is chased
+
+
+def test_chance_is_over_the_options_shown_and_folds_are_whole_scenes() -> None:
+    rng = np.random.default_rng(0)
+    record = _direction("room-0", 0, "forward", rng)
+    assert shown_chance(record, {}) == 0.25 and shown_chance(_existence("room-0", 1, "no", rng), {}) == 0.5
+    folds = scene_folds([f"room-{i}" for i in range(7)] * 3, 3, seed=0)
+    assert sorted(s for f in folds for s in f) == [f"room-{i}" for i in range(7)] and len(folds) == 3
+    assert scene_folds(["a", "b"], 5, seed=0) == scene_folds(["b", "a"], 5, seed=0) and len(scene_folds(["a", "b"], 5, 0)) == 2
+    assert probe([record]).rows == []  # one scene: nothing held out
+
+
+def test_boosted_trees_learn_a_planted_option_and_targets_spread() -> None:
+    records = _table(scenes=2, per_scene=60, planted=0.8, seed=5)
+    mcq = [r for r in records if r.answer_type is AnswerType.MCQ]
+    model = BoostedChoice(mcq[:60], frozenset({"where", "is", "the", "relative", "to", "camera"}))
+    answers, truth = model.predict_many(mcq[60:])
+    assert np.mean([a == r.answer for a, r in zip(answers, mcq[60:])]) > 0.6 and np.all((truth >= 0) & (truth <= 1))
+    assert spread_targets({("a", "x"): 10, ("b", "y"): 5}, 6) == {("a", "x"): 4, ("b", "y"): 2}
+    assert spread_targets({("a", "x"): 3}, 6) == {("a", "x"): 3}
+
+
+@pytest.mark.parametrize("kwargs", [{"bound": -1.0}, {"overall_bound": "2"}, {"folds": 1}, {"max_rounds": -1}, {"floor": 2.0}])
+def test_bad_arguments_are_named(kwargs) -> None:
+    name = next(iter(kwargs))
+    with pytest.raises(ParameterError, match=name):
+        debias(_table(scenes=2, per_scene=2), **kwargs)
+
+
+def test_qa_audit_debias_prints_before_after_and_rounds(tmp_path, capsys) -> None:
+    from spacedg.cli import main
+
+    for record in _table(scenes=3, per_scene=16, planted=0.9, seed=6):
+        with open(tmp_path / f"{record.scene_id}.qa.jsonl", "a", encoding="utf-8") as f:
+            f.write(record.to_json() + "\n")
+    assert main(["qa", "audit", str(tmp_path), "--no-learned", "--debias"]) == 0
+    text = capsys.readouterr().out
+    assert "Blind pruning" in text and "round 1 (blind models over the bound)" in text and "| bbox_center_direction |" in text
