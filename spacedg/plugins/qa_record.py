@@ -68,6 +68,32 @@ class _NotPlain(Exception):
     """Raised by :func:`_plain` when a value needs :func:`json_ready`'s full conversion or its error."""
 
 
+#: Exact scalar types :func:`_plain` returns as they are (a float only when finite).
+_SCALARS = frozenset({int, str, bool, type(None)})
+_NUMBERS = frozenset({float, int})
+
+
+def _finite_sum(value: list[Any] | tuple[Any, ...]) -> bool:
+    """Whether the sum of these numbers is finite (then every one is; False may be an overflow)."""
+    try:
+        return math.isfinite(sum(value))
+    except OverflowError:
+        return False
+
+
+def _plain_list(value: list[Any] | tuple[Any, ...]) -> list[Any]:
+    """:func:`_plain` of a list or tuple: one C-level pass over the element types for the common
+    flat cases (all numbers: finite when their sum is; all other scalars), else element by element."""
+    kinds = set(map(type, value))
+    if kinds <= _NUMBERS:
+        if float not in kinds or _finite_sum(value):
+            return list(value)
+        return [_plain(item) for item in value]  # a NaN/Inf (or an overflowing sum): the exact check
+    if kinds <= _SCALARS:
+        return list(value)
+    return [_plain(item) for item in value]
+
+
 def _plain(value: Any) -> Any:
     """Fast path of :func:`json_ready` for values made of exact built-in types only (no numpy, no
     subclasses): the same result, without building a location string per element. Anything else
@@ -77,16 +103,17 @@ def _plain(value: Any) -> Any:
         if math.isfinite(value):
             return value
         raise _NotPlain
-    if kind is int or kind is str or kind is bool or value is None:
+    if kind in _SCALARS:
         return value
     if kind is list or kind is tuple:
-        return [_plain(item) for item in value]
+        return _plain_list(value)
     if kind is dict:
         out: dict[str, Any] = {}
         for key, item in value.items():
             if type(key) is not str:
                 raise _NotPlain
-            out[key] = _plain(item)
+            kind = type(item)
+            out[key] = item if kind in _SCALARS else _plain(item)
         return out
     raise _NotPlain
 

@@ -96,6 +96,20 @@ ROTATION_WORDS: dict[str, tuple[str, str]] = {
 
 
 # ------------------------------------------------------------------ poses
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross(a, b)`` of two float64 3-vectors, bit for bit (the same three products and
+    differences in float64), without ``np.cross``'s axis handling (the cost of a candidate's
+    geometry). Anything else goes to ``np.cross``."""
+    if (
+        type(a) is np.ndarray and type(b) is np.ndarray and a.shape == (3,) and b.shape == (3,)
+        and a.dtype == np.float64 and b.dtype == np.float64
+    ):
+        a0, a1, a2 = a.tolist()
+        b0, b1, b2 = b.tolist()
+        return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+    return np.cross(a, b)
+
+
 def camera_center(camera: Camera) -> np.ndarray:
     """Camera centre in world metres."""
     return np.asarray(camera.cam_to_world, dtype=np.float64)[:3, 3].copy()
@@ -162,9 +176,9 @@ def camera_attitude(cam_to_world: np.ndarray, up: np.ndarray) -> tuple[np.ndarra
     norm = float(np.linalg.norm(flat))
     if norm <= 1e-12:
         return np.zeros(3), elevation, 0.0
-    level_right = np.cross(forward, u)
+    level_right = cross3(forward, u)
     level_right /= np.linalg.norm(level_right)
-    level_down = np.cross(forward, level_right)
+    level_down = cross3(forward, level_right)
     bank = math.degrees(math.atan2(float(right @ level_down), float(right @ level_right)))
     return flat / norm, elevation, bank
 
@@ -334,7 +348,7 @@ def ground_angle(forward: np.ndarray, vector: np.ndarray, up: np.ndarray) -> flo
     """
     u = np.asarray(up, dtype=np.float64)
     f = _ground_unit(forward, u, "ground_angle")
-    right = np.cross(f, u)
+    right = cross3(f, u)
     v = horizontal(vector, u)
     angle = math.degrees(math.atan2(float(v @ right), float(v @ f)))
     return angle % 360.0
@@ -442,10 +456,10 @@ def compass_frame(reference: np.ndarray, assumed_dir: str, up: np.ndarray) -> tu
     u = np.asarray(up, dtype=np.float64)
     u = u / np.linalg.norm(u)
     f = _ground_unit(reference, u, "compass_frame")
-    r = np.cross(f, u)
+    r = cross3(f, u)
     c, s = _QUARTER_TURNS[CARDINALS.index(assumed_dir)]
     north = c * f - s * r
-    return north, np.cross(north, u)
+    return north, cross3(north, u)
 
 
 def compass_answer(reference: np.ndarray, assumed_dir: str, query: np.ndarray, up: np.ndarray) -> tuple[str, float, SectorHit, np.ndarray, np.ndarray]:
