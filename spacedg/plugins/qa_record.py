@@ -32,11 +32,14 @@ digits of the SHA-1 of the views and a family-chosen key (instances, template, â
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import dataclasses
 import hashlib
 import json
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,7 +49,7 @@ from spacedg.errors import InvalidDataError
 from spacedg.plugins.answers import MCQ_LETTERS, Answer, validate_answer
 from spacedg.plugins.specs import NAME_PATTERN, SUB_TYPE_PATTERN, AnswerType, TaskGroup, enum_member
 
-__all__ = ["QARecord", "MCQ_LETTERS", "make_record_id", "json_ready"]
+__all__ = ["QARecord", "MCQ_LETTERS", "make_record_id", "json_ready", "deferred_geometry"]
 
 _OPTION = re.compile(r"^([A-D])\. \S")
 _FIELDS = (
@@ -62,6 +65,25 @@ _FIELDS = (
     "answer",
     "geometry",
 )
+
+
+#: True inside :func:`deferred_geometry`: records keep their ``geometry`` as given (not converted).
+_DEFER_GEOMETRY: contextvars.ContextVar[bool] = contextvars.ContextVar("spacedg_defer_geometry", default=False)
+
+
+@contextlib.contextmanager
+def deferred_geometry() -> Iterator[None]:
+    """Within this block, a new :class:`QARecord` keeps its ``geometry`` mapping as given: the
+    conversion to plain JSON types (:func:`json_ready`, and its errors) waits for
+    :meth:`QARecord.materialised`. For a caller that builds many candidates and keeps few (the
+    question index pools thousands per family and keeps a few hundred); everything else about
+    the record is checked as usual. The candidates must not be written or compared before they
+    are materialised."""
+    token = _DEFER_GEOMETRY.set(True)
+    try:
+        yield
+    finally:
+        _DEFER_GEOMETRY.reset(token)
 
 
 class _NotPlain(Exception):
@@ -230,7 +252,17 @@ class QARecord:
         object.__setattr__(self, "answer", self._check_answer(where))
         if not isinstance(self.geometry, Mapping):
             raise InvalidDataError(f"{where}: geometry must be a dict of the numbers the answer came from, got {type(self.geometry).__name__}")
-        object.__setattr__(self, "geometry", json_ready(self.geometry))
+        if _DEFER_GEOMETRY.get():
+            object.__setattr__(self, "_raw_geometry", True)
+        else:
+            object.__setattr__(self, "geometry", json_ready(self.geometry))
+
+    def materialised(self) -> QARecord:
+        """This record with its ``geometry`` in plain JSON types: ``self`` unless it was made inside
+        :func:`deferred_geometry`, else the converted copy (raising what construction would have)."""
+        if not self.__dict__.get("_raw_geometry"):
+            return self
+        return dataclasses.replace(self)
 
     def _check_options(self, where: str) -> tuple[str, ...]:
         if isinstance(self.options, str):

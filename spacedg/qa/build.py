@@ -42,7 +42,7 @@ import numpy as np
 
 from spacedg.errors import SpaceDGError
 from spacedg.plugins.guard import plugin_call
-from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.qa_record import QARecord, deferred_geometry
 from spacedg.qa.deal import deal_distractors, deal_letters
 from spacedg.qa.index import (
     QA_INDEX_VERSION,
@@ -116,12 +116,14 @@ def prepare_scene(
 def _pool(family: Any, scene: Scene, config: QABuildConfig) -> list[QARecord]:
     """A family's candidates in scan order: up to ``pool_factor × per_sub_type`` distinct subjects
     per sub type, :data:`ALTERNATES` records each, ``max_scan`` candidates in all (seeded per
-    (scene, family))."""
+    (scene, family)). The candidates are made inside
+    :func:`~spacedg.plugins.qa_record.deferred_geometry`: their ``geometry`` blocks are converted to
+    plain JSON types only once selected (:func:`_family_records`)."""
     rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
     want = config.per_sub_type * config.pool_factor
     pooled: list[QARecord] = []
     distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
-    with plugin_call("question family", family, "generate"):
+    with plugin_call("question family", family, "generate"), deferred_geometry():
         for scanned, record in enumerate(family.generate(scene, rng)):
             if scanned >= config.max_scan:
                 break
@@ -155,6 +157,8 @@ def _family_records(
     keep = functools.partial(_judged, judge=judge, dropped=dropped, family_name=family.name)
     stats: dict[str, Counter[str]] = {}
     chosen = select_records(_pool(family, scene, config), config.per_sub_type, keep, stats)
+    with plugin_call("question family", family, "generate"):
+        chosen = [r.materialised() for r in chosen]  # geometry converted for the kept records only
     chosen = deal_distractors(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "distractors")))
     chosen = deal_letters(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "letters")))
     by_sub: dict[str, list[QARecord]] = {}

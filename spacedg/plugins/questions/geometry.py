@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.scene.box import OrientedBox
+from spacedg.scene.box import OrientedBox, cross3
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.errors import InvalidDataError
 from spacedg.render.camera import Camera
@@ -96,20 +96,6 @@ ROTATION_WORDS: dict[str, tuple[str, str]] = {
 
 
 # ------------------------------------------------------------------ poses
-def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross(a, b)`` of two float64 3-vectors, bit for bit (the same three products and
-    differences in float64), without ``np.cross``'s axis handling (the cost of a candidate's
-    geometry). Anything else goes to ``np.cross``."""
-    if (
-        type(a) is np.ndarray and type(b) is np.ndarray and a.shape == (3,) and b.shape == (3,)
-        and a.dtype == np.float64 and b.dtype == np.float64
-    ):
-        a0, a1, a2 = a.tolist()
-        b0, b1, b2 = b.tolist()
-        return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
-    return np.cross(a, b)
-
-
 def camera_center(camera: Camera) -> np.ndarray:
     """Camera centre in world metres."""
     return np.asarray(camera.cam_to_world, dtype=np.float64)[:3, 3].copy()
@@ -373,8 +359,22 @@ def ground_leg(vector: np.ndarray, up: np.ndarray, min_horizontal_m: float = MIN
 # ---------------------------------------------------------------- boxes
 def boxes_intersect(a: OrientedBox, b: OrientedBox) -> bool:
     """True when the boxes overlap by more than :data:`INTERSECT_TOL_M` (1 mm) along every
-    separating axis (:meth:`~spacedg.scene.box.OrientedBox.intersects`); touching boxes do not intersect."""
-    return a.intersects(b, tol=INTERSECT_TOL_M)
+    separating axis (:meth:`~spacedg.scene.box.OrientedBox.intersects`); touching boxes do not intersect.
+
+    Memoised per pair of box objects (the same pairs recur in many views' candidates)."""
+    key = (id(a), id(b))
+    hit = _INTERSECTS.get(key)
+    if hit is not None and hit[0] is a and hit[1] is b:
+        return hit[2]
+    if len(_INTERSECTS) >= 65_536:
+        _INTERSECTS.clear()
+    result = a.intersects(b, tol=INTERSECT_TOL_M)
+    _INTERSECTS[key] = (a, b, result)
+    return result
+
+
+#: (id(a), id(b)) → (a, b, :func:`boxes_intersect`); the boxes are kept, so a reused id never hits.
+_INTERSECTS: dict[tuple[int, int], tuple[OrientedBox, OrientedBox, bool]] = {}
 
 
 # ---------------------------------------------------------------- sectors
