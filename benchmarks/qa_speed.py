@@ -10,8 +10,8 @@ rooms are the built-in synthetic rooms (``spacedg scenes synth``: seeds 0–3, t
 ``--other-seed`` … +3), generated once into ``--work`` (default ``/tmp/qa-speed``) unless given
 with ``--rooms``. Both checkouts build every room's index (:func:`~spacedg.qa.build.build_scene_index`, default
 settings, one process, ``NUMBA_NUM_THREADS=1``) in their own interpreter (``PYTHONPATH``), one
-after the other, twice: the first pass fills the visibility and covisibility caches and the
-imports, the second is timed, so what differs is question generation. Per room: records, the
+after the other, with the visibility and covisibility caches in place (``_rooms`` fills them with
+a first ``qa build``), so what differs is question generation. Per room: records, the
 CPU seconds (``time.process_time``: robust on a loaded machine) and wall seconds of each build,
 their ratios, and whether the two ``<scene>.qa.jsonl`` files have the same SHA-256. Then the new code's
 generation of one room under cProfile (``NUMBA_NUM_THREADS=1``): the top functions by own time.
@@ -47,18 +47,19 @@ def _rooms(work: Path, seed: int, n: int, code: Path) -> list[Path]:
     out = work / f"seed{seed}"
     if not out.is_dir():
         _spacedg(code, "scenes", "synth", "--n", str(n), "--out", str(out), "--seed", str(seed))
+        _spacedg(code, "qa", "build", str(out), "--out", str(work / f"cache{seed}"), "--jobs", "1")  # the caches
     return sorted(p for p in out.iterdir() if (p / "scene.json").is_file())
 
 
 #: Run in the checkout's own interpreter: build each room's index (``--force``; visibility and
-#: covisibility from the rooms' caches) and print scene id → [records, wall s, CPU s of the build].
+#: covisibility from the rooms' caches, filled by an earlier build) and print scene id →
+#: [records, wall s, CPU s of the build].
 _CHILD = """
 import json, sys, time
 from spacedg.qa.build import build_scene_index
-from spacedg.qa.index import QABuildConfig
+from spacedg.qa.index import QABuildConfig, selected_families
+selected_families(None)  # the plugin registry, loaded once before timing
 out = {}
-for room in sys.argv[2:]:
-    build_scene_index(room, QABuildConfig(), out_dir=sys.argv[1], force=True, progress=False)  # caches, imports
 for room in sys.argv[2:]:
     w, c = time.perf_counter(), time.process_time()
     qa = build_scene_index(room, QABuildConfig(), out_dir=sys.argv[1], force=True, progress=False)
@@ -69,7 +70,7 @@ print(json.dumps(out))
 
 def _build(code: Path, rooms: list[Path], out: Path) -> dict[str, tuple[int, float, float, str]]:
     """scene id → (records, wall s, CPU s, sha256 of ``<scene>.qa.jsonl``) of building every room's
-    index with ``code`` (the second of two builds: the first fills the caches)."""
+    index with ``code``."""
     done = subprocess.run(
         [sys.executable, "-c", _CHILD, str(out), *map(str, rooms)], env=_env(code), check=True, capture_output=True, text=True,
     )
