@@ -217,12 +217,26 @@ def round_robin_sub_types(
 def referable(index: VisibilityIndex, view: str, instance_id: int) -> bool:
     """An object a question may name in ``view``: clearly visible there and no description clash
     (no other same-label instance with the same description is seen in that image)."""
-    return instance_id in index.visible[view] and not description_clash(index, view, index.instance(instance_id))
+    memo = _memo(index, "referable")
+    key = (view, instance_id)
+    hit = memo.get(key)
+    if hit is None:
+        hit = memo[key] = instance_id in index.visible[view] and not description_clash(index, view, index.instance(instance_id))
+    return hit
 
 
 def referable_ids(index: VisibilityIndex, view: str) -> list[int]:
     """Ids of the objects a question may name in ``view`` (:func:`referable`), in id order."""
-    return [i for i in index.visible[view] if referable(index, view, i)]
+    memo = _memo(index, "referable_ids")
+    ids = memo.get(view)
+    if ids is None:
+        ids = memo[view] = [i for i in index.visible[view] if referable(index, view, i)]
+    return list(ids)
+
+
+def _memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
+    """A per-index cache (an index is built once per generation of a scene and never changes)."""
+    return index.__dict__.setdefault(f"_memo_{name}", {})
 
 
 def phrase(inst: Instance) -> str:
