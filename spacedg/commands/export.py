@@ -29,6 +29,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "ratio within it, e.g. 640x480 (a 16:9 view at 320x240 renders 320x180; default: the views' own size)")
     parser.add_argument("--seed", type=_args.SEED, default=0, help="seed of the questions and of the degradations (default 0)")
     parser.add_argument("--per-sub-type", type=_args.whole(1), default=25, help="questions per sub type and scene when indexes are built (default 25)")
+    parser.add_argument("--qa-mode", choices=("auto", "bench", "train"), default="auto",
+                        help="question selection: bench (strict: an object once per sub type and scene) or train (dense: many views, "
+                             "4x the questions); auto (default): bench for --split bench, train otherwise (docs/question-modes.md)")
     parser.add_argument("--clean-prob", type=_args.real(0.0, 1.0), default=0.1, help="share of clean items, train/val only (default 0.1)")
     parser.add_argument("--max-questions", type=_args.whole(1), default=None, help="keep at most N questions, spread over question types")
     parser.add_argument("--shard", default="0/1", help="i/n: export the chunks k with k %% n == i; 'env' reads RANK/WORLD_SIZE "
@@ -71,6 +74,13 @@ def _shard_lock(out: Path, shard: tuple[int, int]) -> ExclusiveLock:
     return exclusive_lock(out / f".shard-{i}-of-{n}.lock", f"shard {i}/{n} of {out} is being written by another process")
 
 
+def _qa_mode(args: argparse.Namespace) -> str:
+    """--qa-mode, with ``auto`` resolved by the split (bench → ``bench``, train/val → ``train``)."""
+    if args.qa_mode != "auto":
+        return str(args.qa_mode)
+    return "bench" if args.split == "bench" else "train"
+
+
 def _names(text: str | None) -> list[str] | None:
     return None if text is None else [t.strip() for t in text.split(",") if t.strip()]
 
@@ -100,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     dataset = SpaceDGDataset(
         args.split, chains, scenes=args.scenes, families=_names(args.families),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,
-        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type),
+        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type, mode=_qa_mode(args)),
         on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device, max_questions=args.max_questions,
         split_fractions=fractions,
     )

@@ -275,7 +275,7 @@ class SpaceDGDataset(Dataset):
         return chains
 
     def _records(self, folder: Path) -> list[QARecord]:
-        jsonl, _ = index_paths(load_scene(folder).id, folder, self.qa_config.families)
+        jsonl, _ = index_paths(load_scene(folder).id, folder, self.qa_config.families, self.qa_config.mode)
         return read_index(jsonl)
 
     # ------------------------------------------------------------ indexing

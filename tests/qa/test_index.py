@@ -118,6 +118,15 @@ def test_cli_build_and_stats(qa_room_dirs, tmp_path, capsys):
     assert main(["qa", "stats", *files]) == 0
     text = capsys.readouterr().out
     assert "Blind stress test" in text and "Repeats" in text and "Ambiguities" in text
+    assert "Counting answers (bench)" in text and "Selection modes" in text
+    # the dense train index goes beside the bench one; stats reports both modes
+    assert main([*argv, "--mode", "train"]) == 0 and len(list(out.glob("*.qa-train.object_counting+object_existence_estimation.jsonl"))) == 2
+    capsys.readouterr()
+    assert main(["qa", "stats", str(out), "--json", "--no-blind", "--families", "object_counting,object_existence_estimation"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    modes = {row["mode"]: row for row in report["modes"]}
+    assert set(modes) == {"bench", "train"} and modes["train"]["records"] > modes["bench"]["records"] == report["records"]
+    assert sum(report["count_answers"].values()) == sum(r["n"] for r in report["counts"] if r["question_type"] == "object_counting")
     assert main(["qa", "stats", str(tmp_path / "nothing")]) == 2
     assert "no such file" in capsys.readouterr().err
 
