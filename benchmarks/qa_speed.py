@@ -53,17 +53,25 @@ def _rooms(work: Path, seed: int, n: int, code: Path) -> list[Path]:
 
 #: Run in the checkout's own interpreter: build each room's index (``--force``; visibility and
 #: covisibility from the rooms' caches, filled by an earlier build) and print scene id →
-#: [records, wall s, CPU s of the build].
+#: [records, wall s, CPU s of its generation (``generate_records``)].
 _CHILD = """
 import json, sys, time
-from spacedg.qa.build import build_scene_index
+import spacedg.qa.build as build
 from spacedg.qa.index import QABuildConfig, selected_families
 selected_families(None)  # the plugin registry, loaded once before timing
+plain, spent = build.generate_records, []
+
+def timed(*args, **kwargs):
+    w, c = time.perf_counter(), time.process_time()
+    records = plain(*args, **kwargs)
+    spent.append((time.perf_counter() - w, time.process_time() - c))
+    return records
+
+build.generate_records = timed  # what build_scene_index calls: generation only, not the visibility
 out = {}
 for room in sys.argv[2:]:
-    w, c = time.perf_counter(), time.process_time()
-    qa = build_scene_index(room, QABuildConfig(), out_dir=sys.argv[1], force=True, progress=False)
-    out[qa.scene_id] = [len(qa.records), time.perf_counter() - w, time.process_time() - c]
+    qa = build.build_scene_index(room, QABuildConfig(), out_dir=sys.argv[1], force=True, progress=False)
+    out[qa.scene_id] = [len(qa.records), *spent.pop()]
 print(json.dumps(out))
 """
 
@@ -80,15 +88,18 @@ def _build(code: Path, rooms: list[Path], out: Path) -> dict[str, tuple[int, flo
     return result
 
 
-def _compare(label: str, base: dict, new: dict) -> tuple[float, float, bool]:
-    """Print the per-room table; returns (base CPU s, new CPU s, every index identical)."""
+def _compare(label: str, base: dict, new: dict, reference: dict | None = None) -> tuple[float, float, bool]:
+    """Print the per-room table (``identical``: the new index equals ``reference``'s, default
+    ``base``'s, byte for byte); returns (base CPU s, new CPU s, every index identical)."""
+    what = "identical" if reference is None else "same as --same-as"
     print(f"\n{label}\n{'scene':<14}{'records':>8}{'base CPU s':>11}{'new CPU s':>10}{'ratio':>7}"
-          f"{'base wall s':>12}{'new wall s':>11}{'ratio':>7}  identical")
+          f"{'base wall s':>12}{'new wall s':>11}{'ratio':>7}  {what}")
     tb = tn = wb = wn = 0.0
     same_all = True
     for scene in sorted(base):
-        (nb, wall_b, cpu_b, hb), (nn, wall_n, cpu_n, hn) = base[scene], new[scene]
-        same = hb == hn and nb == nn
+        (nb, wall_b, cpu_b, _), (nn, wall_n, cpu_n, hn) = base[scene], new[scene]
+        ref = (reference or base)[scene]
+        same = ref[3] == hn and ref[0] == nn
         same_all &= same
         tb, tn, wb, wn = tb + cpu_b, tn + cpu_n, wb + wall_b, wn + wall_n
         print(f"{scene:<14}{nb:>8}{cpu_b:>11.2f}{cpu_n:>10.2f}{cpu_b / cpu_n:>6.1f}x"
@@ -118,6 +129,9 @@ def _profile(room: Path, top: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--base", type=Path, required=True, help="checkout of the reference code")
+    parser.add_argument("--same-as", type=Path, default=None,
+                        help="checkout whose indexes the new ones must equal byte for byte (default: --base), e.g. the "
+                        "branch this one merged when its outputs changed on purpose; timed too")
     parser.add_argument("--work", type=Path, default=Path("/tmp/qa-speed"))
     parser.add_argument("--rooms", type=Path, nargs="*", help="room folders (default: generate the demo rooms and --other-seed rooms)")
     parser.add_argument("--other-seed", type=int, default=20)
@@ -133,7 +147,10 @@ def main() -> None:
     for i, (label, rooms) in enumerate(groups.items()):
         base = _build(args.base, rooms, args.work / f"base{i}")
         new = _build(HERE, rooms, args.work / f"new{i}")
-        tb, tn, _ = _compare(label, base, new)
+        if args.same_as is not None:
+            same = _build(args.same_as, rooms, args.work / f"same{i}")
+            _compare(f"{label}: --same-as {args.same_as} (reference of the identity) vs this checkout", same, new)
+        tb, tn, _ = _compare(f"{label}: --base {args.base} vs this checkout", base, new, same if args.same_as else None)
         totals[0] += tb
         totals[1] += tn
     print(f"\ngeneration CPU, every room: base {totals[0]:.1f} s, new {totals[1]:.1f} s: {totals[0] / totals[1]:.1f}x faster")
