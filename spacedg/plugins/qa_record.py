@@ -34,11 +34,14 @@ digits of the SHA-1 of the views and a family-chosen key (instances, template, â
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import dataclasses
 import hashlib
 import json
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -48,7 +51,7 @@ from spacedg.errors import InvalidDataError
 from spacedg.plugins.answers import MCQ_LETTERS, MCQ_OPTION_COUNTS, Answer, validate_answer
 from spacedg.plugins.specs import NAME_PATTERN, SUB_TYPE_PATTERN, AnswerType, TaskGroup, enum_member
 
-__all__ = ["QARecord", "MCQ_LETTERS", "make_record_id", "json_ready"]
+__all__ = ["QARecord", "MCQ_LETTERS", "make_record_id", "json_ready", "deferred_geometry"]
 
 _OPTION = re.compile(r"^([A-D])\. \S")
 _FIELDS = (
@@ -66,8 +69,53 @@ _FIELDS = (
 )
 
 
+#: True inside :func:`deferred_geometry`: records keep their ``geometry`` as given (not converted).
+_DEFER_GEOMETRY: contextvars.ContextVar[bool] = contextvars.ContextVar("spacedg_defer_geometry", default=False)
+
+
+@contextlib.contextmanager
+def deferred_geometry() -> Iterator[None]:
+    """Within this block, a new :class:`QARecord` keeps its ``geometry`` mapping as given: the
+    conversion to plain JSON types (:func:`json_ready`, and its errors) waits for
+    :meth:`QARecord.materialised`. For a caller that builds many candidates and keeps few (the
+    question index pools thousands per family and keeps a few hundred); everything else about
+    the record is checked as usual. The candidates must not be written or compared before they
+    are materialised."""
+    token = _DEFER_GEOMETRY.set(True)
+    try:
+        yield
+    finally:
+        _DEFER_GEOMETRY.reset(token)
+
+
 class _NotPlain(Exception):
     """Raised by :func:`_plain` when a value needs :func:`json_ready`'s full conversion or its error."""
+
+
+#: Exact scalar types :func:`_plain` returns as they are (a float only when finite).
+_SCALARS = frozenset({int, str, bool, type(None)})
+_NUMBERS = frozenset({float, int})
+
+
+def _finite_sum(value: list[Any] | tuple[Any, ...]) -> bool:
+    """Whether the sum of these numbers is finite (then every one is; False may be an overflow)."""
+    try:
+        return math.isfinite(sum(value))
+    except OverflowError:
+        return False
+
+
+def _plain_list(value: list[Any] | tuple[Any, ...]) -> list[Any]:
+    """:func:`_plain` of a list or tuple: one C-level pass over the element types for the common
+    flat cases (all numbers: finite when their sum is; all other scalars), else element by element."""
+    kinds = set(map(type, value))
+    if kinds <= _NUMBERS:
+        if float not in kinds or _finite_sum(value):
+            return list(value)
+        return [_plain(item) for item in value]  # a NaN/Inf (or an overflowing sum): the exact check
+    if kinds <= _SCALARS:
+        return list(value)
+    return [_plain(item) for item in value]
 
 
 def _plain(value: Any) -> Any:
@@ -79,16 +127,17 @@ def _plain(value: Any) -> Any:
         if math.isfinite(value):
             return value
         raise _NotPlain
-    if kind is int or kind is str or kind is bool or value is None:
+    if kind in _SCALARS:
         return value
     if kind is list or kind is tuple:
-        return [_plain(item) for item in value]
+        return _plain_list(value)
     if kind is dict:
         out: dict[str, Any] = {}
         for key, item in value.items():
             if type(key) is not str:
                 raise _NotPlain
-            out[key] = _plain(item)
+            kind = type(item)
+            out[key] = item if kind in _SCALARS else _plain(item)
         return out
     raise _NotPlain
 
@@ -205,7 +254,17 @@ class QARecord:
         object.__setattr__(self, "answer", self._check_answer(where))
         if not isinstance(self.geometry, Mapping):
             raise InvalidDataError(f"{where}: geometry must be a dict of the numbers the answer came from, got {type(self.geometry).__name__}")
-        object.__setattr__(self, "geometry", json_ready(self.geometry))
+        if _DEFER_GEOMETRY.get():
+            object.__setattr__(self, "_raw_geometry", True)
+        else:
+            object.__setattr__(self, "geometry", json_ready(self.geometry))
+
+    def materialised(self) -> QARecord:
+        """This record with its ``geometry`` in plain JSON types: ``self`` unless it was made inside
+        :func:`deferred_geometry`, else the converted copy (raising what construction would have)."""
+        if not self.__dict__.get("_raw_geometry"):
+            return self
+        return dataclasses.replace(self)
 
     def _check_options(self, where: str) -> tuple[str, ...]:
         if isinstance(self.options, str):

@@ -42,7 +42,7 @@ import numpy as np
 
 from spacedg.errors import SpaceDGError
 from spacedg.plugins.guard import plugin_call
-from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.qa_record import QARecord, deferred_geometry
 from spacedg.qa.deal import deal_distractors, deal_letters
 from spacedg.qa.index import (
     QA_INDEX_VERSION,
@@ -121,12 +121,14 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
     (the family's own, views included: the mode's stricter subjects are the selection's job) per sub type, :data:`ALTERNATES`
     records each, ``max_scan`` candidates in all (seeded per (scene, family)); candidates naming
     an object whose twin shows in one of their images (:meth:`~spacedg.qa.twins.TwinCheck.has_twin`) are
-    left out and counted in ``twins`` per family."""
+    left out and counted in ``twins`` per family. The candidates are made inside
+    :func:`~spacedg.plugins.qa_record.deferred_geometry`: their ``geometry`` blocks are converted to
+    plain JSON types only once selected (:func:`_family_records`)."""
     rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
     want = quota(config.per_sub_type, config.mode) * config.pool_factor
     pooled: list[QARecord] = []
     distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
-    with plugin_call("question family", family, "generate"):
+    with plugin_call("question family", family, "generate"), deferred_geometry():
         for scanned, record in enumerate(family.generate(scene, rng)):
             if scanned >= config.max_scan:
                 break
@@ -165,6 +167,8 @@ def _family_records(
     stats: dict[str, Counter[str]] = {}
     pool = _pool(family, scene, config, index, twins)
     chosen = select_records(pool, quota(config.per_sub_type, config.mode), keep, stats, mode=config.mode)
+    with plugin_call("question family", family, "generate"):
+        chosen = [r.materialised() for r in chosen]  # geometry converted for the kept records only
     chosen = deal_distractors(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "distractors")))
     chosen = deal_letters(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "letters")))
     by_sub: dict[str, list[QARecord]] = {}

@@ -121,9 +121,20 @@ _COMPOUND_HEADS: tuple[str, ...] = (
 _SIBILANT = re.compile(r"(s|x|z|ch|sh)$")
 
 
+#: label → :func:`label_text` (labels recur in every question of a scene; bounded).
+_LABEL_TEXT: dict[str, str] = {}
+
+
 def label_text(label: str) -> str:
     """A label as written in a question: underscores to spaces, whitespace collapsed, trimmed."""
-    return " ".join(str(label).replace("_", " ").split())
+    if type(label) is not str:
+        return " ".join(str(label).replace("_", " ").split())
+    text = _LABEL_TEXT.get(label)
+    if text is None:
+        if len(_LABEL_TEXT) >= 65_536:
+            _LABEL_TEXT.clear()
+        text = _LABEL_TEXT[label] = " ".join(label.replace("_", " ").split())
+    return text
 
 
 def _plural_word(word: str) -> str:

@@ -64,7 +64,18 @@ LEXICON_ENV = "SPACEDG_LEXICON"
 
 def label_key(label: str) -> str:
     """Labels compare case-, space- and underscore-insensitively (``"Coffee_table"`` = ``"coffee table"``)."""
-    return label_text(label).lower()
+    if type(label) is not str:
+        return label_text(label).lower()
+    key = _LABEL_KEYS.get(label)
+    if key is None:
+        if len(_LABEL_KEYS) >= 65_536:
+            _LABEL_KEYS.clear()
+        key = _LABEL_KEYS[label] = label_text(label).lower()
+    return key
+
+
+#: label → :func:`label_key` (every candidate compares labels; bounded).
+_LABEL_KEYS: dict[str, str] = {}
 
 
 def head_noun(label: str) -> str:

@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.scene.box import OrientedBox
+from spacedg.scene.box import OrientedBox, cross3
 from spacedg.plugins.answers import MCQ_LETTERS, MCQ_OPTION_COUNTS
 from spacedg.errors import InvalidDataError
 from spacedg.render.camera import Camera
@@ -162,9 +162,9 @@ def camera_attitude(cam_to_world: np.ndarray, up: np.ndarray) -> tuple[np.ndarra
     norm = float(np.linalg.norm(flat))
     if norm <= 1e-12:
         return np.zeros(3), elevation, 0.0
-    level_right = np.cross(forward, u)
+    level_right = cross3(forward, u)
     level_right /= np.linalg.norm(level_right)
-    level_down = np.cross(forward, level_right)
+    level_down = cross3(forward, level_right)
     bank = math.degrees(math.atan2(float(right @ level_down), float(right @ level_right)))
     return flat / norm, elevation, bank
 
@@ -339,7 +339,7 @@ def ground_angle(forward: np.ndarray, vector: np.ndarray, up: np.ndarray) -> flo
     """
     u = np.asarray(up, dtype=np.float64)
     f = _ground_unit(forward, u, "ground_angle")
-    right = np.cross(f, u)
+    right = cross3(f, u)
     v = horizontal(vector, u)
     angle = math.degrees(math.atan2(float(v @ right), float(v @ f)))
     return angle % 360.0
@@ -364,8 +364,22 @@ def ground_leg(vector: np.ndarray, up: np.ndarray, min_horizontal_m: float = MIN
 # ---------------------------------------------------------------- boxes
 def boxes_intersect(a: OrientedBox, b: OrientedBox) -> bool:
     """True when the boxes overlap by more than :data:`INTERSECT_TOL_M` (1 mm) along every
-    separating axis (:meth:`~spacedg.scene.box.OrientedBox.intersects`); touching boxes do not intersect."""
-    return a.intersects(b, tol=INTERSECT_TOL_M)
+    separating axis (:meth:`~spacedg.scene.box.OrientedBox.intersects`); touching boxes do not intersect.
+
+    Memoised per pair of box objects (the same pairs recur in many views' candidates)."""
+    key = (id(a), id(b))
+    hit = _INTERSECTS.get(key)
+    if hit is not None and hit[0] is a and hit[1] is b:
+        return hit[2]
+    if len(_INTERSECTS) >= 65_536:
+        _INTERSECTS.clear()
+    result = a.intersects(b, tol=INTERSECT_TOL_M)
+    _INTERSECTS[key] = (a, b, result)
+    return result
+
+
+#: (id(a), id(b)) → (a, b, :func:`boxes_intersect`); the boxes are kept, so a reused id never hits.
+_INTERSECTS: dict[tuple[int, int], tuple[OrientedBox, OrientedBox, bool]] = {}
 
 
 # ---------------------------------------------------------------- sectors
@@ -447,10 +461,10 @@ def compass_frame(reference: np.ndarray, assumed_dir: str, up: np.ndarray) -> tu
     u = np.asarray(up, dtype=np.float64)
     u = u / np.linalg.norm(u)
     f = _ground_unit(reference, u, "compass_frame")
-    r = np.cross(f, u)
+    r = cross3(f, u)
     c, s = _QUARTER_TURNS[CARDINALS.index(assumed_dir)]
     north = c * f - s * r
-    return north, np.cross(north, u)
+    return north, cross3(north, u)
 
 
 def compass_answer(reference: np.ndarray, assumed_dir: str, query: np.ndarray, up: np.ndarray) -> tuple[str, float, SectorHit, np.ndarray, np.ndarray]:

@@ -34,6 +34,22 @@ def object_phrase(label: str, description: str = "") -> str:
     ``"chair"``. A description that does not mention the label gets it appended in
     parentheses (``"red hardcover (book)"``) so the category is always stated.
     """
+    if type(label) is not str or type(description) is not str:
+        return _object_phrase(label, description)
+    key = (label, description)
+    text = _PHRASES.get(key)
+    if text is None:
+        if len(_PHRASES) >= 65_536:
+            _PHRASES.clear()
+        text = _PHRASES[key] = _object_phrase(label, description)
+    return text
+
+
+#: (label, description) → :func:`object_phrase` (every candidate names its objects; bounded).
+_PHRASES: dict[tuple[str, str], str] = {}
+
+
+def _object_phrase(label: str, description: str) -> str:
     text = " ".join(str(description).split()).rstrip(".")
     name = label_text(label)
     if not text:

@@ -217,12 +217,26 @@ def round_robin_sub_types(
 def referable(index: VisibilityIndex, view: str, instance_id: int) -> bool:
     """An object a question may name in ``view``: clearly visible there and no description clash
     (no other same-label instance with the same description is seen in that image)."""
-    return instance_id in index.visible[view] and not description_clash(index, view, index.instance(instance_id))
+    memo = _memo(index, "referable")
+    key = (view, instance_id)
+    hit = memo.get(key)
+    if hit is None:
+        hit = memo[key] = instance_id in index.visible[view] and not description_clash(index, view, index.instance(instance_id))
+    return hit
 
 
 def referable_ids(index: VisibilityIndex, view: str) -> list[int]:
     """Ids of the objects a question may name in ``view`` (:func:`referable`), in id order."""
-    return [i for i in index.visible[view] if referable(index, view, i)]
+    memo = _memo(index, "referable_ids")
+    ids = memo.get(view)
+    if ids is None:
+        ids = memo[view] = [i for i in index.visible[view] if referable(index, view, i)]
+    return list(ids)
+
+
+def _memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
+    """A per-index cache (an index is built once per generation of a scene and never changes)."""
+    return index.__dict__.setdefault(f"_memo_{name}", {})
 
 
 def phrase(inst: Instance) -> str:
@@ -236,13 +250,40 @@ def phrase_key(inst: Instance) -> str:
 
 
 # ------------------------------------------------------------ geometry-block entries
-def object_entry(inst: Instance) -> dict[str, Any]:
-    """An object's identity and oriented box (world metres): ``id``, ``label``, ``description``,
-    ``center``, ``extents`` (full side lengths) and ``rotation`` (columns = box axes in world coordinates)."""
+#: id → (object, its entry): entries that depend on one immutable scene object only, computed
+#: once per object (a scene's instances and cameras recur in thousands of candidates). The object
+#: is kept with its entry, so an id reused by another object never reads a stale entry.
+_ENTRIES: dict[tuple[str, int], tuple[Any, Any]] = {}
+_ENTRIES_MAX = 65_536
+
+
+def _entry_of(kind: str, obj: Any, make: Callable[[Any], Any]) -> Any:
+    """``make(obj)``, memoised per object (:data:`_ENTRIES`); the caller copies what it hands out."""
+    key = (kind, id(obj))
+    hit = _ENTRIES.get(key)
+    if hit is not None and hit[0] is obj:
+        return hit[1]
+    if len(_ENTRIES) >= _ENTRIES_MAX:
+        _ENTRIES.clear()
+    value = make(obj)
+    _ENTRIES[key] = (obj, value)
+    return value
+
+
+def _object_entry(inst: Instance) -> dict[str, Any]:
     return {
         "id": inst.id, "label": inst.label, "description": inst.description,
         "center": inst.box.center.tolist(), "extents": inst.box.extents.tolist(), "rotation": inst.box.rotation.tolist(),
     }
+
+
+def object_entry(inst: Instance) -> dict[str, Any]:
+    """An object's identity and oriented box (world metres): ``id``, ``label``, ``description``,
+    ``center``, ``extents`` (full side lengths) and ``rotation`` (columns = box axes in world coordinates).
+
+    Computed once per instance; every call returns a new dict whose lists are shared between calls
+    (a record's geometry is copied into plain JSON types when the record is made: never mutate them)."""
+    return dict(_entry_of("object", inst, _object_entry))
 
 
 def ref_entry(inst: Instance, view: str) -> dict[str, Any]:
@@ -252,7 +293,13 @@ def ref_entry(inst: Instance, view: str) -> dict[str, Any]:
 
 def camera_entry(scene: Scene, views: Sequence[str]) -> dict[str, list[list[float]]]:
     """View → 4×4 ``cam_to_world`` (OpenCV axes, metres) of the views a question uses."""
-    return {v: np.asarray(scene.views[v].cam_to_world, dtype=np.float64).tolist() for v in views}
+    return {v: _entry_of("camera", scene.views[v], _pose_list) for v in views}
+
+
+def _pose_list(camera: Any) -> list[list[float]]:
+    """A camera's 4×4 ``cam_to_world`` as nested lists (memoised per camera by :func:`camera_entry`;
+    the record copies it)."""
+    return np.asarray(camera.cam_to_world, dtype=np.float64).tolist()
 
 
 def pair_geometry(scene: Scene, pair: ViewPair) -> dict[str, Any]:

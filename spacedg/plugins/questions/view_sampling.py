@@ -86,6 +86,7 @@ class VisibilityIndex:
             self.visible[view] = tuple(sorted(i for i, c in row.items() if c is VisibilityClass.VISIBLE))
             self.seen[view] = tuple(sorted(i for i, c in row.items() if c is not VisibilityClass.HIDDEN))
         self._by_id = {inst.id: inst for inst in scene.instances}
+        self._entries: dict[tuple[str, int], dict[str, object]] = {}  # vis_entry, per (view, id)
 
     def instance(self, instance_id: int) -> Instance:
         return self._by_id[instance_id]
@@ -95,6 +96,13 @@ class VisibilityIndex:
 
     def vis_entry(self, view: str, instance_id: int) -> dict[str, object]:
         """``{"visible_pixels", "visible_fraction", "class"}`` of one instance in one view (for geometry blocks)."""
+        key = (view, instance_id)
+        entry = self._entries.get(key)
+        if entry is None:
+            entry = self._entries[key] = self._vis_entry(view, instance_id)
+        return dict(entry)
+
+    def _vis_entry(self, view: str, instance_id: int) -> dict[str, object]:
         vis = self._by_id[instance_id].visibility.get(view)
         return {
             "visible_pixels": 0 if vis is None else vis.visible_pixels,

@@ -1,0 +1,162 @@
+"""Question generation before/after: time of ``qa build``'s generation stage and byte identity.
+
+Prints numbers only (never part of the test run).
+
+    .venv/bin/python benchmarks/qa_speed.py --base /tmp/qa-base            # 4 demo rooms + 4 rooms of seed 20
+    .venv/bin/python benchmarks/qa_speed.py --base /tmp/qa-base --rooms DIR [DIR ...] --no-profile
+
+``--base`` is a checkout of the reference code (``git worktree add /tmp/qa-base 41e7ace``). The
+rooms are the built-in synthetic rooms (``spacedg scenes synth``: seeds 0–3, the demo rooms, and
+``--other-seed`` … +3), generated once into ``--work`` (default ``/tmp/qa-speed``) unless given
+with ``--rooms``. Both checkouts build every room's index (:func:`~spacedg.qa.build.build_scene_index`, default
+settings, one process, ``NUMBA_NUM_THREADS=1``) in their own interpreter (``PYTHONPATH``), one
+after the other, with the visibility and covisibility caches in place (``_rooms`` fills them with
+a first ``qa build``), so what differs is question generation. Per room: records, the
+CPU seconds (``time.process_time``: robust on a loaded machine) and wall seconds of each build,
+their ratios, and whether the two ``<scene>.qa.jsonl`` files have the same SHA-256. Then the new code's
+generation of one room under cProfile (``NUMBA_NUM_THREADS=1``): the top functions by own time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import hashlib
+import io
+import json
+import os
+import pstats
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parents[1]
+
+
+def _env(code: Path) -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": str(code), "NUMBA_NUM_THREADS": "1"}
+
+
+def _spacedg(code: Path, *args: str) -> None:
+    """``spacedg ARGS`` with ``code`` first on the path (its own interpreter)."""
+    subprocess.run([sys.executable, "-m", "spacedg", *args], env=_env(code), check=True, stdout=subprocess.DEVNULL)
+
+
+def _rooms(work: Path, seed: int, n: int, code: Path) -> list[Path]:
+    out = work / f"seed{seed}"
+    if not out.is_dir():
+        _spacedg(code, "scenes", "synth", "--n", str(n), "--out", str(out), "--seed", str(seed))
+        _spacedg(code, "qa", "build", str(out), "--out", str(work / f"cache{seed}"), "--jobs", "1")  # the caches
+    return sorted(p for p in out.iterdir() if (p / "scene.json").is_file())
+
+
+#: Run in the checkout's own interpreter: build each room's index (``--force``; visibility and
+#: covisibility from the rooms' caches, filled by an earlier build) and print scene id →
+#: [records, wall s, CPU s of its generation (``generate_records``)].
+_CHILD = """
+import json, sys, time
+import spacedg.qa.build as build
+from spacedg.qa.index import QABuildConfig, selected_families
+selected_families(None)  # the plugin registry, loaded once before timing
+plain, spent = build.generate_records, []
+
+def timed(*args, **kwargs):
+    w, c = time.perf_counter(), time.process_time()
+    records = plain(*args, **kwargs)
+    spent.append((time.perf_counter() - w, time.process_time() - c))
+    return records
+
+build.generate_records = timed  # what build_scene_index calls: generation only, not the visibility
+out = {}
+for room in sys.argv[2:]:
+    qa = build.build_scene_index(room, QABuildConfig(), out_dir=sys.argv[1], force=True, progress=False)
+    out[qa.scene_id] = [len(qa.records), *spent.pop()]
+print(json.dumps(out))
+"""
+
+
+def _build(code: Path, rooms: list[Path], out: Path) -> dict[str, tuple[int, float, float, str]]:
+    """scene id → (records, wall s, CPU s, sha256 of ``<scene>.qa.jsonl``) of building every room's
+    index with ``code``."""
+    done = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(out), *map(str, rooms)], env=_env(code), check=True, capture_output=True, text=True,
+    )
+    result = {}
+    for scene, (n, wall, cpu) in json.loads(done.stdout.strip().splitlines()[-1]).items():
+        result[scene] = (n, wall, cpu, hashlib.sha256((out / f"{scene}.qa.jsonl").read_bytes()).hexdigest())
+    return result
+
+
+def _compare(label: str, base: dict, new: dict, reference: dict | None = None) -> tuple[float, float, bool]:
+    """Print the per-room table (``identical``: the new index equals ``reference``'s, default
+    ``base``'s, byte for byte); returns (base CPU s, new CPU s, every index identical)."""
+    what = "identical" if reference is None else "same as --same-as"
+    print(f"\n{label}\n{'scene':<14}{'records':>8}{'base CPU s':>11}{'new CPU s':>10}{'ratio':>7}"
+          f"{'base wall s':>12}{'new wall s':>11}{'ratio':>7}  {what}")
+    tb = tn = wb = wn = 0.0
+    same_all = True
+    for scene in sorted(base):
+        (nb, wall_b, cpu_b, _), (nn, wall_n, cpu_n, hn) = base[scene], new[scene]
+        ref = (reference or base)[scene]
+        same = ref[3] == hn and ref[0] == nn
+        same_all &= same
+        tb, tn, wb, wn = tb + cpu_b, tn + cpu_n, wb + wall_b, wn + wall_n
+        print(f"{scene:<14}{nb:>8}{cpu_b:>11.2f}{cpu_n:>10.2f}{cpu_b / cpu_n:>6.1f}x"
+              f"{wall_b:>12.2f}{wall_n:>11.2f}{wall_b / wall_n:>6.1f}x  {'yes' if same else 'NO'}")
+    print(f"{'all':<14}{'':>8}{tb:>11.2f}{tn:>10.2f}{tb / tn:>6.1f}x{wb:>12.2f}{wn:>11.2f}{wb / wn:>6.1f}x  {'yes' if same_all else 'NO'}")
+    return tb, tn, same_all
+
+
+def _profile(room: Path, top: int) -> None:
+    """The new code's generation of ``room`` under cProfile: top functions by own time."""
+    from spacedg.qa.build import generate_records, prepare_scene
+    from spacedg.qa.index import QABuildConfig
+    from spacedg.scene.io import load_scene
+
+    scene = prepare_scene(load_scene(room), room / "cache", QABuildConfig(), progress=False)
+    profile = cProfile.Profile()
+    t0 = time.perf_counter()
+    profile.enable()
+    records = generate_records(scene, QABuildConfig())
+    profile.disable()
+    print(f"\nprofile of {room.name}: {len(records)} records in {time.perf_counter() - t0:.2f} s under cProfile")
+    text = io.StringIO()
+    pstats.Stats(profile, stream=text).sort_stats("tottime").print_stats(top)
+    print("\n".join(line for line in text.getvalue().splitlines() if line.strip())[-6000:])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--base", type=Path, required=True, help="checkout of the reference code")
+    parser.add_argument("--same-as", type=Path, default=None,
+                        help="checkout whose indexes the new ones must equal byte for byte (default: --base), e.g. the "
+                        "branch this one merged when its outputs changed on purpose; timed too")
+    parser.add_argument("--work", type=Path, default=Path("/tmp/qa-speed"))
+    parser.add_argument("--rooms", type=Path, nargs="*", help="room folders (default: generate the demo rooms and --other-seed rooms)")
+    parser.add_argument("--other-seed", type=int, default=20)
+    parser.add_argument("--n", type=int, default=4, help="rooms per seed")
+    parser.add_argument("--no-profile", action="store_true")
+    parser.add_argument("--top", type=int, default=20)
+    args = parser.parse_args()
+    groups = {"given rooms": args.rooms} if args.rooms else {
+        "demo rooms (seeds 0-3)": _rooms(args.work, 0, args.n, HERE),
+        f"rooms of seed {args.other_seed}": _rooms(args.work, args.other_seed, args.n, HERE),
+    }
+    totals = [0.0, 0.0]
+    for i, (label, rooms) in enumerate(groups.items()):
+        base = _build(args.base, rooms, args.work / f"base{i}")
+        new = _build(HERE, rooms, args.work / f"new{i}")
+        if args.same_as is not None:
+            same = _build(args.same_as, rooms, args.work / f"same{i}")
+            _compare(f"{label}: --same-as {args.same_as} (reference of the identity) vs this checkout", same, new)
+        tb, tn, _ = _compare(f"{label}: --base {args.base} vs this checkout", base, new, same if args.same_as else None)
+        totals[0] += tb
+        totals[1] += tn
+    print(f"\ngeneration CPU, every room: base {totals[0]:.1f} s, new {totals[1]:.1f} s: {totals[0] / totals[1]:.1f}x faster")
+    if not args.no_profile:
+        _profile(next(iter(groups.values()))[0], args.top)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,72 @@
+"""The fast paths of question generation give exactly what the plain code gives: deferred
+geometry conversion, the list fast path of ``json_ready``, ``cross3`` and the memoised entries."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from spacedg.errors import InvalidDataError
+from spacedg.plugins.qa_record import _json_ready_walk, deferred_geometry, json_ready
+from spacedg.scene.box import OrientedBox, cross3
+from tests.qa_records import qa_record as _record
+
+GEOMETRY = {"up": (0.0, 0.0, 1.0), "m": [[1.0, 2], (3, 4.5)], "n": np.float64(2.5), "k": [np.int64(3), True, None, "a"]}
+
+
+def test_deferred_geometry_is_converted_once_materialised() -> None:
+    plain = _record(geometry=GEOMETRY)
+    with deferred_geometry():
+        raw = _record(geometry=GEOMETRY)
+    assert raw.geometry is GEOMETRY  # kept as given inside the block
+    done = raw.materialised()
+    assert done == plain and done.to_json() == plain.to_json()
+    assert plain.materialised() is plain and done.materialised() is done
+
+
+def test_deferred_geometry_raises_on_materialising() -> None:
+    with deferred_geometry():
+        raw = _record(geometry={"bad": [1.0, math.nan]})
+    with pytest.raises(InvalidDataError, match=r"geometry\.bad\[1\]"):
+        raw.materialised()
+
+
+@pytest.mark.parametrize("value", [
+    [1.0, 2.0], (1, 2.5), (1e308, 1e308), [10**400, 1.0], [True, 1.0], [None, "a", 1], [], (),
+    {"a": [1.0, [2.0, np.float64(3)]]}, [[1.0, 2.0], [3.0, 4.0]], {"a": {"b": (1, 2)}},
+])
+def test_json_ready_list_fast_path_equals_the_walk(value: object) -> None:
+    fast, walk = json_ready(value), _json_ready_walk(value, "geometry")
+    assert repr(fast) == repr(walk)
+
+
+@pytest.mark.parametrize("value", [[math.nan, 1.0], [1.0, math.inf], [[1.0], [2.0, -math.inf]], {1: 2.0}])
+def test_json_ready_list_fast_path_rejects_like_the_walk(value: object) -> None:
+    with pytest.raises(InvalidDataError) as fast:
+        json_ready(value)
+    with pytest.raises(InvalidDataError) as walk:
+        _json_ready_walk(value, "geometry")
+    assert str(fast.value) == str(walk.value)
+
+
+def test_cross3_is_np_cross_bit_for_bit() -> None:
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(500, 3)) * 10.0 ** rng.integers(-6, 6, size=(500, 1))
+    b = rng.normal(size=(500, 3)) * 10.0 ** rng.integers(-6, 6, size=(500, 1))
+    for x, y in zip(a, b):
+        assert cross3(x, y).tobytes() == np.cross(x, y).tobytes()
+    pose = np.eye(4)
+    assert cross3(pose[:3, 2], np.array([0.0, 0.0, 1.0])).tobytes() == np.cross(pose[:3, 2], [0.0, 0.0, 1.0]).tobytes()
+    assert np.array_equal(cross3(np.array([1, 0, 0]), np.array([0, 1, 0])), [0, 0, 1])  # ints: np.cross itself
+
+
+def test_box_intersection_memo_is_per_box_object() -> None:
+    from spacedg.plugins.questions.geometry import boxes_intersect
+
+    a = OrientedBox(np.zeros(3), np.ones(3), np.eye(3))
+    near = OrientedBox(np.array([0.5, 0.0, 0.0]), np.ones(3), np.eye(3))
+    far = OrientedBox(np.array([5.0, 0.0, 0.0]), np.ones(3), np.eye(3))
+    assert boxes_intersect(a, near) and boxes_intersect(a, near)
+    assert not boxes_intersect(a, far) and not boxes_intersect(a, far)
