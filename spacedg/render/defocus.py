@@ -82,7 +82,7 @@ from spacedg.render.frame import expected_depth
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 from spacedg.render.settings import DEFOCUS_SLAB
 
-__all__ = ["MEASURE_SCALE", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of", "composite_factor", "coarse_view", "factor_for_coc", "upsample"]
+__all__ = ["MEASURE_SCALE", "alpha_mass", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of", "composite_factor", "coarse_view", "factor_for_coc", "upsample"]
 
 
 def slab_of(depths: np.ndarray) -> np.ndarray:
@@ -119,21 +119,39 @@ def inside_fraction(packed: np.ndarray, width: int, height: int) -> np.ndarray:
     return fx * fy
 
 
-def match_factors(sums: np.ndarray, inside: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def alpha_mass(packed: np.ndarray, rects: np.ndarray | None = None) -> np.ndarray:
+    """(N,) float64 integrated alpha ``o·2π·sqrt(det Σ)·(1 − f/o)`` of each projected Gaussian (pixels²
+    of the projection's grid): opacity ``o``, 2D covariance ``Σ`` from the conic, the part above the
+    alpha floor ``f`` kept. 0 for Gaussians culled (``rects`` empty, when given) or degenerate."""
+    opa = packed[:, OPA].astype(np.float64)
+    det_conic = packed[:, CA].astype(np.float64) * packed[:, CC] - np.square(packed[:, CB].astype(np.float64))
+    ok = (opa > 0.0) & (det_conic > 0.0)
+    if rects is not None:
+        ok &= rects[:, 1] > rects[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kept = 1.0 - np.clip(packed[:, AMIN].astype(np.float64) / np.where(ok, opa, 1.0), 0.0, 1.0)
+        mass = opa * 2.0 * math.pi / np.sqrt(np.where(ok, det_conic, 1.0)) * kept
+    return np.where(ok & np.isfinite(mass), mass, 0.0)
+
+
+def match_factors(sums: np.ndarray, inside: np.ndarray, mass: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-Gaussian ``(κ (N,), ρ (N, 3))`` from the sharp pass's sums ``(N, 6)`` = M, S, W, U_r, U_g, U_b.
 
-    ``κ = S / M`` in [0, 1] and ``ρ = U / W`` (≥ 0), blended with the view's ratios of the
-    totals (``κ̄ = ΣS / ΣM``, ``ρ̄ = ΣU / ΣW``; 1 when the sharp view shows nothing) in
-    proportion to the share of the footprint outside the measured frame (``1 − inside``);
-    Gaussians with ``M = 0`` (or ``W = 0``) take the means.
+    ``κ = W / mass`` — the share of the Gaussian's alpha (``mass``, :func:`alpha_mass` of the sharp
+    projection) that the sharp view shows — plus ``(1 − inside)·κ̄`` for the share of its footprint
+    outside the measured frame (``κ̄ = ΣW / Σ(mass·inside)``), clipped to [0, 1]; ``ρ = U / W`` (≥ 0)
+    blended alike with ``ρ̄ = ΣU / ΣW`` (1 when the sharp view shows nothing). A Gaussian the pass
+    reached but found hidden (W = 0) gets κ = 0; one outside the measured frame gets κ̄.
     """
     sums = np.asarray(sums, dtype=np.float64)
-    m, s, w, u = sums[:, 0], sums[:, 1], sums[:, 2], sums[:, 3:6]
-    kappa_mean = s.sum() / m.sum() if m.sum() > 0 else 1.0
+    w, u = sums[:, 2], sums[:, 3:6]
+    share = np.clip(np.asarray(inside, dtype=np.float64), 0.0, 1.0)
+    mass = np.asarray(mass, dtype=np.float64)
+    expected = float((mass * share).sum())
+    kappa_mean = min(w.sum() / expected, 1.0) if expected > 0 else 1.0
     rho_mean = u.sum(axis=0) / w.sum() if w.sum() > 0 else np.ones(3)
-    share = np.ones(m.shape[0]) if inside is None else np.clip(np.asarray(inside, dtype=np.float64), 0.0, 1.0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        kappa = np.where(m > 0, share * (s / np.where(m > 0, m, 1.0)) + (1.0 - share) * kappa_mean, kappa_mean)
+        kappa = np.where(mass > 0, w / np.where(mass > 0, mass, 1.0) + (1.0 - share) * kappa_mean, kappa_mean)
         rho = np.where(
             (w > 0)[:, None], share[:, None] * (u / np.where(w > 0, w, 1.0)[:, None]) + (1.0 - share[:, None]) * rho_mean[None, :],
             rho_mean[None, :],
@@ -218,7 +236,8 @@ def render_cpu(
     lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
     defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pair_out)  # type: ignore[attr-defined]
     # pass 2: the blurred view, with the factors of match_factors / apply_match (compiled)
-    packed, rects = defocus_cpu.match_and_apply(gauss, pair_out, sharp, wide.width, wide.height, packed, rects, want_color)
+    mass = alpha_mass(sharp, sharp_rects)
+    packed, rects = defocus_cpu.match_and_apply(gauss, pair_out, sharp, mass, wide.width, wide.height, packed, rects, want_color)
     n_visible = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
     factor = composite_factor(packed, rects, width, height)
     if factor > 1:  # every visible Gaussian blurred by >= COMPOSITE_MIN_COC px: composite on a coarser grid

@@ -251,15 +251,16 @@ def composite_defocus(
 
 
 @numba.njit(cache=True)
-def match_and_apply(gauss, pair_out, sharp, mwidth, mheight, packed, rects, want_color):  # pragma: no cover - compiled
+def match_and_apply(gauss, pair_out, sharp, mass, mwidth, mheight, packed, rects, want_color):  # pragma: no cover - compiled
     """:func:`spacedg.render.defocus.match_factors` and :func:`~spacedg.render.defocus.apply_match` in one
     compiled pass (the numpy versions took as long as the blurred composite at 448×336).
 
     Sums each pair's row of ``pair_out`` into its Gaussian (in pair order, as ``np.bincount``),
     takes every Gaussian's share of its footprint box inside the measured frame
-    (``mwidth`` × ``mheight``, from the ``sharp`` projection), and returns the blurred projection
-    ``(packed, rects)`` (copies) with κ and ρ applied. Means are over float64 totals; κ and ρ are
-    rounded to float32 before they are applied, as the numpy path does.
+    (``mwidth`` × ``mheight``, from the ``sharp`` projection) and its integrated alpha ``mass``
+    (:func:`spacedg.render.defocus.alpha_mass` of the sharp projection), and returns the blurred
+    projection ``(packed, rects)`` (copies) with κ and ρ applied. Means are over float64 totals;
+    κ and ρ are rounded to float32 before they are applied, as the numpy path does.
     """
     n = packed.shape[0]
     sums = np.zeros((n, PAIR_COLUMNS), np.float64)
@@ -267,11 +268,21 @@ def match_and_apply(gauss, pair_out, sharp, mwidth, mheight, packed, rects, want
         g = gauss[k]
         for j in range(PAIR_COLUMNS):
             sums[g, j] += np.float64(pair_out[k, j])
+    share = np.zeros(n, np.float64)
+    expected = 0.0
     tot = np.zeros(PAIR_COLUMNS, np.float64)
     for g in range(n):
         for j in range(PAIR_COLUMNS):
             tot[j] += sums[g, j]
-    kappa_mean = tot[1] / tot[0] if tot[0] > 0.0 else 1.0
+        # share of the sharp footprint box inside the measured frame
+        u, v = np.float64(sharp[g, PX]), np.float64(sharp[g, PY])
+        rx = max(np.float64(sharp[g, RADX]), 0.5)
+        ry = max(np.float64(sharp[g, RADY]), 0.5)
+        fx = max(min(u + rx, np.float64(mwidth)) - max(u - rx, 0.0), 0.0) / (2.0 * rx)
+        fy = max(min(v + ry, np.float64(mheight)) - max(v - ry, 0.0), 0.0) / (2.0 * ry)
+        share[g] = min(max(fx * fy, 0.0), 1.0)
+        expected += mass[g] * share[g]
+    kappa_mean = min(tot[2] / expected, 1.0) if expected > 0.0 else 1.0
     rho_mean = np.ones(3, np.float64)
     if tot[2] > 0.0:
         for c in range(3):
@@ -281,15 +292,8 @@ def match_and_apply(gauss, pair_out, sharp, mwidth, mheight, packed, rects, want
     for g in range(n):
         if not packed[g, COC] > 0.0:
             continue
-        # share of the sharp footprint box inside the measured frame
-        u, v = np.float64(sharp[g, PX]), np.float64(sharp[g, PY])
-        rx = max(np.float64(sharp[g, RADX]), 0.5)
-        ry = max(np.float64(sharp[g, RADY]), 0.5)
-        fx = max(min(u + rx, np.float64(mwidth)) - max(u - rx, 0.0), 0.0) / (2.0 * rx)
-        fy = max(min(v + ry, np.float64(mheight)) - max(v - ry, 0.0), 0.0) / (2.0 * ry)
-        share = min(max(fx * fy, 0.0), 1.0)
-        m, s, w = sums[g, 0], sums[g, 1], sums[g, 2]
-        kappa = share * (s / m) + (1.0 - share) * kappa_mean if m > 0.0 else kappa_mean
+        w = sums[g, 2]
+        kappa = w / mass[g] + (1.0 - share[g]) * kappa_mean if mass[g] > 0.0 else kappa_mean
         if kappa != kappa:
             kappa = kappa_mean
         kappa32 = np.float32(min(max(kappa, 0.0), 1.0))
@@ -302,7 +306,7 @@ def match_and_apply(gauss, pair_out, sharp, mwidth, mheight, packed, rects, want
             out_rects[g, 3] = 0
         if want_color:
             for c in range(3):
-                rho = share * (sums[g, 3 + c] / w) + (1.0 - share) * rho_mean[c] if w > 0.0 else rho_mean[c]
+                rho = share[g] * (sums[g, 3 + c] / w) + (1.0 - share[g]) * rho_mean[c] if w > 0.0 else rho_mean[c]
                 if rho != rho:
                     rho = 1.0
                 elif rho == np.inf:

@@ -32,7 +32,7 @@ from spacedg.render.settings import (
     RasterSettings,
 )
 
-__all__ = ["composite_defocus", "has_blur", "match_factors", "measure_sharp", "render_torch"]
+__all__ = ["alpha_mass", "composite_defocus", "has_blur", "match_factors", "measure_sharp", "render_torch"]
 
 
 def has_blur(proj: Projected) -> bool:
@@ -157,15 +157,29 @@ def inside_fraction(proj: Projected, width: int, height: int) -> torch.Tensor:
     return fx * fy
 
 
-def match_factors(sums: torch.Tensor, inside: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+def alpha_mass(proj: Projected) -> torch.Tensor:
+    """(N,) float64 integrated alpha of each projected Gaussian, as :func:`spacedg.render.defocus.alpha_mass`."""
+    opa = proj.opacities.double()
+    conics = proj.conics.double()
+    det_conic = conics[:, 0] * conics[:, 2] - conics[:, 1] * conics[:, 1]
+    ok = (opa > 0) & (det_conic > 0) & proj.visible
+    safe_opa = torch.where(ok, opa, torch.ones_like(opa))
+    kept = 1.0 - torch.clamp(proj.alpha_floor.double() / safe_opa, 0.0, 1.0)
+    mass = opa * 2.0 * math.pi / torch.sqrt(torch.where(ok, det_conic, torch.ones_like(det_conic))) * kept
+    return torch.where(ok & torch.isfinite(mass), mass, torch.zeros_like(mass))
+
+
+def match_factors(sums: torch.Tensor, inside: torch.Tensor, mass: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-Gaussian ``(κ (N,), ρ (N, 3))`` from per-Gaussian sums (N, 6), as :func:`spacedg.render.defocus.match_factors`."""
     sums = sums.double()
-    m, s, w, u = sums[:, 0], sums[:, 1], sums[:, 2], sums[:, 3:6]
-    kappa_mean = float(s.sum() / m.sum()) if float(m.sum()) > 0 else 1.0
+    w, u = sums[:, 2], sums[:, 3:6]
+    share = torch.clamp(inside.double(), 0.0, 1.0)
+    mass = mass.double()
+    expected = float((mass * share).sum())
+    kappa_mean = min(float(w.sum()) / expected, 1.0) if expected > 0 else 1.0
     rho_mean = u.sum(0) / w.sum() if float(w.sum()) > 0 else torch.ones(3, dtype=sums.dtype, device=sums.device)
-    share = torch.ones_like(m) if inside is None else torch.clamp(inside.double(), 0.0, 1.0)
-    kappa = torch.where(m > 0, share * (s / torch.where(m > 0, m, torch.ones_like(m))) + (1 - share) * kappa_mean,
-                        torch.full_like(m, kappa_mean))
+    kappa = torch.where(mass > 0, w / torch.where(mass > 0, mass, torch.ones_like(mass)) + (1 - share) * kappa_mean,
+                        torch.full_like(mass, kappa_mean))
     rho = torch.where(
         (w > 0)[:, None],
         share[:, None] * (u / torch.where(w > 0, w, torch.ones_like(w))[:, None]) + (1 - share[:, None]) * rho_mean[None, :],
@@ -289,7 +303,7 @@ def render_torch(
     pairs = measure_sharp(sharp, offsets, gauss, _slab(sharp.depths), wide.width, wide.height, settings.alpha_max)
     sums = torch.zeros(proj.means2d.shape[0], 6, dtype=torch.float64, device=pairs.device)
     sums.index_add_(0, gauss.long(), pairs.double())
-    kappa, rho = match_factors(sums, inside_fraction(sharp, wide.width, wide.height))
+    kappa, rho = match_factors(sums, inside_fraction(sharp, wide.width, wide.height), alpha_mass(sharp))
     blurred = apply_match(proj, kappa, rho)
     factor = composite_factor(blurred, width, height)
     if factor > 1:  # as the compiled path: every visible Gaussian blurred by >= COMPOSITE_MIN_COC px
