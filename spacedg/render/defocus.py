@@ -75,12 +75,15 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from scipy.special import erf
 
 from spacedg.limits import image_size_problem
 from spacedg.render.colour import srgb_to_linear
 from spacedg.render.frame import expected_depth
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
+from spacedg.render.defocus_lens import CENTRE_WEIGHT, LENS_POINTS, PRIOR, lens_defocus, visibility
 from spacedg.render.settings import DEFOCUS_SLAB
+from spacedg.render.thin_lens import lens_camera
 
 __all__ = ["MEASURE_SCALE", "alpha_mass", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of", "composite_factor", "coarse_view", "factor_for_coc", "upsample"]
 
@@ -111,12 +114,19 @@ def measurement_margin(packed: np.ndarray, rects: np.ndarray, width: int, height
 
 
 def inside_fraction(packed: np.ndarray, width: int, height: int) -> np.ndarray:
-    """(N,) share of each Gaussian's footprint box (centre ± radius) inside ``[0, width] × [0, height]``."""
+    """(N,) share of each Gaussian's mass inside ``[0, width] × [0, height]``: the product of its two
+    marginal normal masses (standard deviations ``sqrt(Σxx)``, ``sqrt(Σyy)`` from the conic)."""
     u, v = packed[:, PX].astype(np.float64), packed[:, PY].astype(np.float64)
-    rx, ry = np.maximum(packed[:, RADX], 0.5).astype(np.float64), np.maximum(packed[:, RADY], 0.5).astype(np.float64)
-    fx = np.clip(np.minimum(u + rx, width) - np.maximum(u - rx, 0.0), 0.0, None) / (2.0 * rx)
-    fy = np.clip(np.minimum(v + ry, height) - np.maximum(v - ry, 0.0), 0.0, None) / (2.0 * ry)
-    return fx * fy
+    a, b, c = (packed[:, k].astype(np.float64) for k in (CA, CB, CC))
+    det = a * c - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sx = np.sqrt(np.where(det > 0, c / np.where(det > 0, det, 1.0), 0.25))
+        sy = np.sqrt(np.where(det > 0, a / np.where(det > 0, det, 1.0), 0.25))
+    sx, sy = np.maximum(np.nan_to_num(sx, nan=0.5), 1e-6), np.maximum(np.nan_to_num(sy, nan=0.5), 1e-6)
+    root2 = math.sqrt(2.0)
+    fx = 0.5 * (erf((width - u) / (root2 * sx)) - erf(-u / (root2 * sx)))
+    fy = 0.5 * (erf((height - v) / (root2 * sy)) - erf(-v / (root2 * sy)))
+    return np.clip(fx * fy, 0.0, 1.0)
 
 
 def alpha_mass(packed: np.ndarray, rects: np.ndarray | None = None) -> np.ndarray:
@@ -137,9 +147,11 @@ def alpha_mass(packed: np.ndarray, rects: np.ndarray | None = None) -> np.ndarra
 def match_factors(sums: np.ndarray, inside: np.ndarray, mass: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-Gaussian ``(κ (N,), ρ (N, 3))`` from the sharp pass's sums ``(N, 6)`` = M, S, W, U_r, U_g, U_b.
 
-    ``κ = W / mass`` — the share of the Gaussian's alpha (``mass``, :func:`alpha_mass` of the sharp
-    projection) that the sharp view shows — plus ``(1 − inside)·κ̄`` for the share of its footprint
-    outside the measured frame (``κ̄ = ΣW / Σ(mass·inside)``), clipped to [0, 1]; ``ρ = U / W`` (≥ 0)
+    ``κ = (W + p·mass·κ̄) / (mass·(inside + p))`` — the share of the Gaussian's alpha inside the
+    measured frame (``mass·inside``, :func:`alpha_mass` of the sharp projection) that the sharp
+    view shows, taken for the whole Gaussian, pulled towards the frame's mean ``κ̄ = ΣW / Σ(mass·inside)``
+    by a prior of weight ``p`` = :data:`spacedg.render.defocus_lens.PRIOR` (a Gaussian barely inside
+    the frame gets κ̄), clipped to [0, 1]; ``ρ = U / W`` (≥ 0)
     blended alike with ``ρ̄ = ΣU / ΣW`` (1 when the sharp view shows nothing). A Gaussian the pass
     reached but found hidden (W = 0) gets κ = 0; one outside the measured frame gets κ̄.
     """
@@ -151,7 +163,7 @@ def match_factors(sums: np.ndarray, inside: np.ndarray, mass: np.ndarray) -> tup
     kappa_mean = min(w.sum() / expected, 1.0) if expected > 0 else 1.0
     rho_mean = u.sum(axis=0) / w.sum() if w.sum() > 0 else np.ones(3)
     with np.errstate(divide="ignore", invalid="ignore"):
-        kappa = np.where(mass > 0, w / np.where(mass > 0, mass, 1.0) + (1.0 - share) * kappa_mean, kappa_mean)
+        kappa = np.where(mass > 0, (w + PRIOR * mass * kappa_mean) / np.where(mass > 0, mass * (share + PRIOR), 1.0), kappa_mean)
         rho = np.where(
             (w > 0)[:, None], share[:, None] * (u / np.where(w > 0, w, 1.0)[:, None]) + (1.0 - share[:, None]) * rho_mean[None, :],
             rho_mean[None, :],
@@ -218,26 +230,30 @@ def measurement_settings(settings: Any, scale: float | None = None) -> Any:
 
 def render_cpu(
     gaussians: object, camera: object, settings: object, packed: np.ndarray, rects: np.ndarray,
-    instance_ids: np.ndarray, want_color: bool, want_depth: bool, want_ids: bool,
+    instance_ids: np.ndarray, want_color: bool, want_depth: bool, want_ids: bool, defocus: Any,
 ) -> dict[str, np.ndarray]:
     """Both passes on the compiled path; ``rgb`` in the result is **linear** light."""
-    from spacedg.render import defocus_cpu, project_cpu, raster_cpu
+    from spacedg.render import defocus_cpu, raster_cpu
     from spacedg.render.colour_cpu import decode_srgb
 
     width, height = camera.width, camera.height  # type: ignore[attr-defined]
     tight = settings.tight_tiles and settings.opacity_extent  # type: ignore[attr-defined]
     tiles_x = (width + 15) // 16
-    # pass 1: the sharp view, widened by a margin, measured
+    # pass 1: the sharp view, widened by a margin, measured from the lens centre and the other lens points
     margin = measurement_margin(packed, rects, width, height)
     wide = measurement_camera(camera, margin)
-    sharp, sharp_rects = project_cpu.project_gaussians(gaussians, wide, measurement_settings(settings), None, want_color)  # type: ignore[arg-type]
-    offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, wide.width, wide.height, tight)
-    pair_out = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
-    lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
-    defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pair_out)  # type: ignore[attr-defined]
+    sharp, sharp_rects, gauss, pair_out = _measure_cpu(gaussians, wide, settings, want_color)
+    lens = lens_defocus(defocus, wide.fx / camera.fx)  # type: ignore[attr-defined]
+    seen = np.zeros(packed.shape[0])
+    for offset, weight in LENS_POINTS:
+        seen_b, rects_b, gauss_b, pairs_b = _measure_cpu(gaussians, lens_camera(wide, lens, np.array(offset)), settings, False)
+        w_b = np.bincount(gauss_b, weights=pairs_b[:, defocus_cpu.PAIR_W].astype(np.float64), minlength=packed.shape[0])
+        seen += weight * visibility(w_b, alpha_mass(seen_b, rects_b), inside_fraction(seen_b, wide.width, wide.height))
     # pass 2: the blurred view, with the factors of match_factors / apply_match (compiled)
     mass = alpha_mass(sharp, sharp_rects)
-    packed, rects = defocus_cpu.match_and_apply(gauss, pair_out, sharp, mass, wide.width, wide.height, packed, rects, want_color)
+    packed, rects = defocus_cpu.match_and_apply(
+        gauss, pair_out, sharp, mass, wide.width, wide.height, packed, rects, want_color, CENTRE_WEIGHT, seen, PRIOR,
+    )
     n_visible = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
     factor = composite_factor(packed, rects, width, height)
     if factor > 1:  # every visible Gaussian blurred by >= COMPOSITE_MIN_COC px: composite on a coarser grid
@@ -265,6 +281,18 @@ def render_cpu(
     out["n_pairs"] = np.int64(gauss.shape[0])
     out["n_visible"] = n_visible
     return out
+
+
+def _measure_cpu(gaussians: Any, camera: Any, settings: Any, want_color: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One sharp measurement pass on the compiled path: ``(sharp packed, rects, pair Gaussians, pair sums)``."""
+    from spacedg.render import defocus_cpu, project_cpu, raster_cpu
+
+    sharp, sharp_rects = project_cpu.project_gaussians(gaussians, camera, measurement_settings(settings), None, want_color)
+    offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, camera.width, camera.height, settings.tight_tiles and settings.opacity_extent)
+    pair_out = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
+    lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
+    defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, slab_of(sharp[:, DEPTH]), (camera.width + 15) // 16, settings.alpha_max, pair_out)
+    return sharp, sharp_rects, gauss, pair_out
 
 
 #: Smallest circle of confusion (px) for which the blurred view is composited on a coarser grid: when

@@ -28,11 +28,13 @@ that LLVM vectorises the 16-pixel rows, like :func:`spacedg.render.raster_cpu.co
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
 from spacedg.render.colour_cpu import _DECODE_LUT, _TOE
-from spacedg.render.project_cpu import AMIN, CBL, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
+from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 from spacedg.render.raster_cpu import (
     _accumulate, _add_rgb, _conic, _f32_constants, _gauss_alpha, _pair_rows, _put_pixel, _put_rgb, _row_terms, _tile_span, _tile_state,
 )
@@ -43,6 +45,7 @@ __all__ = ["composite_defocus", "match_and_apply", "measure_sharp", "PAIR_M", "P
 #: Columns of :func:`measure_sharp`'s per-pair sums: M, S, W, then U for r, g, b.
 PAIR_M, PAIR_S, PAIR_W, PAIR_U = 0, 1, 2, 3
 PAIR_COLUMNS = 6
+_ROOT2 = math.sqrt(2.0)
 
 
 @numba.njit(cache=True, inline="always")
@@ -251,7 +254,7 @@ def composite_defocus(
 
 
 @numba.njit(cache=True)
-def match_and_apply(gauss, pair_out, sharp, mass, mwidth, mheight, packed, rects, want_color):  # pragma: no cover - compiled
+def match_and_apply(gauss, pair_out, sharp, mass, mwidth, mheight, packed, rects, want_color, centre_weight, seen, prior):  # pragma: no cover - compiled
     """:func:`spacedg.render.defocus.match_factors` and :func:`~spacedg.render.defocus.apply_match` in one
     compiled pass (the numpy versions took as long as the blurred composite at 448×336).
 
@@ -259,7 +262,9 @@ def match_and_apply(gauss, pair_out, sharp, mass, mwidth, mheight, packed, rects
     takes every Gaussian's share of its footprint box inside the measured frame
     (``mwidth`` × ``mheight``, from the ``sharp`` projection) and its integrated alpha ``mass``
     (:func:`spacedg.render.defocus.alpha_mass` of the sharp projection), and returns the blurred
-    projection ``(packed, rects)`` (copies) with κ and ρ applied. Means are over float64 totals;
+    projection ``(packed, rects)`` (copies) with κ and ρ applied: κ is ``centre_weight`` times the
+    centre's share plus ``seen`` (N,), the other lens points' weighted shares
+    (:mod:`spacedg.render.defocus_lens`). Means are over float64 totals;
     κ and ρ are rounded to float32 before they are applied, as the numpy path does.
     """
     n = packed.shape[0]
@@ -274,12 +279,16 @@ def match_and_apply(gauss, pair_out, sharp, mass, mwidth, mheight, packed, rects
     for g in range(n):
         for j in range(PAIR_COLUMNS):
             tot[j] += sums[g, j]
-        # share of the sharp footprint box inside the measured frame
+        # share of the sharp Gaussian's mass inside the measured frame (product of its marginals)
         u, v = np.float64(sharp[g, PX]), np.float64(sharp[g, PY])
-        rx = max(np.float64(sharp[g, RADX]), 0.5)
-        ry = max(np.float64(sharp[g, RADY]), 0.5)
-        fx = max(min(u + rx, np.float64(mwidth)) - max(u - rx, 0.0), 0.0) / (2.0 * rx)
-        fy = max(min(v + ry, np.float64(mheight)) - max(v - ry, 0.0), 0.0) / (2.0 * ry)
+        ca, cb, cc = np.float64(sharp[g, CA]), np.float64(sharp[g, CB]), np.float64(sharp[g, CC])
+        det = ca * cc - cb * cb
+        sx = math.sqrt(cc / det) if det > 0.0 else 0.5
+        sy = math.sqrt(ca / det) if det > 0.0 else 0.5
+        sx = max(sx, 1e-6) if sx == sx else 0.5
+        sy = max(sy, 1e-6) if sy == sy else 0.5
+        fx = 0.5 * (math.erf((np.float64(mwidth) - u) / (_ROOT2 * sx)) - math.erf(-u / (_ROOT2 * sx)))
+        fy = 0.5 * (math.erf((np.float64(mheight) - v) / (_ROOT2 * sy)) - math.erf(-v / (_ROOT2 * sy)))
         share[g] = min(max(fx * fy, 0.0), 1.0)
         expected += mass[g] * share[g]
     kappa_mean = min(tot[2] / expected, 1.0) if expected > 0.0 else 1.0
@@ -293,9 +302,10 @@ def match_and_apply(gauss, pair_out, sharp, mass, mwidth, mheight, packed, rects
         if not packed[g, COC] > 0.0:
             continue
         w = sums[g, 2]
-        kappa = w / mass[g] + (1.0 - share[g]) * kappa_mean if mass[g] > 0.0 else kappa_mean
+        kappa = (w + prior * mass[g] * kappa_mean) / (mass[g] * (share[g] + prior)) if mass[g] > 0.0 else kappa_mean
         if kappa != kappa:
             kappa = kappa_mean
+        kappa = centre_weight * min(max(kappa, 0.0), 1.0) + seen[g]
         kappa32 = np.float32(min(max(kappa, 0.0), 1.0))
         out[g, OPA] = packed[g, OPA] * kappa32
         out[g, AMIN] = packed[g, AMIN] * kappa32

@@ -23,12 +23,14 @@ import torch
 from spacedg.limits import image_size_problem
 from spacedg.render.camera import Camera
 from spacedg.render.colour import srgb_to_linear
+from spacedg.render.defocus_lens import PRIOR
 from spacedg.render.project_torch import GaussianTensors, Projected, project_gaussians
 from spacedg.render.raster_torch import advance_transmittance, bin_tiles, images_from_tiles, median_update
 from spacedg.render.settings import (
     DEFOCUS_SLAB,
     TILE_SIZE,
     TRANSMITTANCE_MIN,
+    Defocus,
     RasterSettings,
 )
 
@@ -148,13 +150,18 @@ def measurement_margin(proj: Projected, width: int, height: int) -> int:
 
 
 def inside_fraction(proj: Projected, width: int, height: int) -> torch.Tensor:
-    """(N,) share of each Gaussian's footprint box inside the frame, as :func:`spacedg.render.defocus.inside_fraction`."""
+    """(N,) share of each Gaussian's mass inside the frame, as :func:`spacedg.render.defocus.inside_fraction`."""
     u, v = proj.means2d[:, 0].double(), proj.means2d[:, 1].double()
-    rx = torch.clamp(proj.radii[:, 0].double(), min=0.5)
-    ry = torch.clamp(proj.radii[:, 1].double(), min=0.5)
-    fx = torch.clamp(torch.clamp(u + rx, max=width) - torch.clamp(u - rx, min=0.0), min=0.0) / (2.0 * rx)
-    fy = torch.clamp(torch.clamp(v + ry, max=height) - torch.clamp(v - ry, min=0.0), min=0.0) / (2.0 * ry)
-    return fx * fy
+    conics = proj.conics.double()
+    a, b, c = conics[:, 0], conics[:, 1], conics[:, 2]
+    det = a * c - b * b
+    safe = torch.where(det > 0, det, torch.ones_like(det))
+    sx = torch.clamp(torch.nan_to_num(torch.where(det > 0, torch.sqrt(torch.clamp(c / safe, min=0.0)), torch.full_like(det, 0.5)), nan=0.5), min=1e-6)
+    sy = torch.clamp(torch.nan_to_num(torch.where(det > 0, torch.sqrt(torch.clamp(a / safe, min=0.0)), torch.full_like(det, 0.5)), nan=0.5), min=1e-6)
+    root2 = math.sqrt(2.0)
+    fx = 0.5 * (torch.erf((width - u) / (root2 * sx)) - torch.erf(-u / (root2 * sx)))
+    fy = 0.5 * (torch.erf((height - v) / (root2 * sy)) - torch.erf(-v / (root2 * sy)))
+    return torch.clamp(fx * fy, 0.0, 1.0)
 
 
 def alpha_mass(proj: Projected) -> torch.Tensor:
@@ -178,7 +185,7 @@ def match_factors(sums: torch.Tensor, inside: torch.Tensor, mass: torch.Tensor) 
     expected = float((mass * share).sum())
     kappa_mean = min(float(w.sum()) / expected, 1.0) if expected > 0 else 1.0
     rho_mean = u.sum(0) / w.sum() if float(w.sum()) > 0 else torch.ones(3, dtype=sums.dtype, device=sums.device)
-    kappa = torch.where(mass > 0, w / torch.where(mass > 0, mass, torch.ones_like(mass)) + (1 - share) * kappa_mean,
+    kappa = torch.where(mass > 0, (w + PRIOR * mass * kappa_mean) / torch.where(mass > 0, mass * (share + PRIOR), torch.ones_like(mass)),
                         torch.full_like(mass, kappa_mean))
     rho = torch.where(
         (w > 0)[:, None],
@@ -288,22 +295,40 @@ def composite_defocus(
     )
 
 
+def _measure(gs: GaussianTensors, camera: Camera, settings: RasterSettings, want_color: bool) -> tuple[Projected, torch.Tensor]:
+    """One sharp measurement pass: the projection and its per-Gaussian sums (N, 6) float64."""
+    from spacedg.render.defocus import measurement_settings
+
+    tight = settings.tight_tiles and settings.opacity_extent
+    sharp = project_gaussians(gs, camera, measurement_settings(settings), None, want_color)
+    offsets, gauss = bin_tiles(sharp, camera.width, camera.height, tight)
+    pairs = measure_sharp(sharp, offsets, gauss, _slab(sharp.depths), camera.width, camera.height, settings.alpha_max)
+    sums = torch.zeros(sharp.means2d.shape[0], 6, dtype=torch.float64, device=pairs.device)
+    sums.index_add_(0, gauss.long(), pairs.double())
+    return sharp, sums
+
+
 def render_torch(
     gs: GaussianTensors, camera: Camera, settings: RasterSettings, proj: Projected,
-    want_color: bool, want_depth: bool, want_ids: bool,
+    want_color: bool, want_depth: bool, want_ids: bool, defocus: Defocus,
 ) -> dict[str, torch.Tensor]:
     """Both passes on the torch path: ``alpha``, ``enc`` + ``lin`` (when colour is wanted), depth/ids, ``n_pairs``."""
-    from spacedg.render.defocus import measurement_camera, measurement_settings
+    from spacedg.render.defocus import measurement_camera
+    from spacedg.render.defocus_lens import CENTRE_WEIGHT, LENS_POINTS, lens_defocus, visibility
+    from spacedg.render.thin_lens import lens_camera
 
     tight = settings.tight_tiles and settings.opacity_extent
     width, height = camera.width, camera.height
     wide = measurement_camera(camera, measurement_margin(proj, width, height))
-    sharp = project_gaussians(gs, wide, measurement_settings(settings), None, want_color)
-    offsets, gauss = bin_tiles(sharp, wide.width, wide.height, tight)
-    pairs = measure_sharp(sharp, offsets, gauss, _slab(sharp.depths), wide.width, wide.height, settings.alpha_max)
-    sums = torch.zeros(proj.means2d.shape[0], 6, dtype=torch.float64, device=pairs.device)
-    sums.index_add_(0, gauss.long(), pairs.double())
+    sharp, sums = _measure(gs, wide, settings, want_color)
     kappa, rho = match_factors(sums, inside_fraction(sharp, wide.width, wide.height), alpha_mass(sharp))
+    lens = lens_defocus(defocus, wide.fx / camera.fx)
+    seen = torch.zeros_like(kappa)
+    for offset, weight in LENS_POINTS:
+        seen_b, sums_b = _measure(gs, lens_camera(wide, lens, offset), settings, False)
+        share = visibility(sums_b[:, 2].cpu().numpy(), alpha_mass(seen_b).cpu().numpy(), inside_fraction(seen_b, wide.width, wide.height).cpu().numpy())
+        seen = seen + weight * torch.from_numpy(share).to(seen)
+    kappa = torch.clamp(CENTRE_WEIGHT * kappa + seen, 0.0, 1.0)
     blurred = apply_match(proj, kappa, rho)
     factor = composite_factor(blurred, width, height)
     if factor > 1:  # as the compiled path: every visible Gaussian blurred by >= COMPOSITE_MIN_COC px

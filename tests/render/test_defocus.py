@@ -113,6 +113,7 @@ def test_backends_agree_on_huge_gaussians(scale: float) -> None:
 def test_the_compiled_factors_are_the_numpy_factors_bit_for_bit() -> None:
     """defocus_cpu.match_and_apply = match_factors + inside_fraction + apply_match (the numpy reference)."""
     from spacedg.render import defocus as model
+    from spacedg.render.defocus_lens import CENTRE_WEIGHT, PRIOR
     from spacedg.render import defocus_cpu, project_cpu, raster_cpu
     from spacedg.render.colour import srgb_to_linear
     from spacedg.render.project_cpu import CBL, CG, CR, DEPTH
@@ -128,11 +129,14 @@ def test_the_compiled_factors_are_the_numpy_factors_bit_for_bit() -> None:
     lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
     defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, model.slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pairs)
     sums = np.stack([np.bincount(gauss, weights=pairs[:, j], minlength=len(g)) for j in range(pairs.shape[1])], axis=1)
-    kappa, rho = model.match_factors(sums, model.inside_fraction(sharp, wide.width, wide.height))
+    mass = model.alpha_mass(sharp, sharp_rects)
+    kappa, rho = model.match_factors(sums, model.inside_fraction(sharp, wide.width, wide.height), mass)
+    seen = np.random.default_rng(4).uniform(0.0, 2.0 / 3.0, len(g))  # the other lens points' shares
+    kappa = np.clip(CENTRE_WEIGHT * kappa.astype(np.float64) + seen, 0.0, 1.0).astype(np.float32)
     want = model.apply_match(packed, rects, kappa, rho, True)
-    got = defocus_cpu.match_and_apply(gauss, pairs, sharp, wide.width, wide.height, packed, rects, True)
+    got = defocus_cpu.match_and_apply(gauss, pairs, sharp, mass, wide.width, wide.height, packed, rects, True, CENTRE_WEIGHT, seen, PRIOR)
     np.testing.assert_array_equal(got[1], want[1])
-    np.testing.assert_allclose(got[0], want[0], rtol=2e-7, atol=0)  # the view's means: float64 totals summed in another order
+    np.testing.assert_allclose(got[0], want[0], rtol=1e-6, atol=0)  # float64 totals summed in another order, κ rounded once
 
 
 def test_the_measurement_frame_is_half_the_view_in_whole_tiles_centred() -> None:
