@@ -82,6 +82,7 @@ from spacedg.render.colour import srgb_to_linear
 from spacedg.render.frame import expected_depth
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 from spacedg.render.defocus_lens import CENTRE_WEIGHT, LENS_POINTS, PRIOR, lens_defocus, visibility
+from spacedg.render.defocus_place import place_visible
 from spacedg.render.settings import DEFOCUS_SLAB
 from spacedg.render.thin_lens import lens_camera
 
@@ -254,6 +255,9 @@ def render_cpu(
     packed, rects = defocus_cpu.match_and_apply(
         gauss, pair_out, sharp, mass, wide.width, wide.height, packed, rects, want_color, CENTRE_WEIGHT, seen, PRIOR,
     )
+    moments = np.stack([np.bincount(gauss, weights=pair_out[:, j].astype(np.float64), minlength=packed.shape[0])
+                        for j in (defocus_cpu.PAIR_W, *range(defocus_cpu.PAIR_MOMENTS, defocus_cpu.PAIR_COLUMNS))], axis=1)
+    packed, rects = place_visible(packed, rects, moments, wide.fx / camera.fx, width, height)  # type: ignore[attr-defined]
     n_visible = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
     factor = composite_factor(packed, rects, width, height)
     if factor > 1:  # every visible Gaussian blurred by >= COMPOSITE_MIN_COC px: composite on a coarser grid

@@ -42,9 +42,10 @@ from spacedg.render.threads import fork_safe
 
 __all__ = ["composite_defocus", "match_and_apply", "measure_sharp", "PAIR_M", "PAIR_S", "PAIR_W", "PAIR_U", "PAIR_COLUMNS"]
 
-#: Columns of :func:`measure_sharp`'s per-pair sums: M, S, W, then U for r, g, b.
-PAIR_M, PAIR_S, PAIR_W, PAIR_U = 0, 1, 2, 3
-PAIR_COLUMNS = 6
+#: Columns of :func:`measure_sharp`'s per-pair sums: M, S, W, then U for r, g, b, then the visible
+#: weight's moments about the Gaussian's mean (measurement pixels): Σw·dx, Σw·dy, Σw·dx², Σw·dx·dy, Σw·dy².
+PAIR_M, PAIR_S, PAIR_W, PAIR_U, PAIR_MOMENTS = 0, 1, 2, 3, 6
+PAIR_COLUMNS = 11
 _ROOT2 = math.sqrt(2.0)
 
 
@@ -93,14 +94,20 @@ def _measure_sweep(state, packed, lin, g, x0, y0, amax, pair_out, k, second):
     ca, cb, cc, opa, amin = _conic(packed, g)
     cr, cg, cbl = packed[g, CR], packed[g, CG], packed[g, CBL]
     lr, lg, lb = lin[g, 0], lin[g, 1], lin[g, 2]
-    m_sum = zero  # sweep 1: M, S, W
+    m_sum = zero  # sweep 1: M, S, W and the visible weight's moments
     s_sum = zero
     w_sum = zero
+    wx = zero
+    wy = zero
+    wxx = zero
+    wxy = zero
+    wyy = zero
     ur = zero  # sweep 2: U
     ug = zero
     ub = zero
     for row in range(r0, r1):
         bdy, cdy, base = _row_terms(row, gy, cb, cc)
+        dy = np.float32(row) - gy
         for col in range(16):
             p = base + np.uint64(col)
             alpha = _gauss_alpha(col, gx, ca, bdy, cdy, opa, amin, amax, zero) * state[p + _MLIVE]
@@ -116,6 +123,12 @@ def _measure_sweep(state, packed, lin, g, x0, y0, amax, pair_out, k, second):
                 m_sum += a_taken
                 s_sum += a_taken * state[p + _TS]
                 w_sum += w
+                dx = np.float32(col) - gx
+                wx += w * dx
+                wy += w * dy
+                wxx += w * dx * dx
+                wxy += w * dx * dy
+                wyy += w * dy * dy
                 state[p + _TS] = state[p + _TS] * (one - a_taken)
                 _add_rgb(state, p + _ER, w, cr, cg, cbl)
                 _add_rgb(state, p + _LR, w, lr, lg, lb)
@@ -129,6 +142,11 @@ def _measure_sweep(state, packed, lin, g, x0, y0, amax, pair_out, k, second):
         pair_out[k, 0] += m_sum
         pair_out[k, 1] += s_sum
         pair_out[k, 2] += w_sum
+        pair_out[k, 6] += wx
+        pair_out[k, 7] += wy
+        pair_out[k, 8] += wxx
+        pair_out[k, 9] += wxy
+        pair_out[k, 10] += wyy
 
 
 @numba.njit(cache=True, inline="always")

@@ -80,10 +80,11 @@ def measure_sharp(
     proj: Projected, offsets: torch.Tensor, gauss: torch.Tensor, slab: torch.Tensor, width: int, height: int,
     alpha_max: float, chunk: int = 32, max_elements: int = 1 << 22,
 ) -> torch.Tensor:
-    """Per-pair sums ``(pairs, 6)``: M, S, W, U_r, U_g, U_b (see the module docstring)."""
+    """Per-pair sums ``(pairs, 11)``: M, S, W, U_r, U_g, U_b and the visible weight's moments about the
+    Gaussian's mean Σw·dx, Σw·dy, Σw·dx², Σw·dx·dy, Σw·dy² (see the module docstring)."""
     device, dtype = proj.means2d.device, proj.means2d.dtype
     tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
-    out = torch.zeros(gauss.numel(), 6, dtype=dtype, device=device)
+    out = torch.zeros(gauss.numel(), 11, dtype=dtype, device=device)
     steps = torch.arange(chunk, device=device)
     colors = proj.colors if proj.colors is not None else torch.zeros(proj.means2d.shape[0], 3, dtype=dtype, device=device)
     linear = srgb_to_linear(colors)
@@ -121,13 +122,18 @@ def measure_sharp(
                     t_slab = t_before / torch.clamp(t_slab_start, min=1e-30)
                     sums = torch.stack([taken.sum(1), (taken * t_slab).sum(1), weight.sum(1)], dim=-1)  # (B, C, 3)
                     out[pair[in_list], :3] += sums[in_list]
+                    dx = px[:, :, None] - proj.means2d[g, 0][:, None, :]
+                    dy = py[:, :, None] - proj.means2d[g, 1][:, None, :]
+                    moments = torch.stack([(weight * dx).sum(1), (weight * dy).sum(1), (weight * dx * dx).sum(1),
+                                           (weight * dx * dy).sum(1), (weight * dy * dy).sum(1)], dim=-1)
+                    out[pair[in_list], 6:] += moments[in_list]
                     enc = enc + torch.einsum("bpc,bck->bpk", weight, colors[g])
                     mix = mix + torch.einsum("bpc,bck->bpk", weight, linear[g])
                     t_start = torch.where((last[:, -1] >= 0)[:, None], at[:, :, -1], t_start)
                     slab_prev = s[:, -1]
                 else:
                     u = torch.einsum("bpc,bpk->bck", weight, rho)
-                    out[pair[in_list], 3:] += u[in_list]
+                    out[pair[in_list], 3:6] += u[in_list]
                 trans, alive, open_ = advance_transmittance(trans, alive, t_after, take)
                 if not open_:
                     break
@@ -303,7 +309,7 @@ def _measure(gs: GaussianTensors, camera: Camera, settings: RasterSettings, want
     sharp = project_gaussians(gs, camera, measurement_settings(settings), None, want_color)
     offsets, gauss = bin_tiles(sharp, camera.width, camera.height, tight)
     pairs = measure_sharp(sharp, offsets, gauss, _slab(sharp.depths), camera.width, camera.height, settings.alpha_max)
-    sums = torch.zeros(sharp.means2d.shape[0], 6, dtype=torch.float64, device=pairs.device)
+    sums = torch.zeros(sharp.means2d.shape[0], pairs.shape[1], dtype=torch.float64, device=pairs.device)
     sums.index_add_(0, gauss.long(), pairs.double())
     return sharp, sums
 
@@ -329,7 +335,7 @@ def render_torch(
         share = visibility(sums_b[:, 2].cpu().numpy(), alpha_mass(seen_b).cpu().numpy(), inside_fraction(seen_b, wide.width, wide.height).cpu().numpy())
         seen = seen + weight * torch.from_numpy(share).to(seen)
     kappa = torch.clamp(CENTRE_WEIGHT * kappa + seen, 0.0, 1.0)
-    blurred = apply_match(proj, kappa, rho)
+    blurred = place_visible_torch(apply_match(proj, kappa, rho), sums[:, [2, 6, 7, 8, 9, 10]], wide.fx / camera.fx, width, height)
     factor = composite_factor(blurred, width, height)
     if factor > 1:  # as the compiled path: every visible Gaussian blurred by >= COMPOSITE_MIN_COC px
         blurred, width, height = coarse_view(blurred, width, height, factor)
@@ -338,6 +344,32 @@ def render_torch(
     out["n_pairs"] = torch.tensor(gauss.numel())
     out["factor"] = torch.tensor(factor)  # the caller upsamples (spacedg.render.defocus.upsample)
     return out
+
+
+def place_visible_torch(proj: Projected, sums: torch.Tensor, scale: float, width: int, height: int) -> Projected:
+    """:func:`spacedg.render.defocus_place.place_visible` on a torch projection (the per-Gaussian
+    arithmetic runs in float64 numpy on the host, as the compiled path's; the result is on ``proj``'s device)."""
+    import numpy as np
+
+    from spacedg.render.defocus_place import place_visible
+    from spacedg.render.project_cpu import AMIN, CA, CB, CC, COC, OPA, PX, PY, RADX, RADY
+
+    n = proj.means2d.shape[0]
+    packed = np.zeros((n, 14), np.float32)
+    host = {PX: proj.means2d[:, 0], PY: proj.means2d[:, 1], CA: proj.conics[:, 0], CB: proj.conics[:, 1], CC: proj.conics[:, 2],
+            OPA: proj.opacities, AMIN: proj.alpha_floor, RADX: proj.radii[:, 0], RADY: proj.radii[:, 1], COC: proj.coc}
+    for column, value in host.items():
+        packed[:, column] = value.detach().double().cpu().numpy()
+    rects = proj.rects.detach().cpu().numpy()
+    placed, placed_rects = place_visible(packed, rects, sums.detach().double().cpu().numpy(), scale, width, height)
+    dev, dtype = proj.means2d.device, proj.means2d.dtype
+    column = lambda k: torch.from_numpy(placed[:, k]).to(device=dev, dtype=dtype)  # noqa: E731
+    return replace(
+        proj, means2d=torch.stack([column(PX), column(PY)], dim=-1), conics=torch.stack([column(CA), column(CB), column(CC)], dim=-1),
+        opacities=column(OPA), alpha_floor=column(AMIN),
+        radii=torch.from_numpy(placed[:, [RADX, RADY]]).to(device=dev, dtype=proj.radii.dtype),
+        rects=torch.from_numpy(placed_rects).to(device=dev, dtype=proj.rects.dtype),
+    )
 
 
 def composite_factor(proj: Projected, width: int, height: int) -> int:
