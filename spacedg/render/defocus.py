@@ -81,7 +81,7 @@ from spacedg.limits import image_size_problem
 from spacedg.render.colour import srgb_to_linear
 from spacedg.render.frame import expected_depth
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
-from spacedg.render.defocus_lens import CENTRE_WEIGHT, LENS_POINTS, PRIOR, lens_defocus, visibility
+from spacedg.render.defocus_lens import PRIOR, lens_defocus, lens_points, visibility
 from spacedg.render.defocus_place import place_visible
 from spacedg.render.settings import DEFOCUS_SLAB
 from spacedg.render.thin_lens import lens_camera
@@ -244,20 +244,24 @@ def render_cpu(
     margin = measurement_margin(packed, rects, width, height)
     wide = measurement_camera(camera, margin)
     sharp, sharp_rects, gauss, pair_out = _measure_cpu(gaussians, wide, settings, want_color)
-    lens = lens_defocus(defocus, wide.fx / camera.fx)  # type: ignore[attr-defined]
+    lens = lens_defocus(defocus, wide.fx / camera.fx, wide.fx)  # type: ignore[attr-defined]
     seen = np.zeros(packed.shape[0])
-    for offset, weight in LENS_POINTS:
+    visible = rects[:, 1] > rects[:, 0]
+    centre_weight, points = lens_points(float(packed[visible, COC].max()) if visible.any() else 0.0)
+    for offset, weight in points:
         seen_b, rects_b, gauss_b, pairs_b = _measure_cpu(gaussians, lens_camera(wide, lens, np.array(offset)), settings, False)
         w_b = np.bincount(gauss_b, weights=pairs_b[:, defocus_cpu.PAIR_W].astype(np.float64), minlength=packed.shape[0])
         seen += weight * visibility(w_b, alpha_mass(seen_b, rects_b), inside_fraction(seen_b, wide.width, wide.height))
     # pass 2: the blurred view, with the factors of match_factors / apply_match (compiled)
     mass = alpha_mass(sharp, sharp_rects)
     packed, rects = defocus_cpu.match_and_apply(
-        gauss, pair_out, sharp, mass, wide.width, wide.height, packed, rects, want_color, CENTRE_WEIGHT, seen, PRIOR,
+        gauss, pair_out, sharp, mass, wide.width, wide.height, packed, rects, want_color, centre_weight, seen, PRIOR,
     )
     moments = np.stack([np.bincount(gauss, weights=pair_out[:, j].astype(np.float64), minlength=packed.shape[0])
                         for j in (defocus_cpu.PAIR_W, *range(defocus_cpu.PAIR_MOMENTS, defocus_cpu.PAIR_COLUMNS))], axis=1)
-    packed, rects = place_visible(packed, rects, moments, wide.fx / camera.fx, width, height)  # type: ignore[attr-defined]
+    packed, rects = place_visible(
+        packed, rects, moments, wide.fx / camera.fx, width, height, inside_fraction(sharp, wide.width, wide.height),  # type: ignore[attr-defined]
+    )
     n_visible = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
     factor = composite_factor(packed, rects, width, height)
     if factor > 1:  # every visible Gaussian blurred by >= COMPOSITE_MIN_COC px: composite on a coarser grid

@@ -23,11 +23,15 @@ import numpy as np
 
 from spacedg.render.settings import Defocus
 
-__all__ = ["CENTRE_WEIGHT", "LENS_POINTS", "PRIOR", "lens_defocus", "visibility"]
+__all__ = ["CENTRE_WEIGHT", "LENS_POINTS", "PRIOR", "REACH", "LENS_MIN_COC", "lens_points", "lens_defocus", "visibility"]
 
 #: Weight (in units of the Gaussian's mass) of the frame's mean visible share in a Gaussian's estimate:
 #: a Gaussian with 5 % of its mass inside the measured frame gets half its own share, half the mean.
 PRIOR = 0.05
+
+#: Largest visible circle of confusion (px) below which the lens points are not measured (the centre's
+#: visibility stands for the lens's): what the lens sees around an occluder is a strip at most about that wide.
+LENS_MIN_COC = 2.0
 
 #: Weight of the lens centre in the cubature (the sharp measurement pass).
 CENTRE_WEIGHT = 1.0 / 3.0
@@ -38,10 +42,23 @@ LENS_POINTS: tuple[tuple[tuple[float, float], float], ...] = tuple(
 )
 
 
-def lens_defocus(defocus: Defocus, scale: float) -> Defocus:
-    """``defocus`` for a camera imaging at ``scale`` of the view's resolution (aperture × scale), so that
-    :func:`spacedg.render.thin_lens.lens_camera` moves the pinhole by the view's lens offsets."""
-    return replace(defocus, aperture=defocus.aperture * scale, max_radius=None)
+#: Farthest a cubature point may lie from the lens centre, as a fraction of the focus distance. A lens
+#: wider than that (aperture > REACH·fx/√3 px: 72 px at fx = 500) is no thin lens in a room: its points
+#: would look at the scene from outside it. Beyond, the visibility is estimated at this reach.
+REACH = 0.25
+
+
+def lens_points(largest_coc: float) -> tuple[float, tuple[tuple[tuple[float, float], float], ...]]:
+    """``(centre weight, other points)`` of the cubature for a view whose largest visible circle of
+    confusion is ``largest_coc`` px: the centre alone (weight 1) below :data:`LENS_MIN_COC`."""
+    return (CENTRE_WEIGHT, LENS_POINTS) if largest_coc >= LENS_MIN_COC else (1.0, ())
+
+
+def lens_defocus(defocus: Defocus, scale: float, fx: float) -> Defocus:
+    """``defocus`` for a camera of focal length ``fx`` px imaging at ``scale`` of the view's resolution
+    (aperture × scale, at most ``REACH·fx/√3``), so that :func:`spacedg.render.thin_lens.lens_camera`
+    moves the pinhole by the view's lens offsets (at most ``REACH·focus`` metres)."""
+    return replace(defocus, aperture=min(defocus.aperture * scale, REACH * fx / _R), max_radius=None)
 
 
 def visibility(w: np.ndarray, mass: np.ndarray, inside: np.ndarray) -> np.ndarray:

@@ -12,8 +12,7 @@ visible weight, and its 2D covariance becomes the visible weight's covariance (p
 ``1/(12·s²)`` px² of a measurement pixel of side ``1/s`` full-resolution pixels, the sampling of
 a point to its pixel) plus ``r²·I``. Its integrated alpha is unchanged: opacity and alpha floor are
 multiplied by ``sqrt(det Σ_old / det Σ_new)``; a covariance so small that the opacity would pass
-:data:`MAX_OPACITY` is widened isotropically until it does not. Only Gaussians blurred by at least
-:data:`MIN_COC` px are re-placed (below, the blur does not wash out the footprint's shape).
+:data:`MAX_OPACITY` is widened isotropically until it does not. Every blurred Gaussian (``r`` > :data:`MIN_COC`) whose mass lies inside the measured frame is re-placed.
 """
 
 from __future__ import annotations
@@ -24,10 +23,12 @@ import numpy as np
 
 from spacedg.render.project_cpu import AMIN, CA, CB, CC, COC, OPA, PX, PY, RADX, RADY
 
-__all__ = ["MAX_OPACITY", "MIN_COC", "placed_covariance", "place_visible"]
+__all__ = ["MAX_OPACITY", "MIN_COC", "MIN_INSIDE", "placed_covariance", "place_visible"]
 
 #: Smallest circle of confusion (px) for which a Gaussian is re-placed at its visible moments.
 MIN_COC = 0.0
+#: Smallest share of a Gaussian's mass inside the measured frame for it to be re-placed.
+MIN_INSIDE = 0.99
 #: Largest opacity a re-placed Gaussian may take (its covariance is widened beyond).
 MAX_OPACITY = 0.5
 
@@ -54,17 +55,19 @@ def placed_covariance(old: np.ndarray, visible: np.ndarray, coc: np.ndarray, sca
 
 
 def place_visible(
-    packed: np.ndarray, rects: np.ndarray, sums: np.ndarray, scale: float, width: int, height: int,
+    packed: np.ndarray, rects: np.ndarray, sums: np.ndarray, scale: float, width: int, height: int, inside: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The blurred projection ``(packed, rects)`` (new arrays) with every Gaussian blurred by at least
     :data:`MIN_COC` px that the sharp view shows re-placed at its visible weight's moments.
 
     ``sums`` (N, 6): per Gaussian W, Σw·dx, Σw·dy, Σw·dx², Σw·dx·dy, Σw·dy² of the sharp measurement
-    pass (its pixels are ``1/scale`` of the view's)."""
+    pass (its pixels are ``1/scale`` of the view's); ``inside`` (N,): the share of each Gaussian's mass inside
+    the measured frame. A Gaussian cut by that frame (``inside`` < :data:`MIN_INSIDE`) keeps its place: its
+    visible weight was measured on one side only."""
     packed, rects = packed.copy(), rects.copy()
     sums = np.asarray(sums, dtype=np.float64)
     w = sums[:, 0]
-    pick = np.flatnonzero((packed[:, COC] > MIN_COC) & (w > 0) & (rects[:, 1] > rects[:, 0]))
+    pick = np.flatnonzero((packed[:, COC] > MIN_COC) & (w > 0) & (rects[:, 1] > rects[:, 0]) & (np.asarray(inside) >= MIN_INSIDE))
     if pick.size == 0:
         return packed, rects
     p = packed[pick].astype(np.float64)

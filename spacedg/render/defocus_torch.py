@@ -320,7 +320,7 @@ def render_torch(
 ) -> dict[str, torch.Tensor]:
     """Both passes on the torch path: ``alpha``, ``enc`` + ``lin`` (when colour is wanted), depth/ids, ``n_pairs``."""
     from spacedg.render.defocus import measurement_camera
-    from spacedg.render.defocus_lens import CENTRE_WEIGHT, LENS_POINTS, lens_defocus, visibility
+    from spacedg.render.defocus_lens import lens_defocus, lens_points, visibility
     from spacedg.render.thin_lens import lens_camera
 
     tight = settings.tight_tiles and settings.opacity_extent
@@ -328,14 +328,19 @@ def render_torch(
     wide = measurement_camera(camera, measurement_margin(proj, width, height))
     sharp, sums = _measure(gs, wide, settings, want_color)
     kappa, rho = match_factors(sums, inside_fraction(sharp, wide.width, wide.height), alpha_mass(sharp))
-    lens = lens_defocus(defocus, wide.fx / camera.fx)
+    lens = lens_defocus(defocus, wide.fx / camera.fx, wide.fx)
     seen = torch.zeros_like(kappa)
-    for offset, weight in LENS_POINTS:
+    largest = float(proj.coc[proj.visible].max()) if bool(proj.visible.any()) else 0.0
+    centre_weight, points = lens_points(largest)
+    for offset, weight in points:
         seen_b, sums_b = _measure(gs, lens_camera(wide, lens, offset), settings, False)
         share = visibility(sums_b[:, 2].cpu().numpy(), alpha_mass(seen_b).cpu().numpy(), inside_fraction(seen_b, wide.width, wide.height).cpu().numpy())
         seen = seen + weight * torch.from_numpy(share).to(seen)
-    kappa = torch.clamp(CENTRE_WEIGHT * kappa + seen, 0.0, 1.0)
-    blurred = place_visible_torch(apply_match(proj, kappa, rho), sums[:, [2, 6, 7, 8, 9, 10]], wide.fx / camera.fx, width, height)
+    kappa = torch.clamp(centre_weight * kappa + seen, 0.0, 1.0)
+    blurred = place_visible_torch(
+        apply_match(proj, kappa, rho), sums[:, [2, 6, 7, 8, 9, 10]], wide.fx / camera.fx, width, height,
+        inside_fraction(sharp, wide.width, wide.height),
+    )
     factor = composite_factor(blurred, width, height)
     if factor > 1:  # as the compiled path: every visible Gaussian blurred by >= COMPOSITE_MIN_COC px
         blurred, width, height = coarse_view(blurred, width, height, factor)
@@ -346,7 +351,7 @@ def render_torch(
     return out
 
 
-def place_visible_torch(proj: Projected, sums: torch.Tensor, scale: float, width: int, height: int) -> Projected:
+def place_visible_torch(proj: Projected, sums: torch.Tensor, scale: float, width: int, height: int, inside: torch.Tensor) -> Projected:
     """:func:`spacedg.render.defocus_place.place_visible` on a torch projection (the per-Gaussian
     arithmetic runs in float64 numpy on the host, as the compiled path's; the result is on ``proj``'s device)."""
     import numpy as np
@@ -361,7 +366,7 @@ def place_visible_torch(proj: Projected, sums: torch.Tensor, scale: float, width
     for column, value in host.items():
         packed[:, column] = value.detach().double().cpu().numpy()
     rects = proj.rects.detach().cpu().numpy()
-    placed, placed_rects = place_visible(packed, rects, sums.detach().double().cpu().numpy(), scale, width, height)
+    placed, placed_rects = place_visible(packed, rects, sums.detach().double().cpu().numpy(), scale, width, height, inside.detach().cpu().numpy())
     dev, dtype = proj.means2d.device, proj.means2d.dtype
     column = lambda k: torch.from_numpy(placed[:, k]).to(device=dev, dtype=dtype)  # noqa: E731
     return replace(
