@@ -21,21 +21,30 @@ footprint; under defocus the frustum is widened by the widest blurred footprint'
 the light of Gaussians outside the view enters it with its true size (a room's coverage at
 aperture 1000 px fell to a third without this).
 
-The model here (two passes, both backends):
+The model here (two passes, both backends; issue 29 replaced the same-slab share ``κ = S/M``, which
+gave hidden Gaussians — an object's back, everything behind a saturated pixel — light they never
+show: +19 % to +490 % of the light around an object on an empty background):
 
 1. **Measure the sharp view.** Composite the sharp projection as the sharp render does and,
-   per Gaussian, sum over the pixels it reaches: ``M = Σα``, ``S = Σα·T_slab`` (the part not
-   hidden by Gaussians of its own **depth slab**, bins of ``DEFOCUS_SLAB`` = 10 % of the
-   depth), ``W = Σw`` (visible weight) and ``U_c = Σw·ρ_c`` with ``ρ_c`` the pixel's ratio of
-   its decoded composite to the linear-light mix of the same splats.
+   per Gaussian, sum over the pixels it reaches ``W = Σw`` (visible weight), ``U_c = Σw·ρ_c``
+   (``ρ_c``: the pixel's decoded composite over the linear-light mix of the same splats) and the
+   visible weight's first and second moments. The same pass from four more points of the lens
+   (:mod:`spacedg.render.defocus_lens`, from a 2 px blur on) gives the lens-averaged visibility.
 2. **Render the blurred view** with each blurred Gaussian's opacity (and alpha floor) scaled by
-   ``κ = S / M`` — its share of its own surface's coverage — and its colour replaced by
-   linear light ``decode(c)·U_c / W`` — what its visible light amounts to in the sharp render.
-   Blurred Gaussians **add** their weight ``w = min(α·T_f, T)`` until the pixel saturates (the
-   blurred images of one surface's splats add up, as a lens adds light; ``T_f`` is the
-   transmittance through in-focus Gaussians in front, so a sharp foreground still hides what
-   is behind it); in-focus Gaussians (``r = 0``) follow the sharp rules in encoded colour. The
+   ``κ`` — the share of its integrated alpha (:func:`alpha_mass`) that the lens sees — its colour
+   replaced by linear light ``decode(c)·U_c / W``, and its 2D mean and covariance moved to its
+   visible weight's (:mod:`spacedg.render.defocus_place`), so each Gaussian pours exactly the light
+   the sharp view shows of it where it shows it. Blurred Gaussians **add** their weight
+   ``w = min(α·T_f, T)`` until the pixel saturates (``T_f``: the transmittance through in-focus
+   Gaussians in front); in-focus Gaussians (``r < 0.5 px`` counts as in focus,
+   :data:`~spacedg.render.settings.DEFOCUS_MIN_COC`) follow the sharp rules in encoded colour. The
    pixel is ``decode(encoded mix) + linear mix``.
+
+Measured against the thin-lens reference (:mod:`spacedg.render.thin_lens`,
+``benchmarks/defocus_reference.py``): see that benchmark's table for light, PSNR and cost. What
+still limits it: the per-pixel sums of blurred weights scatter around full coverage and the
+saturation clips the excess (1–4 % of the light at blurs of 0.5–2 px); the lens-visibility is a
+five-point estimate; the measurement passes cost several clean renders.
 
 The sharp pass is rendered on the view widened by a margin (the largest blurred footprint
 radius, at most half the view's longer side), so Gaussians whose blur reaches into the view
@@ -53,19 +62,8 @@ every pixel of a tile); the factors are gathered and applied in one compiled pas
 least :data:`COMPOSITE_MIN_COC` px, the image holds no detail finer than that and the blurred view
 is composited on a 2× (from 4 px) or 4× (from 8 px) coarser grid and upsampled bilinearly
 (median depth and ids: nearest). Against the full-resolution model: PSNR 45–53 dB on the built-in
-rooms and the plant capture at presets 1–5 and bench; a wall keeps its light within 0.5 %. Consequences, tested in ``tests/render/test_defocus.py``:
-
-- a uniform wall keeps its mean radiance and coverage within 1 % at every aperture up to the
-  hard limit (the wall is wider than the blur, so light enters the frame as much as leaves
-  it); an isolated Gaussian keeps its alpha;
-- a room's mean radiance is within 6 % and its coverage within 4 % of the exact thin lens
-  (the average of sharp renders from points over the lens) at the bench apertures, and its
-  coverage within 3 % of the sharp render up to the hard limit. A blurred foreground
-  legitimately shows more or less of what lies behind it than the sharp view did, and light
-  from outside the view enters it, so the room's mean is not the sharp view's;
-- limits of the model: semi-transparent sheets of *different* slabs that overlap add instead
-  of multiplying (bounded by saturation); a Gaussian partly hidden in the sharp view spreads
-  its visible share evenly over its blurred footprint.
+rooms and the plant capture at presets 1–5 and bench; a wall keeps its light within 0.5 %. Tests: ``tests/render/test_defocus.py`` (a wall, rooms and an opaque ball on an empty background
+against the thin lens; r = 0 is the sharp render bit for bit; the backends agree).
 """
 
 from __future__ import annotations
