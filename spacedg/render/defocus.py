@@ -79,10 +79,9 @@ from spacedg.limits import image_size_problem
 from spacedg.render.colour import srgb_to_linear
 from spacedg.render.frame import expected_depth
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
-from spacedg.render.defocus_lens import PRIOR, lens_defocus, lens_points, visibility
+from spacedg.render.defocus_lens import PRIOR, lens_camera, lens_defocus, lens_points, visibility
 from spacedg.render.defocus_place import place_visible
 from spacedg.render.settings import DEFOCUS_SLAB
-from spacedg.render.thin_lens import lens_camera
 
 __all__ = ["MEASURE_SCALE", "alpha_mass", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of", "composite_factor", "coarse_view", "factor_for_coc", "upsample"]
 

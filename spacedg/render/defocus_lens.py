@@ -21,9 +21,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from spacedg.render.camera import Camera
 from spacedg.render.settings import Defocus
 
-__all__ = ["CENTRE_WEIGHT", "LENS_POINTS", "PRIOR", "REACH", "LENS_MIN_COC", "lens_points", "lens_defocus", "visibility"]
+__all__ = ["CENTRE_WEIGHT", "LENS_POINTS", "PRIOR", "REACH", "LENS_MIN_COC", "lens_points", "lens_camera", "lens_defocus", "visibility"]
 
 #: Weight (in units of the Gaussian's mass) of the frame's mean visible share in a Gaussian's estimate:
 #: a Gaussian with 5 % of its mass inside the measured frame gets half its own share, half the mean.
@@ -75,3 +76,13 @@ def visibility(w: np.ndarray, mass: np.ndarray, inside: np.ndarray) -> np.ndarra
     with np.errstate(divide="ignore", invalid="ignore"):
         kappa = np.where(mass > 0, (w + PRIOR * mass * mean) / np.where(mass > 0, mass * (share + PRIOR), 1.0), mean)
     return np.clip(np.nan_to_num(kappa, nan=mean), 0.0, 1.0)
+
+
+def lens_camera(camera: Camera, defocus: Defocus, offset: np.ndarray) -> Camera:
+    """The pinhole at lens point ``offset`` (unit-normal units; metres = ``offset ×
+    aperture·focus/(fx, fy)``), its principal point shifted so the focus plane stays put."""
+    bx = float(offset[0]) * defocus.aperture * defocus.focus / camera.fx
+    by = float(offset[1]) * defocus.aperture * defocus.focus / camera.fy
+    pose = np.array(camera.cam_to_world, dtype=np.float64)
+    pose[:3, 3] = pose[:3, 3] + camera.rotation @ np.array([bx, by, 0.0])
+    return replace(camera, cam_to_world=pose, cx=camera.cx + camera.fx * bx / defocus.focus, cy=camera.cy + camera.fy * by / defocus.focus)

@@ -320,9 +320,8 @@ def render_torch(
 ) -> dict[str, torch.Tensor]:
     """Both passes on the torch path: ``alpha``, ``enc`` + ``lin`` (when colour is wanted), depth/ids, ``n_pairs``."""
     from spacedg.render.defocus import measurement_camera
-    from spacedg.render.defocus_lens import lens_defocus, lens_points, visibility
-    from spacedg.render.thin_lens import lens_camera
-
+    from spacedg.render.defocus_lens import lens_camera, lens_defocus, lens_points, visibility
+    
     tight = settings.tight_tiles and settings.opacity_extent
     width, height = camera.width, camera.height
     wide = measurement_camera(camera, measurement_margin(proj, width, height))

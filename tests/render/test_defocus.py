@@ -198,7 +198,8 @@ def test_the_backends_agree_on_a_coarse_composite() -> None:
 def test_the_thin_lens_keeps_the_focus_plane_and_blurs_by_the_circle_of_confusion() -> None:
     """Over the reference's lens points, a point on the focus plane projects to one pixel and a point at
     depth d spreads with standard deviation aperture·|d − focus|/d px on each axis (the model's r)."""
-    from spacedg.render.thin_lens import lens_camera, lens_offsets
+    from spacedg.render.defocus_lens import lens_camera
+    from spacedg.render.thin_lens import lens_offsets
 
     cam = Camera(50.0, 40.0, 32.0, 24.0, 64, 48, np.eye(4))
     defocus = Defocus(6.0, 2.0)
