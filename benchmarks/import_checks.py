@@ -92,6 +92,21 @@ def holi_release(root: Path) -> None:
         _report("Holi-Spatial released ScanNet++ scene", 1.0, done[1])
 
 
+def scannetpp_iphone(root: Path) -> None:
+    from spacedg.scene.io import write_ply
+    from tests.scene import capture_layouts as cl
+    from tests.scene import holi_release as hr
+
+    truth = hr.tiny_scene()
+    folder = cl.write_scannetpp_iphone(root / "iphone" / hr.SCENE_ID, truth)  # iphone/pose_intrinsic_imu.json (ARKit)
+    (folder / "gs" / "point_cloud" / "iteration_30000").mkdir(parents=True)
+    write_ply(folder / "gs" / "point_cloud" / "iteration_30000" / "point_cloud.ply", cl.without_ids(truth.gaussians))
+    done = _attempt("ScanNet++ iPhone (ARKit poses)", lambda: import_scene(folder, None, device="iphone", progress=False))
+    if done is not None:
+        _report("ScanNet++ iPhone scene, cameras from pose_intrinsic_imu.json", 1.0, done[1])
+    _attempt("ScanNet++ iPhone with --up +y", lambda: import_scene(folder, None, device="iphone", up="+y", progress=False))
+
+
 def plant(root: Path) -> None:
     from import_capture import PLANT, plant_scene, write_capture
 
@@ -113,6 +128,7 @@ def main() -> None:
         plant(root)
         room_and_tabletop(root)
         holi_release(root)
+        scannetpp_iphone(root)
 
 
 if __name__ == "__main__":

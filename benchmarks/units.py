@@ -15,6 +15,7 @@ Prints numbers only (never part of the test run):
 
     .venv/bin/python benchmarks/units.py              # 24 rooms
     .venv/bin/python benchmarks/units.py --rooms 60
+    .venv/bin/python benchmarks/units.py --write runs/units   # only write the two fixtures (to try scenes import on)
 """
 
 from __future__ import annotations
@@ -102,7 +103,14 @@ def plant() -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rooms", type=int, default=24)
+    parser.add_argument("--write", type=Path, metavar="DIR", help="only write the two captures without metric scale under DIR")
     args = parser.parse_args()
+    if args.write is not None:
+        from tests.scene.unit_captures import MPU, write_unit_fixtures
+
+        for name, path, instances in write_unit_fixtures(args.write):
+            print(f"{name} ({MPU} m per file unit): spacedg scenes import {path} --instances {instances} --out {args.write / 'scenes' / (path.parent.name if path.name == 'output' else path.name)}")
+        return
     sweep(args.rooms)
     fixtures()
     plant()

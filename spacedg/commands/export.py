@@ -29,6 +29,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "ratio within it, e.g. 640x480 (a 16:9 view at 320x240 renders 320x180; default: the views' own size)")
     parser.add_argument("--seed", type=_args.SEED, default=0, help="seed of the questions and of the degradations (default 0)")
     parser.add_argument("--per-sub-type", type=_args.whole(1), default=25, help="questions per sub type and scene when indexes are built (default 25)")
+    parser.add_argument("--qa-mode", choices=("auto", "bench", "train"), default="auto",
+                        help="question selection: bench (strict: an object once per sub type and scene) or train (dense: many views, "
+                             "4x the questions); auto (default): bench for --split bench, train otherwise (docs/question-modes.md)")
     parser.add_argument("--clean-prob", type=_args.real(0.0, 1.0), default=0.1, help="share of clean items, train/val only (default 0.1)")
     parser.add_argument("--max-questions", type=_args.whole(1), default=None, help="keep at most N questions, spread over question types")
     parser.add_argument("--shard", default="0/1", help="i/n: export the chunks k with k %% n == i; 'env' reads RANK/WORLD_SIZE "
@@ -41,6 +44,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="share of scenes for val and bench, the rest train (default 0.1,0.1; 0 leaves a split empty)")
     parser.add_argument("--skip-bad-scenes", action="store_true", help="skip scenes that cannot be read (they are named)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--answerability", choices=("auto", "on", "off"), default="auto",
+                        help="measure whether each item's named objects are discernible in its images and print the share "
+                        "per degradation and severity (kept per item in summary.json); auto = for the bench split (default)")
     _args.add_backend_arguments(parser)
     _vocabulary.add_deprecated(parser, "export")
 
@@ -71,6 +77,13 @@ def _shard_lock(out: Path, shard: tuple[int, int]) -> ExclusiveLock:
     return exclusive_lock(out / f".shard-{i}-of-{n}.lock", f"shard {i}/{n} of {out} is being written by another process")
 
 
+def _qa_mode(args: argparse.Namespace) -> str:
+    """--qa-mode, with ``auto`` resolved by the split (bench → ``bench``, train/val → ``train``)."""
+    if args.qa_mode != "auto":
+        return str(args.qa_mode)
+    return "bench" if args.split == "bench" else "train"
+
+
 def _names(text: str | None) -> list[str] | None:
     return None if text is None else [t.strip() for t in text.split(",") if t.strip()]
 
@@ -84,16 +97,12 @@ def run(args: argparse.Namespace) -> int:
     """
     from spacedg.data.chain import Chain, split_chains
     from spacedg.data.dataset import SpaceDGDataset
-    from spacedg.data.export import (
-        DEFAULT_SHARD_SIZE,
-        export_bench,
-        parse_shard,
-        shard_from_env,
-    )
+    from spacedg.data.export import DEFAULT_SHARD_SIZE, export_bench
+    from spacedg.data.shards import resolve_shard
     from spacedg.qa.index import QABuildConfig
 
     # every flag is checked before the (slow) dataset construction
-    shard = shard_from_env(os.environ) if args.shard.strip().lower() == "env" else parse_shard(args.shard)
+    shard = resolve_shard(args.shard, os.environ)
     shard_size = DEFAULT_SHARD_SIZE if args.shard_size is None else args.shard_size
     size = args.image_size
     fractions = _fractions(args)
@@ -104,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     dataset = SpaceDGDataset(
         args.split, chains, scenes=args.scenes, families=_names(args.families),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,
-        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type),
+        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type, mode=_qa_mode(args)),
         on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device, max_questions=args.max_questions,
         split_fractions=fractions,
     )
@@ -117,13 +126,18 @@ def run(args: argparse.Namespace) -> int:
     for folder, error in dataset.skipped.items():
         print(f"skipped scene {folder}: {error}")
     with _shard_lock(args.out, shard):
-        summary = export_bench(dataset, args.out, shard=shard, shard_size=shard_size, progress=not args.no_progress)
+        measure = None if args.answerability == "auto" else args.answerability == "on"
+        summary = export_bench(dataset, args.out, shard=shard, shard_size=shard_size, progress=not args.no_progress, answerability=measure)
     print(f"{len(dataset)} items in {summary.chunks_total} chunk(s) of {shard_size}; shard {shard[0]}/{shard[1]} wrote "
           f"{len(summary.chunks_written)} chunk(s) ({summary.items_written} items) in {summary.seconds:.1f} s, "
           f"skipped {len(summary.chunks_skipped)} finished")
     if summary.merged:
         print(f"wrote {args.out / (args.split + '.tsv')}, {args.out / (args.split + '.jsonl')} and {args.out / 'summary.json'}\n")
         print(summary.merge.table)
+        if summary.merge.answerability_table:
+            print("\nanswerability: share of items whose named objects are discernible (Weber contrast >= 2 % with 1 % "
+                  "viewing flare, SNR >= 5; spacedg.data.answerability), per degradation and severity:\n")
+            print(summary.merge.answerability_table)
         if args.split == "bench":
             print(f"\nVLMEvalKit (public SpaceDG evaluator): LMUData={args.out} run.py --data spacedg_bench")
         for names, why in summary.merge.mismatches.items():

@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
-    from spacedg.data.export import parse_shard, shard_from_env
+    from spacedg.data.shards import resolve_shard
     from spacedg.eval.predict import bench_source, dataset_source, predict, shard_path
 
     _check(args)
@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         dataset = SpaceDGDataset(split="bench", scenes=args.scenes, image_size=args.image_size, seed=args.seed,
                                  max_questions=args.max_questions)
         source = dataset_source(dataset)
-    shard = shard_from_env(os.environ) if args.shard == "env" else parse_shard(args.shard)
+    shard = resolve_shard(args.shard, os.environ)
     device = args.device or _default_device(torch)
     summary = predict(
         args.model, source, shard_path(args.out, shard), variant=args.variant, model_name=args.name,

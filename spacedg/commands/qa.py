@@ -32,6 +32,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     build.add_argument("--per-sub-type", type=_args.whole(1), default=25, help="records per sub_question_type and family per scene (default 25)")
     build.add_argument("--force", action="store_true", help="rebuild even when the index is up to date")
+    build.add_argument("--shard", default="0/1",
+                       help="i/n: build the scenes k (in sorted order) with k %% n == i, for n jobs on other machines; 'env' reads "
+                       "RANK/WORLD_SIZE (torchrun), SLURM_ARRAY_TASK_ID/SLURM_ARRAY_TASK_COUNT or SLURM_PROCID/SLURM_NTASKS (default 0/1)")
+    build.add_argument("--jobs", type=_args.whole(1), default=None,
+                       help="processes, one scene each (default: min(scenes, cores) on the CPU, 1 with --device cuda; "
+                       "1 = serially in this process); each renders with cores // jobs threads")
+    build.add_argument("--mode", choices=("bench", "train"), default="bench",
+                       help="bench: strict selection, an object asked at most once per sub type and scene (<id>.qa.jsonl); train: "
+                            "dense, each object from many views, 4x the records (<id>.qa-train.jsonl); see docs/question-modes.md")
     _args.add_backend_arguments(build, "renderer of visibility and covisibility")
 
     preview = _args.add_command(
@@ -55,6 +64,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                        help="scene folders (or folders of them) for the label ambiguity check when the indexes were written elsewhere")
     stats.add_argument("--no-blind", action="store_true", help="skip the blind stress test")
     stats.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    stats.add_argument("--mode", choices=("bench", "train"), default="bench",
+                       help="which indexes the report reads (bench: <id>.qa.jsonl, train: <id>.qa-train.jsonl); "
+                            "the records per scene and object re-asks of both modes are printed where they exist")
 
     audit = _args.add_command(
         sub, "audit", _audit, help="blind stress test: what text-only models answer without the images, per sub type",
@@ -74,42 +86,61 @@ def _build(args: argparse.Namespace) -> int:
     registered family), the one SpaceDGDataset, export and review read. With --families a,b: a selection
     index <scene id>.qa.a+b.jsonl (names sorted, joined by '+') written beside the full index, which is
     never replaced; its records equal that selection's records in a full index built with the same
-    settings.
+    settings. --shard i/n builds this job's share of the scenes; --jobs N builds N scenes at once (one
+    process each); the index files are the same bytes whichever split (spacedg.qa.jobs).
     """
-    from spacedg.commands.scenes import _scene_dirs
-    from spacedg.qa.build import build_scene_index
-    from spacedg.qa.index import QABuildConfig
+    import os
 
+    from spacedg.commands.scenes import _scene_dirs
+    from spacedg.data.shards import chunk_ids, resolve_shard
+    from spacedg.data.workers import pool_plan
+    from spacedg.qa.index import QABuildConfig
+    from spacedg.qa.jobs import build_indexes
+
+    shard = resolve_shard(args.shard, os.environ)
     if args.out is not None:
         _args.output_folder("--out", args.out)
-    config = QABuildConfig(seed=args.seed, families=_family_names(args.families), per_sub_type=args.per_sub_type)
+    config = QABuildConfig(seed=args.seed, families=_family_names(args.families), per_sub_type=args.per_sub_type, mode=args.mode)
+    every = _scene_dirs(args.scenes)
+    mine = [every[k] for k in chunk_ids(len(every), 1, shard)]
+    on_gpu = args.device not in (None, "cpu")
+    plan = pool_plan(len(mine), jobs=1 if on_gpu and args.jobs is None else args.jobs)
+    tqdm.write(f"shard {shard[0]}/{shard[1]}: {len(mine)} of {len(every)} scene(s); {plan.processes} process(es) x {plan.threads} thread(s)")
     tqdm.write(f"{'scene':<16} {'records':>8} {'visibility s':>12} {'covis s':>8} {'generate s':>10} {'q/s':>8}  index")
     total = 0
     start = time.perf_counter()
-    for folder in tqdm(_scene_dirs(args.scenes), desc="qa build", unit="scene"):
-        result = build_scene_index(folder, config, out_dir=args.out, force=args.force, backend=args.backend, device=args.device)
-        s = result.seconds
-        gen = s.get("generate_s", 0.0)
-        rate = f"{len(result.records) / gen:,.0f}" if gen > 0 and not result.reused else "-"
-        note = "reused" if result.reused else ""
-        tqdm.write(f"{result.scene_id:<16} {len(result.records):>8} {s.get('visibility_s', 0):>12.2f} {s.get('covisibility_s', 0):>8.2f} "
-              f"{gen:>10.3f} {rate:>8}  {result.path} {note}")
-        total += len(result.records)
+    rows = build_indexes(mine, config, out_dir=args.out, force=args.force, backend=args.backend, device=args.device,
+                         jobs=plan.processes, threads=plan.threads, progress=plan.processes == 1)
+    for row in tqdm(rows, total=len(mine), desc="qa build", unit="scene"):
+        _print_row(row)
+        total += row.records
     print(f"{total} records in {time.perf_counter() - start:.1f} s")
     return 0
+
+
+def _print_row(row) -> None:
+    """One line of the build table for a :class:`~spacedg.qa.jobs.BuildRow`."""
+    s = row.seconds
+    gen = s.get("generate_s", 0.0)
+    rate = f"{row.records / gen:,.0f}" if gen > 0 and not row.reused else "-"
+    note = "reused" if row.reused else ""
+    tqdm.write(f"{row.scene_id:<16} {row.records:>8} {s.get('visibility_s', 0):>12.2f} {s.get('covisibility_s', 0):>8.2f} "
+               f"{gen:>10.3f} {rate:>8}  {row.path} {note}")
 
 
 def _family_names(text: str) -> tuple[str, ...]:
     return tuple(f.strip() for f in text.split(",") if f.strip())
 
 
-def _index_files(paths: list[Path], families: tuple[str, ...] = ()) -> list[Path]:
+def _index_files(paths: list[Path], families: tuple[str, ...] = (), mode: str = "bench") -> list[Path]:
     """Index files named by ``paths``: files as given; in folders (or their sub-folders) the full
-    indexes ``*.qa.jsonl``, or with ``families`` that selection's ``*.qa.<selection>.jsonl``."""
+    indexes ``*.qa.jsonl``, or with ``families`` that selection's ``*.qa.<selection>.jsonl``
+    (``mode="train"``: ``*.qa-train.jsonl``, ``*.qa-train.<selection>.jsonl``)."""
     from spacedg.qa.index import selection_name
 
     selection = selection_name(families)
-    pattern = f"*.qa.{selection}.jsonl" if selection else "*.qa.jsonl"
+    head = "*.qa" if mode == "bench" else f"*.qa-{mode}"
+    pattern = f"{head}.{selection}.jsonl" if selection else f"{head}.jsonl"
     found: list[Path] = []
     for path in paths:
         if path.is_file():
@@ -126,11 +157,11 @@ def _index_files(paths: list[Path], families: tuple[str, ...] = ()) -> list[Path
     return found
 
 
-def _records_by_scene(paths: list[Path], families: str) -> dict[str, list]:
+def _records_by_scene(paths: list[Path], families: str, mode: str = "bench") -> dict[str, list]:
     from spacedg.qa.index import read_index
 
     by_scene: dict[str, list] = {}
-    for file in _index_files(paths, _family_names(families)):
+    for file in _index_files(paths, _family_names(families), mode):
         records = read_index(file)
         if records:
             by_scene.setdefault(records[0].scene_id, []).extend(records)
@@ -175,15 +206,16 @@ def _stats(args: argparse.Namespace) -> int:
     from spacedg.qa.audit import blind_audit, format_audit
     from spacedg.qa.stats import ambiguities, answer_balance, blind_baseline, count_table, format_table, repeat_rate
 
-    by_scene = _records_by_scene(args.paths, args.families)
+    by_scene = _records_by_scene(args.paths, args.families, args.mode)
     every = [r for rs in by_scene.values() for r in rs]
     scenes = _scenes_with_visibility(by_scene, args.paths, args.scenes)
     audit = blind_audit(by_scene) if len(by_scene) > 1 and not args.no_blind else None
     report = {
-        "scenes": len(by_scene), "records": len(every), "counts": count_table(every),
+        "mode": args.mode, "scenes": len(by_scene), "records": len(every), "counts": count_table(every),
         "balance": answer_balance(every), "blind_baseline": blind_baseline(by_scene) if len(by_scene) > 1 else [],
         "blind": audit.to_dict() if audit else None,
         "repeats": repeat_rate(by_scene), "ambiguities": ambiguities(every, scenes),
+        **_mode_report(args, by_scene),
     }
     if args.json:
         print(json.dumps(report, indent=2))
@@ -193,6 +225,9 @@ def _stats(args: argparse.Namespace) -> int:
     bal = report["balance"]
     letters = "  ".join(f"{k} {v:.1f}%" for k, v in bal["letters"].items())
     print(f"\nMCQ correct letter over {bal['mcq_n']} records: {letters}")
+    if bal["mcq3_n"]:
+        letters3 = "  ".join(f"{k} {v:.1f}%" for k, v in bal["letters3"].items())
+        print(f"3-option MCQ correct letter over {bal['mcq3_n']} records: {letters3}")
     print(f"YN over {bal['yn_n']} records: yes {bal['yes_pct']:.1f}%")
     if audit is not None:
         print("\nBlind stress test (leave-one-scene-out, text only; accuracy %, MRA % for metric answers):")
@@ -205,12 +240,48 @@ def _stats(args: argparse.Namespace) -> int:
               f"({total['repeat_pct']:.1f}%)")
         if worst:
             print(format_table(worst, ["question_type", "sub_question_type", "n", "repeats", "repeat_pct"]))
+    _print_modes(report)
     amb = report["ambiguities"]
     print(f"\nAmbiguities: label-only questions beside a related label {amb['label_related']}, beside an object showing the "
           f"label unannotated {amb['label_shown_unannotated']} (of {amb['checked_label_only']} checked against {len(scenes)} "
           f"scene(s)); undecidable size comparisons {amb['size_undecidable']}; rotations naming a component under 5° "
           f"{amb['rotation_imperceptible']}")
     return 0
+
+
+def _mode_report(args: argparse.Namespace, by_scene: dict[str, list]) -> dict[str, object]:
+    """``count_answers``, ``object_reasks`` of the read mode and ``modes``: one row per mode whose indexes exist."""
+    from spacedg.qa.mode_stats import count_distribution, mode_row, object_reasks
+
+    every = [r for rs in by_scene.values() for r in rs]
+    rows = [mode_row(args.mode, by_scene)]
+    other = "train" if args.mode == "bench" else "bench"
+    if all(p.is_dir() for p in args.paths):  # index files given one by one: their mode only
+        try:
+            rows.append(mode_row(other, _records_by_scene(args.paths, args.families, other)))
+        except InvalidDataError:
+            pass  # no index of the other mode there
+    rows.sort(key=lambda row: row["mode"])
+    return {"count_answers": count_distribution(every), "object_reasks": object_reasks(by_scene), "modes": rows}
+
+
+def _print_modes(report: dict) -> None:
+    from spacedg.qa.mode_stats import format_counts
+    from spacedg.qa.stats import format_table
+
+    print(f"\nCounting answers ({report['mode']}): {format_counts(report['count_answers'])}")
+    reasks = report["object_reasks"]
+    if reasks:
+        total = reasks[-1]
+        print(f"Object re-asks ({report['mode']}: same object or pair, same sub type and scene, any view): "
+              f"{total['reasks']} of {total['n']}, at most {total['max_per_object']} per object")
+        worst = [r for r in reasks[:-1] if r["reasks"]]
+        if worst:
+            print(format_table(worst, ["question_type", "sub_question_type", "n", "reasks", "max_per_object"]))
+    print("\nSelection modes (docs/question-modes.md):")
+    for row in report["modes"]:
+        print(f"  {row['mode']:<6} {row['scenes']} scene(s), {row['records']} records ({row['per_scene']:.0f} per scene), "
+              f"{row['reasks']} object re-asks")
 
 
 def _audit(args: argparse.Namespace) -> int:

@@ -190,6 +190,13 @@ def _render(args: argparse.Namespace) -> int:
     )
     covered = float((frame.alpha > 0.5).mean())
     if covered < MIN_COVERAGE and not args.allow_empty:
+        from spacedg.render.coverage import CoverageLostError, coverage_problem
+
+        lost = coverage_problem(scene.gaussians, camera, frame.alpha, frame.valid, defocus=defocus, motion=motion,
+                                backend=backend, device=args.device)
+        if lost is not None:  # the blur or the lens, not the frame, emptied it
+            raise CoverageLostError(f"view {args.view} of {args.scene}: {lost} (--defocus, --motion, --fisheye); "
+                                    "pass --allow-empty to write it anyway")
         raise InvalidDataError(
             f"view {args.view} of {args.scene} renders empty ({covered:.2%} of the pixels covered): the Gaussians and this "
             "camera do not meet (a frame mismatch? see `spacedg scenes info`); pass --allow-empty to write it anyway"
@@ -203,6 +210,11 @@ def _render(args: argparse.Namespace) -> int:
         + (f"keyframes {stats['keyframes']}" if "keyframes" in stats else f"sub-steps {stats.get('sub_steps', 1)}")
         + f"  -> {args.out}"
     )
+    if lens is not None:
+        from spacedg.render.coverage import captured_share
+
+        print(f"fisheye: the captured view covers {captured_share(fitted, camera):.1%} of the fisheye frame "
+              "(the rest shows what the captured view did not)")
     if want_depth:
         depth_mm = encode_depth_mm(frame.depth)
         write_png(args.depth_out, depth_mm, "--depth-out", compression=9)

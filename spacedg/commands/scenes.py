@@ -80,7 +80,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                      help="instance ids when the Gaussians carry none (default auto = boxes; a Holi-Spatial release scene: masks, "
                           "its RLE mask_encodings; masks votes with Holi-Spatial masks)")
     imp.add_argument("--scannetpp-camera", default="dslr", choices=("dslr", "iphone"),
-                     help="which ScanNet++ capture's cameras to read: dslr (default) or iphone")
+                     help="which ScanNet++ capture's cameras to read: dslr (default) or iphone (iphone/nerfstudio, else the "
+                          "bundle-adjusted iphone/colmap, else the ARKit iphone/pose_intrinsic_imu.json)")
     imp.add_argument("--embodiedscan-scene", default=None, help="scan to take from a multi-scan EmbodiedScan JSON")
     imp.add_argument("--drop-distortion", action="store_true", help="render distorted OPENCV cameras as ideal pinholes")
     imp.add_argument("--allow-frame-mismatch", action="store_true", help="write the scene even if the frame check fails")

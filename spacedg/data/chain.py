@@ -43,6 +43,13 @@ scene depth (``resolve(..., scene_depth=D)``, D in metres: the pipeline measures
 :func:`~spacedg.data.pipeline.sample_scene_depth`); the provenance then holds the resolved
 absolute metres and ``scene_depth_m``, so it still reproduces the bytes without measuring
 anything. :meth:`Chain.scales_with_depth` says whether a chain needs D.
+
+Image size: presets whose pixel lengths are stated at the reference image size
+(``ParamRange(per_size=True)``, :data:`~spacedg.plugins.specs.REFERENCE_IMAGE_SIZE`, a 1752 × 1168
+ScanNet++ DSLR frame: the in-drop blur of water droplets, the sensor's photosite pitch) are
+resolved at the output size (``resolve(..., image_size=(W, H))``,
+:func:`~spacedg.plugins.specs.image_scale`); the provenance then holds the pixels used and
+``image_size``. Explicit parameters are never scaled (they are the pixels used).
 """
 
 from __future__ import annotations
@@ -221,6 +228,7 @@ class ResolvedDegradation:
     seed: int
     preset: str | None
     scene_depth: float | None = None
+    image_size: tuple[int, int] | None = None
 
     @property
     def name(self) -> str:
@@ -236,10 +244,13 @@ class ResolvedDegradation:
 
     def provenance(self) -> dict[str, Any]:
         """``{name, params, seed, preset}`` (plus ``scene_depth_m`` when the preset's metres were
-        scaled to the sample's scene depth), JSON-serialisable."""
+        scaled to the sample's scene depth, ``image_size`` ``[W, H]`` when its pixels were scaled
+        to the output size), JSON-serialisable."""
         out = {"name": self.name, "params": dict(self.params), "seed": self.seed, "preset": self.preset}
         if self.scene_depth is not None:
             out["scene_depth_m"] = self.scene_depth
+        if self.image_size is not None:
+            out["image_size"] = [int(v) for v in self.image_size]
         return out
 
     @classmethod
@@ -248,7 +259,7 @@ class ResolvedDegradation:
         parameter, its seed, preset and scene depth, checked; applying it gives the same bytes."""
         if not isinstance(entry, Mapping) or not {"name", "params", "seed"} <= set(entry) or set(entry) - _PROVENANCE_KEYS:
             raise ParameterError(
-                f"a provenance entry is a mapping with 'name', 'params', 'seed' (and optionally 'preset', 'scene_depth_m'), "
+                f"a provenance entry is a mapping with 'name', 'params', 'seed' (and optionally 'preset', 'scene_depth_m', 'image_size'), "
                 f"got {entry!r}"
             )
         spec = _lookup(str(entry["name"]))
@@ -258,12 +269,16 @@ class ResolvedDegradation:
         depth = entry.get("scene_depth_m")
         if depth is not None and not (isinstance(depth, (int, float)) and math.isfinite(depth) and depth > 0):
             raise ParameterError(f"provenance of {spec.name!r}: scene_depth_m must be a positive number of metres, got {depth!r}")
+        size = entry.get("image_size")
+        if size is not None and not (isinstance(size, (list, tuple)) and len(size) == 2 and all(
+                isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in size)):
+            raise ParameterError(f"provenance of {spec.name!r}: image_size must be [width, height] in whole pixels >= 1, got {size!r}")
         preset = entry.get("preset")
         return cls(spec, spec.validate_params(entry["params"]), int(seed), None if preset is None else str(preset),
-                   None if depth is None else float(depth))
+                   None if depth is None else float(depth), None if size is None else (int(size[0]), int(size[1])))
 
 
-_PROVENANCE_KEYS = frozenset({"name", "params", "seed", "preset", "scene_depth_m"})
+_PROVENANCE_KEYS = frozenset({"name", "params", "seed", "preset", "scene_depth_m", "image_size"})
 
 
 # ------------------------------------------------------------------ parsing
@@ -361,6 +376,12 @@ def _reads_depth(spec: DegradationSpec, preset: str, choice: DegradationChoice) 
     return any(r.per_depth and name not in explicit for name, r in spec.presets.get(preset, {}).items())
 
 
+def _reads_size(spec: DegradationSpec, preset: str, choice: DegradationChoice) -> bool:
+    """Whether ``preset`` of ``spec`` has a pixel range stated at the reference size that ``choice`` does not set explicitly."""
+    explicit = choice.params or {}
+    return any(r.per_size and name not in explicit for name, r in spec.presets.get(preset, {}).items())
+
+
 @dataclass(frozen=True)
 class Chain:
     """One degradation chain (see the module docstring). Build it with :meth:`parse`.
@@ -427,10 +448,12 @@ class Chain:
 
     def resolve(
         self, seed: int, default_preset: str = "bench", mixture_preset: str = "2", scene_depth: float | None = None,
+        image_size: tuple[int, int] | None = None,
     ) -> tuple[ResolvedDegradation, ...]:
         """Concrete parameters for each degradation, drawn from ``derive_seed(seed, name)``, sorted
         into the physical order; depth-relative ranges scaled to ``scene_depth`` metres (``None``:
-        the reference depth, the ranges as written).
+        the reference depth, the ranges as written), pixel ranges to the output's
+        ``image_size = (width, height)`` (``None``: the reference size, the ranges as written).
 
         Raises :class:`ParameterError` (or :class:`UnknownPluginError`) for an unknown name, unknown
         preset, unknown parameter, a value outside its hard limits, or one degradation twice.
@@ -452,20 +475,24 @@ class Chain:
             if preset not in spec.presets:
                 spec.sample_params(preset, np.random.default_rng(deg_seed))  # the unknown-preset error
             scaled = scene_depth is not None and _reads_depth(spec, preset, choice)
-            params = spec.sample_params(preset, np.random.default_rng(deg_seed), scene_depth if scaled else None)
+            sized = image_size is not None and _reads_size(spec, preset, choice)
+            params = spec.sample_params(preset, np.random.default_rng(deg_seed), scene_depth if scaled else None,
+                                        tuple(image_size) if sized else None)  # type: ignore[arg-type]
             if choice.params:
                 params.update(spec.validate_params(dict(choice.params), partial=True))
                 if set(choice.params) == set(spec.param_map):
                     preset = None  # every value explicit: no preset involved
             depth = float(scene_depth) if scaled else None  # type: ignore[arg-type]
-            resolved.append(ResolvedDegradation(spec, spec.validate_params(params), deg_seed, preset, depth))
+            size = (int(image_size[0]), int(image_size[1])) if sized else None  # type: ignore[index]
+            resolved.append(ResolvedDegradation(spec, spec.validate_params(params), deg_seed, preset, depth, size))
         return tuple(sorted(resolved, key=lambda r: r.spec.sort_key))
 
     def provenance(
         self, seed: int, default_preset: str = "bench", mixture_preset: str = "2", scene_depth: float | None = None,
+        image_size: tuple[int, int] | None = None,
     ) -> list[dict[str, Any]]:
         """What a sample under this chain records: ``[{name, params, seed, preset}, …]`` in pipeline order."""
-        return [step.provenance() for step in self.resolve(seed, default_preset, mixture_preset, scene_depth)]
+        return [step.provenance() for step in self.resolve(seed, default_preset, mixture_preset, scene_depth, image_size)]
 
     def check(self, severities: Iterable[str | None] = (None,)) -> Chain:
         """Resolve once per severity (``None``: as written) so unknown names, presets and repeats

@@ -82,6 +82,7 @@ from spacedg.data.pipeline import (
     PipelineOptions,
     degrade_plan,
     frames_nbytes,
+    sample_image_size,
     sample_scene_depth,
 )
 from spacedg.qa.build import ensure_indexes
@@ -275,7 +276,7 @@ class SpaceDGDataset(Dataset):
         return chains
 
     def _records(self, folder: Path) -> list[QARecord]:
-        jsonl, _ = index_paths(load_scene(folder).id, folder, self.qa_config.families)
+        jsonl, _ = index_paths(load_scene(folder).id, folder, self.qa_config.families, self.qa_config.mode)
         return read_index(jsonl)
 
     # ------------------------------------------------------------ indexing
@@ -324,7 +325,8 @@ class SpaceDGDataset(Dataset):
         depth = None
         if plan.chain.scales_with_depth(self.options.default_preset, self.options.mixture_preset):
             depth = sample_scene_depth(self._scene(plan.record.scene_id), plan.views)
-        return plan.chain.provenance(plan.seed, self.options.default_preset, self.options.mixture_preset, depth)
+        size = None if plan.chain.is_clean else sample_image_size(self._scene(plan.record.scene_id), plan.views, self.options)
+        return plan.chain.provenance(plan.seed, self.options.default_preset, self.options.mixture_preset, depth, size)
 
     # ------------------------------------------------------------ items
     def _cache(self) -> ByteLRU:

@@ -9,7 +9,11 @@ Layout of ``out_dir`` (every path inside the exported rows is relative to it)::
     <split>.tsv, <split>.jsonl       every chunk in index order (written once all chunks exist)
     spacedg_bench.tsv                the same bytes as bench.tsv (split ``bench`` only): the file the
                                      public evaluator reads, so the folder is VLMEvalKit's ``$LMUData``
-    summary.json                     counts per question_type × degradation_type
+    parts/answer-{k:05d}.jsonl       chunk k's answerability (one row per item, written before its parts)
+    summary.json                     counts per question_type × degradation_type; ``answerability``:
+                                     per degradation × severity the share of items whose named objects
+                                     are discernible, and per item its objects' contrasts
+                                     (:mod:`spacedg.data.answerability`)
 
 **Chunks and shards.** Items are grouped into chunks of ``shard_size`` consecutive dataset
 indices (chunk ``k`` = indices ``[k·shard_size, (k+1)·shard_size)``); ``shard=(i, n)``
@@ -65,12 +69,23 @@ from pathlib import Path
 from typing import Any
 
 from spacedg._checks import check_bool, check_int, short_repr
+from spacedg.data.answerability import (
+    ROSE_K,
+    VIEWING_FLARE,
+    WEBER_THRESHOLD,
+    answerability_table,
+    condition_of,
+    item_answerability,
+    object_id_maps,
+    share_by_condition,
+)
 from spacedg.data.bench_table import tsv_bytes
 from spacedg.data.chain import CLEAN
 from spacedg.data.chat import ANSWER_PROMPT
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.pipeline import ItemPlan, degrade_device
 from spacedg.data.public_format import PUBLIC_BENCH_NAME, public_fields, public_mismatch
+from spacedg.data.shards import chunk_ids, parse_shard, shard_from_env
 from spacedg.errors import InvalidDataError, ParameterError, SpaceDGError
 from spacedg.files import atomic_write_bytes, remove_stale_temps, write_png
 from spacedg.plugins.answers import answer_text
@@ -108,6 +123,9 @@ class MergeResult:
         mismatches: ``"question_type/sub_question_type"`` → why the public evaluator would score
             those rows with another answer type than ours (empty for the built-in families; see
             :func:`~spacedg.data.public_format.public_mismatch`).
+        answerability: ``degradation → severity → {items, with_objects, answerable, share}``
+            (:func:`~spacedg.data.answerability.share_by_condition`; empty when the export measured none).
+        answerability_table: the same as a Markdown table.
     """
 
     complete: bool
@@ -115,6 +133,8 @@ class MergeResult:
     counts: dict[str, dict[str, int]] = field(default_factory=dict)
     table: str = ""
     mismatches: dict[str, str] = field(default_factory=dict)
+    answerability: dict[str, Any] = field(default_factory=dict)
+    answerability_table: str = ""
 
     def __bool__(self) -> bool:
         return self.complete
@@ -158,43 +178,7 @@ class ExportSummary:
 
 
 # ---------------------------------------------------------------- sharding
-def parse_shard(text: str) -> tuple[int, int]:
-    """``"i/n"`` → ``(i, n)`` with ``0 <= i < n``; a :class:`ParameterError` otherwise."""
-    try:
-        i_text, n_text = str(text).split("/")
-        i, n = int(i_text), int(n_text)
-    except ValueError:
-        raise ParameterError(f"--shard must read i/n with integers 0 <= i < n (e.g. 0/4), or 'env'; got {text!r}") from None
-    if n < 1 or not 0 <= i < n:
-        m = max(n, 1)
-        raise ParameterError(f"--shard {text}: need 0 <= i < n (shards of n={m} are 0/{m} … {m - 1}/{m})")
-    return i, n
-
-
-def shard_from_env(environ: Mapping[str, str]) -> tuple[int, int]:
-    """``(i, n)`` from a launcher's environment: ``RANK``/``WORLD_SIZE`` (torchrun, accelerate,
-    deepspeed), ``SLURM_ARRAY_TASK_ID``/``SLURM_ARRAY_TASK_COUNT`` (a job array starting at
-    ``SLURM_ARRAY_TASK_MIN``, default 0), or ``SLURM_PROCID``/``SLURM_NTASKS`` (``srun``)."""
-    pairs = (("RANK", "WORLD_SIZE"), ("SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT"), ("SLURM_PROCID", "SLURM_NTASKS"))
-    for rank_key, size_key in pairs:
-        if rank_key in environ and size_key in environ:
-            try:
-                rank = int(environ[rank_key]) - (int(environ.get("SLURM_ARRAY_TASK_MIN", "0")) if rank_key.startswith("SLURM_ARRAY") else 0)
-            except ValueError:
-                raise ParameterError(f"--shard env: {rank_key}={environ[rank_key]!r} is not an integer") from None
-            return parse_shard(f"{rank}/{environ[size_key]}")
-    names = ", ".join(f"{a}/{b}" for a, b in pairs)
-    raise ParameterError(f"--shard env: none of {names} is set; pass --shard i/n explicitly")
-
-
-def chunk_ids(total_items: int, shard_size: int, shard: tuple[int, int] = (0, 1)) -> list[int]:
-    """The chunks of an export of ``total_items`` items that ``shard=(i, n)`` owns (``k % n == i``)."""
-    if isinstance(shard_size, bool) or not isinstance(shard_size, int) or shard_size < 1:
-        raise ParameterError(f"shard_size must be an integer >= 1, got {shard_size!r}")
-    i, n = shard
-    if n < 1 or not 0 <= i < n:
-        raise ParameterError(f"shard must be (i, n) with 0 <= i < n, got {shard!r}")
-    return [k for k in range(math.ceil(total_items / shard_size)) if k % n == i]
+# parse_shard, shard_from_env, chunk_ids: spacedg.data.shards (light: `qa build --shard` reads them too)
 
 
 def _chunk_range(k: int, shard_size: int, total: int) -> range:
@@ -317,13 +301,31 @@ def _remove_chunk_temps(out: Path, k: int, shard_size: int, total: int) -> None:
         return name.endswith(".png") and len(stem) == 7 and stem.isdigit() and view.isdigit() and int(stem) in indices
 
     remove_stale_temps(out / "images", image_of_chunk)
-    remove_stale_temps(out / "parts", [p.name for p in _part_paths(out, k)])
+    remove_stale_temps(out / "parts", [p.name for p in (*_part_paths(out, k), _answer_path(out, k))])
 
 
-def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, system: str, bar: Any) -> int:
-    """Render chunk ``k``, write its images, then its JSONL part, then its TSV part; returns its item count."""
+def _answer_path(out: Path, chunk: int) -> Path:
+    return out / "parts" / f"answer-{chunk:05d}.jsonl"
+
+
+def _answer_row(dataset: SpaceDGDataset, plan: ItemPlan, item: dict[str, Any], cache: dict[Any, Any]) -> dict[str, Any]:
+    """The answerability row of one exported item (:mod:`spacedg.data.answerability`)."""
+    scene = dataset._scene(plan.record.scene_id)
+    images = item["images"].permute(0, 2, 3, 1).numpy()
+    maps = object_id_maps(scene, plan.views, item["degradation"], dataset.options, cache)
+    result = item_answerability(plan.record, images, maps)
+    degradation, severity = condition_of(plan.degradation_type, item["degradation"])
+    return {"index": plan.index, "degradation_type": degradation, "severity": severity, **result.to_dict()}
+
+
+def _export_chunk(
+    dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, system: str, bar: Any, answerability: bool = False,
+) -> int:
+    """Render chunk ``k``, write its images, its answerability rows (if asked), then its JSONL part, then its
+    TSV part; returns its item count."""
     _remove_chunk_temps(out, k, shard_size, len(dataset))
-    tsv_rows, chat_rows = [], []
+    tsv_rows, chat_rows, answer_rows = [], [], []
+    cache: dict[Any, Any] = {}
     for index in _chunk_range(k, shard_size, len(dataset)):
         plan = dataset.plan(index)
         item = _item(dataset, plan)
@@ -336,8 +338,12 @@ def _export_chunk(dataset: SpaceDGDataset, out: Path, k: int, shard_size: int, s
         chat["geometry"] = plan.record.geometry  # what the answer was computed from (spacedg review shows it)
         tsv_rows.append(tsv)
         chat_rows.append(chat)
+        if answerability:
+            answer_rows.append(_answer_row(dataset, plan, item, cache))
         bar.update(1)
     tsv_path, jsonl_path = _part_paths(out, k)
+    if answerability:
+        atomic_write_bytes(_answer_path(out, k), "".join(json.dumps(r) + "\n" for r in answer_rows).encode("utf-8"))
     atomic_write_bytes(jsonl_path, "".join(json.dumps(r, ensure_ascii=False) + "\n" for r in chat_rows).encode("utf-8"))
     atomic_write_bytes(tsv_path, tsv_bytes(tsv_rows, header=True))
     return len(tsv_rows)
@@ -351,6 +357,7 @@ def export_bench(
     shard: tuple[int, int] = (0, 1),
     shard_size: int = DEFAULT_SHARD_SIZE,
     progress: bool = True,
+    answerability: bool | None = None,
 ) -> ExportSummary:
     """Export the chunks of ``dataset`` that ``shard=(i, n)`` owns, then merge if every chunk exists.
 
@@ -363,6 +370,9 @@ def export_bench(
         shard: ``(i, n)``: process the chunks ``k`` with ``k % n == i``.
         shard_size: items per chunk (the unit of resuming); every shard must use the same.
         progress: show a tqdm bar over this shard's items.
+        answerability: measure whether each item's named objects are discernible in its images
+            (:mod:`spacedg.data.answerability`; one extra instance-id render per question and lens)
+            and keep it in ``summary.json``; ``None`` = for the ``bench`` split only.
 
     Raises:
         ParameterError: a bad ``shard``/``shard_size``, or ``out_dir`` holds an export of other settings.
@@ -372,6 +382,7 @@ def export_bench(
 
     started = time.perf_counter()
     out = _check_export_arguments(dataset, out_dir, shard, progress)
+    measure = dataset.split == "bench" if answerability is None else check_bool(answerability, "export_bench: answerability")
     mine = chunk_ids(len(dataset), shard_size, shard)
     (out / "images").mkdir(parents=True, exist_ok=True)
     (out / "parts").mkdir(parents=True, exist_ok=True)
@@ -382,7 +393,7 @@ def export_bench(
     total = sum(len(_chunk_range(k, shard_size, len(dataset))) for k in todo)
     with tqdm(total=total, desc=f"export {dataset.split} {shard[0]}/{shard[1]}", unit="item", disable=not progress) as bar:
         for k in todo:
-            summary.items_written += _export_chunk(dataset, out, k, shard_size, ANSWER_PROMPT, bar)
+            summary.items_written += _export_chunk(dataset, out, k, shard_size, ANSWER_PROMPT, bar, bool(measure))
             summary.chunks_written.append(k)
     summary.merge = merge_parts(out)
     summary.seconds = time.perf_counter() - started
@@ -461,11 +472,31 @@ def merge_parts(out_dir: str | Path, *, verbose: bool = False) -> MergeResult:
         "by_question_type": {q: sum(row.values()) for q, row in table.items()},
         "public_evaluator_mismatches": mismatches,
     }
+    answers = _merge_answerability(out, chunks)
+    if answers:
+        summary["answerability"] = answers
     atomic_write_bytes(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode("utf-8"))
     text = counts_table(table)
+    shares = answers.get("by_condition", {})
+    answer_text_table = answerability_table(shares) if shares else ""
     if verbose:
         print(text)
-    return MergeResult(True, [], table, text, mismatches)
+        if answer_text_table:
+            print(answer_text_table)
+    return MergeResult(True, [], table, text, mismatches, shares, answer_text_table)
+
+
+def _merge_answerability(out: Path, chunks: int) -> dict[str, Any]:
+    """``summary.json``'s ``answerability`` block from every chunk's answer part; ``{}`` unless every chunk has one."""
+    paths = [_answer_path(out, k) for k in range(chunks)]
+    if not paths or not all(p.is_file() for p in paths):
+        return {}
+    rows = [json.loads(line) for p in paths for line in p.read_text(encoding="utf-8").splitlines() if line.strip()]
+    return {
+        "criterion": {"weber_threshold": WEBER_THRESHOLD, "viewing_flare": VIEWING_FLARE, "rose_k": ROSE_K},
+        "by_condition": share_by_condition(rows),
+        "items": {str(r["index"]): {k: v for k, v in r.items() if k != "index"} for r in rows},
+    }
 
 
 def counts_table(counts: Mapping[str, Mapping[str, int]]) -> str:

@@ -36,6 +36,11 @@ degrade alike; at 2 m (:data:`~spacedg.plugins.specs.REFERENCE_DEPTH_M`, a ScanN
 presets are the paper's numbers. The provenance records the resolved metres and
 ``scene_depth_m``: it reproduces the bytes without measuring anything.
 
+Image size. Presets whose pixels are stated at the reference image size (1752 × 1168, a ScanNet++
+DSLR frame: ``ParamRange(per_size=True)``) are resolved at the sample's output size, so a
+1920 × 1080 render area-downsampled to 640 × 360 matches a 640 × 360 render
+(``benchmarks/resolution.py``); the provenance records the pixels used and ``image_size``.
+
 Mixtures. The six recipes of the paper (:data:`spacedg.data.chain.MIXTURES`) are available by
 name: the primary degradation at the chain's default preset (``bench``) and the others at the
 milder ``mixture_preset`` (severity ``"2"`` by default).
@@ -75,6 +80,7 @@ from spacedg.limits import check_image_size
 from spacedg.plugins.degradations.common import check_display_image, surface_far_depth
 from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.specs import Stage
+from spacedg.render.coverage import CoverageLostError, captured_share, coverage_problem
 from spacedg.render.renderer import BACKENDS
 from spacedg.render.request import RenderRequest
 from spacedg.render.settings import RasterSettings
@@ -98,6 +104,7 @@ __all__ = [
     "frames_nbytes",
     "replay",
     "sample_scene_depth",
+    "sample_image_size",
     "view_depth",
 ]
 
@@ -157,6 +164,9 @@ class DegradedViews:
         sub_steps: renders averaged per view (1 without motion blur).
         stats: milliseconds spent (``render_ms`` — shared renders counted in every chain that
             used them —, ``linear_ms``, ``encode_ms``, ``display_ms``).
+        captured_share: under a lens change (``distortion``), the smallest share over the views
+            of the distorted frame that the clean view covers
+            (:func:`~spacedg.render.coverage.captured_share`); ``None`` without one.
     """
 
     images: np.ndarray
@@ -164,6 +174,7 @@ class DegradedViews:
     degradations: list[dict[str, Any]]
     sub_steps: list[int]
     stats: dict[str, float] = field(default_factory=dict)
+    captured_share: float | None = None
 
 
 #: Cells of the coarse depth grid of :func:`view_depth` (columns, rows).
@@ -237,6 +248,13 @@ def _cameras(scene: Scene, views: Sequence[str], options: PipelineOptions) -> li
     return cameras
 
 
+def sample_image_size(scene: Scene, views: Sequence[str], options: PipelineOptions) -> tuple[int, int]:
+    """``(width, height)`` pixels the views of a sample render at (they share one size): what
+    pixel presets stated at the reference size are resolved at. Reads cameras only."""
+    camera = _cameras(scene, views, options)[0]
+    return int(camera.width), int(camera.height)
+
+
 def _render_group(
     scene: Scene, cameras: Sequence[Any], raster: Sequence[ResolvedDegradation], outputs: frozenset[str], options: PipelineOptions,
     views: Sequence[str] = (), render_cache: Any = None,
@@ -257,6 +275,12 @@ def _render_group(
         if request.motion is not None and options.motion == "fast":
             request = replace(request, motion=replace(request.motion, fast=True))
         frame = request.render(scene.gaussians, backend=options.backend, device=options.device, settings=options.settings)
+        if request.camera.fisheye is not camera.fisheye:  # a lens change: how much of the new frame the capture covers
+            frame.stats["captured_share"] = captured_share(camera, request.camera)
+        lost = coverage_problem(scene.gaussians, request.camera, frame.alpha, frame.valid, defocus=request.defocus,
+                                motion=request.motion, backend=options.backend, device=options.device, settings=options.settings)
+        if lost is not None:  # never a black image without an error
+            raise CoverageLostError(f"scene {scene.id}, view {views[index] if views else index!r}, {[s.name for s in raster]}: {lost}")
         for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
             image = getattr(frame, name)
             if image is not None:
@@ -532,7 +556,8 @@ def degrade_variants(
     depth = None
     if any(c.scales_with_depth(options.default_preset, options.mixture_preset) for c in parsed):
         depth = sample_scene_depth(scene, views)
-    resolved = [c.resolve(seed, options.default_preset, options.mixture_preset, depth) for c in parsed]
+    size = sample_image_size(scene, views, options)
+    resolved = [c.resolve(seed, options.default_preset, options.mixture_preset, depth, size) for c in parsed]
     return _run_chains(scene, views, resolved, options, progress, render_cache)
 
 
@@ -586,12 +611,14 @@ def _finish_chain(
         images = [_finish_device(frame, linear, display, v, far_depth, timer, device) for v, frame in enumerate(frames)]
     else:
         images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
+    shares = [f.stats["captured_share"] for f in frames if "captured_share" in f.stats]
     return DegradedViews(
         images=np.stack(images),
         views=views,
         degradations=[step.provenance() for step in chain],
         sub_steps=[int(f.stats.get("sub_steps", 1)) for f in frames],
         stats=timer,
+        captured_share=min(shares) if shares else None,
     )
 
 
@@ -728,7 +755,8 @@ def degrade_image(
         covered = np.isfinite(aux["depth"]) & (aux["depth"] > 0) & (aux["alpha"] > 0.5)
         scene_depth = float(np.median(aux["depth"][covered])) if np.any(covered) else None
     parsed = Chain.parse(degradations)
-    chain = parsed.resolve(seed, default_preset, mixture_preset, scene_depth if parsed.scales_with_depth(default_preset, mixture_preset) else None)
+    depth_at = scene_depth if parsed.scales_with_depth(default_preset, mixture_preset) else None
+    chain = parsed.resolve(seed, default_preset, mixture_preset, depth_at, (int(image.shape[1]), int(image.shape[0])))
     raster = _by_stage(chain, Stage.RASTER)
     if raster:
         raise ParameterError(

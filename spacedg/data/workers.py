@@ -19,6 +19,11 @@ Every value is overridable: ``SpaceDGDataset(workers=…, render_threads=…)``,
 ``train.dataloader_num_workers`` (an integer instead of ``auto``), or the environment
 variable ``SPACEDG_WORKERS`` / ``SPACEDG_RENDER_THREADS`` (integers; read by :func:`loader_plan`).
 Counts are integers (processes, threads); nothing here measures time.
+
+A pool of independent tasks (``spacedg qa build``: one process per scene) is planned the same
+way by :func:`pool_plan`, except that its parent only waits, so it keeps no share: ``processes =
+min(tasks, cores)`` and ``threads = max(1, cores // processes)`` (``SPACEDG_RENDER_THREADS``
+overrides the threads).
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from dataclasses import dataclass
 from spacedg._checks import check_int
 from spacedg.errors import ParameterError
 
-__all__ = ["LoaderPlan", "available_cores", "loader_plan", "MAX_WORKERS"]
+__all__ = ["LoaderPlan", "PoolPlan", "available_cores", "loader_plan", "pool_plan", "MAX_WORKERS"]
 
 #: Most DataLoader workers chosen by default (per training process).
 MAX_WORKERS = 8
@@ -90,3 +95,27 @@ def loader_plan(cores: int | None = None, processes: int | None = None, workers:
     if render_threads < 1:
         raise ParameterError(f"loader_plan: render_threads must be >= 1, got {render_threads}")
     return LoaderPlan(cores=share, workers=int(workers), render_threads=int(render_threads))
+
+
+@dataclass(frozen=True)
+class PoolPlan:
+    """``processes`` worker processes with ``threads`` numba threads each, on ``cores`` CPUs."""
+
+    cores: int
+    processes: int
+    threads: int
+
+
+def pool_plan(tasks: int, jobs: int | None = None, cores: int | None = None) -> PoolPlan:
+    """Processes and threads for ``tasks`` independent tasks (module docstring): ``jobs``
+    processes (default ``min(tasks, cores)``; never more than ``tasks``, at least 1), each with
+    ``cores // processes`` threads (``SPACEDG_RENDER_THREADS`` overrides); ``cores`` defaults to
+    this process's affinity."""
+    check_int(tasks, "pool_plan: tasks", minimum=0)
+    for name, value in (("jobs", jobs), ("cores", cores)):
+        if value is not None:
+            check_int(value, f"pool_plan: {name}", minimum=1)
+    total = available_cores() if cores is None else int(cores)
+    processes = max(1, min(max(tasks, 1), total if jobs is None else int(jobs)))
+    threads = _env_int("SPACEDG_RENDER_THREADS") or max(1, total // processes)
+    return PoolPlan(cores=total, processes=processes, threads=int(threads))

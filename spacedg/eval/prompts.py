@@ -36,7 +36,7 @@ from spacedg.data.chat import ANSWER_FORMATS, ANSWER_PROMPT, chat_messages
 from spacedg.errors import UnknownPluginError
 from spacedg.eval.bench import CLEAN, BenchRow
 from spacedg.plugins.registry import degradation_names, get_degradation
-from spacedg.plugins.specs import REFERENCE_DEPTH_M
+from spacedg.plugins.specs import REFERENCE_DEPTH_M, REFERENCE_IMAGE_SIZE
 
 __all__ = [
     "COT_STAGE1_PROMPT",
@@ -139,6 +139,8 @@ def _ranges_text(name: str, preset: str, scene_depth: float | None = None, prove
                     f"{written} at {_number(REFERENCE_DEPTH_M)} m)")
         elif span.per_depth and not provenance:
             text += f" at a scene depth of {_number(REFERENCE_DEPTH_M)} m, scaled with the scene's depth"
+        if span.per_size:  # pixels stated at the reference frame (the provenance holds the pixels used)
+            text += f" at a {REFERENCE_IMAGE_SIZE[0]}×{REFERENCE_IMAGE_SIZE[1]} image, scaled with its size"
         parts.append(text)
     return ", ".join(parts)
 
@@ -148,8 +150,8 @@ def degradation_info(row: BenchRow) -> str:
 
     Each degradation of the row's chain is named with its preset's parameter ranges, e.g.
     ``"The images are degraded by haze (severity given as the rendering parameter ranges:
-    density in [3.5, 6], airlight in [0.7, 0.9], depth_ref = 4.8 m (scaled to the scene depth of
-    3 m; 4 m at 2.5 m))."``. The chain, presets and scene depth (``scene_depth_m``) come from the
+    density in [3.5, 6], airlight in [0.7, 0.9], depth_ref = 15 m (scaled to the scene depth of
+    3 m; 12.5 m at 2.5 m))."``. The chain, presets and scene depth (``scene_depth_m``) come from the
     row's ``degradation`` provenance: metres of scale-aware presets (defocus ``depth``, motion
     ``trans``, haze ``depth_ref``) are the ranges resolved at that depth, as rendered. A row
     without provenance (a foreign bench) uses its ``degradation_type`` and the ``bench`` preset,

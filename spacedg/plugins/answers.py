@@ -32,10 +32,13 @@ import numpy as np
 from spacedg.errors import InvalidDataError
 from spacedg.plugins.specs import AnswerType
 
-__all__ = ["MCQ_LETTERS", "Answer", "validate_answer", "answer_text", "answer_from_text"]
+__all__ = ["MCQ_LETTERS", "MCQ_OPTION_COUNTS", "Answer", "validate_answer", "answer_text", "answer_from_text"]
 
 #: Option letters of a multiple-choice question, in order.
 MCQ_LETTERS: tuple[str, ...] = ("A", "B", "C", "D")
+#: How many options an MCQ may have: 4, or 3 where only three answers are possible (a size
+#: comparison: object 1, object 2, about the same); never an option that cannot be the answer.
+MCQ_OPTION_COUNTS: tuple[int, ...] = (3, 4)
 
 #: A record's answer value (see the module docstring).
 Answer = str | int | float | tuple[float, ...]

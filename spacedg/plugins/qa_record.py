@@ -5,8 +5,10 @@ by :func:`spacedg.plugins.answers.validate_answer`, written by :func:`~spacedg.p
 
 ``MCQ``
     ``answer`` is the correct option letter, ``"A"`` … ``"D"`` (string); ``options`` holds
-    exactly 4 lines ``"A. text"``, ``"B. text"``, ``"C. text"``, ``"D. text"``, in letter order
-    (letters assigned after a seeded shuffle by the family).
+    4 lines ``"A. text"``, ``"B. text"``, ``"C. text"``, ``"D. text"``, in letter order
+    (letters assigned after a seeded shuffle by the family), or 3 (``"A."`` – ``"C."``) where
+    only three answers are possible (:data:`~spacedg.plugins.answers.MCQ_OPTION_COUNTS`); the
+    answer is one of the letters shown.
 ``YN``
     ``"yes"`` or ``"no"`` (string, lower case).
 ``NA``
@@ -43,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.errors import InvalidDataError
-from spacedg.plugins.answers import MCQ_LETTERS, Answer, validate_answer
+from spacedg.plugins.answers import MCQ_LETTERS, MCQ_OPTION_COUNTS, Answer, validate_answer
 from spacedg.plugins.specs import NAME_PATTERN, SUB_TYPE_PATTERN, AnswerType, TaskGroup, enum_member
 
 __all__ = ["QARecord", "MCQ_LETTERS", "make_record_id", "json_ready"]
@@ -213,15 +215,17 @@ class QARecord:
             if options:
                 raise InvalidDataError(f"{where}: only MCQ records have options; a {self.answer_type.value} record must have options=()")
             return options
-        if len(options) != 4:
-            raise InvalidDataError(f"{where}: an MCQ needs exactly 4 options 'A. …' to 'D. …', got {len(options)}")
+        if len(options) not in MCQ_OPTION_COUNTS:
+            raise InvalidDataError(f"{where}: an MCQ needs 4 options 'A. …' to 'D. …' (or 3, 'A. …' to 'C. …'), got {len(options)}")
         for letter, option in zip(MCQ_LETTERS, options):
             match = _OPTION.match(option) if isinstance(option, str) else None
             if match is None or match.group(1) != letter:
                 raise InvalidDataError(f"{where}: option {letter} must read '{letter}. <text>', got {option!r}")
         texts = [o[3:].strip() for o in options]
-        if len(set(texts)) != 4:
-            raise InvalidDataError(f"{where}: MCQ options repeat a text: {list(options)}; the 4 options must differ")
+        if len(set(texts)) != len(options):
+            raise InvalidDataError(f"{where}: MCQ options repeat a text: {list(options)}; the options must differ")
+        if isinstance(self.answer, str) and self.answer in MCQ_LETTERS and MCQ_LETTERS.index(self.answer) >= len(options):
+            raise InvalidDataError(f"{where}: the answer {self.answer!r} names no option; the options are {list(MCQ_LETTERS[:len(options)])}")
         return options
 
     def _check_answer(self, where: str) -> Answer:

@@ -84,6 +84,9 @@ __all__ = [
     "ParamSpec",
     "ParamRange",
     "REFERENCE_DEPTH_M",
+    "REFERENCE_IMAGE_SIZE",
+    "image_scale",
+    "scale_pixels",
     "Category",
     "Stage",
     "AnswerType",
@@ -256,6 +259,9 @@ class ParamSpec:
         harsher: ``"higher"`` if larger values degrade more, ``"lower"`` if smaller values do,
             ``None`` if neither (structural parameters such as a sub-step count). Used to check
             that the severity presets are monotone.
+        recorded_default: for a parameter added after callers and samples were written: the
+            value a params mapping (or provenance entry) without it stands for, the behaviour
+            before it existed; ``None`` = it must be given.
     """
 
     name: str
@@ -265,6 +271,7 @@ class ParamSpec:
     high: float | None = None
     integer: bool = False
     harsher: Literal["higher", "lower"] | None = None
+    recorded_default: float | None = None
 
     def __post_init__(self) -> None:
         _check_name(self.name, "parameter name")
@@ -308,8 +315,11 @@ class ParamSpec:
         return number
 
     def to_dict(self) -> dict[str, Any]:
-        """Every field, in declaration order (plain JSON types)."""
-        return asdict(self)
+        """Every field, in declaration order (plain JSON types; ``recorded_default`` only when set)."""
+        out = asdict(self)
+        if self.recorded_default is None:
+            del out["recorded_default"]
+        return out
 
 
 #: The scene depth (metres) at which a preset's depth-relative ranges (``ParamRange(per_depth=True)``)
@@ -317,6 +327,46 @@ class ParamSpec:
 #: such as ScanNet and NYUv2 put the median of their depth maps at 2–3 m; the built-in rooms
 #: measure 2.9–3.5 m). At this depth the ``bench`` presets are the paper's table verbatim.
 REFERENCE_DEPTH_M = 2.5
+
+
+#: The image size ``(width, height)`` in pixels at which a preset's pixel ranges
+#: (``ParamRange(per_size=True)``) are stated: a ScanNet++ DSLR frame as published (the
+#: undistorted and resized DSLR images of ScanNet++ are 1752 × 1168, 3:2, principal point at
+#: (876, 584)), the frames the paper's bench was rendered from. At this size the ``bench``
+#: presets are the paper's table verbatim.
+REFERENCE_IMAGE_SIZE: tuple[int, int] = (1752, 1168)
+
+
+def image_scale(width: int, height: int) -> float:
+    """How many times larger an image of ``width × height`` pixels is than the reference
+    (:data:`REFERENCE_IMAGE_SIZE`): the ratio of the shorter sides, ``min(W, H) / 1168``.
+
+    The one place pixel lengths are scaled with the image (a length in pixels at the reference
+    becomes ``length · image_scale`` pixels). The shorter side is used because it is what the
+    drop field of ``water_droplets`` counts its cells across, so blur and drops keep their
+    proportion at every aspect ratio; at the reference's 3:2 it equals the width ratio.
+    """
+    w, h = int(width), int(height)
+    if w < 1 or h < 1:
+        raise ParameterError(f"image_scale: the image size must be at least 1 × 1 pixels, got {width!r} × {height!r}")
+    return min(w, h) / float(min(REFERENCE_IMAGE_SIZE))
+
+
+def scale_pixels(value: float, scale: float, integer: bool = False, power: int = 1) -> int | float:
+    """A length of ``value`` pixels at the reference size, at an image ``scale`` times larger
+    (:func:`image_scale`): ``value · scale``. With ``power = -1`` a fraction of the image whose
+    result is stated in reference pixels (low_res's size factor: the reduced image keeps its
+    pixel count): ``value / scale``. An integer is a window size: an odd window stays odd (its
+    half-width ``(value - 1) / 2`` is scaled and rounded, so a kernel keeps a centre pixel;
+    never below 1), an even one is rounded (never below 1)."""
+    if power == -1:
+        return float(value) / float(scale)
+    if not integer:
+        return float(value) * float(scale)
+    value = int(value)
+    if value % 2 == 1:
+        return 2 * int(round((value - 1) / 2 * scale)) + 1
+    return max(1, int(round(value * scale)))
 
 
 @dataclass(frozen=True)
@@ -328,11 +378,18 @@ class ParamRange:
     distance: metres that should follow the scene's size, so a tabletop and a room degrade
     alike); :meth:`DegradationSpec.sample_params` draws from the range, then multiplies by
     ``D / REFERENCE_DEPTH_M`` (clamped to the parameter's hard limits).
+
+    ``per_size=True`` (= 1): a length in pixels (unit ``"px"``) stated at
+    :data:`REFERENCE_IMAGE_SIZE` that scales with the output image (:func:`image_scale`,
+    :func:`scale_pixels`), so one preset degrades a 1920 × 1080 and a 640 × 360 render of the
+    same view alike. ``per_size=-1``: a fraction of the image (unit ``"1"``) whose result is a
+    pixel count stated at the reference, so it scales inversely (low_res's ``scale``).
     """
 
     low: float
     high: float
     per_depth: bool = False
+    per_size: int = 0
 
     def __post_init__(self) -> None:
         for side in ("low", "high"):
@@ -382,6 +439,12 @@ class ParamRange:
         if not self.per_depth or scene_depth is None:
             return value
         return float(value) * (float(scene_depth) / REFERENCE_DEPTH_M)  # ratio first: exact at the reference
+
+    def sized(self, value: int | float, image_size: tuple[int, int] | None, integer: bool = False) -> int | float:
+        """``value`` drawn from this range, at an image of ``image_size = (width, height)`` pixels."""
+        if not self.per_size or image_size is None:
+            return value
+        return scale_pixels(value, image_scale(*image_size), integer, -1 if self.per_size == -1 else 1)
 
 
 # --------------------------------------------------------- degradations
@@ -483,8 +546,14 @@ class DegradationSpec:
                         raise PluginError(str(err)) from None
                 if rng_.per_depth and (spec.integer or spec.unit != "m"):
                     raise PluginError(f"{where}: preset {preset!r}: only a parameter in metres may scale with scene depth (per_depth), not {pname!r}")
+                if rng_.per_size not in (0, 1, -1) or (rng_.per_size == 1 and spec.unit != "px") or (rng_.per_size == -1 and spec.unit != "1"):
+                    raise PluginError(
+                        f"{where}: preset {preset!r}: only a parameter in pixels may scale with the image size (per_size=True), "
+                        f"and only a dimensionless fraction inversely (per_size=-1), not {pname!r} ({spec.unit}, per_size={rng_.per_size!r})"
+                    )
                 converted[pname] = (
-                    ParamRange(int(rng_.low), int(rng_.high)) if spec.integer else ParamRange(float(rng_.low), float(rng_.high), rng_.per_depth)
+                    ParamRange(int(rng_.low), int(rng_.high), per_size=rng_.per_size) if spec.integer
+                    else ParamRange(float(rng_.low), float(rng_.high), rng_.per_depth, rng_.per_size)
                 )
             out[preset] = converted
         missing_presets = [p for p in REQUIRED_PRESETS if p not in out]
@@ -528,7 +597,9 @@ class DegradationSpec:
 
         Raises :class:`ParameterError` for an unknown name (with close names suggested), a
         value that is not a finite number, a non-integer value for an integer parameter, a
-        value outside the hard limits, or (unless ``partial``) a missing parameter.
+        value outside the hard limits, or (unless ``partial``) a missing parameter. A missing
+        parameter with a ``recorded_default`` (one added after callers and records were written)
+        takes that value.
         """
         where = f"degradation {self.name!r}"
         if not isinstance(params, Mapping):
@@ -543,6 +614,7 @@ class DegradationSpec:
                 )
             out[key] = by_name[key].check(value, where)
         if not partial:
+            out.update({k: v for k, v in self.recorded_defaults().items() if k not in out})
             missing = [k for k in by_name if k not in out]
             if missing:
                 raise ParameterError(
@@ -555,12 +627,24 @@ class DegradationSpec:
         """Whether ``preset`` has a depth-relative range (``ParamRange(per_depth=True)``)."""
         return any(r.per_depth for r in self.presets.get(str(preset), {}).values())
 
-    def sample_params(self, preset: str, rng: np.random.Generator, scene_depth: float | None = None) -> dict[str, int | float]:
+    def recorded_defaults(self) -> dict[str, int | float]:
+        """``{name: recorded_default}`` of the parameters that have one (:class:`ParamSpec`), checked."""
+        return {p.name: p.check(p.recorded_default, f"degradation {self.name!r}") for p in self.params if p.recorded_default is not None}
+
+    def scales_with_size(self, preset: str) -> bool:
+        """Whether ``preset`` has a pixel range stated at the reference size (``ParamRange(per_size=True)``)."""
+        return any(r.per_size for r in self.presets.get(str(preset), {}).values())
+
+    def sample_params(
+        self, preset: str, rng: np.random.Generator, scene_depth: float | None = None, image_size: tuple[int, int] | None = None,
+    ) -> dict[str, int | float]:
         """Draw one value per parameter from ``preset``, in declaration order, one draw each.
 
         ``scene_depth`` (metres, the sample's): depth-relative ranges are scaled by
         ``scene_depth / REFERENCE_DEPTH_M`` and clamped to the hard limits; ``None`` = the
-        reference depth (the ranges as written)."""
+        reference depth (the ranges as written). ``image_size`` (``(width, height)`` pixels of
+        the output): pixel ranges stated at :data:`REFERENCE_IMAGE_SIZE` are scaled by
+        :func:`image_scale` (:func:`scale_pixels`) and clamped; ``None`` = the reference size."""
         preset = str(preset)  # severities may be given as int
         if preset not in self.presets:
             raise ParameterError(
@@ -572,13 +656,19 @@ class DegradationSpec:
         ranges = self.presets[preset]
         if scene_depth is not None and not (_is_number(scene_depth) and math.isfinite(float(scene_depth)) and scene_depth > 0):
             raise ParameterError(f"degradation {self.name!r}: scene_depth must be a positive number of metres, got {scene_depth!r}")
+        if image_size is not None and not (
+            isinstance(image_size, (tuple, list)) and len(image_size) == 2
+            and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1 for v in image_size)
+        ):
+            raise ParameterError(f"degradation {self.name!r}: image_size must be (width, height) in whole pixels >= 1, got {image_size!r}")
         out: dict[str, int | float] = {}
         for p in self.params:
             value = ranges[p.name].sample(rng, integer=p.integer)
-            if ranges[p.name].per_depth and scene_depth is not None:
-                value = ranges[p.name].scaled(value, scene_depth)
-                value = value if p.low is None else max(value, float(p.low))
-                value = value if p.high is None else min(value, float(p.high))
+            scaled = (ranges[p.name].per_depth and scene_depth is not None) or (ranges[p.name].per_size and image_size is not None)
+            if scaled:
+                value = ranges[p.name].sized(ranges[p.name].scaled(value, scene_depth), image_size, p.integer)
+                value = value if p.low is None else max(value, p.low)
+                value = value if p.high is None else min(value, p.high)
             out[p.name] = value
         return out
 

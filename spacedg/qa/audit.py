@@ -44,9 +44,9 @@ Scores: accuracy (MCQ, YN, COUNT) or mean relative accuracy (NA, SIZE_LIST: MRA 
 number of the record's options that can be correct (*live* options: an option whose text, or
 role "an object the question names", is the truth of at least one record of the same
 question type and wording (the question without the objects, labels and numbers it names)
-across all audited scenes: the size-comparison option "cannot be determined" is never correct,
-so those questions have three live options; "Up" is never where an object lies from a camera
-at eye height, so a direction question offering it has three), YN 1/2, COUNT 1 / the number of
+across all audited scenes; index version 5 offers only such options, so live options are the
+options shown, but older indexes offered "cannot be determined" in size comparisons and "Up"
+in direction questions, which never are), YN 1/2, COUNT 1 / the number of
 distinct counts of the question type. ``best`` is the best predictor per sub type (chosen on the
 held-out scores themselves: an upper bound on what these blind models reach); the ``ALL`` row
 pools MCQ, YN and COUNT records with each sub type's best predictor.
@@ -183,7 +183,7 @@ def _live_roles(records: Sequence[QARecord]) -> dict[tuple[str, str], set[str]]:
 def _live_letters(record: QARecord, live: Mapping[tuple[str, str], set[str]]) -> list[str]:
     """The letters of the MCQ ``record`` whose options can be correct (:func:`_live_roles`)."""
     allowed = live[_wording(record)]
-    return [k for k in MCQ_LETTERS if _role_kind(option_role(record, option_text(record, k))) in allowed]
+    return [k for k in MCQ_LETTERS[:len(record.options)] if _role_kind(option_role(record, option_text(record, k))) in allowed]
 
 
 def _distinct_counts(records: Sequence[QARecord]) -> dict[str, int]:

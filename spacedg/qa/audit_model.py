@@ -144,7 +144,7 @@ class ConditionalLogit:
         return [option_features(record, option_text(record, k), sig) for k in MCQ_LETTERS]
 
     def predict(self, record: QARecord) -> str:
-        scores = self.vocab.matrix(self._docs(record)).dot(self.w)
+        scores = self.vocab.matrix(self._docs(record)).dot(self.w)[:len(record.options)]  # a 3-option MCQ has no D
         return MCQ_LETTERS[int(np.argmax(scores))]
 
 

@@ -42,11 +42,12 @@ def _majority(counter: Counter[str] | None) -> str | None:
 def _best_option(record: QARecord, *counters: Counter[str] | None) -> str:
     """The option whose role was correct most often in the first counter that knows any of the
     record's options (later counters break ties and fill in); ties → the earlier letter."""
-    roles = [option_role(record, option_text(record, k)) for k in MCQ_LETTERS]
+    letters = MCQ_LETTERS[:len(record.options)]
+    roles = [option_role(record, option_text(record, k)) for k in letters]
     keys = []
     for k, role in enumerate(roles):
         keys.append((tuple((c or {}).get(role, 0) for c in counters), -k))
-    return MCQ_LETTERS[max(range(4), key=lambda k: keys[k])]
+    return letters[max(range(len(letters)), key=lambda k: keys[k])]
 
 
 def _size_values(record: QARecord) -> list[tuple[str, float]]:
@@ -91,7 +92,7 @@ class Priors:
     def _add_mcq(self, r: QARecord, sig: str) -> None:
         self.letters[str(r.answer)] += 1
         truth = option_role(r, truth_text(r))
-        for k in MCQ_LETTERS:
+        for k in MCQ_LETTERS[:len(r.options)]:
             self.text_seen[option_role(r, option_text(r, k))] += 1
         self.text_hits[truth] += 1
         self.by_sig[sig][truth] += 1
@@ -135,7 +136,7 @@ class Priors:
 
     def _option_text(self, record: QARecord) -> str:
         rates = []
-        for k in MCQ_LETTERS:
+        for k in MCQ_LETTERS[:len(record.options)]:
             role = option_role(record, option_text(record, k))
             rates.append(((self.text_hits[role] + 0.5) / (self.text_seen[role] + 2.0), -MCQ_LETTERS.index(k), k))
         return max(rates)[2]

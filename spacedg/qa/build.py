@@ -59,7 +59,10 @@ from spacedg.qa.index import (
     write_index,
 )
 from spacedg.qa.judge import DescriptionJudge
+from spacedg.plugins.questions.view_sampling import VisibilityIndex
+from spacedg.qa.modes import quota
 from spacedg.qa.selection import select_records, selection_of
+from spacedg.qa.twins import TwinCheck
 from spacedg.scene.covisibility import with_covisibility
 from spacedg.scene.frame_check import require_frame
 from spacedg.scene.io import load_scene
@@ -113,18 +116,23 @@ def prepare_scene(
     return scene
 
 
-def _pool(family: Any, scene: Scene, config: QABuildConfig) -> list[QARecord]:
-    """A family's candidates in scan order: up to ``pool_factor × per_sub_type`` distinct subjects
-    per sub type, :data:`ALTERNATES` records each, ``max_scan`` candidates in all (seeded per
-    (scene, family))."""
+def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, twins: Counter[str]) -> list[QARecord]:
+    """A family's candidates in scan order: up to ``pool_factor × quota`` distinct subjects
+    (the family's own, views included: the mode's stricter subjects are the selection's job) per sub type, :data:`ALTERNATES`
+    records each, ``max_scan`` candidates in all (seeded per (scene, family)); candidates naming
+    an object whose twin shows in one of their images (:meth:`~spacedg.qa.twins.TwinCheck.has_twin`) are
+    left out and counted in ``twins`` per family."""
     rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
-    want = config.per_sub_type * config.pool_factor
+    want = quota(config.per_sub_type, config.mode) * config.pool_factor
     pooled: list[QARecord] = []
     distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
     with plugin_call("question family", family, "generate"):
         for scanned, record in enumerate(family.generate(scene, rng)):
             if scanned >= config.max_scan:
                 break
+            if index.has_twin(record):
+                twins[family.name] += 1
+                continue
             seen = distinct.setdefault(record.sub_question_type, Counter())
             sel = selection_of(record)
             subject = str(sel["subject"]) if sel is not None else f"record:{record.id}"
@@ -150,11 +158,13 @@ def _judged(record: QARecord, judge: DescriptionJudge | None, dropped: dict[str,
 def _family_records(
     family: Any, scene: Scene, config: QABuildConfig, judge: DescriptionJudge | None,
     dropped: dict[str, int] | None, selection_stats: dict[str, dict[str, int]] | None,
+    index: TwinCheck, twins: Counter[str],
 ) -> list[QARecord]:
     """One family's records for the index: pooled, selected, dealt, in its sub-type order."""
     keep = functools.partial(_judged, judge=judge, dropped=dropped, family_name=family.name)
     stats: dict[str, Counter[str]] = {}
-    chosen = select_records(_pool(family, scene, config), config.per_sub_type, keep, stats)
+    pool = _pool(family, scene, config, index, twins)
+    chosen = select_records(pool, quota(config.per_sub_type, config.mode), keep, stats, mode=config.mode)
     chosen = deal_distractors(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "distractors")))
     chosen = deal_letters(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "letters")))
     by_sub: dict[str, list[QARecord]] = {}
@@ -173,6 +183,7 @@ def generate_records(
     judge: Any = None,
     dropped: dict[str, int] | None = None,
     selection_stats: dict[str, dict[str, int]] | None = None,
+    twins: dict[str, int] | None = None,
 ) -> list[QARecord]:
     """Records of every selected family for a prepared scene (see the module docstring).
 
@@ -190,14 +201,21 @@ def generate_records(
     :class:`~spacedg.qa.judge.DescriptionJudge`, asked only about records being taken;
     ``dropped`` receives per-family counts of records the judge removed; ``selection_stats``
     receives per ``question_type/sub_question_type`` the counts of
-    :func:`~spacedg.qa.selection.select_records`.
+    :func:`~spacedg.qa.selection.select_records`; ``twins`` per family the candidates left
+    out because an object they name has a same-description twin in one of their images
+    (:mod:`spacedg.qa.twins`). ``config.mode`` picks the strict bench or the dense train
+    selection (:mod:`spacedg.qa.modes`).
     """
 
     if judge is not None and not isinstance(judge, DescriptionJudge):
         judge = DescriptionJudge(scene, judge)
+    index = TwinCheck(VisibilityIndex(scene))
+    found: Counter[str] = Counter()
     out: list[QARecord] = []
     for family in selected_families(config.families):
-        out.extend(_family_records(family, scene, config, judge, dropped, selection_stats))
+        out.extend(_family_records(family, scene, config, judge, dropped, selection_stats, index, found))
+    if twins is not None:
+        twins.update(sorted(found.items()))
     return out
 
 
@@ -220,7 +238,7 @@ def build_scene_index(
     scene = load_scene(scene_dir)
     scene_json = scene_json_path(scene_dir)
     key = index_key(scene_json, config, selected_families(config.families), judge)
-    jsonl, meta_path = index_paths(scene.id, out_dir if out_dir is not None else scene_json.parent, config.families)
+    jsonl, meta_path = index_paths(scene.id, out_dir if out_dir is not None else scene_json.parent, config.families, config.mode)
     if not force and is_current(jsonl, meta_path, key):
         meta = read_meta(meta_path) or {}
         return SceneQA(scene.id, jsonl, read_index(jsonl), reused=True, seconds=dict(meta.get("seconds", {})))
@@ -228,14 +246,15 @@ def build_scene_index(
     prepared = prepare_scene(scene, scene_json.parent / "cache", config, backend=backend, progress=progress, timings=timings, device=device)
     dropped: dict[str, int] = {}
     selection: dict[str, dict[str, int]] = {}
+    twins: dict[str, int] = {}
     t0 = time.perf_counter()
-    records = generate_records(prepared, config, judge=judge, dropped=dropped, selection_stats=selection)
+    records = generate_records(prepared, config, judge=judge, dropped=dropped, selection_stats=selection, twins=twins)
     timings["generate_s"] = time.perf_counter() - t0
     meta = {
         "format": "spacedg-qa-index", "version": QA_INDEX_VERSION, "key": key, "scene_id": scene.id,
         "config": config.to_dict(), "records": len(records),
         "counts": dict(sorted(Counter(r.question_type for r in records).items())),
-        "dropped_by_judge": dropped, "selection": selection, "seconds": {k: round(v, 4) for k, v in timings.items()},
+        "dropped_by_judge": dropped, "twins": twins, "selection": selection, "seconds": {k: round(v, 4) for k, v in timings.items()},
     }
     write_index(jsonl, meta_path, records, meta)
     return SceneQA(scene.id, jsonl, records, reused=False, seconds=timings, dropped=dropped)

@@ -24,7 +24,7 @@ __all__ = ["with_letter", "deal_distractors", "deal_letters"]
 
 
 def with_letter(record: QARecord, slot: int) -> QARecord:
-    """``record`` (MCQ) with its correct option moved to letter ``slot`` (0–3), the other options
+    """``record`` (MCQ) with its correct option moved to letter ``slot`` (0 … options − 1), the other options
     keeping their order: the same question and answer text, another letter."""
 
     texts = [line[3:] for line in record.options]
@@ -87,14 +87,15 @@ def deal_letters(records: Sequence[QARecord], rng: np.random.Generator) -> list[
     letters were balanced over the whole generation only). Only records with a ``selection``
     entry are re-lettered: their geometry never refers to option positions (families without
     one keep their letters)."""
-    decks: dict[str, list[int]] = {}
+    decks: dict[tuple[str, int], list[int]] = {}
     out = []
     for r in records:
         if r.answer_type is not AnswerType.MCQ or selection_of(r) is None:
             out.append(r)  # a family without selection entries may tie its geometry to the option order
             continue
-        deck = decks.setdefault(r.sub_question_type, [])
+        n = len(r.options)
+        deck = decks.setdefault((r.sub_question_type, n), [])
         if not deck:
-            deck.extend(int(v) for v in rng.permutation(4))
+            deck.extend(int(v) for v in rng.permutation(n))
         out.append(with_letter(r, deck.pop()))
     return out

@@ -44,7 +44,7 @@ from spacedg.scene.io import load_scene
 from spacedg.scene.lexicon import default_lexicon
 
 __all__ = [
-    "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "selected_families", "MAX_SELECTION_CHARS", "selection_name",
+    "MODES", "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "selected_families", "MAX_SELECTION_CHARS", "selection_name",
     "index_paths", "scene_json_path", "index_key", "read_meta", "is_current", "index_is_current", "read_index", "write_index",
 ]
 
@@ -52,7 +52,11 @@ __all__ = [
 #: 3: debiased selection (subjects once per sub type, whole rounds per cell), lexicon in the key.
 #: 4: pools count distinct subjects (:data:`~spacedg.qa.build.ALTERNATES` records each); rounds
 #: balance the selection entries' ``features`` across roles; distractors of sector-label MCQs dealt evenly.
-QA_INDEX_VERSION = 4
+#: 5: selection modes (:mod:`spacedg.qa.modes`: strict ``bench``, dense ``train``); no twins; counts beyond 2.
+QA_INDEX_VERSION = 5
+
+#: The selection modes (:mod:`spacedg.qa.modes`): strict ``bench``, dense ``train``.
+MODES: tuple[str, ...] = ("bench", "train")
 
 #: A family selection whose ``+``-joined names are longer than this is named by its hash.
 MAX_SELECTION_CHARS = 100
@@ -71,8 +75,13 @@ class QABuildConfig:
         max_scan: at most this many candidates examined per family.
         pool_factor: candidates pooled per sub type, as a multiple of ``per_sub_type``, for
             answer balancing (1 = no balancing: the first ``per_sub_type`` in seeded order).
-        visibility_size: reduced render size (width, height) px for instance visibility.
-        covisibility_size: reduced render size (width, height) px for covisibility.
+        visibility_size: reduced render size (width, height) px for instance visibility: a bounding box,
+            each view rendered at its own aspect inside it (16:9 views at 160×90).
+        covisibility_size: reduced render size (width, height) px for covisibility (a bounding box, likewise).
+        mode: ``"bench"`` (strict: an object or pair asked at most once per sub type and scene,
+            whatever the views) or ``"train"`` (dense: each object from many views,
+            :data:`~spacedg.qa.modes.TRAIN_QUOTA_FACTOR` × ``per_sub_type`` per sub type); a
+            train index has files of its own (:func:`index_paths`). See :mod:`spacedg.qa.modes`.
     """
 
     seed: int = 0
@@ -82,6 +91,7 @@ class QABuildConfig:
     pool_factor: int = 40
     visibility_size: tuple[int, int] = (160, 120)
     covisibility_size: tuple[int, int] = (80, 60)
+    mode: str = "bench"
 
     def __post_init__(self) -> None:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
@@ -92,6 +102,8 @@ class QABuildConfig:
                 raise ParameterError(f"QABuildConfig: {name} must be a positive integer, got {value!r}")
         if isinstance(self.families, str):
             raise ParameterError(f"QABuildConfig: families must be a sequence of family names, not one string ({self.families!r})")
+        if self.mode not in MODES:
+            raise ParameterError(f"QABuildConfig: mode must be one of {list(MODES)}, got {self.mode!r}")
         object.__setattr__(self, "families", tuple(sorted(set(self.families))))
         object.__setattr__(self, "visibility_size", tuple(self.visibility_size))
         object.__setattr__(self, "covisibility_size", tuple(self.covisibility_size))
@@ -107,7 +119,7 @@ class QABuildConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> QABuildConfig:
         """The config :meth:`to_dict` wrote (lists back to tuples)."""
-        return cls(**{**data, "families": tuple(data["families"]), "visibility_size": tuple(data["visibility_size"]),
+        return cls(**{"mode": "bench", **data, "families": tuple(data["families"]), "visibility_size": tuple(data["visibility_size"]),
                       "covisibility_size": tuple(data["covisibility_size"])})
 
 
@@ -148,13 +160,15 @@ def selection_name(families: Sequence[str]) -> str:
     return text
 
 
-def index_paths(scene_id: str, out_dir: str | Path, families: Sequence[str] = ()) -> tuple[Path, Path]:
+def index_paths(scene_id: str, out_dir: str | Path, families: Sequence[str] = (), mode: str = "bench") -> tuple[Path, Path]:
     """``(<out>/<id>.qa.jsonl, <out>/<id>.qa.meta.json)``: the full index; with ``families``, the
     selection index ``(<out>/<id>.qa.<selection>.jsonl, <out>/<id>.qa.<selection>.meta.json)``
-    (:func:`selection_name`; see the module docstring)."""
+    (:func:`selection_name`; see the module docstring). ``mode="train"`` (the dense training
+    selection, :mod:`spacedg.qa.modes`): ``<id>.qa-train…`` instead of ``<id>.qa…``."""
     out = Path(out_dir)
     selection = selection_name(families)
-    stem = f"{scene_id}.qa" if not selection else f"{scene_id}.qa.{selection}"
+    head = f"{scene_id}.qa" if mode == "bench" else f"{scene_id}.qa-{mode}"
+    stem = head if not selection else f"{head}.{selection}"
     return out / f"{stem}.jsonl", out / f"{stem}.meta.json"
 
 
@@ -224,7 +238,7 @@ def index_is_current(scene_dir: str | Path, config: QABuildConfig = QABuildConfi
 
     scene_json = scene_json_path(scene_dir)
     scene_id = load_scene(Path(scene_dir)).id
-    jsonl, meta_path = index_paths(scene_id, out_dir if out_dir is not None else scene_json.parent, config.families)
+    jsonl, meta_path = index_paths(scene_id, out_dir if out_dir is not None else scene_json.parent, config.families, config.mode)
     return is_current(jsonl, meta_path, index_key(scene_json, config, selected_families(config.families), None))
 
 

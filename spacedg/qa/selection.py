@@ -29,6 +29,7 @@ from typing import Any
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import AnswerType
+from spacedg.qa.modes import subject_key
 
 __all__ = ["truth_key", "selection_of", "features_of", "select_balanced", "select_records"]
 
@@ -95,9 +96,12 @@ class _Pool:
     cell_roles: dict[str, list[str]] = field(default_factory=dict)  # cell → the roles of a round
 
     @classmethod
-    def of(cls, records: Sequence[QARecord]) -> _Pool:
+    def of(cls, records: Sequence[QARecord], mode: str = "bench") -> _Pool:
         pool = cls(records, [selection_of(r) for r in records], [features_of(r) for r in records])
-        pool.subjects = [None if sel is None else (r.sub_question_type, str(sel["subject"])) for r, sel in zip(records, pool.selections)]
+        pool.subjects = [
+            None if sel is None else (r.sub_question_type, subject_key(str(sel["subject"]), r.views, mode))
+            for r, sel in zip(records, pool.selections)
+        ]
         partial: set[str] = set()
         for i, r in enumerate(records):
             sel = pool.selections[i]
@@ -135,8 +139,8 @@ class _Selection:
     """The state of one :func:`select_records` call: what is taken, which subjects are asked,
     the room left per sub type, and the features each role has had (see the module docstring)."""
 
-    def __init__(self, records: Sequence[QARecord], per_sub_type: int, keep: Keep | None) -> None:
-        self.pool = _Pool.of(records)
+    def __init__(self, records: Sequence[QARecord], per_sub_type: int, keep: Keep | None, mode: str = "bench") -> None:
+        self.pool = _Pool.of(records, mode)
         self.per_sub_type = per_sub_type
         self.keep = keep or (lambda record: True)
         self.judged_out: set[str] = set()
@@ -309,6 +313,7 @@ class _Selection:
 
 def select_records(
     records: Sequence[QARecord], per_sub_type: int, keep: Keep | None = None, stats: dict[str, Counter[str]] | None = None,
+    mode: str = "bench",
 ) -> list[QARecord]:
     """The debiased selection among one family's candidates (in generation order): up to
     ``per_sub_type`` records per sub type, returned in generation order.
@@ -333,11 +338,14 @@ def select_records(
     Records without a ``selection`` entry are taken per sub type round-robin over their correct
     answers (:func:`truth_key`), as before version 3.
 
+    ``mode``: what "the same subject" is (:func:`~spacedg.qa.modes.subject_key`): ``"bench"``
+    asks an object at most once per sub type whatever the views, ``"train"`` once per views.
+
     ``stats`` (optional) receives per sub type: ``pooled``, ``taken``, and why the others were
     not: ``repeat`` (subject already asked), ``quota`` (its sub type has no room for another
     round of its cell), ``unbalanced`` (no complete round of its cell left), ``judge``.
     """
-    selection = _Selection(records, per_sub_type, keep)
+    selection = _Selection(records, per_sub_type, keep, mode)
     selection.take_metric()
     selection.take_rounds()
     selection.take_small_quotas()

@@ -1,8 +1,8 @@
 """Counts and answer balance of question records, and the blind baseline.
 
 - :func:`count_table`: records per (question_type, sub_question_type) and answer type.
-- :func:`answer_balance`: share of each correct letter A–D over MCQ records and of yes/no over
-  YN records, in percent.
+- :func:`answer_balance`: share of each correct letter A–D over 4-option MCQ records (A–C over
+  3-option ones) and of yes/no over YN records, in percent.
 - :func:`blind_baseline`: leave-one-scene-out "always answer the most frequent answer of this
   sub type" accuracy on MCQ and YN records, against chance (25 % / 50 %). Two priors are
   measured: the most frequent **letter** (what a blind model can output) and the most
@@ -54,19 +54,24 @@ def count_table(records: Iterable[QARecord]) -> list[dict[str, Any]]:
 
 
 def answer_balance(records: Iterable[QARecord]) -> dict[str, Any]:
-    """``{"mcq_n", "letters": {A: %, ...}, "yn_n", "yes_pct"}``."""
+    """``{"mcq_n", "letters": {A: %, ...}, "mcq3_n", "letters3": {A: %, B: %, C: %}, "yn_n", "yes_pct"}``:
+    the correct letters of the 4-option MCQs (``letters``, uniform = 25 %) and of the 3-option
+    ones (size comparisons; ``letters3``, uniform = 33.3 %) apart."""
     letters: Counter[str] = Counter()
+    letters3: Counter[str] = Counter()
     yes = no = 0
     for r in records:
         if r.answer_type is AnswerType.MCQ:
-            letters[str(r.answer)] += 1
+            (letters3 if len(r.options) == 3 else letters)[str(r.answer)] += 1
         elif r.answer_type is AnswerType.YN:
             yes += r.answer == "yes"
             no += r.answer == "no"
-    mcq = sum(letters.values())
+    mcq, mcq3 = sum(letters.values()), sum(letters3.values())
     return {
         "mcq_n": mcq,
         "letters": {k: (100.0 * letters[k] / mcq if mcq else 0.0) for k in MCQ_LETTERS},
+        "mcq3_n": mcq3,
+        "letters3": {k: (100.0 * letters3[k] / mcq3 if mcq3 else 0.0) for k in MCQ_LETTERS[:3]},
         "yn_n": yes + no,
         "yes_pct": 100.0 * yes / (yes + no) if yes + no else 0.0,
     }
@@ -108,13 +113,13 @@ def blind_baseline(records_by_scene: Mapping[str, Sequence[QARecord]]) -> list[d
             k = (r.question_type, r.sub_question_type)
             if k not in keys:
                 continue
-            chance[k] = 25.0 if r.answer_type is AnswerType.MCQ else 50.0
+            chance[k] = 100.0 / len(r.options) if r.answer_type is AnswerType.MCQ else 50.0
             row = hits[k]
             row[0] += 1
             guess = answer_prior[k].most_common(1)[0][0] if answer_prior[k] else ("A" if r.answer_type is AnswerType.MCQ else "yes")
             row[1] += guess == str(r.answer)
             if r.answer_type is AnswerType.MCQ:
-                texts = [(option_text(r, letter), letter) for letter in MCQ_LETTERS]
+                texts = [(option_text(r, letter), letter) for letter in MCQ_LETTERS[:len(r.options)]]
                 best = max(texts, key=lambda tl: text_prior[k][tl[0]])[1]
                 row[2] += best == str(r.answer)
             else:

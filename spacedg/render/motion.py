@@ -8,10 +8,11 @@ centre); sub-exposure k of K is centred at time ``s_k = (k + ½)/K − ½``.
   paper's reference), averaged.
 - Fast (``fast=True``, pinhole cameras): ``K`` keyframes and depth-reprojected path gathers
   (:func:`render_motion_keyframes`, kernels in :mod:`spacedg.render.motion_warp`). The
-  exposure is cut into ``K = clamp(ceil(D / KEYFRAME_PATH_PX), 1, MAX_KEYFRAMES)`` (2 at least
-  past ``SINGLE_KEYFRAME_PX``) equal
+  exposure is cut into ``K = clamp(max(ceil(D / KEYFRAME_PATH_PX), ceil(sqrt(P / PARALLAX_PX))), 1,
+  MAX_KEYFRAMES)`` (2 at least past ``SINGLE_KEYFRAME_PX``) equal
   intervals, D the largest on-screen path (pixels) of the visible Gaussians
-  (:func:`motion_extent`); each interval's centre pose is rendered once (with depth, on a canvas
+  (:func:`motion_extent`) and P the translation parallax between near and far (:func:`motion_parallax`:
+  close-ups need more keyframes than their path alone asks for); each interval's centre pose is rendered once (with depth, on a canvas
   widened by the path so what the camera sweeps in is rendered) and every output pixel
   averages the keyframe along the segment it sees during the interval, sampled every ≤ 1 px
   (a box-doubling pass for long paths, then a gather every ``PATH_SPACING_PX``; segments over
@@ -213,8 +214,18 @@ KEYFRAME_PATH_PX = 90.0
 #: … but two keyframes at least once D exceeds this (one keyframe over the plant's 88 px bench
 #: path gave 40.5 dB against N = 80, two 47.5 dB).
 SINGLE_KEYFRAME_PX = 60.0
-#: … and the keyframe count's bounds.
-MIN_KEYFRAMES, MAX_KEYFRAMES = 1, 6
+#: … and at least ``ceil(sqrt(P / PARALLAX_PX))`` keyframes for a translation parallax of P
+#: pixels: the spread of on-screen translation between the 10th and 90th percentile depths of
+#: the visible Gaussians (:func:`motion_parallax`). The warp takes what a pixel sees from its
+#: keyframe, so each depth edge leaves a band of the interval's parallax. Measured
+#: (``benchmarks/motion_closeup.py``, bench motion, 640×480): a close-up of the plant (P = 16–29
+#: px) gave 38.9–40.4 dB against N = 80 with 2 keyframes and 31.4 dB with one, 44–50 dB with 3–4;
+#: a room (P = 60–74 px, sparser depth edges) 38.5 dB with 2, 42.6–46.5 with 3, 47–50 with 4. A
+#: linear rule (one keyframe per 9 px) met both but gave rooms 7–8 keyframes (13–18× a clean
+#: render); the square root gives the plant 3 and rooms 5.
+PARALLAX_PX = 3.5
+#: … and the keyframe count's bounds (8 renders at most: the issue's budget).
+MIN_KEYFRAMES, MAX_KEYFRAMES = 1, 8
 #: Box-doubling passes before the path gather when an interval's longest path exceeds
 #: ``DOUBLING_FROM_PX``: each halves the samples the gather takes but reads the whole canvas
 #: twice and resamples it once (~1 dB on the plant's fine texture). Measured (640×480, one
@@ -228,10 +239,28 @@ DOUBLING_FROM_PX = 24.0
 PATH_SPACING_PX = 1.0
 
 
-def choose_keyframes(displacement_px: float, max_steps: int) -> int:
-    """Keyframe count for a largest on-screen path of ``displacement_px`` pixels."""
+def choose_keyframes(displacement_px: float, max_steps: int, parallax_px: float = 0.0) -> int:
+    """Keyframe count for a largest on-screen path of ``displacement_px`` pixels and a translation
+    parallax of ``parallax_px`` pixels (:func:`motion_parallax`) over the exposure."""
     count = max(math.ceil(displacement_px / KEYFRAME_PATH_PX), 2 if displacement_px > SINGLE_KEYFRAME_PX else 1)
+    if math.isfinite(parallax_px) and parallax_px > 0:
+        count = max(count, math.ceil(math.sqrt(parallax_px / PARALLAX_PX)))
     return int(min(max(count, MIN_KEYFRAMES), MAX_KEYFRAMES, max_steps))
+
+
+def motion_parallax(gaussians: Gaussians, camera: Camera, motion: MotionBlur) -> float:
+    """Translation parallax (pixels) over the exposure: ``f · |t_xy| · (1/z₁₀ − 1/z₉₀)``, the
+    difference in on-screen sweep between the 10th and 90th percentile depths of the Gaussian
+    means visible at mid-exposure (camera-frame translation ``t``; rotation sweeps every depth
+    alike and makes none). 0 when nothing is visible."""
+    stride = max(1, len(gaussians) // _DISPLACEMENT_SAMPLE)
+    uv, depth, ok = camera.project(gaussians.means[::stride].astype(np.float64))
+    visible = ok & camera.in_image(uv) & (depth > 1e-3)
+    if visible.sum() < 2:
+        return 0.0
+    near, far = np.percentile(depth[visible], [10.0, 90.0])
+    sideways = math.hypot(motion.translation[0], motion.translation[1])
+    return float(0.5 * (camera.fx + camera.fy) * sideways * (1.0 / near - 1.0 / far))
 
 
 def render_motion_keyframes(
@@ -253,7 +282,7 @@ def render_motion_keyframes(
     passes = DOUBLING_PASSES if passes is None else passes
     spacing = PATH_SPACING_PX if spacing is None else spacing
     displacement, _ = motion_extent(job.gaussians, camera, motion)
-    count = keyframes or choose_keyframes(displacement, motion.sub_steps)
+    count = keyframes or choose_keyframes(displacement, motion.sub_steps, motion_parallax(job.gaussians, camera, motion))
     margin = int(min(math.ceil(0.6 * displacement / count) + 2, max(camera.width, camera.height) // 2))
     canvas = camera.widened(margin)
     want_depth = "depth" in wanted

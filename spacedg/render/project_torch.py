@@ -209,7 +209,7 @@ def project_gaussians(
         coc = torch.where(coc < DEFOCUS_MIN_COC, torch.zeros_like(coc), coc)  # below half a pixel: sharp
         sxx, syy = sxx + coc * coc, syy + coc * coc
         det_blur = sxx * syy - sxy * sxy
-        compensation = torch.sqrt(torch.clamp(det / det_blur, min=0.0))
+        compensation = torch.sqrt(torch.clamp(det / torch.clamp(det_blur, min=1e-300), min=0.0))  # as the CPU path: 0/0 is 0, not NaN
         opacity = opacity * compensation
         alpha_floor = alpha_floor * compensation
         det = det_blur

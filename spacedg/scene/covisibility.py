@@ -43,7 +43,7 @@ __all__ = [
 #: Default reduced render size (width, height) of :func:`covisibility_matrix`, pixels.
 COVISIBILITY_IMAGE_SIZE = (80, 60)
 #: Version of the covisibility computation; part of the cache key (bump on a change of method).
-COVISIBILITY_VERSION = 1
+COVISIBILITY_VERSION = 2  # 2: reduced renders keep each view's aspect (visibility.reduced_camera)
 #: Smallest ``cos θ`` of a fisheye ray that is lifted to 3D (rays near 90° are ill-conditioned).
 _MIN_COS_THETA = 1e-3
 
@@ -178,7 +178,8 @@ def covisibility_matrix(
     Args:
         scene: the scene.
         views: view names (default: all, in ``scene.views`` order).
-        image_size: reduced render size ``(width, height)``, pixels.
+        image_size: reduced render size ``(width, height)``, pixels: a bounding box, each view keeping
+            its own aspect (:func:`~spacedg.scene.visibility.reduced_camera`).
         rel_threshold: relative depth tolerance, in (0, 1).
         stride: lift every ``stride``-th row and column of view i (targets keep full reduced
             resolution); 1 uses every pixel.

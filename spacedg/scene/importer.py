@@ -20,7 +20,8 @@ What it does, in order (each step reported in :class:`ImportReport`):
    against the labelled objects' typical sizes (refused when implausible); recorded in ``metadata["units"]``.
 3. **Up**: given (``"+z"``, ``"-y"``, ``"0,0,1"``), ScanNet++'s +z, or estimated from the cameras (else the
    boxes), and verified against the capture's evidence (:mod:`spacedg.scene.up_evidence`): a contradicted up is
-   refused unless ``trust_up``; the evidence is kept in ``metadata.up_evidence``.
+   refused unless ``trust_up``; the evidence is kept in ``metadata.up_evidence``. Up, units and the box fill
+   are decided by :mod:`spacedg.scene.capture_checks`, which :func:`~spacedg.scene.io.scene_from_files` runs too.
 4. **Frame check** (:mod:`spacedg.scene.frame_check`): refused with the disagreeing parts and the
    probable cause unless ``frame_check="warn"``.
 4b. **Box fill** (:mod:`spacedg.scene.box_fill`): every box must hold its object; an empty or
@@ -34,8 +35,6 @@ What it does, in order (each step reported in :class:`ImportReport`):
 
 from __future__ import annotations
 
-import json
-import math
 import re
 import time
 from collections.abc import Callable
@@ -49,7 +48,8 @@ from spacedg.errors import FileFormatError, ParameterError
 from spacedg.files import PathLike, read_json
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
-from spacedg.scene.box_fill import BoxFillError, BoxFillReport, measure_box_fill
+from spacedg.scene.box_fill import BoxFillReport, measure_box_fill
+from spacedg.scene.capture_checks import FRAME_CHECKS, FrameDecision, check_box_fill, check_metres_per_unit, decide_frame, parse_up
 from spacedg.scene.frame_check import (
     BOX_PROBLEM,
     FrameReport,
@@ -91,16 +91,15 @@ from spacedg.scene.io.scannetpp import (
     read_segments_anno,
     scannetpp_cameras,
 )
+from spacedg.scene.io.scannetpp_iphone import POSE_FILE, arkit_agreement
 from spacedg.scene.labelling import AssignmentReport, MaskSource, assign_instances, load_mask
 from spacedg.scene.model import Instance, Scene
-from spacedg.scene.up_evidence import decide_up
-from spacedg.scene.units import UnitDecision, decide_units
+from spacedg.scene.units import UnitDecision
 
 __all__ = ["LAYOUTS", "CaptureLayout", "ImportReport", "import_scene", "detect_layout", "detect_capture", "parse_up", "read_any_instances"]
 
 #: Layouts :func:`import_scene` knows (``format=``).
 LAYOUTS = ("auto", "inria", "colmap", "nerfstudio", "scannetpp", "holi-spatial", "gaussians")
-_AXES = {"x": 0, "y": 1, "z": 2}
 _SAFE_ID = re.compile(r"[^A-Za-z0-9_.\-]+")
 
 
@@ -199,6 +198,11 @@ def detect_capture(src: Path) -> CaptureLayout:
         raise FileFormatError(f"{src}: not a Gaussians file ({', '.join(GAUSSIAN_SUFFIXES)}) nor a transforms.json")
     if not src.is_dir():
         raise FileFormatError(f"{src}: no such file or folder")
+    if (src / "scene.json").is_file():
+        raise FileFormatError(
+            f"{src}: already a spacedg scene folder (scene.json + gaussians.ply): every command takes it as it is, there is "
+            f"nothing to import; `spacedg scenes info {src}` prints its units, up check and boxes"
+        )
     if is_release_scene(src):
         return CaptureLayout("holi-spatial")
     if is_inria_output(src):
@@ -212,7 +216,8 @@ def detect_capture(src: Path) -> CaptureLayout:
         return CaptureLayout("colmap", model)
     raise FileFormatError(
         f"{src}: no known layout: looked for an INRIA output (point_cloud/iteration_*/point_cloud.ply), a ScanNet++ scene "
-        "(dslr/nerfstudio, scans/segments_anno.json), a nerfstudio transforms.json, a COLMAP model (sparse/0 or cameras.bin/txt); "
+        "(dslr/nerfstudio, iphone/nerfstudio, iphone/pose_intrinsic_imu.json, scans/segments_anno.json), a Holi-Spatial released "
+        "scene (mesh/tsdf_fusion_post.ply), a nerfstudio transforms.json, a COLMAP model (sparse/0 or cameras.bin/txt); "
         "pass --format, or a Gaussians file with --cameras"
     )
 
@@ -228,25 +233,6 @@ def _single_gaussians_file(folder: Path, what: str) -> Path:
         return found[0]
     listing = ", ".join(p.name for p in found[:5]) or "none"
     raise FileFormatError(f"{folder}: {what} needs a Gaussians file: pass --gaussians FILE (found {len(found)}: {listing})")
-
-
-def parse_up(text: str | None) -> np.ndarray | None:
-    """``"auto"``/``None`` → None; ``"+z"``, ``"-y"``, ``"z"`` or ``"x,y,z"`` → a unit vector."""
-    if text is None or str(text).strip().lower() == "auto":
-        return None
-    t = str(text).strip().lower()
-    match = re.fullmatch(r"([+-]?)([xyz])", t)
-    if match:
-        out = np.zeros(3)
-        out[_AXES[match.group(2)]] = -1.0 if match.group(1) == "-" else 1.0
-        return out
-    try:
-        vec = np.array([float(v) for v in t.split(",")], dtype=np.float64)
-    except ValueError:
-        vec = np.zeros(0)
-    if vec.shape != (3,) or not np.isfinite(vec).all() or np.linalg.norm(vec) == 0:
-        raise ParameterError(f"--up {text!r}: give auto, an axis (+z, -y, x, ...) or three numbers x,y,z")
-    return vec / np.linalg.norm(vec)
 
 
 def read_any_instances(path: PathLike, views: Any = None, *, embodiedscan_scene: str | None = None) -> tuple[list[Instance], str]:
@@ -292,6 +278,8 @@ class _Parts:
     notes: list[str]
     #: (4×4 rigid world change, the parts it applies to: "views", "gaussians", "instances") into the scan frame.
     to_scan: tuple[np.ndarray, frozenset[str]] | None = None
+    #: ScanNet++'s iPhone ARKit poses, compared with the (COLMAP-refined) cameras used when both exist.
+    arkit: Path | None = None
 
 
 def _inria_cameras(src: Path, notes: list[str]) -> CameraFiles:
@@ -317,6 +305,7 @@ def _resolve_parts(
     notes: list[str] = []
     default_up, up_note = None, ""
     to_scan: tuple[np.ndarray, frozenset[str]] | None = None
+    arkit: Path | None = None
     given = None if cameras is None else find_cameras(cameras)
     if layout.name == "inria":
         gpath = gaussians or latest_point_cloud(src)
@@ -333,24 +322,8 @@ def _resolve_parts(
         files = given or find_cameras(src if src.is_file() else src / "transforms.json")
         gpath = gaussians or _single_gaussians_file(src if src.is_dir() else src.parent, "a nerfstudio transforms.json")
     elif layout.name == "scannetpp":
-        files = given or find_cameras(scannetpp_cameras(src, device))
-        if instances is None and (src / "scans" / "segments_anno.json").is_file():
-            instances = src / "scans" / "segments_anno.json"
-        if gaussians is None:
-            found = sorted(src.glob("**/point_cloud/iteration_*/point_cloud.ply"))
-            if not found:
-                raise FileFormatError(
-                    f"{src}: ScanNet++ ships no Gaussians: train them on the DSLR images (INRIA, gsplat or splatfacto) and pass --gaussians FILE"
-                )
-            gpath = latest_point_cloud(found[-1].parents[2])
-            notes.append(f"Gaussians found in the scene folder: {gpath}")
-        else:
-            gpath = gaussians
+        files, gpath, instances, to_scan, arkit = _scannetpp_parts(src, given, gaussians, instances, device, notes)
         default_up, up_note = np.array([0.0, 0.0, 1.0]), "ScanNet++ scan frame (z up)"
-        if given is None and files.kind == "nerfstudio":
-            to_scan = (NERFSTUDIO_FROM_SCAN, frozenset({"views", "gaussians"}))
-            notes.append("cameras and Gaussians taken from ScanNet++'s nerfstudio world (rows y, x, -z) back to the scan frame "
-                         "of the mesh and segments_anno.json")
     elif layout.name == "holi-spatial":
         gpath = gaussians or latest_point_cloud(src)
         files = given or _inria_cameras(src, notes)
@@ -371,7 +344,34 @@ def _resolve_parts(
         dataparser = gpath.parent / "dataparser_transforms.json"
         notes.append(f"found {dataparser.name} next to the Gaussians: they are a splatfacto export in nerfstudio's normalised frame")
     applied = read_applied_transform(files.read_path) if files.kind == "nerfstudio" else None
-    return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes, to_scan)
+    return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes, to_scan, arkit)
+
+
+def _scannetpp_parts(
+    src: Path, given: CameraFiles | None, gaussians: Path | None, instances: Path | None, device: str, notes: list[str],
+) -> tuple[CameraFiles, Path, Path | None, tuple[np.ndarray, frozenset[str]] | None, Path | None]:
+    """A ScanNet++ scene folder's cameras, Gaussians, boxes, world change and ARKit file to compare."""
+    files = given or find_cameras(scannetpp_cameras(src, device))
+    if instances is None and (src / "scans" / "segments_anno.json").is_file():
+        instances = src / "scans" / "segments_anno.json"
+    if gaussians is None:
+        found = sorted(src.glob("**/point_cloud/iteration_*/point_cloud.ply"))
+        if not found:
+            raise FileFormatError(
+                f"{src}: ScanNet++ ships no Gaussians: train them on the DSLR images (INRIA, gsplat or splatfacto) and pass --gaussians FILE"
+            )
+        gaussians = latest_point_cloud(found[-1].parents[2])
+        notes.append(f"Gaussians found in the scene folder: {gaussians}")
+    to_scan = None
+    if given is None and files.kind == "nerfstudio":
+        to_scan = (NERFSTUDIO_FROM_SCAN, frozenset({"views", "gaussians"}))
+        notes.append("cameras and Gaussians taken from ScanNet++'s nerfstudio world (rows y, x, -z) back to the scan frame "
+                     "of the mesh and segments_anno.json")
+    arkit = src / "iphone" / POSE_FILE
+    if files.kind == "scannetpp-iphone":
+        notes.append(f"cameras: ARKit aligned_pose of {files.path} (scan frame, OpenCV axes); no iphone/nerfstudio or "
+                     "iphone/colmap (bundle-adjusted poses, preferred when present) here")
+    return files, gaussians, instances, to_scan, arkit if device == "iphone" and files.kind != "scannetpp-iphone" and arkit.is_file() else None
 
 
 def _holi_frame(src: Path, boxes: Path, notes: list[str]) -> tuple[np.ndarray | None, str, tuple[np.ndarray, frozenset[str]] | None]:
@@ -464,111 +464,33 @@ def import_scene(
             (the message gives the estimate and the option to pass).
     """
     src_path = Path(src)
-    timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    if out is not None and (Path(out) / "scene.json").is_file() and not overwrite:
-        raise ParameterError(f"{out}: a scene folder already exists; pass --overwrite (overwrite=True) or choose another --out")
-    if metres_per_unit is not None and (isinstance(metres_per_unit, bool) or not isinstance(metres_per_unit, (int, float))
-                                        or not (math.isfinite(metres_per_unit) and metres_per_unit > 0)):
-        raise ParameterError(f"--metres-per-unit must be a positive number, got {metres_per_unit!r}")
-    if format not in LAYOUTS:
-        raise ParameterError(f"--format {format!r}: choose one of {', '.join(LAYOUTS)}")
+    _check_arguments(out, overwrite, metres_per_unit, format, frame_check)
     layout = detect_capture(src_path) if format == "auto" else CaptureLayout(format)
     parts = _resolve_parts(
-        src_path, layout, None if gaussians is None else Path(gaussians), None if cameras is None else Path(cameras),
-        None if instances is None else Path(instances), None if dataparser_transforms is None else Path(dataparser_transforms), device,
+        src_path, layout, _opt_path(gaussians), _opt_path(cameras), _opt_path(instances), _opt_path(dataparser_transforms), device,
     )
-    notes = parts.notes
-    gauss = read_gaussians(parts.gaussians_path)
-    timings["read_gaussians"] = time.perf_counter() - t0
-    views, test_views = read_cameras(parts.cameras, opencv_distortion), parts.cameras.test_frames()
-    if parts.dataparser is not None:
-        transform, scale = read_dataparser_transforms(parts.dataparser)
-        rot, trans, k = denormalising_similarity(transform, scale)
-        gauss = gauss.transformed(rot, trans, k)
-        notes.append(f"Gaussians taken back from nerfstudio's normalised frame with {parts.dataparser} (scale 1/{scale:.4g})")
-    if undo_applied_transform:
-        if parts.applied_transform is None:
-            raise ParameterError("--undo-applied-transform: the cameras are not a transforms.json with an applied_transform")
-        views = _move_views(views, np.linalg.inv(parts.applied_transform))
-        notes.append("cameras moved back to the COLMAP frame (inverse of transforms.json's applied_transform)")
-    found_instances: list[Instance] = []
-    instances_format = None
-    if parts.instances_path is not None:
-        found_instances, instances_format = read_any_instances(parts.instances_path, views.keys(), embodiedscan_scene=embodiedscan_scene)
-        notes.append(f"instances read as {instances_format}")
-    mask_source = _rle_source(parts, instances_format, found_instances, views, assign, masks, notes)
-    if parts.to_scan is not None:
-        views, gauss, found_instances = _to_scan(parts.to_scan, views, gauss, found_instances)
-    timings["read"] = time.perf_counter() - t0
-    given_up = parse_up(up) if isinstance(up, (str, type(None))) else np.asarray(up, dtype=np.float64)
-    up_vec, up_source, up_evidence = decide_up(views, found_instances, given=given_up, default=parts.default_up, default_note=parts.up_note,
-                                               means=gauss.means, trust=trust_up, where=f"{src_path}: ")
-    notes.append(f"up evidence  {up_evidence.summary()}" + "".join(f"; {n}" for n in up_evidence.notes))
-    decision = decide_units(parts.layout, found_instances, views, up_vec, instances_format=instances_format, units=units,
-                            metres_per_unit=metres_per_unit)
-    if decision.implausible():
-        raise decision.refusal(str(src_path), parts.layout)
-    scale = decision.metres_per_unit
-    if scale != 1.0:
-        views, found_instances = scale_views(views, scale), scale_instances(found_instances, scale)
-    gauss = scale_gaussians(gauss, scale)
-    scene_id = _scene_id(name, src_path)
-    metadata: dict[str, Any] = {
-        "source": {"layout": parts.layout, "src": str(src_path), "gaussians": str(parts.gaussians_path), "cameras": str(parts.cameras.path),
-                   "instances": None if parts.instances_path is None else str(parts.instances_path),
-                   "instances_format": instances_format,
-                   "dataparser_transforms": None if parts.dataparser is None else str(parts.dataparser)},
-        "scale_to_metres": scale, "up_source": up_source, "up_evidence": up_evidence.to_dict(), "units": decision.to_dict(),
-    }
-    scene = Scene(scene_id, gauss, views, found_instances, up_vec.tolist(), None, metadata)
-
+    capture = _read_capture(parts, opencv_distortion=opencv_distortion, undo_applied_transform=undo_applied_transform,
+                            embodiedscan_scene=embodiedscan_scene, assign=assign, masks=masks)
+    timings = {"read_gaussians": capture.gaussians_seconds, "read": time.perf_counter() - t0}
+    decided = decide_frame(capture.views, capture.instances, where=str(src_path), layout=parts.layout, up=up,
+                           default_up=parts.default_up, default_note=parts.up_note, means=capture.gaussians.means,
+                           instances_format=capture.instances_format, units=units, metres_per_unit=metres_per_unit, trust_up=trust_up)
+    parts.notes.append(decided.note())
+    scene = _scaled_scene(_scene_id(name, src_path), src_path, parts, capture, decided)
     t1 = time.perf_counter()
-    fill = measure_box_fill(scene.gaussians.means, scene.instances) if scene.instances else None
-    report_frame = check_frame(scene, backend=backend, box_share=None if fill is None else fill.held_share)
-    if report_frame.problems and all(p.startswith(BOX_PROBLEM) for p in report_frame.problems) and fill is not None:
-        report_frame = FrameReport(report_frame.gaussians_in_view, report_frame.views_seeing, report_frame.boxes_with_gaussians,
-                                   report_frame.render_coverage)  # boxes only: the fill check below names them
-    if not report_frame.ok:
-        report_frame = diagnose(scene, report_frame, _corrections(scene, parts), backend=backend)
-        if not report_frame.hints:
-            hint = normalised_hint(scene, layout=parts.layout, gaussians_given=gaussians is not None)
-            if hint:
-                report_frame = FrameReport(report_frame.gaussians_in_view, report_frame.views_seeing, report_frame.boxes_with_gaussians,
-                                           report_frame.render_coverage, report_frame.problems, (hint,))
-        if frame_check == "error":
-            report_frame.raise_if_bad(scene_id, where=f"{src_path}")
-        notes.append("FRAME MISMATCH written anyway (frame_check='warn'): " + "; ".join(report_frame.problems))
-    if fill is not None:
-        try:
-            fill.raise_if_bad(f"{src_path}: {parts.instances_path}", parts.layout)
-        except BoxFillError:
-            if frame_check == "error":
-                raise
-            notes.append("BOXES NOT HOLDING THEIR OBJECTS written anyway (frame_check='warn'): " + fill.message("boxes", parts.layout))
-        scene.metadata["box_fill"] = fill.to_dict()
+    frame, fill = _check_scene(scene, parts, src_path, frame_check=frame_check, backend=backend, gaussians_given=gaussians is not None)
     timings["frame_check"] = time.perf_counter() - t1
-    scene.metadata["frame_check"] = report_frame.to_dict()
-
-    assignment = None
-    if gauss.instance_ids is not None:
-        ids_source = "kept from the Gaussians file"
-    elif not found_instances:
-        ids_source = "none (no instances: only camera questions can be built)"
-    elif assign == "none":
-        ids_source = "none (assign='none'): qa build will assign them by boxes on the fly"
-    else:
-        method = assign if assign != "auto" else "masks" if mask_source is not None and parts.layout == "holi-spatial" else "boxes"
-        t2 = time.perf_counter()
-        scene, assignment = assign_instances(scene, method, masks_root=masks, progress=progress, backend=backend,  # type: ignore[arg-type]
-                                             mask_source=mask_source)
+    t2 = time.perf_counter()
+    scene, assignment, ids_source = _instance_ids(scene, parts, capture.mask_source, assign=assign, masks=masks, progress=progress,
+                                                  backend=backend)
+    if assignment is not None:
         timings["assign_instances"] = time.perf_counter() - t2
-        ids_source = f"assigned by {method} (the Gaussians file carried none)"
-        scene.metadata["instance_assignment"] = {k: v for k, v in assignment.to_dict().items() if k != "instances"}
     report = ImportReport(
-        scene_id, parts.layout, None, str(parts.gaussians_path), len(gauss), gauss.sh_degree, len(views), test_views,
-        str(parts.cameras.path), len(found_instances), None if parts.instances_path is None else str(parts.instances_path),
-        [float(v) for v in scene.up], up_source, scale, report_frame, ids_source, assignment, fill, notes, units=decision,
+        scene.id, parts.layout, None, str(parts.gaussians_path), len(scene.gaussians), scene.gaussians.sh_degree, len(scene.views),
+        capture.test_views, str(parts.cameras.path), len(scene.instances), None if parts.instances_path is None else str(parts.instances_path),
+        [float(v) for v in scene.up], decided.up_source, decided.metres_per_unit, frame, ids_source, assignment, fill, parts.notes,
+        units=decided.units,
     )
     if out is not None:
         t3 = time.perf_counter()
@@ -578,6 +500,128 @@ def import_scene(
     timings["total"] = time.perf_counter() - t0
     report.seconds = timings
     return scene, report
+
+
+def _opt_path(value: PathLike | None) -> Path | None:
+    return None if value is None else Path(value)
+
+
+def _check_arguments(out: PathLike | None, overwrite: bool, metres_per_unit: float | None, format: str, frame_check: str) -> None:
+    """The arguments that can be checked before reading anything (one :class:`ParameterError` each)."""
+    if out is not None and (Path(out) / "scene.json").is_file() and not overwrite:
+        raise ParameterError(f"{out}: a scene folder already exists; pass --overwrite (overwrite=True) or choose another --out")
+    check_metres_per_unit(metres_per_unit)
+    if format not in LAYOUTS:
+        raise ParameterError(f"--format {format!r}: choose one of {', '.join(LAYOUTS)}")
+    if frame_check not in FRAME_CHECKS:
+        raise ParameterError(f"frame_check {frame_check!r}: choose one of {', '.join(FRAME_CHECKS)}")
+
+
+@dataclass
+class _Capture:
+    """The parts of a capture as read, in the files' frame and units (the scan frame once ``to_scan`` applied)."""
+
+    gaussians: Gaussians
+    views: dict[str, Camera]
+    test_views: int
+    instances: list[Instance]
+    instances_format: str | None
+    mask_source: MaskSource | None
+    gaussians_seconds: float
+
+
+def _read_capture(
+    parts: _Parts, *, opencv_distortion: Literal["error", "drop"], undo_applied_transform: bool, embodiedscan_scene: str | None,
+    assign: str, masks: PathLike | None,
+) -> _Capture:
+    """Read the Gaussians, cameras and instances of ``parts``; undo nerfstudio's frames; move to the scan frame."""
+    t0 = time.perf_counter()
+    gauss = read_gaussians(parts.gaussians_path)
+    seconds = time.perf_counter() - t0
+    views, test_views = read_cameras(parts.cameras, opencv_distortion), parts.cameras.test_frames()
+    if parts.dataparser is not None:
+        transform, scale = read_dataparser_transforms(parts.dataparser)
+        rot, trans, k = denormalising_similarity(transform, scale)
+        gauss = gauss.transformed(rot, trans, k)
+        parts.notes.append(f"Gaussians taken back from nerfstudio's normalised frame with {parts.dataparser} (scale 1/{scale:.4g})")
+    if undo_applied_transform:
+        if parts.applied_transform is None:
+            raise ParameterError("--undo-applied-transform: the cameras are not a transforms.json with an applied_transform")
+        views = _move_views(views, np.linalg.inv(parts.applied_transform))
+        parts.notes.append("cameras moved back to the COLMAP frame (inverse of transforms.json's applied_transform)")
+    found: list[Instance] = []
+    instances_format = None
+    if parts.instances_path is not None:
+        found, instances_format = read_any_instances(parts.instances_path, views.keys(), embodiedscan_scene=embodiedscan_scene)
+        parts.notes.append(f"instances read as {instances_format}")
+    mask_source = _rle_source(parts, instances_format, found, views, assign, masks, parts.notes)
+    if parts.to_scan is not None:
+        views, gauss, found = _to_scan(parts.to_scan, views, gauss, found)
+    if parts.arkit is not None:
+        parts.notes.append(arkit_agreement(views, parts.arkit))
+    return _Capture(gauss, views, test_views, found, instances_format, mask_source, seconds)
+
+
+def _scaled_scene(scene_id: str, src: Path, parts: _Parts, capture: _Capture, decided: FrameDecision) -> Scene:
+    """The scene in metres (the decided metres per unit applied once), its import record in ``metadata``."""
+    scale = decided.metres_per_unit
+    views, instances = capture.views, capture.instances
+    if scale != 1.0:
+        views, instances = scale_views(views, scale), scale_instances(instances, scale)
+    metadata: dict[str, Any] = {
+        "source": {"layout": parts.layout, "src": str(src), "gaussians": str(parts.gaussians_path), "cameras": str(parts.cameras.path),
+                   "instances": None if parts.instances_path is None else str(parts.instances_path),
+                   "instances_format": capture.instances_format,
+                   "dataparser_transforms": None if parts.dataparser is None else str(parts.dataparser)},
+        **decided.metadata(),
+    }
+    return Scene(scene_id, scale_gaussians(capture.gaussians, scale), views, instances, decided.up.tolist(), None, metadata)
+
+
+def _check_scene(
+    scene: Scene, parts: _Parts, src: Path, *, frame_check: str, backend: str, gaussians_given: bool,
+) -> tuple[FrameReport, BoxFillReport | None]:
+    """Frame check then box fill (metres): refused with ``frame_check="error"``, else noted; both recorded in ``metadata``."""
+    fill = measure_box_fill(scene.gaussians.means, scene.instances) if scene.instances else None
+    report = check_frame(scene, backend=backend, box_share=None if fill is None else fill.held_share)
+    if report.problems and all(p.startswith(BOX_PROBLEM) for p in report.problems) and fill is not None:
+        report = FrameReport(report.gaussians_in_view, report.views_seeing, report.boxes_with_gaussians,
+                             report.render_coverage)  # boxes only: the fill check below names them
+    if not report.ok:
+        report = diagnose(scene, report, _corrections(scene, parts), backend=backend)
+        if not report.hints:
+            hint = normalised_hint(scene, layout=parts.layout, gaussians_given=gaussians_given)
+            if hint:
+                report = FrameReport(report.gaussians_in_view, report.views_seeing, report.boxes_with_gaussians,
+                                     report.render_coverage, report.problems, (hint,))
+        if frame_check == "error":
+            report.raise_if_bad(scene.id, where=f"{src}")
+        parts.notes.append("FRAME MISMATCH written anyway (frame_check='warn'): " + "; ".join(report.problems))
+    fill, note = check_box_fill(scene.gaussians.means, scene.instances, where=f"{src}: {parts.instances_path}", layout=parts.layout,
+                                frame_check=frame_check, fill=fill)
+    if note:
+        parts.notes.append(note)
+    if fill is not None:
+        scene.metadata["box_fill"] = fill.to_dict()
+    scene.metadata["frame_check"] = report.to_dict()
+    return report, fill
+
+
+def _instance_ids(
+    scene: Scene, parts: _Parts, mask_source: MaskSource | None, *, assign: str, masks: PathLike | None, progress: bool, backend: str,
+) -> tuple[Scene, AssignmentReport | None, str]:
+    """Instance ids: kept from the Gaussians file, or assigned (boxes / masks), or none; ``(scene, report, how)``."""
+    if scene.gaussians.instance_ids is not None:
+        return scene, None, "kept from the Gaussians file"
+    if not scene.instances:
+        return scene, None, "none (no instances: only camera questions can be built)"
+    if assign == "none":
+        return scene, None, "none (assign='none'): qa build will assign them by boxes on the fly"
+    method = assign if assign != "auto" else "masks" if mask_source is not None and parts.layout == "holi-spatial" else "boxes"
+    scene, assignment = assign_instances(scene, method, masks_root=masks, progress=progress, backend=backend,  # type: ignore[arg-type]
+                                         mask_source=mask_source)
+    scene.metadata["instance_assignment"] = {k: v for k, v in assignment.to_dict().items() if k != "instances"}
+    return scene, assignment, f"assigned by {method} (the Gaussians file carried none)"
 
 
 def _to_scan(

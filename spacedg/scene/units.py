@@ -51,6 +51,7 @@ from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
 from spacedg.scene.lexicon import BUILTIN, LEXICON_ENV, Lexicon, head_noun, label_key, load_lexicon
 from spacedg.scene.model import Instance, Scene
+from spacedg.scene.up_evidence import upright_boxes_up
 
 __all__ = [
     "AGREE_FACTOR", "CAMERA_HEIGHT_M", "METRIC_INSTANCE_FORMATS", "METRIC_LAYOUTS", "MIN_FLOOR_BOXES", "MIN_OBJECTS",
@@ -217,29 +218,12 @@ def _sized_objects(instances: Iterable[Instance], lexicon: Lexicon) -> tuple[lis
     return found, sorted(ignored)
 
 
-def _boxes_up(instances: Sequence[Instance], up: np.ndarray) -> np.ndarray:
-    """``up`` refined by the boxes' own axes when they agree: annotated boxes stand upright, so each
-    has an axis along gravity (the one nearest ``up``); their mean is taken when it lies within 20°
-    of ``up`` and at least 60 % of those axes lie within 5° of it (an up estimated from a few cameras
-    can be off by 10°, which tilts a room's floor by tens of centimetres)."""
-    axes = []
-    for inst in instances:
-        dots = inst.box.rotation.T @ up
-        k = int(np.argmax(np.abs(dots)))
-        axes.append(inst.box.rotation[:, k] * math.copysign(1.0, dots[k]))
-    mean = np.sum(axes, axis=0)
-    if not np.linalg.norm(mean) > 0:
-        return up
-    mean /= np.linalg.norm(mean)
-    close = np.array(axes) @ mean >= math.cos(math.radians(5.0))
-    return mean if mean @ up >= math.cos(math.radians(20.0)) and close.mean() >= 0.6 else up
-
-
 def _camera_height(instances: Sequence[Instance], views: Mapping[str, Camera], up: np.ndarray) -> CameraHeightEvidence | None:
-    """The floor as the lowest box bottoms along up (:func:`_boxes_up`) and the cameras' median height above it, or ``None``."""
+    """The floor as the lowest box bottoms along up (refined by :func:`~spacedg.scene.up_evidence.upright_boxes_up`) and the cameras' median height above it, or ``None``."""
     if len(instances) < MIN_FLOOR_BOXES or not views:
         return None
-    up = _boxes_up(instances, up)
+    refined = upright_boxes_up(instances, up)
+    up = up if refined is None else refined
     bottoms = np.array([inst.box.extent_along(up)[0] for inst in instances])
     sizes = np.array([float(np.max(inst.box.extents)) for inst in instances])
     tol = 0.1 * float(np.median(sizes))

@@ -35,12 +35,11 @@ import numpy as np
 
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.render.camera import Camera
-from spacedg.scene.io import MIN_UP_AGREEMENT, estimate_up
 from spacedg.scene.model import Instance, Scene
 
 __all__ = [
-    "AXES", "BoxAxesEvidence", "CameraEvidence", "FloorEvidence", "UpContradictedError", "UpEvidence", "UpUndecidedError",
-    "axis_name", "camera_evidence", "box_axes_evidence", "decide_up", "evidence_report", "floor_evidence", "gather_up_evidence",
+    "AXES", "MIN_UP_AGREEMENT", "BoxAxesEvidence", "CameraEvidence", "FloorEvidence", "UpContradictedError", "UpEvidence", "UpUndecidedError",
+    "axis_name", "camera_evidence", "level_up", "refine_up", "upright_boxes_up", "box_axes_evidence", "box_up_axes", "estimate_up", "decide_up", "evidence_report", "floor_evidence", "gather_up_evidence",
     "scene_up_evidence",
 ]
 
@@ -48,6 +47,8 @@ __all__ = [
 AXES: dict[str, np.ndarray] = {
     f"{s}{a}": (1.0 if s == "+" else -1.0) * np.eye(3)[i] for a, i in (("x", 0), ("y", 1), ("z", 2)) for s in "+-"
 }
+#: Smallest length of the mean camera −y axis accepted as an up estimate (1 = all agree).
+MIN_UP_AGREEMENT = 0.5
 #: Cameras decide only when their image-up vectors' resultant length reaches this (estimate_up's own threshold).
 MIN_RESULTANT = MIN_UP_AGREEMENT
 #: Cameras support an up within this angle of their mean image-up, and contradict it beyond CONTRADICT_DEG, degrees.
@@ -307,15 +308,101 @@ def floor_evidence(
     return FloorEvidence(n, resting_up, resting_down, slab_low, slab_high, floor_h, above, verdict, reason)
 
 
+def estimate_up(views: Mapping[str, Camera]) -> np.ndarray:
+    """Up estimated as the normalised mean of the cameras' −y axes (image "up" in the world).
+
+    Photographs are mostly taken upright, so the image's up direction averages to gravity's.
+    Raises when there are no cameras or their up axes disagree (mean length <
+    :data:`MIN_UP_AGREEMENT`), e.g. for a camera looking straight down: pass ``up`` then.
+    """
+    if not views:
+        raise InvalidDataError("cannot estimate up without cameras; pass up=(x, y, z)")
+    axes = np.array([-cam.cam_to_world[:3, 1] for cam in views.values()])
+    mean = axes.mean(axis=0)
+    norm = float(np.linalg.norm(mean))
+    if norm < MIN_UP_AGREEMENT:
+        raise InvalidDataError(
+            f"cannot estimate up: the {len(views)} cameras' up axes disagree (mean length {norm:.2f} < {MIN_UP_AGREEMENT}); pass up=(x, y, z)"
+        )
+    return mean / norm
+
+
+#: The cameras' x axes must spread this much in yaw (second eigenvalue of their scatter) to define a level plane.
+MIN_LEVEL_SPREAD = 0.05
+#: ... and lie this close to one plane (smallest eigenvalue: ~sin² of their typical roll; 0.03 is about 10°).
+MAX_LEVEL_ROLL = 0.03
+#: A refinement (level plane or box axes) is taken only within this angle of the mean image-up, in degrees.
+MAX_REFINE_DEG = 20.0
+
+
+def level_up(views: Mapping[str, Camera], up: np.ndarray) -> np.ndarray | None:
+    """Up as the normal of the plane the cameras' x axes lie in, signed like ``up``; ``None`` when undetermined.
+
+    People and robots hold cameras level (little roll) while pitching them freely, so the image x axis stays
+    horizontal while the image-up (−y) tilts with the pitch: the mean image-up of cameras looking down at a
+    table leans towards their viewing direction by the mean pitch, the x axes' plane does not. Needs x axes
+    that spread in yaw (:data:`MIN_LEVEL_SPREAD`) and lie near one plane (:data:`MAX_LEVEL_ROLL`), and a
+    normal within :data:`MAX_REFINE_DEG` of ``up``."""
+    if len(views) < 3:
+        return None
+    x_axes = np.array([np.asarray(c.cam_to_world, dtype=np.float64)[:3, 0] for c in views.values()])
+    x_axes = x_axes / np.linalg.norm(x_axes, axis=1, keepdims=True)
+    values, vectors = np.linalg.eigh(x_axes.T @ x_axes / len(x_axes))
+    if not (values[1] >= MIN_LEVEL_SPREAD and values[0] <= MAX_LEVEL_ROLL):
+        return None
+    normal = vectors[:, 0] * (1.0 if float(vectors[:, 0] @ up) >= 0.0 else -1.0)
+    return normal if _angle(normal, up) <= MAX_REFINE_DEG else None
+
+
+def upright_boxes_up(instances: Sequence[Instance], up: np.ndarray) -> np.ndarray | None:
+    """The mean of the boxes' axes nearest ``up`` when they agree (at least 60 % within 5° of their mean,
+    the mean within :data:`MAX_REFINE_DEG` of ``up``), else ``None``: annotated boxes stand upright, so each
+    has an axis along gravity, usually far more exactly than any camera estimate."""
+    axes = box_up_axes(instances, up)
+    mean = np.sum(axes, axis=0)
+    if not np.linalg.norm(mean) > 0:
+        return None
+    mean = mean / np.linalg.norm(mean)
+    close = axes @ mean >= math.cos(math.radians(5.0))
+    return mean if _angle(mean, up) <= MAX_REFINE_DEG and close.mean() >= 0.6 else None
+
+
+def refine_up(views: Mapping[str, Camera], instances: Sequence[Instance], up: np.ndarray) -> tuple[np.ndarray, str]:
+    """An estimated ``up`` (the cameras' mean image-up) made exact where the capture allows, and how:
+    the boxes' upright axes when they agree (:func:`upright_boxes_up`), else the cameras' level plane
+    (:func:`level_up`), else ``up`` unchanged."""
+    boxes = upright_boxes_up(instances, up)
+    if boxes is not None:
+        return boxes, f"the upright axes of {len(instances)} boxes"
+    level = level_up(views, up)
+    if level is not None:
+        return level, f"the plane of {len(views)} cameras' level x axes"
+    return up, f"the mean -y axis of {len(views)} cameras"
+
+
+def box_up_axes(instances: Sequence[Instance], up: np.ndarray) -> np.ndarray:
+    """(n, 3): every box's own axis nearest the line of ``up`` (a unit vector), signed to point along ``up``.
+
+    The one place the boxes' axes are matched to an up: :func:`box_axes_evidence` counts how many lie along
+    a line, :func:`upright_boxes_up` refines an estimated up with their mean."""
+    if not instances:
+        return np.zeros((0, 3))
+    rotations = np.array([inst.box.rotation for inst in instances])  # (n, 3, 3), columns = box axes
+    dots = np.einsum("nij,i->nj", rotations, np.asarray(up, dtype=np.float64))
+    rows = np.arange(len(rotations))
+    nearest = np.argmax(np.abs(dots), axis=1)
+    signs = np.where(dots[rows, nearest] < 0.0, -1.0, 1.0)
+    return rotations[rows, :, nearest] * signs[:, None]
+
+
 def box_axes_evidence(instances: Sequence[Instance], up: np.ndarray) -> BoxAxesEvidence:
     """The boxes' own axes' verdict on the axis of ``up``; see :class:`BoxAxesEvidence`."""
     if not instances:
         return BoxAxesEvidence(0, 0.0, None, 0.0, "undecided", "no boxes")
     cos_along = math.cos(math.radians(BOX_AXIS_DEG))
-    rotations = np.array([inst.box.rotation for inst in instances])  # (n, 3, 3), columns = box axes
 
     def share(direction: np.ndarray) -> float:
-        return float(np.mean(np.abs(np.einsum("nij,i->nj", rotations, direction)).max(axis=1) >= cos_along))
+        return float(np.mean(box_up_axes(instances, direction) @ direction >= cos_along))
 
     along = share(up)
     others = [(share(np.eye(3)[i]), "xyz"[i]) for i in range(3) if abs(float(up[i])) < math.cos(math.radians(45.0))]
@@ -437,8 +524,8 @@ def decide_up(
         return up, source, ev
     probe = camera_evidence(views, np.array([0.0, 0.0, 1.0])) if views else None
     if probe is not None and probe.resultant >= MIN_RESULTANT:
-        up = estimate_up(views)
-        ev = gather_up_evidence(views, instances, up, means=means, source=f"estimated from the -y axes of {len(views)} cameras")
+        up, how = refine_up(views, instances, estimate_up(views))
+        ev = gather_up_evidence(views, instances, up, means=means, source=f"estimated from {how}")
         if ev.cameras.verdict == "supports" and ev.box_axes.verdict != "contradicts":
             return up, ev.source, ev
         if ev.cameras.verdict == "supports":

@@ -68,10 +68,10 @@ def check_size(image_size: tuple[int, int], caller: str) -> tuple[int, int]:
 
 
 def reduced_camera(camera: Camera, image_size: tuple[int, int]) -> Camera:
-    """``camera`` resized to ``image_size`` (never enlarged beyond its own resolution, per axis)."""
-    w = min(image_size[0], camera.width)
-    h = min(image_size[1], camera.height)
-    return camera if (w, h) == (camera.width, camera.height) else camera.resized(w, h)
+    """``camera`` at the largest image of its **own aspect ratio** inside ``image_size`` (a bounding box,
+    pixels; never enlarged beyond its own resolution): :meth:`Camera.fitted`, the one image-size policy.
+    A 4:3 view in the default 160×120 box renders at 160×120, a 16:9 one at 160×90, never squeezed."""
+    return camera.fitted(min(image_size[0], camera.width), min(image_size[1], camera.height))
 
 
 def unbounded_canvas(camera: Camera, scale: int = 3) -> Camera:
@@ -143,8 +143,9 @@ def compute_visibility(
     Args:
         scene: the scene (its Gaussians must carry ``instance_ids``).
         views: view names (default: all of the scene's views).
-        image_size: reduced render size ``(width, height)`` in pixels; intrinsics are scaled
-            with :meth:`Camera.resized`; a view smaller than this renders at its own size.
+        image_size: reduced render size ``(width, height)`` in pixels, a bounding box: each view renders
+            at the largest image of its own aspect inside it (:func:`reduced_camera`, intrinsics scaled
+            with it); a view smaller than this renders at its own size.
         backend: render backend (``"auto"``, ``"cpu"``, ``"torch"``, ``"gsplat"``).
         device: torch device of the render (``"cuda"``: gsplat's CUDA compositor under ``auto``).
         canvas_scale: odd enlargement factor of the own-projection canvas (3: one frame of
@@ -221,7 +222,7 @@ def with_visibility(
 
 
 #: Version of the visibility computation; part of its cache key (bump on a change of method).
-VISIBILITY_VERSION = 1
+VISIBILITY_VERSION = 2  # 2: reduced renders keep each view's aspect (reduced_camera)
 
 
 def load_or_compute_visibility(

@@ -17,6 +17,9 @@ still renders the ``val`` split of ``scenes`` (the built-in rooms when null); ``
 turns it off. ``render_device: cuda`` renders and degrades the online samples on each rank's own
 GPU (``cuda:$LOCAL_RANK``) in the training process (``train.dataloader_num_workers`` must then
 be 0: CUDA stays in the process that owns it); ``null`` renders on the CPU in DataLoader workers.
+``qa_mode`` picks the question index of the training split (``train``: the dense train selection,
+more questions per scene; ``bench``: the strict one; ``null``: the dataset's default), passed to
+the dataset as ``qa_config=QABuildConfig(mode=...)`` (:func:`qa_config_for`); evaluation reads the default.
 """
 
 from __future__ import annotations
@@ -33,9 +36,10 @@ from spacedg.data.chat import chat_messages, item_images
 from spacedg.data.public_format import public_fields
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.errors import ParameterError, error_context
+from spacedg.qa import index as qa_index
 from spacedg.sft.data import ChatJsonlDataset, OnlineSFTDataset
 
-__all__ = ["DataOptions", "ValOptions"]
+__all__ = ["DataOptions", "QA_MODES", "ValOptions", "qa_config_for"]
 
 _SEVERITIES = (*SEVERITIES, "random")
 
@@ -54,6 +58,18 @@ def _check_degradations(degradations: Degradations, severity: str, where: str) -
     with error_context(where):
         for chain in [degradations] if isinstance(degradations, str) else degradations:
             Chain.parse(chain).check(levels)
+
+
+#: The question-index selection modes ``data.qa_mode`` accepts.
+QA_MODES: tuple[str, ...] = qa_index.MODES
+
+
+def qa_config_for(mode: str | None) -> qa_index.QABuildConfig | None:
+    """The :class:`~spacedg.qa.index.QABuildConfig` whose index trains for ``data.qa_mode``: ``None``
+    (the dataset's default) for ``None``."""
+    if mode is None:
+        return None
+    return qa_index.QABuildConfig(mode=mode)
 
 
 @dataclass(frozen=True)
@@ -95,6 +111,7 @@ class DataOptions:
     severity: str
     question_types: Sequence[str] | None
     max_questions: int | None
+    qa_mode: str | None
     seed: int
     max_length: int
     render_device: str | None
@@ -105,6 +122,8 @@ class DataOptions:
             raise ParameterError(f"data.source must be online or jsonl, got {self.source!r}")
         if self.source == "jsonl" and not self.jsonl:
             raise ParameterError("data.source=jsonl needs data.jsonl=PATH (a chat .jsonl written by spacedg export)")
+        if self.qa_mode is not None and self.qa_mode not in QA_MODES:
+            raise ParameterError(f"data.qa_mode must be null or one of {list(QA_MODES)}, got {self.qa_mode!r}")
         if self.severity not in _SEVERITIES:
             raise ParameterError(f"data.severity must be one of {list(_SEVERITIES)}, got {self.severity!r}")
         if self.source == "online":
@@ -117,7 +136,7 @@ class DataOptions:
             split, list(BENCH_DEGRADATIONS) if degradations is None else degradations, scenes=self.scenes,
             families=self.question_types, severity=self.severity, clean_prob=clean_prob,
             image_size=self.image_size, seed=self.seed, max_questions=max_questions, builtin_rooms=self.builtin_rooms,
-            device=self.rank_render_device(),
+            device=self.rank_render_device(), qa_config=qa_config_for(self.qa_mode) if split == "train" else None,
         )
 
     def rank_render_device(self) -> str | None:

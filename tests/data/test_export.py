@@ -13,6 +13,7 @@ import pytest
 
 import spacedg.data.export as export_module
 from spacedg.cli import main
+from spacedg.data.answerability import named_objects
 from spacedg.data.chain import CLEAN
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.bench_table import TSV_COLUMNS, tsv_bytes
@@ -92,6 +93,23 @@ def test_tsv_loads_with_pandas_and_matches_the_dataset(bench, exported):
     assert sum(sum(row.values()) for row in counts["counts"].values()) == len(bench) == counts["items"]
     assert counts["by_degradation"][CLEAN] == len(bench.records)
     assert "| total |" in summary.merge.table and CLEAN in summary.merge.table.splitlines()[0]
+
+
+def test_summary_keeps_answerability_per_item(bench, exported):
+    """summary.json: the share per degradation × severity and, per item, each named object's contrast."""
+    out, summary = exported
+    block = json.loads((out / "summary.json").read_text())["answerability"]
+    assert block["criterion"] == {"weber_threshold": 0.02, "viewing_flare": 0.01, "rose_k": 5.0}
+    assert set(block["by_condition"]) == {CLEAN, *BENCH_DEGRADATIONS} and set(block["by_condition"][CLEAN]) == {"-"}
+    assert all(set(row) == {"bench"} for name, row in block["by_condition"].items() if name != CLEAN)
+    assert len(block["items"]) == len(bench) and summary.merge.answerability == block["by_condition"]
+    for index, item in block["items"].items():
+        plan = bench.plan(int(index))
+        named = {i for _, ids in named_objects(plan.record) for i in ids}
+        assert item["degradation_type"] == plan.degradation_type and item["groups"] == len(named_objects(plan.record))
+        assert {o["id"] for o in item["objects"]} == named
+        assert item["answerable"] == all(any(o["discernible"] for o in item["objects"] if o["id"] in ids) for _, ids in named_objects(plan.record))
+    assert "| ori |" in summary.merge.answerability_table
 
 
 def test_tsv_quoting_survives_quotes_tabs_and_newlines():
@@ -250,6 +268,7 @@ def test_cli_export_and_bad_scene(rooms, tmp_path, capsys, monkeypatch):
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "bench.tsv" in text and "| object_counting |" in text and "| total |" in text
+    assert "answerability: share of items" in text and "| ori | " in text  # the bench split measures it by default
     assert len(pd.read_csv(out / "bench.tsv", sep="\t")) == sum(json.loads((out / "summary.json").read_text())["by_question_type"].values())
     assert main(argv) == 0 and "wrote 0 chunk(s)" in capsys.readouterr().out  # a rerun does nothing
     monkeypatch.setenv("RANK", "0")

@@ -18,7 +18,7 @@ ZERO_STRENGTH = {
     "motion_blur": {"trans": 0.0, "rot": 0.0, "sub_steps": 80},
     "haze": {"density": 0.0},
     "water_droplets": {"radius": 0.0},
-    "low_light": {"exposure": 1.0, "k": 0.0, "sigma_read": 0.0},
+    "low_light": {"exposure": 1.0, "k": 0.0, "sigma_read": 0.0, "gain": 1.0},
     "over_exposure": {"exposure": 1.0, "k": 0.0, "sigma_read": 0.0},
     "low_res": {"scale": 1.0},
 }
@@ -124,8 +124,9 @@ def test_distance_to_clean_rises_with_severity(small_room, views, name: str) -> 
     results = degrade_variants(small_room, views[:1], chains, seed=10, options=SMALL)
     clean = results[0].images.astype(np.float64)
     distances = [float(np.abs(r.images - clean).mean()) for r in results[1:]]
-    # at 96×72 px the mildest motion can be sub-pixel, which the renderer skips by design
-    assert (distances[0] > 0 or name == "motion_blur") and distances[-1] > max(distances[0], 0.5), (name, distances)
+    # at 96×72 px the mildest motion can be sub-pixel, which the renderer skips by design; low_res's
+    # milder cameras (≥ 175 px on the shorter side, stated at 1752×1168) out-resolve a 72-px image
+    assert (distances[0] > 0 or name in ("motion_blur", "low_res")) and distances[-1] > max(distances[0], 0.5), (name, distances)
     assert all(b >= a * 0.97 for a, b in zip(distances, distances[1:])), (name, distances)
 
 

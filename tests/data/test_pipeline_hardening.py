@@ -53,12 +53,14 @@ def test_a_non_finite_render_is_an_error_not_black_pixels(small_room, monkeypatc
 def test_degrade_image_depth_rules() -> None:
     photo = np.random.default_rng(0).integers(0, 256, (10, 12, 3), dtype=np.uint8)
     far = np.full((10, 12), 5.0, np.float32)
-    # 0, NaN and +inf are "no surface": the far depth's airlight, exactly like a render's empty pixels
+    # 0, NaN and +inf are "no surface": the airlight of the normalisation depth (depth_ref), exactly like a render's empty pixels
     holes = far.copy()
     holes[2, 3], holes[4, 5], holes[6, 7] = 0.0, np.nan, np.inf
-    with_holes, _ = degrade_image(photo, {"name": "haze", "params": {"density": 2.0, "airlight": 0.8}}, depth=holes)
-    at_far, _ = degrade_image(photo, {"name": "haze", "params": {"density": 2.0, "airlight": 0.8}}, depth=far)
-    np.testing.assert_array_equal(with_holes, at_far)
+    with_holes, provenance = degrade_image(photo, {"name": "haze", "params": {"density": 2.0, "airlight": 0.8}}, depth=holes)
+    at_ref = far.copy()
+    at_ref[~np.isfinite(holes) | (holes == 0)] = provenance[0]["params"]["depth_ref"]
+    expected, _ = degrade_image(photo, {"name": "haze", "params": {"density": 2.0, "airlight": 0.8}}, depth=at_ref, scene_depth=5.0)
+    np.testing.assert_array_equal(with_holes, expected)
     for value in (-3.0, -math.inf):
         bad = far.copy()
         bad[1, 2] = value

@@ -24,7 +24,7 @@ def _range(text: str, param: str) -> tuple[float, float]:
 
 
 @pytest.mark.parametrize(("chain", "param", "written"), [
-    ("defocus", "depth", (1.0, 8.0)), ("motion_blur", "trans", (0.2, 0.35)), ("haze", "depth_ref", (4.0, 4.0)),
+    ("defocus", "depth", (1.0, 8.0)), ("motion_blur", "trans", (0.2, 0.35)), ("haze", "depth_ref", (12.5, 12.5)),
 ])
 @pytest.mark.parametrize("depth", [1.0, 4.0])
 def test_scale_aware_metres_are_resolved_at_the_scene_depth(chain: str, param: str, written: tuple[float, float], depth: float) -> None:
@@ -49,5 +49,5 @@ def test_metres_at_the_reference_and_for_a_foreign_bench() -> None:
 
 def test_a_chain_scales_only_its_scale_aware_steps() -> None:
     text = degradation_info(_row("haze:3+low_res", 5.0))
-    assert "depth_ref = 8 m (scaled to the scene depth of 5 m; 4 m at 2.5 m)" in text
-    assert "low res (severity given as the rendering parameter ranges: scale in [0.02, 0.05])" in text
+    assert "depth_ref = 25 m (scaled to the scene depth of 5 m; 12.5 m at 2.5 m)" in text
+    assert "low res (severity given as the rendering parameter ranges: scale in [0.02, 0.05] at a 1752×1168 image, scaled with its size)" in text

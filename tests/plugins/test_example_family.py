@@ -79,7 +79,7 @@ def test_generation_is_seeded_balanced_and_rederivable(family_plugin, rooms) -> 
 def test_qa_build_families_writes_beside_the_full_index(family_plugin, qa_room_dirs, tmp_path, capsys) -> None:
     """`qa build --families` writes a selection index, validated records; the full index is never replaced."""
     rooms = private_copies(qa_room_dirs, tmp_path)
-    argv = ["qa", "build", *map(str, rooms), "--families", NAME, "--per-sub-type", str(CONFIG.per_sub_type)]
+    argv = ["qa", "build", *map(str, rooms), "--families", NAME, "--per-sub-type", str(CONFIG.per_sub_type), "--jobs", "1"]
     assert main(argv) == 0
     assert f".qa.{NAME}.jsonl" in capsys.readouterr().out
     selection = {}

@@ -63,7 +63,8 @@ def test_geometry_becomes_plain_json() -> None:
 @pytest.mark.parametrize(
     ("changes", "pattern"),
     [
-        ({"options": MCQ_OPTIONS[:3]}, "exactly 4 options"),
+        ({"options": MCQ_OPTIONS[:2]}, "needs 4 options"),
+        ({"options": MCQ_OPTIONS[:3], "answer": "D"}, "names no option"),
         ({"options": ("A. x", "B. y", "D. z", "C. w")}, "option C must read 'C. <text>'"),
         ({"options": ("A) x", "B. y", "C. z", "D. w")}, "option A must read"),
         ({"options": ("A. x", "B. x", "C. z", "D. w")}, "repeat a text"),

@@ -100,7 +100,7 @@ def test_judge_drops_only_judged_ambiguous_references():
 def test_cli_build_and_stats(qa_room_dirs, tmp_path, capsys):
     out = tmp_path / "qa"
     argv = ["qa", "build", str(qa_room_dirs[0]), str(qa_room_dirs[1]), "--out", str(out),
-            "--families", "object_counting,object_existence_estimation", "--per-sub-type", "6"]
+            "--families", "object_counting,object_existence_estimation", "--per-sub-type", "6", "--jobs", "1"]
     assert main(argv) == 0
     text = capsys.readouterr().out
     # a family selection has its own index beside the (absent) full one
@@ -118,6 +118,15 @@ def test_cli_build_and_stats(qa_room_dirs, tmp_path, capsys):
     assert main(["qa", "stats", *files]) == 0
     text = capsys.readouterr().out
     assert "Blind stress test" in text and "Repeats" in text and "Ambiguities" in text
+    assert "Counting answers (bench)" in text and "Selection modes" in text
+    # the dense train index goes beside the bench one; stats reports both modes
+    assert main([*argv, "--mode", "train"]) == 0 and len(list(out.glob("*.qa-train.object_counting+object_existence_estimation.jsonl"))) == 2
+    capsys.readouterr()
+    assert main(["qa", "stats", str(out), "--json", "--no-blind", "--families", "object_counting,object_existence_estimation"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    modes = {row["mode"]: row for row in report["modes"]}
+    assert set(modes) == {"bench", "train"} and modes["train"]["records"] > modes["bench"]["records"] == report["records"]
+    assert sum(report["count_answers"].values()) == sum(r["n"] for r in report["counts"] if r["question_type"] == "object_counting")
     assert main(["qa", "stats", str(tmp_path / "nothing")]) == 2
     assert "no such file" in capsys.readouterr().err
 

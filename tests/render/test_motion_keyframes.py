@@ -146,3 +146,18 @@ def test_degenerate_inputs_stay_in_range() -> None:
     for seed in (2000769, 2001442, 2001359, 2002319):
         run = case_render(np.random.default_rng([FAMILIES.index("render"), seed]), None, None)  # type: ignore[arg-type]
         run()  # check_frame: finite, alpha in [0, 1], rgb >= 0
+
+
+def test_parallax_asks_for_more_keyframes_on_a_close_up() -> None:
+    """Translation parallax between near and far (the wall-and-box scene: 1.55 m and 3 m) sets a
+    floor on the keyframe count; rotation alone makes none; at most 8 keyframes."""
+    from spacedg.render.motion import MAX_KEYFRAMES, PARALLAX_PX, choose_keyframes, motion_parallax
+
+    g = textured_wall()
+    cam = camera(80, 60, focal=70.0)
+    sideways = MotionBlur(translation=(0.3, 0.0, 0.0), rotation=(0.0, 0.0, 0.0))
+    parallax = motion_parallax(g, cam, sideways)
+    assert motion_parallax(g, cam, MotionBlur(translation=(0.0, 0.0, 0.0), rotation=(0.0, 0.1, 0.0))) == 0.0
+    assert 70.0 * 0.3 * (1 / 1.6 - 1 / 2.8) < parallax < 70.0 * 0.3 * (1 / 1.5 - 1 / 3.2)  # box 1.5–1.6 m, wall 2.8–3.2 m
+    assert choose_keyframes(44.0, 80) == 1 and choose_keyframes(44.0, 80, 28.7) == math.ceil(math.sqrt(28.7 / PARALLAX_PX)) == 3
+    assert choose_keyframes(5000.0, 80, 5000.0) == MAX_KEYFRAMES == 8 and choose_keyframes(44.0, 2, 28.7) == 2

@@ -330,3 +330,57 @@ def write_scannetpp_dslr(scene_dir: Path, scene: Scene) -> Path:
     (scene_dir / "scans").mkdir()
     (scene_dir / "scans" / "segments_anno.json").write_text(json.dumps(segments_anno(scene)))
     return scene_dir
+
+
+# ----------------------------------------------------------------------------- ScanNet++ iPhone (ARKit)
+#: ARKit's own session world of the iPhone fixture: a rigid change away from the scan frame (``pose`` is given in it).
+ARKIT_WORLD = np.array([[0.0, 0.0, 1.0, 2.0], [1.0, 0.0, 0.0, -1.0], [0.0, 1.0, 0.0, 0.5], [0.0, 0.0, 0.0, 1.0]])
+
+
+def pose_intrinsic_imu(scene: Scene, *, extra_frames: int = 0, flat: bool = False) -> dict:
+    """ScanNet++'s ``iphone/pose_intrinsic_imu.json`` for ``scene``'s views (metres, scan frame), as its toolkit reads it
+    (``iphone/arkit_pcl.py``): ``frame_NNNNNN`` → ``aligned_pose`` (4×4 camera-to-world, OpenCV axes, scan frame),
+    ``pose`` (the same in ARKit's own world, :data:`ARKIT_WORLD`), ``intrinsic`` (3×3 K of the 1920×1440 frames: the
+    views' K scaled from their size), ``timestamp`` and ``imu`` (not read). Frames are numbered 0, 10, 20, ... in view
+    order, then ``extra_frames`` more between them (frames not extracted to ``rgb/``). ``flat``: matrices as flat lists."""
+    out = {}
+    cams = list(scene.views.values())
+    for k in range(len(cams) + extra_frames):
+        cam = cams[k % len(cams)]
+        number = 10 * k if k < len(cams) else 10 * (k - len(cams)) + 5
+        sx, sy = 1920 / cam.width, 1440 / cam.height
+        kmat = [[cam.fx * sx, 0.0, cam.cx * sx], [0.0, cam.fy * sy, cam.cy * sy], [0.0, 0.0, 1.0]]
+        pose = np.asarray(cam.cam_to_world, dtype=np.float64)
+        mats = {"aligned_pose": pose.tolist(), "pose": (ARKIT_WORLD @ pose).tolist(), "intrinsic": kmat}
+        if flat:
+            mats = {key: np.asarray(v).ravel().tolist() for key, v in mats.items()}
+        out[f"frame_{number:06d}"] = {"timestamp": 1000.0 + number / 60.0, **mats,
+                                      "imu": {"gravity": [0.0, -9.81, 0.0], "rotation_rate": [0.0, 0.0, 0.0]}}
+    return out
+
+
+def write_scannetpp_iphone(scene_dir: Path, scene: Scene, *, rgb: bool = True, colmap: float | None = None, extra_frames: int = 2) -> Path:
+    """A ScanNet++ scene folder with the iPhone's ARKit cameras as published: ``iphone/pose_intrinsic_imu.json``
+    (:func:`pose_intrinsic_imu`), the frames extracted to ``iphone/rgb/frame_NNNNNN.jpg`` at the views' size (``rgb``;
+    the extra frames not extracted), ``iphone/colmap/`` when ``colmap`` is a number (the same frames, scan frame,
+    their centres ``colmap`` metres along +x from ARKit's: refined poses differ) and ``scans/segments_anno.json``."""
+    iphone = scene_dir / "iphone"
+    iphone.mkdir(parents=True)
+    data = pose_intrinsic_imu(scene, extra_frames=extra_frames)
+    (iphone / "pose_intrinsic_imu.json").write_text(json.dumps(data))
+    names = {view: f"frame_{10 * k:06d}.jpg" for k, view in enumerate(scene.views)}
+    if rgb:
+        (iphone / "rgb").mkdir()
+        for view, name in names.items():
+            cam = scene.views[view]
+            cv2.imwrite(str(iphone / "rgb" / name), np.full((cam.height, cam.width, 3), 128, np.uint8))
+    if colmap is not None:
+        moved = {}
+        for view, cam in scene.views.items():
+            pose = np.array(cam.cam_to_world, dtype=np.float64)
+            pose[0, 3] += colmap
+            moved[view] = cam.with_pose(pose)
+        write_colmap_text(iphone / "colmap", Scene(scene.id, scene.gaussians, moved, scene.instances, scene.up, None, {}), names)
+    (scene_dir / "scans").mkdir()
+    (scene_dir / "scans" / "segments_anno.json").write_text(json.dumps(segments_anno(scene)))
+    return scene_dir

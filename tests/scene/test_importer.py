@@ -170,3 +170,9 @@ def test_up_and_errors(tmp_path: Path) -> None:
     with pytest.raises(ParameterError, match="--cameras"):
         (tmp_path / "a.ply").write_bytes(b"ply\n")
         import_scene(tmp_path / "a.ply", None)
+
+
+def test_a_spacedg_scene_folder_needs_no_import(tmp_path: Path) -> None:
+    (tmp_path / "scene.json").write_text("{}")
+    with pytest.raises(FileFormatError, match=r"already a spacedg scene folder.*nothing to import.*spacedg scenes info"):
+        detect_layout(tmp_path)

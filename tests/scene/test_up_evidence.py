@@ -15,6 +15,9 @@ from spacedg.scene.importer import import_scene
 from spacedg.scene.io import load_scene, write_ply
 from spacedg.scene.model import Scene
 from spacedg.scene.up_evidence import (
+    estimate_up,
+    level_up,
+    refine_up,
     UpContradictedError,
     UpUndecidedError,
     axis_name,
@@ -77,6 +80,8 @@ def test_colmap_y_down_capture(y_down_inria, tmp_path: Path) -> None:
     # auto: the cameras' mean image-up, close to -y
     scene, report = import_scene(out, None, instances=holi, assign="none", progress=False)
     assert axis_name(scene.up) == "-y" and scene.metadata["up_evidence"]["decision"] == "supported"
+    up = np.asarray(scene.up, dtype=np.float64)
+    assert float(up @ [0.0, -1.0, 0.0]) / float(np.linalg.norm(up)) > math.cos(math.radians(0.5))  # exact, not the cameras' lean
     assert any(n.startswith("up evidence  up -y supported by the cameras") for n in report.notes)
     # the right axis given: accepted
     scene, _ = import_scene(out, None, instances=holi, up="-y", assign="none", progress=False)
@@ -173,3 +178,23 @@ def test_scene_up_evidence_and_bad_vectors(room) -> None:
         decide_up(room.views, room.instances, given=np.zeros(3))
     with pytest.raises(UpUndecidedError, match="cannot decide up"):
         decide_up({}, [], given=None)
+
+
+def test_an_estimated_up_is_made_exact_by_level_cameras_and_upright_boxes(room) -> None:
+    """The cameras look down, so their mean image-up leans ~11° towards where they look; the plane of their level
+    x axes and the boxes' upright axes do not lean."""
+    truth = np.array([0.0, 0.0, 1.0])
+
+    def degrees(v: np.ndarray) -> float:
+        return math.degrees(math.acos(min(1.0, float(v @ truth) / float(np.linalg.norm(v)))))
+
+    mean = estimate_up(room.views)
+    assert degrees(mean) > 5.0
+    level = level_up(room.views, mean)
+    assert level is not None and degrees(level) < 1.5
+    exact, how = refine_up(room.views, room.instances, mean)
+    assert degrees(exact) < 0.1 and "upright axes" in how
+    without_boxes, how = refine_up(room.views, [], mean)
+    assert degrees(without_boxes) < 1.5 and "level x axes" in how
+    same_yaw = {name: cam for name, cam in list(room.views.items())[:1]} | {"b": next(iter(room.views.values()))}
+    assert level_up(same_yaw, mean) is None  # x axes that do not spread in yaw define no plane

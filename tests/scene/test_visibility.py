@@ -10,7 +10,7 @@ from spacedg.scene.model import Instance, Scene
 import spacedg.scene.covisibility as covisibility
 from spacedg.scene.covisibility import covisibility_cache_path, covisibility_matrix, load_or_compute_covisibility, symmetrize
 from spacedg.scene.visibility_classes import VisibilityClass, VisibilityThresholds, classify
-from spacedg.scene.visibility import compute_visibility, unbounded_canvas, with_visibility
+from spacedg.scene.visibility import compute_visibility, reduced_camera, unbounded_canvas, with_visibility
 from spacedg.errors import ParameterError
 from spacedg.render.camera import Camera, FisheyeLens
 from spacedg.render.gaussians import Gaussians
@@ -77,6 +77,21 @@ def test_pixels_are_full_resolution(plates: Scene) -> None:
     half = compute_visibility(plates, image_size=(80, 60), progress=False)["v0"][FRONT]
     assert abs(half.visible_pixels - full.visible_pixels) <= 0.1 * full.visible_pixels
     assert abs(half.visible_fraction - full.visible_fraction) < 0.05
+
+
+def test_reduced_renders_keep_the_view_aspect(plates: Scene) -> None:
+    """A 16:9 view reduced into the default 160×120 box renders at 160×90 (never squeezed to 4:3); a 4:3 view at exactly
+    160×120, as before; the visibility of the wide view is that of the same view fitted beforehand."""
+    wide = Camera(F, F, 160.0, 90.0, 320, 180, np.eye(4))
+    small = reduced_camera(wide, (160, 120))
+    assert (small.width, small.height) == (160, 90) and small.fx == small.fy == F / 2 and (small.cx, small.cy) == (80.0, 45.0)
+    four_three = Camera(2 * F, 2 * F, W, H, 2 * W, 2 * H, np.eye(4))
+    assert reduced_camera(four_three, (W, H)).K.tolist() == four_three.resized(W, H).K.tolist()
+    assert reduced_camera(plates.views["v0"], (W, H)) is plates.views["v0"]
+    scene = Scene("wide", plates.gaussians, {"wide": wide, "fitted": small}, plates.instances)
+    vis = compute_visibility(scene, progress=False)
+    for iid in (FRONT, BACK, HALF_OUT):
+        assert vis["wide"][iid].visible_fraction == pytest.approx(vis["fitted"][iid].visible_fraction, abs=1e-9)
 
 
 def test_with_visibility_fills_instances(plates: Scene) -> None:

@@ -109,11 +109,13 @@ def surface_far_depth(depth: np.ndarray, alpha: np.ndarray) -> float:
     return float(np.percentile(covered, FAR_PERCENTILE))
 
 
-def severity_ladder(param: str, levels: tuple[tuple[float, float], ...], bench: int = 5) -> dict[str, dict[str, ParamRange]]:
+def severity_ladder(
+    param: str, levels: tuple[tuple[float, float], ...], bench: int = 5, per_size: int = 0,
+) -> dict[str, dict[str, ParamRange]]:
     """Presets of a one-parameter degradation: severities ``"1"``–``"5"`` from ``levels`` (five
     ``(low, high)`` ranges of ``param``, mildest first) and ``"bench"``, the paper's range, equal
-    to severity ``bench``."""
+    to severity ``bench``; ``per_size`` as :class:`~spacedg.plugins.specs.ParamRange`'s."""
     if len(levels) != 5:
         raise ValueError(f"severity_ladder({param!r}): give 5 ranges (severities 1-5), got {len(levels)}")
-    presets = {str(level): {param: ParamRange(*bounds)} for level, bounds in enumerate(levels, start=1)}
+    presets = {str(level): {param: ParamRange(*bounds, per_size=per_size)} for level, bounds in enumerate(levels, start=1)}
     return {"bench": dict(presets[str(bench)]), **presets}

@@ -19,7 +19,7 @@ water_droplets   same drop field (drawn from ``rng`` by the same code), field an
                  torch (float64 geometry as the numba kernel), refraction by ``grid_sample``
                  (reflection border = OpenCV's ``BORDER_REFLECT``), in-drop blur by our separable
                  Gaussian with OpenCV's kernel and border (kornia's ``gaussian_blur2d`` has no
-                 ``BORDER_REFLECT``): max |Δ| 3e-7 linear, 0 codes [1e-4].
+                 ``BORDER_REFLECT``): max |Δ| 1.7e-6 linear, 0 codes [1e-4].
 low_light,       the CPU kernel's own random numbers: its counter-based draws (splitmix64 of the key
 over_exposure    from ``rng``, the value index and the draw number) in int64 on the device and its
                  samplers transcribed step for step in float64 (Poisson table, PTRS, the cubic Φ⁻¹
@@ -88,6 +88,7 @@ def haze_torch(rgb: torch.Tensor, depth: torch.Tensor, alpha: torch.Tensor, dens
         far_depth = surface_far_depth(depth.cpu().numpy(), alpha.cpu().numpy())
     far = float(far_depth) if far_depth and math.isfinite(far_depth) and far_depth > 0 else (depth_ref or 1.0)
     beta = float(np.float32(density / (depth_ref if depth_ref > 0 else far)))
+    far = depth_ref if depth_ref > 0 else far  # no surface: at the normalisation depth D
     cover = torch.clamp(torch.nan_to_num(alpha.float(), nan=0.0), 0.0, 1.0)
     d = torch.where((depth > 0) & torch.isfinite(depth), torch.clamp(depth, max=depth_cap), torch.full_like(depth, far)).float()
     t_surface = torch.exp(-beta * d)
@@ -332,15 +333,25 @@ def gaussian_blur_reflect(image: torch.Tensor, size: int, sigma: float) -> torch
     return chw[:, 0].permute(1, 2, 0).contiguous()
 
 
+def _fresnel_ratio(cos_i: torch.Tensor, index: float) -> torch.Tensor:
+    """``water_droplets.fresnel_ratio`` on a float64 tensor (the same formula, transcribed)."""
+    cos_t = torch.sqrt(1.0 - (1.0 - cos_i * cos_i) / (index * index))
+    r_s = ((cos_i - index * cos_t) / (cos_i + index * cos_t)) ** 2
+    r_p = ((index * cos_i - cos_t) / (index * cos_i + cos_t)) ** 2
+    r_0 = ((index - 1.0) / (index + 1.0)) ** 2
+    return (1.0 - 0.5 * (r_s + r_p)) / (1.0 - r_0)
+
+
 def droplet_composite_torch(
-    rgb: torch.Tensor, drops: tuple[np.ndarray, ...], strength: float, blur_sigma: float, blur_kernel: int, *,
+    rgb: torch.Tensor, drops: tuple[np.ndarray, ...], reach: float, index: float, blur_sigma: float, blur_kernel: int, *,
     specular: float, rim: float, edge: float, light: tuple[float, float, float], shininess_log2: int,
 ) -> torch.Tensor:
     """The per-pixel part of :func:`spacedg.plugins.degradations.water_droplets.water_droplets` on
     tensors: ``drops`` as its ``_draw_drops`` returns them (drawn from ``rng`` on the host, the same
     numbers as the CPU path), then the drop field (float64 geometry, as the numba kernel), the
     refracted view (``grid_sample``, reflection border = OpenCV's ``BORDER_REFLECT``), the in-drop
-    blur and the composite; untouched outside drops."""
+    blur and the composite; untouched outside drops. ``reach`` = strength · F px (the refraction's
+    reach at the rim), ``index``: the Fresnel index (water's)."""
     cells, n_cols, n_rows, offsets, cx, cy, rr = drops
     height, width = rgb.shape[:2]
     device = rgb.device
@@ -376,9 +387,9 @@ def droplet_composite_torch(
     for _ in range(shininess_log2):
         spec = spec * spec
     highlight = (a.double() * spec).float()
-    trans = torch.where(drop, nz, torch.ones_like(nz)).float()
-    map_x = torch.where(drop, x - strength * best_dx - 0.5, x - 0.5).float()
-    map_y = torch.where(drop, y - strength * best_dy - 0.5, y - 0.5).float()
+    trans = torch.where(drop, _fresnel_ratio(nz, float(index)), torch.ones_like(nz)).float()
+    map_x = torch.where(drop, x - reach * nx - 0.5, x - 0.5).float()
+    map_y = torch.where(drop, y - reach * ny - 0.5, y - 0.5).float()
     # grid_sample (align_corners=False, reflection) = cv2.remap INTER_LINEAR with BORDER_REFLECT
     grid = torch.stack([(map_x.double() + 0.5) / width * 2 - 1, (map_y.double() + 0.5) / height * 2 - 1], dim=-1).float()
     seen = F.grid_sample(rgb.permute(2, 0, 1)[None], grid[None], mode="bilinear", padding_mode="reflection", align_corners=False)

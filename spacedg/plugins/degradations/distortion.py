@@ -10,17 +10,27 @@ marked invalid and stay black.
 
 Decisions the paper leaves open:
 
-- **Field of view.** The pose and principal point stay; the focal lengths are scaled by the
-  smallest factor ``s`` for which every ray the distorted image shows is inside the clean
-  view's frame: ``s = max_R R / θ_d(θ_src(R))`` over the normalised distances ``R`` from the
-  principal point to the frame boundary (for a pinhole view ``θ_src = atan R``; the maximum is
-  at the corner). So the distorted view never shows an object the clean view does not (answers
-  about what is visible stay true), the corners reach the clean view's corners, and the edge
-  midpoints are pushed outwards (barrel). With the bench lens on a 70° view, ``s ≈ 1.4``.
-  Rays the clean view sees beyond the fold are not reachable; their pixels are invalid (black).
+- **Field of view: the camera's own.** The paper modifies the projection, not the focal length:
+  the lens replaces the pinhole on the view's own ``fx, fy, cx, cy`` and pose. Near the image
+  centre ``θ_d ≈ θ ≈ tan θ``, so apparent sizes there are unchanged (a subject spanning ±0.1 rad
+  keeps its size within 0.6 % at the bench k1; tested within 2 %); towards the border the barrel
+  lens compresses the view and content the clean view did not show enters the frame. The share
+  of the distorted frame that the clean view covers — the part the capture is known to hold —
+  is :func:`spacedg.render.coverage.captured_share`; the degradation pipeline records it per
+  chain (``DegradedViews.captured_share``, the smallest over the views): 0.64 for the
+  bench lens on a 70° 4:3 view, 0.82 on a 50° 16:9 one (the corners gain the most). Rays the lens does not image (beyond ``max_theta`` or the fold)
+  are invalid pixels (black).
+- **The contained variant** (before issue 29 the only one), :func:`distort_contained`: the
+  focal lengths scaled by the smallest factor ``s`` (:func:`containing_zoom`) for which every
+  ray the distorted image shows is inside the clean view's frame, ``s = max_R R / θ_d(θ_src(R))``
+  over the normalised distances ``R`` from the principal point to the frame boundary (for a
+  pinhole view ``θ_src = atan R``; the maximum is at the corner). Nothing uncaptured enters, but
+  the subject grows by ``s`` (≈ 1.2–1.4 with the bench lens): every apparent size changes. An
+  API function for users who need it, not a registered degradation.
 - **No identity value.** ``k1 = … = k4 = 0`` is the ideal f-θ lens, which already differs from
   a pinhole (θ instead of tan θ); the two agree as the field of view goes to 0 (tested).
-- A view that already has a fisheye lens gets its lens replaced, with ``θ_src`` from its own lens.
+- A view that already has a fisheye lens gets its lens replaced (the contained variant takes
+  ``θ_src`` from the view's own lens).
 - Deterministic: ``rng`` is not used.
 
 Parameters (dimensionless coefficients for θ in radians): ``k1``–``k4`` in [−1, 1],
@@ -49,7 +59,7 @@ from spacedg.plugins.specs import (
 from spacedg.render.camera import Camera, FisheyeLens
 from spacedg.render.request import RenderRequest
 
-__all__ = ["SPEC", "containing_zoom", "distort"]
+__all__ = ["SPEC", "containing_zoom", "distort", "distort_contained"]
 
 _BOUNDARY_SAMPLES = 257
 
@@ -74,19 +84,26 @@ def containing_zoom(camera: Camera, lens: FisheyeLens) -> float:
     radius = np.linspace(r_near, r_far, _BOUNDARY_SAMPLES)
     theta = _source_theta(camera, radius)
     edge = lens.effective_max_theta
-    reachable = theta <= edge
+    reachable = (theta <= edge) & (radius > 0.0)  # R = 0 (principal point on the frame's edge) bounds nothing
     if not reachable.any():  # even the nearest edge is beyond the fold: the image circle touches it
         return r_near / float(lens.distort_theta(np.float64(edge)))
     return float(np.max(radius[reachable] / lens.distort_theta(theta[reachable])))
 
 
 def distort(request: RenderRequest, k1: float, k2: float, k3: float, k4: float, max_theta: float) -> RenderRequest:
-    """``request`` rendered through the equidistant fisheye ``k1..k4, max_theta`` (same pose, contained field)."""
+    """``request`` rendered through the equidistant fisheye ``k1..k4, max_theta`` on the camera's own
+    focal lengths, principal point and pose (the paper's model; see the module docstring)."""
+    lens = FisheyeLens(k1=k1, k2=k2, k3=k3, k4=k4, max_theta=max_theta)
+    return replace(request, camera=replace(request.camera, fisheye=lens))
+
+
+def distort_contained(request: RenderRequest, k1: float, k2: float, k3: float, k4: float, max_theta: float) -> RenderRequest:
+    """:func:`distort` with the focal lengths scaled by :func:`containing_zoom`, so that the view shows
+    only rays the clean view shows (magnifies the subject; see the module docstring)."""
     camera = request.camera
     lens = FisheyeLens(k1=k1, k2=k2, k3=k3, k4=k4, max_theta=max_theta)
     zoom = containing_zoom(camera, lens)
-    fisheye_camera = replace(camera, fx=camera.fx * zoom, fy=camera.fy * zoom, fisheye=lens)
-    return replace(request, camera=fisheye_camera)
+    return replace(request, camera=replace(camera, fx=camera.fx * zoom, fy=camera.fy * zoom, fisheye=lens))
 
 
 def apply(request: RenderRequest, params: Mapping[str, Any], rng: np.random.Generator) -> RenderRequest:
@@ -127,7 +144,7 @@ SPEC = DegradationSpec(
         "5": _preset((-0.24, -0.23)),
     },
     apply=apply,
-    description="Equidistant fisheye lens θ_d = θ(1 + k1θ² + k2θ⁴ + k3θ⁶ + k4θ⁸) in the rasterizer (exact Jacobian), field contained in the clean view.",
+    description="Equidistant fisheye lens θ_d = θ(1 + k1θ² + k2θ⁴ + k3θ⁶ + k4θ⁸) in the rasterizer (exact Jacobian) on the camera's own focal lengths: sizes at the centre kept, new content at the border.",
     order=10.0,
 )
 

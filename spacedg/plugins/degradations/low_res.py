@@ -14,6 +14,15 @@ Parameter: ``scale`` ("1", hard limits [1e-6, 1]; lower is harsher; below ``1/W`
 becomes one pixel wide). Presets: ``bench`` [0.02, 0.05] (the paper's table: a 640-px image
 becomes 13–32 px wide); severities ``1``–``5``: [0.5, 0.7], [0.3, 0.45], [0.15, 0.25],
 [0.07, 0.12], [0.02, 0.05].
+
+**Size-invariant** (decision): the presets' ``scale`` is stated at the reference image size
+(:data:`~spacedg.plugins.specs.REFERENCE_IMAGE_SIZE`, 1752 × 1168: bench reduces its shorter
+side to 23–58 px) and scales inversely with the output (``ParamRange(per_size=-1)``, clamped
+at 1), so the reduced image has the same pixels whatever the output size: a low-resolution
+camera's resolution does not depend on the size its picture is shown at. At 640 × 360 the bench
+``scale`` is 0.065–0.16 (the reduced image is 42 × 23 to 104 × 58, as at 1920 × 1080); an
+output already smaller than the reduced image is left as it is. The provenance records the
+``scale`` used. An explicit ``scale`` is the output's fraction, as before.
 """
 
 from __future__ import annotations
@@ -68,7 +77,7 @@ def apply_torch(image: Any, params: Mapping[str, Any], rng: np.random.Generator)
 SPEC = DegradationSpec(
     name="low_res", category=Category.DIGITAL, stage=Stage.DISPLAY,
     params=(ParamSpec("scale", "1", "Linear size factor of the reduced image.", low=1e-6, high=1.0, harsher="lower"),),
-    presets=severity_ladder("scale", ((0.5, 0.7), (0.3, 0.45), (0.15, 0.25), (0.07, 0.12), (0.02, 0.05))),
+    presets=severity_ladder("scale", ((0.5, 0.7), (0.3, 0.45), (0.15, 0.25), (0.07, 0.12), (0.02, 0.05)), per_size=-1),
     apply=apply,
     apply_torch=apply_torch,
     description="Area-downsample the 8-bit image by scale s to max(1, round(W·s)) × max(1, round(H·s)), bilinear upsample back.",

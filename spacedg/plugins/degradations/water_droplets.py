@@ -28,30 +28,52 @@ Drop field (all randomness from ``rng``, a :class:`numpy.random.Generator`)
 Optics (in linear light, HDR values above 1 kept, nothing clipped)
 ------------------------------------------------------------------
 
-- Refraction: the pixel at ``p`` shows the scene at ``p − strength · r · n_xy``, i.e. at
-  ``c + (1 − strength)(p − c)``: a drop is a small magnifier of power ``1 / (1 − strength)``
-  (bench 0.3–0.5: 1.4–2×); ``strength = 1`` shows the centre's colour, ``strength > 1`` an
-  inverted image. Sampling: :func:`cv2.remap` (bilinear, ``BORDER_REFLECT``; coordinates are
-  always finite).
+A drop is a small positive lens: it shows the scene behind it **flipped and minified**, as
+physically based raindrop rendering finds (Garg & Nayar 2006; Roser & Geiger 2009: each drop is
+a wide-angle lens showing an inverted image of the environment), lit by a specular highlight,
+and it creates no light: over a black scene it stays black outside its highlight.
+
+- Refraction, the paper's "simplified Snell's law" ``Δu ∝ n_x, Δv ∝ n_y``: a thin prism of
+  index ``n`` tilted by ``t`` deviates a ray by ``δ ≈ (n − 1) t ≈ (n − 1) sin t``, and a
+  deviation ``δ`` moves the sampled scene point by ``F·δ`` px, ``F`` the focal length in pixels.
+  So the pixel at ``p`` shows the scene at ``p − strength · F · n_xy``: ``strength`` is the
+  deviation per unit of surface slope, ``n − 1`` for a thin drop (water 0.33; the bench range
+  0.3–0.5 allows for the drop's shape) and ``F`` = :data:`REFRACTION_FOCAL`
+  × the image's longer side (a nominal 53° horizontal view: the linear stage has no camera; in
+  units of the image, so the drop's optics do not depend on the output size). With
+  ``n_xy = (p − c) / r`` this is ``c − (strength·F/r − 1)(p − c)``: the drop of radius ``r``
+  shows the scene within ``strength·F − r`` px of its centre, inverted and minified
+  ``strength·F/r − 1`` times (bench at 640×360: about 3× for the largest drops, over 100× for the
+  smallest); ``strength = 0`` shows the scene behind undeviated. Sampling: :func:`cv2.remap`
+  (bilinear, ``BORDER_REFLECT`` for rays leaving the frame; coordinates are always finite). A remap moves
+  radiance and never amplifies it (the brightness theorem: a lossless lens keeps radiance).
 - In-drop optical blur: :func:`cv2.GaussianBlur` of the refracted image, ``blur_sigma`` px (in
-  image pixels, after magnification) with an odd ``blur_kernel`` px square kernel (OpenCV
-  ``ksize``; a kernel narrower than ``±2σ`` truncates the Gaussian, as in OpenCV). No blur when
-  ``blur_sigma = 0`` or ``blur_kernel = 1`` (OpenCV would otherwise derive σ from the kernel).
+  image pixels) with an odd ``blur_kernel`` px square kernel (OpenCV ``ksize``; a kernel
+  narrower than ``±2σ`` truncates the Gaussian, as in OpenCV). No blur when ``blur_sigma = 0``
+  or ``blur_kernel = 1`` (OpenCV would otherwise derive σ from the kernel).
+- Transmission: the Fresnel transmittance of the air–water surface (unpolarised, water's index
+  :data:`WATER_INDEX` = 1.333, a property of the material whatever the drop's shape) at the
+  ray's incidence angle ``θ_i = acos n_z``, relative to normal incidence: ``τ = T(θ_i) / T(0)``
+  (1 at the centre, 0 at the grazing rim, so drops show a dark outline; the clean image already
+  carries the lens's own surface losses at normal incidence). Averaged over a drop, weighted by
+  its coverage, τ is 0.983: outside the highlights a drop carries 98.3 % of the light of the
+  refracted background it shows (98.2–98.4 % measured over whole drop fields, every preset, on
+  textured frames; ``benchmarks/drops_distortion.py``).
+  ``rim`` weights this loss (1 = the Fresnel law, 0 = lossless).
 - Phong specular highlight, white, added in linear light: ``α · k_s · max(0, R·V)^shininess``
   with ``R = 2(n·L)n − L``, view ``V = (0, 0, 1)`` (towards the camera), light from the upper
   left ``L = normalize(−1, −1, 2)`` (:data:`LIGHT_DIRECTION`), ``k_s`` = :data:`SPECULAR_INTENSITY`
-  = 0.5 (linear units, 1 = diffuse white), shininess :data:`SHININESS` = 16.
-- Rim loss: towards the rim the surface turns to grazing, where Fresnel reflection rises and
-  rays refract in from far outside the view, so drops show a dark outline. Transmission
-  ``τ = 1 − rim · (1 − n_z)`` with ``rim`` = :data:`RIM_DARKENING` = 0.7 (1 at the centre,
-  0.67 where the soft edge reaches full coverage, 0.3 at the rim).
-- Composite inside drops: ``out = (1 − α) · I + α · τ · blur(refract(I)) + highlight``.
+  = 0.5 (linear units, 1 = diffuse white: the mirror image of a lamp, about 25× diffuse white
+  seen at water's 2 % reflectance), shininess :data:`SHININESS` = 16. It is the only light a
+  drop adds.
+- Composite inside drops: ``out = (1 − α) · I + α · τ · blur(refract(I)) + highlight``: outside
+  the highlights, a drop's light is the refracted background's, less the Fresnel loss.
 
 Identity, limits and errors
 ---------------------------
 
 - ``radius = 0`` or ``scale = 0`` means no drops: the output is a bit-exact copy (``rng`` is
-  not used). ``strength = 0`` still blurs and lights the drops.
+  not used). ``strength = 0`` still blurs, darkens the rims of and lights the drops.
 - Input: float32 (H, W, 3), finite. NaN or ±inf is rejected with :class:`InvalidDataError`
   (blur and interpolation would turn ``inf · 0`` into NaN inside drops); finite values of any
   size (tested up to 1e30) give finite output.
@@ -66,6 +88,15 @@ Presets: ``bench`` = the paper's table (scale [2.5, 4], radius [0.25, 0.75], str
 [0.3, 0.5], blur_sigma [2, 2.5], blur_kernel 9). Severities ``1`` … ``5`` keep scale in
 [2.5, 4] and raise radius, strength, blur_sigma and blur_kernel (5, 7, 9, 9, 11); ``4`` is
 close to bench.
+
+**Size-invariant** (decision): the drop field is already defined relative to the image (cells
+across the shorter side, radii as fractions of a cell, the refraction offset proportional to
+the radius), and it is drawn per cell, so the same ``rng`` gives the same drops at every size.
+The presets' ``blur_sigma`` and ``blur_kernel`` are pixels of the reference image
+(:data:`~spacedg.plugins.specs.REFERENCE_IMAGE_SIZE`, 1752 × 1168) and scale with the output's
+shorter side (``ParamRange(per_size=True)``; the kernel's half-width is scaled, so it stays
+odd): at 640 × 360 the bench blur is σ ≈ 0.6–0.8 px in a 3 px kernel. The provenance records
+the pixels used. Explicit values are pixels of the output, as before.
 """
 
 from __future__ import annotations
@@ -82,7 +113,7 @@ import numpy as np
 from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins.degradations.common import check_linear_rgb
 from spacedg.plugins.hookspecs import registering
-from spacedg.plugins.specs import Category, DegradationSpec, ParamSpec, Stage
+from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 from spacedg.render.threads import fork_safe
 
 __all__ = [
@@ -98,6 +129,9 @@ __all__ = [
     "SPECULAR_INTENSITY",
     "SHININESS",
     "RIM_DARKENING",
+    "REFRACTION_FOCAL",
+    "WATER_INDEX",
+    "fresnel_ratio",
 ]
 
 NAME = "water_droplets"
@@ -115,15 +149,19 @@ LIGHT_DIRECTION: tuple[float, float, float] = (-1.0 / math.sqrt(6.0), -1.0 / mat
 SPECULAR_INTENSITY = 0.5
 #: Phong shininess exponent, ``2 ** SHININESS_LOG2`` (evaluated by repeated squaring).
 SHININESS_LOG2 = 4
-#: Light lost towards a drop's rim: transmission ``τ = 1 − RIM_DARKENING · (1 − n_z)``.
-RIM_DARKENING = 0.7
+#: Weight of the Fresnel loss towards a drop's rim: ``τ = 1 − RIM_DARKENING · (1 − T(θ_i)/T(0))`` (1 = physical).
+RIM_DARKENING = 1.0
+#: Nominal focal length of the refraction, as a multiple of the image's longer side (a 53° view).
+REFRACTION_FOCAL = 1.0
+#: Refractive index of water (at 589 nm, 20 °C), for the Fresnel transmission of a drop's surface.
+WATER_INDEX = 1.333
 SHININESS = 2**SHININESS_LOG2
 #: Most drop cells of the finest layer (guards extreme aspect ratios at high ``scale``).
 MAX_CELLS = 10_000_000
 
 SCALE = ParamSpec("scale", "1/image", "Drop-field frequency: cells of the largest drop layer across the image's shorter side (0 = no drops).", low=0.0, high=100.0)
 RADIUS = ParamSpec("radius", "1", "Largest drop radius as a fraction of its cell's half-size (0 = no drops).", low=0.0, high=1.0, harsher="higher")
-STRENGTH = ParamSpec("strength", "1", "Refraction: a pixel shows the scene at p - strength * r * n_xy (magnifier of power 1/(1 - strength); > 1 inverts).", low=0.0, high=5.0, harsher="higher")
+STRENGTH = ParamSpec("strength", "1", "Refraction (n - 1 for a thin drop): a pixel shows the scene at p - strength * F * n_xy (F = the image's longer side): a flipped, minified view.", low=0.0, high=5.0, harsher="higher")
 BLUR_SIGMA = ParamSpec("blur_sigma", "px", "Standard deviation of the Gaussian blur inside drops (0 = no blur).", low=0.0, high=20.0, harsher="higher")
 BLUR_KERNEL = ParamSpec("blur_kernel", "px", "Odd side of the square Gaussian kernel inside drops (OpenCV ksize; 1 = no blur).", low=1, high=51, integer=True, harsher="higher")
 
@@ -136,8 +174,9 @@ class DropletField:
         alpha: soft drop coverage in [0, 1]; 0 exactly outside every drop.
         height: height of the top drop in px (0 outside drops).
         highlight: ``alpha · max(0, R·V)^SHININESS``, the Phong term at unit ``k_s``.
-        transmission: ``n_z`` of the top drop's surface (1 at its centre, 0 at its rim; 1
-            outside drops): the transmission at unit :data:`RIM_DARKENING`.
+        transmission: Fresnel transmittance of the top drop's surface relative to normal
+            incidence, ``T(acos n_z) / T(0)`` at :data:`WATER_INDEX` (1 at its centre, 0 at
+            its rim; 1 outside drops): the transmission at unit :data:`RIM_DARKENING`.
         map_x, map_y: :func:`cv2.remap` source coordinates (pixel index units, centre at
             integer) of the refracted view; the identity outside drops.
     """
@@ -151,6 +190,21 @@ class DropletField:
 
 
 # ------------------------------------------------------------------ compiled kernels
+def fresnel_ratio(cos_i: Any, index: float) -> Any:
+    """Unpolarised Fresnel transmittance from air into a medium of ``index`` (>= 1) at incidence
+    cosine ``cos_i`` in [0, 1], relative to normal incidence: 1 at ``cos_i = 1``, 0 at grazing.
+    Floats and numpy arrays alike (and compiled by numba for the drop field)."""
+    sin_t2 = (1.0 - cos_i * cos_i) / (index * index)
+    cos_t = (1.0 - sin_t2) ** 0.5
+    r_s = ((cos_i - index * cos_t) / (cos_i + index * cos_t)) ** 2
+    r_p = ((index * cos_i - cos_t) / (index * cos_i + cos_t)) ** 2
+    r_0 = ((index - 1.0) / (index + 1.0)) ** 2
+    return (1.0 - 0.5 * (r_s + r_p)) / (1.0 - r_0)
+
+
+_fresnel_ratio = numba.njit(cache=True, inline="always")(fresnel_ratio)
+
+
 @fork_safe
 @numba.njit(parallel=True, cache=True)
 def _field_kernel(
@@ -163,7 +217,8 @@ def _field_kernel(
     centre_x: np.ndarray,
     centre_y: np.ndarray,
     drop_r: np.ndarray,
-    strength: float,
+    reach: float,
+    index: float,
     light: np.ndarray,
     shininess_log2: int,
     edge: float,
@@ -174,7 +229,9 @@ def _field_kernel(
     map_y: np.ndarray,
     transmission: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """Per pixel: the highest drop over all layers, its coverage, highlight, rim loss and remap coordinates."""
+    """Per pixel: the highest drop over all layers, its coverage, highlight, Fresnel ratio and remap coordinates.
+
+    ``reach`` = strength · F px (the source moves by ``reach · n_xy``), ``index``: the Fresnel index."""
     n_layers = cell.shape[0]
     lx, ly, lz = light[0], light[1], light[2]
     inv_cell = 1.0 / cell
@@ -220,9 +277,9 @@ def _field_kernel(
             alpha[i, j] = a
             height_map[i, j] = best_h
             highlight[i, j] = a * spec
-            map_x[i, j] = x - strength * best_dx - 0.5
-            map_y[i, j] = y - strength * best_dy - 0.5
-            transmission[i, j] = nz
+            map_x[i, j] = x - reach * nx - 0.5
+            map_y[i, j] = y - reach * ny - 0.5
+            transmission[i, j] = _fresnel_ratio(nz, index)
 
 
 @fork_safe
@@ -293,6 +350,12 @@ def _draw_drops(shape: tuple[int, int], scale: float, radius: float, rng: np.ran
     )
 
 
+def refraction_reach(shape: tuple[int, int], strength: float) -> float:
+    """``strength · F`` px: how far a drop's rim samples the scene from the rim's own pixel
+    (``F`` = :data:`REFRACTION_FOCAL` × the longer side of an image of ``shape = (H, W)``)."""
+    return float(strength) * REFRACTION_FOCAL * float(max(shape))
+
+
 def droplet_field(
     shape: tuple[int, int], scale: float, radius: float, strength: float, rng: np.random.Generator
 ) -> DropletField:
@@ -316,7 +379,7 @@ def droplet_field(
         return field
     drops = _draw_drops((height, width), scale, radius, rng)
     _field_kernel(
-        height, width, *drops, strength, np.asarray(LIGHT_DIRECTION, np.float64), SHININESS_LOG2, EDGE_WIDTH,
+        height, width, *drops, refraction_reach((height, width), strength), WATER_INDEX, np.asarray(LIGHT_DIRECTION, np.float64), SHININESS_LOG2, EDGE_WIDTH,
         field.alpha, field.height, field.highlight, field.map_x, field.map_y, field.transmission,
     )
     return field
@@ -345,7 +408,7 @@ def water_droplets(
         blur_kernel: odd in-drop kernel side in px, [1, 51].
         rng: source of the drop placement.
         specular: Phong ``k_s`` in linear light (0 disables the highlights).
-        rim: light lost at the rim, in [0, 1] (0 disables the rim darkening).
+        rim: weight of the Fresnel loss towards the rim, in [0, 1] (1 = physical, 0 = lossless).
 
     Returns:
         A new float32 (H, W, 3) array, equal to ``rgb`` bit for bit outside the drops.
@@ -355,7 +418,7 @@ def water_droplets(
     if not (math.isfinite(specular) and specular >= 0.0):
         raise ParameterError(f"{NAME}: specular must be a finite number >= 0 (linear light), got {specular!r}")
     if not (math.isfinite(rim) and 0.0 <= rim <= 1.0):
-        raise ParameterError(f"{NAME}: rim must be a number in [0, 1] (fraction of light lost at the rim), got {rim!r}")
+        raise ParameterError(f"{NAME}: rim must be a number in [0, 1] (weight of the Fresnel rim loss), got {rim!r}")
     if not np.isfinite(rgb).all():
         bad = np.argwhere(~np.isfinite(rgb))
         raise InvalidDataError(
@@ -393,29 +456,39 @@ def apply_torch(rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng
         return rgb.clone()
     drops = _draw_drops(tuple(rgb.shape[:2]), p["scale"], p["radius"], rng)  # the CPU path's numbers, from the same rng
     return device.droplet_composite_torch(
-        rgb, drops, p["strength"], p["blur_sigma"], p["blur_kernel"], specular=SPECULAR_INTENSITY, rim=RIM_DARKENING,
+        rgb, drops, refraction_reach(tuple(rgb.shape[:2]), p["strength"]), WATER_INDEX, p["blur_sigma"],
+        p["blur_kernel"], specular=SPECULAR_INTENSITY, rim=RIM_DARKENING,
         edge=EDGE_WIDTH, light=LIGHT_DIRECTION, shininess_log2=SHININESS_LOG2,
     )
+
+
+def _preset(radius: tuple[float, float], strength: tuple[float, float], sigma: tuple[float, float], kernel: int) -> dict[str, ParamRange]:
+    """One preset: scale in [2.5, 4]; the blur's pixels stated at the reference image size (``per_size``)."""
+    return {
+        "scale": ParamRange(2.5, 4.0), "radius": ParamRange(*radius), "strength": ParamRange(*strength),
+        "blur_sigma": ParamRange(*sigma, per_size=True), "blur_kernel": ParamRange(kernel, kernel, per_size=True),
+    }
 
 
 SPEC = DegradationSpec(
     name=NAME, category=Category.METEOROLOGICAL, stage=Stage.LINEAR,
     params=(SCALE, RADIUS, STRENGTH, BLUR_SIGMA, BLUR_KERNEL),
     presets={
-        "bench": {"scale": (2.5, 4.0), "radius": (0.25, 0.75), "strength": (0.3, 0.5), "blur_sigma": (2.0, 2.5), "blur_kernel": 9},
-        "1": {"scale": (2.5, 4.0), "radius": (0.15, 0.25), "strength": (0.1, 0.2), "blur_sigma": (0.5, 1.0), "blur_kernel": 5},
-        "2": {"scale": (2.5, 4.0), "radius": (0.25, 0.4), "strength": (0.2, 0.3), "blur_sigma": (1.0, 1.5), "blur_kernel": 7},
-        "3": {"scale": (2.5, 4.0), "radius": (0.35, 0.55), "strength": (0.3, 0.4), "blur_sigma": (1.5, 2.0), "blur_kernel": 9},
-        "4": {"scale": (2.5, 4.0), "radius": (0.5, 0.75), "strength": (0.4, 0.5), "blur_sigma": (2.0, 2.5), "blur_kernel": 9},
-        "5": {"scale": (2.5, 4.0), "radius": (0.7, 0.9), "strength": (0.5, 0.7), "blur_sigma": (2.5, 3.0), "blur_kernel": 11},
+        "bench": _preset((0.25, 0.75), (0.3, 0.5), (2.0, 2.5), 9),
+        "1": _preset((0.15, 0.25), (0.1, 0.2), (0.5, 1.0), 5),
+        "2": _preset((0.25, 0.4), (0.2, 0.3), (1.0, 1.5), 7),
+        "3": _preset((0.35, 0.55), (0.3, 0.4), (1.5, 2.0), 9),
+        "4": _preset((0.5, 0.75), (0.4, 0.5), (2.0, 2.5), 9),
+        "5": _preset((0.7, 0.9), (0.5, 0.7), (2.5, 3.0), 11),
     },
     apply=apply,
     apply_torch=apply_torch,
     needs=frozenset(),
     description=(
         "Drops on the lens: 3-layer hemispherical height map (scale = cells across the shorter side, radius = "
-        "fraction of the half-cell); refraction p - strength*r*n_xy via cv2.remap, in-drop Gaussian blur "
-        "(blur_sigma px, odd blur_kernel px), Phong highlight, soft edges; untouched outside drops."
+        "fraction of the half-cell); each drop shows the scene behind it flipped and minified (refraction "
+        "p - strength*F*n_xy) with water's Fresnel transmission, in-drop Gaussian blur (blur_sigma px, "
+        "odd blur_kernel px) and a Phong highlight, soft edges; untouched outside drops; adds no light but the highlight."
     ),
     order=20.0,
 )

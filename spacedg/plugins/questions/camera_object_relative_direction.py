@@ -58,7 +58,7 @@ frames and ``Scene.up`` enter the answers, so questions, options and answers are
 the whole scene moves rigidly (any up direction).
 
 Options: :func:`~spacedg.plugins.questions.geometry.build_mcq` (truth never among the
-distractors; seeded shuffle). Camera-frame labels take :func:`flipped_labels` first (1 for a
+distractors; seeded shuffle). ``single_view`` labels take :func:`flipped_labels` first (1 for a
 one-part label, 3 for a two-part one); a one-part label is padded with **both** words of one
 other axis (chosen by ``rng``), as ``camera_translation``'s ``main_dir``: the four options are
 then both signs of two axes, and they never tell which axis is the truth's (padding with
@@ -67,15 +67,22 @@ blind 42 %).
 
 ``bbox_center_direction`` does not ask an object whose label would name "Back" or "Up" (rare:
 behind camera B, or above a camera at eye height; a blind model learns to avoid them), nor one
-whose two-part option set (Up/Down × Front/Back) would leave a single askable answer; the
-options still offer those words, and the audit's chance counts only the answers that occur.
+whose parts are Up/Down × Front/Back. Its **options are answerable** (decision, debiasing: an
+option that is never the truth is one a blind model eliminates): the twelve labels it can
+answer fall into three fixed decks of four (:data:`BBOX_DECKS`: the one-part labels Front,
+Down, Left, Right; the two-part labels led by Right/Left; those led by Front/Down), and a
+question offers exactly the deck of its truth, so every option it shows is the truth of some
+question, and the deck tells nothing of which one (the question index takes whole rounds of
+its four roles). Two-part labels that differ only in order ("Right-Front", "Front-Right") are
+never offered together.
 
 Debiasing (the ``selection`` entry): the camera-frame sub types' **cell** is the sub type, the
 template (``single_view``'s four wordings) and the option set (what the text tells: which
 axes), ``relpos_A_facing_B``'s is the sub type with the eight
 sector labels as roles; the question index takes whole rounds (one record per role) per cell,
-over the roles the scene offers in the camera-frame cells (an object above a camera at eye
-height, "Up", hardly ever occurs: those rounds go over the other three options).
+every role of the cell in each round, so every option a question shows is the truth of another
+question of the same scene (``single_view`` did rounds over the roles a scene offers before
+index version 5, which left rare options such as "Back-Up" shown but never right).
 Subjects: the view and the unordered object pair (``single_view``: "B relative to A" and "A
 relative to B" are one question), camera B's view and the object (``bbox_center_direction``),
 the ordered triplet (``relpos_A_facing_B``).
@@ -154,6 +161,8 @@ from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
     "BBOX_CENTER_DIRECTION",
+    "BBOX_DECKS",
+    "bbox_options",
     "FAMILY",
     "MIN_DISPLACEMENT_M",
     "NAME",
@@ -192,6 +201,13 @@ TWO_VIEW_TEMPLATES: tuple[str, ...] = (
     "Which direction is the \"{label}\" relative to you when taking image B?",
     "When you were taking the photo in Image B, where is the {label} area relative to you?",
 )
+#: ``bbox_center_direction``'s option decks: every label it can answer, in exactly one deck of
+#: four (one-part labels; two-part labels led by Right/Left; two-part labels led by Front/Down).
+BBOX_DECKS: tuple[tuple[str, ...], ...] = (
+    ("Front", "Down", "Left", "Right"),
+    ("Right-Front", "Left-Front", "Right-Down", "Left-Down"),
+    ("Front-Right", "Front-Left", "Down-Right", "Down-Left"),
+)
 RELPOS_TEMPLATE = "You are positioned at the {a} and face the {b}. In which direction is the {c} relative to you?"
 
 
@@ -209,11 +225,19 @@ def body_direction(vector_camera: np.ndarray, rng: np.random.Generator) -> tuple
     return parts, truth, options, letter
 
 
+def bbox_options(truth: str, rng: np.random.Generator) -> tuple[tuple[str, ...], str, tuple[str, ...]]:
+    """``(options, letter, deck)`` of a ``bbox_center_direction`` truth: its :data:`BBOX_DECKS`
+    deck, shuffled by :func:`~spacedg.plugins.questions.geometry.build_mcq`."""
+    deck = next(d for d in BBOX_DECKS if truth in d)
+    options, letter = build_mcq(truth, [t for t in deck if t != truth], rng)
+    return options, letter, deck
+
+
 def _option_selection(subject: str, sub: str, template: int | None, truth: str, options: tuple[str, ...]) -> dict[str, Any]:
     """Selection entry whose cell is the sub type, template (if given) and option set (the roles are its four texts)."""
     texts = sorted(o[3:] for o in options)
     head = sub if template is None else f"{sub}|template:{template}"
-    return selection_entry(subject, f"{head}|options:" + "|".join(texts), truth, texts, all_roles=False)
+    return selection_entry(subject, f"{head}|options:" + "|".join(texts), truth, texts)
 
 
 def _body_geometry(view: str, world: np.ndarray, cam: np.ndarray, parts: list[tuple[int, int]], truth: str) -> dict[str, Any]:
@@ -276,15 +300,16 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         if _rare_bbox_direction(vec):
             continue
         template = int(rng.integers(len(TWO_VIEW_TEMPLATES)))
-        parts, truth, options, letter = body_direction(vec, rng)
-        roles = sorted(o[3:] for o in options if not _rare_bbox_label(o[3:]))
+        parts = dominant_parts(vec)
+        truth = parts_label(parts, BODY_DIRECTION_WORDS)
+        options, letter, deck = bbox_options(truth, rng)
         question = find_in_image(phrase(inst), 0) + "\n" + TWO_VIEW_TEMPLATES[template].format(label=label_text(inst.label))
         extra = {
             **_body_geometry(pair.b, inst.box.center - centre_b, vec, parts, truth),
             "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
             "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
             "selection": selection_entry(
-                f"view:{pair.b}|object:{iid}", f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(sorted(o[3:] for o in options)), truth, roles,
+                f"view:{pair.b}|object:{iid}", f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(sorted(deck)), truth, sorted(deck),
             ),
         }
         yield _record(scene, index, BBOX_CENTER_DIRECTION, (pair.a, pair.b), (inst,), ((inst, pair.a),), question, options, letter, template, extra)
@@ -299,14 +324,14 @@ def _rare_bbox_direction(vec_camera: np.ndarray) -> bool:
     """Whether ``bbox_center_direction`` skips this object (decision, debiasing): its label would
     name "Back" (behind camera B) or "Up" (above a camera held at eye height). Both are rare
     (a few per scene), so a blind model learns never to pick them; asked only where a scene
-    happens to offer them, they would make the rest predictable. The options still show them.
-    Also skipped: a label whose option set leaves fewer than two answers that are asked."""
+    happens to offer them, they would make the rest predictable. Also skipped: Up/Down ×
+    Front/Back labels (only "Front-Down"/"Down-Front" would be left: no deck of four)."""
     parts = dominant_parts(vec_camera)
     if _rare_bbox_label(parts_label(parts, BODY_DIRECTION_WORDS)):
         return True
     if len(parts) == 2:  # the four sign combinations of two axes: at least two must be askable
         axes = {axis for axis, _ in parts}
-        return axes == {1, 2}  # Up/Down × Front/Back: only "Front-Down"/"Down-Front" would be left
+        return axes == {1, 2}  # Up/Down × Front/Back: only "Front-Down"/"Down-Front" would be left (no deck)
     return False
 
 

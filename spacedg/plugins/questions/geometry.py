@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.scene.box import OrientedBox
-from spacedg.plugins.answers import MCQ_LETTERS
+from spacedg.plugins.answers import MCQ_LETTERS, MCQ_OPTION_COUNTS
 from spacedg.errors import InvalidDataError
 from spacedg.render.camera import Camera
 
@@ -233,24 +233,25 @@ def single_word_pool(words: Sequence[tuple[str, str]], exclude_axes: Sequence[in
     return [w for axis, pair in enumerate(words) if axis not in exclude_axes for w in pair]
 
 
-#: Letter decks of recently used generators: id(rng) → (rng kept alive, remaining letters).
-_DECKS: OrderedDict[int, tuple[np.random.Generator, list[int]]] = OrderedDict()
+#: Letter decks of recently used generators: (id(rng), options) → (rng kept alive, remaining letters).
+_DECKS: OrderedDict[tuple[int, int], tuple[np.random.Generator, list[int]]] = OrderedDict()
 _MAX_DECKS = 256
 
 
-def _next_letter(rng: np.random.Generator) -> int:
-    """Index of the next correct letter for ``rng``: shuffled blocks of A–D, so over any
-    generation the correct letter is uniform to within one block (exact balance)."""
-    entry = _DECKS.get(id(rng))
+def _next_letter(rng: np.random.Generator, n_options: int = 4) -> int:
+    """Index of the next correct letter for ``rng``: shuffled blocks of A–D (A–C for three
+    options), so over any generation the correct letter is uniform to within one block (exact balance)."""
+    key = (id(rng), n_options)
+    entry = _DECKS.get(key)
     if entry is None or entry[0] is not rng:
         entry = (rng, [])
-        _DECKS[id(rng)] = entry
+        _DECKS[key] = entry
         while len(_DECKS) > _MAX_DECKS:
             _DECKS.popitem(last=False)
-    _DECKS.move_to_end(id(rng))
+    _DECKS.move_to_end(key)
     deck = entry[1]
     if not deck:
-        deck.extend(int(k) for k in rng.permutation(4))
+        deck.extend(int(k) for k in rng.permutation(n_options))
     return deck.pop()
 
 
@@ -274,30 +275,34 @@ class BalancedDeck:
 
 
 def build_mcq(
-    truth: str, distractors: Sequence[str], rng: np.random.Generator, slot: int | None = None,
+    truth: str, distractors: Sequence[str], rng: np.random.Generator, slot: int | None = None, n_options: int = 4,
 ) -> tuple[tuple[str, ...], str]:
-    """Four ``"A. text"`` option lines and the correct letter.
+    """``n_options`` (4, or 3 where only three answers are possible) ``"A. text"`` option lines
+    and the correct letter.
 
-    ``distractors`` are the candidates in preference order; the first three distinct ones
-    that differ from ``truth`` are used, in an order shuffled by ``rng``. The correct letter is
-    ``slot`` (0–3) when given, else it comes from a deck of shuffled A–D blocks drawn from the
-    same ``rng`` (one deck per generator), so the letters of one family's generation are
+    ``distractors`` are the candidates in preference order; the first ``n_options − 1`` distinct
+    ones that differ from ``truth`` are used, in an order shuffled by ``rng``. The correct letter is
+    ``slot`` (0 … n_options − 1) when given, else it comes from a deck of shuffled A–D (A–C) blocks drawn from the
+    same ``rng`` (one deck per generator and option count), so the letters of one family's generation are
     balanced exactly, not only in expectation; the sequence is still a pure function of the seed.
-    Raises :class:`InvalidDataError` if fewer than three usable distractors exist.
+    Raises :class:`InvalidDataError` if too few usable distractors exist.
     """
+    if n_options not in MCQ_OPTION_COUNTS:
+        raise InvalidDataError(f"build_mcq: n_options must be one of {list(MCQ_OPTION_COUNTS)}, got {n_options!r}")
+    need = n_options - 1
     chosen: list[str] = []
     for text in distractors:
         if text != truth and text not in chosen:
             chosen.append(text)
-        if len(chosen) == 3:
+        if len(chosen) == need:
             break
-    if len(chosen) < 3:
-        raise InvalidDataError(f"build_mcq: need 3 distractors different from {truth!r}, got {list(distractors)}")
-    others = [chosen[i] for i in rng.permutation(3)]
+    if len(chosen) < need:
+        raise InvalidDataError(f"build_mcq: need {need} distractors different from {truth!r}, got {list(distractors)}")
+    others = [chosen[i] for i in rng.permutation(need)]
     if slot is None:
-        slot = _next_letter(rng)
-    elif slot not in (0, 1, 2, 3):
-        raise InvalidDataError(f"build_mcq: slot must be 0-3 (the correct letter's position), got {slot!r}")
+        slot = _next_letter(rng, n_options)
+    elif slot not in range(n_options):
+        raise InvalidDataError(f"build_mcq: slot must be 0-{need} (the correct letter's position), got {slot!r}")
     texts = others[:slot] + [truth] + others[slot:]
     return tuple(f"{MCQ_LETTERS[k]}. {t}" for k, t in enumerate(texts)), MCQ_LETTERS[slot]
 

@@ -13,12 +13,15 @@ annotation (counting "book" beside a bookshelf full of books). A count of **0** 
 (no instance of the label has a visible pixel, and nothing ambiguous is in view), for the
 scene's labels and its vocabulary.
 
-Balance (**debiasing**: a blind model that knows the label must not know the count): the
-answers are the counts in ``counts`` (default :data:`COUNTS` = 0, 1, 2; a view showing more
-is not asked), and each label is asked equally often with each of them: a label is asked only
-when the scene has a view for every count, in whole rounds (one view per count). So neither
-"always 1" nor a per-label prior beats guessing among ``counts``. After the balanced rounds
-come the other candidates with a count in ``counts``, in a seeded order, with a selection cell
+Balance (**debiasing**: a blind model that knows the label must not know the count): views
+showing several instances are asked (counts 0 to :data:`MAX_COUNT` = 10, :data:`COUNTS`), and
+each label is asked equally often in each count **bin** of :data:`COUNT_BINS` (``"0"``, ``"1"``,
+``"2+"``: the bin is the record's selection role): a label is asked only when the scene has a
+view for every bin, in whole rounds (one view per bin). So neither "always 1" nor a per-label
+prior beats a third: a blind model's best exact answer is right at most once per round. Within
+the ``"2+"`` bin the views are taken round-robin over their counts, highest first
+(:func:`_spread`), so a scene with six chairs in a view asks to count six of them rather than
+always two. After the balanced rounds come the other candidates with a count in ``counts``, in a seeded order, with a selection cell
 ``label:<label>|unbalanced`` that never completes a round: the question index takes them
 only when its quota per sub type is smaller than a round (``per_sub_type`` 1 or 2), so a tiny
 index is not empty. ``counts=None`` yields every valid candidate instead (any count ≥ 0),
@@ -47,14 +50,14 @@ entry per counted instance: ``id``, ``visible_pixels``, ``visible_fraction``), `
 ``null`` when the view has no record), ``thresholds`` (``min_pixels`` scaled to this image,
 ``min_fraction``), ``template`` (index into :data:`TEMPLATES`) and ``selection``
 (:func:`~spacedg.plugins.questions.records.selection_entry`: subject = view and label, cell =
-the label and the template, roles = ``counts``).
+the label and the template, roles = the bins of :data:`COUNT_BINS`, role = the count's bin).
 
 Order: every (view, label) candidate is built first (views in scene order, labels in key
-order). Balanced: the labels with a view for every count are visited in the order of one
-``rng.permutation``; each label's candidates of each count are shuffled (``rng.permutation``,
-counts in ascending order: :func:`~spacedg.plugins.questions.records.role_rounds`); the stream
-goes round-robin over the labels, one round (one view per count, counts in the order of an
-``rng.permutation`` per round) per visit. Each round draws one template (``rng.integers``,
+order). Balanced: the labels with a view for every bin are visited in the order of one
+``rng.permutation``; each label's candidates of each bin are shuffled (``rng.permutation``,
+bins in order, as :func:`~spacedg.plugins.questions.records.role_rounds`; the last bin's
+then spread over its counts by :func:`_spread`: :func:`_count_rounds`); the stream goes round-robin over the labels, one
+round (one view per bin, bins in the order of an ``rng.permutation`` per round) per visit. Each round draws one template (``rng.integers``,
 before its permutation) for all its records, so its questions read word for word the same.
 Unbalanced (``counts=None``): all candidates in the order of one ``rng.permutation`` with
 templates drawn up front. The same seed gives the same records in the same order, and a caller
@@ -75,16 +78,31 @@ from spacedg.plugins.questions.view_sampling import VisibilityIndex, label_ambig
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass, VisibilityThresholds
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.language import label_text, plural
-from spacedg.plugins.questions.records import make_record, role_rounds, round_robin, selection_entry
+from spacedg.plugins.questions.records import make_record, round_robin, selection_entry
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
-__all__ = ["COUNTS", "NAME", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
+__all__ = ["COUNTS", "COUNT_BINS", "MAX_COUNT", "NAME", "count_bin", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
 
 NAME = "object_counting"
 SUB_QUESTION_TYPE = "count"
-#: The counts asked, each equally often per label (see the module docstring).
-COUNTS: tuple[int, ...] = (0, 1, 2)
+#: The largest count asked (a view showing more instances of a label is not asked).
+MAX_COUNT = 10
+#: The counts asked (see the module docstring).
+COUNTS: tuple[int, ...] = tuple(range(MAX_COUNT + 1))
+#: The balance bins, by their smallest count: a label is asked equally often in each (the last
+#: bin holds every larger count): ``"0"``, ``"1"``, ``"2+"``.
+COUNT_BINS: tuple[int, ...] = (0, 1, 2)
+
+
+def count_bin(count: int, bins: tuple[int, ...] = COUNT_BINS) -> str:
+    """The bin role of ``count``: ``"0"``, ``"1"``, …, ``"<last>+"`` (:data:`COUNT_BINS`)."""
+    k = max(i for i, low in enumerate(bins) if count >= low)
+    return f"{bins[k]}+" if k == len(bins) - 1 else str(bins[k])
+
+
+def _bin_roles(bins: tuple[int, ...] = COUNT_BINS) -> tuple[str, ...]:
+    return tuple(count_bin(low, bins) for low in bins)
 
 #: ``{plural}``: the label's plural; ``{label}``: the label as written.
 TEMPLATES: tuple[str, ...] = (
@@ -157,13 +175,34 @@ def _record(
         geometry["selection"] = selection_entry(subject)
     else:
         cell = f"label:{cand.key}|unbalanced" if unbalanced else f"label:{cand.key}|template:{template}"
-        geometry["selection"] = selection_entry(subject, cell, str(count), tuple(str(c) for c in counts))
+        geometry["selection"] = selection_entry(subject, cell, count_bin(count), _bin_roles())
     views = (cand.view,)
     return make_record(
         scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.COUNT, views,
         {"label": cand.key, "counted": counted_ids, "template": template},
         question=render_question(template, cand.label), answer=count, geometry=geometry,
     )
+
+
+def _spread(group: list[_Candidate]) -> list[_Candidate]:
+    """The last bin's candidates (``"2+"``: several counts) round-robin over their counts, highest
+    count first (each count's candidates keep their shuffled order), so the rounds a scene can
+    afford count the most instances it shows, then the next count, and so on."""
+    by_count: dict[int, list[_Candidate]] = {}
+    for cand in group:
+        by_count.setdefault(len(cand.counted), []).append(cand)
+    return list(round_robin(iter(by_count[c]) for c in sorted(by_count, reverse=True)))
+
+
+def _count_rounds(by_key: dict[str, list[list[_Candidate]]], rng: np.random.Generator) -> list[list[tuple[_Candidate, ...]]]:
+    """:func:`~spacedg.plugins.questions.records.role_rounds` (same draws) with each key's last
+    bin :func:`_spread` before its rounds are formed."""
+    keys = sorted(key for key, groups in by_key.items() if all(groups))
+    out: list[list[tuple[_Candidate, ...]]] = []
+    for i in rng.permutation(len(keys)):
+        shuffled = [[group[int(j)] for j in rng.permutation(len(group))] for group in by_key[keys[int(i)]]]
+        out.append(list(zip(*shuffled[:-1], _spread(shuffled[-1]))))
+    return out
 
 
 def generate(
@@ -184,15 +223,16 @@ def generate(
             yield _record(scene, candidates[idx], int(templates[idx]), thresholds, None)
         return
     counts = tuple(sorted({int(c) for c in counts}))
+    roles = _bin_roles()
     by_key: dict[str, list[list[_Candidate]]] = {}
     for cand in candidates:
-        by_key.setdefault(cand.key, [[] for _ in counts])
+        by_key.setdefault(cand.key, [[] for _ in roles])
         if len(cand.counted) in counts:
-            by_key[cand.key][counts.index(len(cand.counted))].append(cand)
+            by_key[cand.key][roles.index(count_bin(len(cand.counted)))].append(cand)
     used: set[int] = set()
-    for round_ in round_robin([iter(rounds) for rounds in role_rounds(by_key, rng)]):
+    for round_ in round_robin([iter(rounds) for rounds in _count_rounds(by_key, rng)]):
         template = int(rng.integers(0, len(TEMPLATES)))  # one wording per round: the text tells nothing
-        for k in rng.permutation(len(counts)):
+        for k in rng.permutation(len(roles)):
             used.add(id(round_[int(k)]))
             yield _record(scene, round_[int(k)], template, thresholds, counts)
     # then the other candidates with an asked count, in a seeded order: their cell never completes
@@ -207,7 +247,7 @@ def generate(
 make_family = FamilyFactory(
     generate, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.COUNT}, sub_question_types=(SUB_QUESTION_TYPE,),
     num_views=(1,), needs={"visibility"},
-    description="How many clearly visible instances of a label one image shows (0, 1 or 2, balanced per label; grey-zone and ambiguous views skipped).",
+    description="How many clearly visible instances of a label one image shows (0 to 10, balanced per label over 0 / 1 / 2+; grey-zone and ambiguous views skipped).",
 )
 FAMILY = make_family()
 spacedg_register_question_families = registering(FAMILY)

@@ -30,10 +30,13 @@ seen: two sides 1–5 cm apart are neither "the same" to the eye nor decidable):
   (top elevation, :data:`TOP_DIFFERENT_M`);
 - in between (a visible but unsure difference) the pair is **skipped**.
 
-Options (:func:`~spacedg.plugins.questions.geometry.build_mcq`, seeded shuffle): object 1's
-phrase, object 2's phrase, ``"about the same"`` and the never-correct option
-:data:`NEVER_CORRECT` = ``"cannot be determined"``: both boxes are annotated in metres, so the
-comparison is always determinable, and this option is never the truth.
+Options (:func:`~spacedg.plugins.questions.geometry.build_mcq` with ``n_options=3``, seeded
+shuffle): object 1's phrase, object 2's phrase and ``"about the same"``: **three** options,
+the three answers that are possible (decision, debiasing: the fourth option the spec named,
+"cannot be determined", was never the truth, since both boxes are annotated in metres, and a
+blind model eliminated it; a user's chance is one in the options shown, a third).
+:data:`NEVER_CORRECT` is kept only so that an object named "cannot be determined" is still
+refused.
 
 Object rules (decisions the spec left open):
 
@@ -89,7 +92,7 @@ Geometry block (JSON): ``pair`` (``a``, ``b``, covisibility, baseline, rotation)
 and, for heights, ``top_corner``), ``values`` ``[v1, v2]``, ``delta`` ``v1 − v2``,
 ``tie_threshold_m`` (``|Δ|`` below it: same) and ``different_threshold_m`` (``|Δ|`` at or above
 it: different) for this pair, ``truth`` (``"object1"`` / ``"object2"`` / ``"same"``),
-``truth_text``, ``never_correct_option``, ``template``, ``refs`` (``id``, ``label``,
+``truth_text``, ``template``, ``refs`` (``id``, ``label``,
 ``description``, ``view`` of both objects, in question order), ``prior_values`` (the typical
 values the cell came from) and ``selection``. Answers, questions and options are invariant
 under a rigid motion of the whole scene (``Scene.transformed``): extents are unchanged and
@@ -177,7 +180,7 @@ TOP_DIFFERENT_M = 0.15
 TIE_THRESHOLD_M = SAME_M
 #: Option text of a tie.
 SAME = "about the same"
-#: The never-correct fourth option (the boxes always determine the answer).
+#: The never-correct option earlier versions offered (no longer offered; a phrase reading so is refused).
 NEVER_CORRECT = "cannot be determined"
 
 
@@ -327,8 +330,8 @@ def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str
     prior_role = role_of(_outcome(prior, thresholds_for(quantity, prior)[0]))
     cell = _cell(sub, quantity, prior, prior_role)
     subject = f"{sub}|objects:{min(one.id, two.id)}|{max(one.id, two.id)}"
-    texts = [phrase1, phrase2, SAME, NEVER_CORRECT]
-    options, letter = build_mcq(truth_text, [t for t in texts if t != truth_text], rng)
+    texts = [phrase1, phrase2, SAME]
+    options, letter = build_mcq(truth_text, [t for t in texts if t != truth_text], rng, n_options=3)
     views = (pair.a, pair.b)
     geometry = {
         "pair": {"a": pair.a, "b": pair.b, **pair.to_dict()},
@@ -341,7 +344,6 @@ def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str
         "different_threshold_m": different_from,
         "truth": truth,
         "truth_text": truth_text,
-        "never_correct_option": NEVER_CORRECT,
         "template": 0,
         "refs": [ref_entry(one, pair.a), ref_entry(two, pair.b)],
         "prior_values": list(prior),

@@ -17,8 +17,6 @@ and an ``InvalidDataError``); every message names the file and the record.
 from spacedg.files import FileValueError
 from spacedg.scene.io._assemble import (
     GAUSSIAN_SUFFIXES,
-    MIN_UP_AGREEMENT,
-    estimate_up,
     read_gaussians,
     read_views,
     scene_from_files,
@@ -29,6 +27,7 @@ from spacedg.scene.io.native import load_scene, save_scene
 from spacedg.scene.io.nerfstudio import read_transforms
 from spacedg.scene.io.ply import quantize_for_ply, read_ply, write_ply
 from spacedg.scene.io.splat import read_splat, write_splat
+from spacedg.scene.up_evidence import MIN_UP_AGREEMENT, estimate_up
 
 __all__ = [
     "GAUSSIAN_SUFFIXES",

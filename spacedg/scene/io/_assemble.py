@@ -3,27 +3,21 @@
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, Literal
 
-import numpy as np
-
-from spacedg.errors import FileFormatError, InvalidDataError
+from spacedg.errors import FileFormatError
 from spacedg.files import PathLike, as_path, require_file
 from spacedg.render.camera import Camera
 from spacedg.render.gaussians import Gaussians
+from spacedg.scene import capture_checks as checks
 from spacedg.scene.io.capture import find_cameras, read_cameras, scale_gaussians, scale_instances, scale_views
 from spacedg.scene.io.instances import read_instances
 from spacedg.scene.io.ply import read_ply
 from spacedg.scene.io.splat import read_splat
 from spacedg.scene.io.spz import read_spz
 from spacedg.scene.model import Scene
-
-#: Smallest length of the mean camera −y axis accepted as an up estimate (1 = all agree).
-MIN_UP_AGREEMENT = 0.5
-
 
 #: Gaussian file suffixes :func:`read_gaussians` reads.
 GAUSSIAN_SUFFIXES = (".ply", ".splat", ".spz")
@@ -62,79 +56,74 @@ def read_views(source: PathLike | Mapping[str, Camera], opencv_distortion: Liter
     return read_cameras(find_cameras(as_path(source, "views")), opencv_distortion)
 
 
-def estimate_up(views: Mapping[str, Camera]) -> np.ndarray:
-    """Up estimated as the normalised mean of the cameras' −y axes (image "up" in the world).
-
-    Photographs are mostly taken upright, so the image's up direction averages to gravity's.
-    Raises when there are no cameras or their up axes disagree (mean length <
-    :data:`MIN_UP_AGREEMENT`), e.g. for a camera looking straight down: pass ``up`` then.
-    """
-    if not views:
-        raise InvalidDataError("cannot estimate up without cameras; pass up=(x, y, z)")
-    axes = np.array([-cam.cam_to_world[:3, 1] for cam in views.values()])
-    mean = axes.mean(axis=0)
-    norm = float(np.linalg.norm(mean))
-    if norm < MIN_UP_AGREEMENT:
-        raise InvalidDataError(
-            f"cannot estimate up: the {len(views)} cameras' up axes disagree (mean length {norm:.2f} < {MIN_UP_AGREEMENT}); pass up=(x, y, z)"
-        )
-    return mean / norm
-
-
 def scene_from_files(
     id: str,
     gaussians_path: PathLike,
     views: PathLike | Mapping[str, Camera],
     instances_path: PathLike | None = None,
-    up: Iterable[float] | None = None,
-    scale: float = 1.0,
+    up: str | Iterable[float] | None = None,
+    metres_per_unit: float | None = None,
     *,
+    units: Literal["auto", "metric"] = "auto",
+    trust_up: bool = False,
+    frame_check: Literal["error", "warn"] = "error",
     opencv_distortion: Literal["error", "drop"] = "error",
     metadata: Mapping[str, Any] | None = None,
 ) -> Scene:
-    """Build a :class:`Scene` from a Gaussians file, cameras and (optionally) instance boxes.
+    """Build a :class:`Scene` from a Gaussians file, cameras and (optionally) instance boxes, with the
+    checks of ``spacedg scenes import`` (:mod:`spacedg.scene.capture_checks`: the same functions, the
+    same errors, the same override arguments).
 
     Args:
         id: scene id.
-        gaussians_path: ``.ply`` (INRIA 3DGS) or ``.splat``; loaded lazily on first use.
+        gaussians_path: ``.ply`` (INRIA 3DGS), ``.splat`` or ``.spz``; loaded lazily on first use when
+            there are no instances (the box checks need the Gaussians' centres).
         views: a COLMAP model folder, a ``transforms.json`` (or its folder), an INRIA
             ``cameras.json``, or a mapping name → Camera (see :func:`read_views`).
         instances_path: instance JSON (:func:`read_instances`, Holi-Spatial's layout included);
             image references must resolve to views.
-        up: unit vector against gravity, in the **files'** world frame; ``None`` estimates it
-            with :func:`estimate_up` (recorded in ``metadata["up_source"]``).
-        scale: metres per file unit, applied once to Gaussians (positions and sizes), camera
-            centres and boxes. Up is a direction and is not scaled.
+        up: ``None``/``"auto"`` (estimated from the cameras, else the boxes), an axis (``"+z"``) or three
+            numbers, in the **files'** world frame; verified against the capture's evidence either way.
+        metres_per_unit: metres per file unit, applied once to Gaussians (positions and sizes), camera
+            centres and boxes (up is a direction and is not scaled). ``None``: the files carry no metric
+            scale, so 1 m per unit is taken **only when the labelled objects agree** (else refused).
+        units: ``"metric"`` states the files are in metres (not checked).
+        trust_up: keep an up the evidence contradicts (recorded as overridden).
+        frame_check: ``"warn"`` writes boxes that do not hold their objects anyway (noted in metadata).
         opencv_distortion: passed to the camera reader.
-        metadata: extra facts; ``source``, ``scale_to_metres`` and ``up_source`` are added.
+        metadata: extra facts; ``source``, ``scale_to_metres``, ``up_source``, ``up_evidence``,
+            ``units`` (and ``box_fill`` with instances) are added.
+
+    Raises:
+        ParameterError: a bad ``up``, ``metres_per_unit``, ``units`` or ``frame_check``.
+        UpContradictedError / UpUndecidedError / UnitsImplausibleError / BoxFillError: as ``scenes import``.
     """
-    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (math.isfinite(scale) and scale > 0):
-        raise InvalidDataError(f"scene_from_files: scale (metres per file unit) must be a positive number, got {scale!r}")
-    scale = float(scale)
+    checks.check_metres_per_unit(metres_per_unit)
     gpath = as_path(gaussians_path, "Gaussians file")
     require_file(gpath, "Gaussians file")
     if gpath.suffix.lower() not in GAUSSIAN_SUFFIXES:
         read_gaussians(gpath)  # raises the suffix's own message
-    cameras = read_views(views, opencv_distortion)
+    files = None if isinstance(views, Mapping) else find_cameras(as_path(views, "views"))
+    cameras = dict(views) if files is None else read_cameras(files, opencv_distortion)
     instances = read_instances(instances_path, views=cameras.keys()) if instances_path is not None else []
-    if up is None:
-        up_vec = estimate_up(cameras)
-        up_source = f"estimated: normalised mean of the -y axes of {len(cameras)} cameras"
-    else:
-        up_vec = np.asarray(list(up), dtype=np.float64)
-        up_source = "given"
+    gauss = read_gaussians(gpath) if instances else None
+    layout = "gaussians" if files is None else files.kind
+    decided = checks.decide_frame(cameras, instances, where=str(gpath), layout=layout, up=up,
+                                  means=None if gauss is None else gauss.means, units=units, metres_per_unit=metres_per_unit,
+                                  trust_up=trust_up)
+    scale = decided.metres_per_unit
     if scale != 1.0:
         cameras = scale_views(cameras, scale)
         instances = scale_instances(instances, scale)
     meta: dict[str, Any] = dict(metadata or {})
-    meta.update(
-        source={
-            "gaussians": str(gpath),
-            "views": "<memory>" if isinstance(views, Mapping) else str(Path(views)),
-            "instances": None if instances_path is None else str(Path(instances_path)),
-        },
-        scale_to_metres=scale,
-        up_source=up_source,
-    )
-    loader = functools.partial(load_scaled_gaussians, str(gpath), scale)
-    return Scene(id, loader, cameras, instances, up_vec.tolist(), None, meta)
+    meta.update(source={"gaussians": str(gpath), "views": "<memory>" if files is None else str(Path(views)),  # type: ignore[arg-type]
+                        "instances": None if instances_path is None else str(Path(instances_path))}, **decided.metadata())
+    if gauss is None:
+        return Scene(id, functools.partial(load_scaled_gaussians, str(gpath), scale), cameras, instances, decided.up.tolist(), None, meta)
+    gauss = scale_gaussians(gauss, scale)
+    fill, note = checks.check_box_fill(gauss.means, instances, where=str(instances_path), layout=layout, frame_check=frame_check)
+    if fill is not None:
+        meta["box_fill"] = fill.to_dict()
+    if note:
+        meta["notes"] = [*meta.get("notes", []), note]
+    return Scene(id, gauss, cameras, instances, decided.up.tolist(), None, meta)

@@ -28,6 +28,7 @@ from spacedg.render.gaussians import Gaussians
 from spacedg.scene.io.colmap import read_colmap
 from spacedg.scene.io.inria import read_inria_cameras
 from spacedg.scene.io.nerfstudio import read_transforms
+from spacedg.scene.io.scannetpp_iphone import POSE_FILE, read_pose_intrinsic_imu
 from spacedg.scene.model import Instance
 
 __all__ = [
@@ -40,7 +41,7 @@ __all__ = [
     "scale_views",
 ]
 
-CameraKind = Literal["inria", "nerfstudio", "colmap"]
+CameraKind = Literal["inria", "nerfstudio", "colmap", "scannetpp-iphone"]
 
 
 @dataclass(frozen=True)
@@ -48,7 +49,8 @@ class CameraFiles:
     """A camera source whose format is known.
 
     Attributes:
-        kind: ``"inria"`` (``cameras.json``), ``"nerfstudio"`` (``transforms.json``) or ``"colmap"``.
+        kind: ``"inria"`` (``cameras.json``), ``"nerfstudio"`` (``transforms.json``), ``"colmap"`` or
+            ``"scannetpp-iphone"`` (ScanNet++'s ``iphone/pose_intrinsic_imu.json``).
         path: what was given (a file or folder; named in reports and metadata).
         read_path: what is read: the ``cameras.json`` / ``transforms.json`` file, or the COLMAP
             model folder (``path`` itself when no model was found: the reader then names what is missing).
@@ -82,7 +84,8 @@ def colmap_model(folder: Path) -> Path | None:
 def find_cameras(path: Path) -> CameraFiles:
     """The format of the camera source ``path`` (the one detection rule, in this order):
 
-    1. a file named ``cameras.json``: INRIA;
+    1. a file named ``cameras.json``: INRIA; one named ``pose_intrinsic_imu.json``: ScanNet++'s iPhone ARKit
+       cameras (:mod:`spacedg.scene.io.scannetpp_iphone`);
     2. any other ``.json`` path: a nerfstudio ``transforms.json``;
     3. a folder with a COLMAP model (:func:`colmap_model`): COLMAP, read from the model;
     4. a folder with a ``transforms.json``: nerfstudio;
@@ -94,6 +97,8 @@ def find_cameras(path: Path) -> CameraFiles:
     if path.is_file():
         if path.name == "cameras.json":
             return CameraFiles("inria", path, path)
+        if path.name == POSE_FILE:
+            return CameraFiles("scannetpp-iphone", path, path)
         if path.suffix.lower() == ".json":
             return CameraFiles("nerfstudio", path, path)
         raise FileFormatError(f"{path}: views must be a COLMAP model folder or a transforms.json file")
@@ -115,6 +120,8 @@ def read_cameras(files: CameraFiles, opencv_distortion: Literal["error", "drop"]
         return read_inria_cameras(files.read_path)
     if files.kind == "nerfstudio":
         return read_transforms(files.read_path, opencv_distortion=opencv_distortion)
+    if files.kind == "scannetpp-iphone":
+        return read_pose_intrinsic_imu(files.read_path)
     return read_colmap(files.read_path, opencv_distortion=opencv_distortion)
 
 

@@ -9,7 +9,9 @@ A ScanNet++ scene folder (as downloaded, v1/v2)::
       iphone/nerfstudio/transforms.json             iPhone cameras, same JSON layout (one OPENCV camera:
                                                     fl_x, fl_y, cx, cy, w, h, k1, k2, p1, p2 at the top level)
       iphone/colmap/                                iPhone COLMAP text model (frame_NNNNNN.jpg), scan frame
-      iphone/rgb.mkv, rgb/, depth.bin, pose_intrinsic_imu.json, exif.json   video, frames, ARKit data
+      iphone/pose_intrinsic_imu.json                ARKit cameras of every frame (aligned_pose: scan frame;
+                                                    :mod:`spacedg.scene.io.scannetpp_iphone`)
+      iphone/rgb.mkv, rgb/, depth.bin, exif.json    video, extracted frames, depth
       scans/mesh_aligned_0.05.ply                   the laser-scan mesh (not Gaussians)
       scans/segments_anno.json                      annotated instances
 
@@ -42,6 +44,7 @@ from spacedg.errors import FileFormatError, InvalidDataError
 from spacedg.files import FileValueError, PathLike, as_path, read_json
 from spacedg.scene.box import OrientedBox
 from spacedg.scene.io.annotation_limits import check_box_size, check_instance_id
+from spacedg.scene.io.scannetpp_iphone import POSE_FILE
 from spacedg.scene.model import Instance
 
 __all__ = ["NERFSTUDIO_FROM_SCAN", "read_segments_anno", "scannetpp_cameras", "is_scannetpp_scene"]
@@ -65,7 +68,8 @@ def is_scannetpp_scene(folder: Path) -> bool:
 
 def scannetpp_cameras(folder: PathLike, device: str = "dslr") -> Path:
     """The cameras of ``device``: its nerfstudio JSON (``"dslr"``: the undistorted one when present), else
-    (iPhone) its COLMAP model ``iphone/colmap`` (already in the scan frame)."""
+    (iPhone) its COLMAP model ``iphone/colmap`` (bundle-adjusted, already in the scan frame), else its ARKit
+    ``iphone/pose_intrinsic_imu.json`` (``aligned_pose``: scan frame; :mod:`spacedg.scene.io.scannetpp_iphone`)."""
     root = as_path(folder, "ScanNet++ scene folder")
     if device not in ("dslr", "iphone"):
         raise InvalidDataError(f"ScanNet++ camera must be 'dslr' or 'iphone', got {device!r}")
@@ -76,7 +80,9 @@ def scannetpp_cameras(folder: PathLike, device: str = "dslr") -> Path:
             return path
     if device == "iphone" and (root / "iphone" / "colmap").is_dir():
         return root / "iphone" / "colmap"
-    extra = " nor iphone/colmap" if device == "iphone" else ""
+    if device == "iphone" and (root / "iphone" / POSE_FILE).is_file():
+        return root / "iphone" / POSE_FILE
+    extra = f", iphone/colmap nor iphone/{POSE_FILE}" if device == "iphone" else ""
     raise FileFormatError(
         f"{root}: no {device}/nerfstudio/{' or '.join(names)}{extra}; is this a ScanNet++ scene folder "
         f"(<scene id>/{device}/nerfstudio/...)?"

@@ -75,8 +75,11 @@ def test_haze_no_surface_and_bad_depths_are_far_and_finite() -> None:
 def test_haze_partial_coverage_blends_background_airlight() -> None:
     rgb = np.zeros((1, 1, 3), np.float32)
     out = haze.haze(rgb, np.array([[2.0]], np.float32), np.array([[0.25]], np.float32), 1.0, 1.0, depth_ref=4.0, far_depth=8.0)
-    t_surface, t_far = np.exp(-0.25 * 2.0), np.exp(-0.25 * 8.0)
-    np.testing.assert_allclose(out[0, 0], 0.25 * (1 - t_surface) + 0.75 * (1 - t_far), rtol=1e-6)
+    # the uncovered quarter lies at the normalisation depth (4 m), not at the sample's far surface (8 m)
+    t_surface, t_background = np.exp(-0.25 * 2.0), np.exp(-0.25 * 4.0)
+    np.testing.assert_allclose(out[0, 0], 0.25 * (1 - t_surface) + 0.75 * (1 - t_background), rtol=1e-6)
+    automatic = haze.haze(rgb, np.array([[2.0]], np.float32), np.array([[0.25]], np.float32), 1.0, 1.0, depth_ref=0.0, far_depth=8.0)
+    np.testing.assert_allclose(automatic[0, 0], 0.25 * (1 - np.exp(-2.0 / 8.0)) + 0.75 * (1 - np.exp(-1.0)), rtol=1e-6)
 
 
 def test_haze_needs_depth() -> None:

@@ -56,10 +56,12 @@ def _encode_u8(linear: np.ndarray) -> np.ndarray:
 def test_spec_declaration(spec) -> None:
     assert spec.category is Category.PHOTOMETRIC and spec.stage is Stage.LINEAR
     assert spec.order == 30.0 and spec.needs == frozenset()
-    assert [p.name for p in spec.params] == ["exposure", "k", "sigma_read", "read_model", "read_lambda"]
+    gain = ["gain"] if spec is LOW_LIGHT else []  # the camera's gain after a dark exposure (low light only)
+    assert [p.name for p in spec.params] == ["exposure", "k", "sigma_read", "read_model", "read_lambda", "pitch", *gain]
     for preset in spec.preset_names:
         ranges = spec.presets[preset]
         assert (ranges["k"].to_list(), ranges["sigma_read"].to_list(), ranges["read_model"].to_list()) == ([K, K], [SIGMA, SIGMA], [0, 0])
+        assert ranges["pitch"].to_list() == [1.0, 1.0] and ranges["pitch"].per_size  # one photosite per reference pixel
     registered: list = []
     module = low_light_module if spec is LOW_LIGHT else over_exposure_module
     module.spacedg_register_degradations(registered.append)

@@ -86,9 +86,9 @@ def _unproject_valid(cam: Camera) -> np.ndarray:
 
 
 @pytest.mark.parametrize("k1", [-0.24, -0.05, 0.0, 0.1, -1.0])
-def test_distortion_never_shows_what_the_clean_view_does_not(k1: float) -> None:
+def test_contained_distortion_never_shows_what_the_clean_view_does_not(k1: float) -> None:
     clean = camera(320, 240)
-    distorted = distortion.distort(RenderRequest(clean), k1, 2e-4, 1e-4, 5e-5, 1.5).camera
+    distorted = distortion.distort_contained(RenderRequest(clean), k1, 2e-4, 1e-4, 5e-5, 1.5).camera
     assert distorted.fisheye is not None and np.array_equal(distorted.cam_to_world, clean.cam_to_world)
     rays = _unproject_valid(distorted)
     assert rays.shape[0] > 0.5 * clean.width * clean.height
@@ -99,9 +99,9 @@ def test_distortion_never_shows_what_the_clean_view_does_not(k1: float) -> None:
     assert u.min() >= -tol and v.min() >= -tol and u.max() <= clean.width + tol and v.max() <= clean.height + tol
 
 
-def test_distortion_corners_reach_the_clean_corners() -> None:
+def test_contained_distortion_corners_reach_the_clean_corners() -> None:
     clean = camera(320, 240)
-    distorted = distortion.distort(RenderRequest(clean), -0.24, 2e-4, 1e-4, 5e-5, 1.5).camera
+    distorted = distortion.distort_contained(RenderRequest(clean), -0.24, 2e-4, 1e-4, 5e-5, 1.5).camera
     lens = distorted.fisheye
     # the farthest corner of the frame: its ray angle equals the clean camera's there
     xs = np.array([-clean.cx, clean.width - clean.cx])
@@ -111,6 +111,45 @@ def test_distortion_corners_reach_the_clean_corners() -> None:
     fisheye_theta = float(lens.undistort_theta(np.float64(math.hypot(far[0] / distorted.fx, far[1] / distorted.fy))))
     assert fisheye_theta == pytest.approx(clean_theta, abs=1e-4)
     assert 1.2 < distorted.fx / clean.fx < 1.6
+
+def _width_at_half_alpha(alpha: np.ndarray) -> float:
+    """Width (px) of the covered columns of the row through the image centre, with sub-pixel ends."""
+    row = alpha[alpha.shape[0] // 2].astype(np.float64)
+    return float(np.sum(np.clip(row, 0.0, 1.0)))
+
+
+@pytest.mark.parametrize("k1", [-0.24, -0.05])
+def test_distortion_keeps_the_apparent_size_at_the_centre(k1: float) -> None:
+    # The paper's lens on the camera's own focal lengths: a subject at the image centre keeps its
+    # size within 2 % (the contained variant grows it by its zoom, 1.2–1.4×).
+    rng = np.random.default_rng(11)
+    n = 400
+    means = np.column_stack([rng.uniform(-0.12, 0.12, n), rng.uniform(-0.02, 0.02, n), np.full(n, 2.0)])
+    gauss = Gaussians.from_colors(means, np.tile([1.0, 0, 0, 0], (n, 1)), np.full((n, 3), 0.012), np.full(n, 1.0), np.full((n, 3), 0.8))
+    clean = camera(320, 240)
+    sharp = _width_at_half_alpha(render(gauss, clean).alpha)
+    distorted = distortion.distort(RenderRequest(clean), k1, 2e-4, 1e-4, 5e-5, 1.5)
+    assert distorted.camera.fx == clean.fx and distorted.camera.fy == clean.fy and distorted.camera.cx == clean.cx
+    lensed = _width_at_half_alpha(distorted.render(gauss).alpha)
+    assert 30.0 < sharp < 60.0 and lensed / sharp == pytest.approx(1.0, abs=0.02)
+    contained = _width_at_half_alpha(distortion.distort_contained(RenderRequest(clean), k1, 2e-4, 1e-4, 5e-5, 1.5).render(gauss).alpha)
+    assert contained / sharp > 1.1
+
+
+def test_distortion_lets_new_content_enter_and_reports_the_captured_share() -> None:
+    from spacedg.render.coverage import captured_share
+
+    clean = camera(320, 240)
+    distorted = distortion.distort(RenderRequest(clean), -0.24, 2e-4, 1e-4, 5e-5, 1.5).camera
+    rays = _unproject_valid(distorted)
+    u = clean.fx * rays[:, 0] / rays[:, 2] + clean.cx
+    outside = (u < 0) | (u > clean.width)
+    assert outside.mean() > 0.05  # the border shows what the clean view did not
+    share = captured_share(clean, distorted)
+    assert 0.5 < share < 0.95 and share == pytest.approx(1.0 - outside.mean(), abs=0.12)
+    contained = distortion.distort_contained(RenderRequest(clean), -0.24, 2e-4, 1e-4, 5e-5, 1.5).camera
+    assert captured_share(clean, contained) > 0.995
+    assert captured_share(clean, clean) == 1.0
 
 
 def test_distortion_at_the_fold_limit_and_beyond_stays_finite() -> None:

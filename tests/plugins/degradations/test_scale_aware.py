@@ -10,6 +10,7 @@ from spacedg.data.pipeline import degrade, degrade_image, sample_scene_depth, vi
 from spacedg.errors import PluginError
 from spacedg.plugins import DegradationSpec, ParamRange, ParamSpec, get_degradation
 from spacedg.plugins.specs import REFERENCE_DEPTH_M
+from spacedg.plugins.degradations.haze import SCALED_DEPTH_REF_M
 from spacedg.render import render
 
 
@@ -60,4 +61,4 @@ def test_scene_depth_resolves_records_and_reproduces(small_room) -> None:
     # a photo with a depth map: its median depth
     photo = out.images[0]
     _, prov = degrade_image(photo, "haze", seed=1, depth=np.full(photo.shape[:2], 0.5, np.float32))
-    assert prov[0]["scene_depth_m"] == pytest.approx(0.5) and prov[0]["params"]["depth_ref"] == pytest.approx(4.0 * 0.5 / REFERENCE_DEPTH_M)
+    assert prov[0]["scene_depth_m"] == pytest.approx(0.5) and prov[0]["params"]["depth_ref"] == pytest.approx(SCALED_DEPTH_REF_M * 0.5 / REFERENCE_DEPTH_M)

@@ -177,9 +177,11 @@ def test_bbox_center_direction_in_front_of_camera_b():
         assert len(records) == 1
         r = records[0]
         seen_orientations.add(r.views)
-        assert _truth(r) == {"v0": "Front", "v1": "Front-Left"}[r.views[0]] and "Back" in " ".join(_texts(r))
-        # the rare answers (Back, Up) are offered but never balanced against: not a role of the cell
-        assert r.geometry["selection"]["roles"] == sorted(t for t in _texts(r) if "Back" not in t and "Up" not in t)
+        assert _truth(r) == {"v0": "Front", "v1": "Front-Left"}[r.views[0]]
+        # only answerable options: the truth's deck, never "Back" or "Up"; the cell's roles are the deck
+        assert set(_texts(r)) in [set(deck) for deck in dir_mod.BBOX_DECKS]
+        assert not any(w in " ".join(_texts(r)) for w in ("Back", "Up"))
+        assert r.geometry["selection"]["roles"] == sorted(_texts(r))
         expected_id = {"v0": 1, "v1": 2}[r.views[0]]
         assert _ids(r) == (expected_id,)
         phrase = {1: "blue vase", 2: "metal stool"}[expected_id]

@@ -109,6 +109,7 @@ def test_answer_balance_and_blind_baseline(records_by_scene):
     balance = answer_balance(every)
     assert balance["mcq_n"] >= 200 and balance["yn_n"] >= 50
     assert all(abs(share - 25.0) <= 4.0 for share in balance["letters"].values()), balance
+    assert balance["mcq3_n"] > 0 and all(abs(share - 100 / 3) <= 6.0 for share in balance["letters3"].values()), balance  # size comparisons
     assert abs(balance["yes_pct"] - 50.0) <= 4.0, balance
     overall = blind_baseline(records_by_scene)[-1]
     assert overall["question_type"] == "ALL"

@@ -21,7 +21,7 @@ v2      320×240 image: min_pixels scales to 100         1 chair (150 px is enou
 ======  =============================================  ==============================
 
 These construction tests use the unbalanced family (``counts=None``: every valid count); the
-registered family asks 0, 1 and 2 equally often per label (``test_balanced_counts_per_label``).
+registered family asks the bins 0, 1 and 2+ equally often per label (``test_balanced_counts_per_label``).
 """
 
 from __future__ import annotations
@@ -267,7 +267,7 @@ def test_empty_scene_yields_nothing() -> None:
 
 
 def test_balanced_counts_per_label() -> None:
-    """The registered family asks 0, 1 and 2 of a label equally often, one wording per round;
+    """The registered family asks the bins 0, 1 and 2+ of a label equally often, one wording per round;
     a label that cannot reach every count is not asked; related labels (armchair) and objects
     showing a label (a bookshelf's books) make a view ambiguous."""
     from tests.qa_scenes import CLEAR, build, camera, obj
@@ -289,7 +289,7 @@ def test_balanced_counts_per_label() -> None:
     assert len({r.question for r in records}) == 1  # one wording for the round
     for r in records:
         assert r.geometry["selection"]["cell"] == f"label:chair|template:{r.geometry['template']}"
-        assert r.geometry["selection"]["roles"] == ["0", "1", "2"]
+        assert r.geometry["selection"]["roles"] == ["0", "1", "2+"]
         assert r.views[0] != "v4"
     every = {(r.views[0], r.geometry["label"]) for r in UNBALANCED.generate(scene, np.random.default_rng(0))}
     assert ("v4", "chair") not in every and ("v5", "book") not in every and ("v6", "book") in every
@@ -299,3 +299,24 @@ def test_module_hook_registers_family() -> None:
     got = []
     object_counting.spacedg_register_question_families(got.append)
     assert got == [FAMILY]
+
+
+def test_counts_beyond_two_are_asked_and_binned() -> None:
+    """A view showing four chairs is asked (bin "2+"), the 2+ bin takes the highest count first,
+    and a view showing more than MAX_COUNT instances is not asked."""
+    from tests.qa_scenes import CLEAR, build, camera, obj
+
+    chairs = [obj(i, "chair", (2, 0.5 * i, 0.4), description=f"chair {i}") for i in range(1, 13)]
+    views = {f"v{k}": camera((0, 0, 1.5), 10.0 * k) for k in range(6)}
+    vis = {"v0": {}, "v1": {1: CLEAR}, "v2": {1: CLEAR, 2: CLEAR}, "v3": {i: CLEAR for i in range(1, 5)},
+           "v4": {i: CLEAR for i in range(1, 13)}, "v5": {}}
+    records = list(FAMILY.generate(build(chairs, views, vis), np.random.default_rng(0)))
+    balanced = [r for r in records if not r.geometry["selection"]["cell"].endswith("|unbalanced")]
+    assert Counter(object_counting.count_bin(r.answer) for r in balanced) == {"0": 1, "1": 1, "2+": 1}
+    assert {r.answer for r in balanced if r.answer >= 2} == {4}  # the highest count of the bin first
+    assert all(r.geometry["selection"]["role"] == object_counting.count_bin(r.answer) for r in records)
+    assert 12 not in {r.answer for r in records} and 2 in {r.answer for r in records}  # 12 > MAX_COUNT
+
+
+def test_count_bin() -> None:
+    assert [object_counting.count_bin(n) for n in (0, 1, 2, 6, 10)] == ["0", "1", "2+", "2+", "2+"]

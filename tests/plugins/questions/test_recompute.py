@@ -295,7 +295,7 @@ def test_near_boundary_cases_are_exercised(scenes_and_records):
 def test_index_selection_is_debiased(scenes_and_records):
     """Per scene: no subject asked twice per sub type; every balanced cell holds whole rounds
     (each of its roles equally often); the correct letters of each MCQ sub type are uniform to
-    within one block of four."""
+    within one block of four (three for the 3-option size comparisons)."""
     from collections import Counter, defaultdict
 
     from spacedg.qa.stats import record_subject
@@ -312,9 +312,9 @@ def test_index_selection_is_debiased(scenes_and_records):
                 cells[(r.question_type, sel["cell"])][sel["role"]] += 1
                 roles[(r.question_type, sel["cell"])] = sel["roles"]
             if r.answer_type.value == "MCQ":
-                letters[r.sub_question_type][r.answer] += 1
+                letters[(r.sub_question_type, len(r.options))][r.answer] += 1
         for key, counts in cells.items():
             # whole rounds: every role of the cell (or, for option-set cells, the ones the scene offers) equally often
             assert set(counts) <= set(roles[key]) and len(counts) >= 2 and len(set(counts.values())) == 1, (key, counts)
-        for sub, counts in letters.items():
-            assert max(counts.get(k, 0) for k in LETTERS) - min(counts.get(k, 0) for k in LETTERS) <= 1, (sub, counts)
+        for (sub, n), counts in letters.items():  # the letters shown: A–D, or A–C for a size comparison's three options
+            assert max(counts.get(k, 0) for k in LETTERS[:n]) - min(counts.get(k, 0) for k in LETTERS[:n]) <= 1, (sub, counts)

@@ -25,7 +25,7 @@ from spacedg.scene.io import (
 )
 from spacedg.scene.io import native as native_io
 from spacedg.scene.model import Instance, InstanceVisibility, Scene
-from spacedg.errors import FileFormatError, InvalidDataError
+from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
 from spacedg.render.camera import Camera, FisheyeLens, look_at
 from spacedg.render.gaussians import Gaussians
 
@@ -198,14 +198,14 @@ def test_scene_from_files_scales_once_and_estimates_up(tmp_path: Path) -> None:
     views = _transforms(tmp_path / "transforms.json", [[0.0, 0.0, 5.0], [1.0, 0.5, 4.0]])
     box = OrientedBox([1.0, 1.0, 0.0], [0.5, 0.2, 0.3])
     write_instances(tmp_path / "inst.json", [Instance(0, "cup", "", box, ("img_1.png",))])
-    scene = scene_from_files("s1", tmp_path / "g.ply", views, tmp_path / "inst.json", scale=0.5)
+    scene = scene_from_files("s1", tmp_path / "g.ply", views, tmp_path / "inst.json", metres_per_unit=0.5, frame_check="warn")
     np.testing.assert_allclose(scene.up, [0.0, 1.0, 0.0], atol=1e-12)
     assert scene.metadata["up_source"].startswith("estimated") and scene.metadata["scale_to_metres"] == 0.5
     np.testing.assert_allclose(scene.views["img_1.png"].center, [0.5, 0.25, 2.0])
     np.testing.assert_array_equal(scene.views["img_1.png"].rotation, np.diag([1.0, -1.0, -1.0]))
     np.testing.assert_allclose(scene.instances[0].box.center, [0.5, 0.5, 0.0])
     np.testing.assert_allclose(scene.instances[0].box.extents, [0.25, 0.1, 0.15])
-    assert not scene.gaussians_loaded
+    assert scene.gaussians_loaded  # with boxes the Gaussians are read at once: the box checks need their centres
     np.testing.assert_allclose(scene.gaussians.means, g.means * 0.5, rtol=1e-6)
     np.testing.assert_allclose(scene.gaussians.scales, g.scales * 0.5, rtol=1e-6)
     clone = pickle.loads(pickle.dumps(scene))
@@ -219,9 +219,9 @@ def test_scene_from_files_splat_and_given_up(tmp_path: Path) -> None:
     write_splat(tmp_path / "g.splat", _grey_gaussians())
     (tmp_path / "ns").mkdir()
     _transforms(tmp_path / "ns" / "transforms.json", [[0.0, 0.0, 3.0]])
-    scene = scene_from_files("s2", tmp_path / "g.splat", tmp_path / "ns", up=(0.0, 0.0, 1.0))  # a nerfstudio folder
+    scene = scene_from_files("s2", tmp_path / "g.splat", tmp_path / "ns", up=(0.0, 1.0, 0.0))  # a nerfstudio folder
     assert scene.metadata["up_source"] == "given" and len(scene.gaussians) == 10 and scene.instances == ()
-    np.testing.assert_array_equal(scene.up, [0.0, 0.0, 1.0])
+    np.testing.assert_array_equal(scene.up, [0.0, 1.0, 0.0])
 
 
 def _grey_gaussians() -> Gaussians:
@@ -232,10 +232,10 @@ def _grey_gaussians() -> Gaussians:
 def test_scene_from_files_errors(tmp_path: Path) -> None:
     views = _transforms(tmp_path / "t.json", [[0.0, 0.0, 3.0]])
     write_ply(tmp_path / "g.ply", random_gaussians(5))
-    with pytest.raises(InvalidDataError, match="scale"):
-        scene_from_files("s", tmp_path / "g.ply", views, scale=-1.0)
-    with pytest.raises(InvalidDataError, match="scale"):
-        scene_from_files("s", tmp_path / "g.ply", views, scale=math.nan)
+    with pytest.raises(ParameterError, match="metres-per-unit"):
+        scene_from_files("s", tmp_path / "g.ply", views, metres_per_unit=-1.0)
+    with pytest.raises(ParameterError, match="metres-per-unit"):
+        scene_from_files("s", tmp_path / "g.ply", views, metres_per_unit=math.nan)
     with pytest.raises(FileFormatError, match="not found"):
         scene_from_files("s", tmp_path / "missing.ply", views)
     (tmp_path / "g.obj").write_text("v 0 0 0")
@@ -245,7 +245,7 @@ def test_scene_from_files_errors(tmp_path: Path) -> None:
         scene_from_files("s", tmp_path / "g.ply", tmp_path / "cams.txt")
     down = {"a": Camera(100, 100, 50, 50, 100, 100, np.diag([1.0, 1.0, 1.0, 1.0])),
             "b": Camera(100, 100, 50, 50, 100, 100, np.diag([1.0, -1.0, -1.0, 1.0]))}
-    with pytest.raises(InvalidDataError, match="disagree"):
+    with pytest.raises(InvalidDataError, match="cannot decide up"):
         scene_from_files("s", tmp_path / "g.ply", down)
 
 

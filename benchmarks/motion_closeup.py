@@ -1,0 +1,106 @@
+"""Motion blur on close-ups: the keyframe path against N = 80 sub-steps, and its cost.
+
+Scenes: the shared plant capture (``../shared/data/splats/plant``, a real phone capture) seen
+from ``--factors`` × the distance of ``benchmarks/render.py``'s plant view (0.3: the plant's
+leaves from 0.25 to 0.6 units, a close-up), and a built-in room's middle view; motion: the
+``motion_blur`` bench preset's mid-range ``trans`` scaled by the view's median depth / 2.5 m (as
+the plugin does) and ``rot``, along random directions (``--seeds``), 640×480. For each case it
+prints the keyframes the rule picks (``K``), the PSNR against N = 80 (clip(sRGB) of linear light),
+the time as a multiple of a clean render (medians of ``--runs``, alternating), and the same for
+the previous rule (path only, at most 6 keyframes). Goal: ≥ 40 dB within ≤ 8 renders::
+
+    .venv/bin/python benchmarks/motion_closeup.py [--factors 0.3,0.5] [--seeds 1,2,3] [--runs 2] [--no-room]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+
+from render import PLANT, WIDTH, HEIGHT, median_depth, plant_scene, psnr, severity_motion  # benchmarks/ is on sys.path
+
+from spacedg.render import render
+from spacedg.render.camera import look_at
+from spacedg.render.motion import (
+    KEYFRAME_PATH_PX,
+    SINGLE_KEYFRAME_PX,
+    MotionJob,
+    motion_extent,
+    motion_parallax,
+    render_motion_keyframes,
+)
+from spacedg.render.settings import MotionBlur
+
+
+def previous_rule(displacement: float) -> int:
+    """The keyframe count before parallax was counted: path only, 1–6."""
+    count = max(math.ceil(displacement / KEYFRAME_PATH_PX), 2 if displacement > SINGLE_KEYFRAME_PX else 1)
+    return int(min(max(count, 1), 6))
+
+
+def cases(factors: list[float], room: bool):
+    g, camera = plant_scene()
+    lo, hi = np.percentile(g.means, 0.5, axis=0), np.percentile(g.means, 99.5, axis=0)
+    centre = 0.5 * (lo + hi)
+    for factor in factors:
+        pose = look_at(centre + factor * (camera.center - centre), centre, np.array([0.0, -1.0, 0.0]))
+        yield f"plant x{factor:g}", g, camera.with_pose(pose)
+    if room:
+        from spacedg.scene.synthetic import generate_room
+
+        scene = generate_room(0)
+        names = sorted(scene.views)
+        yield "room 0", scene.gaussians, scene.views[names[len(names) // 2]].resized(WIDTH, HEIGHT)
+
+
+def timed(fns: dict, runs: int) -> dict[str, tuple[float, object]]:
+    frames = {k: fn() for k, fn in fns.items()}  # warm-up (JIT)
+    times: dict[str, list[float]] = {k: [] for k in fns}
+    for _ in range(runs):
+        for k, fn in fns.items():
+            t0 = time.perf_counter()
+            frames[k] = fn()
+            times[k].append(time.perf_counter() - t0)
+    return {k: (float(np.median(times[k])), frames[k]) for k in fns}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--factors", default="0.3,0.5")
+    parser.add_argument("--seeds", default="1,2,3")
+    parser.add_argument("--runs", type=int, default=2)
+    parser.add_argument("--no-room", action="store_true")
+    args = parser.parse_args()
+    if not PLANT.is_file():
+        raise SystemExit(f"the plant capture is not at {PLANT}")
+    print(f"Motion blur on close-ups, {WIDTH}x{HEIGHT}, CPU; bench motion scaled by the view's median depth; "
+          "dB vs N = 80 sub-steps; x clean = median time / median clean render time")
+    print(f"{'scene':<12} {'seed':>4} {'path px':>7} {'parallax':>8} | {'K':>2} {'dB v80':>6} {'x clean':>7} | "
+          f"{'old K':>5} {'dB v80':>6} {'x clean':>7}")
+    worst, costs = math.inf, []
+    for name, g, camera in cases([float(f) for f in args.factors.split(",")], not args.no_room):
+        depth = median_depth(g, camera)
+        for seed in (int(s) for s in args.seeds.split(",")):
+            translation, rotation = severity_motion("bench", depth, seed=seed)
+            motion = MotionBlur(translation, rotation, sub_steps=80, fast=True)
+            job = MotionJob(g, camera, motion, frozenset({"rgb"}))
+            reference = render(g, camera, motion=MotionBlur(translation, rotation, sub_steps=80), backend="cpu")
+            path, _ = motion_extent(g, camera, motion)
+            old = previous_rule(path)
+            out = timed({"clean": lambda: render(g, camera, backend="cpu"), "new": lambda: render_motion_keyframes(job),
+                         "old": lambda: render_motion_keyframes(job, keyframes=old)}, args.runs)
+            clean = out["clean"][0]
+            new_db, old_db = psnr(out["new"][1].rgb, reference.rgb), psnr(out["old"][1].rgb, reference.rgb)
+            worst = min(worst, new_db)
+            costs.append(out["new"][0] / clean)
+            print(f"{name:<12} {seed:>4} {path:>7.0f} {motion_parallax(g, camera, motion):>8.1f} | "
+                  f"{int(out['new'][1].stats['keyframes']):>2} {new_db:>6.2f} {out['new'][0] / clean:>7.2f} | "
+                  f"{old:>5} {old_db:>6.2f} {out['old'][0] / clean:>7.2f}", flush=True)
+    print(f"keyframe rule: worst {worst:.2f} dB vs N = 80, cost x clean median {np.median(costs):.2f}, max {max(costs):.2f}")
+
+
+if __name__ == "__main__":
+    main()

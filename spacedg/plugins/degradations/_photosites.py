@@ -1,0 +1,87 @@
+"""The sensor's noise drawn per photosite of a fixed pitch, then averaged over each pixel (not a plugin).
+
+Why: photon shot noise and read noise belong to the sensor's photosites, not to the pixels of
+whatever size the image is rendered at. The photometric presets describe a sensor with one
+photosite per pixel of the reference image (:data:`~spacedg.plugins.specs.REFERENCE_IMAGE_SIZE`,
+1752 × 1168): its ``pitch`` parameter is the photosite side in output pixels, 1 px at the
+reference and scaled with the image (``ParamRange(per_size=True)``). A 640 × 360 image then
+sees each pixel average ≈ 10.5 photosites (noise std ÷ 3.2, as binning would give), and a
+1920 × 1080 image area-downsampled to 640 × 360 carries the *same* noise as a 640 × 360 image
+rendered directly: both draw it on the same photosite grid with the same counter-based keys.
+
+Model (``pitch ≠ 1``), with ``s = e·x`` the exposed linear light of the output (NaN → 0, ±inf
+and beyond ±:data:`~._sensor.SIGNAL_CAP` clamped, as in :mod:`._sensor`):
+
+1. the photosite grid has ``(round(W / pitch), round(H / pitch))`` sites over the image (so
+   images of one aspect ratio share one grid whatever their size);
+2. each site's signal ``s_g`` is ``s`` area-resampled onto the grid (:func:`cv2.resize`,
+   ``INTER_AREA``: the box average where sites are larger than pixels, the overlapping pixel's
+   value where they are smaller);
+3. each site is captured by :func:`~._sensor.sensor_capture` (exact Poisson photons, read
+   noise; the key's counters run over the grid's values), giving its noise ``n_g = y_g − s_g``;
+4. the output is ``s + A(n)`` with ``A`` the area resampling back to (W, H), then the clip to
+   [0, 1] when the degradation clips (over-exposure): the signal itself is never resampled.
+
+Cost: the sensor draws every photosite, about the reference's 2–3 M (× 3 channels) whatever the
+output size below it: at 640 × 360 about 10 × the pixels, so about 10 × the sensor's time of a
+per-pixel draw (still a fraction of a render's); at or above the reference, about the pixel count.
+
+Approximations, stated: the signal-dependence of the noise is taken at the site's average light
+(within a pixel the light is constant, so this is exact whenever sites are smaller than pixels);
+saturation is applied to the binned value, not per site. ``pitch = 1`` is
+:func:`~._sensor.sensor_capture` itself, bit for bit (the reference size, and every plain call).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from spacedg.errors import ParameterError
+from spacedg.plugins.degradations._sensor import SIGNAL_CAP, sensor_capture
+
+__all__ = ["MAX_PHOTOSITES", "photosite_grid", "binned_capture"]
+
+#: Most photosites one capture may draw (a far smaller pitch than any preset gives is refused).
+MAX_PHOTOSITES = 64_000_000
+
+
+def photosite_grid(width: int, height: int, pitch: float) -> tuple[int, int]:
+    """``(columns, rows)`` of photosites of side ``pitch`` output pixels over a ``width × height`` image."""
+    if not (math.isfinite(pitch) and pitch > 0):
+        raise ParameterError(f"sensor: pitch must be a finite number of pixels > 0, got {pitch!r}")
+    grid = max(1, int(round(width / pitch))), max(1, int(round(height / pitch)))
+    if grid[0] * grid[1] > MAX_PHOTOSITES:
+        raise ParameterError(
+            f"sensor: pitch {pitch:g} px on a {width}×{height} image needs {grid[0]}×{grid[1]} photosites, more than "
+            f"{MAX_PHOTOSITES:.0e}; use a larger pitch (the presets give 1 px at 1752×1168, scaled with the image)"
+        )
+    return grid
+
+
+def binned_capture(rgb: np.ndarray, *, pitch: float, exposure: float, clip: bool, key: int, **sensor: float | int) -> np.ndarray:
+    """Expose ``rgb`` (float32 (H, W, 3) linear light) by ``exposure`` with the noise of photosites
+    of side ``pitch`` px (module docstring); ``sensor`` = ``k, sigma_read, read_model, read_lambda``.
+
+    Returns a new float32 array, always finite.
+    """
+    if pitch == 1.0:
+        return sensor_capture(rgb, exposure=exposure, key=key, clip=clip, **sensor)  # type: ignore[arg-type]
+    import cv2  # here: importing the plugin stays light (the entry point's import is timed)
+
+    height, width = rgb.shape[:2]
+    grid = photosite_grid(width, height, pitch)
+    signal = np.array(rgb, dtype=np.float32)  # a copy, worked on in place
+    np.nan_to_num(signal, copy=False, nan=0.0, posinf=SIGNAL_CAP, neginf=-SIGNAL_CAP)
+    signal *= np.float32(exposure)
+    np.clip(signal, -SIGNAL_CAP, SIGNAL_CAP, out=signal)
+    sites = signal if grid == (width, height) else cv2.resize(signal, grid, interpolation=cv2.INTER_AREA)
+    noise = sensor_capture(sites, exposure=1.0, key=key, clip=False, **sensor)  # type: ignore[arg-type]
+    noise -= sites
+    if grid != (width, height):
+        noise = cv2.resize(noise, (width, height), interpolation=cv2.INTER_AREA)
+    signal += noise.reshape(signal.shape)
+    if clip:
+        np.clip(signal, 0.0, 1.0, out=signal)
+    return signal
