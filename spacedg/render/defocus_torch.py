@@ -145,11 +145,13 @@ def measure_sharp(
 def measurement_margin(proj: Projected, width: int, height: int) -> int:
     """As :func:`spacedg.render.defocus.measurement_margin`, from a torch projection."""
 
+    from spacedg.render.defocus import margin_cap
+
     visible = proj.visible
     if not bool(visible.any()):
         return 0
     wanted = float(proj.radii[visible].max())
-    margin = int(min(math.ceil(wanted), max(width, height) // 2))
+    margin = int(min(math.ceil(wanted), margin_cap(width, height)))
     while margin > 0 and image_size_problem(width + 2 * margin, height + 2 * margin) is not None:
         margin //= 2
     return margin

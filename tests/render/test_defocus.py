@@ -64,7 +64,8 @@ def test_a_room_matches_the_thin_lens(room_views, aperture: float, focus: float)
         assert blurred.alpha.mean() == pytest.approx(coverage, rel=0.04)
 
 
-@pytest.mark.xfail(reason="issue 29 open: coverage 0.65 of the sharp render at aperture 1000 px since the visible-share model", strict=False)
+@pytest.mark.xfail(reason="issue 29 open: coverage 0.65 of the sharp render at aperture 1000 px: Gaussians outside the measured "
+                   "frame (margin <= MAX_MARGIN x the longer side) take the frame's mean visible share; 0.88 at MAX_MARGIN = 2", strict=False)
 @pytest.mark.parametrize("backend", ["cpu", "torch"])
 def test_a_room_stays_covered_up_to_the_hard_limit(room_views, backend: str) -> None:
     gaussians, cams = room_views
@@ -177,8 +178,10 @@ def test_a_view_blurred_everywhere_is_composited_coarse_with_its_light(room_view
     assert np.abs(coarse.depth - full.depth)[covered].mean() < 0.01 * full.depth[covered].mean()
 
 
-@pytest.mark.xfail(reason="issue 29 open: the backends differ by more than 1e-3 on a 4x coarse composite since the re-placement", strict=False)
 def test_the_backends_agree_on_a_coarse_composite() -> None:
+    """Light and coverage agree; an id may differ only where the two backends' median hits are two
+    Gaussians at the same depth (the transmittance crosses 0.5 within float32 rounding: 16 pixels,
+    one coarse pixel, at 0.7 mm apart)."""
     g = random_gaussians(3000, np.random.default_rng(0))
     cam = camera(96, 72)
     from spacedg.render import defocus as model
@@ -191,7 +194,9 @@ def test_the_backends_agree_on_a_coarse_composite() -> None:
         reference = render(g, cam, defocus=defocus, backend="torch", outputs="all")
         assert np.abs(compiled.rgb - reference.rgb).max() < 1e-3
         assert np.abs(compiled.alpha - reference.alpha).max() < 1e-4
-        np.testing.assert_array_equal(compiled.instance_ids, reference.instance_ids)
+        differ = compiled.instance_ids != reference.instance_ids
+        assert differ.mean() < 0.01
+        np.testing.assert_allclose(compiled.median_depth[differ], reference.median_depth[differ], rtol=1e-3)
 
 
 # ---------------------------------------------------------------- issue 29: the thin-lens reference
