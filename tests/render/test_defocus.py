@@ -53,7 +53,7 @@ def room_views(small_room):
 
 
 @pytest.mark.parametrize("aperture, focus", [(5.0, 1.5), (10.0, 1.5), (15.0, 1.5),
-                                             pytest.param(10.0, 3.0, marks=pytest.mark.xfail(reason="issue 29 open: -6.8 % light against the thin lens (saturation clips the blurred weights)", strict=False)),
+                                             pytest.param(10.0, 3.0, marks=pytest.mark.xfail(reason="issue 29 open: -5.6 to -6.8 % light against the thin lens; not the saturation clip (light unclipped: +0.2 %), coverage -1.9 to -2.8 % and radiance per covered pixel -3 %: the measured visible shares (kappa, rho)", strict=False)),
                                              (15.0, 3.0)])
 def test_a_room_matches_the_thin_lens(room_views, aperture: float, focus: float) -> None:
     gaussians, cams = room_views
