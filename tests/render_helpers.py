@@ -100,27 +100,20 @@ def uniform_wall(extent_px: float, focal: float = 40.0, depth: float = 3.0, sigm
 
 
 def thin_lens_means(gaussians: Gaussians, camera: Camera, aperture: float, focus: float, samples: int = 32, seed: int = 0) -> tuple[float, float]:
-    """Mean linear radiance and alpha coverage of the exact thin lens: the average of sharp renders from lens
-    points drawn from N(0, σ²I) in the camera's x-y plane, σ = aperture·focus/fx metres, each with its
-    principal point shifted so the focus plane stays put (a point at depth d then spreads with standard
-    deviation aperture·|d − focus|/d px, the model's circle of confusion). Stratified normal samples."""
-    from dataclasses import replace
-    from statistics import NormalDist
+    """Mean linear radiance and alpha coverage of the thin-lens reference (:func:`spacedg.render.thin_lens.thin_lens_render`)."""
+    from spacedg.render import Defocus
+    from spacedg.render.thin_lens import thin_lens_render
 
-    from spacedg.render import render
+    ref = thin_lens_render(gaussians, camera, Defocus(aperture, focus), samples=samples, seed=seed)
+    return float(ref["rgb"].mean()), float(ref["alpha"].mean())
 
+
+def opaque_ball(n: int = 1500, radius: float = 0.5, depth: float = 3.0, colour: float = 0.6, seed: int = 0) -> Gaussians:
+    """An opaque ball of ``n`` splats (σ = radius/12) on a sphere of ``radius`` m centred ``depth`` m down +z:
+    an object in front of an empty background."""
     rng = np.random.default_rng(seed)
-    sigma = aperture * focus / camera.fx
-    normal = NormalDist()
-    u = (np.arange(samples) + rng.random(samples)) / samples
-    v = rng.permutation((np.arange(samples) + rng.random(samples)) / samples)
-    rgb = alpha = 0.0
-    for a, b in zip(u, v):
-        x, y = normal.inv_cdf(float(a)) * sigma, normal.inv_cdf(float(b)) * sigma
-        pose = camera.cam_to_world.copy()
-        pose[:3, 3] = pose[:3, 3] + camera.rotation @ np.array([x, y, 0.0])
-        shifted = replace(camera, cam_to_world=pose, cx=camera.cx + camera.fx * x / focus, cy=camera.cy + camera.fy * y / focus)
-        frame = render(gaussians, shifted)
-        rgb += float(frame.rgb.mean()) / samples
-        alpha += float(frame.alpha.mean()) / samples
-    return rgb, alpha
+    normals = rng.normal(size=(n, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    means = normals * radius + np.array([0.0, 0.0, depth])
+    scales = np.full((n, 3), radius / 12.0)
+    return Gaussians.from_colors(means, np.tile([1.0, 0, 0, 0], (n, 1)), scales, np.full(n, 0.95), np.full((n, 3), colour))

@@ -76,7 +76,7 @@ def composite_view(
         t1 = time.perf_counter()
         if defocus is not None and defocus_model.has_blur(packed, rects):
             images = defocus_model.render_cpu(
-                gaussians, camera, settings, packed, rects, ids, want_color, want_depth, want_ids
+                gaussians, camera, settings, packed, rects, ids, want_color, want_depth, want_ids, defocus
             )
         else:
             images = raster_cpu.rasterize(
@@ -100,7 +100,7 @@ def composite_view(
             blurred = defocus is not None and defocus_torch.has_blur(proj)
             factor = 1
             if blurred:
-                result = defocus_torch.render_torch(gs, camera, settings, proj, want_color, want_depth, want_ids)
+                result = defocus_torch.render_torch(gs, camera, settings, proj, want_color, want_depth, want_ids, defocus)
                 stats["pairs"] = int(result.pop("n_pairs"))
                 factor = int(result.pop("factor"))
             else:

@@ -21,24 +21,33 @@ footprint; under defocus the frustum is widened by the widest blurred footprint'
 the light of Gaussians outside the view enters it with its true size (a room's coverage at
 aperture 1000 px fell to a third without this).
 
-The model here (two passes, both backends):
+The model here (two passes, both backends; issue 29 replaced the same-slab share ``κ = S/M``, which
+gave hidden Gaussians — an object's back, everything behind a saturated pixel — light they never
+show: +19 % to +490 % of the light around an object on an empty background):
 
 1. **Measure the sharp view.** Composite the sharp projection as the sharp render does and,
-   per Gaussian, sum over the pixels it reaches: ``M = Σα``, ``S = Σα·T_slab`` (the part not
-   hidden by Gaussians of its own **depth slab**, bins of ``DEFOCUS_SLAB`` = 10 % of the
-   depth), ``W = Σw`` (visible weight) and ``U_c = Σw·ρ_c`` with ``ρ_c`` the pixel's ratio of
-   its decoded composite to the linear-light mix of the same splats.
+   per Gaussian, sum over the pixels it reaches ``W = Σw`` (visible weight), ``U_c = Σw·ρ_c``
+   (``ρ_c``: the pixel's decoded composite over the linear-light mix of the same splats) and the
+   visible weight's first and second moments. The same pass from four more points of the lens
+   (:mod:`spacedg.render.defocus_lens`, from a 2 px blur on) gives the lens-averaged visibility.
 2. **Render the blurred view** with each blurred Gaussian's opacity (and alpha floor) scaled by
-   ``κ = S / M`` — its share of its own surface's coverage — and its colour replaced by
-   linear light ``decode(c)·U_c / W`` — what its visible light amounts to in the sharp render.
-   Blurred Gaussians **add** their weight ``w = min(α·T_f, T)`` until the pixel saturates (the
-   blurred images of one surface's splats add up, as a lens adds light; ``T_f`` is the
-   transmittance through in-focus Gaussians in front, so a sharp foreground still hides what
-   is behind it); in-focus Gaussians (``r = 0``) follow the sharp rules in encoded colour. The
+   ``κ`` — the share of its integrated alpha (:func:`alpha_mass`) that the lens sees — its colour
+   replaced by linear light ``decode(c)·U_c / W``, and its 2D mean and covariance moved to its
+   visible weight's (:mod:`spacedg.render.defocus_place`), so each Gaussian pours exactly the light
+   the sharp view shows of it where it shows it. Blurred Gaussians **add** their weight
+   ``w = min(α·T_f, T)`` until the pixel saturates (``T_f``: the transmittance through in-focus
+   Gaussians in front); in-focus Gaussians (``r < 0.5 px`` counts as in focus,
+   :data:`~spacedg.render.settings.DEFOCUS_MIN_COC`) follow the sharp rules in encoded colour. The
    pixel is ``decode(encoded mix) + linear mix``.
 
+Measured against the thin-lens reference (:mod:`spacedg.render.thin_lens`,
+``benchmarks/defocus_reference.py``): see that benchmark's table for light, PSNR and cost. What
+still limits it: the per-pixel sums of blurred weights scatter around full coverage and the
+saturation clips the excess (1–4 % of the light at blurs of 0.5–2 px); the lens-visibility is a
+five-point estimate; the measurement passes cost several clean renders.
+
 The sharp pass is rendered on the view widened by a margin (the largest blurred footprint
-radius, at most half the view's longer side), so Gaussians whose blur reaches into the view
+radius, at most half the view's longer side, :data:`MAX_MARGIN`), so Gaussians whose blur reaches into the view
 are measured whole; a Gaussian whose sharp footprint still leaves the measured frame gets its
 factors blended with the view's means in proportion to the part left out (a footprint cut by
 the frame would otherwise be judged by its cut side alone), and Gaussians the sharp pass never
@@ -53,19 +62,8 @@ every pixel of a tile); the factors are gathered and applied in one compiled pas
 least :data:`COMPOSITE_MIN_COC` px, the image holds no detail finer than that and the blurred view
 is composited on a 2× (from 4 px) or 4× (from 8 px) coarser grid and upsampled bilinearly
 (median depth and ids: nearest). Against the full-resolution model: PSNR 45–53 dB on the built-in
-rooms and the plant capture at presets 1–5 and bench; a wall keeps its light within 0.5 %. Consequences, tested in ``tests/render/test_defocus.py``:
-
-- a uniform wall keeps its mean radiance and coverage within 1 % at every aperture up to the
-  hard limit (the wall is wider than the blur, so light enters the frame as much as leaves
-  it); an isolated Gaussian keeps its alpha;
-- a room's mean radiance is within 6 % and its coverage within 4 % of the exact thin lens
-  (the average of sharp renders from points over the lens) at the bench apertures, and its
-  coverage within 3 % of the sharp render up to the hard limit. A blurred foreground
-  legitimately shows more or less of what lies behind it than the sharp view did, and light
-  from outside the view enters it, so the room's mean is not the sharp view's;
-- limits of the model: semi-transparent sheets of *different* slabs that overlap add instead
-  of multiplying (bounded by saturation); a Gaussian partly hidden in the sharp view spreads
-  its visible share evenly over its blurred footprint.
+rooms and the plant capture at presets 1–5 and bench; a wall keeps its light within 0.5 %. Tests: ``tests/render/test_defocus.py`` (a wall, rooms and an opaque ball on an empty background
+against the thin lens; r = 0 is the sharp render bit for bit; the backends agree).
 """
 
 from __future__ import annotations
@@ -75,14 +73,17 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from scipy.special import erf
 
 from spacedg.limits import image_size_problem
 from spacedg.render.colour import srgb_to_linear
 from spacedg.render.frame import expected_depth
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
+from spacedg.render.defocus_lens import PRIOR, lens_camera, lens_defocus, lens_points, visibility
+from spacedg.render.defocus_place import place_visible
 from spacedg.render.settings import DEFOCUS_SLAB
 
-__all__ = ["MEASURE_SCALE", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of", "composite_factor", "coarse_view", "factor_for_coc", "upsample"]
+__all__ = ["MAX_MARGIN", "MEASURE_SCALE", "margin_cap", "alpha_mass", "apply_match", "has_blur", "inside_fraction", "match_factors", "measurement_camera", "measurement_margin", "measurement_settings", "slab_of", "composite_factor", "coarse_view", "factor_for_coc", "upsample"]
 
 
 def slab_of(depths: np.ndarray) -> np.ndarray:
@@ -97,43 +98,83 @@ def has_blur(packed: np.ndarray, rects: np.ndarray) -> bool:
     return bool((packed[visible, COC] > 0.0).any())
 
 
+#: Largest margin of the sharp measurement pass, in multiples of the view's longer side. Gaussians
+#: outside the measured frame take the frame's mean visible share, which counts every hidden layer
+#: of a room, so a blur much wider than the view loses coverage: a room at a 1000-px aperture on a
+#: 64 × 48 image keeps 0.65 of the sharp coverage at 0.5×; at 2× it keeps 0.88–0.98 per view, but
+#: the torch path's measurement pass then took 6× longer (issue 29: kept at 0.5 for now).
+MAX_MARGIN = 0.5
+
+
+def margin_cap(width: int, height: int) -> int:
+    """The largest margin (px) of the measurement pass for a ``width × height`` view (:data:`MAX_MARGIN`)."""
+    return int(MAX_MARGIN * max(width, height))
+
+
 def measurement_margin(packed: np.ndarray, rects: np.ndarray, width: int, height: int) -> int:
     """Pixels to widen the view by for the sharp pass: the largest blurred footprint radius among
-    the visible Gaussians, at most half the longer side, and within the size policy."""
+    the visible Gaussians, at most :func:`margin_cap`, and within the size policy."""
     visible = rects[:, 1] > rects[:, 0]
     if not visible.any():
         return 0
     wanted = float(np.max(np.maximum(packed[visible, RADX], packed[visible, RADY])))
-    margin = int(min(math.ceil(wanted), max(width, height) // 2))
+    margin = int(min(math.ceil(wanted), margin_cap(width, height)))
     while margin > 0 and image_size_problem(width + 2 * margin, height + 2 * margin) is not None:
         margin //= 2
     return margin
 
 
 def inside_fraction(packed: np.ndarray, width: int, height: int) -> np.ndarray:
-    """(N,) share of each Gaussian's footprint box (centre ± radius) inside ``[0, width] × [0, height]``."""
+    """(N,) share of each Gaussian's mass inside ``[0, width] × [0, height]``: the product of its two
+    marginal normal masses (standard deviations ``sqrt(Σxx)``, ``sqrt(Σyy)`` from the conic)."""
     u, v = packed[:, PX].astype(np.float64), packed[:, PY].astype(np.float64)
-    rx, ry = np.maximum(packed[:, RADX], 0.5).astype(np.float64), np.maximum(packed[:, RADY], 0.5).astype(np.float64)
-    fx = np.clip(np.minimum(u + rx, width) - np.maximum(u - rx, 0.0), 0.0, None) / (2.0 * rx)
-    fy = np.clip(np.minimum(v + ry, height) - np.maximum(v - ry, 0.0), 0.0, None) / (2.0 * ry)
-    return fx * fy
+    a, b, c = (packed[:, k].astype(np.float64) for k in (CA, CB, CC))
+    det = a * c - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sx = np.sqrt(np.where(det > 0, c / np.where(det > 0, det, 1.0), 0.25))
+        sy = np.sqrt(np.where(det > 0, a / np.where(det > 0, det, 1.0), 0.25))
+    sx, sy = np.maximum(np.nan_to_num(sx, nan=0.5), 1e-6), np.maximum(np.nan_to_num(sy, nan=0.5), 1e-6)
+    root2 = math.sqrt(2.0)
+    fx = 0.5 * (erf((width - u) / (root2 * sx)) - erf(-u / (root2 * sx)))
+    fy = 0.5 * (erf((height - v) / (root2 * sy)) - erf(-v / (root2 * sy)))
+    return np.clip(fx * fy, 0.0, 1.0)
 
 
-def match_factors(sums: np.ndarray, inside: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def alpha_mass(packed: np.ndarray, rects: np.ndarray | None = None) -> np.ndarray:
+    """(N,) float64 integrated alpha ``o·2π·sqrt(det Σ)·(1 − f/o)`` of each projected Gaussian (pixels²
+    of the projection's grid): opacity ``o``, 2D covariance ``Σ`` from the conic, the part above the
+    alpha floor ``f`` kept. 0 for Gaussians culled (``rects`` empty, when given) or degenerate."""
+    opa = packed[:, OPA].astype(np.float64)
+    det_conic = packed[:, CA].astype(np.float64) * packed[:, CC] - np.square(packed[:, CB].astype(np.float64))
+    ok = (opa > 0.0) & (det_conic > 0.0)
+    if rects is not None:
+        ok &= rects[:, 1] > rects[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kept = 1.0 - np.clip(packed[:, AMIN].astype(np.float64) / np.where(ok, opa, 1.0), 0.0, 1.0)
+        mass = opa * 2.0 * math.pi / np.sqrt(np.where(ok, det_conic, 1.0)) * kept
+    return np.where(ok & np.isfinite(mass), mass, 0.0)
+
+
+def match_factors(sums: np.ndarray, inside: np.ndarray, mass: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-Gaussian ``(κ (N,), ρ (N, 3))`` from the sharp pass's sums ``(N, 6)`` = M, S, W, U_r, U_g, U_b.
 
-    ``κ = S / M`` in [0, 1] and ``ρ = U / W`` (≥ 0), blended with the view's ratios of the
-    totals (``κ̄ = ΣS / ΣM``, ``ρ̄ = ΣU / ΣW``; 1 when the sharp view shows nothing) in
-    proportion to the share of the footprint outside the measured frame (``1 − inside``);
-    Gaussians with ``M = 0`` (or ``W = 0``) take the means.
+    ``κ = (W + p·mass·κ̄) / (mass·(inside + p))`` — the share of the Gaussian's alpha inside the
+    measured frame (``mass·inside``, :func:`alpha_mass` of the sharp projection) that the sharp
+    view shows, taken for the whole Gaussian, pulled towards the frame's mean ``κ̄ = ΣW / Σ(mass·inside)``
+    by a prior of weight ``p`` = :data:`spacedg.render.defocus_lens.PRIOR` (a Gaussian barely inside
+    the frame gets κ̄), clipped to [0, 1]; ``ρ = U / W`` (≥ 0)
+    blended alike with ``ρ̄ = ΣU / ΣW`` (1 when the sharp view shows nothing). A Gaussian the pass
+    reached but found hidden (W = 0) gets κ = 0; one outside the measured frame gets κ̄.
     """
     sums = np.asarray(sums, dtype=np.float64)
-    m, s, w, u = sums[:, 0], sums[:, 1], sums[:, 2], sums[:, 3:6]
-    kappa_mean = s.sum() / m.sum() if m.sum() > 0 else 1.0
+    w, u = sums[:, 2], sums[:, 3:6]
+    share = np.clip(np.asarray(inside, dtype=np.float64), 0.0, 1.0)
+    mass = np.asarray(mass, dtype=np.float64)
+    expected = float((mass * share).sum())
+    kappa_mean = min(w.sum() / expected, 1.0) if expected > 0 else 1.0
     rho_mean = u.sum(axis=0) / w.sum() if w.sum() > 0 else np.ones(3)
-    share = np.ones(m.shape[0]) if inside is None else np.clip(np.asarray(inside, dtype=np.float64), 0.0, 1.0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        kappa = np.where(m > 0, share * (s / np.where(m > 0, m, 1.0)) + (1.0 - share) * kappa_mean, kappa_mean)
+        kappa = np.where(mass > 0, (w + PRIOR * mass * kappa_mean) / np.where(mass > 0, mass * (share + PRIOR), 1.0), kappa_mean)
         rho = np.where(
             (w > 0)[:, None], share[:, None] * (u / np.where(w > 0, w, 1.0)[:, None]) + (1.0 - share[:, None]) * rho_mean[None, :],
             rho_mean[None, :],
@@ -200,25 +241,37 @@ def measurement_settings(settings: Any, scale: float | None = None) -> Any:
 
 def render_cpu(
     gaussians: object, camera: object, settings: object, packed: np.ndarray, rects: np.ndarray,
-    instance_ids: np.ndarray, want_color: bool, want_depth: bool, want_ids: bool,
+    instance_ids: np.ndarray, want_color: bool, want_depth: bool, want_ids: bool, defocus: Any,
 ) -> dict[str, np.ndarray]:
     """Both passes on the compiled path; ``rgb`` in the result is **linear** light."""
-    from spacedg.render import defocus_cpu, project_cpu, raster_cpu
+    from spacedg.render import defocus_cpu, raster_cpu
     from spacedg.render.colour_cpu import decode_srgb
 
     width, height = camera.width, camera.height  # type: ignore[attr-defined]
     tight = settings.tight_tiles and settings.opacity_extent  # type: ignore[attr-defined]
     tiles_x = (width + 15) // 16
-    # pass 1: the sharp view, widened by a margin, measured
+    # pass 1: the sharp view, widened by a margin, measured from the lens centre and the other lens points
     margin = measurement_margin(packed, rects, width, height)
     wide = measurement_camera(camera, margin)
-    sharp, sharp_rects = project_cpu.project_gaussians(gaussians, wide, measurement_settings(settings), None, want_color)  # type: ignore[arg-type]
-    offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, wide.width, wide.height, tight)
-    pair_out = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
-    lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
-    defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pair_out)  # type: ignore[attr-defined]
+    sharp, sharp_rects, gauss, pair_out = _measure_cpu(gaussians, wide, settings, want_color)
+    lens = lens_defocus(defocus, wide.fx / camera.fx, wide.fx)  # type: ignore[attr-defined]
+    seen = np.zeros(packed.shape[0])
+    visible = rects[:, 1] > rects[:, 0]
+    centre_weight, points = lens_points(float(packed[visible, COC].max()) if visible.any() else 0.0)
+    for offset, weight in points:
+        seen_b, rects_b, gauss_b, pairs_b = _measure_cpu(gaussians, lens_camera(wide, lens, np.array(offset)), settings, False)
+        w_b = np.bincount(gauss_b, weights=pairs_b[:, defocus_cpu.PAIR_W].astype(np.float64), minlength=packed.shape[0])
+        seen += weight * visibility(w_b, alpha_mass(seen_b, rects_b), inside_fraction(seen_b, wide.width, wide.height))
     # pass 2: the blurred view, with the factors of match_factors / apply_match (compiled)
-    packed, rects = defocus_cpu.match_and_apply(gauss, pair_out, sharp, wide.width, wide.height, packed, rects, want_color)
+    mass = alpha_mass(sharp, sharp_rects)
+    packed, rects = defocus_cpu.match_and_apply(
+        gauss, pair_out, sharp, mass, wide.width, wide.height, packed, rects, want_color, centre_weight, seen, PRIOR,
+    )
+    moments = np.stack([np.bincount(gauss, weights=pair_out[:, j].astype(np.float64), minlength=packed.shape[0])
+                        for j in (defocus_cpu.PAIR_W, *range(defocus_cpu.PAIR_MOMENTS, defocus_cpu.PAIR_COLUMNS))], axis=1)
+    packed, rects = place_visible(
+        packed, rects, moments, wide.fx / camera.fx, width, height, inside_fraction(sharp, wide.width, wide.height),  # type: ignore[attr-defined]
+    )
     n_visible = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
     factor = composite_factor(packed, rects, width, height)
     if factor > 1:  # every visible Gaussian blurred by >= COMPOSITE_MIN_COC px: composite on a coarser grid
@@ -246,6 +299,18 @@ def render_cpu(
     out["n_pairs"] = np.int64(gauss.shape[0])
     out["n_visible"] = n_visible
     return out
+
+
+def _measure_cpu(gaussians: Any, camera: Any, settings: Any, want_color: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One sharp measurement pass on the compiled path: ``(sharp packed, rects, pair Gaussians, pair sums)``."""
+    from spacedg.render import defocus_cpu, project_cpu, raster_cpu
+
+    sharp, sharp_rects = project_cpu.project_gaussians(gaussians, camera, measurement_settings(settings), None, want_color)
+    offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, camera.width, camera.height, settings.tight_tiles and settings.opacity_extent)
+    pair_out = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
+    lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
+    defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, slab_of(sharp[:, DEPTH]), (camera.width + 15) // 16, settings.alpha_max, pair_out)
+    return sharp, sharp_rects, gauss, pair_out
 
 
 #: Smallest circle of confusion (px) for which the blurred view is composited on a coarser grid: when

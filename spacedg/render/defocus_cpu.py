@@ -28,11 +28,13 @@ that LLVM vectorises the 16-pixel rows, like :func:`spacedg.render.raster_cpu.co
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
 from spacedg.render.colour_cpu import _DECODE_LUT, _TOE
-from spacedg.render.project_cpu import AMIN, CBL, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
+from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 from spacedg.render.raster_cpu import (
     _accumulate, _add_rgb, _conic, _f32_constants, _gauss_alpha, _pair_rows, _put_pixel, _put_rgb, _row_terms, _tile_span, _tile_state,
 )
@@ -40,9 +42,11 @@ from spacedg.render.threads import fork_safe
 
 __all__ = ["composite_defocus", "match_and_apply", "measure_sharp", "PAIR_M", "PAIR_S", "PAIR_W", "PAIR_U", "PAIR_COLUMNS"]
 
-#: Columns of :func:`measure_sharp`'s per-pair sums: M, S, W, then U for r, g, b.
-PAIR_M, PAIR_S, PAIR_W, PAIR_U = 0, 1, 2, 3
-PAIR_COLUMNS = 6
+#: Columns of :func:`measure_sharp`'s per-pair sums: M, S, W, then U for r, g, b, then the visible
+#: weight's moments about the Gaussian's mean (measurement pixels): Σw·dx, Σw·dy, Σw·dx², Σw·dx·dy, Σw·dy².
+PAIR_M, PAIR_S, PAIR_W, PAIR_U, PAIR_MOMENTS = 0, 1, 2, 3, 6
+PAIR_COLUMNS = 11
+_ROOT2 = math.sqrt(2.0)
 
 
 @numba.njit(cache=True, inline="always")
@@ -90,14 +94,20 @@ def _measure_sweep(state, packed, lin, g, x0, y0, amax, pair_out, k, second):
     ca, cb, cc, opa, amin = _conic(packed, g)
     cr, cg, cbl = packed[g, CR], packed[g, CG], packed[g, CBL]
     lr, lg, lb = lin[g, 0], lin[g, 1], lin[g, 2]
-    m_sum = zero  # sweep 1: M, S, W
+    m_sum = zero  # sweep 1: M, S, W and the visible weight's moments
     s_sum = zero
     w_sum = zero
+    wx = zero
+    wy = zero
+    wxx = zero
+    wxy = zero
+    wyy = zero
     ur = zero  # sweep 2: U
     ug = zero
     ub = zero
     for row in range(r0, r1):
         bdy, cdy, base = _row_terms(row, gy, cb, cc)
+        dy = np.float32(row) - gy
         for col in range(16):
             p = base + np.uint64(col)
             alpha = _gauss_alpha(col, gx, ca, bdy, cdy, opa, amin, amax, zero) * state[p + _MLIVE]
@@ -113,6 +123,12 @@ def _measure_sweep(state, packed, lin, g, x0, y0, amax, pair_out, k, second):
                 m_sum += a_taken
                 s_sum += a_taken * state[p + _TS]
                 w_sum += w
+                dx = np.float32(col) - gx
+                wx += w * dx
+                wy += w * dy
+                wxx += w * dx * dx
+                wxy += w * dx * dy
+                wyy += w * dy * dy
                 state[p + _TS] = state[p + _TS] * (one - a_taken)
                 _add_rgb(state, p + _ER, w, cr, cg, cbl)
                 _add_rgb(state, p + _LR, w, lr, lg, lb)
@@ -126,6 +142,11 @@ def _measure_sweep(state, packed, lin, g, x0, y0, amax, pair_out, k, second):
         pair_out[k, 0] += m_sum
         pair_out[k, 1] += s_sum
         pair_out[k, 2] += w_sum
+        pair_out[k, 6] += wx
+        pair_out[k, 7] += wy
+        pair_out[k, 8] += wxx
+        pair_out[k, 9] += wxy
+        pair_out[k, 10] += wyy
 
 
 @numba.njit(cache=True, inline="always")
@@ -251,15 +272,18 @@ def composite_defocus(
 
 
 @numba.njit(cache=True)
-def match_and_apply(gauss, pair_out, sharp, mwidth, mheight, packed, rects, want_color):  # pragma: no cover - compiled
+def match_and_apply(gauss, pair_out, sharp, mass, mwidth, mheight, packed, rects, want_color, centre_weight, seen, prior):  # pragma: no cover - compiled
     """:func:`spacedg.render.defocus.match_factors` and :func:`~spacedg.render.defocus.apply_match` in one
     compiled pass (the numpy versions took as long as the blurred composite at 448×336).
 
     Sums each pair's row of ``pair_out`` into its Gaussian (in pair order, as ``np.bincount``),
     takes every Gaussian's share of its footprint box inside the measured frame
-    (``mwidth`` × ``mheight``, from the ``sharp`` projection), and returns the blurred projection
-    ``(packed, rects)`` (copies) with κ and ρ applied. Means are over float64 totals; κ and ρ are
-    rounded to float32 before they are applied, as the numpy path does.
+    (``mwidth`` × ``mheight``, from the ``sharp`` projection) and its integrated alpha ``mass``
+    (:func:`spacedg.render.defocus.alpha_mass` of the sharp projection), and returns the blurred
+    projection ``(packed, rects)`` (copies) with κ and ρ applied: κ is ``centre_weight`` times the
+    centre's share plus ``seen`` (N,), the other lens points' weighted shares
+    (:mod:`spacedg.render.defocus_lens`). Means are over float64 totals;
+    κ and ρ are rounded to float32 before they are applied, as the numpy path does.
     """
     n = packed.shape[0]
     sums = np.zeros((n, PAIR_COLUMNS), np.float64)
@@ -267,11 +291,25 @@ def match_and_apply(gauss, pair_out, sharp, mwidth, mheight, packed, rects, want
         g = gauss[k]
         for j in range(PAIR_COLUMNS):
             sums[g, j] += np.float64(pair_out[k, j])
+    share = np.zeros(n, np.float64)
+    expected = 0.0
     tot = np.zeros(PAIR_COLUMNS, np.float64)
     for g in range(n):
         for j in range(PAIR_COLUMNS):
             tot[j] += sums[g, j]
-    kappa_mean = tot[1] / tot[0] if tot[0] > 0.0 else 1.0
+        # share of the sharp Gaussian's mass inside the measured frame (product of its marginals)
+        u, v = np.float64(sharp[g, PX]), np.float64(sharp[g, PY])
+        ca, cb, cc = np.float64(sharp[g, CA]), np.float64(sharp[g, CB]), np.float64(sharp[g, CC])
+        det = ca * cc - cb * cb
+        sx = math.sqrt(cc / det) if det > 0.0 else 0.5
+        sy = math.sqrt(ca / det) if det > 0.0 else 0.5
+        sx = max(sx, 1e-6) if sx == sx else 0.5
+        sy = max(sy, 1e-6) if sy == sy else 0.5
+        fx = 0.5 * (math.erf((np.float64(mwidth) - u) / (_ROOT2 * sx)) - math.erf(-u / (_ROOT2 * sx)))
+        fy = 0.5 * (math.erf((np.float64(mheight) - v) / (_ROOT2 * sy)) - math.erf(-v / (_ROOT2 * sy)))
+        share[g] = min(max(fx * fy, 0.0), 1.0)
+        expected += mass[g] * share[g]
+    kappa_mean = min(tot[2] / expected, 1.0) if expected > 0.0 else 1.0
     rho_mean = np.ones(3, np.float64)
     if tot[2] > 0.0:
         for c in range(3):
@@ -281,17 +319,11 @@ def match_and_apply(gauss, pair_out, sharp, mwidth, mheight, packed, rects, want
     for g in range(n):
         if not packed[g, COC] > 0.0:
             continue
-        # share of the sharp footprint box inside the measured frame
-        u, v = np.float64(sharp[g, PX]), np.float64(sharp[g, PY])
-        rx = max(np.float64(sharp[g, RADX]), 0.5)
-        ry = max(np.float64(sharp[g, RADY]), 0.5)
-        fx = max(min(u + rx, np.float64(mwidth)) - max(u - rx, 0.0), 0.0) / (2.0 * rx)
-        fy = max(min(v + ry, np.float64(mheight)) - max(v - ry, 0.0), 0.0) / (2.0 * ry)
-        share = min(max(fx * fy, 0.0), 1.0)
-        m, s, w = sums[g, 0], sums[g, 1], sums[g, 2]
-        kappa = share * (s / m) + (1.0 - share) * kappa_mean if m > 0.0 else kappa_mean
+        w = sums[g, 2]
+        kappa = (w + prior * mass[g] * kappa_mean) / (mass[g] * (share[g] + prior)) if mass[g] > 0.0 else kappa_mean
         if kappa != kappa:
             kappa = kappa_mean
+        kappa = centre_weight * min(max(kappa, 0.0), 1.0) + seen[g]
         kappa32 = np.float32(min(max(kappa, 0.0), 1.0))
         out[g, OPA] = packed[g, OPA] * kappa32
         out[g, AMIN] = packed[g, AMIN] * kappa32
@@ -302,7 +334,7 @@ def match_and_apply(gauss, pair_out, sharp, mwidth, mheight, packed, rects, want
             out_rects[g, 3] = 0
         if want_color:
             for c in range(3):
-                rho = share * (sums[g, 3 + c] / w) + (1.0 - share) * rho_mean[c] if w > 0.0 else rho_mean[c]
+                rho = share[g] * (sums[g, 3 + c] / w) + (1.0 - share[g]) * rho_mean[c] if w > 0.0 else rho_mean[c]
                 if rho != rho:
                     rho = 1.0
                 elif rho == np.inf:

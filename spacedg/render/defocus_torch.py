@@ -23,16 +23,18 @@ import torch
 from spacedg.limits import image_size_problem
 from spacedg.render.camera import Camera
 from spacedg.render.colour import srgb_to_linear
+from spacedg.render.defocus_lens import PRIOR
 from spacedg.render.project_torch import GaussianTensors, Projected, project_gaussians
 from spacedg.render.raster_torch import advance_transmittance, bin_tiles, images_from_tiles, median_update
 from spacedg.render.settings import (
     DEFOCUS_SLAB,
     TILE_SIZE,
     TRANSMITTANCE_MIN,
+    Defocus,
     RasterSettings,
 )
 
-__all__ = ["composite_defocus", "has_blur", "match_factors", "measure_sharp", "render_torch"]
+__all__ = ["alpha_mass", "composite_defocus", "has_blur", "match_factors", "measure_sharp", "render_torch"]
 
 
 def has_blur(proj: Projected) -> bool:
@@ -78,10 +80,11 @@ def measure_sharp(
     proj: Projected, offsets: torch.Tensor, gauss: torch.Tensor, slab: torch.Tensor, width: int, height: int,
     alpha_max: float, chunk: int = 32, max_elements: int = 1 << 22,
 ) -> torch.Tensor:
-    """Per-pair sums ``(pairs, 6)``: M, S, W, U_r, U_g, U_b (see the module docstring)."""
+    """Per-pair sums ``(pairs, 11)``: M, S, W, U_r, U_g, U_b and the visible weight's moments about the
+    Gaussian's mean Σw·dx, Σw·dy, Σw·dx², Σw·dx·dy, Σw·dy² (see the module docstring)."""
     device, dtype = proj.means2d.device, proj.means2d.dtype
     tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
-    out = torch.zeros(gauss.numel(), 6, dtype=dtype, device=device)
+    out = torch.zeros(gauss.numel(), 11, dtype=dtype, device=device)
     steps = torch.arange(chunk, device=device)
     colors = proj.colors if proj.colors is not None else torch.zeros(proj.means2d.shape[0], 3, dtype=dtype, device=device)
     linear = srgb_to_linear(colors)
@@ -119,13 +122,18 @@ def measure_sharp(
                     t_slab = t_before / torch.clamp(t_slab_start, min=1e-30)
                     sums = torch.stack([taken.sum(1), (taken * t_slab).sum(1), weight.sum(1)], dim=-1)  # (B, C, 3)
                     out[pair[in_list], :3] += sums[in_list]
+                    dx = px[:, :, None] - proj.means2d[g, 0][:, None, :]
+                    dy = py[:, :, None] - proj.means2d[g, 1][:, None, :]
+                    moments = torch.stack([(weight * dx).sum(1), (weight * dy).sum(1), (weight * dx * dx).sum(1),
+                                           (weight * dx * dy).sum(1), (weight * dy * dy).sum(1)], dim=-1)
+                    out[pair[in_list], 6:] += moments[in_list]
                     enc = enc + torch.einsum("bpc,bck->bpk", weight, colors[g])
                     mix = mix + torch.einsum("bpc,bck->bpk", weight, linear[g])
                     t_start = torch.where((last[:, -1] >= 0)[:, None], at[:, :, -1], t_start)
                     slab_prev = s[:, -1]
                 else:
                     u = torch.einsum("bpc,bpk->bck", weight, rho)
-                    out[pair[in_list], 3:] += u[in_list]
+                    out[pair[in_list], 3:6] += u[in_list]
                 trans, alive, open_ = advance_transmittance(trans, alive, t_after, take)
                 if not open_:
                     break
@@ -137,35 +145,56 @@ def measure_sharp(
 def measurement_margin(proj: Projected, width: int, height: int) -> int:
     """As :func:`spacedg.render.defocus.measurement_margin`, from a torch projection."""
 
+    from spacedg.render.defocus import margin_cap
+
     visible = proj.visible
     if not bool(visible.any()):
         return 0
     wanted = float(proj.radii[visible].max())
-    margin = int(min(math.ceil(wanted), max(width, height) // 2))
+    margin = int(min(math.ceil(wanted), margin_cap(width, height)))
     while margin > 0 and image_size_problem(width + 2 * margin, height + 2 * margin) is not None:
         margin //= 2
     return margin
 
 
 def inside_fraction(proj: Projected, width: int, height: int) -> torch.Tensor:
-    """(N,) share of each Gaussian's footprint box inside the frame, as :func:`spacedg.render.defocus.inside_fraction`."""
+    """(N,) share of each Gaussian's mass inside the frame, as :func:`spacedg.render.defocus.inside_fraction`."""
     u, v = proj.means2d[:, 0].double(), proj.means2d[:, 1].double()
-    rx = torch.clamp(proj.radii[:, 0].double(), min=0.5)
-    ry = torch.clamp(proj.radii[:, 1].double(), min=0.5)
-    fx = torch.clamp(torch.clamp(u + rx, max=width) - torch.clamp(u - rx, min=0.0), min=0.0) / (2.0 * rx)
-    fy = torch.clamp(torch.clamp(v + ry, max=height) - torch.clamp(v - ry, min=0.0), min=0.0) / (2.0 * ry)
-    return fx * fy
+    conics = proj.conics.double()
+    a, b, c = conics[:, 0], conics[:, 1], conics[:, 2]
+    det = a * c - b * b
+    safe = torch.where(det > 0, det, torch.ones_like(det))
+    sx = torch.clamp(torch.nan_to_num(torch.where(det > 0, torch.sqrt(torch.clamp(c / safe, min=0.0)), torch.full_like(det, 0.5)), nan=0.5), min=1e-6)
+    sy = torch.clamp(torch.nan_to_num(torch.where(det > 0, torch.sqrt(torch.clamp(a / safe, min=0.0)), torch.full_like(det, 0.5)), nan=0.5), min=1e-6)
+    root2 = math.sqrt(2.0)
+    fx = 0.5 * (torch.erf((width - u) / (root2 * sx)) - torch.erf(-u / (root2 * sx)))
+    fy = 0.5 * (torch.erf((height - v) / (root2 * sy)) - torch.erf(-v / (root2 * sy)))
+    return torch.clamp(fx * fy, 0.0, 1.0)
 
 
-def match_factors(sums: torch.Tensor, inside: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+def alpha_mass(proj: Projected) -> torch.Tensor:
+    """(N,) float64 integrated alpha of each projected Gaussian, as :func:`spacedg.render.defocus.alpha_mass`."""
+    opa = proj.opacities.double()
+    conics = proj.conics.double()
+    det_conic = conics[:, 0] * conics[:, 2] - conics[:, 1] * conics[:, 1]
+    ok = (opa > 0) & (det_conic > 0) & proj.visible
+    safe_opa = torch.where(ok, opa, torch.ones_like(opa))
+    kept = 1.0 - torch.clamp(proj.alpha_floor.double() / safe_opa, 0.0, 1.0)
+    mass = opa * 2.0 * math.pi / torch.sqrt(torch.where(ok, det_conic, torch.ones_like(det_conic))) * kept
+    return torch.where(ok & torch.isfinite(mass), mass, torch.zeros_like(mass))
+
+
+def match_factors(sums: torch.Tensor, inside: torch.Tensor, mass: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-Gaussian ``(κ (N,), ρ (N, 3))`` from per-Gaussian sums (N, 6), as :func:`spacedg.render.defocus.match_factors`."""
     sums = sums.double()
-    m, s, w, u = sums[:, 0], sums[:, 1], sums[:, 2], sums[:, 3:6]
-    kappa_mean = float(s.sum() / m.sum()) if float(m.sum()) > 0 else 1.0
+    w, u = sums[:, 2], sums[:, 3:6]
+    share = torch.clamp(inside.double(), 0.0, 1.0)
+    mass = mass.double()
+    expected = float((mass * share).sum())
+    kappa_mean = min(float(w.sum()) / expected, 1.0) if expected > 0 else 1.0
     rho_mean = u.sum(0) / w.sum() if float(w.sum()) > 0 else torch.ones(3, dtype=sums.dtype, device=sums.device)
-    share = torch.ones_like(m) if inside is None else torch.clamp(inside.double(), 0.0, 1.0)
-    kappa = torch.where(m > 0, share * (s / torch.where(m > 0, m, torch.ones_like(m))) + (1 - share) * kappa_mean,
-                        torch.full_like(m, kappa_mean))
+    kappa = torch.where(mass > 0, (w + PRIOR * mass * kappa_mean) / torch.where(mass > 0, mass * (share + PRIOR), torch.ones_like(mass)),
+                        torch.full_like(mass, kappa_mean))
     rho = torch.where(
         (w > 0)[:, None],
         share[:, None] * (u / torch.where(w > 0, w, torch.ones_like(w))[:, None]) + (1 - share[:, None]) * rho_mean[None, :],
@@ -274,23 +303,45 @@ def composite_defocus(
     )
 
 
+def _measure(gs: GaussianTensors, camera: Camera, settings: RasterSettings, want_color: bool) -> tuple[Projected, torch.Tensor]:
+    """One sharp measurement pass: the projection and its per-Gaussian sums (N, 6) float64."""
+    from spacedg.render.defocus import measurement_settings
+
+    tight = settings.tight_tiles and settings.opacity_extent
+    sharp = project_gaussians(gs, camera, measurement_settings(settings), None, want_color)
+    offsets, gauss = bin_tiles(sharp, camera.width, camera.height, tight)
+    pairs = measure_sharp(sharp, offsets, gauss, _slab(sharp.depths), camera.width, camera.height, settings.alpha_max)
+    sums = torch.zeros(sharp.means2d.shape[0], pairs.shape[1], dtype=torch.float64, device=pairs.device)
+    sums.index_add_(0, gauss.long(), pairs.double())
+    return sharp, sums
+
+
 def render_torch(
     gs: GaussianTensors, camera: Camera, settings: RasterSettings, proj: Projected,
-    want_color: bool, want_depth: bool, want_ids: bool,
+    want_color: bool, want_depth: bool, want_ids: bool, defocus: Defocus,
 ) -> dict[str, torch.Tensor]:
     """Both passes on the torch path: ``alpha``, ``enc`` + ``lin`` (when colour is wanted), depth/ids, ``n_pairs``."""
-    from spacedg.render.defocus import measurement_camera, measurement_settings
-
+    from spacedg.render.defocus import measurement_camera
+    from spacedg.render.defocus_lens import lens_camera, lens_defocus, lens_points, visibility
+    
     tight = settings.tight_tiles and settings.opacity_extent
     width, height = camera.width, camera.height
     wide = measurement_camera(camera, measurement_margin(proj, width, height))
-    sharp = project_gaussians(gs, wide, measurement_settings(settings), None, want_color)
-    offsets, gauss = bin_tiles(sharp, wide.width, wide.height, tight)
-    pairs = measure_sharp(sharp, offsets, gauss, _slab(sharp.depths), wide.width, wide.height, settings.alpha_max)
-    sums = torch.zeros(proj.means2d.shape[0], 6, dtype=torch.float64, device=pairs.device)
-    sums.index_add_(0, gauss.long(), pairs.double())
-    kappa, rho = match_factors(sums, inside_fraction(sharp, wide.width, wide.height))
-    blurred = apply_match(proj, kappa, rho)
+    sharp, sums = _measure(gs, wide, settings, want_color)
+    kappa, rho = match_factors(sums, inside_fraction(sharp, wide.width, wide.height), alpha_mass(sharp))
+    lens = lens_defocus(defocus, wide.fx / camera.fx, wide.fx)
+    seen = torch.zeros_like(kappa)
+    largest = float(proj.coc[proj.visible].max()) if bool(proj.visible.any()) else 0.0
+    centre_weight, points = lens_points(largest)
+    for offset, weight in points:
+        seen_b, sums_b = _measure(gs, lens_camera(wide, lens, offset), settings, False)
+        share = visibility(sums_b[:, 2].cpu().numpy(), alpha_mass(seen_b).cpu().numpy(), inside_fraction(seen_b, wide.width, wide.height).cpu().numpy())
+        seen = seen + weight * torch.from_numpy(share).to(seen)
+    kappa = torch.clamp(centre_weight * kappa + seen, 0.0, 1.0)
+    blurred = place_visible_torch(
+        apply_match(proj, kappa, rho), sums[:, [2, 6, 7, 8, 9, 10]], wide.fx / camera.fx, width, height,
+        inside_fraction(sharp, wide.width, wide.height),
+    )
     factor = composite_factor(blurred, width, height)
     if factor > 1:  # as the compiled path: every visible Gaussian blurred by >= COMPOSITE_MIN_COC px
         blurred, width, height = coarse_view(blurred, width, height, factor)
@@ -299,6 +350,32 @@ def render_torch(
     out["n_pairs"] = torch.tensor(gauss.numel())
     out["factor"] = torch.tensor(factor)  # the caller upsamples (spacedg.render.defocus.upsample)
     return out
+
+
+def place_visible_torch(proj: Projected, sums: torch.Tensor, scale: float, width: int, height: int, inside: torch.Tensor) -> Projected:
+    """:func:`spacedg.render.defocus_place.place_visible` on a torch projection (the per-Gaussian
+    arithmetic runs in float64 numpy on the host, as the compiled path's; the result is on ``proj``'s device)."""
+    import numpy as np
+
+    from spacedg.render.defocus_place import place_visible
+    from spacedg.render.project_cpu import AMIN, CA, CB, CC, COC, OPA, PX, PY, RADX, RADY
+
+    n = proj.means2d.shape[0]
+    packed = np.zeros((n, 14), np.float32)
+    host = {PX: proj.means2d[:, 0], PY: proj.means2d[:, 1], CA: proj.conics[:, 0], CB: proj.conics[:, 1], CC: proj.conics[:, 2],
+            OPA: proj.opacities, AMIN: proj.alpha_floor, RADX: proj.radii[:, 0], RADY: proj.radii[:, 1], COC: proj.coc}
+    for column, value in host.items():
+        packed[:, column] = value.detach().double().cpu().numpy()
+    rects = proj.rects.detach().cpu().numpy()
+    placed, placed_rects = place_visible(packed, rects, sums.detach().double().cpu().numpy(), scale, width, height, inside.detach().cpu().numpy())
+    dev, dtype = proj.means2d.device, proj.means2d.dtype
+    column = lambda k: torch.from_numpy(placed[:, k]).to(device=dev, dtype=dtype)  # noqa: E731
+    return replace(
+        proj, means2d=torch.stack([column(PX), column(PY)], dim=-1), conics=torch.stack([column(CA), column(CB), column(CC)], dim=-1),
+        opacities=column(OPA), alpha_floor=column(AMIN),
+        radii=torch.from_numpy(placed[:, [RADX, RADY]]).to(device=dev, dtype=proj.radii.dtype),
+        rects=torch.from_numpy(placed_rects).to(device=dev, dtype=proj.rects.dtype),
+    )
 
 
 def composite_factor(proj: Projected, width: int, height: int) -> int:

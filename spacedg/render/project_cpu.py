@@ -38,7 +38,7 @@ import numpy as np
 
 from spacedg.render.camera import equidistant_theta_d, equidistant_theta_d_slope
 from spacedg.render.gaussians import _SH_C1, _SH_C2, _SH_C3, SH_C0
-from spacedg.render.settings import FOOTPRINT_CAP
+from spacedg.render.settings import DEFOCUS_MIN_COC, FOOTPRINT_CAP
 from spacedg.render.threads import fork_safe
 
 if TYPE_CHECKING:
@@ -216,6 +216,8 @@ def _project_kernel(
         coc = 0.0
         if aperture > 0.0:
             coc = min(aperture * abs(z - focus) / z, max_coc)
+            if coc < DEFOCUS_MIN_COC:  # below half a pixel: sharp
+                coc = 0.0
             coc2 = coc * coc
             sxx += coc2
             syy += coc2

@@ -16,7 +16,7 @@ import torch
 
 from spacedg.render.camera import Camera, equidistant_theta_d, equidistant_theta_d_slope
 from spacedg.render.gaussians import Gaussians, quat_to_matrix, sh_basis
-from spacedg.render.settings import ALPHA_MIN, FOOTPRINT_CAP, TILE_SIZE, Defocus, RasterSettings
+from spacedg.render.settings import ALPHA_MIN, DEFOCUS_MIN_COC, FOOTPRINT_CAP, TILE_SIZE, Defocus, RasterSettings
 
 _TENSOR_CACHE: "weakref.WeakKeyDictionary[Gaussians, dict]" = weakref.WeakKeyDictionary()
 
@@ -206,6 +206,7 @@ def project_gaussians(
     if defocus is not None and defocus.aperture > 0:
         z_w = cam_safe[:, 2].to(wide)
         coc = torch.clamp(defocus.aperture * torch.abs(z_w - defocus.focus) / z_w, max=defocus.max_radius)
+        coc = torch.where(coc < DEFOCUS_MIN_COC, torch.zeros_like(coc), coc)  # below half a pixel: sharp
         sxx, syy = sxx + coc * coc, syy + coc * coc
         det_blur = sxx * syy - sxy * sxy
         compensation = torch.sqrt(torch.clamp(det / torch.clamp(det_blur, min=1e-300), min=0.0))  # as the CPU path: 0/0 is 0, not NaN
