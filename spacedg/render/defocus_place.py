@@ -83,8 +83,12 @@ def place_visible(
     rad_x, rad_y = np.ceil(reach_x * np.sqrt(new[:, 0])), np.ceil(reach_y * np.sqrt(new[:, 2]))
     columns = {PX: u, PY: v, CA: new[:, 2] / det_new, CB: -new[:, 1] / det_new, CC: new[:, 0] / det_new,
                OPA: p[:, OPA] * factor, AMIN: p[:, AMIN] * factor, RADX: rad_x, RADY: rad_y}
+    # a degenerate footprint (singular covariance, overflow) keeps its blurred projection as it was
+    with np.errstate(over="ignore", invalid="ignore"):  # finite as stored (float32), not only in float64
+        ok = (det_c > 0) & (det_new > 0) & np.isfinite(np.stack(list(columns.values()), 1).astype(np.float32)).all(axis=1)
+    pick, u, v, rad_x, rad_y = pick[ok], u[ok], v[ok], rad_x[ok], rad_y[ok]
     for column, value in columns.items():
-        packed[pick, column] = value.astype(np.float32)
+        packed[pick, column] = value[ok].astype(np.float32)
     tiles = np.array([math.ceil(width / 16), math.ceil(height / 16)], np.float64)
     lo = np.minimum(np.clip(np.floor((np.stack([u - rad_x, v - rad_y], 1)) / 16.0), 0, None), tiles)
     hi = np.minimum(np.clip(np.ceil((np.stack([u + rad_x, v + rad_y], 1)) / 16.0), 0, None), tiles)

@@ -125,8 +125,9 @@ def test_distance_to_clean_rises_with_severity(small_room, views, name: str) -> 
     clean = results[0].images.astype(np.float64)
     distances = [float(np.abs(r.images - clean).mean()) for r in results[1:]]
     # at 96×72 px the mildest motion can be sub-pixel, which the renderer skips by design; low_res's
-    # milder cameras (≥ 175 px on the shorter side, stated at 1752×1168) out-resolve a 72-px image
-    assert (distances[0] > 0 or name in ("motion_blur", "low_res")) and distances[-1] > max(distances[0], 0.5), (name, distances)
+    # milder cameras (≥ 175 px on the shorter side, stated at 1752×1168) out-resolve a 72-px image; defocus's
+    # mildest aperture (0.51-1 px at 1752×1168) is under half a pixel at 72 px, which renders sharp
+    assert (distances[0] > 0 or name in ("motion_blur", "low_res", "defocus")) and distances[-1] > max(distances[0], 0.5), (name, distances)
     assert all(b >= a * 0.97 for a, b in zip(distances, distances[1:])), (name, distances)
 
 

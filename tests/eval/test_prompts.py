@@ -41,7 +41,8 @@ def test_scale_aware_metres_are_resolved_at_the_scene_depth(chain: str, param: s
 
 def test_metres_at_the_reference_and_for_a_foreign_bench() -> None:
     at_reference = degradation_info(_row("defocus"))  # resolved without a scene depth: the ranges as written
-    assert "aperture in [10, 15] px, depth in [1, 8] m)" in at_reference and "scaled" not in at_reference
+    assert "aperture in [10, 15] px at a 1752×1168 image, scaled with its size, depth in [1, 8] m)" in at_reference
+    assert "scene depth" not in at_reference  # metres as written: no depth scaling without a scene depth
     foreign = degradation_info(_row("motion_blur", provenance=False))
     assert "trans in [0.2, 0.35] m at a scene depth of 2.5 m, scaled with the scene's depth" in foreign
     assert "rot in [0.06, 0.12] rad" in foreign
