@@ -64,9 +64,13 @@ def test_a_room_matches_the_thin_lens(room_views, aperture: float, focus: float)
         assert blurred.alpha.mean() == pytest.approx(coverage, rel=0.04)
 
 
-@pytest.mark.xfail(reason="issue 29 open: coverage 0.65 of the sharp render at aperture 1000 px: Gaussians outside the measured "
-                   "frame (margin <= MAX_MARGIN x the longer side) take the frame's mean visible share; 0.88 at MAX_MARGIN = 2", strict=False)
-@pytest.mark.parametrize("backend", ["cpu", "torch"])
+_COVERAGE_XFAIL = ("issue 29 open: coverage 0.65 of the sharp render at aperture 1000 px: Gaussians outside the measured "
+                   "frame (margin <= MAX_MARGIN x the longer side) take the frame's mean visible share; 0.88 at MAX_MARGIN = 2")
+
+
+@pytest.mark.parametrize("backend", [pytest.param("cpu", marks=pytest.mark.xfail(reason=_COVERAGE_XFAIL, strict=False)),
+                                     pytest.param("torch", marks=pytest.mark.xfail(reason=_COVERAGE_XFAIL + " (the torch twin, 38 s "
+                                                  "on CPU: not run until it is fixed; the cpu case runs)", run=False))])
 def test_a_room_stays_covered_up_to_the_hard_limit(room_views, backend: str) -> None:
     gaussians, cams = room_views
     for cam in cams:
