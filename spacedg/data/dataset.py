@@ -324,8 +324,8 @@ class SpaceDGDataset(Dataset):
         plan = self.plan(index)
         depth = None
         if plan.chain.scales_with_depth(self.options.default_preset, self.options.mixture_preset):
-            depth = sample_scene_depth(self._scene(plan.record.scene_id), plan.views)
-        size = None if plan.chain.is_clean else sample_image_size(self._scene(plan.record.scene_id), plan.views, self.options)
+            depth = sample_scene_depth(self.scene(plan.record.scene_id), plan.views)
+        size = None if plan.chain.is_clean else sample_image_size(self.scene(plan.record.scene_id), plan.views, self.options)
         return plan.chain.provenance(plan.seed, self.options.default_preset, self.options.mixture_preset, depth, size)
 
     # ------------------------------------------------------------ items
@@ -338,7 +338,8 @@ class SpaceDGDataset(Dataset):
             self._scenes = ByteLRU(self._cache_bytes, size_of)
         return self._scenes
 
-    def _scene(self, scene_id: str) -> Any:
+    def scene(self, scene_id: str) -> Any:
+        """The loaded :class:`~spacedg.scene.Scene` of ``scene_id``, kept in the dataset's byte-bounded cache."""
         folder = self.scene_dirs[scene_id]
         return self._cache().get(("scene", scene_id), lambda: load_scene(folder))
 
@@ -375,7 +376,7 @@ class SpaceDGDataset(Dataset):
                     "DataLoader worker processes: use num_workers=0, or SpaceDGDataset(..., defer_render=True) with "
                     "DataLoader(..., collate_fn=list) and render each batch in the main process with dataset.render_batch(batch)"
                 )
-        scene = self._scene(plan.record.scene_id)
+        scene = self.scene(plan.record.scene_id)
         result = degrade_plan(scene, plan, self.options, render_cache=self._cache())
         images = torch.from_numpy(np.ascontiguousarray(result.images.transpose(0, 3, 1, 2)))
         return {"images": images, **item, "degradation": result.degradations, "stats": dict(result.stats)}

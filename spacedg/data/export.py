@@ -310,7 +310,7 @@ def _answer_path(out: Path, chunk: int) -> Path:
 
 def _answer_row(dataset: SpaceDGDataset, plan: ItemPlan, item: dict[str, Any], cache: dict[Any, Any]) -> dict[str, Any]:
     """The answerability row of one exported item (:mod:`spacedg.data.answerability`)."""
-    scene = dataset._scene(plan.record.scene_id)
+    scene = dataset.scene(plan.record.scene_id)
     images = item["images"].permute(0, 2, 3, 1).numpy()
     maps = object_id_maps(scene, plan.views, item["degradation"], dataset.options, cache)
     result = item_answerability(plan.record, images, maps)

@@ -242,12 +242,12 @@ def read_any_instances(path: PathLike, views: Any = None, *, embodiedscan_scene:
     p = Path(path)
     data = read_json(p, "instance JSON") if data is None else data
     if isinstance(data, dict) and "segGroups" in data:
-        return read_segments_anno(p), "scannetpp segments_anno"
+        return read_segments_anno(p, data=data), "scannetpp segments_anno"
     first = data[0] if isinstance(data, list) and data else None
     if (isinstance(data, dict) and ("data_list" in data or ("instances" in data and data["instances"]
                                                             and isinstance(data["instances"][0], dict) and "bbox_3d" in data["instances"][0]))) \
             or (isinstance(first, dict) and "bbox_3d" in first):
-        return read_embodiedscan_boxes(p, embodiedscan_scene), "embodiedscan"
+        return read_embodiedscan_boxes(p, embodiedscan_scene, data=data), "embodiedscan"
     holi = isinstance(first, dict) and ("ins_id" in first or "bounding_box" in first)
     return read_instances(p, views=views, data=data), "holi-spatial" if holi else "spacedg"
 

@@ -67,18 +67,19 @@ def _entry(p: object, data: Any, scene: str | None) -> tuple[list[Any], dict[str
     return instance_list(p, data, "'instances' (EmbodiedScan info entry), 'data_list', or a list of instances"), categories
 
 
-def read_embodiedscan_boxes(path: PathLike, scene: str | None = None) -> list[Instance]:
+def read_embodiedscan_boxes(path: PathLike, scene: str | None = None, *, data: Any = None) -> list[Instance]:
     """Instances from EmbodiedScan 9-DoF boxes (see the module docstring).
 
     Args:
         path: the JSON file.
         scene: with several scans in ``data_list``, the one whose ``sample_idx`` ends with it.
+        data: the file's content already parsed (it is then not read again).
 
     Raises:
         FileFormatError: unknown layout, malformed boxes, labels that cannot be named, duplicate ids.
     """
     p = as_path(path, "EmbodiedScan JSON")
-    items, categories = _entry(p, read_json(p, "EmbodiedScan JSON"), scene)
+    items, categories = _entry(p, read_json(p, "EmbodiedScan JSON") if data is None else data, scene)
     names = {int(v): str(k) for k, v in categories.items() if isinstance(v, int)}
     out: list[Instance] = []
     seen: set[int] = set()

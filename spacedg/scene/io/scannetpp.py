@@ -116,14 +116,15 @@ def _box(where: str, obb: Any) -> OrientedBox:
         raise FileValueError(f"{where}: {error}") from error
 
 
-def read_segments_anno(path: PathLike) -> list[Instance]:
-    """Instances (id = ``objectId`` else ``id``, label, box) from a ScanNet++ ``segments_anno.json``.
+def read_segments_anno(path: PathLike, *, data: Any = None) -> list[Instance]:
+    """Instances (id = ``objectId`` else ``id``, label, box) from a ScanNet++ ``segments_anno.json``
+    (``data``: its content already parsed, then not read again).
 
     Raises:
         FileFormatError: no ``segGroups`` list, malformed groups or boxes, duplicate ids.
     """
     p = as_path(path, "segments_anno.json")
-    data = read_json(p, "segments_anno.json")
+    data = read_json(p, "segments_anno.json") if data is None else data
     groups = data.get("segGroups") if isinstance(data, dict) else None
     if not isinstance(groups, list):
         raise FileFormatError(f"{p}: expected an object with a 'segGroups' list (ScanNet++ segments_anno.json)")
