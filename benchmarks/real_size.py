@@ -302,6 +302,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--views", type=int, default=400, help="views at full size (default 400)")
     parser.add_argument("--gaussians", type=int, default=2_000_000, help="Gaussians at full size (default 2,000,000)")
     parser.add_argument("--fractions", default="0.25,0.5,1", help="sweep fractions of the full size (default 0.25,0.5,1)")
+    parser.add_argument("--sweep", choices=("both", "views", "gaussians"), default="both",
+                        help="which sweep to run (default both; merge separate runs with --report)")
     parser.add_argument("--width", type=int, default=1752)
     parser.add_argument("--height", type=int, default=1168)
     parser.add_argument("--seed", type=int, default=0, help="room seed")
@@ -376,7 +378,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         print("  (warm-up, not counted)")
         (work / "warm-up").mkdir(exist_ok=True)
         measure(Size(4, 20_000), work / "warm-up", warm)
-    for size in dict.fromkeys([*by_views, *by_gaussians]):
+    chosen = {"both": [*by_views, *by_gaussians], "views": by_views, "gaussians": by_gaussians}[args.sweep]
+    for size in dict.fromkeys(chosen):
         measure(size, work, args)
     report(read_results([work / RESULTS]))
     print(f"(reports in {work / RESULTS}: print them again, or merge runs, with --report FILE ...)")
