@@ -374,6 +374,8 @@ def projection(full: dict[str, dict], slopes: dict[str, tuple[float, ...]], targ
     views, gaussians = full["visibility"].get("views"), full["visibility"].get("gaussians")
     if not views or not gaussians:
         return "no projection (the full size's views and Gaussians are unknown)"
+    if views < 100 or gaussians < 500_000:
+        return "no projection from so small a full size (exponents of tiny scenes are dominated by fixed costs)"
     total = 0.0
     for stage in INDEX_STAGES:
         a_v, a_g = slopes.get(stage, (float("nan"),) * 4)[2:]
