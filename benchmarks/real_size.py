@@ -2,8 +2,10 @@
 
 Prints numbers only (never part of the test run).
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/real_size.py --quick          # ~1 min: 2 small sizes
-    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/real_size.py                  # 400 views, 2 M Gaussians, 1/4 1/2 1
+    .venv/bin/python benchmarks/real_size.py --quick      # 3 small sizes: ~40 CPU s (minutes of wall time when loaded)
+    .venv/bin/python benchmarks/real_size.py              # 400 views, 2 M Gaussians; 1/4, 1/2, 1 of each: ~25 CPU min
+    .venv/bin/python benchmarks/real_size.py --sweep views --work /tmp/v --keep   # one sweep; merge runs:
+    .venv/bin/python benchmarks/real_size.py --report /tmp/v/results.jsonl /tmp/g/results.jsonl
 
 The scene is built in code at ScanNet++ DSLR scale: a built-in room (:func:`generate_room`) with
 ``--gaussians`` Gaussians, ``--views`` views at 1752×1168 (``--width``/``--height``) and 30–40
