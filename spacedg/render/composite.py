@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from spacedg.render.camera import Camera
+from spacedg.render.defocus_sharp import SharpPass
 from spacedg.render.frame import Frame
 from spacedg.render.gaussians import Gaussians
 from spacedg.render.settings import Defocus, RasterSettings
@@ -74,7 +75,7 @@ def composite_view(
         ids = gaussians.instance_ids if gaussians.instance_ids is not None else np.full(len(gaussians), -1, np.int32)
         packed, rects = project_cpu.project_gaussians(gaussians, camera, settings, defocus, want_color)
         t1 = time.perf_counter()
-        images, coc = _raster_cpu(packed, rects, ids, camera, settings, want_color, want_depth, want_ids, defocus is not None)
+        images, sharp = _raster_cpu(gaussians, packed, rects, ids, camera, settings, want_color, want_depth, want_ids, defocus is not None)
     else:
         import torch  # heavy: only the torch backend needs it
 
@@ -84,9 +85,9 @@ def composite_view(
         with torch.no_grad():
             proj = project_torch.project_gaussians(gs, camera, settings, defocus, want_color)
             t1 = time.perf_counter()
-            images, coc = _raster_torch(gs, proj, camera, settings, want_color, want_depth, want_ids, defocus is not None)
-    if want_color and coc is not None:
-        images["rgb"] = _conserved(gaussians, camera, backend, device, settings, defocus, images["rgb"], coc)  # type: ignore[arg-type]
+            images, sharp = _raster_torch(gs, proj, camera, settings, want_color, want_depth, want_ids, defocus is not None)
+    if sharp is not None:  # the blurred view's light and coverage brought to the sharp view's local flux
+        images["rgb"], images["alpha"] = _conserved(camera, defocus, images, sharp)  # type: ignore[arg-type]
     t2 = time.perf_counter()
     stats["project_ms"] = (t1 - t0) * 1e3
     stats["raster_ms"] = (t2 - t1) * 1e3
@@ -96,21 +97,24 @@ def composite_view(
 
 
 def _raster_cpu(
-    packed: np.ndarray, rects: np.ndarray, ids: np.ndarray, camera: Camera, settings: RasterSettings,
+    gaussians: Gaussians, packed: np.ndarray, rects: np.ndarray, ids: np.ndarray, camera: Camera, settings: RasterSettings,
     want_color: bool, want_depth: bool, want_ids: bool, defocused: bool,
-) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
-    """Composite a CPU projection (coarse when every visible blur is wide); ``(images, visible circles
-    of confusion or None when nothing is blurred)``."""
+) -> tuple[dict[str, np.ndarray], SharpPass | None]:
+    """Composite a CPU projection; when anything is blurred, also the sharp pass
+    (:mod:`spacedg.render.defocus_sharp`), and coarse when every visible blur is wide.
+    ``(images, the sharp pass or None when nothing is blurred)``."""
     from spacedg.render import defocus as defocus_model
     from spacedg.render import raster_cpu
     from spacedg.render.colour_cpu import decode_srgb
+    from spacedg.render.defocus_flux import flux_scale
+    from spacedg.render.defocus_sharp import sharp_pass_cpu
     from spacedg.render.project_cpu import COC
 
     width, height, factor = camera.width, camera.height, 1
-    coc = None
+    sharp = None
     n_visible = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
     if defocused and defocus_model.has_blur(packed, rects):
-        coc = packed[rects[:, 1] > rects[:, 0], COC].astype(np.float64)
+        sharp = sharp_pass_cpu(gaussians, camera, settings, flux_scale(float(np.percentile(packed[rects[:, 1] > rects[:, 0], COC], 95))))
         factor = defocus_model.composite_factor(packed, rects, width, height)
         if factor > 1:
             packed, rects, width, height = defocus_model.coarse_view(packed, rects, width, height, factor)
@@ -123,23 +127,26 @@ def _raster_cpu(
     if factor > 1:
         images = defocus_model.upsample(images, factor, camera.width, camera.height, want_color, want_depth, want_ids)
     images["n_visible"] = n_visible
-    return images, coc
+    return images, sharp
 
 
 def _raster_torch(
     gs: object, proj: object, camera: Camera, settings: RasterSettings,
     want_color: bool, want_depth: bool, want_ids: bool, defocused: bool,
-) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+) -> tuple[dict[str, np.ndarray], SharpPass | None]:
     """As :func:`_raster_cpu` on the torch path (numpy images)."""
     from spacedg.render import defocus_torch, raster_torch
     from spacedg.render.colour_cpu import decode_srgb
     from spacedg.render.defocus import upsample
+    from spacedg.render.defocus_flux import flux_scale
+    from spacedg.render.defocus_sharp import sharp_pass_torch
 
     width, height, factor = camera.width, camera.height, 1
-    coc = None
+    sharp = None
     n_visible = int(proj.visible.sum())  # type: ignore[attr-defined]
     if defocused and defocus_torch.has_blur(proj):  # type: ignore[arg-type]
         coc = proj.coc[proj.visible].double().cpu().numpy()  # type: ignore[attr-defined]
+        sharp = sharp_pass_torch(gs, camera, settings, flux_scale(float(np.percentile(coc, 95))))
         factor = defocus_torch.composite_factor(proj, width, height)  # type: ignore[arg-type]
         if factor > 1:
             proj, width, height = defocus_torch.coarse_view(proj, width, height, factor)  # type: ignore[arg-type]
@@ -155,24 +162,19 @@ def _raster_torch(
         images = upsample(images, factor, camera.width, camera.height, want_color, want_depth, want_ids)
     images["n_visible"] = np.int64(n_visible)
     images["n_pairs"] = np.int64(gauss.numel())
-    return images, coc
+    return images, sharp
 
 
-def _conserved(
-    gaussians: Gaussians, camera: Camera, backend: str, device: torch.device | None, settings: RasterSettings,
-    defocus: Defocus, rgb: np.ndarray, coc: np.ndarray,
-) -> np.ndarray:
-    """``rgb`` (the blurred view, linear) with the sharp view's local flux (:mod:`spacedg.render.defocus_flux`)."""
-    from spacedg.render.defocus import measurement_camera, measurement_settings
-    from spacedg.render.defocus_flux import conserve_light, flux_lengths, flux_margin, flux_scale
+def _conserved(camera: Camera, defocus: Defocus, images: dict[str, np.ndarray], sharp: SharpPass) -> tuple[np.ndarray, np.ndarray]:
+    """The blurred view's ``rgb`` (linear) and ``alpha`` with the sharp view's local flux (:mod:`spacedg.render.defocus_flux`)."""
+    from spacedg.render.defocus_flux import conserve_light, flux_lengths
 
-    estimate = float(np.percentile(coc, 95)) if coc.size else 0.0
-    scale = flux_scale(estimate)
-    wide = measurement_camera(camera, flux_margin(estimate, camera.width, camera.height), scale)
-    sharp, _ = composite_view(gaussians, wide, frozenset({"rgb", "alpha", "depth"}), backend, device, measurement_settings(settings, scale), None)
-    covered = sharp["alpha"] > 0.5
-    length, blur = flux_lengths(defocus.radius(np.maximum(sharp["depth"][covered], 1e-6)))
-    return conserve_light(rgb, sharp["rgb"], camera, wide, length, blur)
+    length, blur = flux_lengths(defocus.radius(np.maximum(sharp.depth[sharp.alpha > 0.5], 1e-6)))
+    alpha = images["alpha"]
+    colour = images["rgb"].shape[:2] == alpha.shape
+    rgb = images["rgb"] if colour else np.zeros((*alpha.shape, 3), np.float32)
+    rgb, alpha = conserve_light(rgb, alpha, sharp.rgb, sharp.alpha, camera, sharp.wide, length, blur)
+    return (rgb if colour else images["rgb"]), alpha
 
 
 def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: frozenset[str]) -> Frame:
