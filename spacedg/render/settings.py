@@ -27,10 +27,6 @@ TRANSMITTANCE_MIN = 1e-4
 #: (16384 px), so the cap changes no pixel, and it keeps the radii exact integers in both
 #: backends for Gaussians of any finite size (a Gaussian 10²⁰ m wide seen from 1 m away).
 FOOTPRINT_CAP = float(1 << 30)
-#: Depth slabs of the defocus model (:mod:`spacedg.render.defocus`): Gaussians whose camera
-#: depths fall in one bin of ``⌊ln z / ln(1 + DEFOCUS_SLAB)⌋`` (10 % of the depth) count as
-#: one surface.
-DEFOCUS_SLAB = 0.1
 #: Smallest circle of confusion (px) that blurs: a Gaussian whose ``r`` is below it is rendered sharp
 #: (``r = 0``). 0: every blur counts, however small — a cut-off in output pixels breaks size invariance
 #: (issue 29: at 0.5 px, the room's defocus rows of ``benchmarks/resolution.py`` were 29.5 / 29.8 dB at
@@ -115,7 +111,7 @@ class Defocus:
     ``r = aperture · |d − focus| / d`` pixels (at the rendered resolution), clamped to
     ``max_radius``; ``r² I`` is added to its 2D covariance (after the ``eps2d`` dilation) and
     its opacity is multiplied by ``sqrt(det Σ / det(Σ + r² I))`` so its integrated alpha is
-    unchanged; the view keeps its light through the two passes of :mod:`spacedg.render.defocus`.
+    unchanged; the view keeps its light through the local flux step of :mod:`spacedg.render.defocus_flux`.
     ``aperture = 0``, or every visible Gaussian in focus, is the sharp render, bit for bit.
 
     Attributes:

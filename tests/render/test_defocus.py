@@ -110,35 +110,6 @@ def test_backends_agree_on_huge_gaussians(scale: float) -> None:
 
 
 # ---------------------------------------------------------------- issue 21 part 3: the cheaper passes
-def test_the_compiled_factors_are_the_numpy_factors_bit_for_bit() -> None:
-    """defocus_cpu.match_and_apply = match_factors + inside_fraction + apply_match (the numpy reference)."""
-    from spacedg.render import defocus as model
-    from spacedg.render.defocus_lens import CENTRE_WEIGHT, PRIOR
-    from spacedg.render import defocus_cpu, project_cpu, raster_cpu
-    from spacedg.render.colour import srgb_to_linear
-    from spacedg.render.project_cpu import CBL, CG, CR, DEPTH
-    from spacedg.render.settings import RasterSettings
-
-    g = random_gaussians(3000, np.random.default_rng(3))
-    cam, settings = camera(96, 72), RasterSettings()
-    packed, rects = project_cpu.project_gaussians(g, cam, settings, Defocus(12.0, 3.0), True)
-    wide = model.measurement_camera(cam, model.measurement_margin(packed, rects, 96, 72))
-    sharp, sharp_rects = project_cpu.project_gaussians(g, wide, model.measurement_settings(settings), None, True)
-    offsets, gauss = raster_cpu.bin_visible(sharp, sharp_rects, wide.width, wide.height, True)
-    pairs = np.zeros((gauss.shape[0], defocus_cpu.PAIR_COLUMNS), np.float32)
-    lin = srgb_to_linear(sharp[:, [CR, CG, CBL]]).astype(np.float32)
-    defocus_cpu.measure_sharp(offsets, gauss, sharp, lin, model.slab_of(sharp[:, DEPTH]), (wide.width + 15) // 16, settings.alpha_max, pairs)
-    sums = np.stack([np.bincount(gauss, weights=pairs[:, j], minlength=len(g)) for j in range(pairs.shape[1])], axis=1)
-    mass = model.alpha_mass(sharp, sharp_rects)
-    kappa, rho = model.match_factors(sums, model.inside_fraction(sharp, wide.width, wide.height), mass)
-    seen = np.random.default_rng(4).uniform(0.0, 2.0 / 3.0, len(g))  # the other lens points' shares
-    kappa = np.clip(CENTRE_WEIGHT * kappa.astype(np.float64) + seen, 0.0, 1.0).astype(np.float32)
-    want = model.apply_match(packed, rects, kappa, rho, True)
-    got = defocus_cpu.match_and_apply(gauss, pairs, sharp, mass, wide.width, wide.height, packed, rects, True, CENTRE_WEIGHT, seen, PRIOR)
-    np.testing.assert_array_equal(got[1], want[1])
-    np.testing.assert_allclose(got[0], want[0], rtol=1e-6, atol=0)  # float64 totals summed in another order, κ rounded once
-
-
 def test_the_measurement_frame_is_half_the_view_in_whole_tiles_centred() -> None:
     from spacedg.render.defocus import MEASURE_SCALE, measurement_camera
 
@@ -199,8 +170,7 @@ def test_the_backends_agree_on_a_coarse_composite() -> None:
 def test_the_thin_lens_keeps_the_focus_plane_and_blurs_by_the_circle_of_confusion() -> None:
     """Over the reference's lens points, a point on the focus plane projects to one pixel and a point at
     depth d spreads with standard deviation aperture·|d − focus|/d px on each axis (the model's r)."""
-    from spacedg.render.defocus_lens import lens_camera
-    from spacedg.render.thin_lens import lens_offsets
+    from spacedg.render.thin_lens import lens_camera, lens_offsets
 
     cam = Camera(50.0, 40.0, 32.0, 24.0, 64, 48, np.eye(4))
     defocus = Defocus(6.0, 2.0)
