@@ -169,7 +169,8 @@ def _conserved(camera: Camera, defocus: Defocus, images: dict[str, np.ndarray], 
     """The blurred view's ``rgb`` (linear) and ``alpha`` with the sharp view's local flux (:mod:`spacedg.render.defocus_flux`)."""
     from spacedg.render.defocus_flux import conserve_light, flux_lengths
 
-    length, blur = flux_lengths(defocus.radius(np.maximum(sharp.depth[sharp.alpha > 0.5], 1e-6)))
+    seen = sharp.alpha > 1e-3
+    length, blur = flux_lengths(defocus.radius(np.maximum(sharp.depth[seen], 1e-6)), sharp.alpha[seen])
     alpha = images["alpha"]
     colour = images["rgb"].shape[:2] == alpha.shape
     rgb = images["rgb"] if colour else np.zeros((*alpha.shape, 3), np.float32)

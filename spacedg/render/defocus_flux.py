@@ -14,7 +14,7 @@ loses less of its light to self-occlusion (up to +10 %). Both are compositing ar
 :func:`conserve_light` corrects them where they happen: it multiplies the blurred linear image by
 ``(G_√(L²+r²) * S) / (G_L * D)`` per channel — ``S`` the sharp linear image, ``D`` the blurred one,
 ``L = max(FLUX_LENGTH · r₉₅, FLUX_MIN_SIGMA)`` px, ``r₉₅`` and ``r`` the 95th percentile and the
-median of the circle of confusion over the sharp view's covered pixels — so that every
+median of the circle of confusion over the sharp view's pixels weighted by their coverage — so that every
 neighbourhood a few ``L`` wide holds the light the sharp view holds there. Guards: both low-passes
 get ``ε = 10⁻³ ×`` the sharp image's mean added (no division by ~0 on black), and the ratio is
 clipped to ``FLUX_RATIO`` (finite everywhere; a region the blurred view leaves empty cannot be
@@ -46,14 +46,20 @@ FLUX_MIN_SIGMA = 1.0
 FLUX_RATIO = (0.25, 4.0)
 
 
-def flux_lengths(coc: np.ndarray) -> tuple[float, float]:
-    """``(L, r)`` px from the circles of confusion ``coc`` (px) of the sharp view's covered pixels:
-    ``L = max(FLUX_LENGTH · r₉₅, FLUX_MIN_SIGMA)``, ``r`` the median (0 with no covered pixel)."""
-    coc = np.asarray(coc, dtype=np.float64)
-    coc = coc[np.isfinite(coc)]
+def flux_lengths(coc: np.ndarray, weight: np.ndarray | None = None) -> tuple[float, float]:
+    """``(L, r)`` px from the circles of confusion ``coc`` (px) of the sharp view's pixels, each
+    weighted by ``weight`` (its coverage; default 1): ``L = max(FLUX_LENGTH · r₉₅, FLUX_MIN_SIGMA)``,
+    ``r`` the weighted median (0 with nothing covered)."""
+    coc = np.asarray(coc, dtype=np.float64).ravel()
+    weight = np.ones_like(coc) if weight is None else np.asarray(weight, dtype=np.float64).ravel()
+    keep = np.isfinite(coc) & np.isfinite(weight) & (weight > 0.0)
+    coc, weight = coc[keep], weight[keep]
     if coc.size == 0:
         return FLUX_MIN_SIGMA, 0.0
-    return max(FLUX_LENGTH * float(np.percentile(coc, 95)), FLUX_MIN_SIGMA), float(np.median(coc))
+    order = np.argsort(coc)
+    cumulative = np.cumsum(weight[order])
+    at = lambda q: float(coc[order][min(int(np.searchsorted(cumulative, q * cumulative[-1])), coc.size - 1)])  # noqa: E731
+    return max(FLUX_LENGTH * at(0.95), FLUX_MIN_SIGMA), at(0.5)
 
 
 def flux_scale(coc_estimate: float) -> float:

@@ -1,5 +1,6 @@
-"""Defocus keeps a view's light (spacedg.render.defocus): a wall at every aperture up to the hard limit,
-a room against the exact thin lens, both backends; r = 0 is the sharp render bit for bit.
+"""Defocus keeps a view's light (spacedg.render.defocus, spacedg.render.defocus_flux): a wall at every aperture up
+to the hard limit, a room against the exact thin lens, an object on an empty background, both backends;
+r = 0 is the sharp render bit for bit.
 
 What is compared (means over the whole frame):
 
@@ -7,10 +8,8 @@ What is compared (means over the whole frame):
   frame from outside as much as leaves it: mean linear radiance and mean alpha of the blurred render
   within 1 % of the sharp render, apertures 2–1000 px (the plugin's hard limit; r = aperture / 2);
 - room (320×240) — mean radiance within 6 % and coverage within 4 % of the exact thin lens (the
-  average of 32 sharp renders from points over the lens) at the bench apertures; the model's
-  blur fills the sharp render's pinholes between splats, which the thin lens keeps (up to +3.4 %
-  coverage). Coverage within 3 % of the sharp render up to the hard limit at 64×48 (it fell to
-  a third before the Jacobian's frustum was widened by the blur's reach).
+  average of 32 sharp renders from points over the lens) at the bench apertures; coverage within 3 %
+  of the sharp render up to the hard limit at 64×48.
 """
 
 from __future__ import annotations
@@ -64,11 +63,13 @@ def test_a_room_matches_the_thin_lens(room_views, aperture: float, focus: float)
 
 @pytest.mark.parametrize("backend", ["cpu", "torch"])
 def test_a_room_stays_covered_up_to_the_hard_limit(room_views, backend: str) -> None:
+    """Coverage within 3 % of the sharp render at apertures 200 and 1000 px on three views (the torch twin:
+    one view at 1000 px, its tile chunks being slow on CPU)."""
     gaussians, cams = room_views
-    for cam in cams:
+    for cam in cams if backend == "cpu" else cams[:1]:
         small = cam.resized(64, 48)
         sharp = render(gaussians, small, backend=backend)
-        for aperture in (200.0, HARD_LIMIT):
+        for aperture in (200.0, HARD_LIMIT) if backend == "cpu" else (HARD_LIMIT,):
             blurred = render(gaussians, small, defocus=Defocus(aperture, 3.0), backend=backend)
             assert np.isfinite(blurred.rgb).all()
             assert blurred.alpha.mean() == pytest.approx(sharp.alpha.mean(), rel=0.03), aperture
