@@ -18,7 +18,10 @@ median of the circle of confusion over the sharp view's pixels weighted by their
 neighbourhood a few ``L`` wide holds the light the sharp view holds there. Guards: both low-passes
 get ``ε = 10⁻³ ×`` the sharp image's mean added (no division by ~0 on black), and the ratio is
 clipped to ``FLUX_RATIO`` (finite everywhere; a region the blurred view leaves empty cannot be
-filled in by a factor).
+filled in by a factor). A local ratio keeps each neighbourhood's mean but not exactly the frame's
+total (a footprint truncated at ``defocus_extent`` σ is narrower than the lens's Gaussian: −3 % of a
+lone Gaussian's alpha), so the ratio is finally scaled per channel to give the frame the sharp
+view's total.
 
 The sharp image comes from one clean render of the view, widened by ``3·√(L²+r²)`` px (so light
 from just outside the frame is counted), at half the resolution when ``L ≥ 2`` px (its low-pass is
@@ -106,10 +109,17 @@ def conserve_light(
     else:
         blurred = image
     sharp = np.ascontiguousarray(np.concatenate([sharp_rgb, sharp_alpha[..., None]], axis=-1), dtype=np.float32)
-    target = _blur(sample_shifted(sharp, camera, wide, step, (rows, cols)), math.hypot(length, coc) / step)
+    seen = sample_shifted(sharp, camera, wide, step, (rows, cols))
+    target = _blur(seen, math.hypot(length, coc) / step)
     eps = (1e-3 * np.maximum(target.reshape(-1, 4).mean(axis=0), 0.0) + 1e-12).astype(np.float32)
     ratio = np.clip((target + eps) / (_blur(blurred, length / step) + eps), *FLUX_RATIO)
     ratio = np.nan_to_num(ratio, nan=1.0, posinf=FLUX_RATIO[1], neginf=FLUX_RATIO[0])
+    # the local ratio holds each neighbourhood's mean; the frame's total, once more, exactly
+    kept = (blurred * ratio).reshape(-1, 4).sum(axis=0, dtype=np.float64)
+    wanted = seen.reshape(-1, 4).sum(axis=0, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        total = np.where(kept > 1e-12 * max(float(wanted.max()), 1e-30), wanted / kept, 1.0)
+    ratio = ratio * np.clip(np.nan_to_num(total, nan=1.0), *FLUX_RATIO).astype(np.float32)
     if step > 1:  # bilinear, cell centres to pixel centres (edges repeated)
         ratio = cv2.resize(ratio, (cols * step, rows * step), interpolation=cv2.INTER_LINEAR)[: image.shape[0], : image.shape[1]]
     out = image * ratio
