@@ -19,10 +19,11 @@ With nothing blurred in the view (every visible ``r = 0``) the sharp render is r
 Measured against the thin-lens reference (:mod:`spacedg.render.thin_lens`, 48 lens points;
 ``benchmarks/defocus_reference.py --backends cpu --samples 48 --runs 2``; issue 35) on a built-in
 room, the plant capture, its close-up and an object on an empty background, severities 1, 3 and
-bench, at 240–320 and 480–640 px: light 0.998–1.004 of the clean render in every row (the
-reference: 1.000), PSNR 36.2–56.8 dB (goal ≥ 35), cost 1.3–3.4× a clean render on the room, plant
-and close-up (object: 2.4–7.9×; a 10k-Gaussian render of a few ms, where the sharp pass's fixed
-costs dominate). The earlier two-pass model (per-Gaussian visible shares measured from five lens
+bench, at 240–320 and 480–640 px: light 1.000–1.002 of the clean render in every row (the
+reference: 1.000), PSNR 36.2–56.8 dB (goal ≥ 35), cost 1.7–3.9× a clean render on the room, plant
+and close-up on a loaded machine (object: 3.1–7.3×; a 10k-Gaussian render of a few ms, where the
+sharp pass's and the flux step's fixed costs dominate); torch at 120 × 90: light 1.000 in every row,
+34.7–59.0 dB. The earlier two-pass model (per-Gaussian visible shares measured from five lens
 points) was 0.918–0.999 of the light, 29.3–52.4 dB, 2–43×. What still limits it: the blurred
 splats' shape at scales below ``L`` — an opaque object of many stacked splats blurred far beyond
 their own size saturates (``1 − e^(−Σα)``) out past its rim, so the blurred rim is steeper than the
