@@ -81,7 +81,7 @@ def flux_scale(coc_estimate: float) -> float:
 def _blur(image: np.ndarray, sigma: float) -> np.ndarray:
     """Gaussian low-pass of standard deviation ``sigma`` px (±3σ kernel, edges mirrored: a kernel wider than the image tends to its mean)."""
     if sigma <= 0.0:
-        return image
+        return image.copy()
     size = 2 * int(math.ceil(3.0 * sigma)) + 1
     return cv2.GaussianBlur(image, (size, size), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REFLECT)
 
@@ -115,8 +115,11 @@ def conserve_light(
     sharp = np.ascontiguousarray(np.concatenate([sharp_rgb, sharp_alpha[..., None]], axis=-1), dtype=np.float32)
     seen = sample_shifted(sharp, camera, wide, step, (rows, cols))
     target = _blur(seen, math.hypot(length, coc) / step)
-    eps = (1e-3 * np.maximum(target.reshape(-1, 4).mean(axis=0), 0.0) + 1e-12).astype(np.float32)
-    ratio = np.clip((target + eps) / (_blur(blurred, length / step) + eps), *FLUX_RATIO)
+    eps = (1e-3 * np.maximum(np.array(cv2.mean(target)), 0.0) + 1e-12).astype(np.float32)
+    low = _blur(blurred, length / step)
+    low += eps
+    target += eps
+    ratio = np.clip(np.divide(target, low, out=target), *FLUX_RATIO, out=target)
     ratio[np.isnan(ratio)] = 1.0
     # the local ratio holds each neighbourhood's mean; the frame's total, once more, exactly
     kept = np.array(cv2.sumElems(blurred * ratio))
