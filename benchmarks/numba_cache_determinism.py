@@ -13,7 +13,7 @@ It prints one SHA-256 per output array and exits 1 if any differs.
     .venv/bin/python benchmarks/numba_cache_determinism.py --size 64x48 --cases motion_fast
 
 Kernels reached (spacedg/render/…): raster_cpu ``composite_tiles`` (each output specialisation),
-project_cpu, colour_cpu, defocus_cpu, motion_warp ``flow_field`` / ``doubling_pass`` /
+project_cpu, colour_cpu, motion_warp ``flow_field`` / ``doubling_pass`` /
 ``gather``; plugins/degradations ``_sensor`` (device presets, low light, over exposure) and
 ``water_droplets``.
 """

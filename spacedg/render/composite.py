@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from spacedg.render.camera import Camera
+from spacedg.render.defocus_sharp import SharpPass
 from spacedg.render.frame import Frame
 from spacedg.render.gaussians import Gaussians
 from spacedg.render.settings import Defocus, RasterSettings
@@ -57,73 +58,124 @@ def composite_view(
 ) -> tuple[dict[str, np.ndarray], dict[str, float]]:
     """One render (no camera motion) as numpy arrays; ``rgb`` is **linear** light.
 
-    Without blur the composite is the sRGB-encoded mix of 3DGS, decoded once here; under
-    defocus with anything blurred, the two passes of :mod:`spacedg.render.defocus`.
+    The composite is the sRGB-encoded mix of 3DGS, decoded once here. Under defocus with anything
+    blurred, each Gaussian carries its circle of confusion (:class:`~spacedg.render.settings.Defocus`),
+    the composite runs on a coarser grid when every visible blur is wide
+    (:func:`spacedg.render.defocus.composite_factor`), and the colour is brought back to the sharp
+    view's local flux (:mod:`spacedg.render.defocus_flux`).
     """
     want_color = "rgb" in outputs
     want_depth = "depth" in outputs
     want_ids = "median_depth" in outputs or "instance_ids" in outputs
     stats: dict[str, float] = {}
     t0 = time.perf_counter()
-    tight = settings.tight_tiles and settings.opacity_extent
     if backend == "cpu":
-        from spacedg.render import defocus as defocus_model
-        from spacedg.render import project_cpu, raster_cpu  # numba kernels: compiled on first render, not with spacedg
-        from spacedg.render.colour_cpu import decode_srgb
+        from spacedg.render import project_cpu  # numba kernels: compiled on first render, not with spacedg
 
         ids = gaussians.instance_ids if gaussians.instance_ids is not None else np.full(len(gaussians), -1, np.int32)
         packed, rects = project_cpu.project_gaussians(gaussians, camera, settings, defocus, want_color)
         t1 = time.perf_counter()
-        if defocus is not None and defocus_model.has_blur(packed, rects):
-            images = defocus_model.render_cpu(
-                gaussians, camera, settings, packed, rects, ids, want_color, want_depth, want_ids, defocus
-            )
-        else:
-            images = raster_cpu.rasterize(
-                packed, rects, ids, camera.width, camera.height, settings.alpha_max,
-                want_color, want_depth, want_ids, tight,
-            )
-            if want_color:
-                images["rgb"] = decode_srgb(images["rgb"])
-        stats["visible"] = int(images.pop("n_visible"))
-        stats["pairs"] = int(images.pop("n_pairs"))
+        images, sharp = _raster_cpu(gaussians, packed, rects, ids, camera, settings, want_color, want_depth, want_ids, defocus is not None)
     else:
         import torch  # heavy: only the torch backend needs it
 
-        from spacedg.render import defocus_torch, project_torch, raster_torch
-        from spacedg.render.colour_cpu import decode_srgb
+        from spacedg.render import project_torch
 
         gs = project_torch.GaussianTensors.of(gaussians, device, torch.float32)
         with torch.no_grad():
             proj = project_torch.project_gaussians(gs, camera, settings, defocus, want_color)
             t1 = time.perf_counter()
-            blurred = defocus is not None and defocus_torch.has_blur(proj)
-            factor = 1
-            if blurred:
-                result = defocus_torch.render_torch(gs, camera, settings, proj, want_color, want_depth, want_ids, defocus)
-                stats["pairs"] = int(result.pop("n_pairs"))
-                factor = int(result.pop("factor"))
-            else:
-                offsets, gauss = raster_torch.bin_tiles(proj, camera.width, camera.height, tight)
-                result = raster_torch.composite(
-                    proj, offsets, gauss, gs.instance_ids, camera.width, camera.height, settings.alpha_max,
-                    want_color, want_depth, want_ids,
-                )
-                stats["pairs"] = int(gauss.numel())
-        images = {k: v.cpu().numpy() for k, v in result.items()}
-        if want_color and blurred:
-            images["rgb"] = decode_srgb(images.pop("enc")) + images.pop("lin")
-        elif want_color:
-            images["rgb"] = decode_srgb(images["rgb"])
-        if factor > 1:  # the blurred view was composited on a coarser grid
-            from spacedg.render.defocus import upsample
-
-            images = upsample(images, factor, camera.width, camera.height, want_color, want_depth, want_ids)
-        stats["visible"] = int(proj.visible.sum())
+            images, sharp = _raster_torch(gs, proj, camera, settings, want_color, want_depth, want_ids, defocus is not None)
+    if sharp is not None:  # the blurred view's light and coverage brought to the sharp view's local flux
+        images["rgb"], images["alpha"] = _conserved(camera, defocus, images, sharp)  # type: ignore[arg-type]
     t2 = time.perf_counter()
     stats["project_ms"] = (t1 - t0) * 1e3
     stats["raster_ms"] = (t2 - t1) * 1e3
+    stats["visible"] = int(images.pop("n_visible"))
+    stats["pairs"] = int(images.pop("n_pairs"))
     return images, stats
+
+
+def _raster_cpu(
+    gaussians: Gaussians, packed: np.ndarray, rects: np.ndarray, ids: np.ndarray, camera: Camera, settings: RasterSettings,
+    want_color: bool, want_depth: bool, want_ids: bool, defocused: bool,
+) -> tuple[dict[str, np.ndarray], SharpPass | None]:
+    """Composite a CPU projection; when anything is blurred, also the sharp pass
+    (:mod:`spacedg.render.defocus_sharp`), and coarse when every visible blur is wide.
+    ``(images, the sharp pass or None when nothing is blurred)``."""
+    from spacedg.render import defocus as defocus_model
+    from spacedg.render import raster_cpu
+    from spacedg.render.colour_cpu import decode_srgb
+    from spacedg.render.defocus_flux import flux_scale
+    from spacedg.render.defocus_sharp import sharp_pass_cpu
+    from spacedg.render.project_cpu import COC
+
+    width, height, factor = camera.width, camera.height, 1
+    sharp = None
+    n_visible = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
+    if defocused and defocus_model.has_blur(packed, rects):
+        sharp = sharp_pass_cpu(gaussians, camera, settings, flux_scale(float(np.percentile(packed[rects[:, 1] > rects[:, 0], COC], 95))))
+        factor = defocus_model.composite_factor(packed, rects, width, height)
+        if factor > 1:
+            packed, rects, width, height = defocus_model.coarse_view(packed, rects, width, height, factor)
+    images = raster_cpu.rasterize(
+        packed, rects, ids, width, height, settings.alpha_max, want_color, want_depth, want_ids,
+        settings.tight_tiles and settings.opacity_extent,
+    )
+    if want_color:
+        images["rgb"] = decode_srgb(images["rgb"])
+    if factor > 1:
+        images = defocus_model.upsample(images, factor, camera.width, camera.height, want_color, want_depth, want_ids)
+    images["n_visible"] = n_visible
+    return images, sharp
+
+
+def _raster_torch(
+    gs: object, proj: object, camera: Camera, settings: RasterSettings,
+    want_color: bool, want_depth: bool, want_ids: bool, defocused: bool,
+) -> tuple[dict[str, np.ndarray], SharpPass | None]:
+    """As :func:`_raster_cpu` on the torch path (numpy images)."""
+    from spacedg.render import defocus_torch, raster_torch
+    from spacedg.render.colour_cpu import decode_srgb
+    from spacedg.render.defocus import upsample
+    from spacedg.render.defocus_flux import flux_scale
+    from spacedg.render.defocus_sharp import sharp_pass_torch
+
+    width, height, factor = camera.width, camera.height, 1
+    sharp = None
+    n_visible = int(proj.visible.sum())  # type: ignore[attr-defined]
+    if defocused and defocus_torch.has_blur(proj):  # type: ignore[arg-type]
+        coc = proj.coc[proj.visible].double().cpu().numpy()  # type: ignore[attr-defined]
+        sharp = sharp_pass_torch(gs, camera, settings, flux_scale(float(np.percentile(coc, 95))))
+        factor = defocus_torch.composite_factor(proj, width, height)  # type: ignore[arg-type]
+        if factor > 1:
+            proj, width, height = defocus_torch.coarse_view(proj, width, height, factor)  # type: ignore[arg-type]
+    offsets, gauss = raster_torch.bin_tiles(proj, width, height, settings.tight_tiles and settings.opacity_extent)  # type: ignore[arg-type]
+    result = raster_torch.composite(
+        proj, offsets, gauss, gs.instance_ids, width, height, settings.alpha_max,  # type: ignore[attr-defined, arg-type]
+        want_color, want_depth, want_ids,
+    )
+    images = {k: v.cpu().numpy() for k, v in result.items()}
+    if want_color:
+        images["rgb"] = decode_srgb(images["rgb"])
+    if factor > 1:
+        images = upsample(images, factor, camera.width, camera.height, want_color, want_depth, want_ids)
+    images["n_visible"] = np.int64(n_visible)
+    images["n_pairs"] = np.int64(gauss.numel())
+    return images, sharp
+
+
+def _conserved(camera: Camera, defocus: Defocus, images: dict[str, np.ndarray], sharp: SharpPass) -> tuple[np.ndarray, np.ndarray]:
+    """The blurred view's ``rgb`` (linear) and ``alpha`` with the sharp view's local flux (:mod:`spacedg.render.defocus_flux`)."""
+    from spacedg.render.defocus_flux import conserve_light, flux_lengths
+
+    seen = sharp.alpha > 1e-3
+    length, blur = flux_lengths(defocus.radius(np.maximum(sharp.depth[seen], 1e-6)), sharp.alpha[seen])
+    alpha = images["alpha"]
+    colour = images["rgb"].shape[:2] == alpha.shape
+    rgb = images["rgb"] if colour else np.zeros((*alpha.shape, 3), np.float32)
+    rgb, alpha = conserve_light(rgb, alpha, sharp.rgb, sharp.alpha, camera, sharp.wide, length, blur)
+    return (rgb if colour else images["rgb"]), alpha
 
 
 def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: frozenset[str]) -> Frame:

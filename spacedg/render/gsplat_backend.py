@@ -27,8 +27,8 @@ others ``alpha = alpha_max·e^(−σ)`` instead of ``min(alpha_max, o·e^(−σ)
 1 % of that Gaussian's alpha); ``alpha_max = 0.999`` is exact; above 0.999 is refused. The
 1/255 alpha floor and the stop before transmittance ≤ 1e-4 are the same rules as ours.
 
-Defocus (a Gaussian's alpha floor scales with its CoC compensation, and the energy-keeping
-two-pass model of :mod:`spacedg.render.defocus` adds blurred light instead of compositing it)
+Defocus (a Gaussian's alpha floor scales with its CoC compensation, and the blurred view is
+brought to the sharp view's local flux, :mod:`spacedg.render.defocus_flux`)
 has no counterpart in gsplat's kernel: a render with ``defocus`` is delegated to the torch twin
 on the same device (``stats["delegated"] = "torch"``).
 

@@ -216,7 +216,7 @@ def _project_kernel(
         coc = 0.0
         if aperture > 0.0:
             coc = min(aperture * abs(z - focus) / z, max_coc)
-            if coc < DEFOCUS_MIN_COC:  # below half a pixel: sharp
+            if coc < DEFOCUS_MIN_COC:  # below DEFOCUS_MIN_COC: sharp
                 coc = 0.0
             coc2 = coc * coc
             sxx += coc2

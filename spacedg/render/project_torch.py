@@ -206,7 +206,7 @@ def project_gaussians(
     if defocus is not None and defocus.aperture > 0:
         z_w = cam_safe[:, 2].to(wide)
         coc = torch.clamp(defocus.aperture * torch.abs(z_w - defocus.focus) / z_w, max=defocus.max_radius)
-        coc = torch.where(coc < DEFOCUS_MIN_COC, torch.zeros_like(coc), coc)  # below half a pixel: sharp
+        coc = torch.where(coc < DEFOCUS_MIN_COC, torch.zeros_like(coc), coc)  # below DEFOCUS_MIN_COC: sharp
         sxx, syy = sxx + coc * coc, syy + coc * coc
         det_blur = sxx * syy - sxy * sxy
         compensation = torch.sqrt(torch.clamp(det / torch.clamp(det_blur, min=1e-300), min=0.0))  # as the CPU path: 0/0 is 0, not NaN

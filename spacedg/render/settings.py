@@ -27,15 +27,13 @@ TRANSMITTANCE_MIN = 1e-4
 #: (16384 px), so the cap changes no pixel, and it keeps the radii exact integers in both
 #: backends for Gaussians of any finite size (a Gaussian 10²⁰ m wide seen from 1 m away).
 FOOTPRINT_CAP = float(1 << 30)
-#: Depth slabs of the defocus model (:mod:`spacedg.render.defocus`): Gaussians whose camera
-#: depths fall in one bin of ``⌊ln z / ln(1 + DEFOCUS_SLAB)⌋`` (10 % of the depth) count as
-#: one surface.
-DEFOCUS_SLAB = 0.1
-#: Smallest circle of confusion (px) that blurs: a Gaussian whose ``r`` is below half a pixel is rendered
-#: sharp (``r = 0``). A blur that small is below the pixel's own footprint; the thin-lens reference at
-#: such ``r`` is the sharp render within sampling noise, which the two-pass model (built for blurs of
-#: pixels) matched worse (2–4 % of the light lost at severity 1, ``benchmarks/defocus_reference.py``).
-DEFOCUS_MIN_COC = 0.5
+#: Smallest circle of confusion (px) that blurs: a Gaussian whose ``r`` is below it is rendered sharp
+#: (``r = 0``). 0: every blur counts, however small — a cut-off in output pixels breaks size invariance
+#: (issue 29: at 0.5 px, the room's defocus rows of ``benchmarks/resolution.py`` were 29.5 / 29.8 dB at
+#: severities 1 / 2, because the 640-px render was sharp where the 1920-px one blurred). Sub-pixel
+#: blur is exact in the per-Gaussian model (``r²·I`` added to a covariance), and
+#: :mod:`spacedg.render.defocus_flux` keeps its light.
+DEFOCUS_MIN_COC = 0.0
 
 
 def _finite(name: str, value: object, low: float | None = None, high: float | None = None, *, open_low: bool = False) -> float:
@@ -113,7 +111,7 @@ class Defocus:
     ``r = aperture · |d − focus| / d`` pixels (at the rendered resolution), clamped to
     ``max_radius``; ``r² I`` is added to its 2D covariance (after the ``eps2d`` dilation) and
     its opacity is multiplied by ``sqrt(det Σ / det(Σ + r² I))`` so its integrated alpha is
-    unchanged; the view keeps its light through the two passes of :mod:`spacedg.render.defocus`.
+    unchanged; the view keeps its light through the local flux step of :mod:`spacedg.render.defocus_flux`.
     ``aperture = 0``, or every visible Gaussian in focus, is the sharp render, bit for bit.
 
     Attributes:

@@ -35,11 +35,12 @@ reports the convergence (PSNR of N against 2N samples).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+
 import numpy as np
 
 from spacedg.errors import ParameterError
 from spacedg.render.camera import Camera
-from spacedg.render.defocus_lens import lens_camera
 from spacedg.render.gaussians import Gaussians
 from spacedg.render.renderer import render
 from spacedg.render.settings import Defocus
@@ -59,6 +60,16 @@ def lens_offsets(samples: int, seed: int = 0) -> np.ndarray:
     turn = 0.0 if seed == 0 else float(np.random.default_rng(seed).uniform(0.0, 2.0 * math.pi))
     angle = i * _GOLDEN_ANGLE + turn
     return np.stack([radius * np.cos(angle), radius * np.sin(angle)], axis=1)
+
+
+def lens_camera(camera: Camera, defocus: Defocus, offset: np.ndarray) -> Camera:
+    """The pinhole at lens point ``offset`` (unit-normal units; metres = ``offset ×
+    aperture·focus/(fx, fy)``), its principal point shifted so the focus plane stays put."""
+    bx = float(offset[0]) * defocus.aperture * defocus.focus / camera.fx
+    by = float(offset[1]) * defocus.aperture * defocus.focus / camera.fy
+    pose = np.array(camera.cam_to_world, dtype=np.float64)
+    pose[:3, 3] = pose[:3, 3] + camera.rotation @ np.array([bx, by, 0.0])
+    return replace(camera, cam_to_world=pose, cx=camera.cx + camera.fx * bx / defocus.focus, cy=camera.cy + camera.fy * by / defocus.focus)
 
 
 def thin_lens_render(

@@ -1,0 +1,84 @@
+"""Local flux conservation of defocus (spacedg.render.defocus_flux): the step restores the sharp view's
+light wherever the blurred composite lost or gained some, maps the half-resolution sharp grid onto the
+view exactly, stays finite on black and empty images, and lets sub-pixel blur blur (issue 35)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from spacedg.render import Camera, Defocus, render
+from spacedg.render.defocus import measurement_camera
+from spacedg.render.defocus_flux import conserve_light, flux_lengths, flux_scale, sample_shifted
+from tests.render_helpers import camera, random_gaussians
+
+CAM = Camera(40.0, 40.0, 32.0, 24.0, 64, 48, np.eye(4))
+
+
+def _texture(seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return cv2.GaussianBlur(rng.uniform(0.0, 1.0, (48, 64, 3)).astype(np.float32), (5, 5), 1.0)
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.5])
+def test_a_darkened_blur_gets_the_sharp_views_light_back(scale: float) -> None:
+    """A blurred view that lost 12 % of the light on its left half and gained 8 % on its right comes back
+    to the sharp view's light within 0.5 % on each half (the sharp pass at full or half resolution)."""
+    sharp = _texture()
+    wide = measurement_camera(CAM, 0, scale)
+    sharp_wide = _on_grid(sharp, wide) if scale != 1.0 else sharp  # the half-resolution grid is centred in whole tiles
+    blurred = cv2.GaussianBlur(sharp, (13, 13), 2.0)
+    blurred[:, :32] *= 0.88
+    blurred[:, 32:] *= 1.08
+    alpha = np.ones((48, 64), np.float32)
+    rgb, out_alpha = conserve_light(blurred, alpha, sharp_wide, np.ones(sharp_wide.shape[:2], np.float32), CAM, wide, 2.0, 2.0)
+    for half in (slice(4, 28), slice(36, 60)):
+        assert rgb[:, half].mean() == pytest.approx(sharp[:, half].mean(), rel=0.005)
+    np.testing.assert_allclose(out_alpha, 1.0, atol=1e-6)
+
+
+def _on_grid(image: np.ndarray, wide: Camera) -> np.ndarray:
+    """``image`` (the view) area-downsampled by 2 and placed on ``wide``'s grid (edges repeated)."""
+    half = cv2.resize(image, (image.shape[1] // 2, image.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    x0, y0 = int(round(wide.cx - CAM.cx / 2)), int(round(wide.cy - CAM.cy / 2))
+    return cv2.copyMakeBorder(half, y0, wide.height - half.shape[0] - y0, x0, wide.width - half.shape[1] - x0, cv2.BORDER_REPLICATE)
+
+
+def test_the_half_resolution_grid_maps_onto_the_view_exactly() -> None:
+    """A linear ramp on the half-resolution measurement grid, sampled at the centres of the view's 2 × 2
+    cells, is the ramp at those centres."""
+    view = Camera(100.0, 100.0, 50.0, 30.0, 100, 60, np.eye(4))
+    wide = measurement_camera(view, 0, 0.5)
+    ys, xs = np.mgrid[0 : wide.height, 0 : wide.width].astype(np.float32)
+    ramp = np.stack([xs, ys, xs + ys], axis=-1)
+    got = sample_shifted(ramp, view, wide, 2, (30, 50))
+    cx = (np.arange(50) * 2 + 1.0 - view.cx) * 0.5 + wide.cx - 0.5
+    cy = (np.arange(30) * 2 + 1.0 - view.cy) * 0.5 + wide.cy - 0.5
+    np.testing.assert_allclose(got[..., 0], np.broadcast_to(cx[None, :], (30, 50)), atol=1e-4)
+    np.testing.assert_allclose(got[..., 1], np.broadcast_to(cy[:, None], (30, 50)), atol=1e-4)
+
+
+def test_black_and_empty_images_stay_finite() -> None:
+    """Zero light anywhere (blurred, sharp or both) gives finite output, black where the blurred view is black,
+    and the factor never exceeds its bound."""
+    zero, ones = np.zeros((48, 64, 3), np.float32), np.ones((48, 64, 3), np.float32)
+    a0, a1 = np.zeros((48, 64), np.float32), np.ones((48, 64), np.float32)
+    for blurred, sharp, alpha, sharp_alpha in ((zero, zero, a0, a0), (zero, ones, a0, a1), (ones, zero, a1, a0)):
+        rgb, alpha_out = conserve_light(blurred, alpha, sharp, sharp_alpha, CAM, CAM, 1.0, 0.5)
+        assert np.isfinite(rgb).all() and np.isfinite(alpha_out).all()
+        assert rgb.max() <= 4.0 * blurred.max() + 1e-6 and 0.0 <= alpha_out.min() and alpha_out.max() <= 1.0
+    assert flux_lengths(np.array([])) == (1.0, 0.0) and flux_lengths(np.array([np.nan, 8.0]))[0] == pytest.approx(4.0)
+    assert flux_scale(0.5) == 1.0 and flux_scale(4.0) == 0.5 and flux_scale(float("nan")) == 1.0
+
+
+def test_sub_pixel_blur_blurs_and_keeps_the_light() -> None:
+    """A blur of a third of a pixel is no longer rendered sharp (DEFOCUS_MIN_COC = 0: a cut-off in output pixels
+    broke size invariance), and keeps the light within 0.5 %."""
+    g = random_gaussians(400, np.random.default_rng(1), depth=(2.0, 4.0))
+    cam = camera(96, 72)
+    sharp = render(g, cam)
+    blurred = render(g, cam, defocus=Defocus(1.0, 3.0))  # r <= 0.5 px over the depths
+    assert not np.array_equal(sharp.rgb, blurred.rgb)
+    assert blurred.rgb.mean() == pytest.approx(sharp.rgb.mean(), rel=0.005)
+    assert np.abs(blurred.rgb - sharp.rgb).mean() < 0.02
