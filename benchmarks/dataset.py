@@ -291,7 +291,7 @@ def clean_vs_renders(ds: SpaceDGDataset, samples: int, repeats: int, size: tuple
     from spacedg.scene.io import load_scene
     from spacedg.render import render
 
-    two_view = [i for i in range(len(ds)) if len(ds.plan(i)[0].views) == 2]
+    two_view = [i for i in range(len(ds)) if len(ds.plan(i).views) == 2]
     if not two_view:
         print("\nno 2-view questions in the clean dataset: goal check skipped")
         return
@@ -311,13 +311,13 @@ def clean_vs_renders(ds: SpaceDGDataset, samples: int, repeats: int, size: tuple
 
     # warm-up: kernels compiled, every scene loaded in both paths
     for i in chosen:
-        record = ds.plan(i)[0]
+        record = ds.plan(i).record
         ds[i]
         for cam in cameras(record):
             render(scenes[record.scene_id].gaussians, cam, outputs="rgb")
     rows = []
     for i in chosen:
-        record = ds.plan(i)[0]
+        record = ds.plan(i).record
         gaussians, cams = scenes[record.scene_id].gaussians, cameras(record)
         cold, warm, direct = [], [], []
         for _ in range(repeats):
@@ -334,7 +334,7 @@ def clean_vs_renders(ds: SpaceDGDataset, samples: int, repeats: int, size: tuple
             warm.append(t2 - t1)
             direct.append(t3 - t2)
         rows.append((i, float(np.median(cold)) * 1e3, float(np.median(warm)) * 1e3, float(np.median(direct)) * 1e3))
-    cam = cameras(ds.plan(chosen[0])[0])[0]
+    cam = cameras(ds.plan(chosen[0]).record)[0]
     print(f"\ngoal: clean 2-view sample ≤ 1.2× its two renders ({len(rows)} items, {cam.width}×{cam.height}, "
           f"median of {repeats} repeats each)")
     print(f"{'index':>6} {'dataset[i] ms':>13} {'2 renders ms':>12} {'ratio':>6} {'cached ms':>9}")
