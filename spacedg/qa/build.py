@@ -42,6 +42,7 @@ import numpy as np
 
 from spacedg.errors import SpaceDGError
 from spacedg.plugins.guard import plugin_call
+from spacedg.plugins.candidates import Candidate, light_candidates
 from spacedg.plugins.qa_record import QARecord, deferred_geometry
 from spacedg.qa.deal import deal_distractors, deal_letters
 from spacedg.qa.index import (
@@ -62,7 +63,7 @@ from spacedg.qa.judge import DescriptionJudge
 from spacedg.plugins.questions.view_sampling import VisibilityIndex
 from spacedg.qa.modes import quota
 from spacedg.qa.selection import select_records, selection_of
-from spacedg.qa.twins import TwinCheck
+from spacedg.qa.twins import TwinCheck, named_ids
 from spacedg.scene.covisibility import with_covisibility
 from spacedg.scene.frame_check import require_frame
 from spacedg.scene.io import load_scene
@@ -128,24 +129,38 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
     want = quota(config.per_sub_type, config.mode) * config.pool_factor
     pooled: list[QARecord] = []
     distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
-    with plugin_call("question family", family, "generate"), deferred_geometry():
-        for scanned, record in enumerate(family.generate(scene, rng)):
+    with plugin_call("question family", family, "generate"), deferred_geometry(), light_candidates():
+        for scanned, item in enumerate(family.generate(scene, rng)):
             if scanned >= config.max_scan:
                 break
-            if index.has_twin(record):
+            light = type(item) is Candidate
+            if index.has_twin_ids(item.views, item.named if light else named_ids(item)):
                 twins[family.name] += 1
                 continue
-            seen = distinct.setdefault(record.sub_question_type, Counter())
-            sel = selection_of(record)
-            subject = str(sel["subject"]) if sel is not None else f"record:{record.id}"
+            seen = distinct.setdefault(item.sub_question_type, Counter())
+            subject = item.subject if light else _subject(item)
             if seen[subject] >= ALTERNATES:
                 continue  # a subject already pooled (another view of the same question)
             if subject in seen or len(seen) < want:
                 seen[subject] += 1
-                pooled.append(record)
+                pooled.append(_built(item, family, scene.id) if light else item)
             elif all(len(distinct.get(s, ())) >= want for s in family.sub_question_types):
                 break
     return pooled
+
+
+def _subject(record: QARecord) -> str:
+    """The pool's subject of a record: its selection subject, else its id."""
+    sel = selection_of(record)
+    return str(sel["subject"]) if sel is not None else f"record:{record.id}"
+
+
+def _built(candidate: Candidate, family: Any, scene_id: str) -> QARecord:
+    """The record of a pooled :class:`~spacedg.plugins.candidates.Candidate`, checked as the family's
+    ``generate`` checks the records it yields."""
+    record = candidate.build()
+    family.check_record(record, scene_id)
+    return record
 
 
 def _judged(record: QARecord, judge: DescriptionJudge | None, dropped: dict[str, int] | None, family_name: str) -> bool:

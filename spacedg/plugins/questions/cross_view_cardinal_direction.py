@@ -83,12 +83,15 @@ record-building helpers in ``records.py``, shared with ``object_proxy_cardinal_d
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
-from spacedg.scene.model import Scene
+from spacedg.plugins.candidates import Candidate, offer
+from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
     PairRules,
     ViewPair,
@@ -139,35 +142,56 @@ def render_question(phrase1: str, phrase2: str, assumed_dir: str) -> str:
     return markers + "\n" + TEMPLATE.format(obj1=phrase1, obj2=phrase2, assumed=assumed_dir)
 
 
-def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+def _record(
+    scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, one: Instance, two: Instance,
+    legs: tuple[dict[str, Any], dict[str, Any]], origins: tuple[np.ndarray, np.ndarray], drawn: tuple[str, tuple[str, ...], str, dict[str, Any]],
+) -> QARecord:
+    """The record of one candidate: ``legs`` (reference, query: :func:`~spacedg.plugins.questions.geometry.ground_leg`),
+    the camera centres ``origins`` and what :func:`~spacedg.plugins.questions.records.compass_question` drew."""
+    views = (pair.a, pair.b)
+    (ref, query), (origin_a, origin_b), (assumed, options, letter, compass) = legs, origins, drawn
+    geometry = {
+        **objects_block(scene, index, views, [one, two], [(one, pair.a), (two, pair.b)]),
+        "reference": {"origin_view": pair.a, "origin": origin_a.tolist(), "object": one.id, **ref},
+        "query": {"origin_view": pair.b, "origin": origin_b.tolist(), "object": two.id, **query},
+        **compass,
+        "template": 0,
+        "pair": pair.to_dict(),
+        "pair_rules": rules.to_dict(),
+        "selection": selection_entry(
+            _subject(one, two), f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
+            distractors=compass_distractors(compass),
+        ),
+    }
+    return make_record(
+        scene, NAME, SUB_QUESTION_TYPE, TaskGroup.CAMERA_OBJECT, AnswerType.MCQ, views,
+        {"objects": [one.id, two.id], "assumed_dir": assumed},
+        question=render_question(phrase(one), phrase(two), assumed), answer=letter, geometry=geometry, options=options,
+    )
+
+
+def _subject(one: Instance, two: Instance) -> str:
+    """The selection subject: the ordered object pair."""
+    return f"objects:{one.id}|{two.id}"
+
+
+def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
-    origin_a, origin_b = camera_center(scene.views[pair.a]), camera_center(scene.views[pair.b])
+    origins = origin_a, origin_b = camera_center(scene.views[pair.a]), camera_center(scene.views[pair.b])
+    legs_a: dict[int, dict[str, Any] | None] = {}  # object id → its leg from camera A (an object recurs in many candidates)
+    legs_b: dict[int, dict[str, Any] | None] = {}
     for one, two in object_pairs(index, pair, rng):
         if phrase_key(one) == phrase_key(two):
             continue
-        ref = ground_leg(one.box.center - origin_a, up)
-        query = ground_leg(two.box.center - origin_b, up)
+        ref = legs_a[one.id] if one.id in legs_a else legs_a.setdefault(one.id, ground_leg(one.box.center - origin_a, up))
+        query = legs_b[two.id] if two.id in legs_b else legs_b.setdefault(two.id, ground_leg(two.box.center - origin_b, up))
         if ref is None or query is None:
             continue
-        assumed, options, letter, compass = compass_question(np.asarray(ref["vector"]), np.asarray(query["vector"]), up, rng)
-        geometry = {
-            **objects_block(scene, index, views, [one, two], [(one, pair.a), (two, pair.b)]),
-            "reference": {"origin_view": pair.a, "origin": origin_a.tolist(), "object": one.id, **ref},
-            "query": {"origin_view": pair.b, "origin": origin_b.tolist(), "object": two.id, **query},
-            **compass,
-            "template": 0,
-            "pair": pair.to_dict(),
-            "pair_rules": rules.to_dict(),
-            "selection": selection_entry(
-                f"objects:{one.id}|{two.id}", f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
-                distractors=compass_distractors(compass),
-            ),
-        }
-        yield make_record(
-            scene, NAME, SUB_QUESTION_TYPE, TaskGroup.CAMERA_OBJECT, AnswerType.MCQ, views,
-            {"objects": [one.id, two.id], "assumed_dir": assumed},
-            question=render_question(phrase(one), phrase(two), assumed), answer=letter, geometry=geometry, options=options,
+        drawn = compass_question(np.asarray(ref["vector"]), np.asarray(query["vector"]), up, rng)
+        yield offer(
+            SUB_QUESTION_TYPE, views, _subject(one, two), (one.id, two.id),
+            functools.partial(_record, scene, index, pair, rules, one, two, (ref, query), origins, drawn),
         )
 
 

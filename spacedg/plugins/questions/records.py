@@ -99,6 +99,7 @@ __all__ = [
     "round_robin_views",
     "seeded_order",
     "selection_entry",
+    "index_memo",
     "visibility_entry",
     "visibility_thresholds",
 ]
@@ -234,9 +235,14 @@ def referable_ids(index: VisibilityIndex, view: str) -> list[int]:
     return list(ids)
 
 
-def _memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
-    """A per-index cache (an index is built once per generation of a scene and never changes)."""
+def index_memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
+    """A per-index cache named ``name`` (an index is built once per generation of a scene and
+    never changes): for quantities a family computes again for every view pair an object or a
+    pair of objects recurs in."""
     return index.__dict__.setdefault(f"_memo_{name}", {})
+
+
+_memo = index_memo
 
 
 def phrase(inst: Instance) -> str:
