@@ -62,6 +62,7 @@ from spacedg.qa.index import (
 from spacedg.qa.judge import DescriptionJudge
 from spacedg.plugins.questions.view_sampling import VisibilityIndex
 from spacedg.qa.modes import quota
+from spacedg.qa.pooled import Pooled
 from spacedg.qa.selection import select_records, selection_of
 from spacedg.qa.twins import TwinCheck, named_ids
 from spacedg.scene.covisibility import with_covisibility
@@ -143,7 +144,7 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
                 continue  # a subject already pooled (another view of the same question)
             if subject in seen or len(seen) < want:
                 seen[subject] += 1
-                pooled.append(_built(item, family, scene.id) if light else item)
+                pooled.append(Pooled(item, family, scene.id) if light else item)  # type: ignore[arg-type]
             elif all(len(distinct.get(s, ())) >= want for s in family.sub_question_types):
                 break
     return pooled
@@ -155,17 +156,9 @@ def _subject(record: QARecord) -> str:
     return str(sel["subject"]) if sel is not None else f"record:{record.id}"
 
 
-def _built(candidate: Candidate, family: Any, scene_id: str) -> QARecord:
-    """The record of a pooled :class:`~spacedg.plugins.candidates.Candidate`, checked as the family's
-    ``generate`` checks the records it yields."""
-    record = candidate.build()
-    family.check_record(record, scene_id)
-    return record
-
-
 def _judged(record: QARecord, judge: DescriptionJudge | None, dropped: dict[str, int] | None, family_name: str) -> bool:
     """Whether ``judge`` keeps ``record`` (always without one); a drop is counted in ``dropped``."""
-    if judge is None or judge.keep(record):
+    if judge is None or judge.keep(record.record() if isinstance(record, Pooled) else record):
         return True
     if dropped is not None:
         dropped[family_name] = dropped.get(family_name, 0) + 1

@@ -283,7 +283,7 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
         parts, truth, options, letter = body_direction(vec, rng)
         subject = f"view:{view}|objects:{min(ia, ib)}|{max(ia, ib)}"
         yield offer(
-            SINGLE_VIEW, (view,), subject, (ia, ib),
+            SINGLE_VIEW, (view,), subject, (ia, ib), functools.partial(_option_selection, subject, SINGLE_VIEW, template, truth, options),
             functools.partial(_single_view_record, scene, index, view, (a, b), subject, (world, vec), template, (parts, truth, options, letter)),
         )
 
@@ -321,9 +321,14 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         truth = parts_label(parts, BODY_DIRECTION_WORDS)
         drawn = bbox_options(truth, rng)
         yield offer(
-            BBOX_CENTER_DIRECTION, (pair.a, pair.b), f"view:{pair.b}|object:{iid}", (iid,),
+            BBOX_CENTER_DIRECTION, (pair.a, pair.b), f"view:{pair.b}|object:{iid}", (iid,), functools.partial(_bbox_selection, pair, iid, truth, drawn[2]),
             functools.partial(_bbox_record, scene, index, pair, rules, inst, (centre_b, vec), template, (parts, truth), drawn),
         )
+
+
+def _bbox_selection(pair: ViewPair, iid: int, truth: str, deck: Sequence[str]) -> dict[str, Any]:
+    """The selection entry of a box-centre question: cell = the option deck, role = the truth."""
+    return selection_entry(f"view:{pair.b}|object:{iid}", f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(sorted(deck)), truth, sorted(deck))
 
 
 def _bbox_record(
@@ -338,9 +343,7 @@ def _bbox_record(
         **_body_geometry(pair.b, inst.box.center - centre_b, vec, parts, truth),
         "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
         "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
-        "selection": selection_entry(
-            f"view:{pair.b}|object:{inst.id}", f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(sorted(deck)), truth, sorted(deck),
-        ),
+        "selection": _bbox_selection(pair, inst.id, truth, deck),
     }
     return _record(scene, index, BBOX_CENTER_DIRECTION, (pair.a, pair.b), (inst,), ((inst, pair.a),), question, options, letter, template, extra)
 
@@ -427,7 +430,7 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
         truth = RELPOS_SECTORS.labels[hit.index]
         drawn = build_mcq(truth, RELPOS_SECTORS.distractors(hit, rng), rng)
         yield offer(
-            RELPOS, views, _relpos_subject(ids), tuple(ids),
+            RELPOS, views, _relpos_subject(ids), tuple(ids), functools.partial(_relpos_selection, ids, hit),
             functools.partial(_relpos_record, scene, index, pair, rules, ids, objs, ref_views, names, (leg_ab, leg_ac), angle, hit, drawn),
         )
 
@@ -435,6 +438,16 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
 def _relpos_subject(ids: Sequence[int]) -> str:
     """The selection subject of a relative-position question: the ordered triplet."""
     return f"objects:{ids[0]}|{ids[1]}|{ids[2]}"
+
+
+def _relpos_selection(ids: Sequence[int], hit: SectorHit) -> dict[str, Any]:
+    """The selection entry of a relative-position question whose query falls in sector ``hit``."""
+    truth = RELPOS_SECTORS.labels[hit.index]
+    banned = [RELPOS_SECTORS.labels[hit.neighbour]] if hit.boundary_distance_deg < BOUNDARY_GUARD_DEG else []
+    return selection_entry(
+        _relpos_subject(ids), RELPOS, truth, RELPOS_SECTORS.labels,
+        distractors=[t for t in RELPOS_SECTORS.labels if t != truth and t not in banned],
+    )
 
 
 def _relpos_record(
@@ -473,10 +486,7 @@ def _relpos_record(
             "intersect_tol_m": INTERSECT_TOL_M,
         },
         "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
-        "selection": selection_entry(
-            _relpos_subject(ids), RELPOS, truth, RELPOS_SECTORS.labels,
-            distractors=[t for t in RELPOS_SECTORS.labels if t != truth and t not in banned],
-        ),
+        "selection": _relpos_selection(ids, hit),
     }
     return _record(scene, index, RELPOS, views, objs, list(zip(objs, ref_views)), question, options, letter, 0, extra)
 

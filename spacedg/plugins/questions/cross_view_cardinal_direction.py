@@ -158,10 +158,7 @@ def _record(
         "template": 0,
         "pair": pair.to_dict(),
         "pair_rules": rules.to_dict(),
-        "selection": selection_entry(
-            _subject(one, two), f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
-            distractors=compass_distractors(compass),
-        ),
+        "selection": _selection(one, two, drawn),
     }
     return make_record(
         scene, NAME, SUB_QUESTION_TYPE, TaskGroup.CAMERA_OBJECT, AnswerType.MCQ, views,
@@ -173,6 +170,14 @@ def _record(
 def _subject(one: Instance, two: Instance) -> str:
     """The selection subject: the ordered object pair."""
     return f"objects:{one.id}|{two.id}"
+
+
+def _selection(one: Instance, two: Instance, drawn: tuple[str, tuple[str, ...], str, dict[str, Any]]) -> dict[str, Any]:
+    """The selection entry (module docstring) of the question about ``one`` and ``two`` that ``drawn`` describes."""
+    assumed, compass = drawn[0], drawn[3]
+    return selection_entry(
+        _subject(one, two), f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels, distractors=compass_distractors(compass),
+    )
 
 
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
@@ -190,7 +195,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             continue
         drawn = compass_question(np.asarray(ref["vector"]), np.asarray(query["vector"]), up, rng)
         yield offer(
-            SUB_QUESTION_TYPE, views, _subject(one, two), (one.id, two.id),
+            SUB_QUESTION_TYPE, views, _subject(one, two), (one.id, two.id), functools.partial(_selection, one, two, drawn),
             functools.partial(_record, scene, index, pair, rules, one, two, (ref, query), origins, drawn),
         )
 

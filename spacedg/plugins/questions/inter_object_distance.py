@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
@@ -99,7 +100,7 @@ def _record(
         "template": 0,
         "pair": pair.to_dict(),
         "pair_rules": rules.to_dict(),
-        "selection": selection_entry(_subject(one, two)),
+        "selection": _selection(one, two),
     }
     return make_record(
         scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.NA, views, {"objects": [one.id, two.id]},
@@ -110,6 +111,11 @@ def _record(
 def _subject(one: Instance, two: Instance) -> str:
     """The selection subject: the unordered object pair."""
     return f"objects:{min(one.id, two.id)}|{max(one.id, two.id)}"
+
+
+def _selection(one: Instance, two: Instance) -> dict[str, Any]:
+    """The selection entry: the subject only (a metric answer)."""
+    return selection_entry(_subject(one, two))
 
 
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
@@ -127,7 +133,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         if distance < MIN_DISTANCE_M:
             continue
         yield offer(
-            SUB_QUESTION_TYPE, views, _subject(one, two), (one.id, two.id),
+            SUB_QUESTION_TYPE, views, _subject(one, two), (one.id, two.id), functools.partial(_selection, one, two),
             functools.partial(_record, scene, index, pair, rules, one, two, vector, distance),
         )
 

@@ -190,7 +190,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         objs = tuple(insts[t] for t in tri)
         obj_views = tuple(ref_view[i] for i in triplet_ids)
         yield offer(
-            SUB_QUESTION_TYPE, views, _subject(objs), triplet_ids,
+            SUB_QUESTION_TYPE, views, _subject(objs), triplet_ids, functools.partial(_selection, objs, drawn),
             functools.partial(_record, scene, index, pair, rules, objs, obj_views, centres[y].tolist(), (ref, query), drawn),
         )
 
@@ -198,6 +198,14 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
 def _subject(objs: Sequence[Instance]) -> str:
     """The selection subject: the ordered triplet (A, B, C)."""
     return "objects:" + "|".join(str(o.id) for o in objs)
+
+
+def _selection(objs: Sequence[Instance], drawn: tuple[str, tuple[str, ...], str, dict[str, Any]]) -> dict[str, Any]:
+    """The selection entry (module docstring) of the question about ``objs`` that ``drawn`` describes."""
+    assumed, compass = drawn[0], drawn[3]
+    return selection_entry(
+        _subject(objs), f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels, distractors=compass_distractors(compass),
+    )
 
 
 def _record(
@@ -219,10 +227,7 @@ def _record(
         "intersect_tol_m": INTERSECT_TOL_M,
         "pair": pair.to_dict(),
         "pair_rules": rules.to_dict(),
-        "selection": selection_entry(
-            _subject(objs), f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
-            distractors=compass_distractors(compass),
-        ),
+        "selection": _selection(objs, drawn),
     }
     return make_record(
         scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.MCQ, views,

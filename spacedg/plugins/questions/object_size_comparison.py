@@ -106,7 +106,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Iterator
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -370,6 +370,11 @@ def _verdict_of(scene: Scene, index: VisibilityIndex, one: Instance, two: Instan
     return hit[2]
 
 
+def _selection(verdict: _Verdict) -> dict[str, Any]:
+    """The selection entry of a comparison (module docstring)."""
+    return selection_entry(verdict.subject, verdict.cell, verdict.role, ROLES, features=verdict.features)
+
+
 def _record(
     scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str, verdict: _Verdict, drawn: tuple[tuple[str, ...], str],
 ) -> QARecord:
@@ -395,7 +400,7 @@ def _record(
         "template": 0,
         "refs": [ref_entry(one, pair.a), ref_entry(two, pair.b)],
         "prior_values": list(v.prior),
-        "selection": selection_entry(v.subject, v.cell, v.role, ROLES, features=v.features),
+        "selection": _selection(v),
     }
     return make_record(
         scene, NAME, sub, TaskGroup.OBJECT_CENTRIC, AnswerType.MCQ, (pair.a, pair.b), {"objects": [one.id, two.id]},
@@ -424,7 +429,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             continue
         texts = [*verdict.phrases, SAME]
         drawn = build_mcq(verdict.truth_text, [t for t in texts if t != verdict.truth_text], rng, n_options=3)
-        yield offer(sub, views, verdict.subject, (one.id, two.id), functools.partial(_record, scene, pair, one, two, sub, verdict, drawn))
+        yield offer(sub, views, verdict.subject, (one.id, two.id), functools.partial(_selection, verdict), functools.partial(_record, scene, pair, one, two, sub, verdict, drawn))
 
 
 #: ``make_family(thresholds, pair_rules)``: this family with other visibility thresholds / pair rules
