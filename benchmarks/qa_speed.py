@@ -46,7 +46,7 @@ def _env(code: Path) -> dict[str, str]:
 
 def _spacedg(code: Path, *args: str) -> None:
     """``spacedg ARGS`` with ``code`` first on the path (its own interpreter)."""
-    subprocess.run([sys.executable, "-m", "spacedg", *args], env=_env(code), check=True, stdout=subprocess.DEVNULL)
+    subprocess.run([sys.executable, "-m", "spacedg", *args], env=_env(code), check=True, stdout=subprocess.DEVNULL, cwd=code)
 
 
 def _rooms(work: Path, seed: int, n: int, code: Path) -> list[Path]:
@@ -62,7 +62,8 @@ def _rooms(work: Path, seed: int, n: int, code: Path) -> list[Path]:
 #: [records, wall s, CPU s of its generation (``generate_records``)].
 _CHILD = """
 import json, sys, time
-import spacedg.qa.build as build
+import spacedg, spacedg.qa.build as build
+print("imported", spacedg.__file__, file=sys.stderr)
 from spacedg.qa.index import QABuildConfig, selected_families
 selected_families(None)  # the plugin registry, loaded once before timing
 plain, spent = build.generate_records, []
@@ -87,7 +88,10 @@ def _build(code: Path, rooms: list[Path], out: Path, mode: str = "bench") -> dic
     building every room's index with ``code``."""
     done = subprocess.run(
         [sys.executable, "-c", _CHILD, str(out), mode, *map(str, rooms)], env=_env(code), check=True, capture_output=True, text=True,
+        cwd=code,  # ``-c`` puts the working directory first on sys.path: it must be the checkout timed
     )
+    if f"imported {Path(code).resolve() / 'spacedg'}" not in done.stderr:
+        raise SystemExit(f"{code}: the child did not import this checkout's spacedg\n{done.stderr[-2000:]}")
     suffix = "qa-train" if mode == "train" else "qa"
     result = {}
     for scene, (n, wall, cpu) in json.loads(done.stdout.strip().splitlines()[-1]).items():
