@@ -77,7 +77,8 @@ def timed(*args, **kwargs):
 build.generate_records = timed  # what build_scene_index calls: generation only, not the visibility
 out = {}
 for room in sys.argv[3:]:
-    qa = build.build_scene_index(room, QABuildConfig(mode=sys.argv[2]), out_dir=sys.argv[1], force=True, progress=False)
+    config = QABuildConfig() if sys.argv[2] == "bench" else QABuildConfig(mode=sys.argv[2])  # older checkouts: no mode
+    qa = build.build_scene_index(room, config, out_dir=sys.argv[1], force=True, progress=False)
     out[qa.scene_id] = [len(qa.records), *spent.pop()]
 print(json.dumps(out))
 """
@@ -87,9 +88,11 @@ def _build(code: Path, rooms: list[Path], out: Path, mode: str = "bench") -> dic
     """scene id → (records, wall s, CPU s, sha256 of ``<scene>.qa.jsonl`` or ``.qa-train.jsonl``) of
     building every room's index with ``code``."""
     done = subprocess.run(
-        [sys.executable, "-c", _CHILD, str(out), mode, *map(str, rooms)], env=_env(code), check=True, capture_output=True, text=True,
+        [sys.executable, "-c", _CHILD, str(out), mode, *map(str, rooms)], env=_env(code), capture_output=True, text=True,
         cwd=code,  # ``-c`` puts the working directory first on sys.path: it must be the checkout timed
     )
+    if done.returncode != 0:
+        raise SystemExit(f"{code}: the build failed\n{done.stderr[-3000:]}")
     if f"imported {Path(code).resolve() / 'spacedg'}" not in done.stderr:
         raise SystemExit(f"{code}: the child did not import this checkout's spacedg\n{done.stderr[-2000:]}")
     suffix = "qa-train" if mode == "train" else "qa"

@@ -105,9 +105,9 @@ from spacedg.plugins.questions.geometry import (
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import object_pairs, pair_family
 from spacedg.plugins.questions.geometry import COMPASS_SECTORS
+from spacedg.plugins.questions.compass_cache import CompassQuestions
 from spacedg.plugins.questions.records import (
     compass_distractors,
-    compass_question,
     make_record,
     objects_block,
     phrase,
@@ -186,6 +186,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     origins = origin_a, origin_b = camera_center(scene.views[pair.a]), camera_center(scene.views[pair.b])
     legs_a: dict[int, dict[str, Any] | None] = {}  # object id → its leg from camera A (an object recurs in many candidates)
     legs_b: dict[int, dict[str, Any] | None] = {}
+    compass = CompassQuestions(up)
     for one, two in object_pairs(index, pair, rng):
         if phrase_key(one) == phrase_key(two):
             continue
@@ -193,7 +194,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         query = legs_b[two.id] if two.id in legs_b else legs_b.setdefault(two.id, ground_leg(two.box.center - origin_b, up))
         if ref is None or query is None:
             continue
-        drawn = compass_question(np.asarray(ref["vector"]), np.asarray(query["vector"]), up, rng)
+        drawn = compass.ask(one.id, ref["vector"], two.id, query["vector"], rng)  # = compass_question(ref, query, up, rng)
         yield offer(
             SUB_QUESTION_TYPE, views, _subject(one, two), (one.id, two.id), functools.partial(_selection, one, two, drawn),
             functools.partial(_record, scene, index, pair, rules, one, two, (ref, query), origins, drawn),

@@ -100,9 +100,9 @@ from spacedg.plugins.questions.geometry import (
 )
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import pair_family
+from spacedg.plugins.questions.compass_cache import CompassQuestions
 from spacedg.plugins.questions.records import (
     compass_distractors,
-    compass_question,
     lazy_permutation,
     make_record,
     objects_block,
@@ -159,6 +159,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     centres = [inst.box.center for inst in insts]
     legs: dict[tuple[int, int], dict[str, Any] | None] = {}
     hits: dict[tuple[int, int], bool] = {}
+    compass = CompassQuestions(up)
 
     def leg(to: int, origin: int) -> dict[str, Any] | None:
         if (to, origin) not in legs:
@@ -186,7 +187,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             continue
         if any(overlap(p, q) for p, q in itertools.combinations(tri, 2)):
             continue
-        drawn = compass_question(np.asarray(ref["vector"]), np.asarray(query["vector"]), up, rng)
+        drawn = compass.ask((x, y), ref["vector"], (z, y), query["vector"], rng)  # = compass_question(ref, query, up, rng)
         objs = tuple(insts[t] for t in tri)
         obj_views = tuple(ref_view[i] for i in triplet_ids)
         yield offer(
