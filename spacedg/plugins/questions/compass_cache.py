@@ -28,9 +28,10 @@ from spacedg.plugins.questions.geometry import (
     ground_axes,
     horizontal,
 )
-from spacedg.plugins.questions.records import compass_entries
+from spacedg.plugins.questions.records import compass_entries, index_memo
+from spacedg.plugins.questions.view_sampling import VisibilityIndex
 
-__all__ = ["CompassQuestions"]
+__all__ = ["CompassQuestions", "compass_questions"]
 
 
 class CompassQuestions:
@@ -61,3 +62,13 @@ class CompassQuestions:
         block = compass_entries(assumed, label, angle, hit, north, east)
         options, letter = build_mcq(label, COMPASS_SECTORS.distractors(hit, rng), rng)
         return assumed, options, letter, block
+
+
+def compass_questions(index: VisibilityIndex, up: np.ndarray) -> CompassQuestions:
+    """The scene's :class:`CompassQuestions` (one per index and ``up``, memoised on the index:
+    legs recur across view pairs, so the keys must name what fixes a leg, e.g. ``("camera", view, id)``)."""
+    memo = index_memo(index, "compass_questions")
+    key = tuple(float(v) for v in np.asarray(up, dtype=np.float64))
+    if key not in memo:
+        memo[key] = CompassQuestions(up)
+    return memo[key]

@@ -105,8 +105,9 @@ from spacedg.plugins.questions.geometry import (
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import object_pairs, pair_family
 from spacedg.plugins.questions.geometry import COMPASS_SECTORS
-from spacedg.plugins.questions.compass_cache import CompassQuestions
+from spacedg.plugins.questions.compass_cache import compass_questions
 from spacedg.plugins.questions.records import (
+    index_memo,
     compass_distractors,
     make_record,
     objects_block,
@@ -184,17 +185,17 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
     origins = origin_a, origin_b = camera_center(scene.views[pair.a]), camera_center(scene.views[pair.b])
-    legs_a: dict[int, dict[str, Any] | None] = {}  # object id → its leg from camera A (an object recurs in many candidates)
-    legs_b: dict[int, dict[str, Any] | None] = {}
-    compass = CompassQuestions(up)
+    legs = index_memo(index, "camera_legs")  # (view, object id) → the leg camera → object (recurs in many candidates)
+    compass = compass_questions(index, up)
     for one, two in object_pairs(index, pair, rng):
         if phrase_key(one) == phrase_key(two):
             continue
-        ref = legs_a[one.id] if one.id in legs_a else legs_a.setdefault(one.id, ground_leg(one.box.center - origin_a, up))
-        query = legs_b[two.id] if two.id in legs_b else legs_b.setdefault(two.id, ground_leg(two.box.center - origin_b, up))
+        key_a, key_b = (pair.a, one.id), (pair.b, two.id)
+        ref = legs[key_a] if key_a in legs else legs.setdefault(key_a, ground_leg(one.box.center - origin_a, up))
+        query = legs[key_b] if key_b in legs else legs.setdefault(key_b, ground_leg(two.box.center - origin_b, up))
         if ref is None or query is None:
             continue
-        drawn = compass.ask(one.id, ref["vector"], two.id, query["vector"], rng)  # = compass_question(ref, query, up, rng)
+        drawn = compass.ask(("camera", *key_a), ref["vector"], ("camera", *key_b), query["vector"], rng)  # = compass_question(ref, query, up, rng)
         yield offer(
             SUB_QUESTION_TYPE, views, _subject(one, two), (one.id, two.id), functools.partial(_selection, one, two, drawn),
             functools.partial(_record, scene, index, pair, rules, one, two, (ref, query), origins, drawn),

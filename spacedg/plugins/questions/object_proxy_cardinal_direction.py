@@ -100,8 +100,9 @@ from spacedg.plugins.questions.geometry import (
 )
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import pair_family
-from spacedg.plugins.questions.compass_cache import CompassQuestions
+from spacedg.plugins.questions.compass_cache import compass_questions
 from spacedg.plugins.questions.records import (
+    index_memo,
     compass_distractors,
     lazy_permutation,
     make_record,
@@ -157,17 +158,20 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     insts = [index.instance(i) for i in ids]
     keys = [phrase_key(inst) for inst in insts]
     centres = [inst.box.center for inst in insts]
-    legs: dict[tuple[int, int], dict[str, Any] | None] = {}
-    hits: dict[tuple[int, int], bool] = {}
-    compass = CompassQuestions(up)
+    # memoised per scene (the index), by instance ids: a leg between two objects, whether two
+    # boxes overlap and the compass frames do not depend on the views
+    legs: dict[tuple[int, int], dict[str, Any] | None] = index_memo(index, "object_legs")
+    hits: dict[tuple[int, int], bool] = index_memo(index, "box_overlaps")
+    compass = compass_questions(index, up)
 
     def leg(to: int, origin: int) -> dict[str, Any] | None:
-        if (to, origin) not in legs:
-            legs[(to, origin)] = ground_leg(centres[to] - centres[origin], up)
-        return legs[(to, origin)]
+        key = (ids[to], ids[origin])
+        if key not in legs:
+            legs[key] = ground_leg(centres[to] - centres[origin], up)
+        return legs[key]
 
     def overlap(p: int, q: int) -> bool:
-        key = (min(p, q), max(p, q))
+        key = (min(ids[p], ids[q]), max(ids[p], ids[q]))
         if key not in hits:
             hits[key] = boxes_intersect(insts[p].box, insts[q].box)
         return hits[key]
@@ -187,7 +191,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             continue
         if any(overlap(p, q) for p, q in itertools.combinations(tri, 2)):
             continue
-        drawn = compass.ask((x, y), ref["vector"], (z, y), query["vector"], rng)  # = compass_question(ref, query, up, rng)
+        drawn = compass.ask(("objects", ids[x], ids[y]), ref["vector"], ("objects", ids[z], ids[y]), query["vector"], rng)  # = compass_question(ref, query, up, rng)
         objs = tuple(insts[t] for t in tri)
         obj_views = tuple(ref_view[i] for i in triplet_ids)
         yield offer(
