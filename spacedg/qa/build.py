@@ -123,9 +123,14 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
     (the family's own, views included: the mode's stricter subjects are the selection's job) per sub type, :data:`ALTERNATES`
     records each, ``max_scan`` candidates in all (seeded per (scene, family)); candidates naming
     an object whose twin shows in one of their images (:meth:`~spacedg.qa.twins.TwinCheck.has_twin`) are
-    left out and counted in ``twins`` per family. The candidates are made inside
-    :func:`~spacedg.plugins.qa_record.deferred_geometry`: their ``geometry`` blocks are converted to
-    plain JSON types only once selected (:func:`_family_records`)."""
+    left out and counted in ``twins`` per family. The family runs inside
+    :func:`~spacedg.plugins.candidates.light_candidates`: the built-in families yield
+    :class:`~spacedg.plugins.candidates.Candidate` objects (sub type, views, subject, named ids; every
+    draw already made), pooled as :class:`~spacedg.qa.pooled.Pooled` (their selection entry only), so
+    a record is built only for the candidates the selection takes; records a family yields
+    as such (third-party families) are made inside :func:`~spacedg.plugins.qa_record.deferred_geometry`,
+    their ``geometry`` converted to plain JSON types only once selected (:func:`_family_records`).
+    The indexes are the same bytes either way."""
     rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
     want = quota(config.per_sub_type, config.mode) * config.pool_factor
     pooled: list[QARecord] = []
