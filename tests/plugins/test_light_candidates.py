@@ -54,3 +54,22 @@ def test_offer_builds_outside_the_block() -> None:
     with light_candidates():
         item = offer("s", ("v",), "object:1", (1,), dict, lambda: record)
     assert isinstance(item, Candidate) and item.build() is record and item.named == (1,)
+
+
+def test_pooled_refuses_a_record_whose_selection_differs_from_its_offer() -> None:
+    from spacedg.errors import PluginError
+    from spacedg.qa.pooled import Pooled
+    from tests.qa_records import qa_record
+
+    class Declared:
+        name = "demo_family"
+
+        def check_record(self, record, scene_id=None) -> None:
+            pass
+
+    record = qa_record(geometry={"selection": {"subject": "object:1"}})
+    good = Pooled(Candidate("s", ("v",), "object:1", (1,), lambda: {"subject": "object:1"}, lambda: record), Declared(), "scene")
+    assert good.geometry == {"selection": {"subject": "object:1"}} and good.materialised() == record and good.id == record.id
+    bad = Pooled(Candidate("s", ("v",), "object:2", (2,), lambda: {"subject": "object:2"}, lambda: record), Declared(), "scene")
+    with pytest.raises(PluginError, match="selection entry"):
+        bad.materialised()
