@@ -4,6 +4,12 @@ Prints numbers only (never part of the test run).
 
     .venv/bin/python benchmarks/qa_speed.py --base /tmp/qa-base            # 4 demo rooms + 4 rooms of seed 20
     .venv/bin/python benchmarks/qa_speed.py --base /tmp/qa-base --rooms DIR [DIR ...] --no-profile
+    .venv/bin/python benchmarks/qa_speed.py --base /tmp/qa-41e7ace --same-as /tmp/qa-456f964 --rooms DIR ... --mode train
+
+Issue 31's measurement: ``--base`` a checkout of 41e7ace (before issue 31's work), ``--same-as``
+one of 456f964 (the indexes this code must equal byte for byte: main before the light
+candidates; 41e7ace's indexes differ on purpose, version 4). ``--mode train`` times the dense
+train selection (``<id>.qa-train.jsonl``).
 
 ``--base`` is a checkout of the reference code (``git worktree add /tmp/qa-base 41e7ace``). The
 rooms are the built-in synthetic rooms (``spacedg scenes synth``: seeds 0–3, the demo rooms, and
@@ -40,7 +46,7 @@ def _env(code: Path) -> dict[str, str]:
 
 def _spacedg(code: Path, *args: str) -> None:
     """``spacedg ARGS`` with ``code`` first on the path (its own interpreter)."""
-    subprocess.run([sys.executable, "-m", "spacedg", *args], env=_env(code), check=True, stdout=subprocess.DEVNULL)
+    subprocess.run([sys.executable, "-m", "spacedg", *args], env=_env(code), check=True, stdout=subprocess.DEVNULL, cwd=code)
 
 
 def _rooms(work: Path, seed: int, n: int, code: Path) -> list[Path]:
@@ -56,7 +62,8 @@ def _rooms(work: Path, seed: int, n: int, code: Path) -> list[Path]:
 #: [records, wall s, CPU s of its generation (``generate_records``)].
 _CHILD = """
 import json, sys, time
-import spacedg.qa.build as build
+import spacedg, spacedg.qa.build as build
+print("imported", spacedg.__file__, file=sys.stderr)
 from spacedg.qa.index import QABuildConfig, selected_families
 selected_families(None)  # the plugin registry, loaded once before timing
 plain, spent = build.generate_records, []
@@ -69,22 +76,29 @@ def timed(*args, **kwargs):
 
 build.generate_records = timed  # what build_scene_index calls: generation only, not the visibility
 out = {}
-for room in sys.argv[2:]:
-    qa = build.build_scene_index(room, QABuildConfig(), out_dir=sys.argv[1], force=True, progress=False)
+for room in sys.argv[3:]:
+    config = QABuildConfig() if sys.argv[2] == "bench" else QABuildConfig(mode=sys.argv[2])  # older checkouts: no mode
+    qa = build.build_scene_index(room, config, out_dir=sys.argv[1], force=True, progress=False)
     out[qa.scene_id] = [len(qa.records), *spent.pop()]
 print(json.dumps(out))
 """
 
 
-def _build(code: Path, rooms: list[Path], out: Path) -> dict[str, tuple[int, float, float, str]]:
-    """scene id → (records, wall s, CPU s, sha256 of ``<scene>.qa.jsonl``) of building every room's
-    index with ``code``."""
+def _build(code: Path, rooms: list[Path], out: Path, mode: str = "bench") -> dict[str, tuple[int, float, float, str]]:
+    """scene id → (records, wall s, CPU s, sha256 of ``<scene>.qa.jsonl`` or ``.qa-train.jsonl``) of
+    building every room's index with ``code``."""
     done = subprocess.run(
-        [sys.executable, "-c", _CHILD, str(out), *map(str, rooms)], env=_env(code), check=True, capture_output=True, text=True,
+        [sys.executable, "-c", _CHILD, str(out), mode, *map(str, rooms)], env=_env(code), capture_output=True, text=True,
+        cwd=code,  # ``-c`` puts the working directory first on sys.path: it must be the checkout timed
     )
+    if done.returncode != 0:
+        raise SystemExit(f"{code}: the build failed\n{done.stderr[-3000:]}")
+    if f"imported {Path(code).resolve() / 'spacedg'}" not in done.stderr:
+        raise SystemExit(f"{code}: the child did not import this checkout's spacedg\n{done.stderr[-2000:]}")
+    suffix = "qa-train" if mode == "train" else "qa"
     result = {}
     for scene, (n, wall, cpu) in json.loads(done.stdout.strip().splitlines()[-1]).items():
-        result[scene] = (n, wall, cpu, hashlib.sha256((out / f"{scene}.qa.jsonl").read_bytes()).hexdigest())
+        result[scene] = (n, wall, cpu, hashlib.sha256((out / f"{scene}.{suffix}.jsonl").read_bytes()).hexdigest())
     return result
 
 
@@ -108,17 +122,17 @@ def _compare(label: str, base: dict, new: dict, reference: dict | None = None) -
     return tb, tn, same_all
 
 
-def _profile(room: Path, top: int) -> None:
+def _profile(room: Path, top: int, mode: str = "bench") -> None:
     """The new code's generation of ``room`` under cProfile: top functions by own time."""
     from spacedg.qa.build import generate_records, prepare_scene
     from spacedg.qa.index import QABuildConfig
     from spacedg.scene.io import load_scene
 
-    scene = prepare_scene(load_scene(room), room / "cache", QABuildConfig(), progress=False)
+    scene = prepare_scene(load_scene(room), room / "cache", QABuildConfig(mode=mode), progress=False)
     profile = cProfile.Profile()
     t0 = time.perf_counter()
     profile.enable()
-    records = generate_records(scene, QABuildConfig())
+    records = generate_records(scene, QABuildConfig(mode=mode))
     profile.disable()
     print(f"\nprofile of {room.name}: {len(records)} records in {time.perf_counter() - t0:.2f} s under cProfile")
     text = io.StringIO()
@@ -136,6 +150,7 @@ def main() -> None:
     parser.add_argument("--rooms", type=Path, nargs="*", help="room folders (default: generate the demo rooms and --other-seed rooms)")
     parser.add_argument("--other-seed", type=int, default=20)
     parser.add_argument("--n", type=int, default=4, help="rooms per seed")
+    parser.add_argument("--mode", choices=("bench", "train"), default="bench", help="the selection timed (qa build --mode)")
     parser.add_argument("--no-profile", action="store_true")
     parser.add_argument("--top", type=int, default=20)
     args = parser.parse_args()
@@ -145,17 +160,17 @@ def main() -> None:
     }
     totals = [0.0, 0.0]
     for i, (label, rooms) in enumerate(groups.items()):
-        base = _build(args.base, rooms, args.work / f"base{i}")
-        new = _build(HERE, rooms, args.work / f"new{i}")
+        base = _build(args.base, rooms, args.work / f"base{i}", args.mode)
+        new = _build(HERE, rooms, args.work / f"new{i}", args.mode)
         if args.same_as is not None:
-            same = _build(args.same_as, rooms, args.work / f"same{i}")
+            same = _build(args.same_as, rooms, args.work / f"same{i}", args.mode)
             _compare(f"{label}: --same-as {args.same_as} (reference of the identity) vs this checkout", same, new)
         tb, tn, _ = _compare(f"{label}: --base {args.base} vs this checkout", base, new, same if args.same_as else None)
         totals[0] += tb
         totals[1] += tn
     print(f"\ngeneration CPU, every room: base {totals[0]:.1f} s, new {totals[1]:.1f} s: {totals[0] / totals[1]:.1f}x faster")
     if not args.no_profile:
-        _profile(next(iter(groups.values()))[0], args.top)
+        _profile(next(iter(groups.values()))[0], args.top, args.mode)
 
 
 if __name__ == "__main__":

@@ -42,6 +42,7 @@ import numpy as np
 
 from spacedg.errors import SpaceDGError
 from spacedg.plugins.guard import plugin_call
+from spacedg.plugins.candidates import Candidate, light_candidates
 from spacedg.plugins.qa_record import QARecord, deferred_geometry
 from spacedg.qa.deal import deal_distractors, deal_letters
 from spacedg.qa.index import (
@@ -61,8 +62,9 @@ from spacedg.qa.index import (
 from spacedg.qa.judge import DescriptionJudge
 from spacedg.plugins.questions.view_sampling import VisibilityIndex
 from spacedg.qa.modes import quota
+from spacedg.qa.pooled import Pooled
 from spacedg.qa.selection import select_records, selection_of
-from spacedg.qa.twins import TwinCheck
+from spacedg.qa.twins import TwinCheck, named_ids
 from spacedg.scene.covisibility import with_covisibility
 from spacedg.scene.frame_check import require_frame
 from spacedg.scene.io import load_scene
@@ -121,36 +123,47 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
     (the family's own, views included: the mode's stricter subjects are the selection's job) per sub type, :data:`ALTERNATES`
     records each, ``max_scan`` candidates in all (seeded per (scene, family)); candidates naming
     an object whose twin shows in one of their images (:meth:`~spacedg.qa.twins.TwinCheck.has_twin`) are
-    left out and counted in ``twins`` per family. The candidates are made inside
-    :func:`~spacedg.plugins.qa_record.deferred_geometry`: their ``geometry`` blocks are converted to
-    plain JSON types only once selected (:func:`_family_records`)."""
+    left out and counted in ``twins`` per family. The family runs inside
+    :func:`~spacedg.plugins.candidates.light_candidates`: the built-in families yield
+    :class:`~spacedg.plugins.candidates.Candidate` objects (sub type, views, subject, named ids; every
+    draw already made), pooled as :class:`~spacedg.qa.pooled.Pooled` (their selection entry only), so
+    a record is built only for the candidates the selection takes; records a family yields
+    as such (third-party families) are made inside :func:`~spacedg.plugins.qa_record.deferred_geometry`,
+    their ``geometry`` converted to plain JSON types only once selected (:func:`_family_records`).
+    The indexes are the same bytes either way."""
     rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
     want = quota(config.per_sub_type, config.mode) * config.pool_factor
     pooled: list[QARecord] = []
     distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
-    with plugin_call("question family", family, "generate"), deferred_geometry():
-        for scanned, record in enumerate(family.generate(scene, rng)):
+    with plugin_call("question family", family, "generate"), deferred_geometry(), light_candidates():
+        for scanned, item in enumerate(family.generate(scene, rng)):
             if scanned >= config.max_scan:
                 break
-            if index.has_twin(record):
+            light = type(item) is Candidate
+            if index.has_twin_ids(item.views, item.named if light else named_ids(item)):
                 twins[family.name] += 1
                 continue
-            seen = distinct.setdefault(record.sub_question_type, Counter())
-            sel = selection_of(record)
-            subject = str(sel["subject"]) if sel is not None else f"record:{record.id}"
+            seen = distinct.setdefault(item.sub_question_type, Counter())
+            subject = item.subject if light else _subject(item)
             if seen[subject] >= ALTERNATES:
                 continue  # a subject already pooled (another view of the same question)
             if subject in seen or len(seen) < want:
                 seen[subject] += 1
-                pooled.append(record)
+                pooled.append(Pooled(item, family, scene.id) if light else item)  # type: ignore[arg-type]
             elif all(len(distinct.get(s, ())) >= want for s in family.sub_question_types):
                 break
     return pooled
 
 
+def _subject(record: QARecord) -> str:
+    """The pool's subject of a record: its selection subject, else its id."""
+    sel = selection_of(record)
+    return str(sel["subject"]) if sel is not None else f"record:{record.id}"
+
+
 def _judged(record: QARecord, judge: DescriptionJudge | None, dropped: dict[str, int] | None, family_name: str) -> bool:
     """Whether ``judge`` keeps ``record`` (always without one); a drop is counted in ``dropped``."""
-    if judge is None or judge.keep(record):
+    if judge is None or judge.keep(record.record() if isinstance(record, Pooled) else record):
         return True
     if dropped is not None:
         dropped[family_name] = dropped.get(family_name, 0) + 1

@@ -157,7 +157,7 @@ class _Selection:
 
     def accept(self, record: QARecord) -> bool:
         """Whether the judge keeps ``record`` (asked once; a refusal is remembered)."""
-        if record.id in self.judged_out:
+        if self.judged_out and record.id in self.judged_out:
             return False
         if self.keep(record):
             return True
@@ -189,7 +189,7 @@ class _Selection:
     def _usable(self, i: int, used: Container[tuple[str, str]] = ()) -> bool:
         """Whether record ``i``'s subject is free (not asked, not in ``used``) and the judge has not refused it."""
         subject = self.pool.subject(i)
-        return subject not in self.asked and subject not in used and self.pool.records[i].id not in self.judged_out
+        return subject not in self.asked and subject not in used and not (self.judged_out and self.pool.records[i].id in self.judged_out)
 
     def pick(self, cell: str, role: str, used: set[tuple[str, str]]) -> int | None:
         """The candidate of ``role`` in ``cell`` for the next round: free subject, accepted by the
@@ -293,7 +293,7 @@ class _Selection:
         pool, r = self.pool, self.pool.records[i]
         if i in self.taken:
             return "taken"
-        if r.id in self.judged_out:
+        if self.judged_out and r.id in self.judged_out:
             return "judge"
         if pool.selections[i] is not None and pool.subject(i) in self.asked:
             return "repeat"

@@ -14,6 +14,8 @@ Records without ``refs`` (camera motion, counting, existence: they name labels o
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.questions.view_sampling import VisibilityIndex, description_clash
 
@@ -54,4 +56,16 @@ class TwinCheck:
 
     def has_twin(self, record: QARecord) -> bool:
         """Whether an object ``record`` names has a same-description twin shown in any of its views."""
-        return any(self.clash(view, iid) for iid in named_ids(record) for view in record.views)
+        return self.has_twin_ids(record.views, named_ids(record))
+
+    def has_twin_ids(self, views: Sequence[str], ids: Sequence[int]) -> bool:
+        """Whether one of the objects ``ids`` has a same-description twin shown in one of ``views``."""
+        clash = self._clash
+        for iid in ids:
+            for view in views:
+                hit = clash.get((view, iid))
+                if hit is None:
+                    hit = self.clash(view, iid)
+                if hit:
+                    return True
+        return False

@@ -242,7 +242,15 @@ class Lexicon:
 
     def confuses(self, asked: str, seen: str) -> bool:
         """Whether a view showing an instance labelled ``seen`` makes a label-only question about
-        ``asked`` ambiguous: the labels are related, or ``seen`` shows ``asked`` unannotated."""
+        ``asked`` ambiguous: the labels are related, or ``seen`` shows ``asked`` unannotated
+        (memoised per pair of labels, like :meth:`related`: a scene asks it for every object of every view)."""
+        memo = ("confuses", asked, seen)
+        hit = self._memo.get(memo)
+        if hit is None:
+            hit = self._memo[memo] = self._confuses(asked, seen)
+        return hit
+
+    def _confuses(self, asked: str, seen: str) -> bool:
         if self.related(asked, seen):
             return True
         containers = self.shown_by(asked)

@@ -70,3 +70,21 @@ def test_box_intersection_memo_is_per_box_object() -> None:
     far = OrientedBox(np.array([5.0, 0.0, 0.0]), np.ones(3), np.eye(3))
     assert boxes_intersect(a, near) and boxes_intersect(a, near)
     assert not boxes_intersect(a, far) and not boxes_intersect(a, far)
+
+
+def test_compass_questions_equal_compass_question() -> None:
+    from spacedg.plugins.questions.compass_cache import CompassQuestions
+    from spacedg.plugins.questions.records import compass_question
+
+    gen = np.random.default_rng(11)
+    up = np.array([0.1, -0.2, 0.97])
+    refs, queries = gen.normal(size=(4, 3)), gen.normal(size=(5, 3))
+    plain_rng, cached_rng = np.random.default_rng(2), np.random.default_rng(2)
+    cache = CompassQuestions(up)
+    for _ in range(3):  # every reference/query again: memoised frames and projections
+        for i, ref in enumerate(refs):
+            for j, query in enumerate(queries):
+                plain = compass_question(ref, query, up, plain_rng)
+                cached = cache.ask(i, ref.tolist(), j, query.tolist(), cached_rng)
+                assert repr(cached) == repr(plain)
+    assert plain_rng.random() == cached_rng.random()  # the same draws

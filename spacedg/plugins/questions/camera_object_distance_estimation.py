@@ -53,11 +53,13 @@ The record-building helpers (seeded orders, round robins, geometry-block entries
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 
+from spacedg.plugins.candidates import offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -139,8 +141,17 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
         if distance is None:
             continue
         template = int(rng.integers(len(TEMPLATES)))
-        question = TEMPLATES[template].format(obj=phrase(inst))
-        yield _record(scene, index, SINGLE_VIEW, (view,), inst, distance, question, template, {"selection": selection_entry(f"view:{view}|object:{inst.id}")})
+        subject = f"view:{view}|object:{inst.id}"
+        yield offer(
+            SINGLE_VIEW, (view,), subject, (inst.id,), functools.partial(selection_entry, subject),
+            functools.partial(_single_view_record, scene, index, view, inst, distance, template),
+        )
+
+
+def _single_view_record(scene: Scene, index: VisibilityIndex, view: str, inst: Instance, distance: float, template: int) -> QARecord:
+    """The single-view record of ``inst`` at ``distance`` metres from ``view``'s camera, in wording ``template``."""
+    question = TEMPLATES[template].format(obj=phrase(inst))
+    return _record(scene, index, SINGLE_VIEW, (view,), inst, distance, question, template, {"selection": selection_entry(f"view:{view}|object:{inst.id}")})
 
 
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
@@ -152,9 +163,18 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         distance = _distance(scene, pair.b, inst)
         if distance is None:
             continue
-        question = find_in_image(phrase(inst), 0) + "\n" + TWO_VIEW_TEMPLATE.format(label=label_text(inst.label))
-        extra = {"pair": pair.to_dict(), "pair_rules": rules.to_dict(), "selection": selection_entry(f"view:{pair.b}|object:{inst.id}")}
-        yield _record(scene, index, BBOX_CENTER_DISTANCE, (pair.a, pair.b), inst, distance, question, 0, extra)
+        subject = f"view:{pair.b}|object:{inst.id}"
+        yield offer(
+            BBOX_CENTER_DISTANCE, (pair.a, pair.b), subject, (inst.id,), functools.partial(selection_entry, subject),
+            functools.partial(_pair_record, scene, index, pair, rules, inst, distance),
+        )
+
+
+def _pair_record(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, inst: Instance, distance: float) -> QARecord:
+    """The two-view record of ``inst`` at ``distance`` metres from camera B of ``pair``."""
+    question = find_in_image(phrase(inst), 0) + "\n" + TWO_VIEW_TEMPLATE.format(label=label_text(inst.label))
+    extra = {"pair": pair.to_dict(), "pair_rules": rules.to_dict(), "selection": selection_entry(f"view:{pair.b}|object:{inst.id}")}
+    return _record(scene, index, BBOX_CENTER_DISTANCE, (pair.a, pair.b), inst, distance, question, 0, extra)
 
 
 def generate(

@@ -105,12 +105,14 @@ record-building helpers come from :mod:`~spacedg.plugins.questions.records`.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
 
+from spacedg.plugins.candidates import Candidate, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -131,6 +133,7 @@ from spacedg.plugins.questions.geometry import (
     MAX_PARTS,
     MIN_HORIZONTAL_M,
     RELPOS_SECTORS,
+    SectorHit,
     TAN30,
     VERTICAL_FACTOR,
     boxes_intersect,
@@ -266,7 +269,7 @@ def _record(
 
 
 # --------------------------------------------------------------- single view
-def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np.random.Generator) -> Iterator[QARecord]:
+def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     cam = scene.views[view]
     for ia, ib in seeded_order(list(itertools.permutations(referable_ids(index, view), 2)), rng):
         a, b = index.instance(ia), index.instance(ib)
@@ -278,16 +281,30 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
             continue
         template = int(rng.integers(len(SINGLE_VIEW_TEMPLATES)))
         parts, truth, options, letter = body_direction(vec, rng)
-        question = SINGLE_VIEW_TEMPLATES[template].format(a=phrase(a), b=phrase(b)) + SINGLE_VIEW_NOTE
-        extra = {
-            **_body_geometry(view, world, vec, parts, truth), "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
-            "selection": _option_selection(f"view:{view}|objects:{min(ia, ib)}|{max(ia, ib)}", SINGLE_VIEW, template, truth, options),
-        }
-        yield _record(scene, index, SINGLE_VIEW, (view,), (a, b), ((a, view), (b, view)), question, options, letter, template, extra)
+        subject = f"view:{view}|objects:{min(ia, ib)}|{max(ia, ib)}"
+        yield offer(
+            SINGLE_VIEW, (view,), subject, (ia, ib), functools.partial(_option_selection, subject, SINGLE_VIEW, template, truth, options),
+            functools.partial(_single_view_record, scene, index, view, (a, b), subject, (world, vec), template, (parts, truth, options, letter)),
+        )
+
+
+def _single_view_record(
+    scene: Scene, index: VisibilityIndex, view: str, objs: tuple[Instance, Instance], subject: str,
+    vectors: tuple[np.ndarray, np.ndarray], template: int, drawn: tuple[list[tuple[int, int]], str, tuple[str, ...], str],
+) -> QARecord:
+    """The record of a single-view question about ``objs`` (A, B): ``vectors`` = A → B in world and
+    camera axes, ``drawn`` = what :func:`~spacedg.plugins.questions.geometry.body_direction` drew."""
+    (a, b), (world, vec), (parts, truth, options, letter) = objs, vectors, drawn
+    question = SINGLE_VIEW_TEMPLATES[template].format(a=phrase(a), b=phrase(b)) + SINGLE_VIEW_NOTE
+    extra = {
+        **_body_geometry(view, world, vec, parts, truth), "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
+        "selection": _option_selection(subject, SINGLE_VIEW, template, truth, options),
+    }
+    return _record(scene, index, SINGLE_VIEW, (view,), (a, b), ((a, view), (b, view)), question, options, letter, template, extra)
 
 
 # ------------------------------------------------------------ bbox direction
-def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     cam_b = scene.views[pair.b]
     centre_b = camera_center(cam_b)
     for iid in seeded_order(index.visible[pair.a], rng):
@@ -302,17 +319,33 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         template = int(rng.integers(len(TWO_VIEW_TEMPLATES)))
         parts = dominant_parts(vec)
         truth = parts_label(parts, BODY_DIRECTION_WORDS)
-        options, letter, deck = bbox_options(truth, rng)
-        question = find_in_image(phrase(inst), 0) + "\n" + TWO_VIEW_TEMPLATES[template].format(label=label_text(inst.label))
-        extra = {
-            **_body_geometry(pair.b, inst.box.center - centre_b, vec, parts, truth),
-            "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
-            "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
-            "selection": selection_entry(
-                f"view:{pair.b}|object:{iid}", f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(sorted(deck)), truth, sorted(deck),
-            ),
-        }
-        yield _record(scene, index, BBOX_CENTER_DIRECTION, (pair.a, pair.b), (inst,), ((inst, pair.a),), question, options, letter, template, extra)
+        drawn = bbox_options(truth, rng)
+        yield offer(
+            BBOX_CENTER_DIRECTION, (pair.a, pair.b), f"view:{pair.b}|object:{iid}", (iid,), functools.partial(_bbox_selection, pair, iid, truth, drawn[2]),
+            functools.partial(_bbox_record, scene, index, pair, rules, inst, (centre_b, vec), template, (parts, truth), drawn),
+        )
+
+
+def _bbox_selection(pair: ViewPair, iid: int, truth: str, deck: Sequence[str]) -> dict[str, Any]:
+    """The selection entry of a box-centre question: cell = the option deck, role = the truth."""
+    return selection_entry(f"view:{pair.b}|object:{iid}", f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(sorted(deck)), truth, sorted(deck))
+
+
+def _bbox_record(
+    scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, inst: Instance, where: tuple[np.ndarray, np.ndarray],
+    template: int, answer: tuple[list[tuple[int, int]], str], drawn: tuple[tuple[str, ...], str, Sequence[str]],
+) -> QARecord:
+    """The record of a box-centre question about ``inst``: ``where`` = camera B's centre and the
+    object's centre in B's axes, ``answer`` = its dominant parts and label, ``drawn`` = :func:`bbox_options`'."""
+    (centre_b, vec), (parts, truth), (options, letter, deck) = where, answer, drawn
+    question = find_in_image(phrase(inst), 0) + "\n" + TWO_VIEW_TEMPLATES[template].format(label=label_text(inst.label))
+    extra = {
+        **_body_geometry(pair.b, inst.box.center - centre_b, vec, parts, truth),
+        "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
+        "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
+        "selection": _bbox_selection(pair, inst.id, truth, deck),
+    }
+    return _record(scene, index, BBOX_CENTER_DIRECTION, (pair.a, pair.b), (inst,), ((inst, pair.a),), question, options, letter, template, extra)
 
 
 def _rare_bbox_label(label: str) -> bool:
@@ -371,7 +404,7 @@ def _intersects(cache: dict[tuple[int, int], bool], p: Instance, q: Instance) ->
     return cache[key]
 
 
-def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
     ref_view, triplets = _relpos_candidates(index, pair)
@@ -395,37 +428,67 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
         angle = ground_angle(forward, ac, up)
         hit = RELPOS_SECTORS.classify(angle)
         truth = RELPOS_SECTORS.labels[hit.index]
-        options, letter = build_mcq(truth, RELPOS_SECTORS.distractors(hit, rng), rng)
-        markers = " ".join(find_in_image(phrase(o), views.index(v)) for o, v in zip(objs, ref_views))
-        question = markers + "\n" + RELPOS_TEMPLATE.format(a=names[0], b=names[1], c=names[2])
-        fwd_unit = forward / ab_h
-        banned = [RELPOS_SECTORS.labels[hit.neighbour]] if hit.boundary_distance_deg < BOUNDARY_GUARD_DEG else []
-        extra = {
-            "roles": {"anchor": ids[0], "facing": ids[1], "query": ids[2]},
-            "forward": fwd_unit.tolist(),
-            "right": np.cross(fwd_unit, up).tolist(),
-            "ab_horizontal_m": ab_h,
-            "ab_vertical_m": leg_ab["vertical_m"],
-            "ac_horizontal_m": leg_ac["horizontal_m"],
-            "ac_vertical_m": leg_ac["vertical_m"],
-            "angle_deg": angle,
-            "sector_index": hit.index,
-            "sector_label": truth,
-            "sector_starts_deg": list(RELPOS_SECTORS.starts),
-            "boundary_distance_deg": hit.boundary_distance_deg,
-            "neighbour_index": hit.neighbour,
-            "banned_labels": banned,
-            "thresholds": {
-                "min_horizontal_m": MIN_HORIZONTAL_M, "vertical_factor": VERTICAL_FACTOR, "boundary_guard_deg": BOUNDARY_GUARD_DEG,
-                "intersect_tol_m": INTERSECT_TOL_M,
-            },
-            "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
-            "selection": selection_entry(
-                f"objects:{ids[0]}|{ids[1]}|{ids[2]}", RELPOS, truth, RELPOS_SECTORS.labels,
-                distractors=[t for t in RELPOS_SECTORS.labels if t != truth and t not in banned],
-            ),
-        }
-        yield _record(scene, index, RELPOS, views, objs, list(zip(objs, ref_views)), question, options, letter, 0, extra)
+        drawn = build_mcq(truth, RELPOS_SECTORS.distractors(hit, rng), rng)
+        yield offer(
+            RELPOS, views, _relpos_subject(ids), tuple(ids), functools.partial(_relpos_selection, ids, hit),
+            functools.partial(_relpos_record, scene, index, pair, rules, ids, objs, ref_views, names, (leg_ab, leg_ac), angle, hit, drawn),
+        )
+
+
+def _relpos_subject(ids: Sequence[int]) -> str:
+    """The selection subject of a relative-position question: the ordered triplet."""
+    return f"objects:{ids[0]}|{ids[1]}|{ids[2]}"
+
+
+def _relpos_selection(ids: Sequence[int], hit: SectorHit) -> dict[str, Any]:
+    """The selection entry of a relative-position question whose query falls in sector ``hit``."""
+    truth = RELPOS_SECTORS.labels[hit.index]
+    banned = [RELPOS_SECTORS.labels[hit.neighbour]] if hit.boundary_distance_deg < BOUNDARY_GUARD_DEG else []
+    return selection_entry(
+        _relpos_subject(ids), RELPOS, truth, RELPOS_SECTORS.labels,
+        distractors=[t for t in RELPOS_SECTORS.labels if t != truth and t not in banned],
+    )
+
+
+def _relpos_record(
+    scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, ids: Sequence[int], objs: list[Instance],
+    ref_views: list[str], names: list[str], legs: tuple[dict[str, Any], dict[str, Any]], angle: float, hit: SectorHit,
+    drawn: tuple[tuple[str, ...], str],
+) -> QARecord:
+    """The record of a relative-position triplet: anchor, facing and query ``objs`` found in ``ref_views``, the
+    ``legs`` anchor → facing and anchor → query, the ``angle`` and sector ``hit`` of the query, ``drawn`` = (options, letter)."""
+    up = np.asarray(scene.up, dtype=np.float64)
+    views = (pair.a, pair.b)
+    (leg_ab, leg_ac), (options, letter) = legs, drawn
+    forward, ab_h = np.asarray(leg_ab["horizontal"]), leg_ab["horizontal_m"]
+    truth = RELPOS_SECTORS.labels[hit.index]
+    markers = " ".join(find_in_image(phrase(o), views.index(v)) for o, v in zip(objs, ref_views))
+    question = markers + "\n" + RELPOS_TEMPLATE.format(a=names[0], b=names[1], c=names[2])
+    fwd_unit = forward / ab_h
+    banned = [RELPOS_SECTORS.labels[hit.neighbour]] if hit.boundary_distance_deg < BOUNDARY_GUARD_DEG else []
+    extra = {
+        "roles": {"anchor": ids[0], "facing": ids[1], "query": ids[2]},
+        "forward": fwd_unit.tolist(),
+        "right": np.cross(fwd_unit, up).tolist(),
+        "ab_horizontal_m": ab_h,
+        "ab_vertical_m": leg_ab["vertical_m"],
+        "ac_horizontal_m": leg_ac["horizontal_m"],
+        "ac_vertical_m": leg_ac["vertical_m"],
+        "angle_deg": angle,
+        "sector_index": hit.index,
+        "sector_label": truth,
+        "sector_starts_deg": list(RELPOS_SECTORS.starts),
+        "boundary_distance_deg": hit.boundary_distance_deg,
+        "neighbour_index": hit.neighbour,
+        "banned_labels": banned,
+        "thresholds": {
+            "min_horizontal_m": MIN_HORIZONTAL_M, "vertical_factor": VERTICAL_FACTOR, "boundary_guard_deg": BOUNDARY_GUARD_DEG,
+            "intersect_tol_m": INTERSECT_TOL_M,
+        },
+        "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
+        "selection": _relpos_selection(ids, hit),
+    }
+    return _record(scene, index, RELPOS, views, objs, list(zip(objs, ref_views)), question, options, letter, 0, extra)
 
 
 def generate(

@@ -83,12 +83,15 @@ record-building helpers in ``records.py``, shared with ``object_proxy_cardinal_d
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
-from spacedg.scene.model import Scene
+from spacedg.plugins.candidates import Candidate, offer
+from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
     PairRules,
     ViewPair,
@@ -102,9 +105,10 @@ from spacedg.plugins.questions.geometry import (
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import object_pairs, pair_family
 from spacedg.plugins.questions.geometry import COMPASS_SECTORS
+from spacedg.plugins.questions.compass_cache import compass_questions
 from spacedg.plugins.questions.records import (
+    index_memo,
     compass_distractors,
-    compass_question,
     make_record,
     objects_block,
     phrase,
@@ -139,35 +143,62 @@ def render_question(phrase1: str, phrase2: str, assumed_dir: str) -> str:
     return markers + "\n" + TEMPLATE.format(obj1=phrase1, obj2=phrase2, assumed=assumed_dir)
 
 
-def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+def _record(
+    scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, one: Instance, two: Instance,
+    legs: tuple[dict[str, Any], dict[str, Any]], origins: tuple[np.ndarray, np.ndarray], drawn: tuple[str, tuple[str, ...], str, dict[str, Any]],
+) -> QARecord:
+    """The record of one candidate: ``legs`` (reference, query: :func:`~spacedg.plugins.questions.geometry.ground_leg`),
+    the camera centres ``origins`` and what :func:`~spacedg.plugins.questions.records.compass_question` drew."""
+    views = (pair.a, pair.b)
+    (ref, query), (origin_a, origin_b), (assumed, options, letter, compass) = legs, origins, drawn
+    geometry = {
+        **objects_block(scene, index, views, [one, two], [(one, pair.a), (two, pair.b)]),
+        "reference": {"origin_view": pair.a, "origin": origin_a.tolist(), "object": one.id, **ref},
+        "query": {"origin_view": pair.b, "origin": origin_b.tolist(), "object": two.id, **query},
+        **compass,
+        "template": 0,
+        "pair": pair.to_dict(),
+        "pair_rules": rules.to_dict(),
+        "selection": _selection(one, two, drawn),
+    }
+    return make_record(
+        scene, NAME, SUB_QUESTION_TYPE, TaskGroup.CAMERA_OBJECT, AnswerType.MCQ, views,
+        {"objects": [one.id, two.id], "assumed_dir": assumed},
+        question=render_question(phrase(one), phrase(two), assumed), answer=letter, geometry=geometry, options=options,
+    )
+
+
+def _subject(one: Instance, two: Instance) -> str:
+    """The selection subject: the ordered object pair."""
+    return f"objects:{one.id}|{two.id}"
+
+
+def _selection(one: Instance, two: Instance, drawn: tuple[str, tuple[str, ...], str, dict[str, Any]]) -> dict[str, Any]:
+    """The selection entry (module docstring) of the question about ``one`` and ``two`` that ``drawn`` describes."""
+    assumed, compass = drawn[0], drawn[3]
+    return selection_entry(
+        _subject(one, two), f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels, distractors=compass_distractors(compass),
+    )
+
+
+def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
-    origin_a, origin_b = camera_center(scene.views[pair.a]), camera_center(scene.views[pair.b])
+    origins = origin_a, origin_b = camera_center(scene.views[pair.a]), camera_center(scene.views[pair.b])
+    legs = index_memo(index, "camera_legs")  # (view, object id) → the leg camera → object (recurs in many candidates)
+    compass = compass_questions(index, up)
     for one, two in object_pairs(index, pair, rng):
         if phrase_key(one) == phrase_key(two):
             continue
-        ref = ground_leg(one.box.center - origin_a, up)
-        query = ground_leg(two.box.center - origin_b, up)
+        key_a, key_b = (pair.a, one.id), (pair.b, two.id)
+        ref = legs[key_a] if key_a in legs else legs.setdefault(key_a, ground_leg(one.box.center - origin_a, up))
+        query = legs[key_b] if key_b in legs else legs.setdefault(key_b, ground_leg(two.box.center - origin_b, up))
         if ref is None or query is None:
             continue
-        assumed, options, letter, compass = compass_question(np.asarray(ref["vector"]), np.asarray(query["vector"]), up, rng)
-        geometry = {
-            **objects_block(scene, index, views, [one, two], [(one, pair.a), (two, pair.b)]),
-            "reference": {"origin_view": pair.a, "origin": origin_a.tolist(), "object": one.id, **ref},
-            "query": {"origin_view": pair.b, "origin": origin_b.tolist(), "object": two.id, **query},
-            **compass,
-            "template": 0,
-            "pair": pair.to_dict(),
-            "pair_rules": rules.to_dict(),
-            "selection": selection_entry(
-                f"objects:{one.id}|{two.id}", f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
-                distractors=compass_distractors(compass),
-            ),
-        }
-        yield make_record(
-            scene, NAME, SUB_QUESTION_TYPE, TaskGroup.CAMERA_OBJECT, AnswerType.MCQ, views,
-            {"objects": [one.id, two.id], "assumed_dir": assumed},
-            question=render_question(phrase(one), phrase(two), assumed), answer=letter, geometry=geometry, options=options,
+        drawn = compass.ask(("camera", *key_a), ref["vector"], ("camera", *key_b), query["vector"], rng)  # = compass_question(ref, query, up, rng)
+        yield offer(
+            SUB_QUESTION_TYPE, views, _subject(one, two), (one.id, two.id), functools.partial(_selection, one, two, drawn),
+            functools.partial(_record, scene, index, pair, rules, one, two, (ref, query), origins, drawn),
         )
 
 

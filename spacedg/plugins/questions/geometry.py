@@ -60,7 +60,7 @@ __all__ = [
     "TAN30", "MAX_PARTS", "BOUNDARY_GUARD_DEG", "CAMERA_MOTION_WORDS", "BODY_DIRECTION_WORDS",
     "relative_rotation", "relative_translation", "camera_center", "camera_distance", "point_in_camera",
     "dominant_parts", "parts_label", "flipped_labels", "single_word_pool", "build_mcq", "BalancedDeck",
-    "horizontal", "ground_angle", "vertical_dominates",
+    "horizontal", "ground_angle", "ground_axes", "angle_on_ground", "vertical_dominates",
     "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS",
     "euler_yaw_pitch_roll", "ROTATION_WORDS", "camera_attitude", "gravity_rotation",
     "MIN_HORIZONTAL_M", "VERTICAL_FACTOR", "ground_leg", "compass_frame", "compass_answer",
@@ -338,10 +338,22 @@ def ground_angle(forward: np.ndarray, vector: np.ndarray, up: np.ndarray) -> flo
     ``forward`` seen from above (right-handed world, ``up`` against gravity).
     """
     u = np.asarray(up, dtype=np.float64)
+    return angle_on_ground(ground_axes(forward, u), horizontal(vector, u))
+
+
+def ground_axes(forward: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(f, right)``: ``forward`` flattened on the ground plane to unit length and ``f × up``
+    (the axes :func:`ground_angle` measures in; ``up`` as given, float64)."""
+    u = np.asarray(up, dtype=np.float64)
     f = _ground_unit(forward, u, "ground_angle")
-    right = cross3(f, u)
-    v = horizontal(vector, u)
-    angle = math.degrees(math.atan2(float(v @ right), float(v @ f)))
+    return f, cross3(f, u)
+
+
+def angle_on_ground(axes: tuple[np.ndarray, np.ndarray], flat: np.ndarray) -> float:
+    """:func:`ground_angle` of a vector already flattened (``flat = horizontal(vector, up)``) in
+    :func:`ground_axes` ``axes``, degrees in [0, 360): for callers that reuse the axes or the flattened vector."""
+    f, right = axes
+    angle = math.degrees(math.atan2(float(flat @ right), float(flat @ f)))
     return angle % 360.0
 
 

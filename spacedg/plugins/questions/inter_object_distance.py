@@ -45,12 +45,15 @@ object pair: the question index asks a pair once per scene, whatever the views).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
-from spacedg.scene.model import Scene
+from spacedg.plugins.candidates import Candidate, offer
+from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
     PairRules,
     ViewPair,
@@ -60,7 +63,7 @@ from spacedg.plugins.questions.view_sampling import (
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import object_pairs, pair_family
-from spacedg.plugins.questions.records import make_record, objects_block, phrase, selection_entry
+from spacedg.plugins.questions.records import index_memo, make_record, objects_block, phrase, selection_entry
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = ["DECIMALS", "FAMILY", "MIN_DISTANCE_M", "NAME", "SUB_QUESTION_TYPE", "TEMPLATE", "make_family", "render_question"]
@@ -83,29 +86,55 @@ def render_question(phrase1: str, phrase2: str) -> str:
     return f"{find_in_image(phrase1, 0)} {find_in_image(phrase2, 1)}\n{TEMPLATE}"
 
 
-def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+def _record(
+    scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, one: Instance, two: Instance, vector: np.ndarray, distance: float,
+) -> QARecord:
+    """The record of one candidate (``vector``: centre 1 → centre 2, ``distance`` its length, metres)."""
     views = (pair.a, pair.b)
+    geometry = {
+        **objects_block(scene, index, views, [one, two], [(one, pair.a), (two, pair.b)]),
+        "vector": vector.tolist(),
+        "distance_m": distance,
+        "decimals": DECIMALS,
+        "thresholds": {"min_distance_m": MIN_DISTANCE_M},
+        "template": 0,
+        "pair": pair.to_dict(),
+        "pair_rules": rules.to_dict(),
+        "selection": _selection(one, two),
+    }
+    return make_record(
+        scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.NA, views, {"objects": [one.id, two.id]},
+        question=render_question(phrase(one), phrase(two)), answer=round(distance, DECIMALS), geometry=geometry,
+    )
+
+
+def _subject(one: Instance, two: Instance) -> str:
+    """The selection subject: the unordered object pair."""
+    return f"objects:{min(one.id, two.id)}|{max(one.id, two.id)}"
+
+
+def _selection(one: Instance, two: Instance) -> dict[str, Any]:
+    """The selection entry: the subject only (a metric answer)."""
+    return selection_entry(_subject(one, two))
+
+
+def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
+    views = (pair.a, pair.b)
+    memo = index_memo(index, "centre_distance")  # (id 1, id 2) → (vector, distance): a pair recurs in many view pairs
     for one, two in object_pairs(index, pair, rng):
         if label_key(one.label) == label_key(two.label):
             continue
-        vector = two.box.center - one.box.center
-        distance = float(np.linalg.norm(vector))
+        key = (one.id, two.id)
+        hit = memo.get(key)
+        if hit is None or hit[0] is not one or hit[1] is not two:
+            vector = two.box.center - one.box.center
+            hit = memo[key] = (one, two, vector, float(np.linalg.norm(vector)))
+        vector, distance = hit[2], hit[3]
         if distance < MIN_DISTANCE_M:
             continue
-        geometry = {
-            **objects_block(scene, index, views, [one, two], [(one, pair.a), (two, pair.b)]),
-            "vector": vector.tolist(),
-            "distance_m": distance,
-            "decimals": DECIMALS,
-            "thresholds": {"min_distance_m": MIN_DISTANCE_M},
-            "template": 0,
-            "pair": pair.to_dict(),
-            "pair_rules": rules.to_dict(),
-            "selection": selection_entry(f"objects:{min(one.id, two.id)}|{max(one.id, two.id)}"),
-        }
-        yield make_record(
-            scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.NA, views, {"objects": [one.id, two.id]},
-            question=render_question(phrase(one), phrase(two)), answer=round(distance, DECIMALS), geometry=geometry,
+        yield offer(
+            SUB_QUESTION_TYPE, views, _subject(one, two), (one.id, two.id), functools.partial(_selection, one, two),
+            functools.partial(_record, scene, index, pair, rules, one, two, vector, distance),
         )
 
 

@@ -75,14 +75,16 @@ balanced per assumed direction by the question index; subject = the ordered trip
 
 from __future__ import annotations
 
+import functools
 import itertools
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
 
+from spacedg.plugins.candidates import Candidate, offer
 from spacedg.plugins.qa_record import QARecord
-from spacedg.scene.model import Scene
+from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
     PairRules,
     ViewPair,
@@ -98,9 +100,10 @@ from spacedg.plugins.questions.geometry import (
 )
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import pair_family
+from spacedg.plugins.questions.compass_cache import compass_questions
 from spacedg.plugins.questions.records import (
+    index_memo,
     compass_distractors,
-    compass_question,
     lazy_permutation,
     make_record,
     objects_block,
@@ -138,7 +141,7 @@ def render_question(phrases: tuple[str, str, str], images: tuple[int, int, int],
     return markers + "\n" + TEMPLATE.format(a=phrases[0], b=phrases[1], c=phrases[2], assumed=assumed_dir)
 
 
-def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
     ref_view: dict[int, str] = {}
@@ -155,16 +158,20 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     insts = [index.instance(i) for i in ids]
     keys = [phrase_key(inst) for inst in insts]
     centres = [inst.box.center for inst in insts]
-    legs: dict[tuple[int, int], dict[str, Any] | None] = {}
-    hits: dict[tuple[int, int], bool] = {}
+    # memoised per scene (the index), by instance ids: a leg between two objects, whether two
+    # boxes overlap and the compass frames do not depend on the views
+    legs: dict[tuple[int, int], dict[str, Any] | None] = index_memo(index, "object_legs")
+    hits: dict[tuple[int, int], bool] = index_memo(index, "box_overlaps")
+    compass = compass_questions(index, up)
 
     def leg(to: int, origin: int) -> dict[str, Any] | None:
-        if (to, origin) not in legs:
-            legs[(to, origin)] = ground_leg(centres[to] - centres[origin], up)
-        return legs[(to, origin)]
+        key = (ids[to], ids[origin])
+        if key not in legs:
+            legs[key] = ground_leg(centres[to] - centres[origin], up)
+        return legs[key]
 
     def overlap(p: int, q: int) -> bool:
-        key = (min(p, q), max(p, q))
+        key = (min(ids[p], ids[q]), max(ids[p], ids[q]))
         if key not in hits:
             hits[key] = boxes_intersect(insts[p].box, insts[q].box)
         return hits[key]
@@ -184,32 +191,55 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             continue
         if any(overlap(p, q) for p, q in itertools.combinations(tri, 2)):
             continue
-        assumed, options, letter, compass = compass_question(np.asarray(ref["vector"]), np.asarray(query["vector"]), up, rng)
-        objs = [insts[t] for t in tri]
-        obj_views = [ref_view[i] for i in triplet_ids]
-        phrases = tuple(phrase(o) for o in objs)
-        origin = centres[y].tolist()
-        geometry = {
-            **objects_block(scene, index, views, objs, zip(objs, obj_views)),
-            "roles": {"A": objs[0].id, "B": objs[1].id, "C": objs[2].id},
-            "reference": {"origin": origin, **ref},
-            "query": {"origin": origin, **query},
-            **compass,
-            "template": 0,
-            "intersect_tol_m": INTERSECT_TOL_M,
-            "pair": pair.to_dict(),
-            "pair_rules": rules.to_dict(),
-            "selection": selection_entry(
-                "objects:" + "|".join(str(o.id) for o in objs), f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels,
-                distractors=compass_distractors(compass),
-            ),
-        }
-        yield make_record(
-            scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.MCQ, views,
-            {"roles": list(triplet_ids), "assumed_dir": assumed},
-            question=render_question(phrases, tuple(views.index(v) for v in obj_views), assumed),  # type: ignore[arg-type]
-            answer=letter, geometry=geometry, options=options,
+        drawn = compass.ask(("objects", ids[x], ids[y]), ref["vector"], ("objects", ids[z], ids[y]), query["vector"], rng)  # = compass_question(ref, query, up, rng)
+        objs = tuple(insts[t] for t in tri)
+        obj_views = tuple(ref_view[i] for i in triplet_ids)
+        yield offer(
+            SUB_QUESTION_TYPE, views, _subject(objs), triplet_ids, functools.partial(_selection, objs, drawn),
+            functools.partial(_record, scene, index, pair, rules, objs, obj_views, centres[y].tolist(), (ref, query), drawn),
         )
+
+
+def _subject(objs: Sequence[Instance]) -> str:
+    """The selection subject: the ordered triplet (A, B, C)."""
+    return "objects:" + "|".join(str(o.id) for o in objs)
+
+
+def _selection(objs: Sequence[Instance], drawn: tuple[str, tuple[str, ...], str, dict[str, Any]]) -> dict[str, Any]:
+    """The selection entry (module docstring) of the question about ``objs`` that ``drawn`` describes."""
+    assumed, compass = drawn[0], drawn[3]
+    return selection_entry(
+        _subject(objs), f"assumed:{assumed}", compass["sector_label"], COMPASS_SECTORS.labels, distractors=compass_distractors(compass),
+    )
+
+
+def _record(
+    scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, objs: tuple[Instance, ...], obj_views: tuple[str, ...],
+    origin: list[float], legs: tuple[dict[str, Any], dict[str, Any]], drawn: tuple[str, tuple[str, ...], str, dict[str, Any]],
+) -> QARecord:
+    """The record of one triplet ``objs`` (A, B, C) found in ``obj_views``: B's centre ``origin``,
+    the ``legs`` B → A and B → C, and what :func:`~spacedg.plugins.questions.records.compass_question` drew."""
+    views = (pair.a, pair.b)
+    (ref, query), (assumed, options, letter, compass) = legs, drawn
+    phrases = tuple(phrase(o) for o in objs)
+    geometry = {
+        **objects_block(scene, index, views, list(objs), zip(objs, obj_views)),
+        "roles": {"A": objs[0].id, "B": objs[1].id, "C": objs[2].id},
+        "reference": {"origin": origin, **ref},
+        "query": {"origin": list(origin), **query},
+        **compass,
+        "template": 0,
+        "intersect_tol_m": INTERSECT_TOL_M,
+        "pair": pair.to_dict(),
+        "pair_rules": rules.to_dict(),
+        "selection": _selection(objs, drawn),
+    }
+    return make_record(
+        scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.MCQ, views,
+        {"roles": [o.id for o in objs], "assumed_dir": assumed},
+        question=render_question(phrases, tuple(views.index(v) for v in obj_views), assumed),  # type: ignore[arg-type]
+        answer=letter, geometry=geometry, options=options,
+    )
 
 
 #: ``make_family(thresholds, pair_rules)``: this family with other visibility thresholds / pair rules

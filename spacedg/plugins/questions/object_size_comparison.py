@@ -104,10 +104,13 @@ The ``objects`` and ``refs`` entries are :func:`~spacedg.plugins.questions.recor
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
+from typing import Any, NamedTuple
 
 import numpy as np
 
+from spacedg.plugins.candidates import Candidate, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -123,6 +126,7 @@ from spacedg.plugins.questions.geometry import build_mcq
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import pair_family
 from spacedg.plugins.questions.records import (
+    index_memo,
     label_features,
     make_record,
     object_entry,
@@ -294,19 +298,41 @@ def render_question(sub: str, phrase1: str, phrase2: str) -> str:
 
 
 # ---------------------------------------------------------------- records
-def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str, rng: np.random.Generator) -> QARecord | None:
+class _Verdict(NamedTuple):
+    """What a comparison of two objects in a sub type says, whatever the views (memoised per pair)."""
+
+    quantity: str
+    values: tuple[float, float]
+    corners: tuple[list[float], list[float]] | None  # the top corners (top elevation only)
+    delta: float
+    same_below: float
+    different_from: float
+    truth: str
+    truth_text: str
+    phrases: tuple[str, str]
+    prior: tuple[float, float]
+    subject: str
+    cell: str
+    role: str
+    features: list[str]
+
+
+#: The roles of a comparison's cell, in label order, then a tie.
+ROLES = ("first", "second", "same")
+
+
+def _verdict(scene: Scene, one: Instance, two: Instance, sub: str) -> _Verdict | None:
+    """The comparison of ``one`` and ``two`` in ``sub``, or ``None`` when the difference is
+    visible but not sure (skipped; module docstring)."""
     up = np.asarray(scene.up, dtype=np.float64)
-    objects = [{**object_entry(one), "view": pair.a}, {**object_entry(two), "view": pair.b}]
+    corners = None
     if sub == LONGEST:
-        values = [longest_side(one), longest_side(two)]
+        values = (longest_side(one), longest_side(two))
         quantity = "longest_side"
     else:
         (v1, c1), (v2, c2) = _top(one, up), _top(two, up)
-        values = [v1, v2]
-        objects[0]["top_corner"], objects[1]["top_corner"] = c1.tolist(), c2.tolist()
+        values, corners = (v1, v2), (c1.tolist(), c2.tolist())
         quantity = "top_elevation"
-    for entry, value in zip(objects, values):
-        entry["value"] = value
     delta = values[0] - values[1]
     same_below, different_from = thresholds_for(quantity, values)
     size = abs(round(delta, DELTA_DECIMALS))
@@ -320,44 +346,69 @@ def _record(scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str
     else:
         truth, truth_text = "object2", phrase2
     ordered = sorted([(label_key(one.label), phrase_key(one), 0), (label_key(two.label), phrase_key(two), 1)])
-    roles = ("first", "second", "same")
 
     def role_of(outcome: int) -> str:  # outcome in question order → role in label order
-        return "same" if outcome < 0 else roles[[o[2] for o in ordered].index(outcome)]
+        return "same" if outcome < 0 else ROLES[[o[2] for o in ordered].index(outcome)]
 
     role = role_of(_outcome(values, same_below))
     prior = _prior_values(scene, quantity, one, two, up)
     prior_role = role_of(_outcome(prior, thresholds_for(quantity, prior)[0]))
-    cell = _cell(sub, quantity, prior, prior_role)
-    subject = f"{sub}|objects:{min(one.id, two.id)}|{max(one.id, two.id)}"
-    texts = [phrase1, phrase2, SAME]
-    options, letter = build_mcq(truth_text, [t for t in texts if t != truth_text], rng, n_options=3)
-    views = (pair.a, pair.b)
-    geometry = {
-        "pair": {"a": pair.a, "b": pair.b, **pair.to_dict()},
-        "up": up.tolist(),
-        "quantity": quantity,
-        "objects": objects,
-        "values": values,
-        "delta": delta,
-        "tie_threshold_m": same_below,
-        "different_threshold_m": different_from,
-        "truth": truth,
-        "truth_text": truth_text,
-        "template": 0,
-        "refs": [ref_entry(one, pair.a), ref_entry(two, pair.b)],
-        "prior_values": list(prior),
-        "selection": selection_entry(
-            subject, cell, role, roles, features=_size_features([one, two][ordered[0][2]], [one, two][ordered[1][2]]),
-        ),
-    }
-    return make_record(
-        scene, NAME, sub, TaskGroup.OBJECT_CENTRIC, AnswerType.MCQ, views, {"objects": [one.id, two.id]},
-        question=render_question(sub, phrase1, phrase2), answer=letter, geometry=geometry, options=options,
+    return _Verdict(
+        quantity, values, corners, delta, same_below, different_from, truth, truth_text, (phrase1, phrase2), prior,
+        f"{sub}|objects:{min(one.id, two.id)}|{max(one.id, two.id)}", _cell(sub, quantity, prior, prior_role), role,
+        _size_features([one, two][ordered[0][2]], [one, two][ordered[1][2]]),
     )
 
 
-def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
+def _verdict_of(scene: Scene, index: VisibilityIndex, one: Instance, two: Instance, sub: str) -> _Verdict | None:
+    """:func:`_verdict`, memoised per (object 1, object 2, sub type) on ``index``."""
+    memo = index_memo(index, "size_verdict")
+    key = (one.id, two.id, sub)
+    hit = memo.get(key)
+    if hit is None or hit[0] is not one or hit[1] is not two:
+        hit = memo[key] = (one, two, _verdict(scene, one, two, sub))
+    return hit[2]
+
+
+def _selection(verdict: _Verdict) -> dict[str, Any]:
+    """The selection entry of a comparison (module docstring)."""
+    return selection_entry(verdict.subject, verdict.cell, verdict.role, ROLES, features=verdict.features)
+
+
+def _record(
+    scene: Scene, pair: ViewPair, one: Instance, two: Instance, sub: str, verdict: _Verdict, drawn: tuple[tuple[str, ...], str],
+) -> QARecord:
+    """The record of one candidate: the ``verdict`` of its objects, ``drawn`` = (options, letter)."""
+    v = verdict
+    objects = [{**object_entry(one), "view": pair.a}, {**object_entry(two), "view": pair.b}]
+    if v.corners is not None:
+        objects[0]["top_corner"], objects[1]["top_corner"] = list(v.corners[0]), list(v.corners[1])
+    for entry, value in zip(objects, v.values):
+        entry["value"] = value
+    options, letter = drawn
+    geometry = {
+        "pair": {"a": pair.a, "b": pair.b, **pair.to_dict()},
+        "up": np.asarray(scene.up, dtype=np.float64).tolist(),
+        "quantity": v.quantity,
+        "objects": objects,
+        "values": list(v.values),
+        "delta": v.delta,
+        "tie_threshold_m": v.same_below,
+        "different_threshold_m": v.different_from,
+        "truth": v.truth,
+        "truth_text": v.truth_text,
+        "template": 0,
+        "refs": [ref_entry(one, pair.a), ref_entry(two, pair.b)],
+        "prior_values": list(v.prior),
+        "selection": _selection(v),
+    }
+    return make_record(
+        scene, NAME, sub, TaskGroup.OBJECT_CENTRIC, AnswerType.MCQ, (pair.a, pair.b), {"objects": [one.id, two.id]},
+        question=render_question(sub, *v.phrases), answer=letter, geometry=geometry, options=options,
+    )
+
+
+def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     """The pair's candidates ``(object 1, object 2, sub type)`` in the order of one ``rng.permutation``
     (drawn on the first ``next``); candidate ``k`` = object 1 ``k // (len(twos) · 2)``, object 2
     ``k // 2 % len(twos)``, sub type ``k % 2``. A pair without objects on both sides draws nothing."""
@@ -366,13 +417,19 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     size = len(ones) * len(twos) * len(SUB_QUESTION_TYPES)
     if not size:
         return
+    views = (pair.a, pair.b)
     for k in rng.permutation(size):
         rest, s = divmod(int(k), len(SUB_QUESTION_TYPES))
         i, j = divmod(rest, len(twos))
-        if _distinguishable(ones[i], twos[j]):
-            record = _record(scene, pair, ones[i], twos[j], SUB_QUESTION_TYPES[s], rng)
-            if record is not None:
-                yield record
+        one, two, sub = ones[i], twos[j], SUB_QUESTION_TYPES[s]
+        if not _distinguishable(one, two):
+            continue
+        verdict = _verdict_of(scene, index, one, two, sub)
+        if verdict is None:
+            continue
+        texts = [*verdict.phrases, SAME]
+        drawn = build_mcq(verdict.truth_text, [t for t in texts if t != verdict.truth_text], rng, n_options=3)
+        yield offer(sub, views, verdict.subject, (one.id, two.id), functools.partial(_selection, verdict), functools.partial(_record, scene, pair, one, two, sub, verdict, drawn))
 
 
 #: ``make_family(thresholds, pair_rules)``: this family with other visibility thresholds / pair rules

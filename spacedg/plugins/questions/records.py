@@ -80,6 +80,7 @@ __all__ = [
     "child_rngs",
     "compass_block",
     "compass_distractors",
+    "compass_entries",
     "compass_question",
     "label_features",
     "lazy_permutation",
@@ -99,6 +100,7 @@ __all__ = [
     "round_robin_views",
     "seeded_order",
     "selection_entry",
+    "index_memo",
     "visibility_entry",
     "visibility_thresholds",
 ]
@@ -234,9 +236,14 @@ def referable_ids(index: VisibilityIndex, view: str) -> list[int]:
     return list(ids)
 
 
-def _memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
-    """A per-index cache (an index is built once per generation of a scene and never changes)."""
+def index_memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
+    """A per-index cache named ``name`` (an index is built once per generation of a scene and
+    never changes): for quantities a family computes again for every view pair an object or a
+    pair of objects recurs in."""
     return index.__dict__.setdefault(f"_memo_{name}", {})
+
+
+_memo = index_memo
 
 
 def phrase(inst: Instance) -> str:
@@ -354,8 +361,14 @@ def compass_block(reference: np.ndarray, assumed_dir: str, query: np.ndarray, up
     :data:`~spacedg.plugins.questions.geometry.BOUNDARY_GUARD_DEG`) and ``thresholds``.
     """
     label, angle, hit, north, east = compass_answer(reference, assumed_dir, query, up)
+    return label, hit, compass_entries(assumed_dir, label, angle, hit, north, east)
+
+
+def compass_entries(assumed_dir: str, label: str, angle: float, hit: SectorHit, north: np.ndarray, east: np.ndarray) -> dict[str, Any]:
+    """The compass part of a geometry block (:func:`compass_block`) from the answer's parts
+    (:func:`~spacedg.plugins.questions.geometry.compass_answer`)."""
     banned = [COMPASS_SECTORS.labels[hit.neighbour]] if hit.boundary_distance_deg < BOUNDARY_GUARD_DEG else []
-    block = {
+    return {
         "assumed_dir": assumed_dir,
         "assumed_angle_deg": 90.0 * CARDINALS.index(assumed_dir),
         "north": north.tolist(),
@@ -373,7 +386,6 @@ def compass_block(reference: np.ndarray, assumed_dir: str, query: np.ndarray, up
             "boundary_guard_deg": BOUNDARY_GUARD_DEG, "cardinal_ratio": TAN30,
         },
     }
-    return label, hit, block
 
 
 def compass_question(reference: np.ndarray, query: np.ndarray, up: np.ndarray, rng: np.random.Generator) -> tuple[str, tuple[str, ...], str, dict[str, Any]]:

@@ -1,0 +1,74 @@
+"""Light candidates: a family's question before its record is built, for a caller that keeps few.
+
+The question index (:func:`~spacedg.qa.build.generate_records`) scans up to ``max_scan``
+candidates per family and pools a few thousand of them; most are passed over without being
+read (their subject already has its alternates, or an object they name has a twin in one of
+their images). Building a :class:`~spacedg.plugins.qa_record.QARecord` (question text, geometry
+block, id) for those is most of generation's cost. Inside :func:`light_candidates` a family
+that supports it yields a :class:`Candidate` instead: what the pool reads (sub type, views,
+subject, the ids of the objects it names), a ``selection`` closure making the record's
+``selection`` entry (what the debiased selection reads, :mod:`spacedg.qa.selection`) and a
+``build`` closure making the record, called only for the few hundred records kept. Every
+random draw a candidate needs is made **before** it is yielded (the closure draws nothing), so
+the order of draws, and the records, are the same whichever way the stream is read. Outside
+the block :func:`offer` builds the record at once: the family yields records as always.
+
+A :class:`Candidate`'s fields equal what its built record says: ``sub_question_type`` and
+``views`` the record's, ``subject`` its ``geometry["selection"]["subject"]``, ``selection()`` its
+``geometry["selection"]`` and ``named`` the ids of its ``geometry["refs"]`` (checked by the tests for every built-in family that offers them).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+from collections.abc import Callable, Iterator
+from typing import Any, NamedTuple
+
+from spacedg.plugins.qa_record import QARecord
+
+__all__ = ["Candidate", "light_candidates", "offer"]
+
+#: True inside :func:`light_candidates`: :func:`offer` hands out :class:`Candidate` objects.
+_LIGHT: contextvars.ContextVar[bool] = contextvars.ContextVar("spacedg_light_candidates", default=False)
+
+
+class Candidate(NamedTuple):
+    """A question not built yet (module docstring).
+
+    Attributes:
+        sub_question_type: the record's sub type.
+        views: the record's views, in order.
+        subject: the record's selection subject (``geometry["selection"]["subject"]``).
+        named: ids of the objects the question names (``geometry["refs"]``), in question order.
+        selection: makes the record's ``geometry["selection"]`` entry (no random draws).
+        build: makes the record (no random draws).
+    """
+
+    sub_question_type: str
+    views: tuple[str, ...]
+    subject: str
+    named: tuple[int, ...]
+    selection: Callable[[], dict[str, Any]]
+    build: Callable[[], QARecord]
+
+
+@contextlib.contextmanager
+def light_candidates() -> Iterator[None]:
+    """Within this block, families that support it yield :class:`Candidate` objects (:func:`offer`)."""
+    token = _LIGHT.set(True)
+    try:
+        yield
+    finally:
+        _LIGHT.reset(token)
+
+
+def offer(
+    sub_question_type: str, views: tuple[str, ...], subject: str, named: tuple[int, ...],
+    selection: Callable[[], dict[str, Any]], build: Callable[[], QARecord],
+) -> QARecord | Candidate:
+    """What a family yields for one question: a :class:`Candidate` inside :func:`light_candidates`,
+    else ``build()`` (the record)."""
+    if _LIGHT.get():
+        return Candidate(sub_question_type, views, subject, named, selection, build)
+    return build()
