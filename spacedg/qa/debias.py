@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter, defaultdict
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -58,6 +58,10 @@ __all__ = ["DEFAULT_BOUND", "DEFAULT_OVERALL_BOUND", "OVERSAMPLE", "DebiasResult
 DEFAULT_BOUND = 3.0
 #: The pooled best-per-sub-type accuracy may exceed chance by this many points.
 DEFAULT_OVERALL_BOUND = 2.0
+#: Fold seeds every probe of the pruning averages over (a record one split happens to solve weighs less).
+DEFAULT_REPEATS = 3
+#: A sub type is pruned only above ``max(bound, noise_z × σ)``, σ a uniform guess's binomial deviation at its n.
+DEFAULT_NOISE_Z = 1.0
 #: The predictors whose figures decide the pruning (module docstring).
 DECIDING: tuple[str, ...] = PROBES
 _PRUNE = "blind models over the bound"
@@ -78,6 +82,8 @@ class DebiasResult:
     targets: dict[tuple[str, str], int] = field(default_factory=dict)
     bound: float = DEFAULT_BOUND
     overall_bound: float = DEFAULT_OVERALL_BOUND
+    noise_z: float = 0.0
+    repeats: int = 1
 
     @property
     def removed(self) -> dict[str, int]:
@@ -99,14 +105,15 @@ class DebiasResult:
     @property
     def within(self) -> bool:
         """Whether the final probe meets both bounds."""
-        return all(r.excess <= self.bound + 1e-9 for r in self.after.rows) and self.after.overall.get("excess", 0.0) <= self.overall_bound + 1e-9
+        return all(r.excess <= row_bound(r, self.bound, self.noise_z) + 1e-9 for r in self.after.rows) and self.after.overall.get("excess", 0.0) <= self.overall_bound + 1e-9
 
     def to_dict(self) -> dict[str, Any]:
         def table(p: Probe) -> dict[str, Any]:
-            return {"rows": [r.to_dict() for r in p.rows], "overall": p.overall}
+            return {"rows": [{**r.to_dict(), "allowed": row_bound(r, self.bound, self.noise_z)} for r in p.rows], "overall": p.overall}
 
         return {
-            "bound": self.bound, "overall_bound": self.overall_bound, "within": self.within, "kept": len(self.kept),
+            "bound": self.bound, "overall_bound": self.overall_bound, "noise_z": self.noise_z, "repeats": self.repeats,
+            "within": self.within, "kept": len(self.kept),
             "before": table(self.before), "after": table(self.after), "rounds": self.rounds, "removed": self.removed,
             "pruned": self.pruned,
             "targets": {f"{q}/{s}": n for (q, s), n in sorted(self.targets.items())},
@@ -125,20 +132,52 @@ def spread_targets(counts: Mapping[tuple[str, str], int], total: int) -> dict[tu
     return out
 
 
-def _order(records: Sequence[QARecord], pr: Probe, best: str, seed: int) -> list[QARecord]:
-    """``records`` most blind-solvable first (module docstring)."""
+def _solvable_key(pr: Probe, best: str, seed: int) -> Callable[[QARecord], tuple[Any, ...]]:
+    """Sort key: most blind-solvable first (module docstring)."""
     def key(r: QARecord) -> tuple[Any, ...]:
         hits = pr.correct.get(r.id, {})
         return (-hits.get(best, 0.0), -sum(hits.get(p, 0.0) for p in PROBES), -pr.truth_probability.get(r.id, 0.0),
                 stable_hash(seed, "prune", r.id))
-    return sorted(records, key=key)
+    return key
 
 
-def _aims(pr: Probe, bound: float, overall_bound: float) -> dict[tuple[str, str], float]:
+def balanced_pick(records: Sequence[QARecord], x: int, rank: Callable[[QARecord], Any]) -> set[str]:
+    """The ids of ``x`` of ``records`` taken **answer-balanced**: each pick comes from the answer
+    (correct letter, yes/no, count) that has the most records left, ties to the answer whose next
+    record ranks first; within an answer, in ``rank`` order. Removing them keeps the answers as
+    balanced as they were (or makes them more so), so pruning never plants a letter or yes/no
+    bias of its own."""
+    queues: dict[str, list[QARecord]] = defaultdict(list)
+    for r in sorted(records, key=rank):
+        queues[str(r.answer)].append(r)
+    taken: set[str] = set()
+    head = dict.fromkeys(queues, 0)
+    for _ in range(min(x, len(records))):
+        answer = min((a for a in queues if head[a] < len(queues[a])),
+                     key=lambda a: (-(len(queues[a]) - head[a]), rank(queues[a][head[a]]), a))
+        taken.add(queues[answer][head[answer]].id)
+        head[answer] += 1
+    return taken
+
+
+def noise_band(row: SubTypeBlind, z: float) -> float:
+    """``z`` binomial standard deviations of a uniform guess's accuracy at the row's ``n``, in points:
+    how far chance alone moves a sub type's figure (a row of 75 four-option MCQs: 5.0 at ``z = 1``)."""
+    c = row.chance / 100.0
+    return z * 100.0 * math.sqrt(max(c * (1.0 - c), 0.0) / max(row.n, 1))
+
+
+def row_bound(row: SubTypeBlind, bound: float, noise_z: float) -> float:
+    """The excess a sub type may keep: ``bound``, or its :func:`noise_band` where that is wider
+    (pruning inside the band removes what the fitted predictors hit by luck, not a bias)."""
+    return max(bound, noise_band(row, noise_z))
+
+
+def _aims(pr: Probe, bound: float, overall_bound: float, noise_z: float = 0.0) -> dict[tuple[str, str], float]:
     """The excess each sub type is pruned towards this round: the sub types over ``bound`` aim at
     chance (0); only when none is, and the pooled figure is over ``overall_bound``, those above
     ``overall_bound − 1`` aim at ``overall_bound − 1.5``."""
-    over = {row.key: 0.0 for row in pr.rows if row.excess > bound}
+    over = {row.key: 0.0 for row in pr.rows if row.excess > row_bound(row, bound, noise_z)}
     if over or pr.overall.get("excess", 0.0) <= overall_bound:
         return over
     return {row.key: overall_bound - 1.5 for row in pr.rows if row.excess > overall_bound - 1.0}
@@ -151,10 +190,10 @@ def _to_remove(row: SubTypeBlind, aim: float) -> int:
 
 
 def _prune_round(by_key: dict[tuple[str, str], list[QARecord]], pr: Probe, floors: Mapping[tuple[str, str], int],
-                 bound: float, overall_bound: float, seed: int) -> dict[str, int]:
+                 bound: float, overall_bound: float, seed: int, noise_z: float) -> dict[str, int]:
     """Remove this round's records from ``by_key`` in place; returns ``"q/s" → removed``."""
     removed: dict[str, int] = {}
-    aims = _aims(pr, bound, overall_bound)
+    aims = _aims(pr, bound, overall_bound, noise_z)
     for row in pr.rows:
         aim = aims.get(row.key)
         rs = by_key.get(row.key, [])
@@ -162,7 +201,7 @@ def _prune_round(by_key: dict[tuple[str, str], list[QARecord]], pr: Probe, floor
         if aim is None or room <= 0:
             continue
         x = min(_to_remove(row, aim), room)
-        gone = {r.id for r in _order(rs, pr, row.best, seed)[:x]}
+        gone = balanced_pick(rs, x, _solvable_key(pr, row.best, seed))
         by_key[row.key] = [r for r in rs if r.id not in gone]
         removed[f"{row.key[0]}/{row.key[1]}"] = x
     return removed
@@ -176,7 +215,7 @@ def _trim_round(by_key: dict[tuple[str, str], list[QARecord]], targets: Mapping[
     for key, rs in by_key.items():
         surplus = len(rs) - targets.get(key, len(rs))
         if surplus > 0:
-            gone = {r.id for r in sorted(rs, key=lambda r: (stable_hash(seed, "trim", r.id), r.id))[:surplus]}
+            gone = balanced_pick(rs, surplus, lambda r: (stable_hash(seed, "trim", r.id), r.id))
             by_key[key] = [r for r in rs if r.id not in gone]
             removed[f"{key[0]}/{key[1]}"] = surplus
     return removed
@@ -214,7 +253,7 @@ def _check(bound: float, overall_bound: float, folds: int, max_rounds: int, floo
 def debias(
     records: Sequence[QARecord], targets: Mapping[tuple[str, str], int] | None = None, *, bound: float = DEFAULT_BOUND,
     overall_bound: float = DEFAULT_OVERALL_BOUND, folds: int = 5, seed: int = 0, max_rounds: int = 20,
-    floor: float = 0.5, learned: bool = True,
+    floor: float = 0.5, learned: bool = True, repeats: int = DEFAULT_REPEATS, noise_z: float = DEFAULT_NOISE_Z,
 ) -> DebiasResult:
     """Prune ``records`` (a pooled bench) until no blind model beats chance by more than the bounds (module docstring).
 
@@ -225,8 +264,16 @@ def debias(
         folds: scene folds of the probe. seed: the folds and the order of equals.
         max_rounds: probe-and-prune rounds at most. floor: never prune a sub type below this share of its target.
         learned: include the logistic model in the probe.
+        repeats: fold seeds each probe averages over (:func:`~spacedg.qa.debias_probe.probe`).
+        noise_z: a sub type is pruned only above its noise band too (:func:`row_bound`); 0: ``bound`` alone.
     """
     _check(bound, overall_bound, folds, max_rounds, floor)
+    for name, value, low in (("repeats", repeats, 1),):
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            raise ParameterError(f"debias: {name} must be an integer >= {low}, got {value!r}")
+    if isinstance(noise_z, bool) or not isinstance(noise_z, (int, float)) or not 0.0 <= noise_z <= 5.0:
+        raise ParameterError(f"debias: noise_z must be a number of standard deviations in [0, 5], got {noise_z!r}")
+    options = {"folds": folds, "seed": seed, "learned": learned, "repeats": repeats}
     discrete = [r for r in records if r.answer_type in DISCRETE]
     by_key: dict[tuple[str, str], list[QARecord]] = defaultdict(list)
     for r in discrete:
@@ -235,43 +282,45 @@ def debias(
     targets = {k: int(targets.get(k, len(v))) if targets else len(v) for k, v in by_key.items()}
     floors = {k: math.ceil(floor * t) for k, t in targets.items()}
     counts = count_chances(discrete)
-    current = before = probe(discrete, folds=folds, seed=seed, learned=learned, counts=counts)
+    current = before = probe(discrete, counts=counts, **options)
     rounds: list[dict[str, Any]] = []
     for number in range(1, max_rounds + 1):
-        removed = _prune_round(by_key, _deciding(current, by_key, counts), floors, bound, overall_bound, seed)
+        removed = _prune_round(by_key, _deciding(current, by_key, counts), floors, bound, overall_bound, seed, noise_z)
         why = _PRUNE
         if not removed:
             removed, why = _trim_round(by_key, targets, seed), _TRIM
         if not removed:
             break
         rounds.append({"round": number, "why": why, "removed": removed, "total": sum(removed.values())})
-        current = probe([r for rs in by_key.values() for r in rs], folds=folds, seed=seed, learned=learned, counts=counts)
+        current = probe([r for rs in by_key.values() for r in rs], counts=counts, **options)
     keep = {r.id for rs in by_key.values() for r in rs} | metric
     kept = [r for r in records if r.id in keep]
-    return DebiasResult(kept, before, current, rounds, targets, float(bound), float(overall_bound))
+    return DebiasResult(kept, before, current, rounds, targets, float(bound), float(overall_bound), float(noise_z), repeats)
 
 
 def format_debias(result: DebiasResult) -> str:
     """Before/after per sub type (n, best blind, chance, excess, target, records pruned as blind-solved and
     trimmed to the target) and the records removed per round, as Markdown."""
     lines = [
-        f"Blind pruning (k-fold by scene; chance = 1 / options shown; bound: sub type <= chance + {result.bound:g}, "
-        f"overall <= chance + {result.overall_bound:g})",
-        "| question_type | sub_question_type | type | n before | best before | n after | best after | chance | excess before | excess after | target | pruned | trimmed |",
-        "|---|---|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|",
+        f"Blind pruning (k-fold by scene, mean over {result.repeats} fold seed(s); chance = 1 / options shown; bound: sub type "
+        f"<= chance + max({result.bound:g}, {result.noise_z:g} sigma of chance at its n) = 'allowed', overall <= chance + {result.overall_bound:g})",
+        "| question_type | sub_question_type | type | n before | best before | n after | best after | chance | excess before | excess after "
+        "| allowed | target | pruned | trimmed |",
+        "|---|---|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     removed, pruned = result.removed, result.pruned
     for row in result.before.rows:
         after = result.after.row(row.key)
         name = f"{row.key[0]}/{row.key[1]}"
         a_n, a_best, a_excess = (after.n, f"{after.best} {after.best_score:.1f}", f"{after.excess:+.1f}") if after else (0, "", "")
+        allowed = f"{row_bound(after or row, result.bound, result.noise_z):.1f}"
         lines.append(f"| {row.question_type} | {row.sub_question_type} | {row.answer_type} | {row.n} | {row.best} {row.best_score:.1f} | "
-                     f"{a_n} | {a_best} | {row.chance:.1f} | {row.excess:+.1f} | {a_excess} | {result.targets.get(row.key, row.n)} | "
+                     f"{a_n} | {a_best} | {row.chance:.1f} | {row.excess:+.1f} | {a_excess} | {allowed} | {result.targets.get(row.key, row.n)} | "
                      f"{pruned.get(name, 0)} | {removed.get(name, 0) - pruned.get(name, 0)} |")
     b, a = result.before.overall, result.after.overall
     if b.get("n"):
         lines.append(f"| ALL (MCQ+YN+COUNT) | | | {int(b['n'])} | {b['best']:.1f} | {int(a.get('n', 0))} | {a.get('best', 0.0):.1f} | "
-                     f"{b['chance']:.1f} / {a.get('chance', 0.0):.1f} | {b['excess']:+.1f} | {a.get('excess', 0.0):+.1f} | "
+                     f"{b['chance']:.1f} / {a.get('chance', 0.0):.1f} | {b['excess']:+.1f} | {a.get('excess', 0.0):+.1f} | {result.overall_bound:g} | "
                      f"{sum(result.targets.values())} | {sum(pruned.values())} | {sum(removed.values()) - sum(pruned.values())} |")
     for r in result.rounds:
         parts = ", ".join(f"{k} {v}" for k, v in sorted(r["removed"].items()))

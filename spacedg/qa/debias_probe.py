@@ -35,7 +35,7 @@ from spacedg.qa.audit_text import frequent_words
 from spacedg.qa.debias_gbm import BoostedChoice
 
 __all__ = [
-    "DISCRETE", "PROBES", "SubTypeBlind", "Probe", "blind_rows", "count_chances", "probe", "scene_folds", "shown_chance", "stable_hash",
+    "DISCRETE", "PROBES", "SubTypeBlind", "Probe", "blind_rows", "count_chances", "probe", "repeat_seeds", "scene_folds", "shown_chance", "stable_hash",
 ]
 
 #: The answer types the probe scores and the pruning acts on.
@@ -178,16 +178,33 @@ def blind_rows(records: Sequence[QARecord], correct: Mapping[str, Mapping[str, f
     return rows, overall
 
 
+def repeat_seeds(seed: int, repeats: int) -> list[int]:
+    """The fold seeds of ``repeats`` probes: ``seed`` itself, then seeded derivations of it."""
+    return [seed] + [stable_hash(seed, "repeat", i) % (2**31) for i in range(1, repeats)]
+
+
 def probe(records: Sequence[QARecord], *, folds: int = 5, seed: int = 0, learned: bool = True,
-          counts: Mapping[str, float] | None = None) -> Probe:
+          counts: Mapping[str, float] | None = None, repeats: int = 1) -> Probe:
     """Probe the discrete ``records`` (pooled over their scenes) k-fold by scene (module docstring).
 
     ``counts``: COUNT chance per question type (default: :func:`count_chances` of ``records``).
+    ``repeats``: probes with different fold seeds (:func:`repeat_seeds`); a record's 0/1 per
+    predictor and the boosted probability become their **means** over the repeats, so a record
+    that one fold split happens to solve weighs less than one every split solves.
     Fewer than two scenes: nothing is held out and the probe is empty.
     """
     discrete = [r for r in records if r.answer_type in DISCRETE]
     counts = count_chances(discrete) if counts is None else counts
-    groups = scene_folds([r.scene_id for r in discrete], folds, seed)
-    correct, prob = _held_out(discrete, groups, learned)
+    correct: dict[str, dict[str, float]] = defaultdict(dict)
+    prob: dict[str, float] = defaultdict(float)
+    seeds = repeat_seeds(seed, repeats)
+    for fold_seed in seeds:
+        groups = scene_folds([r.scene_id for r in discrete], folds, fold_seed)
+        hits, probs = _held_out(discrete, groups, learned)
+        for rid, per in hits.items():
+            for name, value in per.items():
+                correct[rid][name] = correct[rid].get(name, 0.0) + value / len(seeds)
+        for rid, p in probs.items():
+            prob[rid] += p / len(seeds)
     rows, overall = blind_rows(discrete, correct, counts)
-    return Probe(correct, prob, rows, overall)
+    return Probe(dict(correct), dict(prob), rows, overall)
