@@ -50,7 +50,9 @@ from typing import Any
 
 from spacedg.errors import ParameterError
 from spacedg.plugins.qa_record import QARecord
-from spacedg.qa.debias_probe import DISCRETE, PROBES, Probe, SubTypeBlind, blind_rows, count_chances, probe, stable_hash
+from spacedg.qa.debias_probe import (
+    DISCRETE, PROBES, Probe, SubTypeBlind, answer_class, blind_rows, count_chances, probe, stable_hash,
+)
 
 __all__ = ["DEFAULT_BOUND", "DEFAULT_OVERALL_BOUND", "OVERSAMPLE", "DebiasResult", "debias", "format_debias", "spread_targets"]
 
@@ -143,13 +145,13 @@ def _solvable_key(pr: Probe, best: str, seed: int) -> Callable[[QARecord], tuple
 
 def balanced_pick(records: Sequence[QARecord], x: int, rank: Callable[[QARecord], Any]) -> set[str]:
     """The ids of ``x`` of ``records`` taken **answer-balanced**: each pick comes from the answer
-    (correct letter, yes/no, count) that has the most records left, ties to the answer whose next
+    (:func:`~spacedg.qa.debias_probe.answer_class`: correct letter, yes/no, count bin) that has the most records left, ties to the answer whose next
     record ranks first; within an answer, in ``rank`` order. Removing them keeps the answers as
     balanced as they were (or makes them more so), so pruning never plants a letter or yes/no
     bias of its own."""
     queues: dict[str, list[QARecord]] = defaultdict(list)
     for r in sorted(records, key=rank):
-        queues[str(r.answer)].append(r)
+        queues[answer_class(r)].append(r)
     taken: set[str] = set()
     head = dict.fromkeys(queues, 0)
     for _ in range(min(x, len(records))):
@@ -292,7 +294,8 @@ def debias(
         if not removed:
             break
         rounds.append({"round": number, "why": why, "removed": removed, "total": sum(removed.values())})
-        current = probe([r for rs in by_key.values() for r in rs], counts=counts, **options)
+        changed = {name.split("/", 1)[0] for name in removed}
+        current = probe([r for rs in by_key.values() for r in rs], counts=counts, reuse=current, changed=changed, **options)
     keep = {r.id for rs in by_key.values() for r in rs} | metric
     kept = [r for r in records if r.id in keep]
     return DebiasResult(kept, before, current, rounds, targets, float(bound), float(overall_bound), float(noise_z), repeats)

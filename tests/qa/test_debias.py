@@ -171,3 +171,28 @@ def test_repeats_average_the_probes_of_their_fold_seeds() -> None:
             assert value == pytest.approx((one.correct[r.id][name] + two.correct[r.id][name]) / 2)
     row = both.row(KEY)
     assert row is not None and noise_band(row, 1.0) == pytest.approx(100 * math.sqrt(0.25 * 0.75 / row.n))
+
+
+def test_a_probe_refits_only_the_question_types_that_changed() -> None:
+    table = [r for r in _table(scenes=4, per_scene=8, planted=0.6, seed=8) if r.answer_type is not AnswerType.NA]
+    full = probe(table, folds=3, seed=2, learned=False)
+    fewer = [r for r in table if not (r.question_type == KEY[0] and r.id.endswith(("1", "5")))]
+    again = probe(fewer, folds=3, seed=2, learned=False)
+    reused = probe(fewer, folds=3, seed=2, learned=False, reuse=full, changed={KEY[0]})
+    assert reused.correct == again.correct and reused.rows == again.rows and reused.truth_probability == again.truth_probability
+
+
+def test_count_chance_is_one_over_the_answer_bins() -> None:
+    from spacedg.qa.debias_probe import answer_class, count_chances
+
+    def count(k: int, n: int) -> QARecord:
+        return QARecord(
+            id=f"room-0/object_counting/count/{k:012x}", scene_id="room-0", question_type="object_counting", sub_question_type="count",
+            task_group=TaskGroup.OBJECT_CENTRIC, answer_type=AnswerType.COUNT, views=(f"v{k}",), question="How many chairs are visible?",
+            options=(), answer=n, geometry={"label": "chair", "refs": []},
+        )
+
+    records = [count(k, n) for k, n in enumerate((0, 1, 2, 3, 6, 0))]
+    assert [answer_class(r) for r in records] == ["0", "1", "2+", "2+", "2+", "0"]
+    assert count_chances(records) == {"object_counting": pytest.approx(1 / 3)}  # bins 0, 1, 2+: not 1 / five counts
+    assert shown_chance(records[0], count_chances(records)) == pytest.approx(1 / 3)
