@@ -5,13 +5,14 @@ A room has too few records per sub type to tell a small bias from noise; a bench
 (:func:`spacedg.qa.debias_probe.probe`: the stress test's five plus boosted trees, chance = 1 /
 options shown) and, round after round, removes items the blind models solve, until
 
-- every MCQ / YN / COUNT sub type's best blind accuracy is within ``chance + bound`` (3 points), and
+- every MCQ / YN / COUNT sub type's best blind accuracy is within ``chance + allowed`` (:func:`row_bound`:
+  ``bound``, 3 points, or the sub type's noise band where wider), and
 - the pooled figure (each sub type's best predictor) is within ``chance + overall_bound`` (2 points),
 
 then trims every sub type to its target size (``targets``: what the bench would hold without
 pruning; the caller oversamples candidates so that the pruned bench keeps that size).
 
-**A round.** For a sub type over its bound (best ``a``, chance ``c``, aim ``t = 0``: chance itself, since
+**A round.** For an eligible sub type over its allowed excess (best ``a``, chance ``c``, aim ``t = 0``: chance itself, since
 the probe that picks the records also scores them, and a probe with other folds finds part of
 the bias again (measured on 8 held-out rooms: +2.5 in the pruning's folds, +8.0 leave-one-scene-out
 when aiming at ``bound − 1``); when no
@@ -23,9 +24,10 @@ records the sub type's best predictor solves first, then by how many predictors 
 boosted model's probability of the truth, and a seeded hash (so the result is a pure function of
 the records and ``seed``). Then everything is probed again (the predictors refit on what remains)
 and the next round starts. **Trimming**: once no sub type is over, sub types above their target
-lose their surplus in a seeded random order (not the most solvable first: removing many of those
-plants the opposite bias, which the next probe learns), and the probe runs again (a sub type pushed over its bound
-goes back to pruning). At most ``max_rounds`` rounds.
+lose their surplus in a seeded random order, answer-balanced (not the most solvable first: removing
+many of those plants the opposite bias, which the next probe learns), and the probe runs again (an
+eligible sub type pushed over its allowed excess goes back to pruning). Only the question types
+that lost records are refitted (the predictors are fitted per question type). At most ``max_rounds`` rounds.
 
 **Only what was there is pruned.** The sub types pruned are those over their allowed excess in
 the probe of the candidates (``eligible``); a sub type within it then is never pruned later, even

@@ -96,6 +96,7 @@ def test_a_planted_bias_is_pruned_to_the_bound_and_balance_is_kept(planted) -> N
     assert max(letters.values()) - min(letters.values()) <= max(before.values()) - min(before.values())  # removal is letter-balanced
     kept_ids = {r.id for r in result.kept}
     assert [r.id for r in result.kept] == [r.id for r in records if r.id in kept_ids]  # input order
+    assert f"{KEY[0]}/{KEY[1]}" in result.eligible and set(result.pruned) <= set(result.eligible)
     text = format_debias(result)
     assert "round 1 (blind models over the bound)" in text and "within the bounds" in text
 
@@ -105,6 +106,7 @@ def test_pruning_is_deterministic_and_leaves_an_unbiased_table_alone() -> None:
     one, two = debias(table, learned=False, seed=3, repeats=1), debias(list(table), learned=False, seed=3, repeats=1)
     assert [r.id for r in one.kept] == [r.id for r in two.kept] and one.rounds == two.rounds
     assert one.removed.get(f"{KEY[0]}/{KEY[1]}", 0) <= 0.25 * 64  # unbiased: at most noise is chased
+    assert set(one.pruned) <= set(one.eligible)  # only what was over its band before pruning is pruned
 
 
 def test_chance_is_over_the_options_shown_and_folds_are_whole_scenes() -> None:
