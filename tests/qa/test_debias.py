@@ -198,3 +198,18 @@ def test_count_chance_is_one_over_the_answer_bins() -> None:
     assert [answer_class(r) for r in records] == ["0", "1", "2+", "2+", "2+", "0"]
     assert count_chances(records) == {"object_counting": pytest.approx(1 / 3)}  # bins 0, 1, 2+: not 1 / five counts
     assert shown_chance(records[0], count_chances(records)) == pytest.approx(1 / 3)
+
+
+def test_removal_keeps_every_cells_roles_balanced() -> None:
+    from dataclasses import replace
+
+    from spacedg.qa.debias import balance_class
+
+    rng = np.random.default_rng(2)
+    records = []
+    for k, (cell, role, letter) in enumerate([(c, r, "ABCD"[(i + j) % 4]) for i, c in enumerate("ab") for j, r in enumerate("xyxyxy")]):
+        base = _direction("room-0", k, "forward", rng)
+        records.append(replace(base, answer=letter, geometry={**base.geometry, "selection": {"subject": f"o{k}", "cell": cell, "role": role}}))
+    gone = balanced_pick(records, 8, lambda r: r.id)
+    left = Counter(balance_class(r) for r in records if r.id not in gone)
+    assert sorted(left.values()) == [1, 1, 1, 1] and set(left) == {"a|x", "a|y", "b|x", "b|y"}
