@@ -124,7 +124,8 @@ class DebiasResult:
 
     def to_dict(self) -> dict[str, Any]:
         def table(p: Probe) -> dict[str, Any]:
-            return {"rows": [{**r.to_dict(), "allowed": row_bound(r, self.bound, self.noise_z)} for r in p.rows], "overall": p.overall}
+            rows = [{**r.to_dict(), "allowed": row_bound(r, self.bound, self.noise_z)} for r in p.rows]
+            return {"rows": rows, "overall": p.overall}
 
         return {
             "bound": self.bound, "overall_bound": self.overall_bound, "noise_z": self.noise_z, "repeats": self.repeats,

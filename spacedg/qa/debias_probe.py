@@ -36,7 +36,8 @@ from spacedg.qa.audit_text import frequent_words
 from spacedg.qa.debias_gbm import BoostedChoice
 
 __all__ = [
-    "DISCRETE", "PROBES", "SubTypeBlind", "Probe", "answer_class", "blind_rows", "count_chances", "probe", "repeat_seeds", "scene_folds", "shown_chance", "stable_hash",
+    "DISCRETE", "PROBES", "SubTypeBlind", "Probe", "answer_class", "blind_rows", "count_chances", "probe", "repeat_seeds",
+    "scene_folds", "shown_chance", "stable_hash",
 ]
 
 #: The answer types the probe scores and the pruning acts on.
