@@ -29,8 +29,9 @@ many of those plants the opposite bias, which the next probe learns), and the pr
 eligible sub type pushed over its allowed excess goes back to pruning). Only the question types
 that lost records are refitted (the predictors are fitted per question type). At most ``max_rounds`` rounds.
 
-**Only what was there is pruned.** The sub types pruned are those over their allowed excess in
-the probe of the candidates (``eligible``); a sub type within it then is never pruned later, even
+**Only what was there is pruned.** The sub types pruned for their own figure are those over their
+allowed excess in the probe of the candidates (``eligible``; the pooled rule above may still take
+from any sub type while the pooled figure is over); a sub type within it then is never pruned later, even
 if a refit after other sub types' removals pushes its figure over (measured on 12 rooms: two
 rotation sub types at chance + 0.0 and + 0.8 before were chased by refit noise from 132 to 70
 records, which *planted* a bias: + 14.1 and − 12.3 under an independent leave-one-scene-out probe).
