@@ -3,7 +3,8 @@
 Builds the bench records exactly as ``spacedg export --split bench --all-bench`` does before it
 renders (so no image is rendered here):
 
-- **plain**: ``--no-debias``: the indexes at ``--per-sub-type`` (read from ``--plain``);
+- **plain**: ``--no-debias``: the indexes at ``--per-sub-type`` (read from ``--plain``; without
+  ``--plain`` the table's "plain" columns are the oversampled candidates before pruning);
 - **debiased**: the default: indexes at ``OVERSAMPLE × --per-sub-type`` (built in ``--candidates``,
   which must be *other* folders of the same scenes, e.g. ``cp -al`` copies, because an index at
   another size replaces the cached one), pruned by :func:`spacedg.data.bench_debias.debias_dataset`.
@@ -11,7 +12,8 @@ renders (so no image is rendered here):
 Both are then probed by an **independent check**: the same predictors, but leave-one-scene-out
 (every scene its own fold, not the pruning's five folds) and another fold seed; chance = 1 / options
 shown. Prints the table per sub type (n, best blind, chance, excess, before and after), the
-records each round removed, and writes ``--json``.
+records each round removed, the answer balance (letters, yes/no, counts) before and after, and
+writes ``--json``.
 
     .venv/bin/python benchmarks/debias_bench.py --plain rooms100 rooms200 --candidates cand100 cand200
 """
@@ -54,6 +56,30 @@ def _table(plain, debiased, removed) -> str:
     return "\n".join(lines)
 
 
+def _shares(records) -> dict:
+    """Per discrete sub type: n and the largest minus the smallest answer share (letters, yes/no, counts), percent."""
+    from collections import Counter, defaultdict
+
+    from spacedg.qa.debias_probe import DISCRETE
+
+    groups = defaultdict(Counter)
+    for r in records:
+        if r.answer_type in DISCRETE:
+            groups[(r.question_type, r.sub_question_type)][str(r.answer)] += 1
+    return {k: (sum(c.values()), c) for k, c in sorted(groups.items())}
+
+
+def _balance(before, after) -> str:
+    """Answer balance before and after: per sub type the answers' counts (letters, yes/no, counts)."""
+    lines = ["Answer balance (counts per correct answer; before -> after):"]
+    b, a = _shares(before), _shares(after)
+    for key, (n, counts) in b.items():
+        n2, c2 = a.get(key, (0, {}))
+        fmt = lambda c: " ".join(f"{k}:{c[k]}" for k in sorted(c))  # noqa: E731
+        lines.append(f"  {key[0]}/{key[1]}: n {n} [{fmt(counts)}] -> n {n2} [{fmt(c2)}]")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--plain", type=Path, nargs="+", default=None,
@@ -66,18 +92,22 @@ def main() -> None:
     args = parser.parse_args()
     cand = _bench(args.candidates, args.per_sub_type * OVERSAMPLE, args.seed)
     plain = _bench(args.plain, args.per_sub_type, args.seed) if args.plain else None
+    scenes = len(cand.scene_dirs)
+    before_records = list(plain.records if plain else cand.records)
+    check_before = probe(before_records, folds=scenes, seed=args.check_seed)
     started = time.perf_counter()
     result = debias_dataset(cand, args.per_sub_type, None, args.seed)
     seconds = time.perf_counter() - started
-    scenes = len(cand.scene_dirs)
     print(f"{scenes} scenes; plain bench {len(plain.records) if plain else '-'} records; candidates {len(result.before.correct)} discrete "
           f"-> debiased bench {len(cand.records)} records ({seconds:.0f} s, {len(result.rounds)} rounds)\n")
     print(format_debias(result) + "\n")
     check_debiased = probe(cand.records, folds=scenes, seed=args.check_seed)
-    check_plain = probe(plain.records, folds=scenes, seed=args.check_seed) if plain else check_debiased
+    check_plain = check_before
     print(f"Independent check (leave-one-scene-out, fold seed {args.check_seed}; chance = 1 / options shown; "
+          f"'plain' = {'the --no-debias bench' if plain else 'the candidates before pruning'}; "
           "pruned: removed as blind-solved, trimming not counted):")
     print(_table(check_plain, check_debiased, result.pruned))
+    print("\n" + _balance(plain.records if plain else before_records, cand.records))
     if args.json:
         args.json.write_text(json.dumps({
             "scenes": sorted(cand.scene_dirs), "debias": result.to_dict(),

@@ -47,10 +47,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--answerability", choices=("auto", "on", "off"), default="auto",
                         help="measure whether each item's named objects are discernible in its images and print the share "
                         "per degradation and severity (kept per item in summary.json); auto = for the bench split (default)")
-    parser.add_argument("--debias", action=argparse.BooleanOptionalAction, default=False,
-                        help="bench: blind pruning (oversampled, probed k-fold by scene with text-only models and pruned until every "
-                        "sub type is within chance + 3; see spacedg.data.bench_debias); off by default until it holds on held-out "
-                        "scenes (docs/question-audit.md)")
+    parser.add_argument("--debias", action=argparse.BooleanOptionalAction, default=True,
+                        help="bench: blind pruning (on by default; --no-debias skips it): oversampled candidates, probed k-fold by "
+                        "scene with text-only models and pruned until every sub type is within chance + 3 (or its noise band), "
+                        "then trimmed to the requested size; needs >= 2 bench scenes (docs/question-audit.md)")
     parser.add_argument("--oversample", type=_args.whole(1), default=None,
                         help="bench: candidates per requested record for the blind pruning, which trims back to the requested "
                         "size (indexes are built at --per-sub-type x this; default 2; 1 prunes without oversampling)")
@@ -91,6 +91,14 @@ def _qa_mode(args: argparse.Namespace) -> str:
     return "bench" if args.split == "bench" else "train"
 
 
+def _bench_scenes(scenes: list[Path] | None, fractions: tuple[float, float]) -> int:
+    """Scenes the bench split gets (the built-in rooms' 16 when ``--scenes`` is not given)."""
+    from spacedg.data.bench_debias import bench_scene_count
+    from spacedg.scene.store import scene_dirs_of
+
+    return bench_scene_count(16 if scenes is None else len(scene_dirs_of(scenes)), fractions)
+
+
 def _names(text: str | None) -> list[str] | None:
     return None if text is None else [t.strip() for t in text.split(",") if t.strip()]
 
@@ -106,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     from spacedg.data.dataset import SpaceDGDataset
     from spacedg.data.export import DEFAULT_SHARD_SIZE, export_bench
     from spacedg.data.shards import resolve_shard
-    from spacedg.data.bench_debias import OVERSAMPLE, debias_dataset, write_debias_report
+    from spacedg.data.bench_debias import MIN_SCENES, OVERSAMPLE, debias_dataset, write_debias_report
     from spacedg.qa.debias import format_debias
     from spacedg.qa.index import QABuildConfig
 
@@ -119,9 +127,13 @@ def run(args: argparse.Namespace) -> int:
     for chain in chains or ():
         Chain.parse(chain).check()  # an unknown name or preset fails now, with suggestions
     _args.output_folder("--out", args.out)
-    debias = args.split == "bench" and args.debias
+    few = args.split == "bench" and args.debias and _bench_scenes(args.scenes, fractions) < MIN_SCENES
+    debias = args.split == "bench" and args.debias and not few
     if args.oversample is not None and not debias:
-        raise ParameterError(f"--oversample {args.oversample} is for the blind pruning of --split bench, which this run skips")
+        why = f"the bench has fewer than {MIN_SCENES} scenes" if few else "this run skips it"
+        raise ParameterError(f"--oversample {args.oversample} is for the blind pruning of --split bench, and {why}")
+    if few:
+        print(f"blind pruning skipped: the bench split has fewer than {MIN_SCENES} scenes (the probe holds whole scenes out)")
     factor = (OVERSAMPLE if args.oversample is None else args.oversample) if debias else 1  # trimmed back to the requested size
     dataset = SpaceDGDataset(
         args.split, chains, scenes=args.scenes, families=_names(args.families),

@@ -1,4 +1,4 @@
-"""Blind pruning of a bench dataset before export (``spacedg export --split bench --debias``; off by default).
+"""Blind pruning of a bench dataset before export (``spacedg export --split bench``: on by default, ``--no-debias`` skips it).
 
 The export builds its question indexes with :data:`~spacedg.qa.debias.OVERSAMPLE` × ``--per-sub-type``
 records per sub type and scene (and, with ``--max-questions N``, keeps ``OVERSAMPLE × N``
@@ -6,7 +6,9 @@ candidates), then :func:`debias_dataset` pools the bench's records over all its 
 what the blind models solve (:func:`spacedg.qa.debias.debias`) and trims every sub type to the
 size the bench would have without pruning (:func:`bench_targets`), so the pruned bench keeps its
 requested size wherever the candidates allow. The result is a pure function of the records and
-the seed: every shard of a sharded export prunes the same way.
+the seed: every shard of a sharded export prunes the same way. A bench of fewer than
+:data:`MIN_SCENES` scenes is not pruned (nothing can be held out), nor oversampled:
+:func:`bench_scene_count` tells the export before it builds any index.
 
 Written beside the export: ``debias.json`` (:meth:`~spacedg.qa.debias.DebiasResult.to_dict`:
 before/after per sub type, records removed per round and sub type) and ``debias.md``
@@ -25,7 +27,23 @@ from spacedg.files import atomic_write_bytes
 from spacedg.plugins.qa_record import QARecord
 from spacedg.qa.debias import OVERSAMPLE, DebiasResult, debias, format_debias, spread_targets
 
-__all__ = ["OVERSAMPLE", "bench_targets", "debias_dataset", "write_debias_report"]
+__all__ = ["MIN_SCENES", "OVERSAMPLE", "bench_scene_count", "bench_targets", "debias_dataset", "write_debias_report"]
+
+#: Scenes a bench needs for the blind pruning (the probe holds whole scenes out).
+MIN_SCENES = 2
+
+
+def bench_scene_count(n_scenes: int, fractions: tuple[float, float]) -> int:
+    """How many of ``n_scenes`` scenes :func:`~spacedg.scene.store.assign_splits` puts in the bench
+    (it depends on the count alone, not on the scene ids); 0 when the scenes cannot be split."""
+    from spacedg.errors import InvalidDataError
+    from spacedg.scene.store import assign_splits
+
+    try:
+        splits = assign_splits([f"s{i}" for i in range(n_scenes)], fractions)
+    except InvalidDataError:
+        return 0
+    return sum(1 for split in splits.values() if split == "bench")
 
 
 def bench_targets(records: Sequence[QARecord], per_sub_type: int, max_questions: int | None = None) -> dict[tuple[str, str], int]:

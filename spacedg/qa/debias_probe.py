@@ -12,8 +12,8 @@ whole scenes: leave-scenes-out), and for each fold fits on the others and scores
 
 Only discrete answers are probed (MCQ, YN, COUNT). **Chance** is what a benchmark user's uniform
 guess gets: MCQ ``1 / options shown`` (not over the options that can be correct, which is the
-audit's), YN ``1/2``, COUNT ``1 / distinct counts`` of the question type (passed in, so that
-pruning never raises chance by removing a count). A sub type's **best** is the best predictor's
+audit's), YN ``1/2``, COUNT ``1 / answer bins`` of the question type (0, 1, 2+: :func:`count_chances`;
+passed in, so that pruning never raises chance by removing a bin). A sub type's **best** is the best predictor's
 held-out accuracy (chosen on those scores: an upper bound on these blind models), its
 **excess** best − chance in points; ``ALL`` pools the sub types with each one's best predictor.
 """
@@ -29,13 +29,15 @@ from typing import Any
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.questions.object_counting import count_bin
 from spacedg.plugins.specs import AnswerType
 from spacedg.qa.audit import PREDICTORS, held_out_scores
 from spacedg.qa.audit_text import frequent_words
 from spacedg.qa.debias_gbm import BoostedChoice
 
 __all__ = [
-    "DISCRETE", "PROBES", "SubTypeBlind", "Probe", "blind_rows", "count_chances", "probe", "scene_folds", "shown_chance", "stable_hash",
+    "DISCRETE", "PROBES", "SubTypeBlind", "Probe", "answer_class", "blind_rows", "count_chances", "probe", "repeat_seeds",
+    "scene_folds", "shown_chance", "stable_hash",
 ]
 
 #: The answer types the probe scores and the pruning acts on.
@@ -57,12 +59,24 @@ def scene_folds(scene_ids: Sequence[str], folds: int, seed: int) -> list[list[st
     return [ordered[i::k] for i in range(k)]
 
 
+def answer_class(record: QARecord) -> str:
+    """What answer balance is kept over: the correct letter (MCQ), ``yes``/``no``, a count's **bin**
+    (``"0"``, ``"1"``, ``"2+"``: :func:`~spacedg.plugins.questions.object_counting.count_bin`)."""
+    if record.answer_type is AnswerType.COUNT:
+        return count_bin(int(record.answer))
+    return str(record.answer)
+
+
 def count_chances(records: Sequence[QARecord]) -> dict[str, float]:
-    """Per question type with COUNT answers, ``1 / distinct counts`` among ``records``."""
+    """Per question type with COUNT answers, ``1 / answer bins`` among ``records``: the selection
+    balances a label's counts over the bins 0, 1, 2+ (the last spread over its counts), so the
+    best answer a blind model can give is right a third of the time whatever counts the scenes
+    reach; ``1 / distinct counts`` would put a bin-balanced design at +8 points (four counts)
+    and grow with every larger count the scenes offer."""
     seen: dict[str, set[str]] = defaultdict(set)
     for r in records:
         if r.answer_type is AnswerType.COUNT:
-            seen[r.question_type].add(str(r.answer))
+            seen[r.question_type].add(answer_class(r))
     return {q: 1.0 / len(v) for q, v in seen.items()}
 
 
@@ -178,16 +192,45 @@ def blind_rows(records: Sequence[QARecord], correct: Mapping[str, Mapping[str, f
     return rows, overall
 
 
+def repeat_seeds(seed: int, repeats: int) -> list[int]:
+    """The fold seeds of ``repeats`` probes: ``seed`` itself, then seeded derivations of it."""
+    return [seed] + [stable_hash(seed, "repeat", i) % (2**31) for i in range(1, repeats)]
+
+
 def probe(records: Sequence[QARecord], *, folds: int = 5, seed: int = 0, learned: bool = True,
-          counts: Mapping[str, float] | None = None) -> Probe:
+          counts: Mapping[str, float] | None = None, repeats: int = 1, reuse: Probe | None = None,
+          changed: set[str] | None = None) -> Probe:
     """Probe the discrete ``records`` (pooled over their scenes) k-fold by scene (module docstring).
 
     ``counts``: COUNT chance per question type (default: :func:`count_chances` of ``records``).
+    ``repeats``: probes with different fold seeds (:func:`repeat_seeds`); a record's 0/1 per
+    predictor and the boosted probability become their **means** over the repeats, so a record
+    that one fold split happens to solve weighs less than one every split solves.
+    ``reuse`` / ``changed``: every predictor is fitted per question type, so after records of
+    the question types ``changed`` were removed, the others' held-out scores are ``reuse``'s
+    (the same numbers a full probe gives: their training records are the same) and only the
+    changed ones are fitted again (the folds are dealt over all the records' scenes as before).
     Fewer than two scenes: nothing is held out and the probe is empty.
     """
     discrete = [r for r in records if r.answer_type in DISCRETE]
     counts = count_chances(discrete) if counts is None else counts
-    groups = scene_folds([r.scene_id for r in discrete], folds, seed)
-    correct, prob = _held_out(discrete, groups, learned)
+    correct: dict[str, dict[str, float]] = defaultdict(dict)
+    prob: dict[str, float] = defaultdict(float)
+    fitted = discrete
+    if reuse is not None and changed is not None:
+        fitted = [r for r in discrete if r.question_type in changed]
+        for r in discrete:
+            if r.question_type not in changed and r.id in reuse.correct:
+                correct[r.id] = dict(reuse.correct[r.id])
+                prob[r.id] = reuse.truth_probability.get(r.id, 0.0)
+    seeds = repeat_seeds(seed, repeats)
+    for fold_seed in seeds:
+        groups = scene_folds([r.scene_id for r in discrete], folds, fold_seed)
+        hits, probs = _held_out(fitted, groups, learned)
+        for rid, per in hits.items():
+            for name, value in per.items():
+                correct[rid][name] = correct[rid].get(name, 0.0) + value / len(seeds)
+        for rid, p in probs.items():
+            prob[rid] += p / len(seeds)
     rows, overall = blind_rows(discrete, correct, counts)
-    return Probe(correct, prob, rows, overall)
+    return Probe(dict(correct), dict(prob), rows, overall)

@@ -39,7 +39,7 @@ def test_a_shard_being_written_is_refused_naming_its_writer(tmp_path: Path, caps
     out = tmp_path / "bench"
     with _shard_lock(out, (1, 2)) as lock:
         assert lock.path == out / ".shard-1-of-2.lock" and lock.path.is_file()
-        code = main(["export", "--out", str(out), "--shard", "1/2", "--no-progress"])
+        code = main(["export", "--out", str(out), "--shard", "1/2", "--no-progress", "--no-debias"])
         err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
         assert code == 2 and len(err) == 1, err
         assert f"shard 1/2 of {out} is being written by another process (pid {os.getpid()}" in err[0]

@@ -310,11 +310,9 @@ def test_cli_bench_debias_prunes_and_no_debias_skips_it(indexed_room_dirs, tmp_p
     common = ["export", "--split", "bench", "--all-bench", "--scenes", *map(str, rooms), "--image-size", "64x48",
               "--families", "camera_object_relative_direction,object_existence_estimation", "--degradations", "haze",
               "--max-questions", "40", "--shard-size", "64", "--no-progress"]
-    assert main([*common, "--out", str(tmp_path / "plain")]) == 0  # off by default (not yet held on held-out scenes)
-    assert "Blind pruning" not in capsys.readouterr().out
     assert main([*common, "--out", str(tmp_path / "plain"), "--no-debias"]) == 0
     assert "Blind pruning" not in capsys.readouterr().out and not (tmp_path / "plain" / "debias.json").exists()
-    assert main([*common, "--out", str(tmp_path / "debiased"), "--debias", "--oversample", "1"]) == 0
+    assert main([*common, "--out", str(tmp_path / "debiased"), "--oversample", "1"]) == 0  # on by default
     text = capsys.readouterr().out
     assert "Blind pruning" in text and "| object_existence_estimation | existence |" in text and "round 1" in text
     plain = pd.read_csv(tmp_path / "plain" / "bench.tsv", sep="\t")
@@ -323,10 +321,15 @@ def test_cli_bench_debias_prunes_and_no_debias_skips_it(indexed_room_dirs, tmp_p
     assert set(debiased["record_id"]) < set(plain["record_id"])  # pruned
     assert report["kept"] == debiased["record_id"].nunique() and sum(report["removed"].values()) > 0
     for row in report["after"]["rows"]:
-        assert row["excess"] <= report["bound"] or row["n"] <= 0.5 * report["targets"][f"{row['question_type']}/{row['sub_question_type']}"] + 1
+        name = f"{row['question_type']}/{row['sub_question_type']}"
+        assert name not in report["eligible"] or row["excess"] <= row["allowed"] or row["n"] <= 0.5 * report["targets"][name] + 1
+        assert row["allowed"] >= report["bound"]  # the bound, or the sub type's noise band where wider
     # every record keeps all its degradations: the degradation balance is untouched
     assert set(debiased.groupby("record_id").size()) == {2} and (tmp_path / "debiased" / "debias.md").is_file()
     assert main([*common, "--out", str(tmp_path / "debiased"), "--debias", "--oversample", "1"]) == 0  # deterministic: same manifest
     assert "wrote 0 chunk(s)" in capsys.readouterr().out
     assert main([*common, "--out", str(tmp_path / "x"), "--no-debias", "--oversample", "2"]) == 2
     assert "--oversample" in capsys.readouterr().err
+    one = [a for a in common if a not in map(str, rooms[1:])]  # a bench of one scene: nothing to hold out, no pruning
+    assert main([*one, "--out", str(tmp_path / "x"), "--oversample", "2"]) == 2
+    assert "fewer than 2 scenes" in capsys.readouterr().err

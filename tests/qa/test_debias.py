@@ -11,9 +11,9 @@ import pytest
 from spacedg.errors import ParameterError
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import AnswerType, TaskGroup
-from spacedg.qa.debias import debias, format_debias, spread_targets
+from spacedg.qa.debias import balanced_pick, debias, format_debias, noise_band, spread_targets
 from spacedg.qa.debias_gbm import BoostedChoice
-from spacedg.qa.debias_probe import probe, scene_folds, shown_chance
+from spacedg.qa.debias_probe import probe, repeat_seeds, scene_folds, shown_chance
 
 DIRECTIONS = ("left", "right", "forward", "back")
 LABELS = ("chair", "lamp", "table", "cup")
@@ -74,14 +74,16 @@ TARGETS = {KEY: 75, YN_KEY: 75, ("camera_object_distance", "single"): 10}
 def planted() -> tuple[list[QARecord], object]:
     """Five scenes of 30 + 30 + 4 records, "forward" planted in 70 % of the directions, pruned to half (the targets)."""
     records = _table(scenes=5, per_scene=30)
-    return records, debias(records, TARGETS, learned=False)
+    return records, debias(records, TARGETS, learned=False, repeats=1)
 
 
 def test_a_planted_bias_is_pruned_to_the_bound_and_balance_is_kept(planted) -> None:
     records, result = planted
     before = result.before.row(KEY)
     assert before is not None and before.chance == pytest.approx(25.0) and before.excess > 20  # the plant is found
-    assert result.within and all(r.excess <= 3.0 for r in result.after.rows) and result.after.overall["excess"] <= 2.0
+    allowed = {(r["question_type"], r["sub_question_type"]): r["allowed"] for r in result.to_dict()["after"]["rows"]}
+    assert allowed[KEY] == pytest.approx(max(3.0, 100 * math.sqrt(0.25 * 0.75 / result.after.row(KEY).n)))  # the noise band at its n
+    assert result.within and all(r.excess <= allowed[r.key] for r in result.after.rows) and result.after.overall["excess"] <= 2.0
     kept = Counter((r.question_type, r.sub_question_type) for r in result.kept)
     assert kept[("camera_object_distance", "single")] == 10  # metric records: trimmed to their target only
     assert 0.8 * 75 <= kept[YN_KEY] <= 75  # the unbiased sub type keeps (about) its target (n = 75: noise is chased a little)
@@ -90,18 +92,21 @@ def test_a_planted_bias_is_pruned_to_the_bound_and_balance_is_kept(planted) -> N
     truths = Counter(r.answer for r in result.kept if r.answer_type is AnswerType.YN)
     assert abs(truths["yes"] - truths["no"]) <= 0.2 * sum(truths.values())  # yes/no stays balanced
     letters = Counter(r.answer for r in result.kept if r.answer_type is AnswerType.MCQ)
-    assert max(letters.values()) - min(letters.values()) <= 0.25 * sum(letters.values())
+    before = Counter(r.answer for r in records if r.answer_type is AnswerType.MCQ)
+    assert max(letters.values()) - min(letters.values()) <= max(before.values()) - min(before.values())  # removal is letter-balanced
     kept_ids = {r.id for r in result.kept}
     assert [r.id for r in result.kept] == [r.id for r in records if r.id in kept_ids]  # input order
+    assert f"{KEY[0]}/{KEY[1]}" in result.eligible and set(result.pruned) <= set(result.eligible)
     text = format_debias(result)
     assert "round 1 (blind models over the bound)" in text and "within the bounds" in text
 
 
 def test_pruning_is_deterministic_and_leaves_an_unbiased_table_alone() -> None:
     table = _table(scenes=4, per_scene=16, planted=0.0, seed=4)
-    one, two = debias(table, learned=False, seed=3), debias(list(table), learned=False, seed=3)
+    one, two = debias(table, learned=False, seed=3, repeats=1), debias(list(table), learned=False, seed=3, repeats=1)
     assert [r.id for r in one.kept] == [r.id for r in two.kept] and one.rounds == two.rounds
     assert one.removed.get(f"{KEY[0]}/{KEY[1]}", 0) <= 0.25 * 64  # unbiased: at most noise is chased
+    assert set(one.pruned) <= set(one.eligible)  # only what was over its band before pruning is pruned
 
 
 def test_chance_is_over_the_options_shown_and_folds_are_whole_scenes() -> None:
@@ -124,7 +129,8 @@ def test_boosted_trees_learn_a_planted_option_and_targets_spread() -> None:
     assert spread_targets({("a", "x"): 3}, 6) == {("a", "x"): 3}
 
 
-@pytest.mark.parametrize("kwargs", [{"bound": -1.0}, {"overall_bound": "2"}, {"folds": 1}, {"max_rounds": -1}, {"floor": 2.0}])
+@pytest.mark.parametrize("kwargs", [{"bound": -1.0}, {"overall_bound": "2"}, {"folds": 1}, {"max_rounds": -1}, {"floor": 2.0},
+                                    {"repeats": 0}, {"noise_z": -1.0}, {"noise_z": True}])
 def test_bad_arguments_are_named(kwargs) -> None:
     name = next(iter(kwargs))
     with pytest.raises(ParameterError, match=name):
@@ -140,3 +146,70 @@ def test_qa_audit_debias_prints_before_after_and_rounds(tmp_path, capsys) -> Non
     assert main(["qa", "audit", str(tmp_path), "--no-learned", "--debias"]) == 0
     text = capsys.readouterr().out
     assert "Blind pruning" in text and "round 1 (blind models over the bound)" in text and "| bbox_center_direction |" in text
+
+
+def test_removal_takes_from_the_most_common_answer_first() -> None:
+    from dataclasses import replace
+
+    rng = np.random.default_rng(1)
+    records = [replace(_direction("room-0", k, "forward", rng), answer=letter) for k, letter in enumerate("AAAAAABBBCCD")]
+    rank = {r.id: (i * 7) % 12 for i, r in enumerate(records)}  # a "solvability" order that mixes the letters
+    gone = balanced_pick(records, 4, lambda r: rank[r.id])
+    left = Counter(r.answer for r in records if r.id not in gone)
+    assert left["A"] + left["B"] == 5 and left["C"] == 2 and left["D"] == 1 and max(left.values()) == 3
+    a_ranks = sorted(rank[r.id] for r in records if r.answer == "A")
+    assert {rank[r.id] for r in records if r.id in gone and r.answer == "A"} >= set(a_ranks[:2])  # most solvable first within a letter
+    assert balanced_pick(records, 99, lambda r: rank[r.id]) == {r.id for r in records}
+
+
+def test_repeats_average_the_probes_of_their_fold_seeds() -> None:
+    table = [r for r in _table(scenes=4, per_scene=6, planted=0.5, seed=7) if r.answer_type is not AnswerType.NA]
+    seeds = repeat_seeds(5, 2)
+    assert seeds[0] == 5 and len(set(seeds)) == 2 and repeat_seeds(5, 2) == seeds
+    one, two = (probe(table, folds=2, seed=s, learned=False) for s in seeds)
+    both = probe(table, folds=2, seed=5, learned=False, repeats=2)
+    for r in table:
+        for name, value in both.correct[r.id].items():
+            assert value == pytest.approx((one.correct[r.id][name] + two.correct[r.id][name]) / 2)
+    row = both.row(KEY)
+    assert row is not None and noise_band(row, 1.0) == pytest.approx(100 * math.sqrt(0.25 * 0.75 / row.n))
+
+
+def test_a_probe_refits_only_the_question_types_that_changed() -> None:
+    table = [r for r in _table(scenes=4, per_scene=8, planted=0.6, seed=8) if r.answer_type is not AnswerType.NA]
+    full = probe(table, folds=3, seed=2, learned=False)
+    fewer = [r for r in table if not (r.question_type == KEY[0] and r.id.endswith(("1", "5")))]
+    again = probe(fewer, folds=3, seed=2, learned=False)
+    reused = probe(fewer, folds=3, seed=2, learned=False, reuse=full, changed={KEY[0]})
+    assert reused.correct == again.correct and reused.rows == again.rows and reused.truth_probability == again.truth_probability
+
+
+def test_count_chance_is_one_over_the_answer_bins() -> None:
+    from spacedg.qa.debias_probe import answer_class, count_chances
+
+    def count(k: int, n: int) -> QARecord:
+        return QARecord(
+            id=f"room-0/object_counting/count/{k:012x}", scene_id="room-0", question_type="object_counting", sub_question_type="count",
+            task_group=TaskGroup.OBJECT_CENTRIC, answer_type=AnswerType.COUNT, views=(f"v{k}",), question="How many chairs are visible?",
+            options=(), answer=n, geometry={"label": "chair", "refs": []},
+        )
+
+    records = [count(k, n) for k, n in enumerate((0, 1, 2, 3, 6, 0))]
+    assert [answer_class(r) for r in records] == ["0", "1", "2+", "2+", "2+", "0"]
+    assert count_chances(records) == {"object_counting": pytest.approx(1 / 3)}  # bins 0, 1, 2+: not 1 / five counts
+    assert shown_chance(records[0], count_chances(records)) == pytest.approx(1 / 3)
+
+
+def test_removal_keeps_every_cells_roles_balanced() -> None:
+    from dataclasses import replace
+
+    from spacedg.qa.debias import balance_class
+
+    rng = np.random.default_rng(2)
+    records = []
+    for k, (cell, role, letter) in enumerate([(c, r, "ABCD"[(i + j) % 4]) for i, c in enumerate("ab") for j, r in enumerate("xyxyxy")]):
+        base = _direction("room-0", k, "forward", rng)
+        records.append(replace(base, answer=letter, geometry={**base.geometry, "selection": {"subject": f"o{k}", "cell": cell, "role": role}}))
+    gone = balanced_pick(records, 8, lambda r: r.id)
+    left = Counter(balance_class(r) for r in records if r.id not in gone)
+    assert sorted(left.values()) == [1, 1, 1, 1] and set(left) == {"a|x", "a|y", "b|x", "b|y"}
