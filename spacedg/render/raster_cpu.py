@@ -207,18 +207,18 @@ def _conic_limits(packed, g):
     return u, v, a, b, c, limit, det, det > 1e-9 * a * c and a > 0.0 and c > 0.0 and limit > 0.0
 
 
-@numba.njit(cache=True)
-def _tight_row(pair_tile, counts, n_pairs, g_row, a, b, c, limit, det, box, u, v, tx0, tx1, tiles_x, width, y_lo, y_hi):
+@numba.njit(cache=True, inline="always")
+def _tight_row(pair_tile, counts, n_pairs, g_row, a, b, c, limit, det, box, x_half, y_ext, u, v, tx0, tx1, tiles_x, width,
+               y_lo, y_hi):
     """Append the tiles ``[tx0, tx1)`` of tile row ``g_row`` that the ellipse ``σ <= limit`` reaches; returns ``n_pairs``.
 
     A well-conditioned ellipse (``box``) is first reduced to its x-extent inside the row's strip
     (:func:`_strip_reach`): tiles clear of it by a margin (1e-6 relative, far above the rounding
     error) are dropped, tiles overlapping it by that margin kept, and only the rest take the exact
-    edge test (:func:`_tile_reached`), so the kept tiles are exactly those of the edge test alone."""
+    edge test (:func:`_tile_reached`), so the kept tiles are exactly those of the edge test alone.
+    ``x_half``: the ellipse's exact x half-extent; ``y_ext``: its y half-extent widened by the margin."""
     x_lo_keep, x_hi_keep, x_lo_drop, x_hi_drop = math.inf, -math.inf, -math.inf, math.inf
     if box:
-        x_half = math.sqrt(2.0 * limit * c / det)
-        y_ext = math.sqrt(2.0 * limit * a / det) * (1.0 + 1e-6) + 1e-6
         x_min, x_max = _strip_reach(a, b, c, det, limit, x_half, y_ext, y_lo, y_hi)
         margin = 1e-6 * x_half + 1e-6
         x_lo_drop, x_hi_drop = x_min - margin, x_max + margin
@@ -285,11 +285,13 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
                     n_pairs += 1
             continue
         u, v, a, b, c, limit, det, box = _conic_limits(packed, g)
+        x_half = math.sqrt(2.0 * limit * c / det) if box else 0.0
+        y_ext = math.sqrt(2.0 * limit * a / det) * (1.0 + 1e-6) + 1e-6 if box else 0.0
         for ty in range(ty0, ty1):
             y_lo = ty * 16 + 0.5 - v
             y_hi = min(ty * 16 + 16, height) - 0.5 - v
-            n_pairs = _tight_row(pair_tile, counts, n_pairs, ty, a, b, c, limit, det, box, u, v, tx0, tx1,
-                                 tiles_x, width, y_lo, y_hi)
+            n_pairs = _tight_row(pair_tile, counts, n_pairs, ty, a, b, c, limit, det, box, x_half, y_ext, u, v,
+                                 tx0, tx1, tiles_x, width, y_lo, y_hi)
     first[n] = n_pairs
     for t in range(n_tiles):
         counts[t + 1] += counts[t]
