@@ -7,7 +7,7 @@ runs in its own subprocess with ``NUMBA_NUM_THREADS`` set (default 1) and ``PYTH
 its checkout, on the same scenes (built here once, saved to an ``.npz``; the plant is read from
 ``../shared/data/splats/plant`` at run time and skipped when absent).
 
-    .venv/bin/python benchmarks/render_speed.py                  # 100k random, room 0, plant; 1 thread
+    .venv/bin/python benchmarks/render_speed.py                  # 100k random, rooms 0 and 1, plant; 1 thread
     .venv/bin/python benchmarks/render_speed.py --runs 9 --old ef144fe --threads 1
 
 Stages are timed by wrapping the module functions the render calls (``project_cpu.project_gaussians``,
@@ -38,7 +38,7 @@ STAGES = ("project", "bin", "composite", "other", "total")
 
 
 # ------------------------------------------------------------------ scenes (driver side, this checkout)
-def build_scenes(path: Path, with_plant: bool) -> list[str]:
+def build_scenes(path: Path, with_plant: bool, rooms: list[int]) -> list[str]:
     """Save the benchmark scenes (Gaussians + camera) to ``path``; returns their names."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from device_paths import random_scene  # noqa: E402
@@ -48,10 +48,11 @@ def build_scenes(path: Path, with_plant: bool) -> list[str]:
     scenes = {}
     g, cam = random_scene(100_000, seed=100_000, degree=1)
     scenes["random100k"] = (g, cam, (np.arange(len(g)) % 13).astype(np.int32))
-    room = generate_room(0)
-    names = sorted(room.views)
-    rcam = room.views[names[len(names) // 2]].resized(640, 480)
-    scenes["room0"] = (room.gaussians, rcam, room.gaussians.instance_ids)
+    for seed in rooms:  # built-in rooms, their middle view
+        room = generate_room(seed)
+        names = sorted(room.views)
+        rcam = room.views[names[len(names) // 2]].resized(640, 480)
+        scenes[f"room{seed}"] = (room.gaussians, rcam, room.gaussians.instance_ids)
     if with_plant:
         import render as render_bench  # benchmarks/render.py
 
@@ -155,6 +156,7 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=5, help="timed renders per cell and round (default 5)")
     parser.add_argument("--rounds", type=int, default=2, help="old/new subprocess rounds, alternating (default 2)")
     parser.add_argument("--threads", type=int, default=1, help="numba threads (default 1)")
+    parser.add_argument("--rooms", default="0,1", help="seeds of the built-in rooms (default 0,1)")
     parser.add_argument("--no-plant", action="store_true", help="skip the shared plant capture")
     parser.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--names", default="", help=argparse.SUPPRESS)
@@ -164,7 +166,8 @@ def main() -> None:
         worker(args.worker, args.names.split(","), args.runs, args.out)
         return
     tmp = Path(tempfile.mkdtemp(prefix="render_speed_"))
-    names = build_scenes(tmp / "scenes.npz", not args.no_plant)
+    names = build_scenes(tmp / "scenes.npz", not args.no_plant,
+                         [int(r) for r in args.rooms.split(",") if r.strip()])
     old_src = checkout(args.old)
     rows: dict = {"old": {}, "new": {}}
     for _ in range(args.rounds):  # old and new alternate, so a change in the machine's load hits both
