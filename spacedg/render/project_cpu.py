@@ -113,7 +113,9 @@ def _fisheye_terms(x, y, z, k1, k2, k3, k4):
 
 
 @numba.njit(cache=True, inline="always")
-def _surely_outside(x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos, eps2d):
+def _surely_outside(
+    x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos, eps2d
+):
     """Whether a sharp pinhole Gaussian at camera point (x, y, z) is culled whatever its rotation.
 
     A coarse, exact frustum test before the covariance: ``Σ2D = J M Mᵀ Jᵀ`` with ``M = W R S``, so
