@@ -112,11 +112,37 @@ def _fisheye_terms(x, y, z, k1, k2, k3, k4):
     return theta, rho, g, drho_dz
 
 
+@numba.njit(cache=True, inline="always")
+def _surely_outside(
+    x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos, eps2d
+):
+    """Whether a sharp pinhole Gaussian at camera point (x, y, z) is culled whatever its rotation.
+
+    A coarse, exact frustum test before the covariance: ``Σ2D = J M Mᵀ Jᵀ`` with ``M = W R S``, so
+    ``Σ_xx <= |J row 0|² ‖W‖² max(s)²`` (``rot_norm`` >= ‖W‖₂, R orthonormal); with ``extent <= 3.33``
+    the footprint radius is at most ``ceil`` of that bound (taken 1e-6 relative wider, far above
+    rounding), and a footprint that cannot reach the image is culled by the full test too.
+    """
+    u = fx * x / z + cx
+    v = fy * y / z + cy
+    if 0.0 <= u <= width and 0.0 <= v <= height:  # the mean is in view: kept by the full test
+        return False
+    smax = max(abs(float(scales[i, 0])), abs(float(scales[i, 1])), abs(float(scales[i, 2]))) * rot_norm * (1.0 + 1e-6)
+    tx = z * min(max(x / z, -lim_x_neg), lim_x_pos)
+    ty = z * min(max(y / z, -lim_y_neg), lim_y_pos)
+    inv_z = 1.0 / z
+    jx = fx * inv_z * math.sqrt(1.0 + (tx * inv_z) ** 2)
+    jy = fy * inv_z * math.sqrt(1.0 + (ty * inv_z) ** 2)
+    rad_x = np.ceil(3.33 * math.sqrt(jx * jx * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
+    rad_y = np.ceil(3.33 * math.sqrt(jy * jy * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
+    return u + rad_x <= 0 or u - rad_x >= width or v + rad_y <= 0 or v - rad_y >= height
+
+
 @fork_safe
 @numba.njit(parallel=True, cache=True)
 def _project_kernel(
     means, quats, scales, opacities, sh, degree, want_color,
-    view_rot, view_trans, cam_center,
+    view_rot, view_trans, cam_center, rot_norm,
     fx, fy, cx, cy, width, height,
     fisheye, k1, k2, k3, k4, theta_max,
     near, far, eps2d, antialiased, opacity_extent,
@@ -146,6 +172,10 @@ def _project_kernel(
         y = view_rot[1, 0] * wx + view_rot[1, 1] * wy + view_rot[1, 2] * wz + view_trans[1]
         z = view_rot[2, 0] * wx + view_rot[2, 1] * wy + view_rot[2, 2] * wz + view_trans[2]
         if not (z > near and z < far):
+            continue
+        if not fisheye and aperture <= 0.0 and _surely_outside(
+            x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos, eps2d
+        ):
             continue
         # ---- 3D covariance in the camera frame: Σc = (W R S)(W R S)ᵀ
         qw, qx, qy, qz = quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3]
@@ -296,6 +326,7 @@ def project_gaussians(
         gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities, gaussians.sh,
         gaussians.sh_degree, want_color,
         np.ascontiguousarray(view[:3, :3]), np.ascontiguousarray(view[:3, 3]), np.array(camera.center),
+        float(np.linalg.norm(view[:3, :3], 2)),
         camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height,
         lens is not None, *(lens.coeffs if lens else (0.0, 0.0, 0.0, 0.0)),
         lens.effective_max_theta if lens else math.pi,

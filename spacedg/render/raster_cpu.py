@@ -166,6 +166,80 @@ def _edge_min(a, b, c, fixed, lo, hi, fixed_is_x):
     return 0.5 * (a * dx * dx + c * fixed * fixed) + b * dx * fixed
 
 
+@numba.njit(cache=True, inline="always")
+def _tile_reached(a, b, c, limit, x_lo, x_hi, y_lo, y_hi):
+    """Whether ``σ <= limit`` somewhere on the rectangle ``[x_lo, x_hi] × [y_lo, y_hi]`` (relative to the
+    mean) that does not hold the mean: its smallest ``σ`` is on one of the four edges."""
+    best = min(
+        min(_edge_min(a, b, c, x_lo, y_lo, y_hi, True), _edge_min(a, b, c, x_hi, y_lo, y_hi, True)),
+        min(_edge_min(a, b, c, y_lo, x_lo, x_hi, False), _edge_min(a, b, c, y_hi, x_lo, x_hi, False)),
+    )
+    return best <= limit
+
+
+@numba.njit(cache=True, inline="always")
+def _strip_reach(a, b, c, det, limit, x_half, y_ext, y_lo, y_hi):
+    """The x-extent ``[x_min, x_max]`` of the ellipse ``σ <= limit`` inside the strip ``y ∈ [y_lo, y_hi]``
+    (coordinates relative to the mean; ``x_min > x_max`` when the strip misses it).
+
+    On the ellipse ``x = (−b y ± sqrt(2 a limit − det y²)) / a``: the + branch is concave in ``y`` with
+    its top at ``y = −b x_half / c`` (``x_half``: the ellipse's exact x half-extent), the − branch
+    convex with its bottom at ``+b x_half / c``; each is evaluated at its optimum clamped into the strip."""
+    lo = max(y_lo, -y_ext)
+    hi = min(y_hi, y_ext)
+    if lo > hi:
+        return math.inf, -math.inf
+    y_top = min(max(-b * x_half / c, lo), hi)
+    y_bottom = min(max(b * x_half / c, lo), hi)
+    x_max = (-b * y_top + math.sqrt(max(2.0 * a * limit - det * y_top * y_top, 0.0))) / a
+    x_min = (-b * y_bottom - math.sqrt(max(2.0 * a * limit - det * y_bottom * y_bottom, 0.0))) / a
+    return x_min, x_max
+
+
+@numba.njit(cache=True, inline="always")
+def _conic_limits(packed, g):
+    """Gaussian ``g``'s mean ``u, v``, conic ``a, b, c`` (float64), the binning limit ``ln(o / f) + 1e-3`` on ``σ``
+    and whether its ellipse is well conditioned (``det > 1e-9 a c``, ``a, c > 0``, limit > 0)."""
+    u, v = float(packed[g, PX]), float(packed[g, PY])
+    a, b, c = float(packed[g, CA]), float(packed[g, CB]), float(packed[g, CC])
+    limit = math.log(max(float(packed[g, OPA]), 1e-30) / float(packed[g, AMIN])) + 1e-3
+    det = a * c - b * b
+    return u, v, a, b, c, limit, det, det > 1e-9 * a * c and a > 0.0 and c > 0.0 and limit > 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _tight_row(pair_tile, counts, n_pairs, g_row, a, b, c, limit, det, box, x_half, y_ext, u, v, tx0, tx1, tiles_x, width,
+               y_lo, y_hi):
+    """Append the tiles ``[tx0, tx1)`` of tile row ``g_row`` that the ellipse ``σ <= limit`` reaches; returns ``n_pairs``.
+
+    A well-conditioned ellipse (``box``) is first reduced to its x-extent inside the row's strip
+    (:func:`_strip_reach`): tiles clear of it by a margin (1e-6 relative, far above the rounding
+    error) are dropped, tiles overlapping it by that margin kept, and only the rest take the exact
+    edge test (:func:`_tile_reached`), so the kept tiles are exactly those of the edge test alone.
+    ``x_half``: the ellipse's exact x half-extent; ``y_ext``: its y half-extent widened by the margin."""
+    x_lo_keep, x_hi_keep, x_lo_drop, x_hi_drop = math.inf, -math.inf, -math.inf, math.inf
+    if box:
+        x_min, x_max = _strip_reach(a, b, c, det, limit, x_half, y_ext, y_lo, y_hi)
+        margin = 1e-6 * x_half + 1e-6
+        x_lo_drop, x_hi_drop = x_min - margin, x_max + margin
+        x_lo_keep, x_hi_keep = x_min + margin, x_max - margin
+    inside_y = y_lo <= 0.0 <= y_hi
+    for tx in range(tx0, tx1):
+        x_lo = tx * 16 + 0.5 - u
+        x_hi = min(tx * 16 + 16, width) - 0.5 - u
+        if not (inside_y and x_lo <= 0.0 <= x_hi) and a > 0.0 and c > 0.0:
+            if x_hi < x_lo_drop or x_lo > x_hi_drop:
+                continue
+            if not (x_hi >= x_lo_keep and x_lo <= x_hi_keep and x_lo_keep <= x_hi_keep):
+                if not _tile_reached(a, b, c, limit, x_lo, x_hi, y_lo, y_hi):
+                    continue
+        t = g_row * tiles_x + tx
+        pair_tile[n_pairs] = t
+        counts[t + 1] += 1
+        n_pairs += 1
+    return n_pairs
+
+
 @numba.njit(cache=True)
 def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capacity):  # pragma: no cover - compiled
     """Counting-sort (Gaussian, tile) pairs by tile, keeping depth order inside each tile.
@@ -174,7 +248,12 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
     least 2×2 tiles; smaller ones are kept whole) is dropped unless the ``α >= f``
     ellipse ``σ <= ln(o / f)`` reaches the rectangle of the tile's pixel centres: the minimum
     of ``σ`` over that rectangle is 0 if the mean is inside, else the smallest clamped 1-D
-    minimum along its four edges. Dropped tiles would have composited nothing.
+    minimum along its four edges (decided per tile row by :func:`_tight_row`, which gives the
+    same tiles). Dropped tiles would have composited nothing.
+
+    Two passes: the kept tiles of every listed Gaussian in index order (its parameters read
+    sequentially) with each tile's count, then, after a prefix sum, every Gaussian's index
+    scattered into its tiles' lists in depth order. A Gaussian listed twice in ``order`` is binned once.
 
     Args:
         order: visible Gaussian indices sorted by depth (front to back).
@@ -184,65 +263,49 @@ def bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, capa
     Returns:
         ``(offsets, gauss)``: offsets (tiles+1,) int64 into gauss (pairs,) int32.
     """
-    n_tiles = tiles_x * tiles_y
+    n_tiles, n = tiles_x * tiles_y, rects.shape[0]
+    listed = np.zeros(n, np.bool_)
+    for k in range(order.shape[0]):
+        listed[order[k]] = True
     pair_tile = np.empty(capacity, np.int32)
-    pair_gauss = np.empty(capacity, np.int32)
+    first = np.zeros(n + 1, np.int64)  # Gaussian g's kept tiles are pair_tile[first[g]:first[g + 1]]
     counts = np.zeros(n_tiles + 1, np.int64)
     n_pairs = 0
-    for k in range(order.shape[0]):
-        g = order[k]
+    for g in range(n):  # index order: the parameters are read sequentially
+        first[g] = n_pairs
+        if not listed[g]:
+            continue
         tx0, tx1, ty0, ty1 = rects[g, 0], rects[g, 1], rects[g, 2], rects[g, 3]
-        test = tight and tx1 - tx0 >= 2 and ty1 - ty0 >= 2
-        u, v = float(packed[g, PX]), float(packed[g, PY])
-        a, b, c = float(packed[g, CA]), float(packed[g, CB]), float(packed[g, CC])
-        limit = math.log(max(float(packed[g, OPA]), 1e-30) / float(packed[g, AMIN])) + 1e-3
-        # cheap sure answers before the exact test, which they never contradict: the tile is outside
-        # the ellipse's bounding box (dropped) or sigma at its point nearest the mean is below the
-        # limit (kept), each by a margin (1e-6 relative) far above the rounding error of a conic
-        # whose det > 1e-9 a c (others always take the exact edge test)
-        det = a * c - b * b
-        box = det > 1e-9 * a * c and a > 0.0 and c > 0.0
-        x_ext = math.sqrt(2.0 * limit * c / det) * (1.0 + 1e-6) + 1e-6 if box else math.inf
-        y_ext = math.sqrt(2.0 * limit * a / det) * (1.0 + 1e-6) + 1e-6 if box else math.inf
-        sure = limit * (1.0 - 1e-6) if box else -math.inf
+        if not (tight and tx1 - tx0 >= 2 and ty1 - ty0 >= 2):
+            for ty in range(ty0, ty1):
+                for tx in range(tx0, tx1):
+                    t = ty * tiles_x + tx
+                    pair_tile[n_pairs] = t
+                    counts[t + 1] += 1
+                    n_pairs += 1
+            continue
+        u, v, a, b, c, limit, det, box = _conic_limits(packed, g)
+        x_half = math.sqrt(2.0 * limit * c / det) if box else 0.0
+        y_ext = math.sqrt(2.0 * limit * a / det) * (1.0 + 1e-6) + 1e-6 if box else 0.0
         for ty in range(ty0, ty1):
             y_lo = ty * 16 + 0.5 - v
             y_hi = min(ty * 16 + 16, height) - 0.5 - v
-            for tx in range(tx0, tx1):
-                if test:
-                    x_lo = tx * 16 + 0.5 - u
-                    x_hi = min(tx * 16 + 16, width) - 0.5 - u
-                    if not (x_lo <= 0.0 <= x_hi and y_lo <= 0.0 <= y_hi) and a > 0.0 and c > 0.0:
-                        if x_lo > x_ext or x_hi < -x_ext or y_lo > y_ext or y_hi < -y_ext:
-                            continue
-                        px = min(max(0.0, x_lo), x_hi)
-                        py = min(max(0.0, y_lo), y_hi)
-                        if 0.5 * (a * px * px + c * py * py) + b * px * py <= sure:
-                            t = ty * tiles_x + tx
-                            pair_tile[n_pairs] = t
-                            pair_gauss[n_pairs] = g
-                            counts[t + 1] += 1
-                            n_pairs += 1
-                            continue
-                        best = min(
-                            min(_edge_min(a, b, c, x_lo, y_lo, y_hi, True), _edge_min(a, b, c, x_hi, y_lo, y_hi, True)),
-                            min(_edge_min(a, b, c, y_lo, x_lo, x_hi, False), _edge_min(a, b, c, y_hi, x_lo, x_hi, False)),
-                        )
-                        if best > limit:
-                            continue
-                t = ty * tiles_x + tx
-                pair_tile[n_pairs] = t
-                pair_gauss[n_pairs] = g
-                counts[t + 1] += 1
-                n_pairs += 1
+            n_pairs = _tight_row(pair_tile, counts, n_pairs, ty, a, b, c, limit, det, box, x_half, y_ext, u, v,
+                                 tx0, tx1, tiles_x, width, y_lo, y_hi)
+    first[n] = n_pairs
     for t in range(n_tiles):
         counts[t + 1] += counts[t]
     cursor = counts[:n_tiles].copy()
     gauss = np.empty(n_pairs, np.int32)
-    for p in range(n_pairs):
-        t = pair_tile[p]
-        gauss[cursor[t]] = pair_gauss[p]
-        cursor[t] += 1
+    for k in range(order.shape[0]):  # depth order: each tile's list comes out front to back
+        g = order[k]
+        if not listed[g]:  # a repeat in order: binned once
+            continue
+        listed[g] = False
+        for p in range(first[g], first[g + 1]):
+            t = pair_tile[p]
+            gauss[cursor[t]] = g
+            cursor[t] += 1
     return counts, gauss
 
 

@@ -1,0 +1,81 @@
+"""Tight tile binning (per-row strip test) and the projection's coarse frustum pre-cull.
+
+The binning must keep every tile where some pixel centre has ``α >= f`` (``σ <= ln(o / f)``) and
+only tiles of the footprint's rectangle, each list in depth order; the pre-cull must change no
+projected Gaussian (a camera looking across a scene, most of it out of view)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from spacedg.render import RasterSettings, project_cpu, raster_cpu
+from spacedg.render.camera import Camera, look_at
+from spacedg.render.project_cpu import AMIN, CA, CB, CC, DEPTH, OPA, PACKED, PX, PY
+from tests.render_helpers import random_gaussians
+
+W, H, TX, TY = 320, 240, 20, 15
+
+
+def _random_conics(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` random footprints (some nearly degenerate) and their 3.33-sigma tile rectangles."""
+    packed = np.zeros((n, PACKED), np.float32)
+    packed[:, PX], packed[:, PY] = rng.uniform(-40, W + 40, n), rng.uniform(-40, H + 40, n)
+    sx, sy = np.exp(rng.uniform(-1, 4, n)), np.exp(rng.uniform(-1, 4, n))
+    rho = rng.uniform(-0.999, 0.999, n)
+    det = (sx * sy) ** 2 * (1 - rho**2)
+    packed[:, CA], packed[:, CB], packed[:, CC] = sy**2 / det, -rho * sx * sy / det, sx**2 / det
+    packed[:, OPA], packed[:, AMIN], packed[:, DEPTH] = rng.uniform(0.01, 1, n), 1 / 255, rng.uniform(1, 5, n)
+    u, v = packed[:, PX].astype(np.float64), packed[:, PY].astype(np.float64)
+    rx, ry = np.ceil(3.33 * sx), np.ceil(3.33 * sy)
+    rects = np.stack([np.clip(np.floor((u - rx) / 16), 0, TX), np.clip(np.ceil((u + rx) / 16), 0, TX),
+                      np.clip(np.floor((v - ry) / 16), 0, TY), np.clip(np.ceil((v + ry) / 16), 0, TY)], 1)
+    return packed, rects.astype(np.int32)
+
+
+def _reached_tiles(p: np.ndarray, rect: np.ndarray) -> set[int]:
+    """Tiles of ``rect`` with a pixel centre where ``σ <= ln(o / f)`` (brute force)."""
+    ys, xs = np.mgrid[rect[2] * 16 : min(rect[3] * 16, H), rect[0] * 16 : min(rect[1] * 16, W)]
+    dx, dy = xs + 0.5 - p[PX], ys + 0.5 - p[PY]
+    sigma = 0.5 * (p[CA] * dx * dx + p[CC] * dy * dy) + p[CB] * dx * dy
+    hit = sigma <= math.log(p[OPA] / p[AMIN])
+    return set((ys[hit] // 16 * TX + xs[hit] // 16).tolist())
+
+
+def test_tight_binning_keeps_every_reached_tile_in_depth_order() -> None:
+    packed, rects = _random_conics(np.random.default_rng(7), 150)
+    offsets, gauss = raster_cpu.bin_visible(packed, rects, W, H, True)
+    kept: dict[int, set[int]] = {}
+    for t in range(TX * TY):
+        members = gauss[offsets[t] : offsets[t + 1]]
+        assert np.all(np.diff(packed[members, DEPTH]) >= 0)
+        for g in members.tolist():
+            kept.setdefault(g, set()).add(t)
+    dropped = 0
+    for g in range(len(packed)):
+        x0, x1, y0, y1 = rects[g]
+        box = {ty * TX + tx for ty in range(y0, y1) for tx in range(x0, x1)}
+        assert _reached_tiles(packed[g], rects[g]) <= kept.get(g, set()) <= box
+        dropped += len(box) - len(kept.get(g, set()))
+    assert dropped > 50  # the tight test did drop tiles
+
+
+def test_pre_cull_changes_no_projection() -> None:
+    g = random_gaussians(3000, np.random.default_rng(3), depth=(-6.0, 6.0), half_width=6.0, scale=(0.01, 0.3))
+    pose = look_at(np.array([0.0, 0.0, 0.0]), np.array([5.0, 0.5, 3.0]), np.array([0.0, -1.0, 0.0]))
+    cam = Camera(200.0, 200.0, 160.0, 120.0, W, H, pose)
+    packed, rects = project_cpu.project_gaussians(g, cam, RasterSettings())
+    assert 0 < np.count_nonzero(rects[:, 1] > rects[:, 0]) < len(g) // 2
+    # the same projection with the pre-cull disabled (a rotation norm of infinity never culls)
+    ref_packed, ref_rects = np.empty_like(packed), np.empty_like(rects)
+    view, s = cam.world_to_cam, RasterSettings()
+    project_cpu._project_kernel(
+        g.means, g.quats, g.scales, g.opacities, g.sh, g.sh_degree, True,
+        np.ascontiguousarray(view[:3, :3]), np.ascontiguousarray(view[:3, 3]), np.array(cam.center), math.inf,
+        cam.fx, cam.fy, cam.cx, cam.cy, W, H, False, 0.0, 0.0, 0.0, 0.0, math.pi,
+        s.near, s.far, s.eps2d, s.antialiased, s.opacity_extent, 0.0, 1.0, 0.0, s.defocus_extent or 0.0,
+        ref_packed, ref_rects,
+    )
+    np.testing.assert_array_equal(packed, ref_packed)
+    np.testing.assert_array_equal(rects, ref_rects)
