@@ -76,6 +76,9 @@ class ForkSafeKernel:
         self.parallel = dispatcher
         self._serial: Any = None
         functools.update_wrapper(self, dispatcher.py_func)
+        code = dispatcher.py_func.__code__
+        self._arity = code.co_argcount
+        self._defaults: tuple[Any, ...] = dispatcher.py_func.__defaults__ or ()
 
     @property
     def serial(self) -> Any:
@@ -91,6 +94,12 @@ class ForkSafeKernel:
         return self._serial
 
     def __call__(self, *args: Any) -> Any:
+        missing = self._arity - len(args)
+        if 0 < missing <= len(self._defaults):
+            # defaults passed explicitly: numba keys an omitted argument by its value, an array's by
+            # its id(), so a kernel called without its array default never hit its disk cache and
+            # compiled afresh in every process (seconds each)
+            args = (*args, *self._defaults[len(self._defaults) - missing:])
         return (self.serial if _serial else self.parallel)(*args)
 
     def __getattr__(self, name: str) -> Any:

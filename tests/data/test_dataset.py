@@ -42,6 +42,9 @@ FAMILIES = ("camera_rotation", "inter_object_distance", "object_bounding_size_es
 CONFIG = QABuildConfig(seed=0, per_sub_type=2, families=FAMILIES)
 MIX = ["haze", "low_res:3", "jpeg_compression", "defocus", "water_droplets", {"name": "low_light", "params": {"exposure": 0.05}}]
 INDEX_FILES = shutil.ignore_patterns("*.qa.*", "cache")  # full and selection indexes
+#: The train items the DataLoader and determinism tests render (of 32): over epochs 0 and 1 they
+#: draw every entry of MIX and clean, at a fraction of the renders of the whole split.
+MIX_QUESTIONS = 12
 
 
 def make(rooms: list[Path], split: str = "train", degradations=None, **kwargs) -> SpaceDGDataset:
@@ -152,15 +155,17 @@ def test_bench_split_is_every_question_under_clean_and_nine(splits):
 
 # ------------------------------------------------------------------ determinism
 def test_same_index_same_bytes_in_process(rooms):
-    a = make(rooms, "train", MIX, clean_prob=0.3)
-    b = make(rooms, "train", MIX, clean_prob=0.3, cache=0)  # no cache at all: every item rendered afresh
+    a = make(rooms, "train", MIX, clean_prob=0.3, max_questions=MIX_QUESTIONS)
+    b = make(rooms, "train", MIX, clean_prob=0.3, max_questions=MIX_QUESTIONS, cache=0)  # no cache at all: every item rendered afresh
     n = len(a)
     forward = [digest(a[i]) for i in range(n)]
     backward = [digest(b[i]) for i in reversed(range(n))][::-1]
     assert forward == backward
     assert [digest(a[i]) for i in range(n)] == forward  # second pass: renders from a's cache
+    whole = make(rooms, "train", MIX, clean_prob=0.3)  # plans only (no render): the whole train split
     other = make(rooms, "train", MIX, clean_prob=0.3, split_fractions=(0.1, 0.1))
-    assert [other.plan(i).chain.text for i in range(n)] == [a.plan(i).chain.text for i in range(n)]
+    n = len(whole)
+    assert [other.plan(i).chain.text for i in range(n)] == [whole.plan(i).chain.text for i in range(n)]
 
 
 def test_splits_do_not_follow_the_sample_seed(rooms, splits):
@@ -180,7 +185,7 @@ from spacedg.qa.index import QABuildConfig
 args = json.loads(sys.argv[1])
 config = QABuildConfig(**args["config"])
 ds = SpaceDGDataset("train", args["degradations"], scenes=args["scenes"], image_size=tuple(args["size"]),
-                    qa_config=config, clean_prob=args["clean_prob"])
+                    qa_config=config, clean_prob=args["clean_prob"], max_questions=args["max_questions"])
 out = {"records": [r.id for r in ds.records], "len": len(ds),
        "numba_threads_started": bool(parallel._is_initialized), "cuda_initialized": torch.cuda.is_initialized()}
 
@@ -204,7 +209,8 @@ def loader_run(rooms, tmp_path_factory) -> dict:
     the indexes itself), then reads it with 2 persistent workers (epochs 0 and 1) and in-process."""
     root = tmp_path_factory.mktemp("loader_rooms")
     copies = [str(shutil.copytree(d, root / d.name, ignore=INDEX_FILES)) for d in rooms]
-    args = {"scenes": copies, "config": CONFIG.to_dict(), "size": list(SIZE), "degradations": MIX, "clean_prob": 0.3}
+    args = {"scenes": copies, "config": CONFIG.to_dict(), "size": list(SIZE), "degradations": MIX, "clean_prob": 0.3,
+            "max_questions": MIX_QUESTIONS}
     script = root / "loader_script.py"
     script.write_text(LOADER_SCRIPT)
     proc = subprocess.run([sys.executable, str(script), json.dumps(args)], capture_output=True, text=True, timeout=300,
@@ -219,7 +225,7 @@ def _in_process_table(ds: SpaceDGDataset, epoch: int) -> dict[str, list[str]]:
 
 
 def test_same_bytes_across_worker_counts_and_processes(rooms, loader_run):
-    ds = make(rooms, "train", MIX, clean_prob=0.3)
+    ds = make(rooms, "train", MIX, clean_prob=0.3, max_questions=MIX_QUESTIONS)
     assert loader_run["records"] == [r.id for r in ds.records] and loader_run["len"] == len(ds)
     here = _in_process_table(ds, 0)
     assert set(here) == {str(i) for i in range(len(ds))}
@@ -236,8 +242,11 @@ def test_construction_starts_no_numba_threads_or_cuda(loader_run):
 
 
 def test_set_epoch_reaches_persistent_workers(rooms, loader_run):
-    ds = make(rooms, "train", MIX, clean_prob=0.3)
+    ds = make(rooms, "train", MIX, clean_prob=0.3, max_questions=MIX_QUESTIONS)
     assert loader_run["workers2_epoch1"] == _in_process_table(ds, 1)
+    # over both epochs the workers rendered every entry of MIX and clean
+    names = {name for epoch in (0, 1) for name, _ in loader_run[f"workers2_epoch{epoch}"].values()}
+    assert names == {CLEAN, "haze", "low_res", "jpeg_compression", "defocus", "water_droplets", "low_light"}, names
 
 
 PEEK_SCRIPT = r"""
@@ -589,9 +598,10 @@ def test_dataset_pickles_small_without_gaussians(rooms):
 
 def test_default_scenes_are_the_builtin_rooms_made_on_first_use(tmp_path, monkeypatch, capfd):
     """Without ``scenes=``, the built-in rooms are generated into $SPACEDG_HOME (with a progress
-    bar) and indexed on first use, then reused."""
+    bar) and indexed on first use, then reused. (Visibility at a small size: the rooms are
+    full-size, and indexing them at the default sizes was most of this test's time.)"""
     monkeypatch.setenv("SPACEDG_HOME", str(tmp_path))
-    config = QABuildConfig(per_sub_type=1, families=("object_counting",))
+    config = QABuildConfig(per_sub_type=1, families=("object_counting",), visibility_size=(40, 30), covisibility_size=(20, 15))
     ds = SpaceDGDataset("bench", builtin_rooms=3, qa_config=config, image_size=SIZE, degradations=["low_res"])
     assert "built-in rooms (first use)" in capfd.readouterr().err
     assert sorted(p.name for p in (tmp_path / "rooms").iterdir()) == ["room-000000", "room-000001", "room-000002"]

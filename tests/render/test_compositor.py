@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 import torch
@@ -34,13 +36,21 @@ def scene_and_projection(seed: int, n: int, width: int, height: int, **kw):
     return gaussians, cam, packed, rects
 
 
+@functools.cache
+def _small_case(seed: int) -> tuple:
+    """200 Gaussians at 29×23 and their brute-force composite, once per seed (both binnings of a
+    seed compare against the same oracle; no test writes to these arrays)."""
+    gaussians, cam, packed, rects = scene_and_projection(seed, 200, 29, 23, scale=(0.05, 0.5), opacity=(0.3, 1.0))
+    oracle = brute_force_composite(packed, rects, gaussians.instance_ids, cam.width, cam.height, SETTINGS.alpha_max)
+    return gaussians, cam, packed, rects, oracle
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("tight", [True, False])
 def test_compiled_compositor_matches_brute_force(seed: int, tight: bool) -> None:
-    gaussians, cam, packed, rects = scene_and_projection(seed, 200, 29, 23, scale=(0.05, 0.5), opacity=(0.3, 1.0))
+    gaussians, cam, packed, rects, oracle = _small_case(seed)
     assert (rects[:, 1] > rects[:, 0]).sum() > 20
     ids = gaussians.instance_ids
-    oracle = brute_force_composite(packed, rects, ids, cam.width, cam.height, SETTINGS.alpha_max)
     got = raster_cpu.rasterize(packed, rects, ids, cam.width, cam.height, SETTINGS.alpha_max, True, True, True, tight)
     for name in ("rgb", "alpha"):
         np.testing.assert_allclose(got[name], oracle[name], atol=1e-5, err_msg=name)
@@ -50,17 +60,25 @@ def test_compiled_compositor_matches_brute_force(seed: int, tight: bool) -> None
     assert (got["instance_ids"] >= 0).any() and (got["alpha"] > 0.5).mean() > 0.3 and (got["alpha"] > 0.99).any()
 
 
+@functools.cache
+def _saturated_case() -> tuple:
+    """1500 Gaussians at 40×30 and their brute-force composite, computed once for the eight
+    specialisations below (the oracle is the expensive part; no test writes to these arrays)."""
+    gaussians, cam, packed, rects = scene_and_projection(7, 1500, 40, 30, scale=(0.05, 0.5), opacity=(0.5, 1.0))
+    oracle = brute_force_composite(packed, rects, gaussians.instance_ids, cam.width, cam.height, SETTINGS.alpha_max)
+    return gaussians, cam, packed, rects, oracle
+
+
 @pytest.mark.parametrize("flags", [(c, d, i) for c in (True, False) for d in (True, False) for i in (True, False)])
 def test_every_output_specialisation_matches_brute_force(flags: tuple[bool, bool, bool]) -> None:
     """Each compiled specialisation of the compositor (output flags as constants) against the brute force:
     the tiles hold more than one gathered batch of Gaussians and saturate, so batching and the
     early exit are exercised; outputs not asked for are left untouched."""
     want_color, want_depth, want_ids = flags
-    gaussians, cam, packed, rects = scene_and_projection(7, 1500, 40, 30, scale=(0.05, 0.5), opacity=(0.5, 1.0))
+    gaussians, cam, packed, rects, oracle = _saturated_case()
     ids = gaussians.instance_ids
     offsets, _ = raster_cpu.bin_visible(packed, rects, cam.width, cam.height, True)
     assert np.diff(offsets).max() > 2 * 32
-    oracle = brute_force_composite(packed, rects, ids, cam.width, cam.height, SETTINGS.alpha_max)
     got = raster_cpu.rasterize(packed, rects, ids, cam.width, cam.height, SETTINGS.alpha_max, *flags, True)
     np.testing.assert_allclose(got["alpha"], oracle["alpha"], atol=1e-5)
     assert (got["alpha"] > 0.999).mean() > 0.5  # most pixels saturate: the early exit is taken
