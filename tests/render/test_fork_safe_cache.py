@@ -1,8 +1,8 @@
 """ForkSafeKernel (spacedg.render.threads) passes a kernel's defaults explicitly, so its disk cache hits.
 
 numba types an omitted argument as ``Omitted(default)``, keyed by the default's value, an array's
-by its ``id()``: a kernel called without its array default (``defocus_cpu.measure_sharp``'s
-``lut``) got a new signature in every process, never found its on-disk cache and compiled afresh
+by its ``id()``: a kernel called without its array default (the former
+``defocus_cpu.measure_sharp``'s ``lut``) got a new signature in every process, never found its on-disk cache and compiled afresh
 each time (~6 s of CPU per process that rendered defocus).
 """
 
@@ -32,8 +32,21 @@ def test_defaults_are_passed_explicitly_and_keep_a_stable_signature() -> None:
     assert len(signatures) == 1, signatures  # (int64, float64, array): one compile whatever was omitted
 
 
-def test_the_defocus_measurement_kernel_has_no_omitted_argument() -> None:
-    from spacedg.render import defocus_cpu
+def test_every_fork_safe_render_kernel_knows_all_its_defaults() -> None:
+    import importlib
+    import pkgutil
 
-    kernel = defocus_cpu.measure_sharp
-    assert kernel._arity == kernel.parallel.py_func.__code__.co_argcount and len(kernel._defaults) == len(kernel.parallel.py_func.__defaults__ or ())
+    import spacedg.render as render_pkg
+    from spacedg.render.threads import ForkSafeKernel
+
+    kernels = []
+    for info in pkgutil.iter_modules(render_pkg.__path__):
+        if info.name == "gsplat_backend":
+            continue  # needs CUDA's gsplat; holds no numba kernel
+        module = importlib.import_module(f"spacedg.render.{info.name}")
+        kernels += [k for k in vars(module).values() if isinstance(k, ForkSafeKernel)]
+    assert kernels, "no fork-safe kernel found under spacedg.render"
+    for kernel in kernels:
+        code = kernel.parallel.py_func.__code__
+        assert kernel._arity == code.co_argcount, kernel
+        assert len(kernel._defaults) == len(kernel.parallel.py_func.__defaults__ or ()), kernel
