@@ -17,7 +17,7 @@ sharp pass (:mod:`spacedg.render.defocus_sharp`, at half resolution once the low
 With nothing blurred in the view (every visible ``r = 0``) the sharp render is returned, bit for bit.
 
 Measured against the thin-lens reference (:mod:`spacedg.render.thin_lens`, 48 lens points;
-``benchmarks/defocus_reference.py --backends cpu --samples 48 --runs 2``; issue 35) on a built-in
+``benchmarks/defocus_reference.py --backends cpu --samples 48 --runs 2``; issue 29) on a built-in
 room, the plant capture, its close-up and an object on an empty background, severities 1, 3 and
 bench, at 240–320 and 480–640 px: light 1.000–1.002 of the clean render in every row (the
 reference: 1.000), PSNR 36.2–56.8 dB (goal ≥ 35), cost 1.7–3.9× a clean render on the room, plant

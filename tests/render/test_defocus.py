@@ -212,7 +212,7 @@ def test_an_object_on_an_empty_background_keeps_its_light(backend: str, aperture
     assert light == pytest.approx(1.0, abs=0.01)
 
 
-@pytest.mark.xfail(reason="issue 35: 30.9 dB. 1500 splats stacked ~20 alpha deep, blurred to 1.5 px (their own sigma 0.8 px): "
+@pytest.mark.xfail(reason="issue 29: 30.9 dB. 1500 splats stacked ~20 alpha deep, blurred to 1.5 px (their own sigma 0.8 px): "
                    "the spread alpha saturates (1 - exp(-sum)) out to ~1.3 r past the rim, so the blurred rim is steeper than the "
                    "lens's; the flux step keeps the light (0.9998) but not the rim's shape (FLUX_LENGTH 0 to 0.5: 30.9-32.3 dB)", strict=False)
 def test_an_object_on_an_empty_background_matches_the_thin_lens() -> None:

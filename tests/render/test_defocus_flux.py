@@ -1,6 +1,6 @@
 """Local flux conservation of defocus (spacedg.render.defocus_flux): the step restores the sharp view's
 light wherever the blurred composite lost or gained some, maps the half-resolution sharp grid onto the
-view exactly, stays finite on black and empty images, and lets sub-pixel blur blur (issue 35)."""
+view exactly, stays finite on black and empty images, and lets sub-pixel blur blur (issue 29)."""
 
 from __future__ import annotations
 
