@@ -35,6 +35,7 @@ from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.data.pipeline import PipelineOptions, degrade_variants
 from spacedg.render import Camera
 from spacedg.render.camera import look_at
+from spacedg.render.settings import RasterSettings
 from spacedg.scene.model import Scene
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "splats"
@@ -100,16 +101,19 @@ def main() -> None:
     parser.add_argument("--degradations", default=",".join(BENCH_DEGRADATIONS))
     parser.add_argument("--gaussians", type=int, default=20_000, help="room only")
     parser.add_argument("--seed", type=int, default=1, help="the sample's seed (same at both sizes)")
+    parser.add_argument("--antialiased", action="store_true",
+                        help="render with RasterSettings(antialiased=True) (opacity compensated for the eps2d dilation)")
     args = parser.parse_args()
     severities = [s.strip() for s in args.severities.split(",") if s.strip()]
     names = [d.strip() for d in args.degradations.split(",") if d.strip()]
     chains = ["clean"] + [f"{name}:{sev}" for name in names for sev in severities]
     make = (lambda size: room_scene(args.gaussians, size)) if args.scene == "room" else plant_scene
     results, timing = {}, {}
+    settings = RasterSettings(antialiased=True) if args.antialiased else None
     for size in (args.high, args.low):
         scene = make(size)
         t0 = time.perf_counter()
-        results[size] = degrade_variants(scene, ["view"], chains, seed=args.seed, options=PipelineOptions(image_size=size))
+        results[size] = degrade_variants(scene, ["view"], chains, seed=args.seed, options=PipelineOptions(image_size=size, settings=settings))
         timing[size] = time.perf_counter() - t0
     (hw, hh), (lw, lh) = args.high, args.low
     print(f"Resolution table: {args.scene} ({'%d Gaussians' % args.gaussians if args.scene == 'room' else 'plant capture'}), "
