@@ -138,7 +138,7 @@ def _boosted_scores(train: Sequence[QARecord], tests: Sequence[QARecord]) -> tup
     test_groups: dict[tuple[str, AnswerType], list[QARecord]] = defaultdict(list)
     for r in tests:
         test_groups[(r.question_type, r.answer_type)].append(r)
-    frequent = {q: frequent_words([r for r in train if r.question_type == q]) for q, _ in test_groups}
+    frequent = {q: frequent_words([r for r in train if r.question_type == q]) for q in {q for q, _ in test_groups}}
     for key, rs in test_groups.items():
         model = BoostedChoice(groups.get(key, []), frequent[key[0]])
         answers, truth = model.predict_many(rs)
@@ -155,15 +155,16 @@ def _held_out(records: Sequence[QARecord], folds: list[list[str]], learned: bool
     for r in records:
         by_fold[f"fold{fold_of[r.scene_id]}"].append(r)
     names = sorted(by_fold)
-    correct = held_out_scores(by_fold, names, learned) if len(names) >= 2 else {}
     prob: dict[str, float] = {}
-    if len(names) >= 2:
-        for held in names:
-            train = [r for name in names if name != held for r in by_fold[name]]
-            hits, probs = _boosted_scores(train, by_fold[held])
-            for rid, hit in hits.items():
-                correct.setdefault(rid, {})["boosted"] = hit
-            prob.update(probs)
+    if len(names) < 2:
+        return {}, prob
+    correct = held_out_scores(by_fold, names, learned)
+    for held in names:
+        train = [r for name in names if name != held for r in by_fold[name]]
+        hits, probs = _boosted_scores(train, by_fold[held])
+        for rid, hit in hits.items():
+            correct.setdefault(rid, {})["boosted"] = hit
+        prob.update(probs)
     return correct, prob
 
 

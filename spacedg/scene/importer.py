@@ -35,7 +35,6 @@ What it does, in order (each step reported in :class:`ImportReport`):
 
 from __future__ import annotations
 
-
 import re
 import time
 from collections.abc import Callable
