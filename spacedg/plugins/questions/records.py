@@ -219,7 +219,7 @@ def round_robin_sub_types(
 def referable(index: VisibilityIndex, view: str, instance_id: int) -> bool:
     """An object a question may name in ``view``: clearly visible there and no description clash
     (no other same-label instance with the same description is seen in that image)."""
-    memo = _memo(index, "referable")
+    memo = index_memo(index, "referable")
     key = (view, instance_id)
     hit = memo.get(key)
     if hit is None:
@@ -229,7 +229,7 @@ def referable(index: VisibilityIndex, view: str, instance_id: int) -> bool:
 
 def referable_ids(index: VisibilityIndex, view: str) -> list[int]:
     """Ids of the objects a question may name in ``view`` (:func:`referable`), in id order."""
-    memo = _memo(index, "referable_ids")
+    memo = index_memo(index, "referable_ids")
     ids = memo.get(view)
     if ids is None:
         ids = memo[view] = [i for i in index.visible[view] if referable(index, view, i)]
@@ -242,8 +242,6 @@ def index_memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
     pair of objects recurs in."""
     return index.__dict__.setdefault(f"_memo_{name}", {})
 
-
-_memo = index_memo
 
 
 def phrase(inst: Instance) -> str:
