@@ -112,9 +112,10 @@ def _raster_cpu(
 
     width, height, factor = camera.width, camera.height, 1
     sharp = None
-    n_visible = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))
+    visible = rects[:, 1] > rects[:, 0]
+    n_visible = np.int64(np.count_nonzero(visible))
     if defocused and defocus_model.has_blur(packed, rects):
-        sharp = sharp_pass_cpu(gaussians, camera, settings, flux_scale(float(np.percentile(packed[rects[:, 1] > rects[:, 0], COC], 95))))
+        sharp = sharp_pass_cpu(gaussians, camera, settings, flux_scale(float(np.percentile(packed[visible, COC], 95))))
         factor = defocus_model.composite_factor(packed, rects, width, height)
         if factor > 1:
             packed, rects, width, height = defocus_model.coarse_view(packed, rects, width, height, factor)
