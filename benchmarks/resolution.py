@@ -58,20 +58,46 @@ def room_scene(gaussians: int, size: tuple[int, int], seed: int = 3) -> Scene:
     return Scene("resolution-room", room.gaussians, {"view": camera}, room.instances, up=room.up)
 
 
-def plant_scene(size: tuple[int, int]) -> Scene:
-    """The shared plant capture filling ~80 % of the frame's height, seen slightly from above (up = -y)."""
-    from spacedg.scene.io import read_splat
+def object_scene(path: Path, size: tuple[int, int], capture: tuple[int, int] | None, up: str = "-y") -> Scene:
+    """A Gaussians file (``.splat``/``.ply``/``.spz``, e.g. the shared plant) as one object filling ~80 % of
+    the frame's height, seen slightly from above; ``up`` is the file's up axis (the plant's is -y).
 
-    g = read_splat(SHARED / "plant" / "plant.splat")
+    ``capture``: the image size the Gaussians are taken to have been trained at (a file without
+    cameras does not say): the view's ``capture_focal`` is its focal at that size (``None``: classic
+    dilation, no capture scale; see :func:`spacedg.render.settings.footprint_dilation`)."""
+    from spacedg.scene.io import read_gaussians
+
+    axis = {"x": 0, "y": 1, "z": 2}[up[-1]]
+    up_vec = np.zeros(3)
+    up_vec[axis] = -1.0 if up.startswith("-") else 1.0
+    g = read_gaussians(path)
     lo, hi = np.percentile(g.means, 0.5, axis=0), np.percentile(g.means, 99.5, axis=0)
     centre, extent = 0.5 * (lo + hi), hi - lo
+    side = next(i for i in range(3) if i != axis)  # the camera looks along the third axis
+    depth_axis = 3 - axis - side
+    height_extent, depth_extent = extent[axis], extent[depth_axis]
     width, height = size
     focal = 0.75 * width
-    direction = np.array([0.0, -0.25, 1.0]) / np.linalg.norm([0.0, -0.25, 1.0])
-    distance = 0.5 * extent[1] * focal / (0.4 * height) + 0.5 * extent[2]
-    pose = look_at(centre + distance * direction, centre, np.array([0.0, -1.0, 0.0]))
-    camera = Camera(focal, focal, width / 2, height / 2, width, height, pose)
-    return Scene("resolution-plant", g, {"view": camera}, up=(0.0, -1.0, 0.0))
+    direction = np.zeros(3)
+    direction[depth_axis], direction[axis] = 1.0, 0.25 * up_vec[axis]
+    direction /= np.linalg.norm(direction)
+    distance = 0.5 * height_extent * focal / (0.4 * height) + 0.5 * depth_extent
+    pose = look_at(centre + distance * direction, centre, up_vec)
+    capture_focal = None if capture is None else (0.75 * capture[0], 0.75 * capture[0])
+    camera = Camera(focal, focal, width / 2, height / 2, width, height, pose, capture_focal=capture_focal)
+    return Scene("resolution-object", g, {"view": camera}, up=tuple(up_vec))
+
+
+def saved_scene(path: Path, size: tuple[int, int], view: str | None) -> Scene:
+    """A saved scene (``spacedg scenes import`` output), one view (``view``, default its middle one),
+    fitted to ``size`` (its own ``capture_focal``, set on import, keeps the trained look)."""
+    from spacedg.scene.io.native import load_scene
+
+    scene = load_scene(path)
+    names = sorted(scene.views)
+    name = view or names[len(names) // 2]
+    camera = scene.views[name].fitted(*size)
+    return Scene("resolution-saved", scene.gaussians, {"view": camera}, scene.instances, up=scene.up)
 
 
 def psnr_u8(a: np.ndarray, b: np.ndarray) -> float:
@@ -94,7 +120,12 @@ def pixel_params(provenance: list[dict]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scene", choices=("room", "plant"), default="room")
+    parser.add_argument("--scene", default="room",
+                        help="room | plant | a Gaussians file (.splat/.ply/.spz, framed as one object) | a saved scene folder")
+    parser.add_argument("--up", default="-y", help="a Gaussians file's up axis (+x..-z; the plant's is -y)")
+    parser.add_argument("--capture", default="high",
+                        help="WxH the Gaussians file was trained at ('high': the --high size; 'none': unknown, classic dilation)")
+    parser.add_argument("--view", default=None, help="a saved scene's view (default: its middle one)")
     parser.add_argument("--high", type=_size, default=(1920, 1080), help="WxH rendered and area-downsampled")
     parser.add_argument("--low", type=_size, default=(640, 360), help="WxH rendered directly (same aspect ratio)")
     parser.add_argument("--severities", default="bench,1,2,3,4,5")
@@ -107,7 +138,14 @@ def main() -> None:
     severities = [s.strip() for s in args.severities.split(",") if s.strip()]
     names = [d.strip() for d in args.degradations.split(",") if d.strip()]
     chains = ["clean"] + [f"{name}:{sev}" for name in names for sev in severities]
-    make = (lambda size: room_scene(args.gaussians, size)) if args.scene == "room" else plant_scene
+    capture = None if args.capture == "none" else (args.high if args.capture == "high" else _size(args.capture))
+    source = SHARED / "plant" / "plant.splat" if args.scene == "plant" else Path(args.scene)
+    if args.scene == "room":
+        make = lambda size: room_scene(args.gaussians, size)  # noqa: E731
+    elif source.is_dir():
+        make = lambda size: saved_scene(source, size, args.view)  # noqa: E731
+    else:
+        make = lambda size: object_scene(source, size, capture, args.up)  # noqa: E731
     results, timing = {}, {}
     settings = RasterSettings(antialiased=True) if args.antialiased else None
     for size in (args.high, args.low):
@@ -116,7 +154,9 @@ def main() -> None:
         results[size] = degrade_variants(scene, ["view"], chains, seed=args.seed, options=PipelineOptions(image_size=size, settings=settings))
         timing[size] = time.perf_counter() - t0
     (hw, hh), (lw, lh) = args.high, args.low
-    print(f"Resolution table: {args.scene} ({'%d Gaussians' % args.gaussians if args.scene == 'room' else 'plant capture'}), "
+    what = f"{args.gaussians} Gaussians" if args.scene == "room" else (
+        "saved scene, its own capture focal" if source.is_dir() else f"capture size {'unknown' if capture is None else '%dx%d' % capture}")
+    print(f"Resolution table: {args.scene} ({what}), "
           f"seed {args.seed}; PSNR dB of area-downsample({hw}x{hh}) vs {lw}x{lh}, 8-bit sRGB; goal >= {GOAL_DB:g} dB "
           f"(JPEG exempt); load average {os.getloadavg()[0]:.2f}; degrade time {timing[args.high]:.1f} s at high, "
           f"{timing[args.low]:.1f} s at low")

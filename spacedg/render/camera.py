@@ -154,6 +154,16 @@ class Camera:
             (at most 16384 a side and 2²⁵ pixels in all).
         cam_to_world: (4, 4) rigid transform, OpenCV camera axes, metres.
         fisheye: ``None`` for a pinhole camera, else the equidistant lens.
+        capture_focal: ``(fx, fy)`` pixels of the images the Gaussians were optimised on, when known
+            (the capture importers set it to the capture's own intrinsics; :meth:`resized` and
+            :meth:`fitted` keep it). 3DGS training dilates every footprint by ``eps2d`` (0.3 px²) in
+            *those* pixels, so that dilation is part of the trained model: rendered at focal ``fx``
+            (scale ``s = fx / capture fx``) it is ``eps2d · s²`` output px², and where ``s < 1`` a
+            low-pass of the capture pixels' area-average is added with the opacity compensated
+            (as Mip-Splatting's 2D filter), so a smaller render is the area-average of the native one (issue 29: size
+            invariance on real captures). ``None``: no training scale is known; the classic 3DGS
+            dilation (``eps2d`` in output pixels, uncompensated). See
+            :func:`spacedg.render.settings.footprint_dilation`.
     """
 
     fx: float
@@ -164,10 +174,19 @@ class Camera:
     height: int
     cam_to_world: np.ndarray = field(repr=False)
     fisheye: FisheyeLens | None = None
+    capture_focal: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         for name in ("fx", "fy", "cx", "cy"):
             object.__setattr__(self, name, finite_float(getattr(self, name), f"{_SOURCE}: {name}"))
+        if self.capture_focal is not None:
+            pair = tuple(self.capture_focal) if isinstance(self.capture_focal, (tuple, list, np.ndarray)) else ()
+            if len(pair) != 2:
+                raise InvalidDataError(f"{_SOURCE}: capture_focal must be (fx, fy) pixels or None, got {self.capture_focal!r}")
+            focal = tuple(finite_float(v, f"{_SOURCE}: capture_focal") for v in pair)
+            if min(focal) <= 0:
+                raise InvalidDataError(f"{_SOURCE}: capture_focal must be > 0 pixels, got {focal}")
+            object.__setattr__(self, "capture_focal", focal)
         if self.fx <= 0 or self.fy <= 0:
             raise InvalidDataError(f"{_SOURCE}: focal lengths must be > 0 pixels (got fx={self.fx}, fy={self.fy})")
         for name in ("width", "height"):
@@ -220,6 +239,11 @@ class Camera:
     def K(self) -> np.ndarray:  # noqa: N802 - the usual name of the intrinsics matrix
         """(3, 3) intrinsics matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def as_captured(self) -> Camera:
+        """This camera marked as the one the Gaussians were optimised on (``capture_focal`` = its own
+        focal lengths); a camera already marked is returned unchanged."""
+        return self if self.capture_focal is not None else replace(self, capture_focal=(self.fx, self.fy))
 
     def with_pose(self, cam_to_world: np.ndarray) -> Camera:
         """Same intrinsics and lens at another pose."""
@@ -309,6 +333,8 @@ class Camera:
                 k1=self.fisheye.k1, k2=self.fisheye.k2, k3=self.fisheye.k3, k4=self.fisheye.k4,
                 max_theta=self.fisheye.max_theta,
             )
+        if self.capture_focal is not None:
+            out["capture_focal"] = list(self.capture_focal)
         return out
 
     @classmethod
@@ -329,7 +355,7 @@ class Camera:
             )
         return cls(
             data["fx"], data["fy"], data["cx"], data["cy"], data["width"], data["height"],
-            np.asarray(data["cam_to_world"], dtype=np.float64), lens,
+            np.asarray(data["cam_to_world"], dtype=np.float64), lens, data.get("capture_focal"),
         )
 
 

@@ -72,9 +72,12 @@ def measurement_camera(camera: Any, margin: int, scale: float | None = None) -> 
     # and bottom edges more fully than those on its left and top (on an opaque wall, 2 % more light)
     width, height = max(1, math.ceil(camera.width * scale)), max(1, math.ceil(camera.height * scale))
     grow_x, grow_y = -width % 16, -height % 16
+    capture = camera.capture_focal
     return replace(
         camera, fx=camera.fx * scale, fy=camera.fy * scale,
         cx=camera.cx * scale + grow_x // 2, cy=camera.cy * scale + grow_y // 2, width=width + grow_x, height=height + grow_y,
+        # with eps2d × scale² (measurement_settings), the footprint_dilation of the full-resolution view, scaled
+        capture_focal=None if capture is None else (capture[0] * scale, capture[1] * scale),
     )
 
 

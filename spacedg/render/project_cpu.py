@@ -10,7 +10,9 @@ against gsplat's torch reference and against float64 finite differences):
    defocus also by the reach of the widest blurred footprint, ``defocus_extent · max_radius``
    px: a Gaussian outside the view whose blur reaches into it needs its true footprint), or
    equidistant fisheye with k1..k4 (rays beyond the lens's effective max θ are culled).
-4. ``+ eps2d·I`` dilation; optional antialiasing compensation; optional defocus
+4. the dilation of :func:`~spacedg.render.settings.footprint_dilation` (``+ eps2d·I`` classic; the
+   training dilation plus a compensated low-pass when the camera knows its capture's focal or
+   the render is antialiased); optional defocus
    (``+ r_CoC²·I`` with the sqrt-det opacity compensation taken after the dilation).
 5. alpha floor ``f = 1/255``, times the defocus compensation under defocus (a blurred
    Gaussian then keeps the same fraction of its energy as the sharp one; with a fixed 1/255
@@ -38,7 +40,7 @@ import numpy as np
 
 from spacedg.render.camera import equidistant_theta_d, equidistant_theta_d_slope
 from spacedg.render.gaussians import _SH_C1, _SH_C2, _SH_C3, SH_C0
-from spacedg.render.settings import DEFOCUS_MIN_COC, FOOTPRINT_CAP
+from spacedg.render.settings import DEFOCUS_MIN_COC, FOOTPRINT_CAP, footprint_dilation
 from spacedg.render.threads import fork_safe
 
 if TYPE_CHECKING:
@@ -145,7 +147,7 @@ def _project_kernel(
     view_rot, view_trans, cam_center, rot_norm,
     fx, fy, cx, cy, width, height,
     fisheye, k1, k2, k3, k4, theta_max,
-    near, far, eps2d, antialiased, opacity_extent,
+    near, far, model_x, model_y, filter_x, filter_y, opacity_extent,
     aperture, focus, max_coc, defocus_extent,
     packed, rects,
 ):  # pragma: no cover - compiled; covered through render() and the oracle tests
@@ -162,6 +164,8 @@ def _project_kernel(
     # alpha at the truncation per unit opacity, and 1 / the mass kept inside defocus_extent σ
     defocus_tail = math.exp(-0.5 * defocus_extent * defocus_extent) if defocus_extent > 0.0 else 0.0
     defocus_boost = 1.0 / (1.0 - defocus_tail)
+    filtered = filter_x > 0.0 or filter_y > 0.0
+    eps_cull = max(model_x + filter_x, model_y + filter_y)  # an upper bound of the dilation, for _surely_outside
     for i in numba.prange(n):
         for c in range(PACKED):
             packed[i, c] = 0.0
@@ -174,7 +178,7 @@ def _project_kernel(
         if not (z > near and z < far):
             continue
         if not fisheye and aperture <= 0.0 and _surely_outside(
-            x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos, eps2d
+            x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos, eps_cull
         ):
             continue
         # ---- 3D covariance in the camera frame: Σc = (W R S)(W R S)ᵀ
@@ -235,14 +239,18 @@ def _project_kernel(
         sxx = t00 * t00 + t01 * t01 + t02 * t02
         sxy = t00 * t10 + t01 * t11 + t02 * t12
         syy = t10 * t10 + t11 * t11 + t12 * t12
-        det_raw = sxx * syy - sxy * sxy
-        sxx += eps2d
-        syy += eps2d
-        det = sxx * syy - sxy * sxy
+        sxx += model_x
+        syy += model_y
         opacity = float(opacities[i])
         alpha_floor = 1.0 / 255.0
-        if antialiased:
-            opacity *= math.sqrt(max(det_raw / max(det, 1e-300), 0.0))
+        if filtered:  # footprint_dilation: a low-pass with the opacity (and, as under defocus, the floor) compensated
+            det_model = sxx * syy - sxy * sxy
+            sxx += filter_x
+            syy += filter_y
+            low_pass = math.sqrt(max(det_model / max(sxx * syy - sxy * sxy, 1e-300), 0.0))
+            opacity *= low_pass
+            alpha_floor *= low_pass
+        det = sxx * syy - sxy * sxy
         coc = 0.0
         if aperture > 0.0:
             coc = min(aperture * abs(z - focus) / z, max_coc)
@@ -330,7 +338,7 @@ def project_gaussians(
         camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height,
         lens is not None, *(lens.coeffs if lens else (0.0, 0.0, 0.0, 0.0)),
         lens.effective_max_theta if lens else math.pi,
-        settings.near, settings.far, settings.eps2d, settings.antialiased, settings.opacity_extent,
+        settings.near, settings.far, *footprint_dilation(camera, settings), settings.opacity_extent,
         defocus.aperture if defocus else 0.0, defocus.focus if defocus else 1.0, defocus.max_radius if defocus else 0.0,
         settings.defocus_extent or 0.0,
         packed, rects,

@@ -16,7 +16,7 @@ import torch
 
 from spacedg.render.camera import Camera, equidistant_theta_d, equidistant_theta_d_slope
 from spacedg.render.gaussians import Gaussians, quat_to_matrix, sh_basis
-from spacedg.render.settings import ALPHA_MIN, DEFOCUS_MIN_COC, FOOTPRINT_CAP, TILE_SIZE, Defocus, RasterSettings
+from spacedg.render.settings import ALPHA_MIN, DEFOCUS_MIN_COC, FOOTPRINT_CAP, TILE_SIZE, Defocus, RasterSettings, footprint_dilation
 
 _TENSOR_CACHE: "weakref.WeakKeyDictionary[Gaussians, dict]" = weakref.WeakKeyDictionary()
 
@@ -195,14 +195,17 @@ def project_gaussians(
     jac = jac.to(wide)
     cov2d = small_matmul(small_matmul(jac, cov_cam), jac.transpose(-1, -2))
     sxx, sxy, syy = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
-    det_raw = sxx * syy - sxy * sxy
-    sxx, syy = sxx + settings.eps2d, syy + settings.eps2d
-    det = sxx * syy - sxy * sxy
+    model_x, model_y, filter_x, filter_y = footprint_dilation(camera, settings)
+    sxx, syy = sxx + model_x, syy + model_y
     opacity = gs.opacities.to(wide)
     alpha_floor = torch.full_like(opacity, ALPHA_MIN)
+    if filter_x > 0.0 or filter_y > 0.0:  # a low-pass with the opacity (and, as under defocus, the floor) compensated
+        det_model = sxx * syy - sxy * sxy
+        sxx, syy = sxx + filter_x, syy + filter_y
+        low_pass = torch.sqrt(torch.clamp(det_model / (sxx * syy - sxy * sxy), min=0.0))
+        opacity, alpha_floor = opacity * low_pass, alpha_floor * low_pass
+    det = sxx * syy - sxy * sxy
     coc = torch.zeros_like(opacity)
-    if settings.antialiased:
-        opacity = opacity * torch.sqrt(torch.clamp(det_raw / det, min=0.0))
     if defocus is not None and defocus.aperture > 0:
         z_w = cam_safe[:, 2].to(wide)
         coc = torch.clamp(defocus.aperture * torch.abs(z_w - defocus.focus) / z_w, max=defocus.max_radius)

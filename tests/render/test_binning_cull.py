@@ -13,6 +13,7 @@ import numpy as np
 from spacedg.render import RasterSettings, project_cpu, raster_cpu
 from spacedg.render.camera import Camera, look_at
 from spacedg.render.project_cpu import AMIN, CA, CB, CC, DEPTH, OPA, PACKED, PX, PY
+from spacedg.render.settings import footprint_dilation
 from tests.render_helpers import random_gaussians
 
 W, H, TX, TY = 320, 240, 20, 15
@@ -74,7 +75,7 @@ def test_pre_cull_changes_no_projection() -> None:
         g.means, g.quats, g.scales, g.opacities, g.sh, g.sh_degree, True,
         np.ascontiguousarray(view[:3, :3]), np.ascontiguousarray(view[:3, 3]), np.array(cam.center), math.inf,
         cam.fx, cam.fy, cam.cx, cam.cy, W, H, False, 0.0, 0.0, 0.0, 0.0, math.pi,
-        s.near, s.far, s.eps2d, s.antialiased, s.opacity_extent, 0.0, 1.0, 0.0, s.defocus_extent or 0.0,
+        s.near, s.far, *footprint_dilation(cam, s), s.opacity_extent, 0.0, 1.0, 0.0, s.defocus_extent or 0.0,
         ref_packed, ref_rects,
     )
     np.testing.assert_array_equal(packed, ref_packed)

@@ -115,14 +115,18 @@ def find_cameras(path: Path) -> CameraFiles:
 
 
 def read_cameras(files: CameraFiles, opencv_distortion: Literal["error", "drop"] = "error") -> dict[str, Camera]:
-    """The cameras of ``files`` (name → :class:`Camera`, OpenCV axes, file units)."""
+    """The cameras of ``files`` (name → :class:`Camera`, OpenCV axes, file units), each marked as the
+    capture's own (:meth:`Camera.as_captured`: the Gaussians were trained on these images, so a render
+    at another size keeps their look, :func:`spacedg.render.settings.footprint_dilation`)."""
     if files.kind == "inria":
-        return read_inria_cameras(files.read_path)
-    if files.kind == "nerfstudio":
-        return read_transforms(files.read_path, opencv_distortion=opencv_distortion)
-    if files.kind == "scannetpp-iphone":
-        return read_pose_intrinsic_imu(files.read_path)
-    return read_colmap(files.read_path, opencv_distortion=opencv_distortion)
+        cameras = read_inria_cameras(files.read_path)
+    elif files.kind == "nerfstudio":
+        cameras = read_transforms(files.read_path, opencv_distortion=opencv_distortion)
+    elif files.kind == "scannetpp-iphone":
+        cameras = read_pose_intrinsic_imu(files.read_path)
+    else:
+        cameras = read_colmap(files.read_path, opencv_distortion=opencv_distortion)
+    return {name: camera.as_captured() for name, camera in cameras.items()}
 
 
 def scale_views(views: Mapping[str, Camera], scale: float) -> dict[str, Camera]:
