@@ -37,6 +37,7 @@ def _round_trip(folder: Path, n_instances: int) -> None:
     assert scene.gaussians.instance_ids is not None, "the importer gives the Gaussians instance ids"
     assert len(scene.instances) == n_instances
     cam = next(iter(scene.views.values()))
+    assert all(v.capture_focal == (v.fx, v.fy) for v in scene.views.values()), "imported views are the capture's own"
     assert (render(scene.gaussians, cam.resized(80, 60), outputs="alpha").alpha > 0.5).mean() > 0.5
     qa = build_scene_index(folder, QA, progress=False)
     types = set(qa.counts())

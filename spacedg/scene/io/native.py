@@ -210,6 +210,18 @@ def _instances(record: dict[str, Any], where: str) -> list[Instance]:
     return out
 
 
+def _imported_from_capture_files(metadata: dict) -> bool:
+    """Whether the scene's views were read from a capture's camera files (``metadata.source.cameras``
+    of ``spacedg scenes import``, or ``.views`` of ``scene_from_files``, a path): their cameras are then
+    the capture's own, which scenes saved before ``Camera.capture_focal`` existed did not record
+    (:meth:`Camera.as_captured` keeps a recorded one)."""
+    source = metadata.get("source")
+    if not isinstance(source, dict):
+        return False
+    files = source.get("cameras", source.get("views"))
+    return isinstance(files, str) and files not in ("", "<memory>")
+
+
 def load_scene(path: PathLike) -> Scene:
     """Load a native scene folder (or its ``scene.json``); the Gaussians load lazily.
 
@@ -235,6 +247,8 @@ def load_scene(path: PathLike) -> Scene:
     metadata = record.get("metadata", {})
     if not isinstance(metadata, dict):
         raise FileFormatError(f"{where}: 'metadata' must be an object")
+    if _imported_from_capture_files(metadata):
+        views = {name: camera.as_captured() for name, camera in views.items()}
     try:
         return Scene(scene_id, source, views, instances, up, vocabulary, metadata)
     except (InvalidDataError, TypeError, ValueError) as err:

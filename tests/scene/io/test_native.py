@@ -261,3 +261,16 @@ def test_written_files_get_the_usual_permissions(tmp_path) -> None:
     finally:
         os.umask(umask)
     assert (tmp_path / "a.bin").stat().st_mode & 0o777 == 0o644
+
+
+def test_a_capture_saved_without_capture_focal_loads_as_captured(tmp_path: Path) -> None:
+    """Scenes imported before ``Camera.capture_focal`` existed: their views are the capture's own
+    (metadata ``source.cameras``/``views`` a path), so they load marked; built-in or in-memory views do not."""
+    imported = make_scene()
+    imported.metadata["source"] = {"cameras": "/data/capture/sparse/0", "gaussians": "/data/capture/point_cloud.ply"}
+    save_scene(imported, tmp_path / "imported")
+    assert "capture_focal" not in json.loads((tmp_path / "imported" / "scene.json").read_text())["views"]["front"]
+    back = load_scene(tmp_path / "imported")
+    assert all(v.capture_focal == (v.fx, v.fy) for v in back.views.values())
+    save_scene(make_scene(), tmp_path / "plain")
+    assert all(v.capture_focal is None for v in load_scene(tmp_path / "plain").views.values())
