@@ -250,6 +250,8 @@ def _project_kernel(
             low_pass = math.sqrt(max(det_model / max(sxx * syy - sxy * sxy, 1e-300), 0.0))
             opacity *= low_pass
             alpha_floor *= low_pass
+            if not alpha_floor > 0.0:  # a degenerate (zero-area) Gaussian: nothing left to draw
+                continue
         det = sxx * syy - sxy * sxy
         coc = 0.0
         if aperture > 0.0:

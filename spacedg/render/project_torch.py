@@ -237,7 +237,7 @@ def project_gaussians(
         (means2d[:, 0] + radii[:, 0] > 0) & (means2d[:, 0] - radii[:, 0] < camera.width)
         & (means2d[:, 1] + radii[:, 1] > 0) & (means2d[:, 1] - radii[:, 1] < camera.height)
     )
-    keep = in_range & lens_ok & opaque_enough & finite & on_screen & (radii > 0).all(-1)
+    keep = in_range & lens_ok & opaque_enough & finite & on_screen & (radii > 0).all(-1) & (alpha_floor > 0)  # as the CPU path
     tiles_x = (camera.width + TILE_SIZE - 1) // TILE_SIZE
     tiles_y = (camera.height + TILE_SIZE - 1) // TILE_SIZE
     lo = torch.floor((means2d.to(wide) - radii) / TILE_SIZE)
