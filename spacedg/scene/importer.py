@@ -75,6 +75,7 @@ from spacedg.scene.io.capture import (
 from spacedg.scene.io.embodiedscan import read_embodiedscan_boxes
 from spacedg.scene.io.holispatial import find_release_boxes, is_release_scene, rle_masks
 from spacedg.scene.io.inria import (
+    at_training_scale,
     is_inria_output,
     latest_point_cloud,
     read_cfg_args,
@@ -280,6 +281,8 @@ class _Parts:
     to_scan: tuple[np.ndarray, frozenset[str]] | None = None
     #: ScanNet++'s iPhone ARKit poses, compared with the (COLMAP-refined) cameras used when both exist.
     arkit: Path | None = None
+    #: an INRIA output's ``cfg_args`` ``resolution`` (the size its Gaussians were trained at); ``None``: not an INRIA output.
+    inria_resolution: Any = None
 
 
 def _inria_cameras(src: Path, notes: list[str]) -> CameraFiles:
@@ -344,7 +347,9 @@ def _resolve_parts(
         dataparser = gpath.parent / "dataparser_transforms.json"
         notes.append(f"found {dataparser.name} next to the Gaussians: they are a splatfacto export in nerfstudio's normalised frame")
     applied = read_applied_transform(files.read_path) if files.kind == "nerfstudio" else None
-    return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes, to_scan, arkit)
+    cfg = src / "cfg_args" if layout.name in ("inria", "holi-spatial") else None
+    resolution = read_cfg_args(cfg).get("resolution", -1) if cfg is not None and cfg.is_file() else None
+    return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes, to_scan, arkit, resolution)
 
 
 def _scannetpp_parts(
@@ -539,6 +544,10 @@ def _read_capture(
     gauss = read_gaussians(parts.gaussians_path)
     seconds = time.perf_counter() - t0
     views, test_views = read_cameras(parts.cameras, opencv_distortion), parts.cameras.test_frames()
+    if parts.inria_resolution is not None:
+        views, note = at_training_scale(views, parts.inria_resolution)
+        if note:
+            parts.notes.append(note)
     if parts.dataparser is not None:
         transform, scale = read_dataparser_transforms(parts.dataparser)
         rot, trans, k = denormalising_similarity(transform, scale)

@@ -64,8 +64,13 @@ def test_inria_colmap_holi_spatial(tmp_path: Path, room) -> None:
     _round_trip(tmp_path / "scene", len(room.instances))
     # without the COLMAP model: cameras.json (principal point at the centre, as INRIA assumes)
     shutil.rmtree(tmp_path / "data")
-    _, report = import_scene(out, tmp_path / "scene2", instances=tmp_path / "holi.json", progress=False)
+    # trained with -r 2: the cameras' capture focal is taken at half the images' size
+    (out / "cfg_args").write_text((out / "cfg_args").read_text().replace("resolution=-1", "resolution=2"))
+    scene2, report = import_scene(out, tmp_path / "scene2", instances=tmp_path / "holi.json", progress=False)
     assert report.cameras_path.endswith("cameras.json") and report.frame.ok
+    assert "trained at" in report.text()
+    for view in load_scene(tmp_path / "scene2").views.values():
+        assert view.capture_focal == pytest.approx((view.fx * round(view.width / 2) / view.width, view.fy * round(view.width / 2) / view.width))
     with pytest.raises(ParameterError, match="already exists"):
         import_scene(out, tmp_path / "scene2", progress=False)
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 import ast
 import math
 import re
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +37,7 @@ from spacedg.files import FileValueError, PathLike, as_path, read_json
 from spacedg.render.camera import Camera
 from spacedg.scene.io.fields import matrix_field, named_record
 
-__all__ = ["read_inria_cameras", "read_cfg_args", "latest_point_cloud", "is_inria_output"]
+__all__ = ["read_inria_cameras", "read_cfg_args", "latest_point_cloud", "is_inria_output", "training_width", "at_training_scale"]
 
 _ITERATION = re.compile(r"^iteration_(\d+)$")
 #: Largest |RᵀR − I| accepted for a cameras.json rotation.
@@ -87,6 +88,35 @@ def read_cfg_args(path: PathLike) -> dict[str, Any]:
         except ValueError:
             out[keyword.arg] = None  # not a literal (never evaluated)
     return out
+
+
+def training_width(width: int, resolution: Any) -> int:
+    """The width (px) INRIA 3DGS trained on for an image ``width`` px wide, from ``cfg_args``'
+    ``resolution`` (``-r``): 1, 2, 4 or 8 divide the image (rounded); -1 (the default) keeps it up
+    to 1600 px and scales wider images down to 1600; any other positive value is the width itself
+    (``utils/camera_utils.loadCam``). An unreadable value keeps the image's width."""
+    if isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not math.isfinite(resolution):
+        return int(width)
+    if resolution in (1, 2, 4, 8):
+        return max(1, round(width / resolution))
+    if resolution == -1:
+        return min(int(width), 1600)
+    return max(1, int(resolution)) if resolution > 0 else int(width)
+
+
+def at_training_scale(views: dict[str, Camera], resolution: Any) -> tuple[dict[str, Camera], str | None]:
+    """``views`` with ``capture_focal`` at the size INRIA 3DGS trained on (:func:`training_width`), and a
+    note saying so when that differs from the images' size (else the views unchanged and ``None``)."""
+    out, scaled = {}, set()
+    for name, camera in views.items():
+        scale = training_width(camera.width, resolution) / camera.width
+        out[name] = replace(camera, capture_focal=(camera.fx * scale, camera.fy * scale))
+        if scale != 1.0:
+            scaled.add(training_width(camera.width, resolution))
+    if not scaled:
+        return out, None
+    return out, (f"Gaussians trained at {', '.join(map(str, sorted(scaled)))} px wide (cfg_args resolution {resolution!r}, "
+                 "INRIA's rule): the cameras' capture focal is taken at that size")
 
 
 def _number(where: str, key: str, value: Any, positive: bool = True) -> float:

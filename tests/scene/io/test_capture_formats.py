@@ -233,3 +233,17 @@ def test_bad_spz_and_ksplat(tmp_path: Path) -> None:
     (tmp_path / "d.ksplat").write_bytes(b"\0" * 64)
     with pytest.raises(FileFormatError, match=r"\.ksplat.*not read"):
         read_gaussians(tmp_path / "d.ksplat")
+
+
+def test_inria_training_width_follows_its_resolution_rule() -> None:
+    from spacedg.render.camera import Camera
+    from spacedg.scene.io.inria import at_training_scale, training_width
+
+    assert training_width(1752, -1) == 1600 and training_width(1200, -1) == 1200  # the default caps at 1600 px
+    assert training_width(1753, 2) == 876 and training_width(1000, 8) == 125       # -r 1/2/4/8 divide (rounded)
+    assert training_width(1920, 800) == 800 and training_width(1920, None) == 1920  # a width; unreadable: the image's
+    cam = Camera(1000.0, 1000.0, 876.0, 584.0, 1752, 1168, np.eye(4))
+    views, note = at_training_scale({"a": cam}, -1)
+    assert views["a"].capture_focal == pytest.approx((1000.0 * 1600 / 1752,) * 2) and "1600" in note
+    views, note = at_training_scale({"a": cam.resized(800, 533)}, -1)
+    assert views["a"].capture_focal == (views["a"].fx, views["a"].fy) and note is None
