@@ -342,6 +342,36 @@ def _fresnel_ratio(cos_i: torch.Tensor, index: float) -> torch.Tensor:
     return (1.0 - 0.5 * (r_s + r_p)) / (1.0 - r_0)
 
 
+def _box_means(rgb: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor, spread: torch.Tensor) -> torch.Tensor:
+    """The mean of ``rgb`` over the ``spread``-px square centred on each (mirrored) source point, as the
+    CPU path's ``_box_kernel``: a float64 summed-area table of the ``BORDER_REFLECT``-padded frame,
+    sampled bilinearly at the four corners."""
+    from spacedg.plugins.degradations.water_droplets import box_pad
+
+    height, width = rgb.shape[:2]
+    pad = box_pad(float(spread.max()), (height, width))
+    padded = _symmetric_pad(rgb.double().permute(2, 0, 1), pad)
+    full_h, full_w = padded.shape[1:]
+    sat = torch.zeros((3, full_h + 1, full_w + 1), dtype=torch.float64, device=rgb.device)
+    sat[:, 1:, 1:] = padded.cumsum(1).cumsum(2)
+
+    def mirror(x: torch.Tensor, size: int) -> torch.Tensor:
+        x = x - 2.0 * size * torch.floor(x / (2.0 * size))
+        return torch.where(x > size, 2.0 * size - x, x)
+
+    u, v, half = mirror(map_x.double() + 0.5, width) + pad, mirror(map_y.double() + 0.5, height) + pad, 0.5 * spread.double()
+    u0, u1 = torch.clamp(u - half, min=0.0), torch.clamp(u + half, max=float(full_w))
+    v0, v1 = torch.clamp(v - half, min=0.0), torch.clamp(v + half, max=float(full_h))
+
+    def at(vv: torch.Tensor, uu: torch.Tensor) -> torch.Tensor:  # nodes at 0..size: align_corners=True
+        grid = torch.stack([uu / full_w * 2 - 1, vv / full_h * 2 - 1], dim=-1)
+        return F.grid_sample(sat[None], grid[None], mode="bilinear", padding_mode="border", align_corners=True)[0]
+
+    total = at(v1, u1) - at(v0, u1) - at(v1, u0) + at(v0, u0)
+    area = torch.clamp((u1 - u0) * (v1 - v0), min=1e-12)
+    return (total / area).permute(1, 2, 0).float()
+
+
 def droplet_composite_torch(
     rgb: torch.Tensor, drops: tuple[np.ndarray, ...], reach: float, index: float, blur_sigma: float, blur_kernel: int, *,
     specular: float, rim: float, edge: float, light: tuple[float, float, float], shininess_log2: int,
@@ -394,6 +424,9 @@ def droplet_composite_torch(
     grid = torch.stack([(map_x.double() + 0.5) / width * 2 - 1, (map_y.double() + 0.5) / height * 2 - 1], dim=-1).float()
     seen = F.grid_sample(rgb.permute(2, 0, 1)[None], grid[None], mode="bilinear", padding_mode="reflection", align_corners=False)
     seen = seen[0].permute(1, 2, 0)
+    spread = torch.where(drop, torch.abs(1.0 - reach / best_r), torch.zeros_like(best_r)).float()
+    if bool((spread > 1.0).any()):  # minifying drops: the mean over the square each pixel spans (refracted_view)
+        seen = torch.where((spread > 1.0)[..., None], _box_means(rgb, map_x, map_y, spread), seen)
     if blur_kernel > 1 and blur_sigma > 0.0:
         seen = gaussian_blur_reflect(seen, blur_kernel, blur_sigma)
     through = a * (1.0 - float(rim) * (1.0 - trans))

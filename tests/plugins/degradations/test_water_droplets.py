@@ -15,6 +15,7 @@ from spacedg.plugins.degradations.water_droplets import (
     SPECULAR_INTENSITY,
     droplet_field,
     fresnel_ratio,
+    refracted_view,
     refraction_reach,
     water_droplets,
 )
@@ -122,21 +123,27 @@ def test_refraction_flips_and_minifies() -> None:
     out = water_droplets(image, 1.5, 1.0, 0.4, 0.0, 1, np.random.default_rng(0), specular=0.0, rim=0.0)[..., 0]
     core = field.alpha == 1.0
     pairs = core[:, 1:] & core[:, :-1] & (np.abs(np.diff(field.height, axis=1)) < 2.0)
-    pairs &= (field.map_x[:, 1:] > 0) & (field.map_x[:, :-1] < 95) & (field.map_x[:, 1:] < 95) & (field.map_x[:, :-1] > 0)
+    # the square each pixel averages (its spread, where the drop minifies) stays inside the frame
+    lo, hi = field.map_x - 0.5 * np.maximum(field.spread, 1.0), field.map_x + 0.5 * np.maximum(field.spread, 1.0)
+    pairs &= (lo[:, 1:] > 0) & (hi[:, :-1] < 95) & (hi[:, 1:] < 95) & (lo[:, :-1] > 0)
     steps = np.diff(field.map_x, axis=1)  # source px per image px: 1 − strength·F/r, constant across one drop
     inside = pairs[:, 1:] & pairs[:, :-1] & (np.abs(np.diff(steps, axis=1)) < 1e-3)  # two steps alike: not a drop's edge
     step = steps[:, 1:][inside]
     assert inside.sum() > 200 and np.all(step < 0.0) and np.median(step) < -1.0, "every drop flips, most minify"
-    np.testing.assert_allclose(np.diff(out, axis=1)[:, 1:][inside] * 64.0, step, atol=2e-3)
+    # a magnifying pixel samples the ramp bilinearly (exact); a minifying one averages its square of the
+    # pixel staircase, which follows the ramp once the square spans a few pixels (not near 1 px)
+    clear = inside & ((field.spread[:, 1:-1] <= 1.0) | (field.spread[:, 1:-1] >= 4.0))
+    assert clear.sum() > 200
+    np.testing.assert_allclose(np.diff(out, axis=1)[:, 1:][clear] * 64.0, steps[:, 1:][clear], atol=0.05)
     assert refraction_reach((64, 96), 0.4) == pytest.approx(0.4 * 96)
     plain = water_droplets(image, 1.5, 1.0, 0.0, 0.0, 1, np.random.default_rng(0), specular=0.0, rim=0.0)
     np.testing.assert_allclose(plain, image, atol=1e-6)  # strength 0: the scene behind, undeviated
 
 
 def _refracted_background(image: np.ndarray, params: dict, seed: int) -> tuple[object, np.ndarray]:
-    """The drop field and what the scene behind carries through it, lossless: ``(1 − α) I + α blur(remap(I))``."""
+    """The drop field and what the scene behind carries through it, lossless: ``(1 − α) I + α blur(refracted(I))``."""
     field = droplet_field(image.shape[:2], params["scale"], params["radius"], params["strength"], np.random.default_rng(seed))
-    seen = cv2.remap(image, field.map_x, field.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    seen = refracted_view(image, field)
     k, sigma = params["blur_kernel"], params["blur_sigma"]
     if k > 1 and sigma > 0:
         seen = cv2.GaussianBlur(seen, (k, k), sigma, borderType=cv2.BORDER_REFLECT)
@@ -275,3 +282,21 @@ def test_input_not_modified() -> None:
     assert image.tobytes() == before.tobytes()
     strided = _textured(96, 256)[:, ::2]  # non-contiguous view
     assert _apply(strided).shape == strided.shape
+
+
+def test_a_minifying_drop_shows_the_mean_of_what_it_spans() -> None:
+    """A drop that minifies k× shows, at each pixel, the mean of the k × k source pixels it spans (a lens
+    integrates; a point sample would alias). Over a 1-px checkerboard every pixel whose square spans
+    ≥ 4 × 4 source pixels reads within 0.1 of the board's mean; a bilinear point sample reads 0 or 1."""
+    y, x = np.mgrid[0:72, 0:128]
+    board = np.repeat(((x + y) % 2).astype(np.float32)[..., None], 3, axis=-1)
+    field = droplet_field(board.shape[:2], 3.0, 0.5, 0.4, np.random.default_rng(3))
+    seen = refracted_view(board, field)
+    wide = field.spread >= 4.0
+    assert wide.sum() > 100
+    assert np.abs(seen[wide] - 0.5).max() < 0.1
+    point = cv2.remap(board, field.map_x, field.map_y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_REFLECT)
+    assert np.abs(point[wide] - 0.5).min() > 0.4
+    # over a constant scene the mean is the constant (exact, edges and reflections included)
+    flat = refracted_view(np.full_like(board, 0.3), field)
+    np.testing.assert_allclose(flat, 0.3, rtol=1e-5)
