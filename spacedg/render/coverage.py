@@ -31,8 +31,10 @@ if TYPE_CHECKING:
 
 __all__ = ["MIN_COVERED", "CoverageLostError", "captured_share", "coverage_problem", "covered_share", "pixel_rays"]
 
-#: Longest side of the pixel grid :func:`captured_share` samples (pixel centres, evenly spread).
-SHARE_GRID = 160
+#: Longest side of the pixel grid :func:`captured_share` samples (pixel centres, evenly spread): 64 resolves
+#: the share to ~1 % at a sixth of the cost of 160 (the fisheye inverse on every sample was 35 % of a
+#: 640×480 distortion sample).
+SHARE_GRID = 64
 
 
 def pixel_rays(camera: Camera, cols: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
