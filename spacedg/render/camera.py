@@ -66,6 +66,11 @@ def fitted_size(view_width: int, view_height: int, box_width: int, box_height: i
     return (bw if abs(bw - exact) <= 1.0 else min(bw, max(1, round(exact)))), bh
 
 
+#: ``capture_focal`` / the camera's own focal, per axis: a capture rendered 10⁴× smaller or larger
+#: than it was trained is refused (beyond, the training dilation ``0.3·s²`` px² stops being a render).
+CAPTURE_SCALE_RANGE = (1e-4, 1e4)
+
+
 @dataclass(frozen=True)
 class FisheyeLens:
     """Equidistant fisheye distortion (OpenCV fisheye model).
@@ -184,8 +189,13 @@ class Camera:
             if len(pair) != 2:
                 raise InvalidDataError(f"{_SOURCE}: capture_focal must be (fx, fy) pixels or None, got {self.capture_focal!r}")
             focal = tuple(finite_float(v, f"{_SOURCE}: capture_focal") for v in pair)
-            if min(focal) <= 0:
-                raise InvalidDataError(f"{_SOURCE}: capture_focal must be > 0 pixels, got {focal}")
+            ratios = (focal[0] / self.fx, focal[1] / self.fy) if min(focal) > 0 else (0.0, 0.0)
+            if not all(CAPTURE_SCALE_RANGE[0] <= r <= CAPTURE_SCALE_RANGE[1] for r in ratios):
+                raise InvalidDataError(
+                    f"{_SOURCE}: capture_focal {focal} px must be > 0 and within {CAPTURE_SCALE_RANGE[0]:g}–"
+                    f"{CAPTURE_SCALE_RANGE[1]:g}× the camera's own focal lengths ({self.fx:g}, {self.fy:g}); it is the "
+                    "focal of the images the Gaussians were trained on"
+                )
             object.__setattr__(self, "capture_focal", focal)
         if self.fx <= 0 or self.fy <= 0:
             raise InvalidDataError(f"{_SOURCE}: focal lengths must be > 0 pixels (got fx={self.fx}, fy={self.fy})")

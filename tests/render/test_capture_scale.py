@@ -67,6 +67,6 @@ def test_the_capture_focal_is_kept_saved_and_checked() -> None:
     assert cam.fitted(30, 30).capture_focal == cam.capture_focal
     assert Camera.from_dict(cam.to_dict()).capture_focal == cam.capture_focal
     assert "capture_focal" not in camera(90, 60).to_dict()
-    for bad in ((1.0,), (0.0, 5.0), (float("nan"), 3.0), "wide"):
+    for bad in ((1.0,), (0.0, 5.0), (float("nan"), 3.0), "wide", (1e-300, 1e-300), (1e300, 1e300), (cam.fx * 2e4, cam.fy)):
         with pytest.raises(InvalidDataError, match="capture_focal"):
             replace(cam, capture_focal=bad)
