@@ -79,7 +79,9 @@ def scene_from_files(
         gaussians_path: ``.ply`` (INRIA 3DGS), ``.splat`` or ``.spz``; loaded lazily on first use when
             there are no instances (the box checks need the Gaussians' centres).
         views: a COLMAP model folder, a ``transforms.json`` (or its folder), an INRIA
-            ``cameras.json``, or a mapping name → Camera (see :func:`read_views`).
+            ``cameras.json``, or a mapping name → Camera (see :func:`read_views`). Camera files are
+            the capture's own (their ``capture_focal`` is set); a mapping's cameras are used as given
+            (mark them with :meth:`Camera.as_captured` when the Gaussians were trained on them).
         instances_path: instance JSON (:func:`read_instances`, Holi-Spatial's layout included);
             image references must resolve to views.
         up: ``None``/``"auto"`` (estimated from the cameras, else the boxes), an axis (``"+z"``) or three
