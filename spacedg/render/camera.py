@@ -164,11 +164,11 @@ class Camera:
             :meth:`fitted` keep it). 3DGS training dilates every footprint by ``eps2d`` (0.3 px²) in
             *those* pixels, so that dilation is part of the trained model: rendered at focal ``fx``
             (scale ``s = fx / capture fx``) it is ``eps2d · s²`` output px², and where ``s < 1`` a
-            low-pass of the capture pixels' area-average is added with the opacity compensated
-            (as Mip-Splatting's 2D filter), so a smaller render is the area-average of the native one (issue 29: size
-            invariance on real captures). ``None``: no training scale is known; the classic 3DGS
-            dilation (``eps2d`` in output pixels, uncompensated). See
-            :func:`spacedg.render.settings.footprint_dilation`.
+            low-pass of the capture pixels' area-average is added with the opacity compensated (as
+            Mip-Splatting's 2D filter), so a smaller render is the area-average of the native one
+            (issue 29: size invariance on real captures). Within 10⁻⁴–10⁴× the camera's own focal.
+            ``None``: no training scale is known; the classic 3DGS dilation (``eps2d`` in output
+            pixels, uncompensated). See :func:`spacedg.render.settings.footprint_dilation`.
     """
 
     fx: float
@@ -184,6 +184,8 @@ class Camera:
     def __post_init__(self) -> None:
         for name in ("fx", "fy", "cx", "cy"):
             object.__setattr__(self, name, finite_float(getattr(self, name), f"{_SOURCE}: {name}"))
+        if self.fx <= 0 or self.fy <= 0:
+            raise InvalidDataError(f"{_SOURCE}: focal lengths must be > 0 pixels (got fx={self.fx}, fy={self.fy})")
         if self.capture_focal is not None:
             pair = tuple(self.capture_focal) if isinstance(self.capture_focal, (tuple, list, np.ndarray)) else ()
             if len(pair) != 2:
@@ -197,8 +199,6 @@ class Camera:
                     "focal of the images the Gaussians were trained on"
                 )
             object.__setattr__(self, "capture_focal", focal)
-        if self.fx <= 0 or self.fy <= 0:
-            raise InvalidDataError(f"{_SOURCE}: focal lengths must be > 0 pixels (got fx={self.fx}, fy={self.fy})")
         for name in ("width", "height"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or int(value) < 1:
