@@ -369,7 +369,9 @@ def _box_means(rgb: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor, spre
 
     total = at(v1, u1) - at(v0, u1) - at(v1, u0) + at(v0, u0)
     area = torch.clamp((u1 - u0) * (v1 - v0), min=1e-12)
-    return (total / area).permute(1, 2, 0).float()
+    flat = rgb.double().reshape(-1, 3)  # a mean never leaves the frame's range (large sums lose digits)
+    lo, hi = flat.min(dim=0).values[:, None, None], flat.max(dim=0).values[:, None, None]
+    return torch.minimum(torch.maximum(total / area, lo), hi).permute(1, 2, 0).float()
 
 
 def droplet_composite_torch(

@@ -400,14 +400,16 @@ def droplet_field(
 @fork_safe
 @numba.njit(parallel=True, cache=True)
 def _box_kernel(
-    sat: np.ndarray, pad: int, map_x: np.ndarray, map_y: np.ndarray, spread: np.ndarray, out: np.ndarray,
+    sat: np.ndarray, pad: int, map_x: np.ndarray, map_y: np.ndarray, spread: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+    out: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """Where ``spread > 1``: ``out`` = the mean of the scene over the ``spread``-px square centred on the
     source point (mirrored into the frame as ``BORDER_REFLECT`` does), from ``sat``, the summed-area
     table ((H + 2 pad + 1, W + 2 pad + 1, 3) float64) of the frame padded by ``pad`` px with
     ``BORDER_REFLECT``: the table interpolated bilinearly between its nodes is the exact integral of
     the pixels as constant squares, so the mean is exact for a fractional square (cut at the padding's
-    edge beyond ``pad``)."""
+    edge beyond ``pad``). A mean never leaves the frame's range per channel, ``[lo, hi]``: it is clamped
+    there (differences of large sums lose digits when the frame holds huge values, e.g. 1e30)."""
     full_h, full_w = sat.shape[0] - 1, sat.shape[1] - 1
     height, width = full_h - 2 * pad, full_w - 2 * pad
     for i in numba.prange(out.shape[0]):
@@ -425,7 +427,7 @@ def _box_kernel(
                 continue
             for ch in range(3):
                 total = _sat_at(sat, v1, u1, ch) - _sat_at(sat, v0, u1, ch) - _sat_at(sat, v1, u0, ch) + _sat_at(sat, v0, u0, ch)
-                out[i, j, ch] = total / area
+                out[i, j, ch] = min(max(total / area, lo[ch]), hi[ch])
 
 
 @numba.njit(cache=True, inline="always")
@@ -473,7 +475,9 @@ def refracted_view(rgb: np.ndarray, field: DropletField) -> np.ndarray:
     if widest > 1.0:
         pad = box_pad(widest, rgb.shape[:2])
         sat = _padded_sat(rgb, reflect_index(rgb.shape[0], pad), reflect_index(rgb.shape[1], pad))
-        _box_kernel(sat, pad, field.map_x, field.map_y, field.spread, seen)
+        flat = rgb.reshape(-1, 3)
+        _box_kernel(sat, pad, field.map_x, field.map_y, field.spread, flat.min(axis=0).astype(np.float64),
+                    flat.max(axis=0).astype(np.float64), seen)
     return seen
 
 
