@@ -112,6 +112,16 @@ def test_sensor_noise_is_drawn_on_photosites() -> None:
     assert np.abs(down - binned).max() < 1e-6  # the same photosites at both sizes: the same noise
 
 
+def test_every_size_of_one_view_shares_one_photosite_grid() -> None:
+    # a 3:2 view (the reference 1752 × 1168) fitted to other sizes is 3:2 up to a pixel of rounding:
+    # its grid is the reference's, so the same sites (and noise) land on every size
+    for width, height in ((1752, 1168), (584, 389), (640, 427), (876, 584), (1168, 779)):
+        assert photosite_grid(width, height, height / 1168) == (1752, 1168), (width, height)
+    assert photosite_grid(389, 584, 389 / 1168) == (1168, 1752)  # portrait
+    assert photosite_grid(640, 360, 360 / 1168) == photosite_grid(1920, 1080, 1080 / 1168) == (2076, 1168)
+    assert photosite_grid(700, 360, 360 / 1168) == (2271, 1168)  # no common ratio within a pixel: its own
+
+
 def _textured(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
     """A smooth sRGB picture and a depth ramp (metres), defined in normalised coordinates."""
     y, x = np.mgrid[0:height, 0:width] / float(height)
