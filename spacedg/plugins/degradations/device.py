@@ -342,14 +342,11 @@ def _fresnel_ratio(cos_i: torch.Tensor, index: float) -> torch.Tensor:
     return (1.0 - 0.5 * (r_s + r_p)) / (1.0 - r_0)
 
 
-def _box_means(rgb: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor, spread: torch.Tensor) -> torch.Tensor:
+def _box_means(rgb: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor, spread: torch.Tensor, pad: int) -> torch.Tensor:
     """The mean of ``rgb`` over the ``spread``-px square centred on each (mirrored) source point, as the
-    CPU path's ``_box_kernel``: a float64 summed-area table of the ``BORDER_REFLECT``-padded frame,
-    sampled bilinearly at the four corners."""
-    from spacedg.plugins.degradations.water_droplets import box_pad
-
+    CPU path's ``_box_kernel``: a float64 summed-area table of the frame padded by ``pad`` px with
+    ``BORDER_REFLECT``, sampled bilinearly at the four corners."""
     height, width = rgb.shape[:2]
-    pad = box_pad(float(spread.max()), (height, width))
     padded = _symmetric_pad(rgb.double().permute(2, 0, 1), pad)
     full_h, full_w = padded.shape[1:]
     sat = torch.zeros((3, full_h + 1, full_w + 1), dtype=torch.float64, device=rgb.device)
@@ -376,14 +373,15 @@ def _box_means(rgb: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor, spre
 
 def droplet_composite_torch(
     rgb: torch.Tensor, drops: tuple[np.ndarray, ...], reach: float, index: float, blur_sigma: float, blur_kernel: int, *,
-    specular: float, rim: float, edge: float, light: tuple[float, float, float], shininess_log2: int,
+    specular: float, rim: float, edge: float, light: tuple[float, float, float], shininess_log2: int, box_pad: int = 0,
 ) -> torch.Tensor:
     """The per-pixel part of :func:`spacedg.plugins.degradations.water_droplets.water_droplets` on
     tensors: ``drops`` as its ``_draw_drops`` returns them (drawn from ``rng`` on the host, the same
     numbers as the CPU path), then the drop field (float64 geometry, as the numba kernel), the
-    refracted view (``grid_sample``, reflection border = OpenCV's ``BORDER_REFLECT``), the in-drop
-    blur and the composite; untouched outside drops. ``reach`` = strength · F px (the refraction's
-    reach at the rim), ``index``: the Fresnel index (water's)."""
+    refracted view (``grid_sample``, reflection border = OpenCV's ``BORDER_REFLECT``; where a drop
+    minifies, the mean over what each pixel spans, the frame padded by ``box_pad`` px: the CPU path's
+    ``box_pad`` of the widest spread), the in-drop blur and the composite; untouched outside drops.
+    ``reach`` = strength · F px (the refraction's reach at the rim), ``index``: the Fresnel index (water's)."""
     cells, n_cols, n_rows, offsets, cx, cy, rr = drops
     height, width = rgb.shape[:2]
     device = rgb.device
@@ -428,7 +426,7 @@ def droplet_composite_torch(
     seen = seen[0].permute(1, 2, 0)
     spread = torch.where(drop, torch.abs(1.0 - reach / best_r), torch.zeros_like(best_r)).float()
     if bool((spread > 1.0).any()):  # minifying drops: the mean over the square each pixel spans (refracted_view)
-        seen = torch.where((spread > 1.0)[..., None], _box_means(rgb, map_x, map_y, spread), seen)
+        seen = torch.where((spread > 1.0)[..., None], _box_means(rgb, map_x, map_y, spread, box_pad), seen)
     if blur_kernel > 1 and blur_sigma > 0.0:
         seen = gaussian_blur_reflect(seen, blur_kernel, blur_sigma)
     through = a * (1.0 - float(rim) * (1.0 - trans))

@@ -570,10 +570,13 @@ def apply_torch(rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng
     if p["scale"] == 0.0 or p["radius"] == 0.0:
         return rgb.clone()
     drops = _draw_drops(tuple(rgb.shape[:2]), p["scale"], p["radius"], rng)  # the CPU path's numbers, from the same rng
+    reach = refraction_reach(tuple(rgb.shape[:2]), p["strength"])
+    radii = drops[-1][drops[-1] > 0]
+    widest = float(np.max(np.abs(1.0 - reach / radii))) if radii.size else 0.0  # the widest spread of any drop
     return device.droplet_composite_torch(
-        rgb, drops, refraction_reach(tuple(rgb.shape[:2]), p["strength"]), WATER_INDEX, p["blur_sigma"],
+        rgb, drops, reach, WATER_INDEX, p["blur_sigma"],
         p["blur_kernel"], specular=SPECULAR_INTENSITY, rim=RIM_DARKENING,
-        edge=EDGE_WIDTH, light=LIGHT_DIRECTION, shininess_log2=SHININESS_LOG2,
+        edge=EDGE_WIDTH, light=LIGHT_DIRECTION, shininess_log2=SHININESS_LOG2, box_pad=box_pad(widest, tuple(rgb.shape[:2])),
     )
 
 
