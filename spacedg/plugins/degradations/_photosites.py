@@ -40,6 +40,7 @@ import numpy as np
 
 from spacedg.errors import ParameterError
 from spacedg.plugins.degradations._sensor import SIGNAL_CAP, sensor_capture
+from spacedg.plugins.degradations.common import view_aspect
 
 __all__ = ["MAX_PHOTOSITES", "photosite_grid", "binned_capture"]
 
@@ -47,24 +48,14 @@ __all__ = ["MAX_PHOTOSITES", "photosite_grid", "binned_capture"]
 MAX_PHOTOSITES = 64_000_000
 
 
-#: Aspect ratios (long side / short side) of common sensors and views. An image within one pixel of
-#: one (a view fitted to a size: 1752 × 1168 at 584 × 389 or 640 × 427 is 3:2 up to rounding) takes
-#: its photosite grid's long side from the short side's count and this ratio, so every size of one
-#: view shares one grid (from its own rounded size, 584 × 389 had 1754 columns against 1752: the
-#: noise of its right half no longer matched, 32 dB instead of 40 in ``benchmarks/resolution.py``).
-COMMON_ASPECTS = (1.0, 5 / 4, 4 / 3, 3 / 2, 16 / 10, 5 / 3, 16 / 9, 2.0, 21 / 9)
-
-
 def photosite_grid(width: int, height: int, pitch: float) -> tuple[int, int]:
     """``(columns, rows)`` of photosites of side ``pitch`` output pixels over a ``width × height``
-    image: ``round(side / pitch)`` on the shorter side; on the longer one the same, or the shorter
-    count times the :data:`COMMON_ASPECTS` ratio the image is within one pixel of."""
+    image: ``round(short side / pitch)`` on the shorter side, that count times the image's
+    :func:`~.common.view_aspect` on the longer one (so every size of one view shares one grid)."""
     if not (math.isfinite(pitch) and pitch > 0):
         raise ParameterError(f"sensor: pitch must be a finite number of pixels > 0, got {pitch!r}")
-    short, long = min(width, height), max(width, height)
-    n_short = max(1, int(round(short / pitch)))
-    ratio = next((c for c in COMMON_ASPECTS if abs(long - c * short) <= 1.0), None)
-    n_long = max(1, int(round(n_short * ratio if ratio is not None else long / pitch)))
+    n_short = max(1, int(round(min(width, height) / pitch)))
+    n_long = max(1, int(round(n_short * view_aspect(width, height))))
     grid = (n_long, n_short) if width >= height else (n_short, n_long)
     if grid[0] * grid[1] > MAX_PHOTOSITES:
         raise ParameterError(

@@ -116,7 +116,7 @@ import numba
 import numpy as np
 
 from spacedg.errors import InvalidDataError, ParameterError
-from spacedg.plugins.degradations.common import check_linear_rgb
+from spacedg.plugins.degradations.common import check_linear_rgb, view_aspect
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 from spacedg.render.threads import fork_safe
@@ -337,9 +337,15 @@ def _draw_drops(shape: tuple[int, int], scale: float, radius: float, rng: np.ran
         )
     cells, cols, rows, offsets, cx, cy, rr = [], [], [], [], [], [], []
     total = 0
+    # the long side as the view's common aspect has it (every size of one view gets the same cells, and
+    # drops); the image's own when it is exact
+    short, long = min(height, width), max(height, width)
+    snapped = view_aspect(width, height) * short
+    long_px = long if abs(snapped - long) < 1e-6 else snapped
     for layer in range(N_LAYERS):
-        c = min(height, width) / (scale * 2.0**layer)
-        n_cols, n_rows = max(1, int(np.ceil(width / c))), max(1, int(np.ceil(height / c)))
+        c = short / (scale * 2.0**layer)
+        n_short, n_long = max(1, int(np.ceil(short / c))), max(1, int(np.ceil(long_px / c)))
+        n_cols, n_rows = (n_long, n_short) if width >= height else (n_short, n_long)
         u = rng.random((4, n_rows, n_cols))
         r = np.where(u[0] < PRESENCE[layer], radius * 0.5 * c * (MIN_SIZE + (1.0 - MIN_SIZE) * u[1]), 0.0)
         room = 0.5 * c - r  # the centre may move this far from the cell centre, keeping the drop inside
