@@ -120,7 +120,7 @@ def footprint_dilation(camera: Any, settings: RasterSettings) -> tuple[float, fl
       ``(n² − 1)/(12 n²)``), so the render approximates the area-average of the native render. At
       ``s = 1`` this is the classic dilation, bit for bit. Measured (``benchmarks/resolution.py
       --scene plant``, capture focal at 1920×1080, 640×360 against the 1920×1080 render
-      area-downsampled): 31.0 dB classic, 38.6 with Mip's ``filter = eps2d − model``, 45.7 with this
+      area-downsampled): 31.0 dB classic, 38.6 with Mip's ``filter = eps2d − model``, 45.4 with this
       box variance; the best total (0.085 px²) gave 46.1.
     - otherwise (classic 3DGS / gsplat): ``model = eps2d``, ``filter = 0``.
     """
