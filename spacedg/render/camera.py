@@ -66,9 +66,10 @@ def fitted_size(view_width: int, view_height: int, box_width: int, box_height: i
     return (bw if abs(bw - exact) <= 1.0 else min(bw, max(1, round(exact)))), bh
 
 
-#: ``capture_focal`` / the camera's own focal, per axis: a capture rendered 10⁴× smaller or larger
-#: than it was trained is refused (beyond, the training dilation ``0.3·s²`` px² stops being a render).
-CAPTURE_SCALE_RANGE = (1e-4, 1e4)
+#: ``capture_focal`` / the camera's own focal, per axis: 2⁻¹⁶–2¹⁶, wider than any resize the image
+#: size policy allows (16384 px a side to 1 px and back), so resizing a captured camera never fails,
+#: while a hostile value (1e-300, 1e300) is refused.
+CAPTURE_SCALE_RANGE = (2.0**-16, 2.0**16)
 
 
 @dataclass(frozen=True)
@@ -160,13 +161,13 @@ class Camera:
         cam_to_world: (4, 4) rigid transform, OpenCV camera axes, metres.
         fisheye: ``None`` for a pinhole camera, else the equidistant lens.
         capture_focal: ``(fx, fy)`` pixels of the images the Gaussians were optimised on, when known
-            (the capture importers set it to the capture's own intrinsics; :meth:`resized` and
-            :meth:`fitted` keep it). 3DGS training dilates every footprint by ``eps2d`` (0.3 px²) in
+            (the capture importers set it: the camera files' own, or an INRIA output's training
+            size; :meth:`resized` and :meth:`fitted` keep it). 3DGS training dilates every footprint by ``eps2d`` (0.3 px²) in
             *those* pixels, so that dilation is part of the trained model: rendered at focal ``fx``
             (scale ``s = fx / capture fx``) it is ``eps2d · s²`` output px², and where ``s < 1`` a
             low-pass of the capture pixels' area-average is added with the opacity compensated (as
             Mip-Splatting's 2D filter), so a smaller render is the area-average of the native one
-            (issue 29: size invariance on real captures). Within 10⁻⁴–10⁴× the camera's own focal.
+            (issue 29: size invariance on real captures). Within 2⁻¹⁶–2¹⁶× the camera's own focal.
             ``None``: no training scale is known; the classic 3DGS dilation (``eps2d`` in output
             pixels, uncompensated). See :func:`spacedg.render.settings.footprint_dilation`.
     """

@@ -76,17 +76,19 @@ def measurement_camera(camera: Any, margin: int, scale: float | None = None) -> 
     return replace(
         camera, fx=camera.fx * scale, fy=camera.fy * scale,
         cx=camera.cx * scale + grow_x // 2, cy=camera.cy * scale + grow_y // 2, width=width + grow_x, height=height + grow_y,
-        # with eps2d × scale² (measurement_settings), the footprint_dilation of the full-resolution view, scaled
+        # the capture scale s unchanged: with measurement_settings' dilation_scale, the footprint_dilation
+        # of the full-resolution view, × scale²
         capture_focal=None if capture is None else (capture[0] * scale, capture[1] * scale),
     )
 
 
 def measurement_settings(settings: Any, scale: float | None = None) -> Any:
-    """``settings`` for the sharp pass at ``scale`` (default :data:`MEASURE_SCALE`): the ``eps2d``
-    dilation × scale², so that every measured footprint is the full-resolution one scaled (the
-    ratios the pass yields then do not depend on the scale but through pixel sampling)."""
+    """``settings`` for the sharp pass at ``scale`` (default :data:`MEASURE_SCALE`): the whole
+    dilation (:func:`~spacedg.render.settings.footprint_dilation`, with its capture-scale low-pass)
+    × scale², so that every measured footprint is the full-resolution one scaled (the ratios the
+    pass yields then do not depend on the scale but through pixel sampling)."""
     scale = MEASURE_SCALE if scale is None else float(scale)
-    return settings if scale == 1.0 else replace(settings, eps2d=settings.eps2d * scale * scale)
+    return settings if scale == 1.0 else replace(settings, dilation_scale=settings.dilation_scale * scale)
 
 
 #: Smallest circle of confusion (px) for which the blurred view is composited on a coarser grid: when

@@ -243,15 +243,11 @@ def _project_kernel(
         syy += model_y
         opacity = float(opacities[i])
         alpha_floor = 1.0 / 255.0
-        if filtered:  # footprint_dilation: a low-pass with the opacity (and, as under defocus, the floor) compensated
+        if filtered:  # footprint_dilation: a low-pass with the opacity compensated (the floor stays 1/255, as gsplat's)
             det_model = sxx * syy - sxy * sxy
             sxx += filter_x
             syy += filter_y
-            low_pass = math.sqrt(max(det_model / max(sxx * syy - sxy * sxy, 1e-300), 0.0))
-            opacity *= low_pass
-            alpha_floor *= low_pass
-            if not alpha_floor > 0.0:  # a degenerate (zero-area) Gaussian: nothing left to draw
-                continue
+            opacity *= math.sqrt(max(det_model / max(sxx * syy - sxy * sxy, 1e-300), 0.0))
         det = sxx * syy - sxy * sxy
         coc = 0.0
         if aperture > 0.0:

@@ -199,11 +199,11 @@ def project_gaussians(
     sxx, syy = sxx + model_x, syy + model_y
     opacity = gs.opacities.to(wide)
     alpha_floor = torch.full_like(opacity, ALPHA_MIN)
-    if filter_x > 0.0 or filter_y > 0.0:  # a low-pass with the opacity (and, as under defocus, the floor) compensated
+    if filter_x > 0.0 or filter_y > 0.0:  # a low-pass with the opacity compensated (the floor stays 1/255, as gsplat's)
         det_model = sxx * syy - sxy * sxy
         sxx, syy = sxx + filter_x, syy + filter_y
-        low_pass = torch.sqrt(torch.clamp(det_model / (sxx * syy - sxy * sxy), min=0.0))
-        opacity, alpha_floor = opacity * low_pass, alpha_floor * low_pass
+        # as the CPU path: 0/0 is 0, not NaN
+        opacity = opacity * torch.sqrt(torch.clamp(det_model / torch.clamp(sxx * syy - sxy * sxy, min=1e-300), min=0.0))
     det = sxx * syy - sxy * sxy
     coc = torch.zeros_like(opacity)
     if defocus is not None and defocus.aperture > 0:

@@ -73,6 +73,9 @@ class RasterSettings:
         alpha_max: cap on one Gaussian's alpha at one pixel (0.99 as in 3DGS; gsplat 1.5.3 used 0.999).
         antialiased: the Gaussians are exact (no training dilation): multiply opacity by
             ``sqrt(det Σ / det(Σ + eps2d I))`` (Mip-Splatting style), whatever the camera's ``capture_focal``.
+        dilation_scale: the render's pixels are ``1 / dilation_scale`` times the view's (the defocus
+            measurement pass on a coarser grid): every term of :func:`footprint_dilation` is
+            multiplied by ``dilation_scale²``, so each footprint is the view's, scaled. 1: the view's own.
         opacity_extent: footprint radius ``min(3.33, sqrt(2 ln(255 o)))`` standard deviations and
             cull ``o < 1/255`` (gsplat's CUDA kernels); ``False`` gives the fixed 3.33 σ of
             gsplat's torch reference (used by the parity tests).
@@ -90,6 +93,7 @@ class RasterSettings:
     eps2d: float = 0.3
     alpha_max: float = 0.99
     antialiased: bool = False
+    dilation_scale: float = 1.0
     opacity_extent: bool = True
     tight_tiles: bool = True
     defocus_extent: float | None = 2.5
@@ -100,6 +104,7 @@ class RasterSettings:
         _finite("near", self.near, 0.0, open_low=True)
         _finite("far", self.far, self.near, open_low=True)
         _finite("eps2d", self.eps2d, 0.0)
+        _finite("dilation_scale", self.dilation_scale, 0.0, 1.0, open_low=True)
         _finite("alpha_max", self.alpha_max, ALPHA_MIN, 1.0)
         if self.alpha_max >= 1.0:
             raise ParameterError(f"alpha_max must be < 1 so transmittance never reaches 0 in one step, got {self.alpha_max}")
@@ -123,8 +128,13 @@ def footprint_dilation(camera: Any, settings: RasterSettings) -> tuple[float, fl
       area-downsampled): 31.0 dB classic, 38.6 with Mip's ``filter = eps2d − model``, 45.4 with this
       box variance; the best total (0.085 px²) gave 46.1.
     - otherwise (classic 3DGS / gsplat): ``model = eps2d``, ``filter = 0``.
+
+    Every term is then × ``settings.dilation_scale²`` (a pass on a coarser grid than the view's). On a
+    fisheye the scale is the global focal's; the lens's local magnification is not followed (as in
+    the classic dilation).
     """
-    eps = float(settings.eps2d)
+    k = float(settings.dilation_scale)
+    eps = float(settings.eps2d) * k * k if k != 1.0 else float(settings.eps2d)
     if settings.antialiased:
         return 0.0, 0.0, eps, eps
     focal = getattr(camera, "capture_focal", None)
@@ -133,7 +143,7 @@ def footprint_dilation(camera: Any, settings: RasterSettings) -> tuple[float, fl
     sx, sy = float(camera.fx) / focal[0], float(camera.fy) / focal[1]
     if sx == 1.0 and sy == 1.0:
         return eps, eps, 0.0, 0.0
-    return eps * sx * sx, eps * sy * sy, _box_variance(sx), _box_variance(sy)
+    return eps * sx * sx, eps * sy * sy, _box_variance(sx) * k * k, _box_variance(sy) * k * k
 
 
 def _box_variance(scale: float) -> float:

@@ -28,7 +28,8 @@ __all__ = ["views_key", "read_npz_entry", "write_npz_entry"]
 
 
 def views_key(scene: Scene, names: Sequence[str], params: Mapping[str, Any]) -> str:
-    """SHA-256 hex digest of ``params``, the scene id, its Gaussian count and the cameras ``names``."""
+    """SHA-256 hex digest of ``params``, the scene id, its Gaussian count and the cameras ``names``
+    (intrinsics, lens, pose and, when set, ``capture_focal``)."""
     digest = hashlib.sha256()
     head = {**params, "gaussians": len(scene.gaussians), "scene": scene.id}
     digest.update(json.dumps(head, sort_keys=True).encode())
@@ -38,6 +39,8 @@ def views_key(scene: Scene, names: Sequence[str], params: Mapping[str, Any]) -> 
         digest.update(name.encode() + b"\0")
         digest.update(np.array([cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height, *lens], np.float64).tobytes())
         digest.update(np.ascontiguousarray(cam.cam_to_world, np.float64).tobytes())
+        if cam.capture_focal is not None:  # it changes renders at other sizes (footprint_dilation); absent: the old key
+            digest.update(b"capture" + np.array(cam.capture_focal, np.float64).tobytes())
     return digest.hexdigest()
 
 

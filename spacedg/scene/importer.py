@@ -281,8 +281,8 @@ class _Parts:
     to_scan: tuple[np.ndarray, frozenset[str]] | None = None
     #: ScanNet++'s iPhone ARKit poses, compared with the (COLMAP-refined) cameras used when both exist.
     arkit: Path | None = None
-    #: an INRIA output's ``cfg_args`` ``resolution`` (the size its Gaussians were trained at); ``None``: not an INRIA output.
-    inria_resolution: Any = None
+    #: an INRIA output's ``cfg_args`` ``(resolution, images)``: the size its Gaussians were trained at; ``None``: not one.
+    inria_training: tuple[Any, Any] | None = None
 
 
 def _inria_cameras(src: Path, notes: list[str]) -> CameraFiles:
@@ -347,9 +347,22 @@ def _resolve_parts(
         dataparser = gpath.parent / "dataparser_transforms.json"
         notes.append(f"found {dataparser.name} next to the Gaussians: they are a splatfacto export in nerfstudio's normalised frame")
     applied = read_applied_transform(files.read_path) if files.kind == "nerfstudio" else None
-    cfg = src / "cfg_args" if layout.name in ("inria", "holi-spatial") else None
-    resolution = read_cfg_args(cfg).get("resolution", -1) if cfg is not None and cfg.is_file() else None
-    return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes, to_scan, arkit, resolution)
+    return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes, to_scan, arkit,
+                  _inria_training(src, layout.name, notes))
+
+
+def _inria_training(src: Path, layout: str, notes: list[str]) -> tuple[Any, Any] | None:
+    """``cfg_args``' ``(resolution, images)`` of an INRIA output (or Holi-Spatial scene) folder; ``None``
+    for other layouts, without a ``cfg_args``, or when it cannot be read (noted: the cameras' own size is used)."""
+    cfg = src / "cfg_args"
+    if layout not in ("inria", "holi-spatial") or not cfg.is_file():
+        return None
+    try:
+        args = read_cfg_args(cfg)
+    except FileFormatError as err:
+        notes.append(f"{err}: the Gaussians are taken as trained at the cameras' own size")
+        return None
+    return args.get("resolution", -1), args.get("images")
 
 
 def _scannetpp_parts(
@@ -544,8 +557,8 @@ def _read_capture(
     gauss = read_gaussians(parts.gaussians_path)
     seconds = time.perf_counter() - t0
     views, test_views = read_cameras(parts.cameras, opencv_distortion), parts.cameras.test_frames()
-    if parts.inria_resolution is not None:
-        views, note = at_training_scale(views, parts.inria_resolution)
+    if parts.inria_training is not None:
+        views, note = at_training_scale(views, *parts.inria_training)
         if note:
             parts.notes.append(note)
     if parts.dataparser is not None:

@@ -67,6 +67,31 @@ def test_the_capture_focal_is_kept_saved_and_checked() -> None:
     assert cam.fitted(30, 30).capture_focal == cam.capture_focal
     assert Camera.from_dict(cam.to_dict()).capture_focal == cam.capture_focal
     assert "capture_focal" not in camera(90, 60).to_dict()
-    for bad in ((1.0,), (0.0, 5.0), (float("nan"), 3.0), "wide", (1e-300, 1e-300), (1e300, 1e300), (cam.fx * 2e4, cam.fy)):
+    assert cam.resized(1, 1).capture_focal == cam.capture_focal  # any resize the size policy allows keeps it
+    for bad in ((1.0,), (0.0, 5.0), (float("nan"), 3.0), "wide", (1e-300, 1e-300), (1e300, 1e300), (cam.fx * 1e5, cam.fy)):
         with pytest.raises(InvalidDataError, match="capture_focal"):
             replace(cam, capture_focal=bad)
+
+
+def test_the_defocus_sharp_pass_dilates_as_the_view_scaled() -> None:
+    """The half-resolution sharp pass of defocus: its footprints are the view's × ½, the capture-scale
+    low-pass included (its dilation is the view's × ¼ term by term)."""
+    from spacedg.render.defocus import measurement_camera, measurement_settings
+
+    view = camera(96, 72).as_captured().resized(32, 24)
+    settings = RasterSettings()
+    full = footprint_dilation(view, settings)
+    half = footprint_dilation(measurement_camera(view, 0, 0.5), measurement_settings(settings, 0.5))
+    assert half == pytest.approx(tuple(0.25 * v for v in full), rel=1e-12)
+    plain = camera(32, 24)  # no capture focal: the classic eps2d × ¼, bit for bit as before
+    assert footprint_dilation(measurement_camera(plain, 0, 0.5), measurement_settings(settings, 0.5)) == (0.075, 0.075, 0.0, 0.0)
+
+
+def test_both_backends_agree_with_a_capture_scale() -> None:
+    gaussians = random_gaussians(3000, np.random.default_rng(11), scale=(0.003, 0.05))
+    view = camera(192, 144).as_captured().resized(64, 48)
+    a = render(gaussians, view, outputs="rgb,alpha", backend="cpu")
+    b = render(gaussians, view, outputs="rgb,alpha", backend="torch")
+    for name in ("rgb", "alpha"):
+        diff = np.abs(getattr(a, name) - getattr(b, name))
+        assert diff.mean() < 1e-5 and diff.max() < 5e-3, (name, diff.mean(), diff.max())

@@ -40,7 +40,7 @@ import numpy as np
 
 from spacedg.errors import ParameterError
 from spacedg.plugins.degradations._sensor import SIGNAL_CAP, sensor_capture
-from spacedg.plugins.degradations.common import view_aspect
+from spacedg.plugins.degradations.common import snapped_long_side
 
 __all__ = ["MAX_PHOTOSITES", "photosite_grid", "binned_capture"]
 
@@ -50,12 +50,12 @@ MAX_PHOTOSITES = 64_000_000
 
 def photosite_grid(width: int, height: int, pitch: float) -> tuple[int, int]:
     """``(columns, rows)`` of photosites of side ``pitch`` output pixels over a ``width × height``
-    image: ``round(short side / pitch)`` on the shorter side, that count times the image's
-    :func:`~.common.view_aspect` on the longer one (so every size of one view shares one grid)."""
+    image: ``round(side / pitch)``, the long side taken as :func:`~.common.snapped_long_side` has it
+    (so every size of one view shares one grid; an exact aspect keeps the image's own side)."""
     if not (math.isfinite(pitch) and pitch > 0):
         raise ParameterError(f"sensor: pitch must be a finite number of pixels > 0, got {pitch!r}")
     n_short = max(1, int(round(min(width, height) / pitch)))
-    n_long = max(1, int(round(n_short * view_aspect(width, height))))
+    n_long = max(1, int(round(snapped_long_side(width, height) / pitch)))
     grid = (n_long, n_short) if width >= height else (n_short, n_long)
     if grid[0] * grid[1] > MAX_PHOTOSITES:
         raise ParameterError(

@@ -20,7 +20,7 @@ from spacedg.errors import InvalidDataError
 from spacedg.plugins.specs import ParamRange
 
 __all__ = ["FAR_PERCENTILE", "COMMON_ASPECTS", "severity_ladder", "check_linear_rgb", "check_display_image", "aux_image", "stream_key",
-           "surface_far_depth", "view_aspect"]
+           "reflect_index", "snapped_long_side", "surface_far_depth", "view_aspect"]
 
 
 def _describe(value: object) -> str:
@@ -132,7 +132,25 @@ COMMON_ASPECTS = (1.0, 5 / 4, 4 / 3, 3 / 2, 16 / 10, 5 / 3, 16 / 9, 2.0, 21 / 9)
 
 
 def view_aspect(width: int, height: int) -> float:
-    """The image's aspect ratio, long side over short side (>= 1): the :data:`COMMON_ASPECTS` ratio it
-    is within one pixel of, else its own."""
+    """The image's aspect ratio, long side over short side (>= 1): the :data:`COMMON_ASPECTS` ratio
+    nearest to it when one is within one pixel (an exact one is itself), else its own."""
     short, long = min(width, height), max(width, height)
-    return next((c for c in COMMON_ASPECTS if abs(long - c * short) <= 1.0), long / short)
+    near = min(COMMON_ASPECTS, key=lambda c: abs(long - c * short))
+    return near if abs(long - near * short) <= 1.0 else long / short
+
+
+def snapped_long_side(width: int, height: int) -> float:
+    """The image's longer side in pixels as its :func:`view_aspect` has it: ``aspect × short side``,
+    or the side itself when that is exact (then bit for bit the image's own, as every grid laid over
+    it was before). Grids laid over the image (photosites, drop cells) count along the long side from
+    this, so every size of one view gets the same grid."""
+    short, long = min(width, height), max(width, height)
+    snapped = view_aspect(width, height) * short
+    return float(long) if abs(snapped - long) < 1e-6 else snapped
+
+
+def reflect_index(n: int, pad: int) -> np.ndarray:
+    """Source indices of ``n`` pixels padded by ``pad`` on each side with OpenCV's ``BORDER_REFLECT``
+    (``fedcba|abcdef|fedcba``), folded as often as the pad needs (period ``2n``)."""
+    q = np.mod(np.arange(-pad, n + pad), 2 * n)
+    return np.where(q < n, q, 2 * n - 1 - q)

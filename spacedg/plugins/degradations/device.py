@@ -346,8 +346,12 @@ def _box_means(rgb: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor, spre
     """The mean of ``rgb`` over the ``spread``-px square centred on each (mirrored) source point, as the
     CPU path's ``_box_kernel``: a float64 summed-area table of the frame padded by ``pad`` px with
     ``BORDER_REFLECT``, sampled bilinearly at the four corners."""
+    from spacedg.plugins.degradations.common import reflect_index
+
     height, width = rgb.shape[:2]
-    padded = _symmetric_pad(rgb.double().permute(2, 0, 1), pad)
+    rows = torch.from_numpy(reflect_index(height, pad)).to(rgb.device)
+    cols = torch.from_numpy(reflect_index(width, pad)).to(rgb.device)
+    padded = rgb.double().permute(2, 0, 1).index_select(1, rows).index_select(2, cols)
     full_h, full_w = padded.shape[1:]
     sat = torch.zeros((3, full_h + 1, full_w + 1), dtype=torch.float64, device=rgb.device)
     sat[:, 1:, 1:] = padded.cumsum(1).cumsum(2)
@@ -373,7 +377,7 @@ def _box_means(rgb: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor, spre
 
 def droplet_composite_torch(
     rgb: torch.Tensor, drops: tuple[np.ndarray, ...], reach: float, index: float, blur_sigma: float, blur_kernel: int, *,
-    specular: float, rim: float, edge: float, light: tuple[float, float, float], shininess_log2: int, box_pad: int = 0,
+    specular: float, rim: float, edge: float, light: tuple[float, float, float], shininess_log2: int, box_pad: int,
 ) -> torch.Tensor:
     """The per-pixel part of :func:`spacedg.plugins.degradations.water_droplets.water_droplets` on
     tensors: ``drops`` as its ``_draw_drops`` returns them (drawn from ``rng`` on the host, the same

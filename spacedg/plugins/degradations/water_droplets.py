@@ -116,7 +116,7 @@ import numba
 import numpy as np
 
 from spacedg.errors import InvalidDataError, ParameterError
-from spacedg.plugins.degradations.common import check_linear_rgb, view_aspect
+from spacedg.plugins.degradations.common import check_linear_rgb, reflect_index, snapped_long_side
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 from spacedg.render.threads import fork_safe
@@ -337,11 +337,8 @@ def _draw_drops(shape: tuple[int, int], scale: float, radius: float, rng: np.ran
         )
     cells, cols, rows, offsets, cx, cy, rr = [], [], [], [], [], [], []
     total = 0
-    # the long side as the view's common aspect has it (every size of one view gets the same cells, and
-    # drops); the image's own when it is exact
-    short, long = min(height, width), max(height, width)
-    snapped = view_aspect(width, height) * short
-    long_px = long if abs(snapped - long) < 1e-6 else snapped
+    # the long side as the view's common aspect has it: every size of one view gets the same cells (and drops)
+    short, long_px = min(height, width), snapped_long_side(width, height)
     for layer in range(N_LAYERS):
         c = short / (scale * 2.0**layer)
         n_short, n_long = max(1, int(np.ceil(short / c))), max(1, int(np.ceil(long_px / c)))
@@ -414,8 +411,8 @@ def _box_kernel(
     table ((H + 2 pad + 1, W + 2 pad + 1, 3) float64) of the frame padded by ``pad`` px with
     ``BORDER_REFLECT``: the table interpolated bilinearly between its nodes is the exact integral of
     the pixels as constant squares, so the mean is exact for a fractional square (cut at the padding's
-    edge beyond ``pad``). A mean never leaves the frame's range per channel, ``[lo, hi]``: it is clamped
-    there (differences of large sums lose digits when the frame holds huge values, e.g. 1e30)."""
+    edge beyond ``pad``) up to float64 cancellation: a frame that holds values ~1e12 times its others
+    loses ~1e-3 of them, so a mean is clamped to the frame's range per channel ``[lo, hi]`` (finite)."""
     full_h, full_w = sat.shape[0] - 1, sat.shape[1] - 1
     height, width = full_h - 2 * pad, full_w - 2 * pad
     for i in numba.prange(out.shape[0]):
@@ -457,20 +454,14 @@ def _sat_at(sat: np.ndarray, v: float, u: float, ch: int) -> float:  # pragma: n
 
 def box_pad(spread: float, shape: tuple[int, int]) -> int:
     """Pixels of ``BORDER_REFLECT`` padding for squares of side up to ``spread`` px around points in the
-    frame: half the side and one, at most the frame's longer side (one reflection)."""
+    frame: half the side and one, at most the frame's longer side (a square wider than that is cut
+    at the padding's edge)."""
     return int(min(math.ceil(0.5 * spread) + 1, max(shape)))
 
 
-def reflect_index(n: int, pad: int) -> np.ndarray:
-    """Source indices of ``n`` pixels padded by ``pad`` with OpenCV's ``BORDER_REFLECT`` (``fedcba|abcdef``;
-    clamped where the pad exceeds one reflection)."""
-    idx = np.arange(-pad, n + pad)
-    idx = np.where(idx < 0, -idx - 1, idx)
-    return np.clip(np.where(idx >= n, 2 * n - idx - 1, idx), 0, n - 1)
-
-
 def refracted_view(rgb: np.ndarray, field: DropletField) -> np.ndarray:
-    """What each pixel sees through its drop: float32 (H, W, 3). Bilinear at the source point
+    """What each pixel sees through its drop: float32 (H, W, 3), from finite ``rgb`` (the caller's check:
+    a NaN would spread over every minifying pixel). Bilinear at the source point
     (:func:`cv2.remap`, ``BORDER_REFLECT``) where the drop magnifies or keeps the scale; where it
     minifies (``spread > 1``), the mean of the scene over the ``spread``-px square the pixel spans
     (a summed-area table), as a lens integrates it: a point sample there would alias, and differ
@@ -481,9 +472,9 @@ def refracted_view(rgb: np.ndarray, field: DropletField) -> np.ndarray:
     if widest > 1.0:
         pad = box_pad(widest, rgb.shape[:2])
         sat = _padded_sat(rgb, reflect_index(rgb.shape[0], pad), reflect_index(rgb.shape[1], pad))
-        flat = rgb.reshape(-1, 3)
-        _box_kernel(sat, pad, field.map_x, field.map_y, field.spread, flat.min(axis=0).astype(np.float64),
-                    flat.max(axis=0).astype(np.float64), seen)
+        lo = np.array([rgb[..., c].min() for c in range(3)], np.float64)  # per channel: ~20x faster than axis=0
+        hi = np.array([rgb[..., c].max() for c in range(3)], np.float64)
+        _box_kernel(sat, pad, field.map_x, field.map_y, field.spread, lo, hi, seen)
     return seen
 
 

@@ -90,11 +90,19 @@ def read_cfg_args(path: PathLike) -> dict[str, Any]:
     return out
 
 
-def training_width(width: int, resolution: Any) -> int:
-    """The width (px) INRIA 3DGS trained on for an image ``width`` px wide, from ``cfg_args``'
-    ``resolution`` (``-r``): 1, 2, 4 or 8 divide the image (rounded); -1 (the default) keeps it up
-    to 1600 px and scales wider images down to 1600; any other positive value is the width itself
-    (``utils/camera_utils.loadCam``). An unreadable value keeps the image's width."""
+_IMAGES_FACTOR = re.compile(r"(?:^|[/\\])images_(\d+)[/\\]?$")
+
+
+def training_width(width: int, resolution: Any, images: Any = None) -> int:
+    """The width (px) INRIA 3DGS trained on for a camera ``width`` px wide, from ``cfg_args``:
+    ``images`` (``-i``) ``images_N`` loads the images downscaled N× first (Mip-NeRF 360's
+    ``images_4``; the camera files keep the full size), then ``resolution`` (``-r``): 1, 2, 4 or 8
+    divide the image (rounded); -1 (the default) keeps it up to 1600 px and scales wider images down
+    to 1600; any other positive value is the width itself (``utils/camera_utils.loadCam``). An
+    unreadable value keeps the width."""
+    match = _IMAGES_FACTOR.search(images) if isinstance(images, str) else None
+    if match and int(match.group(1)) > 0:
+        width = max(1, round(width / int(match.group(1))))
     if isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not math.isfinite(resolution):
         return int(width)
     if resolution in (1, 2, 4, 8):
@@ -104,19 +112,20 @@ def training_width(width: int, resolution: Any) -> int:
     return max(1, int(resolution)) if resolution > 0 else int(width)
 
 
-def at_training_scale(views: dict[str, Camera], resolution: Any) -> tuple[dict[str, Camera], str | None]:
+def at_training_scale(views: dict[str, Camera], resolution: Any, images: Any = None) -> tuple[dict[str, Camera], str | None]:
     """``views`` with ``capture_focal`` at the size INRIA 3DGS trained on (:func:`training_width`), and a
-    note saying so when that differs from the images' size (else the views unchanged and ``None``)."""
+    note saying so when that differs from the images' size (else ``None``)."""
     out, scaled = {}, set()
     for name, camera in views.items():
-        scale = training_width(camera.width, resolution) / camera.width
+        trained = training_width(camera.width, resolution, images)
+        scale = trained / camera.width
         out[name] = replace(camera, capture_focal=(camera.fx * scale, camera.fy * scale))
         if scale != 1.0:
-            scaled.add(training_width(camera.width, resolution))
+            scaled.add(trained)
     if not scaled:
         return out, None
-    return out, (f"Gaussians trained at {', '.join(map(str, sorted(scaled)))} px wide (cfg_args resolution {resolution!r}, "
-                 "INRIA's rule): the cameras' capture focal is taken at that size")
+    return out, (f"Gaussians trained at {', '.join(map(str, sorted(scaled)))} px wide (cfg_args images {images!r}, "
+                 f"resolution {resolution!r}: INRIA's rule): the cameras' capture focal is taken at that size")
 
 
 def _number(where: str, key: str, value: Any, positive: bool = True) -> float:

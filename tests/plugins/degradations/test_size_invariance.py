@@ -21,6 +21,7 @@ from spacedg.data.pipeline import degrade_image
 from spacedg.errors import PluginError
 from spacedg.plugins import DegradationSpec, ParamRange, ParamSpec, get_degradation
 from spacedg.plugins.degradations._photosites import photosite_grid
+from spacedg.plugins.degradations.common import view_aspect
 from spacedg.plugins.degradations.low_light import low_light
 from spacedg.plugins.degradations.paper_table import PAPER_PARAMETER_TABLE, outside_paper_table
 from spacedg.plugins.specs import REFERENCE_DEPTH_M, REFERENCE_IMAGE_SIZE, image_scale, scale_pixels
@@ -120,6 +121,18 @@ def test_every_size_of_one_view_shares_one_photosite_grid() -> None:
     assert photosite_grid(389, 584, 389 / 1168) == (1168, 1752)  # portrait
     assert photosite_grid(640, 360, 360 / 1168) == photosite_grid(1920, 1080, 1080 / 1168) == (2076, 1168)
     assert photosite_grid(700, 360, 360 / 1168) == (2271, 1168)  # no common ratio within a pixel: its own
+    assert photosite_grid(1752, 1168, 2.5) == (701, 467)  # an exact aspect keeps its own side at any pitch
+    assert view_aspect(16, 10) == 1.6 and view_aspect(5, 4) == 1.25  # the nearest ratio, an exact one itself
+
+
+def test_every_size_of_one_view_draws_the_same_drops() -> None:
+    from spacedg.plugins.degradations.water_droplets import _draw_drops
+
+    big = _draw_drops((1168, 1752), 3.0, 0.5, np.random.default_rng(4))
+    small = _draw_drops((389, 584), 3.0, 0.5, np.random.default_rng(4))
+    for layer in range(3):
+        assert (big[1][layer], big[2][layer]) == (small[1][layer], small[2][layer])  # columns and rows of cells
+    np.testing.assert_allclose(small[6] / 389, big[6] / 1168, rtol=1e-9)  # radii, as fractions of the short side
 
 
 def _textured(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:

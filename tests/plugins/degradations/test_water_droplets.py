@@ -287,7 +287,7 @@ def test_input_not_modified() -> None:
 def test_a_minifying_drop_shows_the_mean_of_what_it_spans() -> None:
     """A drop that minifies k× shows, at each pixel, the mean of the k × k source pixels it spans (a lens
     integrates; a point sample would alias). Over a 1-px checkerboard every pixel whose square spans
-    ≥ 4 × 4 source pixels reads within 0.1 of the board's mean; a bilinear point sample reads 0 or 1."""
+    ≥ 4 × 4 source pixels reads within 0.1 of the board's mean; a point sample reads 0 or 1."""
     y, x = np.mgrid[0:72, 0:128]
     board = np.repeat(((x + y) % 2).astype(np.float32)[..., None], 3, axis=-1)
     field = droplet_field(board.shape[:2], 3.0, 0.5, 0.4, np.random.default_rng(3))

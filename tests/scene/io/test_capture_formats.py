@@ -242,6 +242,8 @@ def test_inria_training_width_follows_its_resolution_rule() -> None:
     assert training_width(1752, -1) == 1600 and training_width(1200, -1) == 1200  # the default caps at 1600 px
     assert training_width(1753, 2) == 876 and training_width(1000, 8) == 125       # -r 1/2/4/8 divide (rounded)
     assert training_width(1920, 800) == 800 and training_width(1920, None) == 1920  # a width; unreadable: the image's
+    assert training_width(4946, -1, "images_4") == 1236 and training_width(4946, 2, "images_2") == 1236  # -i images_N first
+    assert training_width(4946, -1, "images") == 1600 and training_width(4946, -1, "/data/bicycle/images_8/") == 618
     cam = Camera(1000.0, 1000.0, 876.0, 584.0, 1752, 1168, np.eye(4))
     views, note = at_training_scale({"a": cam}, -1)
     assert views["a"].capture_focal == pytest.approx((1000.0 * 1600 / 1752,) * 2) and "1600" in note
