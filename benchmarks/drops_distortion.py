@@ -48,7 +48,7 @@ def drops_table() -> None:
         for seed in range(3):
             p = wd.SPEC.sample_params(preset, np.random.default_rng(seed))
             field = wd.droplet_field(image.shape[:2], p["scale"], p["radius"], p["strength"], np.random.default_rng(seed))
-            seen = cv2.remap(image, field.map_x, field.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+            seen = wd.refracted_view(image, field)  # the scene through each drop (a minifying drop's mean)
             seen = cv2.GaussianBlur(seen, (p["blur_kernel"],) * 2, p["blur_sigma"], borderType=cv2.BORDER_REFLECT)
             behind = (1 - field.alpha[..., None]) * image + field.alpha[..., None] * seen
             lit = wd.SPECULAR_INTENSITY * field.highlight
