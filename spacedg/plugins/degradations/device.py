@@ -398,9 +398,9 @@ def droplet_composite_torch(
     best_dy = torch.zeros_like(best_h)
     best_r = torch.ones_like(best_h)
     for layer in range(len(cells)):
-        inv = 1.0 / float(cells[layer])
-        row = torch.clamp((y * inv).long(), max=int(n_rows[layer]) - 1)
-        col = torch.clamp((x * inv).long(), max=int(n_cols[layer]) - 1)
+        inv_x, inv_y = 1.0 / float(cells[layer][0]), 1.0 / float(cells[layer][1])  # cell width and height, px
+        row = torch.clamp((y * inv_y).long(), max=int(n_rows[layer]) - 1)
+        col = torch.clamp((x * inv_x).long(), max=int(n_cols[layer]) - 1)
         k = int(offsets[layer]) + row * int(n_cols[layer]) + col
         r = rr_t[k]
         dx, dy = x - cx_t[k], y - cy_t[k]

@@ -13,7 +13,10 @@ Drop field (all randomness from ``rng``, a :class:`numpy.random.Generator`)
   ``S = min(H, W)`` is the shorter side.
 - :data:`N_LAYERS` = 3 layers ``l = 0, 1, 2`` of square cells of side ``c_l = S / (scale · 2^l)``
   px, anchored at the image's top-left corner: ``scale`` cells of the largest layer span the
-  shorter side. Each cell holds at most one drop, present with probability
+  shorter side. Along the longer side the cells are counted and laid as the view's common aspect
+  has it (:func:`~.common.snapped_long_side`: a 584 × 389 image is 3:2, as 1752 × 1168), stretched
+  by the image's own side over that (1 for an exact aspect), so every size of one view gets the
+  same drops at the same fractions of the image. Each cell holds at most one drop, present with probability
   :data:`PRESENCE` ``[l]`` (0.9, 0.7, 0.5): finer layers have more, smaller, sparser drops.
 - Drop radius ``r = radius · (c_l / 2) · f`` px with a size factor ``f ~ U[`` :data:`MIN_SIZE` ``, 1]``:
   ``radius`` is the largest drop radius as a fraction of its cell's half-size. The centre is
@@ -242,14 +245,15 @@ def _field_kernel(
     """Per pixel: the highest drop over all layers, its coverage, highlight, Fresnel ratio, remap coordinates and spread.
 
     ``reach`` = strength · F px (the source moves by ``reach · n_xy``), ``index``: the Fresnel index."""
-    n_layers = cell.shape[0]
+    n_layers = cell.shape[0]  # cell: (L, 2) cell width and height per layer, px
     lx, ly, lz = light[0], light[1], light[2]
-    inv_cell = 1.0 / cell
+    inv_cell_x = 1.0 / cell[:, 0]
+    inv_cell_y = 1.0 / cell[:, 1]
     for i in numba.prange(height):
         y = i + 0.5
         row_start = np.empty(n_layers, np.int64)  # first drop index of this pixel row's cells, per layer
         for layer in range(n_layers):
-            row = min(int(y * inv_cell[layer]), n_rows[layer] - 1)
+            row = min(int(y * inv_cell_y[layer]), n_rows[layer] - 1)
             row_start[layer] = offset[layer] + row * n_cols[layer]
         for j in range(width):
             x = j + 0.5
@@ -258,7 +262,7 @@ def _field_kernel(
             best_dy = 0.0
             best_r = 1.0
             for layer in range(n_layers):
-                k = row_start[layer] + min(int(x * inv_cell[layer]), n_cols[layer] - 1)
+                k = row_start[layer] + min(int(x * inv_cell_x[layer]), n_cols[layer] - 1)
                 r = drop_r[k]
                 dx = x - centre_x[k]
                 dy = y - centre_y[k]
@@ -327,7 +331,8 @@ def _check_params(scale: float, radius: float, strength: float, blur_sigma: floa
 
 
 def _draw_drops(shape: tuple[int, int], scale: float, radius: float, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
-    """Per-layer grids and per-cell drops (centre x, y and radius in px; radius 0 = no drop)."""
+    """Per-layer grids (``cells`` (L, 2): cell width and height, px) and per-cell drops (centre x, y and
+    radius in px; radius 0 = no drop)."""
     height, width = shape
     finest = min(height, width) / (scale * 2.0 ** (N_LAYERS - 1))
     if np.ceil(width / finest) * np.ceil(height / finest) > MAX_CELLS:
@@ -337,19 +342,25 @@ def _draw_drops(shape: tuple[int, int], scale: float, radius: float, rng: np.ran
         )
     cells, cols, rows, offsets, cx, cy, rr = [], [], [], [], [], [], []
     total = 0
-    # the long side as the view's common aspect has it: every size of one view gets the same cells (and drops)
-    short, long_px = min(height, width), snapped_long_side(width, height)
+    # the long side as the view's common aspect has it: every size of one view gets the same cells and
+    # drops, at the same fractions of the image (cells along the long side stretched by long / long_px,
+    # exactly 1 for an exact aspect)
+    short, long = min(height, width), max(height, width)
+    long_px = snapped_long_side(width, height)
+    stretch = long / long_px
     for layer in range(N_LAYERS):
         c = short / (scale * 2.0**layer)
         n_short, n_long = max(1, int(np.ceil(short / c))), max(1, int(np.ceil(long_px / c)))
         n_cols, n_rows = (n_long, n_short) if width >= height else (n_short, n_long)
+        c_x, c_y = (c * stretch, c) if width >= height else (c, c * stretch)
         u = rng.random((4, n_rows, n_cols))
         r = np.where(u[0] < PRESENCE[layer], radius * 0.5 * c * (MIN_SIZE + (1.0 - MIN_SIZE) * u[1]), 0.0)
-        room = 0.5 * c - r  # the centre may move this far from the cell centre, keeping the drop inside
-        cx.append(((np.arange(n_cols) + 0.5) * c + room * (2.0 * u[2] - 1.0)).ravel())
-        cy.append(((np.arange(n_rows)[:, None] + 0.5) * c + room * (2.0 * u[3] - 1.0)).ravel())
+        # the centre may move this far from the cell centre, keeping the drop inside
+        room_x, room_y = 0.5 * c_x - r, 0.5 * c_y - r
+        cx.append(((np.arange(n_cols) + 0.5) * c_x + room_x * (2.0 * u[2] - 1.0)).ravel())
+        cy.append(((np.arange(n_rows)[:, None] + 0.5) * c_y + room_y * (2.0 * u[3] - 1.0)).ravel())
         rr.append(r.ravel())
-        cells.append(c)
+        cells.append((c_x, c_y))
         cols.append(n_cols)
         rows.append(n_rows)
         offsets.append(total)

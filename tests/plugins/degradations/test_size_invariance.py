@@ -133,6 +133,8 @@ def test_every_size_of_one_view_draws_the_same_drops() -> None:
     for layer in range(3):
         assert (big[1][layer], big[2][layer]) == (small[1][layer], small[2][layer])  # columns and rows of cells
     np.testing.assert_allclose(small[6] / 389, big[6] / 1168, rtol=1e-9)  # radii, as fractions of the short side
+    np.testing.assert_allclose(small[4] / 584, big[4] / 1752, rtol=1e-3)  # centres, as fractions of the image (the jitter
+    np.testing.assert_allclose(small[5] / 389, big[5] / 1168, rtol=1e-9)  # keeps radii in short-side pixels: 0.09 % in x)
 
 
 def _textured(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
