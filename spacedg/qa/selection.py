@@ -143,7 +143,7 @@ class _Selection:
         self.pool = _Pool.of(records, mode)
         self.per_sub_type = per_sub_type
         self.keep = keep or (lambda record: True)
-        self.judged_out: set[str] = set()
+        self.judged_out: set[int] = set()  # pool positions the judge refused (a pooled record's id needs the record built)
         self.room: Counter[str] = Counter()
         for r in records:
             self.room[r.sub_question_type] = per_sub_type
@@ -155,13 +155,13 @@ class _Selection:
         self.balance: dict[tuple[str, str], Counter[str]] = {}
         self.featured = {cell: any(self.pool.features[i] for q in by_role.values() for i in q) for cell, by_role in cells.items()}
 
-    def accept(self, record: QARecord) -> bool:
-        """Whether the judge keeps ``record`` (asked once; a refusal is remembered)."""
-        if self.judged_out and record.id in self.judged_out:
+    def accept(self, i: int) -> bool:
+        """Whether the judge keeps pool record ``i`` (asked once; a refusal is remembered)."""
+        if i in self.judged_out:
             return False
-        if self.keep(record):
+        if self.keep(self.pool.records[i]):
             return True
-        self.judged_out.add(record.id)
+        self.judged_out.add(i)
         return False
 
     def take(self, i: int) -> None:
@@ -173,7 +173,7 @@ class _Selection:
         """Metric answers: generation order, subjects once."""
         pool = self.pool
         for i in pool.metric:
-            if self.room[pool.sub(i)] > 0 and pool.subject(i) not in self.asked and self.accept(pool.records[i]):
+            if self.room[pool.sub(i)] > 0 and pool.subject(i) not in self.asked and self.accept(i):
                 self.take(i)
 
     def cost(self, i: int, role: str, roles: Sequence[str]) -> float:
@@ -189,7 +189,7 @@ class _Selection:
     def _usable(self, i: int, used: Container[tuple[str, str]] = ()) -> bool:
         """Whether record ``i``'s subject is free (not asked, not in ``used``) and the judge has not refused it."""
         subject = self.pool.subject(i)
-        return subject not in self.asked and subject not in used and not (self.judged_out and self.pool.records[i].id in self.judged_out)
+        return subject not in self.asked and subject not in used and i not in self.judged_out
 
     def pick(self, cell: str, role: str, used: set[tuple[str, str]]) -> int | None:
         """The candidate of ``role`` in ``cell`` for the next round: free subject, accepted by the
@@ -212,7 +212,7 @@ class _Selection:
                         break
             if best is None:
                 return None
-            if self.accept(self.pool.records[best]):
+            if self.accept(best):
                 return best
 
     def next_round(self, cell: str) -> list[int] | None:
@@ -275,7 +275,7 @@ class _Selection:
         for i in sorted(i for by_role in pool.cells.values() for queue in by_role.values() for i in queue):
             sub = pool.sub(i)
             if got[sub] == 0 and 0 < self.room[sub] < smallest.get(sub, 0) and pool.subject(i) not in self.asked \
-                    and self.accept(pool.records[i]):
+                    and self.accept(i):
                 self.take(i)
 
     def take_plain(self) -> None:
@@ -285,7 +285,7 @@ class _Selection:
             first: dict[str, int] = {}
             for i in ix:
                 first.setdefault(records[i].id, i)
-            for r in select_balanced([records[i] for i in ix], self.per_sub_type, self.accept):
+            for r in select_balanced([records[i] for i in ix], self.per_sub_type, lambda r: self.accept(first[r.id])):
                 self.taken.add(first[r.id])
 
     def why(self, i: int) -> str:
@@ -293,7 +293,7 @@ class _Selection:
         pool, r = self.pool, self.pool.records[i]
         if i in self.taken:
             return "taken"
-        if self.judged_out and r.id in self.judged_out:
+        if i in self.judged_out:
             return "judge"
         if pool.selections[i] is not None and pool.subject(i) in self.asked:
             return "repeat"
