@@ -121,7 +121,7 @@ class DebiasResult:
     @property
     def within(self) -> bool:
         """Whether the final probe meets both bounds."""
-        return all(r.excess <= row_bound(r, self.bound, self.noise_z) + 1e-9 for r in self.after.rows) and self.after.overall.get("excess", 0.0) <= self.overall_bound + 1e-9
+        return not any(over_bound(r, self.bound, self.noise_z, 1e-9) for r in self.after.rows) and self.after.overall.get("excess", 0.0) <= self.overall_bound + 1e-9
 
     def to_dict(self) -> dict[str, Any]:
         def table(p: Probe) -> dict[str, Any]:
@@ -205,13 +205,18 @@ def row_bound(row: SubTypeBlind, bound: float, noise_z: float) -> float:
     return max(bound, noise_band(row, noise_z))
 
 
+def over_bound(row: SubTypeBlind, bound: float, noise_z: float, tol: float = 0.0) -> bool:
+    """Whether the sub type's excess is over its :func:`row_bound` (by more than ``tol`` points)."""
+    return row.excess > row_bound(row, bound, noise_z) + tol
+
+
 def _aims(pr: Probe, bound: float, overall_bound: float, noise_z: float = 0.0,
           eligible: Collection[tuple[str, str]] | None = None) -> dict[tuple[str, str], float]:
     """The excess each sub type is pruned towards this round: the ``eligible`` sub types over
     their :func:`row_bound` aim at chance (0); only when none is, and the pooled figure is over
     ``overall_bound``, those above ``overall_bound − 1`` aim at ``overall_bound − 1.5``."""
     over = {row.key: 0.0 for row in pr.rows
-            if row.excess > row_bound(row, bound, noise_z) and (eligible is None or row.key in eligible)}
+            if over_bound(row, bound, noise_z) and (eligible is None or row.key in eligible)}
     if over or pr.overall.get("excess", 0.0) <= overall_bound:
         return over
     return {row.key: overall_bound - 1.5 for row in pr.rows if row.excess > overall_bound - 1.0}
@@ -274,7 +279,7 @@ def _trim_metric(records: Sequence[QARecord], targets: Mapping[tuple[str, str], 
     return kept
 
 
-def _check(bound: float, overall_bound: float, folds: int, max_rounds: int, floor: float) -> None:
+def _check(bound: float, overall_bound: float, folds: int, max_rounds: int, floor: float, repeats: int, noise_z: float) -> None:
     for name, value in (("bound", bound), ("overall_bound", overall_bound)):
         if not isinstance(value, (int, float)) or isinstance(value, bool) or not 0.0 <= value <= 100.0:
             raise ParameterError(f"debias: {name} must be a number of points in [0, 100], got {value!r}")
@@ -283,6 +288,10 @@ def _check(bound: float, overall_bound: float, folds: int, max_rounds: int, floo
             raise ParameterError(f"debias: {name} must be an integer >= {low}, got {value!r}")
     if not isinstance(floor, (int, float)) or isinstance(floor, bool) or not 0.0 <= floor <= 1.0:
         raise ParameterError(f"debias: floor must be a share in [0, 1], got {floor!r}")
+    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
+        raise ParameterError(f"debias: repeats must be an integer >= 1, got {repeats!r}")
+    if isinstance(noise_z, bool) or not isinstance(noise_z, (int, float)) or not 0.0 <= noise_z <= 5.0:
+        raise ParameterError(f"debias: noise_z must be a number of standard deviations in [0, 5], got {noise_z!r}")
 
 
 def debias(
@@ -302,12 +311,7 @@ def debias(
         repeats: fold seeds each probe averages over (:func:`~spacedg.qa.debias_probe.probe`).
         noise_z: a sub type is pruned only above its noise band too (:func:`row_bound`); 0: ``bound`` alone.
     """
-    _check(bound, overall_bound, folds, max_rounds, floor)
-    for name, value, low in (("repeats", repeats, 1),):
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise ParameterError(f"debias: {name} must be an integer >= {low}, got {value!r}")
-    if isinstance(noise_z, bool) or not isinstance(noise_z, (int, float)) or not 0.0 <= noise_z <= 5.0:
-        raise ParameterError(f"debias: noise_z must be a number of standard deviations in [0, 5], got {noise_z!r}")
+    _check(bound, overall_bound, folds, max_rounds, floor, repeats, noise_z)
     options = {"folds": folds, "seed": seed, "learned": learned, "repeats": repeats}
     discrete = [r for r in records if r.answer_type in DISCRETE]
     by_key: dict[tuple[str, str], list[QARecord]] = defaultdict(list)
@@ -318,10 +322,11 @@ def debias(
     floors = {k: math.ceil(floor * t) for k, t in targets.items()}
     counts = count_chances(discrete)
     current = before = probe(discrete, counts=counts, **options)
-    eligible = {row.key for row in _deciding(before, by_key, counts).rows if row.excess > row_bound(row, bound, noise_z)}
+    deciding = _deciding(before, by_key, counts)
+    eligible = {row.key for row in deciding.rows if over_bound(row, bound, noise_z)}
     rounds: list[dict[str, Any]] = []
     for number in range(1, max_rounds + 1):
-        removed = _prune_round(by_key, _deciding(current, by_key, counts), floors, bound, overall_bound, seed, noise_z, eligible)
+        removed = _prune_round(by_key, deciding, floors, bound, overall_bound, seed, noise_z, eligible)
         why = _PRUNE
         if not removed:
             removed, why = _trim_round(by_key, targets, seed), _TRIM
@@ -330,6 +335,7 @@ def debias(
         rounds.append({"round": number, "why": why, "removed": removed, "total": sum(removed.values())})
         changed = {name.split("/", 1)[0] for name in removed}
         current = probe([r for rs in by_key.values() for r in rs], counts=counts, reuse=current, changed=changed, **options)
+        deciding = _deciding(current, by_key, counts)
     keep = {r.id for rs in by_key.values() for r in rs} | metric
     kept = [r for r in records if r.id in keep]
     return DebiasResult(kept, before, current, rounds, targets, float(bound), float(overall_bound), float(noise_z), repeats,
@@ -364,7 +370,7 @@ def format_debias(result: DebiasResult) -> str:
         parts = ", ".join(f"{k} {v}" for k, v in sorted(r["removed"].items()))
         lines.append(f"round {r['round']} ({r['why']}): removed {r['total']}: {parts}")
     lines.append(f"pruned for blind bias (over their allowed excess before pruning): {', '.join(result.eligible) or 'none'}")
-    over = [f"{r.question_type}/{r.sub_question_type}" for r in result.after.rows if r.excess > row_bound(r, result.bound, result.noise_z) + 1e-9]
+    over = [f"{r.question_type}/{r.sub_question_type}" for r in result.after.rows if over_bound(r, result.bound, result.noise_z, 1e-9)]
     lines.append("within the bounds" if result.within else f"NOT within the bounds after the last round: {', '.join(over) or 'pooled'} "
                  "(a sub type within its band before pruning is not pruned: its excess is noise of the refit predictors)")
     return "\n".join(lines)
