@@ -285,10 +285,24 @@ class _Parts:
     inria_training: tuple[Any, Any] | None = None
 
 
-def _inria_cameras(src: Path, notes: list[str]) -> CameraFiles:
+def _cfg_args(src: Path) -> tuple[dict[str, Any] | None, FileFormatError | None]:
+    """``src/cfg_args`` read once per import: ``(arguments, None)``, ``(None, the reading error)`` or
+    ``(None, None)`` without one."""
     cfg = src / "cfg_args"
-    if cfg.is_file():
-        source = read_cfg_args(cfg).get("source_path")
+    if not cfg.is_file():
+        return None, None
+    try:
+        return read_cfg_args(cfg), None
+    except FileFormatError as err:
+        return None, err
+
+
+def _inria_cameras(src: Path, notes: list[str], cfg: tuple[dict[str, Any] | None, FileFormatError | None]) -> CameraFiles:
+    args, error = cfg
+    if error is not None:
+        raise error
+    if args is not None:
+        source = args.get("source_path")
         if isinstance(source, str) and source:
             for base in (Path(source), src / source, src.parent / source):
                 model = colmap_model(base) if base.is_dir() else None
@@ -310,11 +324,12 @@ def _resolve_parts(
     to_scan: tuple[np.ndarray, frozenset[str]] | None = None
     arkit: Path | None = None
     given = None if cameras is None else find_cameras(cameras)
+    cfg = _cfg_args(src) if layout.name in ("inria", "holi-spatial") else (None, None)
     if layout.name == "inria":
         gpath = gaussians or latest_point_cloud(src)
         if gaussians is None:
             notes.append(f"Gaussians of the latest iteration: {gpath.relative_to(src)}")
-        files = given or _inria_cameras(src, notes)
+        files = given or _inria_cameras(src, notes, cfg)
     elif layout.name == "colmap":
         model = layout.colmap if layout.colmap is not None else colmap_model(src)
         if model is None and given is None:
@@ -329,7 +344,7 @@ def _resolve_parts(
         default_up, up_note = np.array([0.0, 0.0, 1.0]), "ScanNet++ scan frame (z up)"
     elif layout.name == "holi-spatial":
         gpath = gaussians or latest_point_cloud(src)
-        files = given or _inria_cameras(src, notes)
+        files = given or _inria_cameras(src, notes, cfg)
         instances = instances or find_release_boxes(src)
         if instances is None:
             raise FileFormatError(
@@ -348,21 +363,16 @@ def _resolve_parts(
         notes.append(f"found {dataparser.name} next to the Gaussians: they are a splatfacto export in nerfstudio's normalised frame")
     applied = read_applied_transform(files.read_path) if files.kind == "nerfstudio" else None
     return _Parts(layout.name, Path(gpath), files, instances, dataparser, applied, default_up, up_note, notes, to_scan, arkit,
-                  _inria_training(src, layout.name, notes))
+                  _inria_training(cfg, notes))
 
 
-def _inria_training(src: Path, layout: str, notes: list[str]) -> tuple[Any, Any] | None:
-    """``cfg_args``' ``(resolution, images)`` of an INRIA output (or Holi-Spatial scene) folder; ``None``
-    for other layouts, without a ``cfg_args``, or when it cannot be read (noted: the cameras' own size is used)."""
-    cfg = src / "cfg_args"
-    if layout not in ("inria", "holi-spatial") or not cfg.is_file():
-        return None
-    try:
-        args = read_cfg_args(cfg)
-    except FileFormatError as err:
-        notes.append(f"{err}: the Gaussians are taken as trained at the cameras' own size")
-        return None
-    return args.get("resolution", -1), args.get("images")
+def _inria_training(cfg: tuple[dict[str, Any] | None, FileFormatError | None], notes: list[str]) -> tuple[Any, Any] | None:
+    """``cfg_args``' ``(resolution, images)`` (:func:`_cfg_args`) of an INRIA output (or Holi-Spatial scene)
+    folder; ``None`` without one, or when it cannot be read (noted: the cameras' own size is used)."""
+    args, error = cfg
+    if error is not None:
+        notes.append(f"{error}: the Gaussians are taken as trained at the cameras' own size")
+    return None if args is None else (args.get("resolution", -1), args.get("images"))
 
 
 def _scannetpp_parts(
