@@ -40,7 +40,7 @@ import numpy as np
 
 from spacedg.errors import ParameterError
 from spacedg.plugins.degradations._sensor import SIGNAL_CAP, sensor_capture
-from spacedg.plugins.degradations.common import snapped_long_side
+from spacedg.plugins.degradations.common import snapped_size
 
 __all__ = ["MAX_PHOTOSITES", "photosite_grid", "binned_capture"]
 
@@ -50,13 +50,12 @@ MAX_PHOTOSITES = 64_000_000
 
 def photosite_grid(width: int, height: int, pitch: float) -> tuple[int, int]:
     """``(columns, rows)`` of photosites of side ``pitch`` output pixels over a ``width × height``
-    image: ``round(side / pitch)``, the long side taken as :func:`~.common.snapped_long_side` has it
-    (so every size of one view shares one grid; an exact aspect keeps the image's own side)."""
+    image: ``round(side / pitch)`` of each side as :func:`~.common.snapped_size` has it (so every size
+    of one view shares one grid; an exact aspect keeps the image's own sides)."""
     if not (math.isfinite(pitch) and pitch > 0):
         raise ParameterError(f"sensor: pitch must be a finite number of pixels > 0, got {pitch!r}")
-    n_short = max(1, int(round(min(width, height) / pitch)))
-    n_long = max(1, int(round(snapped_long_side(width, height) / pitch)))
-    grid = (n_long, n_short) if width >= height else (n_short, n_long)
+    snapped_w, snapped_h = snapped_size(width, height)
+    grid = max(1, int(round(snapped_w / pitch))), max(1, int(round(snapped_h / pitch)))
     if grid[0] * grid[1] > MAX_PHOTOSITES:
         raise ParameterError(
             f"sensor: pitch {pitch:g} px on a {width}×{height} image needs {grid[0]}×{grid[1]} photosites, more than "

@@ -20,7 +20,7 @@ from spacedg.errors import InvalidDataError
 from spacedg.plugins.specs import ParamRange
 
 __all__ = ["FAR_PERCENTILE", "COMMON_ASPECTS", "severity_ladder", "check_linear_rgb", "check_display_image", "aux_image", "stream_key",
-           "reflect_index", "snapped_long_side", "surface_far_depth", "view_aspect"]
+           "reflect_index", "snapped_size", "surface_far_depth", "view_aspect"]
 
 
 def _describe(value: object) -> str:
@@ -139,14 +139,15 @@ def view_aspect(width: int, height: int) -> float:
     return near if abs(long - near * short) <= 1.0 else long / short
 
 
-def snapped_long_side(width: int, height: int) -> float:
-    """The image's longer side in pixels as its :func:`view_aspect` has it: ``aspect × short side``,
-    or the side itself when that is exact (then bit for bit the image's own, as every grid laid over
-    it was before). Grids laid over the image (photosites, drop cells) count along the long side from
-    this, so every size of one view gets the same grid."""
+def snapped_size(width: int, height: int) -> tuple[float, float]:
+    """``(width, height)`` in pixels as the image's :func:`view_aspect` has them: the longer side is
+    ``aspect × shorter side``, or itself when that is exact (then bit for bit the image's own, as
+    every grid laid over it was before); the shorter side is its own. Grids laid over the image
+    (photosites, drop cells) count from these, so every size of one view gets the same grid."""
     short, long = min(width, height), max(width, height)
     snapped = view_aspect(width, height) * short
-    return float(long) if abs(snapped - long) < 1e-6 else snapped
+    side = float(long) if abs(snapped - long) < 1e-6 else snapped
+    return (side, float(height)) if width >= height else (float(width), side)
 
 
 def reflect_index(n: int, pad: int) -> np.ndarray:

@@ -14,7 +14,7 @@ Drop field (all randomness from ``rng``, a :class:`numpy.random.Generator`)
 - :data:`N_LAYERS` = 3 layers ``l = 0, 1, 2`` of square cells of side ``c_l = S / (scale · 2^l)``
   px, anchored at the image's top-left corner: ``scale`` cells of the largest layer span the
   shorter side. Along the longer side the cells are counted and laid as the view's common aspect
-  has it (:func:`~.common.snapped_long_side`: a 584 × 389 image is 3:2, as 1752 × 1168), stretched
+  has it (:func:`~.common.snapped_size`: a 584 × 389 image is 3:2, as 1752 × 1168), stretched
   by the image's own side over that (1 for an exact aspect), so every size of one view gets the
   same drops at the same fractions of the image. Each cell holds at most one drop, present with probability
   :data:`PRESENCE` ``[l]`` (0.9, 0.7, 0.5): finer layers have more, smaller, sparser drops.
@@ -119,7 +119,7 @@ import numba
 import numpy as np
 
 from spacedg.errors import InvalidDataError, ParameterError
-from spacedg.plugins.degradations.common import check_linear_rgb, reflect_index, snapped_long_side
+from spacedg.plugins.degradations.common import check_linear_rgb, reflect_index, snapped_size
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 from spacedg.render.threads import fork_safe
@@ -342,17 +342,14 @@ def _draw_drops(shape: tuple[int, int], scale: float, radius: float, rng: np.ran
         )
     cells, cols, rows, offsets, cx, cy, rr = [], [], [], [], [], [], []
     total = 0
-    # the long side as the view's common aspect has it: every size of one view gets the same cells and
-    # drops, at the same fractions of the image (cells along the long side stretched by long / long_px,
-    # exactly 1 for an exact aspect)
-    short, long = min(height, width), max(height, width)
-    long_px = snapped_long_side(width, height)
-    stretch = long / long_px
+    # the sides as the view's common aspect has them: every size of one view gets the same cells and
+    # drops, at the same fractions of the image (cells stretched by the image's side over that, exactly 1
+    # for the shorter side and for an exact aspect)
+    snapped_w, snapped_h = snapped_size(width, height)
     for layer in range(N_LAYERS):
-        c = short / (scale * 2.0**layer)
-        n_short, n_long = max(1, int(np.ceil(short / c))), max(1, int(np.ceil(long_px / c)))
-        n_cols, n_rows = (n_long, n_short) if width >= height else (n_short, n_long)
-        c_x, c_y = (c * stretch, c) if width >= height else (c, c * stretch)
+        c = min(height, width) / (scale * 2.0**layer)
+        n_cols, n_rows = max(1, int(np.ceil(snapped_w / c))), max(1, int(np.ceil(snapped_h / c)))
+        c_x, c_y = c * (width / snapped_w), c * (height / snapped_h)
         u = rng.random((4, n_rows, n_cols))
         r = np.where(u[0] < PRESENCE[layer], radius * 0.5 * c * (MIN_SIZE + (1.0 - MIN_SIZE) * u[1]), 0.0)
         # the centre may move this far from the cell centre, keeping the drop inside
