@@ -22,28 +22,24 @@ class SharpPass:
 
 
 def sharp_pass_cpu(gaussians: Any, camera: Any, settings: Any, scale: float) -> SharpPass:
-    """The sharp pass on the compiled path, at ``scale`` of ``camera``'s resolution."""
-    from spacedg.render import project_cpu, raster_cpu
-    from spacedg.render.colour_cpu import decode_srgb
+    """The sharp pass on the compiled path, at ``scale`` of ``camera``'s resolution: the clean render
+    of :func:`spacedg.render.composite._raster_cpu` on the measurement grid."""
+    from spacedg.render import composite, project_cpu
     from spacedg.render.defocus import measurement_camera, measurement_settings
 
-    wide = measurement_camera(camera, 0, scale)
-    sharp, rects = project_cpu.project_gaussians(gaussians, wide, measurement_settings(settings, scale), None, True)
+    wide, measured = measurement_camera(camera, 0, scale), measurement_settings(settings, scale)
+    sharp, rects = project_cpu.project_gaussians(gaussians, wide, measured, None, True)
     ids = np.full(sharp.shape[0], -1, np.int32)
-    out = raster_cpu.rasterize(sharp, rects, ids, wide.width, wide.height, settings.alpha_max, True, True, False,
-                               settings.tight_tiles and settings.opacity_extent)
-    return SharpPass(wide, decode_srgb(out["rgb"]), out["alpha"], out["depth"])
+    out, _ = composite._raster_cpu(gaussians, sharp, rects, ids, wide, measured, True, True, False, False)
+    return SharpPass(wide, out["rgb"], out["alpha"], out["depth"])
 
 
 def sharp_pass_torch(gs: Any, camera: Any, settings: Any, scale: float) -> SharpPass:
-    """The sharp pass on the torch path."""
-    from spacedg.render import raster_torch
-    from spacedg.render.colour_cpu import decode_srgb
+    """The sharp pass on the torch path (:func:`spacedg.render.composite._raster_torch`'s clean render)."""
+    from spacedg.render import composite
     from spacedg.render.defocus import measurement_camera, measurement_settings
     from spacedg.render.project_torch import project_gaussians
 
-    wide = measurement_camera(camera, 0, scale)
-    sharp = project_gaussians(gs, wide, measurement_settings(settings, scale), None, True)
-    offsets, gauss = raster_torch.bin_tiles(sharp, wide.width, wide.height, settings.tight_tiles and settings.opacity_extent)
-    out = raster_torch.composite(sharp, offsets, gauss, gs.instance_ids, wide.width, wide.height, settings.alpha_max, True, True, False)
-    return SharpPass(wide, decode_srgb(out["rgb"].cpu().numpy()), out["alpha"].cpu().numpy(), out["depth"].cpu().numpy())
+    wide, measured = measurement_camera(camera, 0, scale), measurement_settings(settings, scale)
+    out, _ = composite._raster_torch(gs, project_gaussians(gs, wide, measured, None, True), wide, measured, True, True, False, False)
+    return SharpPass(wide, out["rgb"], out["alpha"], out["depth"])
