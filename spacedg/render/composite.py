@@ -87,7 +87,7 @@ def composite_view(
             t1 = time.perf_counter()
             images, sharp = _raster_torch(gs, proj, camera, settings, want_color, want_depth, want_ids, defocus is not None)
     if sharp is not None:  # the blurred view's light and coverage brought to the sharp view's local flux
-        images["rgb"], images["alpha"] = _conserved(camera, defocus, images, sharp)  # type: ignore[arg-type]
+        images["rgb"], images["alpha"] = _conserved(camera, defocus, images, sharp, want_color)  # type: ignore[arg-type]
     t2 = time.perf_counter()
     stats["project_ms"] = (t1 - t0) * 1e3
     stats["raster_ms"] = (t2 - t1) * 1e3
@@ -112,11 +112,11 @@ def _raster_cpu(
 
     width, height, factor = camera.width, camera.height, 1
     sharp = None
-    visible = rects[:, 1] > rects[:, 0]
-    n_visible = np.int64(np.count_nonzero(visible))
-    if defocused and defocus_model.has_blur(packed, rects):
-        sharp = sharp_pass_cpu(gaussians, camera, settings, flux_scale(float(np.percentile(packed[visible, COC], 95))))
-        factor = defocus_model.composite_factor(packed, rects, width, height)
+    visible = rects[:, 1] > rects[:, 0] if defocused else None
+    plan = defocus_model.blur_plan(packed[visible, COC], width, height) if defocused else None
+    if plan is not None:
+        sharp = sharp_pass_cpu(gaussians, camera, settings, flux_scale(plan[0]))
+        factor = plan[1]
         if factor > 1:
             packed, rects, width, height = defocus_model.coarse_view(packed, rects, width, height, factor)
     images = raster_cpu.rasterize(
@@ -125,9 +125,9 @@ def _raster_cpu(
     )
     if want_color:
         images["rgb"] = decode_srgb(images["rgb"])
-    if factor > 1:
+    if factor > 1:  # the count of the view's own projection, not the coarse grid's
         images = defocus_model.upsample(images, factor, camera.width, camera.height, want_color, want_depth, want_ids)
-    images["n_visible"] = n_visible
+        images["n_visible"] = np.int64(np.count_nonzero(visible))
     return images, sharp
 
 
@@ -138,17 +138,19 @@ def _raster_torch(
     """As :func:`_raster_cpu` on the torch path (numpy images)."""
     from spacedg.render import defocus_torch, raster_torch
     from spacedg.render.colour_cpu import decode_srgb
-    from spacedg.render.defocus import upsample
+    from spacedg.render.defocus import blur_plan, upsample
     from spacedg.render.defocus_flux import flux_scale
     from spacedg.render.defocus_sharp import sharp_pass_torch
 
     width, height, factor = camera.width, camera.height, 1
     sharp = None
     n_visible = int(proj.visible.sum())  # type: ignore[attr-defined]
-    if defocused and defocus_torch.has_blur(proj):  # type: ignore[arg-type]
-        coc = proj.coc[proj.visible].double().cpu().numpy()  # type: ignore[attr-defined]
-        sharp = sharp_pass_torch(gs, camera, settings, flux_scale(float(np.percentile(coc, 95))))
-        factor = defocus_torch.composite_factor(proj, width, height)  # type: ignore[arg-type]
+    plan = None
+    if defocused and proj.coc is not None:  # type: ignore[attr-defined]
+        plan = blur_plan(proj.coc[proj.visible].double().cpu().numpy(), width, height)  # type: ignore[attr-defined]
+    if plan is not None:
+        sharp = sharp_pass_torch(gs, camera, settings, flux_scale(plan[0]))
+        factor = plan[1]
         if factor > 1:
             proj, width, height = defocus_torch.coarse_view(proj, width, height, factor)  # type: ignore[arg-type]
     offsets, gauss = raster_torch.bin_tiles(proj, width, height, settings.tight_tiles and settings.opacity_extent)  # type: ignore[arg-type]
@@ -166,17 +168,19 @@ def _raster_torch(
     return images, sharp
 
 
-def _conserved(camera: Camera, defocus: Defocus, images: dict[str, np.ndarray], sharp: SharpPass) -> tuple[np.ndarray, np.ndarray]:
-    """The blurred view's ``rgb`` (linear) and ``alpha`` with the sharp view's local flux (:mod:`spacedg.render.defocus_flux`)."""
+def _conserved(
+    camera: Camera, defocus: Defocus, images: dict[str, np.ndarray], sharp: SharpPass, want_color: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The blurred view's ``rgb`` (linear; the placeholder without ``want_color``) and ``alpha`` with the
+    sharp view's local flux (:mod:`spacedg.render.defocus_flux`)."""
     from spacedg.render.defocus_flux import conserve_light, flux_lengths
 
     seen = sharp.alpha > 1e-3
     length, blur = flux_lengths(defocus.radius(np.maximum(sharp.depth[seen], 1e-6)), sharp.alpha[seen])
     alpha = images["alpha"]
-    colour = images["rgb"].shape[:2] == alpha.shape
-    rgb = images["rgb"] if colour else np.zeros((*alpha.shape, 3), np.float32)
+    rgb = images["rgb"] if want_color else np.zeros((*alpha.shape, 3), np.float32)
     rgb, alpha = conserve_light(rgb, alpha, sharp.rgb, sharp.alpha, camera, sharp.wide, length, blur)
-    return (rgb if colour else images["rgb"]), alpha
+    return (rgb if want_color else images["rgb"]), alpha
 
 
 def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: frozenset[str]) -> Frame:

@@ -43,14 +43,18 @@ import numpy as np
 from spacedg.render.frame import expected_depth
 from spacedg.render.project_cpu import CA, CB, CC, COC, PX, PY, RADX, RADY
 
-__all__ = ["COMPOSITE_MIN_COC", "COMPOSITE_MAX_FACTOR", "MEASURE_SCALE", "coarse_view", "composite_factor", "factor_for_coc",
-           "has_blur", "measurement_camera", "measurement_settings", "upsample"]
+__all__ = ["COMPOSITE_MIN_COC", "COMPOSITE_MAX_FACTOR", "MEASURE_SCALE", "blur_plan", "coarse_view", "composite_factor",
+           "factor_for_coc", "measurement_camera", "measurement_settings", "upsample"]
 
 
-def has_blur(packed: np.ndarray, rects: np.ndarray) -> bool:
-    """Whether any visible Gaussian of a defocused projection has a circle of confusion > 0."""
-    visible = rects[:, 1] > rects[:, 0]
-    return bool((packed[visible, COC] > 0.0).any())
+def blur_plan(coc: np.ndarray, width: int, height: int) -> tuple[float, int] | None:
+    """``(95th-percentile circle of confusion px, composite factor)`` of a defocused view from its
+    visible Gaussians' circles of confusion ``coc`` (px, either backend's, as numpy), or ``None`` when
+    none blurs (the view is the sharp render). The factor is :func:`composite_factor`'s."""
+    if not (coc > 0.0).any():
+        return None
+    factor = 1 if COMPOSITE_MIN_COC <= 0 else factor_for_coc(float(coc.min()), width, height)
+    return float(np.percentile(coc, 95)), factor
 
 
 #: Default resolution of the sharp pass relative to the view (see :func:`measurement_camera`;

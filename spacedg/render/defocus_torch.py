@@ -14,22 +14,7 @@ import torch
 from spacedg.render.project_torch import Projected
 from spacedg.render.settings import TILE_SIZE
 
-__all__ = ["coarse_view", "composite_factor", "has_blur"]
-
-
-def has_blur(proj: Projected) -> bool:
-    """Whether any visible Gaussian of a defocused projection has a circle of confusion > 0."""
-    return proj.coc is not None and bool((proj.coc[proj.visible] > 0).any())
-
-
-def composite_factor(proj: Projected, width: int, height: int) -> int:
-    """As :func:`spacedg.render.defocus.composite_factor`, from a torch projection."""
-    from spacedg.render import defocus
-
-    visible = proj.visible
-    if defocus.COMPOSITE_MIN_COC <= 0 or proj.coc is None or not bool(visible.any()):
-        return 1
-    return defocus.factor_for_coc(float(proj.coc[visible].min()), width, height)
+__all__ = ["coarse_view"]
 
 
 def coarse_view(proj: Projected, width: int, height: int, factor: int) -> tuple[Projected, int, int]:
