@@ -65,11 +65,11 @@ def object_scene(path: Path, size: tuple[int, int], capture: tuple[int, int] | N
     ``capture``: the image size the Gaussians are taken to have been trained at (a file without
     cameras does not say): the view's ``capture_focal`` is its focal at that size (``None``: classic
     dilation, no capture scale; see :func:`spacedg.render.settings.footprint_dilation`)."""
+    from spacedg.scene.capture_checks import parse_up
     from spacedg.scene.io import read_gaussians
 
-    axis = {"x": 0, "y": 1, "z": 2}[up[-1]]
-    up_vec = np.zeros(3)
-    up_vec[axis] = -1.0 if up.startswith("-") else 1.0
+    up_vec = parse_up(up)  # "+x".."-z" (a clear error otherwise)
+    axis = int(np.argmax(np.abs(up_vec)))
     g = read_gaussians(path)
     lo, hi = np.percentile(g.means, 0.5, axis=0), np.percentile(g.means, 99.5, axis=0)
     centre, extent = 0.5 * (lo + hi), hi - lo

@@ -23,10 +23,11 @@ total (a footprint truncated at ``defocus_extent`` σ is narrower than the lens'
 lone Gaussian's alpha), so the ratio is finally scaled per channel to give the frame the sharp
 view's total.
 
-The sharp image comes from one clean render of the view, widened by ``3·√(L²+r²)`` px (so light
-from just outside the frame is counted), at half the resolution when ``L ≥ 2`` px (its low-pass is
-then at least one half-resolution pixel wide); the ratio is computed on that grid and upsampled
-bilinearly. Measured against the thin-lens reference (``benchmarks/defocus_reference.py``; the
+The sharp image comes from one clean render of the view on the view's own frame (grown to whole
+tiles; both low-passes mirror the same support, so no margin is rendered: a sharp pass wider than
+the blurred view was measured to lose 1.6–2.6 % of a frame's light), at half the resolution when
+``√(L²+r²) ≥ 2`` px (:func:`flux_scale`: its low-pass is then at least one half-resolution pixel
+wide); the ratio is computed on that grid and upsampled bilinearly. Measured against the thin-lens reference (``benchmarks/defocus_reference.py``; the
 table is in the module docstring of :mod:`spacedg.render.defocus`).
 """
 

@@ -134,15 +134,13 @@ def footprint_dilation(camera: Any, settings: RasterSettings) -> tuple[float, fl
     the classic dilation).
     """
     k = float(settings.dilation_scale)
-    eps = float(settings.eps2d) * k * k if k != 1.0 else float(settings.eps2d)
+    eps = float(settings.eps2d) * k * k
     if settings.antialiased:
         return 0.0, 0.0, eps, eps
     focal = getattr(camera, "capture_focal", None)
     if focal is None:
         return eps, eps, 0.0, 0.0
-    sx, sy = float(camera.fx) / focal[0], float(camera.fy) / focal[1]
-    if sx == 1.0 and sy == 1.0:
-        return eps, eps, 0.0, 0.0
+    sx, sy = float(camera.fx) / focal[0], float(camera.fy) / focal[1]  # at s = 1: eps, eps, 0, 0 (the classic)
     return eps * sx * sx, eps * sy * sy, _box_variance(sx) * k * k, _box_variance(sy) * k * k
 
 
