@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from functools import lru_cache
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -101,13 +101,12 @@ def _raster_cpu(
     want_color: bool, want_depth: bool, want_ids: bool, defocused: bool,
 ) -> tuple[dict[str, np.ndarray], SharpPass | None]:
     """Composite a CPU projection; when anything is blurred, also the sharp pass
-    (:mod:`spacedg.render.defocus_sharp`), and coarse when every visible blur is wide.
+    (:func:`sharp_pass`), and coarse when every visible blur is wide.
     ``(images, the sharp pass or None when nothing is blurred)``."""
     from spacedg.render import defocus as defocus_model
     from spacedg.render import raster_cpu
     from spacedg.render.colour_cpu import decode_srgb
     from spacedg.render.defocus_flux import flux_scale
-    from spacedg.render.defocus_sharp import sharp_pass_cpu
     from spacedg.render.project_cpu import COC
 
     width, height, factor = camera.width, camera.height, 1
@@ -115,7 +114,7 @@ def _raster_cpu(
     visible = rects[:, 1] > rects[:, 0] if defocused else None
     plan = defocus_model.blur_plan(packed[visible, COC], width, height) if defocused else None
     if plan is not None:
-        sharp = sharp_pass_cpu(gaussians, camera, settings, flux_scale(plan[0]))
+        sharp = sharp_pass(gaussians, camera, settings, flux_scale(plan[0]))
         factor = plan[1]
         if factor > 1:
             packed, rects, width, height = defocus_model.coarse_view(packed, rects, width, height, factor)
@@ -140,7 +139,6 @@ def _raster_torch(
     from spacedg.render.colour_cpu import decode_srgb
     from spacedg.render.defocus import blur_plan, upsample
     from spacedg.render.defocus_flux import flux_scale
-    from spacedg.render.defocus_sharp import sharp_pass_torch
 
     width, height, factor = camera.width, camera.height, 1
     sharp = None
@@ -149,7 +147,7 @@ def _raster_torch(
     if defocused and proj.coc is not None:  # type: ignore[attr-defined]
         plan = blur_plan(proj.coc[proj.visible].double().cpu().numpy(), width, height)  # type: ignore[attr-defined]
     if plan is not None:
-        sharp = sharp_pass_torch(gs, camera, settings, flux_scale(plan[0]))
+        sharp = sharp_pass(gs, camera, settings, flux_scale(plan[0]))
         factor = plan[1]
         if factor > 1:
             proj, width, height = defocus_torch.coarse_view(proj, width, height, factor)  # type: ignore[arg-type]
@@ -166,6 +164,26 @@ def _raster_torch(
     images["n_visible"] = np.int64(n_visible)
     images["n_pairs"] = np.int64(gauss.numel())
     return images, sharp
+
+
+def sharp_pass(gaussians: Any, camera: Camera, settings: RasterSettings, scale: float) -> SharpPass:
+    """The sharp pass of defocus (:mod:`spacedg.render.defocus_sharp`) at ``scale`` of ``camera``'s
+    resolution: the clean raster of the backend ``gaussians`` belong to (:class:`Gaussians`: the
+    compiled path; tensors: the torch path) on the measurement grid."""
+    from spacedg.render.defocus import measurement_camera, measurement_settings
+
+    wide, measured = measurement_camera(camera, 0, scale), measurement_settings(settings, scale)
+    if isinstance(gaussians, Gaussians):
+        from spacedg.render import project_cpu
+
+        packed, rects = project_cpu.project_gaussians(gaussians, wide, measured, None, True)
+        ids = np.full(packed.shape[0], -1, np.int32)
+        out, _ = _raster_cpu(gaussians, packed, rects, ids, wide, measured, True, True, False, False)
+    else:
+        from spacedg.render.project_torch import project_gaussians
+
+        out, _ = _raster_torch(gaussians, project_gaussians(gaussians, wide, measured, None, True), wide, measured, True, True, False, False)
+    return SharpPass(wide, out["rgb"], out["alpha"], out["depth"])
 
 
 def _conserved(

@@ -13,7 +13,7 @@ so every neighbourhood a little wider than the blur keeps the light (and the cov
 view holds there. That step corrects what compositing blurred splats gets wrong about light —
 spread-out splats of one surface occlude each other less (a room 2–4 % dark), an object's hidden
 back shows through its thinned front (an object on an empty background up to +10 %) — from one
-sharp pass (:mod:`spacedg.render.defocus_sharp`, at half resolution once the low-pass is ≥ 2 px).
+sharp pass (:func:`spacedg.render.composite.sharp_pass`, at half resolution once the low-pass is ≥ 2 px).
 With nothing blurred in the view (every visible ``r = 0``) the sharp render is returned, bit for bit.
 
 Measured against the thin-lens reference (:mod:`spacedg.render.thin_lens`, 48 lens points;
