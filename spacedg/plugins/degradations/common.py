@@ -12,6 +12,7 @@ way, so the messages are the same everywhere:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
@@ -20,7 +21,7 @@ from spacedg.errors import InvalidDataError
 from spacedg.plugins.specs import ParamRange
 
 __all__ = ["FAR_PERCENTILE", "COMMON_ASPECTS", "severity_ladder", "check_linear_rgb", "check_display_image", "aux_image", "stream_key",
-           "reflect_index", "snapped_size", "surface_far_depth", "view_aspect"]
+           "box_pad", "reflect_index", "snapped_size", "surface_far_depth", "view_aspect"]
 
 
 def _describe(value: object) -> str:
@@ -148,6 +149,13 @@ def snapped_size(width: int, height: int) -> tuple[float, float]:
     snapped = view_aspect(width, height) * short
     side = float(long) if abs(snapped - long) < 1e-6 else snapped
     return (side, float(height)) if width >= height else (float(width), side)
+
+
+def box_pad(spread: float, shape: tuple[int, int]) -> int:
+    """Pixels of ``BORDER_REFLECT`` padding for squares of side up to ``spread`` px around points in the
+    frame of ``shape``: half the side and one, at most the frame's longer side (a square wider than
+    that is cut at the padding's edge). Shared by both backends of ``water_droplets``' refracted view."""
+    return int(min(math.ceil(0.5 * spread) + 1, max(shape)))
 
 
 def reflect_index(n: int, pad: int) -> np.ndarray:

@@ -377,14 +377,14 @@ def _box_means(rgb: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor, spre
 
 def droplet_composite_torch(
     rgb: torch.Tensor, drops: tuple[np.ndarray, ...], reach: float, index: float, blur_sigma: float, blur_kernel: int, *,
-    specular: float, rim: float, edge: float, light: tuple[float, float, float], shininess_log2: int, box_pad: int,
+    specular: float, rim: float, edge: float, light: tuple[float, float, float], shininess_log2: int,
 ) -> torch.Tensor:
     """The per-pixel part of :func:`spacedg.plugins.degradations.water_droplets.water_droplets` on
     tensors: ``drops`` as its ``_draw_drops`` returns them (drawn from ``rng`` on the host, the same
     numbers as the CPU path), then the drop field (float64 geometry, as the numba kernel), the
     refracted view (``grid_sample``, reflection border = OpenCV's ``BORDER_REFLECT``; where a drop
-    minifies, the mean over what each pixel spans, the frame padded by ``box_pad`` px: the CPU path's
-    ``box_pad`` of the widest spread), the in-drop blur and the composite; untouched outside drops.
+    minifies, the mean over what each pixel spans, the frame padded as the CPU path pads it for the
+    widest spread seen), the in-drop blur and the composite; untouched outside drops.
     ``reach`` = strength · F px (the refraction's reach at the rim), ``index``: the Fresnel index (water's)."""
     cells, n_cols, n_rows, offsets, cx, cy, rr = drops
     height, width = rgb.shape[:2]
@@ -429,8 +429,12 @@ def droplet_composite_torch(
     seen = F.grid_sample(rgb.permute(2, 0, 1)[None], grid[None], mode="bilinear", padding_mode="reflection", align_corners=False)
     seen = seen[0].permute(1, 2, 0)
     spread = torch.where(drop, torch.abs(1.0 - reach / best_r), torch.zeros_like(best_r)).float()
-    if bool((spread > 1.0).any()):  # minifying drops: the mean over the square each pixel spans (refracted_view)
-        seen = torch.where((spread > 1.0)[..., None], _box_means(rgb, map_x, map_y, spread, box_pad), seen)
+    minify = spread > 1.0
+    if bool(minify.any()):  # minifying drops: the mean over the square each pixel spans (refracted_view)
+        from spacedg.plugins.degradations.common import box_pad
+
+        pad = box_pad(float(spread.max()), (height, width))
+        seen = torch.where(minify[..., None], _box_means(rgb, map_x, map_y, spread, pad), seen)
     if blur_kernel > 1 and blur_sigma > 0.0:
         seen = gaussian_blur_reflect(seen, blur_kernel, blur_sigma)
     through = a * (1.0 - float(rim) * (1.0 - trans))

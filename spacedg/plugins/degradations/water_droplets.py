@@ -119,7 +119,7 @@ import numba
 import numpy as np
 
 from spacedg.errors import InvalidDataError, ParameterError
-from spacedg.plugins.degradations.common import check_linear_rgb, reflect_index, snapped_size
+from spacedg.plugins.degradations.common import box_pad, check_linear_rgb, reflect_index, snapped_size
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
 from spacedg.render.threads import fork_safe
@@ -460,13 +460,6 @@ def _sat_at(sat: np.ndarray, v: float, u: float, ch: int) -> float:  # pragma: n
     return top * (1.0 - fv) + bottom * fv
 
 
-def box_pad(spread: float, shape: tuple[int, int]) -> int:
-    """Pixels of ``BORDER_REFLECT`` padding for squares of side up to ``spread`` px around points in the
-    frame: half the side and one, at most the frame's longer side (a square wider than that is cut
-    at the padding's edge)."""
-    return int(min(math.ceil(0.5 * spread) + 1, max(shape)))
-
-
 def refracted_view(rgb: np.ndarray, field: DropletField) -> np.ndarray:
     """What each pixel sees through its drop: float32 (H, W, 3), from finite ``rgb`` (the caller's check:
     a NaN would spread over every minifying pixel). Bilinear at the source point
@@ -575,13 +568,10 @@ def apply_torch(rgb: Any, aux: Mapping[str, Any], params: Mapping[str, Any], rng
     if p["scale"] == 0.0 or p["radius"] == 0.0:
         return rgb.clone()
     drops = _draw_drops(tuple(rgb.shape[:2]), p["scale"], p["radius"], rng)  # the CPU path's numbers, from the same rng
-    reach = refraction_reach(tuple(rgb.shape[:2]), p["strength"])
-    radii = drops[-1][drops[-1] > 0]
-    widest = float(np.max(np.abs(1.0 - reach / radii))) if radii.size else 0.0  # the widest spread of any drop
     return device.droplet_composite_torch(
-        rgb, drops, reach, WATER_INDEX, p["blur_sigma"],
+        rgb, drops, refraction_reach(tuple(rgb.shape[:2]), p["strength"]), WATER_INDEX, p["blur_sigma"],
         p["blur_kernel"], specular=SPECULAR_INTENSITY, rim=RIM_DARKENING,
-        edge=EDGE_WIDTH, light=LIGHT_DIRECTION, shininess_log2=SHININESS_LOG2, box_pad=box_pad(widest, tuple(rgb.shape[:2])),
+        edge=EDGE_WIDTH, light=LIGHT_DIRECTION, shininess_log2=SHININESS_LOG2,
     )
 
 
