@@ -39,7 +39,7 @@ def small_room():
     """A small but complete synthetic room (30k Gaussians), generated once per session."""
     from spacedg.scene.synthetic import RoomConfig, generate_room
 
-    return generate_room(7, RoomConfig(gaussians=30_000))
+    return generate_room(7, RoomConfig(gaussians=30_000, row_probability=0.0))  # the test world before wall rows
 
 
 def private_copies(dirs: list[Path], root: Path, *, indexes: bool = False) -> list[Path]:
@@ -64,7 +64,7 @@ def qa_room_dirs(tmp_path_factory) -> list[Path]:
     root = tmp_path_factory.mktemp("qa_rooms")
     dirs = []
     for seed in (11, 12, 13, 14):
-        config = RoomConfig(gaussians=30_000, capture=CaptureConfig(320, 240, 24, 32))
+        config = RoomConfig(gaussians=30_000, capture=CaptureConfig(320, 240, 24, 32), row_probability=0.0)  # the test world before wall rows
         folder = root / f"room-{seed:06d}"
         save_scene(generate_room(seed, config, scene_id=folder.name), folder)
         prepare_room(load_scene(folder), folder / "cache")

@@ -43,6 +43,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                        help="a .splat object to place in every room (repeatable; label and up axis from its meta.json)")
     synth.add_argument("--splat-size", type=_args.real(0, above=True, unit="metres"), default=0.35,
                        help="longest side of placed .splat objects, metres")
+    synth.add_argument("--row-probability", type=_args.real(0, 1, unit="probability"), default=RoomConfig.row_probability, metavar="P",
+                       help="chance that a room has a row of 4-6 identical chairs or boxes along a wall, for counting (default 0.5; 0 gives the rooms of before)")
     synth.add_argument("--overwrite", action="store_true", help="regenerate rooms whose folder already exists")
     _vocabulary.add_deprecated(synth, "scenes synth", **{
         "--width": dict(dest="width", type=image_side, metavar="W"), "--height": dict(dest="height", type=image_side, metavar="H"),
@@ -119,6 +121,7 @@ def _synth(args: argparse.Namespace) -> int:
         gaussians=args.num_gaussians,
         capture=CaptureConfig(width, height, args.min_views, args.max_views),
         external=externals,
+        row_probability=args.row_probability,
     )
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -171,6 +174,7 @@ def _config_record(config: RoomConfig) -> dict:
         "min_objects": config.min_objects,
         "max_objects": config.max_objects,
         "twin_probability": config.twin_probability,
+        "row_probability": config.row_probability,
         "world_frame": config.world_frame,
         "capture": asdict(config.capture),
         "external": [

@@ -9,8 +9,8 @@ would.
 What a blind predictor sees (and nothing else): the question text, the option texts, and the
 object labels the question names (read from the record's ``refs`` / ``label`` entries: the
 question states them verbatim, so this is text, not geometry). It never sees the
-``sub_question_type`` (not part of the prompt; for ``camera_rotation`` it names the dominant
-axis, i.e. the answer) nor the images. Predictors are trained per ``question_type`` (the
+``sub_question_type`` (not part of the prompt; a dual ``camera_rotation`` sub type names the
+dominant axis first) nor the images. Predictors are trained per ``question_type`` (the
 wording identifies it) and reported per ``(question_type, sub_question_type)``.
 
 Predictors (all fitted on the training scenes only; the count-based ones are

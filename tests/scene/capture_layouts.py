@@ -39,7 +39,7 @@ def truth_room(seed: int = 5, gaussians: int = 20_000, views: int = 10, shift: t
     """A small z-up synthetic room (ids on its Gaussians), optionally shifted away from the origin."""
     from spacedg.scene.synthetic import CaptureConfig, RoomConfig, generate_room
 
-    room = generate_room(seed, RoomConfig(gaussians=gaussians, capture=CaptureConfig(160, 120, views, views), world_frame="z_up"))
+    room = generate_room(seed, RoomConfig(gaussians=gaussians, capture=CaptureConfig(160, 120, views, views), world_frame="z_up", row_probability=0.0))
     if any(shift):
         room = room.transformed(np.eye(3), np.asarray(shift, dtype=np.float64))
     return room

@@ -23,12 +23,12 @@ def _all_rooms(default_rooms, small_room):
 
 
 def test_same_seed_same_bytes_other_seed_differs(small_room):
-    again = generate_room(7, RoomConfig(gaussians=30_000))
+    again = generate_room(7, RoomConfig(gaussians=30_000, row_probability=0.0))  # as the small_room fixture
     for field in ("means", "quats", "scales", "opacities", "sh", "instance_ids"):
         assert getattr(again.gaussians, field).tobytes() == getattr(small_room.gaussians, field).tobytes()
     assert [i.to_dict() for i in again.instances] == [i.to_dict() for i in small_room.instances]
     assert all(np.array_equal(again.views[k].cam_to_world, small_room.views[k].cam_to_world) for k in small_room.views)
-    other = generate_room(8, RoomConfig(gaussians=30_000))
+    other = generate_room(8, RoomConfig(gaussians=30_000, row_probability=0.0))
     assert other.gaussians.means.shape != small_room.gaussians.means.shape or not np.array_equal(
         other.gaussians.means, small_room.gaussians.means
     )
@@ -190,3 +190,34 @@ def test_invalid_configs_are_rejected():
         ExternalObject(_blob(), "statue", size_m=5.0)
     with pytest.raises(InvalidDataError, match="up_axis must be one of"):
         ExternalObject(_blob(), "statue", up_axis="up")
+
+
+def test_wall_rows_stand_identical_objects_side_by_side():
+    """``row_probability=1``: a row of 4–6 identical chairs or boxes along a wall (for counting),
+    one model, evenly spaced on a line, never intersecting anything; 0 draws no row."""
+    rows_seen = 0
+    for seed in range(6):
+        scene = generate_room(seed, RoomConfig(gaussians=10_000, row_probability=1.0))
+        rows: dict[int, list] = {}
+        for inst in scene.instances:
+            if "row" in inst.attributes:
+                rows.setdefault(int(inst.attributes["row"]), []).append(inst)
+        for first, members in rows.items():
+            rows_seen += 1
+            assert 4 <= len(members) <= 6 and members[0].id == first
+            assert len({m.label for m in members}) == 1 and members[0].label in ("chair", "box")
+            ext = np.array([m.box.extents for m in members])
+            np.testing.assert_allclose(ext, np.broadcast_to(ext[0], ext.shape), atol=0.02)  # one model (boxes are fitted to its surfels)
+            centres = np.array([m.box.center for m in members])
+            steps = np.diff(centres, axis=0)
+            np.testing.assert_allclose(steps, np.broadcast_to(steps[0], steps.shape), atol=0.03)  # evenly spaced on a line
+            assert np.abs(steps[0] @ scene.up) < 1e-6 + 0.02  # on the floor, not stacked
+        for a, b in itertools.combinations(scene.instances, 2):
+            if a.attributes.get("support") in (b.id,) or b.attributes.get("support") in (a.id,):
+                continue
+            assert not a.box.intersects(b.box, tol=1e-3), (seed, a.id, b.id)
+    assert rows_seen >= 4
+    for seed in range(3):
+        assert not any("row" in i.attributes for i in generate_room(seed, RoomConfig(gaussians=10_000, row_probability=0.0)).instances)
+    with pytest.raises(InvalidDataError, match="row_probability must be in"):
+        RoomConfig(row_probability=1.5)

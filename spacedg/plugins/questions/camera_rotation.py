@@ -33,8 +33,18 @@ Options (4, letters after a seeded shuffle, :func:`~spacedg.plugins.questions.ge
 
 The two axes are always written in the order yaw, pitch, roll, in the question text and in
 the dual options, **not** in dominance order (which would give the answer away).
-``sub_question_type = f"{ax1}+{ax2}_{mode}"`` with ``ax1`` the dominant axis (all 12
-combinations are declared).
+
+``sub_question_type``: dual ``f"{ax1}+{ax2}_dual"`` with ``ax1`` the dominant axis (SPEC-QA);
+single ``f"{t1}+{t2}_single"`` with the two axes **in text order** (``yaw+pitch_single``,
+``yaw+roll_single``, ``pitch+roll_single``). **Deviation** from SPEC-QA's ``{ax1}+{ax2}`` for
+singles: a single's answer *is* its dominant axis's word, so a sub type named by the dominant
+axis tells the answer's axis, and the blind rule "always tilt up" scores 50 % on a
+``pitch+yaw_single`` of any sign-balanced bench (chance 25 %), 0 % on ``yaw+pitch_single``:
+per sub type the bench would read as solvable blind though no model can use it. Named by what
+the question shows, the sub type holds both answer axes, balanced. A dual's answer is the signs
+of both axes whichever dominates, so its name keeps the spec's order. The dominant axis stays in
+the geometry block (``axes``) for breakdowns. The 9 sub types that can occur are declared
+(:data:`SUB_TYPES`).
 
 Every named component is perceivable: the answer's axes have ``|angle| >= 5°``
 (:data:`MIN_ROTATION_DEG`; a dual answer needs ``a2 >= 0.6 a1 >= 5°``).
@@ -42,8 +52,8 @@ Every named component is perceivable: the answer's axes have ``|angle| >= 5°``
 Debiasing (the ``selection`` entry): the question text tells a blind model the two axes and
 the mode, and pans are far more common than tilts, so the dominant axis was guessable. The
 **cell** is the mode and the two axes named in the text; the **roles** are the four option
-texts; the question index takes whole rounds (one record per option) per cell, across the two
-sub types that share a cell (``yaw+pitch_single`` and ``pitch+yaw_single``). The subject is
+texts; the question index takes whole rounds (one record per option) per cell (a single cell
+is one sub type; a dual cell spans the two sub types of its axes by dominance). The subject is
 the unordered view pair.
 
 Pairs: :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` with
@@ -92,6 +102,7 @@ __all__ = [
     "FAMILY",
     "NAME",
     "SUB_TYPES",
+    "sub_question_type",
     "TEMPLATES",
     "RotationCase",
     "classify_rotation",
@@ -119,7 +130,18 @@ TEMPLATES: tuple[str, ...] = (
     _LEAD + "Which option best describes the rotation direction using TWO components: {axis1} and {axis2}?",
 )
 MODES: tuple[str, ...] = ("single", "dual")
-SUB_TYPES: tuple[str, ...] = tuple(f"{a}+{b}_{m}" for m in MODES for a in AXES for b in AXES if a != b)
+#: Single sub types name the two axes in text order; dual ones dominant axis first (module docstring).
+SUB_TYPES: tuple[str, ...] = tuple(f"{a}+{b}_single" for i, a in enumerate(AXES) for b in AXES[i + 1:]) + tuple(
+    f"{a}+{b}_dual" for a in AXES for b in AXES if a != b
+)
+
+
+def sub_question_type(case: "RotationCase") -> str:
+    """The sub type of a rotation case: singles by their text axes, duals dominant axis first."""
+    if case.mode == "single":
+        first, second = (a for a in AXES if a in (case.ax1, case.ax2))
+        return f"{first}+{second}_single"
+    return f"{case.ax1}+{case.ax2}_{case.mode}"
 
 ANGLE_DECIMALS = 6
 MIN_ROTATION_DEG = 5.0
@@ -201,7 +223,7 @@ def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator, decks: dict[
     truth, distractors, text_axes = _options(case, euler)
     options, answer = build_mcq(truth, distractors, rng, slot=decks[case.mode].next())
     template = MODES.index(case.mode)
-    sub = f"{case.ax1}+{case.ax2}_{case.mode}"
+    sub = sub_question_type(case)
     options_text = [o[3:] for o in options]
     geometry = {
         **pair_geometry(scene, pair),

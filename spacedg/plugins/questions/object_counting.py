@@ -2,9 +2,17 @@
 
 Rule (SPEC-QA, type 11): for one view and one label, the answer is the number of instances of
 that label that are **clearly visible** in the view (:func:`spacedg.scene.visibility.classify`
-→ ``VISIBLE``). The (view, label) pair is skipped when any instance of the label is in the
-grey zone (``PARTIAL``) there, since a viewer could reasonably count it or not; instances with
-no visible pixel (``HIDDEN``) are simply not counted. The pair is also skipped when the view
+→ ``VISIBLE``) under :data:`COUNT_THRESHOLDS`. The (view, label) pair is skipped when any
+instance of the label is in the grey zone (``PARTIAL``) there, since a viewer could reasonably
+count it or not; instances with no visible pixel (``HIDDEN``) are simply not counted.
+
+**Counting as people count** (:data:`COUNT_THRESHOLDS`: ``min_pixels`` 400 at 640×480, as
+everywhere, but ``min_fraction`` **0.25**, not the 0.5 of :data:`DEFAULT_THRESHOLDS`): a person
+counts the chairs around a table though the table hides their seats, and a chair half out of
+frame. With 0.5 every view of a group had one such instance in the grey zone and was skipped,
+so no view with several instances was ever asked. An instance is counted when at least 400 px
+(scaled) and a quarter of its own projection show; one with fewer pixels or less of it showing
+is the grey zone (the view is skipped); the ambiguity rules below still hold. The pair is also skipped when the view
 shows (any pixel) an instance that makes the label ambiguous
 (:func:`~spacedg.plugins.questions.view_sampling.label_ambiguous`, the scene lexicon
 :mod:`spacedg.scene.lexicon`): a related label (counting "chair" beside an armchair, "lamp"
@@ -82,7 +90,7 @@ from spacedg.plugins.questions.records import make_record, round_robin, selectio
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
-__all__ = ["COUNTS", "COUNT_BINS", "MAX_COUNT", "NAME", "count_bin", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
+__all__ = ["COUNTS", "COUNT_BINS", "COUNT_THRESHOLDS", "MAX_COUNT", "NAME", "count_bin", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
 
 NAME = "object_counting"
 SUB_QUESTION_TYPE = "count"
@@ -93,6 +101,10 @@ COUNTS: tuple[int, ...] = tuple(range(MAX_COUNT + 1))
 #: The balance bins, by their smallest count: a label is asked equally often in each (the last
 #: bin holds every larger count): ``"0"``, ``"1"``, ``"2+"``.
 COUNT_BINS: tuple[int, ...] = (0, 1, 2)
+
+
+#: The visibility thresholds of counting (module docstring): recognisable = 400 px at 640×480 and a quarter of the object.
+COUNT_THRESHOLDS = VisibilityThresholds(min_pixels=DEFAULT_THRESHOLDS.min_pixels, min_fraction=0.25)
 
 
 def count_bin(count: int, bins: tuple[int, ...] = COUNT_BINS) -> str:
@@ -206,7 +218,7 @@ def _count_rounds(by_key: dict[str, list[list[_Candidate]]], rng: np.random.Gene
 
 
 def generate(
-    scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS,
+    scene: Scene, rng: np.random.Generator, thresholds: VisibilityThresholds = COUNT_THRESHOLDS,
     counts: tuple[int, ...] | None = COUNTS,
 ) -> Iterator[QARecord]:
     """Counting questions of ``scene`` in a seeded order: balanced over ``counts`` per label, or
@@ -247,7 +259,7 @@ def generate(
 make_family = FamilyFactory(
     generate, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.COUNT}, sub_question_types=(SUB_QUESTION_TYPE,),
     num_views=(1,), needs={"visibility"},
-    description="How many clearly visible instances of a label one image shows (0 to 10, balanced per label over 0 / 1 / 2+; grey-zone and ambiguous views skipped).",
+    description="How many recognisable instances (400 px at 640×480 and a quarter of the object) of a label one image shows (0 to 10, balanced per label over 0 / 1 / 2+; grey-zone and ambiguous views skipped).",
 )
 FAMILY = make_family()
 spacedg_register_question_families = registering(FAMILY)

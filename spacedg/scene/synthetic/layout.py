@@ -26,6 +26,10 @@ from spacedg.scene.synthetic.catalogue import CATALOGUE, ObjectModel
 CORRIDOR_HALF_WIDTH = 0.45  # metres kept free around the camera path
 FOOTPRINT_MARGIN = 0.04  # metres between floor footprints
 WALL_GAP = 0.02  # metres between a wall-standing object and its wall
+#: Kinds that may stand in a row along a wall (:meth:`Layout.place_row`), and the row's length range.
+ROW_KINDS = ("chair", "chair", "box")
+ROW_LENGTH = (4, 6)
+ROW_GAP = (0.06, 0.2)  # metres between neighbours in a row
 #: Kinds that may only stand on certain hosts (others stand on any top).
 SUPPORT_HOSTS = {"tv": ("cabinet",), "monitor": ("desk",)}
 
@@ -197,6 +201,40 @@ class Layout:
                 return cand
         return None
 
+    def place_row(self, model: ObjectModel, kind: str, count: int, tries: int = 20) -> list[Placement]:
+        """Stand ``count`` copies of ``model`` side by side along one wall, backs to it, ``ROW_GAP``
+        apart (one draw per row), fewer where the wall is too short; all or none: a try whose row
+        meets the corridor or other furniture is dropped whole. Each member's ``extra["row"]`` is
+        the index of the row's first placement. Returns the placed row (empty if none fit)."""
+        lo, hi = model.local_bounds()
+        width, depth_back = float(hi[0] - lo[0]), float(hi[1])
+        gap = float(self.rng.uniform(*ROW_GAP))
+        W, D = self.shape.width, self.shape.depth
+        for _ in range(tries):
+            wall = int(self.rng.integers(0, 4))
+            length = W if wall in (0, 2) else D
+            fits = max(0, min(count, int((length - 0.1 + gap) // (width + gap))))
+            if fits == 0:
+                continue
+            span = fits * width + (fits - 1) * gap
+            start = float(self.rng.uniform(-length / 2 + 0.05, max(-length / 2 + 0.05, length / 2 - 0.05 - span)))
+            yaw = (0.0, -math.pi / 2, math.pi, math.pi / 2)[wall]
+            off = W / 2 - WALL_GAP - depth_back if wall in (1, 3) else D / 2 - WALL_GAP - depth_back
+            row: list[Placement] = []
+            first = len(self.placements)  # the row's id: the index (= instance id) of its first member
+            for i in range(fits):
+                along = start + width / 2 + i * (width + gap)
+                x, y = {0: (along, off), 1: (off, along), 2: (along, -off), 3: (-off, along)}[wall]
+                cand = Placement(model, kind, np.array([x, y, 0.0]), yaw, extra={"row": first})
+                if not self.floor_ok(cand):
+                    break
+                row.append(cand)
+                self.placements.append(cand)
+            if len(row) == fits:
+                return row
+            del self.placements[len(self.placements) - len(row):]
+        return []
+
     def place_around(self, anchor: Placement, model: ObjectModel, kind: str, tries: int = 12) -> Placement | None:
         """Place a chair-like model at one side of ``anchor``, its front (−y) facing it."""
         lo, hi = anchor.model.local_bounds()
@@ -283,11 +321,15 @@ def fill_room(
     target_objects: int,
     external_models: list[tuple[ObjectModel, str]] | None = None,
     size_spread: tuple[float, float] = (1.0, 1.0),
+    row_probability: float = 0.0,
 ) -> None:
     """Place furniture until ``target_objects`` instances stand in the room (or space runs out).
 
-    Order: one central group (a table with chairs, or a coffee table), wall furniture, other
-    floor objects, external objects, then small objects on the tops. Each catalogue object is
+    Order: one central group (a table with chairs, or a coffee table), with ``row_probability``
+    a row of 4–6 identical chairs or boxes along a wall (:data:`ROW_KINDS`: the views that show
+    several instances of a label, which counting needs; no draw at all when it is 0, so such a
+    room is the room of before), wall furniture, other floor objects, external objects, then
+    small objects on the tops. Each catalogue object is
     scaled by a factor drawn log-uniformly from ``size_spread`` (one draw per object, after its
     builder's draws; none when the spread is ``(1, 1)``).
     """
@@ -311,6 +353,11 @@ def fill_room(
     if anchor is not None and center_kind == "table":
         for _ in range(int(rng.integers(2, 7))):
             layout.place_around(anchor, build("chair"), "chair")
+    # 1b. a row of identical objects along a wall
+    if row_probability > 0 and rng.uniform() < row_probability:
+        kind = ROW_KINDS[int(rng.integers(0, len(ROW_KINDS)))]
+        placed_row = layout.place_row(build(kind), kind, int(rng.integers(ROW_LENGTH[0], ROW_LENGTH[1] + 1)))
+        counts[kind] += len(placed_row) - 1
     # 2. wall furniture and free-standing floor objects, by weight
     floor_kinds = [k for k, e in CATALOGUE.items() if e.placement in ("wall", "floor", "center")]
     n_floor = max(4, int(round(target_objects * 0.55)))

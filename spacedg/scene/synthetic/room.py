@@ -78,6 +78,9 @@ class RoomConfig:
             this range (default 0.75–1.35: a chair's longest side then spans 0.62–1.32 m), so
             a label does not fix an object's size: size questions cannot be answered from
             label priors alone. ``(1, 1)`` keeps the catalogue's own ranges.
+        row_probability: chance that the room has a row of 4–6 identical chairs or boxes along
+            a wall (views showing several instances of a label, for counting); 0 draws nothing,
+            so a room generated with 0 is the room of before rows existed.
     """
 
     gaussians: int | None = None
@@ -88,6 +91,7 @@ class RoomConfig:
     capture: CaptureConfig = field(default_factory=CaptureConfig)
     external: tuple[ExternalObject, ...] = ()
     size_spread: tuple[float, float] = (0.75, 1.35)
+    row_probability: float = 0.5
 
     def __post_init__(self) -> None:
         lo, hi = (float(v) for v in self.size_spread)
@@ -99,6 +103,8 @@ class RoomConfig:
             raise InvalidDataError(
                 f"RoomConfig: need 1 <= min_objects <= max_objects <= 40, got {self.min_objects}, {self.max_objects}"
             )
+        if isinstance(self.row_probability, bool) or not isinstance(self.row_probability, (int, float)) or not 0.0 <= self.row_probability <= 1.0:
+            raise InvalidDataError(f"RoomConfig: row_probability must be in [0, 1], got {self.row_probability!r}")
         if not 0.0 <= self.twin_probability <= 1.0:
             raise InvalidDataError(f"RoomConfig: twin_probability must be in [0, 1], got {self.twin_probability}")
         if self.world_frame != "random" and self.world_frame not in WORLD_FRAMES:
@@ -284,7 +290,7 @@ def generate_room(seed: int, config: RoomConfig | None = None, scene_id: str | N
         shape = choose_room_shape(rng_layout)
         layout = Layout(shape, rng_layout)
         target = int(rng_layout.integers(config.min_objects, config.max_objects + 1))
-        fill_room(layout, target, externals, config.size_spread)
+        fill_room(layout, target, externals, config.size_spread, config.row_probability)
         placements = layout.placements
         if len(placements) >= config.min_objects and all(any(p.model is m for p in placements) for m, _ in externals):
             break
@@ -328,6 +334,8 @@ def generate_room(seed: int, config: RoomConfig | None = None, scene_id: str | N
             attrs.update(colour=app.colour, material=app.material)
         if twin_of is not None:
             attrs["twin_of"] = int(twin_of)
+        if "row" in p.extra:
+            attrs["row"] = int(p.extra["row"])  # a member of the wall row starting at this instance id
         instances_raw.append((iid, p.model.label, desc, OrientedBox.fit_points(centres, p.rotation), attrs))
     room_gaussians = _to_gaussians(batch, shape, rng_surf)
     gaussians = Gaussians.concat([room_gaussians, *prebuilt_parts]) if prebuilt_parts else room_gaussians

@@ -251,7 +251,7 @@ def test_yaw_30_pitch_25_is_dual(seed: int) -> None:
 def test_roll_is_clockwise() -> None:
     for seed in range(4):
         (rec,) = _records(camera_rotation.FAMILY, _turned(roll=20.0), seed)
-        assert rec.sub_question_type == "roll+yaw_single"
+        assert rec.sub_question_type == "yaw+roll_single"  # singles are named by their text axes
         assert _truth(rec) == ("clockwise roll" if rec.views == ("a", "b") else "counterclockwise roll")
         assert "among yaw (turn left/right) and roll (clockwise/counterclockwise)" in rec.question
 
@@ -399,7 +399,18 @@ def test_registered_family_matches_module(monkeypatch: pytest.MonkeyPatch, name:
         reset_registry()
 
 
-def test_rotation_declares_all_twelve_sub_types() -> None:
+def test_rotation_declares_the_nine_sub_types_that_occur() -> None:
+    """Three singles named by their text axes (not by the answer's axis) and six duals, dominant axis first."""
     subs = camera_rotation.FAMILY.sub_question_types
-    assert len(subs) == 12 and len(set(subs)) == 12
-    assert "yaw+pitch_dual" in subs and "roll+yaw_single" in subs
+    assert len(subs) == 9 and len(set(subs)) == 9
+    assert {s for s in subs if s.endswith("_single")} == {"yaw+pitch_single", "yaw+roll_single", "pitch+roll_single"}
+    assert "yaw+pitch_dual" in subs and "pitch+yaw_dual" in subs
+
+
+@pytest.mark.parametrize("turn", [dict(yaw=-30.0), dict(pitch=25.0), dict(yaw=-8.0, pitch=30.0)])
+def test_a_single_sub_type_does_not_tell_the_answer_axis(turn: dict[str, float]) -> None:
+    """A tilt and a pan between the same axes are one sub type: the name shows what the text shows."""
+    for seed in range(3):
+        (rec,) = _records(camera_rotation.FAMILY, _turned(**turn), seed)
+        assert rec.sub_question_type == "yaw+pitch_single"
+        assert rec.geometry["axes"][0] == ("pitch" if "pitch" in turn and abs(turn["pitch"]) > abs(turn.get("yaw", 0.0)) else "yaw")

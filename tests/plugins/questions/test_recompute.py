@@ -153,7 +153,12 @@ def _check(record):  # noqa: C901 - one branch per family, on purpose
         angles = {"yaw": yaw, "pitch": pitch, "roll": roll}
         words = {"yaw": ("turn left", "turn right"), "pitch": ("tilt down", "tilt up"), "roll": ("counterclockwise roll", "clockwise roll")}
         axes, mode = sub.rsplit("_", 1)
-        ax1, ax2 = axes.split("+")
+        named = axes.split("+")
+        if mode == "single":  # a single names its two text axes in the order yaw, pitch, roll; the larger is asked
+            assert named == [a for a in ("yaw", "pitch", "roll") if a in named]
+            ax1, ax2 = sorted(named, key=lambda k: -abs(angles[k]))
+        else:
+            ax1, ax2 = named
         a1, a2 = abs(angles[ax1]), abs(angles[ax2])
         ranked = sorted(angles, key=lambda k: -abs(angles[k]))
         assert a1 >= 5 and [ax1, ax2] == ranked[:2] and abs(pitch) <= 60
