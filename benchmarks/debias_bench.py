@@ -9,9 +9,10 @@ renders (so no image is rendered here):
   which must be *other* folders of the same scenes, e.g. ``cp -al`` copies, because an index at
   another size replaces the cached one), pruned by :func:`spacedg.data.bench_debias.debias_dataset`.
 
-Both are then probed by an **independent check**: the same predictors, but leave-one-scene-out
-(every scene its own fold, not the pruning's five folds) and another fold seed; chance = 1 / options
-shown. Prints the table per sub type (n, best blind, chance, excess, before and after), the
+Both are then probed by two checks with the same predictors: leave-one-scene-out (what an outside
+checker trained on the bench's other scenes measures; up to 12 scenes these are the pruning's own
+folds) and half as many folds of whole scenes on another fold seed (folds the pruning never saw);
+chance = 1 / options shown. Prints the table per sub type (n, best blind, chance, excess, before and after), the
 records each round removed, the answer balance (letters, yes/no, counts) before and after, and
 writes ``--json``.
 
@@ -31,7 +32,7 @@ sys.path.insert(0, str(REPO))
 
 from spacedg.data.bench_debias import OVERSAMPLE, debias_dataset  # noqa: E402
 from spacedg.data.dataset import SpaceDGDataset  # noqa: E402
-from spacedg.qa.debias import format_debias  # noqa: E402
+from spacedg.qa.debias import MAX_PROBE_FOLDS, format_debias  # noqa: E402
 from spacedg.qa.debias_probe import probe  # noqa: E402
 from spacedg.qa.index import QABuildConfig  # noqa: E402
 
@@ -94,26 +95,31 @@ def main() -> None:
     plain = _bench(args.plain, args.per_sub_type, args.seed) if args.plain else None
     scenes = len(cand.scene_dirs)
     before_records = list(plain.records if plain else cand.records)
-    check_before = probe(before_records, folds=scenes, seed=args.check_seed)
+    checks = {"loso": (scenes, args.check_seed), "half": (max(2, scenes // 2), args.check_seed + 6)}
+    before_checks = {name: probe(before_records, folds=f, seed=sd) for name, (f, sd) in checks.items()}
     started = time.perf_counter()
     result = debias_dataset(cand, args.per_sub_type, None, args.seed)
     seconds = time.perf_counter() - started
     print(f"{scenes} scenes; plain bench {len(plain.records) if plain else '-'} records; candidates {len(result.before.correct)} discrete "
           f"-> debiased bench {len(cand.records)} records ({seconds:.0f} s, {len(result.rounds)} rounds)\n")
     print(format_debias(result) + "\n")
-    check_debiased = probe(cand.records, folds=scenes, seed=args.check_seed)
-    check_plain = check_before
-    print(f"Independent check (leave-one-scene-out, fold seed {args.check_seed}; chance = 1 / options shown; "
-          f"'plain' = {'the --no-debias bench' if plain else 'the candidates before pruning'}; "
-          "pruned: removed as blind-solved, trimming not counted):")
-    print(_table(check_plain, check_debiased, result.pruned))
-    print("\n" + _balance(plain.records if plain else before_records, cand.records))
+    after_checks = {name: probe(cand.records, folds=f, seed=sd) for name, (f, sd) in checks.items()}
+    same = " (the pruning's own folds: it leaves one scene out up to 12 scenes)" if scenes <= MAX_PROBE_FOLDS else ""
+    titles = {"loso": f"Check: leave-one-scene-out, fold seed {args.check_seed}{same}",
+              "half": f"Check: {checks['half'][0]} folds of whole scenes, fold seed {checks['half'][1]} (folds the pruning never used)"}
+    for name in checks:
+        print(f"{titles[name]}; chance = 1 / options shown; 'plain' = {'the --no-debias bench' if plain else 'the candidates before pruning'}; "
+              "pruned: removed as blind-solved, trimming not counted:")
+        print(_table(before_checks[name], after_checks[name], result.pruned) + "\n")
+    print(_balance(plain.records if plain else before_records, cand.records))
     if args.json:
-        args.json.write_text(json.dumps({
-            "scenes": sorted(cand.scene_dirs), "debias": result.to_dict(),
-            "check_plain": [r.to_dict() for r in check_plain.rows], "check_plain_overall": check_plain.overall,
-            "check_debiased": [r.to_dict() for r in check_debiased.rows], "check_debiased_overall": check_debiased.overall,
-        }, indent=2))
+        out = {"scenes": sorted(cand.scene_dirs), "debias": result.to_dict()}
+        for name in checks:
+            out[f"check_{name}_plain"] = [r.to_dict() for r in before_checks[name].rows]
+            out[f"check_{name}_plain_overall"] = before_checks[name].overall
+            out[f"check_{name}_debiased"] = [r.to_dict() for r in after_checks[name].rows]
+            out[f"check_{name}_debiased_overall"] = after_checks[name].overall
+        args.json.write_text(json.dumps(out, indent=2))
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@ import pytest
 from spacedg.errors import ParameterError
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import AnswerType, TaskGroup
-from spacedg.qa.debias import balanced_pick, debias, format_debias, noise_band, spread_targets
+from spacedg.qa.debias import MAX_ALLOWED, balanced_pick, debias, format_debias, noise_band, spread_targets
 from spacedg.qa.debias_gbm import BoostedChoice
 from spacedg.qa.debias_probe import probe, repeat_seeds, scene_folds, shown_chance
 
@@ -82,7 +82,9 @@ def test_a_planted_bias_is_pruned_to_the_bound_and_balance_is_kept(planted) -> N
     before = result.before.row(KEY)
     assert before is not None and before.chance == pytest.approx(25.0) and before.excess > 20  # the plant is found
     allowed = {(r["question_type"], r["sub_question_type"]): r["allowed"] for r in result.to_dict()["after"]["rows"]}
-    assert allowed[KEY] == pytest.approx(max(3.0, 100 * math.sqrt(0.25 * 0.75 / result.after.row(KEY).n)))  # the noise band at its n
+    band = 100 * math.sqrt(0.25 * 0.75 / result.after.row(KEY).n)
+    assert allowed[KEY] == pytest.approx(min(max(3.0, band), MAX_ALLOWED))  # the noise band at its n, never past 4 points
+    assert result.folds == 5  # leave one scene out: one fold per scene
     assert result.within and all(r.excess <= allowed[r.key] for r in result.after.rows) and result.after.overall["excess"] <= 2.0
     kept = Counter((r.question_type, r.sub_question_type) for r in result.kept)
     assert kept[("camera_object_distance", "single")] == 10  # metric records: trimmed to their target only
@@ -213,3 +215,29 @@ def test_removal_keeps_every_cells_roles_balanced() -> None:
     gone = balanced_pick(records, 8, lambda r: r.id)
     left = Counter(balance_class(r) for r in records if r.id not in gone)
     assert sorted(left.values()) == [1, 1, 1, 1] and set(left) == {"a|x", "a|y", "b|x", "b|y"}
+
+
+def _count(scene: str, k: int, count: int) -> QARecord:
+    """A counting record of bin role ``0`` / ``1`` / ``2+`` in one cell, as the selection deals them."""
+    role = "0" if count == 0 else "1" if count == 1 else "2+"
+    return QARecord(
+        id=f"{scene}/object_counting/count/{k:012x}", scene_id=scene, question_type="object_counting", sub_question_type="count",
+        task_group=TaskGroup.OBJECT_CENTRIC, answer_type=AnswerType.COUNT, views=(f"v{k}",),
+        question="How many chairs are visible in this image?", options=(), answer=count,
+        geometry={"label": "chair", "refs": [], "selection": {"subject": f"view:v{k}|label:chair", "cell": "label:chair|template:0",
+                                                              "role": role, "roles": ["0", "1", "2+"]}},
+    )
+
+
+def test_trimming_keeps_the_highest_counts_of_the_two_plus_bin() -> None:
+    """A ``2+`` bin of twos and a few fives to sevens, trimmed by half: the twos go first (the
+    selection asks the highest counts first; a random trim lost every count above four on 12 rooms)."""
+    records = []
+    for s in range(4):
+        counts = [0] * 6 + [1] * 6 + [2] * 4 + [s + 4, 7]
+        records += [_count(f"room-{s}", 10 * s + k, c) for k, c in enumerate(counts)]
+    target = {("object_counting", "count"): len(records) // 2}
+    kept = debias(records, target, learned=False, max_rounds=1).kept
+    got = Counter(int(r.answer) for r in kept)
+    assert sum(got.values()) == len(records) // 2 and got[0] == got[1] == got[2] + got[4] + got[5] + got[6] + got[7] + got[3]
+    assert got[7] == 5 and got[4] == got[5] == got[6] == 1 and got[2] < 16  # every high count kept, twos trimmed
