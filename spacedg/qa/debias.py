@@ -186,8 +186,9 @@ def balance_class(record: QARecord) -> str:
 
 def balanced_pick(records: Sequence[QARecord], x: int, rank: Callable[[QARecord], Any]) -> set[str]:
     """The ids of ``x`` of ``records`` taken **balanced**: each pick comes from the
-    :func:`balance_class` (cell and role) with the most records left (ties: the class whose
-    best record ranks first), and within it from the answer (:func:`~spacedg.qa.debias_probe.answer_class`:
+    :func:`balance_class` (cell and role) with the most records left (ties: the class whose role
+    has the most records left over all cells, so the roles stay balanced pooled too, not only
+    within each cell; then the class whose best record ranks first), and within it from the answer (:func:`~spacedg.qa.debias_probe.answer_class`:
     letter, yes/no, count bin) with the most records left, in ``rank`` order. Removing them keeps
     the roles of every cell and the letters as balanced as the selection dealt them (or makes
     them more so), so pruning and trimming never plant an answer-text or letter bias of their own
@@ -196,16 +197,27 @@ def balanced_pick(records: Sequence[QARecord], x: int, rank: Callable[[QARecord]
     classes: dict[str, list[QARecord]] = defaultdict(list)
     for r in sorted(records, key=rank):
         classes[balance_class(r)].append(r)
+    role_of = {c: _role(rs[0]) for c, rs in classes.items()}
+    roles = Counter(_role(r) for r in records)
     letters = Counter(answer_class(r) for r in records)
     taken: set[str] = set()
     for _ in range(min(x, len(records))):
-        cls = min((c for c in classes if classes[c]), key=lambda c: (-len(classes[c]), rank(classes[c][0]), c))
+        cls = min((c for c in classes if classes[c]), key=lambda c: (-len(classes[c]), -roles[role_of[c]], rank(classes[c][0]), c))
         queue = classes[cls]
         pick = min(range(len(queue)), key=lambda i: (-letters[answer_class(queue[i])], i))
         r = queue.pop(pick)
         letters[answer_class(r)] -= 1
+        roles[role_of[cls]] -= 1
         taken.add(r.id)
     return taken
+
+
+def _role(record: QARecord) -> str:
+    """A record's selection role (the answer text or count bin the selection balanced), else its answer class."""
+    entry = record.geometry.get("selection") if isinstance(record.geometry, Mapping) else None
+    if isinstance(entry, Mapping) and entry.get("role") is not None:
+        return str(entry["role"])
+    return answer_class(record)
 
 
 def noise_band(row: SubTypeBlind, z: float) -> float:
@@ -278,10 +290,15 @@ def _trim_round(by_key: dict[tuple[str, str], list[QARecord]], targets: Mapping[
 
 
 def _trim_first(record: QARecord) -> int:
-    """Trimming order before the seeded one: a COUNT record's count (the ``2+`` bin loses its twos
-    before its sixes, as the selection asks the highest counts first; a random trim kept none of
-    the few views that show five to seven), 0 for any other record."""
-    return int(record.answer) if record.answer_type is AnswerType.COUNT else 0  # type: ignore[arg-type]
+    """Trimming order before the seeded one: a COUNT record's count above the lowest of its bin
+    (the ``2+`` bin loses its twos before its sixes, as the selection asks the highest counts
+    first; a random trim kept none of the few views that show five to seven), 0 for any other
+    record. Relative to the bin, so every class's first record ranks 0 and the classes' ties
+    are broken by the seeded hash alone (the absolute count made the ``0`` bin lose every tie:
+    bins 33 / 50 / 54 of 137 on 6 rooms)."""
+    if record.answer_type is not AnswerType.COUNT:
+        return 0
+    return int(record.answer) - int(answer_class(record).rstrip("+"))  # type: ignore[arg-type]
 
 
 def _deciding(pr: Probe, by_key: Mapping[tuple[str, str], list[QARecord]], counts: Mapping[str, float]) -> Probe:

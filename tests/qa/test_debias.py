@@ -217,14 +217,14 @@ def test_removal_keeps_every_cells_roles_balanced() -> None:
     assert sorted(left.values()) == [1, 1, 1, 1] and set(left) == {"a|x", "a|y", "b|x", "b|y"}
 
 
-def _count(scene: str, k: int, count: int) -> QARecord:
+def _count(scene: str, k: int, count: int, cell: str = "label:chair|template:0") -> QARecord:
     """A counting record of bin role ``0`` / ``1`` / ``2+`` in one cell, as the selection deals them."""
     role = "0" if count == 0 else "1" if count == 1 else "2+"
     return QARecord(
         id=f"{scene}/object_counting/count/{k:012x}", scene_id=scene, question_type="object_counting", sub_question_type="count",
         task_group=TaskGroup.OBJECT_CENTRIC, answer_type=AnswerType.COUNT, views=(f"v{k}",),
         question="How many chairs are visible in this image?", options=(), answer=count,
-        geometry={"label": "chair", "refs": [], "selection": {"subject": f"view:v{k}|label:chair", "cell": "label:chair|template:0",
+        geometry={"label": "chair", "refs": [], "selection": {"subject": f"view:v{k}|label:chair", "cell": cell,
                                                               "role": role, "roles": ["0", "1", "2+"]}},
     )
 
@@ -241,3 +241,19 @@ def test_trimming_keeps_the_highest_counts_of_the_two_plus_bin() -> None:
     got = Counter(int(r.answer) for r in kept)
     assert sum(got.values()) == len(records) // 2 and got[0] == got[1] == got[2] + got[4] + got[5] + got[6] + got[7] + got[3]
     assert got[7] == 5 and got[4] == got[5] == got[6] == 1 and got[2] < 16  # every high count kept, twos trimmed
+
+
+def test_trimming_counts_keeps_their_bins_balanced() -> None:
+    """Cells (label and wording) of whole rounds but unequal sizes, trimmed together: the bins stay
+    balanced pooled (ties between classes go to the role with most records left), not only per cell."""
+    records, k = [], 0
+    for cell in range(9):
+        for _ in range(1 + cell % 4):
+            for count in (0, 1, 2 + cell % 3):
+                scene = f"room-{k % 5}"
+                records.append(_count(scene, k, count, cell=f"label:l{cell}|template:0"))
+                k += 1
+    for target in (30, 41, 52):
+        kept = debias(records, {("object_counting", "count"): target}, learned=False, max_rounds=1).kept
+        bins = Counter(min(int(r.answer), 2) for r in kept)
+        assert sum(bins.values()) == target and max(bins.values()) - min(bins.values()) <= 1, (target, bins)
