@@ -72,6 +72,7 @@ from typing import Any
 from spacedg.errors import ParameterError
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import AnswerType
+from spacedg.qa.mode_stats import count_distribution, format_counts
 from spacedg.qa.debias_probe import (
     DISCRETE, PROBES, Probe, SubTypeBlind, answer_class, blind_rows, count_chances, probe, stable_hash,
 )
@@ -413,6 +414,9 @@ def format_debias(result: DebiasResult) -> str:
         parts = ", ".join(f"{k} {v}" for k, v in sorted(r["removed"].items()))
         lines.append(f"round {r['round']} ({r['why']}): removed {r['total']}: {parts}")
     lines.append(f"pruned for blind bias (over their allowed excess before pruning): {', '.join(result.eligible) or 'none'}")
+    counts = count_distribution(result.kept)
+    if counts:
+        lines.append(f"counting answers kept: {format_counts(counts)}")
     over = [f"{r.question_type}/{r.sub_question_type}" for r in result.after.rows if over_bound(r, result.bound, result.noise_z, 1e-9, result.max_allowed)]
     lines.append("within the bounds" if result.within else f"NOT within the bounds after the last round: {', '.join(over) or 'pooled'} "
                  "(a sub type within its band before pruning is not pruned: its excess is noise of the refit predictors)")

@@ -257,3 +257,4 @@ def test_trimming_counts_keeps_their_bins_balanced() -> None:
         kept = debias(records, {("object_counting", "count"): target}, learned=False, max_rounds=1).kept
         bins = Counter(min(int(r.answer), 2) for r in kept)
         assert sum(bins.values()) == target and max(bins.values()) - min(bins.values()) <= 1, (target, bins)
+    assert "counting answers kept: 0: " in format_debias(debias(records, {("object_counting", "count"): 30}, learned=False, max_rounds=1))
