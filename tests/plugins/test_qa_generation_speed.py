@@ -88,3 +88,29 @@ def test_compass_questions_equal_compass_question() -> None:
                 cached = cache.ask(i, ref.tolist(), j, query.tolist(), cached_rng)
                 assert repr(cached) == repr(plain)
     assert plain_rng.random() == cached_rng.random()  # the same draws
+
+
+def test_a_compass_angle_on_a_sector_boundary_is_not_asked() -> None:
+    """30° clockwise of the reference lies on a sector boundary whichever cardinal is assumed
+    (30, 120, 210, 300): ±30° and the 0.5774 ratio disagree there, so neither path asks it, and
+    both draw only the assumed cardinal."""
+    from spacedg.plugins.questions.compass_cache import CompassQuestions
+    from spacedg.plugins.questions.records import compass_question
+
+    up = np.array([0.0, 0.0, 1.0])
+    ref = np.array([1.0, 0.0, 0.0])
+    on_edge = np.array([math.cos(math.radians(30.0)), -math.sin(math.radians(30.0)), 0.0])
+    beside = np.array([math.cos(math.radians(30.05)), -math.sin(math.radians(30.05)), 0.0])
+    for seed in range(4):
+        plain_rng, cached_rng = np.random.default_rng(seed), np.random.default_rng(seed)
+        assert compass_question(ref, on_edge, up, plain_rng) is None
+        assert CompassQuestions(up).ask(0, ref.tolist(), 1, on_edge.tolist(), cached_rng) is None
+        assert plain_rng.random() == cached_rng.random() == _after_one_integer(seed)
+        asked = compass_question(ref, beside, up, np.random.default_rng(seed))
+        assert asked is not None and asked[3]["banned_labels"]  # 0.05° off: asked, the neighbour banned
+
+
+def _after_one_integer(seed: int) -> float:
+    rng = np.random.default_rng(seed)
+    rng.integers(4)
+    return rng.random()

@@ -21,6 +21,7 @@ import numpy as np
 
 from spacedg.plugins.questions.geometry import (
     CARDINALS,
+    COMPASS_RULE_BAND_DEG,
     COMPASS_SECTORS,
     angle_on_ground,
     build_mcq,
@@ -44,8 +45,8 @@ class CompassQuestions:
 
     def ask(
         self, reference_key: Hashable, reference: Sequence[float], query_key: Hashable, query: Sequence[float], rng: np.random.Generator,
-    ) -> tuple[str, tuple[str, ...], str, dict[str, Any]]:
-        """``(assumed_dir, options, letter, block)``: what
+    ) -> tuple[str, tuple[str, ...], str, dict[str, Any]] | None:
+        """``(assumed_dir, options, letter, block)``, or ``None``: what
         ``compass_question(np.asarray(reference), np.asarray(query), up, rng)`` returns (the same draws)."""
         assumed = CARDINALS[int(rng.integers(len(CARDINALS)))]
         frame = self._frames.get((reference_key, assumed))
@@ -58,6 +59,8 @@ class CompassQuestions:
         north, east, axes = frame
         angle = angle_on_ground(axes, flat)
         hit = COMPASS_SECTORS.classify(angle)
+        if hit.boundary_distance_deg < COMPASS_RULE_BAND_DEG:
+            return None
         label = COMPASS_SECTORS.labels[hit.index]
         block = compass_entries(assumed, label, angle, hit, north, east)
         options, letter = build_mcq(label, COMPASS_SECTORS.distractors(hit, rng), rng)

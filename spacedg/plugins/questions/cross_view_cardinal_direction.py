@@ -196,6 +196,8 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         if ref is None or query is None:
             continue
         drawn = compass.ask(("camera", *key_a), ref["vector"], ("camera", *key_b), query["vector"], rng)  # = compass_question(ref, query, up, rng)
+        if drawn is None:
+            continue  # on a sector boundary: the label depends on the reading of the rule
         yield offer(
             SUB_QUESTION_TYPE, views, _subject(one, two), (one.id, two.id), functools.partial(_selection, one, two, drawn),
             functools.partial(_record, scene, index, pair, rules, one, two, (ref, query), origins, drawn),

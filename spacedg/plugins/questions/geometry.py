@@ -63,7 +63,7 @@ __all__ = [
     "horizontal", "ground_angle", "ground_axes", "angle_on_ground", "vertical_dominates",
     "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS",
     "euler_yaw_pitch_roll", "ROTATION_WORDS", "camera_attitude", "gravity_rotation",
-    "MIN_HORIZONTAL_M", "VERTICAL_FACTOR", "ground_leg", "compass_frame", "compass_answer",
+    "MIN_HORIZONTAL_M", "VERTICAL_FACTOR", "COMPASS_RULE_BAND_DEG", "ground_leg", "compass_frame", "compass_answer",
     "INTERSECT_TOL_M", "boxes_intersect",
 ]
 
@@ -73,6 +73,11 @@ TAN30 = 0.5774
 MAX_PARTS = 2
 #: Within this many degrees of a sector boundary, the neighbour across it is no distractor.
 BOUNDARY_GUARD_DEG = 3.0
+#: A compass angle within this many degrees of a sector boundary is not asked: SPEC-QA states the
+#: compass sectors both as ±30° and by the 0.5774 ratio, which puts each boundary 0.0013° apart
+#: (atan 0.5774 = 30.0013°), and an independent recomputation's float noise is far below 0.01°;
+#: inside the band the label depends on which reading a checker takes (one of 11,366 records did).
+COMPASS_RULE_BAND_DEG = 0.01
 #: A ground-plane leg shorter than this (metres) has no reliable direction: skipped.
 MIN_HORIZONTAL_M = 0.25
 #: A vector whose |vertical part| >= this × its horizontal length is vertical-dominant.

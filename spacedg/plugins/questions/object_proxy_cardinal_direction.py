@@ -192,6 +192,8 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         if any(overlap(p, q) for p, q in itertools.combinations(tri, 2)):
             continue
         drawn = compass.ask(("objects", ids[x], ids[y]), ref["vector"], ("objects", ids[z], ids[y]), query["vector"], rng)  # = compass_question(ref, query, up, rng)
+        if drawn is None:
+            continue  # on a sector boundary: the label depends on the reading of the rule
         objs = tuple(insts[t] for t in tri)
         obj_views = tuple(ref_view[i] for i in triplet_ids)
         yield offer(

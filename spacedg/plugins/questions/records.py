@@ -70,6 +70,7 @@ from spacedg.plugins.questions.geometry import (
     VERTICAL_FACTOR,
     SectorHit,
     build_mcq,
+    COMPASS_RULE_BAND_DEG,
     compass_answer,
 )
 from spacedg.plugins.questions.language import object_phrase
@@ -386,13 +387,19 @@ def compass_entries(assumed_dir: str, label: str, angle: float, hit: SectorHit, 
     }
 
 
-def compass_question(reference: np.ndarray, query: np.ndarray, up: np.ndarray, rng: np.random.Generator) -> tuple[str, tuple[str, ...], str, dict[str, Any]]:
+def compass_question(
+    reference: np.ndarray, query: np.ndarray, up: np.ndarray, rng: np.random.Generator,
+) -> tuple[str, tuple[str, ...], str, dict[str, Any]] | None:
     """``(assumed_dir, options, letter, block)`` of a compass question, drawn from ``rng`` in this order:
     the assumed cardinal (``rng.integers`` over :data:`~spacedg.plugins.questions.geometry.CARDINALS`),
     then the distractor order (``COMPASS_SECTORS.distractors``) and the options and letter
-    (:func:`~spacedg.plugins.questions.geometry.build_mcq`). ``block`` is :func:`compass_block`'s."""
+    (:func:`~spacedg.plugins.questions.geometry.build_mcq`). ``block`` is :func:`compass_block`'s.
+    ``None`` (after the assumed cardinal's draw only) when the angle lies within
+    :data:`~spacedg.plugins.questions.geometry.COMPASS_RULE_BAND_DEG` of a sector boundary."""
     assumed = CARDINALS[int(rng.integers(len(CARDINALS)))]
     truth, hit, block = compass_block(reference, assumed, query, up)
+    if hit.boundary_distance_deg < COMPASS_RULE_BAND_DEG:
+        return None
     options, letter = build_mcq(truth, COMPASS_SECTORS.distractors(hit, rng), rng)
     return assumed, options, letter, block
 
