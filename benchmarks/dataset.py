@@ -76,7 +76,7 @@ import numpy as np
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.qa.index import QABuildConfig
-from spacedg.scene.store import builtin_scene_dirs, spacedg_home
+from spacedg.scene.store import BUILTIN_ROOMS_FOLDER, builtin_scene_dirs, spacedg_home
 
 STAGES = ("render_ms", "linear_ms", "encode_ms", "display_ms")
 
@@ -96,7 +96,7 @@ def _generate_small(root: str, seeds: list[int]) -> None:
 
 
 def scene_folders(args: argparse.Namespace) -> list[Path]:
-    root = Path(args.root) if args.root else spacedg_home() / "benchmark-rooms"
+    root = Path(args.root) if args.root else spacedg_home() / f"benchmark-{BUILTIN_ROOMS_FOLDER}"
     if not args.small:
         return builtin_scene_dirs(args.rooms, root=root / "builtin")
     folder = root / "small"
@@ -429,7 +429,7 @@ def main(argv: Sequence[str] | None = None) -> None:
           f"{args.worker_threads or 'default (all CPUs)'}; shares are of the time inside dataset[i]")
 
     if args.mixture_only:
-        mixture_table(common, args.mixture_samples, worker_counts, Path(args.root) if args.root else spacedg_home() / "benchmark-rooms")
+        mixture_table(common, args.mixture_samples, worker_counts, Path(args.root) if args.root else spacedg_home() / f"benchmark-{BUILTIN_ROOMS_FOLDER}")
         print(f"total {time.perf_counter() - t_start:.1f} s")
         return
     plans = {}
@@ -447,7 +447,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                     f" high-water mark)", results)
         goal_line(results)
     if args.mixture:
-        mixture_table(common, args.mixture_samples, worker_counts, Path(args.root) if args.root else spacedg_home() / "benchmark-rooms")
+        mixture_table(common, args.mixture_samples, worker_counts, Path(args.root) if args.root else spacedg_home() / f"benchmark-{BUILTIN_ROOMS_FOLDER}")
     if "clean" in datasets:
         clean_vs_renders(pickle_copy(datasets["clean"]), ratio_samples, repeats, size)
     me = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

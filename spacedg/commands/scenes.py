@@ -174,13 +174,14 @@ def _config_record(config: RoomConfig) -> dict:
         "min_objects": config.min_objects,
         "max_objects": config.max_objects,
         "twin_probability": config.twin_probability,
-        "row_probability": config.row_probability,
         "world_frame": config.world_frame,
         "capture": asdict(config.capture),
         "external": [
             {"label": e.label, "size_m": e.size_m, "placement": e.placement, "n": len(e.gaussians)} for e in config.external
         ],
     }
+    if config.row_probability:  # absent at 0: rooms without rows are the rooms of before, and their folders stay valid
+        record["row_probability"] = config.row_probability
     return json.loads(json.dumps(record))
 
 

@@ -6,7 +6,7 @@ A room has too few records per sub type to tell a small bias from noise; a bench
 options shown) and, round after round, removes items the blind models solve, until
 
 - every MCQ / YN / COUNT sub type's best blind accuracy is within ``chance + allowed`` (:func:`row_bound`:
-  ``bound``, 3 points, or the sub type's noise band where wider), and
+  ``bound``, 3 points, or the sub type's noise band where wider, never past :data:`MAX_ALLOWED`, 4), and
 - the pooled figure (each sub type's best predictor) is within ``chance + overall_bound`` (2 points),
 
 then trims every sub type to its target size (``targets``: what the bench would hold without
@@ -40,9 +40,9 @@ records, which *planted* a bias: + 14.1 and − 12.3 under an independent leave-
 scenes is dealt into that many), as a blind model trained on the bench's other scenes would be
 and as an outside checker probes. Five folds were used before: a per-label prior needs most
 scenes to train on, and on 12 rooms the five-fold probe read `bbox_center_direction` at + 3.3
-(within its band, so never pruned) where leave-one-scene-out read + 8.3 (measured in stop 37).
-``repeats`` fold seeds are averaged where the folds do not leave single scenes out (1 by
-default). A sub type's allowed excess is ``max(bound, noise_z σ)``, σ a uniform guess's binomial
+(within its band, so never pruned) where leave-one-scene-out read + 8.3.
+``repeats`` fold seeds are averaged where the folds group several scenes (3 by default; 1
+when every fold is one scene, since every seed then deals the same folds). A sub type's allowed excess is ``max(bound, noise_z σ)``, σ a uniform guess's binomial
 deviation at its n, but never more than ``max_allowed`` (4 points, one under the chance + 5 a
 bench must meet): a sub type of 50 three-option records (σ 6.7) was left at + 5.8.
 Removal is answer-balanced (:func:`balanced_pick`), so the letters, yes/no and count bins stay
@@ -83,9 +83,9 @@ __all__ = ["DEFAULT_BOUND", "DEFAULT_OVERALL_BOUND", "MAX_ALLOWED", "MAX_PROBE_F
 DEFAULT_BOUND = 3.0
 #: The pooled best-per-sub-type accuracy may exceed chance by this many points.
 DEFAULT_OVERALL_BOUND = 2.0
-#: Fold seeds every probe of the pruning averages over (a record one split happens to solve weighs
-#: less); with leave-one-scene-out folds every seed deals the same folds.
-DEFAULT_REPEATS = 1
+#: Fold seeds every probe of the pruning averages over when its folds group several scenes (a record
+#: one split happens to solve weighs less); leaving one scene out, every seed deals the same folds: 1.
+DEFAULT_REPEATS = 3
 #: The probe's folds: one per scene up to this many scenes, this many beyond.
 MAX_PROBE_FOLDS = 12
 #: A sub type's allowed excess never exceeds this many points (the bar is chance + 5).
@@ -175,14 +175,21 @@ def _solvable_key(pr: Probe, best: str, seed: int) -> Callable[[QARecord], tuple
     return key
 
 
+def _cell_role(record: QARecord) -> tuple[str | None, str]:
+    """A record's selection ``(cell, role)`` (the answer text or count bin the selection balanced
+    per cell), else ``(None, answer class)`` (:func:`~spacedg.qa.debias_probe.answer_class`)."""
+    entry = record.geometry.get("selection") if isinstance(record.geometry, Mapping) else None
+    if isinstance(entry, Mapping) and entry.get("cell") is not None and entry.get("role") is not None:
+        return str(entry["cell"]), str(entry["role"])
+    return None, answer_class(record)
+
+
 def balance_class(record: QARecord) -> str:
     """What a record's removal is balanced over: its selection ``cell`` and ``role`` (the selection
     took whole rounds of every role per cell: e.g. each compass label per assumed direction), else
     its :func:`~spacedg.qa.debias_probe.answer_class` (letter, yes/no, count bin)."""
-    entry = record.geometry.get("selection") if isinstance(record.geometry, Mapping) else None
-    if isinstance(entry, Mapping) and entry.get("cell") is not None and entry.get("role") is not None:
-        return f"{entry['cell']}|{entry['role']}"
-    return answer_class(record)
+    cell, role = _cell_role(record)
+    return role if cell is None else f"{cell}|{role}"
 
 
 def balanced_pick(records: Sequence[QARecord], x: int, rank: Callable[[QARecord], Any]) -> set[str]:
@@ -194,12 +201,14 @@ def balanced_pick(records: Sequence[QARecord], x: int, rank: Callable[[QARecord]
     the roles of every cell and the letters as balanced as the selection dealt them (or makes
     them more so), so pruning and trimming never plant an answer-text or letter bias of their own
     (a letter-only balance was measured to leave a compass sub type's answer texts uneven: + 7.6
-    by the option-text prior after trimming 256 records to 141)."""
+    by the option-text prior after trimming 256 records to 141). Pruning and trimming both pick
+    this way; when pruning, the pooled-role tie-break ranks before blind solvability among
+    classes of equal size."""
     classes: dict[str, list[QARecord]] = defaultdict(list)
     for r in sorted(records, key=rank):
         classes[balance_class(r)].append(r)
-    role_of = {c: _role(rs[0]) for c, rs in classes.items()}
-    roles = Counter(_role(r) for r in records)
+    role_of = {c: _cell_role(rs[0])[1] for c, rs in classes.items()}
+    roles = Counter(_cell_role(r)[1] for r in records)
     letters = Counter(answer_class(r) for r in records)
     taken: set[str] = set()
     for _ in range(min(x, len(records))):
@@ -213,14 +222,6 @@ def balanced_pick(records: Sequence[QARecord], x: int, rank: Callable[[QARecord]
     return taken
 
 
-def _role(record: QARecord) -> str:
-    """A record's selection role (the answer text or count bin the selection balanced), else its answer class."""
-    entry = record.geometry.get("selection") if isinstance(record.geometry, Mapping) else None
-    if isinstance(entry, Mapping) and entry.get("role") is not None:
-        return str(entry["role"])
-    return answer_class(record)
-
-
 def noise_band(row: SubTypeBlind, z: float) -> float:
     """``z`` binomial standard deviations of a uniform guess's accuracy at the row's ``n``, in points:
     how far chance alone moves a sub type's figure (a row of 75 four-option MCQs: 5.0 at ``z = 1``)."""
@@ -230,7 +231,8 @@ def noise_band(row: SubTypeBlind, z: float) -> float:
 
 def row_bound(row: SubTypeBlind, bound: float, noise_z: float, max_allowed: float = MAX_ALLOWED) -> float:
     """The excess a sub type may keep: ``bound``, or its :func:`noise_band` where that is wider
-    (pruning inside the band removes what the fitted predictors hit by luck, not a bias)."""
+    (pruning inside the band removes what the fitted predictors hit by luck, not a bias), but
+    never more than ``max(bound, max_allowed)`` (a bench must keep every sub type within chance + 5)."""
     return min(max(bound, noise_band(row, noise_z)), max(bound, max_allowed))
 
 
@@ -294,9 +296,9 @@ def _trim_first(record: QARecord) -> int:
     """Trimming order before the seeded one: a COUNT record's count above the lowest of its bin
     (the ``2+`` bin loses its twos before its sixes, as the selection asks the highest counts
     first; a random trim kept none of the few views that show five to seven), 0 for any other
-    record. Relative to the bin, so every class's first record ranks 0 and the classes' ties
-    are broken by the seeded hash alone (the absolute count made the ``0`` bin lose every tie:
-    bins 33 / 50 / 54 of 137 on 6 rooms)."""
+    record. Relative to the bin, so the ``0`` and ``1`` classes and any ``2+`` class holding a two
+    rank alike and their ties are broken by the pooled role count and the seeded hash (the
+    absolute count made the ``0`` bin lose every tie: bins 33 / 50 / 54 of 137 on 6 rooms)."""
     if record.answer_type is not AnswerType.COUNT:
         return 0
     return int(record.answer) - int(answer_class(record).rstrip("+"))  # type: ignore[arg-type]
@@ -338,7 +340,7 @@ def _check(bound: float, overall_bound: float, folds: int, max_rounds: int, floo
 def debias(
     records: Sequence[QARecord], targets: Mapping[tuple[str, str], int] | None = None, *, bound: float = DEFAULT_BOUND,
     overall_bound: float = DEFAULT_OVERALL_BOUND, folds: int | None = None, seed: int = 0, max_rounds: int = 20,
-    floor: float = 0.5, learned: bool = True, repeats: int = DEFAULT_REPEATS, noise_z: float = DEFAULT_NOISE_Z,
+    floor: float = 0.5, learned: bool = True, repeats: int | None = None, noise_z: float = DEFAULT_NOISE_Z,
 ) -> DebiasResult:
     """Prune ``records`` (a pooled bench) until no blind model beats chance by more than the bounds (module docstring).
 
@@ -350,11 +352,15 @@ def debias(
             seed: the folds and the order of equals.
         max_rounds: probe-and-prune rounds at most. floor: never prune a sub type below this share of its target.
         learned: include the logistic model in the probe.
-        repeats: fold seeds each probe averages over (:func:`~spacedg.qa.debias_probe.probe`).
+        repeats: fold seeds each probe averages over (:func:`~spacedg.qa.debias_probe.probe`; ``None``:
+            1 when every fold is one scene, else :data:`DEFAULT_REPEATS`).
         noise_z: a sub type is pruned only above its noise band too (:func:`row_bound`); 0: ``bound`` alone.
     """
+    scenes = len({r.scene_id for r in records})
     if folds is None:
-        folds = max(2, min(len({r.scene_id for r in records}), MAX_PROBE_FOLDS))
+        folds = max(2, min(scenes, MAX_PROBE_FOLDS))
+    if repeats is None:
+        repeats = 1 if folds >= scenes else DEFAULT_REPEATS
     _check(bound, overall_bound, folds, max_rounds, floor, repeats, noise_z)
     options = {"folds": folds, "seed": seed, "learned": learned, "repeats": repeats}
     discrete = [r for r in records if r.answer_type in DISCRETE]

@@ -53,7 +53,8 @@ __all__ = [
 #: 4: pools count distinct subjects (:data:`~spacedg.qa.build.ALTERNATES` records each); rounds
 #: balance the selection entries' ``features`` across roles; distractors of sector-label MCQs dealt evenly.
 #: 5: selection modes (:mod:`spacedg.qa.modes`: strict ``bench``, dense ``train``); no twins; counts beyond 2.
-#: 6: single-axis rotation sub types named by their text axes; counting counts an instance with a quarter of it showing.
+#: 6: single-axis rotation sub types named by their text axes; counting counts an instance with a quarter of it
+#: showing; compass angles within 0.01° of a sector boundary not asked.
 QA_INDEX_VERSION = 6
 
 #: The selection modes (:mod:`spacedg.qa.modes`): strict ``bench``, dense ``train``.

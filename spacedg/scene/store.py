@@ -1,7 +1,8 @@
 """Scenes for a dataset: where they come from, which split they belong to, and a byte-bounded cache.
 
 - :func:`builtin_scene_dirs`: the procedural rooms, generated once into a cache folder
-  (``$SPACEDG_HOME/rooms``, default ``~/.cache/spacedg/rooms``) with a progress bar.
+  (``$SPACEDG_HOME/rooms-v2``, default ``~/.cache/spacedg/rooms-v2``; :data:`BUILTIN_ROOMS_FOLDER`)
+  with a progress bar.
 - :func:`assign_splits`: scenes → ``train`` / ``val`` / ``bench``, disjoint, deterministic.
 - :func:`run_isolated`: run a function in a fresh Python interpreter (the built-in rooms here;
   question indexes in :func:`spacedg.qa.build.ensure_indexes`), so the calling process never
@@ -23,7 +24,12 @@ from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.scene.io import save_scene
 from spacedg.scene.synthetic import generate_room
 
-__all__ = ["SPLITS", "spacedg_home", "builtin_scene_dirs", "assign_splits", "run_isolated", "ByteLRU", "scene_dirs_of"]
+__all__ = ["BUILTIN_ROOMS_FOLDER", "SPLITS", "spacedg_home", "builtin_scene_dirs", "assign_splits", "run_isolated", "ByteLRU", "scene_dirs_of"]
+
+#: The built-in rooms' cache folder under :func:`spacedg_home`, named by the generator's version: rooms
+#: generated before wall rows (``rooms``, v1) differ from today's for the same seed, so a cache of
+#: them is never silently reused (it stays on disk; delete it by hand).
+BUILTIN_ROOMS_FOLDER = "rooms-v2"
 
 #: The dataset splits, disjoint by scene.
 SPLITS: tuple[str, ...] = ("train", "val", "bench")
@@ -51,7 +57,7 @@ def builtin_scene_dirs(n: int = 16, root: str | os.PathLike[str] | None = None) 
     """Folders of the built-in rooms ``room-000000`` … (seeds ``0 … n-1``), generated when missing."""
     if isinstance(n, bool) or not isinstance(n, int) or n < 3:
         raise ParameterError(f"builtin_scene_dirs: n must be an integer >= 3 (one scene per split at least), got {n!r}")
-    folder = Path(root) if root is not None else spacedg_home() / "rooms"
+    folder = Path(root) if root is not None else spacedg_home() / BUILTIN_ROOMS_FOLDER
     folder.mkdir(parents=True, exist_ok=True)
     missing = [s for s in range(n) if not (folder / f"room-{s:06d}" / "scene.json").is_file()]
     if missing:

@@ -41,6 +41,15 @@ def test_synth_info_preview_round_trip(tmp_path, capsys):
     assert capsys.readouterr().out.count("exists") == 2
     assert main(["scenes", "synth", "--n", "1", "--out", str(out), "--seed", "4", "--num-gaussians", "13000"]) == 2
     assert "exists with other generation settings" in capsys.readouterr().err
+    # wall rows are a generation setting: a room made with them is not the room without them
+    assert scene.metadata["config"]["row_probability"] == 0.5
+    assert main(["scenes", "synth", "--n", "1", "--out", str(out), "--seed", "4", "--num-gaussians", "12000",
+                 "--min-views", "40", "--max-views", "44", "--row-probability", "0"]) == 2
+    assert "exists with other generation settings" in capsys.readouterr().err
+    flat = tmp_path / "flat"  # without rows the record has no row key: folders made before rows existed stay valid
+    assert main(["scenes", "synth", "--n", "1", "--out", str(flat), "--seed", "4", "--num-gaussians", "12000",
+                 "--min-views", "40", "--max-views", "44", "--row-probability", "0"]) == 0
+    assert "row_probability" not in load_scene(flat / "room-000004").metadata["config"]
 
 
 @pytest.mark.parametrize(

@@ -93,9 +93,8 @@ def _option_key(record: QARecord, text: str) -> str:
 
 def _wording(record: QARecord) -> str:
     """What a model sees of the question's kind: its sub type, except camera rotation, whose
-    ``{ax1}+{ax2}`` sub types (dominant axis first) share one wording per axis pair and mode
-    (the selection cell): "tilt up" is never the answer of ``yaw+pitch_single`` but is of
-    ``pitch+yaw_single``, asked in the same words with the same options."""
+    dual sub types (dominant axis first) share one wording per axis pair (the selection cell);
+    for rotation the cell is the wording (a single's sub type already is)."""
     if record.question_type == "camera_rotation":
         return f"camera_rotation|{record.geometry['selection']['cell']}"
     return record.sub_question_type

@@ -21,13 +21,13 @@ import numpy as np
 
 from spacedg.plugins.questions.geometry import (
     CARDINALS,
-    COMPASS_RULE_BAND_DEG,
     COMPASS_SECTORS,
     angle_on_ground,
     build_mcq,
     compass_frame,
     ground_axes,
     horizontal,
+    on_compass_boundary,
 )
 from spacedg.plugins.questions.records import compass_entries, index_memo
 from spacedg.plugins.questions.view_sampling import VisibilityIndex
@@ -59,7 +59,7 @@ class CompassQuestions:
         north, east, axes = frame
         angle = angle_on_ground(axes, flat)
         hit = COMPASS_SECTORS.classify(angle)
-        if hit.boundary_distance_deg < COMPASS_RULE_BAND_DEG:
+        if on_compass_boundary(hit):
             return None
         label = COMPASS_SECTORS.labels[hit.index]
         block = compass_entries(assumed, label, angle, hit, north, east)

@@ -33,7 +33,9 @@ Options: the truth and three of the seven other compass labels
 (``COMPASS_SECTORS.distractors``: seeded order; when ``angle`` is within
 :data:`~spacedg.plugins.questions.geometry.BOUNDARY_GUARD_DEG` = 3° of a sector boundary the
 label across that boundary is never offered), letters by
-:func:`~spacedg.plugins.questions.geometry.build_mcq`.
+:func:`~spacedg.plugins.questions.geometry.build_mcq`. An angle within
+:data:`~spacedg.plugins.questions.geometry.COMPASS_RULE_BAND_DEG` (0.01°) of a boundary is not
+asked: there the ±30° and the 0.5774 readings of the rule disagree.
 
 Objects (decisions): pairs of views from :func:`~spacedg.plugins.questions.view_sampling.sample_pairs` with
 :data:`~spacedg.plugins.questions.view_sampling.OBJECT_PAIRS` (covisibility > 0.25, baseline ≥ 0.2 m; no

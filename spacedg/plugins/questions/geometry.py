@@ -63,7 +63,7 @@ __all__ = [
     "horizontal", "ground_angle", "ground_axes", "angle_on_ground", "vertical_dominates",
     "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS",
     "euler_yaw_pitch_roll", "ROTATION_WORDS", "camera_attitude", "gravity_rotation",
-    "MIN_HORIZONTAL_M", "VERTICAL_FACTOR", "COMPASS_RULE_BAND_DEG", "ground_leg", "compass_frame", "compass_answer",
+    "MIN_HORIZONTAL_M", "VERTICAL_FACTOR", "COMPASS_RULE_BAND_DEG", "on_compass_boundary", "ground_leg", "compass_frame", "compass_answer",
     "INTERSECT_TOL_M", "boxes_intersect",
 ]
 
@@ -455,6 +455,14 @@ COMPASS_SECTORS = Sectors(
     ("north", "northeast", "east", "southeast", "south", "southwest", "west", "northwest"),
     (330.0, 30.0, 60.0, 120.0, 150.0, 210.0, 240.0, 300.0),
 )
+
+
+def on_compass_boundary(hit: SectorHit) -> bool:
+    """Whether a compass hit lies within :data:`COMPASS_RULE_BAND_DEG` of a sector boundary, where
+    its label depends on the reading of the rule (such a question is not asked)."""
+    return hit.boundary_distance_deg < COMPASS_RULE_BAND_DEG
+
+
 #: The four cardinal labels (the assumed direction of compass questions is one of them).
 CARDINALS: tuple[str, ...] = ("north", "east", "south", "west")
 

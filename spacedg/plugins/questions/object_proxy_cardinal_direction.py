@@ -17,7 +17,9 @@ Frame (exact definition; world metres, ``up = Scene.up``, box centres ``c_A, c_B
   ``COMPASS_SECTORS.classify(angle)`` (cardinals ±30° around their axis, diagonals the 30°
   between: the 0.5774 rule). Options: the truth and three of the other seven labels from
   ``COMPASS_SECTORS.distractors`` (seeded; within 3° of a sector boundary the label across it is
-  never offered), letters by :func:`~spacedg.plugins.questions.geometry.build_mcq`.
+  never offered), letters by :func:`~spacedg.plugins.questions.geometry.build_mcq`; not asked
+  within :data:`~spacedg.plugins.questions.geometry.COMPASS_RULE_BAND_DEG` (0.01°) of a boundary,
+  where the ±30° and the 0.5774 readings disagree.
 
 Skipped (the paper's "geometric ambiguity filters"): any two of the three boxes intersect
 (:func:`~spacedg.plugins.questions.geometry.boxes_intersect`, tolerance

@@ -70,8 +70,8 @@ from spacedg.plugins.questions.geometry import (
     VERTICAL_FACTOR,
     SectorHit,
     build_mcq,
-    COMPASS_RULE_BAND_DEG,
     compass_answer,
+    on_compass_boundary,
 )
 from spacedg.plugins.questions.language import object_phrase
 from spacedg.plugins.specs import AnswerType, TaskGroup
@@ -398,7 +398,7 @@ def compass_question(
     :data:`~spacedg.plugins.questions.geometry.COMPASS_RULE_BAND_DEG` of a sector boundary."""
     assumed = CARDINALS[int(rng.integers(len(CARDINALS)))]
     truth, hit, block = compass_block(reference, assumed, query, up)
-    if hit.boundary_distance_deg < COMPASS_RULE_BAND_DEG:
+    if on_compass_boundary(hit):
         return None
     options, letter = build_mcq(truth, COMPASS_SECTORS.distractors(hit, rng), rng)
     return assumed, options, letter, block

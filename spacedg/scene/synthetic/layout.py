@@ -203,8 +203,10 @@ class Layout:
 
     def place_row(self, model: ObjectModel, kind: str, count: int, tries: int = 20) -> list[Placement]:
         """Stand ``count`` copies of ``model`` side by side along one wall, backs to it, ``ROW_GAP``
-        apart (one draw per row), fewer where the wall is too short; all or none: a try whose row
-        meets the corridor or other furniture is dropped whole. Each member's ``extra["row"]`` is
+        apart (one draw per row), fewer where the wall is too short (never fewer than
+        ``ROW_LENGTH[0]``: such a wall is not used); all or none: a try whose row meets the
+        corridor or other furniture is dropped whole. A row does not count against the
+        catalogue's ``max_count`` (a table's chairs and a row of chairs can make twelve). Each member's ``extra["row"]`` is
         the index of the row's first placement. Returns the placed row (empty if none fit)."""
         lo, hi = model.local_bounds()
         width, depth_back = float(hi[0] - lo[0]), float(hi[1])
@@ -214,8 +216,8 @@ class Layout:
             wall = int(self.rng.integers(0, 4))
             length = W if wall in (0, 2) else D
             fits = max(0, min(count, int((length - 0.1 + gap) // (width + gap))))
-            if fits == 0:
-                continue
+            if fits < min(count, ROW_LENGTH[0]):
+                continue  # a wall too short for a row
             span = fits * width + (fits - 1) * gap
             start = float(self.rng.uniform(-length / 2 + 0.05, max(-length / 2 + 0.05, length / 2 - 0.05 - span)))
             yaw = (0.0, -math.pi / 2, math.pi, math.pi / 2)[wall]
