@@ -30,6 +30,7 @@ from spacedg.data.chat import chat_collate, format_question
 from spacedg.data.public_format import public_fields
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.scene.io import load_scene
+from spacedg.scene.store import BUILTIN_ROOMS_FOLDER
 from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.qa.index import QABuildConfig, index_paths, read_index
 from spacedg.errors import InvalidDataError, ParameterError, UnknownPluginError
@@ -604,7 +605,8 @@ def test_default_scenes_are_the_builtin_rooms_made_on_first_use(tmp_path, monkey
     config = QABuildConfig(per_sub_type=1, families=("object_counting",), visibility_size=(40, 30), covisibility_size=(20, 15))
     ds = SpaceDGDataset("bench", builtin_rooms=3, qa_config=config, image_size=SIZE, degradations=["low_res"])
     assert "built-in rooms (first use)" in capfd.readouterr().err
-    assert sorted(p.name for p in (tmp_path / "rooms").iterdir()) == ["room-000000", "room-000001", "room-000002"]
+    assert BUILTIN_ROOMS_FOLDER == "rooms-v2"  # rooms made before wall rows (``rooms``) are never reused
+    assert sorted(p.name for p in (tmp_path / BUILTIN_ROOMS_FOLDER).iterdir()) == ["room-000000", "room-000001", "room-000002"]
     assert len(ds.scene_dirs) == 1 and len(ds) == 2 * len(ds.records) and ds[0]["images"].dtype == torch.uint8
     again = SpaceDGDataset("bench", builtin_rooms=3, qa_config=config, image_size=SIZE, degradations=["low_res"])
     assert "first use" not in capfd.readouterr().err and [r.id for r in again.records] == [r.id for r in ds.records]
