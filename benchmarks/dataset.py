@@ -8,7 +8,7 @@ Prints tables only (never part of the test run).
 
 Scenes: ``--rooms`` built-in rooms (seeds 0…n-1, :func:`~spacedg.scene.store.builtin_scene_dirs`)
 or, with ``--small``, 30k-Gaussian rooms, generated once into ``--root`` (default
-``$SPACEDG_HOME/benchmark-rooms``) with their question indexes (``--per-sub-type`` records per
+``$SPACEDG_HOME/benchmark-rooms-v2``) with their question indexes (``--per-sub-type`` records per
 sub type, every family). Rooms and indexes are reused by later runs.
 
 Configurations, each a fresh dataset (fresh caches):
@@ -95,8 +95,13 @@ def _generate_small(root: str, seeds: list[int]) -> None:
             tmp.rename(folder)
 
 
+
+def _root(args: argparse.Namespace) -> Path:
+    """``--root``, or ``$SPACEDG_HOME/benchmark-rooms-v2`` (versioned as the built-in rooms' cache)."""
+    return Path(args.root) if args.root else spacedg_home() / f"benchmark-{BUILTIN_ROOMS_FOLDER}"
+
 def scene_folders(args: argparse.Namespace) -> list[Path]:
-    root = Path(args.root) if args.root else spacedg_home() / f"benchmark-{BUILTIN_ROOMS_FOLDER}"
+    root = _root(args)
     if not args.small:
         return builtin_scene_dirs(args.rooms, root=root / "builtin")
     folder = root / "small"
@@ -365,7 +370,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--quick", action="store_true", help="30k rooms, 320x240, 8 samples (< 1 minute)")
     parser.add_argument("--small", action="store_true", help="30k-Gaussian rooms instead of the built-in size")
     parser.add_argument("--rooms", type=int, default=4, help="rooms (>= 3; default 4: 2 train, 1 val, 1 bench)")
-    parser.add_argument("--root", default=None, help="where rooms are generated (default $SPACEDG_HOME/benchmark-rooms)")
+    parser.add_argument("--root", default=None, help="where rooms are generated (default $SPACEDG_HOME/benchmark-rooms-v2)")
     parser.add_argument("--samples", type=int, default=None, help="items per configuration (default 32; quick 8)")
     parser.add_argument("--size", default=None, help="render size WxH (default: the views' own size; quick 320x240)")
     parser.add_argument("--workers", default="2,0", help="worker counts, comma-separated (default 2,0; >0 run first)")
@@ -429,7 +434,7 @@ def main(argv: Sequence[str] | None = None) -> None:
           f"{args.worker_threads or 'default (all CPUs)'}; shares are of the time inside dataset[i]")
 
     if args.mixture_only:
-        mixture_table(common, args.mixture_samples, worker_counts, Path(args.root) if args.root else spacedg_home() / f"benchmark-{BUILTIN_ROOMS_FOLDER}")
+        mixture_table(common, args.mixture_samples, worker_counts, _root(args))
         print(f"total {time.perf_counter() - t_start:.1f} s")
         return
     plans = {}
@@ -447,7 +452,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                     f" high-water mark)", results)
         goal_line(results)
     if args.mixture:
-        mixture_table(common, args.mixture_samples, worker_counts, Path(args.root) if args.root else spacedg_home() / f"benchmark-{BUILTIN_ROOMS_FOLDER}")
+        mixture_table(common, args.mixture_samples, worker_counts, _root(args))
     if "clean" in datasets:
         clean_vs_renders(pickle_copy(datasets["clean"]), ratio_samples, repeats, size)
     me = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

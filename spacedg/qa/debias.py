@@ -46,7 +46,7 @@ scenes to train on, and on 12 rooms the five-fold probe read `bbox_center_direct
 (within its band, so never pruned) where leave-one-scene-out read + 8.3.
 ``repeats`` fold seeds are averaged where the folds group several scenes (3 by default; 1
 when every fold is one scene, since every seed then deals the same folds). A sub type's allowed excess is ``max(bound, noise_z σ)``, σ a uniform guess's binomial
-deviation at its n, but never more than ``max_allowed`` (4 points, one under the chance + 5 a
+deviation at its n, but never more than :data:`MAX_ALLOWED` (4 points, one under the chance + 5 a
 bench must meet): a sub type of 50 three-option records (σ 6.7) was left at + 5.8.
 Removal is answer-balanced (:func:`balanced_pick`), so the letters, yes/no and count bins stay
 as balanced as the selection dealt them.
@@ -74,6 +74,7 @@ from typing import Any
 
 from spacedg.errors import ParameterError
 from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.questions.object_counting import COUNT_BINS
 from spacedg.plugins.specs import AnswerType
 from spacedg.qa.mode_stats import count_distribution, format_counts
 from spacedg.qa.debias_probe import (
@@ -118,7 +119,6 @@ class DebiasResult:
     noise_z: float = 0.0
     repeats: int = 1
     folds: int = 0
-    max_allowed: float = MAX_ALLOWED
     eligible: list[str] = field(default_factory=list)
 
     @property
@@ -141,15 +141,15 @@ class DebiasResult:
     @property
     def within(self) -> bool:
         """Whether the final probe meets both bounds."""
-        return not any(over_bound(r, self.bound, self.noise_z, 1e-9, self.max_allowed) for r in self.after.rows) and self.after.overall.get("excess", 0.0) <= self.overall_bound + 1e-9
+        return not any(over_bound(r, self.bound, self.noise_z, 1e-9) for r in self.after.rows) and self.after.overall.get("excess", 0.0) <= self.overall_bound + 1e-9
 
     def to_dict(self) -> dict[str, Any]:
         def table(p: Probe) -> dict[str, Any]:
-            rows = [{**r.to_dict(), "allowed": row_bound(r, self.bound, self.noise_z, self.max_allowed)} for r in p.rows]
+            rows = [{**r.to_dict(), "allowed": row_bound(r, self.bound, self.noise_z)} for r in p.rows]
             return {"rows": rows, "overall": p.overall}
 
         return {
-            "bound": self.bound, "overall_bound": self.overall_bound, "noise_z": self.noise_z, "repeats": self.repeats, "folds": self.folds, "max_allowed": self.max_allowed,
+            "bound": self.bound, "overall_bound": self.overall_bound, "noise_z": self.noise_z, "repeats": self.repeats, "folds": self.folds, "max_allowed": MAX_ALLOWED,
             "within": self.within, "kept": len(self.kept), "eligible": self.eligible,
             "before": table(self.before), "after": table(self.after), "rounds": self.rounds, "removed": self.removed,
             "pruned": self.pruned,
@@ -208,10 +208,14 @@ def balanced_pick(records: Sequence[QARecord], x: int, rank: Callable[[QARecord]
     this way; when pruning, the pooled-role tie-break ranks before blind solvability among
     classes of equal size."""
     classes: dict[str, list[QARecord]] = defaultdict(list)
+    role_of: dict[str, str] = {}
+    roles: Counter[str] = Counter()
     for r in sorted(records, key=rank):
-        classes[balance_class(r)].append(r)
-    role_of = {c: _cell_role(rs[0])[1] for c, rs in classes.items()}
-    roles = Counter(_cell_role(r)[1] for r in records)
+        cell, role = _cell_role(r)
+        cls = role if cell is None else f"{cell}|{role}"  # = balance_class(r)
+        classes[cls].append(r)
+        role_of[cls] = role
+        roles[role] += 1
     letters = Counter(answer_class(r) for r in records)
     taken: set[str] = set()
     for _ in range(min(x, len(records))):
@@ -232,16 +236,16 @@ def noise_band(row: SubTypeBlind, z: float) -> float:
     return z * 100.0 * math.sqrt(max(c * (1.0 - c), 0.0) / max(row.n, 1))
 
 
-def row_bound(row: SubTypeBlind, bound: float, noise_z: float, max_allowed: float = MAX_ALLOWED) -> float:
+def row_bound(row: SubTypeBlind, bound: float, noise_z: float) -> float:
     """The excess a sub type may keep: ``bound``, or its :func:`noise_band` where that is wider
     (pruning inside the band removes what the fitted predictors hit by luck, not a bias), but
-    never more than ``max(bound, max_allowed)`` (a bench must keep every sub type within chance + 5)."""
-    return min(max(bound, noise_band(row, noise_z)), max(bound, max_allowed))
+    never more than :data:`MAX_ALLOWED` where that is over ``bound`` (a bench must keep every sub type within chance + 5)."""
+    return max(bound, min(noise_band(row, noise_z), MAX_ALLOWED))
 
 
-def over_bound(row: SubTypeBlind, bound: float, noise_z: float, tol: float = 0.0, max_allowed: float = MAX_ALLOWED) -> bool:
+def over_bound(row: SubTypeBlind, bound: float, noise_z: float, tol: float = 0.0) -> bool:
     """Whether the sub type's excess is over its :func:`row_bound` (by more than ``tol`` points)."""
-    return row.excess > row_bound(row, bound, noise_z, max_allowed) + tol
+    return row.excess > row_bound(row, bound, noise_z) + tol
 
 
 def _aims(pr: Probe, bound: float, overall_bound: float, noise_z: float = 0.0,
@@ -304,7 +308,8 @@ def _trim_first(record: QARecord) -> int:
     absolute count made the ``0`` bin lose every tie: bins 33 / 50 / 54 of 137 on 6 rooms)."""
     if record.answer_type is not AnswerType.COUNT:
         return 0
-    return int(record.answer) - int(answer_class(record).rstrip("+"))  # type: ignore[arg-type]
+    count = int(record.answer)  # type: ignore[arg-type]
+    return count - max(low for low in COUNT_BINS if count >= low)
 
 
 def _deciding(pr: Probe, by_key: Mapping[tuple[str, str], list[QARecord]], counts: Mapping[str, float]) -> Probe:
@@ -393,7 +398,7 @@ def debias(
             eligible |= {row.key for row in deciding.rows if row.key[0] in changed and over_bound(row, bound, noise_z)}
     keep = {r.id for rs in by_key.values() for r in rs} | metric
     kept = [r for r in records if r.id in keep]
-    return DebiasResult(kept, before, current, rounds, targets, float(bound), float(overall_bound), float(noise_z), repeats, folds, MAX_ALLOWED,
+    return DebiasResult(kept, before, current, rounds, targets, float(bound), float(overall_bound), float(noise_z), repeats, folds,
                         sorted(f"{q}/{t}" for q, t in eligible))
 
 
@@ -402,7 +407,7 @@ def format_debias(result: DebiasResult) -> str:
     trimmed to the target) and the records removed per round, as Markdown."""
     lines = [
         f"Blind pruning ({result.folds} folds by scene, mean over {result.repeats} fold seed(s); chance = 1 / options shown; bound: sub type "
-        f"<= chance + min(max({result.bound:g}, {result.noise_z:g} sigma of chance at its n), {result.max_allowed:g}) = 'allowed', overall <= chance + {result.overall_bound:g})",
+        f"<= chance + min(max({result.bound:g}, {result.noise_z:g} sigma of chance at its n), {MAX_ALLOWED:g}) = 'allowed', overall <= chance + {result.overall_bound:g})",
         "| question_type | sub_question_type | type | n before | best before | n after | best after | chance | excess before | excess after "
         "| allowed | target | pruned | trimmed |",
         "|---|---|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|---:|",
@@ -412,7 +417,7 @@ def format_debias(result: DebiasResult) -> str:
         after = result.after.row(row.key)
         name = f"{row.key[0]}/{row.key[1]}"
         a_n, a_best, a_excess = (after.n, f"{after.best} {after.best_score:.1f}", f"{after.excess:+.1f}") if after else (0, "", "")
-        allowed = f"{row_bound(after or row, result.bound, result.noise_z, result.max_allowed):.1f}"
+        allowed = f"{row_bound(after or row, result.bound, result.noise_z):.1f}"
         lines.append(f"| {row.question_type} | {row.sub_question_type} | {row.answer_type} | {row.n} | {row.best} {row.best_score:.1f} | "
                      f"{a_n} | {a_best} | {row.chance:.1f} | {row.excess:+.1f} | {a_excess} | {allowed} | {result.targets.get(row.key, row.n)} | "
                      f"{pruned.get(name, 0)} | {removed.get(name, 0) - pruned.get(name, 0)} |")
@@ -428,7 +433,7 @@ def format_debias(result: DebiasResult) -> str:
     counts = count_distribution(result.kept)
     if counts:
         lines.append(f"counting answers kept: {format_counts(counts)}")
-    over = [f"{r.question_type}/{r.sub_question_type}" for r in result.after.rows if over_bound(r, result.bound, result.noise_z, 1e-9, result.max_allowed)]
+    over = [f"{r.question_type}/{r.sub_question_type}" for r in result.after.rows if over_bound(r, result.bound, result.noise_z, 1e-9)]
     lines.append("within the bounds" if result.within else f"NOT within the bounds after the last round: {', '.join(over) or 'pooled'} "
                  "(a sub type within its band before pruning is not pruned: its excess is noise of the refit predictors)")
     return "\n".join(lines)

@@ -30,7 +30,7 @@ from spacedg.data.chat import chat_collate, format_question
 from spacedg.data.public_format import public_fields
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.scene.io import load_scene
-from spacedg.scene.store import BUILTIN_ROOMS_FOLDER
+from spacedg.scene.store import BUILTIN_ROOMS_FOLDER, builtin_scene_dirs
 from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.qa.index import QABuildConfig, index_paths, read_index
 from spacedg.errors import InvalidDataError, ParameterError, UnknownPluginError
@@ -606,10 +606,15 @@ def test_default_scenes_are_the_builtin_rooms_made_on_first_use(tmp_path, monkey
     ds = SpaceDGDataset("bench", builtin_rooms=3, qa_config=config, image_size=SIZE, degradations=["low_res"])
     assert "built-in rooms (first use)" in capfd.readouterr().err
     assert BUILTIN_ROOMS_FOLDER == "rooms-v2"  # rooms made before wall rows (``rooms``) are never reused
-    assert sorted(p.name for p in (tmp_path / BUILTIN_ROOMS_FOLDER).iterdir()) == ["room-000000", "room-000001", "room-000002"]
+    assert sorted(p.name for p in (tmp_path / BUILTIN_ROOMS_FOLDER).iterdir()) == [".spacedg-rooms-version", "room-000000", "room-000001", "room-000002"]
     assert len(ds.scene_dirs) == 1 and len(ds) == 2 * len(ds.records) and ds[0]["images"].dtype == torch.uint8
     again = SpaceDGDataset("bench", builtin_rooms=3, qa_config=config, image_size=SIZE, degradations=["low_res"])
     assert "first use" not in capfd.readouterr().err and [r.id for r in again.records] == [r.id for r in ds.records]
+    old = tmp_path / "old-rooms"  # rooms of an older generator (no version file) are refused, not reused
+    (old / "room-000000").mkdir(parents=True)
+    (old / "room-000000" / "scene.json").write_text("{}")
+    with pytest.raises(InvalidDataError, match="generator version unknown"):
+        builtin_scene_dirs(3, root=old)
 
 
 # ------------------------------------------------------------------ device: who renders

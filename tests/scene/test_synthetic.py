@@ -193,7 +193,7 @@ def test_invalid_configs_are_rejected():
 
 
 def test_wall_rows_stand_identical_objects_side_by_side():
-    """``row_probability=1``: a row of 4–6 identical chairs or boxes along a wall (for counting),
+    """``row_probability=1``: a row of 4–6 chairs or boxes of one model (one shape and size, each its own colour) along a wall (for counting),
     one model, evenly spaced on a line, never intersecting anything; 0 draws no row."""
     rows_seen = 0
     for seed in range(6):

@@ -102,7 +102,6 @@ __all__ = [
     "FAMILY",
     "NAME",
     "SUB_TYPES",
-    "sub_question_type",
     "TEMPLATES",
     "RotationCase",
     "classify_rotation",
@@ -135,13 +134,6 @@ SUB_TYPES: tuple[str, ...] = tuple(f"{a}+{b}_single" for i, a in enumerate(AXES)
     f"{a}+{b}_dual" for a in AXES for b in AXES if a != b
 )
 
-
-def sub_question_type(case: "RotationCase") -> str:
-    """The sub type of a rotation case: singles by their text axes, duals dominant axis first."""
-    if case.mode == "single":
-        first, second = (a for a in AXES if a in (case.ax1, case.ax2))
-        return f"{first}+{second}_single"
-    return f"{case.ax1}+{case.ax2}_{case.mode}"
 
 ANGLE_DECIMALS = 6
 MIN_ROTATION_DEG = 5.0
@@ -223,7 +215,8 @@ def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator, decks: dict[
     truth, distractors, text_axes = _options(case, euler)
     options, answer = build_mcq(truth, distractors, rng, slot=decks[case.mode].next())
     template = MODES.index(case.mode)
-    sub = sub_question_type(case)
+    # singles by their text axes, duals dominant axis first (module docstring)
+    sub = f"{text_axes[0]}+{text_axes[1]}_single" if case.mode == "single" else f"{case.ax1}+{case.ax2}_dual"
     options_text = [o[3:] for o in options]
     geometry = {
         **pair_geometry(scene, pair),

@@ -215,7 +215,7 @@ class Layout:
         for _ in range(tries):
             wall = int(self.rng.integers(0, 4))
             length = W if wall in (0, 2) else D
-            fits = max(0, min(count, int((length - 0.1 + gap) // (width + gap))))
+            fits = min(count, int((length - 0.1 + gap) // (width + gap)))
             if fits < min(count, ROW_LENGTH[0]):
                 continue  # a wall too short for a row
             span = fits * width + (fits - 1) * gap
@@ -328,7 +328,7 @@ def fill_room(
     """Place furniture until ``target_objects`` instances stand in the room (or space runs out).
 
     Order: one central group (a table with chairs, or a coffee table), with ``row_probability``
-    a row of 4–6 identical chairs or boxes along a wall (:data:`ROW_KINDS`: the views that show
+    a row of 4–6 chairs or boxes of one model (one shape and size, each its own colour) along a wall (:data:`ROW_KINDS`: the views that show
     several instances of a label, which counting needs; no draw at all when it is 0, so such a
     room is the room of before), wall furniture, other floor objects, external objects, then
     small objects on the tops. Each catalogue object is

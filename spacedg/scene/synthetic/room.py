@@ -78,7 +78,7 @@ class RoomConfig:
             this range (default 0.75–1.35: a chair's longest side then spans 0.62–1.32 m), so
             a label does not fix an object's size: size questions cannot be answered from
             label priors alone. ``(1, 1)`` keeps the catalogue's own ranges.
-        row_probability: chance that the room has a row of 4–6 identical chairs or boxes along
+        row_probability: chance that the room has a row of 4–6 chairs or boxes of one model (one shape and size, each its own colour) along
             a wall (views showing several instances of a label, for counting); 0 draws nothing,
             so a room generated with 0 is the room of before rows existed.
     """
