@@ -435,5 +435,6 @@ def format_debias(result: DebiasResult) -> str:
         lines.append(f"counting answers kept: {format_counts(counts)}")
     over = [f"{r.question_type}/{r.sub_question_type}" for r in result.after.rows if over_bound(r, result.bound, result.noise_z, 1e-9)]
     lines.append("within the bounds" if result.within else f"NOT within the bounds after the last round: {', '.join(over) or 'pooled'} "
-                 "(a sub type within its band before pruning is not pruned: its excess is noise of the refit predictors)")
+                 "(pruning stops at half a sub type's target: too few candidates there; and a sub type within its band "
+                 "before pruning is not pruned: its excess is noise of the refit predictors)")
     return "\n".join(lines)
