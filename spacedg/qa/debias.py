@@ -74,7 +74,7 @@ from typing import Any
 
 from spacedg.errors import ParameterError
 from spacedg.plugins.qa_record import QARecord
-from spacedg.plugins.questions.object_counting import COUNT_BINS
+from spacedg.plugins.questions.object_counting import bin_floor
 from spacedg.plugins.specs import AnswerType
 from spacedg.qa.mode_stats import count_distribution, format_counts
 from spacedg.qa.debias_probe import (
@@ -309,7 +309,7 @@ def _trim_first(record: QARecord) -> int:
     if record.answer_type is not AnswerType.COUNT:
         return 0
     count = int(record.answer)  # type: ignore[arg-type]
-    return count - max(low for low in COUNT_BINS if count >= low)
+    return count - bin_floor(count)
 
 
 def _deciding(pr: Probe, by_key: Mapping[tuple[str, str], list[QARecord]], counts: Mapping[str, float]) -> Probe:

@@ -90,7 +90,7 @@ from spacedg.plugins.questions.records import make_record, round_robin, selectio
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
-__all__ = ["COUNTS", "COUNT_BINS", "COUNT_THRESHOLDS", "MAX_COUNT", "NAME", "count_bin", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
+__all__ = ["COUNTS", "COUNT_BINS", "COUNT_THRESHOLDS", "MAX_COUNT", "NAME", "bin_floor", "count_bin", "SUB_QUESTION_TYPE", "TEMPLATES", "FAMILY", "make_family", "generate", "render_question"]
 
 NAME = "object_counting"
 SUB_QUESTION_TYPE = "count"
@@ -107,10 +107,15 @@ COUNT_BINS: tuple[int, ...] = (0, 1, 2)
 COUNT_THRESHOLDS = VisibilityThresholds(min_pixels=DEFAULT_THRESHOLDS.min_pixels, min_fraction=0.25)
 
 
+def bin_floor(count: int, bins: tuple[int, ...] = COUNT_BINS) -> int:
+    """The smallest count of ``count``'s bin (:data:`COUNT_BINS`): 0, 1 or 2."""
+    return max(low for low in bins if count >= low)
+
+
 def count_bin(count: int, bins: tuple[int, ...] = COUNT_BINS) -> str:
     """The bin role of ``count``: ``"0"``, ``"1"``, …, ``"<last>+"`` (:data:`COUNT_BINS`)."""
-    k = max(i for i, low in enumerate(bins) if count >= low)
-    return f"{bins[k]}+" if k == len(bins) - 1 else str(bins[k])
+    low = bin_floor(count, bins)
+    return f"{low}+" if low == bins[-1] else str(low)
 
 
 def _bin_roles(bins: tuple[int, ...] = COUNT_BINS) -> tuple[str, ...]:

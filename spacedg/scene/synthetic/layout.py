@@ -168,6 +168,15 @@ class Layout:
         return self._inside_room(fp) and self._clear_of_floor_objects(fp) and self._clear_of_corridor(fp)
 
     # ----------------------------------------------------------- placement
+    def wall_pose(self, wall: int, along: float, depth_back: float) -> tuple[np.ndarray, float]:
+        """Bottom-centre position and yaw of a footprint centred at ``along`` metres on wall ``wall``
+        (0: +y, 1: +x, 2: −y, 3: −x), its back (+y local, ``depth_back`` from the centre) ``WALL_GAP`` from it."""
+        W, D = self.shape.width, self.shape.depth
+        yaw = (0.0, -math.pi / 2, math.pi, math.pi / 2)[wall]
+        if wall in (0, 2):
+            return np.array([along, (D / 2 - WALL_GAP - depth_back) * (1 if wall == 0 else -1), 0.0]), yaw
+        return np.array([(W / 2 - WALL_GAP - depth_back) * (1 if wall == 1 else -1), along, 0.0]), yaw
+
     def place_on_floor(self, model: ObjectModel, kind: str, mode: str, tries: int = 60, external: bool = False) -> Placement | None:
         """Try to stand ``model`` on the floor; ``mode`` is "wall", "center" or "floor"."""
         lo, hi = model.local_bounds()
@@ -176,17 +185,10 @@ class Layout:
         for _ in range(tries):
             if mode == "wall":
                 wall = int(self.rng.integers(0, 4))
-                yaw = (0.0, -math.pi / 2, math.pi, math.pi / 2)[wall]
-                # back (+y local) against the wall
-                if wall in (0, 2):
-                    half_w = (hi[0] - lo[0]) / 2
-                    x = float(self.rng.uniform(-W / 2 + half_w + 0.02, W / 2 - half_w - 0.02)) if W / 2 - half_w > 0.05 else 0.0
-                    y = (D / 2 - WALL_GAP - depth_back) * (1 if wall == 0 else -1)
-                else:
-                    half_w = (hi[0] - lo[0]) / 2
-                    y = float(self.rng.uniform(-D / 2 + half_w + 0.02, D / 2 - half_w - 0.02)) if D / 2 - half_w > 0.05 else 0.0
-                    x = (W / 2 - WALL_GAP - depth_back) * (1 if wall == 1 else -1)
-                pos = np.array([x, y, 0.0])
+                half_w = (hi[0] - lo[0]) / 2
+                length = W if wall in (0, 2) else D
+                along = float(self.rng.uniform(-length / 2 + half_w + 0.02, length / 2 - half_w - 0.02)) if length / 2 - half_w > 0.05 else 0.0
+                pos, yaw = self.wall_pose(wall, along, depth_back)
             elif mode == "center":
                 ax = max(0.05, W / 2 - self.shape.inset - CORRIDOR_HALF_WIDTH)
                 ay = max(0.05, D / 2 - self.shape.inset - CORRIDOR_HALF_WIDTH)
@@ -220,14 +222,11 @@ class Layout:
                 continue  # a wall too short for a row
             span = fits * width + (fits - 1) * gap
             start = float(self.rng.uniform(-length / 2 + 0.05, max(-length / 2 + 0.05, length / 2 - 0.05 - span)))
-            yaw = (0.0, -math.pi / 2, math.pi, math.pi / 2)[wall]
-            off = W / 2 - WALL_GAP - depth_back if wall in (1, 3) else D / 2 - WALL_GAP - depth_back
             row: list[Placement] = []
             first = len(self.placements)  # the row's id: the index (= instance id) of its first member
             for i in range(fits):
-                along = start + width / 2 + i * (width + gap)
-                x, y = {0: (along, off), 1: (off, along), 2: (along, -off), 3: (-off, along)}[wall]
-                cand = Placement(model, kind, np.array([x, y, 0.0]), yaw, extra={"row": first})
+                pos, yaw = self.wall_pose(wall, start + width / 2 + i * (width + gap), depth_back)
+                cand = Placement(model, kind, pos, yaw, extra={"row": first})
                 if not self.floor_ok(cand):
                     break
                 row.append(cand)
