@@ -95,10 +95,10 @@ def _generate_small(root: str, seeds: list[int]) -> None:
             tmp.rename(folder)
 
 
-
 def _root(args: argparse.Namespace) -> Path:
     """``--root``, or ``$SPACEDG_HOME/benchmark-rooms-v2`` (versioned as the built-in rooms' cache)."""
     return Path(args.root) if args.root else spacedg_home() / f"benchmark-{BUILTIN_ROOMS_FOLDER}"
+
 
 def scene_folders(args: argparse.Namespace) -> list[Path]:
     root = _root(args)

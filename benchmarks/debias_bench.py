@@ -106,7 +106,7 @@ def main() -> None:
           f"-> debiased bench {len(cand.records)} records ({seconds:.0f} s, {len(result.rounds)} rounds)\n")
     print(format_debias(result) + "\n")
     after_checks = {name: probe(cand.records, folds=f, seed=sd) for name, (f, sd) in checks.items()}
-    same = " (the pruning's own folds: it leaves one scene out up to 12 scenes)" if scenes <= MAX_PROBE_FOLDS else ""
+    same = f" (the pruning's own folds: it leaves one scene out up to {MAX_PROBE_FOLDS} scenes)" if scenes <= MAX_PROBE_FOLDS else ""
     titles = {"loso": f"Check: leave-one-scene-out, fold seed {args.check_seed}{same}"}
     if "half" in checks:
         titles["half"] = f"Check: {checks['half'][0]} folds of whole scenes, fold seed {checks['half'][1]} (folds the pruning never used)"

@@ -44,7 +44,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     synth.add_argument("--splat-size", type=_args.real(0, above=True, unit="metres"), default=0.35,
                        help="longest side of placed .splat objects, metres")
     synth.add_argument("--row-probability", type=_args.real(0, 1, unit="probability"), default=RoomConfig.row_probability, metavar="P",
-                       help="chance that a room has a row of 4-6 chairs or boxes of one model along a wall, for counting (default 0.5; 0 gives the rooms of before)")
+                       help="chance that a room has a row of 4-6 chairs or boxes of one model along a wall, for counting (default %(default)s; 0 gives the rooms of before)")
     synth.add_argument("--overwrite", action="store_true", help="regenerate rooms whose folder already exists")
     _vocabulary.add_deprecated(synth, "scenes synth", **{
         "--width": dict(dest="width", type=image_side, metavar="W"), "--height": dict(dest="height", type=image_side, metavar="H"),

@@ -191,7 +191,10 @@ def balance_class(record: QARecord) -> str:
     """What a record's removal is balanced over: its selection ``cell`` and ``role`` (the selection
     took whole rounds of every role per cell: e.g. each compass label per assumed direction), else
     its :func:`~spacedg.qa.debias_probe.answer_class` (letter, yes/no, count bin)."""
-    cell, role = _cell_role(record)
+    return _class_name(*_cell_role(record))
+
+
+def _class_name(cell: str | None, role: str) -> str:
     return role if cell is None else f"{cell}|{role}"
 
 
@@ -212,7 +215,7 @@ def balanced_pick(records: Sequence[QARecord], x: int, rank: Callable[[QARecord]
     roles: Counter[str] = Counter()
     for r in sorted(records, key=rank):
         cell, role = _cell_role(r)
-        cls = role if cell is None else f"{cell}|{role}"  # = balance_class(r)
+        cls = _class_name(cell, role)  # = balance_class(r)
         classes[cls].append(r)
         role_of[cls] = role
         roles[role] += 1

@@ -53,8 +53,7 @@ def blur_plan(coc: np.ndarray, width: int, height: int) -> tuple[float, int] | N
     none blurs (the view is the sharp render). The factor is :func:`composite_factor`'s."""
     if not (coc > 0.0).any():
         return None
-    factor = 1 if COMPOSITE_MIN_COC <= 0 else factor_for_coc(float(coc.min()), width, height)
-    return float(np.percentile(coc, 95)), factor
+    return float(np.percentile(coc, 95)), factor_for_coc(float(coc.min()), width, height)
 
 
 #: Default resolution of the sharp pass relative to the view (see :func:`measurement_camera`;
@@ -108,14 +107,15 @@ def composite_factor(packed: np.ndarray, rects: np.ndarray, width: int, height: 
     every visible Gaussian's circle of confusion is at least ``COMPOSITE_MIN_COC`` px and the coarse
     grid keeps at least 16 px on each side."""
     visible = rects[:, 1] > rects[:, 0]
-    if COMPOSITE_MIN_COC <= 0 or not visible.any():
-        return 1
-    return factor_for_coc(float(packed[visible, COC].min()), width, height)
+    plan = blur_plan(packed[visible, COC], width, height)
+    return 1 if plan is None else plan[1]
 
 
 def factor_for_coc(smallest: float, width: int, height: int) -> int:
     """:func:`composite_factor` given the smallest visible circle of confusion ``smallest`` (px);
     shared by both backends."""
+    if COMPOSITE_MIN_COC <= 0:
+        return 1
     factor = 1
     while (
         factor < COMPOSITE_MAX_FACTOR and smallest >= COMPOSITE_MIN_COC * factor

@@ -62,25 +62,28 @@ def builtin_scene_dirs(n: int = 16, root: str | os.PathLike[str] | None = None) 
         raise ParameterError(f"builtin_scene_dirs: n must be an integer >= 3 (one scene per split at least), got {n!r}")
     folder = Path(root) if root is not None else spacedg_home() / BUILTIN_ROOMS_FOLDER
     folder.mkdir(parents=True, exist_ok=True)
-    _check_rooms_version(folder)
+    if not _rooms_version_matches(folder):  # written before any room, so an interrupted first use keeps its rooms
+        (folder / ROOMS_VERSION_FILE).write_text(f"{BUILTIN_ROOMS_VERSION}\n")
     missing = [s for s in range(n) if not (folder / f"room-{s:06d}" / "scene.json").is_file()]
     if missing:
         run_isolated("spacedg.scene.store:_generate_rooms", {"root": str(folder), "seeds": missing})
-    (folder / ROOMS_VERSION_FILE).write_text(f"{BUILTIN_ROOMS_VERSION}\n")
     return [folder / f"room-{s:06d}" for s in range(n)]
 
 
-def _check_rooms_version(folder: Path) -> None:
-    """Refuse a rooms folder holding rooms of another generator version (or of an unknown one:
-    rooms without the version file), so an old cache is never silently reused for today's seeds."""
+def _rooms_version_matches(folder: Path) -> bool:
+    """Whether the rooms folder's version file names :data:`BUILTIN_ROOMS_VERSION`; ``False`` for a
+    folder without rooms. A folder holding rooms of another generator version (or of an unknown one:
+    rooms without the version file) is refused, so an old cache is never silently reused for today's seeds."""
     marker = folder / ROOMS_VERSION_FILE
-    has_rooms = any(folder.glob("room-*/scene.json"))
     found = marker.read_text().strip() if marker.is_file() else None
-    if has_rooms and found != str(BUILTIN_ROOMS_VERSION):
+    if found == str(BUILTIN_ROOMS_VERSION):
+        return True
+    if any(folder.glob("room-*/scene.json")):
         raise InvalidDataError(
             f"{folder}: holds built-in rooms of generator version {found or 'unknown (before version 2)'}, not "
             f"{BUILTIN_ROOMS_VERSION}: the same seeds now give other rooms. Delete the folder or use another one."
         )
+    return False
 
 
 def scene_dirs_of(paths: Sequence[str | os.PathLike[str]]) -> list[Path]:

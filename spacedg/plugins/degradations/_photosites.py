@@ -12,8 +12,9 @@ rendered directly: both draw it on the same photosite grid with the same counter
 Model (``pitch ≠ 1``), with ``s = e·x`` the exposed linear light of the output (NaN → 0, ±inf
 and beyond ±:data:`~._sensor.SIGNAL_CAP` clamped, as in :mod:`._sensor`):
 
-1. the photosite grid has ``(round(W / pitch), round(H / pitch))`` sites over the image (so
-   images of one aspect ratio share one grid whatever their size);
+1. the photosite grid has ``round(side / pitch)`` sites per side of the image's
+   :func:`~.common.snapped_size` (a side within a pixel of a common aspect is taken at that
+   aspect), so the sizes of one view share one grid whatever their rounding;
 2. each site's signal ``s_g`` is ``s`` area-resampled onto the grid (:func:`cv2.resize`,
    ``INTER_AREA``: the box average where sites are larger than pixels, the overlapping pixel's
    value where they are smaller);

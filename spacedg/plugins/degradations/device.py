@@ -351,7 +351,8 @@ def _box_means(rgb: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor, spre
     height, width = rgb.shape[:2]
     rows = torch.from_numpy(reflect_index(height, pad)).to(rgb.device)
     cols = torch.from_numpy(reflect_index(width, pad)).to(rgb.device)
-    padded = rgb.double().permute(2, 0, 1).index_select(1, rows).index_select(2, cols)
+    rgb64 = rgb.double()
+    padded = rgb64.permute(2, 0, 1).index_select(1, rows).index_select(2, cols)
     full_h, full_w = padded.shape[1:]
     sat = torch.zeros((3, full_h + 1, full_w + 1), dtype=torch.float64, device=rgb.device)
     sat[:, 1:, 1:] = padded.cumsum(1).cumsum(2)
@@ -370,7 +371,7 @@ def _box_means(rgb: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor, spre
 
     total = at(v1, u1) - at(v0, u1) - at(v1, u0) + at(v0, u0)
     area = torch.clamp((u1 - u0) * (v1 - v0), min=1e-12)
-    flat = rgb.double().reshape(-1, 3)  # a mean never leaves the frame's range (large sums lose digits)
+    flat = rgb64.reshape(-1, 3)  # a mean never leaves the frame's range (large sums lose digits)
     lo, hi = flat.min(dim=0).values[:, None, None], flat.max(dim=0).values[:, None, None]
     return torch.minimum(torch.maximum(total / area, lo), hi).permute(1, 2, 0).float()
 
@@ -429,12 +430,12 @@ def droplet_composite_torch(
     seen = F.grid_sample(rgb.permute(2, 0, 1)[None], grid[None], mode="bilinear", padding_mode="reflection", align_corners=False)
     seen = seen[0].permute(1, 2, 0)
     spread = torch.where(drop, torch.abs(1.0 - reach / best_r), torch.zeros_like(best_r)).float()
-    minify = spread > 1.0
-    if bool(minify.any()):  # minifying drops: the mean over the square each pixel spans (refracted_view)
+    widest = float(spread.max())  # one device sync
+    if widest > 1.0:  # minifying drops: the mean over the square each pixel spans (refracted_view)
         from spacedg.plugins.degradations.common import box_pad
 
-        pad = box_pad(float(spread.max()), (height, width))
-        seen = torch.where(minify[..., None], _box_means(rgb, map_x, map_y, spread, pad), seen)
+        pad = box_pad(widest, (height, width))
+        seen = torch.where((spread > 1.0)[..., None], _box_means(rgb, map_x, map_y, spread, pad), seen)
     if blur_kernel > 1 and blur_sigma > 0.0:
         seen = gaussian_blur_reflect(seen, blur_kernel, blur_sigma)
     through = a * (1.0 - float(rim) * (1.0 - trans))
