@@ -5,7 +5,7 @@ renders (so no image is rendered here):
 
 - **plain**: ``--no-debias``: the indexes at ``--per-sub-type`` (read from ``--plain``; without
   ``--plain`` the table's "plain" columns are the oversampled candidates before pruning);
-- **debiased**: the default: indexes at ``OVERSAMPLE × --per-sub-type`` (built in ``--candidates``,
+- **debiased**: the default: indexes at ``OVERSAMPLE × --per-sub-type`` with partial rounds (built in ``--candidates``,
   which must be *other* folders of the same scenes, e.g. ``cp -al`` copies, because an index at
   another size replaces the cached one), pruned by :func:`spacedg.data.bench_debias.debias_dataset`.
 
@@ -37,9 +37,9 @@ from spacedg.qa.debias_probe import probe  # noqa: E402
 from spacedg.qa.index import QABuildConfig  # noqa: E402
 
 
-def _bench(scenes: list[Path], per_sub_type: int, seed: int) -> SpaceDGDataset:
+def _bench(scenes: list[Path], per_sub_type: int, seed: int, partial_rounds: bool = False) -> SpaceDGDataset:
     return SpaceDGDataset("bench", scenes=scenes, split_fractions=(0.0, 1.0), seed=seed,
-                          qa_config=QABuildConfig(seed=seed, per_sub_type=per_sub_type))
+                          qa_config=QABuildConfig(seed=seed, per_sub_type=per_sub_type, partial_rounds=partial_rounds))
 
 
 def _table(plain, debiased, removed) -> str:
@@ -91,7 +91,7 @@ def main() -> None:
     parser.add_argument("--check-seed", type=int, default=1, help="fold seed of the independent check")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
-    cand = _bench(args.candidates, args.per_sub_type * OVERSAMPLE, args.seed)
+    cand = _bench(args.candidates, args.per_sub_type * OVERSAMPLE, args.seed, partial_rounds=True)
     plain = _bench(args.plain, args.per_sub_type, args.seed) if args.plain else None
     scenes = len(cand.scene_dirs)
     before_records = list(plain.records if plain else cand.records)

@@ -138,9 +138,11 @@ def run(args: argparse.Namespace) -> int:
     dataset = SpaceDGDataset(
         args.split, chains, scenes=args.scenes, families=_names(args.families),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,
-        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type * factor, mode=_qa_mode(args)),
+        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type * factor, mode=_qa_mode(args),
+                                 partial_rounds=debias and _qa_mode(args) == "bench"),
         on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device,
-        max_questions=None if args.max_questions is None else args.max_questions * factor, split_fractions=fractions,
+        # the pruning trims to --max-questions itself, cells balanced (a random subset of the candidates would break their rounds)
+        max_questions=None if args.max_questions is None or debias else args.max_questions, split_fractions=fractions,
     )
     pruned = debias_dataset(dataset, args.per_sub_type, args.max_questions, args.seed) if debias else None
     if pruned is not None:

@@ -42,6 +42,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     build.add_argument("--mode", choices=("bench", "train"), default="bench",
                        help="bench: strict selection, an object asked at most once per sub type and scene (<id>.qa.jsonl); train: "
                             "dense, each object from many views, 4x the records (<id>.qa-train.jsonl); see docs/question-modes.md")
+    build.add_argument("--partial-rounds", action="store_true",
+                       help="also take partial rounds of the balancing cells' roles (bench mode): the candidates of a bench whose "
+                            "roles are balanced across its scenes afterwards, as `spacedg export --split bench` builds them for the "
+                            "blind pruning; such an index is not balanced on its own")
     _args.add_backend_arguments(build, "renderer of visibility and covisibility")
 
     preview = _args.add_command(
@@ -82,7 +86,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     audit.add_argument("--json", action="store_true", help="print JSON instead of tables")
     audit.add_argument("--debias", action="store_true",
                        help="also pool the records, probe them k-fold by scene (chance = 1 / options shown) and prune what the "
-                       "blind models solve, as a bench export does; print before/after per sub type and each round's removals")
+                       "blind models solve, as a bench export does (the cells' roles balanced across the scenes first, for indexes "
+                       "built with --partial-rounds); print before/after per sub type and each round's removals")
 
 
 def _build(args: argparse.Namespace) -> int:
@@ -104,7 +109,8 @@ def _build(args: argparse.Namespace) -> int:
     shard = resolve_shard(args.shard, os.environ)
     if args.out is not None:
         _args.output_folder("--out", args.out)
-    config = QABuildConfig(seed=args.seed, families=_family_names(args.families), per_sub_type=args.per_sub_type, mode=args.mode)
+    config = QABuildConfig(seed=args.seed, families=_family_names(args.families), per_sub_type=args.per_sub_type, mode=args.mode,
+                           partial_rounds=args.partial_rounds)
     every = _scene_dirs(args.scenes)
     mine = [every[k] for k in chunk_ids(len(every), 1, shard)]
     on_gpu = args.device not in (None, "cpu")
@@ -337,10 +343,16 @@ def _audit(args: argparse.Namespace) -> int:
 
 
 def _debias(by_scene: dict, learned: bool) -> Any:
-    """The bench-level blind pruning of every record of ``by_scene``, pooled (:func:`spacedg.qa.debias.debias`)."""
+    """The bench-level blind pruning of every record of ``by_scene``, pooled: the cells' roles balanced
+    across the scenes (:func:`spacedg.qa.cell_balance.balance_cells`; indexes built with
+    ``--partial-rounds``), then :func:`spacedg.qa.debias.debias`."""
+    from spacedg.qa.cell_balance import balance_cells
     from spacedg.qa.debias import debias
 
-    return debias([r for rs in by_scene.values() for r in rs], learned=learned)
+    balanced = balance_cells([r for rs in by_scene.values() for r in rs])
+    result = debias(balanced.kept, learned=learned)
+    result.balanced = balanced.removed
+    return result
 
 
 def _pick(records: list, n: int, types: set[str], seed: int) -> list:

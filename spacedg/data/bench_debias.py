@@ -1,8 +1,11 @@
 """Blind pruning of a bench dataset before export (``spacedg export --split bench``: on by default, ``--no-debias`` skips it).
 
 The export builds its question indexes with :data:`~spacedg.qa.debias.OVERSAMPLE` × ``--per-sub-type``
-records per sub type and scene (and, with ``--max-questions N``, keeps ``OVERSAMPLE × N``
-candidates), then :func:`debias_dataset` pools the bench's records over all its scenes, prunes
+records per sub type and scene (``partial_rounds``: its balancing cells take partial rounds too;
+with ``--max-questions N`` it keeps every candidate, and the pruning's trim takes the bench to
+``N``, spread over sub types in proportion and keeping every cell's roles balanced), then
+:func:`debias_dataset` pools the bench's records over all its scenes, balances every cell's roles
+across them (:func:`~spacedg.qa.cell_balance.balance_cells`), prunes
 what the blind models solve (:func:`spacedg.qa.debias.debias`) and trims every sub type to the
 size the bench would have without pruning (:func:`bench_targets`), so the pruned bench keeps its
 requested size wherever the candidates allow. The result is a pure function of the records and
@@ -25,6 +28,7 @@ from pathlib import Path
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.files import atomic_write_bytes
 from spacedg.plugins.qa_record import QARecord
+from spacedg.qa.cell_balance import balance_cells
 from spacedg.qa.debias import OVERSAMPLE, DebiasResult, debias, format_debias, spread_targets
 
 __all__ = ["MIN_SCENES", "OVERSAMPLE", "bench_scene_count", "bench_targets", "debias_dataset", "write_debias_report"]
@@ -59,8 +63,11 @@ def bench_targets(records: Sequence[QARecord], per_sub_type: int, max_questions:
 
 
 def debias_dataset(dataset: SpaceDGDataset, per_sub_type: int, max_questions: int | None = None, seed: int = 0) -> DebiasResult:
-    """Prune ``dataset.records`` in place (their order kept) and return what was done."""
-    result = debias(dataset.records, bench_targets(dataset.records, per_sub_type, max_questions), seed=seed)
+    """Balance the cells' roles of ``dataset.records`` across its scenes (:func:`~spacedg.qa.cell_balance.balance_cells`:
+    the candidates took partial rounds), then prune them; in place (their order kept); returns what was done."""
+    balanced = balance_cells(dataset.records, seed)
+    result = debias(balanced.kept, bench_targets(balanced.kept, per_sub_type, max_questions), seed=seed)
+    result.balanced = balanced.removed
     dataset.records = result.kept
     return result
 

@@ -179,7 +179,7 @@ def _family_records(
     keep = functools.partial(_judged, judge=judge, dropped=dropped, family_name=family.name)
     stats: dict[str, Counter[str]] = {}
     pool = _pool(family, scene, config, index, twins)
-    chosen = select_records(pool, quota(config.per_sub_type, config.mode), keep, stats, mode=config.mode)
+    chosen = select_records(pool, quota(config.per_sub_type, config.mode), keep, stats, mode=config.mode, partial_rounds=config.partial_rounds)
     with plugin_call("question family", family, "generate"):
         chosen = [r.materialised() for r in chosen]  # geometry converted for the kept records only
     chosen = deal_distractors(chosen, np.random.default_rng(derive_seed(config.seed, scene.id, family.name, "distractors")))

@@ -120,6 +120,9 @@ class DebiasResult:
     repeats: int = 1
     folds: int = 0
     eligible: list[str] = field(default_factory=list)
+    #: Records removed per sub type before the probe to balance the cells' roles across scenes
+    #: (:func:`~spacedg.qa.cell_balance.balance_cells`; empty where the caller did not balance).
+    balanced: dict[str, int] = field(default_factory=dict)
 
     @property
     def removed(self) -> dict[str, int]:
@@ -152,7 +155,7 @@ class DebiasResult:
             "bound": self.bound, "overall_bound": self.overall_bound, "noise_z": self.noise_z, "repeats": self.repeats, "folds": self.folds, "max_allowed": MAX_ALLOWED,
             "within": self.within, "kept": len(self.kept), "eligible": self.eligible,
             "before": table(self.before), "after": table(self.after), "rounds": self.rounds, "removed": self.removed,
-            "pruned": self.pruned,
+            "pruned": self.pruned, "balanced": self.balanced,
             "targets": {f"{q}/{s}": n for (q, s), n in sorted(self.targets.items())},
         }
 
@@ -429,6 +432,9 @@ def format_debias(result: DebiasResult) -> str:
         lines.append(f"| ALL (MCQ+YN+COUNT) | | | {int(b['n'])} | {b['best']:.1f} | {int(a.get('n', 0))} | {a.get('best', 0.0):.1f} | "
                      f"{b['chance']:.1f} / {a.get('chance', 0.0):.1f} | {b['excess']:+.1f} | {a.get('excess', 0.0):+.1f} | {result.overall_bound:g} | "
                      f"{sum(result.targets.values())} | {sum(pruned.values())} | {sum(removed.values()) - sum(pruned.values())} |")
+    if result.balanced:
+        parts = ", ".join(f"{k} {v}" for k, v in result.balanced.items())
+        lines.append(f"before the probe, roles balanced per cell across scenes: removed {sum(result.balanced.values())}: {parts}")
     for r in result.rounds:
         parts = ", ".join(f"{k} {v}" for k, v in sorted(r["removed"].items()))
         lines.append(f"round {r['round']} ({r['why']}): removed {r['total']}: {parts}")

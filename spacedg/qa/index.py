@@ -84,6 +84,11 @@ class QABuildConfig:
             whatever the views) or ``"train"`` (dense: each object from many views,
             :data:`~spacedg.qa.modes.TRAIN_QUOTA_FACTOR` × ``per_sub_type`` per sub type); a
             train index has files of its own (:func:`index_paths`). See :mod:`spacedg.qa.modes`.
+        partial_rounds: also take partial rounds of the cells' roles where whole rounds leave a
+            sub type room (:func:`~spacedg.qa.selection.select_records`): the candidates of a bench
+            whose roles are balanced across its scenes afterwards
+            (:func:`~spacedg.qa.cell_balance.balance_cells`; ``spacedg export --split bench`` with
+            the blind pruning). Such an index is not balanced on its own; off by default.
     """
 
     seed: int = 0
@@ -94,6 +99,7 @@ class QABuildConfig:
     visibility_size: tuple[int, int] = (160, 120)
     covisibility_size: tuple[int, int] = (80, 60)
     mode: str = "bench"
+    partial_rounds: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
@@ -106,6 +112,11 @@ class QABuildConfig:
             raise ParameterError(f"QABuildConfig: families must be a sequence of family names, not one string ({self.families!r})")
         if self.mode not in MODES:
             raise ParameterError(f"QABuildConfig: mode must be one of {list(MODES)}, got {self.mode!r}")
+        if not isinstance(self.partial_rounds, bool):
+            raise ParameterError(f"QABuildConfig: partial_rounds must be True or False, got {self.partial_rounds!r}")
+        if self.partial_rounds and self.mode != "bench":
+            raise ParameterError("QABuildConfig: partial_rounds is for the candidates of a pooled bench (mode 'bench'), "
+                                 f"not mode {self.mode!r}")
         object.__setattr__(self, "families", tuple(sorted(set(self.families))))
         object.__setattr__(self, "visibility_size", tuple(self.visibility_size))
         object.__setattr__(self, "covisibility_size", tuple(self.covisibility_size))
@@ -116,12 +127,14 @@ class QABuildConfig:
         out["families"] = list(self.families)
         out["visibility_size"] = list(self.visibility_size)
         out["covisibility_size"] = list(self.covisibility_size)
+        if not self.partial_rounds:
+            del out["partial_rounds"]  # recorded only when on: the keys of every index built without it stay as they were
         return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> QABuildConfig:
         """The config :meth:`to_dict` wrote (lists back to tuples)."""
-        return cls(**{"mode": "bench", **data, "families": tuple(data["families"]), "visibility_size": tuple(data["visibility_size"]),
+        return cls(**{"mode": "bench", "partial_rounds": False, **data, "families": tuple(data["families"]), "visibility_size": tuple(data["visibility_size"]),
                       "covisibility_size": tuple(data["covisibility_size"])})
 
 

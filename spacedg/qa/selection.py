@@ -12,7 +12,8 @@ its option set, the axes it names), the *role* (its answer), the cell's ``roles`
    (:meth:`_Selection.take_metric`);
 2. cells: whole rounds, one record of every role, cells visited round-robin
    (:meth:`_Selection.take_rounds`; a role is filled by :meth:`_Selection.pick`, which balances
-   features across roles with :meth:`_Selection.cost`);
+   features across roles with :meth:`_Selection.cost`); for a bench balanced across its scenes
+   afterwards, partial rounds too (:meth:`_Selection.take_partial_rounds`);
 3. sub types whose quota is smaller than every round of their cells: their first free
    candidates (:meth:`_Selection.take_small_quotas`);
 4. records without a ``selection`` entry (third-party families): round-robin over their
@@ -254,6 +255,29 @@ class _Selection:
                 still.append(cell)
             open_cells = still
 
+    def take_partial_rounds(self) -> None:
+        """Partial rounds, for a bench that balances every cell's roles across its scenes
+        (:func:`~spacedg.qa.cell_balance.balance_cells`): while a sub type has room left after
+        its whole rounds, its cells are visited round-robin and each visit takes one free
+        candidate of every role the cell still offers (the least over-represented features
+        first, as in a whole round). A scene with a pair against its labels' prior and none with
+        it then still gives the one it has, which another scene's surplus completes."""
+        cells, roles = self.pool.cells, self.pool.cell_roles
+        open_cells = [c for c in cells if len(roles[c]) >= 2]
+        while open_cells:
+            still = []
+            for cell in open_cells:
+                used: set[tuple[str, str]] = set()
+                for role in roles[cell]:
+                    i = self.pick(cell, role, used)
+                    if i is None or self.room[self.pool.sub(i)] <= 0:
+                        continue
+                    self.take_round([i])
+                    used.add(self.pool.subject(i))
+                if used:
+                    still.append(cell)
+            open_cells = still
+
     def _smallest_rounds(self) -> dict[str, int]:
         """Per sub type, the smallest round among its cells (cells of fewer than two roles: 10**9)."""
         smallest: dict[str, int] = {}
@@ -313,7 +337,7 @@ class _Selection:
 
 def select_records(
     records: Sequence[QARecord], per_sub_type: int, keep: Keep | None = None, stats: dict[str, Counter[str]] | None = None,
-    mode: str = "bench",
+    mode: str = "bench", partial_rounds: bool = False,
 ) -> list[QARecord]:
     """The debiased selection among one family's candidates (in generation order): up to
     ``per_sub_type`` records per sub type, returned in generation order.
@@ -341,6 +365,11 @@ def select_records(
     ``mode``: what "the same subject" is (:func:`~spacedg.qa.modes.subject_key`): ``"bench"``
     asks an object at most once per sub type whatever the views, ``"train"`` once per views.
 
+    ``partial_rounds``: after the whole rounds, a sub type with room left takes partial rounds
+    (:meth:`_Selection.take_partial_rounds`): the candidates of a bench whose cells are balanced
+    across its scenes afterwards (:func:`~spacedg.qa.cell_balance.balance_cells`); an index used
+    on its own is built without them.
+
     ``stats`` (optional) receives per sub type: ``pooled``, ``taken``, and why the others were
     not: ``repeat`` (subject already asked), ``quota`` (its sub type has no room for another
     round of its cell), ``unbalanced`` (no complete round of its cell left), ``judge``.
@@ -348,6 +377,8 @@ def select_records(
     selection = _Selection(records, per_sub_type, keep, mode)
     selection.take_metric()
     selection.take_rounds()
+    if partial_rounds:
+        selection.take_partial_rounds()
     selection.take_small_quotas()
     selection.take_plain()
     if stats is not None:

@@ -26,7 +26,7 @@ from spacedg.data.export import (
 )
 from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.data.public_format import to_public
-from spacedg.qa.index import QABuildConfig
+from spacedg.qa.index import QABuildConfig, read_index
 from spacedg.errors import InvalidDataError, ParameterError
 from tests.conftest import private_copies
 
@@ -318,8 +318,11 @@ def test_cli_bench_debias_prunes_and_no_debias_skips_it(indexed_room_dirs, tmp_p
     plain = pd.read_csv(tmp_path / "plain" / "bench.tsv", sep="\t")
     debiased = pd.read_csv(tmp_path / "debiased" / "bench.tsv", sep="\t")
     report = json.loads((tmp_path / "debiased" / "debias.json").read_text())
-    assert set(debiased["record_id"]) < set(plain["record_id"])  # pruned
+    # the candidates: the indexes at --per-sub-type x 1 with partial rounds, all kept before the pruning trims to --max-questions
+    candidates = {r.id for room in rooms for path in room.glob("*.qa*.jsonl") for r in read_index(path)}
+    assert set(debiased["record_id"]) < candidates and 30 <= debiased["record_id"].nunique() <= 40 == plain["record_id"].nunique()
     assert report["kept"] == debiased["record_id"].nunique() and sum(report["removed"].values()) > 0
+    assert "before the probe, roles balanced per cell across scenes" in text and sum(report["balanced"].values()) > 0
     for row in report["after"]["rows"]:
         name = f"{row['question_type']}/{row['sub_question_type']}"
         assert name not in report["eligible"] or row["excess"] <= row["allowed"] or row["n"] <= 0.5 * report["targets"][name] + 1

@@ -149,6 +149,7 @@ from spacedg.plugins.questions.geometry import (
 )
 from spacedg.plugins.questions.language import find_in_image, label_text
 from spacedg.plugins.questions.records import (
+    label_features,
     make_record,
     objects_block,
     phrase,
@@ -321,14 +322,17 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         truth = parts_label(parts, BODY_DIRECTION_WORDS)
         drawn = bbox_options(truth, rng)
         yield offer(
-            BBOX_CENTER_DIRECTION, (pair.a, pair.b), f"view:{pair.b}|object:{iid}", (iid,), functools.partial(_bbox_selection, pair, iid, truth, drawn[2]),
+            BBOX_CENTER_DIRECTION, (pair.a, pair.b), f"view:{pair.b}|object:{iid}", (iid,), functools.partial(_bbox_selection, pair, inst, truth, drawn[2]),
             functools.partial(_bbox_record, scene, index, pair, rules, inst, (centre_b, vec), template, (parts, truth), drawn),
         )
 
 
-def _bbox_selection(pair: ViewPair, iid: int, truth: str, deck: Sequence[str]) -> dict[str, Any]:
-    """The selection entry of a box-centre question: cell = the option deck, role = the truth."""
-    return selection_entry(f"view:{pair.b}|object:{iid}", f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(sorted(deck)), truth, sorted(deck))
+def _bbox_selection(pair: ViewPair, inst: Instance, truth: str, deck: Sequence[str]) -> dict[str, Any]:
+    """The selection entry of a box-centre question: cell = the option deck, role = the truth, feature =
+    the object's label (a chair is usually below a camera at eye height: the selection gives each label
+    every direction of a deck alike, so a per-label prior learns nothing)."""
+    return selection_entry(f"view:{pair.b}|object:{inst.id}", f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(sorted(deck)), truth,
+                           sorted(deck), features=label_features(plain=False, object=inst.label))
 
 
 def _bbox_record(
@@ -343,7 +347,7 @@ def _bbox_record(
         **_body_geometry(pair.b, inst.box.center - centre_b, vec, parts, truth),
         "thresholds": {"min_displacement_m": MIN_DISPLACEMENT_M},
         "pair": pair.to_dict(), "pair_rules": rules.to_dict(),
-        "selection": _bbox_selection(pair, inst.id, truth, deck),
+        "selection": _bbox_selection(pair, inst, truth, deck),
     }
     return _record(scene, index, BBOX_CENTER_DIRECTION, (pair.a, pair.b), (inst,), ((inst, pair.a),), question, options, letter, template, extra)
 

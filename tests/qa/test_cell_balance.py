@@ -1,0 +1,106 @@
+"""Partial rounds in a scene's candidates and the roles balanced across a bench's scenes
+(:func:`spacedg.qa.selection.select_records` ``partial_rounds``, :func:`spacedg.qa.cell_balance.balance_cells`)."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import pytest
+
+from spacedg.errors import ParameterError
+from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.questions.records import label_features, selection_entry
+from spacedg.plugins.specs import AnswerType, TaskGroup
+from spacedg.qa.cell_balance import balance_cells
+from spacedg.qa.index import QABuildConfig
+from spacedg.qa.selection import select_records
+
+ROLES = ("first", "second", "same")
+
+
+def _sized(scene: str, k: int, role: str, first: str = "chair", second: str = "table", cell: str = "prior:first|medium",
+           **entry) -> QARecord:
+    """A size comparison of pair ``k`` in ``scene`` whose truth is ``role`` in ``cell``."""
+    return QARecord(
+        id=f"{scene}-{k}", scene_id=scene, question_type="object_size_comparison", sub_question_type="longest_side_compare",
+        task_group=TaskGroup.OBJECT_CENTRIC, answer_type=AnswerType.MCQ, views=("a", "b"), question=f"Which {scene} {k}?",
+        options=("A. x", "B. y", "C. about the same"), answer="A",
+        geometry={"selection": selection_entry(f"pair{k}", cell, role, ROLES,
+                                               features=label_features(plain=False, first=first, second=second), **entry)},
+    )
+
+
+def _roles(records: list[QARecord]) -> Counter[str]:
+    return Counter(r.geometry["selection"]["role"] for r in records)
+
+
+def test_partial_rounds_take_the_roles_a_scene_offers_only_when_asked() -> None:
+    # a room with pairs that go with the prior and ties, none against it: no whole round
+    records = [_sized("s", k, "first") for k in range(5)] + [_sized("s", 10 + k, "same") for k in range(2)]
+    assert select_records(records, per_sub_type=25) == []
+    partial = select_records(records, per_sub_type=25, partial_rounds=True)
+    assert _roles(partial) == Counter(first=5, same=2)
+    assert len({r.geometry["selection"]["subject"] for r in partial}) == len(partial)  # a pair once
+    assert len(select_records(records, per_sub_type=3, partial_rounds=True)) == 3  # the quota holds
+    # whole rounds come first and are the same with or without partial rounds
+    whole = records + [_sized("s", 20, "second")]
+    plain = select_records(whole, per_sub_type=25)
+    assert _roles(plain) == Counter(first=1, second=1, same=1)
+    assert {r.id for r in plain} <= {r.id for r in select_records(whole, per_sub_type=25, partial_rounds=True)}
+
+
+def test_balance_cells_evens_every_role_across_scenes_and_keeps_the_rest() -> None:
+    a = [_sized("A", k, "first") for k in range(4)] + [_sized("A", 10, "same")]
+    b = [_sized("B", k, "second") for k in range(2)] + [_sized("B", 10 + k, "same") for k in range(3)]
+    strong = [_sized("A", 30 + k, "first", cell="prior:first|strong") for k in range(6)]  # no scene against a strong prior
+    metric = QARecord(id="m", scene_id="A", question_type="object_bounding_size_estimation", sub_question_type="size",
+                      task_group=TaskGroup.OBJECT_CENTRIC, answer_type=AnswerType.NA, views=("a",), question="How long?",
+                      answer=1.0, geometry={"selection": selection_entry("object:1")})
+    out = balance_cells([*a, *b, *strong, metric], seed=0)
+    kept = [r for r in out.kept if r.question_type == "object_size_comparison"]
+    assert _roles(kept) == Counter(first=2, second=2, same=2)
+    assert metric in out.kept
+    assert out.removed == {"object_size_comparison/longest_side_compare": 6 + 2 + 2}
+    assert [r.id for r in out.kept] == [r.id for r in [*a, *b, *strong, metric] if r in out.kept]  # input order kept
+    assert balance_cells([*a, *b], seed=0).kept == balance_cells([*a, *b], seed=0).kept  # seeded, a pure function
+    # whole rounds are balanced already: nothing goes
+    rounds = [_sized("C", 3 * k + i, role) for k in range(3) for i, role in enumerate(ROLES)]
+    assert balance_cells(rounds).kept == rounds and balance_cells(rounds).removed == {}
+
+
+def test_balance_cells_drops_the_features_a_role_has_had_most() -> None:
+    # "first" has 4 chairs-first and 2 lamps-first; "second" and "same" have one of each
+    first = [_sized("A", k, "first", "chair") for k in range(4)] + [_sized("A", 10 + k, "first", "lamp") for k in range(2)]
+    others = [_sized("B", 20, "second", "chair"), _sized("B", 21, "second", "lamp"),
+              _sized("B", 22, "same", "chair"), _sized("B", 23, "same", "lamp")]
+    kept = balance_cells([*first, *others]).kept
+    firsts = Counter(r.geometry["selection"]["features"][0] for r in kept if r.geometry["selection"]["role"] == "first")
+    assert firsts == Counter({"first:chair": 1, "first:lamp": 1})
+
+
+def test_balance_cells_leaves_cells_over_offered_roles_alone() -> None:
+    offered = [_sized("A", k, "first", all_roles=False) for k in range(3)] + [_sized("A", 9, "same", all_roles=False)]
+    assert balance_cells(offered).kept == offered
+
+
+def test_partial_rounds_config() -> None:
+    assert "partial_rounds" not in QABuildConfig().to_dict()  # the keys of indexes built without it are unchanged
+    on = QABuildConfig(per_sub_type=50, partial_rounds=True)
+    assert on.to_dict()["partial_rounds"] is True and QABuildConfig.from_dict(on.to_dict()) == on
+    assert QABuildConfig.from_dict(QABuildConfig().to_dict()) == QABuildConfig()
+    with pytest.raises(ParameterError, match="partial_rounds"):
+        QABuildConfig(mode="train", partial_rounds=True)
+    with pytest.raises(ParameterError, match="partial_rounds must be True or False"):
+        QABuildConfig(partial_rounds="yes")  # type: ignore[arg-type]
+
+
+def test_balance_cells_keeps_the_letters_even_among_equals() -> None:
+    # "first" has three answered A and one answered B, the other roles C: the surplus goes from A
+    def lettered(scene: str, k: int, role: str, letter: str) -> QARecord:
+        r = _sized(scene, k, role)
+        return QARecord(**{**r.__dict__, "answer": letter})
+
+    first = [lettered("A", k, "first", "A") for k in range(3)] + [lettered("A", 3, "first", "B")]
+    others = [lettered("B", 10 + k, role, "C") for k, role in enumerate(("second", "second", "same", "same"))]
+    kept = balance_cells([*first, *others]).kept
+    assert Counter(r.answer for r in kept if r.geometry["selection"]["role"] == "first") == Counter({"A": 1, "B": 1})
