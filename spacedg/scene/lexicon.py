@@ -292,13 +292,15 @@ BUILTIN = Lexicon.from_dict({
         "bookshelf": ["book"], "shelf": ["book"],
     },
     # [longest side, top above the floor], metres: the synthetic catalogue's mean instance (objects on
-    # tables counted at a 0.75 m top; "plant" mixes floor plants and small plants on tables) and
-    # common indoor labels
+    # tables counted at a 0.75 m top; "plant" mixes floor plants and small plants on tables: 37 plants of
+    # 28 built-in rooms measure 0.41 m median, 0.53 m mean, so 0.5, not the 0.73 a mixture of the two
+    # builders' nominal sizes gave, which put most plant pairs in the wrong prior cell: a blind model
+    # that learned plants' sizes solved 55 % of them, 31 % of the others) and common indoor labels
     "sizes": {
         "table": [1.4, 0.75], "coffee table": [1.0, 0.42], "desk": [1.25, 0.74], "chair": [0.9, 0.9], "stool": [0.6, 0.6],
         "sofa": [1.95, 0.82], "armchair": [0.9, 0.82], "bed": [2.05, 1.05], "wardrobe": [2.0, 2.0], "bookshelf": [1.55, 1.55],
         "cabinet": [1.2, 0.75], "tv": [1.05, 1.45], "monitor": [0.6, 1.2], "floor lamp": [1.6, 1.6], "lamp": [0.45, 1.2],
-        "plant": [0.73, 0.98], "small plant": [0.35, 1.1], "box": [0.45, 0.28], "trash can": [0.4, 0.4], "ball": [0.23, 0.23],
+        "plant": [0.5, 0.98], "small plant": [0.35, 1.1], "box": [0.45, 0.28], "trash can": [0.4, 0.4], "ball": [0.23, 0.23],
         "suitcase": [0.7, 0.7], "vase": [0.3, 1.05], "cup": [0.12, 0.85], "bowl": [0.22, 0.82], "book": [0.26, 0.79],
         "door": [2.05, 2.05], "window": [1.3, 2.0], "refrigerator": [1.8, 1.8], "sink": [0.6, 0.9], "toilet": [0.7, 0.75],
         "bathtub": [1.65, 0.55], "pillow": [0.6, 0.6], "backpack": [0.45, 0.45], "nightstand": [0.5, 0.55],
