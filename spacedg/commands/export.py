@@ -33,7 +33,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="question selection: bench (strict: an object once per sub type and scene) or train (dense: many views, "
                              "4x the questions); auto (default): bench for --split bench, train otherwise (docs/question-modes.md)")
     parser.add_argument("--clean-prob", type=_args.real(0.0, 1.0), default=0.1, help="share of clean items, train/val only (default 0.1)")
-    parser.add_argument("--max-questions", type=_args.whole(1), default=None, help="keep at most N questions, spread over question types")
+    parser.add_argument("--max-questions", type=_args.whole(1), default=None, help="keep at most N questions, shared round-robin over question types (with the blind pruning: "
+                        "its trim takes the candidates to N so, each cell's roles kept balanced)")
     parser.add_argument("--shard", default="0/1", help="i/n: export the chunks k with k %% n == i; 'env' reads RANK/WORLD_SIZE "
                                                        "(torchrun) or SLURM_ARRAY_TASK_ID/COUNT (default 0/1)")
     parser.add_argument("--shard-size", type=_args.whole(1), default=None,
@@ -48,12 +49,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="measure whether each item's named objects are discernible in its images and print the share "
                         "per degradation and severity (kept per item in summary.json); auto = for the bench split (default)")
     parser.add_argument("--debias", action=argparse.BooleanOptionalAction, default=True,
-                        help="bench: blind pruning (on by default; --no-debias skips it): oversampled candidates, probed k-fold by "
+                        help="bench: blind pruning (on by default; --no-debias skips it): oversampled candidates (partial rounds "
+                        "too, <id>.qa-pooled.jsonl), each balancing cell's roles evened across the scenes, probed k-fold by "
                         "scene with text-only models and pruned until every sub type is within chance + 3 (or its noise band), "
                         "then trimmed to the requested size; needs >= 2 bench scenes (docs/question-audit.md)")
     parser.add_argument("--oversample", type=_args.whole(1), default=None,
                         help="bench: candidates per requested record for the blind pruning, which trims back to the requested "
-                        "size (indexes are built at --per-sub-type x this; default 2; 1 prunes without oversampling)")
+                        "size (candidate indexes are built at --per-sub-type x this; default 2; 1: at --per-sub-type, with partial rounds)")
     _args.add_backend_arguments(parser)
     _vocabulary.add_deprecated(parser, "export")
 

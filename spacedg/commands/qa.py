@@ -45,7 +45,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     build.add_argument("--partial-rounds", action="store_true",
                        help="also take partial rounds of the balancing cells' roles (bench mode): the candidates of a bench whose "
                             "roles are balanced across its scenes afterwards, as `spacedg export --split bench` builds them for the "
-                            "blind pruning; such an index is not balanced on its own")
+                            "blind pruning; such an index is not balanced on its own and is written to <id>.qa-pooled.jsonl "
+                            "(`spacedg qa audit --debias --mode pooled` prunes them as the export does)")
     _args.add_backend_arguments(build, "renderer of visibility and covisibility")
 
     preview = _args.add_command(
@@ -77,6 +78,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         sub, "audit", _audit, help="blind stress test: what text-only models answer without the images, per sub type",
     )
     _add_index_inputs(audit)
+    audit.add_argument("--mode", choices=("bench", "train", "pooled"), default="bench",
+                       help="which indexes it reads: bench <id>.qa.jsonl, train <id>.qa-train.jsonl, pooled <id>.qa-pooled.jsonl "
+                            "(a bench's candidates, `qa build --partial-rounds`)")
     audit.add_argument("--solved", type=Path, default=None, help="write the ids of the records the blind models solve (JSONL)")
     audit.add_argument("--show", type=_args.whole(0), default=0, metavar="N", help="print this many solved questions per sub type")
     audit.add_argument("--no-learned", action="store_true", help="skip the logistic model (count-based priors only)")
@@ -302,7 +306,7 @@ def _audit(args: argparse.Namespace) -> int:
     """
     from spacedg.qa.audit import blind_audit, format_audit
 
-    by_scene = _records_by_scene(args.paths, args.families)
+    by_scene = _records_by_scene(args.paths, args.families, args.mode)
     if len(by_scene) < 2:
         raise InvalidDataError(f"qa audit: found question indexes of {len(by_scene)} scene(s); the blind models are trained on "
                                "other scenes and scored on a held-out one, so give at least two")
@@ -344,8 +348,9 @@ def _audit(args: argparse.Namespace) -> int:
 
 def _debias(by_scene: dict, learned: bool) -> Any:
     """The bench-level blind pruning of every record of ``by_scene``, pooled: the cells' roles balanced
-    across the scenes (:func:`spacedg.qa.cell_balance.balance_cells`; indexes built with
-    ``--partial-rounds``), then :func:`spacedg.qa.debias.debias`."""
+    across the scenes (:func:`spacedg.qa.cell_balance.balance_cells`: what ``--mode pooled`` indexes,
+    built with ``--partial-rounds``, need; whole rounds lose nothing), then :func:`spacedg.qa.debias.debias`
+    (no trim to a target size: every record is kept unless blind models solve it)."""
     from spacedg.qa.cell_balance import balance_cells
     from spacedg.qa.debias import debias
 

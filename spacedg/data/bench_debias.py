@@ -6,9 +6,12 @@ with ``--max-questions N`` it keeps every candidate, and the pruning's trim take
 ``N``, spread over sub types in proportion and keeping every cell's roles balanced), then
 :func:`debias_dataset` pools the bench's records over all its scenes, balances every cell's roles
 across them (:func:`~spacedg.qa.cell_balance.balance_cells`), prunes
-what the blind models solve (:func:`spacedg.qa.debias.debias`) and trims every sub type to the
-size the bench would have without pruning (:func:`bench_targets`), so the pruned bench keeps its
-requested size wherever the candidates allow. The result is a pure function of the records and
+what the blind models solve (:func:`spacedg.qa.debias.debias`) and trims every sub type to what
+the bench asks for (:func:`bench_targets`: ``--per-sub-type`` per scene, or ``--max-questions``
+shared as a bench without pruning shares it), so the pruned bench keeps its requested size
+wherever the candidates allow (a sub type that whole rounds left short, such as the size
+comparisons, can come out larger than the same bench without pruning: partial rounds complete
+each other across scenes). The result is a pure function of the records and
 the seed: every shard of a sharded export prunes the same way. A bench of fewer than
 :data:`MIN_SCENES` scenes is not pruned (nothing can be held out), nor oversampled:
 :func:`bench_scene_count` tells the export before it builds any index.
@@ -52,14 +55,43 @@ def bench_scene_count(n_scenes: int, fractions: tuple[float, float]) -> int:
 
 def bench_targets(records: Sequence[QARecord], per_sub_type: int, max_questions: int | None = None) -> dict[tuple[str, str], int]:
     """Records wanted per ``(question_type, sub_question_type)`` from oversampled candidates:
-    per scene at most ``per_sub_type`` of each (what an index at ``per_sub_type`` holds at most),
-    summed over scenes; with ``max_questions``, that many in all, shared in proportion."""
+    per scene at most ``per_sub_type`` of each (what a bench at ``per_sub_type`` asks for),
+    summed over scenes; with ``max_questions``, that many in all, shared over question types
+    round-robin as ``--max-questions`` shares a bench without pruning (a type with fewer takes
+    them all, the rest share what is left), then within a question type over its sub types in
+    proportion (:func:`~spacedg.qa.debias.spread_targets`)."""
     per_scene = Counter((r.scene_id, r.question_type, r.sub_question_type) for r in records)
     targets: Counter[tuple[str, str]] = Counter()
     for (_, question_type, sub_type), n in per_scene.items():
         targets[(question_type, sub_type)] += min(n, per_sub_type)
     out = dict(sorted(targets.items()))
-    return spread_targets(out, max_questions) if max_questions is not None else out
+    if max_questions is None:
+        return out
+    shares = _round_robin_shares(_sum_by_type(out), max_questions)
+    spread: dict[tuple[str, str], int] = {}
+    for question_type, share in shares.items():
+        spread.update(spread_targets({k: n for k, n in out.items() if k[0] == question_type}, share))
+    return spread
+
+
+def _sum_by_type(targets: dict[tuple[str, str], int]) -> Counter[str]:
+    total: Counter[str] = Counter()
+    for (question_type, _), n in targets.items():
+        total[question_type] += n
+    return total
+
+
+def _round_robin_shares(available: Counter[str], total: int) -> dict[str, int]:
+    """``total`` shared over the keys one at a time in sorted order, each at most its ``available``
+    (what taking records round-robin over question types gives, :func:`spacedg.data.dataset._spread_subset`)."""
+    shares = dict.fromkeys(sorted(available), 0)
+    left = min(total, sum(available.values()))
+    while left > 0:
+        for key in shares:
+            if left > 0 and shares[key] < available[key]:
+                shares[key] += 1
+                left -= 1
+    return shares
 
 
 def debias_dataset(dataset: SpaceDGDataset, per_sub_type: int, max_questions: int | None = None, seed: int = 0) -> DebiasResult:

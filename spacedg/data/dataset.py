@@ -276,7 +276,7 @@ class SpaceDGDataset(Dataset):
         return chains
 
     def _records(self, folder: Path) -> list[QARecord]:
-        jsonl, _ = index_paths(load_scene(folder).id, folder, self.qa_config.families, self.qa_config.mode)
+        jsonl, _ = index_paths(load_scene(folder).id, folder, self.qa_config.families, self.qa_config.file_mode)
         return read_index(jsonl)
 
     # ------------------------------------------------------------ indexing

@@ -255,7 +255,7 @@ def build_scene_index(
     scene = load_scene(scene_dir)
     scene_json = scene_json_path(scene_dir)
     key = index_key(scene_json, config, selected_families(config.families), judge)
-    jsonl, meta_path = index_paths(scene.id, out_dir if out_dir is not None else scene_json.parent, config.families, config.mode)
+    jsonl, meta_path = index_paths(scene.id, out_dir if out_dir is not None else scene_json.parent, config.families, config.file_mode)
     if not force and is_current(jsonl, meta_path, key):
         meta = read_meta(meta_path) or {}
         return SceneQA(scene.id, jsonl, read_index(jsonl), reused=True, seconds=dict(meta.get("seconds", {})))

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.qa.debias_probe import answer_class, stable_hash
-from spacedg.qa.selection import features_of, selection_of
+from spacedg.qa.selection import features_of, role_excess, selection_of
 
 __all__ = ["CellBalance", "balance_cells"]
 
@@ -50,64 +50,69 @@ def _cell_roles(record: QARecord) -> tuple[str, str, tuple[str, ...]] | None:
         return None
     roles = tuple(str(r) for r in entry.get("roles", ()))
     if len(roles) < 2 or entry.get("all_roles", True) is False:
-        return None  # a cell balanced over the roles each scene offers is left as it is
+        return None  # a cell balanced over the roles each scene offers takes no partial rounds: left as it is
     return f"{record.question_type}|{entry['cell']}", str(entry["role"]), roles
+
+
+def _features(record: QARecord) -> list[str]:
+    """The record's selection features, an object's own (``first#12``: ids are a scene's) scoped by its scene."""
+    return [f"{record.scene_id}/{f}" if "#" in f else f for f in features_of(record)]
 
 
 def _trim_role(records: list[QARecord], role: str, surplus: int, balance: dict[str, Counter[str]],
                roles: Sequence[str], letters: Counter[str], seed: int) -> set[str]:
     """The ids of ``surplus`` of ``records`` (one role of one cell) whose features ``role`` has had
-    most relative to the cell's mean over ``roles`` (greedy; ties: the correct letter, yes/no or
-    count bin the sub type has most, then a seeded hash); ``balance`` (feature → role → records)
-    and ``letters`` (answer class → records) are updated."""
-    def cost(r: QARecord) -> float:
-        total = 0.0
-        for f in features_of(r):
-            row = balance[f]
-            total += row[role] - sum(row[x] for x in roles) / len(roles)
-        return total
-
+    most relative to the cell's mean over ``roles`` (greedy, :func:`~spacedg.qa.selection.role_excess`;
+    ties: the correct letter, yes/no or count bin the sub type has most, then a seeded hash);
+    ``balance`` (feature → role → records) and ``letters`` (answer class → records) are updated."""
     left = sorted(records, key=lambda r: (stable_hash(seed, "cells", r.id), r.id))
+    features = [_features(r) for r in left]
+    classes = [answer_class(r) for r in left]
     gone: set[str] = set()
     for _ in range(surplus):
-        k = max(range(len(left)), key=lambda i: (cost(left[i]), letters[answer_class(left[i])], -i))
-        r = left.pop(k)
+        k = max(range(len(left)), key=lambda i: (role_excess([balance[f] for f in features[i]], role, roles), letters[classes[i]], -i))
+        r, fs, cls = left.pop(k), features.pop(k), classes.pop(k)
         gone.add(r.id)
-        letters[answer_class(r)] -= 1
-        for f in features_of(r):
+        letters[cls] -= 1
+        for f in fs:
             balance[f][role] -= 1
     return gone
 
 
 def balance_cells(records: Sequence[QARecord], seed: int = 0) -> CellBalance:
     """Keep, per balancing cell pooled over ``records``' scenes, as many records of every role as its
-    rarest role has (module docstring); records without a cell are all kept."""
-    cells: dict[str, dict[str, list[QARecord]]] = defaultdict(lambda: defaultdict(list))
-    cell_roles: dict[str, tuple[str, ...]] = {}
+    rarest role has (module docstring); records without a cell are all kept. A cell's roles are the
+    union of its records' ``roles``; a record id given twice is kept once."""
+    first: dict[str, QARecord] = {}
     for r in records:
+        first.setdefault(r.id, r)
+    unique = list(first.values())  # the first record of each id, in input order
+    cells: dict[str, dict[str, list[QARecord]]] = defaultdict(lambda: defaultdict(list))
+    cell_roles: dict[str, dict[str, None]] = defaultdict(dict)  # cell → its roles, in first-seen order
+    for r in unique:
         got = _cell_roles(r)
         if got is not None:
             cell, role, roles = got
             cells[cell][role].append(r)
-            cell_roles.setdefault(cell, roles)
+            cell_roles[cell].update(dict.fromkeys(roles))
     letters: dict[str, Counter[str]] = defaultdict(Counter)  # sub type → answer class → records
-    for r in records:
+    for r in unique:
         letters[r.sub_question_type][answer_class(r)] += 1
     gone: set[str] = set()
     removed: Counter[str] = Counter()
     for cell in sorted(cells):
-        by_role, roles = cells[cell], cell_roles[cell]
+        by_role, roles = cells[cell], tuple(cell_roles[cell])
         low = min(len(by_role.get(role, ())) for role in roles)
         balance: dict[str, Counter[str]] = defaultdict(Counter)
         for role, rs in by_role.items():
             for r in rs:
-                for f in features_of(r):
+                for f in _features(r):
                     balance[f][role] += 1
         for role in sorted(by_role):
             rs = by_role[role]
-            surplus = len(rs) - (low if role in roles else 0)
+            surplus = len(rs) - low
             if surplus > 0:
                 out = _trim_role(rs, role, surplus, balance, roles, letters[rs[0].sub_question_type], seed)
                 gone |= out
                 removed.update(f"{r.question_type}/{r.sub_question_type}" for r in rs if r.id in out)
-    return CellBalance([r for r in records if r.id not in gone], dict(sorted(removed.items())))
+    return CellBalance([r for r in unique if r.id not in gone], dict(sorted(removed.items())))

@@ -191,8 +191,9 @@ def _cell_role(record: QARecord) -> tuple[str | None, str]:
 
 
 def balance_class(record: QARecord) -> str:
-    """What a record's removal is balanced over: its selection ``cell`` and ``role`` (the selection
-    took whole rounds of every role per cell: e.g. each compass label per assumed direction), else
+    """What a record's removal is balanced over: its selection ``cell`` and ``role`` (each cell's
+    roles are balanced, by whole rounds per scene or across scenes by
+    :func:`~spacedg.qa.cell_balance.balance_cells`: e.g. each compass label per assumed direction), else
     its :func:`~spacedg.qa.debias_probe.answer_class` (letter, yes/no, count bin)."""
     return _class_name(*_cell_role(record))
 

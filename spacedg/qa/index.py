@@ -88,7 +88,8 @@ class QABuildConfig:
             sub type room (:func:`~spacedg.qa.selection.select_records`): the candidates of a bench
             whose roles are balanced across its scenes afterwards
             (:func:`~spacedg.qa.cell_balance.balance_cells`; ``spacedg export --split bench`` with
-            the blind pruning). Such an index is not balanced on its own; off by default.
+            the blind pruning). Such an index is not balanced on its own and has files of its own
+            (``<id>.qa-pooled.jsonl``, :attr:`file_mode`); off by default.
     """
 
     seed: int = 0
@@ -120,6 +121,13 @@ class QABuildConfig:
         object.__setattr__(self, "families", tuple(sorted(set(self.families))))
         object.__setattr__(self, "visibility_size", tuple(self.visibility_size))
         object.__setattr__(self, "covisibility_size", tuple(self.covisibility_size))
+
+    @property
+    def file_mode(self) -> str:
+        """The index files' mode part (:func:`index_paths`): ``"pooled"`` for a bench's candidates
+        with partial rounds (``<id>.qa-pooled.jsonl``: not balanced on its own, so never read as the
+        strict bench index ``<id>.qa.jsonl``), else :attr:`mode`."""
+        return "pooled" if self.partial_rounds else self.mode
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready fields (tuples as lists): what the meta file and the key record."""
@@ -179,7 +187,8 @@ def index_paths(scene_id: str, out_dir: str | Path, families: Sequence[str] = ()
     """``(<out>/<id>.qa.jsonl, <out>/<id>.qa.meta.json)``: the full index; with ``families``, the
     selection index ``(<out>/<id>.qa.<selection>.jsonl, <out>/<id>.qa.<selection>.meta.json)``
     (:func:`selection_name`; see the module docstring). ``mode="train"`` (the dense training
-    selection, :mod:`spacedg.qa.modes`): ``<id>.qa-train…`` instead of ``<id>.qa…``."""
+    selection, :mod:`spacedg.qa.modes`): ``<id>.qa-train…`` instead of ``<id>.qa…``; ``"pooled"``
+    (a bench's candidates with partial rounds, :attr:`QABuildConfig.file_mode`): ``<id>.qa-pooled…``."""
     out = Path(out_dir)
     selection = selection_name(families)
     head = f"{scene_id}.qa" if mode == "bench" else f"{scene_id}.qa-{mode}"
@@ -253,7 +262,7 @@ def index_is_current(scene_dir: str | Path, config: QABuildConfig = QABuildConfi
 
     scene_json = scene_json_path(scene_dir)
     scene_id = load_scene(Path(scene_dir)).id
-    jsonl, meta_path = index_paths(scene_id, out_dir if out_dir is not None else scene_json.parent, config.families, config.mode)
+    jsonl, meta_path = index_paths(scene_id, out_dir if out_dir is not None else scene_json.parent, config.families, config.file_mode)
     return is_current(jsonl, meta_path, index_key(scene_json, config, selected_families(config.families), None))
 
 

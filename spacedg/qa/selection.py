@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Callable, Container, Sequence
+from collections.abc import Callable, Container, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,7 +32,7 @@ from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import AnswerType
 from spacedg.qa.modes import subject_key
 
-__all__ = ["truth_key", "selection_of", "features_of", "select_balanced", "select_records"]
+__all__ = ["truth_key", "selection_of", "features_of", "role_excess", "select_balanced", "select_records"]
 
 Keep = Callable[[QARecord], bool]
 
@@ -95,6 +95,7 @@ class _Pool:
     metric: list[int] = field(default_factory=list)  # entries without a cell
     cells: dict[str, dict[str, list[int]]] = field(default_factory=dict)  # cell → role → records
     cell_roles: dict[str, list[str]] = field(default_factory=dict)  # cell → the roles of a round
+    offered: set[str] = field(default_factory=set)  # cells whose rounds go over the roles the scene offers (all_roles false)
 
     @classmethod
     def of(cls, records: Sequence[QARecord], mode: str = "bench") -> _Pool:
@@ -119,6 +120,7 @@ class _Pool:
         for cell in partial:  # rounds over the roles this scene offers in the cell (at least two)
             offered = [role for role in pool.cell_roles[cell] if pool.cells[cell].get(role)]
             pool.cell_roles[cell] = offered if len(offered) >= 2 else []
+        pool.offered = partial
         return pool
 
     def subject(self, i: int) -> tuple[str, str]:
@@ -134,6 +136,17 @@ class _Pool:
             return 1
         roles = self.cell_roles.get(f"{r.question_type}|{sel['cell']}") or sel.get("roles", [])
         return max(1, len(roles))
+
+
+def role_excess(rows: Sequence[Mapping[str, int] | None], role: str, roles: Sequence[str]) -> float:
+    """How over-represented a record's features are in ``role``: over its features' ``rows``
+    (role → records taken with that feature; ``None``: none yet), the count in ``role`` minus the
+    mean over ``roles``, summed (the greedy chi-square the selection and the pooled balance share)."""
+    total = 0.0
+    for row in rows:
+        if row:
+            total += row.get(role, 0) - sum(row.get(r, 0) for r in roles) / len(roles)
+    return total
 
 
 class _Selection:
@@ -180,12 +193,7 @@ class _Selection:
     def cost(self, i: int, role: str, roles: Sequence[str]) -> float:
         """How over-represented record i's features already are in ``role`` (greedy chi-square)."""
         sub = self.pool.sub(i)
-        total = 0.0
-        for f in self.pool.features[i]:
-            row = self.balance.get((sub, f))
-            if row:
-                total += row[role] - sum(row[r] for r in roles) / len(roles)
-        return total
+        return role_excess([self.balance.get((sub, f)) for f in self.pool.features[i]], role, roles)
 
     def _usable(self, i: int, used: Container[tuple[str, str]] = ()) -> bool:
         """Whether record ``i``'s subject is free (not asked, not in ``used``) and the judge has not refused it."""
@@ -261,9 +269,11 @@ class _Selection:
         its whole rounds, its cells are visited round-robin and each visit takes one free
         candidate of every role the cell still offers (the least over-represented features
         first, as in a whole round). A scene with a pair against its labels' prior and none with
-        it then still gives the one it has, which another scene's surplus completes."""
+        it then still gives the one it has, which another scene's surplus completes. Cells whose
+        rounds go over the roles each scene offers (``all_roles`` false) take none: their roles
+        differ by scene, so no pooled count could balance them."""
         cells, roles = self.pool.cells, self.pool.cell_roles
-        open_cells = [c for c in cells if len(roles[c]) >= 2]
+        open_cells = [c for c in cells if len(roles[c]) >= 2 and c not in self.pool.offered]
         while open_cells:
             still = []
             for cell in open_cells:

@@ -305,7 +305,7 @@ def test_max_questions_spreads_over_types(rooms):
 
 
 def test_cli_bench_debias_prunes_and_no_debias_skips_it(indexed_room_dirs, tmp_path, capsys):
-    # the session's default indexes (per sub type 25): --oversample 1 prunes them without building others
+    # --oversample 1: the candidates are indexes at per sub type 25 with partial rounds (<id>.qa-pooled.jsonl)
     rooms = private_copies(indexed_room_dirs, tmp_path / "rooms", indexes=True)
     common = ["export", "--split", "bench", "--all-bench", "--scenes", *map(str, rooms), "--image-size", "64x48",
               "--families", "camera_object_relative_direction,object_existence_estimation", "--degradations", "haze",
@@ -318,8 +318,11 @@ def test_cli_bench_debias_prunes_and_no_debias_skips_it(indexed_room_dirs, tmp_p
     plain = pd.read_csv(tmp_path / "plain" / "bench.tsv", sep="\t")
     debiased = pd.read_csv(tmp_path / "debiased" / "bench.tsv", sep="\t")
     report = json.loads((tmp_path / "debiased" / "debias.json").read_text())
-    # the candidates: the indexes at --per-sub-type x 1 with partial rounds, all kept before the pruning trims to --max-questions
-    candidates = {r.id for room in rooms for path in room.glob("*.qa*.jsonl") for r in read_index(path)}
+    # the candidates: the indexes at --per-sub-type x 1 with partial rounds, files of their own beside the strict bench
+    # indexes (which stay as they were), all kept before the pruning trims to --max-questions
+    assert all(len(list(room.glob("*.qa-pooled.jsonl"))) == 1 for room in rooms)
+    assert all("partial_rounds" not in json.loads(next(room.glob("*.qa.meta.json")).read_text())["config"] for room in rooms)
+    candidates = {r.id for room in rooms for path in room.glob("*.qa-pooled.jsonl") for r in read_index(path)}
     assert set(debiased["record_id"]) < candidates and 30 <= debiased["record_id"].nunique() <= 40 == plain["record_id"].nunique()
     assert report["kept"] == debiased["record_id"].nunique() and sum(report["removed"].values()) > 0
     assert "before the probe, roles balanced per cell across scenes" in text and sum(report["balanced"].values()) > 0

@@ -78,7 +78,7 @@ def test_balance_cells_drops_the_features_a_role_has_had_most() -> None:
     assert firsts == Counter({"first:chair": 1, "first:lamp": 1})
 
 
-def test_balance_cells_leaves_cells_over_offered_roles_alone() -> None:
+def test_balance_cells_leaves_cells_over_offered_roles_alone() -> None:  # (they took no partial rounds)
     offered = [_sized("A", k, "first", all_roles=False) for k in range(3)] + [_sized("A", 9, "same", all_roles=False)]
     assert balance_cells(offered).kept == offered
 
@@ -104,3 +104,41 @@ def test_balance_cells_keeps_the_letters_even_among_equals() -> None:
     others = [lettered("B", 10 + k, role, "C") for k, role in enumerate(("second", "second", "same", "same"))]
     kept = balance_cells([*first, *others]).kept
     assert Counter(r.answer for r in kept if r.geometry["selection"]["role"] == "first") == Counter({"A": 1, "B": 1})
+
+
+def test_partial_rounds_leave_cells_over_offered_roles_alone() -> None:
+    # a cell balanced over the roles each scene offers: its whole rounds only, never a partial one
+    offered = [_sized("A", k, "first", all_roles=False) for k in range(4)] + [_sized("A", 9, "same", all_roles=False)]
+    assert _roles(select_records(offered, per_sub_type=25, partial_rounds=True)) == Counter(first=1, same=1)
+
+
+def test_balance_cells_takes_the_union_of_roles_and_each_id_once() -> None:
+    a = [_sized("A", k, role) for k, role in enumerate(("first", "second", "same"))]
+    odd = QARecord(**{**a[0].__dict__, "id": "A-odd", "question": "Which odd?",
+                      "geometry": {"selection": selection_entry("pair99", "prior:first|medium", "other", (*ROLES, "other"))}})
+    out = balance_cells([*a, a[0], odd])  # a role only one record knows, and a record given twice
+    assert [r.id for r in out.kept] == [*(r.id for r in a), "A-odd"] and out.removed == {}  # every role of the union has one
+    lone = balance_cells([*a, _sized("B", 7, "first")])  # a second "first": the surplus goes
+    assert _roles([r for r in lone.kept]) == Counter(first=1, second=1, same=1)
+
+
+def test_bench_targets_share_max_questions_over_question_types_first() -> None:
+    from spacedg.data.bench_debias import bench_targets
+
+    sized = [_sized(s, k, "first") for s in ("A", "B") for k in range(30)]  # 2 scenes x 30 of one sub type
+    few = [QARecord(id=f"c{k}", scene_id="A", question_type="object_counting", sub_question_type="count",
+                    task_group=TaskGroup.OBJECT_CENTRIC, answer_type=AnswerType.COUNT, views=("a",), question=f"How many {k}?",
+                    answer=k % 3) for k in range(4)]
+    assert bench_targets([*sized, *few], 25) == {("object_counting", "count"): 4, ("object_size_comparison", "longest_side_compare"): 50}
+    # 20 shared round-robin over the two question types, as --max-questions shares a bench without pruning
+    assert bench_targets([*sized, *few], 25, 20) == {("object_counting", "count"): 4, ("object_size_comparison", "longest_side_compare"): 16}
+    assert bench_targets([*sized, *few], 25, 6) == {("object_counting", "count"): 3, ("object_size_comparison", "longest_side_compare"): 3}
+
+
+def test_partial_rounds_have_index_files_of_their_own() -> None:
+    from spacedg.qa.index import index_paths
+
+    pooled = QABuildConfig(per_sub_type=50, partial_rounds=True)
+    assert pooled.file_mode == "pooled" and QABuildConfig().file_mode == "bench" and QABuildConfig(mode="train").file_mode == "train"
+    assert index_paths("room", "/x", (), pooled.file_mode)[0].name == "room.qa-pooled.jsonl"
+    assert index_paths("room", "/x", (), "bench")[0].name == "room.qa.jsonl"

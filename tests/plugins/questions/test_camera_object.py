@@ -183,6 +183,8 @@ def test_bbox_center_direction_in_front_of_camera_b():
         assert not any(w in " ".join(_texts(r)) for w in ("Back", "Up"))
         assert r.geometry["selection"]["roles"] == sorted(_texts(r))
         expected_id = {"v0": 1, "v1": 2}[r.views[0]]
+        # the object's label is a selection feature: each label meets every direction of a deck alike
+        assert r.geometry["selection"]["features"] == [f"object:{ {1: 'vase', 2: 'stool'}[expected_id]}"]
         assert _ids(r) == (expected_id,)
         phrase = {1: "blue vase", 2: "metal stool"}[expected_id]
         label = {1: "vase", 2: "stool"}[expected_id]
