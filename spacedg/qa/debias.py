@@ -45,7 +45,11 @@ and as an outside checker probes. Five folds were used before: a per-label prior
 scenes to train on, and on 12 rooms the five-fold probe read `bbox_center_direction` at + 3.3
 (within its band, so never pruned) where leave-one-scene-out read + 8.3.
 ``repeats`` fold seeds are averaged where the folds group several scenes (3 by default; 1
-when every fold is one scene, since every seed then deals the same folds). A sub type's allowed excess is ``max(bound, noise_z σ)``, σ a uniform guess's binomial
+when every fold is one scene, since every seed then deals the same folds); a leave-one-scene-out
+probe of 4 scenes or more averages in :data:`HALF_SPLITS` probes on half as many folds too (other
+fold seeds), so the records pruned are those blind models solve whatever the split: pruned by
+leave-one-scene-out alone, 4 unseen rooms kept `relpos_A_facing_B` at + 3.0 there but + 6.0 on
+average over ten 2-fold splits. A sub type's allowed excess is ``max(bound, noise_z σ)``, σ a uniform guess's binomial
 deviation at its n, but never more than :data:`MAX_ALLOWED` (4 points, one under the chance + 5 a
 bench must meet): a sub type of 50 three-option records (σ 6.7) was left at + 5.8.
 Removal is answer-balanced (:func:`balanced_pick`), so the letters, yes/no and count bins stay
@@ -92,6 +96,9 @@ DEFAULT_OVERALL_BOUND = 2.0
 DEFAULT_REPEATS = 3
 #: The probe's folds: one per scene up to this many scenes, this many beyond.
 MAX_PROBE_FOLDS = 12
+#: Probes on half as many folds (other fold seeds) the pruning's probe averages in beside its
+#: leave-one-scene-out one (:func:`~spacedg.qa.debias_probe.probe` ``half_splits``), from 4 scenes.
+HALF_SPLITS = 2
 #: A sub type's allowed excess never exceeds this many points (the bar is chance + 5).
 MAX_ALLOWED = 4.0
 #: A sub type is pruned only above ``max(bound, noise_z × σ)``, σ a uniform guess's binomial deviation at its n.
@@ -119,6 +126,7 @@ class DebiasResult:
     noise_z: float = 0.0
     repeats: int = 1
     folds: int = 0
+    half_splits: int = 0
     eligible: list[str] = field(default_factory=list)
     #: Records removed per sub type before the probe to balance the cells' roles across scenes
     #: (:func:`~spacedg.qa.cell_balance.balance_cells`; empty where the caller did not balance).
@@ -152,7 +160,7 @@ class DebiasResult:
             return {"rows": rows, "overall": p.overall}
 
         return {
-            "bound": self.bound, "overall_bound": self.overall_bound, "noise_z": self.noise_z, "repeats": self.repeats, "folds": self.folds, "max_allowed": MAX_ALLOWED,
+            "bound": self.bound, "overall_bound": self.overall_bound, "noise_z": self.noise_z, "repeats": self.repeats, "folds": self.folds, "half_splits": self.half_splits, "max_allowed": MAX_ALLOWED,
             "within": self.within, "kept": len(self.kept), "eligible": self.eligible,
             "before": table(self.before), "after": table(self.after), "rounds": self.rounds, "removed": self.removed,
             "pruned": self.pruned, "balanced": self.balanced,
@@ -377,7 +385,8 @@ def debias(
     if repeats is None:
         repeats = 1 if folds >= scenes else DEFAULT_REPEATS
     _check(bound, overall_bound, folds, max_rounds, floor, repeats, noise_z)
-    options = {"folds": folds, "seed": seed, "learned": learned, "repeats": repeats}
+    half_splits = HALF_SPLITS if folds >= scenes >= 4 else 0
+    options = {"folds": folds, "seed": seed, "learned": learned, "repeats": repeats, "half_splits": half_splits}
     discrete = [r for r in records if r.answer_type in DISCRETE]
     by_key: dict[tuple[str, str], list[QARecord]] = defaultdict(list)
     for r in discrete:
@@ -405,7 +414,7 @@ def debias(
             eligible |= {row.key for row in deciding.rows if row.key[0] in changed and over_bound(row, bound, noise_z)}
     keep = {r.id for rs in by_key.values() for r in rs} | metric
     kept = [r for r in records if r.id in keep]
-    return DebiasResult(kept, before, current, rounds, targets, float(bound), float(overall_bound), float(noise_z), repeats, folds,
+    return DebiasResult(kept, before, current, rounds, targets, float(bound), float(overall_bound), float(noise_z), repeats, folds, half_splits,
                         sorted(f"{q}/{t}" for q, t in eligible))
 
 
@@ -413,7 +422,8 @@ def format_debias(result: DebiasResult) -> str:
     """Before/after per sub type (n, best blind, chance, excess, target, records pruned as blind-solved and
     trimmed to the target) and the records removed per round, as Markdown."""
     lines = [
-        f"Blind pruning ({result.folds} folds by scene, mean over {result.repeats} fold seed(s); chance = 1 / options shown; bound: sub type "
+        f"Blind pruning ({result.folds} folds by scene, mean over {result.repeats} fold seed(s)"
+        f"{f' and {result.half_splits} splits into half as many folds' if result.half_splits else ''}; chance = 1 / options shown; bound: sub type "
         f"<= chance + min(max({result.bound:g}, {result.noise_z:g} sigma of chance at its n), {MAX_ALLOWED:g}) = 'allowed', overall <= chance + {result.overall_bound:g})",
         "| question_type | sub_question_type | type | n before | best before | n after | best after | chance | excess before | excess after "
         "| allowed | target | pruned | trimmed |",
