@@ -11,9 +11,9 @@ import pytest
 from spacedg.errors import ParameterError
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import AnswerType, TaskGroup
-from spacedg.qa.debias import MAX_ALLOWED, balanced_pick, debias, format_debias, noise_band, spread_targets
+from spacedg.qa.debias import HALF_SPLITS, MAX_ALLOWED, balanced_pick, debias, format_debias, noise_band, spread_targets
 from spacedg.qa.debias_gbm import BoostedChoice
-from spacedg.qa.debias_probe import probe, repeat_seeds, scene_folds, shown_chance
+from spacedg.qa.debias_probe import probe, repeat_seeds, scene_folds, shown_chance, stable_hash
 
 DIRECTIONS = ("left", "right", "forward", "back")
 LABELS = ("chair", "lamp", "table", "cup")
@@ -175,6 +175,21 @@ def test_repeats_average_the_probes_of_their_fold_seeds() -> None:
             assert value == pytest.approx((one.correct[r.id][name] + two.correct[r.id][name]) / 2)
     row = both.row(KEY)
     assert row is not None and noise_band(row, 1.0) == pytest.approx(100 * math.sqrt(0.25 * 0.75 / row.n))
+
+
+def test_half_splits_average_in_probes_on_half_as_many_folds() -> None:
+    table = [r for r in _table(scenes=4, per_scene=6, planted=0.5, seed=7) if r.answer_type is not AnswerType.NA]
+    loso = probe(table, folds=4, seed=5, learned=False)
+    halves = [probe(table, folds=2, seed=s, learned=False) for s in repeat_seeds(stable_hash(5, "half") % (2**31), 2)]
+    mixed = probe(table, folds=4, seed=5, learned=False, half_splits=2)
+    for r in table:
+        for name, value in mixed.correct[r.id].items():
+            assert value == pytest.approx((loso.correct[r.id][name] + sum(h.correct[r.id][name] for h in halves)) / 3)
+    # the pruning uses them from 4 scenes when it leaves one scene out, and says so
+    result = debias(table, learned=False)
+    assert result.half_splits == HALF_SPLITS and result.to_dict()["half_splits"] == HALF_SPLITS
+    assert f"and {HALF_SPLITS} splits into half as many folds" in format_debias(result)
+    assert debias([r for r in table if r.scene_id in {"room-0", "room-1", "room-2"}], learned=False).half_splits == 0
 
 
 def test_a_probe_refits_only_the_question_types_that_changed() -> None:
