@@ -5,9 +5,9 @@ renders (so no image is rendered here):
 
 - **plain**: ``--no-debias``: the indexes at ``--per-sub-type`` (read from ``--plain``; without
   ``--plain`` the table's "plain" columns are the oversampled candidates before pruning);
-- **debiased**: the default: indexes at ``OVERSAMPLE × --per-sub-type`` with partial rounds (built in ``--candidates``,
-  which must be *other* folders of the same scenes, e.g. ``cp -al`` copies, because an index at
-  another size replaces the cached one), pruned by :func:`spacedg.data.bench_debias.debias_dataset`.
+- **debiased**: the default: indexes at ``OVERSAMPLE × --per-sub-type`` with partial rounds (``<id>.qa-pooled.jsonl``,
+  built in ``--candidates``: the same folders as ``--plain`` or copies), pruned by
+  :func:`spacedg.data.bench_debias.debias_dataset`.
 
 Both are then probed by two checks with the same predictors: leave-one-scene-out (what an outside
 checker trained on the bench's other scenes measures; up to 12 scenes these are the pruning's own
@@ -40,6 +40,17 @@ from spacedg.qa.index import QABuildConfig  # noqa: E402
 def _bench(scenes: list[Path], per_sub_type: int, seed: int, partial_rounds: bool = False) -> SpaceDGDataset:
     return SpaceDGDataset("bench", scenes=scenes, split_fractions=(0.0, 1.0), seed=seed,
                           qa_config=QABuildConfig(seed=seed, per_sub_type=per_sub_type, partial_rounds=partial_rounds))
+
+
+def _half_check_kind(records, check: tuple[int, int], result, seed: int) -> str:
+    """Whether the half-folds check deals the scenes as one of the pruning's own half splits (then it is in-sample)."""
+    from spacedg.qa.debias_probe import repeat_seeds, scene_folds, stable_hash
+
+    scene_ids = [r.scene_id for r in records]
+    def split(folds: int, fold_seed: int) -> set[frozenset[str]]:
+        return {frozenset(group) for group in scene_folds(scene_ids, folds, fold_seed)}
+    own = [split(max(2, len(set(scene_ids)) // 2), s) for s in repeat_seeds(stable_hash(seed, "half") % (2**31), result.half_splits)]
+    return "the same split as one the pruning averaged in: in-sample" if split(*check) in own else "folds the pruning never used"
 
 
 def _table(plain, debiased, removed) -> str:
@@ -85,7 +96,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--plain", type=Path, nargs="+", default=None,
                         help="scene folders (or folders of them): indexes at --per-sub-type (default: no plain bench, debiased only)")
-    parser.add_argument("--candidates", type=Path, nargs="+", required=True, help="other folders of the same scenes: oversampled indexes")
+    parser.add_argument("--candidates", type=Path, nargs="+", required=True,
+                        help="folders of the same scenes (or --plain's): oversampled indexes with partial rounds (<id>.qa-pooled.jsonl)")
     parser.add_argument("--per-sub-type", type=int, default=25)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--check-seed", type=int, default=1, help="fold seed of the independent check")
@@ -109,7 +121,7 @@ def main() -> None:
     same = f" (the pruning's own folds: it leaves one scene out up to {MAX_PROBE_FOLDS} scenes)" if scenes <= MAX_PROBE_FOLDS else ""
     titles = {"loso": f"Check: leave-one-scene-out, fold seed {args.check_seed}{same}"}
     if "half" in checks:
-        titles["half"] = f"Check: {checks['half'][0]} folds of whole scenes, fold seed {checks['half'][1]} (folds the pruning never used)"
+        titles["half"] = f"Check: {checks['half'][0]} folds of whole scenes, fold seed {checks['half'][1]} ({_half_check_kind(cand.records, checks['half'], result, args.seed)})"
     for name in checks:
         print(f"{titles[name]}; chance = 1 / options shown; 'plain' = {'the --no-debias bench' if plain else 'the candidates before pruning'}; "
               "pruned: removed as blind-solved, trimming not counted:")

@@ -137,11 +137,12 @@ def run(args: argparse.Namespace) -> int:
     if few:
         print(f"blind pruning skipped: the bench split has fewer than {MIN_SCENES} scenes (the probe holds whole scenes out)")
     factor = (OVERSAMPLE if args.oversample is None else args.oversample) if debias else 1  # trimmed back to the requested size
+    qa_mode = _qa_mode(args)
     dataset = SpaceDGDataset(
         args.split, chains, scenes=args.scenes, families=_names(args.families),
         image_size=size, seed=args.seed, clean_prob=args.clean_prob,
-        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type * factor, mode=_qa_mode(args),
-                                 partial_rounds=debias and _qa_mode(args) == "bench"),
+        qa_config=QABuildConfig(seed=args.seed, per_sub_type=args.per_sub_type * factor, mode=qa_mode,
+                                 partial_rounds=debias and qa_mode == "bench"),
         on_bad_scene="skip" if args.skip_bad_scenes else "raise", backend=args.backend, device=args.device,
         # the pruning trims to --max-questions itself, cells balanced (a random subset of the candidates would break their rounds)
         max_questions=None if args.max_questions is None or debias else args.max_questions, split_fractions=fractions,

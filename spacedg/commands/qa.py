@@ -164,7 +164,8 @@ def _index_files(paths: list[Path], families: tuple[str, ...] = (), mode: str = 
             if not files:
                 others = sorted(p.name for p in [*path.glob("*.qa.*.jsonl"), *path.glob("*/*.qa.*.jsonl")])
                 hint = f" (it has selection indexes {others[:3]}: pass --families)" if others and not selection else ""
-                raise InvalidDataError(f"{path}: no {pattern} in it or its sub-folders{hint}; build them with `spacedg qa build`")
+                build = "`spacedg qa build --partial-rounds`" if mode == "pooled" else "`spacedg qa build`"
+                raise InvalidDataError(f"{path}: no {pattern} in it or its sub-folders{hint}; build them with {build}")
             found.extend(files)
         else:
             raise InvalidDataError(f"{path}: no such file or folder")
@@ -311,12 +312,19 @@ def _audit(args: argparse.Namespace) -> int:
         raise InvalidDataError(f"qa audit: found question indexes of {len(by_scene)} scene(s); the blind models are trained on "
                                "other scenes and scored on a held-out one, so give at least two")
     start = time.perf_counter()
+    balanced: dict[str, int] = {}
+    if args.mode == "pooled":  # a bench's candidates: audited (and pruned) as the export uses them, roles balanced across scenes
+        from spacedg.qa.cell_balance import balance_cells
+
+        even = balance_cells([r for rs in by_scene.values() for r in rs])
+        keep, balanced = {r.id for r in even.kept}, even.removed
+        by_scene = {scene: [r for r in rs if r.id in keep] for scene, rs in by_scene.items()}
     report = blind_audit(by_scene, learned=not args.no_learned)
     if args.null > 0:
         from spacedg.qa.audit import null_audit, with_null
 
         report = with_null(report, null_audit(by_scene, args.null, learned=not args.no_learned))
-    pruned = _debias(by_scene, not args.no_learned) if args.debias else None
+    pruned = _debias(by_scene, not args.no_learned, balanced) if args.debias else None
     seconds = time.perf_counter() - start
     if args.solved is not None:
         from spacedg.files import atomic_write_bytes
@@ -346,17 +354,13 @@ def _audit(args: argparse.Namespace) -> int:
     return 0
 
 
-def _debias(by_scene: dict, learned: bool) -> Any:
-    """The bench-level blind pruning of every record of ``by_scene``, pooled: the cells' roles balanced
-    across the scenes (:func:`spacedg.qa.cell_balance.balance_cells`: what ``--mode pooled`` indexes,
-    built with ``--partial-rounds``, need; whole rounds lose nothing), then :func:`spacedg.qa.debias.debias`
-    (no trim to a target size: every record is kept unless blind models solve it)."""
-    from spacedg.qa.cell_balance import balance_cells
+def _debias(by_scene: dict, learned: bool, balanced: dict[str, int]) -> Any:
+    """The bench-level blind pruning of every record of ``by_scene``, pooled (:func:`spacedg.qa.debias.debias`;
+    no trim to a size); ``balanced``: what balancing the cells across the scenes removed before (``--mode pooled``)."""
     from spacedg.qa.debias import debias
 
-    balanced = balance_cells([r for rs in by_scene.values() for r in rs])
-    result = debias(balanced.kept, learned=learned)
-    result.balanced = balanced.removed
+    result = debias([r for rs in by_scene.values() for r in rs], learned=learned)
+    result.balanced = dict(balanced)
     return result
 
 

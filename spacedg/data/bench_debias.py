@@ -1,9 +1,9 @@
 """Blind pruning of a bench dataset before export (``spacedg export --split bench``: on by default, ``--no-debias`` skips it).
 
 The export builds its question indexes with :data:`~spacedg.qa.debias.OVERSAMPLE` × ``--per-sub-type``
-records per sub type and scene (``partial_rounds``: its balancing cells take partial rounds too;
-with ``--max-questions N`` it keeps every candidate, and the pruning's trim takes the bench to
-``N``, spread over sub types in proportion and keeping every cell's roles balanced), then
+records per sub type and scene (``partial_rounds``: its balancing cells take partial rounds too,
+``<id>.qa-pooled.jsonl``; with ``--max-questions N`` it keeps every candidate, and the pruning's
+trim takes the bench to ``N`` (:func:`bench_targets`), keeping every cell's roles balanced), then
 :func:`debias_dataset` pools the bench's records over all its scenes, balances every cell's roles
 across them (:func:`~spacedg.qa.cell_balance.balance_cells`), prunes
 what the blind models solve (:func:`spacedg.qa.debias.debias`) and trims every sub type to what
@@ -31,8 +31,7 @@ from pathlib import Path
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.files import atomic_write_bytes
 from spacedg.plugins.qa_record import QARecord
-from spacedg.qa.cell_balance import balance_cells
-from spacedg.qa.debias import OVERSAMPLE, DebiasResult, debias, format_debias, spread_targets
+from spacedg.qa.debias import OVERSAMPLE, DebiasResult, debias_pooled, format_debias, spread_targets
 
 __all__ = ["MIN_SCENES", "OVERSAMPLE", "bench_scene_count", "bench_targets", "debias_dataset", "write_debias_report"]
 
@@ -97,9 +96,7 @@ def _round_robin_shares(available: Counter[str], total: int) -> dict[str, int]:
 def debias_dataset(dataset: SpaceDGDataset, per_sub_type: int, max_questions: int | None = None, seed: int = 0) -> DebiasResult:
     """Balance the cells' roles of ``dataset.records`` across its scenes (:func:`~spacedg.qa.cell_balance.balance_cells`:
     the candidates took partial rounds), then prune them; in place (their order kept); returns what was done."""
-    balanced = balance_cells(dataset.records, seed)
-    result = debias(balanced.kept, bench_targets(balanced.kept, per_sub_type, max_questions), seed=seed)
-    result.balanced = balanced.removed
+    result = debias_pooled(dataset.records, lambda kept: bench_targets(kept, per_sub_type, max_questions), seed=seed)
     dataset.records = result.kept
     return result
 

@@ -60,21 +60,21 @@ def _features(record: QARecord) -> list[str]:
 
 
 def _trim_role(records: list[QARecord], role: str, surplus: int, balance: dict[str, Counter[str]],
-               roles: Sequence[str], letters: Counter[str], seed: int) -> set[str]:
+               roles: Sequence[str], letters: Counter[str], seed: int, features: dict[str, list[str]],
+               classes: dict[str, str]) -> set[str]:
     """The ids of ``surplus`` of ``records`` (one role of one cell) whose features ``role`` has had
     most relative to the cell's mean over ``roles`` (greedy, :func:`~spacedg.qa.selection.role_excess`;
     ties: the correct letter, yes/no or count bin the sub type has most, then a seeded hash);
-    ``balance`` (feature → role → records) and ``letters`` (answer class → records) are updated."""
-    left = sorted(records, key=lambda r: (stable_hash(seed, "cells", r.id), r.id))
-    features = [_features(r) for r in left]
-    classes = [answer_class(r) for r in left]
+    ``balance`` (feature → role → records) and ``letters`` (answer class → records) are updated;
+    ``features`` / ``classes``: each record's (by id), computed once by the caller."""
+    left = [r.id for r in sorted(records, key=lambda r: (stable_hash(seed, "cells", r.id), r.id))]
     gone: set[str] = set()
     for _ in range(surplus):
-        k = max(range(len(left)), key=lambda i: (role_excess([balance[f] for f in features[i]], role, roles), letters[classes[i]], -i))
-        r, fs, cls = left.pop(k), features.pop(k), classes.pop(k)
-        gone.add(r.id)
-        letters[cls] -= 1
-        for f in fs:
+        k = max(range(len(left)), key=lambda i: (role_excess([balance[f] for f in features[left[i]]], role, roles), letters[classes[left[i]]], -i))
+        rid = left.pop(k)
+        gone.add(rid)
+        letters[classes[rid]] -= 1
+        for f in features[rid]:
             balance[f][role] -= 1
     return gone
 
@@ -95,9 +95,11 @@ def balance_cells(records: Sequence[QARecord], seed: int = 0) -> CellBalance:
             cell, role, roles = got
             cells[cell][role].append(r)
             cell_roles[cell].update(dict.fromkeys(roles))
+    features = {r.id: _features(r) for rs in cells.values() for role_records in rs.values() for r in role_records}
+    classes = {r.id: answer_class(r) for r in unique}
     letters: dict[str, Counter[str]] = defaultdict(Counter)  # sub type → answer class → records
     for r in unique:
-        letters[r.sub_question_type][answer_class(r)] += 1
+        letters[r.sub_question_type][classes[r.id]] += 1
     gone: set[str] = set()
     removed: Counter[str] = Counter()
     for cell in sorted(cells):
@@ -106,13 +108,13 @@ def balance_cells(records: Sequence[QARecord], seed: int = 0) -> CellBalance:
         balance: dict[str, Counter[str]] = defaultdict(Counter)
         for role, rs in by_role.items():
             for r in rs:
-                for f in _features(r):
+                for f in features[r.id]:
                     balance[f][role] += 1
         for role in sorted(by_role):
             rs = by_role[role]
             surplus = len(rs) - low
             if surplus > 0:
-                out = _trim_role(rs, role, surplus, balance, roles, letters[rs[0].sub_question_type], seed)
+                out = _trim_role(rs, role, surplus, balance, roles, letters[rs[0].sub_question_type], seed, features, classes)
                 gone |= out
                 removed.update(f"{r.question_type}/{r.sub_question_type}" for r in rs if r.id in out)
     return CellBalance([r for r in unique if r.id not in gone], dict(sorted(removed.items())))

@@ -80,12 +80,14 @@ from spacedg.errors import ParameterError
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.questions.object_counting import bin_floor
 from spacedg.plugins.specs import AnswerType
+from spacedg.qa.cell_balance import balance_cells
 from spacedg.qa.mode_stats import count_distribution, format_counts
 from spacedg.qa.debias_probe import (
     DISCRETE, PROBES, Probe, SubTypeBlind, answer_class, blind_rows, count_chances, probe, stable_hash,
 )
 
-__all__ = ["DEFAULT_BOUND", "DEFAULT_OVERALL_BOUND", "MAX_ALLOWED", "MAX_PROBE_FOLDS", "OVERSAMPLE", "DebiasResult", "debias", "format_debias", "spread_targets"]
+__all__ = ["DEFAULT_BOUND", "DEFAULT_OVERALL_BOUND", "HALF_SPLITS", "MAX_ALLOWED", "MAX_PROBE_FOLDS", "OVERSAMPLE", "DebiasResult", "debias",
+           "debias_pooled", "format_debias", "spread_targets"]
 
 #: A sub type's best blind accuracy may exceed chance by this many points.
 DEFAULT_BOUND = 3.0
@@ -364,6 +366,7 @@ def debias(
     records: Sequence[QARecord], targets: Mapping[tuple[str, str], int] | None = None, *, bound: float = DEFAULT_BOUND,
     overall_bound: float = DEFAULT_OVERALL_BOUND, folds: int | None = None, seed: int = 0, max_rounds: int = 20,
     floor: float = 0.5, learned: bool = True, repeats: int | None = None, noise_z: float = DEFAULT_NOISE_Z,
+    half_splits: int | None = None,
 ) -> DebiasResult:
     """Prune ``records`` (a pooled bench) until no blind model beats chance by more than the bounds (module docstring).
 
@@ -378,6 +381,8 @@ def debias(
         repeats: fold seeds each probe averages over (:func:`~spacedg.qa.debias_probe.probe`; ``None``:
             1 when every fold is one scene, else :data:`DEFAULT_REPEATS`).
         noise_z: a sub type is pruned only above its noise band too (:func:`row_bound`); 0: ``bound`` alone.
+        half_splits: probes on half as many folds averaged into each probe (``None``: :data:`HALF_SPLITS`
+            when the folds leave one scene out of 4 or more, else 0).
     """
     scenes = len({r.scene_id for r in records})
     if folds is None:
@@ -385,7 +390,8 @@ def debias(
     if repeats is None:
         repeats = 1 if folds >= scenes else DEFAULT_REPEATS
     _check(bound, overall_bound, folds, max_rounds, floor, repeats, noise_z)
-    half_splits = HALF_SPLITS if folds >= scenes >= 4 else 0
+    if half_splits is None:
+        half_splits = HALF_SPLITS if folds >= scenes >= 4 else 0
     options = {"folds": folds, "seed": seed, "learned": learned, "repeats": repeats, "half_splits": half_splits}
     discrete = [r for r in records if r.answer_type in DISCRETE]
     by_key: dict[tuple[str, str], list[QARecord]] = defaultdict(list)
@@ -416,6 +422,18 @@ def debias(
     kept = [r for r in records if r.id in keep]
     return DebiasResult(kept, before, current, rounds, targets, float(bound), float(overall_bound), float(noise_z), repeats, folds, half_splits,
                         sorted(f"{q}/{t}" for q, t in eligible))
+
+
+def debias_pooled(records: Sequence[QARecord], targets_for: Callable[[list[QARecord]], Mapping[tuple[str, str], int]] | None = None,
+                  *, seed: int = 0, **options: Any) -> DebiasResult:
+    """A bench's candidates (partial rounds, ``<id>.qa-pooled.jsonl``) pruned: every cell's roles balanced
+    across the scenes first (:func:`~spacedg.qa.cell_balance.balance_cells`, reported in
+    :attr:`DebiasResult.balanced`), then :func:`debias` with ``targets_for(the balanced records)``
+    (``None``: no trim to a size) and ``options``."""
+    balanced = balance_cells(records, seed)
+    result = debias(balanced.kept, targets_for(balanced.kept) if targets_for is not None else None, seed=seed, **options)
+    result.balanced = balanced.removed
+    return result
 
 
 def format_debias(result: DebiasResult) -> str:

@@ -7,8 +7,9 @@ is :mod:`spacedg.qa.build`.
 
 **Full index and selection indexes** (:func:`index_paths`). The *full* index
 ``<scene id>.qa.jsonl`` holds every registered family (``QABuildConfig.families`` empty): it is
-what :class:`~spacedg.data.dataset.SpaceDGDataset` reads by default, what exports and the review
-page find. A build restricted to some families (``families=("a", "b")``, ``spacedg qa build
+what :class:`~spacedg.data.dataset.SpaceDGDataset` reads by default and what a bench export
+without pruning reads (a pruned bench reads its candidates, ``<scene id>.qa-pooled.jsonl``,
+:attr:`QABuildConfig.file_mode`; a train export ``<scene id>.qa-train.jsonl``). A build restricted to some families (``families=("a", "b")``, ``spacedg qa build
 --families a,b``) writes a *selection index* beside it, ``<scene id>.qa.a+b.jsonl`` with
 ``<scene id>.qa.a+b.meta.json`` (names sorted and joined by ``+``; a selection longer than
 :data:`MAX_SELECTION_CHARS` characters is named ``families-<12 hex of its SHA-1>``), and never

@@ -23,6 +23,7 @@ its option set, the axes it names), the *role* (its answer), the cell's ``roles`
 from __future__ import annotations
 
 import math
+import zlib
 from collections import Counter
 from collections.abc import Callable, Container, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -95,7 +96,7 @@ class _Pool:
     metric: list[int] = field(default_factory=list)  # entries without a cell
     cells: dict[str, dict[str, list[int]]] = field(default_factory=dict)  # cell → role → records
     cell_roles: dict[str, list[str]] = field(default_factory=dict)  # cell → the roles of a round
-    offered: set[str] = field(default_factory=set)  # cells whose rounds go over the roles the scene offers (all_roles false)
+    offered_roles_only: set[str] = field(default_factory=set)  # cells whose rounds go over the roles the scene offers (all_roles false)
 
     @classmethod
     def of(cls, records: Sequence[QARecord], mode: str = "bench") -> _Pool:
@@ -120,7 +121,7 @@ class _Pool:
         for cell in partial:  # rounds over the roles this scene offers in the cell (at least two)
             offered = [role for role in pool.cell_roles[cell] if pool.cells[cell].get(role)]
             pool.cell_roles[cell] = offered if len(offered) >= 2 else []
-        pool.offered = partial
+        pool.offered_roles_only = partial
         return pool
 
     def subject(self, i: int) -> tuple[str, str]:
@@ -269,16 +270,28 @@ class _Selection:
         its whole rounds, its cells are visited round-robin and each visit takes one free
         candidate of every role the cell still offers (the least over-represented features
         first, as in a whole round). A scene with a pair against its labels' prior and none with
-        it then still gives the one it has, which another scene's surplus completes. Cells whose
+        it then still gives the one it has, which another scene's surplus completes. Each visit
+        starts at another role (a seeded offset per scene and cell, then one on per visit), so a
+        quota that ends inside a visit does not favour the same roles in every scene. Cells whose
         rounds go over the roles each scene offers (``all_roles`` false) take none: their roles
-        differ by scene, so no pooled count could balance them."""
+        differ by scene, so no pooled count could balance them; nor do cells whose sub type's
+        quota is smaller than one of their rounds (:meth:`take_small_quotas` serves those)."""
         cells, roles = self.pool.cells, self.pool.cell_roles
-        open_cells = [c for c in cells if len(roles[c]) >= 2 and c not in self.pool.offered]
+        subs = {c: {self.pool.sub(i) for queue in by_role.values() for i in queue} for c, by_role in cells.items()}
+        open_cells = [c for c in cells if len(roles[c]) >= 2 and c not in self.pool.offered_roles_only
+                      and self.per_sub_type >= len(roles[c])]
+        scene = self.pool.records[0].scene_id if self.pool.records else ""
+        visits: Counter[str] = Counter()
         while open_cells:
             still = []
             for cell in open_cells:
+                if all(self.room[sub] <= 0 for sub in subs[cell]):
+                    continue  # no room left: asking the judge about its candidates would be wasted
+                n = len(roles[cell])
+                start = (zlib.crc32(f"{scene}|{cell}".encode()) + visits[cell]) % n
+                visits[cell] += 1
                 used: set[tuple[str, str]] = set()
-                for role in roles[cell]:
+                for role in roles[cell][start:] + roles[cell][:start]:
                     i = self.pick(cell, role, used)
                     if i is None or self.room[self.pool.sub(i)] <= 0:
                         continue

@@ -51,7 +51,8 @@ question, so the question a model sees and the option columns agree. A refused c
 :class:`ReviewError` (its message is shown in the page) and writes nothing.
 
 Geometry (the audit numbers an answer came from) is looked up, lazily and cached per scene,
-in the scene question indexes ``<scene>/<scene_id>.qa.jsonl`` under the ``scenes`` folders (read
+in the scene question indexes ``<scene>/<scene_id>.qa.jsonl`` (and ``.qa-pooled.jsonl``, a pruned
+bench's candidates, and ``.qa-train.jsonl``) under the ``scenes`` folders (read
 with the project's record loader, :func:`spacedg.data.bench_table.index_geometry`: a malformed
 index is an error naming its file and line), or taken from a ``"geometry"`` field of the bench's
 chat JSONL (``<table stem>.jsonl``) when present.
@@ -575,11 +576,16 @@ class ReviewStore:
         return self._jsonl_geometry
 
     def _scene_geometry(self, scene_id: str) -> dict[str, Any]:
-        """``record id → geometry`` of the first ``<scene_id>.qa.jsonl`` under the scene roots
-        (each root itself, then its ``<scene_id>/`` folder), cached per scene."""
+        """``record id → geometry`` of the scene's question indexes under the scene roots (each root
+        itself, then its ``<scene_id>/`` folder): the first ``<scene_id>.qa.jsonl`` found, merged with
+        the first ``<scene_id>.qa-pooled.jsonl`` (a pruned bench's candidates) and
+        ``<scene_id>.qa-train.jsonl``; cached per scene."""
         if scene_id not in self._scene_cache:
-            name = f"{scene_id}.qa.jsonl"
-            candidates = (c for root in self._scene_roots for c in (root / name, root / scene_id / name))
-            path = next((c for c in candidates if c.is_file()), None)
-            self._scene_cache[scene_id] = index_geometry(path) if path is not None else {}
+            geometry: dict[str, Any] = {}
+            for name in (f"{scene_id}.qa.jsonl", f"{scene_id}.qa-pooled.jsonl", f"{scene_id}.qa-train.jsonl"):
+                candidates = (c for root in self._scene_roots for c in (root / name, root / scene_id / name))
+                path = next((c for c in candidates if c.is_file()), None)
+                if path is not None:
+                    geometry = {**index_geometry(path), **geometry}
+            self._scene_cache[scene_id] = geometry
         return self._scene_cache[scene_id]

@@ -142,3 +142,21 @@ def test_partial_rounds_have_index_files_of_their_own() -> None:
     assert pooled.file_mode == "pooled" and QABuildConfig().file_mode == "bench" and QABuildConfig(mode="train").file_mode == "train"
     assert index_paths("room", "/x", (), pooled.file_mode)[0].name == "room.qa-pooled.jsonl"
     assert index_paths("room", "/x", (), "bench")[0].name == "room.qa.jsonl"
+
+
+def test_qa_audit_mode_pooled_balances_the_candidates_first(tmp_path, capsys) -> None:
+    from spacedg.cli import main
+
+    # scene A offers "first" and "same", scene B "second" and "same" twice: pooled, one round survives per role
+    records = [_sized("room-a", 0, "first"), _sized("room-a", 1, "first"), _sized("room-a", 2, "same"),
+               _sized("room-b", 0, "second"), _sized("room-b", 1, "same"), _sized("room-b", 2, "same")]
+    for record in records:
+        with open(tmp_path / f"{record.scene_id}.qa-pooled.jsonl", "a", encoding="utf-8") as f:
+            f.write(record.to_json() + "\n")
+    assert main(["qa", "audit", str(tmp_path), "--mode", "pooled", "--no-learned", "--debias"]) == 0
+    text = capsys.readouterr().out
+    assert "Blind stress test over 3 records of 2 scenes" in text
+    assert "before the probe, roles balanced per cell across scenes: removed 3: object_size_comparison/longest_side_compare 3" in text
+    assert main(["qa", "audit", str(tmp_path), "--no-learned"]) == 2  # the strict indexes are not there
+    assert "--partial-rounds" not in capsys.readouterr().err
+    assert main(["qa", "audit", str(tmp_path / "none"), "--mode", "pooled"]) == 2
