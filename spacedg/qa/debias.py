@@ -103,6 +103,8 @@ MAX_PROBE_FOLDS = 12
 HALF_SPLITS = 2
 #: A sub type's allowed excess never exceeds this many points (the bar is chance + 5).
 MAX_ALLOWED = 4.0
+#: Below this many records a sub type's blind accuracy moves by 3+ points per record: the summary names such sub types.
+MIN_MEASURABLE = 30
 #: A sub type is pruned only above ``max(bound, noise_z × σ)``, σ a uniform guess's binomial deviation at its n.
 DEFAULT_NOISE_Z = 1.0
 #: The predictors whose figures decide the pruning (module docstring).
@@ -475,4 +477,7 @@ def format_debias(result: DebiasResult) -> str:
     lines.append("within the bounds" if result.within else f"NOT within the bounds after the last round: {', '.join(over) or 'pooled'} "
                  "(pruning stops at half a sub type's target: too few candidates there; and a sub type within its band "
                  "before pruning is not pruned: its excess is noise of the refit predictors)")
+    few = [f"{r.sub_question_type} (n {r.n}, one record = {100 / r.n:.0f} points)" for r in result.after.rows if r.n < MIN_MEASURABLE]
+    if few:
+        lines.append(f"too few records to measure a blind bias to a few points (n < {MIN_MEASURABLE}; add scenes): {', '.join(few)}")
     return "\n".join(lines)

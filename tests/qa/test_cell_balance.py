@@ -160,3 +160,11 @@ def test_qa_audit_mode_pooled_balances_the_candidates_first(tmp_path, capsys) ->
     assert main(["qa", "audit", str(tmp_path), "--no-learned"]) == 2  # the strict indexes are not there
     assert "--partial-rounds" not in capsys.readouterr().err
     assert main(["qa", "audit", str(tmp_path / "none"), "--mode", "pooled"]) == 2
+
+
+def test_format_debias_names_sub_types_too_small_to_measure() -> None:
+    from spacedg.qa.debias import MIN_MEASURABLE, debias, format_debias
+
+    records = [_sized(s, k, role) for s in ("A", "B") for k, role in enumerate(ROLES * 3)]  # 18 records: < MIN_MEASURABLE
+    text = format_debias(debias(records, learned=False))
+    assert f"too few records to measure a blind bias to a few points (n < {MIN_MEASURABLE}; add scenes): longest_side_compare (n " in text
