@@ -28,7 +28,7 @@ from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
-from spacedg.data.dataset import SpaceDGDataset
+from spacedg.data.dataset import SpaceDGDataset, round_robin_shares
 from spacedg.files import atomic_write_bytes
 from spacedg.plugins.qa_record import QARecord
 from spacedg.qa.debias import OVERSAMPLE, DebiasResult, debias_pooled, format_debias, spread_targets
@@ -66,31 +66,14 @@ def bench_targets(records: Sequence[QARecord], per_sub_type: int, max_questions:
     out = dict(sorted(targets.items()))
     if max_questions is None:
         return out
-    shares = _round_robin_shares(_sum_by_type(out), max_questions)
+    by_type: Counter[str] = Counter()
+    for (question_type, _), n in out.items():
+        by_type[question_type] += n
+    shares = round_robin_shares(by_type, max_questions)
     spread: dict[tuple[str, str], int] = {}
     for question_type, share in shares.items():
         spread.update(spread_targets({k: n for k, n in out.items() if k[0] == question_type}, share))
     return spread
-
-
-def _sum_by_type(targets: dict[tuple[str, str], int]) -> Counter[str]:
-    total: Counter[str] = Counter()
-    for (question_type, _), n in targets.items():
-        total[question_type] += n
-    return total
-
-
-def _round_robin_shares(available: Counter[str], total: int) -> dict[str, int]:
-    """``total`` shared over the keys one at a time in sorted order, each at most its ``available``
-    (what taking records round-robin over question types gives, :func:`spacedg.data.dataset._spread_subset`)."""
-    shares = dict.fromkeys(sorted(available), 0)
-    left = min(total, sum(available.values()))
-    while left > 0:
-        for key in shares:
-            if left > 0 and shares[key] < available[key]:
-                shares[key] += 1
-                left -= 1
-    return shares
 
 
 def debias_dataset(dataset: SpaceDGDataset, per_sub_type: int, max_questions: int | None = None, seed: int = 0) -> DebiasResult:

@@ -86,7 +86,7 @@ from spacedg.data.pipeline import (
     sample_scene_depth,
 )
 from spacedg.qa.build import ensure_indexes
-from spacedg.qa.index import QABuildConfig, index_paths, read_index
+from spacedg.qa.index import QABuildConfig, config_index_paths, read_index
 from spacedg.data.workers import loader_plan
 from spacedg.devices import resolve_device
 from spacedg.errors import InvalidDataError, ParameterError
@@ -276,7 +276,7 @@ class SpaceDGDataset(Dataset):
         return chains
 
     def _records(self, folder: Path) -> list[QARecord]:
-        jsonl, _ = index_paths(load_scene(folder).id, folder, self.qa_config.families, self.qa_config.file_mode)
+        jsonl, _ = config_index_paths(load_scene(folder).id, folder, self.qa_config)
         return read_index(jsonl)
 
     # ------------------------------------------------------------ indexing
@@ -464,10 +464,20 @@ def _spread_subset(records: list[QARecord], n: int, seed: int) -> list[QARecord]
     by_type: dict[str, list[int]] = {}
     for i, record in enumerate(records):
         by_type.setdefault(record.question_type, []).append(i)
-    queues = [[ix[j] for j in rng.permutation(len(ix))] for _, ix in sorted(by_type.items())]
-    taken: list[int] = []
-    while len(taken) < n and any(queues):
-        for queue in queues:
-            if queue and len(taken) < n:
-                taken.append(queue.pop())
+    queues = {t: [ix[j] for j in rng.permutation(len(ix))] for t, ix in sorted(by_type.items())}
+    shares = round_robin_shares({t: len(q) for t, q in queues.items()}, n)
+    taken = [i for t, q in queues.items() for i in q[len(q) - shares[t]:]]  # each queue's last ``share``: what popping round-robin takes
     return [records[i] for i in sorted(taken)]
+
+
+def round_robin_shares(available: Mapping[str, int], total: int) -> dict[str, int]:
+    """``total`` shared over the keys one at a time in sorted order, each at most its ``available``:
+    how many records taking them round-robin over the keys gives each (``--max-questions`` over question types)."""
+    shares = dict.fromkeys(sorted(available), 0)
+    left = min(total, sum(available.values()))
+    while left > 0:
+        for key in shares:
+            if left > 0 and shares[key] < available[key]:
+                shares[key] += 1
+                left -= 1
+    return shares

@@ -51,7 +51,7 @@ from spacedg.qa.index import (
     SceneQA,
     index_is_current,
     index_key,
-    index_paths,
+    config_index_paths,
     is_current,
     read_index,
     read_meta,
@@ -255,7 +255,7 @@ def build_scene_index(
     scene = load_scene(scene_dir)
     scene_json = scene_json_path(scene_dir)
     key = index_key(scene_json, config, selected_families(config.families), judge)
-    jsonl, meta_path = index_paths(scene.id, out_dir if out_dir is not None else scene_json.parent, config.families, config.file_mode)
+    jsonl, meta_path = config_index_paths(scene.id, out_dir if out_dir is not None else scene_json.parent, config)
     if not force and is_current(jsonl, meta_path, key):
         meta = read_meta(meta_path) or {}
         return SceneQA(scene.id, jsonl, read_index(jsonl), reused=True, seconds=dict(meta.get("seconds", {})))

@@ -267,6 +267,12 @@ def over_bound(row: SubTypeBlind, bound: float, noise_z: float, tol: float = 0.0
     return row.excess > row_bound(row, bound, noise_z) + tol
 
 
+def _over(pr: Probe, bound: float, noise_z: float, question_types: Collection[str] | None = None) -> set[tuple[str, str]]:
+    """The sub types over their allowed excess in ``pr`` (of ``question_types`` only, when given)."""
+    return {row.key for row in pr.rows
+            if (question_types is None or row.key[0] in question_types) and over_bound(row, bound, noise_z)}
+
+
 def _aims(pr: Probe, bound: float, overall_bound: float, noise_z: float = 0.0,
           eligible: Collection[tuple[str, str]] | None = None) -> dict[tuple[str, str], float]:
     """The excess each sub type is pruned towards this round: the ``eligible`` sub types over
@@ -405,7 +411,7 @@ def debias(
     counts = count_chances(discrete)
     current = before = probe(discrete, counts=counts, **options)
     deciding = _deciding(before, by_key, counts)
-    eligible = {row.key for row in deciding.rows if over_bound(row, bound, noise_z)}
+    eligible = _over(deciding, bound, noise_z)
     rounds: list[dict[str, Any]] = []
     for number in range(1, max_rounds + 1):
         removed = _prune_round(by_key, deciding, floors, bound, overall_bound, seed, noise_z, eligible)
@@ -419,7 +425,7 @@ def debias(
         current = probe([r for rs in by_key.values() for r in rs], counts=counts, reuse=current, changed=changed, **options)
         deciding = _deciding(current, by_key, counts)
         if why == _TRIM:  # what the trim pushed over its allowed excess (its own records or its question type's refit) is pruned too
-            eligible |= {row.key for row in deciding.rows if row.key[0] in changed and over_bound(row, bound, noise_z)}
+            eligible |= _over(deciding, bound, noise_z, changed)
     keep = {r.id for rs in by_key.values() for r in rs} | metric
     kept = [r for r in records if r.id in keep]
     return DebiasResult(kept, before, current, rounds, targets, float(bound), float(overall_bound), float(noise_z), repeats, folds, half_splits,

@@ -46,7 +46,7 @@ from spacedg.scene.lexicon import default_lexicon
 
 __all__ = [
     "MODES", "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "selected_families", "MAX_SELECTION_CHARS", "selection_name",
-    "index_paths", "scene_json_path", "index_key", "read_meta", "is_current", "index_is_current", "read_index", "write_index",
+    "index_paths", "config_index_paths", "scene_json_path", "index_key", "read_meta", "is_current", "index_is_current", "read_index", "write_index",
 ]
 
 #: Bump when the index layout or the build procedure changes (part of the key).
@@ -197,6 +197,11 @@ def index_paths(scene_id: str, out_dir: str | Path, families: Sequence[str] = ()
     return out / f"{stem}.jsonl", out / f"{stem}.meta.json"
 
 
+def config_index_paths(scene_id: str, out_dir: str | Path, config: QABuildConfig) -> tuple[Path, Path]:
+    """:func:`index_paths` of the index ``config`` builds (its families and :attr:`~QABuildConfig.file_mode`)."""
+    return index_paths(scene_id, out_dir, config.families, config.file_mode)
+
+
 def scene_json_path(scene_dir: str | Path) -> Path:
     """The ``scene.json`` of a native scene folder (or the file itself when given one)."""
     scene_dir = Path(scene_dir)
@@ -263,7 +268,7 @@ def index_is_current(scene_dir: str | Path, config: QABuildConfig = QABuildConfi
 
     scene_json = scene_json_path(scene_dir)
     scene_id = load_scene(Path(scene_dir)).id
-    jsonl, meta_path = index_paths(scene_id, out_dir if out_dir is not None else scene_json.parent, config.families, config.file_mode)
+    jsonl, meta_path = config_index_paths(scene_id, out_dir if out_dir is not None else scene_json.parent, config)
     return is_current(jsonl, meta_path, index_key(scene_json, config, selected_families(config.families), None))
 
 
