@@ -13,6 +13,15 @@ random draw a candidate needs is made **before** it is yielded (the closure draw
 the order of draws, and the records, are the same whichever way the stream is read. Outside
 the block :func:`offer` builds the record at once: the family yields records as always.
 
+A caller that pools candidates may also refuse one **before** the family computes it:
+inside :func:`gated`, a family asks :func:`admitted` with the candidate's sub type, views,
+subject and named ids as soon as it knows them, and skips the candidate (its geometry and its
+random draws) when the caller does not want it (a subject that already has its alternates, or
+a twin in one of its images). Outside :func:`gated`, :func:`admitted` is always true, so a
+family's ``generate`` yields what it always yielded; inside, the draws of refused candidates are
+never made, so the streams draw differently from an ungated run (each draw is still a fresh
+uniform draw, so the candidates' questions follow the same distribution).
+
 A :class:`Candidate`'s fields equal what its built record says: ``sub_question_type`` and
 ``views`` the record's, ``subject`` its ``geometry["selection"]["subject"]``, ``selection()`` its
 ``geometry["selection"]`` and ``named`` the ids of its ``geometry["refs"]`` (checked by the tests for every built-in family that offers them).
@@ -27,10 +36,15 @@ from typing import Any, NamedTuple
 
 from spacedg.plugins.qa_record import QARecord
 
-__all__ = ["Candidate", "light_candidates", "offer"]
+__all__ = ["Candidate", "ScanGate", "admitted", "gated", "light_candidates", "offer"]
 
 #: True inside :func:`light_candidates`: :func:`offer` hands out :class:`Candidate` objects.
 _LIGHT: contextvars.ContextVar[bool] = contextvars.ContextVar("spacedg_light_candidates", default=False)
+
+#: ``gate(sub_question_type, views, subject, named) -> bool``: whether the caller wants a candidate
+#: (it may also raise to end the caller's scan); see :func:`gated`.
+ScanGate = Callable[[str, tuple[str, ...], str, tuple[int, ...]], bool]
+_GATE: contextvars.ContextVar[ScanGate | None] = contextvars.ContextVar("spacedg_scan_gate", default=None)
 
 
 class Candidate(NamedTuple):
@@ -61,6 +75,24 @@ def light_candidates() -> Iterator[None]:
         yield
     finally:
         _LIGHT.reset(token)
+
+
+@contextlib.contextmanager
+def gated(gate: ScanGate) -> Iterator[None]:
+    """Within this block, :func:`admitted` asks ``gate`` (module docstring)."""
+    token = _GATE.set(gate)
+    try:
+        yield
+    finally:
+        _GATE.reset(token)
+
+
+def admitted(sub_question_type: str, views: tuple[str, ...], subject: str, named: tuple[int, ...]) -> bool:
+    """Whether the candidate (sub type, views, subject, named ids, as it would be offered) is
+    wanted: the :func:`gated` caller's answer, always ``True`` outside :func:`gated`. A family
+    asks before computing the candidate's geometry or drawing for it, and skips it when refused."""
+    gate = _GATE.get()
+    return gate is None or gate(sub_question_type, views, subject, named)
 
 
 def offer(

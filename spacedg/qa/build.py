@@ -42,7 +42,7 @@ import numpy as np
 
 from spacedg.errors import SpaceDGError
 from spacedg.plugins.guard import plugin_call
-from spacedg.plugins.candidates import Candidate, light_candidates
+from spacedg.plugins.candidates import Candidate, gated, light_candidates
 from spacedg.plugins.qa_record import QARecord, deferred_geometry
 from spacedg.qa.deal import deal_distractors, deal_letters
 from spacedg.qa.index import (
@@ -118,40 +118,89 @@ def prepare_scene(
     return scene
 
 
+class _ScanDone(BaseException):
+    """Raised by the pool's gate to end a family's scan (``max_scan`` reached, or every sub type
+    has its subjects). A :class:`BaseException`, so a family's own ``except Exception`` never swallows it."""
+
+
+class _PoolScan:
+    """The pool's rules for one family (see :func:`_pool`), asked about candidates already made
+    (:meth:`take`) and, through :func:`~spacedg.plugins.candidates.gated`, about candidates
+    before a family makes them (:meth:`gate`)."""
+
+    def __init__(self, family: Any, config: QABuildConfig, index: TwinCheck, twins: Counter[str]) -> None:
+        self.family, self.index, self.twins = family, index, twins
+        self.max_scan = config.max_scan
+        self.want = quota(config.per_sub_type, config.mode) * config.pool_factor
+        self.scanned = 0
+        self.distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
+
+    def _wanted(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:
+        """Whether the pool takes the candidate; counts a twin; raises :class:`_ScanDone` when a new
+        subject arrives and every sub type has ``want`` subjects."""
+        if self.index.has_twin_ids(views, named):
+            self.twins[self.family.name] += 1
+            return False
+        seen = self.distinct.setdefault(sub, Counter())
+        if seen[subject] >= ALTERNATES:
+            return False  # a subject already pooled (another view of the same question)
+        if subject in seen or len(seen) < self.want:
+            return True
+        if all(len(self.distinct.get(s, ())) >= self.want for s in self.family.sub_question_types):
+            raise _ScanDone
+        return False
+
+    def _count(self) -> None:
+        if self.scanned >= self.max_scan:
+            raise _ScanDone
+        self.scanned += 1
+
+    def gate(self, sub: str, views: tuple[str, ...], subject: str, named: tuple[int, ...]) -> bool:
+        """A candidate before it is made: a refused one counts as scanned; an admitted one is
+        counted when it is yielded (:meth:`take`)."""
+        self._count()
+        if self._wanted(sub, views, subject, named):
+            self.scanned -= 1
+            return True
+        return False
+
+    def take(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:
+        """A candidate the family yielded: counted as scanned; whether the pool keeps it (and then noted)."""
+        self._count()
+        if not self._wanted(sub, views, subject, named):
+            return False
+        self.distinct[sub][subject] += 1
+        return True
+
+
 def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, twins: Counter[str]) -> list[QARecord]:
     """A family's candidates in scan order: up to ``pool_factor × quota`` distinct subjects
     (the family's own, views included: the mode's stricter subjects are the selection's job) per sub type, :data:`ALTERNATES`
     records each, ``max_scan`` candidates in all (seeded per (scene, family)); candidates naming
     an object whose twin shows in one of their images (:meth:`~spacedg.qa.twins.TwinCheck.has_twin`) are
     left out and counted in ``twins`` per family. The family runs inside
-    :func:`~spacedg.plugins.candidates.light_candidates`: the built-in families yield
-    :class:`~spacedg.plugins.candidates.Candidate` objects (sub type, views, subject, named ids; every
-    draw already made), pooled as :class:`~spacedg.qa.pooled.Pooled` (their selection entry only), so
-    a record is built only for the candidates the selection takes; records a family yields
-    as such (third-party families) are made inside :func:`~spacedg.plugins.qa_record.deferred_geometry`,
-    their ``geometry`` converted to plain JSON types only once selected (:func:`_family_records`).
-    The indexes are the same bytes either way."""
+    :func:`~spacedg.plugins.candidates.light_candidates` and :func:`~spacedg.plugins.candidates.gated`:
+    the built-in families ask the pool (:func:`~spacedg.plugins.candidates.admitted`) before they
+    compute a candidate's geometry or draw for it, so a candidate the pool would pass over costs
+    only its subject (a refused candidate counts as scanned), and yield
+    :class:`~spacedg.plugins.candidates.Candidate` objects, pooled as :class:`~spacedg.qa.pooled.Pooled`
+    (their selection entry only), so a record is built only for the candidates the selection takes;
+    records a family yields as such (third-party families) are made inside
+    :func:`~spacedg.plugins.qa_record.deferred_geometry`, their ``geometry`` converted to plain
+    JSON types only once selected (:func:`_family_records`)."""
     rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
-    want = quota(config.per_sub_type, config.mode) * config.pool_factor
+    scan = _PoolScan(family, config, index, twins)
     pooled: list[QARecord] = []
-    distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
-    with plugin_call("question family", family, "generate"), deferred_geometry(), light_candidates():
-        for scanned, item in enumerate(family.generate(scene, rng)):
-            if scanned >= config.max_scan:
-                break
-            light = type(item) is Candidate
-            if index.has_twin_ids(item.views, item.named if light else named_ids(item)):
-                twins[family.name] += 1
-                continue
-            seen = distinct.setdefault(item.sub_question_type, Counter())
-            subject = item.subject if light else _subject(item)
-            if seen[subject] >= ALTERNATES:
-                continue  # a subject already pooled (another view of the same question)
-            if subject in seen or len(seen) < want:
-                seen[subject] += 1
-                pooled.append(Pooled(item, family, scene.id) if light else item)  # type: ignore[arg-type]
-            elif all(len(distinct.get(s, ())) >= want for s in family.sub_question_types):
-                break
+    with plugin_call("question family", family, "generate"), deferred_geometry(), light_candidates(), gated(scan.gate):
+        try:
+            for item in family.generate(scene, rng):
+                if type(item) is Candidate:
+                    if scan.take(item.sub_question_type, item.views, item.subject, item.named):
+                        pooled.append(Pooled(item, family, scene.id))  # type: ignore[arg-type]
+                elif scan.take(item.sub_question_type, item.views, _subject(item), named_ids(item)):
+                    pooled.append(item)
+        except _ScanDone:
+            pass
     return pooled
 
 

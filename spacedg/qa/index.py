@@ -56,7 +56,9 @@ __all__ = [
 #: 5: selection modes (:mod:`spacedg.qa.modes`: strict ``bench``, dense ``train``); no twins; counts beyond 2.
 #: 6: single-axis rotation sub types named by their text axes; counting counts an instance with a quarter of it
 #: showing; compass angles within 0.01° of a sector boundary not asked.
-QA_INDEX_VERSION = 6
+#: 7: the pool refuses a candidate before its family computes it (:func:`~spacedg.plugins.candidates.admitted`):
+#: the same rules, but a refused candidate's random draws are never taken, so later candidates draw other numbers.
+QA_INDEX_VERSION = 7
 
 #: The selection modes (:mod:`spacedg.qa.modes`): strict ``bench``, dense ``train``.
 MODES: tuple[str, ...] = ("bench", "train")

@@ -4,6 +4,7 @@ otherwise: same records, same order, same draws; a candidate's fields are its re
 from __future__ import annotations
 
 import itertools
+import zlib
 
 import numpy as np
 import pytest
@@ -73,3 +74,127 @@ def test_pooled_refuses_a_record_whose_selection_differs_from_its_offer() -> Non
     bad = Pooled(Candidate("s", ("v",), "object:2", (2,), lambda: {"subject": "object:2"}, lambda: record), Declared(), "scene")
     with pytest.raises(PluginError, match="selection entry"):
         bad.materialised()
+
+
+@pytest.mark.parametrize("family", selected_families(None), ids=lambda f: f.name)
+def test_a_gate_is_asked_with_what_is_then_offered(room_scene, family) -> None:
+    """Every candidate a family yields was admitted just before with its own sub type, views,
+    subject and named ids (so the pool's rules read the same fields either way), and a gate that
+    admits everything changes no draw: the same candidates as without one."""
+    from spacedg.plugins.candidates import gated
+
+    asked: list[tuple] = []
+
+    def admit_all(sub, views, subject, named) -> bool:
+        asked.append((sub, tuple(views), subject, tuple(named)))
+        return True
+
+    with light_candidates():
+        plain = list(itertools.islice(family.generate(room_scene, np.random.default_rng(3)), FIRST))
+        gated_items, last_asked = [], []
+        with gated(admit_all):
+            for item in itertools.islice(family.generate(room_scene, np.random.default_rng(3)), FIRST):
+                gated_items.append(item)
+                last_asked.append(asked[-1] if asked else None)  # the gate's last question when the item came
+    assert len(gated_items) == len(plain) > 0
+    for item, same, question in zip(gated_items, plain, last_asked):
+        if type(item) is not Candidate:
+            assert item.to_dict() == same.to_dict()
+            continue
+        assert item[:4] == same[:4] and item.selection() == same.selection()
+        assert question == (item.sub_question_type, tuple(item.views), item.subject, tuple(item.named))
+
+
+@pytest.mark.parametrize("family", [f for f in selected_families(None) if f.name in {
+    "cross_view_cardinal_direction", "object_size_comparison", "camera_object_relative_direction", "object_proxy_cardinal_direction",
+}], ids=lambda f: f.name)
+def test_refused_candidates_are_never_yielded_or_drawn_for(room_scene, family) -> None:
+    """A gate that refuses every other subject: no refused subject is yielded, and what is
+    yielded is built exactly (draws made only for the admitted)."""
+    from spacedg.plugins.candidates import gated
+
+    refused: set[str] = set()
+
+    def every_other(sub, views, subject, named) -> bool:
+        if subject in refused:
+            return False
+        if zlib.crc32(subject.encode()) % 2:
+            refused.add(subject)
+            return False
+        return True
+
+    with light_candidates(), gated(every_other):
+        items = list(itertools.islice(family.generate(room_scene, np.random.default_rng(5)), FIRST))
+    assert items and refused
+    for item in items:
+        assert item.subject not in refused
+        record = item.build()
+        assert item.selection() == record.geometry["selection"] and item.subject == record.geometry["selection"]["subject"]
+
+
+def test_admitted_is_true_outside_a_gate() -> None:
+    from spacedg.plugins.candidates import admitted, gated
+
+    assert admitted("s", ("v",), "object:1", (1,))
+    with gated(lambda *args: False):
+        assert not admitted("s", ("v",), "object:1", (1,))
+    assert admitted("s", ("v",), "object:1", (1,))
+
+
+class _GatedFamily:
+    """A family whose stream asks the gate, as the built-in ones do: subjects ``s0 … s{n-1}``
+    (each offered ``repeats`` times, on views ``v{k}``), drawing one number per admitted candidate."""
+
+    name = "gated_demo"
+    sub_question_types = ("only",)
+
+    def __init__(self, subjects: int, repeats: int) -> None:
+        self.subjects, self.repeats, self.asked, self.drawn = subjects, repeats, 0, 0
+
+    def generate(self, scene, rng):
+        from spacedg.plugins.candidates import admitted, offer
+
+        for r in range(self.repeats):
+            for k in range(self.subjects):
+                subject, views = f"s{k}", (f"v{r}",)
+                self.asked += 1
+                if not admitted("only", views, subject, (k,)):
+                    continue
+                self.drawn += 1
+                rng.random()
+                yield offer("only", views, subject, (k,), lambda s=subject: {"subject": s}, lambda: None)
+
+    def check_record(self, record, scene_id=None) -> None:
+        pass
+
+
+class _NoTwins:
+    def has_twin_ids(self, views, ids) -> bool:
+        return 3 in ids  # object 3 always has a twin
+
+
+def test_the_pool_gate_applies_the_pool_rules_before_a_candidate_is_made() -> None:
+    """:func:`spacedg.qa.build._pool` with a gating family: at most ``ALTERNATES`` records per
+    subject, at most ``want`` subjects, twins left out and counted, and refused candidates count
+    as scanned (``max_scan`` bounds the candidates asked about, not only those made)."""
+    from collections import Counter
+    from types import SimpleNamespace
+
+    from spacedg.qa.build import ALTERNATES, _pool
+    from spacedg.qa.index import QABuildConfig
+
+    scene = SimpleNamespace(id="demo")
+    family = _GatedFamily(subjects=6, repeats=ALTERNATES + 3)
+    twins: Counter[str] = Counter()
+    pooled = _pool(family, scene, QABuildConfig(per_sub_type=1, pool_factor=10, max_scan=10_000), _NoTwins(), twins)  # want 10
+    per_subject = Counter(p.candidate.subject for p in pooled)
+    assert set(per_subject) == {"s0", "s1", "s2", "s4", "s5"}  # s3 names a twin
+    assert all(n == ALTERNATES for n in per_subject.values())
+    assert family.drawn == len(pooled)  # nothing drawn for a refused candidate
+    assert twins["gated_demo"] == ALTERNATES + 3  # every offer of s3
+    full = _GatedFamily(subjects=6, repeats=ALTERNATES + 3)
+    pooled = _pool(full, scene, QABuildConfig(per_sub_type=1, pool_factor=4, max_scan=10_000), _NoTwins(), Counter())  # want 4
+    assert [p.candidate.subject for p in pooled] == ["s0", "s1", "s2", "s4"] and full.asked == 6  # a fifth subject ends the scan
+    small = _GatedFamily(subjects=6, repeats=ALTERNATES + 3)
+    pooled = _pool(small, scene, QABuildConfig(per_sub_type=1, pool_factor=10, max_scan=10), _NoTwins(), Counter())
+    assert small.asked == 11 and len(pooled) == 8  # ten scanned, two of them refused (s3 twice), then the scan ends

@@ -59,7 +59,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.candidates import offer
+from spacedg.plugins.candidates import admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -135,13 +135,13 @@ def _record(
 def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np.random.Generator) -> Iterator[QARecord]:
     for iid in seeded_order(index.visible[view], rng):
         inst = index.instance(iid)
-        if not referable(index, view, iid):
-            continue
+        subject = f"view:{view}|object:{inst.id}"
+        if not referable(index, view, iid) or not admitted(SINGLE_VIEW, (view,), subject, (inst.id,)):
+            continue  # not nameable, or the caller passes it over
         distance = _distance(scene, view, inst)
         if distance is None:
             continue
         template = int(rng.integers(len(TEMPLATES)))
-        subject = f"view:{view}|object:{inst.id}"
         yield offer(
             SINGLE_VIEW, (view,), subject, (inst.id,), functools.partial(selection_entry, subject),
             functools.partial(_single_view_record, scene, index, view, inst, distance, template),
@@ -158,12 +158,12 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     both = sorted(set(index.visible[pair.a]) & set(index.visible[pair.b]))
     for iid in seeded_order(both, rng):
         inst = index.instance(iid)
-        if not (referable(index, pair.a, iid) and referable(index, pair.b, iid)):
-            continue
+        subject = f"view:{pair.b}|object:{inst.id}"
+        if not (referable(index, pair.a, iid) and referable(index, pair.b, iid)) or not admitted(BBOX_CENTER_DISTANCE, (pair.a, pair.b), subject, (inst.id,)):
+            continue  # not nameable, or the caller passes it over
         distance = _distance(scene, pair.b, inst)
         if distance is None:
             continue
-        subject = f"view:{pair.b}|object:{inst.id}"
         yield offer(
             BBOX_CENTER_DISTANCE, (pair.a, pair.b), subject, (inst.id,), functools.partial(selection_entry, subject),
             functools.partial(_pair_record, scene, index, pair, rules, inst, distance),

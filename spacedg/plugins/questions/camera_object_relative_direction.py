@@ -112,7 +112,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.candidates import Candidate, offer
+from spacedg.plugins.candidates import Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -276,13 +276,15 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
         a, b = index.instance(ia), index.instance(ib)
         if phrase_key(a) == phrase_key(b):
             continue
+        subject = f"view:{view}|objects:{min(ia, ib)}|{max(ia, ib)}"
+        if not admitted(SINGLE_VIEW, (view,), subject, (ia, ib)):
+            continue  # the caller passes it over: no geometry, no draws
         world = b.box.center - a.box.center
         vec = np.asarray(cam.cam_to_world, dtype=np.float64)[:3, :3].T @ world
         if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
             continue
         template = int(rng.integers(len(SINGLE_VIEW_TEMPLATES)))
         parts, truth, options, letter = body_direction(vec, rng)
-        subject = f"view:{view}|objects:{min(ia, ib)}|{max(ia, ib)}"
         yield offer(
             SINGLE_VIEW, (view,), subject, (ia, ib), functools.partial(_option_selection, subject, SINGLE_VIEW, template, truth, options),
             functools.partial(_single_view_record, scene, index, view, (a, b), subject, (world, vec), template, (parts, truth, options, letter)),
@@ -310,7 +312,9 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     centre_b = camera_center(cam_b)
     for iid in seeded_order(index.visible[pair.a], rng):
         inst = index.instance(iid)
-        if not referable(index, pair.a, iid) or bool(inst.box.contains(centre_b[None, :])[0]):
+        if not referable(index, pair.a, iid) or not admitted(BBOX_CENTER_DIRECTION, (pair.a, pair.b), f"view:{pair.b}|object:{iid}", (iid,)):
+            continue  # not nameable, or the caller passes it over
+        if bool(inst.box.contains(centre_b[None, :])[0]):
             continue
         vec = point_in_camera(cam_b, inst.box.center)
         if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
@@ -416,6 +420,8 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
     for ids in seeded_order(triplets, rng):
         if not split_across_views(index, pair.a, pair.b, ids):
             continue  # the authoritative three-object rule (the prefilter already applied it)
+        if not admitted(RELPOS, views, _relpos_subject(ids), tuple(ids)):
+            continue  # the caller passes it over: no geometry, no draws
         objs = [index.instance(i) for i in ids]
         names = _relpos_names(objs)
         if names is None:

@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
-from spacedg.plugins.candidates import Candidate, offer
+from spacedg.plugins.candidates import Candidate, admitted, offer
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
     PairRules,
@@ -124,6 +124,9 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     for one, two in object_pairs(index, pair, rng):
         if label_key(one.label) == label_key(two.label):
             continue
+        subject, named = _subject(one, two), (one.id, two.id)
+        if not admitted(SUB_QUESTION_TYPE, views, subject, named):
+            continue  # the caller passes it over
         key = (one.id, two.id)
         hit = memo.get(key)
         if hit is None or hit[0] is not one or hit[1] is not two:
@@ -133,7 +136,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         if distance < MIN_DISTANCE_M:
             continue
         yield offer(
-            SUB_QUESTION_TYPE, views, _subject(one, two), (one.id, two.id), functools.partial(_selection, one, two),
+            SUB_QUESTION_TYPE, views, subject, named, functools.partial(_selection, one, two),
             functools.partial(_record, scene, index, pair, rules, one, two, vector, distance),
         )
 

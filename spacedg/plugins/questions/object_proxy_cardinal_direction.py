@@ -84,7 +84,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.candidates import Candidate, offer
+from spacedg.plugins.candidates import Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -188,6 +188,10 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         x, y, z = tri
         if len({keys[x], keys[y], keys[z]}) < 3:
             continue
+        objs = tuple(insts[t] for t in tri)
+        subject = _subject(objs)
+        if not admitted(SUB_QUESTION_TYPE, views, subject, triplet_ids):
+            continue  # the caller passes it over: no legs, no draws
         ref, query = leg(x, y), leg(z, y)
         if ref is None or query is None:
             continue
@@ -196,10 +200,9 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         drawn = compass.ask(("objects", ids[x], ids[y]), ref["vector"], ("objects", ids[z], ids[y]), query["vector"], rng)  # = compass_question(ref, query, up, rng)
         if drawn is None:
             continue  # on a sector boundary: the label depends on the reading of the rule
-        objs = tuple(insts[t] for t in tri)
         obj_views = tuple(ref_view[i] for i in triplet_ids)
         yield offer(
-            SUB_QUESTION_TYPE, views, _subject(objs), triplet_ids, functools.partial(_selection, objs, drawn),
+            SUB_QUESTION_TYPE, views, subject, triplet_ids, functools.partial(_selection, objs, drawn),
             functools.partial(_record, scene, index, pair, rules, objs, obj_views, centres[y].tolist(), (ref, query), drawn),
         )
 

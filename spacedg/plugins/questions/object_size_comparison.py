@@ -110,7 +110,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from spacedg.plugins.candidates import Candidate, offer
+from spacedg.plugins.candidates import Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -355,9 +355,14 @@ def _verdict(scene: Scene, one: Instance, two: Instance, sub: str) -> _Verdict |
     prior_role = role_of(_outcome(prior, thresholds_for(quantity, prior)[0]))
     return _Verdict(
         quantity, values, corners, delta, same_below, different_from, truth, truth_text, (phrase1, phrase2), prior,
-        f"{sub}|objects:{min(one.id, two.id)}|{max(one.id, two.id)}", _cell(sub, quantity, prior, prior_role), role,
+        _subject(one, two, sub), _cell(sub, quantity, prior, prior_role), role,
         _size_features([one, two][ordered[0][2]], [one, two][ordered[1][2]]),
     )
+
+
+def _subject(one: Instance, two: Instance, sub: str) -> str:
+    """The selection subject: the sub type and the unordered object pair."""
+    return f"{sub}|objects:{min(one.id, two.id)}|{max(one.id, two.id)}"
 
 
 def _verdict_of(scene: Scene, index: VisibilityIndex, one: Instance, two: Instance, sub: str) -> _Verdict | None:
@@ -424,6 +429,8 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         one, two, sub = ones[i], twos[j], SUB_QUESTION_TYPES[s]
         if not _distinguishable(one, two):
             continue
+        if not admitted(sub, views, _subject(one, two, sub), (one.id, two.id)):
+            continue  # the caller passes it over: no verdict, no draws
         verdict = _verdict_of(scene, index, one, two, sub)
         if verdict is None:
             continue

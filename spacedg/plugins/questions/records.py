@@ -251,7 +251,12 @@ def phrase(inst: Instance) -> str:
 
 
 def phrase_key(inst: Instance) -> str:
-    """The object's question phrase, lower case, whitespace collapsed (to test that names differ)."""
+    """The object's question phrase, lower case, whitespace collapsed (to test that names differ);
+    computed once per instance (candidates compare the same objects' names thousands of times)."""
+    return _entry_of("phrase_key", inst, _phrase_key)
+
+
+def _phrase_key(inst: Instance) -> str:
     return " ".join(phrase(inst).lower().split())
 
 
