@@ -17,7 +17,7 @@ from tests.qa_scenes import build, camera, obj
 
 #: The modules the API re-exports from (nothing is defined in authoring itself).
 HOMES = (
-    "spacedg.plugins.answers", "spacedg.plugins.hookspecs", "spacedg.plugins.qa_record", "spacedg.plugins.question_family",
+    "spacedg.plugins.answers", "spacedg.plugins.candidates", "spacedg.plugins.hookspecs", "spacedg.plugins.qa_record", "spacedg.plugins.question_family",
     "spacedg.plugins.questions.geometry", "spacedg.plugins.questions.language", "spacedg.plugins.questions.records",
     "spacedg.plugins.questions.view_sampling", "spacedg.plugins.specs", "spacedg.scene.model", "spacedg.scene.visibility_classes",
 )
