@@ -74,11 +74,14 @@ answer uses), ``attitude_a`` / ``attitude_b`` (``elevation_deg``, ``bank_deg``),
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
 
+from spacedg.plugins.candidates import Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.plugins.questions.view_sampling import ROTATION_PAIRS, PairRules, ViewPair, sample_pairs
@@ -198,7 +201,28 @@ def _options(case: RotationCase, euler: dict[str, float]) -> tuple[str, list[str
     return truth, [c for c in combos if c != truth], text_axes
 
 
-def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator, decks: dict[str, BalancedDeck]) -> QARecord | None:
+class _Turn(NamedTuple):
+    """A pair's rotation as asked (:func:`_turn`): the relative rotation, both attitudes, the
+    gravity-referenced angles, their case and the question's truth and distractors."""
+
+    r_rel: np.ndarray
+    attitude_a: tuple[float, float]
+    attitude_b: tuple[float, float]
+    euler: dict[str, float]
+    case: RotationCase
+    truth: str
+    distractors: list[str]
+    text_axes: list[str]
+
+    @property
+    def sub(self) -> str:
+        """The sub type: singles by their text axes, duals dominant axis first (module docstring)."""
+        c, t = self.case, self.text_axes
+        return f"{t[0]}+{t[1]}_single" if c.mode == "single" else f"{c.ax1}+{c.ax2}_dual"
+
+
+def _turn(scene: Scene, pair: ViewPair) -> _Turn | None:
+    """The rotation of ``pair`` as a question, or ``None`` when it is not asked (no draws)."""
     cam_a, cam_b = scene.views[pair.a], scene.views[pair.b]
     r_rel = relative_rotation(cam_a, cam_b)
     if not np.all(np.isfinite(r_rel)):
@@ -213,25 +237,38 @@ def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator, decks: dict[
         return None
     euler = {"yaw": yaw, "pitch": pitch, "roll": roll}
     truth, distractors, text_axes = _options(case, euler)
-    options, answer = build_mcq(truth, distractors, rng, slot=decks[case.mode].next())
+    return _Turn(r_rel, (elev_a, bank_a), (elev_b, bank_b), euler, case, truth, distractors, text_axes)
+
+
+def _subject(pair: ViewPair) -> str:
+    """The selection subject: the unordered view pair."""
+    return f"views:{min(pair.a, pair.b)}|{max(pair.a, pair.b)}"
+
+
+def _selection(pair: ViewPair, turn: _Turn, options: tuple[str, ...]) -> dict[str, Any]:
+    """The selection entry: cell = mode and text axes, role = the truth, among the options shown."""
+    axes = turn.text_axes
+    return selection_entry(_subject(pair), f"{turn.case.mode}|{axes[0]}+{axes[1]}", turn.truth, sorted(o[3:] for o in options))
+
+
+def _record(scene: Scene, pair: ViewPair, turn: _Turn, drawn: tuple[tuple[str, ...], str]) -> QARecord:
+    """The record of ``pair``'s rotation ``turn`` with the options and letter ``drawn``."""
+    case, euler, text_axes, (options, answer) = turn.case, turn.euler, turn.text_axes, drawn
     template = MODES.index(case.mode)
-    # singles by their text axes, duals dominant axis first (module docstring)
-    sub = f"{text_axes[0]}+{text_axes[1]}_single" if case.mode == "single" else f"{case.ax1}+{case.ax2}_dual"
-    options_text = [o[3:] for o in options]
     geometry = {
         **pair_geometry(scene, pair),
-        "r_rel": r_rel.tolist(),
+        "r_rel": turn.r_rel.tolist(),
         "euler_deg": euler,
-        "attitude_a": {"elevation_deg": elev_a, "bank_deg": bank_a},
-        "attitude_b": {"elevation_deg": elev_b, "bank_deg": bank_b},
-        "camera_euler_deg": dict(zip(AXES, euler_yaw_pitch_roll(r_rel))),
+        "attitude_a": {"elevation_deg": turn.attitude_a[0], "bank_deg": turn.attitude_a[1]},
+        "attitude_b": {"elevation_deg": turn.attitude_b[0], "bank_deg": turn.attitude_b[1]},
+        "camera_euler_deg": dict(zip(AXES, euler_yaw_pitch_roll(turn.r_rel))),
         "axes": [case.ax1, case.ax2],
         "a1_deg": case.a1,
         "a2_deg": case.a2,
         "ratio": case.ratio,
         "mode": case.mode,
         "signs": {a: (1 if euler[a] > 0 else -1) for a in text_axes},
-        "truth": truth,
+        "truth": turn.truth,
         "thresholds": {
             "min_rotation_deg": MIN_ROTATION_DEG, "single_max_ratio": SINGLE_MAX_RATIO,
             "dual_min_ratio": DUAL_MIN_RATIO, "max_abs_pitch_deg": MAX_ABS_PITCH_DEG,
@@ -239,27 +276,30 @@ def _record(scene: Scene, pair: ViewPair, rng: np.random.Generator, decks: dict[
         },
         "template": template,
         "refs": [],
-        "selection": selection_entry(
-            f"views:{min(pair.a, pair.b)}|{max(pair.a, pair.b)}", f"{case.mode}|{text_axes[0]}+{text_axes[1]}", truth, sorted(options_text),
-        ),
+        "selection": _selection(pair, turn, options),
     }
-    views = (pair.a, pair.b)
     question = TEMPLATES[template].format(axis1=AXIS_PHRASES[text_axes[0]], axis2=AXIS_PHRASES[text_axes[1]])
     return make_record(
-        scene, NAME, sub, TaskGroup.CAMERA_CENTRIC, AnswerType.MCQ, views, {"truth": truth, "template": template},
+        scene, NAME, turn.sub, TaskGroup.CAMERA_CENTRIC, AnswerType.MCQ, (pair.a, pair.b), {"truth": turn.truth, "template": template},
         question=question, answer=answer, geometry=geometry, options=options,
     )
 
 
-def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = ROTATION_PAIRS) -> Iterator[QARecord]:
-    """Every camera-rotation question of ``scene`` (at most one per pair), lazily, in a seeded order."""
+def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = ROTATION_PAIRS) -> Iterator[QARecord | Candidate]:
+    """Every camera-rotation question of ``scene`` (at most one per pair), lazily, in a seeded order
+    (:func:`~spacedg.plugins.candidates.offer`: the record is built only if the question index keeps it)."""
     pairs = sample_pairs(scene, rules, rng)
     deck_rngs = child_rngs(rng, len(MODES))
     decks = {mode: BalancedDeck(r) for mode, r in zip(MODES, deck_rngs)}  # correct letter per mode, balanced
     for pair, child in zip(pairs, child_rngs(rng, len(pairs))):
-        record = _record(scene, pair, child, decks)
-        if record is not None:
-            yield record
+        turn = _turn(scene, pair)
+        if turn is None:
+            continue
+        views, subject = (pair.a, pair.b), _subject(pair)
+        if not admitted(turn.sub, views, subject, ()):
+            continue  # the caller passes it over: no draws
+        drawn = build_mcq(turn.truth, turn.distractors, child, slot=decks[turn.case.mode].next())
+        yield offer(turn.sub, views, subject, (), functools.partial(_selection, pair, turn, drawn[0]), functools.partial(_record, scene, pair, turn, drawn))
 
 
 #: ``make_family(rules)``: this family with other pair rules

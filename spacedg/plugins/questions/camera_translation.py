@@ -72,13 +72,15 @@ so the index balances the truth within what the text shows.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
+from spacedg.plugins.candidates import Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -194,10 +196,56 @@ def _candidate(scene: Scene, pair: ViewPair, rules: PairRules) -> _Candidate | N
     return _Candidate(pair, d, float(np.linalg.norm(d)), parts)
 
 
-def _record(
-    scene: Scene, cand: _Candidate, sub: str, rng: np.random.Generator, rules: PairRules, deck: BalancedDeck | None,
-) -> QARecord:
-    """One record of sub type ``sub``; ``deck`` deals the MCQ letter or the yes/no side (None for NA)."""
+class _Drawn(NamedTuple):
+    """What one record of a sub type drew: its options, answer, question, answer type, id key,
+    selection entry and geometry additions (:func:`_draw`)."""
+
+    options: tuple[str, ...]
+    answer: Any
+    question: str
+    answer_type: AnswerType
+    key: dict[str, Any]
+    selection: dict[str, Any]
+    extra: dict[str, Any]
+
+
+def _subject(pair: ViewPair) -> str:
+    """The selection subject: the unordered view pair."""
+    return f"views:{min(pair.a, pair.b)}|{max(pair.a, pair.b)}"
+
+
+def _draw(cand: _Candidate, sub: str, rng: np.random.Generator, deck: BalancedDeck | None) -> _Drawn:
+    """Every random draw of one record of sub type ``sub``; ``deck`` deals the MCQ letter or the yes/no side (None for NA)."""
+    options: tuple[str, ...] = ()
+    key: dict[str, Any] = {"sub": sub}
+    extra: dict[str, Any] = {}
+    subject = _subject(cand.pair)
+    if sub == "main_dir":
+        truth, distractors, how = main_dir_options(cand.parts, rng)
+        assert deck is not None
+        options, answer = build_mcq(truth, distractors, rng, slot=deck.next())
+        extra["options_source"] = how
+        key["label"] = truth
+        texts = sorted(o[3:] for o in options)
+        return _Drawn(options, answer, TEMPLATES[sub], AnswerType.MCQ, key, selection_entry(subject, "options:" + "|".join(texts), truth, texts), extra)
+    if sub == "distance_exact":
+        return _Drawn(options, round(cand.distance, DISTANCE_DECIMALS), TEMPLATES[sub], AnswerType.NA, key, selection_entry(subject), extra)
+    # balanced yes/no: the side (f < 1 → "yes") comes from the deck, then f is drawn from
+    # U(0.6, 1.4) restricted to that side and snapped: the same law as the spec's, per side
+    assert deck is not None
+    low_side = deck.next() == 0
+    drawn = float(rng.uniform(FACTOR_RANGE[0], 1.0) if low_side else rng.uniform(1.0, FACTOR_RANGE[1]))
+    factor = snap_factor(drawn, float(rng.random()))
+    threshold = threshold_for(cand.distance, factor)
+    answer = "yes" if cand.distance > threshold else "no"
+    extra.update(factor_drawn=drawn, factor=factor, threshold_m=threshold, min_threshold_m=MIN_THRESHOLD_M)
+    key["threshold"] = threshold
+    selection = selection_entry(subject, threshold_cell(threshold), str(answer), ("yes", "no"))
+    return _Drawn(options, answer, TEMPLATES[sub].format(threshold=threshold), AnswerType.YN, key, selection, extra)
+
+
+def _record(scene: Scene, cand: _Candidate, sub: str, rules: PairRules, drawn: _Drawn) -> QARecord:
+    """One record of sub type ``sub`` from what :func:`_draw` drew."""
     geometry: dict[str, Any] = {
         **pair_geometry(scene, cand.pair),
         "d": cand.d.tolist(),
@@ -207,51 +255,18 @@ def _record(
         "thresholds": {"ratio": TAN30, "max_parts": MAX_PARTS, "min_translation_m": rules.min_translation_m},
         "template": 0,
         "refs": [],
+        **drawn.extra,
+        "selection": drawn.selection,
     }
-    options: tuple[str, ...] = ()
-    key: dict[str, Any] = {"sub": sub}
-    if sub == "main_dir":
-        truth, distractors, how = main_dir_options(cand.parts, rng)
-        assert deck is not None
-        options, answer = build_mcq(truth, distractors, rng, slot=deck.next())
-        geometry["options_source"] = how
-        question = TEMPLATES[sub]
-        answer_type = AnswerType.MCQ
-        key["label"] = truth
-    elif sub == "distance_exact":
-        answer = round(cand.distance, DISTANCE_DECIMALS)
-        question = TEMPLATES[sub]
-        answer_type = AnswerType.NA
-    else:
-        # balanced yes/no: the side (f < 1 → "yes") comes from the deck, then f is drawn from
-        # U(0.6, 1.4) restricted to that side and snapped: the same law as the spec's, per side
-        assert deck is not None
-        low_side = deck.next() == 0
-        drawn = float(rng.uniform(FACTOR_RANGE[0], 1.0) if low_side else rng.uniform(1.0, FACTOR_RANGE[1]))
-        factor = snap_factor(drawn, float(rng.random()))
-        threshold = threshold_for(cand.distance, factor)
-        answer = "yes" if cand.distance > threshold else "no"
-        geometry.update(factor_drawn=drawn, factor=factor, threshold_m=threshold, min_threshold_m=MIN_THRESHOLD_M)
-        question = TEMPLATES[sub].format(threshold=threshold)
-        answer_type = AnswerType.YN
-        key["threshold"] = threshold
-    subject = f"views:{min(cand.pair.a, cand.pair.b)}|{max(cand.pair.a, cand.pair.b)}"
-    if sub == "main_dir":
-        texts = sorted(o[3:] for o in options)
-        geometry["selection"] = selection_entry(subject, "options:" + "|".join(texts), truth, texts)
-    elif sub == "distance_threshold":
-        geometry["selection"] = selection_entry(subject, threshold_cell(threshold), str(answer), ("yes", "no"))
-    else:
-        geometry["selection"] = selection_entry(subject)
-    views = (cand.pair.a, cand.pair.b)
     return make_record(
-        scene, NAME, sub, TaskGroup.CAMERA_CENTRIC, answer_type, views, key,
-        question=question, answer=answer, geometry=geometry, options=options,
+        scene, NAME, sub, TaskGroup.CAMERA_CENTRIC, drawn.answer_type, (cand.pair.a, cand.pair.b), drawn.key,
+        question=drawn.question, answer=drawn.answer, geometry=geometry, options=drawn.options,
     )
 
 
-def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = TRANSLATION_PAIRS) -> Iterator[QARecord]:
-    """Every camera-translation question of ``scene`` (3 per valid pair), lazily, in a seeded order."""
+def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = TRANSLATION_PAIRS) -> Iterator[QARecord | Candidate]:
+    """Every camera-translation question of ``scene`` (3 per valid pair), lazily, in a seeded order
+    (:func:`~spacedg.plugins.candidates.offer`: the record is built only if the question index keeps it)."""
     pairs = sample_pairs(scene, rules, rng)
     start = int(rng.integers(len(SUB_TYPES)))
     children = child_rngs(rng, len(pairs) * len(SUB_TYPES))  # row-major: pair k, sub type s
@@ -261,7 +276,11 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = TRANSLAT
     for p in range(len(SUB_TYPES)):
         for k, cand in cands:
             s = (start + k + p) % len(SUB_TYPES)
-            yield _record(scene, cand, SUB_TYPES[s], children[k * len(SUB_TYPES) + s], rules, decks.get(SUB_TYPES[s]))
+            sub, views, subject = SUB_TYPES[s], (cand.pair.a, cand.pair.b), _subject(cand.pair)
+            if not admitted(sub, views, subject, ()):
+                continue  # the caller passes it over: no draws
+            drawn = _draw(cand, sub, children[k * len(SUB_TYPES) + s], decks.get(sub))
+            yield offer(sub, views, subject, (), functools.partial(dict, drawn.selection), functools.partial(_record, scene, cand, sub, rules, drawn))
 
 
 #: ``make_family(rules)``: this family with other pair rules
