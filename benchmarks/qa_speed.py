@@ -11,6 +11,12 @@ one of 456f964 (the indexes this code must equal byte for byte: main before the 
 candidates; 41e7ace's indexes differ on purpose, version 4). ``--mode train`` times the dense
 train selection (``<id>.qa-train.jsonl``).
 
+When the new indexes differ from ``--same-as``'s (a change of the order of draws, e.g. the pool's
+gate of index version 7), the run shows the **equivalence** instead: per sub type the records
+of both (counts, the most common answer's share, the independent re-derivation of every answer
+by ``tests/plugins/questions/test_recompute.py``'s checker) and the blind audit's excess over
+chance (:func:`~spacedg.qa.audit.blind_audit`, leave one scene out over every room timed), side by side.
+
 ``--base`` is a checkout of the reference code (``git worktree add /tmp/qa-base 41e7ace``). The
 rooms are the built-in synthetic rooms (``spacedg scenes synth``: seeds 0–3, the demo rooms, and
 ``--other-seed`` … +3), generated once into ``--work`` (default ``/tmp/qa-speed``) unless given
@@ -122,6 +128,75 @@ def _compare(label: str, base: dict, new: dict, reference: dict | None = None) -
     return tb, tn, same_all
 
 
+def _index_records(out: Path, rooms: list[Path], mode: str) -> dict[str, list]:
+    """scene id → the records of its index in ``out`` (built by :func:`_build`)."""
+    from spacedg.qa.index import read_index
+    from spacedg.scene.io import load_scene
+
+    suffix = "qa-train" if mode == "train" else "qa"
+    return {load_scene(room).id: read_index(out / f"{load_scene(room).id}.{suffix}.jsonl") for room in rooms}
+
+
+def _rederive(records_by_scene: dict[str, list], rooms: list[Path]) -> int:
+    """Answers the tests' independent checker disagrees with (0 when every answer re-derives)."""
+    sys.path.insert(0, str(HERE))
+    from spacedg.scene.io import load_scene
+    from tests.plugins.questions import test_recompute as checker
+
+    bad = 0
+    scenes = {load_scene(room).id: load_scene(room) for room in rooms}
+    for scene_id, records in records_by_scene.items():
+        for record in records:
+            try:
+                checker._matches_scene(record, scenes[scene_id])
+                if record.options:
+                    assert [o[3:] for o in record.options].count(checker._truth_text(record)) == 1
+                checker._check(record)
+            except AssertionError:
+                bad += 1
+    return bad
+
+
+def _top_share(records: list) -> str:
+    """The most common answer's share of a discrete sub type (letters, yes/no, counts), as ``"A 26 %"``."""
+    from collections import Counter
+
+    from spacedg.plugins.specs import AnswerType
+
+    if not records or records[0].answer_type not in (AnswerType.MCQ, AnswerType.YN, AnswerType.COUNT):
+        return ""
+    answer, n = Counter(str(r.answer) for r in records).most_common(1)[0]
+    return f"{answer} {100 * n / len(records):.0f} %"
+
+
+def _equivalence(reference: dict[str, list], new: dict[str, list], rooms: list[Path]) -> None:
+    """Print the two index sets side by side per sub type (module docstring)."""
+    from spacedg.qa.audit import blind_audit
+
+    def by_sub(records_by_scene: dict[str, list]) -> dict[tuple[str, str], list]:
+        out: dict[tuple[str, str], list] = {}
+        for records in records_by_scene.values():
+            for r in records:
+                out.setdefault((r.question_type, r.sub_question_type), []).append(r)
+        return out
+
+    subs_ref, subs_new = by_sub(reference), by_sub(new)
+    reports = [blind_audit(x) for x in (reference, new)]
+    audits = [{(row.question_type, row.sub_question_type): row for row in report.rows} for report in reports]
+    bad_ref, bad_new = _rederive(reference, rooms), _rederive(new, rooms)
+    print(f"\nequivalence over {len(rooms)} rooms (--same-as vs this checkout): re-derivation disagreements {bad_ref} / {bad_new}; "
+          "blind excess = best text-only predictor over chance, leave one scene out (points)")
+    print(f"{'question_type/sub_question_type':<58}{'records':>13}{'top answer':>22}{'blind excess':>16}")
+    for key in sorted(set(subs_ref) | set(subs_new)):
+        a, b = subs_ref.get(key, []), subs_new.get(key, [])
+        ex = [getattr(audit.get(key), "excess", None) for audit in audits]
+        excess = " / ".join("" if e is None else f"{e:+.1f}" for e in ex) if any(e is not None for e in ex) else ""
+        print(f"{'/'.join(key):<58}{f'{len(a)} / {len(b)}':>13}{f'{_top_share(a)} / {_top_share(b)}' if a and _top_share(a) else '':>22}{excess:>16}")
+    overall = [report.overall.get("excess") for report in reports]
+    print(f"{'ALL (MCQ+YN+COUNT)':<58}{f'{sum(map(len, subs_ref.values()))} / {sum(map(len, subs_new.values()))}':>13}{'':>22}"
+          f"{' / '.join('' if e is None else f'{e:+.1f}' for e in overall):>16}")
+
+
 def _profile(room: Path, top: int, mode: str = "bench") -> None:
     """The new code's generation of ``room`` under cProfile: top functions by own time."""
     from spacedg.qa.build import generate_records, prepare_scene
@@ -159,16 +234,22 @@ def main() -> None:
         f"rooms of seed {args.other_seed}": _rooms(args.work, args.other_seed, args.n, HERE),
     }
     totals = [0.0, 0.0]
+    pairs: list[tuple[dict, dict]] = []
     for i, (label, rooms) in enumerate(groups.items()):
         base = _build(args.base, rooms, args.work / f"base{i}", args.mode)
         new = _build(HERE, rooms, args.work / f"new{i}", args.mode)
         if args.same_as is not None:
             same = _build(args.same_as, rooms, args.work / f"same{i}", args.mode)
             _compare(f"{label}: --same-as {args.same_as} (reference of the identity) vs this checkout", same, new)
+            if any(same[scene][3] != new[scene][3] for scene in new):
+                pairs.append((_index_records(args.work / f"same{i}", rooms, args.mode), _index_records(args.work / f"new{i}", rooms, args.mode)))
         tb, tn, _ = _compare(f"{label}: --base {args.base} vs this checkout", base, new, same if args.same_as else None)
         totals[0] += tb
         totals[1] += tn
     print(f"\ngeneration CPU, every room: base {totals[0]:.1f} s, new {totals[1]:.1f} s: {totals[0] / totals[1]:.1f}x faster")
+    if pairs:
+        all_rooms = [room for rooms in groups.values() for room in rooms]
+        _equivalence({k: v for ref, _ in pairs for k, v in ref.items()}, {k: v for _, new in pairs for k, v in new.items()}, all_rooms)
     if not args.no_profile:
         _profile(next(iter(groups.values()))[0], args.top, args.mode)
 
