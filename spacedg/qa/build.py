@@ -126,50 +126,56 @@ class _ScanDone(BaseException):
 class _PoolScan:
     """The pool's rules for one family (see :func:`_pool`), asked about candidates already made
     (:meth:`take`) and, through :func:`~spacedg.plugins.candidates.gated`, about candidates
-    before a family makes them (:meth:`gate`)."""
+    before a family makes them (:meth:`gate`). A candidate is refused when its subject already
+    has :data:`ALTERNATES` records, when it is a new subject and its sub type has ``want``
+    subjects (the scan ends when every sub type has them), and when an object it names has a
+    twin in one of its images (counted in ``twins``: the cheap subject rules are applied first,
+    so a twin is counted only where it costs the pool a candidate)."""
 
     def __init__(self, family: Any, config: QABuildConfig, index: TwinCheck, twins: Counter[str]) -> None:
         self.family, self.index, self.twins = family, index, twins
         self.max_scan = config.max_scan
         self.want = quota(config.per_sub_type, config.mode) * config.pool_factor
         self.scanned = 0
-        self.distinct: dict[str, Counter[str]] = {}  # sub type → pooled records per subject
+        self.distinct: dict[str, dict[str, int]] = {}  # sub type → pooled records per subject
 
     def _wanted(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:
-        """Whether the pool takes the candidate; counts a twin; raises :class:`_ScanDone` when a new
-        subject arrives and every sub type has ``want`` subjects."""
-        if self.index.has_twin_ids(views, named):
+        """Whether the pool takes the candidate (class docstring); raises :class:`_ScanDone` when a
+        new subject arrives and every sub type has ``want`` subjects."""
+        seen = self.distinct.get(sub)
+        if seen is None:
+            seen = self.distinct[sub] = {}
+        pooled = seen.get(subject, 0)
+        if pooled >= ALTERNATES:
+            return False  # a subject already pooled (another view of the same question)
+        if not pooled and len(seen) >= self.want:
+            if all(len(self.distinct.get(s, ())) >= self.want for s in self.family.sub_question_types):
+                raise _ScanDone
+            return False
+        if named and self.index.has_twin_ids(views, named):
             self.twins[self.family.name] += 1
             return False
-        seen = self.distinct.setdefault(sub, Counter())
-        if seen[subject] >= ALTERNATES:
-            return False  # a subject already pooled (another view of the same question)
-        if subject in seen or len(seen) < self.want:
-            return True
-        if all(len(self.distinct.get(s, ())) >= self.want for s in self.family.sub_question_types):
-            raise _ScanDone
-        return False
-
-    def _count(self) -> None:
-        if self.scanned >= self.max_scan:
-            raise _ScanDone
-        self.scanned += 1
+        return True
 
     def gate(self, sub: str, views: tuple[str, ...], subject: str, named: tuple[int, ...]) -> bool:
         """A candidate before it is made: a refused one counts as scanned; an admitted one is
         counted when it is yielded (:meth:`take`)."""
-        self._count()
+        if self.scanned >= self.max_scan:
+            raise _ScanDone
         if self._wanted(sub, views, subject, named):
-            self.scanned -= 1
             return True
+        self.scanned += 1
         return False
 
     def take(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:
         """A candidate the family yielded: counted as scanned; whether the pool keeps it (and then noted)."""
-        self._count()
+        if self.scanned >= self.max_scan:
+            raise _ScanDone
+        self.scanned += 1
         if not self._wanted(sub, views, subject, named):
             return False
-        self.distinct[sub][subject] += 1
+        seen = self.distinct[sub]
+        seen[subject] = seen.get(subject, 0) + 1
         return True
 
 

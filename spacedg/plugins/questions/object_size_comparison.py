@@ -423,11 +423,16 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     if not size:
         return
     views = (pair.a, pair.b)
+    apart = index_memo(index, "size_distinguishable")  # (id 1, id 2) → _distinguishable (a pair recurs in many view pairs)
     for k in rng.permutation(size):
         rest, s = divmod(int(k), len(SUB_QUESTION_TYPES))
         i, j = divmod(rest, len(twos))
         one, two, sub = ones[i], twos[j], SUB_QUESTION_TYPES[s]
-        if not _distinguishable(one, two):
+        key = (one.id, two.id)
+        distinct = apart.get(key)
+        if distinct is None:
+            distinct = apart[key] = _distinguishable(one, two)
+        if not distinct:
             continue
         if not admitted(sub, views, _subject(one, two, sub), (one.id, two.id)):
             continue  # the caller passes it over: no verdict, no draws

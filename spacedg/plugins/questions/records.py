@@ -45,6 +45,7 @@ cell (one record of every role), so within a scene no function of the cell beats
 
 from __future__ import annotations
 
+import functools
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import Any, TypeVar
@@ -114,14 +115,36 @@ PairStream = Callable[[Scene, VisibilityIndex, ViewPair, PairRules, np.random.Ge
 
 
 # ------------------------------------------------------------ randomness and order
-def child_rngs(rng: np.random.Generator, n: int) -> list[np.random.Generator]:
-    """``n`` independent generators seeded from ``rng`` (one draw of ``n`` integers in [0, 2**63 − 1)).
+class ChildGenerators(Sequence[np.random.Generator]):
+    """:func:`child_rngs`' result: a read-only sequence of generators, each made from its seed the
+    first time it is read (and the same object on every later read), so a family that skips most
+    of its candidates never pays for their generators."""
+
+    def __init__(self, seeds: np.ndarray) -> None:
+        self._seeds = seeds
+        self._made: dict[int, np.random.Generator] = {}
+
+    def __len__(self) -> int:
+        return len(self._seeds)
+
+    def __getitem__(self, i):  # type: ignore[override]
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(len(self)))]
+        k = range(len(self))[i]  # IndexError and negative indices as a list
+        made = self._made.get(k)
+        if made is None:
+            made = self._made[k] = np.random.default_rng(int(self._seeds[k]))
+        return made
+
+
+def child_rngs(rng: np.random.Generator, n: int) -> ChildGenerators:
+    """``n`` independent generators seeded from ``rng`` (one draw of ``n`` integers in [0, 2**63 − 1)),
+    as a sequence that makes each generator when it is first read (:class:`ChildGenerators`).
 
     A family that needs a grid of children (pair × sub type) takes ``n = rows × cols`` and
     indexes ``row * cols + col``: the seeds are drawn in that (row-major) order.
     """
-    seeds = rng.integers(0, 2**63 - 1, size=n, dtype=np.int64)
-    return [np.random.default_rng(int(s)) for s in seeds]
+    return ChildGenerators(rng.integers(0, 2**63 - 1, size=n, dtype=np.int64))
 
 
 def round_robin(streams: Iterable[Iterator[T]]) -> Iterator[T]:
@@ -252,12 +275,13 @@ def phrase(inst: Instance) -> str:
 
 def phrase_key(inst: Instance) -> str:
     """The object's question phrase, lower case, whitespace collapsed (to test that names differ);
-    computed once per instance (candidates compare the same objects' names thousands of times)."""
-    return _entry_of("phrase_key", inst, _phrase_key)
+    computed once per (label, description): candidates compare the same objects' names thousands of times."""
+    return _phrase_key(inst.label, inst.description)
 
 
-def _phrase_key(inst: Instance) -> str:
-    return " ".join(phrase(inst).lower().split())
+@functools.lru_cache(maxsize=65_536)
+def _phrase_key(label: str, description: str) -> str:
+    return " ".join(object_phrase(label, description).lower().split())
 
 
 # ------------------------------------------------------------ geometry-block entries
