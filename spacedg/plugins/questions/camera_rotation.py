@@ -75,7 +75,7 @@ answer uses), ``attitude_a`` / ``attitude_b`` (``elevation_deg``, ``bank_deg``),
 from __future__ import annotations
 
 import functools
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -221,17 +221,19 @@ class _Turn(NamedTuple):
         return f"{t[0]}+{t[1]}_single" if c.mode == "single" else f"{c.ax1}+{c.ax2}_dual"
 
 
-def _turn(scene: Scene, pair: ViewPair) -> _Turn | None:
-    """The rotation of ``pair`` as a question, or ``None`` when it is not asked (no draws)."""
+def _turn(scene: Scene, pair: ViewPair, attitude: Callable[[str], tuple[np.ndarray, float, float]]) -> _Turn | None:
+    """The rotation of ``pair`` as a question, or ``None`` when it is not asked (no draws);
+    ``attitude(view)`` is that camera's :func:`camera_attitude`."""
     cam_a, cam_b = scene.views[pair.a], scene.views[pair.b]
     r_rel = relative_rotation(cam_a, cam_b)
     if not np.all(np.isfinite(r_rel)):
         return None
     up = np.asarray(scene.up, dtype=np.float64)
-    (_, elev_a, bank_a), (_, elev_b, bank_b) = camera_attitude(cam_a.cam_to_world, up), camera_attitude(cam_b.cam_to_world, up)
+    att_a, att_b = attitude(pair.a), attitude(pair.b)
+    (_, elev_a, bank_a), (_, elev_b, bank_b) = att_a, att_b
     if max(abs(elev_a), abs(elev_b)) > MAX_ABS_PITCH_DEG:
         return None
-    yaw, pitch, roll = (round(v, ANGLE_DECIMALS) + 0.0 for v in gravity_rotation(cam_a, cam_b, up))
+    yaw, pitch, roll = (round(v, ANGLE_DECIMALS) + 0.0 for v in gravity_rotation(cam_a, cam_b, up, (att_a, att_b)))
     case = classify_rotation(yaw, pitch, roll)
     if isinstance(case, str):
         return None
@@ -291,8 +293,10 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = ROTATION
     pairs = sample_pairs(scene, rules, rng)
     deck_rngs = child_rngs(rng, len(MODES))
     decks = {mode: BalancedDeck(r) for mode, r in zip(MODES, deck_rngs)}  # correct letter per mode, balanced
+    up = np.asarray(scene.up, dtype=np.float64)
+    attitude = functools.lru_cache(maxsize=None)(lambda view: camera_attitude(scene.views[view].cam_to_world, up))  # once per view
     for pair, child in zip(pairs, child_rngs(rng, len(pairs))):
-        turn = _turn(scene, pair)
+        turn = _turn(scene, pair, attitude)
         if turn is None:
             continue
         views, subject = (pair.a, pair.b), _subject(pair)

@@ -180,7 +180,10 @@ def _wrap180(angle: float) -> float:
     return 180.0 if a == -180.0 else a
 
 
-def gravity_rotation(cam_a: Camera, cam_b: Camera, up: np.ndarray) -> tuple[float, float, float]:
+def gravity_rotation(
+    cam_a: Camera, cam_b: Camera, up: np.ndarray,
+    attitudes: tuple[tuple[np.ndarray, float, float], tuple[np.ndarray, float, float]] | None = None,
+) -> tuple[float, float, float]:
     """``(yaw, pitch, roll)`` degrees of the camera motion from A to B **as a person perceives it**
     (gravity-aware reading; :func:`camera_attitude` of each camera):
 
@@ -193,10 +196,12 @@ def gravity_rotation(cam_a: Camera, cam_b: Camera, up: np.ndarray) -> tuple[floa
     Euler angles of ``R_a^T R_b`` (:func:`euler_yaw_pitch_roll`) also show a few degrees of
     "roll" and "tilt" nobody perceives. For a level camera A both readings agree exactly.
     Heading and bank are ill-defined for a camera looking (nearly) straight up or down:
-    callers skip large elevations.
+    callers skip large elevations. ``attitudes``: both cameras' :func:`camera_attitude` when the
+    caller has them already (the same numbers).
     """
-    fa, ea, ba = camera_attitude(cam_a.cam_to_world, up)
-    fb, eb, bb = camera_attitude(cam_b.cam_to_world, up)
+    if attitudes is None:
+        attitudes = camera_attitude(cam_a.cam_to_world, up), camera_attitude(cam_b.cam_to_world, up)
+    (fa, ea, ba), (fb, eb, bb) = attitudes
     yaw = 0.0 if not (fa.any() and fb.any()) else _wrap180(ground_angle(fa, fb, up))
     return yaw, eb - ea, _wrap180(bb - ba)
 
