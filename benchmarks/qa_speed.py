@@ -197,13 +197,49 @@ def _equivalence(reference: dict[str, list], new: dict[str, list], rooms: list[P
           f"{' / '.join('' if e is None else f'{e:+.1f}' for e in overall):>16}")
 
 
+def _family_split(scene, mode: str) -> None:
+    """The new code's generation of one prepared scene, per family: candidates pooled, records
+    kept and CPU seconds (pooling, selection and building together)."""
+    import spacedg.qa.build as build
+    from spacedg.qa.index import QABuildConfig
+
+    plain_pool, plain_family = build._pool, build._family_records
+    rows: dict[str, list] = {}
+
+    def pool(family, *args, **kwargs):
+        pooled = plain_pool(family, *args, **kwargs)
+        rows.setdefault(family.name, [0, 0, 0.0])[0] = len(pooled)
+        return pooled
+
+    def family_records(family, *args, **kwargs):
+        t = time.process_time()
+        records = plain_family(family, *args, **kwargs)
+        row = rows.setdefault(family.name, [0, 0, 0.0])
+        row[1], row[2] = len(records), time.process_time() - t
+        return records
+
+    build._pool, build._family_records = pool, family_records
+    try:
+        t = time.process_time()
+        build.generate_records(scene, QABuildConfig(mode=mode))
+        total = time.process_time() - t
+    finally:
+        build._pool, build._family_records = plain_pool, plain_family
+    print(f"\ngeneration of {scene.id} per family (CPU s, no profiler; pooled = candidates the selection reads)")
+    print(f"{'family':<36}{'pooled':>8}{'kept':>6}{'CPU s':>8}{'share':>7}")
+    for name, (pooled, kept, spent) in sorted(rows.items(), key=lambda kv: -kv[1][2]):
+        print(f"{name:<36}{pooled:>8}{kept:>6}{spent:>8.3f}{100 * spent / total:>6.0f}%")
+    print(f"{'all (with the pass over families)':<36}{sum(r[0] for r in rows.values()):>8}{sum(r[1] for r in rows.values()):>6}{total:>8.3f}")
+
+
 def _profile(room: Path, top: int, mode: str = "bench") -> None:
-    """The new code's generation of ``room`` under cProfile: top functions by own time."""
+    """The new code's generation of ``room``: per family (:func:`_family_split`), then under cProfile: top functions by own time."""
     from spacedg.qa.build import generate_records, prepare_scene
     from spacedg.qa.index import QABuildConfig
     from spacedg.scene.io import load_scene
 
     scene = prepare_scene(load_scene(room), room / "cache", QABuildConfig(mode=mode), progress=False)
+    _family_split(scene, mode)
     profile = cProfile.Profile()
     t0 = time.perf_counter()
     profile.enable()
