@@ -149,6 +149,7 @@ from spacedg.plugins.questions.geometry import (
 )
 from spacedg.plugins.questions.language import find_in_image, label_text
 from spacedg.plugins.questions.records import (
+    index_memo,
     label_features,
     make_record,
     objects_block,
@@ -412,31 +413,47 @@ def _intersects(cache: dict[tuple[int, int], bool], p: Instance, q: Instance) ->
     return cache[key]
 
 
+def _relpos_shape(
+    index: VisibilityIndex, ids: Sequence[int], up: np.ndarray, intersecting: dict[tuple[int, int], bool],
+) -> tuple[list[Instance], list[str], tuple[dict[str, Any], dict[str, Any]], float, SectorHit] | None:
+    """What a relative-position question about the triplet ``ids`` (A, B, C) is, whatever its
+    views: the objects, their names, the legs A → B and A → C, the angle of C from A facing B
+    and its sector; ``None`` when it is not asked (names that coincide, boxes that overlap, a
+    leg too short or too steep). Computed once per triplet (it recurs in many view pairs)."""
+    objs = [index.instance(i) for i in ids]
+    names = _relpos_names(objs)
+    if names is None:
+        return None
+    if any(_intersects(intersecting, p, q) for p, q in itertools.combinations(objs, 2)):
+        return None
+    ca, cb, cc = (o.box.center for o in objs)
+    ab, ac = cb - ca, cc - ca
+    leg_ab, leg_ac = ground_leg(ab, up), ground_leg(ac, up)
+    if leg_ab is None or leg_ac is None:
+        return None
+    angle = ground_angle(np.asarray(leg_ab["horizontal"]), ac, up)
+    return objs, names, (leg_ab, leg_ac), angle, RELPOS_SECTORS.classify(angle)
+
+
 def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
     ref_view, triplets = _relpos_candidates(index, pair)
-    intersecting: dict[tuple[int, int], bool] = {}
+    intersecting: dict[tuple[int, int], bool] = index_memo(index, "relpos_overlaps")
+    shapes = index_memo(index, "relpos_shapes")  # triplet → (objects, names, legs, angle, sector) or None: no view enters it
     for ids in seeded_order(triplets, rng):
         if not split_across_views(index, pair.a, pair.b, ids):
             continue  # the authoritative three-object rule (the prefilter already applied it)
         if not admitted(RELPOS, views, _relpos_subject(ids), tuple(ids)):
             continue  # the caller passes it over: no geometry, no draws
-        objs = [index.instance(i) for i in ids]
-        names = _relpos_names(objs)
-        if names is None:
+        key = tuple(ids)
+        if key not in shapes:
+            shapes[key] = _relpos_shape(index, ids, up, intersecting)
+        shape = shapes[key]
+        if shape is None:
             continue
-        if any(_intersects(intersecting, p, q) for p, q in itertools.combinations(objs, 2)):
-            continue
+        objs, names, (leg_ab, leg_ac), angle, hit = shape
         ref_views = [ref_view[i] for i in ids]
-        ca, cb, cc = (o.box.center for o in objs)
-        ab, ac = cb - ca, cc - ca
-        leg_ab, leg_ac = ground_leg(ab, up), ground_leg(ac, up)
-        if leg_ab is None or leg_ac is None:
-            continue
-        forward, ab_h = np.asarray(leg_ab["horizontal"]), leg_ab["horizontal_m"]
-        angle = ground_angle(forward, ac, up)
-        hit = RELPOS_SECTORS.classify(angle)
         truth = RELPOS_SECTORS.labels[hit.index]
         drawn = build_mcq(truth, RELPOS_SECTORS.distractors(hit, rng), rng)
         yield offer(
