@@ -13,14 +13,16 @@ random draw a candidate needs is made **before** it is yielded (the closure draw
 the order of draws, and the records, are the same whichever way the stream is read. Outside
 the block :func:`offer` builds the record at once: the family yields records as always.
 
-A caller that pools candidates may also refuse one **before** the family computes it:
+A caller that pools candidates may also refuse one **before** the family draws for it:
 inside :func:`gated`, a family asks :func:`admitted` with the candidate's sub type, views,
-subject and named ids as soon as it knows them, and skips the candidate (its geometry and its
-random draws) when the caller does not want it (a subject that already has its alternates, or
-a twin in one of its images). Outside :func:`gated`, :func:`admitted` is always true, so a
-family's ``generate`` yields what it always yielded; inside, the draws of refused candidates are
-never made, so the streams draw differently from an ungated run (each draw is still a fresh
-uniform draw, so the candidates' questions follow the same distribution).
+subject and named ids once the checks that draw nothing have passed, and when the caller does
+not want it (a subject that already has its alternates, or a twin in one of its images) yields
+:data:`PASSED_OVER` instead of the candidate and makes none of its draws. The marker keeps the
+caller's count and a round-robin's turns as they were (one item per valid candidate), so only
+the draws differ. Outside :func:`gated`, :func:`admitted` is always true, so a family's
+``generate`` yields what it always yielded; inside, the draws of refused candidates are never
+made, so the streams draw differently from an ungated run (each draw is still a fresh uniform
+draw, so the candidates' questions follow the same distribution).
 
 A :class:`Candidate`'s fields equal what its built record says: ``sub_question_type`` and
 ``views`` the record's, ``subject`` its ``geometry["selection"]["subject"]``, ``selection()`` its
@@ -36,10 +38,23 @@ from typing import Any, NamedTuple
 
 from spacedg.plugins.qa_record import QARecord
 
-__all__ = ["Candidate", "ScanGate", "admitted", "gated", "light_candidates", "offer"]
+__all__ = ["PASSED_OVER", "Candidate", "ScanGate", "admitted", "gate_active", "gated", "light_candidates", "offer"]
 
 #: True inside :func:`light_candidates`: :func:`offer` hands out :class:`Candidate` objects.
 _LIGHT: contextvars.ContextVar[bool] = contextvars.ContextVar("spacedg_light_candidates", default=False)
+
+class _PassedOver:
+    """The type of :data:`PASSED_OVER`."""
+
+    __slots__ = ()
+
+    def __repr__(self) -> str:
+        return "PASSED_OVER"
+
+
+#: What a family yields, inside :func:`gated`, for a valid candidate :func:`admitted` refused
+#: (never outside it): the caller counts it as examined; it is no question.
+PASSED_OVER = _PassedOver()
 
 #: ``gate(sub_question_type, views, subject, named) -> bool``: whether the caller wants a candidate
 #: (it may also raise to end the caller's scan); see :func:`gated`.
@@ -87,10 +102,16 @@ def gated(gate: ScanGate) -> Iterator[None]:
         _GATE.reset(token)
 
 
+def gate_active() -> bool:
+    """Whether a :func:`gated` caller is listening (only then may a family yield :data:`PASSED_OVER`)."""
+    return _GATE.get() is not None
+
+
 def admitted(sub_question_type: str, views: tuple[str, ...], subject: str, named: tuple[int, ...]) -> bool:
     """Whether the candidate (sub type, views, subject, named ids, as it would be offered) is
     wanted: the :func:`gated` caller's answer, always ``True`` outside :func:`gated`. A family
-    asks before computing the candidate's geometry or drawing for it, and skips it when refused."""
+    asks once the checks that draw nothing have passed and before any draw for the candidate;
+    when refused it yields :data:`PASSED_OVER` and moves on (module docstring)."""
     gate = _GATE.get()
     return gate is None or gate(sub_question_type, views, subject, named)
 

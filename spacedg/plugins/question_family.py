@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from spacedg.errors import InvalidDataError, ParameterError, PluginError
-from spacedg.plugins.candidates import Candidate
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, gate_active
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import SUB_TYPE_PATTERN, AnswerType, TaskGroup, _check_name, _enum
 
@@ -227,7 +227,7 @@ class _CheckedGenerator:
     def _records(self, scene: Scene, rng: np.random.Generator) -> Iterator[QARecord]:
         family = self.family
         for record in self.__wrapped__(scene, rng):
-            if type(record) is Candidate:  # inside light_candidates: checked once built (spacedg.qa.build)
+            if type(record) is Candidate or (record is PASSED_OVER and gate_active()):  # checked once built (spacedg.qa.build)
                 yield record
                 continue
             if not isinstance(record, QARecord):

@@ -42,7 +42,7 @@ import numpy as np
 
 from spacedg.errors import SpaceDGError
 from spacedg.plugins.guard import plugin_call
-from spacedg.plugins.candidates import Candidate, gated, light_candidates
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, gated, light_candidates
 from spacedg.plugins.qa_record import QARecord, deferred_geometry
 from spacedg.qa.deal import deal_distractors, deal_letters
 from spacedg.qa.index import (
@@ -125,12 +125,14 @@ class _ScanDone(BaseException):
 
 class _PoolScan:
     """The pool's rules for one family (see :func:`_pool`), asked about candidates already made
-    (:meth:`take`) and, through :func:`~spacedg.plugins.candidates.gated`, about candidates
-    before a family makes them (:meth:`gate`). A candidate is refused when its subject already
-    has :data:`ALTERNATES` records, when it is a new subject and its sub type has ``want``
-    subjects (the scan ends when every sub type has them), and when an object it names has a
-    twin in one of its images (counted in ``twins``: the cheap subject rules are applied first,
-    so a twin is counted only where it costs the pool a candidate)."""
+    (:meth:`take`) and, through :func:`~spacedg.plugins.candidates.gated`, about valid
+    candidates before a family draws for them (:meth:`gate`; a refused one comes back as
+    :data:`~spacedg.plugins.candidates.PASSED_OVER` and is counted then, :meth:`passed_over`).
+    A candidate is refused when its subject already has :data:`ALTERNATES` records, when it is a
+    new subject and its sub type has ``want`` subjects (the scan ends at a new subject, not a
+    twin, once every sub type has them), and when an object it names has a twin in one of its
+    images (counted in ``twins``, except for a subject that already has its alternates: that
+    rule comes first, as it is the one most candidates meet)."""
 
     def __init__(self, family: Any, config: QABuildConfig, index: TwinCheck, twins: Counter[str]) -> None:
         self.family, self.index, self.twins = family, index, twins
@@ -148,30 +150,32 @@ class _PoolScan:
         pooled = seen.get(subject, 0)
         if pooled >= ALTERNATES:
             return False  # a subject already pooled (another view of the same question)
+        twin = bool(named) and self.index.has_twin_ids(views, named)
+        if twin:
+            self.twins[self.family.name] += 1
+            return False
         if not pooled and len(seen) >= self.want:
             if all(len(self.distinct.get(s, ())) >= self.want for s in self.family.sub_question_types):
                 raise _ScanDone
             return False
-        if named and self.index.has_twin_ids(views, named):
-            self.twins[self.family.name] += 1
-            return False
         return True
 
     def gate(self, sub: str, views: tuple[str, ...], subject: str, named: tuple[int, ...]) -> bool:
-        """A candidate before it is made: a refused one counts as scanned; an admitted one is
-        counted when it is yielded (:meth:`take`)."""
+        """Whether a valid candidate is wanted, before the family draws for it (counted when the
+        family yields it or, refused, :data:`~spacedg.plugins.candidates.PASSED_OVER`)."""
         if self.scanned >= self.max_scan:
             raise _ScanDone
-        if self._wanted(sub, views, subject, named):
-            return True
+        return self._wanted(sub, views, subject, named)
+
+    def passed_over(self) -> None:
+        """A candidate :meth:`gate` refused: counted as scanned."""
+        if self.scanned >= self.max_scan:
+            raise _ScanDone
         self.scanned += 1
-        return False
 
     def take(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:
         """A candidate the family yielded: counted as scanned; whether the pool keeps it (and then noted)."""
-        if self.scanned >= self.max_scan:
-            raise _ScanDone
-        self.scanned += 1
+        self.passed_over()
         if not self._wanted(sub, views, subject, named):
             return False
         seen = self.distinct[sub]
@@ -187,8 +191,9 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
     left out and counted in ``twins`` per family. The family runs inside
     :func:`~spacedg.plugins.candidates.light_candidates` and :func:`~spacedg.plugins.candidates.gated`:
     the built-in families ask the pool (:func:`~spacedg.plugins.candidates.admitted`) before they
-    compute a candidate's geometry or draw for it, so a candidate the pool would pass over costs
-    only its subject (a refused candidate counts as scanned), and yield
+    draw for a valid candidate, and yield :data:`~spacedg.plugins.candidates.PASSED_OVER` for one
+    it refuses (counted as scanned, in its stream's turn, as the candidate itself was before), so
+    a candidate the pool would pass over costs its checks but none of its draws or its record; they yield
     :class:`~spacedg.plugins.candidates.Candidate` objects, pooled as :class:`~spacedg.qa.pooled.Pooled`
     (their selection entry only), so a record is built only for the candidates the selection takes;
     records a family yields as such (third-party families) are made inside
@@ -200,7 +205,9 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
     with plugin_call("question family", family, "generate"), deferred_geometry(), light_candidates(), gated(scan.gate):
         try:
             for item in family.generate(scene, rng):
-                if type(item) is Candidate:
+                if item is PASSED_OVER:
+                    scan.passed_over()
+                elif type(item) is Candidate:
                     if scan.take(item.sub_question_type, item.views, item.subject, item.named):
                         pooled.append(Pooled(item, family, scene.id))  # type: ignore[arg-type]
                 elif scan.take(item.sub_question_type, item.views, _subject(item), named_ids(item)):

@@ -80,7 +80,7 @@ def test_pooled_refuses_a_record_whose_selection_differs_from_its_offer() -> Non
 def test_a_gate_is_asked_with_what_is_then_offered(room_scene, family) -> None:
     """Every candidate a family yields was admitted just before with its own sub type, views,
     subject and named ids (so the pool's rules read the same fields either way), and a gate that
-    admits everything changes no draw: the same candidates as without one."""
+    admits everything changes no draw: the same candidates, building the same records."""
     from spacedg.plugins.candidates import gated
 
     asked: list[tuple] = []
@@ -102,34 +102,61 @@ def test_a_gate_is_asked_with_what_is_then_offered(room_scene, family) -> None:
             assert item.to_dict() == same.to_dict()
             continue
         assert item[:4] == same[:4] and item.selection() == same.selection()
+        assert item.build().to_dict() == same.build().to_dict()
         assert question == (item.sub_question_type, tuple(item.views), item.subject, tuple(item.named))
+
+
+#: The modules whose ``build_mcq`` a family's per-candidate option draws go through.
+_MCQ_MODULES = (
+    "geometry", "compass_cache", "camera_object_relative_direction", "camera_rotation", "camera_translation", "object_size_comparison",
+)
 
 
 @pytest.mark.parametrize("family", [f for f in selected_families(None) if f.name in {
     "cross_view_cardinal_direction", "object_size_comparison", "camera_object_relative_direction", "object_proxy_cardinal_direction",
+    "camera_rotation", "camera_translation",
 }], ids=lambda f: f.name)
-def test_refused_candidates_are_never_yielded_or_drawn_for(room_scene, family) -> None:
-    """A gate that refuses every other subject: no refused subject is yielded, and what is
-    yielded is built exactly (draws made only for the admitted)."""
-    from spacedg.plugins.candidates import gated
+def test_refused_candidates_are_passed_over_without_draws(room_scene, family, monkeypatch) -> None:
+    """A gate refusing every other subject: a refused subject is never offered, only
+    :data:`PASSED_OVER` stands in for it; what is offered builds exactly; and under a gate that
+    refuses everything no option is drawn (``build_mcq`` is never called), while one that admits
+    everything draws them."""
+    import importlib
 
+    from spacedg.plugins.candidates import PASSED_OVER, gated
+
+    calls = [0]
+    for name in _MCQ_MODULES:
+        module = importlib.import_module(f"spacedg.plugins.questions.{name}")
+        plain_mcq = module.build_mcq
+
+        def counted(*args, _plain=plain_mcq, **kwargs):
+            calls[0] += 1
+            return _plain(*args, **kwargs)
+
+        monkeypatch.setattr(module, "build_mcq", counted)
     refused: set[str] = set()
 
     def every_other(sub, views, subject, named) -> bool:
-        if subject in refused:
-            return False
-        if zlib.crc32(subject.encode()) % 2:
+        if subject in refused or zlib.crc32(subject.encode()) % 2:
             refused.add(subject)
             return False
         return True
 
     with light_candidates(), gated(every_other):
         items = list(itertools.islice(family.generate(room_scene, np.random.default_rng(5)), FIRST))
-    assert items and refused
-    for item in items:
+    offered = [item for item in items if item is not PASSED_OVER]
+    assert offered and refused and len(offered) < len(items)
+    for item in offered:
         assert item.subject not in refused
         record = item.build()
         assert item.selection() == record.geometry["selection"] and item.subject == record.geometry["selection"]["subject"]
+    calls[0] = 0
+    with light_candidates(), gated(lambda *args: False):
+        items = list(itertools.islice(family.generate(room_scene, np.random.default_rng(5)), FIRST))
+    assert items and all(item is PASSED_OVER for item in items) and calls[0] == 0
+    with light_candidates(), gated(lambda *args: True):
+        assert list(itertools.islice(family.generate(room_scene, np.random.default_rng(5)), 20)) and calls[0] > 0
 
 
 def test_admitted_is_true_outside_a_gate() -> None:
@@ -152,23 +179,24 @@ class _GatedFamily:
         self.subjects, self.repeats, self.asked, self.drawn = subjects, repeats, 0, 0
 
     def generate(self, scene, rng):
-        from spacedg.plugins.candidates import admitted, offer
+        from spacedg.plugins.candidates import PASSED_OVER, admitted, offer
 
         for r in range(self.repeats):
             for k in range(self.subjects):
                 subject, views = f"s{k}", (f"v{r}",)
                 self.asked += 1
-                if not admitted("only", views, subject, (k,)):
+                if not admitted(self.sub_question_types[k % len(self.sub_question_types)], views, subject, (k,)):
+                    yield PASSED_OVER
                     continue
                 self.drawn += 1
                 rng.random()
-                yield offer("only", views, subject, (k,), lambda s=subject: {"subject": s}, lambda: None)
+                yield offer(self.sub_question_types[k % len(self.sub_question_types)], views, subject, (k,), lambda s=subject: {"subject": s}, lambda: None)
 
     def check_record(self, record, scene_id=None) -> None:
         pass
 
 
-class _NoTwins:
+class _TwinOf3:
     def has_twin_ids(self, views, ids) -> bool:
         return 3 in ids  # object 3 always has a twin
 
@@ -186,15 +214,15 @@ def test_the_pool_gate_applies_the_pool_rules_before_a_candidate_is_made() -> No
     scene = SimpleNamespace(id="demo")
     family = _GatedFamily(subjects=6, repeats=ALTERNATES + 3)
     twins: Counter[str] = Counter()
-    pooled = _pool(family, scene, QABuildConfig(per_sub_type=1, pool_factor=10, max_scan=10_000), _NoTwins(), twins)  # want 10
+    pooled = _pool(family, scene, QABuildConfig(per_sub_type=1, pool_factor=10, max_scan=10_000), _TwinOf3(), twins)  # want 10
     per_subject = Counter(p.candidate.subject for p in pooled)
     assert set(per_subject) == {"s0", "s1", "s2", "s4", "s5"}  # s3 names a twin
     assert all(n == ALTERNATES for n in per_subject.values())
     assert family.drawn == len(pooled)  # nothing drawn for a refused candidate
     assert twins["gated_demo"] == ALTERNATES + 3  # every offer of s3
     full = _GatedFamily(subjects=6, repeats=ALTERNATES + 3)
-    pooled = _pool(full, scene, QABuildConfig(per_sub_type=1, pool_factor=4, max_scan=10_000), _NoTwins(), Counter())  # want 4
+    pooled = _pool(full, scene, QABuildConfig(per_sub_type=1, pool_factor=4, max_scan=10_000), _TwinOf3(), Counter())  # want 4
     assert [p.candidate.subject for p in pooled] == ["s0", "s1", "s2", "s4"] and full.asked == 6  # a fifth subject ends the scan
     small = _GatedFamily(subjects=6, repeats=ALTERNATES + 3)
-    pooled = _pool(small, scene, QABuildConfig(per_sub_type=1, pool_factor=10, max_scan=10), _NoTwins(), Counter())
+    pooled = _pool(small, scene, QABuildConfig(per_sub_type=1, pool_factor=10, max_scan=10), _TwinOf3(), Counter())
     assert small.asked == 11 and len(pooled) == 8  # ten scanned, two of them refused (s3 twice), then the scan ends

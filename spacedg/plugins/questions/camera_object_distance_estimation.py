@@ -59,7 +59,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.candidates import admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -135,11 +135,14 @@ def _record(
 def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np.random.Generator) -> Iterator[QARecord]:
     for iid in seeded_order(index.visible[view], rng):
         inst = index.instance(iid)
-        subject = f"view:{view}|object:{inst.id}"
-        if not referable(index, view, iid) or not admitted(SINGLE_VIEW, (view,), subject, (inst.id,)):
-            continue  # not nameable, or the caller passes it over
+        if not referable(index, view, iid):
+            continue
         distance = _distance(scene, view, inst)
         if distance is None:
+            continue
+        subject = f"view:{view}|object:{inst.id}"
+        if not admitted(SINGLE_VIEW, (view,), subject, (inst.id,)):
+            yield PASSED_OVER  # the caller passes it over: no draws
             continue
         template = int(rng.integers(len(TEMPLATES)))
         yield offer(
@@ -158,11 +161,14 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     both = sorted(set(index.visible[pair.a]) & set(index.visible[pair.b]))
     for iid in seeded_order(both, rng):
         inst = index.instance(iid)
-        subject = f"view:{pair.b}|object:{inst.id}"
-        if not (referable(index, pair.a, iid) and referable(index, pair.b, iid)) or not admitted(BBOX_CENTER_DISTANCE, (pair.a, pair.b), subject, (inst.id,)):
-            continue  # not nameable, or the caller passes it over
+        if not (referable(index, pair.a, iid) and referable(index, pair.b, iid)):
+            continue
         distance = _distance(scene, pair.b, inst)
         if distance is None:
+            continue
+        subject = f"view:{pair.b}|object:{inst.id}"
+        if not admitted(BBOX_CENTER_DISTANCE, (pair.a, pair.b), subject, (inst.id,)):
+            yield PASSED_OVER  # the caller passes it over
             continue
         yield offer(
             BBOX_CENTER_DISTANCE, (pair.a, pair.b), subject, (inst.id,), functools.partial(selection_entry, subject),

@@ -112,7 +112,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.candidates import Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -277,12 +277,13 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
         a, b = index.instance(ia), index.instance(ib)
         if phrase_key(a) == phrase_key(b):
             continue
-        subject = f"view:{view}|objects:{min(ia, ib)}|{max(ia, ib)}"
-        if not admitted(SINGLE_VIEW, (view,), subject, (ia, ib)):
-            continue  # the caller passes it over: no geometry, no draws
         world = b.box.center - a.box.center
         vec = np.asarray(cam.cam_to_world, dtype=np.float64)[:3, :3].T @ world
         if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
+            continue
+        subject = f"view:{view}|objects:{min(ia, ib)}|{max(ia, ib)}"
+        if not admitted(SINGLE_VIEW, (view,), subject, (ia, ib)):
+            yield PASSED_OVER  # the caller passes it over: no draws
             continue
         template = int(rng.integers(len(SINGLE_VIEW_TEMPLATES)))
         parts, truth, options, letter = body_direction(vec, rng)
@@ -313,21 +314,23 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     centre_b = camera_center(cam_b)
     for iid in seeded_order(index.visible[pair.a], rng):
         inst = index.instance(iid)
-        if not referable(index, pair.a, iid) or not admitted(BBOX_CENTER_DIRECTION, (pair.a, pair.b), f"view:{pair.b}|object:{iid}", (iid,)):
-            continue  # not nameable, or the caller passes it over
-        if bool(inst.box.contains(centre_b[None, :])[0]):
+        if not referable(index, pair.a, iid) or bool(inst.box.contains(centre_b[None, :])[0]):
             continue
         vec = point_in_camera(cam_b, inst.box.center)
         if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
             continue
         if _rare_bbox_direction(vec):
             continue
+        subject = f"view:{pair.b}|object:{iid}"
+        if not admitted(BBOX_CENTER_DIRECTION, (pair.a, pair.b), subject, (iid,)):
+            yield PASSED_OVER  # the caller passes it over: no draws
+            continue
         template = int(rng.integers(len(TWO_VIEW_TEMPLATES)))
         parts = dominant_parts(vec)
         truth = parts_label(parts, BODY_DIRECTION_WORDS)
         drawn = bbox_options(truth, rng)
         yield offer(
-            BBOX_CENTER_DIRECTION, (pair.a, pair.b), f"view:{pair.b}|object:{iid}", (iid,), functools.partial(_bbox_selection, pair, inst, truth, drawn[2]),
+            BBOX_CENTER_DIRECTION, (pair.a, pair.b), subject, (iid,), functools.partial(_bbox_selection, pair, inst, truth, drawn[2]),
             functools.partial(_bbox_record, scene, index, pair, rules, inst, (centre_b, vec), template, (parts, truth), drawn),
         )
 
@@ -444,20 +447,22 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
     for ids in seeded_order(triplets, rng):
         if not split_across_views(index, pair.a, pair.b, ids):
             continue  # the authoritative three-object rule (the prefilter already applied it)
-        if not admitted(RELPOS, views, _relpos_subject(ids), tuple(ids)):
-            continue  # the caller passes it over: no geometry, no draws
         key = tuple(ids)
         if key not in shapes:
             shapes[key] = _relpos_shape(index, ids, up, intersecting)
         shape = shapes[key]
         if shape is None:
             continue
+        subject = _relpos_subject(ids)
+        if not admitted(RELPOS, views, subject, key):
+            yield PASSED_OVER  # the caller passes it over: no draws
+            continue
         objs, names, (leg_ab, leg_ac), angle, hit = shape
         ref_views = [ref_view[i] for i in ids]
         truth = RELPOS_SECTORS.labels[hit.index]
         drawn = build_mcq(truth, RELPOS_SECTORS.distractors(hit, rng), rng)
         yield offer(
-            RELPOS, views, _relpos_subject(ids), tuple(ids), functools.partial(_relpos_selection, ids, hit),
+            RELPOS, views, subject, key, functools.partial(_relpos_selection, ids, hit),
             functools.partial(_relpos_record, scene, index, pair, rules, ids, objs, ref_views, names, (leg_ab, leg_ac), angle, hit, drawn),
         )
 

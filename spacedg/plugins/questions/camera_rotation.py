@@ -81,7 +81,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from spacedg.plugins.candidates import Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.plugins.questions.view_sampling import ROTATION_PAIRS, PairRules, ViewPair, sample_pairs
@@ -301,7 +301,8 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = ROTATION
             continue
         views, subject = (pair.a, pair.b), _subject(pair)
         if not admitted(turn.sub, views, subject, ()):
-            continue  # the caller passes it over: no draws
+            yield PASSED_OVER  # the caller passes it over: no draws
+            continue
         drawn = build_mcq(turn.truth, turn.distractors, child, slot=decks[turn.case.mode].next())
         yield offer(turn.sub, views, subject, (), functools.partial(_selection, pair, turn, drawn[0]), functools.partial(_record, scene, pair, turn, drawn))
 

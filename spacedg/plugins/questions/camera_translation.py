@@ -80,7 +80,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from spacedg.plugins.candidates import Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -278,7 +278,8 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = TRANSLAT
             s = (start + k + p) % len(SUB_TYPES)
             sub, views, subject = SUB_TYPES[s], (cand.pair.a, cand.pair.b), _subject(cand.pair)
             if not admitted(sub, views, subject, ()):
-                continue  # the caller passes it over: no draws
+                yield PASSED_OVER  # the caller passes it over: no draws
+                continue
             drawn = _draw(cand, sub, children[k * len(SUB_TYPES) + s], decks.get(sub))
             yield offer(sub, views, subject, (), functools.partial(dict, drawn.selection), functools.partial(_record, scene, cand, sub, rules, drawn))
 

@@ -92,7 +92,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
-from spacedg.plugins.candidates import Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
     PairRules,
@@ -192,13 +192,14 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     for one, two in object_pairs(index, pair, rng):
         if phrase_key(one) == phrase_key(two):
             continue
-        subject, named = _subject(one, two), (one.id, two.id)
-        if not admitted(SUB_QUESTION_TYPE, views, subject, named):
-            continue  # the caller passes it over: no geometry, no draws
         key_a, key_b = (pair.a, one.id), (pair.b, two.id)
         ref = legs[key_a] if key_a in legs else legs.setdefault(key_a, ground_leg(one.box.center - origin_a, up))
         query = legs[key_b] if key_b in legs else legs.setdefault(key_b, ground_leg(two.box.center - origin_b, up))
         if ref is None or query is None:
+            continue
+        subject, named = _subject(one, two), (one.id, two.id)
+        if not admitted(SUB_QUESTION_TYPE, views, subject, named):
+            yield PASSED_OVER  # the caller passes it over: no draws
             continue
         drawn = compass.ask(("camera", *key_a), ref["vector"], ("camera", *key_b), query["vector"], rng)  # = compass_question(ref, query, up, rng)
         if drawn is None:

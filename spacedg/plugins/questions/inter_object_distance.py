@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
-from spacedg.plugins.candidates import Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
     PairRules,
@@ -124,9 +124,6 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     for one, two in object_pairs(index, pair, rng):
         if label_key(one.label) == label_key(two.label):
             continue
-        subject, named = _subject(one, two), (one.id, two.id)
-        if not admitted(SUB_QUESTION_TYPE, views, subject, named):
-            continue  # the caller passes it over
         key = (one.id, two.id)
         hit = memo.get(key)
         if hit is None or hit[0] is not one or hit[1] is not two:
@@ -134,6 +131,10 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             hit = memo[key] = (one, two, vector, float(np.linalg.norm(vector)))
         vector, distance = hit[2], hit[3]
         if distance < MIN_DISTANCE_M:
+            continue
+        subject, named = _subject(one, two), (one.id, two.id)
+        if not admitted(SUB_QUESTION_TYPE, views, subject, named):
+            yield PASSED_OVER  # the caller passes it over
             continue
         yield offer(
             SUB_QUESTION_TYPE, views, subject, named, functools.partial(_selection, one, two),

@@ -84,7 +84,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.candidates import Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -188,14 +188,15 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         x, y, z = tri
         if len({keys[x], keys[y], keys[z]}) < 3:
             continue
-        objs = tuple(insts[t] for t in tri)
-        subject = _subject(objs)
-        if not admitted(SUB_QUESTION_TYPE, views, subject, triplet_ids):
-            continue  # the caller passes it over: no legs, no draws
         ref, query = leg(x, y), leg(z, y)
         if ref is None or query is None:
             continue
         if any(overlap(p, q) for p, q in itertools.combinations(tri, 2)):
+            continue
+        objs = tuple(insts[t] for t in tri)
+        subject = _subject(objs)
+        if not admitted(SUB_QUESTION_TYPE, views, subject, triplet_ids):
+            yield PASSED_OVER  # the caller passes it over: no draws
             continue
         drawn = compass.ask(("objects", ids[x], ids[y]), ref["vector"], ("objects", ids[z], ids[y]), query["vector"], rng)  # = compass_question(ref, query, up, rng)
         if drawn is None:

@@ -110,7 +110,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from spacedg.plugins.candidates import Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -434,10 +434,11 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             distinct = apart[key] = _distinguishable(one, two)
         if not distinct:
             continue
-        if not admitted(sub, views, _subject(one, two, sub), (one.id, two.id)):
-            continue  # the caller passes it over: no verdict, no draws
         verdict = _verdict_of(scene, index, one, two, sub)
         if verdict is None:
+            continue
+        if not admitted(sub, views, verdict.subject, (one.id, two.id)):
+            yield PASSED_OVER  # the caller passes it over: no draws
             continue
         texts = [*verdict.phrases, SAME]
         drawn = build_mcq(verdict.truth_text, [t for t in texts if t != verdict.truth_text], rng, n_options=3)
