@@ -409,15 +409,8 @@ def _relpos_names(objs: Sequence[Instance]) -> list[str] | None:
     return [phrase(o) for o in objs]
 
 
-def _intersects(cache: dict[tuple[int, int], bool], p: Instance, q: Instance) -> bool:
-    key = (min(p.id, q.id), max(p.id, q.id))
-    if key not in cache:
-        cache[key] = boxes_intersect(p.box, q.box)
-    return cache[key]
-
-
 def _relpos_shape(
-    index: VisibilityIndex, ids: Sequence[int], up: np.ndarray, intersecting: dict[tuple[int, int], bool],
+    index: VisibilityIndex, ids: Sequence[int], up: np.ndarray,
 ) -> tuple[list[Instance], list[str], tuple[dict[str, Any], dict[str, Any]], float, SectorHit] | None:
     """What a relative-position question about the triplet ``ids`` (A, B, C) is, whatever its
     views: the objects, their names, the legs A → B and A → C, the angle of C from A facing B
@@ -427,7 +420,7 @@ def _relpos_shape(
     names = _relpos_names(objs)
     if names is None:
         return None
-    if any(_intersects(intersecting, p, q) for p, q in itertools.combinations(objs, 2)):
+    if any(boxes_intersect(p.box, q.box) for p, q in itertools.combinations(objs, 2)):
         return None
     ca, cb, cc = (o.box.center for o in objs)
     ab, ac = cb - ca, cc - ca
@@ -438,18 +431,23 @@ def _relpos_shape(
     return objs, names, (leg_ab, leg_ac), angle, RELPOS_SECTORS.classify(angle)
 
 
+#: Triplet geometries memoised per scene (:func:`_relpos_shape`, ~1.5 KB each) before the memo starts again.
+_SHAPES_MAX = 65_536
+
+
 def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
     ref_view, triplets = _relpos_candidates(index, pair)
-    intersecting: dict[tuple[int, int], bool] = index_memo(index, "relpos_overlaps")
     shapes = index_memo(index, "relpos_shapes")  # triplet → (objects, names, legs, angle, sector) or None: no view enters it
     for ids in seeded_order(triplets, rng):
         if not split_across_views(index, pair.a, pair.b, ids):
             continue  # the authoritative three-object rule (the prefilter already applied it)
         key = tuple(ids)
         if key not in shapes:
-            shapes[key] = _relpos_shape(index, ids, up, intersecting)
+            if len(shapes) >= _SHAPES_MAX:
+                shapes.clear()  # bounded memory for an exhaustive scan; only time is lost
+            shapes[key] = _relpos_shape(index, ids, up)
         shape = shapes[key]
         if shape is None:
             continue

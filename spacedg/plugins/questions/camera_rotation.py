@@ -75,7 +75,7 @@ answer uses), ``attitude_a`` / ``attitude_b`` (``elevation_deg``, ``bank_deg``),
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -95,7 +95,7 @@ from spacedg.plugins.questions.geometry import (
     gravity_rotation,
     relative_rotation,
 )
-from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry, selection_entry
+from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry, pair_subject, selection_entry
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -221,15 +221,16 @@ class _Turn(NamedTuple):
         return f"{t[0]}+{t[1]}_single" if c.mode == "single" else f"{c.ax1}+{c.ax2}_dual"
 
 
-def _turn(scene: Scene, pair: ViewPair, attitude: Callable[[str], tuple[np.ndarray, float, float]]) -> _Turn | None:
+def _turn(
+    scene: Scene, pair: ViewPair, attitudes: Mapping[str, tuple[np.ndarray, float, float]], up: np.ndarray,
+) -> _Turn | None:
     """The rotation of ``pair`` as a question, or ``None`` when it is not asked (no draws);
-    ``attitude(view)`` is that camera's :func:`camera_attitude`."""
+    ``attitudes``: each view's :func:`camera_attitude` about ``up`` (the scene's, float64)."""
     cam_a, cam_b = scene.views[pair.a], scene.views[pair.b]
     r_rel = relative_rotation(cam_a, cam_b)
     if not np.all(np.isfinite(r_rel)):
         return None
-    up = np.asarray(scene.up, dtype=np.float64)
-    att_a, att_b = attitude(pair.a), attitude(pair.b)
+    att_a, att_b = attitudes[pair.a], attitudes[pair.b]
     (_, elev_a, bank_a), (_, elev_b, bank_b) = att_a, att_b
     if max(abs(elev_a), abs(elev_b)) > MAX_ABS_PITCH_DEG:
         return None
@@ -242,15 +243,10 @@ def _turn(scene: Scene, pair: ViewPair, attitude: Callable[[str], tuple[np.ndarr
     return _Turn(r_rel, (elev_a, bank_a), (elev_b, bank_b), euler, case, truth, distractors, text_axes)
 
 
-def _subject(pair: ViewPair) -> str:
-    """The selection subject: the unordered view pair."""
-    return f"views:{min(pair.a, pair.b)}|{max(pair.a, pair.b)}"
-
-
 def _selection(pair: ViewPair, turn: _Turn, options: tuple[str, ...]) -> dict[str, Any]:
     """The selection entry: cell = mode and text axes, role = the truth, among the options shown."""
     axes = turn.text_axes
-    return selection_entry(_subject(pair), f"{turn.case.mode}|{axes[0]}+{axes[1]}", turn.truth, sorted(o[3:] for o in options))
+    return selection_entry(pair_subject(pair), f"{turn.case.mode}|{axes[0]}+{axes[1]}", turn.truth, sorted(o[3:] for o in options))
 
 
 def _record(scene: Scene, pair: ViewPair, turn: _Turn, drawn: tuple[tuple[str, ...], str]) -> QARecord:
@@ -294,16 +290,17 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = ROTATION
     deck_rngs = child_rngs(rng, len(MODES))
     decks = {mode: BalancedDeck(r) for mode, r in zip(MODES, deck_rngs)}  # correct letter per mode, balanced
     up = np.asarray(scene.up, dtype=np.float64)
-    attitude = functools.lru_cache(maxsize=None)(lambda view: camera_attitude(scene.views[view].cam_to_world, up))  # once per view
-    for pair, child in zip(pairs, child_rngs(rng, len(pairs))):
-        turn = _turn(scene, pair, attitude)
+    attitudes = {view: camera_attitude(cam.cam_to_world, up) for view, cam in scene.views.items()}  # once per view
+    children = child_rngs(rng, len(pairs))  # one per pair, made only for a pair that is asked
+    for k, pair in enumerate(pairs):
+        turn = _turn(scene, pair, attitudes, up)
         if turn is None:
             continue
-        views, subject = (pair.a, pair.b), _subject(pair)
+        views, subject = (pair.a, pair.b), pair_subject(pair)
         if not admitted(turn.sub, views, subject, ()):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
-        drawn = build_mcq(turn.truth, turn.distractors, child, slot=decks[turn.case.mode].next())
+        drawn = build_mcq(turn.truth, turn.distractors, children[k], slot=decks[turn.case.mode].next())
         yield offer(turn.sub, views, subject, (), functools.partial(_selection, pair, turn, drawn[0]), functools.partial(_record, scene, pair, turn, drawn))
 
 

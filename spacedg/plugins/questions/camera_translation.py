@@ -52,8 +52,9 @@ is yielded). They come in three passes over the pairs (in ``sample_pairs``' roun
 order): pass ``p`` gives pair ``k`` the sub type ``SUB_TYPES[(s + k + p) % 3]`` with a seeded
 start ``s``, so a caller that stops after ``n <=`` #pairs records gets ``n`` different pairs and
 a balanced mix of sub types. Each (pair, sub type) draws from its own child generator
-(:func:`~spacedg.plugins.questions.records.child_rngs`, seeded from ``rng``), so its options and
-threshold do not depend on which other pairs were skipped.
+(:func:`~spacedg.plugins.questions.records.child_rngs`, seeded from ``rng``), so its option
+texts and threshold factor do not depend on which other pairs were skipped; the correct letter
+and the yes/no side come from two shared balanced decks, dealt in order over the records made.
 
 Geometry block (JSON): ``up``, ``cam_to_world_a``, ``cam_to_world_b`` (4×4), ``pair``
 (:meth:`ViewPair.to_dict`; these four from
@@ -102,7 +103,7 @@ from spacedg.plugins.questions.geometry import (
     relative_translation,
     single_word_pool,
 )
-from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry, selection_entry
+from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry, pair_subject, selection_entry
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -209,17 +210,12 @@ class _Drawn(NamedTuple):
     extra: dict[str, Any]
 
 
-def _subject(pair: ViewPair) -> str:
-    """The selection subject: the unordered view pair."""
-    return f"views:{min(pair.a, pair.b)}|{max(pair.a, pair.b)}"
-
-
-def _draw(cand: _Candidate, sub: str, rng: np.random.Generator, deck: BalancedDeck | None) -> _Drawn:
-    """Every random draw of one record of sub type ``sub``; ``deck`` deals the MCQ letter or the yes/no side (None for NA)."""
+def _draw(cand: _Candidate, sub: str, subject: str, rng: np.random.Generator, deck: BalancedDeck | None) -> _Drawn:
+    """Every random draw of one record of sub type ``sub`` about ``subject``; ``deck`` deals the
+    MCQ letter or the yes/no side (None for NA)."""
     options: tuple[str, ...] = ()
     key: dict[str, Any] = {"sub": sub}
     extra: dict[str, Any] = {}
-    subject = _subject(cand.pair)
     if sub == "main_dir":
         truth, distractors, how = main_dir_options(cand.parts, rng)
         assert deck is not None
@@ -276,11 +272,11 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = TRANSLAT
     for p in range(len(SUB_TYPES)):
         for k, cand in cands:
             s = (start + k + p) % len(SUB_TYPES)
-            sub, views, subject = SUB_TYPES[s], (cand.pair.a, cand.pair.b), _subject(cand.pair)
+            sub, views, subject = SUB_TYPES[s], (cand.pair.a, cand.pair.b), pair_subject(cand.pair)
             if not admitted(sub, views, subject, ()):
                 yield PASSED_OVER  # the caller passes it over: no draws
                 continue
-            drawn = _draw(cand, sub, children[k * len(SUB_TYPES) + s], decks.get(sub))
+            drawn = _draw(cand, sub, subject, children[k * len(SUB_TYPES) + s], decks.get(sub))
             yield offer(sub, views, subject, (), functools.partial(dict, drawn.selection), functools.partial(_record, scene, cand, sub, rules, drawn))
 
 

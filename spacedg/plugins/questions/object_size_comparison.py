@@ -428,7 +428,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         rest, s = divmod(int(k), len(SUB_QUESTION_TYPES))
         i, j = divmod(rest, len(twos))
         one, two, sub = ones[i], twos[j], SUB_QUESTION_TYPES[s]
-        key = (one.id, two.id)
+        key = (one.id, two.id) if one.id < two.id else (two.id, one.id)  # symmetric
         distinct = apart.get(key)
         if distinct is None:
             distinct = apart[key] = _distinguishable(one, two)

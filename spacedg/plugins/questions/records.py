@@ -268,6 +268,11 @@ def index_memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
 
 
 
+def pair_subject(pair: ViewPair) -> str:
+    """The selection subject of a question about a view pair itself (camera motion): the unordered pair, ``views:<a>|<b>``."""
+    return f"views:{min(pair.a, pair.b)}|{max(pair.a, pair.b)}"
+
+
 def phrase(inst: Instance) -> str:
     """How a question names ``inst``: :func:`~spacedg.plugins.questions.language.object_phrase` of its label and description."""
     return object_phrase(inst.label, inst.description)
@@ -276,7 +281,10 @@ def phrase(inst: Instance) -> str:
 def phrase_key(inst: Instance) -> str:
     """The object's question phrase, lower case, whitespace collapsed (to test that names differ);
     computed once per (label, description): candidates compare the same objects' names thousands of times."""
-    return _phrase_key(inst.label, inst.description)
+    label, description = inst.label, inst.description
+    if type(label) is not str or type(description) is not str:
+        return " ".join(phrase(inst).lower().split())
+    return _phrase_key(label, description)
 
 
 @functools.lru_cache(maxsize=65_536)
