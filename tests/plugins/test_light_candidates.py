@@ -226,3 +226,41 @@ def test_the_pool_gate_applies_the_pool_rules_before_a_candidate_is_made() -> No
     small = _GatedFamily(subjects=6, repeats=ALTERNATES + 3)
     pooled = _pool(small, scene, QABuildConfig(per_sub_type=1, pool_factor=10, max_scan=10), _TwinOf3(), Counter())
     assert small.asked == 11 and len(pooled) == 8  # ten scanned, two of them refused (s3 twice), then the scan ends
+
+
+def test_a_full_sub_type_refuses_new_subjects_while_another_fills() -> None:
+    """Two sub types: eight "even" subjects come first, then five "odd" ones. With ``want`` 5,
+    the sixth to eighth even subjects are passed over (the scan goes on: "odd" is not full), the
+    odd ones fill their sub type, and the next new subject ends the scan."""
+    from collections import Counter
+    from types import SimpleNamespace
+
+    from spacedg.plugins.candidates import PASSED_OVER, admitted, offer
+    from spacedg.qa.build import _pool
+    from spacedg.qa.index import QABuildConfig
+
+    seen: list[str] = []
+
+    class TwoSubTypes:
+        name = "two_sub_types"
+        sub_question_types = ("even", "odd")
+
+        def generate(self, scene, rng):
+            order = [("even", f"e{k}") for k in range(8)] + [("odd", f"o{k}") for k in range(6)]
+            for sub, subject in order:
+                seen.append(subject)
+                if not admitted(sub, ("v",), subject, ()):
+                    yield PASSED_OVER
+                    continue
+                yield offer(sub, ("v",), subject, (), lambda s=subject: {"subject": s}, lambda: None)
+
+        def check_record(self, record, scene_id=None) -> None:
+            pass
+
+    class NoTwins:
+        def has_twin_ids(self, views, ids) -> bool:
+            return False
+
+    pooled = _pool(TwoSubTypes(), SimpleNamespace(id="demo"), QABuildConfig(per_sub_type=1, pool_factor=5, max_scan=10_000), NoTwins(), Counter())
+    assert [p.candidate.subject for p in pooled] == ["e0", "e1", "e2", "e3", "e4", "o0", "o1", "o2", "o3", "o4"]
+    assert seen[-1] == "o5"  # asked, then the scan ended: every sub type had its five subjects
