@@ -56,8 +56,9 @@ __all__ = [
 #: 5: selection modes (:mod:`spacedg.qa.modes`: strict ``bench``, dense ``train``); no twins; counts beyond 2.
 #: 6: single-axis rotation sub types named by their text axes; counting counts an instance with a quarter of it
 #: showing; compass angles within 0.01° of a sector boundary not asked.
-#: 7: the pool refuses a candidate before its family computes it (:func:`~spacedg.plugins.candidates.admitted`):
-#: the same rules, but a refused candidate's random draws are never taken, so later candidates draw other numbers.
+#: 7: the pool refuses a valid candidate before its family draws for it (:func:`~spacedg.plugins.candidates.admitted`,
+#: ``PASSED_OVER`` in its turn): the same rules and scan, but a refused candidate's random draws are never taken,
+#: so later candidates draw other numbers.
 QA_INDEX_VERSION = 7
 
 #: The selection modes (:mod:`spacedg.qa.modes`): strict ``bench``, dense ``train``.
