@@ -44,12 +44,12 @@ def _bench(scenes: list[Path], per_sub_type: int, seed: int, partial_rounds: boo
 
 def _half_check_kind(records, check: tuple[int, int], result, seed: int) -> str:
     """Whether the half-folds check deals the scenes as one of the pruning's own half splits (then it is in-sample)."""
-    from spacedg.qa.debias_probe import repeat_seeds, scene_folds, stable_hash
+    from spacedg.qa.debias_probe import half_split_plans, scene_folds
 
     scene_ids = [r.scene_id for r in records]
     def split(folds: int, fold_seed: int) -> set[frozenset[str]]:
         return {frozenset(group) for group in scene_folds(scene_ids, folds, fold_seed)}
-    own = [split(max(2, len(set(scene_ids)) // 2), s) for s in repeat_seeds(stable_hash(seed, "half") % (2**31), result.half_splits)]
+    own = [split(*plan) for plan in half_split_plans(scene_ids, seed, result.half_splits)]
     return "the same split as one the pruning averaged in: in-sample" if split(*check) in own else "folds the pruning never used"
 
 

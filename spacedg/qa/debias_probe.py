@@ -37,7 +37,7 @@ from spacedg.qa.debias_gbm import BoostedChoice
 
 __all__ = [
     "DISCRETE", "PROBES", "SubTypeBlind", "Probe", "answer_class", "blind_rows", "count_chances", "probe", "repeat_seeds",
-    "scene_folds", "shown_chance", "stable_hash",
+    "half_split_plans", "scene_folds", "shown_chance", "stable_hash",
 ]
 
 #: The answer types the probe scores and the pruning acts on.
@@ -198,6 +198,20 @@ def repeat_seeds(seed: int, repeats: int) -> list[int]:
     return [seed] + [stable_hash(seed, "repeat", i) % (2**31) for i in range(1, repeats)]
 
 
+def half_split_plans(scene_ids: Sequence[str], seed: int, half_splits: int) -> list[tuple[int, int]]:
+    """``(folds, fold seed)`` of :func:`probe`'s ``half_splits`` extra splits: half as many folds
+    as ``scene_ids`` has scenes (at least 2), on fold seeds of their own derived from ``seed``."""
+    half = max(2, len(set(scene_ids)) // 2)
+    return [(half, s) for s in repeat_seeds(stable_hash(seed, "half") % (2**31), half_splits)]
+
+
+def _split_key(groups: Sequence[Sequence[str]]) -> object:
+    """What a split's held-out fits depend on: the groups in order (training records are taken
+    fold by fold), or, with two groups, the unordered pair (each fold trains on the other alone)."""
+    parts = tuple(frozenset(g) for g in groups)
+    return frozenset(parts) if len(parts) == 2 else parts
+
+
 def probe(records: Sequence[QARecord], *, folds: int = 5, seed: int = 0, learned: bool = True,
           counts: Mapping[str, float] | None = None, repeats: int = 1, reuse: Probe | None = None,
           changed: set[str] | None = None, half_splits: int = 0) -> Probe:
@@ -231,11 +245,14 @@ def probe(records: Sequence[QARecord], *, folds: int = 5, seed: int = 0, learned
                 prob[r.id] = reuse.truth_probability.get(r.id, 0.0)
     plans = [(folds, s) for s in repeat_seeds(seed, repeats)]
     if half_splits:
-        half = max(2, len({r.scene_id for r in discrete}) // 2)
-        plans += [(half, s) for s in repeat_seeds(stable_hash(seed, "half") % (2**31), half_splits)]
+        plans += half_split_plans([r.scene_id for r in discrete], seed, half_splits)
+    fits: dict[object, tuple[dict[str, dict[str, float]], dict[str, float]]] = {}  # a split dealt twice is fitted once
     for plan_folds, fold_seed in plans:
         groups = scene_folds([r.scene_id for r in discrete], plan_folds, fold_seed)
-        hits, probs = _held_out(fitted, groups, learned)
+        key = _split_key(groups)
+        if key not in fits:
+            fits[key] = _held_out(fitted, groups, learned)
+        hits, probs = fits[key]
         for rid, per in hits.items():
             for name, value in per.items():
                 correct[rid][name] = correct[rid].get(name, 0.0) + value / len(plans)
