@@ -76,11 +76,13 @@ class _Vocab:
 
     def __init__(self, docs: Sequence[Sequence[str]], min_count: int = 2, cap: int = 4000) -> None:
         counts: Counter[str] = Counter(f for doc in docs for f in set(doc))
-        kept = [f for f, c in counts.most_common() if c >= min_count][:cap]
+        # ties broken by name, not by set order (which follows the process's string hash seed)
+        kept = [f for f, c in sorted(counts.items(), key=lambda fc: (-fc[1], fc[0])) if c >= min_count][:cap]
         self.index = {f: i for i, f in enumerate(sorted(kept))}
 
     def matrix(self, docs: Sequence[Sequence[str]]) -> _Sparse:
-        return _Sparse([[self.index[f] for f in set(doc) if f in self.index] for doc in docs], len(self.index))
+        """Each doc's columns in column order, so every sum over them adds in the same order in every process."""
+        return _Sparse([sorted({self.index[f] for f in doc if f in self.index}) for doc in docs], len(self.index))
 
 
 class _Sparse:
