@@ -109,3 +109,13 @@ def test_null_audit_gives_the_excess_chance_alone_reaches(tmp_path, capsys) -> N
         (tmp_path / f"{scene}.qa.jsonl").write_text("".join(r.to_json() + "\n" for r in records))
     assert main(["qa", "audit", str(tmp_path), "--null", "3"]) == 0
     assert "null excess (mean / p95)" in capsys.readouterr().out
+
+
+def test_the_learned_vocabulary_does_not_follow_set_order() -> None:
+    """Features tied at the vocabulary's cap are kept by name and a row's columns come in column
+    order, so the learned predictor is the same in every process (set order follows the hash seed)."""
+    from spacedg.qa.audit_model import _Vocab
+
+    vocab = _Vocab([["b", "a", "c", "d"], ["d", "c", "a", "b"]], min_count=2, cap=3)
+    assert sorted(vocab.index) == ["a", "b", "c"]
+    assert list(vocab.matrix([["c", "zz", "a", "b", "a"]]).cols) == [0, 1, 2]
