@@ -41,6 +41,7 @@ import pstats
 import subprocess
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parents[1]
@@ -101,10 +102,9 @@ def _build(code: Path, rooms: list[Path], out: Path, mode: str = "bench") -> dic
         raise SystemExit(f"{code}: the build failed\n{done.stderr[-3000:]}")
     if f"imported {Path(code).resolve() / 'spacedg'}" not in done.stderr:
         raise SystemExit(f"{code}: the child did not import this checkout's spacedg\n{done.stderr[-2000:]}")
-    suffix = "qa-train" if mode == "train" else "qa"
     result = {}
     for scene, (n, wall, cpu) in json.loads(done.stdout.strip().splitlines()[-1]).items():
-        result[scene] = (n, wall, cpu, hashlib.sha256((out / f"{scene}.{suffix}.jsonl").read_bytes()).hexdigest())
+        result[scene] = (n, wall, cpu, hashlib.sha256(_index_file(out, scene, mode).read_bytes()).hexdigest())
     return result
 
 
@@ -128,14 +128,18 @@ def _compare(label: str, base: dict, new: dict, reference: dict | None = None) -
     return tb, tn, same_all
 
 
-def _index_records(out: Path, rooms: list[Path], mode: str) -> dict[str, list]:
+def _index_records(out: Path, scene_ids: Iterable[str], mode: str) -> dict[str, list]:
     """scene id → the records of its index in ``out`` (built by :func:`_build`)."""
     from spacedg.qa.index import read_index
-    from spacedg.scene.io import load_scene
 
-    suffix = "qa-train" if mode == "train" else "qa"
-    ids = [load_scene(room).id for room in rooms]
-    return {scene_id: read_index(out / f"{scene_id}.{suffix}.jsonl") for scene_id in ids}
+    return {scene_id: read_index(_index_file(out, scene_id, mode)) for scene_id in scene_ids}
+
+
+def _index_file(out: Path, scene_id: str, mode: str) -> Path:
+    """The index file :func:`_build` writes for ``scene_id`` in ``mode``."""
+    from spacedg.qa.index import index_paths
+
+    return index_paths(scene_id, out, mode=mode)[0]
 
 
 def _rederive(records_by_scene: dict[str, list], scenes: dict[str, object]) -> int:
@@ -149,10 +153,7 @@ def _rederive(records_by_scene: dict[str, list], scenes: dict[str, object]) -> i
     for scene_id, records in records_by_scene.items():
         for record in records:
             try:
-                checker._matches_scene(record, scenes[scene_id])
-                if record.options and [o[3:] for o in record.options].count(checker._truth_text(record)) != 1:
-                    raise AssertionError("the truth is not offered exactly once")
-                checker._check(record)
+                checker.recomputes(record, scenes[scene_id])
             except Exception:  # noqa: BLE001 - any failure of the check is a disagreement, counted
                 bad += 1
     return bad
@@ -164,16 +165,11 @@ def _top_share(records: list) -> str:
     from collections import Counter
 
     from spacedg.plugins.specs import AnswerType
+    from spacedg.qa.audit_text import truth_text
 
     if not records or records[0].answer_type not in (AnswerType.MCQ, AnswerType.YN, AnswerType.COUNT):
         return ""
-
-    def text(r) -> str:
-        if r.answer_type is AnswerType.MCQ:
-            return next((o[3:] for o in r.options if o.startswith(f"{r.answer}.")), str(r.answer))
-        return str(r.answer)
-
-    answer, n = Counter(text(r) for r in records).most_common(1)[0]
+    answer, n = Counter(map(truth_text, records)).most_common(1)[0]
     return f"{answer[:10]} {100 * n / len(records):.0f} %"
 
 
@@ -291,7 +287,7 @@ def main() -> None:
             same = _build(args.same_as, rooms, args.work / f"same{i}", args.mode)
             _compare(f"{label}: --same-as {args.same_as} (reference of the identity) vs this checkout", same, new)
             if any(same[scene][3] != new[scene][3] for scene in new):
-                pairs.append((_index_records(args.work / f"same{i}", rooms, args.mode), _index_records(args.work / f"new{i}", rooms, args.mode)))
+                pairs.append((_index_records(args.work / f"same{i}", same, args.mode), _index_records(args.work / f"new{i}", new, args.mode)))
         tb, tn, _ = _compare(f"{label}: --base {args.base} vs this checkout", base, new, same if args.same_as else None)
         totals[0] += tb
         totals[1] += tn

@@ -89,13 +89,14 @@ def balance_cells(records: Sequence[QARecord], seed: int = 0) -> CellBalance:
     unique = list(first.values())  # the first record of each id, in input order
     cells: dict[str, dict[str, list[QARecord]]] = defaultdict(lambda: defaultdict(list))
     cell_roles: dict[str, dict[str, None]] = defaultdict(dict)  # cell → its roles, in first-seen order
+    features: dict[str, list[str]] = {}
     for r in unique:
         got = _cell_roles(r)
         if got is not None:
             cell, role, roles = got
             cells[cell][role].append(r)
             cell_roles[cell].update(dict.fromkeys(roles))
-    features = {r.id: _features(r) for rs in cells.values() for role_records in rs.values() for r in role_records}
+            features[r.id] = _features(r)
     classes = {r.id: answer_class(r) for r in unique}
     letters: dict[str, Counter[str]] = defaultdict(Counter)  # sub type → answer class → records
     for r in unique:

@@ -45,7 +45,7 @@ from spacedg.scene.io import load_scene
 from spacedg.scene.lexicon import default_lexicon
 
 __all__ = [
-    "MODES", "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "selected_families", "MAX_SELECTION_CHARS", "selection_name",
+    "MODES", "FILE_MODES", "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "selected_families", "MAX_SELECTION_CHARS", "selection_name",
     "index_paths", "config_index_paths", "scene_json_path", "index_key", "read_meta", "is_current", "index_is_current", "read_index", "write_index",
 ]
 
@@ -63,6 +63,9 @@ QA_INDEX_VERSION = 7
 
 #: The selection modes (:mod:`spacedg.qa.modes`): strict ``bench``, dense ``train``.
 MODES: tuple[str, ...] = ("bench", "train")
+#: The index files a scene folder may hold, as :func:`index_paths` modes, in the order readers
+#: prefer them: the bench, a pruned bench's candidates (:attr:`QABuildConfig.file_mode`), the train selection.
+FILE_MODES: tuple[str, ...] = ("bench", "pooled", "train")
 
 #: A family selection whose ``+``-joined names are longer than this is named by its hash.
 MAX_SELECTION_CHARS = 100
@@ -149,7 +152,7 @@ class QABuildConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> QABuildConfig:
         """The config :meth:`to_dict` wrote (lists back to tuples)."""
-        return cls(**{"mode": "bench", "partial_rounds": False, **data, "families": tuple(data["families"]), "visibility_size": tuple(data["visibility_size"]),
+        return cls(**{"mode": "bench", **data, "families": tuple(data["families"]), "visibility_size": tuple(data["visibility_size"]),
                       "covisibility_size": tuple(data["covisibility_size"])})
 
 

@@ -271,7 +271,7 @@ class _Selection:
         candidate of every role the cell still offers (the least over-represented features
         first, as in a whole round). A scene with a pair against its labels' prior and none with
         it then still gives the one it has, which another scene's surplus completes. Each visit
-        starts at another role (a seeded offset per scene and cell, then one on per visit), so a
+        starts at another role (a fixed offset per scene and cell, the CRC-32 of their names, then one on per visit), so a
         quota that ends inside a visit does not favour the same roles in every scene. Cells whose
         rounds go over the roles each scene offers (``all_roles`` false) take none: their roles
         differ by scene, so no pooled count could balance them; nor do cells whose sub type's

@@ -87,6 +87,7 @@ from spacedg.errors import FileFormatError, InvalidDataError, ParameterError
 from spacedg.eval.bench import row_from_mapping
 from spacedg.plugins.answers import MCQ_LETTERS, answer_from_text
 from spacedg.plugins.specs import AnswerType
+from spacedg.qa.index import FILE_MODES, index_paths
 
 __all__ = ["EDITABLE", "ReviewError", "ReviewStore"]
 
@@ -582,7 +583,7 @@ class ReviewStore:
         ``<scene_id>.qa-train.jsonl``; cached per scene."""
         if scene_id not in self._scene_cache:
             geometry: dict[str, Any] = {}
-            for name in (f"{scene_id}.qa.jsonl", f"{scene_id}.qa-pooled.jsonl", f"{scene_id}.qa-train.jsonl"):
+            for name in (index_paths(scene_id, ".", mode=mode)[0].name for mode in FILE_MODES):
                 candidates = (c for root in self._scene_roots for c in (root / name, root / scene_id / name))
                 path = next((c for c in candidates if c.is_file()), None)
                 if path is not None:

@@ -269,16 +269,22 @@ def _matches_scene(record, scene):
     assert np.allclose(g.get("up", scene.up), scene.up)
 
 
+def recomputes(record, scene):
+    """Every check of one record (raises when one fails): its geometry matches the scene, the truth
+    is offered once, and the answer re-derives. ``benchmarks/qa_speed.py`` runs it too."""
+    _matches_scene(record, scene)
+    if record.options:
+        texts = [o[3:] for o in record.options]
+        assert texts.count(_truth_text(record)) == 1  # truth never among the distractors
+    _check(record)
+
+
 def test_every_answer_recomputes(scenes_and_records):
     total = 0
     per_type: dict[str, int] = {}
     for scene, records in scenes_and_records:
         for record in records:
-            _matches_scene(record, scene)
-            if record.options:
-                texts = [o[3:] for o in record.options]
-                assert texts.count(_truth_text(record)) == 1  # truth never among the distractors
-            _check(record)
+            recomputes(record, scene)
             per_type[record.question_type] = per_type.get(record.question_type, 0) + 1
             total += 1
     assert total >= 500, total
