@@ -92,7 +92,7 @@ from spacedg.plugins.questions.geometry import (
     build_mcq,
     camera_attitude,
     euler_yaw_pitch_roll,
-    gravity_rotation,
+    attitude_change,
     relative_rotation,
 )
 from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry, pair_subject, selection_entry
@@ -234,7 +234,7 @@ def _turn(
     (_, elev_a, bank_a), (_, elev_b, bank_b) = att_a, att_b
     if max(abs(elev_a), abs(elev_b)) > MAX_ABS_PITCH_DEG:
         return None
-    yaw, pitch, roll = (round(v, ANGLE_DECIMALS) + 0.0 for v in gravity_rotation(cam_a, cam_b, up, (att_a, att_b)))
+    yaw, pitch, roll = (round(v, ANGLE_DECIMALS) + 0.0 for v in attitude_change(att_a, att_b, up))
     case = classify_rotation(yaw, pitch, roll)
     if isinstance(case, str):
         return None

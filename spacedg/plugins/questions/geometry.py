@@ -62,7 +62,7 @@ __all__ = [
     "dominant_parts", "parts_label", "flipped_labels", "single_word_pool", "build_mcq", "BalancedDeck",
     "horizontal", "ground_angle", "ground_axes", "angle_on_ground", "vertical_dominates",
     "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS",
-    "euler_yaw_pitch_roll", "ROTATION_WORDS", "camera_attitude", "gravity_rotation",
+    "euler_yaw_pitch_roll", "ROTATION_WORDS", "camera_attitude", "gravity_rotation", "attitude_change",
     "MIN_HORIZONTAL_M", "VERTICAL_FACTOR", "COMPASS_RULE_BAND_DEG", "on_compass_boundary", "ground_leg", "compass_frame", "compass_answer",
     "INTERSECT_TOL_M", "boxes_intersect",
 ]
@@ -180,12 +180,9 @@ def _wrap180(angle: float) -> float:
     return 180.0 if a == -180.0 else a
 
 
-def gravity_rotation(
-    cam_a: Camera, cam_b: Camera, up: np.ndarray,
-    attitudes: tuple[tuple[np.ndarray, float, float], tuple[np.ndarray, float, float]] | None = None,
-) -> tuple[float, float, float]:
+def gravity_rotation(cam_a: Camera, cam_b: Camera, up: np.ndarray) -> tuple[float, float, float]:
     """``(yaw, pitch, roll)`` degrees of the camera motion from A to B **as a person perceives it**
-    (gravity-aware reading; :func:`camera_attitude` of each camera):
+    (gravity-aware reading; :func:`camera_attitude` of each camera, then :func:`attitude_change`):
 
     - ``yaw``: the change of heading about ``up`` (+ = turned right, clockwise seen from above),
       wrapped to (-180, 180];
@@ -196,12 +193,17 @@ def gravity_rotation(
     Euler angles of ``R_a^T R_b`` (:func:`euler_yaw_pitch_roll`) also show a few degrees of
     "roll" and "tilt" nobody perceives. For a level camera A both readings agree exactly.
     Heading and bank are ill-defined for a camera looking (nearly) straight up or down:
-    callers skip large elevations. ``attitudes``: both cameras' :func:`camera_attitude` when the
-    caller has them already (the same numbers).
+    callers skip large elevations.
     """
-    if attitudes is None:
-        attitudes = camera_attitude(cam_a.cam_to_world, up), camera_attitude(cam_b.cam_to_world, up)
-    (fa, ea, ba), (fb, eb, bb) = attitudes
+    return attitude_change(camera_attitude(cam_a.cam_to_world, up), camera_attitude(cam_b.cam_to_world, up), up)
+
+
+def attitude_change(
+    attitude_a: tuple[np.ndarray, float, float], attitude_b: tuple[np.ndarray, float, float], up: np.ndarray,
+) -> tuple[float, float, float]:
+    """:func:`gravity_rotation` from the two cameras' :func:`camera_attitude` about ``up`` (for a
+    caller that has each view's attitude already): ``(yaw, pitch, roll)`` degrees."""
+    (fa, ea, ba), (fb, eb, bb) = attitude_a, attitude_b
     yaw = 0.0 if not (fa.any() and fb.any()) else _wrap180(ground_angle(fa, fb, up))
     return yaw, eb - ea, _wrap180(bb - ba)
 

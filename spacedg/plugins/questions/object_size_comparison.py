@@ -366,12 +366,13 @@ def _subject(one: Instance, two: Instance, sub: str) -> str:
 
 
 def _verdict_of(scene: Scene, index: VisibilityIndex, one: Instance, two: Instance, sub: str) -> _Verdict | None:
-    """:func:`_verdict`, memoised per (object 1, object 2, sub type) on ``index``."""
+    """:func:`_verdict` of two :func:`_distinguishable` objects (else ``None``), memoised per
+    (object 1, object 2, sub type) on ``index``: a pair recurs in many view pairs."""
     memo = index_memo(index, "size_verdict")
     key = (one.id, two.id, sub)
     hit = memo.get(key)
     if hit is None or hit[0] is not one or hit[1] is not two:
-        hit = memo[key] = (one, two, _verdict(scene, one, two, sub))
+        hit = memo[key] = (one, two, _verdict(scene, one, two, sub) if _distinguishable(one, two) else None)
     return hit[2]
 
 
@@ -423,17 +424,10 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     if not size:
         return
     views = (pair.a, pair.b)
-    apart = index_memo(index, "size_distinguishable")  # (id 1, id 2) → _distinguishable (a pair recurs in many view pairs)
     for k in rng.permutation(size):
         rest, s = divmod(int(k), len(SUB_QUESTION_TYPES))
         i, j = divmod(rest, len(twos))
         one, two, sub = ones[i], twos[j], SUB_QUESTION_TYPES[s]
-        key = (one.id, two.id) if one.id < two.id else (two.id, one.id)  # symmetric
-        distinct = apart.get(key)
-        if distinct is None:
-            distinct = apart[key] = _distinguishable(one, two)
-        if not distinct:
-            continue
         verdict = _verdict_of(scene, index, one, two, sub)
         if verdict is None:
             continue
