@@ -264,3 +264,22 @@ def test_a_full_sub_type_refuses_new_subjects_while_another_fills() -> None:
     pooled = _pool(TwoSubTypes(), SimpleNamespace(id="demo"), QABuildConfig(per_sub_type=1, pool_factor=5, max_scan=10_000), NoTwins(), Counter())
     assert [p.candidate.subject for p in pooled] == ["e0", "e1", "e2", "e3", "e4", "o0", "o1", "o2", "o3", "o4"]
     assert seen[-1] == "o5"  # asked, then the scan ended: every sub type had its five subjects
+
+
+def test_passed_over_outside_the_pool_is_a_plugin_error(room_scene) -> None:
+    """A third-party family that yields ``PASSED_OVER`` where no pool is gating (a plain
+    ``generate``) gets one clear plugin error, not a stray marker among its records."""
+    from spacedg.errors import PluginError
+    from spacedg.plugins.candidates import PASSED_OVER
+    from spacedg.plugins.question_family import QuestionFamily
+    from spacedg.plugins.specs import AnswerType, TaskGroup
+
+    def generate(scene, rng):
+        yield PASSED_OVER
+
+    family = QuestionFamily(
+        name="passes_over", task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.YN},
+        sub_question_types=("only",), num_views=(1,), needs=frozenset(), generate=generate,
+    )
+    with pytest.raises(PluginError, match="PassedOver"):
+        list(family.generate(room_scene, np.random.default_rng(0)))
