@@ -45,6 +45,7 @@ from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.candidates import PASSED_OVER, Candidate, gated, light_candidates
 from spacedg.plugins.qa_record import QARecord, deferred_geometry
 from spacedg.qa.deal import deal_distractors, deal_letters
+from spacedg.qa.gc_pause import collector_paused
 from spacedg.qa.index import (
     QA_INDEX_VERSION,
     QABuildConfig,
@@ -291,8 +292,9 @@ def generate_records(
     index = TwinCheck(VisibilityIndex(scene))
     found: Counter[str] = Counter()
     out: list[QARecord] = []
-    for family in selected_families(config.families):
-        out.extend(_family_records(family, scene, config, judge, dropped, selection_stats, index, found))
+    with collector_paused():  # a quarter of the time went to the cyclic collector re-scanning the pools
+        for family in selected_families(config.families):
+            out.extend(_family_records(family, scene, config, judge, dropped, selection_stats, index, found))
     if twins is not None:
         twins.update(sorted(found.items()))
     return out

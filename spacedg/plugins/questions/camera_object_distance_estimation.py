@@ -72,7 +72,17 @@ from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThres
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import camera_center, camera_distance
 from spacedg.plugins.questions.language import find_in_image, label_text
-from spacedg.plugins.questions.records import make_record, objects_block, phrase, referable, round_robin_sub_types, seeded_order, selection_entry
+from spacedg.plugins.questions.records import (
+    camera_inside,
+    index_memo,
+    make_record,
+    objects_block,
+    phrase,
+    referable,
+    round_robin_sub_types,
+    seeded_order,
+    selection_entry,
+)
 from spacedg.plugins.questions.pairs import view_and_pair_family
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -104,12 +114,14 @@ TWO_VIEW_TEMPLATE = (
 
 
 # ------------------------------------------------------------------ records
-def _distance(scene: Scene, view: str, inst: Instance) -> float | None:
-    """Camera centre → box centre in metres, or ``None`` when the camera is inside the box."""
-    camera = scene.views[view]
-    if bool(inst.box.contains(camera_center(camera)[None, :])[0]):
-        return None
-    return camera_distance(camera, inst.box.center)
+def _distance(index: VisibilityIndex, view: str, inst: Instance) -> float | None:
+    """Camera centre → box centre in metres, or ``None`` when the camera is inside the box
+    (memoised per (view, object) on the index: the same pair recurs in many view pairs)."""
+    memo = index_memo(index, "camera_object_distance")
+    key = (view, inst.id)
+    if key not in memo:
+        memo[key] = None if camera_inside(index, view, inst) else camera_distance(index.scene.views[view], inst.box.center)
+    return memo[key]
 
 
 def _record(
@@ -137,7 +149,7 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
         inst = index.instance(iid)
         if not referable(index, view, iid):
             continue
-        distance = _distance(scene, view, inst)
+        distance = _distance(index, view, inst)
         if distance is None:
             continue
         subject = f"view:{view}|object:{inst.id}"
@@ -163,7 +175,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         inst = index.instance(iid)
         if not (referable(index, pair.a, iid) and referable(index, pair.b, iid)):
             continue
-        distance = _distance(scene, pair.b, inst)
+        distance = _distance(index, pair.b, inst)
         if distance is None:
             continue
         subject = f"view:{pair.b}|object:{inst.id}"

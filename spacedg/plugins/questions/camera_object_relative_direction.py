@@ -149,6 +149,7 @@ from spacedg.plugins.questions.geometry import (
 )
 from spacedg.plugins.questions.language import find_in_image, label_text
 from spacedg.plugins.questions.records import (
+    camera_inside,
     index_memo,
     label_features,
     make_record,
@@ -314,7 +315,7 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     centre_b = camera_center(cam_b)
     for iid in seeded_order(index.visible[pair.a], rng):
         inst = index.instance(iid)
-        if not referable(index, pair.a, iid) or bool(inst.box.contains(centre_b[None, :])[0]):
+        if not referable(index, pair.a, iid) or camera_inside(index, pair.b, inst):
             continue
         vec = point_in_camera(cam_b, inst.box.center)
         if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:

@@ -53,6 +53,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from spacedg.plugins.qa_record import Answer, QARecord, make_record_id
+from spacedg.plugins.questions.geometry import camera_center
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
     PairRules,
@@ -265,6 +266,19 @@ def index_memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
     never changes): for quantities a family computes again for every view pair an object or a
     pair of objects recurs in."""
     return index.__dict__.setdefault(f"_memo_{name}", {})
+
+
+def camera_inside(index: VisibilityIndex, view: str, inst: Instance) -> bool:
+    """Whether ``view``'s camera centre lies inside ``inst``'s box (a question about the object's
+    direction or distance from that camera is then not asked): memoised per ``(view, object)`` on
+    the index, as the same camera and object recur in many view pairs."""
+    memo = index_memo(index, "camera_inside")
+    key = (view, inst.id)
+    inside = memo.get(key)
+    if inside is None:
+        centre = camera_center(index.scene.views[view])
+        inside = memo[key] = bool(inst.box.contains(centre[None, :])[0])
+    return inside
 
 
 

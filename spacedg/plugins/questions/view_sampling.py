@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -181,12 +182,48 @@ def sample_pairs(scene: Scene, rules: PairRules, rng: np.random.Generator) -> li
         InvalidDataError: the scene has no covisibility (compute it with
             ``spacedg.scene.covisibility.with_covisibility``).
     """
+    eligible = _eligible_pairs(scene, rules)
+    order = rng.permutation(len(eligible.forward))
+    flips = rng.random(len(eligible.forward)) < 0.5
+    seen_count: dict[int, int] = {}
+    ranked: list[tuple[int, int, ViewPair]] = []
+    for pos, (k, flip) in enumerate(zip(order.tolist(), flips[order].tolist())):
+        a = eligible.second[k] if flip else eligible.first[k]
+        rank = seen_count.get(a, 0)
+        seen_count[a] = rank + 1
+        ranked.append((rank, pos, eligible.backward[k] if flip else eligible.forward[k]))
+    ranked.sort(key=lambda item: (item[0], item[1]))
+    return [pair for _, _, pair in ranked]
+
+
+@dataclass(frozen=True)
+class _EligiblePairs:
+    """The pairs of views of a scene that satisfy one :class:`PairRules`, before any draw: the view
+    indices of each (``first < second``, in ``np.triu_indices`` order) and its :class:`ViewPair` both ways."""
+
+    first: list[int]
+    second: list[int]
+    forward: list[ViewPair]
+    backward: list[ViewPair]
+
+
+#: (id(covisibility), id(views), rules) → (covisibility, views, pairs): the pairs every family
+#: samples from under the same rules, computed once per scene (the objects are kept, so a reused id never hits).
+_ELIGIBLE: dict[tuple[int, int, PairRules], tuple[Any, Any, _EligiblePairs]] = {}
+
+
+def _eligible_pairs(scene: Scene, rules: PairRules) -> _EligiblePairs:
+    """The pairs :func:`sample_pairs` orders (memoised per scene and rules: no draw enters them)."""
     cov = scene.covisibility
     if cov is None:
         raise InvalidDataError(
             f"scene {scene.id!r} has no covisibility; two-view questions need it: "
             "scene = spacedg.scene.covisibility.with_covisibility(scene, cache_dir=...)"
         )
+    key = (id(cov), id(scene.views), rules)
+    hit = _ELIGIBLE.get(key)
+    if hit is not None and hit[0] is cov and hit[1] is scene.views:
+        return hit[2]
     names = [n for n in cov.names if n in scene.views]
     idx = np.array([cov.index(n) for n in names], dtype=np.int64)
     sym = np.minimum(cov.matrix, cov.matrix.T)[np.ix_(idx, idx)].astype(np.float64)
@@ -200,19 +237,19 @@ def sample_pairs(scene: Scene, rules: PairRules, rng: np.random.Generator) -> li
         (score > rules.min_covisibility) & (score <= rules.max_covisibility)
         & (baseline >= rules.min_translation_m) & (angle >= rules.min_rotation_deg)
     )
-    i, j, score, baseline, angle = i[keep], j[keep], score[keep], baseline[keep], angle[keep]
-    order = rng.permutation(len(i))
-    flips = rng.random(len(i)) < 0.5
-    seen_count: dict[int, int] = {}
-    ranked: list[tuple[int, int, ViewPair]] = []
-    for pos, k in enumerate(order):
-        a, b = (j[k], i[k]) if flips[k] else (i[k], j[k])
-        rank = seen_count.get(int(a), 0)
-        seen_count[int(a)] = rank + 1
-        pair = ViewPair(names[a], names[b], round(float(score[k]), 6), round(float(baseline[k]), 6), round(float(angle[k]), 6))
-        ranked.append((rank, pos, pair))
-    ranked.sort(key=lambda item: (item[0], item[1]))
-    return [pair for _, _, pair in ranked]
+    first, second = i[keep].tolist(), j[keep].tolist()
+    measures = [
+        (round(float(c), 6), round(float(t), 6), round(float(r), 6)) for c, t, r in zip(score[keep], baseline[keep], angle[keep])
+    ]
+    eligible = _EligiblePairs(
+        first, second,
+        [ViewPair(names[a], names[b], *m) for a, b, m in zip(first, second, measures)],
+        [ViewPair(names[b], names[a], *m) for a, b, m in zip(first, second, measures)],
+    )
+    if len(_ELIGIBLE) >= 64:
+        _ELIGIBLE.clear()
+    _ELIGIBLE[key] = (cov, scene.views, eligible)
+    return eligible
 
 
 # ------------------------------------------------------------- object rules

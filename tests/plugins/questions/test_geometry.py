@@ -131,6 +131,26 @@ def test_sample_pairs_thresholds_round_robin_and_seed():
     assert len(set(anchors[:first_repeat])) == len(set(anchors))
 
 
+def test_sample_pairs_memo_follows_the_scene():
+    """The eligible pairs are memoised per scene: another covisibility (a new scene object, even
+    one that reuses a freed object's id) gives its own pairs, and the memo gives the pairs a fresh computation gives."""
+    from spacedg.plugins.questions import view_sampling
+
+    covis = np.full((4, 4), 0.6, np.float32)
+    np.fill_diagonal(covis, 1)
+    scene = _pairs_scene(covis)
+    first = sample_pairs(scene, OBJECT_PAIRS, np.random.default_rng(3))
+    view_sampling._ELIGIBLE.clear()
+    assert sample_pairs(scene, OBJECT_PAIRS, np.random.default_rng(3)) == first  # memo hit == fresh
+    low = covis.copy()
+    low[0, :] = low[:, 0] = 0.01  # v0 shares nothing now
+    np.fill_diagonal(low, 1)
+    other = _pairs_scene(low)
+    others = sample_pairs(other, OBJECT_PAIRS, np.random.default_rng(3))
+    assert all("v0" not in (p.a, p.b) for p in others) and any("v0" in (p.a, p.b) for p in first)
+    assert sample_pairs(scene, OBJECT_PAIRS, np.random.default_rng(3)) == first
+
+
 def test_sample_pairs_needs_covisibility():
     scene = _pairs_scene(np.eye(4)).with_covisibility(None)
     with pytest.raises(InvalidDataError, match="with_covisibility"):
