@@ -24,23 +24,17 @@ __all__ = ["Pooled"]
 class Pooled:
     """A pooled candidate of ``family`` in scene ``scene_id`` (module docstring)."""
 
-    __slots__ = ("candidate", "family", "scene_id", "question_type", "geometry", "_record")
+    __slots__ = ("candidate", "family", "scene_id", "question_type", "sub_question_type", "views", "geometry", "_record")
 
     def __init__(self, candidate: Candidate, family: Any, scene_id: str) -> None:
         self.candidate = candidate
         self.family = family
         self.scene_id = scene_id
         self.question_type: str = family.name
+        self.sub_question_type: str = candidate.sub_question_type  # read often by the selection: plain attributes
+        self.views: tuple[str, ...] = candidate.views
         self.geometry: dict[str, Any] = {"selection": candidate.selection()}
         self._record: QARecord | None = None
-
-    @property
-    def sub_question_type(self) -> str:
-        return self.candidate.sub_question_type
-
-    @property
-    def views(self) -> tuple[str, ...]:
-        return self.candidate.views
 
     def record(self) -> QARecord:
         """The record (built and checked once)."""

@@ -215,10 +215,12 @@ def dominant_parts(components: Sequence[float], ratio: float = TAN30, max_parts:
     The largest |component| always names the first part; each further one joins only when
     ``|c| >= ratio * max|c|``, up to ``max_parts``. ``sign`` is +1 or -1. Empty for a zero vector.
     """
-    values = np.asarray(components, dtype=np.float64)
-    mags = np.abs(values)
-    top = float(mags.max()) if mags.size else 0.0
-    if not math.isfinite(top) or top <= 0.0:
+    values = np.asarray(components, dtype=np.float64).tolist()  # plain floats: the same values, cheaper to compare
+    mags = [abs(v) for v in values]
+    if not all(math.isfinite(m) for m in mags):
+        return []  # as numpy's max, which a NaN or an infinity makes non-finite
+    top = max(mags) if mags else 0.0
+    if top <= 0.0:
         return []
     order = sorted(range(len(values)), key=lambda i: (-mags[i], i))
     parts = [(i, 1 if values[i] > 0 else -1) for i in order if mags[i] >= ratio * top]
@@ -263,7 +265,7 @@ def _next_letter(rng: np.random.Generator, n_options: int = 4) -> int:
     _DECKS.move_to_end(key)
     deck = entry[1]
     if not deck:
-        deck.extend(int(k) for k in rng.permutation(n_options))
+        deck.extend(rng.permutation(n_options).tolist())
     return deck.pop()
 
 
@@ -282,8 +284,12 @@ class BalancedDeck:
 
     def next(self) -> int:
         if not self._left:
-            self._left = [int(v) for v in self.rng.permutation(self.k)]
+            self._left = self.rng.permutation(self.k).tolist()
         return self._left.pop()
+
+
+#: ``"A. "``, ``"B. "``, …: what each option line starts with.
+_OPTION_PREFIXES: tuple[str, ...] = tuple(f"{letter}. " for letter in MCQ_LETTERS)
 
 
 def build_mcq(
@@ -310,13 +316,13 @@ def build_mcq(
             break
     if len(chosen) < need:
         raise InvalidDataError(f"build_mcq: need {need} distractors different from {truth!r}, got {list(distractors)}")
-    others = [chosen[i] for i in rng.permutation(need)]
+    others = [chosen[i] for i in rng.permutation(need).tolist()]
     if slot is None:
         slot = _next_letter(rng, n_options)
     elif slot not in range(n_options):
         raise InvalidDataError(f"build_mcq: slot must be 0-{need} (the correct letter's position), got {slot!r}")
-    texts = others[:slot] + [truth] + others[slot:]
-    return tuple(f"{MCQ_LETTERS[k]}. {t}" for k, t in enumerate(texts)), MCQ_LETTERS[slot]
+    others.insert(slot, truth)
+    return tuple([f"{prefix}{text}" for prefix, text in zip(_OPTION_PREFIXES, others)]), MCQ_LETTERS[slot]
 
 
 # ---------------------------------------------------------------- ground plane
@@ -449,7 +455,7 @@ class Sectors:
         if hit.boundary_distance_deg < guard_deg:
             banned.add(hit.neighbour)
         pool = [k for k in range(len(self.labels)) if k not in banned]
-        return [self.labels[pool[i]] for i in rng.permutation(len(pool))]
+        return [self.labels[pool[i]] for i in rng.permutation(len(pool)).tolist()]
 
 
 #: Relative position around a person: eight 45° sectors centred on front, front-right, …

@@ -163,8 +163,8 @@ def round_robin(streams: Iterable[Iterator[T]]) -> Iterator[T]:
 
 def seeded_order(items: Sequence[T], rng: np.random.Generator) -> Iterator[T]:
     """``items`` in the order of ``rng.permutation(len(items))`` (drawn on the first ``next``)."""
-    for i in rng.permutation(len(items)):
-        yield items[int(i)]
+    for i in rng.permutation(len(items)).tolist():
+        yield items[i]
 
 
 def role_rounds(roles_by_key: Mapping[str, Sequence[Sequence[T]]], rng: np.random.Generator) -> list[list[tuple[T, ...]]]:
