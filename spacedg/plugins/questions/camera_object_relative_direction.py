@@ -392,7 +392,7 @@ def _relpos_candidates(index: VisibilityIndex, pair: ViewPair) -> tuple[dict[int
         found = next((v for v in views if referable(index, v, iid)), None)  # image A first, else image B
         if found is not None:
             ref_view[iid] = found
-    seen_a, seen_b = set(index.seen[pair.a]), set(index.seen[pair.b])
+    seen_a, seen_b = index.seen_set(pair.a), index.seen_set(pair.b)
     triplets: list[tuple[int, int, int]] = []
     for combo in itertools.combinations(sorted(ref_view), 3):
         if set(combo) <= seen_a or set(combo) <= seen_b:

@@ -179,13 +179,12 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         return hits[key]
 
     for k in lazy_permutation(n * (n - 1) * (n - 2), rng):
-        tri = decode_triplet(k, n)
-        if not any(only_a[t] for t in tri) or not any(only_b[t] for t in tri):
+        tri = x, y, z = decode_triplet(k, n)
+        if not (only_a[x] or only_a[y] or only_a[z]) or not (only_b[x] or only_b[y] or only_b[z]):
             continue
-        triplet_ids = tuple(ids[t] for t in tri)
+        triplet_ids = (ids[x], ids[y], ids[z])
         if not split_across_views(index, pair.a, pair.b, triplet_ids):
             continue
-        x, y, z = tri
         if len({keys[x], keys[y], keys[z]}) < 3:
             continue
         ref, query = leg(x, y), leg(z, y)

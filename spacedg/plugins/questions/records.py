@@ -197,8 +197,11 @@ def lazy_permutation(n: int, rng: np.random.Generator, batch: int = 256) -> Iter
     swaps: dict[int, int] = {}
     i = 0
     while i < n:
-        for x in rng.random(min(batch, n - i)):
-            j = min(n - 1, i + int(float(x) * (n - i)))
+        count = min(batch, n - i)
+        # j = min(n − 1, i + ⌊x·(n − i)⌋) for the batch's uniforms, in one pass (the same float64 products)
+        left = n - np.arange(i, i + count, dtype=np.int64)
+        targets = np.minimum(n - 1, np.arange(i, i + count, dtype=np.int64) + (rng.random(count) * left).astype(np.int64))
+        for j in targets.tolist():
             value = swaps.get(j, j)
             swaps[j] = swaps.pop(i, i)
             yield value

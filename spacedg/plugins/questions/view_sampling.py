@@ -88,6 +88,23 @@ class VisibilityIndex:
             self.seen[view] = tuple(sorted(i for i, c in row.items() if c is not VisibilityClass.HIDDEN))
         self._by_id = {inst.id: inst for inst in scene.instances}
         self._entries: dict[tuple[str, int], dict[str, object]] = {}  # vis_entry, per (view, id)
+        self._sets: dict[tuple[str, str], frozenset[int]] = {}  # (kind, view) → visible / seen as a set
+
+    def visible_set(self, view: str) -> frozenset[int]:
+        """:attr:`visible` of ``view`` as a set (made once)."""
+        key = ("visible", view)
+        found = self._sets.get(key)
+        if found is None:
+            found = self._sets[key] = frozenset(self.visible[view])
+        return found
+
+    def seen_set(self, view: str) -> frozenset[int]:
+        """:attr:`seen` of ``view`` as a set (made once)."""
+        key = ("seen", view)
+        found = self._sets.get(key)
+        if found is None:
+            found = self._sets[key] = frozenset(self.seen[view])
+        return found
 
     def instance(self, instance_id: int) -> Instance:
         return self._by_id[instance_id]
@@ -258,10 +275,10 @@ def split_across_views(index: VisibilityIndex, view_a: str, view_b: str, ids: tu
 
     "Shows" means any visible pixel, so a partly visible third object also collapses the task.
     """
-    visible = set(index.visible[view_a]) | set(index.visible[view_b])
-    if not set(ids) <= visible or len(set(ids)) < 3:
+    objects = set(ids)
+    if len(objects) < 3 or not objects <= (index.visible_set(view_a) | index.visible_set(view_b)):
         return False
-    return not (set(ids) <= set(index.seen[view_a]) or set(ids) <= set(index.seen[view_b]))
+    return not (objects <= index.seen_set(view_a) or objects <= index.seen_set(view_b))
 
 
 @dataclass(frozen=True)

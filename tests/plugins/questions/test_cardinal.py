@@ -107,6 +107,27 @@ def test_lazy_permutation_and_triplet_decoding():
         assert sorted(got) == sorted(itertools.permutations(range(n), 3))
 
 
+def test_lazy_permutation_draws_as_its_docstring_says():
+    """Each step i takes uniform x from batches of ``rng.random`` and swaps in j = min(n − 1, i + ⌊x(n − i)⌋):
+    the order (and the generator's state after an abandoned walk) follow from the generator alone."""
+
+    def reference(n, rng, batch=256):
+        swaps, i = {}, 0
+        while i < n:
+            for x in rng.random(min(batch, n - i)):
+                j = min(n - 1, i + int(float(x) * (n - i)))
+                value = swaps.get(j, j)
+                swaps[j] = swaps.pop(i, i)
+                yield value
+                i += 1
+
+    for n in (1, 255, 256, 257, 6840, 205_320):
+        assert list(lazy_permutation(n, np.random.default_rng(n))) == list(reference(n, np.random.default_rng(n)))
+        ours, theirs = np.random.default_rng(1), np.random.default_rng(1)
+        assert list(itertools.islice(lazy_permutation(n, ours), 300)) == list(itertools.islice(reference(n, theirs), 300))
+        assert ours.random() == theirs.random()
+
+
 # ------------------------------------------------------- cross-view golden
 def cross_scene(offset2: np.ndarray, offset1: np.ndarray | None = None, extra: list | None = None, vis_a: dict | None = None):
     """Camera A at (0, 0, 1.2) facing +y; object 1 (lamp) at A + ``offset1``; camera B at
