@@ -89,6 +89,18 @@ class VisibilityIndex:
         self._by_id = {inst.id: inst for inst in scene.instances}
         self._entries: dict[tuple[str, int], dict[str, object]] = {}  # vis_entry, per (view, id)
         self._sets: dict[tuple[str, str], frozenset[int]] = {}  # (kind, view) → visible / seen as a set
+        self._seen_labels: dict[str, dict[str, tuple[int, ...]]] = {}  # view → label key → seen ids
+
+    def seen_with_label(self, view: str, key: str) -> tuple[int, ...]:
+        """Ids of :attr:`seen` of ``view`` whose :func:`label_key` is ``key``, in :attr:`seen` order
+        (grouped once per view)."""
+        groups = self._seen_labels.get(view)
+        if groups is None:
+            groups = {}
+            for i in self.seen[view]:
+                groups.setdefault(label_key(self._by_id[i].label), []).append(i)
+            groups = self._seen_labels[view] = {k: tuple(v) for k, v in groups.items()}
+        return groups.get(key, ())
 
     def visible_set(self, view: str) -> frozenset[int]:
         """:attr:`visible` of ``view`` as a set (made once)."""
@@ -333,11 +345,7 @@ def label_ambiguous(index: VisibilityIndex, view: str, label: str, lexicon: Lexi
 
 def same_label_neighbours(index: VisibilityIndex, view: str, instance: Instance) -> list[Instance]:
     """Other instances with the same label that ``view`` shows (any visible pixel)."""
-    key = label_key(instance.label)
-    return [
-        index.instance(i) for i in index.seen[view]
-        if i != instance.id and label_key(index.instance(i).label) == key
-    ]
+    return [index.instance(i) for i in index.seen_with_label(view, label_key(instance.label)) if i != instance.id]
 
 
 def description_clash(index: VisibilityIndex, view: str, instance: Instance) -> bool:
