@@ -31,6 +31,7 @@ Where the files go and when an index is reused: :mod:`spacedg.qa.index`.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import time
 from collections import Counter
@@ -292,7 +293,9 @@ def generate_records(
     index = TwinCheck(VisibilityIndex(scene))
     found: Counter[str] = Counter()
     out: list[QARecord] = []
-    with collector_paused():  # a quarter of the time went to the cyclic collector re-scanning the pools
+    # The cyclic collector re-scanning the pools took a quarter of generation: paused, unless a
+    # judge runs (it renders and may call a model, whose cyclic garbage must not wait for the scene's end).
+    with collector_paused() if judge is None else contextlib.nullcontext():
         for family in selected_families(config.families):
             out.extend(_family_records(family, scene, config, judge, dropped, selection_stats, index, found))
     if twins is not None:

@@ -10,6 +10,10 @@ changes no result, only when cyclic garbage (there is almost none) is reclaimed.
 
 The pause is scoped (:func:`collector_paused`): the collector's state is restored on exit,
 also on an exception, and an inner pause inside an outer one leaves the outer one's state alone.
+Where it is used: a scene's question generation without a judge
+(:func:`~spacedg.qa.build.generate_records`; a judge renders views and may call a model, whose
+garbage should not wait for the scene's end) and reading a question index
+(:func:`~spacedg.qa.index.read_index`).
 """
 
 from __future__ import annotations

@@ -170,7 +170,7 @@ def _single_view_record(scene: Scene, index: VisibilityIndex, view: str, inst: I
 
 
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
-    both = sorted(set(index.visible[pair.a]) & set(index.visible[pair.b]))
+    both = sorted(index.visible_set(pair.a) & index.visible_set(pair.b))
     for iid in seeded_order(both, rng):
         inst = index.instance(iid)
         if not (referable(index, pair.a, iid) and referable(index, pair.b, iid)):

@@ -288,10 +288,6 @@ class BalancedDeck:
         return self._left.pop()
 
 
-#: ``"A. "``, ``"B. "``, …: what each option line starts with.
-_OPTION_PREFIXES: tuple[str, ...] = tuple(f"{letter}. " for letter in MCQ_LETTERS)
-
-
 def build_mcq(
     truth: str, distractors: Sequence[str], rng: np.random.Generator, slot: int | None = None, n_options: int = 4,
 ) -> tuple[tuple[str, ...], str]:
@@ -322,7 +318,7 @@ def build_mcq(
     elif slot not in range(n_options):
         raise InvalidDataError(f"build_mcq: slot must be 0-{need} (the correct letter's position), got {slot!r}")
     others.insert(slot, truth)
-    return tuple([f"{prefix}{text}" for prefix, text in zip(_OPTION_PREFIXES, others)]), MCQ_LETTERS[slot]
+    return tuple(f"{MCQ_LETTERS[k]}. {text}" for k, text in enumerate(others)), MCQ_LETTERS[slot]
 
 
 # ---------------------------------------------------------------- ground plane

@@ -152,7 +152,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             ref_view.setdefault(iid, view)  # image A first, else image B
     ids = sorted(ref_view)
     n = len(ids)
-    seen_a, seen_b = set(index.seen[pair.a]), set(index.seen[pair.b])
+    seen_a, seen_b = index.seen_set(pair.a), index.seen_set(pair.b)
     only_b = [i not in seen_a for i in ids]  # must come from image B: not seen in A
     only_a = [i not in seen_b for i in ids]
     if n < 3 or not any(only_a) or not any(only_b):
@@ -179,7 +179,8 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         return hits[key]
 
     for k in lazy_permutation(n * (n - 1) * (n - 2), rng):
-        tri = x, y, z = decode_triplet(k, n)
+        tri = decode_triplet(k, n)
+        x, y, z = tri
         if not (only_a[x] or only_a[y] or only_a[z]) or not (only_b[x] or only_b[y] or only_b[z]):
             continue
         triplet_ids = (ids[x], ids[y], ids[z])

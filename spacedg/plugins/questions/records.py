@@ -53,7 +53,6 @@ from typing import Any, TypeVar
 import numpy as np
 
 from spacedg.plugins.qa_record import Answer, QARecord, make_record_id
-from spacedg.plugins.questions.geometry import camera_center
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
     PairRules,
@@ -72,6 +71,7 @@ from spacedg.plugins.questions.geometry import (
     VERTICAL_FACTOR,
     SectorHit,
     build_mcq,
+    camera_center,
     compass_answer,
     on_compass_boundary,
 )
@@ -199,8 +199,8 @@ def lazy_permutation(n: int, rng: np.random.Generator, batch: int = 256) -> Iter
     while i < n:
         count = min(batch, n - i)
         # j = min(n − 1, i + ⌊x·(n − i)⌋) for the batch's uniforms, in one pass (the same float64 products)
-        left = n - np.arange(i, i + count, dtype=np.int64)
-        targets = np.minimum(n - 1, np.arange(i, i + count, dtype=np.int64) + (rng.random(count) * left).astype(np.int64))
+        steps = np.arange(i, i + count, dtype=np.int64)
+        targets = np.minimum(n - 1, steps + (rng.random(count) * (n - steps)).astype(np.int64))
         for j in targets.tolist():
             value = swaps.get(j, j)
             swaps[j] = swaps.pop(i, i)
@@ -282,7 +282,6 @@ def camera_inside(index: VisibilityIndex, view: str, inst: Instance) -> bool:
         centre = camera_center(index.scene.views[view])
         inside = memo[key] = bool(inst.box.contains(centre[None, :])[0])
     return inside
-
 
 
 def pair_subject(pair: ViewPair) -> str:

@@ -236,9 +236,10 @@ class _EligiblePairs:
     backward: list[ViewPair]
 
 
-#: (id(covisibility), id(views), rules) → (covisibility, views, pairs): the pairs every family
-#: samples from under the same rules, computed once per scene (the objects are kept, so a reused id never hits).
-_ELIGIBLE: dict[tuple[int, int, PairRules], tuple[Any, Any, _EligiblePairs]] = {}
+#: (id(covisibility), rules) → (covisibility, its views' cameras in order, pairs): the pairs every
+#: family samples from under the same rules, computed once per scene; a hit needs the same
+#: covisibility object and the very same camera objects (kept here, so a reused id never hits).
+_ELIGIBLE: dict[tuple[int, PairRules], tuple[Any, tuple[Any, ...], _EligiblePairs]] = {}
 
 
 def _eligible_pairs(scene: Scene, rules: PairRules) -> _EligiblePairs:
@@ -249,11 +250,12 @@ def _eligible_pairs(scene: Scene, rules: PairRules) -> _EligiblePairs:
             f"scene {scene.id!r} has no covisibility; two-view questions need it: "
             "scene = spacedg.scene.covisibility.with_covisibility(scene, cache_dir=...)"
         )
-    key = (id(cov), id(scene.views), rules)
-    hit = _ELIGIBLE.get(key)
-    if hit is not None and hit[0] is cov and hit[1] is scene.views:
-        return hit[2]
     names = [n for n in cov.names if n in scene.views]
+    cameras = tuple(scene.views[n] for n in names)  # the memo checks the cameras themselves: views may be edited in place
+    key = (id(cov), rules)
+    hit = _ELIGIBLE.get(key)
+    if hit is not None and hit[0] is cov and len(hit[1]) == len(cameras) and all(a is b for a, b in zip(hit[1], cameras)):
+        return hit[2]
     idx = np.array([cov.index(n) for n in names], dtype=np.int64)
     sym = np.minimum(cov.matrix, cov.matrix.T)[np.ix_(idx, idx)].astype(np.float64)
     rot, centre = _poses(scene, names)
@@ -277,7 +279,7 @@ def _eligible_pairs(scene: Scene, rules: PairRules) -> _EligiblePairs:
     )
     if len(_ELIGIBLE) >= 64:
         _ELIGIBLE.clear()
-    _ELIGIBLE[key] = (cov, scene.views, eligible)
+    _ELIGIBLE[key] = (cov, cameras, eligible)
     return eligible
 
 
@@ -287,8 +289,9 @@ def split_across_views(index: VisibilityIndex, view_a: str, view_b: str, ids: tu
 
     "Shows" means any visible pixel, so a partly visible third object also collapses the task.
     """
+    visible_a, visible_b = index.visible_set(view_a), index.visible_set(view_b)  # an unknown view raises KeyError, as always
     objects = set(ids)
-    if len(objects) < 3 or not objects <= (index.visible_set(view_a) | index.visible_set(view_b)):
+    if len(objects) < 3 or not all(i in visible_a or i in visible_b for i in objects):
         return False
     return not (objects <= index.seen_set(view_a) or objects <= index.seen_set(view_b))
 

@@ -9,6 +9,7 @@ import pytest
 
 from tests.qa_scenes import CLEAR, PARTLY, build, camera, obj
 from spacedg.plugins.questions.view_sampling import (
+    ViewPair,
     OBJECT_PAIRS,
     TRANSLATION_PAIRS,
     PairRules,
@@ -131,24 +132,65 @@ def test_sample_pairs_thresholds_round_robin_and_seed():
     assert len(set(anchors[:first_repeat])) == len(set(anchors))
 
 
-def test_sample_pairs_memo_follows_the_scene():
-    """The eligible pairs are memoised per scene: another covisibility (a new scene object, even
-    one that reuses a freed object's id) gives its own pairs, and the memo gives the pairs a fresh computation gives."""
+def _sample_pairs_reference(scene, rules, rng):
+    """``sample_pairs`` as written before its eligible pairs were memoised (stop 39): the draws and the order to match."""
+    cov = scene.covisibility
+    names = [n for n in cov.names if n in scene.views]
+    idx = np.array([cov.index(n) for n in names], dtype=np.int64)
+    sym = np.minimum(cov.matrix, cov.matrix.T)[np.ix_(idx, idx)].astype(np.float64)
+    poses = np.stack([np.asarray(scene.views[n].cam_to_world, dtype=np.float64) for n in names])
+    rot, centre = poses[:, :3, :3], poses[:, :3, 3]
+    i, j = np.triu_indices(len(names), k=1)
+    score = sym[i, j]
+    baseline = np.linalg.norm(centre[j] - centre[i], axis=1)
+    angle = np.degrees(np.arccos(np.clip((np.einsum("nij,nij->n", rot[i], rot[j]) - 1.0) / 2.0, -1.0, 1.0)))
+    keep = ((score > rules.min_covisibility) & (score <= rules.max_covisibility)
+            & (baseline >= rules.min_translation_m) & (angle >= rules.min_rotation_deg))
+    i, j, score, baseline, angle = i[keep], j[keep], score[keep], baseline[keep], angle[keep]
+    order = rng.permutation(len(i))
+    flips = rng.random(len(i)) < 0.5
+    seen_count, ranked = {}, []
+    for pos, k in enumerate(order):
+        a, b = (j[k], i[k]) if flips[k] else (i[k], j[k])
+        rank = seen_count.get(int(a), 0)
+        seen_count[int(a)] = rank + 1
+        ranked.append((rank, pos, ViewPair(names[a], names[b], round(float(score[k]), 6), round(float(baseline[k]), 6),
+                                           round(float(angle[k]), 6))))
+    ranked.sort(key=lambda item: (item[0], item[1]))
+    return [pair for _, _, pair in ranked]
+
+
+def test_sample_pairs_equals_the_unmemoised_sampler_and_follows_the_scene():
+    """The eligible pairs are memoised per covisibility, rules and cameras: over seeds, rules and two
+    calls (a fresh computation, then a memo hit) the pairs and draws equal the plain sampler's, the
+    generator is left in the same state, and a scene with another covisibility, or a camera replaced
+    in place, gets its own pairs."""
     from spacedg.plugins.questions import view_sampling
 
     covis = np.full((4, 4), 0.6, np.float32)
     np.fill_diagonal(covis, 1)
     scene = _pairs_scene(covis)
-    first = sample_pairs(scene, OBJECT_PAIRS, np.random.default_rng(3))
     view_sampling._ELIGIBLE.clear()
-    assert sample_pairs(scene, OBJECT_PAIRS, np.random.default_rng(3)) == first  # memo hit == fresh
+    for rules in (OBJECT_PAIRS, TRANSLATION_PAIRS, PairRules(min_rotation_deg=15)):
+        for seed in range(4):
+            for _ in range(2):  # the first call computes, the second hits the memo
+                ours, theirs = np.random.default_rng(seed), np.random.default_rng(seed)
+                assert sample_pairs(scene, rules, ours) == _sample_pairs_reference(scene, rules, theirs)
+                assert ours.random() == theirs.random()
     low = covis.copy()
     low[0, :] = low[:, 0] = 0.01  # v0 shares nothing now
     np.fill_diagonal(low, 1)
     other = _pairs_scene(low)
-    others = sample_pairs(other, OBJECT_PAIRS, np.random.default_rng(3))
-    assert all("v0" not in (p.a, p.b) for p in others) and any("v0" in (p.a, p.b) for p in first)
-    assert sample_pairs(scene, OBJECT_PAIRS, np.random.default_rng(3)) == first
+    assert sample_pairs(other, OBJECT_PAIRS, np.random.default_rng(3)) == _sample_pairs_reference(other, OBJECT_PAIRS, np.random.default_rng(3))
+    assert all("v0" not in (p.a, p.b) for p in sample_pairs(other, OBJECT_PAIRS, np.random.default_rng(3)))
+    moved = dict(scene.views)
+    scene.views["v1"] = camera((5.0, 5.0, 1.5))  # the same views dict, edited in place
+    try:
+        assert sample_pairs(scene, TRANSLATION_PAIRS, np.random.default_rng(1)) == \
+            _sample_pairs_reference(scene, TRANSLATION_PAIRS, np.random.default_rng(1))
+    finally:
+        scene.views.clear()
+        scene.views.update(moved)
 
 
 def test_sample_pairs_needs_covisibility():
