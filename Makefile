@@ -9,6 +9,9 @@ VENV ?= .venv
 #   make demo TORCH_SPEC="torch==2.13.0 --index-url https://download.pytorch.org/whl/cu128"
 TORCH_SPEC ?= torch==2.13.0
 BIN := $(VENV)/bin
+# bytecode caches written even where the environment says not to (PYTHONDONTWRITEBYTECODE): the
+# packages are installed without them (--no-compile), so every process would compile torch again
+PYCACHE_ON := PYTHONDONTWRITEBYTECODE=
 STAMP := $(VENV)/.spacedg-installed
 DEMO_DIR ?= runs/demo
 # the browser the review page's end-to-end tests drive (Debian's package; playwright's own
@@ -22,8 +25,11 @@ setup: $(STAMP)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -c "import torch" 2>/dev/null || $(BIN)/python -m pip install --quiet $(TORCH_SPEC)
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	@# --no-compile: pip would byte-compile every file of every package (about a minute, torch's
+	@# thousands of modules most of it); the modules spacedg imports are compiled once, below
+	$(BIN)/python -c "import torch" 2>/dev/null || $(BIN)/python -m pip install --quiet --no-compile $(TORCH_SPEC)
+	$(BIN)/python -m pip install --quiet --no-compile -e '.[test]'
+	$(PYCACHE_ON) $(BIN)/python -c "import spacedg.cli, spacedg.sft.app, spacedg.data.dataset, spacedg.eval.predict, spacedg.render.renderer"
 	@# the browser tests (tests/review/test_browser.py) drive Debian's chromium through playwright
 	@command -v $(CHROMIUM) >/dev/null 2>&1 || { \
 	  if [ "$$(id -u)" = 0 ]; then SUDO=; elif command -v sudo >/dev/null 2>&1; then SUDO="sudo -n"; else SUDO=none; fi; \
@@ -55,7 +61,7 @@ demo: $(STAMP)
 	$(BIN)/spacedg plugins
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(PYCACHE_ON) $(BIN)/python -m pytest -q
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
