@@ -60,8 +60,16 @@ demo: $(STAMP)
 	$(BIN)/python -m spacedg.sft +experiment=tiny 'data.scenes=[$(DEMO_DIR)/scenes]' output_dir=$(DEMO_DIR)/sft-tiny
 	$(BIN)/spacedg plugins
 
+# The suite in two lanes on the machine's two cores: tests/sft (torchrun launches, an installed
+# wheel) in the background, the rest in front (beside it, tests/test_readme.py's runner); the
+# background lane's output follows the front's, and both must pass.
 test: $(STAMP)
-	$(PYCACHE_ON) $(BIN)/python -m pytest -q
+	@log=$$(mktemp); \
+	$(PYCACHE_ON) $(BIN)/python -m pytest -q -p no:cacheprovider tests/sft > $$log 2>&1 & lane=$$!; \
+	$(PYCACHE_ON) $(BIN)/python -m pytest -q --ignore=tests/sft; front=$$?; \
+	wait $$lane; back=$$?; \
+	echo "---- tests/sft (the second lane) ----"; cat $$log; rm -f $$log; \
+	test $$front -eq 0 && test $$back -eq 0
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
