@@ -104,18 +104,16 @@ class VisibilityIndex:
 
     def visible_set(self, view: str) -> frozenset[int]:
         """:attr:`visible` of ``view`` as a set (made once)."""
-        key = ("visible", view)
-        found = self._sets.get(key)
-        if found is None:
-            found = self._sets[key] = frozenset(self.visible[view])
-        return found
+        return self._as_set("visible", self.visible, view)
 
     def seen_set(self, view: str) -> frozenset[int]:
         """:attr:`seen` of ``view`` as a set (made once)."""
-        key = ("seen", view)
-        found = self._sets.get(key)
+        return self._as_set("seen", self.seen, view)
+
+    def _as_set(self, kind: str, ids: dict[str, tuple[int, ...]], view: str) -> frozenset[int]:
+        found = self._sets.get((kind, view))
         if found is None:
-            found = self._sets[key] = frozenset(self.seen[view])
+            found = self._sets[(kind, view)] = frozenset(ids[view])  # KeyError for an unknown view, as ids[view]
         return found
 
     def instance(self, instance_id: int) -> Instance:
