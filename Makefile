@@ -63,12 +63,14 @@ demo: $(STAMP)
 # The suite in two lanes on the machine's two cores: tests/sft (torchrun launches, an installed
 # wheel) in the background, the rest in front (beside it, tests/test_readme.py's runner); the
 # background lane's output follows the front's, and both must pass.
+# An interrupted run stops the background lane and removes its log (the EXIT trap).
 test: $(STAMP)
-	@log=$$(mktemp); \
-	$(PYCACHE_ON) $(BIN)/python -m pytest -q -p no:cacheprovider tests/sft > $$log 2>&1 & lane=$$!; \
+	@log=$$(mktemp) || exit 1; lane=; \
+	trap 'if [ -n "$$lane" ]; then kill $$lane 2>/dev/null; fi; rm -f "$$log"' EXIT; trap 'exit 130' INT TERM; \
+	$(PYCACHE_ON) $(BIN)/python -m pytest -q -p no:cacheprovider tests/sft > "$$log" 2>&1 & lane=$$!; \
 	$(PYCACHE_ON) $(BIN)/python -m pytest -q --ignore=tests/sft; front=$$?; \
-	wait $$lane; back=$$?; \
-	echo "---- tests/sft (the second lane) ----"; cat $$log; rm -f $$log; \
+	wait $$lane; back=$$?; lane=; \
+	echo "---- tests/sft (the second lane) ----"; cat "$$log"; \
 	test $$front -eq 0 && test $$back -eq 0
 
 clean:

@@ -198,7 +198,8 @@ def _equivalence(reference: dict[str, list], new: dict[str, list], rooms: list[P
         a, b = subs_ref.get(key, []), subs_new.get(key, [])
         ex = [getattr(audit.get(key), "excess", None) for audit in audits]
         excess = " / ".join("" if e is None else f"{e:+.1f}" for e in ex) if any(e is not None for e in ex) else ""
-        shares = f"{_top_share(a)} / {_top_share(b)}" if _top_share(a) or _top_share(b) else ""
+        top_a, top_b = _top_share(a), _top_share(b)
+        shares = f"{top_a} / {top_b}" if top_a or top_b else ""
         print(f"{'/'.join(key):<58}{f'{len(a)} / {len(b)}':>13}{shares:>36}{excess:>16}")
     overall = [report.overall.get("excess") for report in reports]
     print(f"{'ALL (MCQ+YN+COUNT)':<58}{f'{sum(map(len, subs_ref.values()))} / {sum(map(len, subs_new.values()))}':>13}{'':>36}"

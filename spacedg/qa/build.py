@@ -142,6 +142,7 @@ class _PoolScan:
         self.want = quota(config.per_sub_type, config.mode) * config.pool_factor
         self.scanned = 0
         self.distinct: dict[str, dict[str, int]] = {}  # sub type → pooled records per subject
+        self.admitted: tuple[str, Sequence[str], str, Sequence[int]] | None = None  # what the gate last admitted
 
     def _wanted(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:
         """Whether the pool takes the candidate (class docstring); raises :class:`_ScanDone` when a
@@ -167,18 +168,27 @@ class _PoolScan:
         family yields it or, refused, :data:`~spacedg.plugins.candidates.PASSED_OVER`)."""
         if self.scanned >= self.max_scan:
             raise _ScanDone
-        return self._wanted(sub, views, subject, named)
+        wanted = self._wanted(sub, views, subject, named)
+        self.admitted = (sub, views, subject, named) if wanted else None
+        return wanted
 
-    def passed_over(self) -> None:
-        """A candidate :meth:`gate` refused: counted as scanned."""
+    def _count(self) -> None:
+        """One more candidate scanned (the scan ends at ``max_scan``)."""
         if self.scanned >= self.max_scan:
             raise _ScanDone
         self.scanned += 1
 
+    def passed_over(self) -> None:
+        """A candidate :meth:`gate` refused: counted as scanned."""
+        self._count()
+        self.admitted = None
+
     def take(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:
-        """A candidate the family yielded: counted as scanned; whether the pool keeps it (and then noted)."""
-        self.passed_over()
-        if not self._wanted(sub, views, subject, named):
+        """A candidate the family yielded: counted as scanned; whether the pool keeps it (and then noted).
+        One the gate has just admitted with these very fields is not asked again (nothing changed since)."""
+        self._count()
+        admitted, self.admitted = self.admitted, None
+        if admitted != (sub, views, subject, named) and not self._wanted(sub, views, subject, named):
             return False
         seen = self.distinct[sub]
         seen[subject] = seen.get(subject, 0) + 1

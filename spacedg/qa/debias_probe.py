@@ -243,12 +243,13 @@ def probe(records: Sequence[QARecord], *, folds: int = 5, seed: int = 0, learned
             if r.question_type not in changed and r.id in reuse.correct:
                 correct[r.id] = dict(reuse.correct[r.id])
                 prob[r.id] = reuse.truth_probability.get(r.id, 0.0)
+    scene_ids = [r.scene_id for r in discrete]
     plans = [(folds, s) for s in repeat_seeds(seed, repeats)]
     if half_splits:
-        plans += half_split_plans([r.scene_id for r in discrete], seed, half_splits)
+        plans += half_split_plans(scene_ids, seed, half_splits)
     fits: dict[object, tuple[dict[str, dict[str, float]], dict[str, float]]] = {}  # a split dealt twice is fitted once
     for plan_folds, fold_seed in plans:
-        groups = scene_folds([r.scene_id for r in discrete], plan_folds, fold_seed)
+        groups = scene_folds(scene_ids, plan_folds, fold_seed)
         key = _split_key(groups)
         if key not in fits:
             fits[key] = _held_out(fitted, groups, learned)

@@ -86,9 +86,10 @@ class VisibilityIndex:
             self.classes[view] = row
             self.visible[view] = tuple(sorted(i for i, c in row.items() if c is VisibilityClass.VISIBLE))
             self.seen[view] = tuple(sorted(i for i, c in row.items() if c is not VisibilityClass.HIDDEN))
+        self._visible_sets = {view: frozenset(ids) for view, ids in self.visible.items()}
+        self._seen_sets = {view: frozenset(ids) for view, ids in self.seen.items()}
         self._by_id = {inst.id: inst for inst in scene.instances}
         self._entries: dict[tuple[str, int], dict[str, object]] = {}  # vis_entry, per (view, id)
-        self._sets: dict[tuple[str, str], frozenset[int]] = {}  # (kind, view) → visible / seen as a set
         self._seen_labels: dict[str, dict[str, tuple[int, ...]]] = {}  # view → label key → seen ids
 
     def seen_with_label(self, view: str, key: str) -> tuple[int, ...]:
@@ -103,18 +104,12 @@ class VisibilityIndex:
         return groups.get(key, ())
 
     def visible_set(self, view: str) -> frozenset[int]:
-        """:attr:`visible` of ``view`` as a set (made once)."""
-        return self._as_set("visible", self.visible, view)
+        """:attr:`visible` of ``view`` as a set (``KeyError`` for an unknown view)."""
+        return self._visible_sets[view]
 
     def seen_set(self, view: str) -> frozenset[int]:
-        """:attr:`seen` of ``view`` as a set (made once)."""
-        return self._as_set("seen", self.seen, view)
-
-    def _as_set(self, kind: str, ids: dict[str, tuple[int, ...]], view: str) -> frozenset[int]:
-        found = self._sets.get((kind, view))
-        if found is None:
-            found = self._sets[(kind, view)] = frozenset(ids[view])  # KeyError for an unknown view, as ids[view]
-        return found
+        """:attr:`seen` of ``view`` as a set (``KeyError`` for an unknown view)."""
+        return self._seen_sets[view]
 
     def instance(self, instance_id: int) -> Instance:
         return self._by_id[instance_id]
@@ -212,24 +207,22 @@ def sample_pairs(scene: Scene, rules: PairRules, rng: np.random.Generator) -> li
     eligible = _eligible_pairs(scene, rules)
     order = rng.permutation(len(eligible.forward))
     flips = rng.random(len(eligible.forward)) < 0.5
-    seen_count: dict[int, int] = {}
+    seen_count: dict[str, int] = {}
     ranked: list[tuple[int, int, ViewPair]] = []
     for pos, (k, flip) in enumerate(zip(order.tolist(), flips[order].tolist())):
-        a = eligible.second[k] if flip else eligible.first[k]
-        rank = seen_count.get(a, 0)
-        seen_count[a] = rank + 1
-        ranked.append((rank, pos, eligible.backward[k] if flip else eligible.forward[k]))
+        pair = eligible.backward[k] if flip else eligible.forward[k]
+        rank = seen_count.get(pair.a, 0)  # the anchor's earlier pairs (view names are unique)
+        seen_count[pair.a] = rank + 1
+        ranked.append((rank, pos, pair))
     ranked.sort(key=lambda item: (item[0], item[1]))
     return [pair for _, _, pair in ranked]
 
 
 @dataclass(frozen=True)
 class _EligiblePairs:
-    """The pairs of views of a scene that satisfy one :class:`PairRules`, before any draw: the view
-    indices of each (``first < second``, in ``np.triu_indices`` order) and its :class:`ViewPair` both ways."""
+    """The pairs of views of a scene that satisfy one :class:`PairRules`, before any draw, in
+    ``np.triu_indices`` order: each as a :class:`ViewPair` both ways (``forward``: the earlier view first)."""
 
-    first: list[int]
-    second: list[int]
     forward: list[ViewPair]
     backward: list[ViewPair]
 
@@ -271,7 +264,6 @@ def _eligible_pairs(scene: Scene, rules: PairRules) -> _EligiblePairs:
         (round(float(c), 6), round(float(t), 6), round(float(r), 6)) for c, t, r in zip(score[keep], baseline[keep], angle[keep])
     ]
     eligible = _EligiblePairs(
-        first, second,
         [ViewPair(names[a], names[b], *m) for a, b, m in zip(first, second, measures)],
         [ViewPair(names[b], names[a], *m) for a, b, m in zip(first, second, measures)],
     )
