@@ -100,22 +100,28 @@ class _Pool:
 
     @classmethod
     def of(cls, records: Sequence[QARecord], mode: str = "bench") -> _Pool:
-        pool = cls(records, [selection_of(r) for r in records], [features_of(r) for r in records])
-        pool.subjects = [
-            None if sel is None else (r.sub_question_type, subject_key(str(sel["subject"]), r.views, mode))
-            for r, sel in zip(records, pool.selections)
-        ]
+        pool = cls(records)
+        selections, features, subjects = pool.selections, pool.features, pool.subjects
         partial: set[str] = set()
-        for i, r in enumerate(records):
-            sel = pool.selections[i]
-            if sel is None:
+        for i, r in enumerate(records):  # one pass: selection_of, features_of and subject_key of each record
+            sel = r.geometry.get("selection")
+            if not (isinstance(sel, dict) and "subject" in sel):
+                selections.append(None)
+                features.append([])
+                subjects.append(None)
                 pool.plain.setdefault(r.sub_question_type, []).append(i)
-            elif "cell" not in sel:
+                continue
+            selections.append(sel)
+            feats = sel.get("features")
+            features.append([str(f) for f in feats] if isinstance(feats, list) else [])
+            subjects.append((r.sub_question_type, subject_key(str(sel["subject"]), r.views, mode)))
+            if "cell" not in sel:
                 pool.metric.append(i)
             else:
                 cell = f"{r.question_type}|{sel['cell']}"
                 pool.cells.setdefault(cell, {}).setdefault(str(sel["role"]), []).append(i)
-                pool.cell_roles.setdefault(cell, [str(x) for x in sel.get("roles", [])])
+                if cell not in pool.cell_roles:
+                    pool.cell_roles[cell] = [str(x) for x in sel.get("roles", [])]
                 if sel.get("all_roles", True) is False:
                     partial.add(cell)
         for cell in partial:  # rounds over the roles this scene offers in the cell (at least two)
@@ -335,26 +341,28 @@ class _Selection:
             for r in select_balanced([records[i] for i in ix], self.per_sub_type, lambda r: self.accept(first[r.id])):
                 self.taken.add(first[r.id])
 
-    def why(self, i: int) -> str:
-        """Why record ``i`` was (not) taken: a :func:`select_records` ``stats`` key."""
-        pool, r = self.pool, self.pool.records[i]
-        if i in self.taken:
-            return "taken"
-        if i in self.judged_out:
-            return "judge"
-        if pool.selections[i] is not None and pool.subject(i) in self.asked:
-            return "repeat"
-        if self.room[r.sub_question_type] < pool.round_size(i):
-            return "quota"  # no room for another round of its cell
-        return "unbalanced"
-
     def stats(self) -> dict[str, Counter[str]]:
-        """Per sub type: ``pooled`` and the :meth:`why` counts."""
+        """Per sub type: ``pooled`` and why each record was (not) taken (:func:`select_records`' ``stats``
+        keys): ``taken``, ``judge`` (refused by the judge), ``repeat`` (its subject already asked),
+        ``quota`` (no room for another round of its cell), else ``unbalanced``."""
+        pool, taken, judged_out, asked, room = self.pool, self.taken, self.judged_out, self.asked, self.room
         out: dict[str, Counter[str]] = {}
-        for i, r in enumerate(self.pool.records):
-            row = out.setdefault(r.sub_question_type, Counter())
+        for i, r in enumerate(pool.records):
+            sub = r.sub_question_type
+            row = out.get(sub)
+            if row is None:
+                row = out[sub] = Counter()
             row["pooled"] += 1
-            row[self.why(i)] += 1
+            if i in taken:
+                row["taken"] += 1
+            elif i in judged_out:
+                row["judge"] += 1
+            elif pool.selections[i] is not None and pool.subjects[i] in asked:
+                row["repeat"] += 1
+            elif room[sub] < pool.round_size(i):
+                row["quota"] += 1
+            else:
+                row["unbalanced"] += 1
         return out
 
 

@@ -114,3 +114,50 @@ def _after_one_integer(seed: int) -> float:
     rng = np.random.default_rng(seed)
     rng.integers(4)
     return rng.random()
+
+
+def test_memoised_legs_angles_and_box_centre_answers_equal_the_plain_geometry() -> None:
+    """The relative-position triplets (shared ``object_leg``s, memoised ground axes per anchor and
+    facing object) and the box-centre answers (memoised per camera B and object) give exactly the
+    numbers of the plain calls, for every triplet and camera of a random scene with a tilted up."""
+    import itertools
+    from collections import Counter
+
+    from spacedg.plugins.questions import camera_object_relative_direction as rel
+    from spacedg.plugins.questions.geometry import (
+        BODY_DIRECTION_WORDS, RELPOS_SECTORS, dominant_parts, ground_angle, ground_leg, parts_label, point_in_camera,
+    )
+    from spacedg.plugins.questions.view_sampling import VisibilityIndex
+    from tests.qa_scenes import build, camera, obj
+
+    gen = np.random.default_rng(4)
+    labels = ["chair", "table", "lamp", "sofa", "plant", "desk"]
+    instances = [obj(i + 1, labels[i], gen.uniform(-3.0, 3.0, 3), gen.uniform(0.2, 0.6, 3), yaw_deg=float(gen.uniform(0, 90)))
+                 for i in range(6)]
+    views = {f"v{k}": camera(gen.uniform(-4.0, 4.0, 3), float(gen.uniform(0, 360)), float(gen.uniform(-20, 20))) for k in range(4)}
+    scene = build(instances, views)
+    scene.up = tuple((np.array([0.05, -0.1, 1.0]) / np.linalg.norm([0.05, -0.1, 1.0])).tolist())  # type: ignore[misc]
+    index = VisibilityIndex(scene)
+    up = np.asarray(scene.up, dtype=np.float64)
+    asked = Counter()
+    for _ in range(2):  # the second pass reads the memos
+        for ids in itertools.permutations([inst.id for inst in instances], 3):
+            shape = rel._relpos_shape(index, ids, up)
+            a, b, c = (index.instance(i).box.center for i in ids)
+            leg_ab, leg_ac = ground_leg(b - a, up), ground_leg(c - a, up)
+            if shape is None:
+                continue
+            asked["triplets"] += 1
+            assert shape[2] == (leg_ab, leg_ac)
+            angle = ground_angle(np.asarray(leg_ab["horizontal"]), c - a, up)
+            assert shape[3] == angle and shape[4] == RELPOS_SECTORS.classify(angle)
+        for view, inst in itertools.product(views, instances):
+            vec = point_in_camera(scene.views[view], inst.box.center)
+            got = rel._bbox_answer(scene, index, view, inst)
+            if np.linalg.norm(vec) < rel.MIN_DISPLACEMENT_M or rel._rare_bbox_direction(vec):
+                assert got is None
+            else:
+                parts = dominant_parts(vec)
+                asked["box centres"] += 1
+                assert got is not None and got[0].tolist() == vec.tolist() and got[1:] == (parts, parts_label(parts, BODY_DIRECTION_WORDS))
+    assert asked["triplets"] >= 20 and asked["box centres"] >= 10, asked  # the comparisons above did run

@@ -141,8 +141,8 @@ from spacedg.plugins.questions.geometry import (
     camera_center,
     dominant_parts,
     flipped_labels,
-    ground_angle,
-    ground_leg,
+    angle_on_ground,
+    ground_axes,
     parts_label,
     point_in_camera,
     single_word_pool,
@@ -153,6 +153,7 @@ from spacedg.plugins.questions.records import (
     index_memo,
     label_features,
     make_record,
+    object_leg,
     objects_block,
     phrase,
     phrase_key,
@@ -311,29 +312,41 @@ def _single_view_record(
 
 # ------------------------------------------------------------ bbox direction
 def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
-    cam_b = scene.views[pair.b]
-    centre_b = camera_center(cam_b)
+    centre_b = camera_center(scene.views[pair.b])
     for iid in seeded_order(index.visible[pair.a], rng):
         inst = index.instance(iid)
         if not referable(index, pair.a, iid) or camera_inside(index, pair.b, inst):
             continue
-        vec = point_in_camera(cam_b, inst.box.center)
-        if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
+        answer = _bbox_answer(scene, index, pair.b, inst)
+        if answer is None:
             continue
-        if _rare_bbox_direction(vec):
-            continue
+        vec, parts, truth = answer
         subject = f"view:{pair.b}|object:{iid}"
         if not admitted(BBOX_CENTER_DIRECTION, (pair.a, pair.b), subject, (iid,)):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
         template = int(rng.integers(len(TWO_VIEW_TEMPLATES)))
-        parts = dominant_parts(vec)
-        truth = parts_label(parts, BODY_DIRECTION_WORDS)
         drawn = bbox_options(truth, rng)
         yield offer(
             BBOX_CENTER_DIRECTION, (pair.a, pair.b), subject, (iid,), functools.partial(_bbox_selection, pair, inst, truth, drawn[2]),
             functools.partial(_bbox_record, scene, index, pair, rules, inst, (centre_b, vec), template, (parts, truth), drawn),
         )
+
+
+def _bbox_answer(scene: Scene, index: VisibilityIndex, view_b: str, inst: Instance) -> tuple[np.ndarray, list[tuple[int, int]], str] | None:
+    """``(vector, parts, label)`` of ``inst``'s box centre in camera ``view_b``'s axes, or ``None`` when
+    it is not asked (closer than :data:`MIN_DISPLACEMENT_M`, or :func:`_rare_bbox_direction`): memoised
+    per (camera B, object) on the index, as they recur with every view A."""
+    memo = index_memo(index, "bbox_answers")
+    key = (view_b, inst.id)
+    if key not in memo:
+        vec = point_in_camera(scene.views[view_b], inst.box.center)
+        if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M or _rare_bbox_direction(vec):
+            memo[key] = None
+        else:
+            parts = dominant_parts(vec)
+            memo[key] = (vec, parts, parts_label(parts, BODY_DIRECTION_WORDS))
+    return memo[key]
 
 
 def _bbox_selection(pair: ViewPair, inst: Instance, truth: str, deck: Sequence[str]) -> dict[str, Any]:
@@ -423,12 +436,15 @@ def _relpos_shape(
         return None
     if any(boxes_intersect(p.box, q.box) for p, q in itertools.combinations(objs, 2)):
         return None
-    ca, cb, cc = (o.box.center for o in objs)
-    ab, ac = cb - ca, cc - ca
-    leg_ab, leg_ac = ground_leg(ab, up), ground_leg(ac, up)
+    leg_ab, leg_ac = object_leg(index, ids[1], ids[0], up), object_leg(index, ids[2], ids[0], up)
     if leg_ab is None or leg_ac is None:
         return None
-    angle = ground_angle(np.asarray(leg_ab["horizontal"]), ac, up)
+    axes = index_memo(index, "relpos_axes")  # (A, B) → the ground axes of A facing B
+    key = (ids[0], ids[1])
+    if key not in axes:
+        axes[key] = ground_axes(np.asarray(leg_ab["horizontal"]), up)
+    # = ground_angle(horizontal A → B, c_C − c_A, up): leg_ac["horizontal"] is that projection, exactly
+    angle = angle_on_ground(axes[key], np.asarray(leg_ac["horizontal"]))
     return objs, names, (leg_ab, leg_ac), angle, RELPOS_SECTORS.classify(angle)
 
 

@@ -7,9 +7,10 @@ in image A with every object 2 in image B). :class:`CompassQuestions` gives exac
 ``compass_question(reference, query, up, rng)`` gives, with the same draws in the same order,
 but computes the compass frame (:func:`~spacedg.plugins.questions.geometry.compass_frame`) and
 its ground axes (:func:`~spacedg.plugins.questions.geometry.ground_axes`) once per
-(reference, assumed cardinal), and each query's ground projection once: the angle is then
-:func:`~spacedg.plugins.questions.geometry.angle_on_ground` of the memoised parts, the same
-operations :func:`~spacedg.plugins.questions.geometry.ground_angle` performs.
+(reference, assumed cardinal), each query's ground projection once, and the angle
+(:func:`~spacedg.plugins.questions.geometry.angle_on_ground` of the memoised parts, the same
+operations :func:`~spacedg.plugins.questions.geometry.ground_angle` performs) and its sector once
+per (reference, assumed cardinal, query): a triplet recurs in many view pairs.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numpy as np
 from spacedg.plugins.questions.geometry import (
     CARDINALS,
     COMPASS_SECTORS,
+    SectorHit,
     angle_on_ground,
     build_mcq,
     compass_frame,
@@ -42,6 +44,7 @@ class CompassQuestions:
         self.up = np.asarray(up, dtype=np.float64)
         self._frames: dict[tuple[Hashable, str], tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]] = {}
         self._flats: dict[Hashable, np.ndarray] = {}
+        self._answers: dict[tuple[Hashable, str, Hashable], tuple[float, SectorHit]] = {}  # the angle and sector of a (frame, query)
 
     def ask(
         self, reference_key: Hashable, reference: Sequence[float], query_key: Hashable, query: Sequence[float], rng: np.random.Generator,
@@ -53,12 +56,15 @@ class CompassQuestions:
         if frame is None:
             north, east = compass_frame(np.asarray(reference), assumed, self.up)
             frame = self._frames[(reference_key, assumed)] = (north, east, ground_axes(north, self.up))
-        flat = self._flats.get(query_key)
-        if flat is None:
-            flat = self._flats[query_key] = horizontal(np.asarray(query), self.up)
         north, east, axes = frame
-        angle = angle_on_ground(axes, flat)
-        hit = COMPASS_SECTORS.classify(angle)
+        answer = self._answers.get((reference_key, assumed, query_key))
+        if answer is None:
+            flat = self._flats.get(query_key)
+            if flat is None:
+                flat = self._flats[query_key] = horizontal(np.asarray(query), self.up)
+            angle = angle_on_ground(axes, flat)
+            answer = self._answers[(reference_key, assumed, query_key)] = (angle, COMPASS_SECTORS.classify(angle))
+        angle, hit = answer
         if on_compass_boundary(hit):
             return None
         label = COMPASS_SECTORS.labels[hit.index]

@@ -43,6 +43,7 @@ Conventions (SPEC-QA):
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import OrderedDict
 from collections.abc import Sequence
@@ -430,12 +431,16 @@ class Sectors:
     labels: tuple[str, ...]
     starts: tuple[float, ...]
 
+    @functools.cached_property
+    def _bounds(self) -> tuple[tuple[int, float, float], ...]:
+        """``(k, lo, hi)`` of each sector: its start and the next sector's, in [0, 360) degrees."""
+        n = len(self.labels)
+        return tuple((k, self.starts[k] % 360.0, self.starts[(k + 1) % n] % 360.0) for k in range(n))
+
     def classify(self, angle_deg: float) -> SectorHit:
         a = float(angle_deg) % 360.0
         n = len(self.labels)
-        for k in range(n):
-            lo = self.starts[k] % 360.0
-            hi = self.starts[(k + 1) % n] % 360.0
+        for k, lo, hi in self._bounds:
             inside = lo <= a < hi if lo < hi else (a >= lo or a < hi)
             if inside:
                 to_lo = (a - lo) % 360.0
@@ -447,11 +452,14 @@ class Sectors:
 
     def distractors(self, hit: SectorHit, rng: np.random.Generator, guard_deg: float = BOUNDARY_GUARD_DEG) -> list[str]:
         """The other labels in a seeded order, without the near-boundary neighbour when within ``guard_deg``."""
-        banned = {hit.index}
-        if hit.boundary_distance_deg < guard_deg:
-            banned.add(hit.neighbour)
-        pool = [k for k in range(len(self.labels)) if k not in banned]
-        return [self.labels[pool[i]] for i in rng.permutation(len(pool)).tolist()]
+        pool = self._others[hit.index, hit.neighbour if hit.boundary_distance_deg < guard_deg else hit.index]
+        return [pool[i] for i in rng.permutation(len(pool)).tolist()]
+
+    @functools.cached_property
+    def _others(self) -> dict[tuple[int, int], tuple[str, ...]]:
+        """``(index, banned)`` → the labels other than those two, in label order."""
+        n = len(self.labels)
+        return {(i, j): tuple(label for k, label in enumerate(self.labels) if k not in (i, j)) for i in range(n) for j in range(n)}
 
 
 #: Relative position around a person: eight 45° sectors centred on front, front-right, …

@@ -98,7 +98,6 @@ from spacedg.plugins.questions.geometry import (
     COMPASS_SECTORS,
     INTERSECT_TOL_M,
     boxes_intersect,
-    ground_leg,
 )
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import pair_family
@@ -108,6 +107,7 @@ from spacedg.plugins.questions.records import (
     compass_distractors,
     lazy_permutation,
     make_record,
+    object_leg,
     objects_block,
     phrase,
     phrase_key,
@@ -160,17 +160,10 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     insts = [index.instance(i) for i in ids]
     keys = [phrase_key(inst) for inst in insts]
     centres = [inst.box.center for inst in insts]
-    # memoised per scene (the index), by instance ids: a leg between two objects, whether two
+    # memoised per scene (the index), by instance ids: a leg between two objects (object_leg), whether two
     # boxes overlap and the compass frames do not depend on the views
-    legs: dict[tuple[int, int], dict[str, Any] | None] = index_memo(index, "object_legs")
     hits: dict[tuple[int, int], bool] = index_memo(index, "box_overlaps")
     compass = compass_questions(index, up)
-
-    def leg(to: int, origin: int) -> dict[str, Any] | None:
-        key = (ids[to], ids[origin])
-        if key not in legs:
-            legs[key] = ground_leg(centres[to] - centres[origin], up)
-        return legs[key]
 
     def overlap(p: int, q: int) -> bool:
         key = (min(ids[p], ids[q]), max(ids[p], ids[q]))
@@ -188,7 +181,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             continue
         if len({keys[x], keys[y], keys[z]}) < 3:
             continue
-        ref, query = leg(x, y), leg(z, y)
+        ref, query = object_leg(index, ids[x], ids[y], up), object_leg(index, ids[z], ids[y], up)
         if ref is None or query is None:
             continue
         if any(overlap(p, q) for p, q in itertools.combinations(tri, 2)):

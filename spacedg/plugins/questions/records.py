@@ -73,6 +73,7 @@ from spacedg.plugins.questions.geometry import (
     build_mcq,
     camera_center,
     compass_answer,
+    ground_leg,
     on_compass_boundary,
 )
 from spacedg.plugins.questions.language import object_phrase
@@ -88,6 +89,7 @@ __all__ = [
     "label_features",
     "lazy_permutation",
     "make_record",
+    "object_leg",
     "object_entry",
     "objects_block",
     "pair_geometry",
@@ -282,6 +284,17 @@ def camera_inside(index: VisibilityIndex, view: str, inst: Instance) -> bool:
         centre = camera_center(index.scene.views[view])
         inside = memo[key] = bool(inst.box.contains(centre[None, :])[0])
     return inside
+
+
+def object_leg(index: VisibilityIndex, to_id: int, origin_id: int, up: np.ndarray) -> dict[str, Any] | None:
+    """:func:`~spacedg.plugins.questions.geometry.ground_leg` from object ``origin_id``'s box centre
+    to object ``to_id``'s (world metres, ``up`` = the scene's up, float64): memoised per ordered pair
+    on the index, as a leg recurs in many triplets and view pairs (the compass and relative-position families share it)."""
+    memo = index_memo(index, "object_legs")
+    key = (to_id, origin_id)
+    if key not in memo:
+        memo[key] = ground_leg(index.instance(to_id).box.center - index.instance(origin_id).box.center, up)
+    return memo[key]
 
 
 def pair_subject(pair: ViewPair) -> str:

@@ -78,6 +78,31 @@ def test_sectors_and_boundary_guard():
         "north", "northeast", "northeast", "east", "north", "northwest"]
 
 
+def _plain_classify(sectors, angle):
+    """:meth:`Sectors.classify` written out without its memoised bounds (the reference)."""
+    a, n = float(angle) % 360.0, len(sectors.labels)
+    for k in range(n):
+        lo, hi = sectors.starts[k] % 360.0, sectors.starts[(k + 1) % n] % 360.0
+        if (lo <= a < hi) if lo < hi else (a >= lo or a < hi):
+            to_lo, to_hi = (a - lo) % 360.0, (hi - a) % 360.0
+            return (k, to_lo, (k - 1) % n) if to_lo <= to_hi else (k, to_hi, (k + 1) % n)
+    raise AssertionError
+
+
+@pytest.mark.parametrize("sectors", [RELPOS_SECTORS, COMPASS_SECTORS])
+def test_sectors_memoised_bounds_and_pools_equal_the_plain_rules(sectors):
+    angles = np.random.default_rng(5).uniform(-720.0, 720.0, 400).tolist()
+    angles += [s + d for s in sectors.starts for d in (-1e-9, 0.0, 1e-9, 2.999, 3.0)] + [360.0, -0.0, 1e300]
+    for i, angle in enumerate(angles):
+        hit = sectors.classify(angle)
+        assert (hit.index, hit.boundary_distance_deg, hit.neighbour) == _plain_classify(sectors, angle)
+        # distractors: the other labels (the near-boundary neighbour out within the guard) in one permutation's order
+        banned = {hit.index} | ({hit.neighbour} if hit.boundary_distance_deg < 3.0 else set())
+        pool = [label for k, label in enumerate(sectors.labels) if k not in banned]
+        expected = [pool[j] for j in np.random.default_rng(i).permutation(len(pool)).tolist()]
+        assert sectors.distractors(hit, np.random.default_rng(i)) == expected
+
+
 def test_ground_angle_uses_up_not_a_world_axis():
     up = np.array([0.0, 0.0, 1.0])
     assert ground_angle([1, 0, 0], [0, -1, 0], up) == pytest.approx(90.0)  # right of +x with z up
