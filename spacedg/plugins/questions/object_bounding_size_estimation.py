@@ -39,10 +39,12 @@ invariant under any rigid motion of the scene.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
 
 import numpy as np
 
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import VisibilityIndex
@@ -98,6 +100,18 @@ def render_question(template: int, inst: Instance) -> str:
     return TEMPLATES[template].format(target_obj=phrase(inst))
 
 
+def _offer(scene: Scene, index: VisibilityIndex, view: str, inst: Instance, template: int) -> QARecord | Candidate:
+    """What the stream yields for ``inst`` in ``view`` (its template drawn up front): :data:`~spacedg.plugins.candidates.PASSED_OVER`
+    when the pool refuses it, else :func:`~spacedg.plugins.candidates.offer` of its record."""
+    subject = f"object:{inst.id}"
+    if not admitted(SUB_QUESTION_TYPE, (view,), subject, (inst.id,)):
+        return PASSED_OVER  # type: ignore[return-value]  # the caller passes it over: no record
+    return offer(
+        SUB_QUESTION_TYPE, (view,), subject, (inst.id,), functools.partial(selection_entry, subject),
+        functools.partial(_record, scene, index, view, inst, template),
+    )
+
+
 def _record(scene: Scene, index: VisibilityIndex, view: str, inst: Instance, template: int) -> QARecord:
     answer = size_list(inst)
     geometry = {
@@ -128,7 +142,7 @@ def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThres
     templates = rng.integers(0, len(TEMPLATES), size=len(candidates))
     for idx in order:
         view, inst = candidates[idx]
-        yield _record(scene, index, view, inst, int(templates[idx]))
+        yield _offer(scene, index, view, inst, int(templates[idx]))
 
 
 #: ``make_family(thresholds)``: this family with other visibility thresholds

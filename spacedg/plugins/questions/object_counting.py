@@ -74,12 +74,14 @@ may stop after any number.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import VisibilityIndex, label_ambiguous, scene_labels
@@ -172,6 +174,34 @@ def _vis_entry(inst: Instance, view: str) -> dict[str, Any]:
     }
 
 
+def _subject(cand: _Candidate) -> str:
+    """The selection subject of a count: the view and the label."""
+    return f"view:{cand.view}|label:{cand.key}"
+
+
+def _selection(cand: _Candidate, template: int, counts: tuple[int, ...] | None, unbalanced: bool) -> dict[str, Any]:
+    """The selection entry of a count (module docstring): subject only when ``counts`` is ``None``."""
+    if counts is None:
+        return selection_entry(_subject(cand))
+    cell = f"label:{cand.key}|unbalanced" if unbalanced else f"label:{cand.key}|template:{template}"
+    return selection_entry(_subject(cand), cell, count_bin(len(cand.counted)), _bin_roles())
+
+
+def _offer(
+    scene: Scene, cand: _Candidate, template: int, thresholds: VisibilityThresholds, counts: tuple[int, ...] | None,
+    unbalanced: bool = False,
+) -> QARecord | Candidate:
+    """What the stream yields for ``cand`` (its draws already made): :data:`~spacedg.plugins.candidates.PASSED_OVER`
+    when the pool refuses it, else :func:`~spacedg.plugins.candidates.offer` of its record (named objects: none)."""
+    views, subject = (cand.view,), _subject(cand)
+    if not admitted(SUB_QUESTION_TYPE, views, subject, ()):
+        return PASSED_OVER  # type: ignore[return-value]  # the caller passes it over: no record
+    return offer(
+        SUB_QUESTION_TYPE, views, subject, (), functools.partial(_selection, cand, template, counts, unbalanced),
+        functools.partial(_record, scene, cand, template, thresholds, counts, unbalanced),
+    )
+
+
 def _record(
     scene: Scene, cand: _Candidate, template: int, thresholds: VisibilityThresholds, counts: tuple[int, ...] | None,
     unbalanced: bool = False,
@@ -186,13 +216,8 @@ def _record(
         "not_counted": [{**_vis_entry(inst, cand.view), "class": VisibilityClass.HIDDEN.value} for inst in cand.hidden],
         "thresholds": {"min_pixels": cand.min_pixels, "min_fraction": float(thresholds.min_fraction)},
         "template": template,
+        "selection": _selection(cand, template, counts, unbalanced),
     }
-    subject = f"view:{cand.view}|label:{cand.key}"
-    if counts is None:
-        geometry["selection"] = selection_entry(subject)
-    else:
-        cell = f"label:{cand.key}|unbalanced" if unbalanced else f"label:{cand.key}|template:{template}"
-        geometry["selection"] = selection_entry(subject, cell, count_bin(count), _bin_roles())
     views = (cand.view,)
     return make_record(
         scene, NAME, SUB_QUESTION_TYPE, TaskGroup.OBJECT_CENTRIC, AnswerType.COUNT, views,
@@ -237,7 +262,7 @@ def generate(
         order = rng.permutation(len(candidates))
         templates = rng.integers(0, len(TEMPLATES), size=len(candidates))
         for idx in order:
-            yield _record(scene, candidates[idx], int(templates[idx]), thresholds, None)
+            yield _offer(scene, candidates[idx], int(templates[idx]), thresholds, None)
         return
     counts = tuple(sorted({int(c) for c in counts}))
     roles = _bin_roles()
@@ -251,12 +276,12 @@ def generate(
         template = int(rng.integers(0, len(TEMPLATES)))  # one wording per round: the text tells nothing
         for k in rng.permutation(len(roles)):
             used.add(id(round_[int(k)]))
-            yield _record(scene, round_[int(k)], template, thresholds, counts)
+            yield _offer(scene, round_[int(k)], template, thresholds, counts)
     # then the other candidates with an asked count, in a seeded order: their cell never completes
     # a round, so the question index takes them only to fill a quota too small for any round
     rest = [c for c in candidates if id(c) not in used and len(c.counted) in counts]
     for k in rng.permutation(len(rest)):
-        yield _record(scene, rest[int(k)], int(rng.integers(0, len(TEMPLATES))), thresholds, counts, unbalanced=True)
+        yield _offer(scene, rest[int(k)], int(rng.integers(0, len(TEMPLATES))), thresholds, counts, unbalanced=True)
 
 
 #: ``make_family(thresholds, counts)``: this family with other visibility thresholds or counts

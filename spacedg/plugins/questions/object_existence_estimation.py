@@ -62,11 +62,14 @@ answer is independent of geometry, hence invariant under a rigid motion of the s
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import VisibilityIndex, label_ambiguous, scene_labels
@@ -133,6 +136,28 @@ def candidates(scene: Scene, index: VisibilityIndex) -> tuple[list[_Candidate], 
     return pos, neg
 
 
+def _subject(cand: _Candidate) -> str:
+    """The selection subject: the view and the label."""
+    return f"view:{cand.view}|label:{cand.key}"
+
+
+def _selection(cand: _Candidate, template: int) -> dict[str, Any]:
+    """The selection entry (module docstring): cell = the label and the template, role = the answer."""
+    return selection_entry(_subject(cand), f"label:{cand.key}|template:{template}", cand.answer, ("yes", "no"))
+
+
+def _offer(scene: Scene, index: VisibilityIndex, cand: _Candidate, template: int) -> QARecord | Candidate:
+    """What the stream yields for ``cand`` (its draws already made): :data:`~spacedg.plugins.candidates.PASSED_OVER`
+    when the pool refuses it, else :func:`~spacedg.plugins.candidates.offer` of its record (named objects: none)."""
+    views, subject = (cand.view,), _subject(cand)
+    if not admitted(SUB_QUESTION_TYPE, views, subject, ()):
+        return PASSED_OVER  # type: ignore[return-value]  # the caller passes it over: no record
+    return offer(
+        SUB_QUESTION_TYPE, views, subject, (), functools.partial(_selection, cand, template),
+        functools.partial(_record, scene, index, cand, template),
+    )
+
+
 def _record(scene: Scene, index: VisibilityIndex, cand: _Candidate, template: int) -> QARecord:
     cam = scene.views[cand.view]
     area = cam.width * cam.height
@@ -147,7 +172,7 @@ def _record(scene: Scene, index: VisibilityIndex, cand: _Candidate, template: in
         "up": np.asarray(scene.up, dtype=np.float64).tolist(),
         "template": template,
         "refs": [],
-        "selection": selection_entry(f"view:{cand.view}|label:{cand.key}", f"label:{cand.key}|template:{template}", cand.answer, ("yes", "no")),
+        "selection": _selection(cand, template),
     }
     views = (cand.view,)
     return make_record(
@@ -171,8 +196,8 @@ def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThres
     for yes, no in round_robin([iter(rounds) for rounds in queues]):
         a, b = (yes, no) if yes_first else (no, yes)
         template = int(rng.integers(0, len(TEMPLATES)))  # one wording for both: the text tells nothing
-        yield _record(scene, index, a, template)
-        yield _record(scene, index, b, template)
+        yield _offer(scene, index, a, template)
+        yield _offer(scene, index, b, template)
 
 
 #: ``make_family(thresholds)``: this family with other visibility thresholds
