@@ -1,0 +1,53 @@
+"""Generators made from batched PCG64 states (:mod:`spacedg.rng_batch`) are ``default_rng(seed)`` bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.random import SeedSequence
+
+from spacedg.plugins.questions.records import ChildGenerators, child_rngs
+from spacedg.rng_batch import generator_from_state, pcg64_states
+
+#: Seeds of every entropy length SeedSequence distinguishes (one 32-bit word, two words) and the edges.
+EDGES = [0, 1, 2, 2**31, 2**32 - 1, 2**32, 2**32 + 1, 2**62, 2**63 - 1]
+
+
+def _seeds() -> list[int]:
+    gen = np.random.default_rng(7)
+    return EDGES + gen.integers(0, 2**63 - 1, 300).tolist() + gen.integers(0, 2**32, 100).tolist()
+
+
+def test_states_equal_seed_sequence_for_every_word_length() -> None:
+    seeds = _seeds()
+    states = pcg64_states(seeds)
+    assert states.shape == (len(seeds), 4) and states.dtype == np.uint64
+    for seed, words in zip(seeds, states):
+        assert words.tolist() == SeedSequence(seed).generate_state(4, np.uint64).tolist(), seed
+
+
+@pytest.mark.parametrize("seed", EDGES[:5] + [123456789012345678])
+def test_generator_from_state_draws_as_default_rng(seed: int) -> None:
+    fast, plain = generator_from_state(pcg64_states([seed])[0], seed), np.random.default_rng(seed)
+    assert fast.bit_generator.state == plain.bit_generator.state
+    assert fast.permutation(9).tolist() == plain.permutation(9).tolist()
+    assert fast.integers(0, 2**40, 20).tolist() == plain.integers(0, 2**40, 20).tolist()
+    assert fast.random(5).tolist() == plain.random(5).tolist()
+    # anything but PCG64's own request goes to the real SeedSequence of the seed
+    assert fast.bit_generator.seed_seq.generate_state(3).tolist() == SeedSequence(seed).generate_state(3).tolist()
+
+
+def test_states_refuse_negative_seeds_and_take_an_empty_batch() -> None:
+    with pytest.raises(ValueError, match="non-negative"):
+        pcg64_states([5, -1])
+    assert pcg64_states([]).shape == (0, 4)
+
+
+def test_child_generators_past_the_one_by_one_ones_are_the_same_generators() -> None:
+    children = child_rngs(np.random.default_rng(3), 3 * ChildGenerators.ONE_BY_ONE)
+    seeds = np.random.default_rng(3).integers(0, 2**63 - 1, size=len(children), dtype=np.int64).tolist()
+    order = np.random.default_rng(0).permutation(len(children)).tolist()  # any access order
+    for k in order:
+        assert children[k].bit_generator.state == np.random.default_rng(seeds[k]).bit_generator.state
+        assert children[k] is children[k]
+    assert children._states is not None  # the batched path did run
