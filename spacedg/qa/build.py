@@ -9,7 +9,8 @@ Building one scene (:func:`build_scene_index`):
    (scene, family), so adding a family never changes another family's records;
 3. pool up to ``pool_factor × per_sub_type`` distinct subjects per ``sub_question_type``
    (each with at most :data:`ALTERNATES` records; no more than ``max_scan`` candidates per
-   family) and take up to ``per_sub_type`` of them per sub type with the
+   family; without a judge, a family whose answers are all metric stops as soon as each of its
+   sub types has ``per_sub_type`` subjects, all the selection can take) and take up to ``per_sub_type`` of them per sub type with the
    **debiased selection** (:func:`~spacedg.qa.selection.select_records`): a subject (an object, a pair, a view and
    label: the ``selection`` entry of the record's geometry block) is asked at most once per
    sub type; within each *cell* (what a text-only model can tell about the question: its
@@ -45,6 +46,7 @@ from spacedg.errors import SpaceDGError
 from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.candidates import PASSED_OVER, Candidate, gated, light_candidates
 from spacedg.plugins.qa_record import QARecord, deferred_geometry
+from spacedg.plugins.specs import AnswerType
 from spacedg.qa.deal import deal_distractors, deal_letters
 from spacedg.qa.gc_pause import collector_paused
 from spacedg.qa.index import (
@@ -63,7 +65,7 @@ from spacedg.qa.index import (
 )
 from spacedg.qa.judge import DescriptionJudge
 from spacedg.plugins.questions.view_sampling import VisibilityIndex
-from spacedg.qa.modes import quota
+from spacedg.qa.modes import quota, subject_key
 from spacedg.qa.pooled import Pooled
 from spacedg.qa.selection import select_records, selection_of
 from spacedg.qa.twins import TwinCheck, named_ids
@@ -87,6 +89,9 @@ __all__ = ["ALTERNATES", "prepare_scene", "generate_records", "build_scene_index
 #: several roles, and the judge may drop one); the pool's size counts distinct subjects, so a
 #: family whose subjects recur in many views (size comparisons) pools every pair it finds.
 ALTERNATES = 8
+
+#: Answer types the selection never balances (no cell: metric answers, taken in generation order).
+METRIC_ANSWERS = frozenset({AnswerType.NA, AnswerType.SIZE_LIST})
 
 
 def prepare_scene(
@@ -136,13 +141,19 @@ class _PoolScan:
     images (counted in ``twins``, except for a subject that already has its alternates: that
     rule comes first, as it is the one most candidates meet)."""
 
-    def __init__(self, family: Any, config: QABuildConfig, index: TwinCheck, twins: Counter[str]) -> None:
+    def __init__(self, family: Any, config: QABuildConfig, index: TwinCheck, twins: Counter[str], metric_stop: bool = False) -> None:
         self.family, self.index, self.twins = family, index, twins
         self.max_scan = config.max_scan
-        self.want = quota(config.per_sub_type, config.mode) * config.pool_factor
+        self.quota = quota(config.per_sub_type, config.mode)
+        self.want = self.quota * config.pool_factor
+        self.mode = config.mode
         self.scanned = 0
         self.distinct: dict[str, dict[str, int]] = {}  # sub type → pooled records per subject
         self.admitted: tuple[str, Sequence[str], str, Sequence[int]] | None = None  # what the gate last admitted
+        # sub type → the selection's subjects (subject_key) pooled so far, while the stop for metric families holds
+        self.metric: dict[str, set[str]] | None = (
+            {sub: set() for sub in family.sub_question_types} if metric_stop and set(family.answer_types) <= METRIC_ANSWERS else None
+        )
 
     def _wanted(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:
         """Whether the pool takes the candidate (class docstring); raises :class:`_ScanDone` when a
@@ -194,8 +205,30 @@ class _PoolScan:
         seen[subject] = seen.get(subject, 0) + 1
         return True
 
+    def pooled(self, record: QARecord) -> None:
+        """A record just pooled. For a family whose answers are all metric (no judge), the scan
+        ends once every sub type has ``quota`` distinct selection subjects
+        (:func:`~spacedg.qa.modes.subject_key`): the selection takes a metric record only while
+        its sub type has room, in generation order, one per subject
+        (:meth:`~spacedg.qa.selection._Selection.take_metric`), so no later candidate could be
+        taken. A record with a cell, or without a selection entry, turns the stop off (the
+        selection reads the whole pool for those)."""
+        if self.metric is None:
+            return
+        entry = selection_of(record)
+        if entry is None or "cell" in entry:
+            self.metric = None
+            return
+        keys = self.metric.get(record.sub_question_type)
+        if keys is None:
+            self.metric = None  # a sub type the family did not declare: leave the scan alone
+            return
+        keys.add(subject_key(str(entry["subject"]), record.views, self.mode))
+        if all(len(k) >= self.quota for k in self.metric.values()):
+            raise _ScanDone
 
-def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, twins: Counter[str]) -> list[QARecord]:
+
+def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, twins: Counter[str], metric_stop: bool = False) -> list[QARecord]:
     """A family's candidates in scan order: up to ``pool_factor × quota`` distinct subjects
     (the family's own, views included: the mode's stricter subjects are the selection's job) per sub type, :data:`ALTERNATES`
     records each, ``max_scan`` candidates in all (seeded per (scene, family)); candidates naming
@@ -210,20 +243,27 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
     (their selection entry only), so a record is built only for the candidates the selection takes;
     records a family yields as such (third-party families) are made inside
     :func:`~spacedg.plugins.qa_record.deferred_geometry`, their ``geometry`` converted to plain
-    JSON types only once selected (:func:`_family_records`)."""
+    JSON types only once selected (:func:`_family_records`).
+
+    ``metric_stop`` (no judge): a family whose answers are all metric stops scanning once the
+    selection could take nothing more (:meth:`_PoolScan.pooled`); the pool is then that prefix."""
     rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
-    scan = _PoolScan(family, config, index, twins)
+    scan = _PoolScan(family, config, index, twins, metric_stop)
     pooled: list[QARecord] = []
     with plugin_call("question family", family, "generate"), deferred_geometry(), light_candidates(), gated(scan.gate):
         try:
             for item in family.generate(scene, rng):
                 if item is PASSED_OVER:
                     scan.passed_over()
-                elif type(item) is Candidate:
-                    if scan.take(item.sub_question_type, item.views, item.subject, item.named):
-                        pooled.append(Pooled(item, family, scene.id))  # type: ignore[arg-type]
-                elif scan.take(item.sub_question_type, item.views, _subject(item), named_ids(item)):
-                    pooled.append(item)
+                    continue
+                if type(item) is Candidate:
+                    if not scan.take(item.sub_question_type, item.views, item.subject, item.named):
+                        continue
+                    item = Pooled(item, family, scene.id)  # type: ignore[assignment]
+                elif not scan.take(item.sub_question_type, item.views, _subject(item), named_ids(item)):
+                    continue
+                pooled.append(item)
+                scan.pooled(item)
         except _ScanDone:
             pass
     return pooled
@@ -252,7 +292,7 @@ def _family_records(
     """One family's records for the index: pooled, selected, dealt, in its sub-type order."""
     keep = functools.partial(_judged, judge=judge, dropped=dropped, family_name=family.name)
     stats: dict[str, Counter[str]] = {}
-    pool = _pool(family, scene, config, index, twins)
+    pool = _pool(family, scene, config, index, twins, metric_stop=judge is None)
     chosen = select_records(pool, quota(config.per_sub_type, config.mode), keep, stats, mode=config.mode, partial_rounds=config.partial_rounds)
     with plugin_call("question family", family, "generate"):
         chosen = [r.materialised() for r in chosen]  # geometry converted for the kept records only
