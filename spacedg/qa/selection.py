@@ -324,6 +324,8 @@ class _Selection:
         (too few to balance anyway)."""
         pool = self.pool
         got = Counter(pool.sub(i) for i in self.taken)
+        if all(got[sub] or self.room[sub] <= 0 for sub in self.room):
+            return  # every sub type has records, or no room: nothing to fill
         smallest = self._smallest_rounds()
         for i in sorted(i for by_role in pool.cells.values() for queue in by_role.values() for i in queue):
             sub = pool.sub(i)

@@ -7,7 +7,8 @@ in image A with every object 2 in image B). :class:`CompassQuestions` gives exac
 ``compass_question(reference, query, up, rng)`` gives, with the same draws in the same order,
 but computes the compass frame (:func:`~spacedg.plugins.questions.geometry.compass_frame`) and
 its ground axes (:func:`~spacedg.plugins.questions.geometry.ground_axes`) once per
-(reference, assumed cardinal), each query's ground projection once, and the angle
+(reference, assumed cardinal) from the reference's :func:`~spacedg.plugins.questions.geometry.compass_basis`
+(once per reference), each query's ground projection once, and the angle
 (:func:`~spacedg.plugins.questions.geometry.angle_on_ground` of the memoised parts, the same
 operations :func:`~spacedg.plugins.questions.geometry.ground_angle` performs) and its sector once
 per (reference, assumed cardinal, query): a triplet recurs in many view pairs.
@@ -26,7 +27,8 @@ from spacedg.plugins.questions.geometry import (
     SectorHit,
     angle_on_ground,
     build_mcq,
-    compass_frame,
+    compass_basis,
+    compass_turn,
     ground_axes,
     horizontal,
     on_compass_boundary,
@@ -43,6 +45,7 @@ class CompassQuestions:
     def __init__(self, up: np.ndarray) -> None:
         self.up = np.asarray(up, dtype=np.float64)
         self._frames: dict[tuple[Hashable, str], tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]] = {}
+        self._bases: dict[Hashable, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._flats: dict[Hashable, np.ndarray] = {}
         self._answers: dict[tuple[Hashable, str, Hashable], tuple[float, SectorHit]] = {}  # the angle and sector of a (frame, query)
 
@@ -54,7 +57,10 @@ class CompassQuestions:
         assumed = CARDINALS[int(rng.integers(len(CARDINALS)))]
         frame = self._frames.get((reference_key, assumed))
         if frame is None:
-            north, east = compass_frame(np.asarray(reference), assumed, self.up)
+            basis = self._bases.get(reference_key)
+            if basis is None:
+                basis = self._bases[reference_key] = compass_basis(np.asarray(reference), self.up)
+            north, east = compass_turn(basis, assumed)  # = compass_frame(reference, assumed, up)
             frame = self._frames[(reference_key, assumed)] = (north, east, ground_axes(north, self.up))
         north, east, axes = frame
         answer = self._answers.get((reference_key, assumed, query_key))

@@ -64,7 +64,7 @@ __all__ = [
     "horizontal", "ground_angle", "ground_axes", "angle_on_ground", "vertical_dominates",
     "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS",
     "euler_yaw_pitch_roll", "ROTATION_WORDS", "camera_attitude", "gravity_rotation", "attitude_change",
-    "MIN_HORIZONTAL_M", "VERTICAL_FACTOR", "COMPASS_RULE_BAND_DEG", "on_compass_boundary", "ground_leg", "compass_frame", "compass_answer",
+    "MIN_HORIZONTAL_M", "VERTICAL_FACTOR", "COMPASS_RULE_BAND_DEG", "on_compass_boundary", "ground_leg", "compass_frame", "compass_basis", "compass_turn", "compass_answer",
     "INTERSECT_TOL_M", "boxes_intersect",
 ]
 
@@ -500,10 +500,22 @@ def compass_frame(reference: np.ndarray, assumed_dir: str, up: np.ndarray) -> tu
     """
     if assumed_dir not in CARDINALS:
         raise InvalidDataError(f"compass_frame: assumed_dir must be one of {CARDINALS}, got {assumed_dir!r}")
+    return compass_turn(compass_basis(reference, up), assumed_dir)
+
+
+def compass_basis(reference: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(u, f, r)``: ``up`` normalised, ``reference`` flattened on the ground to unit length and
+    ``f × u``: the part of :func:`compass_frame` that does not depend on the assumed cardinal
+    (a caller asking several cardinals of one reference computes it once)."""
     u = np.asarray(up, dtype=np.float64)
     u = u / np.linalg.norm(u)
     f = _ground_unit(reference, u, "compass_frame")
-    r = cross3(f, u)
+    return u, f, cross3(f, u)
+
+
+def compass_turn(basis: tuple[np.ndarray, np.ndarray, np.ndarray], assumed_dir: str) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`compass_frame`'s ``(north, east)`` from :func:`compass_basis`' ``basis``."""
+    u, f, r = basis
     c, s = _QUARTER_TURNS[CARDINALS.index(assumed_dir)]
     north = c * f - s * r
     return north, cross3(north, u)
