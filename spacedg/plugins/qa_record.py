@@ -71,6 +71,8 @@ _FIELDS = (
 
 #: True inside :func:`deferred_geometry`: records keep their ``geometry`` as given (not converted).
 _DEFER_GEOMETRY: contextvars.ContextVar[bool] = contextvars.ContextVar("spacedg_defer_geometry", default=False)
+#: True while :meth:`QARecord.with_changes` copies a record whose geometry is already plain JSON.
+_GEOMETRY_PLAIN: contextvars.ContextVar[bool] = contextvars.ContextVar("spacedg_geometry_plain", default=False)
 
 
 @contextlib.contextmanager
@@ -256,8 +258,20 @@ class QARecord:
             raise InvalidDataError(f"{where}: geometry must be a dict of the numbers the answer came from, got {type(self.geometry).__name__}")
         if _DEFER_GEOMETRY.get():
             object.__setattr__(self, "_raw_geometry", True)
-        else:
+        elif not _GEOMETRY_PLAIN.get():
             object.__setattr__(self, "geometry", json_ready(self.geometry))
+
+    def with_changes(self, **changes: Any) -> QARecord:
+        """``dataclasses.replace(self, **changes)`` (every field checked again), without converting
+        a geometry that is already plain JSON a second time: for changes of the text, options or
+        answer of a record whose ``geometry`` stays (the copy shares that mapping)."""
+        if "geometry" in changes or self.__dict__.get("_raw_geometry"):
+            return dataclasses.replace(self, **changes)
+        token = _GEOMETRY_PLAIN.set(True)
+        try:
+            return dataclasses.replace(self, **changes)
+        finally:
+            _GEOMETRY_PLAIN.reset(token)
 
     def materialised(self) -> QARecord:
         """This record with its ``geometry`` in plain JSON types: ``self`` unless it was made inside

@@ -9,7 +9,6 @@ often (:func:`deal_distractors`), then the correct letters are dealt from shuffl
 
 from __future__ import annotations
 
-import dataclasses
 from collections import Counter
 from collections.abc import Sequence
 
@@ -31,16 +30,14 @@ def with_letter(record: QARecord, slot: int) -> QARecord:
     k = MCQ_LETTERS.index(str(record.answer))
     others = texts[:k] + texts[k + 1:]
     texts = others[:slot] + [texts[k]] + others[slot:]
-    return dataclasses.replace(
-        record, options=tuple(f"{MCQ_LETTERS[i]}. {t}" for i, t in enumerate(texts)), answer=MCQ_LETTERS[slot],
-    )
+    return record.with_changes(options=tuple(f"{MCQ_LETTERS[i]}. {t}" for i, t in enumerate(texts)), answer=MCQ_LETTERS[slot])
 
 
 def _with_distractors(record: QARecord, picked: Sequence[str]) -> QARecord:
     """``record`` with ``picked`` (three texts, in order) around its truth, which keeps its letter."""
     slot = MCQ_LETTERS.index(str(record.answer))
     texts = [*picked[:slot], str(truth_key(record)), *picked[slot:]]
-    return dataclasses.replace(record, options=tuple(f"{MCQ_LETTERS[i]}. {t}" for i, t in enumerate(texts)))
+    return record.with_changes(options=tuple(f"{MCQ_LETTERS[i]}. {t}" for i, t in enumerate(texts)))
 
 
 def _deal_sub_type(out: list[QARecord], ks: Sequence[int], rng: np.random.Generator) -> None:

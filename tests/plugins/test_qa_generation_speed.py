@@ -161,3 +161,17 @@ def test_memoised_legs_angles_and_box_centre_answers_equal_the_plain_geometry() 
                 asked["box centres"] += 1
                 assert got is not None and got[0].tolist() == vec.tolist() and got[1:] == (parts, parts_label(parts, BODY_DIRECTION_WORDS))
     assert asked["triplets"] >= 20 and asked["box centres"] >= 10, asked  # the comparisons above did run
+
+
+def test_with_changes_keeps_a_plain_geometry_and_checks_the_fields() -> None:
+    plain = _record(geometry=GEOMETRY)
+    changed = plain.with_changes(question="Another question?")
+    assert changed.geometry is plain.geometry and changed.question == "Another question?"
+    assert changed.to_dict() == {**plain.to_dict(), "question": "Another question?"}
+    with pytest.raises(InvalidDataError, match="question"):
+        plain.with_changes(question="  ")  # the fields are checked as by the constructor
+    with deferred_geometry():
+        raw = _record(geometry={"bad": [1.0, math.nan]})
+    with pytest.raises(InvalidDataError, match=r"geometry\.bad\[1\]"):
+        raw.with_changes(question="Q?")  # a geometry not yet converted is converted (and refused) as before
+    assert plain.with_changes(geometry={"n": np.float64(1.5)}).geometry == {"n": 1.5}
