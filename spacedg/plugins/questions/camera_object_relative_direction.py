@@ -122,7 +122,6 @@ from spacedg.plugins.questions.view_sampling import (
     ViewPair,
     VisibilityIndex,
     label_key,
-    split_across_views,
 )
 from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityThresholds
 from spacedg.plugins.hookspecs import registering
@@ -397,7 +396,8 @@ def _rare_bbox_direction(vec_camera: np.ndarray) -> bool:
 # ------------------------------------------------------------------- relpos
 def _relpos_candidates(index: VisibilityIndex, pair: ViewPair) -> tuple[dict[int, str], list[tuple[int, int, int]]]:
     """Each usable object's reference view, and the ordered triplets of usable objects that pass
-    the three-object rule (neither view shows all three)."""
+    the three-object rule (:func:`~spacedg.plugins.questions.view_sampling.split_across_views`: a usable
+    object is referable, so clearly visible, in A or B; neither view may show all three)."""
     views = (pair.a, pair.b)
     union = sorted(set(index.visible[pair.a]) | set(index.visible[pair.b]))
     ref_view: dict[int, str] = {}
@@ -457,9 +457,7 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
     views = (pair.a, pair.b)
     ref_view, triplets = _relpos_candidates(index, pair)
     shapes = index_memo(index, "relpos_shapes")  # triplet → (objects, names, legs, angle, sector) or None: no view enters it
-    for ids in seeded_order(triplets, rng):
-        if not split_across_views(index, pair.a, pair.b, ids):
-            continue  # the authoritative three-object rule (the prefilter already applied it)
+    for ids in seeded_order(triplets, rng):  # each obeys the three-object rule (split_across_views): see _relpos_candidates
         key = tuple(ids)
         if key not in shapes:
             if len(shapes) >= _SHAPES_MAX:

@@ -78,7 +78,6 @@ balanced per assumed direction by the question index; subject = the ordered trip
 from __future__ import annotations
 
 import functools
-import itertools
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -91,7 +90,6 @@ from spacedg.plugins.questions.view_sampling import (
     PairRules,
     ViewPair,
     VisibilityIndex,
-    split_across_views,
 )
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import (
@@ -172,25 +170,24 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         return hits[key]
 
     for k in lazy_permutation(n * (n - 1) * (n - 2), rng):
-        tri = decode_triplet(k, n)
-        x, y, z = tri
+        x, y, z = decode_triplet(k, n)
+        # the three-object rule (split_across_views) for these ids: each is referable in A or B, so
+        # clearly visible in one of them; neither view may show all three (one must be only in A, one only in B)
         if not (only_a[x] or only_a[y] or only_a[z]) or not (only_b[x] or only_b[y] or only_b[z]):
             continue
-        triplet_ids = (ids[x], ids[y], ids[z])
-        if not split_across_views(index, pair.a, pair.b, triplet_ids):
-            continue
-        if len({keys[x], keys[y], keys[z]}) < 3:
-            continue
+        if keys[x] == keys[y] or keys[x] == keys[z] or keys[y] == keys[z]:
+            continue  # two objects with the same phrase
         ref, query = object_leg(index, ids[x], ids[y], up), object_leg(index, ids[z], ids[y], up)
         if ref is None or query is None:
             continue
-        if any(overlap(p, q) for p, q in itertools.combinations(tri, 2)):
+        if overlap(x, y) or overlap(x, z) or overlap(y, z):
             continue
-        objs = tuple(insts[t] for t in tri)
-        subject = _subject(objs)
+        triplet_ids = (ids[x], ids[y], ids[z])
+        subject = f"objects:{triplet_ids[0]}|{triplet_ids[1]}|{triplet_ids[2]}"  # = _subject(objs)
         if not admitted(SUB_QUESTION_TYPE, views, subject, triplet_ids):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
+        objs = (insts[x], insts[y], insts[z])
         drawn = compass.ask(("objects", ids[x], ids[y]), ref["vector"], ("objects", ids[z], ids[y]), query["vector"], rng)  # = compass_question(ref, query, up, rng)
         if drawn is None:
             continue  # on a sector boundary: the label depends on the reading of the rule
