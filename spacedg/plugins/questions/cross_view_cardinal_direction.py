@@ -105,16 +105,18 @@ from spacedg.plugins.questions.geometry import (
     ground_leg,
 )
 from spacedg.plugins.questions.language import find_in_image
-from spacedg.plugins.questions.pairs import object_pairs, pair_family
+from spacedg.plugins.questions.pairs import pair_family
 from spacedg.plugins.questions.geometry import COMPASS_SECTORS
 from spacedg.plugins.questions.compass_cache import compass_questions
 from spacedg.plugins.questions.records import (
     index_memo,
     compass_distractors,
+    lazy_permutation,
     make_record,
     objects_block,
     phrase,
     phrase_key,
+    referable_ids,
     selection_entry,
 )
 from spacedg.plugins.specs import AnswerType, TaskGroup
@@ -183,25 +185,41 @@ def _selection(one: Instance, two: Instance, drawn: tuple[str, tuple[str, ...], 
     )
 
 
+def _side(
+    index: VisibilityIndex, legs: dict[Any, Any], view: str, origin: np.ndarray, iid: int, up: np.ndarray,
+) -> tuple[Instance, str, dict[str, Any] | None]:
+    """An object of one side of a pair: its instance, :func:`~spacedg.plugins.questions.records.phrase_key`
+    and the ground leg from the view's camera centre ``origin`` to its box centre (memoised per (view, id) in ``legs``)."""
+    inst = index.instance(iid)
+    key = (view, iid)
+    if key not in legs:
+        legs[key] = ground_leg(inst.box.center - origin, up)
+    return inst, phrase_key(inst), legs[key]
+
+
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
     origins = origin_a, origin_b = camera_center(scene.views[pair.a]), camera_center(scene.views[pair.b])
     legs = index_memo(index, "camera_legs")  # (view, object id) → the leg camera → object (recurs in many candidates)
     compass = compass_questions(index, up)
-    for one, two in object_pairs(index, pair, rng):
-        if phrase_key(one) == phrase_key(two):
+    ones, twos = referable_ids(index, pair.a), referable_ids(index, pair.b)
+    # per object of each side, once per pair: its instance, phrase and leg from its camera (object_pairs' candidates, in its order)
+    side_a = [_side(index, legs, pair.a, origin_a, iid, up) for iid in ones]
+    side_b = [_side(index, legs, pair.b, origin_b, iid, up) for iid in twos]
+    n_twos = len(twos)
+    for k in lazy_permutation(len(ones) * n_twos, rng):  # = object_pairs(index, pair, rng), the same draws
+        i, j = divmod(k, n_twos)
+        if ones[i] == twos[j]:
             continue
-        key_a, key_b = (pair.a, one.id), (pair.b, two.id)
-        ref = legs[key_a] if key_a in legs else legs.setdefault(key_a, ground_leg(one.box.center - origin_a, up))
-        query = legs[key_b] if key_b in legs else legs.setdefault(key_b, ground_leg(two.box.center - origin_b, up))
-        if ref is None or query is None:
+        (one, key_one, ref), (two, key_two, query) = side_a[i], side_b[j]
+        if key_one == key_two or ref is None or query is None:
             continue
-        subject, named = _subject(one, two), (one.id, two.id)
+        subject, named = f"objects:{one.id}|{two.id}", (one.id, two.id)  # = _subject(one, two)
         if not admitted(SUB_QUESTION_TYPE, views, subject, named):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
-        drawn = compass.ask(("camera", *key_a), ref["vector"], ("camera", *key_b), query["vector"], rng)  # = compass_question(ref, query, up, rng)
+        drawn = compass.ask(("camera", pair.a, one.id), ref["vector"], ("camera", pair.b, two.id), query["vector"], rng)  # = compass_question(ref, query, up, rng)
         if drawn is None:
             continue  # on a sector boundary: the label depends on the reading of the rule
         yield offer(

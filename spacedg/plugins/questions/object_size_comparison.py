@@ -365,10 +365,13 @@ def _subject(one: Instance, two: Instance, sub: str) -> str:
     return f"{sub}|objects:{min(one.id, two.id)}|{max(one.id, two.id)}"
 
 
-def _verdict_of(scene: Scene, index: VisibilityIndex, one: Instance, two: Instance, sub: str) -> _Verdict | None:
+def _verdict_of(
+    scene: Scene, index: VisibilityIndex, one: Instance, two: Instance, sub: str, memo: dict[Any, Any] | None = None,
+) -> _Verdict | None:
     """:func:`_verdict` of two :func:`_distinguishable` objects (else ``None``), memoised per
-    (object 1, object 2, sub type) on ``index``: a pair recurs in many view pairs."""
-    memo = index_memo(index, "size_verdict")
+    (object 1, object 2, sub type) on ``index`` (``memo``: that memo, for a caller asking many): a pair recurs in many view pairs."""
+    if memo is None:
+        memo = index_memo(index, "size_verdict")
     key = (one.id, two.id, sub)
     hit = memo.get(key)
     if hit is None or hit[0] is not one or hit[1] is not two:
@@ -424,11 +427,13 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     if not size:
         return
     views = (pair.a, pair.b)
-    for k in rng.permutation(size):
-        rest, s = divmod(int(k), len(SUB_QUESTION_TYPES))
-        i, j = divmod(rest, len(twos))
+    verdicts = index_memo(index, "size_verdict")
+    n_subs, n_twos = len(SUB_QUESTION_TYPES), len(twos)
+    for k in rng.permutation(size).tolist():
+        rest, s = divmod(k, n_subs)
+        i, j = divmod(rest, n_twos)
         one, two, sub = ones[i], twos[j], SUB_QUESTION_TYPES[s]
-        verdict = _verdict_of(scene, index, one, two, sub)
+        verdict = _verdict_of(scene, index, one, two, sub, verdicts)
         if verdict is None:
             continue
         if not admitted(sub, views, verdict.subject, (one.id, two.id)):

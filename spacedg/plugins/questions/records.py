@@ -284,7 +284,11 @@ def index_memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
     """A per-index cache named ``name`` (an index is built once per generation of a scene and
     never changes): for quantities a family computes again for every view pair an object or a
     pair of objects recurs in."""
-    return index.__dict__.setdefault(f"_memo_{name}", {})
+    memos, key = index.__dict__, "_memo_" + name
+    memo = memos.get(key)
+    if memo is None:
+        memo = memos[key] = {}
+    return memo
 
 
 def camera_inside(index: VisibilityIndex, view: str, inst: Instance) -> bool:
