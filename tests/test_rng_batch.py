@@ -1,4 +1,4 @@
-"""Generators made from batched PCG64 states (:mod:`spacedg.rng_batch`) are ``default_rng(seed)`` bit for bit."""
+"""Generators made from batched PCG64 states (:func:`spacedg.seeding.pcg64_states`) are ``default_rng(seed)`` bit for bit."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 from numpy.random import SeedSequence
 
 from spacedg.plugins.questions.records import ChildGenerators, child_rngs
-from spacedg.rng_batch import generator_from_state, pcg64_states
+from spacedg.seeding import generator_from_state, pcg64_states
 
 #: Seeds of every entropy length SeedSequence distinguishes (one 32-bit word, two words) and the edges.
 EDGES = [0, 1, 2, 2**31, 2**32 - 1, 2**32, 2**32 + 1, 2**62, 2**63 - 1]
@@ -51,3 +51,14 @@ def test_child_generators_past_the_one_by_one_ones_are_the_same_generators() -> 
         assert children[k].bit_generator.state == np.random.default_rng(seeds[k]).bit_generator.state
         assert children[k] is children[k]
     assert children._states is not None  # the batched path did run
+
+
+def test_a_batched_generator_spawns_and_reports_as_default_rng() -> None:
+    seed = 2**40 + 17
+    fast, plain = generator_from_state(pcg64_states([seed])[0], seed), np.random.default_rng(seed)
+    assert fast.bit_generator.seed_seq.entropy == plain.bit_generator.seed_seq.entropy == seed
+    assert fast.bit_generator.seed_seq.n_children_spawned == 0
+    for _ in range(2):  # children counted as numpy counts them: the second spawn gives new children
+        kids_fast, kids_plain = fast.spawn(2), plain.spawn(2)
+        assert [k.random() for k in kids_fast] == [k.random() for k in kids_plain]
+    assert fast.bit_generator.seed_seq.n_children_spawned == 4

@@ -59,6 +59,11 @@ class QuestionFamily:
         needs: what it reads from the scene (subset of :data:`SCENE_NEEDS`), e.g.
             ``{"visibility"}``: per-view instance visibility must have been computed.
         description: what it asks, in a sentence.
+        metric_only: a promise that every record (or light candidate) it yields carries a selection
+            entry without a cell (a metric answer, taken in generation order, one per subject):
+            the question index then stops reading its candidates as soon as each sub type has the
+            subjects its selection can take (:meth:`spacedg.qa.build._PoolScan.pooled`); one that
+            breaks the promise is refused there. Default ``False``: every candidate is read.
         origin: set by the registry: which plugin registered the family.
     """
 
@@ -70,6 +75,7 @@ class QuestionFamily:
     generate: QuestionGenerator
     needs: frozenset[str] = frozenset()
     description: str = ""
+    metric_only: bool = False
     origin: PluginOrigin | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -104,6 +110,8 @@ class QuestionFamily:
         object.__setattr__(self, "needs", needs)
         if not isinstance(self.description, str):
             raise PluginError(f"{where}: description must be a string")
+        if not isinstance(self.metric_only, bool):
+            raise PluginError(f"{where}: metric_only must be True or False, got {self.metric_only!r}")
         if not callable(self.generate):
             raise PluginError(f"{where}: generate must be callable as generate(scene, rng), got {type(self.generate).__name__}")
         if not isinstance(self.generate, _CheckedGenerator):
@@ -158,7 +166,7 @@ class FamilyFactory:
 
     Attributes:
         generate: the raw generator, options not bound.
-        name, task_group, answer_types, sub_question_types, num_views, needs, description:
+        name, task_group, answer_types, sub_question_types, num_views, needs, description, metric_only:
             as :class:`QuestionFamily` (any iterable of answer types and of needs).
     """
 
@@ -170,6 +178,7 @@ class FamilyFactory:
     num_views: tuple[int, ...]
     needs: Iterable[str] = frozenset()
     description: str = ""
+    metric_only: bool = False
 
     def __call__(self, *args: Any, **kwargs: Any) -> QuestionFamily:
         """The family whose ``generate(scene, rng)`` is ``self.generate(scene, rng, *args, **kwargs)``."""
@@ -184,6 +193,7 @@ class FamilyFactory:
             generate=functools.partial(self.generate, **options),
             needs=frozenset(self.needs),
             description=self.description,
+            metric_only=self.metric_only,
         )
 
 

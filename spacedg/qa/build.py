@@ -9,8 +9,8 @@ Building one scene (:func:`build_scene_index`):
    (scene, family), so adding a family never changes another family's records;
 3. pool up to ``pool_factor × per_sub_type`` distinct subjects per ``sub_question_type``
    (each with at most :data:`ALTERNATES` records; no more than ``max_scan`` candidates per
-   family; without a judge, a family whose answers are all metric stops as soon as each of its
-   sub types has ``per_sub_type`` subjects, all the selection can take) and take up to ``per_sub_type`` of them per sub type with the
+   family; without a judge, a family that declares ``metric_only`` stops as soon as each of its
+   sub types has its quota of selection subjects, all the selection can take) and take up to ``per_sub_type`` of them per sub type with the
    **debiased selection** (:func:`~spacedg.qa.selection.select_records`): a subject (an object, a pair, a view and
    label: the ``selection`` entry of the record's geometry block) is asked at most once per
    sub type; within each *cell* (what a text-only model can tell about the question: its
@@ -42,11 +42,10 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.errors import SpaceDGError
+from spacedg.errors import PluginError, SpaceDGError
 from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.candidates import PASSED_OVER, Candidate, gated, light_candidates
 from spacedg.plugins.qa_record import QARecord, deferred_geometry
-from spacedg.plugins.specs import AnswerType
 from spacedg.qa.deal import deal_distractors, deal_letters
 from spacedg.qa.gc_pause import collector_paused
 from spacedg.qa.index import (
@@ -90,9 +89,6 @@ __all__ = ["ALTERNATES", "prepare_scene", "generate_records", "build_scene_index
 #: family whose subjects recur in many views (size comparisons) pools every pair it finds.
 ALTERNATES = 8
 
-#: Answer types the selection never balances (no cell: metric answers, taken in generation order).
-METRIC_ANSWERS = frozenset({AnswerType.NA, AnswerType.SIZE_LIST})
-
 
 def prepare_scene(
     scene: Scene,
@@ -126,8 +122,9 @@ def prepare_scene(
 
 
 class _ScanDone(BaseException):
-    """Raised by the pool's gate to end a family's scan (``max_scan`` reached, or every sub type
-    has its subjects). A :class:`BaseException`, so a family's own ``except Exception`` never swallows it."""
+    """Raised by the pool's gate or its note of a pooled record to end a family's scan (``max_scan``
+    reached, every sub type has its subjects, or a ``metric_only`` family's selection is full). A
+    :class:`BaseException`, so a family's own ``except Exception`` never swallows it."""
 
 
 class _PoolScan:
@@ -139,7 +136,8 @@ class _PoolScan:
     new subject and its sub type has ``want`` subjects (the scan ends at a new subject, not a
     twin, once every sub type has them), and when an object it names has a twin in one of its
     images (counted in ``twins``, except for a subject that already has its alternates: that
-    rule comes first, as it is the one most candidates meet)."""
+    rule comes first, as it is the one most candidates meet). For a family that declares
+    ``metric_only`` (no judge), :meth:`pooled` ends the scan once the selection could take nothing more."""
 
     def __init__(self, family: Any, config: QABuildConfig, index: TwinCheck, twins: Counter[str], metric_stop: bool = False) -> None:
         self.family, self.index, self.twins = family, index, twins
@@ -150,9 +148,9 @@ class _PoolScan:
         self.scanned = 0
         self.distinct: dict[str, dict[str, int]] = {}  # sub type → pooled records per subject
         self.admitted: tuple[str, Sequence[str], str, Sequence[int]] | None = None  # what the gate last admitted
-        # sub type → the selection's subjects (subject_key) pooled so far, while the stop for metric families holds
+        # sub type → the selection's subjects (subject_key) pooled so far, for a family that declares metric_only
         self.metric: dict[str, set[str]] | None = (
-            {sub: set() for sub in family.sub_question_types} if metric_stop and set(family.answer_types) <= METRIC_ANSWERS else None
+            {sub: set() for sub in family.sub_question_types} if metric_stop and getattr(family, "metric_only", False) else None
         )
 
     def _wanted(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:
@@ -206,23 +204,24 @@ class _PoolScan:
         return True
 
     def pooled(self, record: QARecord) -> None:
-        """A record just pooled. For a family whose answers are all metric (no judge), the scan
+        """A record just pooled. For a family that declares ``metric_only`` (and no judge), the scan
         ends once every sub type has ``quota`` distinct selection subjects
-        (:func:`~spacedg.qa.modes.subject_key`): the selection takes a metric record only while
+        (:func:`~spacedg.qa.modes.subject_key`): the selection takes a record without a cell only while
         its sub type has room, in generation order, one per subject
-        (:meth:`~spacedg.qa.selection._Selection.take_metric`), so no later candidate could be
-        taken. A record with a cell, or without a selection entry, turns the stop off (the
-        selection reads the whole pool for those)."""
+        (:meth:`~spacedg.qa.selection._Selection.take_metric`), and with no room left no round,
+        partial round or small quota takes anything either, so no later candidate could be taken.
+        A pooled record with a cell or without a selection entry breaks the declaration: refused."""
         if self.metric is None:
             return
         entry = selection_of(record)
-        if entry is None or "cell" in entry:
-            self.metric = None
-            return
         keys = self.metric.get(record.sub_question_type)
-        if keys is None:
-            self.metric = None  # a sub type the family did not declare: leave the scan alone
-            return
+        if entry is None or "cell" in entry or keys is None:
+            raise PluginError(
+                f"question family {self.family.name!r} declares metric_only, but offered a "
+                + ("record without a selection entry" if entry is None else "balanced record (a selection cell)" if "cell" in entry
+                   else f"record of the undeclared sub type {record.sub_question_type!r}")
+                + " (subject " + repr(entry.get("subject") if entry else None) + "); declare metric_only=False for a family whose records are not all metric"
+            )
         keys.add(subject_key(str(entry["subject"]), record.views, self.mode))
         if all(len(k) >= self.quota for k in self.metric.values()):
             raise _ScanDone
@@ -245,7 +244,7 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
     :func:`~spacedg.plugins.qa_record.deferred_geometry`, their ``geometry`` converted to plain
     JSON types only once selected (:func:`_family_records`).
 
-    ``metric_stop`` (no judge): a family whose answers are all metric stops scanning once the
+    ``metric_stop`` (no judge): a family that declares ``metric_only`` stops scanning once the
     selection could take nothing more (:meth:`_PoolScan.pooled`); the pool is then that prefix."""
     rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
     scan = _PoolScan(family, config, index, twins, metric_stop)

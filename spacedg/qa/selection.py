@@ -57,7 +57,11 @@ def selection_of(record: QARecord) -> dict[str, Any] | None:
 
 def features_of(record: QARecord) -> list[str]:
     """The ``features`` of the record's selection entry (what its text names: labels by position)."""
-    entry = selection_of(record)
+    return _entry_features(selection_of(record))
+
+
+def _entry_features(entry: Mapping[str, Any] | None) -> list[str]:
+    """:func:`features_of` from the selection entry itself."""
     features = entry.get("features") if entry is not None else None
     return [str(f) for f in features] if isinstance(features, list) else []
 
@@ -103,17 +107,14 @@ class _Pool:
         pool = cls(records)
         selections, features, subjects = pool.selections, pool.features, pool.subjects
         partial: set[str] = set()
-        for i, r in enumerate(records):  # one pass: selection_of, features_of and subject_key of each record
-            sel = r.geometry.get("selection")
-            if not (isinstance(sel, dict) and "subject" in sel):
-                selections.append(None)
-                features.append([])
+        for i, r in enumerate(records):  # one pass: the entry, features and subject key of each record
+            sel = selection_of(r)
+            selections.append(sel)
+            features.append(_entry_features(sel))
+            if sel is None:
                 subjects.append(None)
                 pool.plain.setdefault(r.sub_question_type, []).append(i)
                 continue
-            selections.append(sel)
-            feats = sel.get("features")
-            features.append([str(f) for f in feats] if isinstance(feats, list) else [])
             subjects.append((r.sub_question_type, subject_key(str(sel["subject"]), r.views, mode)))
             if "cell" not in sel:
                 pool.metric.append(i)

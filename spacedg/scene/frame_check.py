@@ -32,6 +32,7 @@ import numpy as np
 
 from spacedg.errors import InvalidDataError
 from spacedg.render.renderer import render
+from spacedg.scene.box import OrientedBox
 from spacedg.scene.model import Scene
 
 __all__ = [
@@ -118,16 +119,14 @@ class FrameReport:
 def _even(n: int, k: int) -> np.ndarray:
     """Up to ``k`` indices spread evenly over ``range(n)``: the rounded ``linspace``, sorted, repeats dropped
     (it is non-decreasing, so a neighbour comparison is ``np.unique`` without the sort)."""
-    if not n:
-        return np.zeros(0, np.int64)
-    picks = np.linspace(0, n - 1, num=min(n, k)).round().astype(np.int64)
-    return picks[np.concatenate(([True], picks[1:] != picks[:-1]))]
+    picks = np.linspace(0, n - 1, num=min(n, k)).round().astype(np.int64) if n else np.zeros(0, np.int64)
+    return picks[np.concatenate(([True], picks[1:] != picks[:-1]))] if picks.size else picks
 
 
-def _holds_any(box: object, points: np.ndarray, tol: float, every: int = 16) -> bool:
-    """Whether ``box`` (grown by ``tol``) holds any of ``points``: every ``every``-th point first (a
+def _holds_any(box: OrientedBox, points: np.ndarray, tol: float, every: int = 16) -> bool:
+    """Whether ``box`` (grown by ``tol`` metres) holds any of ``points``: every ``every``-th point first (a
     subset, so a hit there is a hit), then all of them only when that finds none."""
-    return bool(box.contains(points[::every], tol=tol).any()) or bool(box.contains(points, tol=tol).any())  # type: ignore[attr-defined]
+    return bool(box.contains(points[::every], tol=tol).any()) or bool(box.contains(points, tol=tol).any())
 
 
 def check_frame(

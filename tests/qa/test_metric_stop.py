@@ -1,5 +1,5 @@
-"""A family whose answers are all metric stops its scan once the selection could take nothing
-more (:meth:`spacedg.qa.build._PoolScan.pooled`): the same records as the full scan, fewer candidates read."""
+"""A family that declares ``metric_only`` stops its scan once the selection could take nothing more
+(:meth:`spacedg.qa.build._PoolScan.pooled`): the same records as the full scan, fewer candidates read."""
 
 from __future__ import annotations
 
@@ -7,12 +7,17 @@ from collections import Counter
 
 import pytest
 
+from spacedg.errors import PluginError
 from spacedg.plugins.candidates import Candidate, offer
+from spacedg.qa import build
 from spacedg.qa.build import _pool
 from spacedg.qa.index import QABuildConfig, selected_families
+from spacedg.qa.modes import quota
 from spacedg.qa.selection import select_records
 from spacedg.qa.twins import TwinCheck
 from spacedg.plugins.questions.view_sampling import VisibilityIndex
+
+METRIC = ("inter_object_distance", "camera_object_distance_estimation", "object_bounding_size_estimation")
 
 
 @pytest.fixture(scope="module")
@@ -26,47 +31,80 @@ def room_scene(qa_room_dirs):
 
 def _selected(scene, family, config, metric_stop):
     pool = _pool(family, scene, config, TwinCheck(VisibilityIndex(scene)), Counter(), metric_stop=metric_stop)
-    chosen = select_records(pool, config.per_sub_type if config.mode == "bench" else config.per_sub_type * 4, mode=config.mode)
+    chosen = select_records(pool, quota(config.per_sub_type, config.mode), mode=config.mode)
     return pool, [r.materialised().to_dict() for r in chosen]
 
 
-@pytest.mark.parametrize("mode, per_sub_type", [("bench", 25), ("bench", 3), ("train", 25)])
-@pytest.mark.parametrize("family", [f for f in selected_families(None) if f.name in {
-    "inter_object_distance", "camera_object_distance_estimation", "object_bounding_size_estimation"}], ids=lambda f: f.name)
-def test_the_stop_keeps_the_records_of_the_full_scan(room_scene, family, mode, per_sub_type) -> None:
-    from spacedg.qa.modes import quota
+def test_the_built_in_metric_families_declare_it_and_no_other_does() -> None:
+    assert {f.name for f in selected_families(None) if f.metric_only} == set(METRIC)
 
+
+@pytest.mark.parametrize("mode, per_sub_type", [("bench", 25), ("bench", 3), ("train", 25)])
+@pytest.mark.parametrize("family", [f for f in selected_families(None) if f.name in METRIC], ids=lambda f: f.name)
+def test_the_stop_keeps_the_records_of_the_full_scan(room_scene, family, mode, per_sub_type) -> None:
     config = QABuildConfig(mode=mode, per_sub_type=per_sub_type)
     full_pool, full = _selected(room_scene, family, config, metric_stop=False)
     stopped_pool, stopped = _selected(room_scene, family, config, metric_stop=True)
     assert stopped == full and full
     assert [r.geometry["selection"] for r in stopped_pool] == [r.geometry["selection"] for r in full_pool[: len(stopped_pool)]]
-    # the stop ran where every sub type found its quota of subjects
     if all(sum(r["sub_question_type"] == sub for r in full) >= quota(per_sub_type, mode) for sub in family.sub_question_types):
-        assert len(stopped_pool) < len(full_pool)
+        assert len(stopped_pool) < len(full_pool)  # every sub type found its quota: the stop ran
 
 
-def test_a_cell_or_a_record_without_an_entry_turns_the_stop_off(room_scene) -> None:
-    """A metric-declared family that offers a balanced (cell) candidate, or a record without a
-    selection entry, is scanned to the end (the selection reads the whole pool for those)."""
+def test_the_stop_reads_fewer_candidates_where_the_quota_is_small(room_scene) -> None:
+    family = next(f for f in selected_families(None) if f.name == "inter_object_distance")
+    config = QABuildConfig(per_sub_type=3)
+    full_pool, full = _selected(room_scene, family, config, metric_stop=False)
+    stopped_pool, stopped = _selected(room_scene, family, config, metric_stop=True)
+    assert stopped == full and len(full) == 3 and len(stopped_pool) < len(full_pool) // 2
+
+
+def _demo_family(kinds: str, metric_only: bool = True):
     from spacedg.plugins.question_family import FamilyFactory
     from spacedg.plugins.specs import AnswerType, TaskGroup
 
-    def stream(kinds):
-        def generate(scene, rng):
-            for k in range(40):
-                subject = f"object:{k}"
-                entry = {"subject": subject}
-                if k == 0 and kinds == "cell":  # a balanced candidate first
-                    entry = {"subject": subject, "cell": "c", "role": "a", "roles": ["a", "b"]}
-                elif k == 0 and kinds == "plain":  # an entry the selection does not read as one (no subject)
-                    entry = {}
-                yield offer("s", (next(iter(scene.views)),), subject, (), lambda e=entry: e, lambda: None)
-        return generate
+    def generate(scene, rng):
+        for k in range(40):
+            subject = f"object:{k}"
+            entry = {"subject": subject}
+            if k == 5 and kinds == "cell":  # a balanced candidate before the quota is met
+                entry = {"subject": subject, "cell": "c", "role": "a", "roles": ["a", "b"]}
+            elif k == 5 and kinds == "plain":  # an entry the selection does not read as one (no subject)
+                entry = {}
+            yield offer("s", (next(iter(scene.views)),), subject, (), lambda e=entry: e, lambda: None)
 
-    for kinds, expected in (("metric", 2), ("cell", 40), ("plain", 40)):  # quota 2: the metric stream stops after its second subject
-        family = FamilyFactory(stream(kinds), name=f"demo_{kinds}", task_group=TaskGroup.OBJECT_CENTRIC,
-                               answer_types={AnswerType.NA}, sub_question_types=("s",), num_views=(1,), description="demo")()
-        config = QABuildConfig(per_sub_type=2)
-        pool = _pool(family, room_scene, config, TwinCheck(VisibilityIndex(room_scene)), Counter(), metric_stop=True)
-        assert len(pool) == expected and all(type(p.candidate) is Candidate for p in pool)
+    return FamilyFactory(generate, name=f"demo_{kinds}", task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.NA},
+                         sub_question_types=("s",), num_views=(1,), description="demo", metric_only=metric_only)()
+
+
+def test_a_declared_family_stops_and_one_that_breaks_the_declaration_is_refused(room_scene) -> None:
+    config = QABuildConfig(per_sub_type=8)
+    index = TwinCheck(VisibilityIndex(room_scene))
+    pool = _pool(_demo_family("metric"), room_scene, config, index, Counter(), metric_stop=True)
+    assert len(pool) == 8 and all(type(p.candidate) is Candidate for p in pool)  # its quota of subjects, then the stop
+    assert len(_pool(_demo_family("metric", metric_only=False), room_scene, config, index, Counter(), metric_stop=True)) == 40
+    assert len(_pool(_demo_family("metric"), room_scene, config, index, Counter(), metric_stop=False)) == 40
+    for kinds, what in (("cell", "balanced record"), ("plain", "without a selection entry")):
+        with pytest.raises(PluginError, match=f"declares metric_only.*{what}"):
+            _pool(_demo_family(kinds), room_scene, config, index, Counter(), metric_stop=True)
+
+
+def test_a_judge_turns_the_stop_off(room_scene, monkeypatch) -> None:
+    """The stop is exact only when every pooled record is accepted: with a judge the family is read to the end."""
+    asked = []
+    plain_pool = build._pool
+
+    def spy(*args, **kwargs):
+        asked.append(kwargs.get("metric_stop"))
+        return plain_pool(*args, **kwargs)
+
+    class KeepAll:
+        def keep(self, record) -> bool:
+            return True
+
+    monkeypatch.setattr(build, "_pool", spy)
+    family = next(f for f in selected_families(None) if f.name == "object_bounding_size_estimation")
+    index = TwinCheck(VisibilityIndex(room_scene))
+    build._family_records(family, room_scene, QABuildConfig(), None, None, None, index, Counter())
+    build._family_records(family, room_scene, QABuildConfig(), KeepAll(), None, None, index, Counter())
+    assert asked == [True, False]

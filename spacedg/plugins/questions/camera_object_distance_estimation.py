@@ -208,6 +208,7 @@ def generate(
 make_family = view_and_pair_family(
     generate, name=NAME, task_group=TaskGroup.CAMERA_OBJECT, answer_types={AnswerType.NA}, sub_question_types=SUB_QUESTION_TYPES,
     description="Metric distance from a camera centre to an object's box centre (single view, or camera B of a pair).",
+    metric_only=True,
 )
 FAMILY = make_family()
 spacedg_register_question_families = registering(FAMILY)

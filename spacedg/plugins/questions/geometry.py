@@ -498,7 +498,7 @@ def compass_frame(reference: np.ndarray, assumed_dir: str, up: np.ndarray) -> tu
     ``ground_angle(north, reference, up) == 90k``. World metres; ``up`` is normalised first.
     Raises :class:`InvalidDataError` when ``reference`` has no ground component.
     """
-    if assumed_dir not in CARDINALS:
+    if assumed_dir not in CARDINALS:  # before the basis: a bad cardinal is named whatever the reference
         raise InvalidDataError(f"compass_frame: assumed_dir must be one of {CARDINALS}, got {assumed_dir!r}")
     return compass_turn(compass_basis(reference, up), assumed_dir)
 
@@ -515,6 +515,8 @@ def compass_basis(reference: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np
 
 def compass_turn(basis: tuple[np.ndarray, np.ndarray, np.ndarray], assumed_dir: str) -> tuple[np.ndarray, np.ndarray]:
     """:func:`compass_frame`'s ``(north, east)`` from :func:`compass_basis`' ``basis``."""
+    if assumed_dir not in CARDINALS:
+        raise InvalidDataError(f"compass_frame: assumed_dir must be one of {CARDINALS}, got {assumed_dir!r}")
     u, f, r = basis
     c, s = _QUARTER_TURNS[CARDINALS.index(assumed_dir)]
     north = c * f - s * r

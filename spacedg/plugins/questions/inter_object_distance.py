@@ -147,6 +147,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
 make_family = pair_family(
     _pair_stream, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.NA}, sub_question_types=(SUB_QUESTION_TYPE,),
     description="Metric distance between the centres of an object seen in image A and a differently labelled one seen in image B.",
+    metric_only=True,
 )
 FAMILY = make_family()
 spacedg_register_question_families = registering(FAMILY)

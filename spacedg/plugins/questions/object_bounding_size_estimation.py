@@ -150,6 +150,7 @@ def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThres
 make_family = FamilyFactory(
     generate, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.SIZE_LIST}, sub_question_types=(SUB_QUESTION_TYPE,),
     num_views=(1,), needs={"visibility"}, description="The three edge lengths [shortest, middle, longest] of a clearly visible object's box, in metres.",
+    metric_only=True,
 )
 FAMILY = make_family()
 spacedg_register_question_families = registering(FAMILY)

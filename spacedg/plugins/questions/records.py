@@ -77,7 +77,7 @@ from spacedg.plugins.questions.geometry import (
     on_compass_boundary,
 )
 from spacedg.plugins.questions.language import object_phrase
-from spacedg.rng_batch import generator_from_state, pcg64_states
+from spacedg.seeding import generator_from_state, pcg64_states
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -125,7 +125,7 @@ class ChildGenerators(Sequence[np.random.Generator]):
     of its candidates never pays for their generators."""
 
     #: Generators made one by one (``default_rng``, ~9 µs each) before the rest are made from their
-    #: seeds' PCG64 states computed in one vectorised pass (:func:`~spacedg.rng_batch.pcg64_states`,
+    #: seeds' PCG64 states computed in one vectorised pass (:func:`~spacedg.seeding.pcg64_states`,
     #: ~140 µs for any count up to a few hundred, then < 1 µs each): the same generators either way.
     ONE_BY_ONE = 16
 
