@@ -116,9 +116,14 @@ class _FixedSeedSequence(ISpawnableSeedSequence):
     (other state sizes, ``spawn``, ``entropy``, ...) goes to the real ``SeedSequence(seed)``, made
     the first time it is needed and kept (so ``spawn`` counts its children as numpy's does)."""
 
+    __slots__ = ("words", "seed", "_real")
+
     def __init__(self, words: np.ndarray, seed: int) -> None:
         self.words, self.seed = words, seed
         self._real: SeedSequence | None = None
+
+    def __repr__(self) -> str:
+        return repr(self.real())
 
     def real(self) -> SeedSequence:
         """``SeedSequence(seed)`` itself (made once)."""
@@ -128,7 +133,7 @@ class _FixedSeedSequence(ISpawnableSeedSequence):
 
     def generate_state(self, n_words: int, dtype: Any = np.uint32) -> np.ndarray:
         if n_words == _POOL and np.dtype(dtype) == np.uint64:
-            return self.words
+            return self.words.copy()
         return self.real().generate_state(n_words, dtype)
 
     def spawn(self, n_children: int) -> list[SeedSequence]:

@@ -60,10 +60,10 @@ class QuestionFamily:
             ``{"visibility"}``: per-view instance visibility must have been computed.
         description: what it asks, in a sentence.
         metric_only: a promise that every record (or light candidate) it yields carries a selection
-            entry without a cell (a metric answer, taken in generation order, one per subject):
-            the question index then stops reading its candidates as soon as each sub type has the
-            subjects its selection can take (:meth:`spacedg.qa.build._PoolScan.pooled`); one that
-            breaks the promise is refused there. Default ``False``: every candidate is read.
+            entry with a subject and without a cell (a metric answer, taken in generation order, one
+            per subject): the question index (:mod:`spacedg.qa.build`), without a judge, then stops
+            reading its candidates as soon as each sub type has the subjects its selection can take,
+            and refuses a pooled record that breaks the promise. Default ``False``: every candidate is read.
         origin: set by the registry: which plugin registered the family.
     """
 
@@ -146,6 +146,7 @@ class QuestionFamily:
             "num_views": list(self.num_views),
             "needs": sorted(self.needs),
             "description": self.description,
+            "metric_only": self.metric_only,
         }
 
 

@@ -150,8 +150,9 @@ class _PoolScan:
         self.admitted: tuple[str, Sequence[str], str, Sequence[int]] | None = None  # what the gate last admitted
         # sub type → the selection's subjects (subject_key) pooled so far, for a family that declares metric_only
         self.metric: dict[str, set[str]] | None = (
-            {sub: set() for sub in family.sub_question_types} if metric_stop and getattr(family, "metric_only", False) else None
+            {sub: set() for sub in family.sub_question_types} if getattr(family, "metric_only", False) else None
         )
+        self.metric_stop = metric_stop
 
     def _wanted(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:
         """Whether the pool takes the candidate (class docstring); raises :class:`_ScanDone` when a
@@ -204,13 +205,14 @@ class _PoolScan:
         return True
 
     def pooled(self, record: QARecord) -> None:
-        """A record just pooled. For a family that declares ``metric_only`` (and no judge), the scan
-        ends once every sub type has ``quota`` distinct selection subjects
+        """A record just pooled. A family that declares ``metric_only`` is held to it (a pooled record
+        with a cell, without a selection entry or of an undeclared sub type is refused, judge or not),
+        and without a judge (``metric_stop``) its scan ends once every sub type has ``quota`` distinct selection subjects
         (:func:`~spacedg.qa.modes.subject_key`): the selection takes a record without a cell only while
         its sub type has room, in generation order, one per subject
         (:meth:`~spacedg.qa.selection._Selection.take_metric`), and with no room left no round,
         partial round or small quota takes anything either, so no later candidate could be taken.
-        A pooled record with a cell or without a selection entry breaks the declaration: refused."""
+        (A judge may refuse pooled records, so with one every candidate is read.)"""
         if self.metric is None:
             return
         entry = selection_of(record)
@@ -222,6 +224,8 @@ class _PoolScan:
                    else f"record of the undeclared sub type {record.sub_question_type!r}")
                 + " (subject " + repr(entry.get("subject") if entry else None) + "); declare metric_only=False for a family whose records are not all metric"
             )
+        if not self.metric_stop:
+            return
         keys.add(subject_key(str(entry["subject"]), record.views, self.mode))
         if all(len(k) >= self.quota for k in self.metric.values()):
             raise _ScanDone

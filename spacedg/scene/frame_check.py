@@ -119,8 +119,10 @@ class FrameReport:
 def _even(n: int, k: int) -> np.ndarray:
     """Up to ``k`` indices spread evenly over ``range(n)``: the rounded ``linspace``, sorted, repeats dropped
     (it is non-decreasing, so a neighbour comparison is ``np.unique`` without the sort)."""
-    picks = np.linspace(0, n - 1, num=min(n, k)).round().astype(np.int64) if n else np.zeros(0, np.int64)
-    return picks[np.concatenate(([True], picks[1:] != picks[:-1]))] if picks.size else picks
+    if not n or not k:
+        return np.zeros(0, np.int64)
+    picks = np.linspace(0, n - 1, num=min(n, k)).round().astype(np.int64)
+    return picks[np.concatenate(([True], picks[1:] != picks[:-1]))]
 
 
 def _holds_any(box: OrientedBox, points: np.ndarray, tol: float, every: int = 16) -> bool:

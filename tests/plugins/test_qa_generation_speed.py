@@ -175,34 +175,3 @@ def test_with_changes_keeps_a_plain_geometry_and_checks_the_fields() -> None:
     with pytest.raises(InvalidDataError, match=r"geometry\.bad\[1\]"):
         raw.with_changes(question="Q?")  # a geometry not yet converted is converted (and refused) as before
     assert plain.with_changes(geometry={"n": np.float64(1.5)}).geometry == {"n": 1.5}
-
-
-def test_the_triplet_prefilters_are_the_three_object_rule(qa_room_dirs) -> None:
-    """For objects referable in image A or B (the proxy and relative-position streams' candidates),
-    "one is seen only in A and one only in B" is exactly :func:`split_across_views`, so the streams
-    need not ask it again; and the relative-position triplets are all and only the ordered triplets that obey it."""
-    import itertools
-
-    from spacedg.plugins.questions import camera_object_relative_direction as rel
-    from spacedg.plugins.questions.records import referable_ids
-    from spacedg.plugins.questions.view_sampling import OBJECT_DIRECTION_PAIRS, VisibilityIndex, sample_pairs, split_across_views
-    from spacedg.scene.io import load_scene
-    from tests.room_qa import prepare_room
-
-    folder = qa_room_dirs[0]
-    scene = prepare_room(load_scene(folder), folder / "cache")
-    index = VisibilityIndex(scene)
-    checked = 0
-    for pair in sample_pairs(scene, OBJECT_DIRECTION_PAIRS, np.random.default_rng(0))[:12]:
-        ids = sorted(set(referable_ids(index, pair.a)) | set(referable_ids(index, pair.b)))
-        seen_a, seen_b = index.seen_set(pair.a), index.seen_set(pair.b)
-        obeying = set()
-        for tri in itertools.permutations(ids, 3):
-            only_a, only_b = [i not in seen_b for i in tri], [i not in seen_a for i in tri]
-            assert (any(only_a) and any(only_b)) == split_across_views(index, pair.a, pair.b, tri)
-            if any(only_a) and any(only_b):
-                obeying.add(tri)
-            checked += 1
-        ref_view, triplets = rel._relpos_candidates(index, pair)
-        assert sorted(ref_view) == ids and set(triplets) == obeying and len(triplets) == len(obeying)
-    assert checked > 1000

@@ -572,6 +572,7 @@ def test_question_family_validation() -> None:
                                 sub_question_types=("count",), num_views=(1,), generate=gen)
     family = QuestionFamily(**base)
     assert family.generate.__wrapped__ is gen and family.num_views == (1,)
+    assert family.describe()["metric_only"] is False and QuestionFamily(**base, metric_only=True).describe()["metric_only"] is True
     assert QuestionFamily(**{**base, "sub_question_types": ("yaw+pitch_dual",)}).sub_question_types == ("yaw+pitch_dual",)
     assert QuestionFamily(**{**base, "sub_question_types": ("relpos_A_facing_B",)}).sub_question_types == ("relpos_A_facing_B",)
     for changes, pattern in [
@@ -582,6 +583,7 @@ def test_question_family_validation() -> None:
         ({"num_views": (0,)}, "num_views must be positive integers"),
         ({"needs": {"visibilty"}}, r"needs \['visibilty'\] unknown"),
         ({"generate": None}, "generate must be callable"),
+        ({"metric_only": 1}, "metric_only must be True or False"),
     ]:
         with pytest.raises(PluginError, match=pattern):
             QuestionFamily(**{**base, **changes})

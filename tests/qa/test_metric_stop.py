@@ -71,7 +71,8 @@ def _demo_family(kinds: str, metric_only: bool = True):
                 entry = {"subject": subject, "cell": "c", "role": "a", "roles": ["a", "b"]}
             elif k == 5 and kinds == "plain":  # an entry the selection does not read as one (no subject)
                 entry = {}
-            yield offer("s", (next(iter(scene.views)),), subject, (), lambda e=entry: e, lambda: None)
+            sub = "t" if k == 5 and kinds == "undeclared" else "s"
+            yield offer(sub, (next(iter(scene.views)),), subject, (), lambda e=entry: e, lambda: None)
 
     return FamilyFactory(generate, name=f"demo_{kinds}", task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.NA},
                          sub_question_types=("s",), num_views=(1,), description="demo", metric_only=metric_only)()
@@ -84,9 +85,10 @@ def test_a_declared_family_stops_and_one_that_breaks_the_declaration_is_refused(
     assert len(pool) == 8 and all(type(p.candidate) is Candidate for p in pool)  # its quota of subjects, then the stop
     assert len(_pool(_demo_family("metric", metric_only=False), room_scene, config, index, Counter(), metric_stop=True)) == 40
     assert len(_pool(_demo_family("metric"), room_scene, config, index, Counter(), metric_stop=False)) == 40
-    for kinds, what in (("cell", "balanced record"), ("plain", "without a selection entry")):
-        with pytest.raises(PluginError, match=f"declares metric_only.*{what}"):
-            _pool(_demo_family(kinds), room_scene, config, index, Counter(), metric_stop=True)
+    for kinds, what in (("cell", "balanced record"), ("plain", "without a selection entry"), ("undeclared", "undeclared sub type 't'")):
+        for stop in (True, False):  # held to its promise with a judge too (no stop then)
+            with pytest.raises(PluginError, match=f"declares metric_only.*{what}"):
+                _pool(_demo_family(kinds), room_scene, config, index, Counter(), metric_stop=stop)
 
 
 def test_a_judge_turns_the_stop_off(room_scene, monkeypatch) -> None:

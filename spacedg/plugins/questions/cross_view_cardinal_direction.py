@@ -215,7 +215,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         (one, key_one, ref), (two, key_two, query) = side_a[i], side_b[j]
         if key_one == key_two or ref is None or query is None:
             continue
-        subject, named = f"objects:{one.id}|{two.id}", (one.id, two.id)  # = _subject(one, two)
+        subject, named = _subject(one, two), (one.id, two.id)
         if not admitted(SUB_QUESTION_TYPE, views, subject, named):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue

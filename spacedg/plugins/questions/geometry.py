@@ -514,9 +514,10 @@ def compass_basis(reference: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np
 
 
 def compass_turn(basis: tuple[np.ndarray, np.ndarray, np.ndarray], assumed_dir: str) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`compass_frame`'s ``(north, east)`` from :func:`compass_basis`' ``basis``."""
+    """:func:`compass_frame`'s ``(north, east)`` from :func:`compass_basis`' ``basis``; raises
+    :class:`InvalidDataError` for an ``assumed_dir`` not in :data:`CARDINALS`."""
     if assumed_dir not in CARDINALS:
-        raise InvalidDataError(f"compass_frame: assumed_dir must be one of {CARDINALS}, got {assumed_dir!r}")
+        raise InvalidDataError(f"compass_turn: assumed_dir must be one of {CARDINALS}, got {assumed_dir!r}")
     u, f, r = basis
     c, s = _QUARTER_TURNS[CARDINALS.index(assumed_dir)]
     north = c * f - s * r

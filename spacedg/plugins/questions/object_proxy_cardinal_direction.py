@@ -183,7 +183,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         if overlap(x, y) or overlap(x, z) or overlap(y, z):
             continue
         triplet_ids = (ids[x], ids[y], ids[z])
-        subject = f"objects:{triplet_ids[0]}|{triplet_ids[1]}|{triplet_ids[2]}"  # = _subject(objs)
+        subject = _triplet_subject(*triplet_ids)
         if not admitted(SUB_QUESTION_TYPE, views, subject, triplet_ids):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
@@ -200,7 +200,13 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
 
 def _subject(objs: Sequence[Instance]) -> str:
     """The selection subject: the ordered triplet (A, B, C)."""
-    return "objects:" + "|".join(str(o.id) for o in objs)
+    a, b, c = (o.id for o in objs)
+    return _triplet_subject(a, b, c)
+
+
+def _triplet_subject(a: int, b: int, c: int) -> str:
+    """:func:`_subject` from the three instance ids."""
+    return f"objects:{a}|{b}|{c}"
 
 
 def _selection(objs: Sequence[Instance], drawn: tuple[str, tuple[str, ...], str, dict[str, Any]]) -> dict[str, Any]:

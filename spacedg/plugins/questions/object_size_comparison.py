@@ -365,13 +365,9 @@ def _subject(one: Instance, two: Instance, sub: str) -> str:
     return f"{sub}|objects:{min(one.id, two.id)}|{max(one.id, two.id)}"
 
 
-def _verdict_of(
-    scene: Scene, index: VisibilityIndex, one: Instance, two: Instance, sub: str, memo: dict[Any, Any] | None = None,
-) -> _Verdict | None:
+def _verdict_of(scene: Scene, one: Instance, two: Instance, sub: str, memo: dict[Any, Any]) -> _Verdict | None:
     """:func:`_verdict` of two :func:`_distinguishable` objects (else ``None``), memoised per
-    (object 1, object 2, sub type) on ``index`` (``memo``: that memo, for a caller asking many): a pair recurs in many view pairs."""
-    if memo is None:
-        memo = index_memo(index, "size_verdict")
+    (object 1, object 2, sub type) in ``memo`` (the index's ``size_verdict`` memo): a pair recurs in many view pairs."""
     key = (one.id, two.id, sub)
     hit = memo.get(key)
     if hit is None or hit[0] is not one or hit[1] is not two:
@@ -433,7 +429,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         rest, s = divmod(k, n_subs)
         i, j = divmod(rest, n_twos)
         one, two, sub = ones[i], twos[j], SUB_QUESTION_TYPES[s]
-        verdict = _verdict_of(scene, index, one, two, sub, verdicts)
+        verdict = _verdict_of(scene, one, two, sub, verdicts)
         if verdict is None:
             continue
         if not admitted(sub, views, verdict.subject, (one.id, two.id)):

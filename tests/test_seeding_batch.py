@@ -62,3 +62,16 @@ def test_a_batched_generator_spawns_and_reports_as_default_rng() -> None:
         kids_fast, kids_plain = fast.spawn(2), plain.spawn(2)
         assert [k.random() for k in kids_fast] == [k.random() for k in kids_plain]
     assert fast.bit_generator.seed_seq.n_children_spawned == 4
+
+
+def test_a_batched_generator_pickles_copies_and_reads_as_default_rng() -> None:
+    import copy
+    import pickle
+
+    seed = 987654321987
+    fast, plain = generator_from_state(pcg64_states([seed])[0], seed), np.random.default_rng(seed)
+    fast.random(3), plain.random(3)
+    for clone in (pickle.loads(pickle.dumps(fast)), copy.deepcopy(fast)):
+        assert clone.bit_generator.state == plain.bit_generator.state
+    assert repr(fast.bit_generator.seed_seq) == repr(plain.bit_generator.seed_seq)
+    assert fast.random(4).tolist() == plain.random(4).tolist()
