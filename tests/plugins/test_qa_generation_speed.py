@@ -175,3 +175,15 @@ def test_with_changes_keeps_a_plain_geometry_and_checks_the_fields() -> None:
     with pytest.raises(InvalidDataError, match=r"geometry\.bad\[1\]"):
         raw.with_changes(question="Q?")  # a geometry not yet converted is converted (and refused) as before
     assert plain.with_changes(geometry={"n": np.float64(1.5)}).geometry == {"n": 1.5}
+
+
+def test_bbox_options_deal_each_truth_its_first_deck_as_before() -> None:
+    from spacedg.plugins.questions.camera_object_relative_direction import BBOX_DECKS, bbox_options
+    from spacedg.plugins.questions.geometry import build_mcq
+
+    for seed, truth in enumerate(t for deck in BBOX_DECKS for t in deck):
+        deck = next(d for d in BBOX_DECKS if truth in d)  # the plain rule
+        expected = (*build_mcq(truth, [t for t in deck if t != truth], np.random.default_rng(seed)), deck)
+        assert bbox_options(truth, np.random.default_rng(seed)) == expected
+    with pytest.raises(ValueError, match="none of the decks"):
+        bbox_options("Back", np.random.default_rng(0))

@@ -215,6 +215,10 @@ BBOX_DECKS: tuple[tuple[str, ...], ...] = (
     ("Front-Right", "Front-Left", "Down-Right", "Down-Left"),
 )
 RELPOS_TEMPLATE = "You are positioned at the {a} and face the {b}. In which direction is the {c} relative to you?"
+#: truth → (its deck, the deck's other labels in deck order) (:func:`bbox_options`).
+_BBOX_DECK_OF: dict[str, tuple[tuple[str, ...], list[str]]] = {
+    t: (d, [o for o in d if o != t]) for d in reversed(BBOX_DECKS) for t in d  # reversed: the first deck holding a label wins
+}
 
 
 # ------------------------------------------------------- camera-frame labels
@@ -233,9 +237,11 @@ def body_direction(vector_camera: np.ndarray, rng: np.random.Generator) -> tuple
 
 def bbox_options(truth: str, rng: np.random.Generator) -> tuple[tuple[str, ...], str, tuple[str, ...]]:
     """``(options, letter, deck)`` of a ``bbox_center_direction`` truth: its :data:`BBOX_DECKS`
-    deck, shuffled by :func:`~spacedg.plugins.questions.geometry.build_mcq`."""
-    deck = next(d for d in BBOX_DECKS if truth in d)
-    options, letter = build_mcq(truth, [t for t in deck if t != truth], rng)
+    deck, shuffled by :func:`~spacedg.plugins.questions.geometry.build_mcq`; ``ValueError`` for a label in no deck."""
+    if truth not in _BBOX_DECK_OF:
+        raise ValueError(f"bbox_options: {truth!r} is in none of the decks {BBOX_DECKS}")
+    deck, others = _BBOX_DECK_OF[truth]
+    options, letter = build_mcq(truth, others, rng)
     return options, letter, deck
 
 
@@ -273,13 +279,13 @@ def _record(
 
 # --------------------------------------------------------------- single view
 def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
-    cam = scene.views[view]
+    world_to_cam = np.asarray(scene.views[view].cam_to_world, dtype=np.float64)[:3, :3].T  # R^T, read once per view
     for ia, ib in seeded_order(list(itertools.permutations(referable_ids(index, view), 2)), rng):
         a, b = index.instance(ia), index.instance(ib)
         if phrase_key(a) == phrase_key(b):
             continue
         world = b.box.center - a.box.center
-        vec = np.asarray(cam.cam_to_world, dtype=np.float64)[:3, :3].T @ world
+        vec = world_to_cam @ world
         if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
             continue
         subject = f"view:{view}|objects:{min(ia, ib)}|{max(ia, ib)}"
@@ -406,11 +412,13 @@ def _relpos_candidates(index: VisibilityIndex, pair: ViewPair) -> tuple[dict[int
         if found is not None:
             ref_view[iid] = found
     seen_a, seen_b = index.seen_set(pair.a), index.seen_set(pair.b)
+    ids = sorted(ref_view)
+    in_a, in_b = [i in seen_a for i in ids], [i in seen_b for i in ids]
     triplets: list[tuple[int, int, int]] = []
-    for combo in itertools.combinations(sorted(ref_view), 3):
-        if set(combo) <= seen_a or set(combo) <= seen_b:
+    for x, y, z in itertools.combinations(range(len(ids)), 3):
+        if (in_a[x] and in_a[y] and in_a[z]) or (in_b[x] and in_b[y] and in_b[z]):
             continue  # one view shows all three: the task would collapse to a single view
-        triplets.extend(itertools.permutations(combo))
+        triplets.extend(itertools.permutations((ids[x], ids[y], ids[z])))
     return ref_view, triplets
 
 
