@@ -60,17 +60,19 @@ demo: $(STAMP)
 	$(BIN)/python -m spacedg.sft +experiment=tiny 'data.scenes=[$(DEMO_DIR)/scenes]' output_dir=$(DEMO_DIR)/sft-tiny
 	$(BIN)/spacedg plugins
 
-# The suite in two lanes on the machine's two cores: tests/sft (torchrun launches, an installed
-# wheel) in the background, the rest in front (beside it, tests/test_readme.py's runner); the
-# background lane's output follows the front's, and both must pass.
+# The suite in two lanes on the machine's two cores: $(BACK_LANE) (torchrun launches, an installed
+# wheel; the dataset and evaluation tests, to balance the lanes: ~6 min each) in the background, the
+# rest in front (beside it, tests/test_readme.py's runner); the background lane's output follows
+# the front's, and both must pass.
 # An interrupted run stops the background lane and removes its log (the EXIT trap).
+BACK_LANE := tests/sft tests/data tests/eval
 test: $(STAMP)
 	@log=$$(mktemp) || exit 1; lane=; \
 	trap 'if [ -n "$$lane" ]; then kill $$lane 2>/dev/null; fi; rm -f "$$log"' EXIT; trap 'exit 130' INT TERM; \
-	$(PYCACHE_ON) $(BIN)/python -m pytest -q -p no:cacheprovider tests/sft > "$$log" 2>&1 & lane=$$!; \
-	$(PYCACHE_ON) $(BIN)/python -m pytest -q --ignore=tests/sft; front=$$?; \
+	$(PYCACHE_ON) $(BIN)/python -m pytest -q -p no:cacheprovider $(BACK_LANE) > "$$log" 2>&1 & lane=$$!; \
+	$(PYCACHE_ON) $(BIN)/python -m pytest -q $(addprefix --ignore=,$(BACK_LANE)); front=$$?; \
 	wait $$lane; back=$$?; lane=; \
-	echo "---- tests/sft (the second lane) ----"; cat "$$log"; \
+	echo "---- $(BACK_LANE) (the second lane) ----"; cat "$$log"; \
 	test $$front -eq 0 && test $$back -eq 0
 
 clean:
