@@ -105,6 +105,7 @@ Cheap candidates (optional: the question index pools thousands of candidates per
     - :func:`offer`: ``offer(sub, views, subject, named, selection, build)``: what ``generate`` yields for one question: the record (``build()``) normally, a light candidate inside the question index (the record is built only if the selection keeps it). Make every random draw before offering; ``selection`` and ``build`` must not draw.
     - :func:`admitted`: ``admitted(sub, views, subject, named)`` (the four values ``offer`` will get): ask once the checks that draw nothing have passed, before any draw; when ``False`` (the index has the subject's alternates or enough subjects, or a named object has a twin in the images) yield :data:`PASSED_OVER` and go on. Always ``True`` outside the index; may raise a ``BaseException`` to end the scan.
     - :data:`PASSED_OVER`: what a family yields for a candidate :func:`admitted` refused (the index counts it as examined).
+    - :func:`offer_if_admitted`: ``offer_if_admitted(sub, views, subject, named, selection, build)``: the two above in one, for a candidate whose draws are all made already (drawn up front or per round): :data:`PASSED_OVER` or :func:`offer`.
 
 Poses, directions and the ground plane
     - :func:`camera_center`: a camera's centre in world metres.
@@ -143,7 +144,7 @@ Answers
 from __future__ import annotations
 
 from spacedg.plugins.answers import MCQ_LETTERS, Answer, answer_from_text, answer_text, validate_answer
-from spacedg.plugins.candidates import PASSED_OVER, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, admitted, offer, offer_if_admitted
 from spacedg.plugins.hookspecs import hookimpl
 from spacedg.plugins.qa_record import QARecord, json_ready, make_record_id
 from spacedg.plugins.question_family import SCENE_NEEDS, QuestionFamily
@@ -274,7 +275,7 @@ __all__ = [
     "label_ambiguous", "SceneLabel", "scene_labels", "Lexicon", "default_lexicon",
     # options
     "build_mcq", "BalancedDeck", "MCQ_LETTERS",
-    "offer", "admitted", "PASSED_OVER",
+    "offer", "admitted", "offer_if_admitted", "PASSED_OVER",
     # poses, directions, ground plane
     "camera_center", "camera_distance", "point_in_camera", "relative_rotation", "relative_translation", "euler_yaw_pitch_roll", "ROTATION_WORDS",
     "gravity_rotation", "camera_attitude",

@@ -38,7 +38,7 @@ from typing import Any, NamedTuple
 
 from spacedg.plugins.qa_record import QARecord
 
-__all__ = ["PASSED_OVER", "Candidate", "ScanGate", "admitted", "gate_active", "gated", "light_candidates", "offer"]
+__all__ = ["PASSED_OVER", "Candidate", "ScanGate", "admitted", "gate_active", "gated", "light_candidates", "offer", "offer_if_admitted"]
 
 #: True inside :func:`light_candidates`: :func:`offer` hands out :class:`Candidate` objects.
 _LIGHT: contextvars.ContextVar[bool] = contextvars.ContextVar("spacedg_light_candidates", default=False)
@@ -125,3 +125,14 @@ def offer(
     if _LIGHT.get():
         return Candidate(sub_question_type, views, subject, named, selection, build)
     return build()
+
+
+def offer_if_admitted(
+    sub_question_type: str, views: tuple[str, ...], subject: str, named: tuple[int, ...],
+    selection: Callable[[], dict[str, Any]], build: Callable[[], QARecord],
+) -> QARecord | Candidate | _PassedOver:
+    """For a candidate whose random draws are all made already (drawn up front, or per round):
+    :data:`PASSED_OVER` when :func:`admitted` refuses it, else :func:`offer` with the same values."""
+    if not admitted(sub_question_type, views, subject, named):
+        return PASSED_OVER
+    return offer(sub_question_type, views, subject, named, selection, build)

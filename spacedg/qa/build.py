@@ -217,12 +217,19 @@ class _PoolScan:
             return
         entry = selection_of(record)
         keys = self.metric.get(record.sub_question_type)
-        if entry is None or "cell" in entry or keys is None:
+        if entry is None:
+            broken = "record without a selection entry"
+        elif "cell" in entry:
+            broken = "balanced record (a selection cell)"
+        elif keys is None:
+            broken = f"record of the undeclared sub type {record.sub_question_type!r}"
+        else:
+            broken = ""
+        if broken:
+            subject = entry.get("subject") if entry else None
             raise PluginError(
-                f"question family {self.family.name!r} declares metric_only, but offered a "
-                + ("record without a selection entry" if entry is None else "balanced record (a selection cell)" if "cell" in entry
-                   else f"record of the undeclared sub type {record.sub_question_type!r}")
-                + " (subject " + repr(entry.get("subject") if entry else None) + "); declare metric_only=False for a family whose records are not all metric"
+                f"question family {self.family.name!r} declares metric_only, but offered a {broken} (subject {subject!r}); "
+                "declare metric_only=False for a family whose records are not all metric"
             )
         if not self.metric_stop:
             return

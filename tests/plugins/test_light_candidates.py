@@ -283,3 +283,17 @@ def test_passed_over_outside_the_pool_is_a_plugin_error(room_scene) -> None:
     )
     with pytest.raises(PluginError, match="PassedOver"):
         list(family.generate(room_scene, np.random.default_rng(0)))
+
+
+def test_offer_if_admitted_is_admitted_then_offer() -> None:
+    from spacedg.plugins.candidates import PASSED_OVER, gated, offer_if_admitted
+
+    built = object()
+    args = ("s", ("v",), "object:1", (1,), dict, lambda: built)
+    assert offer_if_admitted(*args) is built  # outside the index: the record
+    asked = []
+    with light_candidates(), gated(lambda *q: asked.append(q) or False):
+        assert offer_if_admitted(*args) is PASSED_OVER
+    with light_candidates(), gated(lambda *q: True):
+        item = offer_if_admitted(*args)
+    assert type(item) is Candidate and item[:4] == args[:4] and asked == [args[:4]]

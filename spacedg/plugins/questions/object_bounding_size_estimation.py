@@ -44,7 +44,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
+from spacedg.plugins.candidates import Candidate, offer_if_admitted
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import VisibilityIndex
@@ -104,9 +104,7 @@ def _offer(scene: Scene, index: VisibilityIndex, view: str, inst: Instance, temp
     """What the stream yields for ``inst`` in ``view`` (its template drawn up front): :data:`~spacedg.plugins.candidates.PASSED_OVER`
     when the pool refuses it, else :func:`~spacedg.plugins.candidates.offer` of its record."""
     subject = f"object:{inst.id}"
-    if not admitted(SUB_QUESTION_TYPE, (view,), subject, (inst.id,)):
-        return PASSED_OVER  # type: ignore[return-value]  # the caller passes it over: no record
-    return offer(
+    return offer_if_admitted(  # type: ignore[return-value]
         SUB_QUESTION_TYPE, (view,), subject, (inst.id,), functools.partial(selection_entry, subject),
         functools.partial(_record, scene, index, view, inst, template),
     )

@@ -69,7 +69,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
+from spacedg.plugins.candidates import Candidate, offer_if_admitted
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import VisibilityIndex, label_ambiguous, scene_labels
@@ -149,11 +149,8 @@ def _selection(cand: _Candidate, template: int) -> dict[str, Any]:
 def _offer(scene: Scene, index: VisibilityIndex, cand: _Candidate, template: int) -> QARecord | Candidate:
     """What the stream yields for ``cand`` (its draws already made): :data:`~spacedg.plugins.candidates.PASSED_OVER`
     when the pool refuses it, else :func:`~spacedg.plugins.candidates.offer` of its record (named objects: none)."""
-    views, subject = (cand.view,), _subject(cand)
-    if not admitted(SUB_QUESTION_TYPE, views, subject, ()):
-        return PASSED_OVER  # type: ignore[return-value]  # the caller passes it over: no record
-    return offer(
-        SUB_QUESTION_TYPE, views, subject, (), functools.partial(_selection, cand, template),
+    return offer_if_admitted(  # type: ignore[return-value]
+        SUB_QUESTION_TYPE, (cand.view,), _subject(cand), (), functools.partial(_selection, cand, template),
         functools.partial(_record, scene, index, cand, template),
     )
 
