@@ -64,6 +64,13 @@ class QuestionFamily:
             per subject): the question index (:mod:`spacedg.qa.build`), without a judge, then stops
             reading its candidates as soon as each sub type has the subjects its selection can take,
             and refuses a pooled record that breaks the promise. Default ``False``: every candidate is read.
+        plain_rounds: a promise that every record (or light candidate) it yields carries a selection
+            entry with a subject and a cell, that the records of one cell share one sub type, and that
+            no entry has ``features`` or ``all_roles=False`` (balanced in whole rounds of its cell's
+            roles, each filled by the first free candidate): the question index, without a judge
+            and without partial rounds, then stops reading its candidates once the selection of what
+            it has read is provably final (:func:`spacedg.qa.selection.prefix_settles`), and refuses
+            a pooled record that breaks the promise. Not with ``metric_only``. Default ``False``.
         origin: set by the registry: which plugin registered the family.
     """
 
@@ -76,6 +83,7 @@ class QuestionFamily:
     needs: frozenset[str] = frozenset()
     description: str = ""
     metric_only: bool = False
+    plain_rounds: bool = False
     origin: PluginOrigin | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -110,8 +118,11 @@ class QuestionFamily:
         object.__setattr__(self, "needs", needs)
         if not isinstance(self.description, str):
             raise PluginError(f"{where}: description must be a string")
-        if not isinstance(self.metric_only, bool):
-            raise PluginError(f"{where}: metric_only must be True or False, got {self.metric_only!r}")
+        for promise in ("metric_only", "plain_rounds"):
+            if not isinstance(getattr(self, promise), bool):
+                raise PluginError(f"{where}: {promise} must be True or False, got {getattr(self, promise)!r}")
+        if self.metric_only and self.plain_rounds:
+            raise PluginError(f"{where}: metric_only and plain_rounds exclude each other (records without a cell, or all with one); declare one")
         if not callable(self.generate):
             raise PluginError(f"{where}: generate must be callable as generate(scene, rng), got {type(self.generate).__name__}")
         if not isinstance(self.generate, _CheckedGenerator):
@@ -147,6 +158,7 @@ class QuestionFamily:
             "needs": sorted(self.needs),
             "description": self.description,
             "metric_only": self.metric_only,
+            "plain_rounds": self.plain_rounds,
         }
 
 
@@ -167,7 +179,7 @@ class FamilyFactory:
 
     Attributes:
         generate: the raw generator, options not bound.
-        name, task_group, answer_types, sub_question_types, num_views, needs, description, metric_only:
+        name, task_group, answer_types, sub_question_types, num_views, needs, description, metric_only, plain_rounds:
             as :class:`QuestionFamily` (any iterable of answer types and of needs).
     """
 
@@ -180,6 +192,7 @@ class FamilyFactory:
     needs: Iterable[str] = frozenset()
     description: str = ""
     metric_only: bool = False
+    plain_rounds: bool = False
 
     def __call__(self, *args: Any, **kwargs: Any) -> QuestionFamily:
         """The family whose ``generate(scene, rng)`` is ``self.generate(scene, rng, *args, **kwargs)``."""
@@ -195,6 +208,7 @@ class FamilyFactory:
             needs=frozenset(self.needs),
             description=self.description,
             metric_only=self.metric_only,
+            plain_rounds=self.plain_rounds,
         )
 
 

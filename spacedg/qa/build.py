@@ -10,7 +10,9 @@ Building one scene (:func:`build_scene_index`):
 3. pool up to ``pool_factor × per_sub_type`` distinct subjects per ``sub_question_type``
    (each with at most :data:`ALTERNATES` records; no more than ``max_scan`` candidates per
    family; without a judge, a family that declares ``metric_only`` stops as soon as each of its
-   sub types has its quota of selection subjects, all the selection can take) and take up to ``per_sub_type`` of them per sub type with the
+   sub types has its quota of selection subjects, all the selection can take, and one that declares
+   ``plain_rounds`` once the selection of what it has read is provably final,
+   :func:`~spacedg.qa.selection.prefix_settles`) and take up to ``per_sub_type`` of them per sub type with the
    **debiased selection** (:func:`~spacedg.qa.selection.select_records`): a subject (an object, a pair, a view and
    label: the ``selection`` entry of the record's geometry block) is asked at most once per
    sub type; within each *cell* (what a text-only model can tell about the question: its
@@ -34,6 +36,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import math
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -66,7 +69,7 @@ from spacedg.qa.judge import DescriptionJudge
 from spacedg.plugins.questions.view_sampling import VisibilityIndex
 from spacedg.qa.modes import quota, subject_key
 from spacedg.qa.pooled import Pooled
-from spacedg.qa.selection import select_records, selection_of
+from spacedg.qa.selection import prefix_settles, select_records, selection_of
 from spacedg.qa.twins import TwinCheck, named_ids
 from spacedg.scene.covisibility import with_covisibility
 from spacedg.scene.frame_check import require_frame
@@ -88,6 +91,12 @@ __all__ = ["ALTERNATES", "prepare_scene", "generate_records", "build_scene_index
 #: several roles, and the judge may drop one); the pool's size counts distinct subjects, so a
 #: family whose subjects recur in many views (size comparisons) pools every pair it finds.
 ALTERNATES = 8
+#: A ``plain_rounds`` family's pool is first offered to :func:`~spacedg.qa.selection.prefix_settles`
+#: at this many records, then each time it has grown by :data:`ROUNDS_CHECK_GROWTH` (each check
+#: runs the selection on the pool so far: the checks cost about ``1 / (growth − 1)`` selections of
+#: the final pool, the overshoot up to ``growth − 1`` of it in scanning).
+ROUNDS_FIRST_CHECK = 64
+ROUNDS_CHECK_GROWTH = 1.25
 
 
 def prepare_scene(
@@ -123,7 +132,7 @@ def prepare_scene(
 
 class _ScanDone(BaseException):
     """Raised by the pool's gate or its note of a pooled record to end a family's scan (``max_scan``
-    reached, every sub type has its subjects, or a ``metric_only`` family's selection is full). A
+    reached, every sub type has its subjects, or a ``metric_only`` or ``plain_rounds`` family's selection is final). A
     :class:`BaseException`, so a family's own ``except Exception`` never swallows it."""
 
 
@@ -137,9 +146,9 @@ class _PoolScan:
     twin, once every sub type has them), and when an object it names has a twin in one of its
     images (counted in ``twins``, except for a subject that already has its alternates: that
     rule comes first, as it is the one most candidates meet). For a family that declares
-    ``metric_only`` (no judge), :meth:`pooled` ends the scan once the selection could take nothing more."""
+    ``metric_only`` or ``plain_rounds`` (no judge), :meth:`pooled` ends the scan once the selection could take nothing else."""
 
-    def __init__(self, family: Any, config: QABuildConfig, index: TwinCheck, twins: Counter[str], metric_stop: bool = False) -> None:
+    def __init__(self, family: Any, config: QABuildConfig, index: TwinCheck, twins: Counter[str], stop_early: bool = False) -> None:
         self.family, self.index, self.twins = family, index, twins
         self.max_scan = config.max_scan
         self.quota = quota(config.per_sub_type, config.mode)
@@ -152,7 +161,15 @@ class _PoolScan:
         self.metric: dict[str, set[str]] | None = (
             {sub: set() for sub in family.sub_question_types} if getattr(family, "metric_only", False) else None
         )
-        self.metric_stop = metric_stop
+        # cell → its sub type, for a family that declares plain_rounds
+        self.cell_subs: dict[str, str] | None = {} if getattr(family, "plain_rounds", False) else None
+        # per cell, the roles of a round (from its first record) not seen yet; per sub type, the records the
+        # first visit to its complete cells could take (no prefix can settle before that reaches quota − 1)
+        self.roles_missing: dict[str, set[str]] = {}
+        self.capacity: Counter[str] = Counter()
+        self.stop_early = stop_early
+        # a plain_rounds family's pool is offered to prefix_settles at these sizes (none with partial rounds: the proof does not cover them)
+        self.next_check = ROUNDS_FIRST_CHECK if stop_early and self.cell_subs is not None and not config.partial_rounds else None
 
     def _wanted(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:
         """Whether the pool takes the candidate (class docstring); raises :class:`_ScanDone` when a
@@ -204,41 +221,82 @@ class _PoolScan:
         seen[subject] = seen.get(subject, 0) + 1
         return True
 
-    def pooled(self, record: QARecord) -> None:
-        """A record just pooled. A family that declares ``metric_only`` is held to it (a pooled record
-        with a cell, without a selection entry or of an undeclared sub type is refused, judge or not),
-        and without a judge (``metric_stop``) its scan ends once every sub type has ``quota`` distinct selection subjects
-        (:func:`~spacedg.qa.modes.subject_key`): the selection takes a record without a cell only while
-        its sub type has room, in generation order, one per subject
-        (:meth:`~spacedg.qa.selection._Selection.take_metric`), and with no room left no round,
-        partial round or small quota takes anything either, so no later candidate could be taken.
+    def pooled(self, record: QARecord, pool: Sequence[QARecord]) -> None:
+        """A record just pooled (the last of ``pool``). A family that declares ``metric_only`` or
+        ``plain_rounds`` is held to it (a pooled record that breaks the promise is refused, judge or
+        not). With ``stop_early`` (no judge) the scan then ends as soon as no later candidate could
+        change the selection:
+
+        - ``metric_only``: once every sub type has ``quota`` distinct selection subjects
+          (:func:`~spacedg.qa.modes.subject_key`): the selection takes a record without a cell only
+          while its sub type has room, in generation order, one per subject
+          (:meth:`~spacedg.qa.selection._Selection.take_metric`), and with no room left no round,
+          partial round or small quota takes anything either;
+        - ``plain_rounds`` (and no partial rounds): once :func:`~spacedg.qa.selection.prefix_settles`
+          proves the selection of the pool so far final, asked when the pool reaches
+          :data:`ROUNDS_FIRST_CHECK` records and then every :data:`ROUNDS_CHECK_GROWTH` times more.
+
         (A judge may refuse pooled records, so with one every candidate is read.)"""
-        if self.metric is None:
-            return
+        if self.metric is not None:
+            self._metric_pooled(record, self.metric)
+        elif self.cell_subs is not None:
+            self._rounds_pooled(record, pool, self.cell_subs)
+
+    def _broken(self, promise: str, what: str, entry: dict[str, Any] | None) -> PluginError:
+        """The refusal of a pooled record that breaks the family's declared ``promise``."""
+        subject = entry.get("subject") if entry else None
+        return PluginError(
+            f"question family {self.family.name!r} declares {promise}, but offered a {what} (subject {subject!r}); "
+            f"declare {promise}=False for a family whose records do not all keep that promise"
+        )
+
+    def _metric_pooled(self, record: QARecord, metric: dict[str, set[str]]) -> None:
         entry = selection_of(record)
-        keys = self.metric.get(record.sub_question_type)
+        keys = metric.get(record.sub_question_type)
         if entry is None:
-            broken = "record without a selection entry"
-        elif "cell" in entry:
-            broken = "balanced record (a selection cell)"
-        elif keys is None:
-            broken = f"record of the undeclared sub type {record.sub_question_type!r}"
-        else:
-            broken = ""
-        if broken:
-            subject = entry.get("subject") if entry else None
-            raise PluginError(
-                f"question family {self.family.name!r} declares metric_only, but offered a {broken} (subject {subject!r}); "
-                "declare metric_only=False for a family whose records are not all metric"
-            )
-        if not self.metric_stop:
+            raise self._broken("metric_only", "record without a selection entry", entry)
+        if "cell" in entry:
+            raise self._broken("metric_only", "balanced record (a selection cell)", entry)
+        if keys is None:
+            raise self._broken("metric_only", f"record of the undeclared sub type {record.sub_question_type!r}", entry)
+        if not self.stop_early:
             return
         keys.add(subject_key(str(entry["subject"]), record.views, self.mode))
-        if all(len(k) >= self.quota for k in self.metric.values()):
+        if all(len(k) >= self.quota for k in metric.values()):
             raise _ScanDone
 
+    def _rounds_pooled(self, record: QARecord, pool: Sequence[QARecord], cell_subs: dict[str, str]) -> None:
+        entry = selection_of(record)
+        sub = record.sub_question_type
+        if entry is None:
+            raise self._broken("plain_rounds", "record without a selection entry", entry)
+        if "cell" not in entry:
+            raise self._broken("plain_rounds", "metric record (no selection cell)", entry)
+        if entry.get("all_roles", True) is False or entry.get("features"):
+            raise self._broken("plain_rounds", "record whose cell asks only the roles offered (all_roles false)"
+                               if entry.get("all_roles", True) is False else "record with selection features", entry)
+        if sub not in self.family.sub_question_types:
+            raise self._broken("plain_rounds", f"record of the undeclared sub type {sub!r}", entry)
+        cell = str(entry["cell"])
+        cell_sub = cell_subs.setdefault(cell, sub)
+        if cell_sub != sub:
+            raise self._broken("plain_rounds", f"record of sub type {sub!r} in a cell of sub type {cell_sub!r}", entry)
+        roles = entry.get("roles", ())
+        missing = self.roles_missing.setdefault(cell, {str(r) for r in roles})
+        if missing:
+            missing.discard(str(entry["role"]))
+            if not missing and len(roles) >= 2:
+                self.capacity[sub] += len(roles)  # the cell is complete: its first visit may take a round
+        if self.next_check is None or len(pool) < self.next_check:
+            return
+        if any(self.capacity[s] < self.quota - 1 for s in self.family.sub_question_types):
+            return  # the first visits cannot fill every sub type yet: no prefix settles
+        if prefix_settles(pool, self.quota, self.mode, self.family.sub_question_types):
+            raise _ScanDone
+        self.next_check = math.ceil(len(pool) * ROUNDS_CHECK_GROWTH)
 
-def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, twins: Counter[str], metric_stop: bool = False) -> list[QARecord]:
+
+def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, twins: Counter[str], stop_early: bool = False) -> list[QARecord]:
     """A family's candidates in scan order: up to ``pool_factor × quota`` distinct subjects
     (the family's own, views included: the mode's stricter subjects are the selection's job) per sub type, :data:`ALTERNATES`
     records each, ``max_scan`` candidates in all (seeded per (scene, family)); candidates naming
@@ -255,10 +313,11 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
     :func:`~spacedg.plugins.qa_record.deferred_geometry`, their ``geometry`` converted to plain
     JSON types only once selected (:func:`_family_records`).
 
-    ``metric_stop`` (no judge): a family that declares ``metric_only`` stops scanning once the
-    selection could take nothing more (:meth:`_PoolScan.pooled`); the pool is then that prefix."""
+    ``stop_early`` (no judge): a family that declares ``metric_only``, or ``plain_rounds`` (without
+    partial rounds), stops scanning once the selection could take nothing else
+    (:meth:`_PoolScan.pooled`); the pool is then that prefix, and the selection takes the same records from it."""
     rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
-    scan = _PoolScan(family, config, index, twins, metric_stop)
+    scan = _PoolScan(family, config, index, twins, stop_early)
     pooled: list[QARecord] = []
     with plugin_call("question family", family, "generate"), deferred_geometry(), light_candidates(), gated(scan.gate):
         try:
@@ -273,7 +332,7 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
                 elif not scan.take(item.sub_question_type, item.views, _subject(item), named_ids(item)):
                     continue
                 pooled.append(item)
-                scan.pooled(item)
+                scan.pooled(item, pooled)
         except _ScanDone:
             pass
     return pooled
@@ -302,7 +361,7 @@ def _family_records(
     """One family's records for the index: pooled, selected, dealt, in its sub-type order."""
     keep = functools.partial(_judged, judge=judge, dropped=dropped, family_name=family.name)
     stats: dict[str, Counter[str]] = {}
-    pool = _pool(family, scene, config, index, twins, metric_stop=judge is None)
+    pool = _pool(family, scene, config, index, twins, stop_early=judge is None)
     chosen = select_records(pool, quota(config.per_sub_type, config.mode), keep, stats, mode=config.mode, partial_rounds=config.partial_rounds)
     with plugin_call("question family", family, "generate"):
         chosen = [r.materialised() for r in chosen]  # geometry converted for the kept records only

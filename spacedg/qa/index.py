@@ -226,7 +226,7 @@ def index_key(scene_json: Path, config: QABuildConfig, families: Iterable[Any], 
     for fam in families:
         origin = fam.origin
         fams.append([fam.name, getattr(origin, "distribution", None), getattr(origin, "version", None), _module_digest(fam),
-                     bool(getattr(fam, "metric_only", False))])
+                     bool(getattr(fam, "metric_only", False)), bool(getattr(fam, "plain_rounds", False))])
 
     judge_name = None if judge is None else getattr(judge, "__name__", type(judge).__name__)
     head = {

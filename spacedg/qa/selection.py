@@ -33,7 +33,7 @@ from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import AnswerType
 from spacedg.qa.modes import subject_key
 
-__all__ = ["truth_key", "selection_of", "features_of", "role_excess", "select_balanced", "select_records"]
+__all__ = ["truth_key", "selection_of", "features_of", "role_excess", "select_balanced", "select_records", "prefix_settles"]
 
 Keep = Callable[[QARecord], bool]
 
@@ -157,6 +157,29 @@ def role_excess(rows: Sequence[Mapping[str, int] | None], role: str, roles: Sequ
     return total
 
 
+class _RoundsTrace:
+    """What :meth:`_Selection.take_rounds` tells :func:`prefix_settles`: the room of every sub type
+    after the first visit to every cell, and whether a cell lacked a candidate of a role (none
+    left, or none at all) while its sub type still had room for its whole round (``unsure``: a
+    later candidate of that role could have given the round)."""
+
+    def __init__(self, cell_sub: Mapping[str, str], cell_roles: Mapping[str, Sequence[str]]) -> None:
+        self.cell_sub = cell_sub  # cell → the one sub type of its records
+        self.cell_roles = cell_roles
+        self.first_sweep_room: dict[str, int] | None = None
+        self.unsure = False
+
+    def exhausted(self, cell: str, room: Mapping[str, int]) -> None:
+        """A role of ``cell`` has no free candidate left, with ``room`` per sub type."""
+        self.incomplete(cell, room)
+
+    def incomplete(self, cell: str, room: Mapping[str, int]) -> None:
+        """``cell`` lacks a candidate of a role (none left, or none at all), with ``room`` per sub type:
+        unsure if its sub type has room for its whole round."""
+        if room[self.cell_sub[cell]] >= len(self.cell_roles[cell]):
+            self.unsure = True
+
+
 class _Selection:
     """The state of one :func:`select_records` call: what is taken, which subjects are asked,
     the room left per sub type, and the features each role has had (see the module docstring)."""
@@ -232,15 +255,18 @@ class _Selection:
             if self.accept(best):
                 return best
 
-    def next_round(self, cell: str) -> list[int] | None:
+    def next_round(self, cell: str, trace: _RoundsTrace | None = None) -> list[int] | None:
         """One record per role of ``cell`` (distinct subjects), or ``None`` when a role has no
-        candidate left or a sub type the round touches has no room for it."""
+        candidate left or a sub type the round touches has no room for it. ``trace``: told
+        when a role has no candidate left (:meth:`_RoundsTrace.exhausted`)."""
         round_: list[int] = []
         used: set[tuple[str, str]] = set()
         need: Counter[str] = Counter()
         for role in self.pool.cell_roles[cell]:
             i = self.pick(cell, role, used)
             if i is None:
+                if trace is not None:
+                    trace.exhausted(cell, self.room)
                 return None
             round_.append(i)
             used.add(self.pool.subject(i))
@@ -256,20 +282,29 @@ class _Selection:
             for f in self.pool.features[i]:
                 self.balance.setdefault((self.pool.sub(i), f), Counter())[role] += 1
 
-    def take_rounds(self) -> None:
-        """Balanced cells: whole rounds, one per cell per visit, round-robin until none gives a round."""
+    def take_rounds(self, trace: _RoundsTrace | None = None) -> None:
+        """Balanced cells: whole rounds, one per cell per visit, round-robin until none gives a round
+        (``trace``: told of every role found without a candidate and of the room after the first visit to every cell)."""
         cells, roles = self.pool.cells, self.pool.cell_roles
         # a cell needs two roles at least: a one-role cell would be answered by its text alone
         open_cells = [c for c in cells if len(roles[c]) >= 2 and all(cells[c].get(role) for role in roles[c])]
+        visits = open_cells
+        if trace is not None:  # the first visits pass the cells that lack a role too, in their place, and tell the trace
+            visits = [c for c in cells if len(roles[c]) >= 2]
         while open_cells:
             still = []
-            for cell in open_cells:
-                round_ = self.next_round(cell)
+            for cell in visits:
+                if trace is not None and not all(cells[cell].get(role) for role in roles[cell]):
+                    trace.incomplete(cell, self.room)
+                    continue
+                round_ = self.next_round(cell, trace)
                 if round_ is None:
                     continue  # the cell is exhausted, or a sub type it needs is full
                 self.take_round(round_)
                 still.append(cell)
-            open_cells = still
+            if trace is not None and trace.first_sweep_room is None:
+                trace.first_sweep_room = dict(self.room)
+            open_cells = visits = still
 
     def take_partial_rounds(self) -> None:
         """Partial rounds, for a bench that balances every cell's roles across its scenes
@@ -367,6 +402,57 @@ class _Selection:
             else:
                 row["unbalanced"] += 1
         return out
+
+
+def prefix_settles(records: Sequence[QARecord], per_sub_type: int, mode: str, sub_question_types: Sequence[str]) -> bool:
+    """Whether :func:`select_records` (no judge, no partial rounds) takes from ``records``, a family's
+    candidates so far in generation order, exactly what it would take from them followed by any
+    more candidates of that family, when the family declares ``plain_rounds``: each record has a
+    selection entry with a subject and a cell, the records of a cell share one sub type of
+    ``sub_question_types``, every role of a cell is asked (no ``all_roles`` false) and no entry has
+    ``features``. ``per_sub_type`` is the quota (:func:`~spacedg.qa.modes.quota`).
+
+    True only when all of these hold on ``records`` (each checked here):
+
+    1. every declared sub type has records; every record is a cell's (none metric, none without
+       an entry, no features), and each cell's records share one sub type;
+    2. the rounds (:meth:`_Selection.take_rounds`): after the first visit to every cell (in the
+       order of their first records), every sub type has taken records and has room for fewer
+       than 2 more; and whenever a cell lacked a free candidate of a role, at its first visit
+       (no candidate of the role at all) or in a round, its sub type had no room for its whole
+       round anyway.
+
+    Why that suffices: a pick takes the first free candidate of its role in generation order (no
+    features: every cost is 0), so a pick that finds one here finds the same one among more
+    candidates; a cell here keeps its place among more candidates (a cell is placed by its first
+    record), and a cell first seen later comes after all of these; a pick that finds none here,
+    or a cell that lacks a role here, belongs to a visit where the room refuses the round anyway
+    (2); so every visit to a cell seen here goes as it goes here. A cell first seen later is
+    visited first after the first visit to all of these, when no sub type has room for a round
+    (every round has at least 2 roles), and a cell that gave no round is not visited again. The
+    steps after the rounds take nothing (no partial rounds; every sub type has records, so the
+    small-quota step returns at once; no metric or plain records). Only the selection's
+    statistics differ: they count what was read.
+    """
+    if not records:
+        return False
+    selection = _Selection(records, per_sub_type, None, mode)
+    pool = selection.pool
+    subs = {r.sub_question_type for r in records}
+    if pool.plain or pool.metric or pool.offered_roles_only or any(pool.features) or set(sub_question_types) - subs:
+        return False
+    cell_sub: dict[str, str] = {}
+    for cell, by_role in pool.cells.items():
+        of_cell = {pool.sub(i) for queue in by_role.values() for i in queue}
+        if len(of_cell) != 1:
+            return False
+        cell_sub[cell] = of_cell.pop()
+    trace = _RoundsTrace(cell_sub, pool.cell_roles)
+    selection.take_rounds(trace)
+    if trace.first_sweep_room is None or trace.unsure:
+        return False
+    got = Counter(pool.sub(i) for i in selection.taken)
+    return all(got[sub] > 0 and trace.first_sweep_room[sub] < 2 for sub in subs)
 
 
 def select_records(

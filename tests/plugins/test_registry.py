@@ -573,6 +573,7 @@ def test_question_family_validation() -> None:
     family = QuestionFamily(**base)
     assert family.generate.__wrapped__ is gen and family.num_views == (1,)
     assert family.describe()["metric_only"] is False and QuestionFamily(**base, metric_only=True).describe()["metric_only"] is True
+    assert family.describe()["plain_rounds"] is False and QuestionFamily(**base, plain_rounds=True).describe()["plain_rounds"] is True
     assert QuestionFamily(**{**base, "sub_question_types": ("yaw+pitch_dual",)}).sub_question_types == ("yaw+pitch_dual",)
     assert QuestionFamily(**{**base, "sub_question_types": ("relpos_A_facing_B",)}).sub_question_types == ("relpos_A_facing_B",)
     for changes, pattern in [
@@ -584,6 +585,8 @@ def test_question_family_validation() -> None:
         ({"needs": {"visibilty"}}, r"needs \['visibilty'\] unknown"),
         ({"generate": None}, "generate must be callable"),
         ({"metric_only": 1}, "metric_only must be True or False"),
+        ({"plain_rounds": "yes"}, "plain_rounds must be True or False"),
+        ({"metric_only": True, "plain_rounds": True}, "metric_only and plain_rounds exclude each other"),
     ]:
         with pytest.raises(PluginError, match=pattern):
             QuestionFamily(**{**base, **changes})

@@ -29,8 +29,8 @@ def room_scene(qa_room_dirs):
     return prepare_room(load_scene(folder), folder / "cache")
 
 
-def _selected(scene, family, config, metric_stop):
-    pool = _pool(family, scene, config, TwinCheck(VisibilityIndex(scene)), Counter(), metric_stop=metric_stop)
+def _selected(scene, family, config, stop_early):
+    pool = _pool(family, scene, config, TwinCheck(VisibilityIndex(scene)), Counter(), stop_early=stop_early)
     chosen = select_records(pool, quota(config.per_sub_type, config.mode), mode=config.mode)
     return pool, [r.materialised().to_dict() for r in chosen]
 
@@ -43,8 +43,8 @@ def test_the_built_in_metric_families_declare_it_and_no_other_does() -> None:
 @pytest.mark.parametrize("family", [f for f in selected_families(None) if f.name in METRIC], ids=lambda f: f.name)
 def test_the_stop_keeps_the_records_of_the_full_scan(room_scene, family, mode, per_sub_type) -> None:
     config = QABuildConfig(mode=mode, per_sub_type=per_sub_type)
-    full_pool, full = _selected(room_scene, family, config, metric_stop=False)
-    stopped_pool, stopped = _selected(room_scene, family, config, metric_stop=True)
+    full_pool, full = _selected(room_scene, family, config, stop_early=False)
+    stopped_pool, stopped = _selected(room_scene, family, config, stop_early=True)
     assert stopped == full and full
     assert [r.geometry["selection"] for r in stopped_pool] == [r.geometry["selection"] for r in full_pool[: len(stopped_pool)]]
     if all(sum(r["sub_question_type"] == sub for r in full) >= quota(per_sub_type, mode) for sub in family.sub_question_types):
@@ -54,8 +54,8 @@ def test_the_stop_keeps_the_records_of_the_full_scan(room_scene, family, mode, p
 def test_the_stop_reads_fewer_candidates_where_the_quota_is_small(room_scene) -> None:
     family = next(f for f in selected_families(None) if f.name == "inter_object_distance")
     config = QABuildConfig(per_sub_type=3)
-    full_pool, full = _selected(room_scene, family, config, metric_stop=False)
-    stopped_pool, stopped = _selected(room_scene, family, config, metric_stop=True)
+    full_pool, full = _selected(room_scene, family, config, stop_early=False)
+    stopped_pool, stopped = _selected(room_scene, family, config, stop_early=True)
     assert stopped == full and len(full) == 3 and len(stopped_pool) < len(full_pool) // 2
 
 
@@ -81,14 +81,14 @@ def _demo_family(kinds: str, metric_only: bool = True):
 def test_a_declared_family_stops_and_one_that_breaks_the_declaration_is_refused(room_scene) -> None:
     config = QABuildConfig(per_sub_type=8)
     index = TwinCheck(VisibilityIndex(room_scene))
-    pool = _pool(_demo_family("metric"), room_scene, config, index, Counter(), metric_stop=True)
+    pool = _pool(_demo_family("metric"), room_scene, config, index, Counter(), stop_early=True)
     assert len(pool) == 8 and all(type(p.candidate) is Candidate for p in pool)  # its quota of subjects, then the stop
-    assert len(_pool(_demo_family("metric", metric_only=False), room_scene, config, index, Counter(), metric_stop=True)) == 40
-    assert len(_pool(_demo_family("metric"), room_scene, config, index, Counter(), metric_stop=False)) == 40
+    assert len(_pool(_demo_family("metric", metric_only=False), room_scene, config, index, Counter(), stop_early=True)) == 40
+    assert len(_pool(_demo_family("metric"), room_scene, config, index, Counter(), stop_early=False)) == 40
     for kinds, what in (("cell", "balanced record"), ("plain", "without a selection entry"), ("undeclared", "undeclared sub type 't'")):
         for stop in (True, False):  # held to its promise with a judge too (no stop then)
             with pytest.raises(PluginError, match=f"declares metric_only.*{what}"):
-                _pool(_demo_family(kinds), room_scene, config, index, Counter(), metric_stop=stop)
+                _pool(_demo_family(kinds), room_scene, config, index, Counter(), stop_early=stop)
 
 
 def test_a_judge_turns_the_stop_off(room_scene, monkeypatch) -> None:
@@ -97,7 +97,7 @@ def test_a_judge_turns_the_stop_off(room_scene, monkeypatch) -> None:
     plain_pool = build._pool
 
     def spy(*args, **kwargs):
-        asked.append(kwargs.get("metric_stop"))
+        asked.append(kwargs.get("stop_early"))
         return plain_pool(*args, **kwargs)
 
     class KeepAll:

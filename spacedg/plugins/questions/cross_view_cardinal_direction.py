@@ -232,7 +232,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
 #: (:func:`~spacedg.plugins.questions.pairs.pair_family`); :data:`FAMILY`, the registered one, uses the defaults.
 make_family = pair_family(
     _pair_stream, name=NAME, task_group=TaskGroup.CAMERA_OBJECT, answer_types={AnswerType.MCQ}, sub_question_types=(SUB_QUESTION_TYPE,),
-    description="Given the compass direction of an object seen from image A, the compass direction of another seen from image B.",
+    plain_rounds=True, description="Given the compass direction of an object seen from image A, the compass direction of another seen from image B.",
 )
 FAMILY = make_family()
 spacedg_register_question_families = registering(FAMILY)

@@ -201,7 +201,7 @@ def generate(scene: Scene, rng: np.random.Generator, thresholds: VisibilityThres
 #: (:class:`~spacedg.plugins.question_family.FamilyFactory`); :data:`FAMILY`, the registered one, uses the defaults.
 make_family = FamilyFactory(
     generate, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.YN}, sub_question_types=(SUB_QUESTION_TYPE,),
-    num_views=(1,), needs={"visibility"}, description="Whether an object of a label is visible in one image (yes/no balanced 50/50 per label; grey zone and related labels skipped).",
+    num_views=(1,), needs={"visibility"}, plain_rounds=True, description="Whether an object of a label is visible in one image (yes/no balanced 50/50 per label; grey zone and related labels skipped).",
 )
 FAMILY = make_family()
 spacedg_register_question_families = registering(FAMILY)

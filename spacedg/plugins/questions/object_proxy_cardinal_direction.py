@@ -250,7 +250,7 @@ def _record(
 #: (:func:`~spacedg.plugins.questions.pairs.pair_family`); :data:`FAMILY`, the registered one, uses the defaults.
 make_family = pair_family(
     _pair_stream, name=NAME, task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.MCQ}, sub_question_types=(SUB_QUESTION_TYPE,),
-    description="Given the compass direction of object A from object B, the compass direction of object C from B.",
+    plain_rounds=True, description="Given the compass direction of object A from object B, the compass direction of object C from B.",
 )
 FAMILY = make_family()
 spacedg_register_question_families = registering(FAMILY)
