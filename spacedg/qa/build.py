@@ -195,6 +195,10 @@ class _PoolScan:
         family yields it or, refused, :data:`~spacedg.plugins.candidates.PASSED_OVER`)."""
         if self.scanned >= self.max_scan:
             raise _ScanDone
+        seen = self.distinct.get(sub)
+        if seen is not None and seen.get(subject, 0) >= ALTERNATES:
+            self.admitted = None
+            return False  # the commonest refusal (the first rule of _wanted), without the call
         wanted = self._wanted(sub, views, subject, named)
         self.admitted = (sub, views, subject, named) if wanted else None
         return wanted
@@ -206,8 +210,10 @@ class _PoolScan:
         self.scanned += 1
 
     def passed_over(self) -> None:
-        """A candidate :meth:`gate` refused: counted as scanned."""
-        self._count()
+        """A candidate :meth:`gate` refused: counted as scanned (:meth:`_count`, written out: most candidates end here)."""
+        if self.scanned >= self.max_scan:
+            raise _ScanDone
+        self.scanned += 1
         self.admitted = None
 
     def take(self, sub: str, views: Sequence[str], subject: str, named: Sequence[int]) -> bool:

@@ -74,6 +74,7 @@ from spacedg.plugins.questions.geometry import camera_center, camera_distance
 from spacedg.plugins.questions.language import find_in_image, label_text
 from spacedg.plugins.questions.records import (
     camera_inside,
+    index_memo,
     make_record,
     objects_block,
     phrase,
@@ -115,10 +116,13 @@ TWO_VIEW_TEMPLATE = (
 # ------------------------------------------------------------------ records
 def _distance(index: VisibilityIndex, view: str, inst: Instance) -> float | None:
     """Camera centre → box centre in metres, or ``None`` when the camera is inside the box
-    (:func:`~spacedg.plugins.questions.records.camera_inside`, memoised per (view, object))."""
-    if camera_inside(index, view, inst):
-        return None
-    return camera_distance(index.scene.views[view], inst.box.center)
+    (:func:`~spacedg.plugins.questions.records.camera_inside`): memoised per (view, object) on the
+    index, as a camera B and an object recur with every view A."""
+    memo = index_memo(index, "camera_distances")
+    key = (view, inst.id)
+    if key not in memo:
+        memo[key] = None if camera_inside(index, view, inst) else camera_distance(index.scene.views[view], inst.box.center)
+    return memo[key]
 
 
 def _record(

@@ -145,6 +145,7 @@ from spacedg.plugins.questions.geometry import (
     parts_label,
     point_in_camera,
     single_word_pool,
+    vector_length,
 )
 from spacedg.plugins.questions.language import find_in_image, label_text
 from spacedg.plugins.questions.records import (
@@ -286,7 +287,7 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
             continue
         world = b.box.center - a.box.center
         vec = world_to_cam @ world
-        if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M:
+        if vector_length(vec) < MIN_DISPLACEMENT_M:
             continue
         subject = f"view:{view}|objects:{min(ia, ib)}|{max(ia, ib)}"
         if not admitted(SINGLE_VIEW, (view,), subject, (ia, ib)):
@@ -346,7 +347,7 @@ def _bbox_answer(scene: Scene, index: VisibilityIndex, view_b: str, inst: Instan
     key = (view_b, inst.id)
     if key not in memo:
         vec = point_in_camera(scene.views[view_b], inst.box.center)
-        if float(np.linalg.norm(vec)) < MIN_DISPLACEMENT_M or _rare_bbox_direction(vec):
+        if vector_length(vec) < MIN_DISPLACEMENT_M or _rare_bbox_direction(vec):
             memo[key] = None
         else:
             parts = dominant_parts(vec)

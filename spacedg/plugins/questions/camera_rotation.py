@@ -89,10 +89,12 @@ from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import (
     ROTATION_WORDS,
     BalancedDeck,
+    Heading,
     build_mcq,
     camera_attitude,
     euler_yaw_pitch_roll,
     attitude_change,
+    heading,
     relative_rotation,
 )
 from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry, pair_subject, selection_entry
@@ -222,19 +224,19 @@ class _Turn(NamedTuple):
 
 
 def _turn(
-    scene: Scene, pair: ViewPair, attitudes: Mapping[str, tuple[np.ndarray, float, float]], up: np.ndarray,
+    scene: Scene, pair: ViewPair, attitudes: Mapping[str, tuple[tuple[np.ndarray, float, float], Heading | None]], up: np.ndarray,
 ) -> _Turn | None:
     """The rotation of ``pair`` as a question, or ``None`` when it is not asked (no draws);
-    ``attitudes``: each view's :func:`camera_attitude` about ``up`` (the scene's, float64)."""
+    ``attitudes``: each view's :func:`camera_attitude` about ``up`` (the scene's, float64) and its :func:`heading`."""
     cam_a, cam_b = scene.views[pair.a], scene.views[pair.b]
     r_rel = relative_rotation(cam_a, cam_b)
-    if not np.all(np.isfinite(r_rel)):
+    if not np.isfinite(r_rel).all():
         return None
-    att_a, att_b = attitudes[pair.a], attitudes[pair.b]
+    (att_a, heading_a), (att_b, heading_b) = attitudes[pair.a], attitudes[pair.b]
     (_, elev_a, bank_a), (_, elev_b, bank_b) = att_a, att_b
     if max(abs(elev_a), abs(elev_b)) > MAX_ABS_PITCH_DEG:
         return None
-    yaw, pitch, roll = (round(v, ANGLE_DECIMALS) + 0.0 for v in attitude_change(att_a, att_b, up))
+    yaw, pitch, roll = (round(v, ANGLE_DECIMALS) + 0.0 for v in attitude_change(att_a, att_b, up, (heading_a, heading_b)))
     case = classify_rotation(yaw, pitch, roll)
     if isinstance(case, str):
         return None
@@ -291,9 +293,10 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = ROTATION
     decks = {mode: BalancedDeck(r) for mode, r in zip(MODES, deck_rngs)}  # correct letter per mode, balanced
     up = np.asarray(scene.up, dtype=np.float64)
     attitudes = {view: camera_attitude(cam.cam_to_world, up) for view, cam in scene.views.items()}  # once per view
+    attitudes_and_headings = {view: (att, heading(att, up)) for view, att in attitudes.items()}
     children = child_rngs(rng, len(pairs))  # one per pair, made only for a pair that is asked
     for k, pair in enumerate(pairs):
-        turn = _turn(scene, pair, attitudes, up)
+        turn = _turn(scene, pair, attitudes_and_headings, up)
         if turn is None:
             continue
         views, subject = (pair.a, pair.b), pair_subject(pair)

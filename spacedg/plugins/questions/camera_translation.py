@@ -102,6 +102,7 @@ from spacedg.plugins.questions.geometry import (
     parts_label,
     relative_translation,
     single_word_pool,
+    vector_length,
 )
 from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry, pair_subject, selection_entry
 from spacedg.plugins.question_family import FamilyFactory
@@ -188,13 +189,13 @@ class _Candidate:
 
 def _candidate(scene: Scene, pair: ViewPair, rules: PairRules) -> _Candidate | None:
     raw = relative_translation(scene.views[pair.a], scene.views[pair.b])
-    if not np.all(np.isfinite(raw)) or float(np.linalg.norm(raw)) < rules.min_translation_m:
+    if not np.isfinite(raw).all() or vector_length(raw) < rules.min_translation_m:
         return None
     d = np.round(raw, D_DECIMALS) + 0.0  # + 0.0: no negative zeros
     parts = dominant_parts(d)
     if not parts:
         return None
-    return _Candidate(pair, d, float(np.linalg.norm(d)), parts)
+    return _Candidate(pair, d, vector_length(d), parts)
 
 
 class _Drawn(NamedTuple):

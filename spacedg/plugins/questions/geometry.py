@@ -59,11 +59,11 @@ from spacedg.render.camera import Camera
 
 __all__ = [
     "TAN30", "MAX_PARTS", "BOUNDARY_GUARD_DEG", "CAMERA_MOTION_WORDS", "BODY_DIRECTION_WORDS",
-    "relative_rotation", "relative_translation", "camera_center", "camera_distance", "point_in_camera",
+    "vector_length", "relative_rotation", "relative_translation", "camera_center", "camera_distance", "point_in_camera",
     "dominant_parts", "parts_label", "flipped_labels", "single_word_pool", "build_mcq", "BalancedDeck",
     "horizontal", "ground_angle", "ground_axes", "angle_on_ground", "vertical_dominates",
     "Sectors", "SectorHit", "RELPOS_SECTORS", "COMPASS_SECTORS", "CARDINALS",
-    "euler_yaw_pitch_roll", "ROTATION_WORDS", "camera_attitude", "gravity_rotation", "attitude_change",
+    "euler_yaw_pitch_roll", "ROTATION_WORDS", "camera_attitude", "gravity_rotation", "attitude_change", "Heading", "heading",
     "MIN_HORIZONTAL_M", "VERTICAL_FACTOR", "COMPASS_RULE_BAND_DEG", "on_compass_boundary", "ground_leg", "compass_frame", "compass_basis", "compass_turn", "compass_answer",
     "INTERSECT_TOL_M", "boxes_intersect",
 ]
@@ -102,6 +102,14 @@ ROTATION_WORDS: dict[str, tuple[str, str]] = {
 
 
 # ------------------------------------------------------------------ poses
+def vector_length(vector: np.ndarray) -> float:
+    """``float(np.linalg.norm(vector))`` of a 1-D float64 vector, the same operations without numpy's
+    dispatch (numpy computes a vector's 2-norm as ``sqrt(x.dot(x))`` of ``x = vector.ravel(order="K")``;
+    a square root is correctly rounded either way): bit for bit, for the per-candidate lengths."""
+    x = vector.ravel(order="K")
+    return math.sqrt(x.dot(x))
+
+
 def camera_center(camera: Camera) -> np.ndarray:
     """Camera centre in world metres."""
     return np.asarray(camera.cam_to_world, dtype=np.float64)[:3, 3].copy()
@@ -109,7 +117,7 @@ def camera_center(camera: Camera) -> np.ndarray:
 
 def camera_distance(camera: Camera, point: np.ndarray) -> float:
     """Straight-line distance from ``camera``'s centre to the world ``point`` (an object's box centre), metres."""
-    return float(np.linalg.norm(np.asarray(point, dtype=np.float64) - camera_center(camera)))
+    return vector_length(np.asarray(point, dtype=np.float64) - camera_center(camera))
 
 
 def relative_rotation(cam_a: Camera, cam_b: Camera) -> np.ndarray:
@@ -201,12 +209,33 @@ def gravity_rotation(cam_a: Camera, cam_b: Camera, up: np.ndarray) -> tuple[floa
 
 def attitude_change(
     attitude_a: tuple[np.ndarray, float, float], attitude_b: tuple[np.ndarray, float, float], up: np.ndarray,
+    headings: tuple[Heading | None, Heading | None] | None = None,
 ) -> tuple[float, float, float]:
     """:func:`gravity_rotation` from the two cameras' :func:`camera_attitude` about ``up`` (for a
-    caller that has each view's attitude already): ``(yaw, pitch, roll)`` degrees."""
+    caller that has each view's attitude already): ``(yaw, pitch, roll)`` degrees. ``headings``:
+    the two attitudes' :func:`heading` when the caller keeps them per view (the same numbers,
+    not computed again for every pair)."""
     (fa, ea, ba), (fb, eb, bb) = attitude_a, attitude_b
-    yaw = 0.0 if not (fa.any() and fb.any()) else _wrap180(ground_angle(fa, fb, up))
+    if headings is None:
+        yaw = 0.0 if not (fa.any() and fb.any()) else _wrap180(ground_angle(fa, fb, up))
+    else:
+        ha, hb = headings  # = ground_angle(fa, fb, up): angle_on_ground(ground_axes(fa, up), horizontal(fb, up))
+        yaw = 0.0 if ha is None or hb is None else _wrap180(angle_on_ground(ha[0], hb[1]))
     return yaw, eb - ea, _wrap180(bb - ba)
+
+
+#: A camera's heading as :func:`attitude_change` reads it: its :func:`ground_axes` and its :func:`horizontal` projection.
+Heading = tuple[tuple[np.ndarray, np.ndarray], np.ndarray]
+
+
+def heading(attitude: tuple[np.ndarray, float, float], up: np.ndarray) -> Heading | None:
+    """The :data:`Heading` of a :func:`camera_attitude` about ``up``, or ``None`` for a camera without
+    one (looking straight up or down: its yaw is 0), for :func:`attitude_change`'s ``headings``."""
+    forward = attitude[0]
+    if not forward.any():
+        return None
+    u = np.asarray(up, dtype=np.float64)
+    return ground_axes(forward, u), horizontal(forward, u)
 
 
 # ------------------------------------------------------ dominant-part words
@@ -333,7 +362,7 @@ def horizontal(vector: np.ndarray, up: np.ndarray) -> np.ndarray:
 def _ground_unit(vector: np.ndarray, up: np.ndarray, caller: str) -> np.ndarray:
     """``horizontal(vector, up)`` scaled to unit length; :class:`InvalidDataError` when it is (nearly) zero."""
     flat = horizontal(vector, up)
-    norm = float(np.linalg.norm(flat))
+    norm = vector_length(flat)
     if norm <= 1e-12:
         raise InvalidDataError(f"{caller}: the reference direction is vertical; it has no direction on the ground")
     return flat / norm
@@ -343,7 +372,7 @@ def vertical_dominates(vector: np.ndarray, up: np.ndarray, factor: float = VERTI
     """True when ``|vertical part| >= factor * |horizontal part|`` (direction on the ground ill-defined)."""
     v = np.asarray(vector, dtype=np.float64)
     vertical = abs(float(v @ np.asarray(up, dtype=np.float64)))
-    return vertical >= factor * float(np.linalg.norm(horizontal(v, up)))
+    return vertical >= factor * vector_length(horizontal(v, up))
 
 
 def ground_angle(forward: np.ndarray, vector: np.ndarray, up: np.ndarray) -> float:
@@ -381,7 +410,7 @@ def ground_leg(vector: np.ndarray, up: np.ndarray, min_horizontal_m: float = MIN
     """
     v = np.asarray(vector, dtype=np.float64)
     flat = horizontal(v, up)
-    length = float(np.linalg.norm(flat))
+    length = vector_length(flat)
     if length < min_horizontal_m or vertical_dominates(v, up, factor):
         return None
     vertical = float(v @ np.asarray(up, dtype=np.float64))

@@ -272,3 +272,18 @@ def test_the_triplet_prefilters_are_the_three_object_rule(qa_room_dirs) -> None:
         assert sorted(ref_view) == ids and set(triplets) == obeying and len(triplets) == len(obeying)
     assert checked > 1000
 
+
+
+def test_vector_length_is_numpys_norm_bit_for_bit() -> None:
+    """``vector_length`` (the per-candidate lengths) equals ``float(np.linalg.norm(v))`` exactly:
+    random vectors over many scales, zeros, subnormals, huge values, and strided views."""
+    from spacedg.plugins.questions.geometry import vector_length
+
+    rng = np.random.default_rng(5)
+    vectors = [v for v in rng.standard_normal((3000, 3)) * 10.0 ** rng.integers(-8, 9, size=(3000, 1))]
+    vectors += [np.zeros(3), np.array([5e-324, 0.0, -5e-324]), np.array([1e154, -1e154, 3e153]), np.array([np.inf, 1.0, 0.0])]
+    matrix = rng.standard_normal((4, 4))
+    vectors += [matrix[:3, k] for k in range(4)] + [matrix[k, ::2] for k in range(4)]  # non-contiguous columns and steps
+    with np.errstate(over="ignore"):  # 1e154² overflows to inf in both
+        for v in vectors:
+            assert vector_length(v) == float(np.linalg.norm(v))
