@@ -20,14 +20,26 @@ tests), so nothing seeded changes.
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Iterator
-from typing import Any
+from collections.abc import Iterable, Iterator
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.random import PCG64, Generator
 from numpy.random.bit_generator import ISpawnableSeedSequence, SeedSequence
 
-__all__ = ["derive_seed", "generator_from_state", "pcg64_states"]
+T = TypeVar("T")
+
+__all__ = ["derive_seed", "generator_from_state", "pcg64_states", "shuffled"]
+
+
+def shuffled(items: Iterable[T], rng: Generator) -> list[T]:
+    """``items`` in the order of ``rng.permutation(len(items))``: ``[items[i] for i in rng.permutation(n)]``,
+    the same draws and the same generator state after, 3–4× cheaper for the short lists questions
+    shuffle (numpy's ``permutation(n)`` shuffles ``arange(n)``, and ``Generator.shuffle`` takes the
+    same Fisher–Yates swaps, one ``random_interval`` draw each, on a list as on an array)."""
+    out = list(items)
+    rng.shuffle(out)
+    return out
 
 
 def derive_seed(seed: int, *keys: object) -> int:

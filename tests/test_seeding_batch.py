@@ -75,3 +75,19 @@ def test_a_batched_generator_pickles_copies_and_reads_as_default_rng() -> None:
         assert clone.bit_generator.state == plain.bit_generator.state
     assert repr(fast.bit_generator.seed_seq) == repr(plain.bit_generator.seed_seq)
     assert fast.random(4).tolist() == plain.random(4).tolist()
+
+
+def test_shuffled_takes_the_draws_of_permutation() -> None:
+    """``shuffled(items, rng)`` is ``[items[i] for i in rng.permutation(len(items))]`` with the generator
+    left in the same state, for every length the question families shuffle (and longer), from lists,
+    tuples and ranges: the question indexes rely on it byte for byte."""
+    from spacedg.seeding import shuffled
+
+    for seed in range(25):
+        ours, theirs = np.random.default_rng(seed), np.random.default_rng(seed)
+        for n in [*range(0, 41), 255, 256, 257, 1000, 4321]:
+            items = [f"item{k}" for k in range(n)]
+            for source in (items, tuple(items)):
+                assert shuffled(source, ours) == [items[i] for i in theirs.permutation(n)]
+            assert shuffled(range(n), ours) == theirs.permutation(n).tolist()
+        assert ours.bit_generator.state == theirs.bit_generator.state

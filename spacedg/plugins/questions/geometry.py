@@ -53,6 +53,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.scene.box import OrientedBox, cross3
+from spacedg.seeding import shuffled
 from spacedg.plugins.answers import MCQ_LETTERS, MCQ_OPTION_COUNTS
 from spacedg.errors import InvalidDataError
 from spacedg.render.camera import Camera
@@ -295,7 +296,7 @@ def _next_letter(rng: np.random.Generator, n_options: int = 4) -> int:
     _DECKS.move_to_end(key)
     deck = entry[1]
     if not deck:
-        deck.extend(rng.permutation(n_options).tolist())
+        deck.extend(shuffled(range(n_options), rng))  # = rng.permutation(n_options)
     return deck.pop()
 
 
@@ -314,7 +315,7 @@ class BalancedDeck:
 
     def next(self) -> int:
         if not self._left:
-            self._left = self.rng.permutation(self.k).tolist()
+            self._left = shuffled(range(self.k), self.rng)  # = rng.permutation(k)
         return self._left.pop()
 
 
@@ -342,7 +343,7 @@ def build_mcq(
             break
     if len(chosen) < need:
         raise InvalidDataError(f"build_mcq: need {need} distractors different from {truth!r}, got {list(distractors)}")
-    others = [chosen[i] for i in rng.permutation(need).tolist()]
+    others = shuffled(chosen, rng)  # = [chosen[i] for i in rng.permutation(need)]
     if slot is None:
         slot = _next_letter(rng, n_options)
     elif slot not in range(n_options):
@@ -482,7 +483,7 @@ class Sectors:
     def distractors(self, hit: SectorHit, rng: np.random.Generator, guard_deg: float = BOUNDARY_GUARD_DEG) -> list[str]:
         """The other labels in a seeded order, without the near-boundary neighbour when within ``guard_deg``."""
         pool = self._others[hit.index, hit.neighbour if hit.boundary_distance_deg < guard_deg else hit.index]
-        return [pool[i] for i in rng.permutation(len(pool)).tolist()]
+        return shuffled(pool, rng)  # = [pool[i] for i in rng.permutation(len(pool))]
 
     @functools.cached_property
     def _others(self) -> dict[tuple[int, int], tuple[str, ...]]:

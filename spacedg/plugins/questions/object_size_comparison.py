@@ -123,6 +123,7 @@ from spacedg.plugins.questions.view_sampling import (
 )
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import build_mcq
+from spacedg.seeding import shuffled
 from spacedg.plugins.questions.language import find_in_image
 from spacedg.plugins.questions.pairs import pair_family
 from spacedg.plugins.questions.records import (
@@ -425,7 +426,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     views = (pair.a, pair.b)
     verdicts = index_memo(index, "size_verdict")
     n_subs, n_twos = len(SUB_QUESTION_TYPES), len(twos)
-    for k in rng.permutation(size).tolist():
+    for k in shuffled(range(size), rng):  # = rng.permutation(size)
         rest, s = divmod(k, n_subs)
         i, j = divmod(rest, n_twos)
         one, two, sub = ones[i], twos[j], SUB_QUESTION_TYPES[s]

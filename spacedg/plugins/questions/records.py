@@ -77,7 +77,7 @@ from spacedg.plugins.questions.geometry import (
     on_compass_boundary,
 )
 from spacedg.plugins.questions.language import object_phrase
-from spacedg.seeding import generator_from_state, pcg64_states
+from spacedg.seeding import generator_from_state, pcg64_states, shuffled
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -178,9 +178,8 @@ def round_robin(streams: Iterable[Iterator[T]]) -> Iterator[T]:
 
 
 def seeded_order(items: Sequence[T], rng: np.random.Generator) -> Iterator[T]:
-    """``items`` in the order of ``rng.permutation(len(items))`` (drawn on the first ``next``)."""
-    for i in rng.permutation(len(items)).tolist():
-        yield items[i]
+    """``items`` in the order of ``rng.permutation(len(items))`` (drawn on the first ``next``; :func:`~spacedg.seeding.shuffled`)."""
+    yield from shuffled(items, rng)
 
 
 def role_rounds(roles_by_key: Mapping[str, Sequence[Sequence[T]]], rng: np.random.Generator) -> list[list[tuple[T, ...]]]:
