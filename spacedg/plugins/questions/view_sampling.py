@@ -205,17 +205,23 @@ def sample_pairs(scene: Scene, rules: PairRules, rng: np.random.Generator) -> li
             ``spacedg.scene.covisibility.with_covisibility``).
     """
     eligible = _eligible_pairs(scene, rules)
-    order = rng.permutation(len(eligible.forward))
-    flips = rng.random(len(eligible.forward)) < 0.5
-    seen_count: dict[str, int] = {}
-    ranked: list[tuple[int, int, ViewPair]] = []
-    for pos, (k, flip) in enumerate(zip(order.tolist(), flips[order].tolist())):
-        pair = eligible.backward[k] if flip else eligible.forward[k]
-        rank = seen_count.get(pair.a, 0)  # the anchor's earlier pairs (view names are unique)
-        seen_count[pair.a] = rank + 1
-        ranked.append((rank, pos, pair))
-    ranked.sort(key=lambda item: (item[0], item[1]))
-    return [pair for _, _, pair in ranked]
+    n = len(eligible.forward)
+    order = rng.permutation(n)
+    flips = (rng.random(n) < 0.5)[order]
+    # position p of the drawn order holds pair order[p], flipped or not; its rank is the number of
+    # earlier positions with the same anchor; pairs are returned by (rank, position)
+    anchors = np.where(flips, eligible.second[order], eligible.first[order])
+    by_anchor = np.argsort(anchors, kind="stable")  # positions grouped by anchor, in position order within a group
+    sorted_anchors = anchors[by_anchor]
+    group_start = np.flatnonzero(np.r_[True, sorted_anchors[1:] != sorted_anchors[:-1]]) if n else np.zeros(0, np.int64)
+    starts = np.repeat(group_start, np.diff(np.r_[group_start, n]))
+    rank = np.empty(n, dtype=np.int64)
+    rank[by_anchor] = np.arange(n) - starts
+    ranked = np.lexsort((np.arange(n), rank))
+    return [
+        eligible.backward[k] if flip else eligible.forward[k]
+        for k, flip in zip(order[ranked].tolist(), flips[ranked].tolist())
+    ]
 
 
 @dataclass(frozen=True)
@@ -225,6 +231,8 @@ class _EligiblePairs:
 
     forward: list[ViewPair]
     backward: list[ViewPair]
+    first: np.ndarray  # int64: the index (in the covisibility's view order) of each forward pair's view a
+    second: np.ndarray  # int64: of its view b (the anchor when the pair is flipped)
 
 
 #: (id(covisibility), rules) → (covisibility, its views' cameras in order, pairs): the pairs every
@@ -266,6 +274,7 @@ def _eligible_pairs(scene: Scene, rules: PairRules) -> _EligiblePairs:
     eligible = _EligiblePairs(
         [ViewPair(names[a], names[b], *m) for a, b, m in zip(first, second, measures)],
         [ViewPair(names[b], names[a], *m) for a, b, m in zip(first, second, measures)],
+        i[keep].astype(np.int64), j[keep].astype(np.int64),
     )
     if len(_ELIGIBLE) >= 64:
         _ELIGIBLE.clear()
