@@ -63,7 +63,7 @@ def features_of(record: QARecord) -> list[str]:
 def _entry_features(entry: Mapping[str, Any] | None) -> list[str]:
     """:func:`features_of` from the selection entry itself."""
     features = entry.get("features") if entry is not None else None
-    return [str(f) for f in features] if isinstance(features, list) else []
+    return list(map(str, features)) if isinstance(features, list) else []
 
 
 def select_balanced(pool: list[QARecord], cap: int, keep: Keep) -> list[QARecord]:
@@ -100,31 +100,44 @@ class _Pool:
     metric: list[int] = field(default_factory=list)  # entries without a cell
     cells: dict[str, dict[str, list[int]]] = field(default_factory=dict)  # cell → role → records
     cell_roles: dict[str, list[str]] = field(default_factory=dict)  # cell → the roles of a round
+    cell_keys: list[str | None] = field(default_factory=list)  # each record's cell (None: no cell)
     offered_roles_only: set[str] = field(default_factory=set)  # cells whose rounds go over the roles the scene offers (all_roles false)
 
     @classmethod
     def of(cls, records: Sequence[QARecord], mode: str = "bench") -> _Pool:
         pool = cls(records)
         selections, features, subjects = pool.selections, pool.features, pool.subjects
+        cells, cell_roles, cell_keys = pool.cells, pool.cell_roles, pool.cell_keys
         partial: set[str] = set()
         for i, r in enumerate(records):  # one pass: the entry, features and subject key of each record
             sel = selection_of(r)
             selections.append(sel)
-            features.append(_entry_features(sel))
             if sel is None:
+                features.append([])
                 subjects.append(None)
+                cell_keys.append(None)
                 pool.plain.setdefault(r.sub_question_type, []).append(i)
                 continue
+            features.append(_entry_features(sel))
             subjects.append((r.sub_question_type, subject_key(str(sel["subject"]), r.views, mode)))
             if "cell" not in sel:
+                cell_keys.append(None)
                 pool.metric.append(i)
+                continue
+            cell = f"{r.question_type}|{sel['cell']}"
+            cell_keys.append(cell)
+            by_role = cells.get(cell)
+            if by_role is None:
+                by_role = cells[cell] = {}
+                cell_roles[cell] = [str(x) for x in sel.get("roles", [])]
+            role = str(sel["role"])
+            queue = by_role.get(role)
+            if queue is None:
+                by_role[role] = [i]
             else:
-                cell = f"{r.question_type}|{sel['cell']}"
-                pool.cells.setdefault(cell, {}).setdefault(str(sel["role"]), []).append(i)
-                if cell not in pool.cell_roles:
-                    pool.cell_roles[cell] = [str(x) for x in sel.get("roles", [])]
-                if sel.get("all_roles", True) is False:
-                    partial.add(cell)
+                queue.append(i)
+            if sel.get("all_roles", True) is False:
+                partial.add(cell)
         for cell in partial:  # rounds over the roles this scene offers in the cell (at least two)
             offered = [role for role in pool.cell_roles[cell] if pool.cells[cell].get(role)]
             pool.cell_roles[cell] = offered if len(offered) >= 2 else []
@@ -139,11 +152,27 @@ class _Pool:
 
     def round_size(self, i: int) -> int:
         """How many records a round of record ``i``'s cell takes (1 outside cells)."""
-        sel, r = self.selections[i], self.records[i]
-        if sel is None or "cell" not in sel:
+        cell = self.cell_keys[i]
+        if cell is None:
             return 1
-        roles = self.cell_roles.get(f"{r.question_type}|{sel['cell']}") or sel.get("roles", [])
+        roles = self.cell_roles.get(cell) or self.selections[i].get("roles", [])  # type: ignore[union-attr]
         return max(1, len(roles))
+
+    def round_sizes(self) -> list[int]:
+        """:meth:`round_size` of every record, each cell's worked out once (per length of its own roles,
+        the fallback when the cell has no round of its own)."""
+        by_cell: dict[tuple[str, int], int] = {}
+        out = []
+        for i, cell in enumerate(self.cell_keys):
+            if cell is None:
+                out.append(1)
+                continue
+            key = (cell, len(self.selections[i].get("roles", ())))  # type: ignore[union-attr]
+            size = by_cell.get(key)
+            if size is None:
+                size = by_cell[key] = self.round_size(i)
+            out.append(size)
+        return out
 
 
 def role_excess(rows: Sequence[Mapping[str, int] | None], role: str, roles: Sequence[str]) -> float:
@@ -384,6 +413,7 @@ class _Selection:
         keys): ``taken``, ``judge`` (refused by the judge), ``repeat`` (its subject already asked),
         ``quota`` (no room for another round of its cell), else ``unbalanced``."""
         pool, taken, judged_out, asked, room = self.pool, self.taken, self.judged_out, self.asked, self.room
+        sizes = pool.round_sizes()
         out: dict[str, Counter[str]] = {}
         for i, r in enumerate(pool.records):
             sub = r.sub_question_type
@@ -397,7 +427,7 @@ class _Selection:
                 row["judge"] += 1
             elif pool.selections[i] is not None and pool.subjects[i] in asked:
                 row["repeat"] += 1
-            elif room[sub] < pool.round_size(i):
+            elif room[sub] < sizes[i]:
                 row["quota"] += 1
             else:
                 row["unbalanced"] += 1

@@ -248,9 +248,16 @@ def bbox_options(truth: str, rng: np.random.Generator) -> tuple[tuple[str, ...],
 
 def _option_selection(subject: str, sub: str, template: int | None, truth: str, options: tuple[str, ...]) -> dict[str, Any]:
     """Selection entry whose cell is the sub type, template (if given) and option set (the roles are its four texts)."""
-    texts = sorted(o[3:] for o in options)
+    cell, texts = _option_cell(sub, template, options)
+    return selection_entry(subject, cell, truth, texts)
+
+
+@functools.lru_cache(maxsize=4096)
+def _option_cell(sub: str, template: int | None, options: tuple[str, ...]) -> tuple[str, tuple[str, ...]]:
+    """The cell and roles of :func:`_option_selection` (a few dozen option sets recur in every candidate)."""
+    texts = tuple(sorted(o[3:] for o in options))
     head = sub if template is None else f"{sub}|template:{template}"
-    return selection_entry(subject, f"{head}|options:" + "|".join(texts), truth, texts)
+    return f"{head}|options:" + "|".join(texts), texts
 
 
 def _body_geometry(view: str, world: np.ndarray, cam: np.ndarray, parts: list[tuple[int, int]], truth: str) -> dict[str, Any]:
@@ -359,8 +366,21 @@ def _bbox_selection(pair: ViewPair, inst: Instance, truth: str, deck: Sequence[s
     """The selection entry of a box-centre question: cell = the option deck, role = the truth, feature =
     the object's label (a chair is usually below a camera at eye height: the selection gives each label
     every direction of a deck alike, so a per-label prior learns nothing)."""
-    return selection_entry(f"view:{pair.b}|object:{inst.id}", f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(sorted(deck)), truth,
-                           sorted(deck), features=label_features(plain=False, object=inst.label))
+    cell, roles = _bbox_cell(deck)
+    return selection_entry(f"view:{pair.b}|object:{inst.id}", cell, truth, roles, features=_object_features(inst.label))
+
+
+@functools.lru_cache(maxsize=64)
+def _bbox_cell(deck: tuple[str, ...]) -> tuple[str, tuple[str, ...]]:
+    """The cell and roles of a box-centre deck (:func:`_bbox_selection`)."""
+    roles = tuple(sorted(deck))
+    return f"{BBOX_CENTER_DIRECTION}|options:" + "|".join(roles), roles
+
+
+@functools.lru_cache(maxsize=4096)
+def _object_features(label: str) -> tuple[str, ...]:
+    """``label_features(plain=False, object=label)``, once per label."""
+    return tuple(label_features(plain=False, object=label))
 
 
 def _bbox_record(
@@ -497,11 +517,16 @@ def _relpos_subject(ids: Sequence[int]) -> str:
 def _relpos_selection(ids: Sequence[int], hit: SectorHit) -> dict[str, Any]:
     """The selection entry of a relative-position question whose query falls in sector ``hit``."""
     truth = RELPOS_SECTORS.labels[hit.index]
-    banned = [RELPOS_SECTORS.labels[hit.neighbour]] if hit.boundary_distance_deg < BOUNDARY_GUARD_DEG else []
-    return selection_entry(
-        _relpos_subject(ids), RELPOS, truth, RELPOS_SECTORS.labels,
-        distractors=[t for t in RELPOS_SECTORS.labels if t != truth and t not in banned],
-    )
+    guarded = hit.boundary_distance_deg < BOUNDARY_GUARD_DEG
+    return selection_entry(_relpos_subject(ids), RELPOS, truth, RELPOS_SECTORS.labels, distractors=_relpos_distractors(hit.index, hit.neighbour, guarded))
+
+
+@functools.lru_cache(maxsize=256)
+def _relpos_distractors(index: int, neighbour: int, guarded: bool) -> tuple[str, ...]:
+    """The sector labels that may be distractors: all but the truth (``index``) and, ``guarded``, its neighbour."""
+    labels = RELPOS_SECTORS.labels
+    banned = [labels[neighbour]] if guarded else []
+    return tuple(t for t in labels if t != labels[index] and t not in banned)
 
 
 def _relpos_record(

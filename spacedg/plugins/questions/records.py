@@ -519,19 +519,19 @@ def selection_entry(
     (:func:`~spacedg.qa.deal.deal_distractors`): a text offered more often than others
     would be right less often when offered, and a blind model could learn that.
     """
-    out: dict[str, Any] = {"subject": str(subject)}
-    if cell is not None:
-        if role is None or role not in roles:
-            raise ValueError(f"selection_entry: role {role!r} must be one of roles {list(roles)}")
-        out.update({"cell": str(cell), "role": str(role), "roles": [str(r) for r in roles]})
-        if not all_roles:
-            out["all_roles"] = False
-        if features:
-            out["features"] = [str(f) for f in features]
-        if distractors:
-            if len(set(distractors)) < 3:
-                raise ValueError(f"selection_entry: distractors must hold at least 3 texts, got {list(distractors)}")
-            out["distractors"] = [str(d) for d in distractors]
+    if cell is None:
+        return {"subject": str(subject)}
+    if role is None or role not in roles:
+        raise ValueError(f"selection_entry: role {role!r} must be one of roles {list(roles)}")
+    out: dict[str, Any] = {"subject": str(subject), "cell": str(cell), "role": str(role), "roles": list(map(str, roles))}
+    if not all_roles:
+        out["all_roles"] = False
+    if features:
+        out["features"] = list(map(str, features))
+    if distractors:
+        if len(set(distractors)) < 3:
+            raise ValueError(f"selection_entry: distractors must hold at least 3 texts, got {list(distractors)}")
+        out["distractors"] = list(map(str, distractors))
     return out
 
 
