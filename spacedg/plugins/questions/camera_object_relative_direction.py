@@ -434,12 +434,12 @@ def _relpos_candidates(index: VisibilityIndex, pair: ViewPair) -> tuple[dict[int
             ref_view[iid] = found
     seen_a, seen_b = index.seen_set(pair.a), index.seen_set(pair.b)
     ids = sorted(ref_view)
-    in_a, in_b = [i in seen_a for i in ids], [i in seen_b for i in ids]
+    shown = [(i in seen_a) | (i in seen_b) << 1 for i in ids]  # bit 0: seen in A, bit 1: seen in B
     triplets: list[tuple[int, int, int]] = []
-    for x, y, z in itertools.combinations(range(len(ids)), 3):
-        if (in_a[x] and in_a[y] and in_a[z]) or (in_b[x] and in_b[y] and in_b[z]):
-            continue  # one view shows all three: the task would collapse to a single view
-        triplets.extend(itertools.permutations((ids[x], ids[y], ids[z])))
+    extend = triplets.extend
+    for (x, sx), (y, sy), (z, sz) in itertools.combinations(zip(ids, shown), 3):
+        if not sx & sy & sz:  # else one view shows all three: the task would collapse to a single view
+            extend(itertools.permutations((x, y, z)))
     return ref_view, triplets
 
 

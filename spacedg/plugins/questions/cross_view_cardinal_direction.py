@@ -197,16 +197,25 @@ def _side(
     return inst, phrase_key(inst), legs[key]
 
 
+def _view_side(index: VisibilityIndex, view: str, up: np.ndarray) -> tuple[np.ndarray, tuple[int, ...], tuple[tuple[Instance, str, dict[str, Any] | None], ...]]:
+    """A view as one side of its pairs: its camera centre, its :func:`~spacedg.plugins.questions.records.referable_ids`
+    and each one's :func:`_side` (in that order: object_pairs' candidates), memoised per view on the index (``up``: the scene's)."""
+    memo = index_memo(index, "cross_view_sides")
+    side = memo.get(view)
+    if side is None:
+        origin = camera_center(index.scene.views[view])
+        legs = index_memo(index, "camera_legs")  # (view, object id) → the leg camera → object
+        ids = tuple(referable_ids(index, view))
+        side = memo[view] = (origin, ids, tuple(_side(index, legs, view, origin, iid, up) for iid in ids))
+    return side
+
+
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
-    origins = origin_a, origin_b = camera_center(scene.views[pair.a]), camera_center(scene.views[pair.b])
-    legs = index_memo(index, "camera_legs")  # (view, object id) → the leg camera → object (recurs in many candidates)
     compass = compass_questions(index, up)
-    ones, twos = referable_ids(index, pair.a), referable_ids(index, pair.b)
-    # per object of each side, once per pair: its instance, phrase and leg from its camera (object_pairs' candidates, in its order)
-    side_a = [_side(index, legs, pair.a, origin_a, iid, up) for iid in ones]
-    side_b = [_side(index, legs, pair.b, origin_b, iid, up) for iid in twos]
+    (origin_a, ones, side_a), (origin_b, twos, side_b) = _view_side(index, pair.a, up), _view_side(index, pair.b, up)
+    origins = origin_a, origin_b
     n_twos = len(twos)
     for k in lazy_permutation(len(ones) * n_twos, rng):  # = object_pairs(index, pair, rng), the same draws
         i, j = divmod(k, n_twos)

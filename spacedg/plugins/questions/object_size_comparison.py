@@ -134,7 +134,7 @@ from spacedg.plugins.questions.records import (
     phrase,
     phrase_key,
     ref_entry,
-    referable_ids,
+    referable_instances,
     selection_entry,
 )
 from spacedg.plugins.specs import AnswerType, TaskGroup
@@ -418,8 +418,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     """The pair's candidates ``(object 1, object 2, sub type)`` in the order of one ``rng.permutation``
     (drawn on the first ``next``); candidate ``k`` = object 1 ``k // (len(twos) · 2)``, object 2
     ``k // 2 % len(twos)``, sub type ``k % 2``. A pair without objects on both sides draws nothing."""
-    ones = [index.instance(i) for i in referable_ids(index, pair.a)]
-    twos = [index.instance(i) for i in referable_ids(index, pair.b)]
+    ones, twos = referable_instances(index, pair.a), referable_instances(index, pair.b)
     size = len(ones) * len(twos) * len(SUB_QUESTION_TYPES)
     if not size:
         return

@@ -99,6 +99,7 @@ __all__ = [
     "ref_entry",
     "referable",
     "referable_ids",
+    "referable_instances",
     "role_rounds",
     "round_robin",
     "round_robin_pairs",
@@ -277,6 +278,16 @@ def referable_ids(index: VisibilityIndex, view: str) -> list[int]:
     if ids is None:
         ids = memo[view] = [i for i in index.visible[view] if referable(index, view, i)]
     return list(ids)
+
+
+def referable_instances(index: VisibilityIndex, view: str) -> tuple[Instance, ...]:
+    """The instances of :func:`referable_ids` in ``view``, memoised per view on the index (a tuple:
+    shared by every view pair the view is in)."""
+    memo = index_memo(index, "referable_instances")
+    insts = memo.get(view)
+    if insts is None:
+        insts = memo[view] = tuple(index.instance(i) for i in referable_ids(index, view))
+    return insts
 
 
 def index_memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
