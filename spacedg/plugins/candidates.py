@@ -38,7 +38,7 @@ from typing import Any, NamedTuple
 
 from spacedg.plugins.qa_record import QARecord
 
-__all__ = ["PASSED_OVER", "Candidate", "ScanGate", "admitted", "gate_active", "gated", "light_candidates", "offer", "offer_if_admitted"]
+__all__ = ["PASSED_OVER", "Candidate", "ScanGate", "admission", "admitted", "gate_active", "gated", "light_candidates", "offer", "offer_if_admitted"]
 
 #: True inside :func:`light_candidates`: :func:`offer` hands out :class:`Candidate` objects.
 _LIGHT: contextvars.ContextVar[bool] = contextvars.ContextVar("spacedg_light_candidates", default=False)
@@ -114,6 +114,19 @@ def admitted(sub_question_type: str, views: tuple[str, ...], subject: str, named
     when refused it yields :data:`PASSED_OVER` and moves on (module docstring)."""
     gate = _GATE.get()
     return gate is None or gate(sub_question_type, views, subject, named)
+
+
+def _admit_all(sub_question_type: str, views: tuple[str, ...], subject: str, named: tuple[int, ...]) -> bool:
+    """The gate outside :func:`gated`: every candidate is wanted."""
+    return True
+
+
+def admission() -> ScanGate:
+    """:func:`admitted` as a function looked up once, for a stream that asks about many candidates:
+    the :func:`gated` caller's gate, or one that admits everything outside :func:`gated`. Take it
+    when the stream starts (its first ``next``, inside the caller's scan); it holds for that scan."""
+    gate = _GATE.get()
+    return gate if gate is not None else _admit_all
 
 
 def offer(

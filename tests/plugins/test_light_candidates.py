@@ -159,6 +159,23 @@ def test_refused_candidates_are_passed_over_without_draws(room_scene, family, mo
         assert list(itertools.islice(family.generate(room_scene, np.random.default_rng(5)), 20)) and calls[0] > 0
 
 
+def test_admission_is_the_gate_of_the_scan_it_is_taken_in() -> None:
+    from spacedg.plugins.candidates import admission, gated
+
+    outside = admission()
+    assert outside("s", ("v",), "object:1", (1,))
+    asked = []
+
+    def gate(*candidate) -> bool:
+        asked.append(candidate)
+        return False
+
+    with gated(gate):
+        inside = admission()
+        assert not inside("s", ("v",), "object:1", (1,)) and asked == [("s", ("v",), "object:1", (1,))]
+    assert outside("s", ("v",), "object:2", (2,)) and len(asked) == 1
+
+
 def test_admitted_is_true_outside_a_gate() -> None:
     from spacedg.plugins.candidates import admitted, gated
 

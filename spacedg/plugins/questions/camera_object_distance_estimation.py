@@ -59,7 +59,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.candidates import PASSED_OVER, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, admission, admitted, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -172,6 +172,7 @@ def _single_view_record(scene: Scene, index: VisibilityIndex, view: str, inst: I
 
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord]:
     both = sorted(index.visible_set(pair.a) & index.visible_set(pair.b))
+    admit = admission()
     for iid in seeded_order(both, rng):
         inst = index.instance(iid)
         if not (referable(index, pair.a, iid) and referable(index, pair.b, iid)):
@@ -180,7 +181,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         if distance is None:
             continue
         subject = f"view:{pair.b}|object:{inst.id}"
-        if not admitted(BBOX_CENTER_DISTANCE, (pair.a, pair.b), subject, (inst.id,)):
+        if not admit(BBOX_CENTER_DISTANCE, (pair.a, pair.b), subject, (inst.id,)):
             yield PASSED_OVER  # the caller passes it over
             continue
         yield offer(

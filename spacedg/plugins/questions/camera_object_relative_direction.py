@@ -112,7 +112,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admission, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -288,6 +288,7 @@ def _record(
 # --------------------------------------------------------------- single view
 def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     world_to_cam = np.asarray(scene.views[view].cam_to_world, dtype=np.float64)[:3, :3].T  # R^T, read once per view
+    admit = admission()
     for ia, ib in seeded_order(list(itertools.permutations(referable_ids(index, view), 2)), rng):
         a, b = index.instance(ia), index.instance(ib)
         if phrase_key(a) == phrase_key(b):
@@ -297,7 +298,7 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
         if vector_length(vec) < MIN_DISPLACEMENT_M:
             continue
         subject = f"view:{view}|objects:{min(ia, ib)}|{max(ia, ib)}"
-        if not admitted(SINGLE_VIEW, (view,), subject, (ia, ib)):
+        if not admit(SINGLE_VIEW, (view,), subject, (ia, ib)):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
         template = int(rng.integers(len(SINGLE_VIEW_TEMPLATES)))
@@ -326,6 +327,7 @@ def _single_view_record(
 # ------------------------------------------------------------ bbox direction
 def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     centre_b = camera_center(scene.views[pair.b])
+    admit = admission()
     for iid in seeded_order(index.visible[pair.a], rng):
         inst = index.instance(iid)
         if not referable(index, pair.a, iid) or camera_inside(index, pair.b, inst):
@@ -335,7 +337,7 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             continue
         vec, parts, truth = answer
         subject = f"view:{pair.b}|object:{iid}"
-        if not admitted(BBOX_CENTER_DIRECTION, (pair.a, pair.b), subject, (iid,)):
+        if not admit(BBOX_CENTER_DIRECTION, (pair.a, pair.b), subject, (iid,)):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
         template = int(rng.integers(len(TWO_VIEW_TEMPLATES)))
@@ -485,7 +487,8 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
     ref_view, triplets = _relpos_candidates(index, pair)
-    shapes = index_memo(index, "relpos_shapes")  # triplet → (objects, names, legs, angle, sector) or None: no view enters it
+    shapes = index_memo(index, "relpos_shapes")
+    admit = admission()  # triplet → (objects, names, legs, angle, sector) or None: no view enters it
     for ids in seeded_order(triplets, rng):  # each obeys the three-object rule (split_across_views): see _relpos_candidates
         key = tuple(ids)
         if key not in shapes:
@@ -496,7 +499,7 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
         if shape is None:
             continue
         subject = _relpos_subject(ids)
-        if not admitted(RELPOS, views, subject, key):
+        if not admit(RELPOS, views, subject, key):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
         objs, names, (leg_ab, leg_ac), angle, hit = shape

@@ -81,7 +81,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admission, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.plugins.questions.view_sampling import ROTATION_PAIRS, PairRules, ViewPair, sample_pairs
@@ -295,12 +295,13 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = ROTATION
     attitudes = {view: camera_attitude(cam.cam_to_world, up) for view, cam in scene.views.items()}  # once per view
     attitudes_and_headings = {view: (att, heading(att, up)) for view, att in attitudes.items()}
     children = child_rngs(rng, len(pairs))  # one per pair, made only for a pair that is asked
+    admit = admission()
     for k, pair in enumerate(pairs):
         turn = _turn(scene, pair, attitudes_and_headings, up)
         if turn is None:
             continue
         views, subject = (pair.a, pair.b), pair_subject(pair)
-        if not admitted(turn.sub, views, subject, ()):
+        if not admit(turn.sub, views, subject, ()):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
         drawn = build_mcq(turn.truth, turn.distractors, children[k], slot=decks[turn.case.mode].next())

@@ -81,7 +81,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admission, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -270,11 +270,12 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = TRANSLAT
     letter_rng, side_rng = child_rngs(rng, 2)
     decks = {"main_dir": BalancedDeck(letter_rng, 4), "distance_threshold": BalancedDeck(side_rng, 2)}
     cands = [(k, c) for k, pair in enumerate(pairs) if (c := _candidate(scene, pair, rules)) is not None]
+    admit = admission()
     for p in range(len(SUB_TYPES)):
         for k, cand in cands:
             s = (start + k + p) % len(SUB_TYPES)
             sub, views, subject = SUB_TYPES[s], (cand.pair.a, cand.pair.b), pair_subject(cand.pair)
-            if not admitted(sub, views, subject, ()):
+            if not admit(sub, views, subject, ()):
                 yield PASSED_OVER  # the caller passes it over: no draws
                 continue
             drawn = _draw(cand, sub, subject, children[k * len(SUB_TYPES) + s], decks.get(sub))

@@ -92,7 +92,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
-from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admission, offer
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
     PairRules,
@@ -213,6 +213,7 @@ def _view_side(index: VisibilityIndex, view: str, up: np.ndarray) -> tuple[np.nd
 def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
+    admit = admission()
     compass = compass_questions(index, up)
     (origin_a, ones, side_a), (origin_b, twos, side_b) = _view_side(index, pair.a, up), _view_side(index, pair.b, up)
     origins = origin_a, origin_b
@@ -225,7 +226,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         if key_one == key_two or ref is None or query is None:
             continue
         subject, named = _subject(one, two), (one.id, two.id)
-        if not admitted(SUB_QUESTION_TYPE, views, subject, named):
+        if not admit(SUB_QUESTION_TYPE, views, subject, named):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
         drawn = compass.ask(("camera", pair.a, one.id), ref["vector"], ("camera", pair.b, two.id), query["vector"], rng)  # = compass_question(ref, query, up, rng)

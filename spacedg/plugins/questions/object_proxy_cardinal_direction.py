@@ -83,7 +83,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admission, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -162,6 +162,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     # boxes overlap and the compass frames do not depend on the views
     hits: dict[tuple[int, int], bool] = index_memo(index, "box_overlaps")
     compass = compass_questions(index, up)
+    admit = admission()
 
     def overlap(p: int, q: int) -> bool:
         key = (min(ids[p], ids[q]), max(ids[p], ids[q]))
@@ -184,7 +185,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
             continue
         triplet_ids = (ids[x], ids[y], ids[z])
         subject = _triplet_subject(*triplet_ids)
-        if not admitted(SUB_QUESTION_TYPE, views, subject, triplet_ids):
+        if not admit(SUB_QUESTION_TYPE, views, subject, triplet_ids):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
         objs = (insts[x], insts[y], insts[z])

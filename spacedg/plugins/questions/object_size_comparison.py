@@ -110,7 +110,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from spacedg.plugins.candidates import PASSED_OVER, Candidate, admitted, offer
+from spacedg.plugins.candidates import PASSED_OVER, Candidate, admission, offer
 from spacedg.plugins.qa_record import QARecord
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
@@ -423,6 +423,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
     if not size:
         return
     views = (pair.a, pair.b)
+    admit = admission()
     verdicts = index_memo(index, "size_verdict")
     n_subs, n_twos = len(SUB_QUESTION_TYPES), len(twos)
     for k in shuffled(range(size), rng):  # = rng.permutation(size)
@@ -432,7 +433,7 @@ def _pair_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         verdict = _verdict_of(scene, one, two, sub, verdicts)
         if verdict is None:
             continue
-        if not admitted(sub, views, verdict.subject, (one.id, two.id)):
+        if not admit(sub, views, verdict.subject, (one.id, two.id)):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
         texts = [*verdict.phrases, SAME]
