@@ -356,11 +356,9 @@ def _bbox_answer(scene: Scene, index: VisibilityIndex, view_b: str, inst: Instan
     key = (view_b, inst.id)
     if key not in memo:
         vec = point_in_camera(scene.views[view_b], inst.box.center)
-        if vector_length(vec) < MIN_DISPLACEMENT_M or _rare_bbox_direction(vec):
-            memo[key] = None
-        else:
-            parts = dominant_parts(vec)
-            memo[key] = (vec, parts, parts_label(parts, BODY_DIRECTION_WORDS))
+        parts = dominant_parts(vec) if vector_length(vec) >= MIN_DISPLACEMENT_M else None
+        label = parts_label(parts, BODY_DIRECTION_WORDS) if parts is not None else ""
+        memo[key] = None if parts is None or _rare_bbox_parts(parts, label) else (vec, parts, label)
     return memo[key]
 
 
@@ -407,6 +405,15 @@ def _rare_bbox_label(label: str) -> bool:
     return bool({"Back", "Up"} & set(label.split("-")))
 
 
+def _rare_bbox_parts(parts: list[tuple[int, int]], label: str) -> bool:
+    """:func:`_rare_bbox_direction` from a vector's :func:`dominant_parts` and their label."""
+    if _rare_bbox_label(label):
+        return True
+    if len(parts) == 2:  # the four sign combinations of two axes: at least two must be askable
+        return {axis for axis, _ in parts} == {1, 2}  # Up/Down × Front/Back: only "Front-Down"/"Down-Front" would be left (no deck)
+    return False
+
+
 def _rare_bbox_direction(vec_camera: np.ndarray) -> bool:
     """Whether ``bbox_center_direction`` skips this object (decision, debiasing): its label would
     name "Back" (behind camera B) or "Up" (above a camera held at eye height). Both are rare
@@ -414,12 +421,7 @@ def _rare_bbox_direction(vec_camera: np.ndarray) -> bool:
     happens to offer them, they would make the rest predictable. Also skipped: Up/Down ×
     Front/Back labels (only "Front-Down"/"Down-Front" would be left: no deck of four)."""
     parts = dominant_parts(vec_camera)
-    if _rare_bbox_label(parts_label(parts, BODY_DIRECTION_WORDS)):
-        return True
-    if len(parts) == 2:  # the four sign combinations of two axes: at least two must be askable
-        axes = {axis for axis, _ in parts}
-        return axes == {1, 2}  # Up/Down × Front/Back: only "Front-Down"/"Down-Front" would be left (no deck)
-    return False
+    return _rare_bbox_parts(parts, parts_label(parts, BODY_DIRECTION_WORDS))
 
 
 # ------------------------------------------------------------------- relpos

@@ -335,21 +335,21 @@ def build_mcq(
     if n_options not in MCQ_OPTION_COUNTS:
         raise InvalidDataError(f"build_mcq: n_options must be one of {list(MCQ_OPTION_COUNTS)}, got {n_options!r}")
     need = n_options - 1
-    chosen: list[str] = []
+    others: list[str] = []
     for text in distractors:
-        if text != truth and text not in chosen:
-            chosen.append(text)
-        if len(chosen) == need:
-            break
-    if len(chosen) < need:
+        if text != truth and text not in others:
+            others.append(text)
+            if len(others) == need:
+                break
+    if len(others) < need:
         raise InvalidDataError(f"build_mcq: need {need} distractors different from {truth!r}, got {list(distractors)}")
-    others = shuffled(chosen, rng)  # = [chosen[i] for i in rng.permutation(need)]
+    rng.shuffle(others)  # = [chosen[i] for i in rng.permutation(need)] (spacedg.seeding.shuffled, in place)
     if slot is None:
         slot = _next_letter(rng, n_options)
     elif slot not in range(n_options):
         raise InvalidDataError(f"build_mcq: slot must be 0-{need} (the correct letter's position), got {slot!r}")
     others.insert(slot, truth)
-    return tuple(f"{MCQ_LETTERS[k]}. {text}" for k, text in enumerate(others)), MCQ_LETTERS[slot]
+    return tuple([f"{letter}. {text}" for letter, text in zip(MCQ_LETTERS, others)]), MCQ_LETTERS[slot]
 
 
 # ---------------------------------------------------------------- ground plane
