@@ -324,6 +324,7 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
     (:meth:`_PoolScan.pooled`); the pool is then that prefix, and the selection takes the same records from it."""
     rng = np.random.default_rng(derive_seed(config.seed, scene.id, family.name))
     scan = _PoolScan(family, config, index, twins, stop_early)
+    promised = scan.metric is not None or scan.cell_subs is not None  # a family held to metric_only or plain_rounds
     pooled: list[QARecord] = []
     with plugin_call("question family", family, "generate"), deferred_geometry(), light_candidates(), gated(scan.gate):
         try:
@@ -338,7 +339,8 @@ def _pool(family: Any, scene: Scene, config: QABuildConfig, index: TwinCheck, tw
                 elif not scan.take(item.sub_question_type, item.views, _subject(item), named_ids(item)):
                     continue
                 pooled.append(item)
-                scan.pooled(item, pooled)
+                if promised:
+                    scan.pooled(item, pooled)
         except _ScanDone:
             pass
     return pooled

@@ -414,23 +414,18 @@ class _Selection:
         ``quota`` (no room for another round of its cell), else ``unbalanced``."""
         pool, taken, judged_out, asked, room = self.pool, self.taken, self.judged_out, self.asked, self.room
         sizes = pool.round_sizes()
+        subs = [r.sub_question_type for r in pool.records]
+        counts = Counter(zip(subs, [
+            "taken" if i in taken else "judge" if i in judged_out
+            else "repeat" if subject is not None and subject in asked  # (a record without an entry has no subject)
+            else "quota" if room[sub] < size else "unbalanced"
+            for i, (sub, subject, size) in enumerate(zip(subs, pool.subjects, sizes))
+        ]))
         out: dict[str, Counter[str]] = {}
-        for i, r in enumerate(pool.records):
-            sub = r.sub_question_type
-            row = out.get(sub)
-            if row is None:
-                row = out[sub] = Counter()
-            row["pooled"] += 1
-            if i in taken:
-                row["taken"] += 1
-            elif i in judged_out:
-                row["judge"] += 1
-            elif pool.selections[i] is not None and pool.subjects[i] in asked:
-                row["repeat"] += 1
-            elif room[sub] < sizes[i]:
-                row["quota"] += 1
-            else:
-                row["unbalanced"] += 1
+        for sub, n in Counter(subs).items():  # sub types in the order of their first record
+            out[sub] = Counter({"pooled": n})
+        for (sub, reason), n in counts.items():
+            out[sub][reason] = n
         return out
 
 

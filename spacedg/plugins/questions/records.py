@@ -139,9 +139,12 @@ class ChildGenerators(Sequence[np.random.Generator]):
         return len(self._seeds)
 
     def __getitem__(self, i):  # type: ignore[override]
-        if isinstance(i, slice):
+        if type(i) is int and 0 <= i < len(self._seeds):
+            k = i
+        elif isinstance(i, slice):
             return [self[k] for k in range(*i.indices(len(self)))]
-        k = range(len(self))[i]  # IndexError and negative indices as a list
+        else:
+            k = range(len(self))[i]  # IndexError and negative indices as a list
         made = self._made.get(k)
         if made is None:
             seed = int(self._seeds[k])
@@ -168,14 +171,13 @@ def child_rngs(rng: np.random.Generator, n: int) -> ChildGenerators:
 def round_robin(streams: Iterable[Iterator[T]]) -> Iterator[T]:
     """One item from each stream in turn until all are exhausted (streams are started lazily)."""
     queue = deque(streams)
+    popleft, append = queue.popleft, queue.append
     while queue:
-        stream = queue.popleft()
-        try:
-            item = next(stream)
-        except StopIteration:
-            continue
-        yield item
-        queue.append(stream)
+        stream = popleft()
+        for item in stream:  # one item, then the stream goes to the back; an exhausted one is dropped
+            yield item
+            append(stream)
+            break
 
 
 def seeded_order(items: Sequence[T], rng: np.random.Generator) -> Iterator[T]:
