@@ -158,21 +158,6 @@ class _Pool:
         roles = self.cell_roles.get(cell) or self.selections[i].get("roles", [])  # type: ignore[union-attr]
         return max(1, len(roles))
 
-    def round_sizes(self) -> list[int]:
-        """:meth:`round_size` of every record, each cell's worked out once (per length of its own roles,
-        the fallback when the cell has no round of its own)."""
-        by_cell: dict[tuple[str, int], int] = {}
-        out = []
-        for i, cell in enumerate(self.cell_keys):
-            if cell is None:
-                out.append(1)
-                continue
-            key = (cell, len(self.selections[i].get("roles", ())))  # type: ignore[union-attr]
-            size = by_cell.get(key)
-            if size is None:
-                size = by_cell[key] = self.round_size(i)
-            out.append(size)
-        return out
 
 
 def role_excess(rows: Sequence[Mapping[str, int] | None], role: str, roles: Sequence[str]) -> float:
@@ -413,13 +398,12 @@ class _Selection:
         keys): ``taken``, ``judge`` (refused by the judge), ``repeat`` (its subject already asked),
         ``quota`` (no room for another round of its cell), else ``unbalanced``."""
         pool, taken, judged_out, asked, room = self.pool, self.taken, self.judged_out, self.asked, self.room
-        sizes = pool.round_sizes()
         subs = [r.sub_question_type for r in pool.records]
         counts = Counter(zip(subs, [
             "taken" if i in taken else "judge" if i in judged_out
             else "repeat" if subject is not None and subject in asked  # (a record without an entry has no subject)
-            else "quota" if room[sub] < size else "unbalanced"
-            for i, (sub, subject, size) in enumerate(zip(subs, pool.subjects, sizes))
+            else "quota" if room[sub] < pool.round_size(i) else "unbalanced"
+            for i, (sub, subject) in enumerate(zip(subs, pool.subjects))
         ]))
         out: dict[str, Counter[str]] = {}
         for sub, n in Counter(subs).items():  # sub types in the order of their first record
