@@ -163,9 +163,10 @@ class _PoolScan:
         )
         # cell → its sub type, for a family that declares plain_rounds
         self.cell_subs: dict[str, str] | None = {} if getattr(family, "plain_rounds", False) else None
-        # per cell, the roles of a round (from its first record) not seen yet; per sub type, the records the
-        # first visit to its complete cells could take (no prefix can settle before that reaches quota − 1)
-        self.roles_missing: dict[str, set[str]] = {}
+        # per cell, the roles of its round (its first record's, as the selection reads them) not seen yet and
+        # the round's size; per sub type, the records the first visit to its complete cells could take (no
+        # prefix settles before that reaches quota − 1: a cell takes at most one round per visit)
+        self.roles_missing: dict[str, tuple[set[str], int]] = {}
         self.capacity: Counter[str] = Counter()
         self.stop_early = stop_early
         # a plain_rounds family's pool is offered to prefix_settles at these sizes (none with partial rounds: the proof does not cover them)
@@ -287,12 +288,12 @@ class _PoolScan:
         cell_sub = cell_subs.setdefault(cell, sub)
         if cell_sub != sub:
             raise self._broken("plain_rounds", f"record of sub type {sub!r} in a cell of sub type {cell_sub!r}", entry)
-        roles = entry.get("roles", ())
-        missing = self.roles_missing.setdefault(cell, {str(r) for r in roles})
+        missing, size = self.roles_missing.get(cell) or self.roles_missing.setdefault(
+            cell, ({str(r) for r in entry.get("roles", ())}, len(entry.get("roles", ()))))
         if missing:
             missing.discard(str(entry["role"]))
-            if not missing and len(roles) >= 2:
-                self.capacity[sub] += len(roles)  # the cell is complete: its first visit may take a round
+            if not missing and size >= 2:
+                self.capacity[sub] += size  # the cell is complete: its first visit may take a round
         if self.next_check is None or len(pool) < self.next_check:
             return
         if any(self.capacity[s] < self.quota - 1 for s in self.family.sub_question_types):

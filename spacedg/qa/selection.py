@@ -159,7 +159,6 @@ class _Pool:
         return max(1, len(roles))
 
 
-
 def role_excess(rows: Sequence[Mapping[str, int] | None], role: str, roles: Sequence[str]) -> float:
     """How over-represented a record's features are in ``role``: over its features' ``rows``
     (role → records taken with that feature; ``None``: none yet), the count in ``role`` minus the
@@ -182,10 +181,6 @@ class _RoundsTrace:
         self.cell_roles = cell_roles
         self.first_sweep_room: dict[str, int] | None = None
         self.unsure = False
-
-    def exhausted(self, cell: str, room: Mapping[str, int]) -> None:
-        """A role of ``cell`` has no free candidate left, with ``room`` per sub type."""
-        self.incomplete(cell, room)
 
     def incomplete(self, cell: str, room: Mapping[str, int]) -> None:
         """``cell`` lacks a candidate of a role (none left, or none at all), with ``room`` per sub type:
@@ -272,7 +267,7 @@ class _Selection:
     def next_round(self, cell: str, trace: _RoundsTrace | None = None) -> list[int] | None:
         """One record per role of ``cell`` (distinct subjects), or ``None`` when a role has no
         candidate left or a sub type the round touches has no room for it. ``trace``: told
-        when a role has no candidate left (:meth:`_RoundsTrace.exhausted`)."""
+        when a role has no candidate left (:meth:`_RoundsTrace.incomplete`)."""
         round_: list[int] = []
         used: set[tuple[str, str]] = set()
         need: Counter[str] = Counter()
@@ -280,7 +275,7 @@ class _Selection:
             i = self.pick(cell, role, used)
             if i is None:
                 if trace is not None:
-                    trace.exhausted(cell, self.room)
+                    trace.incomplete(cell, self.room)
                 return None
             round_.append(i)
             used.add(self.pool.subject(i))

@@ -4,7 +4,6 @@ fewer candidates read; a pooled record that breaks the promise is refused."""
 
 from __future__ import annotations
 
-import itertools
 from collections import Counter
 from typing import Any, NamedTuple
 
@@ -224,4 +223,26 @@ def test_rounds_trace_leaves_the_plain_selection_alone() -> None:
         cell_sub = {f"demo|{cell}": sub for cell, (sub, _) in family["cells"].items()}
         traced.take_rounds(_RoundsTrace({c: cell_sub.get(c, "") for c in traced.pool.cells}, traced.pool.cell_roles))
         assert plain.taken == traced.taken
-    assert list(itertools.islice(iter(ROUNDS), 1))
+
+
+def test_the_stop_reads_a_cell_round_from_its_first_record(room_scenes) -> None:
+    """The scan's cheap pre-check (can the first visits fill the quota yet?) counts a cell's round as the
+    selection does, from its first record's roles, whatever later records of the cell list."""
+    from spacedg.plugins.question_family import FamilyFactory
+    from spacedg.plugins.specs import AnswerType, TaskGroup
+
+    def generate(scene, rng):
+        view = next(iter(scene.views))
+        for k in range(100):
+            roles = ["a", "b"] if k < 3 else ["b"]  # the cells' first records list both roles; later ones not
+            entry = {"subject": f"object:{k}", "cell": f"c{k % 3}", "role": "ab"[k // 3 % 2], "roles": roles}
+            yield offer("s", (view,), entry["subject"], (), lambda e=entry: e, lambda: None)
+
+    family = FamilyFactory(generate, name="demo_roles", task_group=TaskGroup.OBJECT_CENTRIC, answer_types={AnswerType.MCQ},
+                           sub_question_types=("s",), num_views=(1,), description="demo", plain_rounds=True)()
+    index, config = TwinCheck(VisibilityIndex(room_scenes[0])), QABuildConfig(per_sub_type=5)
+    stopped = _pool(family, room_scenes[0], config, index, Counter(), stop_early=True)
+    full = _pool(family, room_scenes[0], config, index, Counter(), stop_early=False)
+    assert len(stopped) < len(full) == 100
+    keep = [r.geometry["selection"]["subject"] for r in select_records(stopped, 5)]
+    assert keep == [r.geometry["selection"]["subject"] for r in select_records(full, 5)] and keep

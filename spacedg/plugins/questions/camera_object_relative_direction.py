@@ -356,13 +356,13 @@ def _bbox_answer(scene: Scene, index: VisibilityIndex, view_b: str, inst: Instan
     key = (view_b, inst.id)
     if key not in memo:
         vec = point_in_camera(scene.views[view_b], inst.box.center)
-        parts = dominant_parts(vec) if vector_length(vec) >= MIN_DISPLACEMENT_M else None
+        parts = None if vector_length(vec) < MIN_DISPLACEMENT_M else dominant_parts(vec)
         label = parts_label(parts, BODY_DIRECTION_WORDS) if parts is not None else ""
         memo[key] = None if parts is None or _rare_bbox_parts(parts, label) else (vec, parts, label)
     return memo[key]
 
 
-def _bbox_selection(pair: ViewPair, inst: Instance, truth: str, deck: Sequence[str]) -> dict[str, Any]:
+def _bbox_selection(pair: ViewPair, inst: Instance, truth: str, deck: tuple[str, ...]) -> dict[str, Any]:
     """The selection entry of a box-centre question: cell = the option deck, role = the truth, feature =
     the object's label (a chair is usually below a camera at eye height: the selection gives each label
     every direction of a deck alike, so a per-label prior learns nothing)."""
@@ -489,8 +489,8 @@ def _relpos_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: 
     up = np.asarray(scene.up, dtype=np.float64)
     views = (pair.a, pair.b)
     ref_view, triplets = _relpos_candidates(index, pair)
-    shapes = index_memo(index, "relpos_shapes")
-    admit = admission()  # triplet → (objects, names, legs, angle, sector) or None: no view enters it
+    shapes = index_memo(index, "relpos_shapes")  # triplet → (objects, names, legs, angle, sector) or None: no view enters it
+    admit = admission()
     for ids in seeded_order(triplets, rng):  # each obeys the three-object rule (split_across_views): see _relpos_candidates
         key = tuple(ids)
         if key not in shapes:

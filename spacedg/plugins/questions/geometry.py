@@ -104,9 +104,12 @@ ROTATION_WORDS: dict[str, tuple[str, str]] = {
 
 # ------------------------------------------------------------------ poses
 def vector_length(vector: np.ndarray) -> float:
-    """``float(np.linalg.norm(vector))`` of a 1-D float64 vector, the same operations without numpy's
-    dispatch (numpy computes a vector's 2-norm as ``sqrt(x.dot(x))`` of ``x = vector.ravel(order="K")``;
-    a square root is correctly rounded either way): bit for bit, for the per-candidate lengths."""
+    """``float(np.linalg.norm(vector))``, bit for bit: for a float64 array, the same operations without
+    numpy's dispatch (numpy computes the 2-norm as ``sqrt(x.dot(x))`` of ``x = vector.ravel(order="K")``;
+    a square root is correctly rounded either way), for the per-candidate lengths; any other input
+    goes to ``np.linalg.norm`` itself."""
+    if type(vector) is not np.ndarray or vector.dtype != np.float64:
+        return float(np.linalg.norm(vector))
     x = vector.ravel(order="K")
     return math.sqrt(x.dot(x))
 

@@ -168,9 +168,10 @@ def child_rngs(rng: np.random.Generator, n: int) -> ChildGenerators:
     return ChildGenerators(rng.integers(0, 2**63 - 1, size=n, dtype=np.int64))
 
 
-def round_robin(streams: Iterable[Iterator[T]]) -> Iterator[T]:
-    """One item from each stream in turn until all are exhausted (streams are started lazily)."""
-    queue = deque(streams)
+def round_robin(streams: Iterable[Iterable[T]]) -> Iterator[T]:
+    """One item from each stream in turn until all are exhausted (streams are started lazily;
+    each is iterated once, so a list takes its turns item by item like a generator)."""
+    queue = deque(map(iter, streams))
     popleft, append = queue.popleft, queue.append
     while queue:
         stream = popleft()

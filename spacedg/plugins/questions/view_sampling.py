@@ -33,7 +33,7 @@ object is not trivially in view.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -231,8 +231,8 @@ class _EligiblePairs:
 
     forward: list[ViewPair]
     backward: list[ViewPair]
-    first: np.ndarray  # int64: the index (in the covisibility's view order) of each forward pair's view a
-    second: np.ndarray  # int64: of its view b (the anchor when the pair is flipped)
+    first: np.ndarray = field(compare=False)  # int64: the index (in the covisibility's view order) of each forward pair's view a
+    second: np.ndarray = field(compare=False)  # int64: of its view b (the anchor when the pair is flipped)
 
 
 #: (id(covisibility), rules) → (covisibility, its views' cameras in order, pairs): the pairs every

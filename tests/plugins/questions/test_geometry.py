@@ -302,6 +302,22 @@ def test_vector_length_is_numpys_norm_bit_for_bit() -> None:
     vectors += [np.zeros(3), np.array([5e-324, 0.0, -5e-324]), np.array([1e154, -1e154, 3e153]), np.array([np.inf, 1.0, 0.0])]
     matrix = rng.standard_normal((4, 4))
     vectors += [matrix[:3, k] for k in range(4)] + [matrix[k, ::2] for k in range(4)]  # non-contiguous columns and steps
+    vectors += [matrix, matrix.T, np.array([2**40, 2**40]), np.array([3, 4], dtype=np.float32), np.array([True, True]), [3.0, 4.0]]  # others: numpy's own norm
     with np.errstate(over="ignore"):  # 1e154² overflows to inf in both
         for v in vectors:
             assert vector_length(v) == float(np.linalg.norm(v))
+
+
+def test_round_robin_takes_one_item_per_stream_in_turn() -> None:
+    """Streams take turns, an exhausted one drops out, and any iterable (a list too) is iterated once."""
+    from spacedg.plugins.questions.records import round_robin
+
+    assert list(round_robin([[1, 2], iter([3]), (x for x in [4, 5, 6]), []])) == [1, 3, 4, 2, 5, 6]
+    started = []
+
+    def stream(k):
+        started.append(k)
+        yield k
+
+    merged = round_robin(stream(k) for k in range(3))
+    assert started == [] and next(merged) == 0 and started == [0]  # started lazily
