@@ -91,8 +91,9 @@ def test_a_declared_family_stops_and_one_that_breaks_the_declaration_is_refused(
                 _pool(_demo_family(kinds), room_scene, config, index, Counter(), stop_early=stop)
 
 
-def test_a_judge_turns_the_stop_off(room_scene, monkeypatch) -> None:
-    """The stop is exact only when every pooled record is accepted: with a judge the family is read to the end."""
+@pytest.mark.parametrize("name", ["object_bounding_size_estimation", "object_proxy_cardinal_direction"])  # metric_only, plain_rounds
+def test_a_judge_turns_the_stop_off(room_scene, monkeypatch, name) -> None:
+    """The stops are exact only when every pooled record is accepted: with a judge the family is read to the end."""
     asked = []
     plain_pool = build._pool
 
@@ -105,7 +106,7 @@ def test_a_judge_turns_the_stop_off(room_scene, monkeypatch) -> None:
             return True
 
     monkeypatch.setattr(build, "_pool", spy)
-    family = next(f for f in selected_families(None) if f.name == "object_bounding_size_estimation")
+    family = next(f for f in selected_families(None) if f.name == name)
     index = TwinCheck(VisibilityIndex(room_scene))
     build._family_records(family, room_scene, QABuildConfig(), None, None, None, index, Counter())
     build._family_records(family, room_scene, QABuildConfig(), KeepAll(), None, None, index, Counter())

@@ -12,7 +12,6 @@ import pytest
 
 from spacedg.errors import PluginError
 from spacedg.plugins.candidates import offer
-from spacedg.qa import build
 from spacedg.qa.build import _pool
 from spacedg.qa.index import QABuildConfig, selected_families
 from spacedg.qa.modes import quota
@@ -186,28 +185,14 @@ def test_a_record_that_breaks_the_promise_is_refused(room_scenes, kind, what) ->
     assert len(_pool(_demo_family(kind, plain_rounds=False), room_scenes[0], QABuildConfig(), index, Counter(), stop_early=True)) == 40
 
 
-def test_a_judge_and_partial_rounds_turn_the_stop_off(room_scenes, monkeypatch) -> None:
-    """The proof covers the selection without a judge (it may refuse what a round picked) and without partial rounds."""
+def test_partial_rounds_turn_the_stop_off(room_scenes) -> None:
+    """The proof covers the selection without partial rounds (a judge turns it off too: test_metric_stop.py)."""
     family = next(f for f in selected_families(None) if f.name == "object_proxy_cardinal_direction")
     index = TwinCheck(VisibilityIndex(room_scenes[0]))
     stopped = _pool(family, room_scenes[0], QABuildConfig(), index, Counter(), stop_early=True)
     partial = _pool(family, room_scenes[0], QABuildConfig(partial_rounds=True), index, Counter(), stop_early=True)
     full = _pool(family, room_scenes[0], QABuildConfig(), index, Counter(), stop_early=False)
     assert len(stopped) < len(partial) == len(full)
-    asked = []
-    plain_pool = build._pool
-
-    def spy(*args, **kwargs):
-        asked.append(kwargs.get("stop_early"))
-        return plain_pool(*args, **kwargs)
-
-    class KeepAll:
-        def keep(self, record) -> bool:
-            return True
-
-    monkeypatch.setattr(build, "_pool", spy)
-    build._family_records(family, room_scenes[0], QABuildConfig(), KeepAll(), None, None, index, Counter())
-    assert asked == [False]
 
 
 def test_rounds_trace_leaves_the_plain_selection_alone() -> None:
