@@ -137,7 +137,6 @@ from spacedg.plugins.questions.geometry import (
     VERTICAL_FACTOR,
     boxes_intersect,
     build_mcq,
-    camera_center,
     dominant_parts,
     flipped_labels,
     angle_on_ground,
@@ -162,6 +161,7 @@ from spacedg.plugins.questions.records import (
     round_robin_sub_types,
     seeded_order,
     selection_entry,
+    view_centre,
 )
 from spacedg.plugins.questions.pairs import view_and_pair_family
 from spacedg.plugins.specs import AnswerType, TaskGroup
@@ -326,7 +326,7 @@ def _single_view_record(
 
 # ------------------------------------------------------------ bbox direction
 def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: PairRules, rng: np.random.Generator) -> Iterator[QARecord | Candidate]:
-    centre_b = camera_center(scene.views[pair.b])
+    centre_b = view_centre(index, pair.b)
     admit = admission()
     for iid in seeded_order(index.visible[pair.a], rng):
         inst = index.instance(iid)

@@ -101,7 +101,6 @@ from spacedg.plugins.questions.view_sampling import (
 )
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.questions.geometry import (
-    camera_center,
     ground_leg,
 )
 from spacedg.plugins.questions.language import find_in_image
@@ -118,6 +117,7 @@ from spacedg.plugins.questions.records import (
     phrase_key,
     referable_ids,
     selection_entry,
+    view_centre,
 )
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
@@ -203,7 +203,7 @@ def _view_side(index: VisibilityIndex, view: str, up: np.ndarray) -> tuple[np.nd
     memo = index_memo(index, "cross_view_sides")
     side = memo.get(view)
     if side is None:
-        origin = camera_center(index.scene.views[view])
+        origin = view_centre(index, view)
         legs = index_memo(index, "camera_legs")  # (view, object id) → the leg camera → object
         ids = tuple(referable_ids(index, view))
         side = memo[view] = (origin, ids, tuple(_side(index, legs, view, origin, iid, up) for iid in ids))

@@ -46,6 +46,7 @@ cell (one record of every role), so within a scene no function of the cell beats
 from __future__ import annotations
 
 import functools
+import math
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import Any, TypeVar
@@ -53,6 +54,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from spacedg.plugins.qa_record import Answer, QARecord, make_record_id
+from spacedg.scene.box import OrientedBox
 from spacedg.scene.model import Instance, Scene
 from spacedg.plugins.questions.view_sampling import (
     PairRules,
@@ -100,6 +102,7 @@ __all__ = [
     "referable",
     "referable_ids",
     "referable_instances",
+    "view_centre",
     "role_rounds",
     "round_robin",
     "round_robin_pairs",
@@ -312,9 +315,54 @@ def camera_inside(index: VisibilityIndex, view: str, inst: Instance) -> bool:
     key = (view, inst.id)
     inside = memo.get(key)
     if inside is None:
-        centre = camera_center(index.scene.views[view])
-        inside = memo[key] = bool(inst.box.contains(centre[None, :])[0])
+        centre = _camera_centre(index, view)
+        spheres = index_memo(index, "box_spheres")  # object id → bounding_sphere(box)
+        sphere = spheres.get(inst.id, spheres)
+        if sphere is spheres:  # not worked out yet (None: no shortcut for this box)
+            sphere = spheres[inst.id] = bounding_sphere(inst.box)
+        if sphere is not None and _farther(centre[1], sphere):
+            inside = memo[key] = False  # beyond the box's bounding sphere: outside, whatever the rounding
+        else:
+            inside = memo[key] = bool(inst.box.contains(centre[0][None, :])[0])
     return inside
+
+
+def view_centre(index: VisibilityIndex, view: str) -> np.ndarray:
+    """``view``'s camera centre (world metres, float64), memoised per view on the index: a shared array, read it only."""
+    return _camera_centre(index, view)[0]
+
+
+def _camera_centre(index: VisibilityIndex, view: str) -> tuple[np.ndarray, tuple[float, float, float]]:
+    """``view``'s camera centre and its coordinates as floats (memoised per view on the index)."""
+    centres = index_memo(index, "camera_centres")
+    centre = centres.get(view)
+    if centre is None:
+        point = camera_center(index.scene.views[view])
+        centre = centres[view] = (point, tuple(point.tolist()))
+    return centre
+
+
+def bounding_sphere(box: OrientedBox) -> tuple[tuple[float, float, float], float] | None:
+    """``(centre, r²)`` of a sphere holding every point ``box.contains`` accepts (tolerance 0), for a
+    cheap "surely outside" test: ``contains`` checks ``|(p − c) R| ≤ h`` per axis, so an accepted
+    point has ``|(p − c) R|² ≤ |h|²`` and ``|p − c| ≤ |h| / σ_min(R)``, with ``σ_min(R) ≥ 1 − ‖RᵀR − I‖``
+    for a rotation stored with rounding; r² carries a relative margin of 1e-9 for the float
+    arithmetic. ``None`` (no shortcut) for a rotation that far from orthonormal or non-finite numbers."""
+    rotation = np.asarray(box.rotation, dtype=np.float64)
+    deviation = float(np.linalg.norm(rotation.T @ rotation - np.eye(3)))
+    half = np.asarray(box.extents, dtype=np.float64) / 2.0
+    reach = float(half @ half)
+    centre = np.asarray(box.center, dtype=np.float64)
+    if not (deviation < 0.5 and math.isfinite(reach) and np.isfinite(centre).all()):
+        return None
+    return tuple(centre.tolist()), reach / (1.0 - deviation) ** 2 * (1.0 + 1e-9) + 1e-12  # type: ignore[return-value]
+
+
+def _farther(point: tuple[float, float, float], sphere: tuple[tuple[float, float, float], float]) -> bool:
+    """Whether ``point`` lies beyond ``sphere`` (:func:`bounding_sphere`); False for a non-finite point."""
+    (x, y, z), (cx, cy, cz) = point, sphere[0]
+    dx, dy, dz = x - cx, y - cy, z - cz
+    return dx * dx + dy * dy + dz * dz > sphere[1]
 
 
 def object_leg(index: VisibilityIndex, to_id: int, origin_id: int, up: np.ndarray) -> dict[str, Any] | None:

@@ -321,3 +321,30 @@ def test_round_robin_takes_one_item_per_stream_in_turn() -> None:
 
     merged = round_robin(stream(k) for k in range(3))
     assert started == [] and next(merged) == 0 and started == [0]  # started lazily
+
+
+def test_camera_inside_shortcut_agrees_with_the_box_test() -> None:
+    """``bounding_sphere``'s "surely outside" never rejects a point ``OrientedBox.contains`` accepts: random
+    boxes (rotations exact, rounded to 6 and 7 decimals, skewed by up to 2e-6: what OrientedBox accepts),
+    points on and near their faces and corners, inside, outside and far away."""
+    from spacedg.plugins.questions.records import _farther, bounding_sphere
+    from spacedg.scene.box import OrientedBox
+
+    rng = np.random.default_rng(17)
+    accepted = shortcut = 0
+    for k in range(400):
+        q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+        rotation = [q, np.round(q, 6), np.round(q, 7), q + rng.uniform(-2e-6, 2e-6, (3, 3))][k % 4]
+        box = OrientedBox(rng.uniform(-5, 5, 3), rng.uniform(0.01, 3, 3), rotation)
+        sphere = bounding_sphere(box)
+        assert sphere is not None
+        signs = rng.choice([-1.0, 1.0], (200, 3))
+        local = signs * box.extents / 2.0 * rng.choice([0.0, 0.5, 1.0 - 1e-12, 1.0, 1.0 + 1e-12, 1.5, 20.0], (200, 3))
+        points = box.center + local @ np.asarray(rotation).T
+        inside = box.contains(points)
+        accepted += int(inside.sum())
+        for point, hit in zip(points, inside):
+            if _farther(tuple(point.tolist()), sphere):
+                shortcut += 1
+                assert not hit
+    assert accepted > 1000 and shortcut > 1000
