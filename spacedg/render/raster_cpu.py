@@ -319,10 +319,14 @@ _GX, _GY, _CA, _CB, _CC, _OPA, _AMIN, _CR, _CG, _CBL, _Z = range(11)
 
 
 def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
-    """The compositing kernel with the output flags compiled in as constants (one specialisation each)."""
+    """The compositing kernel with the output flags compiled in as constants (one specialisation each).
 
-    @fork_safe
-    @numba.njit(parallel=True, fastmath=True, cache=True)
+    Each specialisation gets its own qualified name, so its on-disk numba cache has its own index
+    file: numba names a cache by qualified name and line, and two processes compiling *different*
+    specialisations of one shared index at once (two test lanes, DataLoader workers, ``qa build
+    --jobs``) could each pick the same data file for their own entry, leaving an index entry that
+    loads the other specialisation (a colour render without colour, seen once in CI)."""
+
     def composite_tiles(
         offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
         out_rgb, out_alpha, out_depth, out_median, out_ids,
@@ -389,7 +393,8 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
                             out_median[py, px] = zero
                             out_ids[py, px] = -1
 
-    return composite_tiles
+    composite_tiles.__qualname__ = f"composite_tiles_rgb{int(want_color)}_depth{int(want_depth)}_ids{int(want_ids)}"
+    return fork_safe(numba.njit(parallel=True, fastmath=True, cache=True)(composite_tiles))
 
 
 _COMPOSITE_KERNELS: dict[tuple[bool, bool, bool], object] = {}

@@ -180,3 +180,12 @@ def test_alpha_max_is_a_parameter() -> None:
     for alpha_max in (0.5, 0.99):
         frame = render(one, camera(32, 24), settings=RasterSettings(alpha_max=alpha_max))
         assert frame.alpha.max() == pytest.approx(alpha_max, abs=1e-6)
+
+
+def test_each_output_specialisation_has_its_own_disk_cache() -> None:
+    """numba names an on-disk cache by qualified name: the eight specialisations (and their serial twins)
+    must not share one index, or processes compiling different ones at once could mix them up."""
+    kernels = [raster_cpu._make_composite(c, d, i) for c in (True, False) for d in (True, False) for i in (True, False)]
+    names = {k.py_func.__qualname__ for k in kernels}
+    assert len(names) == 8
+    assert len({k.serial.py_func.__qualname__ for k in kernels} | names) == 16
