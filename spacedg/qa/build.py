@@ -93,8 +93,8 @@ __all__ = ["ALTERNATES", "prepare_scene", "generate_records", "build_scene_index
 ALTERNATES = 8
 #: A ``plain_rounds`` family's pool is first offered to :func:`~spacedg.qa.selection.prefix_settles`
 #: at this many records, then each time it has grown by :data:`ROUNDS_CHECK_GROWTH` (each check
-#: runs the selection on the pool so far: the checks cost about ``1 / (growth − 1)`` selections of
-#: the final pool, the overshoot up to ``growth − 1`` of it in scanning).
+#: runs the selection on the pool so far: the checks cost about ``growth / (growth − 1)`` selections
+#: of the final pool, 5 at 1.25, and the scan reads up to ``growth − 1`` more of it than it needs).
 ROUNDS_FIRST_CHECK = 64
 ROUNDS_CHECK_GROWTH = 1.25
 
