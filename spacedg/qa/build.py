@@ -279,17 +279,21 @@ class _PoolScan:
             raise self._broken("plain_rounds", "record without a selection entry", entry)
         if "cell" not in entry:
             raise self._broken("plain_rounds", "metric record (no selection cell)", entry)
-        if entry.get("all_roles", True) is False or entry.get("features"):
-            raise self._broken("plain_rounds", "record whose cell asks only the roles offered (all_roles false)"
-                               if entry.get("all_roles", True) is False else "record with selection features", entry)
+        if entry.get("all_roles", True) is False:
+            raise self._broken("plain_rounds", "record whose cell asks only the roles offered (all_roles false)", entry)
+        if entry.get("features"):
+            raise self._broken("plain_rounds", "record with selection features", entry)
         if sub not in self.family.sub_question_types:
             raise self._broken("plain_rounds", f"record of the undeclared sub type {sub!r}", entry)
         cell = str(entry["cell"])
         cell_sub = cell_subs.setdefault(cell, sub)
         if cell_sub != sub:
             raise self._broken("plain_rounds", f"record of sub type {sub!r} in a cell of sub type {cell_sub!r}", entry)
-        missing, size = self.roles_missing.get(cell) or self.roles_missing.setdefault(
-            cell, ({str(r) for r in entry.get("roles", ())}, len(entry.get("roles", ()))))
+        state = self.roles_missing.get(cell)
+        if state is None:  # the cell's first record: its roles are the round's, as the selection reads them
+            roles = entry.get("roles", ())
+            state = self.roles_missing[cell] = ({str(r) for r in roles}, len(roles))
+        missing, size = state
         if missing:
             missing.discard(str(entry["role"]))
             if not missing and size >= 2:

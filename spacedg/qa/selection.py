@@ -297,14 +297,15 @@ class _Selection:
         cells, roles = self.pool.cells, self.pool.cell_roles
         # a cell needs two roles at least: a one-role cell would be answered by its text alone
         open_cells = [c for c in cells if len(roles[c]) >= 2 and all(cells[c].get(role) for role in roles[c])]
-        visits = open_cells
+        visits, lacking = open_cells, set()
         if trace is not None:  # the first visits pass the cells that lack a role too, in their place, and tell the trace
             visits = [c for c in cells if len(roles[c]) >= 2]
+            lacking = set(visits).difference(open_cells)
         while open_cells:
             still = []
             for cell in visits:
-                if trace is not None and not all(cells[cell].get(role) for role in roles[cell]):
-                    trace.incomplete(cell, self.room)
+                if cell in lacking:
+                    trace.incomplete(cell, self.room)  # type: ignore[union-attr]
                     continue
                 round_ = self.next_round(cell, trace)
                 if round_ is None:
