@@ -21,6 +21,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
 __all__ = ["decode_srgb", "encode_srgb_u8", "encode_thresholds"]

@@ -35,6 +35,7 @@ import math
 import numba
 import numpy as np
 
+from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
 __all__ = ["doubling_pass", "flow_field", "gather", "relative_transform"]

@@ -41,6 +41,7 @@ import numpy as np
 from spacedg.render.camera import equidistant_theta_d, equidistant_theta_d_slope
 from spacedg.render.gaussians import _SH_C1, _SH_C2, _SH_C3, SH_C0
 from spacedg.render.settings import DEFOCUS_MIN_COC, FOOTPRINT_CAP, footprint_dilation
+from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
 if TYPE_CHECKING:

@@ -30,6 +30,7 @@ import numba
 import numpy as np
 
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, CR, DEPTH, OPA, PX, PY, RADY
+from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
 @numba.njit(cache=True, inline="always")

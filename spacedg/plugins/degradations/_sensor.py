@@ -65,6 +65,7 @@ from statistics import NormalDist
 import numba
 import numpy as np
 
+from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
 try:  # LLVM ctlz: used to find the octave of a uniform in the normal-quantile table

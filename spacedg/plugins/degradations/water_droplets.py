@@ -122,6 +122,7 @@ from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins.degradations.common import box_pad, check_linear_rgb, reflect_index, snapped_size
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
+from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
 __all__ = [
