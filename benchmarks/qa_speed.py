@@ -21,11 +21,14 @@ chance (:func:`~spacedg.qa.audit.blind_audit`, leave one scene out over every ro
 rooms are the built-in synthetic rooms (``spacedg scenes synth``: seeds 0–3, the demo rooms, and
 ``--other-seed`` … +3), generated once into ``--work`` (default ``/tmp/qa-speed``) unless given
 with ``--rooms``. Both checkouts build every room's index (:func:`~spacedg.qa.build.build_scene_index`, default
-settings, one process, ``NUMBA_NUM_THREADS=1``) in their own interpreter (``PYTHONPATH``), one
-after the other, with the visibility and covisibility caches in place (``_rooms`` fills them with
-a first ``qa build``), so what differs is question generation. Per room: records, the
-CPU seconds (``time.process_time``: robust on a loaded machine) and wall seconds of each build,
-their ratios, and whether the two ``<scene>.qa.jsonl`` files have the same SHA-256. Then the new code's
+settings, one process, ``NUMBA_NUM_THREADS=1``) in their own interpreter (``PYTHONPATH``),
+alternately ``--repeats`` times (default 3: base, new, base, …), with the visibility and
+covisibility caches in place (``_rooms`` fills them with a first ``qa build``), so what differs is
+question generation. Each round's ratio is printed as it ends; the tables take each room's fastest
+run per side (the same generation of a room varied by up to 50 % between runs on a shared
+2-core machine, a few-second run most). Per room: records, the CPU seconds
+(``time.process_time``) and wall seconds of each build, their ratios, and whether the two
+``<scene>.qa.jsonl`` files have the same SHA-256. Then the new code's
 generation of one room under cProfile (``NUMBA_NUM_THREADS=1``): the top functions by own time.
 """
 
@@ -106,6 +109,30 @@ def _build(code: Path, rooms: list[Path], out: Path, mode: str = "bench") -> dic
     for scene, (n, wall, cpu) in json.loads(done.stdout.strip().splitlines()[-1]).items():
         result[scene] = (n, wall, cpu, hashlib.sha256(_index_file(out, scene, mode).read_bytes()).hexdigest())
     return result
+
+
+def _alternated(base_code: Path, rooms: list[Path], work: Path, group: int, mode: str, repeats: int) -> tuple[dict, dict]:
+    """Build every room with ``base_code`` and with this checkout, alternately, ``repeats`` times
+    (base, new, base, new, …: a slow spell of the machine hits both sides); returns each side's
+    per-room :func:`_build` result with the **fastest** wall and CPU time of its runs (a loaded
+    machine only ever adds time; a run of a few seconds is hit hardest). Prints each round's
+    ratio of the sums, so the spread is visible. Every run of a side must give the same index bytes."""
+    runs: dict[str, list[dict]] = {"base": [], "new": []}
+    for rep in range(repeats):
+        runs["base"].append(_build(base_code, rooms, work / f"base{group}", mode))
+        runs["new"].append(_build(HERE, rooms, work / f"new{group}", mode))
+        if repeats > 1:
+            cpu = [sum(r[2] for r in runs[side][-1].values()) for side in ("base", "new")]
+            print(f"  round {rep + 1}/{repeats}: base {cpu[0]:.2f} s, new {cpu[1]:.2f} s of CPU: {cpu[0] / cpu[1]:.1f}x", flush=True)
+    fastest = []
+    for side, results in runs.items():
+        merged = {}
+        for scene, (n, _, _, sha) in results[0].items():
+            if any(r[scene][3] != sha for r in results):
+                raise SystemExit(f"{side}: {scene}'s index differs between runs of the same code")
+            merged[scene] = (n, min(r[scene][1] for r in results), min(r[scene][2] for r in results), sha)
+        fastest.append(merged)
+    return fastest[0], fastest[1]
 
 
 def _compare(label: str, base: dict, new: dict, reference: dict | None = None) -> tuple[float, float, bool]:
@@ -272,6 +299,8 @@ def main() -> None:
     parser.add_argument("--other-seed", type=int, default=20)
     parser.add_argument("--n", type=int, default=4, help="rooms per seed")
     parser.add_argument("--mode", choices=("bench", "train"), default="bench", help="the selection timed (qa build --mode)")
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="builds per side, alternating base and new; the tables take each room's fastest (default 3)")
     parser.add_argument("--no-profile", action="store_true")
     parser.add_argument("--top", type=int, default=20)
     args = parser.parse_args()
@@ -282,8 +311,7 @@ def main() -> None:
     totals = [0.0, 0.0]
     pairs: list[tuple[dict, dict]] = []
     for i, (label, rooms) in enumerate(groups.items()):
-        base = _build(args.base, rooms, args.work / f"base{i}", args.mode)
-        new = _build(HERE, rooms, args.work / f"new{i}", args.mode)
+        base, new = _alternated(args.base, rooms, args.work, i, args.mode, args.repeats)
         if args.same_as is not None:
             same = _build(args.same_as, rooms, args.work / f"same{i}", args.mode)
             _compare(f"{label}: --same-as {args.same_as} (reference of the identity) vs this checkout", same, new)
