@@ -31,7 +31,7 @@ import os
 import types
 from typing import Any
 
-__all__ = ["ForkSafeKernel", "fork_safe", "serial_mode", "set_render_threads"]
+__all__ = ["ForkSafeKernel", "fork_safe", "limit_blas_threads", "serial_mode", "set_render_threads"]
 
 _serial = False
 
@@ -113,10 +113,28 @@ def fork_safe(dispatcher: Any) -> ForkSafeKernel:
 
 def set_render_threads(count: int) -> int:
     """Use ``count`` numba threads for this process's parallel kernels (clamped to
-    ``[1, NUMBA_NUM_THREADS]``); returns the count set. Imports numba (the compiled path's
-    runtime); call it in the process that renders, e.g. a DataLoader worker."""
+    ``[1, NUMBA_NUM_THREADS]``), and at most as many for numpy's BLAS (:func:`limit_blas_threads`);
+    returns the count set. Imports numba (the compiled path's runtime); call it in the process
+    that renders, e.g. a DataLoader worker."""
     import numba
 
     count = max(1, min(int(count), int(numba.config.NUMBA_NUM_THREADS)))
     numba.set_num_threads(count)
+    limit_blas_threads(count)
     return count
+
+
+def limit_blas_threads(count: int) -> None:
+    """numpy's BLAS (OpenBLAS, MKL, …) on at most ``count`` threads in this process (threadpoolctl).
+
+    Why: a worker process's BLAS pool starts with every core's thread, so the workers of one
+    machine oversubscribe it: the camera projection of the scene depth (``spacedg.data.pipeline.view_depth``,
+    one 167k × 3 by 3 × 3 product) took 31–36 ms a view in two processes at once against 9–11 ms
+    with one BLAS thread each, on 2 cores. A matrix product's bytes do not depend on the thread
+    count (BLAS splits the rows and columns of the result, not the sums). Nothing happens without
+    threadpoolctl or a BLAS it knows."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - a dependency; a stripped environment keeps the defaults
+        return
+    threadpool_limits(limits=max(1, int(count)), user_api="blas")
