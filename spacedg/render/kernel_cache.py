@@ -6,9 +6,9 @@ first number the index does not use, writes the index, then the data. Two proces
 **different** signatures of one function at once (the two test lanes on a fresh clone,
 DataLoader workers or ``qa build --jobs`` on a fresh install) can both take the same number:
 the index that survives then names a data file the other process wrote, and the next process
-loads that entry's machine code for the wrong signature, without any error. Seen once in CI
-(stop 42): colour renders came out black; stop 42 gave the compositor's specialisations their
-own names, which closed that case only.
+loads that entry's machine code for the wrong signature, without any error. Seen once in CI:
+colour renders came out black; giving the compositor's specialisations their own names
+(:func:`spacedg.render.raster_cpu._make_composite`) closed that case only.
 
 What this does: each data file also holds the key (signature, target, source hashes) it was
 written for; a load whose data file holds another key, or a file written without a key (numba's
