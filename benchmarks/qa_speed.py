@@ -304,6 +304,8 @@ def main() -> None:
     parser.add_argument("--no-profile", action="store_true")
     parser.add_argument("--top", type=int, default=20)
     args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error(f"--repeats must be at least 1, got {args.repeats}")
     groups = {"given rooms": args.rooms} if args.rooms else {
         "demo rooms (seeds 0-3)": _rooms(args.work, 0, args.n, HERE),
         f"rooms of seed {args.other_seed}": _rooms(args.work, args.other_seed, args.n, HERE),

@@ -13,8 +13,8 @@ colour renders came out black; giving the compositor's specialisations their own
 What this does: each data file also holds the key (signature, target, source hashes) it was
 written for; a load whose data file holds another key, or a file written without a key (numba's
 own format, an older spacedg), is a cache miss: numba compiles again and writes the entry anew.
-A wrong entry can then cost a compile, never a wrong result. Installed by importing this module
-(:mod:`spacedg.render.threads`, which every spacedg kernel module imports, does); it patches
+A wrong entry can then cost a compile, never a wrong result. Installed by importing this module,
+which every spacedg module with cached kernels does before defining them; it patches
 ``numba.core.caching.IndexDataCacheFile`` for the whole process, so other packages' cached
 kernels are checked too (their entries written before are recompiled once).
 """
