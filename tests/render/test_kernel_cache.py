@@ -17,16 +17,35 @@ from spacedg.render import kernel_cache
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
-def _cache_file(folder: Path) -> IndexDataCacheFile:
-    return IndexDataCacheFile(str(folder), "kernel-12.py311", ("source stamp", 1))
+def _cache_file(folder: Path, checked: bool = True) -> IndexDataCacheFile:
+    """A cache file of a kernel whose source lies in ``folder`` (its ``__pycache__``), checked or not."""
+    if checked:
+        kernel_cache.check_caches_under(folder)
+    (folder / "__pycache__").mkdir(parents=True, exist_ok=True)  # numba's locator makes it
+    return IndexDataCacheFile(str(folder / "__pycache__"), "kernel-12.py311", ("source stamp", 1))
 
 
-def test_the_check_is_installed_by_the_kernel_modules() -> None:
+def test_the_check_is_installed_by_the_kernel_modules_for_spacedgs_own_caches() -> None:
+    import spacedg
     import spacedg.render.raster_cpu  # noqa: F401 - any kernel module installs it
 
     assert kernel_cache.installed()
     assert kernel_cache.install()  # idempotent
     assert kernel_cache.installed()
+    package = Path(spacedg.__file__).parent
+    assert kernel_cache._is_checked(IndexDataCacheFile(str(package / "render" / "__pycache__"), "k-1.py311", ("stamp", 1)))
+    mirrored = str(package / "render").lstrip("/")  # NUMBA_CACHE_DIR and the user-wide cache mirror the source folder
+    assert kernel_cache._is_checked(IndexDataCacheFile(f"/var/cache/numba/{mirrored}", "k-1.py311", ("stamp", 1)))
+    assert not kernel_cache._is_checked(IndexDataCacheFile(str(package.with_name("spacedg_other") / "__pycache__"), "k-1.py311", ("stamp", 1)))
+
+
+def test_other_packages_caches_keep_numbas_own_format(tmp_path: Path) -> None:
+    """A process without spacedg must still read them: no key is added, none is asked for."""
+    cache = _cache_file(tmp_path / "elsewhere", checked=False)
+    cache.save(("float64",), ("machine code",))
+    name = cache._load_index()[("float64",)]
+    assert cache._load_data(name) == ("machine code",)
+    assert cache.load(("float64",)) == ("machine code",)
 
 
 def test_an_entry_naming_another_keys_data_is_a_miss(tmp_path: Path) -> None:
@@ -59,8 +78,11 @@ def test_a_data_file_without_its_key_is_a_miss(tmp_path: Path) -> None:
 _KERNEL = textwrap.dedent(
     """
     import sys
+    import os
     import numba
-    from spacedg.render import kernel_cache  # noqa: F401
+    from spacedg.render import kernel_cache
+
+    kernel_cache.check_caches_under(os.path.dirname(os.path.abspath(__file__)))
 
     @numba.njit(cache=True)
     def scaled(x):
