@@ -22,7 +22,7 @@ rooms are the built-in synthetic rooms (``spacedg scenes synth``: seeds 0–3, t
 ``--other-seed`` … +3), generated once into ``--work`` (default ``/tmp/qa-speed``) unless given
 with ``--rooms``. Both checkouts build every room's index (:func:`~spacedg.qa.build.build_scene_index`, default
 settings, one process, ``NUMBA_NUM_THREADS=1``) in their own interpreter (``PYTHONPATH``),
-alternately ``--repeats`` times (default 3: base, new, base, …), with the visibility and
+alternately ``--repeats`` times (default 3: base, new, new, base, …), with the visibility and
 covisibility caches in place (``_rooms`` fills them with a first ``qa build``), so what differs is
 question generation. Each round's ratio is printed as it ends; the tables take each room's fastest
 run per side (the same generation of a room varied by up to 50 % between runs on a shared
@@ -113,14 +113,17 @@ def _build(code: Path, rooms: list[Path], out: Path, mode: str = "bench") -> dic
 
 def _alternated(base_code: Path, rooms: list[Path], work: Path, group: int, mode: str, repeats: int) -> tuple[dict, dict]:
     """Build every room with ``base_code`` and with this checkout, alternately, ``repeats`` times
-    (base, new, base, new, …: a slow spell of the machine hits both sides); returns each side's
-    per-room :func:`_build` result with the **fastest** wall and CPU time of its runs (a loaded
-    machine only ever adds time; a run of a few seconds is hit hardest). Prints each round's
-    ratio of the sums, so the spread is visible. Every run of a side must give the same index bytes."""
+    (base, new, new, base, …: a slow spell or a drift of the machine hits both sides); returns each
+    side's per-room :func:`_build` result with the **fastest** wall and the fastest CPU time of its
+    runs (each its own minimum, possibly of different runs: a loaded machine only ever adds time,
+    and a run of a few seconds is hit hardest). Prints each round's ratio of the sums, so the
+    spread is visible. Every run of a side must give the same index bytes."""
     runs: dict[str, list[dict]] = {"base": [], "new": []}
+    sides = {"base": (base_code, work / f"base{group}"), "new": (HERE, work / f"new{group}")}
     for rep in range(repeats):
-        runs["base"].append(_build(base_code, rooms, work / f"base{group}", mode))
-        runs["new"].append(_build(HERE, rooms, work / f"new{group}", mode))
+        for side in ("base", "new") if rep % 2 == 0 else ("new", "base"):  # base, new, new, base, …
+            code, out = sides[side]
+            runs[side].append(_build(code, rooms, out, mode))
         if repeats > 1:
             cpu = [sum(r[2] for r in runs[side][-1].values()) for side in ("base", "new")]
             print(f"  round {rep + 1}/{repeats}: base {cpu[0]:.2f} s, new {cpu[1]:.2f} s of CPU: {cpu[0] / cpu[1]:.1f}x", flush=True)

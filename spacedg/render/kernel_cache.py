@@ -10,102 +10,115 @@ loads that entry's machine code for the wrong signature, without any error. Seen
 colour renders came out black; giving the compositor's specialisations their own names
 (:func:`spacedg.render.raster_cpu._make_composite`) closed that case only.
 
-What this does: each data file of a kernel whose cache lies under a checked folder (spacedg's
-package: its ``__pycache__`` folders, or their mirrors under ``NUMBA_CACHE_DIR`` or numba's
-user-wide cache) also holds the key (signature, target, source hashes) it was written for; a
-load whose data file holds another key, or a file written without a key (an older spacedg), is a
-cache miss: numba compiles again and writes the entry anew. A wrong entry can then cost a compile,
-never a wrong result. Every other package's cache keeps numba's own format untouched (so a
-process without spacedg still reads it). Installed by importing this module, which every spacedg
-module with cached kernels does before defining them; it wraps
-``numba.core.caching.IndexDataCacheFile.save``/``load`` for the process.
+What this does: a kernel whose source file lies under a checked folder (spacedg's package;
+:func:`check_caches_under` adds one) caches through :class:`CheckedCacheFile`: its files are
+named ``<numba's name>.checked.nbi`` / ``.checked.<n>.nbc`` and each data file also holds the
+key (signature, target, source hashes) it was written for; a load whose data file holds another
+key is a cache miss: numba compiles again and writes the entry anew. A wrong entry can then cost a
+compile, never a wrong result. The decision is made from the kernel's source file, so it holds
+wherever numba puts the cache (``__pycache__``, ``NUMBA_CACHE_DIR``, the user-wide cache). Every
+other kernel keeps numba's own files, untouched, and numba without this module never opens the
+``.checked`` files (other names). Installed by importing this module, which every spacedg module
+with cached kernels does before defining them (a test holds them to it): it wraps
+``numba.core.caching.Cache.__init__`` for the process.
 """
 
 from __future__ import annotations
 
+import inspect
 import os
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ENTRY_TAG", "check_caches_under", "checked_roots", "install", "installed"]
+from numba.core import caching
 
-#: First item of every data file this module writes: ``(ENTRY_TAG, key, data)``.
+__all__ = ["CHECKED_SUFFIX", "ENTRY_TAG", "CheckedCacheFile", "check_caches_under", "checked_roots", "install", "installed", "is_checked_source"]
+
+#: First item of every data file a :class:`CheckedCacheFile` writes: ``(ENTRY_TAG, key, data)``.
 ENTRY_TAG = "spacedg-kernel-cache-entry-1"
+#: Added to numba's file name base of a checked kernel's cache files.
+CHECKED_SUFFIX = ".checked"
 
-#: The folders (absolute, without drive or leading separator, ending in one) whose kernels' caches are checked.
+#: The folders (real paths) whose kernels' caches are checked.
 _ROOTS: list[str] = []
 
 
-def _mirrored(path: str | os.PathLike[str]) -> str:
-    """``path`` as numba's cache locators embed a source folder in a cache folder: absolute,
-    without its drive and leading separator (``/a/b`` → ``a/b/``)."""
-    rest = os.path.splitdrive(os.path.abspath(os.fspath(path)))[1]
-    return rest.strip(os.sep) + os.sep
+class CheckedCacheFile(caching.IndexDataCacheFile):
+    """numba's index and data files, each data file holding the key it was written for (module docstring)."""
+
+    def save(self, key: Any, data: Any) -> None:
+        """Save ``(ENTRY_TAG, key, data)`` as numba saves ``data``."""
+        super().save(key, (ENTRY_TAG, key, data))
+
+    def load(self, key: Any) -> Any:
+        """numba's entry for ``key``, or ``None`` (a miss: numba compiles) unless its data file was written for ``key``."""
+        entry = super().load(key)
+        if type(entry) is tuple and len(entry) == 3 and entry[0] == ENTRY_TAG and entry[1] == key:
+            return entry[2]
+        return None
 
 
 def check_caches_under(folder: str | os.PathLike[str]) -> None:
-    """Also check the cache entries of kernels whose source lies under ``folder`` (spacedg's own
-    package is checked from the start; a test or a plugin with cached kernels may add its folder)."""
-    root = _mirrored(folder)
+    """Also check the caches of kernels whose source file lies under ``folder`` (spacedg's package is
+    checked from the start; a plugin with cached kernels, or a test, may add its own folder). Takes
+    effect for kernels defined afterwards."""
+    root = os.path.realpath(os.fspath(folder))
     if root not in _ROOTS:
         _ROOTS.append(root)
 
 
 def checked_roots() -> tuple[str, ...]:
-    """The folders whose kernels' cache entries are checked (:func:`check_caches_under`)."""
+    """The folders (real paths) whose kernels' caches are checked."""
     return tuple(_ROOTS)
 
 
-def _is_checked(cache_file: Any) -> bool:
-    """Whether ``cache_file`` (an ``IndexDataCacheFile``) belongs to a kernel under a checked folder."""
-    where = _mirrored(getattr(cache_file, "_cache_path", ""))
-    return any(root in where for root in _ROOTS)
+def is_checked_source(path: str | os.PathLike[str]) -> bool:
+    """Whether a kernel defined in the source file ``path`` caches through :class:`CheckedCacheFile`
+    (the file lies under a checked folder, compared by path components after resolving links)."""
+    real = os.path.realpath(os.fspath(path))
+    for root in _ROOTS:
+        try:
+            if os.path.commonpath([real, root]) == root:
+                return True
+        except ValueError:  # another drive
+            continue
+    return False
 
 
-def _checked_save(plain_save: Any) -> Any:
-    def save(self: Any, key: Any, data: Any) -> None:
-        """numba's ``save``; under a checked folder the data file holds ``(ENTRY_TAG, key, data)``."""
-        plain_save(self, key, (ENTRY_TAG, key, data) if _is_checked(self) else data)
+def _checked_init(plain_init: Any) -> Any:
+    def __init__(self: Any, py_func: Any) -> None:
+        """numba's ``Cache.__init__``; a kernel under a checked folder then caches through :class:`CheckedCacheFile`."""
+        plain_init(self, py_func)
+        try:
+            source = inspect.getfile(py_func)
+        except TypeError:
+            return
+        if is_checked_source(source):
+            self._cache_file = CheckedCacheFile(
+                cache_path=self._cache_path, filename_base=self._impl.filename_base + CHECKED_SUFFIX,
+                source_stamp=self._impl.locator.get_source_stamp(),
+            )
 
-    return save
-
-
-def _checked_load(plain_load: Any) -> Any:
-    def load(self: Any, key: Any) -> Any:
-        """numba's ``load``; under a checked folder ``None`` (a miss: numba compiles) unless the data
-        file was written for ``key``."""
-        entry = plain_load(self, key)
-        if entry is None or not _is_checked(self):
-            return entry
-        if type(entry) is tuple and len(entry) == 3 and entry[0] == ENTRY_TAG and entry[1] == key:
-            return entry[2]
-        return None
-
-    return load
+    __init__._spacedg_checked = True  # type: ignore[attr-defined]
+    return __init__
 
 
 def install() -> bool:
-    """Check the cache entries of spacedg's kernels in this process (module docstring); idempotent.
-    Returns whether the check is active (``False`` if this numba has no
-    ``IndexDataCacheFile.save``/``load``: numba's cache then works as numba's own)."""
-    from numba.core import caching
-
-    check_caches_under(Path(os.path.abspath(__file__)).parents[1])  # spacedg/, as its modules' __file__ name it
-    cache_file = getattr(caching, "IndexDataCacheFile", None)
-    if cache_file is None or not callable(getattr(cache_file, "save", None)) or not callable(getattr(cache_file, "load", None)):
+    """Check the caches of spacedg's kernels in this process (module docstring); idempotent. Returns
+    whether the check is active (``False`` if this numba's ``Cache`` does not build its cache file
+    in ``__init__`` as 0.60–0.68 do: numba's cache then works as numba's own)."""
+    check_caches_under(Path(__file__).resolve().parents[1])
+    init = getattr(caching.Cache, "__init__", None)
+    if init is None or not hasattr(caching, "IndexDataCacheFile"):
         return False
-    if not getattr(cache_file, "_spacedg_checked", False):
-        cache_file.save = _checked_save(cache_file.save)
-        cache_file.load = _checked_load(cache_file.load)
-        cache_file._spacedg_checked = True
+    if not getattr(init, "_spacedg_checked", False):
+        caching.Cache.__init__ = _checked_init(init)
     return True
 
 
 def installed() -> bool:
     """Whether the check is active in this process."""
-    from numba.core import caching
-
-    return bool(getattr(getattr(caching, "IndexDataCacheFile", None), "_spacedg_checked", False))
+    return bool(getattr(caching.Cache.__init__, "_spacedg_checked", False))
 
 
 install()

@@ -125,16 +125,23 @@ def set_render_threads(count: int) -> int:
 
 
 def limit_blas_threads(count: int) -> None:
-    """numpy's BLAS (OpenBLAS, MKL, …) on at most ``count`` threads in this process (threadpoolctl).
+    """numpy's BLAS (OpenBLAS, MKL, …) on at most ``count`` threads in this process (threadpoolctl):
+    each BLAS pool keeps its own count when that is lower already (``OPENBLAS_NUM_THREADS=1``).
 
     Why: a worker process's BLAS pool starts with every core's thread, so the workers of one
     machine oversubscribe it: the camera projection of the scene depth (``spacedg.data.pipeline.view_depth``,
     one 167k × 3 by 3 × 3 product) took 31–36 ms a view in two processes at once against 9–11 ms
-    with one BLAS thread each, on 2 cores. A matrix product's bytes do not depend on the thread
-    count (BLAS splits the rows and columns of the result, not the sums). Nothing happens without
-    threadpoolctl or a BLAS it knows."""
+    with one BLAS thread each, on 2 cores. The products spacedg computes (a few columns) come out
+    the same bytes on any thread count (BLAS splits the rows and columns of the result; a long sum,
+    as in a threaded ``dot``, could split differently). Nothing happens without threadpoolctl or a
+    BLAS it knows."""
     try:
-        from threadpoolctl import threadpool_limits
+        from threadpoolctl import threadpool_info, threadpool_limits
     except ImportError:  # pragma: no cover - a dependency; a stripped environment keeps the defaults
         return
-    threadpool_limits(limits=max(1, int(count)), user_api="blas")
+    limits = {
+        pool["prefix"]: min(max(1, int(count)), int(pool["num_threads"]))
+        for pool in threadpool_info() if pool.get("user_api") == "blas" and pool.get("num_threads")
+    }
+    if limits:
+        threadpool_limits(limits=limits)

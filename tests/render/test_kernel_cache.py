@@ -1,55 +1,57 @@
 """numba's on-disk cache with checked entries (spacedg.render.kernel_cache): an index entry that
-names another signature's data file (two processes saving at once) is a miss, never wrong code."""
+names another signature's data file (two processes saving at once) is a miss, never wrong code;
+other packages' kernels keep numba's own cache files."""
 
 from __future__ import annotations
 
 import os
 import pickle
+import re
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
+import pytest
 from numba.core.caching import IndexDataCacheFile
 
 from spacedg.render import kernel_cache
+from spacedg.render.kernel_cache import CheckedCacheFile
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
+PACKAGE = REPO_ROOT / "spacedg"
 
 
-def _cache_file(folder: Path, checked: bool = True) -> IndexDataCacheFile:
-    """A cache file of a kernel whose source lies in ``folder`` (its ``__pycache__``), checked or not."""
-    if checked:
-        kernel_cache.check_caches_under(folder)
+def _checked_file(folder: Path) -> CheckedCacheFile:
     (folder / "__pycache__").mkdir(parents=True, exist_ok=True)  # numba's locator makes it
-    return IndexDataCacheFile(str(folder / "__pycache__"), "kernel-12.py311", ("source stamp", 1))
+    return CheckedCacheFile(str(folder / "__pycache__"), "kernel-12.py311.checked", ("source stamp", 1))
 
 
-def test_the_check_is_installed_by_the_kernel_modules_for_spacedgs_own_caches() -> None:
-    import spacedg
-    import spacedg.render.raster_cpu  # noqa: F401 - any kernel module installs it
+def test_the_check_is_installed_for_spacedgs_own_kernels(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    import spacedg.render.raster_cpu as raster_cpu
 
-    assert kernel_cache.installed()
-    assert kernel_cache.install()  # idempotent
-    assert kernel_cache.installed()
-    package = Path(spacedg.__file__).parent
-    assert kernel_cache._is_checked(IndexDataCacheFile(str(package / "render" / "__pycache__"), "k-1.py311", ("stamp", 1)))
-    mirrored = str(package / "render").lstrip("/")  # NUMBA_CACHE_DIR and the user-wide cache mirror the source folder
-    assert kernel_cache._is_checked(IndexDataCacheFile(f"/var/cache/numba/{mirrored}", "k-1.py311", ("stamp", 1)))
-    assert not kernel_cache._is_checked(IndexDataCacheFile(str(package.with_name("spacedg_other") / "__pycache__"), "k-1.py311", ("stamp", 1)))
+    assert kernel_cache.installed() and kernel_cache.install() and kernel_cache.installed()  # idempotent
+    assert type(raster_cpu.bin_tiles._cache._cache_file) is CheckedCacheFile
+    assert kernel_cache.is_checked_source(PACKAGE / "render" / "raster_cpu.py")
+    assert not kernel_cache.is_checked_source(REPO_ROOT / "tests" / "render" / "test_kernel_cache.py")
+    monkeypatch.setattr(kernel_cache, "_ROOTS", [str((tmp_path / "pkg").resolve())])
+    assert kernel_cache.is_checked_source(tmp_path / "pkg" / "sub" / "kernels.py")
+    assert not kernel_cache.is_checked_source(tmp_path / "pkg2" / "kernels.py")  # a sibling sharing the prefix
+    assert not kernel_cache.is_checked_source(tmp_path / "other" / "pkg" / "kernels.py")  # the name deeper in a path
 
 
-def test_other_packages_caches_keep_numbas_own_format(tmp_path: Path) -> None:
-    """A process without spacedg must still read them: no key is added, none is asked for."""
-    cache = _cache_file(tmp_path / "elsewhere", checked=False)
-    cache.save(("float64",), ("machine code",))
-    name = cache._load_index()[("float64",)]
-    assert cache._load_data(name) == ("machine code",)
-    assert cache.load(("float64",)) == ("machine code",)
+def test_other_packages_kernels_keep_numbas_own_cache_files() -> None:
+    import numba
+
+    @numba.njit(cache=True)
+    def elsewhere(x):  # pragma: no cover - compiled; defined outside spacedg's package
+        return x + 1
+
+    assert type(elsewhere._cache._cache_file) is IndexDataCacheFile
 
 
 def test_an_entry_naming_another_keys_data_is_a_miss(tmp_path: Path) -> None:
-    cache = _cache_file(tmp_path)
+    cache = _checked_file(tmp_path)
     mine, theirs = ("float64",), ("int64",)
     cache.save(mine, ("machine code for float64",))
     assert cache.load(mine) == ("machine code for float64",)
@@ -65,19 +67,29 @@ def test_an_entry_naming_another_keys_data_is_a_miss(tmp_path: Path) -> None:
 
 
 def test_a_data_file_without_its_key_is_a_miss(tmp_path: Path) -> None:
-    cache = _cache_file(tmp_path)
+    cache = _checked_file(tmp_path)
     key = ("float32",)
     cache.save(key, "anything")
     name = cache._load_index()[key]
-    cache._save_data(name, ("numba's own format",))  # written by numba without the check, or an older spacedg
+    cache._save_data(name, ("numba's own format",))
     assert cache.load(key) is None
     cache.save(key, ("recompiled",))
     assert cache.load(key) == ("recompiled",)
 
 
+def test_every_spacedg_module_with_cached_kernels_installs_the_check_first() -> None:
+    """The check applies to kernels defined after its import: each module with ``cache=True`` imports it before any."""
+    for path in sorted(PACKAGE.rglob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        first_cached = text.find("cache=True")
+        if first_cached < 0 or path.name == "kernel_cache.py":
+            continue
+        found = re.search(r"^from spacedg\.render import kernel_cache\b", text, flags=re.MULTILINE)
+        assert found and found.start() < first_cached, f"{path.relative_to(REPO_ROOT)} defines cached kernels without importing kernel_cache first"
+
+
 _KERNEL = textwrap.dedent(
     """
-    import sys
     import os
     import numba
     from spacedg.render import kernel_cache
@@ -88,7 +100,8 @@ _KERNEL = textwrap.dedent(
     def scaled(x):
         return x * 3
 
-    print(repr(scaled(2)), repr(scaled(0.5)), flush=True)
+    values = (scaled(2), scaled(0.5))
+    print(repr(values[0]), repr(values[1]), len(scaled.stats.cache_misses), flush=True)
     """
 )
 
@@ -102,10 +115,10 @@ def _run(folder: Path) -> str:
 
 def test_a_real_kernel_survives_crossed_cache_entries(tmp_path: Path) -> None:
     """Two signatures of one cached kernel, their index entries crossed as the race leaves them:
-    the next process computes the right values (it recompiles) and then loads them from the cache."""
+    the next process computes the right values (it recompiles both), the one after loads them."""
     (tmp_path / "kernel_module.py").write_text(_KERNEL)
-    assert _run(tmp_path) == "6 1.5"
-    [index_path] = list((tmp_path / "__pycache__").glob("kernel_module.scaled-*.nbi"))
+    assert _run(tmp_path) == "6 1.5 2"  # compiled both
+    [index_path] = list((tmp_path / "__pycache__").glob("kernel_module.scaled-*.checked.nbi"))
     with open(index_path, "rb") as f:
         version = pickle.load(f)
         stamp, overloads = pickle.loads(f.read())
@@ -114,5 +127,5 @@ def test_a_real_kernel_survives_crossed_cache_entries(tmp_path: Path) -> None:
     with open(index_path, "wb") as f:
         pickle.dump(version, f, protocol=-1)
         f.write(pickle.dumps((stamp, {key_a: name_b, key_b: name_a}), protocol=-1))
-    assert _run(tmp_path) == "6 1.5"
-    assert _run(tmp_path) == "6 1.5"
+    assert _run(tmp_path) == "6 1.5 2"  # both entries refused: compiled again, right values
+    assert _run(tmp_path) == "6 1.5 0"  # and now both loaded from the cache
