@@ -32,7 +32,7 @@ from typing import Any
 
 from numba.core import caching
 
-__all__ = ["CHECKED_SUFFIX", "ENTRY_TAG", "CheckedCacheFile", "check_caches_under", "checked_roots", "install", "installed", "is_checked_source"]
+__all__ = ["CHECKED_SUFFIX", "ENTRY_TAG", "CheckedCacheFile", "check_caches_under", "install", "installed", "is_checked_source"]
 
 #: First item of every data file a :class:`CheckedCacheFile` writes: ``(ENTRY_TAG, key, data)``.
 ENTRY_TAG = "spacedg-kernel-cache-entry-1"
@@ -65,11 +65,6 @@ def check_caches_under(folder: str | os.PathLike[str]) -> None:
     root = os.path.realpath(os.fspath(folder))
     if root not in _ROOTS:
         _ROOTS.append(root)
-
-
-def checked_roots() -> tuple[str, ...]:
-    """The folders (real paths) whose kernels' caches are checked."""
-    return tuple(_ROOTS)
 
 
 def is_checked_source(path: str | os.PathLike[str]) -> bool:

@@ -326,7 +326,9 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
     file: numba names a cache by qualified name and line, and two processes compiling *different*
     specialisations of one shared index at once (two test lanes, DataLoader workers, ``qa build
     --jobs``) could each pick the same data file for their own entry, leaving an index entry that
-    loads the other specialisation (a colour render without colour, seen once in CI)."""
+    loads the other specialisation (a colour render without colour, seen once in CI). Every spacedg
+    kernel's cache now refuses such an entry (:mod:`spacedg.render.kernel_cache`: a recompile, not
+    a wrong result); the separate names still spare the eight specialisations that recompile."""
 
     def composite_tiles(
         offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
