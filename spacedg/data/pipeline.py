@@ -198,15 +198,14 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     if key in _DEPTH_CACHE:
         _DEPTH_CACHE.move_to_end(key)
         return _DEPTH_CACHE[key]
-    means = np.asarray(g.means, dtype=np.float64)
-    opaque = np.asarray(g.opacities) >= DEPTH_MIN_OPACITY
-    pc = (means[opaque] - pose[:3, 3]) @ pose[:3, :3]
+    pc = (_opaque_means(g) - pose[:3, 3]) @ pose[:3, :3]
     z = pc[:, 2]
-    front = z > 1e-3
-    pc, z = pc[front], z[front]
-    u = camera.fx * pc[:, 0] / z + camera.cx
-    v = camera.fy * pc[:, 1] / z + camera.cy
-    inside = (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
+    # every point is projected, and those behind the camera (z <= 1e-3: inf or NaN here) fail the mask;
+    # per point the same operations as on the points in front alone, so the same bytes
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = camera.fx * pc[:, 0] / z + camera.cx
+        v = camera.fy * pc[:, 1] / z + camera.cy
+    inside = (z > 1e-3) & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
     value: float | None = None
     if np.any(inside):
         cols, rows = DEPTH_GRID
@@ -219,6 +218,30 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     while len(_DEPTH_CACHE) > _DEPTH_CACHE_SIZE:
         _DEPTH_CACHE.popitem(last=False)
     return value
+
+
+#: The opaque centres of the last few Gaussian sets :func:`view_depth` saw: (means, opacities) → float64 (M, 3).
+_OPAQUE_MEANS: OrderedDict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = OrderedDict()
+_OPAQUE_MEANS_SIZE = 4
+
+
+def _opaque_means(g: Any) -> np.ndarray:
+    """``g.means[g.opacities >= DEPTH_MIN_OPACITY]`` as float64 (M, 3), kept for the last
+    :data:`_OPAQUE_MEANS_SIZE` Gaussian sets (by the identity of their arrays, which the entry keeps
+    alive; a scene's Gaussians are not modified in place): the gather took a quarter of a view's
+    depth, and every view of a scene repeats it."""
+    key = (id(g.means), id(g.opacities))
+    hit = _OPAQUE_MEANS.get(key)
+    if hit is not None and hit[0] is g.means and hit[1] is g.opacities:
+        _OPAQUE_MEANS.move_to_end(key)
+        return hit[2]
+    means = np.asarray(g.means, dtype=np.float64)
+    opaque = np.asarray(g.opacities) >= DEPTH_MIN_OPACITY
+    kept = means if opaque.all() else means[opaque]
+    _OPAQUE_MEANS[key] = (g.means, g.opacities, kept)
+    while len(_OPAQUE_MEANS) > _OPAQUE_MEANS_SIZE:
+        _OPAQUE_MEANS.popitem(last=False)
+    return kept
 
 
 def sample_scene_depth(scene: Scene, views: Sequence[str]) -> float | None:

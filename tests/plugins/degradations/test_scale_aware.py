@@ -62,3 +62,48 @@ def test_scene_depth_resolves_records_and_reproduces(small_room) -> None:
     photo = out.images[0]
     _, prov = degrade_image(photo, "haze", seed=1, depth=np.full(photo.shape[:2], 0.5, np.float32))
     assert prov[0]["scene_depth_m"] == pytest.approx(0.5) and prov[0]["params"]["depth_ref"] == pytest.approx(SCALED_DEPTH_REF_M * 0.5 / REFERENCE_DEPTH_M)
+
+
+def _depth_by_definition(means: np.ndarray, opacities: np.ndarray, camera) -> float | None:  # type: ignore[no-untyped-def]
+    """view_depth's docstring written out point by point: nearest opaque centre per grid cell, median over cells."""
+    from spacedg.data.pipeline import DEPTH_GRID, DEPTH_MIN_OPACITY
+
+    pose = np.asarray(camera.cam_to_world, dtype=np.float64)
+    cols, rows = DEPTH_GRID
+    nearest: dict[int, float] = {}
+    for p, o in zip(np.asarray(means, np.float64), opacities):
+        x, y, z = (p - pose[:3, 3]) @ pose[:3, :3]
+        if o < DEPTH_MIN_OPACITY or not z > 1e-3:
+            continue
+        u, v = camera.fx * x / z + camera.cx, camera.fy * y / z + camera.cy
+        if 0 <= u < camera.width and 0 <= v < camera.height:
+            cell = int(v * rows // camera.height) * cols + int(u * cols // camera.width)
+            nearest[cell] = min(nearest.get(cell, np.inf), z)
+    return float(np.median(list(nearest.values()))) if nearest else None
+
+
+def test_view_depth_is_its_definition_whatever_the_opacities(small_room) -> None:
+    """Partly opaque Gaussians, a camera turned away from the room (nothing in front of it) and two
+    Gaussian sets sharing one ``means`` array (the per-set cache of opaque centres must not mix them)."""
+    from types import SimpleNamespace
+
+    from spacedg.render.gaussians import Gaussians
+
+    full = small_room.gaussians
+    g = Gaussians(*(np.ascontiguousarray(a[::4]) for a in (full.means, full.quats, full.scales, full.opacities, full.sh)))
+    rng = np.random.default_rng(7)
+    camera = small_room.camera(next(iter(small_room.views))).resized(64, 48)
+    away = camera.__class__(**{**camera.__dict__, "cam_to_world": camera.cam_to_world @ np.diag([1.0, -1.0, -1.0, 1.0])})
+    first = Gaussians(g.means, g.quats, g.scales, rng.uniform(0, 1, len(g)).astype(g.opacities.dtype), g.sh)
+    second = Gaussians(g.means, g.quats, g.scales, np.where(first.opacities >= 0.5, 0.1, 0.9).astype(g.opacities.dtype), g.sh)
+    seen = []
+    for k, gaussians in enumerate((first, second, first)):
+        scene = SimpleNamespace(id=f"opacity-{k}", gaussians=gaussians)
+        for cam in (camera, away):
+            expected = _depth_by_definition(gaussians.means, gaussians.opacities, cam)
+            got = view_depth(scene, cam)  # type: ignore[arg-type]
+            assert got == expected or (got is not None and expected is not None and got == pytest.approx(expected, rel=1e-12))
+            seen.append(got)
+    assert seen[0] is not None and seen[0] != seen[2] and seen[4] == seen[0]
+    nothing = SimpleNamespace(id="transparent", gaussians=Gaussians(g.means, g.quats, g.scales, np.full(len(g), 0.2, g.opacities.dtype), g.sh))
+    assert view_depth(nothing, camera) is None  # type: ignore[arg-type]
