@@ -219,3 +219,122 @@ def test_an_object_on_an_empty_background_matches_the_thin_lens() -> None:
     """PSNR >= 35 dB against the thin-lens reference (16 points) for the ball at aperture 3, focus 1.5."""
     light, versus_ref, db = _ball_case("cpu", 3.0, 1.5)
     assert versus_ref == pytest.approx(1.0, abs=0.01) and db >= 35.0, (light, versus_ref, db)
+
+
+# ---------------------------------------------------------------- issue 31: the per-tile coarse grid
+@pytest.mark.parametrize(("aperture", "focus"), [(30.0, 2.5), (16.0, 1.5)])
+def test_a_view_blurred_in_part_is_composited_coarse_where_the_blur_is_wide(room_views, aperture: float, focus: float) -> None:
+    """Tiles whose footprints (and their neighbours' footprints) are all blurred by >= COMPOSITE_MIN_COC px
+    are composited on the 2× coarser grid, the others at full resolution: fewer pairs, the same light and
+    coverage, within 1/255 mean of the full-resolution composite, depth within 1 %."""
+    from spacedg.render import defocus as model
+    from spacedg.render import project_cpu, raster_cpu
+    from spacedg.render.settings import RasterSettings
+
+    gaussians, cams = room_views
+    defocus = Defocus(aperture, focus)
+    mixed_views = 0
+    for cam in cams:
+        packed, rects = project_cpu.project_gaussians(gaussians, cam, RasterSettings(), defocus, True)
+        tiles = raster_cpu.tile_min_coc(rects, packed, (cam.width + 15) // 16, (cam.height + 15) // 16)
+        mask = model.coarse_tile_mask(tiles, cam.width, cam.height)
+        mixed = render(gaussians, cam, defocus=defocus, backend="cpu", outputs="rgb,depth")
+        saved = model.MIXED_MIN_SHARE
+        model.MIXED_MIN_SHARE = 2.0  # never: every tile at full resolution (the model before)
+        try:
+            full = render(gaussians, cam, defocus=defocus, backend="cpu", outputs="rgb,depth")
+        finally:
+            model.MIXED_MIN_SHARE = saved
+        if mask is None:
+            assert mixed.stats["pairs"] == full.stats["pairs"] and np.array_equal(mixed.rgb, full.rgb)
+            continue
+        mixed_views += 1
+        assert 0.1 < mask.mean() < 1.0 and mixed.stats["pairs"] < full.stats["pairs"]
+        assert mixed.rgb.mean() == pytest.approx(full.rgb.mean(), rel=0.005)
+        assert mixed.alpha.mean() == pytest.approx(full.alpha.mean(), rel=0.005)
+        assert np.abs(mixed.rgb - full.rgb).mean() < 1.0 / 255
+        covered = full.alpha > 0.5
+        assert np.abs(mixed.depth - full.depth)[covered].mean() < 0.01 * full.depth[covered].mean()
+    assert mixed_views >= 2
+
+
+def test_the_coarse_tiles_are_those_whose_neighbourhood_is_blurred_wide() -> None:
+    from spacedg.render import defocus as model
+
+    coc = np.full((6, 8), 10.0, np.float32)
+    coc[2, 3] = 1.0  # one sharp footprint: its tile and the 8 around it stay at full resolution
+    coc[0, 7] = np.inf  # a tile no footprint covers: nothing to keep sharp
+    mask = model.coarse_tile_mask(coc, 128, 96)
+    expected = np.ones((6, 8), bool)
+    expected[1:4, 2:5] = False
+    assert np.array_equal(mask, expected)
+    assert model.coarse_tile_mask(np.full((6, 8), 3.9, np.float32), 128, 96) is None  # nothing wide enough
+    assert model.coarse_tile_mask(np.full((2, 2), 10.0, np.float32), 31, 20) is None  # coarse grid under 16 px
+    few = np.full((6, 8), 1.0, np.float32)
+    few[:3, :3] = 10.0  # one qualifying tile (the corner's neighbourhood): under MIXED_MIN_SHARE
+    assert model.coarse_tile_mask(few, 128, 96) is None
+    # the coarse tiles read by the upsampling: each 16-px tile is 8 coarse px, plus one around it
+    need = model.coarse_tiles_needed(np.eye(4, 6, dtype=bool), 96, 64).reshape(2, 3)
+    assert need.tolist() == [[True, True, False], [True, True, True]]  # tile (1, 1) reads coarse px 7-16: both rows and columns
+
+
+def test_a_composite_of_chosen_tiles_is_the_full_composite_there_and_empty_elsewhere() -> None:
+    from spacedg.render import project_cpu, raster_cpu
+    from spacedg.render.settings import RasterSettings
+
+    g = random_gaussians(4000, np.random.default_rng(3))
+    cam = camera(96, 72)
+    packed, rects = project_cpu.project_gaussians(g, cam, RasterSettings(), None, True)
+    ids = np.arange(len(g), dtype=np.int32)
+    full = raster_cpu.rasterize(packed, rects, ids, 96, 72, 0.99, True, True, True, True)
+    keep = np.random.default_rng(4).random(6 * 5) < 0.5
+    part = raster_cpu.rasterize(packed, rects, ids, 96, 72, 0.99, True, True, True, True, tiles=keep)
+    pixels = np.repeat(np.repeat(keep.reshape(5, 6), 16, axis=0), 16, axis=1)[:72, :96]
+    for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
+        assert np.array_equal(part[name][pixels], full[name][pixels])
+        assert np.all(part[name][~pixels] == (-1 if name == "instance_ids" else 0))
+    assert 0 < part["n_pairs"] < full["n_pairs"]
+
+
+def test_the_compiled_coarse_steps_are_the_numpy_arithmetic_byte_for_byte() -> None:
+    """coarse_view and the bilinear upsampling against their numpy forms (the implementation before they were compiled)."""
+    from spacedg.render import defocus as model
+    from spacedg.render import project_cpu
+    from spacedg.render.project_cpu import CA, CB, CC, PX, PY, RADX, RADY
+    from spacedg.render.settings import RasterSettings
+
+    def coarse_numpy(packed, rects, width, height, factor):  # type: ignore[no-untyped-def]
+        f = float(factor)
+        w2, h2 = -(-width // factor), -(-height // factor)
+        packed = packed.copy()
+        packed[:, [PX, PY]] /= np.float32(f)
+        packed[:, [CA, CB, CC]] *= np.float32(f * f)
+        packed[:, [RADX, RADY]] = np.ceil(packed[:, [RADX, RADY]] / np.float32(f))
+        tiles = np.array([(w2 + 15) // 16, (h2 + 15) // 16], np.float64)
+        mean, rad = packed[:, [PX, PY]].astype(np.float64), packed[:, [RADX, RADY]].astype(np.float64)
+        lo = np.minimum(np.clip(np.floor((mean - rad) / 16.0), 0, None), tiles)
+        hi = np.minimum(np.clip(np.ceil((mean + rad) / 16.0), 0, None), tiles)
+        keep = (rects[:, 1] > rects[:, 0]) & (hi > lo).all(axis=1)
+        return packed, (np.stack([lo[:, 0], hi[:, 0], lo[:, 1], hi[:, 1]], axis=1) * keep[:, None]).astype(rects.dtype), w2, h2
+
+    def bilinear_numpy(image, factor, width, height):  # type: ignore[no-untyped-def]
+        y0, y1, ty = model._bilinear_axis(height, image.shape[0], factor)
+        x0, x1, tx = model._bilinear_axis(width, image.shape[1], factor)
+        shape = (-1, 1) + (1,) * (image.ndim - 2)
+        rows = image[y0] * (1 - ty.reshape(shape)) + image[y1] * ty.reshape(shape)
+        shape = (1, -1) + (1,) * (image.ndim - 2)
+        return (rows[:, x0] * (1 - tx.reshape(shape)) + rows[:, x1] * tx.reshape(shape)).astype(np.float32)
+
+    g = random_gaussians(3000, np.random.default_rng(5))
+    for width, height in ((96, 72), (97, 61)):
+        cam = camera(width, height)
+        packed, rects = project_cpu.project_gaussians(g, cam, RasterSettings(), Defocus(20.0, 0.4), True)
+        for factor in (2, 4):
+            got, want = model.coarse_view(packed, rects, width, height, factor), coarse_numpy(packed, rects, width, height, factor)
+            assert np.array_equal(got[0].view(np.uint32), want[0].view(np.uint32)) and np.array_equal(got[1], want[1])
+            assert got[1].dtype == want[1].dtype and got[2:] == want[2:]
+    rng = np.random.default_rng(6)
+    for shape, factor, width, height in (((36, 48, 3), 2, 96, 72), ((18, 24), 4, 96, 72), ((31, 49), 2, 97, 61)):
+        image = rng.random(shape, dtype=np.float32)
+        got, want = model._bilinear(image, factor, width, height), bilinear_numpy(image, factor, width, height)
+        assert got.shape == want.shape and np.array_equal(got.view(np.uint32), want.view(np.uint32))
