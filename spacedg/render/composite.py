@@ -61,8 +61,7 @@ def composite_view(
     The composite is the sRGB-encoded mix of 3DGS, decoded once here. Under defocus with anything
     blurred, each Gaussian carries its circle of confusion (:class:`~spacedg.render.settings.Defocus`),
     the composite runs on a coarser grid when every visible blur is wide
-    (:func:`spacedg.render.defocus.composite_factor`) or, on the CPU path, on it tile by tile where
-    the blur around a tile is (:func:`spacedg.render.defocus.coarse_tile_mask`), and the colour is brought back to the sharp
+    (:func:`spacedg.render.defocus.composite_factor`), and the colour is brought back to the sharp
     view's local flux (:mod:`spacedg.render.defocus_flux`).
     """
     want_color = "rgb" in outputs
@@ -102,7 +101,7 @@ def _raster_cpu(
     want_color: bool, want_depth: bool, want_ids: bool, defocused: bool,
 ) -> tuple[dict[str, np.ndarray], SharpPass | None]:
     """Composite a CPU projection; when anything is blurred, also the sharp pass
-    (:func:`sharp_pass`), and coarse when every visible blur is wide, or per tile where it is (:func:`_mixed_cpu`).
+    (:func:`sharp_pass`), and coarse when every visible blur is wide.
     ``(images, the sharp pass or None when nothing is blurred)``."""
     from spacedg.render import defocus as defocus_model
     from spacedg.render import raster_cpu
@@ -119,11 +118,6 @@ def _raster_cpu(
         factor = plan[1]
         if factor > 1:
             packed, rects, width, height = defocus_model.coarse_view(packed, rects, width, height, factor)
-        else:
-            tile_coc = raster_cpu.tile_min_coc(rects, packed, (width + 15) // 16, (height + 15) // 16)
-            mask = defocus_model.coarse_tile_mask(tile_coc, width, height)
-            if mask is not None:
-                return _mixed_cpu(packed, rects, ids, camera, settings, mask, want_color, want_depth, want_ids), sharp
     images = raster_cpu.rasterize(
         packed, rects, ids, width, height, settings.alpha_max, want_color, want_depth, want_ids,
         settings.tight_tiles and settings.opacity_extent,
@@ -134,34 +128,6 @@ def _raster_cpu(
         images = defocus_model.upsample(images, factor, camera.width, camera.height, want_color, want_depth, want_ids)
         images["n_visible"] = np.int64(np.count_nonzero(visible))
     return images, sharp
-
-
-def _mixed_cpu(
-    packed: np.ndarray, rects: np.ndarray, ids: np.ndarray, camera: Camera, settings: RasterSettings, mask: np.ndarray,
-    want_color: bool, want_depth: bool, want_ids: bool,
-) -> dict[str, np.ndarray]:
-    """A defocused view composited per tile (:func:`spacedg.render.defocus.coarse_tile_mask`): the tiles
-    of ``mask`` on the grid twice coarser, upsampled bilinearly, the others at full resolution."""
-    from spacedg.render import defocus as defocus_model
-    from spacedg.render import raster_cpu
-    from spacedg.render.colour_cpu import decode_srgb
-
-    width, height, tight = camera.width, camera.height, settings.tight_tiles and settings.opacity_extent
-    fine = raster_cpu.rasterize(
-        packed, rects, ids, width, height, settings.alpha_max, want_color, want_depth, want_ids, tight, tiles=~mask.ravel(),
-    )
-    c_packed, c_rects, c_width, c_height = defocus_model.coarse_view(packed, rects, width, height, 2)
-    coarse = raster_cpu.rasterize(
-        c_packed, c_rects, ids, c_width, c_height, settings.alpha_max, want_color, want_depth, want_ids, tight,
-        tiles=defocus_model.coarse_tiles_needed(mask, width, height),
-    )
-    if want_color:
-        fine["rgb"], coarse["rgb"] = decode_srgb(fine["rgb"]), decode_srgb(coarse["rgb"])
-    images = defocus_model.merge_tiles(
-        fine, defocus_model.upsample(coarse, 2, width, height, want_color, want_depth, want_ids), mask, width, height,
-    )
-    images["n_pairs"] = np.int64(fine["n_pairs"] + coarse["n_pairs"])
-    return images
 
 
 def _raster_torch(

@@ -7,9 +7,7 @@ at ``defocus_extent`` σ with the mass renormalised, the alpha floor scaled alik
 however small (:data:`~spacedg.render.settings.DEFOCUS_MIN_COC` = 0: a cut-off in output pixels
 made the preset depend on the image size). The blurred Gaussians are composited by the sharp rules
 (:func:`spacedg.render.composite.composite_view`), on a coarser grid when every visible blur is wide
-(:func:`composite_factor`) — on the compiled CPU path also tile by tile, where every footprint
-around a tile is (:func:`coarse_tile_mask`; the torch path composites such views at full
-resolution, within 1/255 mean of it) — and then brought to the sharp view's **local flux**
+(:func:`composite_factor`), and then brought to the sharp view's **local flux**
 (:mod:`spacedg.render.defocus_flux`): a lens redistributes light, it neither makes nor destroys it,
 so every neighbourhood a little wider than the blur keeps the light (and the coverage) the sharp
 view holds there. That step corrects what compositing blurred splats gets wrong about light —
@@ -45,9 +43,8 @@ import numpy as np
 from spacedg.render.frame import expected_depth
 from spacedg.render.project_cpu import CA, CB, CC, COC, PX, PY, RADX, RADY
 
-__all__ = ["COMPOSITE_MIN_COC", "COMPOSITE_MAX_FACTOR", "MEASURE_SCALE", "MIXED_MIN_SHARE", "blur_plan", "coarse_tile_mask",
-           "coarse_tiles_needed", "coarse_view", "composite_factor", "factor_for_coc", "measurement_camera", "measurement_settings",
-           "merge_tiles", "upsample"]
+__all__ = ["COMPOSITE_MIN_COC", "COMPOSITE_MAX_FACTOR", "MEASURE_SCALE", "blur_plan", "coarse_view", "composite_factor",
+           "factor_for_coc", "measurement_camera", "measurement_settings", "upsample"]
 
 
 def blur_plan(coc: np.ndarray, width: int, height: int) -> tuple[float, int] | None:
@@ -103,57 +100,6 @@ def measurement_settings(settings: Any, scale: float | None = None) -> Any:
 #: 4 px, 4 from 8 px: at least 2 px of blur on the coarse grid) and upsampled bilinearly.
 COMPOSITE_MIN_COC = 4.0
 COMPOSITE_MAX_FACTOR = 4
-
-
-#: Smallest share of a view's tiles that :func:`coarse_tile_mask` sends to the coarse grid (below it,
-#: compositing everything at full resolution costs about as much as the two composites).
-MIXED_MIN_SHARE = 0.125
-
-
-def coarse_tile_mask(tile_min_coc: np.ndarray, width: int, height: int) -> np.ndarray | None:
-    """Per 16 × 16 tile of a defocused view that is not blurred everywhere (:func:`composite_factor` 1),
-    whether it is composited on the grid twice coarser and upsampled bilinearly: every Gaussian whose
-    tile rectangle covers the tile **or one of its eight neighbours** has a circle of confusion of at
-    least :data:`COMPOSITE_MIN_COC` px (``tile_min_coc``: the smallest per tile, ``inf`` where none),
-    so the coarse samples its pixels are interpolated from are those of an image blurred by at least
-    that much, as on :func:`composite_factor`'s coarse grid; the other tiles are composited at full
-    resolution. ``None`` when fewer than :data:`MIXED_MIN_SHARE` of the tiles qualify, or the coarse
-    grid would be under 16 px a side."""
-    if COMPOSITE_MIN_COC <= 0 or min(width, height) < 32:
-        return None
-    wide = np.pad(tile_min_coc >= COMPOSITE_MIN_COC, 1, constant_values=True)
-    rows, cols = tile_min_coc.shape
-    mask = np.ones((rows, cols), bool)
-    for dy in range(3):
-        for dx in range(3):
-            mask &= wide[dy:dy + rows, dx:dx + cols]
-    return mask if mask.any() and mask.mean() >= MIXED_MIN_SHARE else None
-
-
-def coarse_tiles_needed(mask: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Flat bool per tile of the grid twice coarser than a ``width × height`` view: the tiles holding
-    a coarse pixel that :func:`upsample` reads for a pixel of a tile in ``mask`` (its 8 × 8 coarse
-    pixels and the ring around them)."""
-    tiles_x, tiles_y = (-(-width // 2) + 15) // 16, (-(-height // 2) + 15) // 16
-    ty, tx = np.nonzero(mask)
-    need = np.zeros((tiles_y, tiles_x), bool)
-    for ys in (np.clip((8 * ty - 1) // 16, 0, tiles_y - 1), np.clip((8 * ty + 8) // 16, 0, tiles_y - 1)):
-        for xs in (np.clip((8 * tx - 1) // 16, 0, tiles_x - 1), np.clip((8 * tx + 8) // 16, 0, tiles_x - 1)):
-            need[ys, xs] = True
-    return need.ravel()
-
-
-def merge_tiles(fine: dict[str, np.ndarray], coarse: dict[str, np.ndarray], mask: np.ndarray, width: int, height: int) -> dict[str, np.ndarray]:
-    """``fine``'s images with the pixels of the tiles in ``mask`` taken from ``coarse`` (both at the
-    view's size; placeholders of images not wanted, and counts, are ``fine``'s)."""
-    pixels = np.repeat(np.repeat(mask, 16, axis=0), 16, axis=1)[:height, :width]
-    out = dict(fine)
-    for key, image in fine.items():
-        if image.ndim >= 2 and image.shape[:2] == (height, width):
-            merged = image.copy()
-            np.copyto(merged, coarse[key], where=pixels if image.ndim == 2 else pixels[..., None])
-            out[key] = merged
-    return out
 
 
 def composite_factor(packed: np.ndarray, rects: np.ndarray, width: int, height: int) -> int:

@@ -29,7 +29,7 @@ import math
 import numba
 import numpy as np
 
-from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADY
+from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, CR, DEPTH, OPA, PX, PY, RADY
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
@@ -478,42 +478,11 @@ def pair_capacity(order, rects):  # pragma: no cover - compiled
     return total
 
 
-@numba.njit(cache=True)
-def tile_min_coc(rects, packed, tiles_x, tiles_y):  # pragma: no cover - compiled
-    """(tiles_y, tiles_x) float32: per tile, the smallest circle of confusion (``packed[:, COC]``, px)
-    of the Gaussians whose tile rectangle covers it; ``inf`` where none does."""
-    out = np.full((tiles_y, tiles_x), np.inf, np.float32)
-    for g in range(rects.shape[0]):
-        x0, x1, y0, y1 = rects[g, 0], rects[g, 1], rects[g, 2], rects[g, 3]
-        if x1 <= x0 or y1 <= y0:
-            continue
-        coc = packed[g, COC]
-        for ty in range(y0, y1):
-            for tx in range(x0, x1):
-                if coc < out[ty, tx]:
-                    out[ty, tx] = coc
-    return out
-
-
-def keep_tiles(offsets: np.ndarray, gauss: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The tile lists ``(offsets, gauss)`` of :func:`bin_tiles` with every tile not in ``keep`` (flat bool,
-    one per tile) emptied: the compositor then leaves those tiles' pixels at zero."""
-    counts = np.diff(offsets)
-    kept = np.where(keep, counts, 0)
-    new_offsets = np.zeros_like(offsets)
-    np.cumsum(kept, out=new_offsets[1:])
-    return new_offsets, gauss[np.repeat(keep, counts)]
-
-
 def rasterize(packed: np.ndarray, rects: np.ndarray, instance_ids: np.ndarray, width: int, height: int,
-              alpha_max: float, want_color: bool, want_depth: bool, want_ids: bool, tight: bool,
-              tiles: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """Sort, bin and composite projected Gaussians; returns the requested float32/int32 images.
-    ``tiles``: a flat bool per 16 × 16 tile (row-major): only those are composited, the others left at 0."""
+              alpha_max: float, want_color: bool, want_depth: bool, want_ids: bool, tight: bool) -> dict[str, np.ndarray]:
+    """Sort, bin and composite projected Gaussians; returns the requested float32/int32 images."""
     tiles_x = (width + 15) // 16
     offsets, gauss = bin_visible(packed, rects, width, height, tight)
-    if tiles is not None:
-        offsets, gauss = keep_tiles(offsets, gauss, tiles)
     out = {
         "alpha": np.zeros((height, width), np.float32),
         "rgb": np.zeros((height, width, 3) if want_color else (1, 1, 3), np.float32),
