@@ -37,7 +37,10 @@ import math
 from typing import Any
 
 import cv2
+import numba
 import numpy as np
+
+from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 
 __all__ = ["FLUX_LENGTH", "FLUX_MIN_SIGMA", "FLUX_RATIO", "flux_lengths", "flux_scale", "conserve_light", "sample_shifted"]
 
@@ -90,12 +93,58 @@ def _blur(image: np.ndarray, sigma: float) -> np.ndarray:
 def sample_shifted(image: np.ndarray, camera: Any, wide: Any, step: int, shape: tuple[int, int]) -> np.ndarray:
     """``image`` (h, w, 3) on ``wide``'s pixel grid sampled bilinearly at the centres of the
     ``shape`` = (rows, cols) cells of ``step × step`` pixels of ``camera`` (same pose; ``wide`` a
-    widened, rescaled copy of it; edges repeated)."""
+    widened, rescaled copy of it; edges repeated). When the cells are ``wide``'s own pixels (the same
+    grid: an identity map), ``image`` itself, which is what the bilinear sampling returns there."""
     sx, sy = wide.fx / camera.fx, wide.fy / camera.fy
     # wide pixel index (centres at integers) of cell k's centre: ((k + ½)·step − c)·s + c_wide − ½
     affine = np.array([[step * sx, 0.0, (0.5 * step - camera.cx) * sx + wide.cx - 0.5],
                        [0.0, step * sy, (0.5 * step - camera.cy) * sy + wide.cy - 0.5]])
+    if image.shape[:2] == tuple(shape) and np.array_equal(affine, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]):
+        return image
     return cv2.warpAffine(image, affine, (shape[1], shape[0]), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+
+
+@numba.njit(cache=True)
+def _with_alpha(rgb, alpha):  # pragma: no cover - compiled
+    """(H, W, 4) float32: ``rgb`` (H, W, 3) with ``alpha`` (H, W) as a fourth channel."""
+    height, width = alpha.shape
+    out = np.empty((height, width, 4), np.float32)
+    for y in range(height):
+        for x in range(width):
+            out[y, x, 0] = rgb[y, x, 0]
+            out[y, x, 1] = rgb[y, x, 1]
+            out[y, x, 2] = rgb[y, x, 2]
+            out[y, x, 3] = alpha[y, x]
+    return out
+
+
+@numba.njit(cache=True)
+def _flux_ratio(target, low, eps, lo, hi):  # pragma: no cover - compiled
+    """``clip((target + eps) / (low + eps), lo, hi)`` per value, NaN → 1 (float32, written into ``target``)."""
+    height, width, channels = target.shape
+    one = np.float32(1.0)
+    for y in range(height):
+        for x in range(width):
+            for c in range(channels):
+                r = (target[y, x, c] + eps[c]) / (low[y, x, c] + eps[c])
+                target[y, x, c] = one if r != r else min(max(r, lo), hi)
+    return target
+
+
+@numba.njit(cache=True)
+def _scaled(image, ratio, total):  # pragma: no cover - compiled
+    """``image × (ratio × total)`` (float32; ``total`` per channel) and, apart, its last channel clipped to [0, 1]."""
+    height, width, channels = image.shape
+    out = np.empty((height, width, channels), np.float32)
+    alpha = np.empty((height, width), np.float32)
+    zero, one = np.float32(0.0), np.float32(1.0)
+    for y in range(height):
+        for x in range(width):
+            for c in range(channels):
+                out[y, x, c] = image[y, x, c] * (ratio[y, x, c] * total[c])
+            a = out[y, x, channels - 1]
+            alpha[y, x] = a if a != a else min(max(a, zero), one)  # NaN stays NaN, as np.clip
+    return out, alpha
 
 
 def conserve_light(
@@ -106,29 +155,27 @@ def conserve_light(
     ``sharp_alpha``: the sharp view on ``wide``'s grid (the view widened and rescaled by
     ``wide.fx / camera.fx``, 1 or ½); ``length``, ``coc``: ``L`` and ``r`` in the view's pixels."""
     step = max(1, int(round(camera.fx / wide.fx)))
-    image = np.ascontiguousarray(np.concatenate([rgb, alpha[..., None]], axis=-1), dtype=np.float32)
+    image = _with_alpha(np.asarray(rgb, np.float32), np.asarray(alpha, np.float32))
     rows, cols = -(-image.shape[0] // step), -(-image.shape[1] // step)
     if step > 1:  # area mean over step × step cells (the last row/column of cells padded by repetition)
         padded = cv2.copyMakeBorder(image, 0, rows * step - image.shape[0], 0, cols * step - image.shape[1], cv2.BORDER_REPLICATE)
         blurred = cv2.resize(padded, (cols, rows), interpolation=cv2.INTER_AREA)
     else:
         blurred = image
-    sharp = np.ascontiguousarray(np.concatenate([sharp_rgb, sharp_alpha[..., None]], axis=-1), dtype=np.float32)
+    sharp = _with_alpha(np.asarray(sharp_rgb, np.float32), np.asarray(sharp_alpha, np.float32))
     seen = sample_shifted(sharp, camera, wide, step, (rows, cols))
     target = _blur(seen, math.hypot(length, coc) / step)
     eps = (1e-3 * np.maximum(np.array(cv2.mean(target)), 0.0) + 1e-12).astype(np.float32)
     low = _blur(blurred, length / step)
-    low += eps
-    target += eps
-    ratio = np.clip(np.divide(target, low, out=target), *FLUX_RATIO, out=target)
-    ratio[np.isnan(ratio)] = 1.0
+    ratio = _flux_ratio(target, low, eps, np.float32(FLUX_RATIO[0]), np.float32(FLUX_RATIO[1]))
     # the local ratio holds each neighbourhood's mean; the frame's total, once more, exactly
     kept = np.array(cv2.sumElems(blurred * ratio))
     wanted = np.array(cv2.sumElems(seen))
     with np.errstate(divide="ignore", invalid="ignore"):
         total = np.where(kept > 1e-12 * max(float(wanted.max()), 1e-30), wanted / kept, 1.0)
-    ratio = ratio * np.clip(np.nan_to_num(total, nan=1.0), *FLUX_RATIO).astype(np.float32)
+    total = np.clip(np.nan_to_num(total, nan=1.0), *FLUX_RATIO).astype(np.float32)
     if step > 1:  # bilinear, cell centres to pixel centres (edges repeated)
-        ratio = cv2.resize(ratio, (cols * step, rows * step), interpolation=cv2.INTER_LINEAR)[: image.shape[0], : image.shape[1]]
-    out = image * ratio
-    return out[..., :3], np.clip(out[..., 3], 0.0, 1.0)
+        ratio = cv2.resize(ratio * total, (cols * step, rows * step), interpolation=cv2.INTER_LINEAR)[: image.shape[0], : image.shape[1]]
+        total = np.ones(4, np.float32)
+    out, kept_alpha = _scaled(image, np.ascontiguousarray(ratio), total[:4])
+    return out[..., :3], kept_alpha

@@ -82,3 +82,60 @@ def test_sub_pixel_blur_blurs_and_keeps_the_light() -> None:
     assert not np.array_equal(sharp.rgb, blurred.rgb)
     assert blurred.rgb.mean() == pytest.approx(sharp.rgb.mean(), rel=0.005)
     assert np.abs(blurred.rgb - sharp.rgb).mean() < 0.02
+
+
+def _conserve_numpy(rgb, alpha, sharp_rgb, sharp_alpha, camera, wide, length, coc):  # type: ignore[no-untyped-def]
+    """conserve_light as plain numpy/OpenCV (its form before the compiled passes): the reference of the bytes."""
+    import math
+
+    from spacedg.render.defocus_flux import FLUX_RATIO, _blur
+
+    step = max(1, int(round(camera.fx / wide.fx)))
+    image = np.ascontiguousarray(np.concatenate([rgb, alpha[..., None]], axis=-1), dtype=np.float32)
+    rows, cols = -(-image.shape[0] // step), -(-image.shape[1] // step)
+    if step > 1:
+        padded = cv2.copyMakeBorder(image, 0, rows * step - image.shape[0], 0, cols * step - image.shape[1], cv2.BORDER_REPLICATE)
+        blurred = cv2.resize(padded, (cols, rows), interpolation=cv2.INTER_AREA)
+    else:
+        blurred = image
+    sharp = np.ascontiguousarray(np.concatenate([sharp_rgb, sharp_alpha[..., None]], axis=-1), dtype=np.float32)
+    sx, sy = wide.fx / camera.fx, wide.fy / camera.fy
+    affine = np.array([[step * sx, 0.0, (0.5 * step - camera.cx) * sx + wide.cx - 0.5],
+                       [0.0, step * sy, (0.5 * step - camera.cy) * sy + wide.cy - 0.5]])
+    seen = cv2.warpAffine(sharp, affine, (cols, rows), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+    target = _blur(seen, math.hypot(length, coc) / step)
+    eps = (1e-3 * np.maximum(np.array(cv2.mean(target)), 0.0) + 1e-12).astype(np.float32)
+    low = _blur(blurred, length / step)
+    low += eps
+    target += eps
+    ratio = np.clip(np.divide(target, low, out=target), *FLUX_RATIO, out=target)
+    ratio[np.isnan(ratio)] = 1.0
+    kept = np.array(cv2.sumElems(blurred * ratio))
+    wanted = np.array(cv2.sumElems(seen))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        total = np.where(kept > 1e-12 * max(float(wanted.max()), 1e-30), wanted / kept, 1.0)
+    ratio = ratio * np.clip(np.nan_to_num(total, nan=1.0), *FLUX_RATIO).astype(np.float32)
+    if step > 1:
+        ratio = cv2.resize(ratio, (cols * step, rows * step), interpolation=cv2.INTER_LINEAR)[: image.shape[0], : image.shape[1]]
+    out = image * ratio
+    return out[..., :3], np.clip(out[..., 3], 0.0, 1.0)
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.5])
+def test_the_compiled_passes_give_the_numpy_bytes(scale: float) -> None:
+    """conserve_light's fused passes against its plain numpy form, byte for byte: random light with black
+    and saturated corners, an odd-sized view, the sharp pass at full and half resolution (grown to whole tiles)."""
+    rng = np.random.default_rng(11)
+    cam = Camera(60.0, 60.0, 48.5, 30.5, 97, 61, np.eye(4))
+    wide = measurement_camera(cam, 0, scale)
+    rgb = rng.uniform(0.0, 1.5, (61, 97, 3)).astype(np.float32)
+    alpha = rng.uniform(0.0, 1.0, (61, 97)).astype(np.float32)
+    rgb[:8, :8], alpha[:8, :8] = 0.0, 0.0
+    alpha[-4:, -4:] = 1.0
+    sharp_rgb = rng.uniform(0.0, 1.5, (wide.height, wide.width, 3)).astype(np.float32)
+    sharp_alpha = rng.uniform(0.0, 1.0, (wide.height, wide.width)).astype(np.float32)
+    for length, coc in ((1.0, 0.4), (2.5, 3.0)):
+        got = conserve_light(rgb, alpha, sharp_rgb, sharp_alpha, cam, wide, length, coc)
+        want = _conserve_numpy(rgb, alpha, sharp_rgb, sharp_alpha, cam, wide, length, coc)
+        for g, w in zip(got, want):
+            assert g.shape == w.shape and np.array_equal(np.ascontiguousarray(g).view(np.uint32), np.ascontiguousarray(w).view(np.uint32))
