@@ -119,12 +119,14 @@ def _fisheye_terms(x, y, z, k1, k2, k3, k4):
 def _surely_outside(
     x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos, eps2d
 ):
-    """Whether a sharp pinhole Gaussian at camera point (x, y, z) is culled whatever its rotation.
+    """Whether a pinhole Gaussian at camera point (x, y, z) is culled whatever its rotation.
 
     A coarse, exact frustum test before the covariance: ``Σ2D = J M Mᵀ Jᵀ`` with ``M = W R S``, so
-    ``Σ_xx <= |J row 0|² ‖W‖² max(s)²`` (``rot_norm`` >= ‖W‖₂, R orthonormal); with ``extent <= 3.33``
-    the footprint radius is at most ``ceil`` of that bound (taken 1e-6 relative wider, far above
-    rounding), and a footprint that cannot reach the image is culled by the full test too.
+    ``Σ_xx <= |J row 0|² ‖W‖² max(s)²`` (``rot_norm`` >= ‖W‖₂, R orthonormal), plus ``eps2d``: the
+    dilation's largest term and, under defocus, the square of the Gaussian's circle of confusion; with
+    ``extent <= 3.33`` (also for a blurred footprint, whose truncation is at most that) the footprint
+    radius is at most ``ceil`` of that bound (taken 1e-6 relative wider, far above rounding), and a
+    footprint that cannot reach the image is culled by the full test too.
     """
     u = fx * x / z + cx
     v = fy * y / z + cy
@@ -178,8 +180,11 @@ def _project_kernel(
         z = view_rot[2, 0] * wx + view_rot[2, 1] * wy + view_rot[2, 2] * wz + view_trans[2]
         if not (z > near and z < far):
             continue
-        if not fisheye and aperture <= 0.0 and _surely_outside(
-            x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos, eps_cull
+        # under defocus the circle of confusion widens every footprint by at most coc² px² (the full test's coc)
+        coc_cull = min(aperture * abs(z - focus) / z, max_coc) if aperture > 0.0 else 0.0
+        if not fisheye and _surely_outside(
+            x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos,
+            eps_cull + coc_cull * coc_cull,
         ):
             continue
         # ---- 3D covariance in the camera frame: Σc = (W R S)(W R S)ᵀ
