@@ -64,6 +64,7 @@ used are in :attr:`DegradedViews.sub_steps`.
 from __future__ import annotations
 
 import time
+import weakref
 from collections import OrderedDict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -220,27 +221,35 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     return value
 
 
-#: The opaque centres of the last few Gaussian sets :func:`view_depth` saw: (means, opacities) → float64 (M, 3).
-_OPAQUE_MEANS: OrderedDict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = OrderedDict()
+#: The opaque centres of the last few Gaussian sets :func:`view_depth` saw: (id of means, id of opacities) →
+#: (weak references to those arrays, float64 (M, 3) centres). At most :data:`_OPAQUE_MEANS_SIZE` sets and
+#: :data:`_OPAQUE_MEANS_BYTES` bytes of centres (a larger set is not kept).
+_OPAQUE_MEANS: OrderedDict[tuple[int, int], tuple[Any, Any, np.ndarray]] = OrderedDict()
 _OPAQUE_MEANS_SIZE = 4
+_OPAQUE_MEANS_BYTES = 256 << 20
 
 
 def _opaque_means(g: Any) -> np.ndarray:
-    """``g.means[g.opacities >= DEPTH_MIN_OPACITY]`` as float64 (M, 3), kept for the last
-    :data:`_OPAQUE_MEANS_SIZE` Gaussian sets (by the identity of their arrays, which the entry keeps
-    alive; a scene's Gaussians are not modified in place): the gather took a quarter of a view's
-    depth, and every view of a scene repeats it."""
+    """``g.means[g.opacities >= DEPTH_MIN_OPACITY]`` as float64 (M, 3), kept for the last few Gaussian
+    sets (:data:`_OPAQUE_MEANS`): the gather took a quarter of a view's depth, and every view of a scene
+    repeats it. An entry is found by the identity of the set's arrays (weak references: it never keeps a
+    scene's Gaussians alive after the dataset's own cache let them go; a scene's arrays are not
+    modified in place)."""
     key = (id(g.means), id(g.opacities))
     hit = _OPAQUE_MEANS.get(key)
-    if hit is not None and hit[0] is g.means and hit[1] is g.opacities:
+    if hit is not None and hit[0]() is g.means and hit[1]() is g.opacities:
         _OPAQUE_MEANS.move_to_end(key)
         return hit[2]
     means = np.asarray(g.means, dtype=np.float64)
     opaque = np.asarray(g.opacities) >= DEPTH_MIN_OPACITY
     kept = means if opaque.all() else means[opaque]
-    _OPAQUE_MEANS[key] = (g.means, g.opacities, kept)
-    while len(_OPAQUE_MEANS) > _OPAQUE_MEANS_SIZE:
-        _OPAQUE_MEANS.popitem(last=False)
+    if kept.nbytes <= _OPAQUE_MEANS_BYTES:
+        try:
+            _OPAQUE_MEANS[key] = (weakref.ref(g.means), weakref.ref(g.opacities), kept)
+        except TypeError:  # an array type without weak references (a view of a memory map is one): not kept
+            return kept
+        while len(_OPAQUE_MEANS) > _OPAQUE_MEANS_SIZE or sum(e[2].nbytes for e in _OPAQUE_MEANS.values()) > _OPAQUE_MEANS_BYTES:
+            _OPAQUE_MEANS.popitem(last=False)
     return kept
 
 

@@ -25,7 +25,8 @@ def coarse_projection(packed, rects, factor, tiles_x, tiles_y):  # pragma: no co
     """``(packed, rects)`` of the projection ``packed`` (N, PACKED) float32 seen on a grid ``factor``
     times coarser with ``tiles_x × tiles_y`` tiles: means and footprint radii ÷ factor (radii rounded
     up), conics × factor², the rest unchanged; tile rectangles from the scaled footprints (float64,
-    as the projection's), zero for a Gaussian not visible in ``rects`` or whose rectangle is empty."""
+    as the projection's), zero for a Gaussian not visible in ``rects`` or whose rectangle is empty.
+    The radii must be finite (the projection caps them; numpy's form kept a NaN radius NaN, this one does not)."""
     n = packed.shape[0]
     out = packed.copy()
     out_rects = np.zeros_like(rects)

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from spacedg.render.frame import expected_depth
-from spacedg.render.project_cpu import CA, CB, CC, COC, PX, PY, RADX, RADY
+from spacedg.render.project_cpu import COC
 
 __all__ = ["COMPOSITE_MIN_COC", "COMPOSITE_MAX_FACTOR", "MEASURE_SCALE", "blur_plan", "coarse_view", "composite_factor",
            "factor_for_coc", "measurement_camera", "measurement_settings", "upsample"]

@@ -94,7 +94,8 @@ def sample_shifted(image: np.ndarray, camera: Any, wide: Any, step: int, shape: 
     """``image`` (h, w, 3) on ``wide``'s pixel grid sampled bilinearly at the centres of the
     ``shape`` = (rows, cols) cells of ``step × step`` pixels of ``camera`` (same pose; ``wide`` a
     widened, rescaled copy of it; edges repeated). When the cells are ``wide``'s own pixels (the same
-    grid: an identity map), ``image`` itself, which is what the bilinear sampling returns there."""
+    grid: an identity map), ``image`` itself, which is what the bilinear sampling returns there for
+    finite values (OpenCV's would spread a NaN or an infinity to its neighbours)."""
     sx, sy = wide.fx / camera.fx, wide.fy / camera.fy
     # wide pixel index (centres at integers) of cell k's centre: ((k + ½)·step − c)·s + c_wide − ½
     affine = np.array([[step * sx, 0.0, (0.5 * step - camera.cx) * sx + wide.cx - 0.5],
@@ -104,7 +105,7 @@ def sample_shifted(image: np.ndarray, camera: Any, wide: Any, step: int, shape: 
     return cv2.warpAffine(image, affine, (shape[1], shape[0]), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _with_alpha(rgb, alpha):  # pragma: no cover - compiled
     """(H, W, 4) float32: ``rgb`` (H, W, 3) with ``alpha`` (H, W) as a fourth channel."""
     height, width = alpha.shape
@@ -118,9 +119,10 @@ def _with_alpha(rgb, alpha):  # pragma: no cover - compiled
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _flux_ratio(target, low, eps, lo, hi):  # pragma: no cover - compiled
-    """``clip((target + eps) / (low + eps), lo, hi)`` per value, NaN → 1 (float32, written into ``target``)."""
+    """``clip((target + eps) / (low + eps), lo, hi)`` per value, NaN → 1 (float32, written into ``target``;
+    numpy's division rules: ``x / 0`` is ±inf or NaN, then clipped, never an exception)."""
     height, width, channels = target.shape
     one = np.float32(1.0)
     for y in range(height):
@@ -131,7 +133,7 @@ def _flux_ratio(target, low, eps, lo, hi):  # pragma: no cover - compiled
     return target
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _scaled(image, ratio, total):  # pragma: no cover - compiled
     """``image × (ratio × total)`` (float32; ``total`` per channel) and, apart, its last channel clipped to [0, 1]."""
     height, width, channels = image.shape
@@ -154,6 +156,11 @@ def conserve_light(
     flux ratio (see the module docstring): float32, alpha clipped to [0, 1]. ``sharp_rgb``,
     ``sharp_alpha``: the sharp view on ``wide``'s grid (the view widened and rescaled by
     ``wide.fx / camera.fx``, 1 or ½); ``length``, ``coc``: ``L`` and ``r`` in the view's pixels."""
+    if rgb.shape != (*alpha.shape, 3) or sharp_rgb.shape != (*sharp_alpha.shape, 3):
+        raise ValueError(
+            f"conserve_light: rgb must be (H, W, 3) over its alpha (H, W), got {rgb.shape} over {alpha.shape} "
+            f"and, sharp, {sharp_rgb.shape} over {sharp_alpha.shape}"
+        )
     step = max(1, int(round(camera.fx / wide.fx)))
     image = _with_alpha(np.asarray(rgb, np.float32), np.asarray(alpha, np.float32))
     rows, cols = -(-image.shape[0] // step), -(-image.shape[1] // step)

@@ -107,3 +107,32 @@ def test_view_depth_is_its_definition_whatever_the_opacities(small_room) -> None
     assert seen[0] is not None and seen[0] != seen[2] and seen[4] == seen[0]
     nothing = SimpleNamespace(id="transparent", gaussians=Gaussians(g.means, g.quats, g.scales, np.full(len(g), 0.2, g.opacities.dtype), g.sh))
     assert view_depth(nothing, camera) is None  # type: ignore[arg-type]
+
+
+def test_the_opaque_centres_kept_for_view_depth_stay_within_their_budget(small_room, monkeypatch) -> None:
+    """At most _OPAQUE_MEANS_SIZE sets and _OPAQUE_MEANS_BYTES bytes of centres; a set over the budget is used but
+    not kept, and an entry holds its arrays weakly (a set the caller dropped leaves nothing alive)."""
+    import gc
+    from types import SimpleNamespace
+
+    from spacedg.data import pipeline
+    from spacedg.render.gaussians import Gaussians
+
+    g = small_room.gaussians
+    camera = small_room.camera(next(iter(small_room.views))).resized(64, 48)
+    monkeypatch.setattr(pipeline, "_OPAQUE_MEANS", type(pipeline._OPAQUE_MEANS)())
+    sets = [Gaussians(g.means[k::5].copy(), g.quats[k::5], g.scales[k::5], g.opacities[k::5].copy(), g.sh[k::5]) for k in range(5)]
+    for k, gaussians in enumerate(sets):
+        view_depth(SimpleNamespace(id=f"budget-{k}", gaussians=gaussians), camera)  # type: ignore[arg-type]
+    assert len(pipeline._OPAQUE_MEANS) == pipeline._OPAQUE_MEANS_SIZE  # the oldest set left
+    monkeypatch.setattr(pipeline, "_OPAQUE_MEANS_BYTES", sets[0].means.shape[0] * 24 - 1)  # one set's centres, less a byte
+    pipeline._OPAQUE_MEANS.clear()
+    expected = _depth_by_definition(sets[0].means, sets[0].opacities, camera)
+    assert view_depth(SimpleNamespace(id="over-budget", gaussians=sets[0]), camera) == pytest.approx(expected, rel=1e-12)  # type: ignore[arg-type]
+    assert len(pipeline._OPAQUE_MEANS) == 0
+    monkeypatch.setattr(pipeline, "_OPAQUE_MEANS_BYTES", 256 << 20)
+    view_depth(SimpleNamespace(id="weak", gaussians=sets[1]), camera)  # type: ignore[arg-type]
+    (refs,) = [(entry[0], entry[1]) for entry in pipeline._OPAQUE_MEANS.values()]
+    del sets, gaussians  # nothing else holds the sets
+    gc.collect()
+    assert refs[0]() is None and refs[1]() is None
