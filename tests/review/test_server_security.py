@@ -374,3 +374,38 @@ def test_cli_prints_the_tokened_url(bench: Path) -> None:
         out, err = process.communicate(timeout=20)
     assert process.returncode == 0 and "Traceback" not in err, err
     assert not (bench / "bench.reviewed.tsv.lock").exists()
+
+
+def test_cli_stops_cleanly_on_sigterm(bench: Path) -> None:
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    process = subprocess.Popen([str(SPACEDG_SCRIPT), "review", str(bench), "--port", "0", "--reviewer", "cy"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        lines = [process.stdout.readline() for _ in range(3)]
+        assert lines[2].startswith("open http://127.0.0.1:") and (bench / "bench.reviewed.tsv.lock").exists()
+    finally:
+        process.send_signal(15)
+        out, err = process.communicate(timeout=20)
+    assert process.returncode == 0 and out.strip().endswith("stopped") and "Traceback" not in err, err
+    assert not (bench / "bench.reviewed.tsv.lock").exists()
+
+
+def test_a_stop_signal_landing_on_another_thread_still_wakes_the_server() -> None:
+    """The review command waits on the signals' wakeup descriptor, not on the main thread's pending-signal
+    flag: a SIGINT handled by another thread's C handler (here one sent to that thread) stops the wait."""
+    import signal
+    import threading
+
+    from spacedg.commands.review import _stop_signals
+
+    before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+    with _stop_signals() as stopped:
+        assert stopped is not None
+        waiting = threading.Thread(target=stopped, daemon=True)
+        waiting.start()
+        sender = threading.Thread(target=lambda: signal.pthread_kill(threading.get_ident(), signal.SIGINT))
+        sender.start()
+        sender.join()
+        waiting.join(timeout=10)
+        assert not waiting.is_alive()  # the byte reached the descriptor
+    assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before
