@@ -243,10 +243,12 @@ def _opaque_means(g: Any) -> np.ndarray:
     means = np.asarray(g.means, dtype=np.float64)
     opaque = np.asarray(g.opacities) >= DEPTH_MIN_OPACITY
     kept = means if opaque.all() else means[opaque]
+    if kept is g.means:  # float64 and all opaque: nothing was gathered, and an entry would keep the array alive
+        return kept
     if kept.nbytes <= _OPAQUE_MEANS_BYTES:
         try:
             _OPAQUE_MEANS[key] = (weakref.ref(g.means), weakref.ref(g.opacities), kept)
-        except TypeError:  # an array type without weak references (a view of a memory map is one): not kept
+        except TypeError:  # not a numpy array (a list, a tuple): no weak reference to it, not kept
             return kept
         while len(_OPAQUE_MEANS) > _OPAQUE_MEANS_SIZE or sum(e[2].nbytes for e in _OPAQUE_MEANS.values()) > _OPAQUE_MEANS_BYTES:
             _OPAQUE_MEANS.popitem(last=False)
