@@ -236,8 +236,7 @@ def _read(ds: SpaceDGDataset, name: str, plan: tuple[list[int], list[int]], work
     timed = Timed({name: pickle_copy(ds)})  # a fresh, empty cache
     # the scene depths are cached per process, not per dataset: each configuration (and round) pays its own
     # (with workers the main process renders nothing, and forked workers start from these empty caches)
-    pipeline._DEPTH_CACHE.clear()
-    pipeline._OPAQUE_MEANS.clear()
+    pipeline.clear_depth_caches()
     keys = Keys()
     kwargs: dict[str, Any] = {}
     if workers:

@@ -52,10 +52,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         with _stop_signals() as stopped:
             if stopped is not None:
-                server.thread = threading.Thread(
-                    target=server.httpd.serve_forever, kwargs={"poll_interval": 0.2}, name="spacedg-review", daemon=True,
-                )
-                server.thread.start()
+                server.start()
             print(f"open {server.url}  (the token in this address is the session's key; Ctrl+C to stop)", flush=True)
             if stopped is None:  # not the main thread: no signals to watch, served here until the process ends
                 server.httpd.serve_forever()

@@ -221,12 +221,22 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     return value
 
 
-#: The opaque centres of the last few Gaussian sets :func:`view_depth` saw: (id of means, id of opacities) →
-#: (weak references to those arrays, float64 (M, 3) centres). At most :data:`_OPAQUE_MEANS_SIZE` sets and
-#: :data:`_OPAQUE_MEANS_BYTES` bytes of centres (a larger set is not kept).
-_OPAQUE_MEANS: OrderedDict[tuple[int, int], tuple[Any, Any, np.ndarray]] = OrderedDict()
+#: The opaque centres of the last few Gaussian sets :func:`view_depth` saw, made on first use: a
+#: :class:`~spacedg.scene.store.ByteLRU` of at most :data:`_OPAQUE_MEANS_SIZE` sets and
+#: :data:`_OPAQUE_MEANS_BYTES` bytes of centres (a larger set is used, not kept), keyed by the ids of a
+#: set's ``means`` and ``opacities``: (weak references to those arrays, float64 (M, 3) centres or ``None``
+#: when nothing was gathered, the means being float64 and all opaque).
+_OPAQUE_MEANS: Any = None
 _OPAQUE_MEANS_SIZE = 4
 _OPAQUE_MEANS_BYTES = 256 << 20
+
+
+def clear_depth_caches() -> None:
+    """Forget this process's scene depths (:func:`view_depth`) and the opaque centres they come from
+    (a benchmark that wants every reading to pay its own)."""
+    _DEPTH_CACHE.clear()
+    if _OPAQUE_MEANS is not None:
+        _OPAQUE_MEANS.clear()
 
 
 def _opaque_means(g: Any) -> np.ndarray:
@@ -235,24 +245,31 @@ def _opaque_means(g: Any) -> np.ndarray:
     repeats it. An entry is found by the identity of the set's arrays (weak references: it never keeps a
     scene's Gaussians alive after the dataset's own cache let them go; a scene's arrays are not
     modified in place)."""
+    global _OPAQUE_MEANS
+    if _OPAQUE_MEANS is None:
+        from spacedg.scene.store import ByteLRU  # here: the pipeline's import stays light
+
+        _OPAQUE_MEANS = ByteLRU(_OPAQUE_MEANS_BYTES, lambda entry: 0 if entry[2] is None else entry[2].nbytes, _OPAQUE_MEANS_SIZE)
+    try:
+        refs = weakref.ref(g.means), weakref.ref(g.opacities)
+    except TypeError:  # not a numpy array (a list, a tuple): no weak reference to it, not kept
+        kept = _opaque_centres(g)
+        return np.asarray(g.means, dtype=np.float64) if kept is None else kept
     key = (id(g.means), id(g.opacities))
-    hit = _OPAQUE_MEANS.get(key)
-    if hit is not None and hit[0]() is g.means and hit[1]() is g.opacities:
-        _OPAQUE_MEANS.move_to_end(key)
-        return hit[2]
+    entry = _OPAQUE_MEANS.get(key, lambda: (*refs, _opaque_centres(g)))
+    if entry[0]() is not g.means or entry[1]() is not g.opacities:  # an id reused after its set was freed
+        _OPAQUE_MEANS.discard(key)
+        entry = _OPAQUE_MEANS.get(key, lambda: (*refs, _opaque_centres(g)))
+    return g.means if entry[2] is None else entry[2]
+
+
+def _opaque_centres(g: Any) -> np.ndarray | None:
+    """The float64 rows of ``g.means`` whose opacity is at least :data:`DEPTH_MIN_OPACITY`; ``None`` when
+    that is ``g.means`` itself (float64 and all opaque: nothing to keep, and keeping it would keep the set alive)."""
     means = np.asarray(g.means, dtype=np.float64)
     opaque = np.asarray(g.opacities) >= DEPTH_MIN_OPACITY
     kept = means if opaque.all() else means[opaque]
-    if kept is g.means:  # float64 and all opaque: nothing was gathered, and an entry would keep the array alive
-        return kept
-    if kept.nbytes <= _OPAQUE_MEANS_BYTES:
-        try:
-            _OPAQUE_MEANS[key] = (weakref.ref(g.means), weakref.ref(g.opacities), kept)
-        except TypeError:  # not a numpy array (a list, a tuple): no weak reference to it, not kept
-            return kept
-        while len(_OPAQUE_MEANS) > _OPAQUE_MEANS_SIZE or sum(e[2].nbytes for e in _OPAQUE_MEANS.values()) > _OPAQUE_MEANS_BYTES:
-            _OPAQUE_MEANS.popitem(last=False)
-    return kept
+    return None if kept is g.means else kept
 
 
 def sample_scene_depth(scene: Scene, views: Sequence[str]) -> float | None:

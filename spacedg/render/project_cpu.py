@@ -180,11 +180,11 @@ def _project_kernel(
         z = view_rot[2, 0] * wx + view_rot[2, 1] * wy + view_rot[2, 2] * wz + view_trans[2]
         if not (z > near and z < far):
             continue
-        # under defocus the circle of confusion widens every footprint by at most coc² px² (the full test's coc)
-        coc_cull = min(aperture * abs(z - focus) / z, max_coc) if aperture > 0.0 else 0.0
+        # the circle of confusion (px; 0 without defocus): under defocus it widens every footprint by coc² px²
+        lens_coc = min(aperture * abs(z - focus) / z, max_coc) if aperture > 0.0 else 0.0
         if not fisheye and _surely_outside(
             x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos,
-            eps_cull + coc_cull * coc_cull,
+            eps_cull + lens_coc * lens_coc,
         ):
             continue
         # ---- 3D covariance in the camera frame: Σc = (W R S)(W R S)ᵀ
@@ -257,7 +257,7 @@ def _project_kernel(
         det = sxx * syy - sxy * sxy
         coc = 0.0
         if aperture > 0.0:
-            coc = min(aperture * abs(z - focus) / z, max_coc)
+            coc = lens_coc
             if coc < DEFOCUS_MIN_COC:  # below DEFOCUS_MIN_COC: sharp
                 coc = 0.0
             coc2 = coc * coc

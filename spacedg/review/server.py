@@ -438,6 +438,11 @@ class ReviewServer:
     httpd: _Server
     thread: threading.Thread | None = None
 
+    def start(self) -> None:
+        """Serve on a background thread (:meth:`close` stops it)."""
+        self.thread = threading.Thread(target=self.httpd.serve_forever, kwargs={"poll_interval": 0.1}, name="spacedg-review", daemon=True)
+        self.thread.start()
+
     def close(self) -> None:
         if self.thread is not None:
             self.httpd.shutdown()
@@ -490,6 +495,5 @@ def serve_in_thread(bench: str | Path, *, out: str | Path | None = None, reviewe
                     scenes: Sequence[str | Path] | None = None, port: int = 0, token: str | None = None) -> ReviewServer:
     """:func:`make_server` running on a background thread (tests, notebooks)."""
     server = make_server(bench, out=out, reviewer=reviewer, scenes=scenes, port=port, token=token)
-    server.thread = threading.Thread(target=server.httpd.serve_forever, kwargs={"poll_interval": 0.1}, name="spacedg-review", daemon=True)
-    server.thread.start()
+    server.start()
     return server

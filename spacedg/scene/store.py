@@ -164,16 +164,20 @@ def run_isolated(target: str, payload: dict[str, Any]) -> dict[str, str]:
 
 
 class ByteLRU:
-    """A least-recently-used mapping bounded by total ``size_of(value)`` bytes.
+    """A least-recently-used mapping bounded by total ``size_of(value)`` bytes (and, given
+    ``max_items``, by its number of items).
 
     An item larger than the budget is returned to the caller but not kept.
     """
 
-    def __init__(self, max_bytes: int, size_of: Callable[[Any], int]) -> None:
+    def __init__(self, max_bytes: int, size_of: Callable[[Any], int], max_items: int | None = None) -> None:
         check_int(max_bytes, "ByteLRU: max_bytes", minimum=0)
+        if max_items is not None:
+            check_int(max_items, "ByteLRU: max_items", minimum=1)
         if not callable(size_of):
             raise ParameterError(f"ByteLRU: size_of must be a function value → bytes, got {short_repr(size_of)}")
         self.max_bytes = int(max_bytes)
+        self.max_items = None if max_items is None else int(max_items)
         self.size_of = size_of
         self._items: OrderedDict[Any, tuple[Any, int]] = OrderedDict()
         self.bytes = 0
@@ -191,10 +195,25 @@ class ByteLRU:
         if size <= self.max_bytes:
             self._items[key] = (value, size)
             self.bytes += size
-            while self.bytes > self.max_bytes:
+            while self.bytes > self.max_bytes or (self.max_items is not None and len(self._items) > self.max_items):
                 _, (_, old) = self._items.popitem(last=False)
                 self.bytes -= old
         return value
+
+    def discard(self, key: Any) -> None:
+        """Forget ``key``'s item (nothing if it is not kept)."""
+        item = self._items.pop(key, None)
+        if item is not None:
+            self.bytes -= item[1]
+
+    def clear(self) -> None:
+        """Forget every item."""
+        self._items.clear()
+        self.bytes = 0
+
+    def values(self) -> list[Any]:
+        """The kept items, least recently used first."""
+        return [value for value, _ in self._items.values()]
 
     def __len__(self) -> int:
         return len(self._items)

@@ -120,17 +120,18 @@ def test_the_opaque_centres_kept_for_view_depth_stay_within_their_budget(small_r
 
     g = small_room.gaussians
     camera = small_room.camera(next(iter(small_room.views))).resized(64, 48)
-    monkeypatch.setattr(pipeline, "_OPAQUE_MEANS", type(pipeline._OPAQUE_MEANS)())
+    monkeypatch.setattr(pipeline, "_OPAQUE_MEANS", None)  # made afresh on first use, with the module's budget
     sets = [Gaussians(g.means[k::5].copy(), g.quats[k::5], g.scales[k::5], g.opacities[k::5].copy(), g.sh[k::5]) for k in range(5)]
     for k, gaussians in enumerate(sets):
         view_depth(SimpleNamespace(id=f"budget-{k}", gaussians=gaussians), camera)  # type: ignore[arg-type]
     assert len(pipeline._OPAQUE_MEANS) == pipeline._OPAQUE_MEANS_SIZE  # the oldest set left
     monkeypatch.setattr(pipeline, "_OPAQUE_MEANS_BYTES", sets[0].means.shape[0] * 24 - 1)  # one set's centres, less a byte
-    pipeline._OPAQUE_MEANS.clear()
+    monkeypatch.setattr(pipeline, "_OPAQUE_MEANS", None)
     expected = _depth_by_definition(sets[0].means, sets[0].opacities, camera)
     assert view_depth(SimpleNamespace(id="over-budget", gaussians=sets[0]), camera) == pytest.approx(expected, rel=1e-12)  # type: ignore[arg-type]
     assert len(pipeline._OPAQUE_MEANS) == 0
     monkeypatch.setattr(pipeline, "_OPAQUE_MEANS_BYTES", 256 << 20)
+    monkeypatch.setattr(pipeline, "_OPAQUE_MEANS", None)
     view_depth(SimpleNamespace(id="weak", gaussians=sets[1]), camera)  # type: ignore[arg-type]
     (refs,) = [(entry[0], entry[1]) for entry in pipeline._OPAQUE_MEANS.values()]
     del sets, gaussians  # nothing else holds the sets
