@@ -352,6 +352,60 @@ def test_keyboard_clean_view_and_drop(review: Review) -> None:
     assert (review.bench / "bench.tsv").read_bytes() == review.original
 
 
+def _held_back(page, index: int) -> list:
+    """Hold back the page's requests for item ``index`` (``/api/items/<index>``, not its edits):
+    the routes are collected, unanswered, until the test continues them."""
+    held: list = []
+
+    def hold(route) -> None:
+        held.append(route)
+
+    page.route(lambda url: url.split("?", 1)[0].endswith(f"/api/items/{index}"), hold)
+    return held
+
+
+def _release(page, held: list, index: int) -> None:
+    """Let the first held request for item ``index`` through, wait for its answer, then for the page's tasks to run."""
+    deadline = 200
+    while not held and deadline:  # each playwright call lets the route handlers run
+        page.wait_for_timeout(25)
+        deadline -= 1
+    assert held, f"the page never asked for item {index}"
+    with page.expect_response(lambda response: response.url.split("?", 1)[0].endswith(f"/api/items/{index}")):
+        held.pop(0).continue_()
+    page.evaluate("() => new Promise(done => setTimeout(done, 100))")  # the answer's handlers, then a render if any
+
+
+def test_late_answers_never_replace_a_later_selection(review: Review) -> None:
+    """An item's answer that comes back after a later selection was asked for is not shown, and
+    neither are the clean views of an item no longer selected: a loaded server answers out of
+    order (CI saw the page jump back to item 0 after a click on item 5). Both answers are held back
+    here until the later selection has been shown."""
+    from playwright.sync_api import expect
+
+    page = review.page
+    detail = page.locator("#detail")
+    first = _held_back(page, 0)  # the page selects item 0 when it opens: that answer is held
+    review.open()
+    review.select(5)
+    _release(page, first, 0)
+    expect(detail).to_have_attribute("data-index", "5")
+    expect(page.locator("#question")).to_have_text(bench_rows()[5]["question"])
+    expect(page.locator("#item-list li.selected")).to_have_attribute("data-index", "5")
+    assert review.images_loaded("#images")[0].endswith("/images/0000005_0.png")
+
+    # with the clean views shown: item 6's clean counterpart (item 1) is held while item 7 is selected
+    page.locator("#question").click()
+    page.keyboard.press("c")
+    clean_of_six = _held_back(page, 1)
+    review.select(6)
+    review.select(7)
+    assert [src.rsplit("/", 1)[1] for src in review.images_loaded("#clean-images")] == ["0000002_0.png"]
+    _release(page, clean_of_six, 1)
+    assert [src.rsplit("/", 1)[1] for src in review.images_loaded("#clean-images")] == ["0000002_0.png"]
+    assert [src.rsplit("/", 1)[1] for src in review.images_loaded("#images")] == ["0000007_0.png"]
+
+
 def test_screenshot(review: Review, tmp_path: Path) -> None:
     """The page as documented: an MCQ item under haze with its clean counterpart beside it."""
     from playwright.sync_api import expect
