@@ -297,14 +297,11 @@ def render_motion_keyframes(
         images, stats = job.composite(canvas.with_pose(pose), frozenset({"rgb", "depth"}))
         pairs += stats["pairs"]
         alpha, depth = images["alpha"], images["depth"]
+        # the fill depth of uncovered pixels: alpha-weighted mean depth (numpy's float32 sums)
+        fill = float(np.sum(depth * alpha) / max(float(alpha.sum()), 1e-30)) if (alpha > motion_warp.COVERED_ALPHA).any() else 1.0
         src = np.empty((canvas.height, canvas.width, channels), np.float32)
-        src[..., :3] = images["rgb"]
-        src[..., 3] = alpha
-        if want_depth:
-            src[..., 4] = depth * alpha
-        covered = alpha > 1e-3
-        fill = float(np.sum(depth * alpha) / max(float(alpha.sum()), 1e-30)) if covered.any() else 1.0
-        geometry = np.where(covered, depth, np.float32(fill)).astype(np.float32)
+        geometry = np.empty((canvas.height, canvas.width), np.float32)
+        motion_warp.keyframe_source(images["rgb"], alpha, depth, fill, src, geometry)
         field = np.empty((canvas.height, canvas.width, 4), np.float32)
         motion_warp.flow_field(geometry, camera.fx, camera.fy, canvas.cx, canvas.cy,
                                motion_warp.relative_transform(end_poses[k], pose),
@@ -312,8 +309,7 @@ def render_motion_keyframes(
         # a path longer than the canvas reads clamped texels anyway; a non-finite one (a surface at
         # the camera centre, metres of motion at 1e3) is no path: both bound the gather's work and reads
         reach = np.float32(2 * (canvas.width + canvas.height))
-        np.clip(np.nan_to_num(field, copy=False, nan=0.0, posinf=0.0, neginf=0.0), -reach, reach, out=field)
-        longest = float(np.sqrt(np.max(field[..., 2] ** 2 + field[..., 3] ** 2)))
+        longest = float(np.sqrt(np.float32(motion_warp.sanitise_field(field, reach))))
         n_passes = passes if passes_given else (passes if longest > DOUBLING_FROM_PX else 0)
         dst = np.empty_like(src)
         covered_all = bool(alpha.min() > 0.0)  # nothing to skip (a room): no occupancy tables

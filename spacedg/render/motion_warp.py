@@ -38,7 +38,7 @@ import numpy as np
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
-__all__ = ["doubling_pass", "flow_field", "gather", "relative_transform"]
+__all__ = ["doubling_pass", "flow_field", "gather", "keyframe_source", "relative_transform", "sanitise_field"]
 
 
 def relative_transform(pose_from: np.ndarray, pose_to: np.ndarray) -> np.ndarray:
@@ -184,6 +184,68 @@ def flow_field(depth, fx, fy, kcx, kcy, from_a, from_b, field):  # pragma: no co
             field[i, j, 1] = 0.5 * (va + vb) - v0
             field[i, j, 2] = ub - ua
             field[i, j, 3] = vb - va
+
+
+#: Alpha (float32) above which a keyframe pixel's own depth is its flow geometry (below: the fill depth).
+COVERED_ALPHA = np.float32(1e-3)
+
+
+@fork_safe
+@numba.njit(parallel=True, cache=True)
+def keyframe_source(rgb, alpha, depth, fill, src, geometry):  # pragma: no cover - compiled
+    """A keyframe's gather source and flow geometry, in one pass over its canvas (in place).
+
+    ``src[i, j] = (r, g, b, α)``, and ``depth·α`` as a fifth channel when ``src`` has five
+    (premultiplied linear colour, alpha, float32); ``geometry[i, j]`` = ``depth`` (metres) where
+    ``α > COVERED_ALPHA`` (a float32 comparison, as numpy's of a float32 array), else ``fill``
+    (float32). The same values as the numpy assignments and ``np.where`` it replaces; no
+    fast-math (the product is the plain float32 one).
+    """
+    hc, wc = alpha.shape
+    extra = src.shape[2] > 4
+    other = np.float32(fill)
+    for i in numba.prange(hc):
+        for j in range(wc):
+            a = alpha[i, j]
+            d = depth[i, j]
+            src[i, j, 0] = rgb[i, j, 0]
+            src[i, j, 1] = rgb[i, j, 1]
+            src[i, j, 2] = rgb[i, j, 2]
+            src[i, j, 3] = a
+            if extra:
+                src[i, j, 4] = d * a
+            geometry[i, j] = d if a > COVERED_ALPHA else other
+
+
+@fork_safe
+@numba.njit(parallel=True, cache=True)
+def sanitise_field(field, reach):  # pragma: no cover - compiled
+    """A :func:`flow_field` made safe to walk, in place; returns its longest segment's squared
+    extent ``max(d_u² + d_v²)`` (float32, pixels²).
+
+    NaN and ±inf become 0 (no path), then every value is clipped to ``[−reach, reach]``
+    (``reach`` float32): ``np.clip(np.nan_to_num(field, nan=0, posinf=0, neginf=0), −reach, reach)``
+    exactly, and the float32 sum of squares numpy forms. No fast-math: the NaN tests must stay.
+    """
+    hc, wc = field.shape[0], field.shape[1]
+    zero = np.float32(0.0)
+    top = np.float32(reach)
+    row_longest = np.zeros(hc, np.float32)
+    for i in numba.prange(hc):
+        longest = zero
+        for j in range(wc):
+            for c in range(4):
+                v = field[i, j, c]
+                if v != v or v == np.inf or v == -np.inf:
+                    v = zero
+                field[i, j, c] = min(max(v, -top), top)
+            du = field[i, j, 2]
+            dv = field[i, j, 3]
+            length2 = du * du + dv * dv
+            if length2 > longest:
+                longest = length2
+        row_longest[i] = longest
+    return row_longest.max()
 
 
 def occupancy(src: np.ndarray) -> np.ndarray:

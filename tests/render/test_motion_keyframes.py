@@ -161,3 +161,42 @@ def test_parallax_asks_for_more_keyframes_on_a_close_up() -> None:
     assert 70.0 * 0.3 * (1 / 1.6 - 1 / 2.8) < parallax < 70.0 * 0.3 * (1 / 1.5 - 1 / 3.2)  # box 1.5–1.6 m, wall 2.8–3.2 m
     assert choose_keyframes(44.0, 80) == 1 and choose_keyframes(44.0, 80, 28.7) == math.ceil(math.sqrt(28.7 / PARALLAX_PX)) == 3
     assert choose_keyframes(5000.0, 80, 5000.0) == MAX_KEYFRAMES == 8 and choose_keyframes(44.0, 2, 28.7) == 2
+
+
+def test_keyframe_glue_kernels_equal_their_numpy_forms() -> None:
+    """:func:`~spacedg.render.motion_warp.keyframe_source` and :func:`~spacedg.render.motion_warp.sanitise_field`
+    give the bytes of the numpy steps they replaced: alpha right at the float32 threshold, NaN,
+    ±inf and values beyond the reach in the field, 4 and 5 channels, a strided input."""
+    from spacedg.render import motion_warp
+
+    rng = np.random.default_rng(31)
+    h, w = 37, 53
+    rgb = rng.uniform(0, 2, (h, w, 3)).astype(np.float32)
+    alpha = rng.uniform(0, 1, (h, w)).astype(np.float32)
+    alpha[::5, ::3] = np.float32(1e-3)  # exactly the float32 threshold: not covered (numpy compares in float32)
+    alpha[1::7, ::4] = np.nextafter(np.float32(1e-3), np.float32(1))
+    alpha[2::9] = 0.0
+    depth = rng.uniform(0.1, 9, (h, w)).astype(np.float32)
+    for channels in (4, 5):
+        for image in (rgb, np.ascontiguousarray(rgb[:, ::-1])[:, ::-1]):  # contiguous, then a reversed (strided) view
+            fill = float(np.sum(depth * alpha) / max(float(alpha.sum()), 1e-30))
+            want = np.empty((h, w, channels), np.float32)
+            want[..., :3] = image
+            want[..., 3] = alpha
+            if channels == 5:
+                want[..., 4] = depth * alpha
+            want_geometry = np.where(alpha > 1e-3, depth, np.float32(fill)).astype(np.float32)
+            src, geometry = np.empty_like(want), np.empty((h, w), np.float32)
+            motion_warp.keyframe_source(image, alpha, depth, fill, src, geometry)
+            assert src.tobytes() == want.tobytes() and geometry.tobytes() == want_geometry.tobytes()
+
+    field = (rng.standard_normal((h, w, 4)) * 10.0 ** rng.integers(-3, 6, (h, w, 4))).astype(np.float32)
+    field.reshape(-1)[rng.choice(field.size, 60, replace=False)] = rng.choice([np.nan, np.inf, -np.inf, 3e38, -3e38], 60)
+    reach = np.float32(2 * (w + h))
+    want = np.clip(np.nan_to_num(field.copy(), nan=0.0, posinf=0.0, neginf=0.0), -reach, reach)
+    want_longest = float(np.sqrt(np.max(want[..., 2] ** 2 + want[..., 3] ** 2)))
+    longest = float(np.sqrt(np.float32(motion_warp.sanitise_field(field, reach))))
+    assert field.tobytes() == want.tobytes()
+    assert longest == want_longest and math.isfinite(longest)
+    flat = np.zeros((3, 4, 4), np.float32)  # no motion at all: 0
+    assert motion_warp.sanitise_field(flat, reach) == 0.0 and not flat.any()
