@@ -59,43 +59,57 @@ def _tables() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 
 
 _DECODE_LUT, _ENCODE_BASE, _ENCODE_NEXT, _THRESHOLDS = _tables()
+_ENCODE_BASE = _ENCODE_BASE.astype(np.int32)  # int32 codes: LLVM gathers them as wide as the thresholds
 
 
 @fork_safe
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _decode_kernel(flat: np.ndarray, lut: np.ndarray, out: np.ndarray) -> None:
-    scale = (lut.shape[0] - 1) / (1.0 - _TOE)
+    """Decode ``flat`` into ``out`` (module docstring): a branch-free pass that LLVM vectorises, then the
+    power law for the rare values ≥ 1 (HDR) in a second pass, only when there are any.
+
+    Each value takes exactly the arithmetic of its case: 0 for ``x ≤ 0`` and NaN, ``x / 12.92`` on the
+    toe, the table's linear interpolation on (toe, 1) (its index ``min(⌊s⌋, bins − 1)``; clamped
+    into the table for the other cases too, whose interpolation is computed and then not used)."""
+    n_lut = lut.shape[0]
+    scale = (n_lut - 1) / (1.0 - _TOE)
+    last = np.float64(n_lut - 2)
+    bright = 0
     for i in numba.prange(flat.shape[0]):
         x = np.float64(flat[i])
-        if not x > 0.0:  # also NaN
-            out[i] = 0.0
-        elif x <= _TOE:
-            out[i] = x / 12.92
-        elif x < 1.0:
-            s = (x - _TOE) * scale
-            j = min(int(s), lut.shape[0] - 2)
-            f = s - j
-            out[i] = lut[j] + f * (lut[j + 1] - lut[j])
-        else:
-            out[i] = ((x + 0.055) / 1.055) ** 2.4
+        s = (x - _TOE) * scale
+        at = s if s > 0.0 else 0.0  # NaN → 0: every index read is inside the table
+        at = at if at < last else last
+        j = int(at)
+        f = s - j
+        value = lut[j] + f * (lut[j + 1] - lut[j])
+        value = x / 12.92 if x <= _TOE else value
+        out[i] = value if x > 0.0 else 0.0
+        bright += 1 if x >= 1.0 else 0
+    if bright:
+        for i in numba.prange(flat.shape[0]):
+            x = np.float64(flat[i])
+            if x >= 1.0:
+                out[i] = ((x + 0.055) / 1.055) ** 2.4
 
 
 @fork_safe
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _encode_kernel(flat: np.ndarray, base: np.ndarray, nxt: np.ndarray, out: np.ndarray) -> None:
+    """Encode ``flat`` into 8-bit codes ``out`` (module docstring), branch-free so that LLVM vectorises
+    it: a value in (0, 1) takes its bucket's code, plus one at or past the bucket's threshold; the
+    bucket index is clamped into the table for the other values (≤ 0, NaN: 0; ≥ 1: 255)."""
     n_bins = base.shape[0]
+    top = np.float64(n_bins - 1)
     for i in numba.prange(flat.shape[0]):
         x = np.float64(flat[i])
-        if not x > 0.0:
-            out[i] = 0
-        elif x >= 1.0:
-            out[i] = 255
-        else:
-            b = int(x * n_bins)
-            code = base[b]
-            if x >= nxt[b]:
-                code += 1
-            out[i] = code
+        s = x * n_bins
+        at = s if s > 0.0 else 0.0  # NaN → 0
+        at = at if at < top else top
+        b = int(at)
+        code = base[b] + (1 if x >= nxt[b] else 0)
+        code = 255 if x >= 1.0 else code
+        out[i] = np.uint8(code if x > 0.0 else 0)
 
 
 def decode_srgb(encoded: np.ndarray) -> np.ndarray:
