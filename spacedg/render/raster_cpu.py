@@ -464,7 +464,7 @@ def bin_visible(packed: np.ndarray, rects: np.ndarray, width: int, height: int, 
     """Depth-sort the visible Gaussians and bin them into tiles: ``(offsets, gauss)`` (see :func:`bin_tiles`)."""
     tiles_x, tiles_y = (width + 15) // 16, (height + 15) // 16
     visible = np.flatnonzero(rects[:, 1] > rects[:, 0])
-    order = depth_order(visible, np.ascontiguousarray(packed[:, DEPTH]))
+    order = depth_order(visible, packed[:, DEPTH])  # the column read in place (a strided view)
     return bin_tiles(order, rects, packed, tiles_x, tiles_y, width, height, tight, pair_capacity(order, rects))
 
 
@@ -483,12 +483,14 @@ def rasterize(packed: np.ndarray, rects: np.ndarray, instance_ids: np.ndarray, w
     """Sort, bin and composite projected Gaussians; returns the requested float32/int32 images."""
     tiles_x = (width + 15) // 16
     offsets, gauss = bin_visible(packed, rects, width, height, tight)
+    # the composite writes every pixel of every image it is asked for (each pixel lies in one tile):
+    # those start empty; the 1×1 stand-ins of images not asked for keep their fill
     out = {
-        "alpha": np.zeros((height, width), np.float32),
-        "rgb": np.zeros((height, width, 3) if want_color else (1, 1, 3), np.float32),
-        "depth": np.zeros((height, width) if want_depth else (1, 1), np.float32),
-        "median_depth": np.zeros((height, width) if want_ids else (1, 1), np.float32),
-        "instance_ids": np.full((height, width) if want_ids else (1, 1), -1, np.int32),
+        "alpha": np.empty((height, width), np.float32),
+        "rgb": np.empty((height, width, 3), np.float32) if want_color else np.zeros((1, 1, 3), np.float32),
+        "depth": np.empty((height, width), np.float32) if want_depth else np.zeros((1, 1), np.float32),
+        "median_depth": np.empty((height, width), np.float32) if want_ids else np.zeros((1, 1), np.float32),
+        "instance_ids": np.empty((height, width), np.int32) if want_ids else np.full((1, 1), -1, np.int32),
     }
     composite(
         offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
