@@ -2,12 +2,14 @@
 
 The numpy formulas in :mod:`spacedg.render.colour` call ``pow`` per element (≈ 9 ms each way
 for 640×480×3 on one core, half a clean render). These kernels do the same work in one
-parallel pass without ``pow`` on the common range:
+parallel, branch-free pass without ``pow`` on the common range (every case computed and one kept,
+so LLVM vectorises the loop: ≈ 1.1 ms each way for 640×480×3 on one core):
 
 - :func:`decode_srgb` — sRGB-encoded float32 → linear float32. The linear toe exactly; on
   (0.04045, 1) a 4097-entry table with linear interpolation (worst absolute error 4e-8 ≈ the
   float32 resolution of the result, relative error < 3e-6);
-  above 1 (HDR, e.g. a bright window) the exact power law; negative → 0.
+  above 1 (HDR, e.g. a bright window) the exact power law, in a second pass run only when the
+  image has such values; negative and NaN → 0.
 - :func:`encode_srgb_u8` — linear float32 → 8-bit sRGB, **clipping to [0, 1] first**, with
   exactly the code ``round(255 · encode(x))`` of the exact curve: each 8-bit code's decision
   threshold is precomputed in float64 and a bucket table finds the one threshold that can lie
