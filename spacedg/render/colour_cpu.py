@@ -3,7 +3,7 @@
 The numpy formulas in :mod:`spacedg.render.colour` call ``pow`` per element (≈ 9 ms each way
 for 640×480×3 on one core, half a clean render). These kernels do the same work in one
 parallel, branch-free pass without ``pow`` on the common range (every case computed and one kept,
-so LLVM vectorises the loop: ≈ 1.1 ms each way for 640×480×3 on one core):
+so LLVM vectorises the loop: ≈ 1.1 ms each way for 640×480×3 on one thread):
 
 - :func:`decode_srgb` — sRGB-encoded float32 → linear float32. The linear toe exactly; on
   (0.04045, 1) a 4097-entry table with linear interpolation (worst absolute error 4e-8 ≈ the
@@ -51,7 +51,8 @@ def _tables() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     thresholds = encode_thresholds()
     edges = np.arange(_ENCODE_BINS + 1, dtype=np.float64) / _ENCODE_BINS
     # code at each bucket's lower edge, and the next threshold inside the bucket (or +inf)
-    base = (np.searchsorted(thresholds, edges[:-1], side="right") - 1).astype(np.uint8)
+    # int32 codes (not uint8): the encode kernel gathers them as wide as the thresholds
+    base = (np.searchsorted(thresholds, edges[:-1], side="right") - 1).astype(np.int32)
     nxt = np.full(_ENCODE_BINS, np.inf)
     for b in range(_ENCODE_BINS):
         c = int(base[b]) + 1
@@ -61,7 +62,6 @@ def _tables() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 
 
 _DECODE_LUT, _ENCODE_BASE, _ENCODE_NEXT, _THRESHOLDS = _tables()
-_ENCODE_BASE = _ENCODE_BASE.astype(np.int32)  # int32 codes: LLVM gathers them as wide as the thresholds
 
 
 @fork_safe

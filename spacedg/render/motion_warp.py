@@ -38,7 +38,7 @@ import numpy as np
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
-__all__ = ["doubling_pass", "flow_field", "gather", "keyframe_source", "relative_transform", "sanitise_field"]
+__all__ = ["COVERED_ALPHA", "doubling_pass", "flow_field", "gather", "keyframe_source", "relative_transform", "sanitise_field"]
 
 
 def relative_transform(pose_from: np.ndarray, pose_to: np.ndarray) -> np.ndarray:
@@ -190,9 +190,22 @@ def flow_field(depth, fx, fy, kcx, kcy, from_a, from_b, field):  # pragma: no co
 COVERED_ALPHA = np.float32(1e-3)
 
 
+def keyframe_source(rgb: np.ndarray, alpha: np.ndarray, depth: np.ndarray, fill: float, src: np.ndarray, geometry: np.ndarray) -> None:
+    """A keyframe's gather source and flow geometry, in one pass over its canvas (in place; see
+    :func:`_keyframe_source`). ``rgb`` (Hc, Wc, 3), ``alpha`` and ``depth`` (Hc, Wc) float32,
+    ``src`` (Hc, Wc, 4 or 5) and ``geometry`` (Hc, Wc) float32; other shapes are refused."""
+    size = alpha.shape
+    if rgb.shape != (*size, 3) or depth.shape != size or geometry.shape != size or src.shape[:2] != size or src.shape[2] not in (4, 5):
+        raise ValueError(
+            f"keyframe_source: shapes must be rgb (H, W, 3), alpha/depth/geometry (H, W), src (H, W, 4 or 5); got rgb {rgb.shape}, "
+            f"alpha {alpha.shape}, depth {depth.shape}, src {src.shape}, geometry {geometry.shape}"
+        )
+    _keyframe_source(rgb, alpha, depth, fill, src, geometry)
+
+
 @fork_safe
 @numba.njit(parallel=True, cache=True)
-def keyframe_source(rgb, alpha, depth, fill, src, geometry):  # pragma: no cover - compiled
+def _keyframe_source(rgb, alpha, depth, fill, src, geometry):  # pragma: no cover - compiled
     """A keyframe's gather source and flow geometry, in one pass over its canvas (in place).
 
     ``src[i, j] = (r, g, b, α)``, and ``depth·α`` as a fifth channel when ``src`` has five
@@ -217,9 +230,18 @@ def keyframe_source(rgb, alpha, depth, fill, src, geometry):  # pragma: no cover
             geometry[i, j] = d if a > COVERED_ALPHA else other
 
 
+def sanitise_field(field: np.ndarray, reach: np.float32) -> float:
+    """A :func:`flow_field` ``field`` ((Hc, Wc, 4) float32; other shapes are refused) made safe to
+    walk, in place; returns its longest segment's squared extent (pixels², a float32 value; see
+    :func:`_sanitise_field`)."""
+    if field.ndim != 3 or field.shape[2] != 4:
+        raise ValueError(f"sanitise_field: field must be (H, W, 4), got {field.shape}")
+    return float(_sanitise_field(field, np.float32(reach)))
+
+
 @fork_safe
 @numba.njit(parallel=True, cache=True)
-def sanitise_field(field, reach):  # pragma: no cover - compiled
+def _sanitise_field(field, reach):  # pragma: no cover - compiled
     """A :func:`flow_field` made safe to walk, in place; returns its longest segment's squared
     extent ``max(d_u² + d_v²)`` (float32, pixels²).
 
@@ -236,7 +258,7 @@ def sanitise_field(field, reach):  # pragma: no cover - compiled
         for j in range(wc):
             for c in range(4):
                 v = field[i, j, c]
-                if v != v or v == np.inf or v == -np.inf:
+                if not math.isfinite(v):
                     v = zero
                 field[i, j, c] = min(max(v, -top), top)
             du = field[i, j, 2]

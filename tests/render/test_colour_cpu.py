@@ -61,7 +61,7 @@ def test_branch_free_kernels_take_each_values_own_case_on_any_bits() -> None:
         s = (x64 - colour_cpu._TOE) * scale
         j = np.clip(np.nan_to_num(np.floor(s), nan=0.0), 0, lut.shape[0] - 2).astype(np.int64)
         table = lut[j] + (s - j) * (lut[j + 1] - lut[j])
-        power = ((x64 + 0.055) / 1.055) ** 2.4
+        power = colour_cpu._decode_exact(x64)  # the power law above the toe
         want = np.where(~(x64 > 0.0), 0.0, np.where(x64 <= colour_cpu._TOE, x64 / 12.92, np.where(x64 < 1.0, table, power))).astype(np.float32)
     assert np.array_equal(decode_srgb(x).view(np.uint32), want.view(np.uint32))
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from tests.render_helpers import camera, random_gaussians
 from spacedg.render import MotionBlur, render
@@ -200,3 +201,15 @@ def test_keyframe_glue_kernels_equal_their_numpy_forms() -> None:
     assert longest == want_longest and math.isfinite(longest)
     flat = np.zeros((3, 4, 4), np.float32)  # no motion at all: 0
     assert motion_warp.sanitise_field(flat, reach) == 0.0 and not flat.any()
+
+    # nothing covered: every pixel's geometry is the fill depth (render_motion_keyframes passes 1.0 then)
+    src, geometry = np.empty((h, w, 4), np.float32), np.empty((h, w), np.float32)
+    motion_warp.keyframe_source(rgb, np.zeros((h, w), np.float32), depth, 1.0, src, geometry)
+    assert (geometry == 1.0).all() and not src[..., 3].any()
+    # shapes that do not match are refused (the kernels do not check bounds)
+    with pytest.raises(ValueError, match="keyframe_source: shapes"):
+        motion_warp.keyframe_source(rgb, alpha, depth[:-1], 1.0, src, geometry)
+    with pytest.raises(ValueError, match="keyframe_source: shapes"):
+        motion_warp.keyframe_source(rgb, alpha, depth, 1.0, np.empty((h, w, 3), np.float32), geometry)
+    with pytest.raises(ValueError, match=r"sanitise_field: field must be \(H, W, 4\)"):
+        motion_warp.sanitise_field(np.zeros((3, 4, 2), np.float32), reach)

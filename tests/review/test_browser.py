@@ -352,28 +352,48 @@ def test_keyboard_clean_view_and_drop(review: Review) -> None:
     assert (review.bench / "bench.tsv").read_bytes() == review.original
 
 
-def _held_back(page, index: int) -> list:
-    """Hold back the page's requests for item ``index`` (``/api/items/<index>``, not its edits):
-    the routes are collected, unanswered, until the test continues them."""
-    held: list = []
+#: Counts, per path, the API answers the page has read (``response.json()`` settled): after the
+#: count rises, the code awaiting that answer has run (it resumes in the same microtask checkpoint).
+_COUNT_ANSWERS = """
+window.__answered = {};
+const readJson = Response.prototype.json;
+Response.prototype.json = function () {
+  const path = new URL(this.url).pathname;
+  return readJson.call(this).finally(() => { window.__answered[path] = (window.__answered[path] || 0) + 1; });
+};
+"""
 
-    def hold(route) -> None:
-        held.append(route)
 
-    page.route(lambda url: url.split("?", 1)[0].endswith(f"/api/items/{index}"), hold)
-    return held
+class _HeldBack:
+    """The page's requests for item ``index`` (``/api/items/<index>``, not its edits), held unanswered
+    until :meth:`release` (the page must load :data:`_COUNT_ANSWERS` first)."""
 
+    def __init__(self, page, index: int) -> None:
+        self.page, self.path, self.routes = page, f"/api/items/{index}", []
 
-def _release(page, held: list, index: int) -> None:
-    """Let the first held request for item ``index`` through, wait for its answer, then for the page's tasks to run."""
-    deadline = 200
-    while not held and deadline:  # each playwright call lets the route handlers run
-        page.wait_for_timeout(25)
-        deadline -= 1
-    assert held, f"the page never asked for item {index}"
-    with page.expect_response(lambda response: response.url.split("?", 1)[0].endswith(f"/api/items/{index}")):
-        held.pop(0).continue_()
-    page.evaluate("() => new Promise(done => setTimeout(done, 100))")  # the answer's handlers, then a render if any
+        def hold(route) -> None:  # a plain function: playwright tags its handlers with an attribute
+            self.routes.append(route)
+
+        self._hold = hold
+        page.route(self._matches, hold)
+
+    def _matches(self, url: str) -> bool:
+        return url.split("?", 1)[0].endswith(self.path)
+
+    def _answered(self) -> int:
+        return self.page.evaluate("path => window.__answered[path] || 0", self.path)
+
+    def release(self) -> None:
+        """Let the one held request through, stop holding, and wait until the page has read its answer."""
+        for _ in range(200):  # each playwright call lets the route handler run
+            if self.routes:
+                break
+            self.page.wait_for_timeout(25)
+        assert len(self.routes) == 1, f"the page asked for {self.path} {len(self.routes)} times while it was held"
+        before = self._answered()
+        self.routes.pop().continue_()
+        self.page.unroute(self._matches, self._hold)  # after: unrouting settles a route still held
+        self.page.wait_for_function(f"path => (window.__answered[path] || 0) > {before}", arg=self.path, timeout=TIMEOUT_MS)
 
 
 def test_late_answers_never_replace_a_later_selection(review: Review) -> None:
@@ -384,11 +404,12 @@ def test_late_answers_never_replace_a_later_selection(review: Review) -> None:
     from playwright.sync_api import expect
 
     page = review.page
+    page.add_init_script(_COUNT_ANSWERS)
     detail = page.locator("#detail")
-    first = _held_back(page, 0)  # the page selects item 0 when it opens: that answer is held
+    first = _HeldBack(page, 0)  # the page selects item 0 when it opens: that answer is held
     review.open()
     review.select(5)
-    _release(page, first, 0)
+    first.release()
     expect(detail).to_have_attribute("data-index", "5")
     expect(page.locator("#question")).to_have_text(bench_rows()[5]["question"])
     expect(page.locator("#item-list li.selected")).to_have_attribute("data-index", "5")
@@ -397,11 +418,13 @@ def test_late_answers_never_replace_a_later_selection(review: Review) -> None:
     # with the clean views shown: item 6's clean counterpart (item 1) is held while item 7 is selected
     page.locator("#question").click()
     page.keyboard.press("c")
-    clean_of_six = _held_back(page, 1)
+    expect(page.locator("#clean-images")).to_be_visible()
+    assert [src.rsplit("/", 1)[1] for src in review.images_loaded("#clean-images")] == ["0000000_0.png"]  # item 5's (item 0)
+    clean_of_six = _HeldBack(page, 1)
     review.select(6)
     review.select(7)
     assert [src.rsplit("/", 1)[1] for src in review.images_loaded("#clean-images")] == ["0000002_0.png"]
-    _release(page, clean_of_six, 1)
+    clean_of_six.release()
     assert [src.rsplit("/", 1)[1] for src in review.images_loaded("#clean-images")] == ["0000002_0.png"]
     assert [src.rsplit("/", 1)[1] for src in review.images_loaded("#images")] == ["0000007_0.png"]
 
