@@ -256,10 +256,14 @@ def _opaque_means(g: Any) -> np.ndarray:
         kept = _opaque_centres(g)
         return np.asarray(g.means, dtype=np.float64) if kept is None else kept
     key = (id(g.means), id(g.opacities))
-    entry = _OPAQUE_MEANS.get(key, lambda: (*refs, _opaque_centres(g)))
+
+    def make() -> tuple[Any, Any, np.ndarray | None]:
+        return (*refs, _opaque_centres(g))
+
+    entry = _OPAQUE_MEANS.get(key, make)
     if entry[0]() is not g.means or entry[1]() is not g.opacities:  # an id reused after its set was freed
         _OPAQUE_MEANS.discard(key)
-        entry = _OPAQUE_MEANS.get(key, lambda: (*refs, _opaque_centres(g)))
+        entry = _OPAQUE_MEANS.get(key, make)
     return g.means if entry[2] is None else entry[2]
 
 

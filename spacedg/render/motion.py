@@ -309,7 +309,7 @@ def render_motion_keyframes(
         # a path longer than the canvas reads clamped texels anyway; a non-finite one (a surface at
         # the camera centre, metres of motion at 1e3) is no path: both bound the gather's work and reads
         reach = np.float32(2 * (canvas.width + canvas.height))
-        longest = float(np.sqrt(np.float32(motion_warp.sanitise_field(field, reach))))
+        longest = motion_warp.sanitise_field(field, reach)
         n_passes = passes if passes_given else (passes if longest > DOUBLING_FROM_PX else 0)
         dst = np.empty_like(src)
         covered_all = bool(alpha.min() > 0.0)  # nothing to skip (a room): no occupancy tables

@@ -232,11 +232,11 @@ def _keyframe_source(rgb, alpha, depth, fill, src, geometry):  # pragma: no cove
 
 def sanitise_field(field: np.ndarray, reach: np.float32) -> float:
     """A :func:`flow_field` ``field`` ((Hc, Wc, 4) float32; other shapes are refused) made safe to
-    walk, in place; returns its longest segment's squared extent (pixels², a float32 value; see
-    :func:`_sanitise_field`)."""
+    walk, in place (:func:`_sanitise_field`); returns its longest segment's extent (pixels): the
+    float32 square root of the largest float32 ``d_u² + d_v²``."""
     if field.ndim != 3 or field.shape[2] != 4:
         raise ValueError(f"sanitise_field: field must be (H, W, 4), got {field.shape}")
-    return float(_sanitise_field(field, np.float32(reach)))
+    return float(np.sqrt(np.float32(_sanitise_field(field, np.float32(reach)))))
 
 
 @fork_safe
