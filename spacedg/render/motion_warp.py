@@ -34,6 +34,9 @@ import math
 
 import numba
 import numpy as np
+from llvmlite import ir
+from numba.core import types
+from numba.extending import intrinsic
 
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
@@ -57,6 +60,59 @@ def relative_transform(pose_from: np.ndarray, pose_to: np.ndarray) -> np.ndarray
 #: contraction (``contract``) stays and was measured to give identical bits both ways
 #: (``benchmarks/numba_cache_determinism.py``).
 _FASTMATH = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
+
+
+#: The same flags on the 4-lane arithmetic of :func:`_weighted_taps4_intrinsic`.
+_LANE_FLAGS = tuple(sorted(_FASTMATH))
+_LANES = ir.VectorType(ir.FloatType(), 4)
+
+
+def _weighted_taps4_intrinsic(accumulate: bool):
+    """``dst[at : at + 4] = Σ weights[n] · flat[taps[n] : taps[n] + 4]`` (with ``accumulate``: ``+=``),
+    each term one 4-lane float32 vector: a numba intrinsic for the kernels below.
+
+    The four channels of a texel lie next to each other, so a tap is one vector load and each
+    term one vector multiply and add, where the scalar form does four of each (LLVM does not find
+    this itself). The terms are summed left to right, ``((w₀t₀ + w₁t₁) + w₂t₂) + …``, each product
+    and sum with the kernels' fast-math flags: on every lane the arithmetic of the scalar
+    ``w0 * flat[t0 + c] + w1 * flat[t1 + c] + …`` (``dst[c] += …``), so the same bits (tested).
+    Arguments: ``dst`` and ``flat`` contiguous float32 arrays, ``at`` a uint64 index into ``dst``,
+    ``taps`` a tuple of uint64 flat indices, ``weights`` a tuple of as many float32. No bounds
+    checks: the callers clamp their taps to the canvas.
+    """
+
+    def typer(typingctx, dst, at, flat, taps, weights):
+        if not (isinstance(taps, types.UniTuple) and isinstance(weights, types.UniTuple) and taps.count == weights.count):
+            return None
+
+        def codegen(context, builder, signature, args):
+            dst_value, at_value, flat_value, taps_value, weights_value = args
+            data = context.make_array(signature.args[2])(context, builder, flat_value).data
+            total = None
+            for n in range(signature.args[3].count):
+                at = builder.gep(data, [builder.extract_value(taps_value, n)])
+                texel = builder.load(builder.bitcast(at, _LANES.as_pointer()), align=4)
+                weight = builder.extract_value(weights_value, n)
+                lanes = ir.Constant(_LANES, ir.Undefined)
+                for lane in range(4):
+                    lanes = builder.insert_element(lanes, weight, ir.Constant(ir.IntType(32), lane))
+                term = builder.fmul(lanes, texel, flags=_LANE_FLAGS)
+                total = term if total is None else builder.fadd(total, term, flags=_LANE_FLAGS)
+            first = builder.gep(context.make_array(signature.args[0])(context, builder, dst_value).data, [at_value])
+            target = builder.bitcast(first, _LANES.as_pointer())
+            if accumulate:
+                total = builder.fadd(builder.load(target, align=4), total, flags=_LANE_FLAGS)
+            builder.store(total, target, align=4)
+            return context.get_dummy_value()
+
+        return types.void(dst, at, flat, taps, weights), codegen
+
+    typer.__name__ = "_add_weighted_taps4" if accumulate else "_weighted_taps4"
+    return intrinsic(typer)
+
+
+_add_weighted_taps4 = _weighted_taps4_intrinsic(accumulate=True)
+_weighted_taps4 = _weighted_taps4_intrinsic(accumulate=False)
 
 
 @numba.njit(cache=True, inline="always")
@@ -86,13 +142,15 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
         sat: :func:`occupancy` of ``src``: a segment over empty texels adds nothing and is skipped.
         out: (H, W, C) float32 accumulators.
     """
+    if src.shape[2] != 4 and src.shape[2] != 5:
+        raise ValueError("gather: src must have 4 or 5 channels")
     hc, wc = src.shape[0], src.shape[1]
     want_extra = src.shape[2] > 4
     # flat buffer, unsigned indices: numba's negative-index wraparound checks stay out of the loop
     flat = src.reshape(-1)
     nc = np.uint64(src.shape[2])
     row = np.uint64(wc) * nc
-    c1, c2, c3, c4 = np.uint64(1), np.uint64(2), np.uint64(3), np.uint64(4)
+    c4 = np.uint64(4)
     scale = np.float32(length)
     height, width = out.shape[0], out.shape[1]
     xmax = np.float32(wc - 1.001)
@@ -103,6 +161,7 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
     inv_spacing = np.float32(1.0 / spacing)
     for i in numba.prange(height):
         ci = i + margin
+        lanes = np.empty(4, np.float32)  # the path's r, g, b, α sums (one vector register in the loop)
         for j in range(width):
             cj = j + margin
             # the path through the keyframe, array-index coordinates (pixel centres at integers):
@@ -123,10 +182,7 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
             count = max(1, int(math.ceil(scale * math.sqrt(fu * fu + fv * fv) * inv_spacing)))
             step = scale / np.float32(count)
             t = half - half * scale + half * step
-            a0 = zero
-            a1 = zero
-            a2 = zero
-            a3 = zero
+            lanes[:] = zero
             a4 = zero
             for _ in range(count):
                 bend = np.float32(4.0) * t * (one - t)
@@ -143,17 +199,12 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
                 w11 = ax * ay
                 p00 = y0 * row + x0 * nc
                 p10 = p00 + row
-                a0 += w00 * flat[p00] + w01 * flat[p00 + nc] + w10 * flat[p10] + w11 * flat[p10 + nc]
-                a1 += w00 * flat[p00 + c1] + w01 * flat[p00 + nc + c1] + w10 * flat[p10 + c1] + w11 * flat[p10 + nc + c1]
-                a2 += w00 * flat[p00 + c2] + w01 * flat[p00 + nc + c2] + w10 * flat[p10 + c2] + w11 * flat[p10 + nc + c2]
-                a3 += w00 * flat[p00 + c3] + w01 * flat[p00 + nc + c3] + w10 * flat[p10 + c3] + w11 * flat[p10 + nc + c3]
+                _add_weighted_taps4(lanes, np.uint64(0), flat, (p00, p00 + nc, p10, p10 + nc), (w00, w01, w10, w11))
                 if want_extra:
                     a4 += w00 * flat[p00 + c4] + w01 * flat[p00 + nc + c4] + w10 * flat[p10 + c4] + w11 * flat[p10 + nc + c4]
             norm = one / np.float32(count)
-            out[i, j, 0] += a0 * norm
-            out[i, j, 1] += a1 * norm
-            out[i, j, 2] += a2 * norm
-            out[i, j, 3] += a3 * norm
+            for c in range(4):
+                out[i, j, c] += lanes[c] * norm
             if want_extra:
                 out[i, j, 4] += a4 * norm
 
@@ -314,6 +365,8 @@ def doubling_pass(src, field, scale, sat, dst):  # pragma: no cover - compiled
     (a box of length ℓ along ``d`` becomes two of them ``2 s |d|`` apart). ``sat``:
     :func:`occupancy` of ``src``; pixels whose two reads fall on empty texels are set to 0."""
     hc, wc, n_ch = src.shape
+    if n_ch != 4 and n_ch != 5:
+        raise ValueError("doubling_pass: src must have 4 or 5 channels")
     xmax = np.float32(wc - 1.001)
     ymax = np.float32(hc - 1.001)
     half = np.float32(0.5)
@@ -322,6 +375,7 @@ def doubling_pass(src, field, scale, sat, dst):  # pragma: no cover - compiled
     flat = src.reshape(-1)
     out = dst.reshape(-1)
     nc = np.uint64(n_ch)
+    c4 = np.uint64(4)
     row = np.uint64(wc) * nc
     for i in numba.prange(hc):
         for j in range(wc):
@@ -342,8 +396,9 @@ def doubling_pass(src, field, scale, sat, dst):  # pragma: no cover - compiled
             wb01 = half * bx * (one - by)
             wb10 = half * (one - bx) * by
             wb11 = half * bx * by
-            for c in range(n_ch):
-                k = np.uint64(c)
-                out[base + k] = (wa00 * flat[pa + k] + wa01 * flat[pa + nc + k] + wa10 * flat[pa + row + k]
-                                 + wa11 * flat[pa + row + nc + k] + wb00 * flat[pb + k] + wb01 * flat[pb + nc + k]
-                                 + wb10 * flat[pb + row + k] + wb11 * flat[pb + row + nc + k])
+            _weighted_taps4(out, base, flat, (pa, pa + nc, pa + row, pa + row + nc, pb, pb + nc, pb + row, pb + row + nc),
+                            (wa00, wa01, wa10, wa11, wb00, wb01, wb10, wb11))
+            if n_ch > 4:
+                out[base + c4] = (wa00 * flat[pa + c4] + wa01 * flat[pa + nc + c4] + wa10 * flat[pa + row + c4]
+                                  + wa11 * flat[pa + row + nc + c4] + wb00 * flat[pb + c4] + wb01 * flat[pb + nc + c4]
+                                  + wb10 * flat[pb + row + c4] + wb11 * flat[pb + row + nc + c4])

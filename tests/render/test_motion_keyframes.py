@@ -213,3 +213,49 @@ def test_keyframe_glue_kernels_equal_their_numpy_forms() -> None:
         motion_warp.keyframe_source(rgb, alpha, depth, 1.0, np.empty((h, w, 3), np.float32), geometry)
     with pytest.raises(ValueError, match=r"sanitise_field: field must be \(H, W, 4\)"):
         motion_warp.sanitise_field(np.zeros((3, 4, 2), np.float32), reach)
+
+
+def test_vector_taps_give_the_bits_of_the_scalar_sums() -> None:
+    """The 4-lane taps of :func:`~spacedg.render.motion_warp.gather` and
+    :func:`~spacedg.render.motion_warp.doubling_pass` compute, on every lane, the scalar sums the
+    kernels wrote per channel before (same order, same fast-math flags, so the same FMA
+    contractions): the same bits on random texels and weights, with and without accumulation;
+    the kernels refuse canvases of other than 4 or 5 channels."""
+    import numba
+
+    from spacedg.render import motion_warp
+
+    @numba.njit(fastmath=motion_warp._FASTMATH)
+    def both_ways(flat, taps, weights, start, vector4, scalar4, vector8, scalar8):  # pragma: no cover - compiled
+        for k in range(taps.shape[0]):
+            t = taps[k]
+            w = weights[k]
+            at = np.uint64(4 * k)
+            vector4[at : at + np.uint64(4)] = start[k]
+            motion_warp._add_weighted_taps4(vector4, at, flat, (t[0], t[1], t[2], t[3]), (w[0], w[1], w[2], w[3]))
+            motion_warp._weighted_taps4(vector8, at, flat, (t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7]),
+                                        (w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]))
+            for c in range(4):
+                q = np.uint64(c)
+                acc = start[k, c]
+                acc += w[0] * flat[t[0] + q] + w[1] * flat[t[1] + q] + w[2] * flat[t[2] + q] + w[3] * flat[t[3] + q]
+                scalar4[at + q] = acc
+                scalar8[at + q] = (w[0] * flat[t[0] + q] + w[1] * flat[t[1] + q] + w[2] * flat[t[2] + q] + w[3] * flat[t[3] + q]
+                                   + w[4] * flat[t[4] + q] + w[5] * flat[t[5] + q] + w[6] * flat[t[6] + q] + w[7] * flat[t[7] + q])
+
+    rng = np.random.default_rng(46)
+    n = 20_000
+    flat = (rng.standard_normal(4096) * 10.0 ** rng.integers(-3, 4, 4096)).astype(np.float32)
+    taps = rng.integers(0, flat.size - 4, (n, 8)).astype(np.uint64)
+    weights = rng.uniform(0, 1, (n, 8)).astype(np.float32)
+    start = (rng.standard_normal((n, 4)) * 100).astype(np.float32)
+    vector4, scalar4, vector8, scalar8 = (np.full(4 * n, np.nan, np.float32) for _ in range(4))
+    both_ways(flat, taps, weights, start, vector4, scalar4, vector8, scalar8)
+    assert vector4.tobytes() == scalar4.tobytes() and vector8.tobytes() == scalar8.tobytes()
+    assert np.isfinite(vector8).all()
+
+    three = np.zeros((8, 9, 3), np.float32)
+    with pytest.raises(ValueError, match="4 or 5 channels"):
+        motion_warp.gather(three, np.zeros((8, 9, 4), np.float32), 1, 1.0, 1.0, motion_warp.FULL, np.zeros((6, 7, 3), np.float32))
+    with pytest.raises(ValueError, match="4 or 5 channels"):
+        motion_warp.doubling_pass(three, np.zeros((8, 9, 4), np.float32), np.float32(0.25), motion_warp.FULL, np.empty_like(three))
