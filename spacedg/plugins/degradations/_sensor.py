@@ -90,6 +90,7 @@ __all__ = [
     "SIGNAL_CAP",
     "tukey_lambda_std",
     "sensor_capture",
+    "largest_drop",
 ]
 
 #: System gain: normalised full scale per photo-electron (full well ≈ 10⁴ e⁻).
@@ -348,22 +349,32 @@ def _sensor_kernel(
     row_start: np.ndarray,
     guide: np.ndarray,
     coefficients: np.ndarray,
+    skip: np.ndarray,
+    noise: bool,
 ) -> None:
     """``out[i] = k·Poisson(e·x[i]/k) + read_scale·R`` over flat float32 arrays (see the module docstring).
 
     ``saturated`` (with ``clip``): a signal ``s`` at or above it gives 1.0 whatever the draws
-    (``∞`` without ``clip``; see :func:`_saturation_signal`).
+    (``∞`` without ``clip``; see :func:`_saturation_signal`). ``skip``: empty, or one uint8 per
+    value; where it is non-zero the value is not drawn and ``out[i]`` is its signal ``s`` (float32).
+    ``noise``: ``out[i]`` is the capture less the signal instead, both rounded to float32 first
+    (numpy's ``capture − float32(s)``); 0 where skipped.
     """
     key_mix = _mix(key)
     keys = np.empty(_DRAW_KEYS, dtype=np.uint64)
     for draw in range(_DRAW_KEYS):
         keys[draw] = _draw_key(key_mix, draw)
     inv_k = 1.0 / k if k > 0.0 else 0.0
+    skipping = skip.size > 0
     for i in numba.prange(x.size):
         s = exposure * np.float64(x[i])
         if s != s:
             s = 0.0
         s = min(max(s, -SIGNAL_CAP), SIGNAL_CAP)
+        signal = np.float32(s)
+        if skipping and skip[i]:
+            out[i] = np.float32(0.0) if noise else signal  # not needed by the caller: no draw
+            continue
         if s >= saturated:
             out[i] = 1.0  # k·Poisson + read noise ≥ 1 for every possible draw: clip gives 1.0
             continue
@@ -387,7 +398,7 @@ def _sensor_kernel(
             s += read_scale * r
         if clip:
             s = min(max(s, 0.0), 1.0)
-        out[i] = s
+        out[i] = np.float32(s) - signal if noise else np.float32(s)
 
 
 # ------------------------------------------------------------------ host side
@@ -417,6 +428,8 @@ def sensor_capture(
     read_model: int = READ_GAUSSIAN,
     read_lambda: float = READ_LAMBDA_DEFAULT,
     clip: bool = False,
+    skip: np.ndarray | None = None,
+    noise: bool = False,
 ) -> np.ndarray:
     """Expose linear light by ``exposure`` and add shot and read noise (see the module docstring).
 
@@ -430,6 +443,11 @@ def sensor_capture(
         read_model: :data:`READ_GAUSSIAN` or :data:`READ_TUKEY`.
         read_lambda: Tukey λ (> −0.5), used when ``read_model == READ_TUKEY``.
         clip: clip the result to [0, 1] (saturation).
+        skip: optional array of ``rgb``'s shape, non-zero at values the caller will not use. They are
+            not drawn and come back as their exposed signal (NaN → 0, clamped as above, float32);
+            every other value is the same bytes as without ``skip`` (the draws are counter-based).
+        noise: return the capture less the exposed signal (``y − float32(e·x)`` in float32, x as
+            treated above: the bytes of subtracting them in numpy), 0 where skipped; not with ``clip``.
 
     Returns:
         A new float32 array of ``rgb``'s shape, always finite.
@@ -437,6 +455,8 @@ def sensor_capture(
     for name, value in (("exposure", exposure), ("k", k), ("sigma_read", sigma_read)):
         if not (math.isfinite(value) and value >= 0.0):
             raise InvalidDataError(f"sensor model: {name} must be a finite number ≥ 0, got {value!r}")
+    if noise and clip:
+        raise InvalidDataError("sensor model: noise=True returns the unclipped noise; it cannot be combined with clip=True")
     if read_model not in (READ_GAUSSIAN, READ_TUKEY):
         raise InvalidDataError(f"sensor model: read_model must be {READ_GAUSSIAN} (Gaussian) or {READ_TUKEY} (Tukey lambda), got {read_model!r}")
     if not 0 <= key < 2**64:
@@ -449,6 +469,13 @@ def sensor_capture(
     saturated = _saturation_signal(float(k), read_scale * read_bound) if clip else math.inf
     flat = np.ascontiguousarray(rgb, dtype=np.float32).reshape(-1)
     out = np.empty(flat.size, dtype=np.float32)
+    if skip is None:
+        skip_flags = _NO_SKIP
+    elif skip.shape != rgb.shape:
+        raise InvalidDataError(f"sensor model: skip must have the image's shape {rgb.shape}, got {skip.shape}")
+    else:
+        flags = skip if skip.dtype in (np.bool_, np.uint8) else skip != 0
+        skip_flags = np.ascontiguousarray(flags).reshape(-1).view(np.uint8)
     _sensor_kernel(
         flat,
         out,
@@ -464,8 +491,44 @@ def sensor_capture(
         _POISSON_ROW_START,
         _POISSON_GUIDE,
         _NORMAL_COEFFICIENTS,
+        skip_flags,
+        bool(noise),
     )
     return out.reshape(rgb.shape)
+
+
+#: ``skip`` of a capture that draws every value.
+_NO_SKIP = np.zeros(0, np.uint8)
+
+
+def largest_drop(
+    signal_max: np.ndarray, *, k: float, sigma_read: float, read_model: int = READ_GAUSSIAN, read_lambda: float = READ_LAMBDA_DEFAULT,
+) -> np.ndarray:
+    """The most a capture can fall below its signal: ``s − y ≤ largest_drop(m)`` for every signal
+    ``s ≤ m`` (exposed, normalised linear units) and every possible draw; ≥ 0, in ``signal_max``'s
+    float dtype (float32 rounds to ~1e-7 relative: callers leave slack).
+
+    Shot noise: a Poisson count can be 0 (``y ≥ 0``, so at most ``s``), and in the normal regime
+    (``s ≥ 10³·k``) ``y ≥ s − 8.5·√(k·s)`` (|Z| < 8.3 for every 52-bit uniform), so at most
+    ``F(s) = min(s, max(10³·k, 8.5·√(k·s)))``, which grows with ``s``; read noise adds at most its
+    largest magnitude (:data:`_NORMAL_BOUND` σ, or the Tukey clamp's quantile). Used to find
+    values that saturate (clip to 1.0) whatever is drawn.
+    """
+    top = np.maximum(np.asarray(signal_max), 0.0)
+    if not np.issubdtype(top.dtype, np.floating):
+        top = top.astype(np.float64)
+    if k > 0.0:
+        drop = np.sqrt(top * top.dtype.type(k))
+        drop *= top.dtype.type(_NORMAL_BOUND)
+        np.maximum(drop, top.dtype.type(_NORMAL_MIN_RATE * k), out=drop)
+        np.minimum(drop, top, out=drop)
+    else:
+        drop = np.zeros_like(top)
+    read = sigma_read * _NORMAL_BOUND
+    if read_model == READ_TUKEY and sigma_read > 0.0:
+        read = sigma_read / tukey_lambda_std(float(read_lambda)) * _tukey_bound(float(read_lambda))
+    drop += top.dtype.type(read)
+    return drop
 
 
 def _saturation_signal(k: float, read_bound: float) -> float:

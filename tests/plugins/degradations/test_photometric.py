@@ -8,7 +8,7 @@ import numba
 import numpy as np
 import pytest
 
-from spacedg.errors import ParameterError
+from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins import Category, Stage
 from spacedg.plugins.degradations import low_light as low_light_module
 from spacedg.plugins.degradations import over_exposure as over_exposure_module
@@ -211,7 +211,7 @@ def test_saturation_shortcut_gives_the_same_bytes(k: float, sigma_read: float, r
     full = np.empty_like(image)
     _sensor._sensor_kernel(
         image, full, 8.5, k, read_scale, read_model, -0.2, True, math.inf, np.uint64(5), _sensor._POISSON_THRESHOLDS,
-        _sensor._POISSON_ROW_START, _sensor._POISSON_GUIDE, _sensor._NORMAL_COEFFICIENTS,
+        _sensor._POISSON_ROW_START, _sensor._POISSON_GUIDE, _sensor._NORMAL_COEFFICIENTS, np.zeros(0, np.uint8), False,
     )
     assert shortcut.tobytes() == full.tobytes()
     assert (full == 1.0).mean() > 0.3
@@ -297,3 +297,62 @@ def test_bad_params_rejected(spec, params: dict, pattern: str) -> None:
         spec.validate_params(params, partial=True)
     with pytest.raises(ParameterError, match=pattern):
         spec.apply(_textured(8, 8), {}, {**_params(spec, 1.0), **params}, np.random.default_rng(0))
+
+
+@pytest.mark.parametrize(("k", "sigma_read", "read_model"), [(1e-4, 2.5e-4, 0), (0.0, 2.5e-4, 0), (1e-4, 0.0, 0), (1e-2, 0.05, READ_TUKEY)])
+def test_saturated_sites_are_skipped_without_changing_a_byte(k: float, sigma_read: float, read_model: int) -> None:
+    """Over-exposure on photosites (sites smaller than pixels) does not draw the sites that only
+    pixels sure to clip to 1.0 read: the bytes equal drawing every site, at exposures that put
+    many pixels right at the edge of saturating; and the skip does happen."""
+    from spacedg.plugins.degradations import _photosites
+
+    image = _textured(61, 83) * np.float32(1.3)
+    image[5:9, 40:50] = np.nan
+    sensor = {"k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": -0.2}
+    skipped = []
+    for pitch in (0.31, 0.5, 0.77):
+        for exposure in (1.05, 1.6, 2.5, 8.5):
+            edge = image.copy()  # flat patches just above full scale: they clip unless the noise pulls them under
+            edge[20:45, 5:35] = np.float32(1.003 / exposure)
+            edge[45:60, 50:80] = np.float32(1.05 / exposure)
+            args = {"pitch": pitch, "exposure": exposure, "clip": True, "key": 11, **sensor}
+            assert _photosites.binned_capture(edge, **args).tobytes() == _photosites.binned_capture(edge, skip_saturated=False, **args).tobytes()
+            signal = np.nan_to_num(edge) * np.float32(exposure)
+            unread = _photosites._sites_of_saturated_pixels(signal, _photosites.photosite_grid(83, 61, pitch), sensor)
+            skipped.append(0.0 if unread is None else unread.mean())
+    if read_model == READ_TUKEY:  # λ = -0.2: read noise tails reach tens of full scales, so no pixel is sure to clip
+        assert max(skipped) == 0.0
+    else:
+        assert max(skipped) > 0.3
+
+
+def test_the_largest_drop_bounds_every_draw() -> None:
+    signals = np.geomspace(1e-6, 30.0, 4000).astype(np.float32)
+    for k, sigma_read, model in ((1e-4, 2.5e-4, 0), (1e-2, 0.05, READ_TUKEY), (0.0, 1e-3, 0)):
+        drop = _sensor.largest_drop(signals, k=k, sigma_read=sigma_read, read_model=model, read_lambda=-0.2)
+        assert drop.dtype == np.float32 and (np.diff(drop) >= 0).all()  # grows with the signal
+        lowest = np.full(signals.size, np.inf)
+        for key in range(40):
+            lowest = np.minimum(lowest, sensor_capture(signals, exposure=1.0, k=k, sigma_read=sigma_read, key=key, read_model=model, read_lambda=-0.2) - signals)
+        assert (lowest >= -drop).all()
+        if model != READ_TUKEY:  # (the Tukey clamp's tail is far beyond 40 draws)
+            assert (lowest < -0.1 * drop).any()  # not a vacuous bound
+
+
+def test_the_noise_of_a_capture_and_its_skipped_values() -> None:
+    image = _textured() * np.float32(0.2)
+    image[0, :5, 0] = [np.nan, np.inf, -np.inf, -1.0, 2e12]
+    for exposure in (1.0, 0.37):
+        full = sensor_capture(image, exposure=exposure, k=1e-4, sigma_read=2.5e-4, key=3)
+        signal = np.clip(np.nan_to_num(image.astype(np.float64) * exposure, nan=0.0), -SIGNAL_CAP, SIGNAL_CAP).astype(np.float32)
+        noise = sensor_capture(image, exposure=exposure, k=1e-4, sigma_read=2.5e-4, key=3, noise=True)
+        assert noise.tobytes() == (full - signal).tobytes()
+        skip = np.zeros(image.shape, bool)
+        skip[::3, ::2] = True
+        partly = sensor_capture(image, exposure=exposure, k=1e-4, sigma_read=2.5e-4, key=3, skip=skip)
+        assert partly[~skip].tobytes() == full[~skip].tobytes() and partly[skip].tobytes() == signal[skip].tobytes()
+        assert not sensor_capture(image, exposure=exposure, k=1e-4, sigma_read=2.5e-4, key=3, skip=skip, noise=True)[skip].any()
+    with pytest.raises(InvalidDataError, match="noise=True .* clip=True"):
+        sensor_capture(image, exposure=1.0, k=1e-4, sigma_read=2.5e-4, key=3, noise=True, clip=True)
+    with pytest.raises(InvalidDataError, match="skip must have the image's shape"):
+        sensor_capture(image, exposure=1.0, k=1e-4, sigma_read=2.5e-4, key=3, skip=np.zeros(5, bool))
