@@ -18,6 +18,12 @@ old and new alternating; on a loaded machine the minimum is the steadiest estima
 columns compare the new render with the old one (all outputs): max |Δ| of linear rgb, alpha,
 expected depth and median depth, and the count of pixels whose instance id differs.
 Timings are wall-clock on whatever the machine is doing: read the ratios, measured in one run.
+
+Vector width: this checkout asks numba for 512-bit vectors on AVX-512 hosts
+(:mod:`spacedg.render.cpu_target`); a checkout from before that runs at numba's default (256-bit
+on Intel's AVX-512 server cores). The header line says which each side used. ``--old-vectors full``
+gives the old side the same setting (the kernel work alone); ``--old HEAD --old-vectors default``
+compares this checkout with itself at numba's default width (the setting alone, and its error).
 """
 
 from __future__ import annotations
@@ -93,6 +99,8 @@ def worker(scene_file: str, names: list[str], runs: int, out_file: str) -> None:
     from spacedg.render.gaussians import Gaussians
     from spacedg.render.renderer import render
 
+    import numba
+
     data = np.load(scene_file)
     acc: dict = {}
     _wrap(project_cpu, "project_gaussians", acc, "project")
@@ -119,6 +127,7 @@ def worker(scene_file: str, names: list[str], runs: int, out_file: str) -> None:
         for plane in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
             images[f"{name}/{plane}"] = getattr(frame, plane)
     np.savez(out_file, **images)
+    result["vectors"] = "512-bit" if (numba.config.CPU_FEATURES or "").endswith(",-prefer-256-bit") else "numba's default"
     Path(out_file + ".json").write_text(json.dumps(result))
 
 
@@ -134,8 +143,15 @@ def checkout(rev: str) -> Path:
     return path
 
 
-def run_side(src: Path, scene_file: Path, names: list[str], runs: int, threads: int, out: Path) -> dict:
+def run_side(src: Path, scene_file: Path, names: list[str], runs: int, threads: int, out: Path, vectors: str = "auto") -> dict:
+    """One side's timings and images, in a subprocess of its checkout. ``vectors``: ``auto`` (what
+    the checkout sets), ``default`` (numba's host features: 256-bit on Intel's AVX-512 servers) or
+    ``full`` (what :mod:`spacedg.render.cpu_target` sets: 512-bit on AVX-512 hosts)."""
     env = dict(os.environ, PYTHONPATH=str(src), NUMBA_NUM_THREADS=str(threads))
+    if vectors != "auto":  # numba's own setting, which spacedg leaves alone when it is given
+        from numba.core.codegen import get_host_cpu_features
+
+        env["NUMBA_CPU_FEATURES"] = get_host_cpu_features() + (",-prefer-256-bit" if vectors == "full" else "")
     cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", str(scene_file), "--names", ",".join(names),
            "--runs", str(runs), "--out", str(out)]
     subprocess.run(cmd, env=env, check=True, cwd=str(src))
@@ -158,6 +174,9 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1, help="numba threads (default 1)")
     parser.add_argument("--rooms", default="0,1", help="seeds of the built-in rooms (default 0,1)")
     parser.add_argument("--no-plant", action="store_true", help="skip the shared plant capture")
+    parser.add_argument("--old-vectors", choices=("auto", "default", "full"), default="auto",
+                        help="the old side's numba vectors: what its checkout sets (auto), numba's default, or the 512-bit "
+                             "setting of spacedg.render.cpu_target (full); with --old HEAD and default: the setting alone")
     parser.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--names", default="", help=argparse.SUPPRESS)
     parser.add_argument("--out", default="", help=argparse.SUPPRESS)
@@ -170,16 +189,20 @@ def main() -> None:
                          [int(r) for r in args.rooms.split(",") if r.strip()])
     old_src = checkout(args.old)
     rows: dict = {"old": {}, "new": {}}
+    vectors: dict = {}
     for _ in range(args.rounds):  # old and new alternate, so a change in the machine's load hits both
         for side, src in (("old", old_src), ("new", ROOT)):
-            for key, value in run_side(src, tmp / "scenes.npz", names, args.runs, args.threads, tmp / f"{side}.npz").items():
+            out = run_side(src, tmp / "scenes.npz", names, args.runs, args.threads, tmp / f"{side}.npz",
+                           args.old_vectors if side == "old" else "auto")
+            vectors[side] = out.pop("vectors")
+            for key, value in out.items():
                 rows[side][key] = value if key.endswith("/pairs") else rows[side].get(key, []) + value
     timings = {side: {k: (v if k.endswith("/pairs") else np.min(np.array(v), axis=0).tolist()) for k, v in r.items()}
                for side, r in rows.items()}
     old_img, new_img = np.load(tmp / "old.npz"), np.load(tmp / "new.npz")
     print(f"clean CPU render 640x480, {args.threads} numba thread(s), fastest of {args.rounds} x {args.runs} per stage "
           f"(a loaded machine only ever adds time); old = {args.old}, "
-          f"new = this checkout; load average {os.getloadavg()[0]:.2f}")
+          f"new = this checkout; load average {os.getloadavg()[0]:.2f}; numba vectors: old {vectors['old']}, new {vectors['new']}")
     print(f"{'scene':<11} {'out':<4} {'pairs':>7} " + " ".join(f"{s + ' ms':>16}" for s in STAGES)
           + "  speed-up  (old -> new per stage)")
     for key in sorted(k for k in timings["new"] if not k.endswith("/pairs")):

@@ -32,6 +32,8 @@ from typing import Any
 
 from numba.core import caching
 
+from spacedg.render import cpu_target  # noqa: F401 - numba's CPU features set before any kernel compiles
+
 __all__ = ["CHECKED_SUFFIX", "ENTRY_TAG", "CheckedCacheFile", "check_caches_under", "install", "installed", "is_checked_source"]
 
 #: First item of every data file a :class:`CheckedCacheFile` writes: ``(ENTRY_TAG, key, data)``.
