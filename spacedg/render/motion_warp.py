@@ -62,6 +62,8 @@ def relative_transform(pose_from: np.ndarray, pose_to: np.ndarray) -> np.ndarray
 _FASTMATH = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
 
 
+#: Path samples :func:`gather` places before it sums them (its scratch buffers' length).
+_PATH_CHUNK = 64
 #: The same flags on the 4-lane arithmetic of :func:`_weighted_taps4_intrinsic`.
 _LANE_FLAGS = tuple(sorted(_FASTMATH))
 _LANES = ir.VectorType(ir.FloatType(), 4)
@@ -158,10 +160,14 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
     zero = np.float32(0.0)
     one = np.float32(1.0)
     half = np.float32(0.5)
+    four = np.float32(4.0)
     inv_spacing = np.float32(1.0 / spacing)
     for i in numba.prange(height):
         ci = i + margin
         lanes = np.empty(4, np.float32)  # the path's r, g, b, α sums (one vector register in the loop)
+        times = np.empty(_PATH_CHUNK, np.float32)  # a chunk of the path's samples: their times,
+        corners = np.empty(_PATH_CHUNK, np.uint64)  # top-left texels
+        weights = np.empty((4, _PATH_CHUNK), np.float32)  # and bilinear weights
         for j in range(width):
             cj = j + margin
             # the path through the keyframe, array-index coordinates (pixel centres at integers):
@@ -179,29 +185,41 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
                 continue
             au = pu + cu - half * fu
             av = pv + cv - half * fv
-            count = max(1, int(math.ceil(scale * math.sqrt(fu * fu + fv * fv) * inv_spacing)))
+            reach = scale * math.sqrt(fu * fu + fv * fv) * inv_spacing
+            whole = int(reach)
+            count = max(1, whole + (1 if reach > np.float32(whole) else 0))  # ⌈reach⌉ without a libm call
             step = scale / np.float32(count)
             t = half - half * scale + half * step
             lanes[:] = zero
             a4 = zero
-            for _ in range(count):
-                bend = np.float32(4.0) * t * (one - t)
-                x = min(max(au + t * fu - bend * cu, zero), xmax)
-                y = min(max(av + t * fv - bend * cv, zero), ymax)
-                t += step
-                x0 = np.uint64(x)
-                y0 = np.uint64(y)
-                ax = x - np.float32(x0)
-                ay = y - np.float32(y0)
-                w00 = (one - ax) * (one - ay)
-                w01 = ax * (one - ay)
-                w10 = (one - ax) * ay
-                w11 = ax * ay
-                p00 = y0 * row + x0 * nc
-                p10 = p00 + row
-                _add_weighted_taps4(lanes, np.uint64(0), flat, (p00, p00 + nc, p10, p10 + nc), (w00, w01, w10, w11))
-                if want_extra:
-                    a4 += w00 * flat[p00 + c4] + w01 * flat[p00 + nc + c4] + w10 * flat[p10 + c4] + w11 * flat[p10 + nc + c4]
+            # in chunks: the times (one float32 sum after another, as a single loop adds them), then
+            # every sample's texel and weights (independent: LLVM vectorises this loop), then the sums
+            for first in range(0, count, _PATH_CHUNK):
+                n = min(_PATH_CHUNK, count - first)
+                for k in range(n):
+                    times[k] = t
+                    t += step
+                for k in range(n):
+                    tk = times[k]
+                    bend = four * tk * (one - tk)
+                    x = min(max(au + tk * fu - bend * cu, zero), xmax)
+                    y = min(max(av + tk * fv - bend * cv, zero), ymax)
+                    x0 = np.uint64(x)
+                    y0 = np.uint64(y)
+                    ax = x - np.float32(x0)
+                    ay = y - np.float32(y0)
+                    weights[0, k] = (one - ax) * (one - ay)
+                    weights[1, k] = ax * (one - ay)
+                    weights[2, k] = (one - ax) * ay
+                    weights[3, k] = ax * ay
+                    corners[k] = y0 * row + x0 * nc
+                for k in range(n):
+                    p00 = corners[k]
+                    p10 = p00 + row
+                    w00, w01, w10, w11 = weights[0, k], weights[1, k], weights[2, k], weights[3, k]
+                    _add_weighted_taps4(lanes, np.uint64(0), flat, (p00, p00 + nc, p10, p10 + nc), (w00, w01, w10, w11))
+                    if want_extra:
+                        a4 += w00 * flat[p00 + c4] + w01 * flat[p00 + nc + c4] + w10 * flat[p10 + c4] + w11 * flat[p10 + nc + c4]
             norm = one / np.float32(count)
             for c in range(4):
                 out[i, j, c] += lanes[c] * norm

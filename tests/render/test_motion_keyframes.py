@@ -136,6 +136,35 @@ def test_gather_and_doubling_match_a_python_path_average() -> None:
         assert acc.max() > 0.05
 
 
+def test_a_path_longer_than_a_chunk_is_walked_in_one_piece() -> None:
+    """:func:`~spacedg.render.motion_warp.gather` places a path's samples in chunks of
+    ``_PATH_CHUNK``: a path of 2–4 chunks (and one of exactly one chunk) averages the same reads
+    as a plain loop over all of them, with and without the fifth (depth) channel."""
+    from spacedg.render import motion_warp
+
+    rng = np.random.default_rng(8)
+    hc, wc, margin = 40, 260, 4
+    for channels in (4, 5):
+        src = rng.uniform(0.0, 1.0, (hc, wc, channels)).astype(np.float32)
+        field = np.zeros((hc, wc, 4), np.float32)
+        field[..., 0] = rng.uniform(-3, 3, (hc, wc))
+        field[..., 1] = rng.uniform(-1, 1, (hc, wc))
+        field[..., 2] = np.linspace(float(motion_warp._PATH_CHUNK), 250.0, wc, dtype=np.float32)[None, :]
+        field[..., 3] = 5.0
+        acc = np.zeros((hc - 2 * margin, wc - 2 * margin, channels), np.float32)
+        motion_warp.gather(src, field, margin, 1.0, 1.0, motion_warp.FULL, acc)
+        for i, j in [(3, 0), (10, 60), (20, 130), (31, 251)]:
+            ci, cj = i + margin, j + margin
+            c, d = field[ci, cj, :2].astype(np.float64), field[ci, cj, 2:].astype(np.float64)
+            count = int(np.ceil(np.hypot(*d)))
+            assert count >= motion_warp._PATH_CHUNK
+            times = (np.arange(count) + 0.5) / count
+            points = [(cj + c[0] - d[0] / 2 + t * d[0] - 4 * t * (1 - t) * c[0],
+                       ci + c[1] - d[1] / 2 + t * d[1] - 4 * t * (1 - t) * c[1]) for t in times]
+            expected = np.mean([_bilinear(src, x, y) for x, y in points], axis=0)
+            np.testing.assert_allclose(acc[i, j], expected, atol=3e-5, err_msg=f"pixel {(i, j)}, {channels} channels")
+
+
 def test_degenerate_inputs_stay_in_range() -> None:
     """Found by the long fuzz run: a 1 × 1 view and kilometres of motion used to read outside the
     keyframe canvas (alpha 1.8e25, rgb -2.3e13); paths are now bounded and tiny views take the
