@@ -99,7 +99,7 @@ def worker(scene_file: str, names: list[str], runs: int, out_file: str) -> None:
     from spacedg.render.gaussians import Gaussians
     from spacedg.render.renderer import render
 
-    import numba
+    import numba.core.registry
 
     data = np.load(scene_file)
     acc: dict = {}
@@ -127,7 +127,8 @@ def worker(scene_file: str, names: list[str], runs: int, out_file: str) -> None:
         for plane in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
             images[f"{name}/{plane}"] = getattr(frame, plane)
     np.savez(out_file, **images)
-    result["vectors"] = "512-bit" if (numba.config.CPU_FEATURES or "").endswith(",-prefer-256-bit") else "numba's default"
+    features = numba.core.registry.cpu_target.target_context.codegen()._tm_features.split(",")  # what it compiled with
+    result["vectors"] = "512-bit" if "-prefer-256-bit" in features and "+avx512f" in features else "numba's default"
     Path(out_file + ".json").write_text(json.dumps(result))
 
 

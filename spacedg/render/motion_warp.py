@@ -64,8 +64,6 @@ _FASTMATH = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
 
 #: Path samples :func:`gather` places before it sums them (its scratch buffers' length).
 _PATH_CHUNK = 64
-#: The same flags on the 4-lane arithmetic of :func:`_weighted_taps4_intrinsic`.
-_LANE_FLAGS = tuple(sorted(_FASTMATH))
 _LANES = ir.VectorType(ir.FloatType(), 4)
 
 
@@ -75,16 +73,21 @@ def _weighted_taps4_intrinsic(accumulate: bool):
 
     The four channels of a texel lie next to each other, so a tap is one vector load and each
     term one vector multiply and add, where the scalar form does four of each (LLVM does not find
-    this itself). The terms are summed left to right, ``((w₀t₀ + w₁t₁) + w₂t₂) + …``, each product
-    and sum with the kernels' fast-math flags: on every lane the arithmetic of the scalar
-    ``w0 * flat[t0 + c] + w1 * flat[t1 + c] + …`` (``dst[c] += …``), so the same bits (tested).
-    Arguments: ``dst`` and ``flat`` contiguous float32 arrays, ``at`` a uint64 index into ``dst``,
-    ``taps`` a tuple of uint64 flat indices, ``weights`` a tuple of as many float32. No bounds
-    checks: the callers clamp their taps to the canvas.
+    this itself). The terms are summed left to right, ``((w₀t₀ + w₁t₁) + w₂t₂) + …``, and the
+    instructions carry no fast-math flags of their own: numba gives them the calling kernel's, as
+    it does its scalar arithmetic. So every lane computes the caller's scalar
+    ``w0 * flat[t0 + c] + w1 * flat[t1 + c] + …`` (``dst[c] += …``) with the same FMA contractions,
+    the same bits (tested). Arguments: ``dst`` and ``flat`` 1-D C-contiguous float32 arrays, ``at``
+    an integer index into ``dst``, ``taps`` a tuple of integer flat indices, ``weights`` a tuple of
+    as many float32 (other types do not compile). No bounds checks: the callers clamp their taps
+    to the canvas.
     """
 
     def typer(typingctx, dst, at, flat, taps, weights):
-        if not (isinstance(taps, types.UniTuple) and isinstance(weights, types.UniTuple) and taps.count == weights.count):
+        float_vector = [isinstance(a, types.Array) and a.dtype == types.float32 and a.ndim == 1 and a.layout == "C" for a in (dst, flat)]
+        if not (all(float_vector) and isinstance(at, types.Integer)
+                and isinstance(taps, types.UniTuple) and isinstance(taps.dtype, types.Integer)
+                and isinstance(weights, types.UniTuple) and weights.dtype == types.float32 and taps.count == weights.count):
             return None
 
         def codegen(context, builder, signature, args):
@@ -98,12 +101,12 @@ def _weighted_taps4_intrinsic(accumulate: bool):
                 lanes = ir.Constant(_LANES, ir.Undefined)
                 for lane in range(4):
                     lanes = builder.insert_element(lanes, weight, ir.Constant(ir.IntType(32), lane))
-                term = builder.fmul(lanes, texel, flags=_LANE_FLAGS)
-                total = term if total is None else builder.fadd(total, term, flags=_LANE_FLAGS)
+                term = builder.fmul(lanes, texel)
+                total = term if total is None else builder.fadd(total, term)
             first = builder.gep(context.make_array(signature.args[0])(context, builder, dst_value).data, [at_value])
             target = builder.bitcast(first, _LANES.as_pointer())
             if accumulate:
-                total = builder.fadd(builder.load(target, align=4), total, flags=_LANE_FLAGS)
+                total = builder.fadd(builder.load(target, align=4), total)
             builder.store(total, target, align=4)
             return context.get_dummy_value()
 

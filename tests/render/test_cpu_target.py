@@ -1,4 +1,5 @@
-"""numba's CPU features as spacedg sets them: 512-bit vectors on AVX-512 x86-64 hosts, the user's setting first."""
+"""numba's CPU features as spacedg sets them: 512-bit vectors on the AVX-512 x86-64 hosts that keep
+their clock, the user's setting first, numba's default once its target is set up."""
 
 from __future__ import annotations
 
@@ -8,45 +9,63 @@ import subprocess
 import sys
 
 import pytest
+from llvmlite import binding
 from numba.core import codegen, config
 
 from spacedg.render import cpu_target
 
-_PRINT = "import numba, spacedg.render; from spacedg.render import cpu_target; print(repr(numba.config.CPU_FEATURES), cpu_target.full_width_vectors())"
+_PRINT = "import numba, spacedg; from spacedg.render import cpu_target; print(repr(numba.config.CPU_FEATURES), cpu_target.full_width_vectors())"
 
 
-def _run(code: str, **env: str) -> str:
-    clean = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CPU_FEATURES", "NUMBA_CPU_NAME")}
-    done = subprocess.run([sys.executable, "-c", code], env={**clean, **env}, capture_output=True, text=True, timeout=120, check=True)
+def _run(code: str, **env: str) -> subprocess.CompletedProcess:
+    clean = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CPU_FEATURES", "NUMBA_CPU_NAME", cpu_target.VECTORS_ENV)}
+    return subprocess.run([sys.executable, "-c", code], env={**clean, **env}, capture_output=True, text=True, timeout=120)
+
+
+def _printed(code: str, **env: str) -> str:
+    done = _run(code, **env)
+    assert done.returncode == 0, done.stderr
     return done.stdout.strip()
 
 
-def test_importing_spacedg_asks_numba_for_full_width_vectors_on_avx512_hosts() -> None:
+def test_importing_spacedg_asks_numba_for_full_width_vectors_where_it_pays() -> None:
     host = codegen.get_host_cpu_features()
-    wide = platform.machine().lower() in ("x86_64", "amd64") and "+avx512f" in host.split(",")
-    assert _run(_PRINT) == (f"'{host},-prefer-256-bit' True" if wide else "None False")
+    avx512 = platform.machine().lower() in ("x86_64", "amd64") and "+avx512f" in host.split(",")
+    wide = avx512 and binding.get_host_cpu_name() in cpu_target.FULL_WIDTH_CPUS
+    assert _printed(_PRINT) == (f"'{host},-prefer-256-bit' True" if wide else "None False")
+    assert _printed(_PRINT, SPACEDG_NUMBA_VECTORS="default") == "None False"
+    assert _printed(_PRINT, SPACEDG_NUMBA_VECTORS="512") == (f"'{host},-prefer-256-bit' True" if avx512 else "None False")
+    bad = _run(_PRINT, SPACEDG_NUMBA_VECTORS="wide")
+    assert bad.returncode != 0 and "SPACEDG_NUMBA_VECTORS='wide': use auto (the default), 512 or default" in bad.stderr
 
 
-def test_the_users_numba_setting_and_code_compiled_first_are_left_alone() -> None:
+def test_the_users_numba_setting_and_kernels_decorated_first_are_left_alone() -> None:
     host = codegen.get_host_cpu_features()
-    assert _run(_PRINT, NUMBA_CPU_FEATURES=host) == f"'{host}' False"  # numba's default, asked for by the user
-    assert _run(_PRINT, NUMBA_CPU_NAME="generic") == "'' False"  # (numba's own features for a generic CPU)
-    # numba compiled before spacedg was imported: its CPU target is set up, the features are fixed
-    compiled_first = "import numba; numba.njit(lambda x: x + 1)(1); " + _PRINT.replace("import numba, ", "import ")
-    assert _run(compiled_first) == "None False"
+    assert _printed(_PRINT, NUMBA_CPU_FEATURES=host) == f"'{host}' False"  # numba's default, asked for by the user
+    assert _printed(_PRINT, NUMBA_CPU_NAME="generic") == "'' False"  # (numba's own features for a generic CPU)
+    # a kernel decorated (not even compiled) before spacedg's import: numba's target is set up, its features fixed
+    assert _printed("import numba; numba.njit(lambda x: x + 1); " + _PRINT.replace("import numba, ", "import ")) == "None False"
+    # what the check reads: numba sets its CPU target up at the first decoration (any host)
+    probe = ("import numba; from spacedg.render.cpu_target import _target_initialised as t; "
+             "before = t(); numba.njit(lambda x: x); print(before, t())")
+    assert _printed(probe, SPACEDG_NUMBA_VECTORS="default") == "False True"
 
 
-@pytest.mark.parametrize(("machine", "features", "applied"), [
-    ("x86_64", "+64bit,+avx2,+avx512f,+fma", True),
-    ("x86_64", "+64bit,+avx2,-avx512f,+fma", False),  # no AVX-512: nothing to prefer
-    ("aarch64", "+neon,+avx512f", False),  # not x86: the tuning does not exist
+@pytest.mark.parametrize(("machine", "cpu", "features", "choice", "applied"), [
+    ("x86_64", "emeraldrapids", "+64bit,+avx2,+avx512f,+fma", "auto", True),
+    ("x86_64", "skylake-avx512", "+64bit,+avx2,+avx512f,+fma", "auto", False),  # its clock drops on 512-bit work
+    ("x86_64", "skylake-avx512", "+64bit,+avx2,+avx512f,+fma", "512", True),  # asked for
+    ("x86_64", "emeraldrapids", "+64bit,+avx2,+avx512f,+fma", "default", False),
+    ("x86_64", "emeraldrapids", "+64bit,+avx2,-avx512f,+fma", "512", False),  # no AVX-512: nothing to prefer
+    ("aarch64", "neoverse-v2", "+neon,+avx512f", "512", False),  # not x86: the tuning does not exist
 ])
-def test_the_decision(monkeypatch: pytest.MonkeyPatch, machine: str, features: str, applied: bool) -> None:
+def test_the_decision(monkeypatch: pytest.MonkeyPatch, machine: str, cpu: str, features: str, choice: str, applied: bool) -> None:
     monkeypatch.setattr(config, "CPU_FEATURES", None)
     monkeypatch.setattr(config, "CPU_NAME", None)
+    monkeypatch.setenv(cpu_target.VECTORS_ENV, choice)
     monkeypatch.setattr(cpu_target, "_target_initialised", lambda: False)
     monkeypatch.setattr(cpu_target.platform, "machine", lambda: machine)
     monkeypatch.setattr(codegen, "get_host_cpu_features", lambda: features)
+    monkeypatch.setattr(binding, "get_host_cpu_name", lambda: cpu)
     assert cpu_target.prefer_full_width_vectors() is applied
     assert config.CPU_FEATURES == (f"{features},-prefer-256-bit" if applied else None)
-    assert cpu_target.full_width_vectors() is applied

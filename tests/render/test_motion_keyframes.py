@@ -138,8 +138,9 @@ def test_gather_and_doubling_match_a_python_path_average() -> None:
 
 def test_a_path_longer_than_a_chunk_is_walked_in_one_piece() -> None:
     """:func:`~spacedg.render.motion_warp.gather` places a path's samples in chunks of
-    ``_PATH_CHUNK``: a path of 2–4 chunks (and one of exactly one chunk) averages the same reads
-    as a plain loop over all of them, with and without the fifth (depth) channel."""
+    ``_PATH_CHUNK``: paths of one chunk less one sample, exactly one, one more, exactly two, two
+    and one more, and of up to 4 chunks average the same reads as a plain loop over all of them,
+    with and without the fifth (depth) channel."""
     from spacedg.render import motion_warp
 
     rng = np.random.default_rng(8)
@@ -149,15 +150,19 @@ def test_a_path_longer_than_a_chunk_is_walked_in_one_piece() -> None:
         field = np.zeros((hc, wc, 4), np.float32)
         field[..., 0] = rng.uniform(-3, 3, (hc, wc))
         field[..., 1] = rng.uniform(-1, 1, (hc, wc))
-        field[..., 2] = np.linspace(float(motion_warp._PATH_CHUNK), 250.0, wc, dtype=np.float32)[None, :]
+        chunk = motion_warp._PATH_CHUNK
+        edges = np.array([chunk - 1, chunk, chunk + 1, 2 * chunk, 2 * chunk + 1], np.float32) - np.float32(0.5)
+        field[..., 2] = np.linspace(float(chunk), 250.0, wc, dtype=np.float32)[None, :]
+        field[..., 2][:, margin : margin + edges.size] = edges  # counts ⌈d⌉ = 63, 64, 65, 128, 129 (d_v = 0)
         field[..., 3] = 5.0
+        field[..., 3][:, margin : margin + edges.size] = 0.0
         acc = np.zeros((hc - 2 * margin, wc - 2 * margin, channels), np.float32)
         motion_warp.gather(src, field, margin, 1.0, 1.0, motion_warp.FULL, acc)
-        for i, j in [(3, 0), (10, 60), (20, 130), (31, 251)]:
+        for i, j in [(3, 0), (5, 1), (7, 2), (9, 3), (11, 4), (10, 60), (20, 130), (31, 251)]:
             ci, cj = i + margin, j + margin
             c, d = field[ci, cj, :2].astype(np.float64), field[ci, cj, 2:].astype(np.float64)
             count = int(np.ceil(np.hypot(*d)))
-            assert count >= motion_warp._PATH_CHUNK
+            assert count >= chunk - 1
             times = (np.arange(count) + 0.5) / count
             points = [(cj + c[0] - d[0] / 2 + t * d[0] - 4 * t * (1 - t) * c[0],
                        ci + c[1] - d[1] / 2 + t * d[1] - 4 * t * (1 - t) * c[1]) for t in times]

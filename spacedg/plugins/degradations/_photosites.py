@@ -23,8 +23,8 @@ and beyond ±:data:`~._sensor.SIGNAL_CAP` clamped, as in :mod:`._sensor`):
 4. the output is ``s + A(n)`` with ``A`` the area resampling back to (W, H), then the clip to
    [0, 1] when the degradation clips (over-exposure): the signal itself is never resampled.
 
-Cost: the sensor draws every photosite, about the reference's 2–3 M (× 3 channels) whatever the
-output size below it: at 640 × 360 about 10 × the pixels, so about 10 × the sensor's time of a
+Cost: the sensor draws every photosite (over-exposure: every one a pixel that may not saturate
+reads, see below), about the reference's 2–3 M (× 3 channels) whatever the output size below it: at 640 × 360 about 10 × the pixels, so about 10 × the sensor's time of a
 per-pixel draw (still a fraction of a render's); at or above the reference, about the pixel count.
 
 Skipped work (the same bytes): with the clip (over-exposure) and sites no larger than pixels, a
@@ -113,18 +113,27 @@ def _sites_of_saturated_pixels(signal: np.ndarray, grid: tuple[int, int], sensor
     drawn read the site (or ``None`` when no site is skipped). Sites are no larger than pixels here.
 
     A pixel ``p`` reads the sites overlapping it; each site's signal is a convex mix of the pixels
-    next to the one holding its corner, so within 2 px of ``p``. Its noise is at least
-    ``−largest_drop(M)`` with ``M`` the highest signal within 2 px (5 × 5 maximum), and the area
-    average of the noise at least the same, so ``s − largest_drop(M) > 1`` (with slack) clips to
-    1.0. A site overlaps the pixel its corner maps to and the next one: it is skipped when every
-    pixel within 2 px of that one saturates (margins of a pixel against the resamplers' rounding).
+    next to the one holding its corner (OpenCV's area resampling both ways: the corner's pixel and
+    the next), so within 2 px of ``p``. Its noise is at least ``−largest_drop(M)`` with ``M`` the
+    highest signal within 2 px (5 × 5 maximum; float32 rounding of a site's capture and noise adds
+    at most 2⁻²³·M), and the area average of the noise at least the same, so
+    ``s − largest_drop(M) − 2⁻²²·M > 1`` (with slack) clips to 1.0. A site overlaps the pixel its
+    corner maps to and the next one: it is skipped when every pixel within 2 px of that one
+    saturates (a pixel of margin against the resamplers' rounding, both ways).
     """
     import cv2
 
-    box = np.ones((5, 5), np.uint8)
     relative, absolute = _SATURATION_SLACK
-    floor = largest_drop(cv2.dilate(signal, box, borderType=cv2.BORDER_REPLICATE), **sensor)  # type: ignore[arg-type]
-    floor += np.float32(1.0 + absolute)
+    bar = np.float32(1.0 + absolute)
+    top = float(signal.max()) if signal.size else 0.0
+    if top * (1.0 - relative) <= bar + float(largest_drop(np.float32(0.0), **sensor)):  # type: ignore[arg-type]
+        return None  # no pixel is bright enough to be sure (a dark view: low light, most of over-exposure's range)
+    box = np.ones((5, 5), np.uint8)
+    highest = cv2.dilate(signal, box, borderType=cv2.BORDER_REPLICATE)
+    floor = largest_drop(highest, **sensor)  # type: ignore[arg-type]
+    highest *= np.float32(2.0**-22)  # the captures' float32 rounding, at the brightest neighbour's scale
+    floor += highest
+    floor += bar
     sure = (signal * np.float32(1.0 - relative) > floor).view(np.uint8)
     if not sure.any():
         return None

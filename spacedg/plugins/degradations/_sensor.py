@@ -356,9 +356,10 @@ def _sensor_kernel(
 
     ``saturated`` (with ``clip``): a signal ``s`` at or above it gives 1.0 whatever the draws
     (``∞`` without ``clip``; see :func:`_saturation_signal`). ``skip``: empty, or one uint8 per
-    value; where it is non-zero the value is not drawn and ``out[i]`` is its signal ``s`` (float32).
-    ``noise``: ``out[i]`` is the capture less the signal instead, both rounded to float32 first
-    (numpy's ``capture − float32(s)``); 0 where skipped.
+    value; where it is non-zero the value is not drawn and ``out[i]`` is its signal ``s`` (float32;
+    clipped with ``clip``). ``noise``: ``out[i]`` is the capture less the signal instead, both
+    rounded to float32 first (numpy's ``capture − float32(s)``, ``s`` clamped to ±SIGNAL_CAP as
+    above); 0 where skipped.
     """
     key_mix = _mix(key)
     keys = np.empty(_DRAW_KEYS, dtype=np.uint64)
@@ -372,8 +373,8 @@ def _sensor_kernel(
             s = 0.0
         s = min(max(s, -SIGNAL_CAP), SIGNAL_CAP)
         signal = np.float32(s)
-        if skipping and skip[i]:
-            out[i] = np.float32(0.0) if noise else signal  # not needed by the caller: no draw
+        if skipping and skip[i]:  # not needed by the caller: no draw
+            out[i] = np.float32(0.0) if noise else (np.float32(min(max(s, 0.0), 1.0)) if clip else signal)
             continue
         if s >= saturated:
             out[i] = 1.0  # k·Poisson + read noise ≥ 1 for every possible draw: clip gives 1.0
@@ -444,8 +445,9 @@ def sensor_capture(
         read_lambda: Tukey λ (> −0.5), used when ``read_model == READ_TUKEY``.
         clip: clip the result to [0, 1] (saturation).
         skip: optional array of ``rgb``'s shape, non-zero at values the caller will not use. They are
-            not drawn and come back as their exposed signal (NaN → 0, clamped as above, float32);
-            every other value is the same bytes as without ``skip`` (the draws are counter-based).
+            not drawn and come back as their exposed signal (NaN → 0, clamped as above, float32;
+            clipped with ``clip``); every other value is the same bytes as without ``skip`` (the
+            draws are counter-based).
         noise: return the capture less the exposed signal (``y − float32(e·x)`` in float32, x as
             treated above: the bytes of subtracting them in numpy), 0 where skipped; not with ``clip``.
 
@@ -461,12 +463,8 @@ def sensor_capture(
         raise InvalidDataError(f"sensor model: read_model must be {READ_GAUSSIAN} (Gaussian) or {READ_TUKEY} (Tukey lambda), got {read_model!r}")
     if not 0 <= key < 2**64:
         raise InvalidDataError(f"sensor model: key must be an integer in [0, 2**64), got {key!r}; draw it with stream_key(rng)")
-    read_scale = float(sigma_read)
-    read_bound = _NORMAL_BOUND
-    if read_model == READ_TUKEY and sigma_read > 0.0:
-        read_scale /= tukey_lambda_std(float(read_lambda))
-        read_bound = _tukey_bound(float(read_lambda))
-    saturated = _saturation_signal(float(k), read_scale * read_bound) if clip else math.inf
+    read_scale, read_bound = _read_noise(float(sigma_read), int(read_model), float(read_lambda))
+    saturated = _saturation_signal(float(k), read_bound) if clip else math.inf
     flat = np.ascontiguousarray(rgb, dtype=np.float32).reshape(-1)
     out = np.empty(flat.size, dtype=np.float32)
     if skip is None:
@@ -514,9 +512,10 @@ def largest_drop(
     largest magnitude (:data:`_NORMAL_BOUND` σ, or the Tukey clamp's quantile). Used to find
     values that saturate (clip to 1.0) whatever is drawn.
     """
-    top = np.maximum(np.asarray(signal_max), 0.0)
+    top = np.array(signal_max, ndmin=1)  # a copy, worked on in place (ufuncs return scalars for 0-d arrays)
     if not np.issubdtype(top.dtype, np.floating):
         top = top.astype(np.float64)
+    np.maximum(top, top.dtype.type(0.0), out=top)
     if k > 0.0:
         drop = np.sqrt(top * top.dtype.type(k))
         drop *= top.dtype.type(_NORMAL_BOUND)
@@ -524,11 +523,18 @@ def largest_drop(
         np.minimum(drop, top, out=drop)
     else:
         drop = np.zeros_like(top)
-    read = sigma_read * _NORMAL_BOUND
+    drop += top.dtype.type(_read_noise(float(sigma_read), int(read_model), float(read_lambda))[1])
+    return drop.reshape(np.shape(signal_max))
+
+
+def _read_noise(sigma_read: float, read_model: int, read_lambda: float) -> tuple[float, float]:
+    """``(scale, bound)`` of the read noise: the factor on the unit-variance variate ``R`` (σ, or σ
+    over the Tukey-lambda standard deviation) and the largest ``|scale·R|`` any draw gives
+    (:data:`_NORMAL_BOUND` scales, or the Tukey quantile at its clamp)."""
     if read_model == READ_TUKEY and sigma_read > 0.0:
-        read = sigma_read / tukey_lambda_std(float(read_lambda)) * _tukey_bound(float(read_lambda))
-    drop += top.dtype.type(read)
-    return drop
+        scale = sigma_read / tukey_lambda_std(read_lambda)
+        return scale, scale * _tukey_bound(read_lambda)
+    return sigma_read, sigma_read * _NORMAL_BOUND
 
 
 def _saturation_signal(k: float, read_bound: float) -> float:

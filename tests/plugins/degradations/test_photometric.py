@@ -299,8 +299,10 @@ def test_bad_params_rejected(spec, params: dict, pattern: str) -> None:
         spec.apply(_textured(8, 8), {}, {**_params(spec, 1.0), **params}, np.random.default_rng(0))
 
 
-@pytest.mark.parametrize(("k", "sigma_read", "read_model"), [(1e-4, 2.5e-4, 0), (0.0, 2.5e-4, 0), (1e-4, 0.0, 0), (1e-2, 0.05, READ_TUKEY)])
-def test_saturated_sites_are_skipped_without_changing_a_byte(k: float, sigma_read: float, read_model: int) -> None:
+@pytest.mark.parametrize(("k", "sigma_read", "read_model", "read_lambda"), [
+    (1e-4, 2.5e-4, 0, 0.14), (0.0, 2.5e-4, 0, 0.14), (1e-4, 0.0, 0, 0.14), (1e-2, 0.05, READ_TUKEY, -0.2), (1e-4, 2.5e-4, READ_TUKEY, 0.14),
+])
+def test_saturated_sites_are_skipped_without_changing_a_byte(k: float, sigma_read: float, read_model: int, read_lambda: float) -> None:
     """Over-exposure on photosites (sites smaller than pixels) does not draw the sites that only
     pixels sure to clip to 1.0 read: the bytes equal drawing every site, at exposures that put
     many pixels right at the edge of saturating; and the skip does happen."""
@@ -308,19 +310,20 @@ def test_saturated_sites_are_skipped_without_changing_a_byte(k: float, sigma_rea
 
     image = _textured(61, 83) * np.float32(1.3)
     image[5:9, 40:50] = np.nan
-    sensor = {"k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": -0.2}
+    sensor = {"k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": read_lambda}
     skipped = []
     for pitch in (0.31, 0.5, 0.77):
         for exposure in (1.05, 1.6, 2.5, 8.5):
             edge = image.copy()  # flat patches just above full scale: they clip unless the noise pulls them under
             edge[20:45, 5:35] = np.float32(1.003 / exposure)
             edge[45:60, 50:80] = np.float32(1.05 / exposure)
+            edge[30, 35] = edge[52, 49] = np.float32(400.0 / exposure)  # hot pixels beside the patches
             args = {"pitch": pitch, "exposure": exposure, "clip": True, "key": 11, **sensor}
             assert _photosites.binned_capture(edge, **args).tobytes() == _photosites.binned_capture(edge, skip_saturated=False, **args).tobytes()
             signal = np.nan_to_num(edge) * np.float32(exposure)
             unread = _photosites._sites_of_saturated_pixels(signal, _photosites.photosite_grid(83, 61, pitch), sensor)
             skipped.append(0.0 if unread is None else unread.mean())
-    if read_model == READ_TUKEY:  # λ = -0.2: read noise tails reach tens of full scales, so no pixel is sure to clip
+    if read_lambda < 0:  # Tukey λ = -0.2: read noise tails reach tens of full scales, so no pixel is sure to clip
         assert max(skipped) == 0.0
     else:
         assert max(skipped) > 0.3
@@ -352,6 +355,8 @@ def test_the_noise_of_a_capture_and_its_skipped_values() -> None:
         partly = sensor_capture(image, exposure=exposure, k=1e-4, sigma_read=2.5e-4, key=3, skip=skip)
         assert partly[~skip].tobytes() == full[~skip].tobytes() and partly[skip].tobytes() == signal[skip].tobytes()
         assert not sensor_capture(image, exposure=exposure, k=1e-4, sigma_read=2.5e-4, key=3, skip=skip, noise=True)[skip].any()
+        clipped = sensor_capture(image * np.float32(9.0), exposure=exposure, k=1e-4, sigma_read=2.5e-4, key=3, skip=skip, clip=True)
+        assert clipped.min() >= 0.0 and clipped.max() <= 1.0  # skipped values are clipped like drawn ones
     with pytest.raises(InvalidDataError, match="noise=True .* clip=True"):
         sensor_capture(image, exposure=1.0, k=1e-4, sigma_read=2.5e-4, key=3, noise=True, clip=True)
     with pytest.raises(InvalidDataError, match="skip must have the image's shape"):
