@@ -21,10 +21,6 @@ import os as _os
 # i.e. before torch or numba are imported; an explicit user setting wins.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-# numba's CPU features, set before anything of spacedg decorates a kernel (512-bit vectors on the
-# AVX-512 hosts that keep their clock on them: spacedg.render.cpu_target)
-from spacedg.render import cpu_target as _cpu_target  # noqa: E402, F401
-
 
 from spacedg.scene.box import OrientedBox
 from spacedg.scene.io import load_scene, save_scene, scene_from_files

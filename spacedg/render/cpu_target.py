@@ -9,9 +9,10 @@ random Gaussians at 640 × 480 41.6 → 31.5 ms, renders 1.13–1.26× faster, t
 output (spacedg's kernels keep their sums in source order or per pixel, so no result depends on
 the vector width).
 
-What: :func:`prefer_full_width_vectors`, run when this module is imported (``import spacedg`` does
-it first, and :mod:`spacedg.render.kernel_cache`, which every module with kernels imports, too),
-sets ``numba.config.CPU_FEATURES`` to numba's own host feature string plus ``-prefer-256-bit`` when
+What: :func:`prefer_full_width_vectors`, run when this module is imported (by
+:mod:`spacedg.render.kernel_cache`, which every spacedg module with kernels imports before it
+decorates one; ``import spacedg`` alone loads no numba), sets ``numba.config.CPU_FEATURES`` to
+numba's own host feature string plus ``-prefer-256-bit`` when
 
 - ``SPACEDG_NUMBA_VECTORS`` is unset or ``auto`` and the host is an x86-64 CPU of a family this was
   measured on or that keeps its clock on 512-bit work (:data:`FULL_WIDTH_CPUS`: Ice Lake and

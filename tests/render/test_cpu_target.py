@@ -14,7 +14,7 @@ from numba.core import codegen, config
 
 from spacedg.render import cpu_target
 
-_PRINT = "import numba, spacedg; from spacedg.render import cpu_target; print(repr(numba.config.CPU_FEATURES), cpu_target.full_width_vectors())"
+_PRINT = "import numba, spacedg.render; from spacedg.render import cpu_target; print(repr(numba.config.CPU_FEATURES), cpu_target.full_width_vectors())"
 
 
 def _run(code: str, **env: str) -> subprocess.CompletedProcess:
