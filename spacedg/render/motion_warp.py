@@ -64,12 +64,12 @@ _FASTMATH = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
 
 #: Path samples :func:`gather` places before it sums them (its scratch buffers' length).
 _PATH_CHUNK = 64
-_LANES = ir.VectorType(ir.FloatType(), 4)
 
 
-def _weighted_taps4_intrinsic(accumulate: bool):
-    """``dst[at : at + 4] = Σ weights[n] · flat[taps[n] : taps[n] + 4]`` (with ``accumulate``: ``+=``),
-    each term one 4-lane float32 vector: a numba intrinsic for the kernels below.
+def _weighted_taps_intrinsic(lanes: int, accumulate: bool):
+    """``dst[at : at + lanes] = Σ weights[n] · flat[taps[n] : taps[n] + lanes]`` (with ``accumulate``:
+    ``+=``), each term one float32 vector of ``lanes`` (4: a texel's r, g, b, α; 1: the depth
+    channel): a numba intrinsic for the kernels below.
 
     The four channels of a texel lie next to each other, so a tap is one vector load and each
     term one vector multiply and add, where the scalar form does four of each (LLVM does not find
@@ -82,6 +82,7 @@ def _weighted_taps4_intrinsic(accumulate: bool):
     as many float32 (other types do not compile). No bounds checks: the callers clamp their taps
     to the canvas.
     """
+    kind = ir.FloatType() if lanes == 1 else ir.VectorType(ir.FloatType(), lanes)
 
     def typer(typingctx, dst, at, flat, taps, weights):
         float_vector = [isinstance(a, types.Array) and a.dtype == types.float32 and a.ndim == 1 and a.layout == "C" for a in (dst, flat)]
@@ -96,15 +97,17 @@ def _weighted_taps4_intrinsic(accumulate: bool):
             total = None
             for n in range(signature.args[3].count):
                 at = builder.gep(data, [builder.extract_value(taps_value, n)])
-                texel = builder.load(builder.bitcast(at, _LANES.as_pointer()), align=4)
+                texel = builder.load(builder.bitcast(at, kind.as_pointer()), align=4)
                 weight = builder.extract_value(weights_value, n)
-                lanes = ir.Constant(_LANES, ir.Undefined)
-                for lane in range(4):
-                    lanes = builder.insert_element(lanes, weight, ir.Constant(ir.IntType(32), lane))
-                term = builder.fmul(lanes, texel)
+                if lanes > 1:
+                    spread = ir.Constant(kind, ir.Undefined)
+                    for lane in range(lanes):
+                        spread = builder.insert_element(spread, weight, ir.Constant(ir.IntType(32), lane))
+                    weight = spread
+                term = builder.fmul(weight, texel)
                 total = term if total is None else builder.fadd(total, term)
             first = builder.gep(context.make_array(signature.args[0])(context, builder, dst_value).data, [at_value])
-            target = builder.bitcast(first, _LANES.as_pointer())
+            target = builder.bitcast(first, kind.as_pointer())
             if accumulate:
                 total = builder.fadd(builder.load(target, align=4), total)
             builder.store(total, target, align=4)
@@ -112,12 +115,14 @@ def _weighted_taps4_intrinsic(accumulate: bool):
 
         return types.void(dst, at, flat, taps, weights), codegen
 
-    typer.__name__ = "_add_weighted_taps4" if accumulate else "_weighted_taps4"
+    typer.__name__ = f"_{'add_' if accumulate else ''}weighted_taps{lanes}"
     return intrinsic(typer)
 
 
-_add_weighted_taps4 = _weighted_taps4_intrinsic(accumulate=True)
-_weighted_taps4 = _weighted_taps4_intrinsic(accumulate=False)
+_add_weighted_taps4 = _weighted_taps_intrinsic(4, accumulate=True)
+_weighted_taps4 = _weighted_taps_intrinsic(4, accumulate=False)
+_add_weighted_taps1 = _weighted_taps_intrinsic(1, accumulate=True)
+_weighted_taps1 = _weighted_taps_intrinsic(1, accumulate=False)
 
 
 @numba.njit(cache=True, inline="always")
@@ -167,7 +172,7 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
     inv_spacing = np.float32(1.0 / spacing)
     for i in numba.prange(height):
         ci = i + margin
-        lanes = np.empty(4, np.float32)  # the path's r, g, b, α sums (one vector register in the loop)
+        lanes = np.empty(5, np.float32)  # the path's r, g, b, α (one vector register in the loop) and depth·α sums
         times = np.empty(_PATH_CHUNK, np.float32)  # a chunk of the path's samples: their times,
         corners = np.empty(_PATH_CHUNK, np.uint64)  # top-left texels
         weights = np.empty((4, _PATH_CHUNK), np.float32)  # and bilinear weights
@@ -194,7 +199,6 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
             step = scale / np.float32(count)
             t = half - half * scale + half * step
             lanes[:] = zero
-            a4 = zero
             # in chunks: the times (one float32 sum after another, as a single loop adds them), then
             # every sample's texel and weights (independent: LLVM vectorises this loop), then the sums
             for first in range(0, count, _PATH_CHUNK):
@@ -222,12 +226,10 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
                     w00, w01, w10, w11 = weights[0, k], weights[1, k], weights[2, k], weights[3, k]
                     _add_weighted_taps4(lanes, np.uint64(0), flat, (p00, p00 + nc, p10, p10 + nc), (w00, w01, w10, w11))
                     if want_extra:
-                        a4 += w00 * flat[p00 + c4] + w01 * flat[p00 + nc + c4] + w10 * flat[p10 + c4] + w11 * flat[p10 + nc + c4]
+                        _add_weighted_taps1(lanes, c4, flat, (p00 + c4, p00 + nc + c4, p10 + c4, p10 + nc + c4), (w00, w01, w10, w11))
             norm = one / np.float32(count)
-            for c in range(4):
+            for c in range(src.shape[2]):
                 out[i, j, c] += lanes[c] * norm
-            if want_extra:
-                out[i, j, 4] += a4 * norm
 
 
 @fork_safe
@@ -420,6 +422,6 @@ def doubling_pass(src, field, scale, sat, dst):  # pragma: no cover - compiled
             _weighted_taps4(out, base, flat, (pa, pa + nc, pa + row, pa + row + nc, pb, pb + nc, pb + row, pb + row + nc),
                             (wa00, wa01, wa10, wa11, wb00, wb01, wb10, wb11))
             if n_ch > 4:
-                out[base + c4] = (wa00 * flat[pa + c4] + wa01 * flat[pa + nc + c4] + wa10 * flat[pa + row + c4]
-                                  + wa11 * flat[pa + row + nc + c4] + wb00 * flat[pb + c4] + wb01 * flat[pb + nc + c4]
-                                  + wb10 * flat[pb + row + c4] + wb11 * flat[pb + row + nc + c4])
+                _weighted_taps1(out, base + c4, flat, (pa + c4, pa + nc + c4, pa + row + c4, pa + row + nc + c4,
+                                                       pb + c4, pb + nc + c4, pb + row + c4, pb + row + nc + c4),
+                                (wa00, wa01, wa10, wa11, wb00, wb01, wb10, wb11))
