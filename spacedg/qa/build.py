@@ -66,7 +66,7 @@ from spacedg.qa.index import (
     write_index,
 )
 from spacedg.qa.judge import DescriptionJudge
-from spacedg.plugins.questions.view_sampling import VisibilityIndex
+from spacedg.plugins.questions.view_sampling import VisibilityIndex, shared_visibility_tables
 from spacedg.qa.modes import quota, subject_key
 from spacedg.qa.pooled import Pooled
 from spacedg.qa.selection import prefix_settles, select_records, selection_of
@@ -422,12 +422,13 @@ def generate_records(
 
     if judge is not None and not isinstance(judge, DescriptionJudge):
         judge = DescriptionJudge(scene, judge)
-    index = TwinCheck(VisibilityIndex(scene))
     found: Counter[str] = Counter()
     out: list[QARecord] = []
     # The cyclic collector re-scanning the pools took a quarter of generation: paused, unless a
     # judge runs (it renders and may call a model, whose cyclic garbage must not wait for the scene's end).
-    with collector_paused() if judge is None else contextlib.nullcontext():
+    # Every family's VisibilityIndex of the scene shares one classification (the scene does not change here).
+    with collector_paused() if judge is None else contextlib.nullcontext(), shared_visibility_tables():
+        index = TwinCheck(VisibilityIndex(scene))
         for family in selected_families(config.families):
             out.extend(_family_records(family, scene, config, judge, dropped, selection_stats, index, found))
     if twins is not None:

@@ -395,12 +395,19 @@ class _Selection:
         ``quota`` (no room for another round of its cell), else ``unbalanced``."""
         pool, taken, judged_out, asked, room = self.pool, self.taken, self.judged_out, self.asked, self.room
         subs = [r.sub_question_type for r in pool.records]
-        counts = Counter(zip(subs, [
-            "taken" if i in taken else "judge" if i in judged_out
-            else "repeat" if subject is not None and subject in asked  # (a record without an entry has no subject)
-            else "quota" if room[sub] < pool.round_size(i) else "unbalanced"
-            for i, (sub, subject) in enumerate(zip(subs, pool.subjects))
-        ]))
+        sizes = {cell: max(1, len(roles)) for cell, roles in pool.cell_roles.items() if roles}  # else: the record's own roles
+        reasons: list[str] = []
+        for i, (sub, subject, cell) in enumerate(zip(subs, pool.subjects, pool.cell_keys)):
+            if i in taken:
+                reasons.append("taken")
+            elif i in judged_out:
+                reasons.append("judge")
+            elif subject is not None and subject in asked:  # (a record without an entry has no subject)
+                reasons.append("repeat")
+            else:
+                size = 1 if cell is None else sizes.get(cell) or pool.round_size(i)
+                reasons.append("quota" if room[sub] < size else "unbalanced")
+        counts = Counter(zip(subs, reasons))
         out: dict[str, Counter[str]] = {}
         for sub, n in Counter(subs).items():  # sub types in the order of their first record
             out[sub] = Counter({"pooled": n})

@@ -187,3 +187,68 @@ def test_bbox_options_deal_each_truth_its_first_deck_as_before() -> None:
         assert bbox_options(truth, np.random.default_rng(seed)) == expected
     with pytest.raises(ValueError, match="none of the decks"):
         bbox_options("Back", np.random.default_rng(0))
+
+
+def test_draw_index_is_the_one_argument_draw() -> None:
+    from spacedg.seeding import draw_index
+
+    plain, fast = np.random.default_rng(46), np.random.default_rng(46)
+    for k in range(3000):
+        n = 1 + k % 29
+        assert draw_index(fast, n) == int(plain.integers(n))
+        if k % 3 == 0:  # interleaved with other draws (numpy's buffered 32-bit half stays in step)
+            assert fast.random() == plain.random()
+    assert fast.bit_generator.state == plain.bit_generator.state
+
+
+def test_letter_decks_of_interleaved_generators_stay_their_own() -> None:
+    from spacedg.plugins.questions import geometry
+
+    def letters(seed: int, n: int, options: int) -> list[int]:
+        rng = np.random.default_rng(seed)
+        return [geometry._next_letter(rng, options) for _ in range(n)]
+
+    alone = {seed: letters(seed, 23, 4) for seed in (1, 2)}
+    three = letters(3, 11, 3)
+    a, b = np.random.default_rng(1), np.random.default_rng(2)
+    mixed: dict[int, list[int]] = {1: [], 2: []}
+    for k in range(23):  # runs of one generator, then the other: the deck of the last one used must not leak
+        for seed, rng in ((1, a), (2, b)) if k % 5 < 3 else ((2, b), (1, a)):
+            mixed[seed].append(geometry._next_letter(rng, 4))
+    assert mixed == alone
+    c = np.random.default_rng(3)
+    assert [geometry._next_letter(c, 3) for _ in range(11)] == three  # another option count: another deck
+
+
+def test_selection_entry_lists_are_fresh_strings() -> None:
+    from spacedg.plugins.questions.records import selection_entry
+
+    roles, features = ("no", "yes"), ("a:chair",)
+    first = selection_entry("s", "c", "yes", roles, features=features)
+    second = selection_entry("s", "c", "yes", roles, features=features)  # the tuples seen before: copied as they are
+    assert first == second == {"subject": "s", "cell": "c", "role": "yes", "roles": ["no", "yes"], "features": ["a:chair"]}
+    first["roles"].append("maybe")
+    assert second["roles"] == ["no", "yes"] and roles == ("no", "yes")  # each entry has its own list
+    numeric = selection_entry("s", "c", 1, (1, 2))  # not strings: converted
+    assert numeric["roles"] == ["1", "2"] and numeric["role"] == "1" and all(type(r) is str for r in numeric["roles"])
+
+
+def test_visibility_tables_are_shared_only_inside_the_block() -> None:
+    from spacedg.plugins.questions.view_sampling import VisibilityIndex, shared_visibility_tables
+    from spacedg.scene.visibility_classes import VisibilityThresholds
+    from tests.qa_scenes import build, camera, obj
+
+    scene = build([obj(1, "chair", (0, 0, 2)), obj(2, "table", (1, 0, 3))], {"f0": camera((0, 0, 0)), "f1": camera((0.5, 0, 0))})
+    other = build([obj(1, "chair", (0, 0, 2))], {"f0": camera((0, 0, 0))}, scene_id="other")
+    apart = VisibilityIndex(scene)
+    assert VisibilityIndex(scene).classes is not apart.classes  # outside the block: classified anew
+    strict = VisibilityThresholds(min_fraction=0.99)
+    with shared_visibility_tables():
+        first, second = VisibilityIndex(scene), VisibilityIndex(scene)
+        assert second.classes is first.classes and second.visible is first.visible  # one classification
+        assert second.memos is not first.memos  # each index its own memos
+        assert VisibilityIndex(scene, strict).classes is not first.classes  # other thresholds: their own
+        assert VisibilityIndex(other).visible == {"f0": (1,)}  # another scene: its own
+    for index in (first, VisibilityIndex(scene, strict)):
+        plain = VisibilityIndex(scene, index.thresholds)
+        assert (index.classes, index.visible, index.seen) == (plain.classes, plain.visible, plain.seen)

@@ -85,6 +85,7 @@ from spacedg.plugins.questions.records import (
 )
 from spacedg.plugins.questions.pairs import view_and_pair_family
 from spacedg.plugins.specs import AnswerType, TaskGroup
+from spacedg.seeding import draw_index
 
 __all__ = [
     "BBOX_CENTER_DISTANCE", "DECIMALS", "FAMILY", "NAME", "SINGLE_VIEW", "SUB_QUESTION_TYPES", "TEMPLATES", "TWO_VIEW_TEMPLATE",
@@ -157,7 +158,7 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
         if not admitted(SINGLE_VIEW, (view,), subject, (inst.id,)):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
-        template = int(rng.integers(len(TEMPLATES)))
+        template = draw_index(rng, len(TEMPLATES))
         yield offer(
             SINGLE_VIEW, (view,), subject, (inst.id,), functools.partial(selection_entry, subject),
             functools.partial(_single_view_record, scene, index, view, inst, distance, template),

@@ -165,6 +165,7 @@ from spacedg.plugins.questions.records import (
 )
 from spacedg.plugins.questions.pairs import view_and_pair_family
 from spacedg.plugins.specs import AnswerType, TaskGroup
+from spacedg.seeding import draw_index
 
 __all__ = [
     "BBOX_CENTER_DIRECTION",
@@ -230,7 +231,7 @@ def body_direction(vector_camera: np.ndarray, rng: np.random.Generator) -> tuple
     distractors = flipped_labels(parts, BODY_DIRECTION_WORDS)
     if len(parts) == 1:
         others = [axis for axis in range(3) if axis != parts[0][0]]
-        pad_axis = others[int(rng.integers(len(others)))]
+        pad_axis = others[draw_index(rng, len(others))]
         distractors += single_word_pool(BODY_DIRECTION_WORDS, exclude_axes=[a for a in range(3) if a != pad_axis])
     options, letter = build_mcq(truth, distractors, rng)
     return parts, truth, options, letter
@@ -301,7 +302,7 @@ def _single_view_stream(scene: Scene, index: VisibilityIndex, view: str, rng: np
         if not admit(SINGLE_VIEW, (view,), subject, (ia, ib)):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
-        template = int(rng.integers(len(SINGLE_VIEW_TEMPLATES)))
+        template = draw_index(rng, len(SINGLE_VIEW_TEMPLATES))
         parts, truth, options, letter = body_direction(vec, rng)
         yield offer(
             SINGLE_VIEW, (view,), subject, (ia, ib), functools.partial(_option_selection, subject, SINGLE_VIEW, template, truth, options),
@@ -340,7 +341,7 @@ def _bbox_stream(scene: Scene, index: VisibilityIndex, pair: ViewPair, rules: Pa
         if not admit(BBOX_CENTER_DIRECTION, (pair.a, pair.b), subject, (iid,)):
             yield PASSED_OVER  # the caller passes it over: no draws
             continue
-        template = int(rng.integers(len(TWO_VIEW_TEMPLATES)))
+        template = draw_index(rng, len(TWO_VIEW_TEMPLATES))
         drawn = bbox_options(truth, rng)
         yield offer(
             BBOX_CENTER_DIRECTION, (pair.a, pair.b), subject, (iid,), functools.partial(_bbox_selection, pair, inst, truth, drawn[2]),

@@ -107,6 +107,7 @@ from spacedg.plugins.questions.geometry import (
 from spacedg.plugins.questions.records import child_rngs, make_record, pair_geometry, pair_subject, selection_entry
 from spacedg.plugins.question_family import FamilyFactory
 from spacedg.plugins.specs import AnswerType, TaskGroup
+from spacedg.seeding import draw_index
 
 __all__ = [
     "FAMILY",
@@ -172,7 +173,7 @@ def main_dir_options(parts: list[tuple[int, int]], rng: np.random.Generator) -> 
     distractors = flipped_labels(parts, CAMERA_MOTION_WORDS)
     if len(parts) == 1:
         others = [axis for axis in range(3) if axis != parts[0][0]]
-        pad_axis = others[int(rng.integers(len(others)))]
+        pad_axis = others[draw_index(rng, len(others))]
         skip = [parts[0][0], *(a for a in others if a != pad_axis)]
         distractors += single_word_pool(CAMERA_MOTION_WORDS, exclude_axes=skip)
         return truth, distractors, f"flip + both words of axis {pad_axis}"
@@ -191,7 +192,7 @@ def _candidate(scene: Scene, pair: ViewPair, rules: PairRules) -> _Candidate | N
     raw = relative_translation(scene.views[pair.a], scene.views[pair.b])
     if not np.isfinite(raw).all() or vector_length(raw) < rules.min_translation_m:
         return None
-    d = np.round(raw, D_DECIMALS) + 0.0  # + 0.0: no negative zeros
+    d = raw.round(D_DECIMALS) + 0.0  # + 0.0: no negative zeros (ndarray.round: np.round without its dispatch)
     parts = dominant_parts(d)
     if not parts:
         return None
@@ -265,7 +266,7 @@ def generate(scene: Scene, rng: np.random.Generator, rules: PairRules = TRANSLAT
     """Every camera-translation question of ``scene`` (3 per valid pair), lazily, in a seeded order
     (:func:`~spacedg.plugins.candidates.offer`: the record is built only if the question index keeps it)."""
     pairs = sample_pairs(scene, rules, rng)
-    start = int(rng.integers(len(SUB_TYPES)))
+    start = draw_index(rng, len(SUB_TYPES))
     children = child_rngs(rng, len(pairs) * len(SUB_TYPES))  # row-major: pair k, sub type s
     letter_rng, side_rng = child_rngs(rng, 2)
     decks = {"main_dir": BalancedDeck(letter_rng, 4), "distance_threshold": BalancedDeck(side_rng, 2)}

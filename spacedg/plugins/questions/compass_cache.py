@@ -35,6 +35,7 @@ from spacedg.plugins.questions.geometry import (
 )
 from spacedg.plugins.questions.records import compass_entries, index_memo
 from spacedg.plugins.questions.view_sampling import VisibilityIndex
+from spacedg.seeding import draw_index
 
 __all__ = ["CompassQuestions", "compass_questions"]
 
@@ -54,7 +55,7 @@ class CompassQuestions:
     ) -> tuple[str, tuple[str, ...], str, dict[str, Any]] | None:
         """``(assumed_dir, options, letter, block)``, or ``None``: what
         ``compass_question(np.asarray(reference), np.asarray(query), up, rng)`` returns (the same draws)."""
-        assumed = CARDINALS[int(rng.integers(len(CARDINALS)))]
+        assumed = CARDINALS[draw_index(rng, len(CARDINALS))]
         frame = self._frames.get((reference_key, assumed))
         if frame is None:
             basis = self._bases.get(reference_key)

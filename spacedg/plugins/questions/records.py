@@ -79,7 +79,7 @@ from spacedg.plugins.questions.geometry import (
     on_compass_boundary,
 )
 from spacedg.plugins.questions.language import object_phrase
-from spacedg.seeding import generator_from_state, pcg64_states, shuffled
+from spacedg.seeding import draw_index, generator_from_state, pcg64_states, shuffled
 from spacedg.plugins.specs import AnswerType, TaskGroup
 
 __all__ = [
@@ -300,10 +300,9 @@ def index_memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
     """A per-index cache named ``name`` (an index is built once per generation of a scene and
     never changes): for quantities a family computes again for every view pair an object or a
     pair of objects recurs in."""
-    memos, key = index.__dict__, "_memo_" + name
-    memo = memos.get(key)
+    memo = index.memos.get(name)
     if memo is None:
-        memo = memos[key] = {}
+        memo = index.memos[name] = {}
     return memo
 
 
@@ -541,7 +540,7 @@ def compass_question(
     (:func:`~spacedg.plugins.questions.geometry.build_mcq`). ``block`` is :func:`compass_block`'s.
     ``None`` (after the assumed cardinal's draw only) when the angle lies within
     :data:`~spacedg.plugins.questions.geometry.COMPASS_RULE_BAND_DEG` of a sector boundary."""
-    assumed = CARDINALS[int(rng.integers(len(CARDINALS)))]
+    assumed = CARDINALS[draw_index(rng, len(CARDINALS))]
     truth, hit, block = compass_block(reference, assumed, query, up)
     if on_compass_boundary(hit):
         return None
@@ -554,6 +553,23 @@ def compass_distractors(block: dict[str, Any]) -> list[str]:
     ``block``): all but the truth and a banned neighbour, for :func:`selection_entry`."""
     banned = set(block.get("banned_labels", ())) | {block["sector_label"]}
     return [t for t in COMPASS_SECTORS.labels if t not in banned]
+
+
+#: id → tuple of str that :func:`_str_list` has read (held, so that the id stays that tuple's): a cell's
+#: roles and a label's features are the same cached tuple in every candidate that names them.
+_STR_TUPLES: dict[int, tuple[str, ...]] = {}
+_STR_TUPLES_MAX = 4096
+
+
+def _str_list(items: Sequence[Any]) -> list[str]:
+    """``list(map(str, items))``; for a tuple of ``str`` it has read before (that very object), ``list(items)`` without the conversions."""
+    if type(items) is tuple:
+        if _STR_TUPLES.get(id(items)) is items:
+            return list(items)
+        if len(_STR_TUPLES) < _STR_TUPLES_MAX and all(type(x) is str for x in items):
+            _STR_TUPLES[id(items)] = items
+            return list(items)
+    return list(map(str, items))
 
 
 def selection_entry(
@@ -585,11 +601,11 @@ def selection_entry(
         return {"subject": str(subject)}
     if role is None or role not in roles:
         raise ValueError(f"selection_entry: role {role!r} must be one of roles {list(roles)}")
-    out: dict[str, Any] = {"subject": str(subject), "cell": str(cell), "role": str(role), "roles": list(map(str, roles))}
+    out: dict[str, Any] = {"subject": str(subject), "cell": str(cell), "role": str(role), "roles": _str_list(roles)}
     if not all_roles:
         out["all_roles"] = False
     if features:
-        out["features"] = list(map(str, features))
+        out["features"] = _str_list(features)
     if distractors:
         if len(set(distractors)) < 3:
             raise ValueError(f"selection_entry: distractors must hold at least 3 texts, got {list(distractors)}")

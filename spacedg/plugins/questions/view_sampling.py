@@ -32,7 +32,10 @@ object is not trivially in view.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,7 +47,7 @@ from spacedg.scene.visibility_classes import DEFAULT_THRESHOLDS, VisibilityClass
 from spacedg.errors import InvalidDataError, ParameterError
 
 __all__ = [
-    "VisibilityIndex", "PairRules", "ViewPair", "sample_pairs", "split_across_views",
+    "VisibilityIndex", "shared_visibility_tables", "PairRules", "ViewPair", "sample_pairs", "split_across_views",
     "description_key", "label_key", "head_noun", "confusable", "label_ambiguous", "same_label_neighbours", "description_clash",
     "SceneLabel", "scene_labels",
     "Lexicon", "default_lexicon",
@@ -66,30 +69,81 @@ def description_key(text: str) -> str:
     return " ".join(str(text).lower().split()).rstrip(".")
 
 
+@dataclass(frozen=True)
+class _VisibilityTables:
+    """The classification tables of a :class:`VisibilityIndex` (read-only once made): what
+    :func:`shared_visibility_tables` lets the indexes of one scene share."""
+
+    scene: Scene
+    classes: dict[str, dict[int, VisibilityClass]]
+    visible: dict[str, tuple[int, ...]]
+    seen: dict[str, tuple[int, ...]]
+    visible_sets: dict[str, frozenset[int]]
+    seen_sets: dict[str, frozenset[int]]
+    by_id: dict[int, Instance]
+
+    @classmethod
+    def of(cls, scene: Scene, thresholds: VisibilityThresholds) -> _VisibilityTables:
+        classes: dict[str, dict[int, VisibilityClass]] = {}
+        visible: dict[str, tuple[int, ...]] = {}
+        seen: dict[str, tuple[int, ...]] = {}
+        for view, cam in scene.views.items():
+            area = cam.width * cam.height
+            row = {inst.id: classify(inst.visibility.get(view), thresholds, area) for inst in scene.instances}
+            classes[view] = row
+            visible[view] = tuple(sorted(i for i, c in row.items() if c is VisibilityClass.VISIBLE))
+            seen[view] = tuple(sorted(i for i, c in row.items() if c is not VisibilityClass.HIDDEN))
+        return cls(
+            scene, classes, visible, seen,
+            {view: frozenset(ids) for view, ids in visible.items()}, {view: frozenset(ids) for view, ids in seen.items()},
+            {inst.id: inst for inst in scene.instances},
+        )
+
+
+#: (id(scene), thresholds) → tables, inside :func:`shared_visibility_tables` (else ``None``: every index classifies anew).
+_SHARED_TABLES: contextvars.ContextVar[dict[tuple[int, VisibilityThresholds], _VisibilityTables] | None] = contextvars.ContextVar(
+    "spacedg_visibility_tables", default=None,
+)
+
+
+@contextlib.contextmanager
+def shared_visibility_tables() -> Iterator[None]:
+    """Within this block, every :class:`VisibilityIndex` of the same scene object and thresholds
+    shares one set of classification tables (made by the first; each index keeps its own memos).
+    For a caller that runs many families on a scene that does not change meanwhile (question
+    generation, :func:`~spacedg.qa.build.generate_records`): the scene's instances and their
+    visibility must not be changed inside the block."""
+    token = _SHARED_TABLES.set({})
+    try:
+        yield
+    finally:
+        _SHARED_TABLES.reset(token)
+
+
 class VisibilityIndex:
     """Visibility classes of every instance in every view of a scene (built once per generation).
 
     Attributes:
         visible: view → ids of clearly visible instances (sorted).
         seen: view → ids with at least one visible pixel (``VISIBLE`` or ``PARTIAL``), sorted.
+        memos: name → a per-index cache of a family (:func:`~spacedg.plugins.questions.records.index_memo`).
     """
 
     def __init__(self, scene: Scene, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> None:
         self.scene = scene
         self.thresholds = thresholds
-        self.visible: dict[str, tuple[int, ...]] = {}
-        self.seen: dict[str, tuple[int, ...]] = {}
-        self.classes: dict[str, dict[int, VisibilityClass]] = {}
-        for view, cam in scene.views.items():
-            area = cam.width * cam.height
-            row = {inst.id: classify(inst.visibility.get(view), thresholds, area) for inst in scene.instances}
-            self.classes[view] = row
-            self.visible[view] = tuple(sorted(i for i, c in row.items() if c is VisibilityClass.VISIBLE))
-            self.seen[view] = tuple(sorted(i for i, c in row.items() if c is not VisibilityClass.HIDDEN))
-        self._visible_sets = {view: frozenset(ids) for view, ids in self.visible.items()}
-        self._seen_sets = {view: frozenset(ids) for view, ids in self.seen.items()}
-        self._by_id = {inst.id: inst for inst in scene.instances}
+        shared = _SHARED_TABLES.get()
+        tables = shared.get((id(scene), thresholds)) if shared is not None else None
+        if tables is None or tables.scene is not scene:
+            tables = _VisibilityTables.of(scene, thresholds)
+            if shared is not None:
+                shared[(id(scene), thresholds)] = tables
+        self.visible: dict[str, tuple[int, ...]] = tables.visible
+        self.seen: dict[str, tuple[int, ...]] = tables.seen
+        self.classes: dict[str, dict[int, VisibilityClass]] = tables.classes
+        self._visible_sets, self._seen_sets, self._by_id = tables.visible_sets, tables.seen_sets, tables.by_id
         self._entries: dict[tuple[str, int], dict[str, object]] = {}  # vis_entry, per (view, id)
+        self.memos: dict[str, dict[Any, Any]] = {}  # name → a family's per-index cache (records.index_memo)
         self._seen_labels: dict[str, dict[str, tuple[int, ...]]] = {}  # view → label key → seen ids
 
     def seen_with_label(self, view: str, key: str) -> tuple[int, ...]:
