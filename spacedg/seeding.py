@@ -43,9 +43,9 @@ def shuffled(items: Iterable[T], rng: Generator) -> list[T]:
 
 
 def draw_index(rng: Generator, n: int) -> int:
-    """``int(rng.integers(n))``, an index in ``[0, n)``: the same draw and the same generator state
-    after, about 0.8 µs cheaper, as ``rng.integers(0, n)`` (numpy's one-argument form takes a
-    slower path to the same bounded draw); for the per-candidate template and pad draws."""
+    """``int(rng.integers(n))`` for ``n ≥ 1``: an index in ``[0, n)``, the same draw and the same
+    generator state after. Written ``rng.integers(0, n)``, which numpy serves about 0.8 µs faster than
+    its one-argument form (the same bounded draw); for the per-candidate template and pad draws."""
     return int(rng.integers(0, n))
 
 

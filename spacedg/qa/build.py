@@ -426,7 +426,7 @@ def generate_records(
     out: list[QARecord] = []
     # The cyclic collector re-scanning the pools took a quarter of generation: paused, unless a
     # judge runs (it renders and may call a model, whose cyclic garbage must not wait for the scene's end).
-    # Every family's VisibilityIndex of the scene shares one classification (the scene does not change here).
+    # The families' VisibilityIndex objects of the scene share one classification per thresholds (the scene does not change here).
     with collector_paused() if judge is None else contextlib.nullcontext(), shared_visibility_tables():
         index = TwinCheck(VisibilityIndex(scene))
         for family in selected_families(config.families):

@@ -395,7 +395,7 @@ class _Selection:
         ``quota`` (no room for another round of its cell), else ``unbalanced``."""
         pool, taken, judged_out, asked, room = self.pool, self.taken, self.judged_out, self.asked, self.room
         subs = [r.sub_question_type for r in pool.records]
-        sizes = {cell: max(1, len(roles)) for cell, roles in pool.cell_roles.items() if roles}  # else: the record's own roles
+        sizes: dict[str, int] = {}  # cell → round_size of its records (where it is the cell's, not the record's)
         reasons: list[str] = []
         for i, (sub, subject, cell) in enumerate(zip(subs, pool.subjects, pool.cell_keys)):
             if i in taken:
@@ -405,7 +405,11 @@ class _Selection:
             elif subject is not None and subject in asked:  # (a record without an entry has no subject)
                 reasons.append("repeat")
             else:
-                size = 1 if cell is None else sizes.get(cell) or pool.round_size(i)
+                size = sizes.get(cell) if cell is not None else 1
+                if size is None:
+                    size = pool.round_size(i)
+                    if pool.cell_roles.get(cell):  # the cell's roles, not record i's own
+                        sizes[cell] = size
                 reasons.append("quota" if room[sub] < size else "unbalanced")
         counts = Counter(zip(subs, reasons))
         out: dict[str, Counter[str]] = {}

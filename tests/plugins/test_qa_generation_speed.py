@@ -4,6 +4,7 @@ geometry conversion, the list fast path of ``json_ready``, ``cross3`` and the me
 from __future__ import annotations
 
 import math
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -201,23 +202,50 @@ def test_draw_index_is_the_one_argument_draw() -> None:
     assert fast.bit_generator.state == plain.bit_generator.state
 
 
-def test_letter_decks_of_interleaved_generators_stay_their_own() -> None:
+class _PlainDecks:
+    """The letter decks as written before the last-deck fast path: an LRU of (id(rng), options) → (rng, letters)."""
+
+    def __init__(self, size: int) -> None:
+        from collections import OrderedDict
+
+        self.decks: OrderedDict[tuple[int, int], tuple[np.random.Generator, list[int]]] = OrderedDict()
+        self.size = size
+
+    def next(self, rng: np.random.Generator, n_options: int) -> int:
+        key = (id(rng), n_options)
+        entry = self.decks.get(key)
+        if entry is None or entry[0] is not rng:
+            entry = self.decks[key] = (rng, [])
+            while len(self.decks) > self.size:
+                self.decks.popitem(last=False)
+        self.decks.move_to_end(key)
+        if not entry[1]:
+            entry[1].extend(int(i) for i in rng.permutation(n_options))
+        return entry[1].pop()
+
+
+def test_letter_decks_equal_the_plain_lru(monkeypatch: pytest.MonkeyPatch) -> None:
+    from collections import OrderedDict
+
     from spacedg.plugins.questions import geometry
 
-    def letters(seed: int, n: int, options: int) -> list[int]:
-        rng = np.random.default_rng(seed)
-        return [geometry._next_letter(rng, options) for _ in range(n)]
-
-    alone = {seed: letters(seed, 23, 4) for seed in (1, 2)}
-    three = letters(3, 11, 3)
-    a, b = np.random.default_rng(1), np.random.default_rng(2)
-    mixed: dict[int, list[int]] = {1: [], 2: []}
-    for k in range(23):  # runs of one generator, then the other: the deck of the last one used must not leak
-        for seed, rng in ((1, a), (2, b)) if k % 5 < 3 else ((2, b), (1, a)):
-            mixed[seed].append(geometry._next_letter(rng, 4))
-    assert mixed == alone
-    c = np.random.default_rng(3)
-    assert [geometry._next_letter(c, 3) for _ in range(11)] == three  # another option count: another deck
+    monkeypatch.setattr(geometry, "_DECKS", OrderedDict())
+    monkeypatch.setattr(geometry, "_LAST_DECK", [None])
+    monkeypatch.setattr(geometry, "_MAX_DECKS", 8)
+    plain = _PlainDecks(8)
+    order = np.random.default_rng(4646)
+    fast_rngs = [np.random.default_rng(seed) for seed in range(12)]  # more generators than decks: evictions
+    plain_rngs = [np.random.default_rng(seed) for seed in range(12)]
+    got, want = [], []
+    for _ in range(3000):
+        k, options, run = int(order.integers(12)), int(order.choice([3, 4])), int(order.integers(1, 6))
+        for _ in range(run):  # runs of one generator and option count, as a family draws them
+            got.append(geometry._next_letter(fast_rngs[k], options))
+            want.append(plain.next(plain_rngs[k], options))
+        if order.random() < 0.02:  # a generator replaced: a new object, perhaps at the old one's id
+            fast_rngs[k], plain_rngs[k] = np.random.default_rng(100 + k), np.random.default_rng(100 + k)
+    assert got == want
+    assert [r.bit_generator.state for r in fast_rngs] == [r.bit_generator.state for r in plain_rngs]
 
 
 def test_selection_entry_lists_are_fresh_strings() -> None:
@@ -229,6 +257,12 @@ def test_selection_entry_lists_are_fresh_strings() -> None:
     assert first == second == {"subject": "s", "cell": "c", "role": "yes", "roles": ["no", "yes"], "features": ["a:chair"]}
     first["roles"].append("maybe")
     assert second["roles"] == ["no", "yes"] and roles == ("no", "yes")  # each entry has its own list
+    class Label(str):
+        def __str__(self) -> str:
+            return "label:" + str.__str__(self)
+
+    subclassed = selection_entry("s", "c", Label("x"), (Label("x"), "y"))  # a str subclass: str() as before
+    assert subclassed["roles"] == ["label:x", "y"] and type(subclassed["roles"][0]) is str
     numeric = selection_entry("s", "c", 1, (1, 2))  # not strings: converted
     assert numeric["roles"] == ["1", "2"] and numeric["role"] == "1" and all(type(r) is str for r in numeric["roles"])
 
@@ -249,6 +283,57 @@ def test_visibility_tables_are_shared_only_inside_the_block() -> None:
         assert second.memos is not first.memos  # each index its own memos
         assert VisibilityIndex(scene, strict).classes is not first.classes  # other thresholds: their own
         assert VisibilityIndex(other).visible == {"f0": (1,)}  # another scene: its own
+    assert VisibilityIndex(scene).classes is not first.classes  # the block is over: classified anew
     for index in (first, VisibilityIndex(scene, strict)):
         plain = VisibilityIndex(scene, index.thresholds)
         assert (index.classes, index.visible, index.seen) == (plain.classes, plain.visible, plain.seen)
+
+
+def _stats_as_before(selection: object) -> dict[str, Counter[str]]:
+    """``_Selection.stats`` as written before the per-cell round sizes (one comprehension)."""
+    pool, taken, judged_out, asked, room = (getattr(selection, k) for k in ("pool", "taken", "judged_out", "asked", "room"))
+    subs = [r.sub_question_type for r in pool.records]
+    counts = Counter(zip(subs, [
+        "taken" if i in taken else "judge" if i in judged_out
+        else "repeat" if subject is not None and subject in asked
+        else "quota" if room[sub] < pool.round_size(i) else "unbalanced"
+        for i, (sub, subject) in enumerate(zip(subs, pool.subjects))
+    ]))
+    out: dict[str, Counter[str]] = {sub: Counter({"pooled": n}) for sub, n in Counter(subs).items()}
+    for (sub, reason), n in counts.items():
+        out[sub][reason] = n
+    return out
+
+
+@pytest.mark.parametrize("quota", [1, 2, 5])
+def test_selection_stats_equal_the_plain_rule(quota: int) -> None:
+    from spacedg.plugins.qa_record import QARecord
+    from spacedg.plugins.questions.records import selection_entry
+    from spacedg.plugins.specs import AnswerType, TaskGroup
+    from spacedg.qa.selection import _Selection
+
+    def record(k: int, sub: str, **entry: object) -> QARecord:
+        return QARecord(
+            id=f"r{k}", scene_id="s", question_type="fam", sub_question_type=sub, task_group=TaskGroup.OBJECT_CENTRIC,
+            answer_type=AnswerType.YN, views=("a",), question=f"Q{k}?", answer="yes", geometry={"selection": selection_entry(**entry)},
+        )
+
+    rng = np.random.default_rng(12)
+    records = []
+    for k in range(60):
+        kind = int(rng.integers(4))
+        if kind == 0:  # metric (no cell)
+            records.append(record(k, "m", subject=f"o{k % 7}"))
+        elif kind == 1:  # a three-role cell, subjects repeating
+            records.append(record(k, "c", subject=f"p{k % 9}", cell="three", role=str(rng.choice(["x", "y", "z"])), roles=("x", "y", "z")))
+        elif kind == 2:  # rounds over the offered roles, of which this scene offers one: the cell's roles become []
+            records.append(record(k, "c", subject=f"q{k}", cell="partial", role="x", roles=("x", "y"), all_roles=False))
+        else:  # another sub type's two-role cell
+            records.append(record(k, "d", subject=f"r{k % 11}", cell="two", role=str(rng.choice(["yes", "no"])), roles=("yes", "no")))
+    selection = _Selection(records, quota, lambda r: r.id != "r5")  # one refusal of a judge
+    selection.take_metric()
+    selection.take_rounds()
+    selection.take_small_quotas()
+    assert selection.pool.cell_roles["fam|partial"] == []
+    assert selection.stats() == _stats_as_before(selection)
+    assert sum(sum(v for k, v in row.items() if k != "pooled") for row in selection.stats().values()) == len(records)

@@ -284,7 +284,8 @@ def single_word_pool(words: Sequence[tuple[str, str]], exclude_axes: Sequence[in
 #: Letter decks of recently used generators: (id(rng), options) → (rng kept alive, remaining letters).
 _DECKS: OrderedDict[tuple[int, int], tuple[np.random.Generator, list[int]]] = OrderedDict()
 _MAX_DECKS = 256
-#: The deck used last, ``(key, entry)`` of :data:`_DECKS` (it is the last one there): one family draws many letters in a row.
+#: The deck used last, ``(key, entry)`` of :data:`_DECKS` (it is the last one there): one family draws many
+#: letters in a row. Whatever empties or reorders :data:`_DECKS` must reset it.
 _LAST_DECK: list[tuple[tuple[int, int], tuple[np.random.Generator, list[int]]] | None] = [None]
 
 

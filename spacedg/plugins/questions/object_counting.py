@@ -120,7 +120,9 @@ def count_bin(count: int, bins: tuple[int, ...] = COUNT_BINS) -> str:
     return f"{low}+" if low == bins[-1] else str(low)
 
 
+@functools.lru_cache(maxsize=64)
 def _bin_roles(bins: tuple[int, ...] = COUNT_BINS) -> tuple[str, ...]:
+    """The count bins' role texts, in bin order (one tuple per ``bins``: every candidate's selection entry reads it)."""
     return tuple(count_bin(low, bins) for low in bins)
 
 #: ``{plural}``: the label's plural; ``{label}``: the label as written.

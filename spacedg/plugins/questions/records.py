@@ -300,9 +300,13 @@ def index_memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
     """A per-index cache named ``name`` (an index is built once per generation of a scene and
     never changes): for quantities a family computes again for every view pair an object or a
     pair of objects recurs in."""
-    memo = index.memos.get(name)
+    try:
+        memos = index.memos
+    except AttributeError:  # an index object made without VisibilityIndex.__init__
+        memos = index.__dict__.setdefault("memos", {})
+    memo = memos.get(name)
     if memo is None:
-        memo = index.memos[name] = {}
+        memo = memos[name] = {}
     return memo
 
 
@@ -555,18 +559,22 @@ def compass_distractors(block: dict[str, Any]) -> list[str]:
     return [t for t in COMPASS_SECTORS.labels if t not in banned]
 
 
-#: id → tuple of str that :func:`_str_list` has read (held, so that the id stays that tuple's): a cell's
-#: roles and a label's features are the same cached tuple in every candidate that names them.
+#: id → tuple of str that :func:`_str_list` has read (held, so that the id stays that tuple's): most
+#: families pass a cell's roles and a label's features as one cached tuple in every candidate that names them.
 _STR_TUPLES: dict[int, tuple[str, ...]] = {}
 _STR_TUPLES_MAX = 4096
 
 
 def _str_list(items: Sequence[Any]) -> list[str]:
-    """``list(map(str, items))``; for a tuple of ``str`` it has read before (that very object), ``list(items)`` without the conversions."""
+    """``list(map(str, items))``; for a tuple of exact ``str`` it has read before (that very object),
+    ``list(items)`` without the conversions. The memo is emptied when it holds :data:`_STR_TUPLES_MAX`
+    tuples (a family that makes a new tuple per candidate only fills it)."""
     if type(items) is tuple:
         if _STR_TUPLES.get(id(items)) is items:
             return list(items)
-        if len(_STR_TUPLES) < _STR_TUPLES_MAX and all(type(x) is str for x in items):
+        if all(type(x) is str for x in items):
+            if len(_STR_TUPLES) >= _STR_TUPLES_MAX:
+                _STR_TUPLES.clear()
             _STR_TUPLES[id(items)] = items
             return list(items)
     return list(map(str, items))

@@ -69,7 +69,7 @@ def description_key(text: str) -> str:
     return " ".join(str(text).lower().split()).rstrip(".")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class _VisibilityTables:
     """The classification tables of a :class:`VisibilityIndex` (read-only once made): what
     :func:`shared_visibility_tables` lets the indexes of one scene share."""
@@ -127,17 +127,24 @@ class VisibilityIndex:
         visible: view → ids of clearly visible instances (sorted).
         seen: view → ids with at least one visible pixel (``VISIBLE`` or ``PARTIAL``), sorted.
         memos: name → a per-index cache of a family (:func:`~spacedg.plugins.questions.records.index_memo`).
+
+    ``visible``, ``seen`` and ``classes`` are read-only: inside :func:`shared_visibility_tables`
+    (all of question generation) every index of the scene with the same thresholds shares them.
     """
 
     def __init__(self, scene: Scene, thresholds: VisibilityThresholds = DEFAULT_THRESHOLDS) -> None:
         self.scene = scene
         self.thresholds = thresholds
         shared = _SHARED_TABLES.get()
-        tables = shared.get((id(scene), thresholds)) if shared is not None else None
-        if tables is None or tables.scene is not scene:
+        key = (id(scene), thresholds)  # the block's tables hold the scene: its id stays its own
+        try:
+            tables = shared.get(key) if shared is not None else None
+        except TypeError:  # unhashable thresholds: not shared
+            shared = tables = None
+        if tables is None:
             tables = _VisibilityTables.of(scene, thresholds)
             if shared is not None:
-                shared[(id(scene), thresholds)] = tables
+                shared[key] = tables
         self.visible: dict[str, tuple[int, ...]] = tables.visible
         self.seen: dict[str, tuple[int, ...]] = tables.seen
         self.classes: dict[str, dict[int, VisibilityClass]] = tables.classes
