@@ -101,6 +101,7 @@ class _Pool:
     cells: dict[str, dict[str, list[int]]] = field(default_factory=dict)  # cell → role → records
     cell_roles: dict[str, list[str]] = field(default_factory=dict)  # cell → the roles of a round
     cell_keys: list[str | None] = field(default_factory=list)  # each record's cell (None: no cell)
+    round_sizes: dict[str, int] = field(default_factory=dict)  # cell → the size of its rounds (cells with roles)
     offered_roles_only: set[str] = field(default_factory=set)  # cells whose rounds go over the roles the scene offers (all_roles false)
 
     @classmethod
@@ -142,6 +143,7 @@ class _Pool:
             offered = [role for role in pool.cell_roles[cell] if pool.cells[cell].get(role)]
             pool.cell_roles[cell] = offered if len(offered) >= 2 else []
         pool.offered_roles_only = partial
+        pool.round_sizes = {cell: len(roles) for cell, roles in pool.cell_roles.items() if roles}
         return pool
 
     def subject(self, i: int) -> tuple[str, str]:
@@ -155,8 +157,10 @@ class _Pool:
         cell = self.cell_keys[i]
         if cell is None:
             return 1
-        roles = self.cell_roles.get(cell) or self.selections[i].get("roles", [])  # type: ignore[union-attr]
-        return max(1, len(roles))
+        size = self.round_sizes.get(cell)
+        if size is not None:
+            return size
+        return max(1, len(self.selections[i].get("roles", [])))  # type: ignore[union-attr] # a cell left without roles: the record's own
 
 
 def role_excess(rows: Sequence[Mapping[str, int] | None], role: str, roles: Sequence[str]) -> float:
@@ -395,23 +399,12 @@ class _Selection:
         ``quota`` (no room for another round of its cell), else ``unbalanced``."""
         pool, taken, judged_out, asked, room = self.pool, self.taken, self.judged_out, self.asked, self.room
         subs = [r.sub_question_type for r in pool.records]
-        sizes: dict[str, int] = {}  # cell → round_size of its records (where it is the cell's, not the record's)
-        reasons: list[str] = []
-        for i, (sub, subject, cell) in enumerate(zip(subs, pool.subjects, pool.cell_keys)):
-            if i in taken:
-                reasons.append("taken")
-            elif i in judged_out:
-                reasons.append("judge")
-            elif subject is not None and subject in asked:  # (a record without an entry has no subject)
-                reasons.append("repeat")
-            else:
-                size = sizes.get(cell) if cell is not None else 1
-                if size is None:
-                    size = pool.round_size(i)
-                    if pool.cell_roles.get(cell):  # the cell's roles, not record i's own
-                        sizes[cell] = size
-                reasons.append("quota" if room[sub] < size else "unbalanced")
-        counts = Counter(zip(subs, reasons))
+        counts = Counter(zip(subs, [
+            "taken" if i in taken else "judge" if i in judged_out
+            else "repeat" if subject is not None and subject in asked  # (a record without an entry has no subject)
+            else "quota" if room[sub] < pool.round_size(i) else "unbalanced"
+            for i, (sub, subject) in enumerate(zip(subs, pool.subjects))
+        ]))
         out: dict[str, Counter[str]] = {}
         for sub, n in Counter(subs).items():  # sub types in the order of their first record
             out[sub] = Counter({"pooled": n})

@@ -294,19 +294,17 @@ def _next_letter(rng: np.random.Generator, n_options: int = 4) -> int:
     options), so over any generation the correct letter is uniform to within one block (exact balance)."""
     key = (id(rng), n_options)
     last = _LAST_DECK[0]
-    if last is not None and last[0] == key and last[1][0] is rng:  # the most recent deck: already last in _DECKS
-        deck = last[1][1]
-        if not deck:
-            deck.extend(shuffled(range(n_options), rng))
-        return deck.pop()
-    entry = _DECKS.get(key)
-    if entry is None or entry[0] is not rng:
-        entry = (rng, [])
-        _DECKS[key] = entry
-        while len(_DECKS) > _MAX_DECKS:
-            _DECKS.popitem(last=False)
-    _DECKS.move_to_end(key)
-    _LAST_DECK[0] = (key, entry)
+    if last is not None and last[0] == key:  # the most recent deck, already last in _DECKS (it holds rng: the id is rng's)
+        entry = last[1]
+    else:
+        entry = _DECKS.get(key)
+        if entry is None or entry[0] is not rng:
+            entry = (rng, [])
+            _DECKS[key] = entry
+            while len(_DECKS) > _MAX_DECKS:
+                _DECKS.popitem(last=False)
+        _DECKS.move_to_end(key)
+        _LAST_DECK[0] = (key, entry)
     deck = entry[1]
     if not deck:
         deck.extend(shuffled(range(n_options), rng))  # = rng.permutation(n_options)
