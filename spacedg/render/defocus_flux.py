@@ -42,7 +42,7 @@ import numpy as np
 
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 
-__all__ = ["FLUX_LENGTH", "FLUX_MIN_SIGMA", "FLUX_RATIO", "flux_lengths", "flux_scale", "conserve_light", "sample_shifted"]
+__all__ = ["FLUX_LENGTH", "FLUX_MIN_SIGMA", "FLUX_RATIO", "flux_lengths", "flux_scale", "conserve_light", "linear_taps", "sample_shifted"]
 
 #: ``L`` in multiples of the 95th-percentile circle of confusion of the covered pixels (measured on
 #: the defocus table: 0.5 gave 35.9–57.5 dB against the thin lens, 1.0 35.1–57.5, 2.0 33.1–53.7).
@@ -106,17 +106,72 @@ def sample_shifted(image: np.ndarray, camera: Any, wide: Any, step: int, shape: 
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _with_alpha(rgb, alpha):  # pragma: no cover - compiled
-    """(H, W, 4) float32: ``rgb`` (H, W, 3) with ``alpha`` (H, W) as a fourth channel."""
+def _cell_means(rgb, alpha, step):  # pragma: no cover - compiled
+    """(rows, cols, 4) float32: ``rgb`` (H, W, 3) with ``alpha`` (H, W) as a fourth channel, at ``step = 1``
+    as they are, at ``step = 2`` averaged over cells of 2 × 2 pixels, the last row and column of cells
+    padded by repeating the edge pixels (``rows = ⌈H / 2⌉``): ``((a + b) + (c + d)) · ¼`` in float32 with
+    ``a, b`` the cell's top pixels, the bytes of OpenCV's ``INTER_AREA`` on the padded image."""
     height, width = alpha.shape
-    out = np.empty((height, width, 4), np.float32)
-    for y in range(height):
-        for x in range(width):
-            out[y, x, 0] = rgb[y, x, 0]
-            out[y, x, 1] = rgb[y, x, 1]
-            out[y, x, 2] = rgb[y, x, 2]
-            out[y, x, 3] = alpha[y, x]
+    if step == 1:
+        out = np.empty((height, width, 4), np.float32)
+        for y in range(height):
+            for x in range(width):
+                out[y, x, 0] = rgb[y, x, 0]
+                out[y, x, 1] = rgb[y, x, 1]
+                out[y, x, 2] = rgb[y, x, 2]
+                out[y, x, 3] = alpha[y, x]
+        return out
+    rows, cols = (height + 1) // 2, (width + 1) // 2
+    out = np.empty((rows, cols, 4), np.float32)
+    quarter = np.float32(0.25)
+    for r in range(rows):
+        ya, yb = 2 * r, min(2 * r + 1, height - 1)
+        for q in range(cols):
+            xa, xb = 2 * q, min(2 * q + 1, width - 1)
+            for c in range(3):
+                out[r, q, c] = ((rgb[ya, xa, c] + rgb[ya, xb, c]) + (rgb[yb, xa, c] + rgb[yb, xb, c])) * quarter
+            out[r, q, 3] = ((alpha[ya, xa] + alpha[ya, xb]) + (alpha[yb, xa] + alpha[yb, xb])) * quarter
     return out
+
+
+def linear_taps(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """OpenCV's ``INTER_LINEAR`` taps along one axis resized from ``n_in`` to ``n_out`` samples:
+    ``(i0, i1, w0, w1)``, output ``k`` = ``src[i0]·w0 + src[i1]·w1`` (float32 weights; source position
+    ``(k + ½)·n_in/n_out − ½``; past either edge the edge sample with weight 1)."""
+    position = ((np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5).astype(np.float32)
+    i0 = np.floor(position).astype(np.int64)
+    w1 = (position - i0).astype(np.float32)
+    outside = (i0 < 0) | (i0 >= n_in - 1)
+    w1[outside] = 0.0
+    i0 = np.clip(i0, 0, n_in - 1)
+    return i0, np.minimum(i0 + 1, n_in - 1), (np.float32(1.0) - w1).astype(np.float32), w1
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _apply_ratio(rgb, alpha, ratio, y0, y1, wy0, wy1, x0, x1, wx0, wx1):  # pragma: no cover - compiled
+    """``(rgb × R, clip(alpha × R₄, 0, 1))`` (float32 (H, W, 3) and (H, W); NaN alpha stays NaN, as
+    ``np.clip``) with ``R`` the ratio grid (rows, cols, 4) resized to (H, W) by the taps of
+    :func:`linear_taps`, in OpenCV's order without IPP: each row of the grid resized along x (once),
+    then two of those rows mixed along y, in float32."""
+    height, width = alpha.shape
+    rows = ratio.shape[0]
+    wide_rows = np.empty((rows, width, 4), np.float32)
+    for r in range(rows):
+        for x in range(width):
+            ca, cb, b0, b1 = x0[x], x1[x], wx0[x], wx1[x]
+            for c in range(4):
+                wide_rows[r, x, c] = ratio[r, ca, c] * b0 + ratio[r, cb, c] * b1
+    out = np.empty((height, width, 3), np.float32)
+    kept = np.empty((height, width), np.float32)
+    zero, one = np.float32(0.0), np.float32(1.0)
+    for y in range(height):
+        ra, rb, a0, a1 = y0[y], y1[y], wy0[y], wy1[y]
+        for x in range(width):
+            for c in range(3):
+                out[y, x, c] = rgb[y, x, c] * (wide_rows[ra, x, c] * a0 + wide_rows[rb, x, c] * a1)
+            a = alpha[y, x] * (wide_rows[ra, x, 3] * a0 + wide_rows[rb, x, 3] * a1)
+            kept[y, x] = a if a != a else min(max(a, zero), one)
+    return out, kept
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -133,22 +188,6 @@ def _flux_ratio(target, low, eps, lo, hi):  # pragma: no cover - compiled
     return target
 
 
-@numba.njit(cache=True, error_model="numpy")
-def _scaled(image, ratio, total):  # pragma: no cover - compiled
-    """``image × (ratio × total)`` (float32; ``total`` per channel) and, apart, its last channel clipped to [0, 1]."""
-    height, width, channels = image.shape
-    out = np.empty((height, width, channels), np.float32)
-    alpha = np.empty((height, width), np.float32)
-    zero, one = np.float32(0.0), np.float32(1.0)
-    for y in range(height):
-        for x in range(width):
-            for c in range(channels):
-                out[y, x, c] = image[y, x, c] * (ratio[y, x, c] * total[c])
-            a = out[y, x, channels - 1]
-            alpha[y, x] = a if a != a else min(max(a, zero), one)  # NaN stays NaN, as np.clip
-    return out, alpha
-
-
 def conserve_light(
     rgb: np.ndarray, alpha: np.ndarray, sharp_rgb: np.ndarray, sharp_alpha: np.ndarray, camera: Any, wide: Any, length: float, coc: float,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -162,14 +201,13 @@ def conserve_light(
             f"and, sharp, {sharp_rgb.shape} over {sharp_alpha.shape}"
         )
     step = max(1, int(round(camera.fx / wide.fx)))
-    image = _with_alpha(np.asarray(rgb, np.float32), np.asarray(alpha, np.float32))
-    rows, cols = -(-image.shape[0] // step), -(-image.shape[1] // step)
-    if step > 1:  # area mean over step × step cells (the last row/column of cells padded by repetition)
-        padded = cv2.copyMakeBorder(image, 0, rows * step - image.shape[0], 0, cols * step - image.shape[1], cv2.BORDER_REPLICATE)
-        blurred = cv2.resize(padded, (cols, rows), interpolation=cv2.INTER_AREA)
-    else:
-        blurred = image
-    sharp = _with_alpha(np.asarray(sharp_rgb, np.float32), np.asarray(sharp_alpha, np.float32))
+    if step > 2:
+        raise ValueError(f"conserve_light: the sharp pass must be at full or half the view's resolution, got 1/{step}")
+    height, width = alpha.shape
+    rgb, alpha = np.ascontiguousarray(rgb, np.float32), np.ascontiguousarray(alpha, np.float32)
+    blurred = _cell_means(rgb, alpha, step)  # the blurred view and its coverage on the grid of step × step cells
+    rows, cols = blurred.shape[:2]
+    sharp = _cell_means(np.ascontiguousarray(sharp_rgb, np.float32), np.ascontiguousarray(sharp_alpha, np.float32), 1)
     seen = sample_shifted(sharp, camera, wide, step, (rows, cols))
     target = _blur(seen, math.hypot(length, coc) / step)
     eps = (1e-3 * np.maximum(np.array(cv2.mean(target)), 0.0) + 1e-12).astype(np.float32)
@@ -180,9 +218,8 @@ def conserve_light(
     wanted = np.array(cv2.sumElems(seen))
     with np.errstate(divide="ignore", invalid="ignore"):
         total = np.where(kept > 1e-12 * max(float(wanted.max()), 1e-30), wanted / kept, 1.0)
-    total = np.clip(np.nan_to_num(total, nan=1.0), *FLUX_RATIO).astype(np.float32)
-    if step > 1:  # bilinear, cell centres to pixel centres (edges repeated)
-        ratio = cv2.resize(ratio * total, (cols * step, rows * step), interpolation=cv2.INTER_LINEAR)[: image.shape[0], : image.shape[1]]
-        total = np.ones(4, np.float32)
-    out, kept_alpha = _scaled(image, np.ascontiguousarray(ratio), total[:4])
-    return out[..., :3], kept_alpha
+    ratio *= np.clip(np.nan_to_num(total, nan=1.0), *FLUX_RATIO).astype(np.float32)[:4]
+    # bilinear, cell centres to pixel centres (edges repeated; at step 1 the identity)
+    y0, y1, wy0, wy1 = (taps[:height] for taps in linear_taps(rows * step, rows))
+    x0, x1, wx0, wx1 = (taps[:width] for taps in linear_taps(cols * step, cols))
+    return _apply_ratio(rgb, alpha, ratio, y0, y1, wy0, wy1, x0, x1, wx0, wx1)

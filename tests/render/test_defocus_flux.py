@@ -85,7 +85,8 @@ def test_sub_pixel_blur_blurs_and_keeps_the_light() -> None:
 
 
 def _conserve_numpy(rgb, alpha, sharp_rgb, sharp_alpha, camera, wide, length, coc):  # type: ignore[no-untyped-def]
-    """conserve_light as plain numpy/OpenCV (its form before the compiled passes): the reference of the bytes."""
+    """conserve_light as plain numpy/OpenCV (its form before the compiled passes, with OpenCV's own bilinear
+    upsampling written out: :func:`_resize_linear`): the reference of the bytes."""
     import math
 
     from spacedg.render.defocus_flux import FLUX_RATIO, _blur
@@ -116,9 +117,42 @@ def _conserve_numpy(rgb, alpha, sharp_rgb, sharp_alpha, camera, wide, length, co
         total = np.where(kept > 1e-12 * max(float(wanted.max()), 1e-30), wanted / kept, 1.0)
     ratio = ratio * np.clip(np.nan_to_num(total, nan=1.0), *FLUX_RATIO).astype(np.float32)
     if step > 1:
-        ratio = cv2.resize(ratio, (cols * step, rows * step), interpolation=cv2.INTER_LINEAR)[: image.shape[0], : image.shape[1]]
+        ratio = _resize_linear(ratio, cols * step, rows * step)[: image.shape[0], : image.shape[1]]
     out = image * ratio
     return out[..., :3], np.clip(out[..., 3], 0.0, 1.0)
+
+
+def _resize_linear(image: np.ndarray, width: int, height: int) -> np.ndarray:
+    """OpenCV's INTER_LINEAR resize of a float32 (h, w, C) image as numpy, without IPP: source position
+    ``(k + ½)·n_in/n_out − ½``, the edge sample past either edge, rows resized along x first, float32."""
+    def taps(n_out: int, n_in: int):  # type: ignore[no-untyped-def]
+        position = ((np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5).astype(np.float32)
+        i0 = np.floor(position).astype(np.int64)
+        w1 = (position - i0).astype(np.float32)
+        w1[(i0 < 0) | (i0 >= n_in - 1)] = 0.0
+        i0 = np.clip(i0, 0, n_in - 1)
+        return i0, np.minimum(i0 + 1, n_in - 1), np.float32(1.0) - w1, w1
+
+    x0, x1, wx0, wx1 = taps(width, image.shape[1])
+    y0, y1, wy0, wy1 = taps(height, image.shape[0])
+    rows = image[:, x0] * wx0[None, :, None] + image[:, x1] * wx1[None, :, None]
+    return rows[y0] * wy0[:, None, None] + rows[y1] * wy1[:, None, None]
+
+
+def test_the_written_out_bilinear_is_opencvs_without_ipp() -> None:
+    """The reference's bilinear upsampling is OpenCV's own (IPP off: IPP's rounding depends on the build and the
+    CPU, so conserve_light defines its bytes by OpenCV's formula) at factor 2, the one conserve_light uses, on an
+    odd and an even size. (At other factors OpenCV places its taps slightly differently.)"""
+    rng = np.random.default_rng(7)
+    ipp = cv2.ipp.useIPP()
+    cv2.ipp.setUseIPP(False)
+    try:
+        for height, width in ((31, 49), (24, 40)):
+            image = (rng.uniform(0.0, 4.0, (height, width, 4)) * rng.uniform(0.0, 50.0, (height, width, 4))).astype(np.float32)
+            want = cv2.resize(image, (2 * width, 2 * height), interpolation=cv2.INTER_LINEAR)
+            assert np.array_equal(_resize_linear(image, 2 * width, 2 * height).view(np.uint32), want.view(np.uint32))
+    finally:
+        cv2.ipp.setUseIPP(ipp)
 
 
 @pytest.mark.parametrize("scale", [1.0, 0.5])
