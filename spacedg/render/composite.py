@@ -73,9 +73,17 @@ def composite_view(
         from spacedg.render import project_cpu  # numba kernels: compiled on first render, not with spacedg
 
         ids = gaussians.instance_ids if gaussians.instance_ids is not None else np.full(len(gaussians), -1, np.int32)
-        packed, rects = project_cpu.project_gaussians(gaussians, camera, settings, defocus, want_color)
+        projected = None
+        if defocus is None:
+            packed, rects = project_cpu.project_gaussians(gaussians, camera, settings, None, want_color)
+        else:  # with the sharp pass's projection at its usual scale, in the same pass (the same bytes as its own)
+            from spacedg.render.defocus import MEASURE_SCALE, measurement_camera, measurement_settings
+
+            wide, measured = measurement_camera(camera, 0, MEASURE_SCALE), measurement_settings(settings, MEASURE_SCALE)
+            packed, rects, *sharp_projection = project_cpu.project_with_sharp(gaussians, camera, settings, defocus, want_color, wide, measured)
+            projected = (MEASURE_SCALE, *sharp_projection)
         t1 = time.perf_counter()
-        images, sharp = _raster_cpu(gaussians, packed, rects, ids, camera, settings, want_color, want_depth, want_ids, defocus is not None)
+        images, sharp = _raster_cpu(gaussians, packed, rects, ids, camera, settings, want_color, want_depth, want_ids, defocus is not None, projected)
     else:
         import torch  # heavy: only the torch backend needs it
 
@@ -99,10 +107,11 @@ def composite_view(
 def _raster_cpu(
     gaussians: Gaussians, packed: np.ndarray, rects: np.ndarray, ids: np.ndarray, camera: Camera, settings: RasterSettings,
     want_color: bool, want_depth: bool, want_ids: bool, defocused: bool,
+    sharp_projection: tuple[float, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[dict[str, np.ndarray], SharpPass | None]:
     """Composite a CPU projection; when anything is blurred, also the sharp pass
-    (:func:`sharp_pass`), and coarse when every visible blur is wide.
-    ``(images, the sharp pass or None when nothing is blurred)``."""
+    (:func:`sharp_pass`, from ``sharp_projection = (scale, packed, rects)`` when that is its scale),
+    and coarse when every visible blur is wide. ``(images, the sharp pass or None when nothing is blurred)``."""
     from spacedg.render import defocus as defocus_model
     from spacedg.render import raster_cpu
     from spacedg.render.colour_cpu import decode_srgb
@@ -114,7 +123,9 @@ def _raster_cpu(
     visible = rects[:, 1] > rects[:, 0] if defocused else None
     plan = defocus_model.blur_plan(packed[visible, COC], width, height) if defocused else None
     if plan is not None:
-        sharp = sharp_pass(gaussians, camera, settings, flux_scale(plan[0]))
+        scale = flux_scale(plan[0])
+        projected = sharp_projection[1:] if sharp_projection is not None and sharp_projection[0] == scale else None
+        sharp = sharp_pass(gaussians, camera, settings, scale, projected)  # type: ignore[arg-type]
         factor = plan[1]
         if factor > 1:
             packed, rects, width, height = defocus_model.coarse_view(packed, rects, width, height, factor)
@@ -166,17 +177,21 @@ def _raster_torch(
     return images, sharp
 
 
-def sharp_pass(gaussians: Any, camera: Camera, settings: RasterSettings, scale: float) -> SharpPass:
+def sharp_pass(
+    gaussians: Any, camera: Camera, settings: RasterSettings, scale: float, projected: tuple[np.ndarray, np.ndarray] | None = None,
+) -> SharpPass:
     """The sharp pass of defocus (:mod:`spacedg.render.defocus_sharp`) at ``scale`` of ``camera``'s
     resolution: the clean raster of the backend ``gaussians`` belong to (:class:`Gaussians`: the
-    compiled path; tensors: the torch path) on the measurement grid."""
+    compiled path; tensors: the torch path) on the measurement grid. ``projected``: the compiled
+    path's projection onto that grid when it was already made
+    (:func:`spacedg.render.project_cpu.project_with_sharp`)."""
     from spacedg.render.defocus import measurement_camera, measurement_settings
 
     wide, measured = measurement_camera(camera, 0, scale), measurement_settings(settings, scale)
     if isinstance(gaussians, Gaussians):
         from spacedg.render import project_cpu
 
-        packed, rects = project_cpu.project_gaussians(gaussians, wide, measured, None, True)
+        packed, rects = projected if projected is not None else project_cpu.project_gaussians(gaussians, wide, measured, None, True)
         ids = np.full(packed.shape[0], -1, np.int32)
         out, _ = _raster_cpu(gaussians, packed, rects, ids, wide, measured, True, True, False, False)
     else:

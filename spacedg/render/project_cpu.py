@@ -24,7 +24,9 @@ against gsplat's torch reference and against float64 finite differences):
    divided by the mass kept (``f = max(f, o e^(−E²/2))``), so its energy is unchanged.
 6. colour from SH along the camera-centre → mean direction, ``max(0, 0.5 + Σ sh·Y)``.
 
-Everything is computed in float64 and stored in float32. The result is a packed
+Everything is computed in float64 and stored in float32. :func:`project_with_sharp` also projects into
+a second camera of the same pose and lens in the same pass (defocus's sharp pass; steps 1, 2 and 6
+done once), with the bytes a projection of its own gives. The result is a packed
 ``(N, PACKED)`` float32 array (one 64-byte cache line per Gaussian for the compositor) and an
 ``(N, 4)`` int32 tile rectangle ``[x0, x1) × [y0, y1)``, all zero for a culled Gaussian.
 """
@@ -143,6 +145,134 @@ def _surely_outside(
     return u + rad_x <= 0 or u - rad_x >= width or v + rad_y <= 0 or v - rad_y >= height
 
 
+@numba.njit(cache=True, inline="always")
+def _frustum(fx, fy, cx, cy, width, height, reach):
+    """``(lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos)``: the Jacobian's frustum in ``x/z, y/z``, the view
+    widened by 0.3·tan(fov/2) (gsplat) and by ``reach`` px (how far a blurred footprint reaches in)."""
+    return (
+        (cx + reach) / fx + 0.3 * (0.5 * width / fx),
+        (width - cx + reach) / fx + 0.3 * (0.5 * width / fx),
+        (cy + reach) / fy + 0.3 * (0.5 * height / fy),
+        (height - cy + reach) / fy + 0.3 * (0.5 * height / fy),
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def _footprint(i, x, y, z, lens_coc, m, opacity, view, lims, fisheye, lens, dilation, opacity_extent, blur, packed, rects):
+    """Steps 3–5 of the module docstring for Gaussian ``i`` at camera point (x, y, z) with ``M = W R S``
+    (the 9-tuple ``m``, row-major) in one camera: writes its packed record but the colour and its tile
+    rectangle; ``False`` when it is culled (the row is then left as it was: zeros). Tuples (a call of
+    more than 30 arguments compiles to ``*args``, which numba cannot inline): ``view = (fx, fy, cx, cy,
+    width, height)``, ``lims`` of :func:`_frustum`, ``lens = (k1, k2, k3, k4, theta_max)``, ``dilation =
+    (model_x, model_y, filter_x, filter_y)``, ``blur = (aperture, defocus_extent, defocus_tail, defocus_boost)``."""
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
+    fx, fy, cx, cy, width, height = view
+    lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos = lims
+    k1, k2, k3, k4, theta_max = lens
+    model_x, model_y, filter_x, filter_y = dilation
+    aperture, defocus_extent, defocus_tail, defocus_boost = blur
+    tiles_x = (width + 15) // 16
+    tiles_y = (height + 15) // 16
+    # ---- lens: mean and Jacobian rows (j0·, j1·)
+    if fisheye:
+        theta, rho, g, drho_dz = _fisheye_terms(x, y, z, k1, k2, k3, k4)
+        if theta > theta_max:
+            return False
+        u = fx * rho * x + cx
+        v = fy * rho * y + cy
+        j00 = fx * (rho + x * x * g)
+        j01 = fx * x * y * g
+        j02 = fx * x * drho_dz
+        j10 = fy * x * y * g
+        j11 = fy * (rho + y * y * g)
+        j12 = fy * y * drho_dz
+    else:
+        u = fx * x / z + cx
+        v = fy * y / z + cy
+        tx = z * min(max(x / z, -lim_x_neg), lim_x_pos)
+        ty = z * min(max(y / z, -lim_y_neg), lim_y_pos)
+        j00 = fx / z
+        j01 = 0.0
+        j02 = -fx * tx / (z * z)
+        j10 = 0.0
+        j11 = fy / z
+        j12 = -fy * ty / (z * z)
+    # T = J M (2×3); Σ2D = T Tᵀ
+    t00 = j00 * m00 + j01 * m10 + j02 * m20
+    t01 = j00 * m01 + j01 * m11 + j02 * m21
+    t02 = j00 * m02 + j01 * m12 + j02 * m22
+    t10 = j10 * m00 + j11 * m10 + j12 * m20
+    t11 = j10 * m01 + j11 * m11 + j12 * m21
+    t12 = j10 * m02 + j11 * m12 + j12 * m22
+    sxx = t00 * t00 + t01 * t01 + t02 * t02
+    sxy = t00 * t10 + t01 * t11 + t02 * t12
+    syy = t10 * t10 + t11 * t11 + t12 * t12
+    sxx += model_x
+    syy += model_y
+    alpha_floor = 1.0 / 255.0
+    if filter_x > 0.0 or filter_y > 0.0:  # footprint_dilation: a low-pass with the opacity compensated (the floor stays 1/255, as gsplat's)
+        det_model = sxx * syy - sxy * sxy
+        sxx += filter_x
+        syy += filter_y
+        opacity *= math.sqrt(max(det_model / max(sxx * syy - sxy * sxy, 1e-300), 0.0))
+    det = sxx * syy - sxy * sxy
+    coc = 0.0
+    if aperture > 0.0:
+        coc = lens_coc
+        if coc < DEFOCUS_MIN_COC:  # below DEFOCUS_MIN_COC: sharp
+            coc = 0.0
+        coc2 = coc * coc
+        sxx += coc2
+        syy += coc2
+        det_blur = sxx * syy - sxy * sxy
+        compensation = math.sqrt(max(det / max(det_blur, 1e-300), 0.0))
+        opacity *= compensation
+        alpha_floor *= compensation
+        det = det_blur
+        if not alpha_floor > 0.0:  # compensation underflowed: the Gaussian is spread over ~∞ pixels
+            return False
+        if coc > 1.0 and defocus_extent > 0.0:  # truncate the blurred footprint, keeping its energy
+            opacity *= defocus_boost
+            alpha_floor = max(alpha_floor, opacity * defocus_tail)
+    det = max(det, 1e-10)
+    if opacity_extent:
+        if not opacity >= alpha_floor:
+            return False
+        extent = min(3.33, math.sqrt(2.0 * math.log(opacity / alpha_floor)))
+    else:
+        extent = 3.33
+    rad_x = math.ceil(min(extent * math.sqrt(sxx), FOOTPRINT_CAP))
+    rad_y = math.ceil(min(extent * math.sqrt(syy), FOOTPRINT_CAP))
+    ok = (
+        math.isfinite(u) and math.isfinite(v) and math.isfinite(det)
+        and math.isfinite(rad_x) and math.isfinite(rad_y) and rad_x > 0 and rad_y > 0
+    )
+    if not ok:
+        return False
+    if u + rad_x <= 0 or u - rad_x >= width or v + rad_y <= 0 or v - rad_y >= height:
+        return False
+    # tile rectangle as gsplat's isect: [floor((u-r)/16), ceil((u+r)/16)) clamped
+    x0 = min(max(math.floor((u - rad_x) / 16.0), 0.0), tiles_x)
+    x1 = min(max(math.ceil((u + rad_x) / 16.0), 0.0), tiles_x)
+    y0 = min(max(math.floor((v - rad_y) / 16.0), 0.0), tiles_y)
+    y1 = min(max(math.ceil((v + rad_y) / 16.0), 0.0), tiles_y)
+    if x1 <= x0 or y1 <= y0:
+        return False
+    rects[i, 0], rects[i, 1], rects[i, 2], rects[i, 3] = int(x0), int(x1), int(y0), int(y1)
+    packed[i, PX] = u
+    packed[i, PY] = v
+    packed[i, CA] = syy / det
+    packed[i, CB] = -sxy / det
+    packed[i, CC] = sxx / det
+    packed[i, OPA] = opacity
+    packed[i, AMIN] = alpha_floor
+    packed[i, DEPTH] = z
+    packed[i, RADX] = rad_x
+    packed[i, RADY] = rad_y
+    packed[i, COC] = coc
+    return True
+
+
 @fork_safe
 @numba.njit(parallel=True, cache=True)
 def _project_kernel(
@@ -153,27 +283,37 @@ def _project_kernel(
     near, far, model_x, model_y, filter_x, filter_y, opacity_extent,
     aperture, focus, max_coc, defocus_extent,
     packed, rects,
+    sharp_view, sharp_packed, sharp_rects,
 ):  # pragma: no cover - compiled; covered through render() and the oracle tests
-    """Fill ``packed`` (N, PACKED) and ``rects`` (N, 4) in place; see the module docstring."""
+    """Fill ``packed`` (N, PACKED) and ``rects`` (N, 4) in place; see the module docstring.
+
+    ``sharp_packed`` (N, PACKED) and ``sharp_rects`` (N, 4), when not empty, get in the same pass the
+    projection into a second camera of the same pose and lens, without defocus and with colour:
+    ``sharp_view = (fx, fy, cx, cy, width, height, model_x, model_y, filter_x, filter_y)``, each value
+    computed exactly as a projection of its own would (the shared steps, pose, rotation and
+    colour, are done once)."""
     n = means.shape[0]
-    tiles_x = (width + 15) // 16
-    tiles_y = (height + 15) // 16
+    paired = sharp_packed.shape[0] > 0
+    s_fx, s_fy, s_cx, s_cy, s_width, s_height, s_model_x, s_model_y, s_filter_x, s_filter_y = sharp_view
     # the Jacobian's frustum, widened by how far a blurred footprint reaches into the view
     reach = max_coc * (defocus_extent if defocus_extent > 0.0 else 3.33) if aperture > 0.0 else 0.0
-    lim_x_pos = (width - cx + reach) / fx + 0.3 * (0.5 * width / fx)
-    lim_x_neg = (cx + reach) / fx + 0.3 * (0.5 * width / fx)
-    lim_y_pos = (height - cy + reach) / fy + 0.3 * (0.5 * height / fy)
-    lim_y_neg = (cy + reach) / fy + 0.3 * (0.5 * height / fy)
+    lims = _frustum(fx, fy, cx, cy, width, height, reach)
+    s_lims = _frustum(s_fx, s_fy, s_cx, s_cy, s_width, s_height, 0.0)
     # alpha at the truncation per unit opacity, and 1 / the mass kept inside defocus_extent σ
     defocus_tail = math.exp(-0.5 * defocus_extent * defocus_extent) if defocus_extent > 0.0 else 0.0
     defocus_boost = 1.0 / (1.0 - defocus_tail)
-    filtered = filter_x > 0.0 or filter_y > 0.0
     eps_cull = max(model_x + filter_x, model_y + filter_y)  # an upper bound of the dilation, for _surely_outside
+    s_eps_cull = max(s_model_x + s_filter_x, s_model_y + s_filter_y)
     for i in numba.prange(n):
         for c in range(PACKED):
             packed[i, c] = 0.0
         for c in range(4):
             rects[i, c] = 0
+        if paired:
+            for c in range(PACKED):
+                sharp_packed[i, c] = 0.0
+            for c in range(4):
+                sharp_rects[i, c] = 0
         wx, wy, wz = means[i, 0], means[i, 1], means[i, 2]
         x = view_rot[0, 0] * wx + view_rot[0, 1] * wy + view_rot[0, 2] * wz + view_trans[0]
         y = view_rot[1, 0] * wx + view_rot[1, 1] * wy + view_rot[1, 2] * wz + view_trans[1]
@@ -182,10 +322,17 @@ def _project_kernel(
             continue
         # the circle of confusion (px; 0 without defocus): under defocus it widens every footprint by coc² px²
         lens_coc = min(aperture * abs(z - focus) / z, max_coc) if aperture > 0.0 else 0.0
-        if not fisheye and _surely_outside(
-            x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos,
+        main_in = fisheye or not _surely_outside(
+            x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lims[0], lims[1], lims[2], lims[3],
             eps_cull + lens_coc * lens_coc,
-        ):
+        )
+        sharp_in = False
+        if paired:
+            sharp_in = fisheye or not _surely_outside(
+                x, y, z, scales, i, rot_norm, s_fx, s_fy, s_cx, s_cy, s_width, s_height, s_lims[0], s_lims[1], s_lims[2], s_lims[3],
+                s_eps_cull,
+            )
+        if not (main_in or sharp_in):
             continue
         # ---- 3D covariance in the camera frame: Σc = (W R S)(W R S)ᵀ
         qw, qx, qy, qz = quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3]
@@ -202,123 +349,49 @@ def _project_kernel(
         r22 = 1.0 - 2.0 * (qx * qx + qy * qy)
         s0, s1, s2 = float(scales[i, 0]), float(scales[i, 1]), float(scales[i, 2])
         # M = W R S (3×3); columns scaled by s
-        m00 = (view_rot[0, 0] * r00 + view_rot[0, 1] * r10 + view_rot[0, 2] * r20) * s0
-        m01 = (view_rot[0, 0] * r01 + view_rot[0, 1] * r11 + view_rot[0, 2] * r21) * s1
-        m02 = (view_rot[0, 0] * r02 + view_rot[0, 1] * r12 + view_rot[0, 2] * r22) * s2
-        m10 = (view_rot[1, 0] * r00 + view_rot[1, 1] * r10 + view_rot[1, 2] * r20) * s0
-        m11 = (view_rot[1, 0] * r01 + view_rot[1, 1] * r11 + view_rot[1, 2] * r21) * s1
-        m12 = (view_rot[1, 0] * r02 + view_rot[1, 1] * r12 + view_rot[1, 2] * r22) * s2
-        m20 = (view_rot[2, 0] * r00 + view_rot[2, 1] * r10 + view_rot[2, 2] * r20) * s0
-        m21 = (view_rot[2, 0] * r01 + view_rot[2, 1] * r11 + view_rot[2, 2] * r21) * s1
-        m22 = (view_rot[2, 0] * r02 + view_rot[2, 1] * r12 + view_rot[2, 2] * r22) * s2
-        # ---- lens: mean and Jacobian rows (j0·, j1·)
-        if fisheye:
-            theta, rho, g, drho_dz = _fisheye_terms(x, y, z, k1, k2, k3, k4)
-            if theta > theta_max:
-                continue
-            u = fx * rho * x + cx
-            v = fy * rho * y + cy
-            j00 = fx * (rho + x * x * g)
-            j01 = fx * x * y * g
-            j02 = fx * x * drho_dz
-            j10 = fy * x * y * g
-            j11 = fy * (rho + y * y * g)
-            j12 = fy * y * drho_dz
-        else:
-            u = fx * x / z + cx
-            v = fy * y / z + cy
-            tx = z * min(max(x / z, -lim_x_neg), lim_x_pos)
-            ty = z * min(max(y / z, -lim_y_neg), lim_y_pos)
-            j00 = fx / z
-            j01 = 0.0
-            j02 = -fx * tx / (z * z)
-            j10 = 0.0
-            j11 = fy / z
-            j12 = -fy * ty / (z * z)
-        # T = J M (2×3); Σ2D = T Tᵀ
-        t00 = j00 * m00 + j01 * m10 + j02 * m20
-        t01 = j00 * m01 + j01 * m11 + j02 * m21
-        t02 = j00 * m02 + j01 * m12 + j02 * m22
-        t10 = j10 * m00 + j11 * m10 + j12 * m20
-        t11 = j10 * m01 + j11 * m11 + j12 * m21
-        t12 = j10 * m02 + j11 * m12 + j12 * m22
-        sxx = t00 * t00 + t01 * t01 + t02 * t02
-        sxy = t00 * t10 + t01 * t11 + t02 * t12
-        syy = t10 * t10 + t11 * t11 + t12 * t12
-        sxx += model_x
-        syy += model_y
-        opacity = float(opacities[i])
-        alpha_floor = 1.0 / 255.0
-        if filtered:  # footprint_dilation: a low-pass with the opacity compensated (the floor stays 1/255, as gsplat's)
-            det_model = sxx * syy - sxy * sxy
-            sxx += filter_x
-            syy += filter_y
-            opacity *= math.sqrt(max(det_model / max(sxx * syy - sxy * sxy, 1e-300), 0.0))
-        det = sxx * syy - sxy * sxy
-        coc = 0.0
-        if aperture > 0.0:
-            coc = lens_coc
-            if coc < DEFOCUS_MIN_COC:  # below DEFOCUS_MIN_COC: sharp
-                coc = 0.0
-            coc2 = coc * coc
-            sxx += coc2
-            syy += coc2
-            det_blur = sxx * syy - sxy * sxy
-            compensation = math.sqrt(max(det / max(det_blur, 1e-300), 0.0))
-            opacity *= compensation
-            alpha_floor *= compensation
-            det = det_blur
-            if not alpha_floor > 0.0:  # compensation underflowed: the Gaussian is spread over ~∞ pixels
-                continue
-            if coc > 1.0 and defocus_extent > 0.0:  # truncate the blurred footprint, keeping its energy
-                opacity *= defocus_boost
-                alpha_floor = max(alpha_floor, opacity * defocus_tail)
-        det = max(det, 1e-10)
-        if opacity_extent:
-            if not opacity >= alpha_floor:
-                continue
-            extent = min(3.33, math.sqrt(2.0 * math.log(opacity / alpha_floor)))
-        else:
-            extent = 3.33
-        rad_x = math.ceil(min(extent * math.sqrt(sxx), FOOTPRINT_CAP))
-        rad_y = math.ceil(min(extent * math.sqrt(syy), FOOTPRINT_CAP))
-        ok = (
-            math.isfinite(u) and math.isfinite(v) and math.isfinite(det)
-            and math.isfinite(rad_x) and math.isfinite(rad_y) and rad_x > 0 and rad_y > 0
+        m = (
+            (view_rot[0, 0] * r00 + view_rot[0, 1] * r10 + view_rot[0, 2] * r20) * s0,
+            (view_rot[0, 0] * r01 + view_rot[0, 1] * r11 + view_rot[0, 2] * r21) * s1,
+            (view_rot[0, 0] * r02 + view_rot[0, 1] * r12 + view_rot[0, 2] * r22) * s2,
+            (view_rot[1, 0] * r00 + view_rot[1, 1] * r10 + view_rot[1, 2] * r20) * s0,
+            (view_rot[1, 0] * r01 + view_rot[1, 1] * r11 + view_rot[1, 2] * r21) * s1,
+            (view_rot[1, 0] * r02 + view_rot[1, 1] * r12 + view_rot[1, 2] * r22) * s2,
+            (view_rot[2, 0] * r00 + view_rot[2, 1] * r10 + view_rot[2, 2] * r20) * s0,
+            (view_rot[2, 0] * r01 + view_rot[2, 1] * r11 + view_rot[2, 2] * r21) * s1,
+            (view_rot[2, 0] * r02 + view_rot[2, 1] * r12 + view_rot[2, 2] * r22) * s2,
         )
-        if not ok:
-            continue
-        if u + rad_x <= 0 or u - rad_x >= width or v + rad_y <= 0 or v - rad_y >= height:
-            continue
-        # tile rectangle as gsplat's isect: [floor((u-r)/16), ceil((u+r)/16)) clamped
-        x0 = min(max(math.floor((u - rad_x) / 16.0), 0.0), tiles_x)
-        x1 = min(max(math.ceil((u + rad_x) / 16.0), 0.0), tiles_x)
-        y0 = min(max(math.floor((v - rad_y) / 16.0), 0.0), tiles_y)
-        y1 = min(max(math.ceil((v + rad_y) / 16.0), 0.0), tiles_y)
-        if x1 <= x0 or y1 <= y0:
-            continue
-        rects[i, 0], rects[i, 1], rects[i, 2], rects[i, 3] = int(x0), int(x1), int(y0), int(y1)
-        packed[i, PX] = u
-        packed[i, PY] = v
-        packed[i, CA] = syy / det
-        packed[i, CB] = -sxy / det
-        packed[i, CC] = sxx / det
-        packed[i, OPA] = opacity
-        packed[i, AMIN] = alpha_floor
-        packed[i, DEPTH] = z
-        packed[i, RADX] = rad_x
-        packed[i, RADY] = rad_y
-        packed[i, COC] = coc
-        if want_color:
+        opacity = float(opacities[i])
+        main_kept = False
+        if main_in:
+            main_kept = _footprint(
+                i, x, y, z, lens_coc, m, opacity, (fx, fy, cx, cy, width, height), lims, fisheye, (k1, k2, k3, k4, theta_max),
+                (model_x, model_y, filter_x, filter_y), opacity_extent, (aperture, defocus_extent, defocus_tail, defocus_boost),
+                packed, rects,
+            )
+        sharp_kept = False
+        if sharp_in:
+            sharp_kept = _footprint(
+                i, x, y, z, 0.0, m, opacity, (s_fx, s_fy, s_cx, s_cy, s_width, s_height), s_lims, fisheye, (k1, k2, k3, k4, theta_max),
+                (s_model_x, s_model_y, s_filter_x, s_filter_y), opacity_extent, (0.0, defocus_extent, defocus_tail, defocus_boost),
+                sharp_packed, sharp_rects,
+            )
+        if (want_color and main_kept) or sharp_kept:
             dx = wx - cam_center[0]
             dy = wy - cam_center[1]
             dz = wz - cam_center[2]
             dn = math.sqrt(dx * dx + dy * dy + dz * dz)
             dn = dn if dn > 0.0 else 1.0
             dx, dy, dz = dx / dn, dy / dn, dz / dn
-            packed[i, CR] = max(_sh_channel(sh, i, 0, degree, dx, dy, dz) + 0.5, 0.0)
-            packed[i, CG] = max(_sh_channel(sh, i, 1, degree, dx, dy, dz) + 0.5, 0.0)
-            packed[i, CBL] = max(_sh_channel(sh, i, 2, degree, dx, dy, dz) + 0.5, 0.0)
+            red = max(_sh_channel(sh, i, 0, degree, dx, dy, dz) + 0.5, 0.0)
+            green = max(_sh_channel(sh, i, 1, degree, dx, dy, dz) + 0.5, 0.0)
+            blue = max(_sh_channel(sh, i, 2, degree, dx, dy, dz) + 0.5, 0.0)
+            if want_color and main_kept:
+                packed[i, CR], packed[i, CG], packed[i, CBL] = red, green, blue
+            if sharp_kept:
+                sharp_packed[i, CR], sharp_packed[i, CG], sharp_packed[i, CBL] = red, green, blue
+
+
+_NO_SHARP_VIEW = (1.0, 1.0, 0.0, 0.0, 1, 1, 0.0, 0.0, 0.0, 0.0)
 
 
 def project_gaussians(
@@ -329,9 +402,48 @@ def project_gaussians(
     want_color: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Project ``gaussians`` into ``camera``: ``(packed (N, PACKED) float32, rects (N, 4) int32)``."""
+    packed, rects, _, _ = _project(gaussians, camera, settings, defocus, want_color, None, None)
+    return packed, rects
+
+
+def project_with_sharp(
+    gaussians: Gaussians,
+    camera: Camera,
+    settings: RasterSettings,
+    defocus: Defocus | None,
+    want_color: bool,
+    sharp_camera: Camera,
+    sharp_settings: RasterSettings,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``project_gaussians(gaussians, camera, settings, defocus, want_color)`` and
+    ``project_gaussians(gaussians, sharp_camera, sharp_settings, None, True)`` in one pass, the same
+    bytes as the two calls: ``(packed, rects, sharp_packed, sharp_rects)``. ``sharp_camera`` must have
+    ``camera``'s pose and lens and ``sharp_settings`` the same clipping and cut-offs (defocus's sharp
+    pass: the view on a rescaled grid, :func:`spacedg.render.defocus.measurement_camera`)."""
+    same_pose = np.array_equal(sharp_camera.world_to_cam, camera.world_to_cam) and sharp_camera.fisheye == camera.fisheye
+    same_cuts = all(getattr(sharp_settings, k) == getattr(settings, k) for k in ("near", "far", "opacity_extent", "defocus_extent"))
+    if not (same_pose and same_cuts):
+        raise ValueError("project_with_sharp: the sharp camera must share the view's pose and lens, and its settings the view's near, far and cut-offs")
+    return _project(gaussians, camera, settings, defocus, want_color, sharp_camera, sharp_settings)
+
+
+def _project(
+    gaussians: Gaussians, camera: Camera, settings: RasterSettings, defocus: Defocus | None, want_color: bool,
+    sharp_camera: Camera | None, sharp_settings: RasterSettings | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Run :func:`_project_kernel` (the sharp arrays empty without ``sharp_camera``)."""
     n = len(gaussians)
     packed = np.empty((n, PACKED), np.float32)
     rects = np.empty((n, 4), np.int32)
+    m = n if sharp_camera is not None else 0
+    sharp_packed = np.empty((m, PACKED), np.float32)
+    sharp_rects = np.empty((m, 4), np.int32)
+    sharp_view = _NO_SHARP_VIEW
+    if sharp_camera is not None:
+        sharp_view = (
+            float(sharp_camera.fx), float(sharp_camera.fy), float(sharp_camera.cx), float(sharp_camera.cy),
+            int(sharp_camera.width), int(sharp_camera.height), *footprint_dilation(sharp_camera, sharp_settings),
+        )
     lens = camera.fisheye
     view = camera.world_to_cam
     _project_kernel(
@@ -345,6 +457,6 @@ def project_gaussians(
         settings.near, settings.far, *footprint_dilation(camera, settings), settings.opacity_extent,
         defocus.aperture if defocus else 0.0, defocus.focus if defocus else 1.0, defocus.max_radius if defocus else 0.0,
         settings.defocus_extent or 0.0,
-        packed, rects,
+        packed, rects, sharp_view, sharp_packed, sharp_rects,
     )
-    return packed, rects
+    return packed, rects, sharp_packed, sharp_rects

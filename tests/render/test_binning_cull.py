@@ -81,7 +81,8 @@ def test_pre_cull_changes_no_projection(defocus: Defocus | None) -> None:
         cam.fx, cam.fy, cam.cx, cam.cy, W, H, False, 0.0, 0.0, 0.0, 0.0, math.pi,
         s.near, s.far, *footprint_dilation(cam, s), s.opacity_extent,
         defocus.aperture if defocus else 0.0, defocus.focus if defocus else 1.0, defocus.max_radius if defocus else 0.0,
-        s.defocus_extent or 0.0, ref_packed, ref_rects,
+        s.defocus_extent or 0.0, ref_packed, ref_rects, project_cpu._NO_SHARP_VIEW,
+        np.empty((0, project_cpu.PACKED), np.float32), np.empty((0, 4), np.int32),
     )
     np.testing.assert_array_equal(packed, ref_packed)
     np.testing.assert_array_equal(rects, ref_rects)

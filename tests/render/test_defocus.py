@@ -263,3 +263,43 @@ def test_the_compiled_coarse_steps_are_the_numpy_arithmetic_byte_for_byte() -> N
         image = rng.random(shape, dtype=np.float32)
         got, want = model._bilinear(image, factor, width, height), bilinear_numpy(image, factor, width, height)
         assert got.shape == want.shape and np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
+@pytest.mark.parametrize("lens", ["pinhole", "fisheye"])
+def test_the_sharp_pass_projected_with_the_view_is_its_own_projection_byte_for_byte(lens: str) -> None:
+    """project_with_sharp (the defocused view and the sharp pass's grid in one pass) gives the bytes of the two
+    separate projections: random Gaussians partly outside the frame and behind the camera, capture-scaled and
+    antialiased dilations, with and without defocus, the sharp grid at ½ and 1, colour or not for the view."""
+    from dataclasses import replace
+
+    from spacedg.render import RasterSettings, look_at, project_cpu
+    from spacedg.render.camera import FisheyeLens
+    from spacedg.render.defocus import measurement_camera, measurement_settings
+
+    rng = np.random.default_rng(4848)
+    checked = 0
+    for trial in range(4):
+        g = random_gaussians(1500, rng, depth=(-6.0, 6.0), half_width=6.0, scale=(0.005, 0.4))
+        pose = look_at(np.zeros(3), rng.normal(size=3) * 2.0 + np.array([0.0, 0.0, 5.0]), np.array([0.0, -1.0, 0.0]))
+        width, height = int(rng.integers(50, 140)), int(rng.integers(40, 110))
+        cam = Camera(float(rng.uniform(40, 120)), float(rng.uniform(40, 120)), width * 0.45, height * 0.55, width, height, pose)
+        if lens == "fisheye":
+            cam = replace(cam, fisheye=FisheyeLens(-0.2, 2e-4, 1e-4, 0.0, 1.5))
+        if trial % 2:
+            cam = replace(cam, capture_focal=(cam.fx * 2.7, cam.fy * 2.7))
+        settings = RasterSettings(antialiased=trial == 2)
+        for defocus in (None, Defocus(float(rng.uniform(2.0, 12.0)), float(rng.uniform(0.5, 4.0)))):
+            for scale in (0.5, 1.0):
+                sharp_cam, sharp_settings = measurement_camera(cam, 0, scale), measurement_settings(settings, scale)
+                want_color = trial != 3
+                got = project_cpu.project_with_sharp(g, cam, settings, defocus, want_color, sharp_cam, sharp_settings)
+                want = (*project_cpu.project_gaussians(g, cam, settings, defocus, want_color),
+                        *project_cpu.project_gaussians(g, sharp_cam, sharp_settings, None, True))
+                for a, b in zip(got, want):
+                    assert a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a.view(np.uint32), b.view(np.uint32))
+                assert np.count_nonzero(got[3][:, 1] > got[3][:, 0]) > 20
+                checked += 1
+    assert checked == 16
+    with pytest.raises(ValueError, match="pose and lens"):
+        moved = cam.with_pose(look_at(np.ones(3), np.zeros(3), np.array([0.0, -1.0, 0.0])))
+        project_cpu.project_with_sharp(g, cam, settings, None, True, measurement_camera(moved, 0, 0.5), settings)
