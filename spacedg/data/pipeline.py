@@ -199,22 +199,15 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     if key in _DEPTH_CACHE:
         _DEPTH_CACHE.move_to_end(key)
         return _DEPTH_CACHE[key]
+    from spacedg.data.view_depth_cpu import nearest_per_cell  # numba: compiled on first use, not with spacedg
+
     pc = (_opaque_means(g) - pose[:3, 3]) @ pose[:3, :3]
-    z = pc[:, 2]
-    # every point is projected, and those behind the camera (z <= 1e-3: inf or NaN here) fail the mask;
-    # per point the same operations as on the points in front alone, so the same bytes
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = camera.fx * pc[:, 0] / z + camera.cx
-        v = camera.fy * pc[:, 1] / z + camera.cy
-    inside = (z > 1e-3) & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
-    value: float | None = None
-    if np.any(inside):
-        cols, rows = DEPTH_GRID
-        cell = (v[inside] * rows // camera.height).astype(np.int64) * cols + (u[inside] * cols // camera.width).astype(np.int64)
-        nearest = np.full(cols * rows, np.inf)
-        np.minimum.at(nearest, cell, z[inside])
-        occupied = nearest[np.isfinite(nearest)]
-        value = float(np.median(occupied)) if occupied.size else None
+    cols, rows = DEPTH_GRID
+    nearest = nearest_per_cell(
+        pc, float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy), int(camera.width), int(camera.height), cols, rows,
+    )
+    occupied = nearest[np.isfinite(nearest)]
+    value = float(np.median(occupied)) if occupied.size else None
     _DEPTH_CACHE[key] = value
     while len(_DEPTH_CACHE) > _DEPTH_CACHE_SIZE:
         _DEPTH_CACHE.popitem(last=False)

@@ -137,3 +137,38 @@ def test_the_opaque_centres_kept_for_view_depth_stay_within_their_budget(small_r
     del sets, gaussians  # nothing else holds the sets
     gc.collect()
     assert refs[0]() is None and refs[1]() is None
+
+
+def test_the_compiled_cells_are_the_numpy_forms_bytes() -> None:
+    """view_depth's compiled pass (nearest centre per cell) against the numpy form it replaced, byte for byte:
+    random camera-frame points, points behind and at the near limit, exactly on the image's edges and cell
+    borders, non-finite coordinates, odd image sizes."""
+    from spacedg.data.pipeline import DEPTH_GRID
+    from spacedg.data.view_depth_cpu import nearest_per_cell
+
+    def numpy_form(pc, fx, fy, cx, cy, width, height):  # type: ignore[no-untyped-def]
+        z = pc[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = fx * pc[:, 0] / z + cx
+            v = fy * pc[:, 1] / z + cy
+        inside = (z > 1e-3) & (u >= 0) & (u < width) & (v >= 0) & (v < height)
+        cols, rows = DEPTH_GRID
+        cell = (v[inside] * rows // height).astype(np.int64) * cols + (u[inside] * cols // width).astype(np.int64)
+        nearest = np.full(cols * rows, np.inf)
+        np.minimum.at(nearest, cell, z[inside])
+        return nearest
+
+    rng = np.random.default_rng(4848)
+    for width, height, fx, fy in ((640, 480, 500.0, 500.0), (97, 61, 73.3, 80.1), (1752, 1168, 1500.0, 1499.5)):
+        cx, cy = width / 2 + 0.25, height / 2 - 0.5
+        z = rng.uniform(-1.0, 8.0, 20000)
+        pc = np.stack([rng.uniform(-1.2, 1.2, z.size) * np.abs(z) * width / fx / 2, rng.uniform(-1.2, 1.2, z.size) * np.abs(z) * height / fy / 2, z], 1)
+        edges = np.array([0.0, width, width - 1e-9, width / DEPTH_GRID[0] * 3, height, height / DEPTH_GRID[1] * 5])
+        for k, edge in enumerate(edges):  # points landing exactly on an edge or a cell border
+            pc[k, :] = ((edge - cx) * 2.0 / fx, (edge * height / width - cy) * 2.0 / fy, 2.0)
+        pc[10:14] = 0.0  # on the axis: in the image wherever z is taken in front
+        pc[10:14, 2] = (1e-3, 0.0, -0.0, np.nextafter(1e-3, 1.0))
+        pc[14:18] = ((np.nan, 0.0, 2.0), (np.inf, 0.0, 2.0), (0.0, 0.0, np.inf), (0.0, 0.0, np.nan))
+        got = nearest_per_cell(pc, fx, fy, cx, cy, width, height, *DEPTH_GRID)
+        want = numpy_form(pc, fx, fy, cx, cy, width, height)
+        assert np.array_equal(got.view(np.uint64), want.view(np.uint64)) and np.isfinite(got).sum() > 100
