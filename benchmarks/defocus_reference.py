@@ -18,7 +18,7 @@ aperture scaled to the image as ``min(W, H) / 1168`` (the ScanNet++ DSLR frame, 
 reference size) and the low end of the focus range (1 m at the 2.5 m reference depth: 0.4 × the
 view's median depth; points nearer than focus/4, where the model clamps r, are then rare).
 
-    .venv/bin/python benchmarks/defocus_reference.py [--sizes 320x180,640x360] [--samples 96] [--backends cpu,torch]
+    .venv/bin/python benchmarks/defocus_reference.py [--sizes 320x180,640x360] [--samples 96] [--backends cpu,torch] [--focus low,high]
 """
 
 from __future__ import annotations
@@ -79,21 +79,24 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--severities", default="1,3,bench")
     parser.add_argument("--backends", default="cpu,torch")
+    parser.add_argument("--focus", default="low", help="focus at the preset's low end (near: the default), high (far: "
+                        "everything nearer is blurred, most by several px), or both, comma-separated")
     args = parser.parse_args()
     from spacedg.plugins.degradations.defocus import SPEC
     from spacedg.plugins.specs import REFERENCE_DEPTH_M
 
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
     print(f"thin-lens reference: {args.samples} lens points; light = mean radiance / clean; PSNR vs reference (sRGB); cost = time / clean")
-    print(f"{'scene':<9} {'sev':<5} {'size':>8} {'aper px':>7} {'backend':<6} | {'light':>6} {'ref light':>9} | {'PSNR':>6} {'conv':>6} | {'cost':>5}")
+    print(f"{'scene':<9} {'sev':<5} {'focus':<5} {'size':>8} {'aper px':>7} {'backend':<6} | {'light':>6} {'ref light':>9} | {'PSNR':>6} {'conv':>6} | {'cost':>5}")
     for name, g, view in scenes():
         depth = median_depth(g, view)
         for width, height in sizes:
             cam = view.fitted(width, height)
-            for severity in args.severities.split(","):
+            for severity, focus in ((s, f) for s in args.severities.split(",") for f in args.focus.split(",")):
                 preset = SPEC.presets[severity]
                 aperture = 0.5 * (preset["aperture"].low + preset["aperture"].high) * min(cam.width, cam.height) / REFERENCE_SHORT_SIDE
-                defocus = Defocus(aperture, preset["depth"].low * depth / REFERENCE_DEPTH_M)
+                focus_depth = preset["depth"].low if focus == "low" else preset["depth"].high
+                defocus = Defocus(aperture, focus_depth * depth / REFERENCE_DEPTH_M)
                 half = args.samples // 2
                 ref_a = thin_lens_render(g, cam, defocus, samples=half, seed=0)
                 ref_b = thin_lens_render(g, cam, defocus, samples=half, seed=1)
@@ -103,7 +106,7 @@ def main() -> None:
                     t_clean, clean = timed(lambda: render(g, cam, backend=backend), args.runs)
                     t_blur, blurred = timed(lambda: render(g, cam, defocus=defocus, backend=backend), args.runs)
                     base = float(clean.rgb.mean())
-                    print(f"{name:<9} {severity:<5} {cam.width:>4}x{cam.height:<4}{aperture:7.2f} {backend:<6} | "
+                    print(f"{name:<9} {severity:<5} {focus:<5} {cam.width:>4}x{cam.height:<4}{aperture:7.2f} {backend:<6} | "
                           f"{blurred.rgb.mean() / base:6.3f} {ref.mean() / base:9.3f} | {psnr(blurred.rgb, ref):6.2f} {conv:6.2f} | "
                           f"{t_blur / t_clean:5.2f}", flush=True)
 

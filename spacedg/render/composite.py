@@ -132,6 +132,7 @@ def _raster_cpu(
     images = raster_cpu.rasterize(
         packed, rects, ids, width, height, settings.alpha_max, want_color, want_depth, want_ids,
         settings.tight_tiles and settings.opacity_extent,
+        defocus_model.TILE_SAMPLE_MIN_COC if plan is not None and factor == 1 else 0.0,
     )
     if want_color:
         images["rgb"] = decode_srgb(images["rgb"])

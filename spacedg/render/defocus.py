@@ -43,7 +43,7 @@ import numpy as np
 from spacedg.render.frame import expected_depth
 from spacedg.render.project_cpu import COC
 
-__all__ = ["COMPOSITE_MIN_COC", "COMPOSITE_MAX_FACTOR", "MEASURE_SCALE", "blur_plan", "coarse_view", "composite_factor",
+__all__ = ["COMPOSITE_MIN_COC", "COMPOSITE_MAX_FACTOR", "MEASURE_SCALE", "TILE_SAMPLE_MIN_COC", "blur_plan", "coarse_view", "composite_factor",
            "factor_for_coc", "measurement_camera", "measurement_settings", "upsample"]
 
 
@@ -100,6 +100,14 @@ def measurement_settings(settings: Any, scale: float | None = None) -> Any:
 #: 4 px, 4 from 8 px: at least 2 px of blur on the coarse grid) and upsampled bilinearly.
 COMPOSITE_MIN_COC = 4.0
 COMPOSITE_MAX_FACTOR = 4
+#: The same rule per 16 × 16 tile on the compiled path (:func:`spacedg.render.raster_cpu.rasterize`'s
+#: ``sample_min_coc``): in a view that is not coarse as a whole, a tile whose every Gaussian is blurred by
+#: at least this much (px) is composited at the centres of its 2 × 2 blocks and upsampled. A far focus
+#: leaves the background sharp and blurs the near furniture by 5–15 px: on the dataset benchmark's
+#: defocus items about half the tiles of such views qualify, and their composite costs about half.
+#: 0 turns it off (the torch path composites every tile in full). Measured against the thin lens
+#: (``benchmarks/defocus_reference.py --focus high``): every row within 0.3 dB of the full composite.
+TILE_SAMPLE_MIN_COC = COMPOSITE_MIN_COC
 
 
 def composite_factor(packed: np.ndarray, rects: np.ndarray, width: int, height: int) -> int:

@@ -29,7 +29,7 @@ import math
 import numba
 import numpy as np
 
-from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, CR, DEPTH, OPA, PX, PY, RADY
+from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADY
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
@@ -114,7 +114,12 @@ def _gauss_alpha(col, gx, ca, bdy, cdy, opa, amin, amax, zero):
 
     ``zero`` (float32 0) comes from the caller: the raster kernel's own, hoisted out of its tile loop,
     keeps it as fast as when this was written out in the kernel (a literal here costs it about 2 %)."""
-    dx = np.float32(col) - gx
+    return _alpha_at(np.float32(col) - gx, ca, bdy, cdy, opa, amin, amax, zero)
+
+
+@numba.njit(cache=True, inline="always")
+def _alpha_at(dx, ca, bdy, cdy, opa, amin, amax, zero):
+    """:func:`_gauss_alpha` at the offset ``dx`` from the mean along the row."""
     sigma = ca * dx * dx + bdy * dx + cdy
     alpha = min(amax, opa * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
     return alpha if (sigma >= zero and alpha >= amin) else zero
@@ -332,13 +337,20 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
 
     def composite_tiles(
         offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
-        out_rgb, out_alpha, out_depth, out_median, out_ids,
+        out_rgb, out_alpha, out_depth, out_median, out_ids, coarse, samples, sample_median, sample_ids,
     ):  # pragma: no cover - compiled; covered through render() and the oracle tests
         n_tiles = offsets.shape[0] - 1
         amax, t_min, half, zero, one = _f32_constants(alpha_max)
+        coarsening = coarse.shape[0] > 0
         for tile in numba.prange(n_tiles):
             start, end, x0, y0 = _tile_span(offsets, tile, tiles_x)
             state = _tile_state(5, 1)
+            # a sampled tile: 8 × 8 samples at the centres of its 2 × 2 blocks, sample (r, c) at state index
+            # 8r + c (two sample rows per 16-lane row, so the row loop stays 16 lanes wide)
+            sampled = coarsening and coarse[tile] != 0
+            if sampled:
+                for p in range(64, 256):
+                    state[p] = zero  # not a sample: dead from the start
             last = np.full(256 if want_ids else 1, -1, np.int32)  # list position of the median Gaussian
             par = np.empty((11, _BATCH), np.float32)
             rows = np.empty((2, _BATCH), np.int64)
@@ -347,6 +359,10 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
                 for j in range(nb):  # gather: independent loads, so their cache misses overlap
                     g = gauss[b0 + j]
                     par[_GX, j], par[_GY, j], rows[0, j], rows[1, j] = _pair_rows(packed, g, x0, y0)
+                    if sampled:  # sample rows r (at 2r + ½ rows below the first pixel centre) within the footprint
+                        ry = packed[g, RADY]
+                        rows[0, j] = max(int(math.ceil((par[_GY, j] - ry - half) * half)), 0)
+                        rows[1, j] = min(int(math.floor((par[_GY, j] + ry - half) * half)) + 1, 8)
                     par[_CA, j], par[_CB, j], par[_CC, j], par[_OPA, j], par[_AMIN, j] = _conic(packed, g)
                     if want_color:
                         par[_CR, j] = packed[g, CR]
@@ -361,6 +377,25 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
                     cr, cg, cbl = par[_CR, j], par[_CG, j], par[_CBL, j]
                     z = par[_Z, j]
                     at = np.int32(b0 + j - start)
+                    if sampled:
+                        for pair in range(rows[0, j] // 2, (rows[1, j] + 1) // 2):
+                            dy_top = np.float32(4 * pair) + half - gy  # sample rows 2·pair and 2·pair + 1
+                            base = np.uint64(pair * 16)
+                            for lane in range(16):
+                                p = base + np.uint64(lane)
+                                dy = dy_top if lane < 8 else dy_top + np.float32(2.0)
+                                dx = np.float32(2 * (lane & 7)) + half - gx
+                                alpha = _alpha_at(dx, ca, cb * dy, cc * dy * dy, opa, amin, amax, zero)
+                                t_before = state[p]
+                                t_after = t_before * (one - alpha)
+                                take = t_after > t_min
+                                w = alpha * t_before if take else zero
+                                _accumulate(state, p, w, _R, cr, cg, cbl, _D, z, want_color, want_depth)
+                                if want_ids:
+                                    hit = w > zero and t_before > half
+                                    last[p] = at if hit else last[p]
+                                state[p] = t_after if take else -abs(t_before)
+                        continue
                     for row in range(rows[0, j], rows[1, j]):
                         bdy, cdy, base = _row_terms(row, gy, cb, cc)
                         for col in range(16):
@@ -381,6 +416,26 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
                         live += 1 if state[p] > zero else 0
                     if live == 0:
                         break
+            if sampled:  # the samples, for upsample_sampled_tiles: transmittance, colour, Σw·z, median depth, id
+                for k in range(64):
+                    p = k
+                    t = abs(state[p])
+                    samples[tile, k, 0] = t
+                    if want_color:
+                        samples[tile, k, 1] = state[p + 256]
+                        samples[tile, k, 2] = state[p + 512]
+                        samples[tile, k, 3] = state[p + 768]
+                    if want_depth:
+                        samples[tile, k, 4] = state[p + 1024]
+                    if want_ids:
+                        if last[p] >= 0:
+                            g = gauss[start + last[p]]
+                            sample_median[tile, k] = packed[g, DEPTH]
+                            sample_ids[tile, k] = np.int32(np.float32(instance_ids[g])) if t <= half else -1
+                        else:
+                            sample_median[tile, k] = zero
+                            sample_ids[tile, k] = -1
+                continue
             for row in range(min(16, height - y0)):
                 for col in range(min(16, width - x0)):
                     p = row * 16 + col
@@ -406,9 +461,13 @@ _COMPOSITE_KERNELS: dict[tuple[bool, bool, bool], object] = {}
 def composite(
     offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
     want_color, want_depth, want_ids,
-    out_rgb, out_alpha, out_depth, out_median, out_ids,
+    out_rgb, out_alpha, out_depth, out_median, out_ids, coarse=None,
 ):
     """Composite every tile front to back into the output images (in place).
+
+    ``coarse`` (one uint8 per tile, optional): the marked tiles are composited at the 8 × 8 centres
+    of their 2 × 2 pixel blocks only and their pixels upsampled from those samples
+    (:func:`upsample_sampled_tiles`), for tiles whose every Gaussian is widely blurred (defocus).
 
     Per tile: one flat float32 buffer holds its state planes (transmittance, whose sign is the
     live flag, r, g, b, Σw·z; with ids, an int32 plane holds the list position of each pixel's
@@ -422,10 +481,134 @@ def composite(
     kernel = _COMPOSITE_KERNELS.get(key)
     if kernel is None:
         kernel = _COMPOSITE_KERNELS[key] = _make_composite(*key)
+    n_tiles = offsets.shape[0] - 1 if coarse is not None else 0
+    samples = np.empty((n_tiles, 64, 5), np.float32)
+    sample_median = np.empty((n_tiles, 64), np.float32)
+    sample_ids = np.empty((n_tiles, 64), np.int32)
     kernel(
         offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
-        out_rgb, out_alpha, out_depth, out_median, out_ids,
+        out_rgb, out_alpha, out_depth, out_median, out_ids, _NO_TILES if coarse is None else coarse,
+        samples, sample_median, sample_ids,
     )
+    if coarse is not None:
+        upsample_sampled_tiles(
+            coarse, samples, sample_median, sample_ids, tiles_x, width, height,
+            out_rgb, out_alpha, out_depth, out_median, out_ids, want_color, want_depth, want_ids,
+        )
+
+
+#: ``coarse`` of a composite at full resolution everywhere.
+_NO_TILES = np.zeros(0, np.uint8)
+
+
+@numba.njit(cache=True)
+def sampled_tiles(offsets, gauss, packed, min_coc):  # pragma: no cover - compiled
+    """uint8 per tile: 1 where the tile lists a Gaussian and every Gaussian it lists has a circle of
+    confusion (``packed[:, COC]``, px) of at least ``min_coc`` (its image has no detail finer than a
+    Gaussian of that standard deviation: :func:`composite` may sample it every 2 px)."""
+    n_tiles = offsets.shape[0] - 1
+    out = np.zeros(n_tiles, np.uint8)
+    for tile in range(n_tiles):
+        start, end = offsets[tile], offsets[tile + 1]
+        wide = end > start
+        for k in range(start, end):
+            if not packed[gauss[k], COC] >= min_coc:
+                wide = False
+                break
+        out[tile] = 1 if wide else 0
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _block_value(coarse, samples, tiles_x, width, height, block_y, block_x, out_rgb, out_alpha, out_depth, grid, gi, gj,
+                 want_color, want_depth):
+    """``grid[gi, gj] = (α, r, g, b, Σw·z)`` of the 2 × 2 block ``(block_y, block_x)`` of the image (clamped
+    into it): a sampled tile's sample there, else the mean of the block's composited pixels in the image."""
+    blocks_y, blocks_x = (height + 1) // 2, (width + 1) // 2
+    by = min(max(block_y, 0), blocks_y - 1)
+    bx = min(max(block_x, 0), blocks_x - 1)
+    owner = (by // 8) * tiles_x + bx // 8
+    if coarse[owner]:
+        k = (by % 8) * 8 + bx % 8
+        grid[gi, gj, 0] = np.float32(1.0) - samples[owner, k, 0]
+        for c in range(1, 5):
+            grid[gi, gj, c] = samples[owner, k, c]
+        return
+    for c in range(5):
+        grid[gi, gj, c] = np.float32(0.0)
+    n = 0
+    for py in range(2 * by, min(2 * by + 2, height)):
+        for px in range(2 * bx, min(2 * bx + 2, width)):
+            a = out_alpha[py, px]
+            grid[gi, gj, 0] += a
+            if want_color:
+                for c in range(3):
+                    grid[gi, gj, 1 + c] += out_rgb[py, px, c]
+            if want_depth:
+                grid[gi, gj, 4] += out_depth[py, px] * a
+            n += 1
+    inv = np.float32(1.0) / np.float32(n)
+    for c in range(5):
+        grid[gi, gj, c] *= inv
+
+
+@numba.njit(cache=True, inline="always")
+def _bilinear_at(grid, i0, j0, c, vy, wy, vx, wx):
+    """Channel ``c`` of ``grid`` between rows ``i0, i0 + 1`` (weights ``vy, wy``) and columns ``j0, j0 + 1``
+    (``vx, wx``), rows first (as :func:`spacedg.render.coarse_cpu.bilinear`)."""
+    left = grid[i0, j0, c] * vy + grid[i0 + 1, j0, c] * wy
+    right = grid[i0, j0 + 1, c] * vy + grid[i0 + 1, j0 + 1, c] * wy
+    return left * vx + right * wx
+
+
+@fork_safe
+@numba.njit(parallel=True, cache=True)
+def upsample_sampled_tiles(
+    coarse, samples, sample_median, sample_ids, tiles_x, width, height,
+    out_rgb, out_alpha, out_depth, out_median, out_ids, want_color, want_depth, want_ids,
+):  # pragma: no cover - compiled
+    """The pixels of the sampled tiles (:func:`sampled_tiles`), from their 8 × 8 block samples and a ring of
+    the blocks around them (a sampled neighbour's samples, else the mean of its composited block; the
+    image's edge blocks repeated past it): alpha, colour (as composited: sRGB-encoded) and ``Σw·z``
+    bilinearly (block centres at ``2b + 1`` px; as :func:`spacedg.render.defocus.upsample`), depth
+    ``Σw·z / α`` (0 where α is 0), median depth and ids those of the pixel's own block."""
+    one, zero = np.float32(1.0), np.float32(0.0)
+    for tile in numba.prange(coarse.shape[0]):
+        if not coarse[tile]:
+            continue
+        ty, tx = tile // tiles_x, tile % tiles_x
+        grid = np.empty((10, 10, 5), np.float32)
+        for k in range(64):  # the tile's own samples
+            gi, gj = 1 + (k >> 3), 1 + (k & 7)
+            grid[gi, gj, 0] = one - samples[tile, k, 0]
+            for c in range(1, 5):
+                grid[gi, gj, c] = samples[tile, k, c]
+        for ring in range(36):  # the blocks around it
+            gi = 0 if ring < 10 else (9 if ring < 20 else 1 + (ring - 20) // 2)
+            gj = ring if ring < 10 else (ring - 10 if ring < 20 else 9 * ((ring - 20) % 2))
+            _block_value(coarse, samples, tiles_x, width, height, ty * 8 + gi - 1, tx * 8 + gj - 1,
+                         out_rgb, out_alpha, out_depth, grid, gi, gj, want_color, want_depth)
+        for row in range(min(16, height - ty * 16)):
+            i0 = (row + 1) // 2  # grid row of the block centre at or above the pixel centre (row + ½ − 1) / 2
+            wy = np.float32(0.75) if row % 2 == 0 else np.float32(0.25)  # weight of grid row i0 + 1
+            vy = one - wy
+            py = ty * 16 + row
+            for col in range(min(16, width - tx * 16)):
+                j0 = (col + 1) // 2
+                wx = np.float32(0.75) if col % 2 == 0 else np.float32(0.25)
+                vx = one - wx
+                px = tx * 16 + col
+                a = _bilinear_at(grid, i0, j0, 0, vy, wy, vx, wx)
+                out_alpha[py, px] = a
+                if want_color:
+                    for c in range(3):
+                        out_rgb[py, px, c] = _bilinear_at(grid, i0, j0, 1 + c, vy, wy, vx, wx)
+                if want_depth:
+                    out_depth[py, px] = _bilinear_at(grid, i0, j0, 4, vy, wy, vx, wx) / a if a > zero else zero
+                if want_ids:
+                    k = (row // 2) * 8 + col // 2
+                    out_median[py, px] = sample_median[tile, k]
+                    out_ids[py, px] = sample_ids[tile, k]
 
 
 @numba.njit(cache=True)
@@ -479,10 +662,18 @@ def pair_capacity(order, rects):  # pragma: no cover - compiled
 
 
 def rasterize(packed: np.ndarray, rects: np.ndarray, instance_ids: np.ndarray, width: int, height: int,
-              alpha_max: float, want_color: bool, want_depth: bool, want_ids: bool, tight: bool) -> dict[str, np.ndarray]:
-    """Sort, bin and composite projected Gaussians; returns the requested float32/int32 images."""
+              alpha_max: float, want_color: bool, want_depth: bool, want_ids: bool, tight: bool,
+              sample_min_coc: float = 0.0) -> dict[str, np.ndarray]:
+    """Sort, bin and composite projected Gaussians; returns the requested float32/int32 images.
+
+    ``sample_min_coc`` > 0: tiles whose every Gaussian has a circle of confusion of at least that many
+    pixels are composited every 2 px and upsampled (:func:`composite`'s ``coarse``; defocus)."""
     tiles_x = (width + 15) // 16
     offsets, gauss = bin_visible(packed, rects, width, height, tight)
+    coarse = None
+    if sample_min_coc > 0.0:
+        coarse = sampled_tiles(offsets, gauss, packed, np.float32(sample_min_coc))
+        coarse = coarse if coarse.any() else None
     # the composite writes every pixel of every image it is asked for (each pixel lies in one tile):
     # those start empty; the 1×1 stand-ins of images not asked for keep their fill
     out = {
@@ -495,7 +686,7 @@ def rasterize(packed: np.ndarray, rects: np.ndarray, instance_ids: np.ndarray, w
     composite(
         offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
         want_color, want_depth, want_ids,
-        out["rgb"], out["alpha"], out["depth"], out["median_depth"], out["instance_ids"],
+        out["rgb"], out["alpha"], out["depth"], out["median_depth"], out["instance_ids"], coarse,
     )
     out["n_pairs"] = np.int64(gauss.shape[0])
     out["n_visible"] = np.int64(np.count_nonzero(rects[:, 1] > rects[:, 0]))

@@ -123,7 +123,7 @@ def test_the_measurement_frame_is_half_the_view_in_whole_tiles_centred() -> None
 
 
 @pytest.mark.parametrize("backend", ["cpu", "torch"])
-def test_a_view_blurred_everywhere_is_composited_coarse_with_its_light(room_views, backend: str) -> None:
+def test_a_view_blurred_everywhere_is_composited_coarse_with_its_light(room_views, backend: str, monkeypatch) -> None:
     """Every visible Gaussian blurred by >= COMPOSITE_MIN_COC px: the blurred view is composited on a 2× or 4×
     coarser grid and upsampled; it keeps its light and is within 1/255 mean of the full-resolution composite."""
     from spacedg.render import defocus as model
@@ -132,12 +132,9 @@ def test_a_view_blurred_everywhere_is_composited_coarse_with_its_light(room_view
     cam = cams[1]
     defocus = Defocus(40.0, 30.0)  # focus far behind the room: everything blurred by >= 25 px
     coarse = render(gaussians, cam, defocus=defocus, backend=backend, outputs="rgb,depth")
-    saved = model.COMPOSITE_MIN_COC
-    model.COMPOSITE_MIN_COC = 0.0  # full-resolution composite (the model before)
-    try:
-        full = render(gaussians, cam, defocus=defocus, backend=backend, outputs="rgb,depth")
-    finally:
-        model.COMPOSITE_MIN_COC = saved
+    monkeypatch.setattr(model, "COMPOSITE_MIN_COC", 0.0)  # full-resolution composite (the model before)
+    monkeypatch.setattr(model, "TILE_SAMPLE_MIN_COC", 0.0)
+    full = render(gaussians, cam, defocus=defocus, backend=backend, outputs="rgb,depth")
     assert coarse.stats["pairs"] < 0.4 * full.stats["pairs"]
     assert coarse.rgb.mean() == pytest.approx(full.rgb.mean(), rel=0.005)
     assert coarse.alpha.mean() == pytest.approx(full.alpha.mean(), rel=0.005)
@@ -303,3 +300,65 @@ def test_the_sharp_pass_projected_with_the_view_is_its_own_projection_byte_for_b
     with pytest.raises(ValueError, match="pose and lens"):
         moved = cam.with_pose(look_at(np.ones(3), np.zeros(3), np.array([0.0, -1.0, 0.0])))
         project_cpu.project_with_sharp(g, cam, settings, None, True, measurement_camera(moved, 0, 0.5), settings)
+
+
+def _near_blurred_far_sharp(seed: int) -> tuple[Gaussians, Camera, Defocus]:
+    """Near furniture blurred by 6 px (the clamp) on the left of a far textured wall in focus on the right (a mixed
+    view: the whole-view coarse rule does not apply), 160 × 112 px."""
+    rng = np.random.default_rng(seed)
+    near = random_gaussians(1500, rng, depth=(0.8, 1.2), half_width=0.3, scale=(0.005, 0.04), opacity=(0.3, 1.0))
+    far = random_gaussians(4000, rng, depth=(5.8, 6.2), half_width=1.6, scale=(0.01, 0.05), opacity=(0.5, 1.0))
+    shift = lambda g, dx: g.means + np.array([dx, 0.0, 0.0])  # noqa: E731 - near on the left, far on the right
+    parts = {"means": np.concatenate([shift(near, -0.25), shift(far, 2.2)])}
+    parts.update({k: np.concatenate([getattr(near, k), getattr(far, k)]) for k in ("quats", "scales", "opacities", "sh", "instance_ids")})
+    both = Gaussians(parts["means"], parts["quats"], parts["scales"], parts["opacities"], parts["sh"], parts["instance_ids"])
+    return both, Camera(110.0, 110.0, 80.0, 56.0, 160, 112, np.eye(4)), Defocus(2.0, 6.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_widely_blurred_tiles_are_sampled_every_2_px_and_the_rest_is_the_full_composite(seed: int) -> None:
+    """rasterize(sample_min_coc=4): tiles whose every Gaussian is blurred by >= 4 px are composited at the centres of
+    their 2 × 2 blocks and upsampled; every other tile is the full-resolution composite bit for bit. The sampled
+    tiles stay within 40 dB of the full composite (light within 0.5 %), alpha in [0, 1], depth finite, and each 2 × 2
+    block of a sampled tile carries one median depth and one id (a Gaussian's depth and id, or none)."""
+    from spacedg.render import RasterSettings, project_cpu, raster_cpu
+    from spacedg.render.defocus import TILE_SAMPLE_MIN_COC, composite_factor
+
+    g, cam, defocus = _near_blurred_far_sharp(seed)
+    settings = RasterSettings()
+    packed, rects = project_cpu.project_gaussians(g, cam, settings, defocus, True)
+    assert composite_factor(packed, rects, cam.width, cam.height) == 1  # not the whole-view rule
+    args = (packed, rects, g.instance_ids, cam.width, cam.height, settings.alpha_max, True, True, True, True)
+    full = raster_cpu.rasterize(*args)
+    mixed = raster_cpu.rasterize(*args, sample_min_coc=TILE_SAMPLE_MIN_COC)
+    offsets, gauss = raster_cpu.bin_visible(packed, rects, cam.width, cam.height, True)
+    tiles = raster_cpu.sampled_tiles(offsets, gauss, packed, np.float32(TILE_SAMPLE_MIN_COC)).reshape(7, 10).astype(bool)
+    assert 0.1 < tiles.mean() < 0.9
+    sampled = np.kron(tiles, np.ones((16, 16), bool))
+    for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
+        assert np.array_equal(full[name][~sampled], mixed[name][~sampled]), name
+        assert not np.array_equal(full[name][sampled], mixed[name][sampled]) or name == "instance_ids", name
+    err = np.mean((full["rgb"][sampled] - mixed["rgb"][sampled]) ** 2)
+    assert 10 * np.log10(1.0 / err) > 40.0
+    assert abs(mixed["rgb"][sampled].sum() / full["rgb"][sampled].sum() - 1.0) < 5e-3
+    assert 0.0 <= mixed["alpha"].min() and mixed["alpha"].max() <= 1.0 and np.isfinite(mixed["depth"]).all()
+    allowed = {"median_depth": {0.0, *packed[:, project_cpu.DEPTH].tolist()}, "instance_ids": {-1, *g.instance_ids.tolist()}}
+    for name in ("median_depth", "instance_ids"):
+        blocks = mixed[name].reshape(56, 2, 80, 2).transpose(0, 2, 1, 3).reshape(56, 80, 4)
+        block_sampled = sampled.reshape(56, 2, 80, 2)[:, 0, :, 0]
+        assert (blocks[block_sampled] == blocks[block_sampled][:, :1]).all()
+        assert set(np.unique(mixed[name][sampled]).tolist()) <= allowed[name]
+
+
+def test_a_mixed_view_renders_its_sampled_tiles_and_keeps_its_light(monkeypatch) -> None:
+    """Through render(): the mixed view's light stays within 0.5 % of the same render composited at full resolution
+    everywhere (the sampling turned off), and within 40 dB of it."""
+    from spacedg.render import defocus as model
+
+    g, cam, defocus = _near_blurred_far_sharp(2)
+    sampled = render(g, cam, defocus=defocus, backend="cpu")
+    monkeypatch.setattr(model, "TILE_SAMPLE_MIN_COC", 0.0)  # every tile composited in full
+    full = render(g, cam, defocus=defocus, backend="cpu")
+    assert not np.array_equal(sampled.rgb, full.rgb)
+    assert abs(sampled.rgb.mean() / full.rgb.mean() - 1.0) < 5e-3
+    assert 10 * np.log10(1.0 / np.mean((sampled.rgb - full.rgb) ** 2)) > 40.0
