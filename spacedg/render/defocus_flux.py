@@ -41,6 +41,7 @@ import numba
 import numpy as np
 
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
+from spacedg.render.threads import fork_safe
 
 __all__ = ["FLUX_LENGTH", "FLUX_MIN_SIGMA", "FLUX_RATIO", "flux_lengths", "flux_scale", "conserve_light", "linear_taps", "sample_shifted"]
 
@@ -147,7 +148,8 @@ def linear_taps(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return i0, np.minimum(i0 + 1, n_in - 1), (np.float32(1.0) - w1).astype(np.float32), w1
 
 
-@numba.njit(cache=True, error_model="numpy")
+@fork_safe
+@numba.njit(parallel=True, cache=True, error_model="numpy")
 def _apply_ratio(rgb, alpha, ratio, y0, y1, wy0, wy1, x0, x1, wx0, wx1):  # pragma: no cover - compiled
     """``(rgb × R, clip(alpha × R₄, 0, 1))`` (float32 (H, W, 3) and (H, W); NaN alpha stays NaN, as
     ``np.clip``) with ``R`` the ratio grid (rows, cols, 4) resized to (H, W) by the taps of
@@ -156,7 +158,7 @@ def _apply_ratio(rgb, alpha, ratio, y0, y1, wy0, wy1, x0, x1, wx0, wx1):  # prag
     height, width = alpha.shape
     rows = ratio.shape[0]
     wide_rows = np.empty((rows, width, 4), np.float32)
-    for r in range(rows):
+    for r in numba.prange(rows):
         for x in range(width):
             ca, cb, b0, b1 = x0[x], x1[x], wx0[x], wx1[x]
             for c in range(4):
@@ -164,7 +166,7 @@ def _apply_ratio(rgb, alpha, ratio, y0, y1, wy0, wy1, x0, x1, wx0, wx1):  # prag
     out = np.empty((height, width, 3), np.float32)
     kept = np.empty((height, width), np.float32)
     zero, one = np.float32(0.0), np.float32(1.0)
-    for y in range(height):
+    for y in numba.prange(height):
         ra, rb, a0, a1 = y0[y], y1[y], wy0[y], wy1[y]
         for x in range(width):
             for c in range(3):
