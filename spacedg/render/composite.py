@@ -61,7 +61,8 @@ def composite_view(
     The composite is the sRGB-encoded mix of 3DGS, decoded once here. Under defocus with anything
     blurred, each Gaussian carries its circle of confusion (:class:`~spacedg.render.settings.Defocus`),
     the composite runs on a coarser grid when every visible blur is wide
-    (:func:`spacedg.render.defocus.composite_factor`), and the colour is brought back to the sharp
+    (:func:`spacedg.render.defocus.composite_factor`; on the compiled path otherwise per tile,
+    :data:`~spacedg.render.defocus.TILE_SAMPLE_MIN_COC`), and the colour is brought back to the sharp
     view's local flux (:mod:`spacedg.render.defocus_flux`).
     """
     want_color = "rgb" in outputs

@@ -7,7 +7,8 @@ at ``defocus_extent`` σ with the mass renormalised, the alpha floor scaled alik
 however small (:data:`~spacedg.render.settings.DEFOCUS_MIN_COC` = 0: a cut-off in output pixels
 made the preset depend on the image size). The blurred Gaussians are composited by the sharp rules
 (:func:`spacedg.render.composite.composite_view`), on a coarser grid when every visible blur is wide
-(:func:`composite_factor`), and then brought to the sharp view's **local flux**
+(:func:`composite_factor`; on the compiled path otherwise per 16 × 16 tile, :data:`TILE_SAMPLE_MIN_COC`),
+and then brought to the sharp view's **local flux**
 (:mod:`spacedg.render.defocus_flux`): a lens redistributes light, it neither makes nor destroys it,
 so every neighbourhood a little wider than the blur keeps the light (and the coverage) the sharp
 view holds there. That step corrects what compositing blurred splats gets wrong about light —

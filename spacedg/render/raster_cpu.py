@@ -324,6 +324,22 @@ _BATCH = 32
 _GX, _GY, _CA, _CB, _CC, _OPA, _AMIN, _CR, _CG, _CBL, _Z = range(11)
 
 
+@numba.njit(cache=True, inline="always")
+def _composite_lane(state, last, p, alpha, at, cr, cg, cbl, z, t_min, half, zero, one, want_color, want_depth, want_ids):
+    """Composite one Gaussian of alpha ``alpha`` (list position ``at``) over state index ``p``: its weight
+    ``alpha·T`` into the colour and depth planes while ``T`` stays above ``t_min``, the median hit into
+    ``last``, the new ``T`` (negative once saturated: a dead pixel)."""
+    t_before = state[p]
+    t_after = t_before * (one - alpha)
+    take = t_after > t_min  # false for a saturated pixel (negative T)
+    w = alpha * t_before if take else zero
+    _accumulate(state, p, w, _R, cr, cg, cbl, _D, z, want_color, want_depth)
+    if want_ids:
+        hit = w > zero and t_before > half
+        last[p] = at if hit else last[p]
+    state[p] = t_after if take else -abs(t_before)
+
+
 def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
     """The compositing kernel with the output flags compiled in as constants (one specialisation each).
 
@@ -386,30 +402,16 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
                                 dy = dy_top if lane < 8 else dy_top + np.float32(2.0)
                                 dx = np.float32(2 * (lane & 7)) + half - gx
                                 alpha = _alpha_at(dx, ca, cb * dy, cc * dy * dy, opa, amin, amax, zero)
-                                t_before = state[p]
-                                t_after = t_before * (one - alpha)
-                                take = t_after > t_min
-                                w = alpha * t_before if take else zero
-                                _accumulate(state, p, w, _R, cr, cg, cbl, _D, z, want_color, want_depth)
-                                if want_ids:
-                                    hit = w > zero and t_before > half
-                                    last[p] = at if hit else last[p]
-                                state[p] = t_after if take else -abs(t_before)
+                                _composite_lane(state, last, p, alpha, at, cr, cg, cbl, z, t_min, half, zero, one,
+                                                want_color, want_depth, want_ids)
                         continue
                     for row in range(rows[0, j], rows[1, j]):
                         bdy, cdy, base = _row_terms(row, gy, cb, cc)
                         for col in range(16):
                             p = base + np.uint64(col)
                             alpha = _gauss_alpha(col, gx, ca, bdy, cdy, opa, amin, amax, zero)
-                            t_before = state[p]
-                            t_after = t_before * (one - alpha)
-                            take = t_after > t_min  # false for a saturated pixel (negative T)
-                            w = alpha * t_before if take else zero
-                            _accumulate(state, p, w, _R, cr, cg, cbl, _D, z, want_color, want_depth)
-                            if want_ids:
-                                hit = w > zero and t_before > half
-                                last[p] = at if hit else last[p]
-                            state[p] = t_after if take else -abs(t_before)
+                            _composite_lane(state, last, p, alpha, at, cr, cg, cbl, z, t_min, half, zero, one,
+                                            want_color, want_depth, want_ids)
                 if nb == _BATCH:
                     live = 0
                     for p in range(256):
@@ -531,8 +533,11 @@ def _block_value(coarse, samples, tiles_x, width, height, block_y, block_x, out_
     if coarse[owner]:
         k = (by % 8) * 8 + bx % 8
         grid[gi, gj, 0] = np.float32(1.0) - samples[owner, k, 0]
-        for c in range(1, 5):
-            grid[gi, gj, c] = samples[owner, k, c]
+        if want_color:
+            for c in range(1, 4):
+                grid[gi, gj, c] = samples[owner, k, c]
+        if want_depth:
+            grid[gi, gj, 4] = samples[owner, k, 4]
         return
     for c in range(5):
         grid[gi, gj, c] = np.float32(0.0)
@@ -569,20 +574,30 @@ def upsample_sampled_tiles(
 ):  # pragma: no cover - compiled
     """The pixels of the sampled tiles (:func:`sampled_tiles`), from their 8 × 8 block samples and a ring of
     the blocks around them (a sampled neighbour's samples, else the mean of its composited block; the
-    image's edge blocks repeated past it): alpha, colour (as composited: sRGB-encoded) and ``Σw·z``
-    bilinearly (block centres at ``2b + 1`` px; as :func:`spacedg.render.defocus.upsample`), depth
-    ``Σw·z / α`` (0 where α is 0), median depth and ids those of the pixel's own block."""
+    image's edge blocks repeated past it, also for the tile's own samples there): alpha, colour and
+    ``Σw·z`` bilinearly (block centres at ``2b + 1`` px; the taps of :func:`spacedg.render.defocus.upsample`,
+    which mixes decoded linear light where this mixes the colour as composited, sRGB-encoded: under
+    4 px of blur the two differ by far less than the sampling), depth ``Σw·z / α`` (0 where α is 0),
+    median depth and ids those of the pixel's own block."""
     one, zero = np.float32(1.0), np.float32(0.0)
+    blocks_y, blocks_x = (height + 1) // 2, (width + 1) // 2
     for tile in numba.prange(coarse.shape[0]):
         if not coarse[tile]:
             continue
         ty, tx = tile // tiles_x, tile % tiles_x
-        grid = np.empty((10, 10, 5), np.float32)
-        for k in range(64):  # the tile's own samples
+        grid = np.zeros((10, 10, 5), np.float32)
+        for k in range(64):  # the tile's own samples (those past the image's edge: its edge block, as the ring's)
             gi, gj = 1 + (k >> 3), 1 + (k & 7)
+            if ty * 8 + gi - 1 >= blocks_y or tx * 8 + gj - 1 >= blocks_x:
+                _block_value(coarse, samples, tiles_x, width, height, ty * 8 + gi - 1, tx * 8 + gj - 1,
+                             out_rgb, out_alpha, out_depth, grid, gi, gj, want_color, want_depth)
+                continue
             grid[gi, gj, 0] = one - samples[tile, k, 0]
-            for c in range(1, 5):
-                grid[gi, gj, c] = samples[tile, k, c]
+            if want_color:
+                for c in range(1, 4):
+                    grid[gi, gj, c] = samples[tile, k, c]
+            if want_depth:
+                grid[gi, gj, 4] = samples[tile, k, 4]
         for ring in range(36):  # the blocks around it
             gi = 0 if ring < 10 else (9 if ring < 20 else 1 + (ring - 20) // 2)
             gj = ring if ring < 10 else (ring - 10 if ring < 20 else 9 * ((ring - 20) % 2))

@@ -302,52 +302,65 @@ def test_the_sharp_pass_projected_with_the_view_is_its_own_projection_byte_for_b
         project_cpu.project_with_sharp(g, cam, settings, None, True, measurement_camera(moved, 0, 0.5), settings)
 
 
-def _near_blurred_far_sharp(seed: int) -> tuple[Gaussians, Camera, Defocus]:
+def _near_blurred_far_sharp(seed: int, width: int = 160, height: int = 112, side: float = 1.0) -> tuple[Gaussians, Camera, Defocus]:
     """Near furniture blurred by 6 px (the clamp) on the left of a far textured wall in focus on the right (a mixed
-    view: the whole-view coarse rule does not apply), 160 × 112 px."""
+    view: the whole-view coarse rule does not apply; ``side = -1``: mirrored), 160 × 112 px by default."""
     rng = np.random.default_rng(seed)
     near = random_gaussians(1500, rng, depth=(0.8, 1.2), half_width=0.3, scale=(0.005, 0.04), opacity=(0.3, 1.0))
     far = random_gaussians(4000, rng, depth=(5.8, 6.2), half_width=1.6, scale=(0.01, 0.05), opacity=(0.5, 1.0))
     shift = lambda g, dx: g.means + np.array([dx, 0.0, 0.0])  # noqa: E731 - near on the left, far on the right
-    parts = {"means": np.concatenate([shift(near, -0.25), shift(far, 2.2)])}
+    parts = {"means": np.concatenate([shift(near, -0.25 * side), shift(far, 2.2 * side)])}
     parts.update({k: np.concatenate([getattr(near, k), getattr(far, k)]) for k in ("quats", "scales", "opacities", "sh", "instance_ids")})
     both = Gaussians(parts["means"], parts["quats"], parts["scales"], parts["opacities"], parts["sh"], parts["instance_ids"])
-    return both, Camera(110.0, 110.0, 80.0, 56.0, 160, 112, np.eye(4)), Defocus(2.0, 6.0)
+    return both, Camera(110.0, 110.0, width / 2, height / 2, width, height, np.eye(4)), Defocus(2.0, 6.0)
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_widely_blurred_tiles_are_sampled_every_2_px_and_the_rest_is_the_full_composite(seed: int) -> None:
+@pytest.mark.parametrize(("seed", "width", "height", "side"), [(0, 160, 112, 1.0), (1, 151, 101, 1.0), (1, 150, 98, -1.0)])
+def test_widely_blurred_tiles_are_sampled_every_2_px_and_the_rest_is_the_full_composite(seed: int, width: int, height: int, side: float) -> None:
     """rasterize(sample_min_coc=4): tiles whose every Gaussian is blurred by >= 4 px are composited at the centres of
     their 2 × 2 blocks and upsampled; every other tile is the full-resolution composite bit for bit. The sampled
-    tiles stay within 40 dB of the full composite (light within 0.5 %), alpha in [0, 1], depth finite, and each 2 × 2
-    block of a sampled tile carries one median depth and one id (a Gaussian's depth and id, or none)."""
+    tiles stay within 40 dB of the full composite (light within 0.5 %), also in the partial tiles of an odd-sized
+    view, alpha in [0, 1], depth finite; each 2 × 2 block of a sampled tile carries one median depth and one id (a
+    Gaussian's depth and id, or none); and alpha alone, colour alone and depth alone give the same bytes for what they
+    ask for (depth: within float32 rounding, as the full composite's specialisations)."""
     from spacedg.render import RasterSettings, project_cpu, raster_cpu
     from spacedg.render.defocus import TILE_SAMPLE_MIN_COC, composite_factor
 
-    g, cam, defocus = _near_blurred_far_sharp(seed)
+    g, cam, defocus = _near_blurred_far_sharp(seed, width, height, side)
     settings = RasterSettings()
     packed, rects = project_cpu.project_gaussians(g, cam, settings, defocus, True)
     assert composite_factor(packed, rects, cam.width, cam.height) == 1  # not the whole-view rule
-    args = (packed, rects, g.instance_ids, cam.width, cam.height, settings.alpha_max, True, True, True, True)
+    args = (packed, rects, g.instance_ids, width, height, settings.alpha_max, True, True, True, True)
     full = raster_cpu.rasterize(*args)
     mixed = raster_cpu.rasterize(*args, sample_min_coc=TILE_SAMPLE_MIN_COC)
-    offsets, gauss = raster_cpu.bin_visible(packed, rects, cam.width, cam.height, True)
+    offsets, gauss = raster_cpu.bin_visible(packed, rects, width, height, True)
     tiles = raster_cpu.sampled_tiles(offsets, gauss, packed, np.float32(TILE_SAMPLE_MIN_COC)).reshape(7, 10).astype(bool)
-    assert 0.1 < tiles.mean() < 0.9
-    sampled = np.kron(tiles, np.ones((16, 16), bool))
+    assert 0.1 < tiles.mean() < 0.9 and tiles[-1].any()  # some sampled tiles on the bottom edge, and mirrored on the right
+    assert side > 0 or tiles[:, -1].any()
+    sampled = np.kron(tiles, np.ones((16, 16), bool))[:height, :width]
     for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
         assert np.array_equal(full[name][~sampled], mixed[name][~sampled]), name
         assert not np.array_equal(full[name][sampled], mixed[name][sampled]) or name == "instance_ids", name
     err = np.mean((full["rgb"][sampled] - mixed["rgb"][sampled]) ** 2)
     assert 10 * np.log10(1.0 / err) > 40.0
+    edge = sampled & ((np.arange(height)[:, None] >= height - 8) | (np.arange(width)[None, :] >= width - 8))  # bottom and right
+    assert np.abs(full["rgb"][edge] - mixed["rgb"][edge]).mean() < 0.01
     assert abs(mixed["rgb"][sampled].sum() / full["rgb"][sampled].sum() - 1.0) < 5e-3
     assert 0.0 <= mixed["alpha"].min() and mixed["alpha"].max() <= 1.0 and np.isfinite(mixed["depth"]).all()
     allowed = {"median_depth": {0.0, *packed[:, project_cpu.DEPTH].tolist()}, "instance_ids": {-1, *g.instance_ids.tolist()}}
+    even_h, even_w = height // 2 * 2, width // 2 * 2
     for name in ("median_depth", "instance_ids"):
-        blocks = mixed[name].reshape(56, 2, 80, 2).transpose(0, 2, 1, 3).reshape(56, 80, 4)
-        block_sampled = sampled.reshape(56, 2, 80, 2)[:, 0, :, 0]
+        blocks = mixed[name][:even_h, :even_w].reshape(even_h // 2, 2, even_w // 2, 2).transpose(0, 2, 1, 3).reshape(even_h // 2, even_w // 2, 4)
+        block_sampled = sampled[:even_h:2, :even_w:2]
         assert (blocks[block_sampled] == blocks[block_sampled][:, :1]).all()
         assert set(np.unique(mixed[name][sampled]).tolist()) <= allowed[name]
+    for want_color, want_depth, want_ids in ((False, False, False), (True, False, False), (False, True, False)):
+        part = raster_cpu.rasterize(packed, rects, g.instance_ids, width, height, settings.alpha_max, want_color, want_depth, want_ids, True,
+                                    sample_min_coc=TILE_SAMPLE_MIN_COC)
+        asked = ["alpha"] + ["rgb"] * want_color + ["median_depth", "instance_ids"] * want_ids
+        assert all(np.array_equal(part[name], mixed[name]) for name in asked), (want_color, want_depth, want_ids)
+        # depth: the compositor's specialisations contract its sums differently (1 ulp, as without sampling)
+        assert not want_depth or np.allclose(part["depth"], mixed["depth"], rtol=1e-5, atol=1e-6)
 
 
 def test_a_mixed_view_renders_its_sampled_tiles_and_keeps_its_light(monkeypatch) -> None:
