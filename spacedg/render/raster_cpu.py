@@ -340,6 +340,17 @@ def _composite_lane(state, last, p, alpha, at, cr, cg, cbl, z, t_min, half, zero
     state[p] = t_after if take else -abs(t_before)
 
 
+@numba.njit(cache=True, inline="always")
+def _median_hit(at, gauss, start, packed, instance_ids, t, half, zero):
+    """``(median depth, id)`` of a pixel whose median Gaussian is at list position ``at`` of the tile's list
+    from ``start`` (−1: none: 0 and −1) and whose final transmittance is ``t``: the id only where the pixel
+    is covered (``t <= ½``)."""
+    if at < 0:
+        return zero, np.int32(-1)
+    g = gauss[start + at]
+    return packed[g, DEPTH], np.int32(np.float32(instance_ids[g])) if t <= half else np.int32(-1)
+
+
 def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
     """The compositing kernel with the output flags compiled in as constants (one specialisation each).
 
@@ -430,13 +441,7 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
                     if want_depth:
                         samples[tile, k, 4] = state[p + 1024]
                     if want_ids:
-                        if last[p] >= 0:
-                            g = gauss[start + last[p]]
-                            sample_median[tile, k] = packed[g, DEPTH]
-                            sample_ids[tile, k] = np.int32(np.float32(instance_ids[g])) if t <= half else -1
-                        else:
-                            sample_median[tile, k] = zero
-                            sample_ids[tile, k] = -1
+                        sample_median[tile, k], sample_ids[tile, k] = _median_hit(last[p], gauss, start, packed, instance_ids, t, half, zero)
                 continue
             for row in range(min(16, height - y0)):
                 for col in range(min(16, width - x0)):
@@ -445,13 +450,7 @@ def _make_composite(want_color: bool, want_depth: bool, want_ids: bool):
                     t = abs(state[p])
                     _put_pixel(state, p, py, px, t, 256, 1024, out_alpha, out_rgb, out_depth, want_color, want_depth, zero, one)
                     if want_ids:
-                        if last[p] >= 0:
-                            g = gauss[start + last[p]]
-                            out_median[py, px] = packed[g, DEPTH]
-                            out_ids[py, px] = np.int32(np.float32(instance_ids[g])) if t <= half else -1
-                        else:
-                            out_median[py, px] = zero
-                            out_ids[py, px] = -1
+                        out_median[py, px], out_ids[py, px] = _median_hit(last[p], gauss, start, packed, instance_ids, t, half, zero)
 
     composite_tiles.__qualname__ = f"composite_tiles_rgb{int(want_color)}_depth{int(want_depth)}_ids{int(want_ids)}"
     return fork_safe(numba.njit(parallel=True, fastmath=True, cache=True)(composite_tiles))
