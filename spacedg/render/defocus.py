@@ -34,7 +34,9 @@ the frame is not subtracted (the flux step conserves the light inside the frame)
 preset's far end instead (``--focus high``: everything nearer blurred, the near furniture by the
 ``max_radius`` clamp), severity 3 and bench at 320–640 px: plant 34.4–37.1 dB, close-up 31.9–34.9,
 object 41.1–44.8, but the room 24.9–27.0 dB with its reference converged to 36–39 dB: there the model
-is below the 35 dB goal (not yet explained; the clamp is a candidate).
+is below the 35 dB goal. The reference does not clamp (:mod:`spacedg.render.thin_lens`); without the
+``max_radius`` clamp the room is 28.5–29.6 dB (the close-up 31.5–32.8), so the clamp accounts for
+about 3.6 dB and the rest is most likely the see-around at the near furniture's edges, not modelled.
 """
 
 from __future__ import annotations
