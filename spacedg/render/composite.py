@@ -75,8 +75,8 @@ def composite_view(
 
         ids = gaussians.instance_ids if gaussians.instance_ids is not None else np.full(len(gaussians), -1, np.int32)
         projected = None
-        if defocus is None:
-            packed, rects = project_cpu.project_gaussians(gaussians, camera, settings, None, want_color)
+        if defocus is None or not _sharp_pass_may_be_coarse(defocus):
+            packed, rects = project_cpu.project_gaussians(gaussians, camera, settings, defocus, want_color)
         else:  # with the sharp pass's projection at its usual scale, in the same pass (the same bytes as its own)
             from spacedg.render.defocus import MEASURE_SCALE, measurement_camera, measurement_settings
 
@@ -103,6 +103,17 @@ def composite_view(
     stats["visible"] = int(images.pop("n_visible"))
     stats["pairs"] = int(images.pop("n_pairs"))
     return images, stats
+
+
+def _sharp_pass_may_be_coarse(defocus: Defocus) -> bool:
+    """Whether the sharp pass can be at :data:`~spacedg.render.defocus.MEASURE_SCALE`: its scale comes from the
+    visible circles of confusion (:func:`~spacedg.render.defocus_flux.flux_scale`, which grows with them), and
+    none exceeds ``max_radius``; when even that gives full resolution, projecting the sharp pass's coarse
+    grid alongside the view would be thrown away (very mild blur: an aperture under 0.58 px by default)."""
+    from spacedg.render.defocus import MEASURE_SCALE
+    from spacedg.render.defocus_flux import flux_scale
+
+    return flux_scale(float(defocus.max_radius)) == MEASURE_SCALE
 
 
 def _raster_cpu(

@@ -375,3 +375,30 @@ def test_a_mixed_view_renders_its_sampled_tiles_and_keeps_its_light(monkeypatch)
     assert not np.array_equal(sampled.rgb, full.rgb)
     assert abs(sampled.rgb.mean() / full.rgb.mean() - 1.0) < 5e-3
     assert 10 * np.log10(1.0 / np.mean((sampled.rgb - full.rgb) ** 2)) > 40.0
+
+
+def test_the_sharp_pass_is_projected_alongside_only_when_it_can_be_coarse(monkeypatch) -> None:
+    """The view and the sharp pass's half-resolution grid are projected together only when the blur can be wide
+    enough for that grid (flux_scale of max_radius is ½); a very mild blur (aperture 0.3 px, max_radius 0.9)
+    projects the view alone, and its render is the same either way."""
+    from spacedg.render import project_cpu
+
+    calls: list[float] = []
+    paired = project_cpu.project_with_sharp
+
+    def counting(*args, **kwargs):  # type: ignore[no-untyped-def]
+        calls.append(args[3].aperture)
+        return paired(*args, **kwargs)
+
+    monkeypatch.setattr(project_cpu, "project_with_sharp", counting)
+    g = random_gaussians(2000, np.random.default_rng(5))
+    cam = camera(96, 72)
+    mild = render(g, cam, defocus=Defocus(0.3, 2.0), backend="cpu")
+    render(g, cam, defocus=Defocus(6.0, 2.0), backend="cpu")
+    assert calls == [6.0]
+    monkeypatch.setattr(project_cpu, "project_with_sharp", lambda *a, **k: paired(*a, **k))
+    from spacedg.render import composite
+
+    monkeypatch.setattr(composite, "_sharp_pass_may_be_coarse", lambda defocus: True)  # paired anyway: the same image
+    again = render(g, cam, defocus=Defocus(0.3, 2.0), backend="cpu")
+    assert np.array_equal(mild.rgb, again.rgb) and np.array_equal(mild.alpha, again.alpha)
