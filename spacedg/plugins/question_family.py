@@ -251,17 +251,14 @@ class _CheckedGenerator:
 
     def _records(self, scene: Scene, rng: np.random.Generator) -> Iterator[QARecord]:
         family = self.family
-        gated: bool | None = None  # whether a gated caller listens: asked at the first pass-over, as admission() is
+        gated = False  # whether a gated caller listens: asked at the first pass-over, as admission() is (a no raises below)
         for record in self.__wrapped__(scene, rng):
             if type(record) is Candidate:  # checked once built (spacedg.qa.build)
                 yield record
                 continue
-            if record is PASSED_OVER:
-                if gated is None:
-                    gated = gate_active()
-                if gated:
-                    yield record
-                    continue
+            if record is PASSED_OVER and (gated or (gated := gate_active())):
+                yield record
+                continue
             if not isinstance(record, QARecord):
                 raise PluginError(f"question family {family.name!r} yielded a {type(record).__name__}, not a QARecord")
             family.check_record(record, scene.id)

@@ -101,7 +101,6 @@ class _Pool:
     cells: dict[str, dict[str, list[int]]] = field(default_factory=dict)  # cell → role → records
     cell_roles: dict[str, list[str]] = field(default_factory=dict)  # cell → the roles of a round
     cell_keys: list[str | None] = field(default_factory=list)  # each record's cell (None: no cell)
-    round_sizes: dict[str, int] = field(default_factory=dict)  # cell → the size of its rounds (cells with roles)
     offered_roles_only: set[str] = field(default_factory=set)  # cells whose rounds go over the roles the scene offers (all_roles false)
 
     @classmethod
@@ -143,7 +142,6 @@ class _Pool:
             offered = [role for role in pool.cell_roles[cell] if pool.cells[cell].get(role)]
             pool.cell_roles[cell] = offered if len(offered) >= 2 else []
         pool.offered_roles_only = partial
-        pool.round_sizes = {cell: len(roles) for cell, roles in pool.cell_roles.items() if roles}
         return pool
 
     def subject(self, i: int) -> tuple[str, str]:
@@ -157,10 +155,8 @@ class _Pool:
         cell = self.cell_keys[i]
         if cell is None:
             return 1
-        size = self.round_sizes.get(cell)
-        if size is not None:
-            return size
-        return max(1, len(self.selections[i].get("roles", [])))  # type: ignore[union-attr] # a cell left without roles: the record's own
+        roles = self.cell_roles.get(cell) or self.selections[i].get("roles", [])  # type: ignore[union-attr] # a cell left without roles: the record's own
+        return max(1, len(roles))
 
 
 def role_excess(rows: Sequence[Mapping[str, int] | None], role: str, roles: Sequence[str]) -> float:

@@ -74,17 +74,17 @@ def composite_view(
         from spacedg.render import project_cpu  # numba kernels: compiled on first render, not with spacedg
 
         ids = gaussians.instance_ids if gaussians.instance_ids is not None else np.full(len(gaussians), -1, np.int32)
-        projected = None
+        sharp_projection = None
         if defocus is None or not _sharp_pass_may_be_coarse(defocus):
             packed, rects = project_cpu.project_gaussians(gaussians, camera, settings, defocus, want_color)
         else:  # with the sharp pass's projection at its usual scale, in the same pass (the same bytes as its own)
             from spacedg.render.defocus import MEASURE_SCALE, measurement_camera, measurement_settings
 
             wide, measured = measurement_camera(camera, 0, MEASURE_SCALE), measurement_settings(settings, MEASURE_SCALE)
-            packed, rects, *sharp_projection = project_cpu.project_with_sharp(gaussians, camera, settings, defocus, want_color, wide, measured)
-            projected = (MEASURE_SCALE, *sharp_projection)
+            packed, rects, *pair = project_cpu.project_with_sharp(gaussians, camera, settings, defocus, want_color, wide, measured)
+            sharp_projection = (pair[0], pair[1])
         t1 = time.perf_counter()
-        images, sharp = _raster_cpu(gaussians, packed, rects, ids, camera, settings, want_color, want_depth, want_ids, defocus is not None, projected)
+        images, sharp = _raster_cpu(gaussians, packed, rects, ids, camera, settings, want_color, want_depth, want_ids, defocus is not None, sharp_projection)
     else:
         import torch  # heavy: only the torch backend needs it
 
@@ -119,10 +119,11 @@ def _sharp_pass_may_be_coarse(defocus: Defocus) -> bool:
 def _raster_cpu(
     gaussians: Gaussians, packed: np.ndarray, rects: np.ndarray, ids: np.ndarray, camera: Camera, settings: RasterSettings,
     want_color: bool, want_depth: bool, want_ids: bool, defocused: bool,
-    sharp_projection: tuple[float, np.ndarray, np.ndarray] | None = None,
+    sharp_projection: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[dict[str, np.ndarray], SharpPass | None]:
     """Composite a CPU projection; when anything is blurred, also the sharp pass
-    (:func:`sharp_pass`, from ``sharp_projection = (scale, packed, rects)`` when that is its scale),
+    (:func:`sharp_pass`, from ``sharp_projection = (packed, rects)`` on the grid at
+    :data:`~spacedg.render.defocus.MEASURE_SCALE` when that is its scale),
     and coarse when every visible blur is wide. ``(images, the sharp pass or None when nothing is blurred)``."""
     from spacedg.render import defocus as defocus_model
     from spacedg.render import raster_cpu
@@ -136,8 +137,7 @@ def _raster_cpu(
     plan = defocus_model.blur_plan(packed[visible, COC], width, height) if defocused else None
     if plan is not None:
         scale = flux_scale(plan[0])
-        projected = sharp_projection[1:] if sharp_projection is not None and sharp_projection[0] == scale else None
-        sharp = sharp_pass(gaussians, camera, settings, scale, projected)  # type: ignore[arg-type]
+        sharp = sharp_pass(gaussians, camera, settings, scale, sharp_projection if scale == defocus_model.MEASURE_SCALE else None)
         factor = plan[1]
         if factor > 1:
             packed, rects, width, height = defocus_model.coarse_view(packed, rects, width, height, factor)

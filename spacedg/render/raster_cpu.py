@@ -521,6 +521,17 @@ def sampled_tiles(offsets, gauss, packed, min_coc):  # pragma: no cover - compil
 
 
 @numba.njit(cache=True, inline="always")
+def _sample_into(grid, gi, gj, samples, tile, k, want_color, want_depth):
+    """``grid[gi, gj] = (α, r, g, b, Σw·z)`` of sample ``k`` of sampled tile ``tile`` (the channels asked for)."""
+    grid[gi, gj, 0] = np.float32(1.0) - samples[tile, k, 0]
+    if want_color:
+        for c in range(1, 4):
+            grid[gi, gj, c] = samples[tile, k, c]
+    if want_depth:
+        grid[gi, gj, 4] = samples[tile, k, 4]
+
+
+@numba.njit(cache=True, inline="always")
 def _block_value(coarse, samples, tiles_x, width, height, block_y, block_x, out_rgb, out_alpha, out_depth, grid, gi, gj,
                  want_color, want_depth):
     """``grid[gi, gj] = (α, r, g, b, Σw·z)`` of the 2 × 2 block ``(block_y, block_x)`` of the image (clamped
@@ -530,13 +541,7 @@ def _block_value(coarse, samples, tiles_x, width, height, block_y, block_x, out_
     bx = min(max(block_x, 0), blocks_x - 1)
     owner = (by // 8) * tiles_x + bx // 8
     if coarse[owner]:
-        k = (by % 8) * 8 + bx % 8
-        grid[gi, gj, 0] = np.float32(1.0) - samples[owner, k, 0]
-        if want_color:
-            for c in range(1, 4):
-                grid[gi, gj, c] = samples[owner, k, c]
-        if want_depth:
-            grid[gi, gj, 4] = samples[owner, k, 4]
+        _sample_into(grid, gi, gj, samples, owner, (by % 8) * 8 + bx % 8, want_color, want_depth)
         return
     for c in range(5):
         grid[gi, gj, c] = np.float32(0.0)
@@ -584,24 +589,15 @@ def upsample_sampled_tiles(
         if not coarse[tile]:
             continue
         ty, tx = tile // tiles_x, tile % tiles_x
-        grid = np.zeros((10, 10, 5), np.float32)
-        for k in range(64):  # the tile's own samples (those past the image's edge: its edge block, as the ring's)
-            gi, gj = 1 + (k >> 3), 1 + (k & 7)
-            if ty * 8 + gi - 1 >= blocks_y or tx * 8 + gj - 1 >= blocks_x:
-                _block_value(coarse, samples, tiles_x, width, height, ty * 8 + gi - 1, tx * 8 + gj - 1,
-                             out_rgb, out_alpha, out_depth, grid, gi, gj, want_color, want_depth)
-                continue
-            grid[gi, gj, 0] = one - samples[tile, k, 0]
-            if want_color:
-                for c in range(1, 4):
-                    grid[gi, gj, c] = samples[tile, k, c]
-            if want_depth:
-                grid[gi, gj, 4] = samples[tile, k, 4]
-        for ring in range(36):  # the blocks around it
-            gi = 0 if ring < 10 else (9 if ring < 20 else 1 + (ring - 20) // 2)
-            gj = ring if ring < 10 else (ring - 10 if ring < 20 else 9 * ((ring - 20) % 2))
-            _block_value(coarse, samples, tiles_x, width, height, ty * 8 + gi - 1, tx * 8 + gj - 1,
-                         out_rgb, out_alpha, out_depth, grid, gi, gj, want_color, want_depth)
+        grid = np.zeros((10, 10, 5), np.float32)  # the tile's 8 × 8 blocks and the ring around them
+        for gi in range(10):
+            for gj in range(10):
+                by, bx = ty * 8 + gi - 1, tx * 8 + gj - 1
+                if 0 < gi < 9 and 0 < gj < 9 and by < blocks_y and bx < blocks_x:  # its own sample, read directly
+                    _sample_into(grid, gi, gj, samples, tile, (gi - 1) * 8 + gj - 1, want_color, want_depth)
+                else:  # a neighbour's block, or past the image's edge its edge block
+                    _block_value(coarse, samples, tiles_x, width, height, by, bx, out_rgb, out_alpha, out_depth, grid, gi, gj,
+                                 want_color, want_depth)
         for row in range(min(16, height - ty * 16)):
             i0 = (row + 1) // 2  # grid row of the block centre at or above the pixel centre (row + ½ − 1) / 2
             wy = np.float32(0.75) if row % 2 == 0 else np.float32(0.25)  # weight of grid row i0 + 1

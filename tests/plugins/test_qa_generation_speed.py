@@ -230,7 +230,6 @@ def test_letter_decks_equal_the_plain_lru(monkeypatch: pytest.MonkeyPatch) -> No
     from spacedg.plugins.questions import geometry
 
     monkeypatch.setattr(geometry, "_DECKS", OrderedDict())
-    monkeypatch.setattr(geometry, "_LAST_DECK", [None])
     monkeypatch.setattr(geometry, "_MAX_DECKS", 8)
     plain = _PlainDecks(8)
     order = np.random.default_rng(4646)
@@ -290,13 +289,19 @@ def test_visibility_tables_are_shared_only_inside_the_block() -> None:
 
 
 def _stats_as_before(selection: object) -> dict[str, Counter[str]]:
-    """``_Selection.stats`` as written before the per-cell round sizes (one comprehension)."""
+    """``_Selection.stats`` written out independently (one comprehension, each record's round size from the
+    rule itself: 1 outside cells, else its cell's roles or, for a cell left without roles, the record's own)."""
     pool, taken, judged_out, asked, room = (getattr(selection, k) for k in ("pool", "taken", "judged_out", "asked", "room"))
     subs = [r.sub_question_type for r in pool.records]
+
+    def round_size(i: int) -> int:
+        cell = pool.cell_keys[i]
+        return 1 if cell is None else max(1, len(pool.cell_roles.get(cell) or pool.selections[i].get("roles", [])))
+
     counts = Counter(zip(subs, [
         "taken" if i in taken else "judge" if i in judged_out
         else "repeat" if subject is not None and subject in asked
-        else "quota" if room[sub] < pool.round_size(i) else "unbalanced"
+        else "quota" if room[sub] < round_size(i) else "unbalanced"
         for i, (sub, subject) in enumerate(zip(subs, pool.subjects))
     ]))
     out: dict[str, Counter[str]] = {sub: Counter({"pooled": n}) for sub, n in Counter(subs).items()}

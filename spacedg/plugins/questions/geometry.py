@@ -281,34 +281,24 @@ def single_word_pool(words: Sequence[tuple[str, str]], exclude_axes: Sequence[in
     return [w for axis, pair in enumerate(words) if axis not in exclude_axes for w in pair]
 
 
-#: Letter decks of recently used generators: (id(rng), options) → (rng kept alive, remaining letters).
-_DECKS: OrderedDict[tuple[int, int], tuple[np.random.Generator, list[int]]] = OrderedDict()
+#: Letter decks of recently used generators, most recent last: (id(rng), options) → its deck (which keeps rng alive).
+_DECKS: OrderedDict[tuple[int, int], BalancedDeck] = OrderedDict()
 _MAX_DECKS = 256
-#: The deck used last, ``(key, entry)`` of :data:`_DECKS` (it is the last one there): one family draws many
-#: letters in a row. Whatever empties or reorders :data:`_DECKS` must reset it.
-_LAST_DECK: list[tuple[tuple[int, int], tuple[np.random.Generator, list[int]]] | None] = [None]
 
 
 def _next_letter(rng: np.random.Generator, n_options: int = 4) -> int:
     """Index of the next correct letter for ``rng``: shuffled blocks of A–D (A–C for three
     options), so over any generation the correct letter is uniform to within one block (exact balance)."""
     key = (id(rng), n_options)
-    last = _LAST_DECK[0]
-    if last is not None and last[0] == key:  # the most recent deck, already last in _DECKS (it holds rng: the id is rng's)
-        entry = last[1]
-    else:
-        entry = _DECKS.get(key)
-        if entry is None or entry[0] is not rng:
-            entry = (rng, [])
-            _DECKS[key] = entry
-            while len(_DECKS) > _MAX_DECKS:
-                _DECKS.popitem(last=False)
-        _DECKS.move_to_end(key)
-        _LAST_DECK[0] = (key, entry)
-    deck = entry[1]
-    if not deck:
-        deck.extend(shuffled(range(n_options), rng))  # = rng.permutation(n_options)
-    return deck.pop()
+    if _DECKS and next(reversed(_DECKS)) == key:  # the deck used last (one family draws many letters in a row): it holds rng, so the id is rng's
+        return _DECKS[key].next()
+    deck = _DECKS.get(key)
+    if deck is None or deck.rng is not rng:
+        deck = _DECKS[key] = BalancedDeck(rng, n_options)
+        while len(_DECKS) > _MAX_DECKS:
+            _DECKS.popitem(last=False)
+    _DECKS.move_to_end(key)
+    return deck.next()
 
 
 class BalancedDeck:
