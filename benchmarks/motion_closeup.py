@@ -7,7 +7,8 @@ leaves from 0.25 to 0.6 units, a close-up), and a built-in room's middle view; m
 the plugin does) and ``rot``, along random directions (``--seeds``), 640×480. For each case it
 prints the keyframes the rule picks (``K``), the PSNR against N = 80 (clip(sRGB) of linear light),
 the time as a multiple of a clean render (medians of ``--runs``, alternating), and the same for
-the previous rule (path only, at most 6 keyframes). Goal: ≥ 40 dB within ≤ 8 renders::
+the previous rule (``max(⌈D/90⌉, 2 past 60 px, ⌈√(P/3.5)⌉)`` for a path of D px and a near-far
+parallax of P px, at most 8; stop 48 and before). Goal: ≥ 40 dB within ≤ 8 renders::
 
     .venv/bin/python benchmarks/motion_closeup.py [--factors 0.3,0.5] [--seeds 1,2,3] [--runs 2] [--no-room]
 """
@@ -24,21 +25,28 @@ from render import PLANT, WIDTH, HEIGHT, median_depth, plant_scene, psnr, severi
 
 from spacedg.render import render
 from spacedg.render.camera import look_at
-from spacedg.render.motion import (
-    KEYFRAME_PATH_PX,
-    SINGLE_KEYFRAME_PX,
-    MotionJob,
-    motion_extent,
-    motion_parallax,
-    render_motion_keyframes,
-)
+from spacedg.render.camera import Camera
+from spacedg.render.gaussians import Gaussians
+from spacedg.render.motion import MotionJob, motion_extent, render_motion_keyframes
 from spacedg.render.settings import MotionBlur
 
 
-def previous_rule(displacement: float) -> int:
-    """The keyframe count before parallax was counted: path only, 1–6."""
-    count = max(math.ceil(displacement / KEYFRAME_PATH_PX), 2 if displacement > SINGLE_KEYFRAME_PX else 1)
-    return int(min(max(count, 1), 6))
+def motion_parallax(gaussians: Gaussians, camera: Camera, motion: MotionBlur) -> float:
+    """The previous rule's parallax P (pixels): ``f · |t_xy| · (1/z₁₀ − 1/z₉₀)`` over a strided
+    sample of at most 8192 Gaussian means visible at mid-exposure (0 when fewer than 2)."""
+    stride = max(1, len(gaussians) // 8192)
+    uv, depth, ok = camera.project(gaussians.means[::stride].astype(np.float64))
+    visible = ok & camera.in_image(uv) & (depth > 1e-3)
+    if visible.sum() < 2:
+        return 0.0
+    near, far = np.percentile(depth[visible], [10.0, 90.0])
+    return float(0.5 * (camera.fx + camera.fy) * math.hypot(motion.translation[0], motion.translation[1]) * (1.0 / near - 1.0 / far))
+
+
+def previous_rule(displacement: float, parallax: float) -> int:
+    """The keyframe count of stop 48 and before, from the path D and the parallax P (pixels)."""
+    count = max(math.ceil(displacement / 90.0), 2 if displacement > 60.0 else 1, math.ceil(math.sqrt(max(parallax, 0.0) / 3.5)))
+    return int(min(max(count, 1), 8))
 
 
 def cases(factors: list[float], room: bool):
@@ -89,7 +97,7 @@ def main() -> None:
             job = MotionJob(g, camera, motion, frozenset({"rgb"}))
             reference = render(g, camera, motion=MotionBlur(translation, rotation, sub_steps=80), backend="cpu")
             path, _ = motion_extent(g, camera, motion)
-            old = previous_rule(path)
+            old = previous_rule(path, motion_parallax(g, camera, motion))
             out = timed({"clean": lambda: render(g, camera, backend="cpu"), "new": lambda: render_motion_keyframes(job),
                          "old": lambda: render_motion_keyframes(job, keyframes=old)}, args.runs)
             clean = out["clean"][0]

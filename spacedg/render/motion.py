@@ -8,11 +8,10 @@ centre); sub-exposure k of K is centred at time ``s_k = (k + ½)/K − ½``.
   paper's reference), averaged.
 - Fast (``fast=True``, pinhole cameras): ``K`` keyframes and depth-reprojected path gathers
   (:func:`render_motion_keyframes`, kernels in :mod:`spacedg.render.motion_warp`). The
-  exposure is cut into ``K = clamp(max(ceil(D / KEYFRAME_PATH_PX), ceil(sqrt(P / PARALLAX_PX))), 1,
-  MAX_KEYFRAMES)`` (2 at least past ``SINGLE_KEYFRAME_PX``) equal
-  intervals, D the largest on-screen path (pixels) of the visible Gaussians
-  (:func:`motion_extent`) and P the translation parallax between near and far (:func:`motion_parallax`:
-  close-ups need more keyframes than their path alone asks for); each interval's centre pose is rendered once (with depth, on a canvas
+  exposure is cut into ``K`` equal intervals, ``K`` the smallest count whose predicted error meets
+  the goal (:mod:`spacedg.render.motion_error`: a quarter-resolution render of the view gives the
+  contrast times the parallax difference across its depth edges, where the warp errs; at most
+  :data:`MAX_KEYFRAMES`); each interval's centre pose is rendered once (with depth, on a canvas
   widened by the path so what the camera sweeps in is rendered) and every output pixel
   averages the keyframe along the segment it sees during the interval, sampled every ≤ 1 px
   (a box-doubling pass for long paths, then a gather every ``PATH_SPACING_PX``; segments over
@@ -20,7 +19,8 @@ centre); sub-exposure k of K is centred at time ``s_k = (k + ½)/K − ½``.
   is integrated continuously, so there are no stroboscopic copies at any path length; the cost
   is ``K`` canvas renders plus ~1–2 render-equivalents of warping per keyframe on a 165k-Gaussian
   room (more, relative, on cheap scenes: the warp costs per pixel) (``benchmarks/render.py`` prints
-  time, PSNR vs N = 80 and N = 256, and a ghosting measure per scene and severity). Where the
+  time, PSNR vs N = 80 and N = 256, and a ghosting measure per scene and severity;
+  ``benchmarks/motion_keyframes.py`` the counts and PSNR per view of the dataset's rooms). Where the
   approximation is inexact: the depth of what a pixel sees during an interval is taken from the
   keyframe at that pixel (off in a band of the interval's parallax around depth edges), and
   view-dependent colour is that of the keyframe's pose.
@@ -209,29 +209,27 @@ def render_motion_substeps(job: MotionJob, fast: bool | None = None) -> Frame:
     return job.frame(images, t0, {"sub_steps": count, "displacement_px": displacement, "pairs": pairs})
 
 
-#: Keyframe path: largest on-screen path (pixels) one keyframe interval may cover …
-KEYFRAME_PATH_PX = 90.0
-#: … but two keyframes at least once D exceeds this (one keyframe over the plant's 88 px bench
-#: path gave 40.5 dB against N = 80, two 47.5 dB).
-SINGLE_KEYFRAME_PX = 60.0
-#: … and at least ``ceil(sqrt(P / PARALLAX_PX))`` keyframes for a translation parallax of P
-#: pixels: the spread of on-screen translation between the 10th and 90th percentile depths of
-#: the visible Gaussians (:func:`motion_parallax`). The warp takes what a pixel sees from its
-#: keyframe, so each depth edge leaves a band of the interval's parallax. Measured
-#: (``benchmarks/motion_closeup.py``, bench motion, 640×480): a close-up of the plant (P = 16–29
-#: px) gave 38.9–40.4 dB against N = 80 with 2 keyframes and 31.4 dB with one, 44–50 dB with 3–4;
-#: a room (P = 60–74 px, sparser depth edges) 38.5 dB with 2, 42.6–46.5 with 3, 47–50 with 4. A
-#: linear rule (one keyframe per 9 px) met both but gave rooms 7–8 keyframes (13–18× a clean
-#: render); the square root gives the plant 3 and rooms 5.
-PARALLAX_PX = 3.5
-#: … and the keyframe count's bounds (8 renders at most: the issue's budget).
-MIN_KEYFRAMES, MAX_KEYFRAMES = 1, 8
-#: Box-doubling passes before the path gather when an interval's longest path exceeds
-#: ``DOUBLING_FROM_PX``: each halves the samples the gather takes but reads the whole canvas
-#: twice and resamples it once (~1 dB on the plant's fine texture). Measured (640×480, one
-#: thread): 0 → 1 pass 2–8 % faster on rooms and the plant at bench, more passes slower.
-DOUBLING_PASSES = 1
+#: The keyframe count's bounds (8 renders at most: the issue's budget).
+MAX_KEYFRAMES = 8
+#: Box-doubling passes before the path gather: one per doubling of an interval's longest path past
+#: ``DOUBLING_FROM_PX`` (:func:`doubling_passes`), at most this many. Each halves the samples the
+#: gather takes but reads the whole canvas twice and resamples it once (~1 dB on the plant's fine
+#: texture). Measured (640×480, one thread): 0 → 1 pass 2–8 % faster on rooms and the plant at
+#: bench; with the error model's keyframe counts (longer intervals), at most 3 passes instead of 1
+#: took the dataset's room views 103.4 → 93.0 ms (32 items) and 121.9 → 112.9 ms (held-out rooms of
+#: seed 8181), the worst view 43.45 → 43.45 and 44.47 → 44.32 dB against N = 80 (mean −0.3 to
+#: −0.45 dB); the plant's close-ups (short intervals) unchanged in time, worst 43.10 → 43.08 dB
+#: (``benchmarks/motion_keyframes.py --max-passes 1`` against the default).
+DOUBLING_PASSES = 3
 DOUBLING_FROM_PX = 24.0
+
+
+def doubling_passes(longest_px: float) -> int:
+    """Box-doubling passes for an interval whose longest path is ``longest_px`` pixels: one per
+    doubling of it past :data:`DOUBLING_FROM_PX`, at most :data:`DOUBLING_PASSES`."""
+    if not longest_px > DOUBLING_FROM_PX:
+        return 0
+    return int(min(DOUBLING_PASSES, 1 + math.floor(math.log2(min(longest_px / DOUBLING_FROM_PX, 2.0**60)))))
 #: Largest distance (pixels) between two of the path's samples (the gather walks ``2^-passes``
 #: of each path at this spacing; the passes replicate its samples along the rest). Measured on
 #: the room at bench (K = 3): 1.5 px is ~20 % faster at the same PSNR (45.6 dB), but the streak
@@ -239,50 +237,28 @@ DOUBLING_FROM_PX = 24.0
 PATH_SPACING_PX = 1.0
 
 
-def choose_keyframes(displacement_px: float, max_steps: int, parallax_px: float = 0.0) -> int:
-    """Keyframe count for a largest on-screen path of ``displacement_px`` pixels and a translation
-    parallax of ``parallax_px`` pixels (:func:`motion_parallax`) over the exposure."""
-    count = max(math.ceil(displacement_px / KEYFRAME_PATH_PX), 2 if displacement_px > SINGLE_KEYFRAME_PX else 1)
-    if math.isfinite(parallax_px) and parallax_px > 0:
-        count = max(count, math.ceil(math.sqrt(parallax_px / PARALLAX_PX)))
-    return int(min(max(count, MIN_KEYFRAMES), MAX_KEYFRAMES, max_steps))
-
-
-def motion_parallax(gaussians: Gaussians, camera: Camera, motion: MotionBlur) -> float:
-    """Translation parallax (pixels) over the exposure: ``f · |t_xy| · (1/z₁₀ − 1/z₉₀)``, the
-    difference in on-screen sweep between the 10th and 90th percentile depths of the Gaussian
-    means visible at mid-exposure (camera-frame translation ``t``; rotation sweeps every depth
-    alike and makes none). 0 when nothing is visible."""
-    stride = max(1, len(gaussians) // _DISPLACEMENT_SAMPLE)
-    uv, depth, ok = camera.project(gaussians.means[::stride].astype(np.float64))
-    visible = ok & camera.in_image(uv) & (depth > 1e-3)
-    if visible.sum() < 2:
-        return 0.0
-    near, far = np.percentile(depth[visible], [10.0, 90.0])
-    sideways = math.hypot(motion.translation[0], motion.translation[1])
-    return float(0.5 * (camera.fx + camera.fy) * sideways * (1.0 / near - 1.0 / far))
-
-
 def render_motion_keyframes(
     job: MotionJob, keyframes: int | None = None, passes: int | None = None, spacing: float | None = None,
 ) -> Frame:
     """Motion blur from ``K`` keyframes and depth-reprojected path gathers (:mod:`spacedg.render.motion_warp`).
 
-    ``keyframes``, ``passes`` and ``spacing`` (pixels) override :func:`choose_keyframes`,
-    the pass count (default: :data:`DOUBLING_PASSES` where the interval's longest path exceeds
-    :data:`DOUBLING_FROM_PX`, else 0) and
+    ``keyframes``, ``passes`` and ``spacing`` (pixels) override the count of
+    :func:`~spacedg.render.motion_error.keyframes_for`,
+    the pass count (default: :func:`doubling_passes` of the interval's longest path) and
     :data:`PATH_SPACING_PX` (for benchmarks and tests). Pinhole
     cameras only. Deterministic: no random numbers, every kernel writes each element in one order.
     """
-    from spacedg.render import motion_warp
+    from spacedg.render import motion_error, motion_warp
 
     t0 = time.perf_counter()
     camera, motion, wanted = job.camera, job.motion, job.wanted
     passes_given = passes is not None
-    passes = DOUBLING_PASSES if passes is None else passes
     spacing = PATH_SPACING_PX if spacing is None else spacing
     displacement, _ = motion_extent(job.gaussians, camera, motion)
-    count = keyframes or choose_keyframes(displacement, motion.sub_steps, motion_parallax(job.gaussians, camera, motion))
+    measured: dict[str, float] = {}  # the edge measure, when the count is chosen here
+    if not keyframes:
+        measured["edge_measure"] = motion_error.edge_parallax_contrast(job.gaussians, camera, motion, job.settings)
+    count = keyframes or motion_error.keyframes_for(measured["edge_measure"], displacement, min(MAX_KEYFRAMES, motion.sub_steps))
     margin = int(min(math.ceil(0.6 * displacement / count) + 2, max(camera.width, camera.height) // 2))
     canvas = camera.widened(margin)
     want_depth = "depth" in wanted
@@ -310,7 +286,7 @@ def render_motion_keyframes(
         # the camera centre, metres of motion at 1e3) is no path: both bound the gather's work and reads
         reach = np.float32(2 * (canvas.width + canvas.height))
         longest = motion_warp.sanitise_field(field, reach)
-        n_passes = passes if passes_given else (passes if longest > DOUBLING_FROM_PX else 0)
+        n_passes = passes if passes_given else doubling_passes(longest)
         dst = np.empty_like(src)
         covered_all = bool(alpha.min() > 0.0)  # nothing to skip (a room): no occupancy tables
         for j in range(n_passes):
@@ -327,4 +303,5 @@ def render_motion_keyframes(
     if want_depth:
         images["depth"] = expected_depth(acc[..., 4], acc[..., 3])
     # sub_steps: renders made (the keyframes)
-    return job.frame(images, t0, {"sub_steps": count, "keyframes": count, "displacement_px": displacement, "pairs": pairs})
+    stats = {"sub_steps": count, "keyframes": count, "displacement_px": displacement, **measured, "pairs": pairs}
+    return job.frame(images, t0, stats)

@@ -183,19 +183,68 @@ def test_degenerate_inputs_stay_in_range() -> None:
         run()  # check_frame: finite, alpha in [0, 1], rgb >= 0
 
 
-def test_parallax_asks_for_more_keyframes_on_a_close_up() -> None:
-    """Translation parallax between near and far (the wall-and-box scene: 1.55 m and 3 m) sets a
-    floor on the keyframe count; rotation alone makes none; at most 8 keyframes."""
-    from spacedg.render.motion import MAX_KEYFRAMES, PARALLAX_PX, choose_keyframes, motion_parallax
+def test_keyframe_count_follows_contrast_across_moving_depth_edges() -> None:
+    """The count comes from the predicted error (:mod:`spacedg.render.motion_error`): a sideways
+    move past the box's depth edges asks for more keyframes than a turn with the same path; the
+    same scene in one colour, or no motion, for one; the count rises with the measure, is the
+    smallest whose prediction meets the target, has one keyframe per ``KEYFRAME_PATH_PX`` of the
+    path at least, and is clamped."""
+    from spacedg.render.motion_error import KEYFRAME_PATH_PX, MODEL_A, MODEL_B, MODEL_C, TARGET_DB, edge_parallax_contrast, keyframes_for
+    from spacedg.render.settings import RasterSettings
 
+    settings = RasterSettings()
     g = textured_wall()
     cam = camera(80, 60, focal=70.0)
+    sideways = MotionBlur(translation=(0.6, 0.0, 0.0), rotation=(0.0, 0.0, 0.0))
+    turn = MotionBlur(translation=(0.0, 0.0, 0.0), rotation=(0.0, 0.6 / 2.2, 0.0))  # about the same path on the wall
+    moving, turning = edge_parallax_contrast(g, cam, sideways, settings), edge_parallax_contrast(g, cam, turn, settings)
+    assert moving > 1e6 * turning  # a turn moves every depth alike: no parallax (rounding only)
+    assert keyframes_for(moving, 20.0, 8) == 2 and keyframes_for(turning, 20.0, 8) == 1
+    grey = Gaussians(g.means, g.quats, g.scales, g.opacities, np.full_like(g.sh, 0.3))  # edges without contrast
+    assert edge_parallax_contrast(grey, cam, sideways, settings) < 1e-4 * moving
+    still = edge_parallax_contrast(g, cam, MotionBlur(translation=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0)), settings)
+    assert still < 1e-12 and keyframes_for(still, 0.0, 8) == 1  # the pose round trip's rounding only
+
+    def predicted(measure: float, count: int) -> float:
+        return MODEL_A - MODEL_B * 10 * math.log10(measure) + MODEL_C * 10 * math.log10(count)
+
+    counts = [keyframes_for(m, 10.0, 8) for m in np.geomspace(1e-5, 1.0, 60)]
+    assert counts == sorted(counts) and counts[0] == 1 and counts[-1] == 8
+    for measure in np.geomspace(1e-4, 0.1, 25):
+        k = keyframes_for(measure, 0.0, 80)
+        assert predicted(measure, k) >= TARGET_DB - 1e-9 and (k == 1 or predicted(measure, k - 1) < TARGET_DB)
+    assert keyframes_for(0.0, 0.0, 8) == 1 and keyframes_for(math.inf, 0.0, 8) == keyframes_for(math.nan, 0.0, 8) == 8
+    assert keyframes_for(1e6, 0.0, 3) == 3 and keyframes_for(1e6, 0.0, 0) == 1
+    # at least one keyframe per KEYFRAME_PATH_PX of the longest path, whatever the edges
+    assert [keyframes_for(0.0, KEYFRAME_PATH_PX * f, 8) for f in (0.5, 1.0, 1.01, 2.5, 7.99, 100.0)] == [1, 1, 2, 3, 8, 8]
+    assert keyframes_for(0.0, math.nan, 8) == keyframes_for(0.0, math.inf, 8) == 8
+    assert keyframes_for(1e-2, 3.5 * KEYFRAME_PATH_PX, 8) == max(4, keyframes_for(1e-2, 0.0, 8))
+    frame = render_motion_keyframes(MotionJob(g, cam, MotionBlur(**MOTION, fast=True), frozenset({"rgb"})))
+    assert frame.stats["keyframes"] == keyframes_for(frame.stats["edge_measure"], frame.stats["displacement_px"], 8)
+
+
+def test_one_doubling_pass_per_doubling_of_the_path() -> None:
+    """:func:`~spacedg.render.motion.doubling_passes`: none up to ``DOUBLING_FROM_PX``, then one per
+    doubling of the interval's longest path, at most ``DOUBLING_PASSES``; none for a NaN path."""
+    from spacedg.render.motion import DOUBLING_FROM_PX, DOUBLING_PASSES, doubling_passes
+
+    assert [doubling_passes(DOUBLING_FROM_PX * f) for f in (0.0, 0.5, 1.0, 1.01, 1.99, 2.01, 3.9, 4.01)] == [0, 0, 0, 1, 1, 2, 2, 3]
+    assert doubling_passes(1e30) == doubling_passes(math.inf) == DOUBLING_PASSES == 3 and doubling_passes(math.nan) == 0
+
+
+def test_the_edge_measure_does_not_depend_on_the_image_size() -> None:
+    """``S`` is the share of the image in error bands (module docstring): the same view at twice the
+    size measures about the same (the band is twice as wide in pixels, over twice the edge length
+    in an image four times larger)."""
+    from spacedg.render.motion_error import edge_parallax_contrast
+    from spacedg.render.settings import RasterSettings
+
+    g = textured_wall()
+    small = camera(80, 60, focal=70.0)
     sideways = MotionBlur(translation=(0.3, 0.0, 0.0), rotation=(0.0, 0.0, 0.0))
-    parallax = motion_parallax(g, cam, sideways)
-    assert motion_parallax(g, cam, MotionBlur(translation=(0.0, 0.0, 0.0), rotation=(0.0, 0.1, 0.0))) == 0.0
-    assert 70.0 * 0.3 * (1 / 1.6 - 1 / 2.8) < parallax < 70.0 * 0.3 * (1 / 1.5 - 1 / 3.2)  # box 1.5–1.6 m, wall 2.8–3.2 m
-    assert choose_keyframes(44.0, 80) == 1 and choose_keyframes(44.0, 80, 28.7) == math.ceil(math.sqrt(28.7 / PARALLAX_PX)) == 3
-    assert choose_keyframes(5000.0, 80, 5000.0) == MAX_KEYFRAMES == 8 and choose_keyframes(44.0, 2, 28.7) == 2
+    a = edge_parallax_contrast(g, small, sideways, RasterSettings())
+    b = edge_parallax_contrast(g, small.resized(160, 120), sideways, RasterSettings())
+    assert 0.67 < b / a < 1.5, (a, b)
 
 
 def test_keyframe_glue_kernels_equal_their_numpy_forms() -> None:

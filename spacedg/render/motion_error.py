@@ -1,0 +1,141 @@
+"""How many keyframes a motion-blurred view needs: the keyframe warp's error, predicted from a coarse render.
+
+The keyframe warp (:mod:`spacedg.render.motion_warp`) takes what a pixel sees during an interval
+from the keyframe at that pixel. Where neighbouring pixels move alike (a rotation, a smooth
+surface) that is nearly exact; its error lives at depth edges, in a band as wide as the
+interval's parallax difference across the edge, and it is as large as the colour contrast across
+that edge. So the count follows from the view's content, not from its path length alone (the
+previous rule, ``⌈√(P/3.5)⌉`` keyframes for a near-far parallax of P pixels, was fitted on a plant
+close-up, the densest depth edges measured, and gave the built-in rooms 4–5 keyframes where 2
+already met the 40 dB goal).
+
+Feature (:func:`edge_parallax_contrast`): a render of the mid-exposure pose at a quarter of the
+resolution (the CPU backend whatever the job's, so every backend picks the same count; without
+defocus: sharper edges, more keyframes). For each pair of neighbouring coarse pixels, ``c²`` is
+the mean over channels of the squared difference of their sRGB-encoded colour (linear colour
+clipped to [0, 1], the encoding the PSNR is measured on) and ``Δ`` the larger, over the exposure's
+two ends, of how far apart that end's camera sees the first pixel's ray at its own depth and at
+its neighbour's (the alpha-weighted mean depth where nothing covers a pixel, as the warp does), in
+the view's pixels: the parallax across the edge. A turn or a smooth surface gives none (a turn
+moves every depth alike; the warp is exact there), a depth edge the interval's parallax times
+the number of intervals. ``S = mean(c² · Δ)`` over horizontal and vertical pairs: with the
+coarse grid a fixed fraction of the view, ``S`` is proportional to the share of the image that
+lies in error bands, whatever the view's size.
+
+Model (:func:`keyframes_for`): ``PSNR(K) ≈ A − B·10·log₁₀ S + C·10·log₁₀ K`` dB against N = 80
+sub-steps (clip(sRGB) of linear light), least squares over the views with 30–52 dB at K = 1…6
+of the dataset benchmark's 55 motion-blur views of the 4 benchmark rooms and 9 close-ups of the
+plant capture (bench motion, ×0.3/0.5/0.8 of its distance, seeds 1–3): residual std 2.0 dB, worst
+−5.8 dB (``--table`` prints these PSNR; fitted with one doubling pass, the three of
+:data:`~spacedg.render.motion.DOUBLING_PASSES` cost 0.3–0.45 dB on average). The count is the
+smallest K whose prediction reaches :data:`TARGET_DB` = 44 dB, 4 dB above the 40 dB goal, and at
+least one keyframe per :data:`KEYFRAME_PATH_PX` = 128 px of the longest on-screen path (the
+parallax model does not see how far a long interval's path bends).
+
+Measured with ``benchmarks/motion_keyframes.py`` (both rules with the same doubling passes; ms =
+the keyframe render with this count's measurement, fastest of 2): the dataset's 55 views of the 4
+benchmark rooms, 105 keyframes instead of 188, 97.4 ms a view instead of 129.4, worst 43.45 dB
+(the previous rule 46.47); held out (measured once, nothing tuned on them), 54 views of the rooms
+of seed 8181, 117 instead of 172, 126.4 ms instead of 147.9, worst 44.32 dB (45.70), residual
++1.4 ± 1.4 dB. Plant close-ups get as many or more (27 instead of 24 on the 9 fitted ones; 9
+instead of 7 on 4 held-out ones at severity 3), worst 43.08 and 45.39 dB (the previous rule 41.32
+and 43.29). ``benchmarks/render.py --only severity`` (rooms, the plant and two 10k mesh objects,
+every severity and 4 × bench): 42.98–57.5 dB against N = 80, a probe point's smear rippling no
+more than N = 80's own.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from spacedg.render.camera import Camera, exposure_poses
+from spacedg.render.settings import MotionBlur, RasterSettings
+
+if TYPE_CHECKING:
+    from spacedg.render.gaussians import Gaussians
+
+#: Predicted PSNR (dB against N = 80) the keyframe count must reach: 4 dB above the 40 dB goal
+#: (about twice the model's residual std).
+TARGET_DB = 44.0
+#: The model's coefficients (module docstring): ``PSNR ≈ A − B·10·log₁₀ S + C·10·log₁₀ K``.
+MODEL_A, MODEL_B, MODEL_C = 13.749, 1.003, 2.228
+#: Longest on-screen path (pixels) one keyframe interval may cover: a longer interval's parabola
+#: bends away from the true path whatever the scene's edges. A probe point's smear read along its
+#: exact path (``benchmarks/render.py --only severity``, "close" = 4 × the bench motion, 343–405 px
+#: paths on the teapot, the cat and the plant) ripples 96–97 % at one keyframe, 22–28 % at two
+#: (170–200 px an interval; 41.3–47.6 dB against N = 80) and 12–13 % at three (114–135 px;
+#: 44.2–52.7 dB), N = 80's own ripple being 12 %.
+KEYFRAME_PATH_PX = 128.0
+#: The feature's render is this many times coarser than the view, per side.
+COARSE_FACTOR = 4
+
+
+def srgb_encoded(linear: np.ndarray) -> np.ndarray:
+    """The sRGB encoding of linear light clipped to [0, 1] (float64)."""
+    x = np.clip(linear.astype(np.float64), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def edge_parallax_contrast(gaussians: Gaussians, camera: Camera, motion: MotionBlur, settings: RasterSettings) -> float:
+    """``S``, the mean over neighbouring pixel pairs of a coarse render of squared contrast times
+    parallax difference (module docstring); ``inf`` when a displacement is not finite."""
+    from spacedg.render.composite import composite_view
+    from spacedg.render.motion_warp import COVERED_ALPHA, relative_transform
+
+    width, height = max(2, camera.width // COARSE_FACTOR), max(2, camera.height // COARSE_FACTOR)
+    coarse = camera.resized(width, height)
+    images, _ = composite_view(gaussians, coarse, frozenset({"rgb", "depth"}), "cpu", None, settings, None)
+    alpha, depth = images["alpha"].astype(np.float64), images["depth"].astype(np.float64)
+    covered = (images["alpha"] > COVERED_ALPHA) & np.isfinite(depth)
+    fill = float(np.sum(depth[covered] * alpha[covered]) / max(float(alpha[covered].sum()), 1e-30)) if covered.any() else 1.0
+    z = np.where(covered, depth, fill)
+    # coarse pixel centres in the view's pixels, and the surface points there (mid-exposure camera frame)
+    u = (np.arange(width) + 0.5) * (camera.width / width)
+    v = (np.arange(height) + 0.5) * (camera.height / height)
+    x_ray, y_ray = (u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy  # the rays' x/z and y/z
+    delta_h = np.zeros((height, width - 1))
+    delta_v = np.zeros((height - 1, width))
+    with np.errstate(all="ignore"):
+        for pose in exposure_poses(camera, np.array(motion.translation), np.array(motion.rotation), np.array([-0.5, 0.5])):
+            m = relative_transform(camera.cam_to_world, pose)
+            # a pixel's point at its own depth against at its right (lower) neighbour's, seen from this end
+            gap_h = _seen_apart(m, x_ray[None, :-1], y_ray[:, None], z[:, :-1], z[:, 1:], camera.fx, camera.fy)
+            gap_v = _seen_apart(m, x_ray[None, :], y_ray[:-1, None], z[:-1, :], z[1:, :], camera.fx, camera.fy)
+            np.maximum(delta_h, gap_h, out=delta_h)
+            np.maximum(delta_v, gap_v, out=delta_v)
+        encoded = srgb_encoded(images["rgb"])
+        contrast_h = np.mean(np.diff(encoded, axis=1) ** 2, axis=2)
+        contrast_v = np.mean(np.diff(encoded, axis=0) ** 2, axis=2)
+        total = float(np.sum(contrast_h * delta_h) + np.sum(contrast_v * delta_v))
+    value = total / (delta_h.size + delta_v.size)
+    return value if math.isfinite(value) else math.inf
+
+
+def _seen_apart(m: np.ndarray, x_ray: np.ndarray, y_ray: np.ndarray, depth: np.ndarray, other: np.ndarray, fx: float, fy: float) -> np.ndarray:
+    """Pixels between where a camera (:func:`~spacedg.render.motion_warp.relative_transform` ``m`` from
+    the view's frame) sees the points on the rays ``(x_ray, y_ray, 1)`` at ``depth`` and at ``other``."""
+
+    def seen(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x, y = x_ray * z, y_ray * z
+        ze = np.maximum(m[6] * x + m[7] * y + m[8] * z + m[11], 1e-6)
+        return (m[0] * x + m[1] * y + m[2] * z + m[9]) / ze, (m[3] * x + m[4] * y + m[5] * z + m[10]) / ze
+
+    (u0, v0), (u1, v1) = seen(depth), seen(other)
+    return np.hypot(fx * (u0 - u1), fy * (v0 - v1))
+
+
+def keyframes_for(edge_measure: float, path_px: float, max_count: int) -> int:
+    """The keyframe count of a view whose :func:`edge_parallax_contrast` is ``edge_measure`` and whose
+    longest on-screen path over the exposure is ``path_px`` pixels: the smallest count whose
+    predicted PSNR reaches :data:`TARGET_DB`, and at least one per :data:`KEYFRAME_PATH_PX` of the
+    path; within ``[1, max_count]`` (the most when either is not finite)."""
+    if not (edge_measure >= 0.0 and path_px >= 0.0) or math.isinf(edge_measure) or math.isinf(path_px):
+        return max(1, max_count)
+    count = math.ceil(min(path_px / KEYFRAME_PATH_PX, 1e6))
+    if edge_measure > 0.0:
+        exponent = (TARGET_DB - MODEL_A + MODEL_B * 10.0 * math.log10(edge_measure)) / (10.0 * MODEL_C)
+        count = max(count, math.ceil(10.0 ** min(exponent, 6.0) - 1e-9))
+    return int(min(max(count, 1), max(1, max_count)))
