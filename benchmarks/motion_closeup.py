@@ -24,8 +24,7 @@ import numpy as np
 from render import PLANT, WIDTH, HEIGHT, median_depth, plant_scene, psnr, severity_motion  # benchmarks/ is on sys.path
 
 from spacedg.render import render
-from spacedg.render.camera import look_at
-from spacedg.render.camera import Camera
+from spacedg.render.camera import Camera, look_at
 from spacedg.render.gaussians import Gaussians
 from spacedg.render.motion import MotionJob, motion_extent, render_motion_keyframes
 from spacedg.render.settings import MotionBlur
@@ -97,14 +96,15 @@ def main() -> None:
             job = MotionJob(g, camera, motion, frozenset({"rgb"}))
             reference = render(g, camera, motion=MotionBlur(translation, rotation, sub_steps=80), backend="cpu")
             path, _ = motion_extent(g, camera, motion)
-            old = previous_rule(path, motion_parallax(g, camera, motion))
+            parallax = motion_parallax(g, camera, motion)
+            old = previous_rule(path, parallax)
             out = timed({"clean": lambda: render(g, camera, backend="cpu"), "new": lambda: render_motion_keyframes(job),
                          "old": lambda: render_motion_keyframes(job, keyframes=old)}, args.runs)
             clean = out["clean"][0]
             new_db, old_db = psnr(out["new"][1].rgb, reference.rgb), psnr(out["old"][1].rgb, reference.rgb)
             worst = min(worst, new_db)
             costs.append(out["new"][0] / clean)
-            print(f"{name:<12} {seed:>4} {path:>7.0f} {motion_parallax(g, camera, motion):>8.1f} | "
+            print(f"{name:<12} {seed:>4} {path:>7.0f} {parallax:>8.1f} | "
                   f"{int(out['new'][1].stats['keyframes']):>2} {new_db:>6.2f} {out['new'][0] / clean:>7.2f} | "
                   f"{old:>5} {old_db:>6.2f} {out['old'][0] / clean:>7.2f}", flush=True)
     print(f"keyframe rule: worst {worst:.2f} dB vs N = 80, cost x clean median {np.median(costs):.2f}, max {max(costs):.2f}")

@@ -14,7 +14,8 @@ centre); sub-exposure k of K is centred at time ``s_k = (k + ½)/K − ½``.
   :data:`MAX_KEYFRAMES`); each interval's centre pose is rendered once (with depth, on a canvas
   widened by the path so what the camera sweeps in is rendered) and every output pixel
   averages the keyframe along the segment it sees during the interval, sampled every ≤ 1 px
-  (a box-doubling pass for long paths, then a gather every ``PATH_SPACING_PX``; segments over
+  (up to :data:`DOUBLING_PASSES` box-doubling passes for long paths, :func:`doubling_passes`, then a
+  gather every ``PATH_SPACING_PX``; segments over
   empty canvas are skipped). The smear
   is integrated continuously, so there are no stroboscopic copies at any path length; the cost
   is ``K`` canvas renders plus ~1–2 render-equivalents of warping per keyframe on a 165k-Gaussian
@@ -209,7 +210,7 @@ def render_motion_substeps(job: MotionJob, fast: bool | None = None) -> Frame:
     return job.frame(images, t0, {"sub_steps": count, "displacement_px": displacement, "pairs": pairs})
 
 
-#: The keyframe count's bounds (8 renders at most: the issue's budget).
+#: The keyframe count's upper bound (8 renders at most: the issue's budget).
 MAX_KEYFRAMES = 8
 #: Box-doubling passes before the path gather: one per doubling of an interval's longest path past
 #: ``DOUBLING_FROM_PX`` (:func:`doubling_passes`), at most this many. Each halves the samples the
@@ -223,6 +224,12 @@ MAX_KEYFRAMES = 8
 DOUBLING_PASSES = 3
 DOUBLING_FROM_PX = 24.0
 
+#: Largest distance (pixels) between two of the path's samples (the gather walks ``2^-passes``
+#: of each path at this spacing; the passes replicate its samples along the rest). Measured on
+#: the room at bench (K = 3): 1.5 px is ~20 % faster at the same PSNR (45.6 dB), but the streak
+#: of a sub-pixel point then ripples −15/+23 % (1.25 px: −4/+12 %; 1 px: ±2 %).
+PATH_SPACING_PX = 1.0
+
 
 def doubling_passes(longest_px: float) -> int:
     """Box-doubling passes for an interval whose longest path is ``longest_px`` pixels: one per
@@ -230,11 +237,6 @@ def doubling_passes(longest_px: float) -> int:
     if not longest_px > DOUBLING_FROM_PX:
         return 0
     return int(min(DOUBLING_PASSES, 1 + math.floor(math.log2(min(longest_px / DOUBLING_FROM_PX, 2.0**60)))))
-#: Largest distance (pixels) between two of the path's samples (the gather walks ``2^-passes``
-#: of each path at this spacing; the passes replicate its samples along the rest). Measured on
-#: the room at bench (K = 3): 1.5 px is ~20 % faster at the same PSNR (45.6 dB), but the streak
-#: of a sub-pixel point then ripples −15/+23 % (1.25 px: −4/+12 %; 1 px: ±2 %).
-PATH_SPACING_PX = 1.0
 
 
 def render_motion_keyframes(
@@ -255,10 +257,14 @@ def render_motion_keyframes(
     passes_given = passes is not None
     spacing = PATH_SPACING_PX if spacing is None else spacing
     displacement, _ = motion_extent(job.gaussians, camera, motion)
-    measured: dict[str, float] = {}  # the edge measure, when the count is chosen here
+    measured: dict[str, float] = {}  # the edge measure, when the count is chosen here and it can matter
     if not keyframes:
-        measured["edge_measure"] = motion_error.edge_parallax_contrast(job.gaussians, camera, motion, job.settings)
-    count = keyframes or motion_error.keyframes_for(measured["edge_measure"], displacement, min(MAX_KEYFRAMES, motion.sub_steps))
+        most = min(MAX_KEYFRAMES, motion.sub_steps)
+        measure = 0.0  # without translation no depth edge moves apart (a turn moves every depth alike)
+        if any(motion.translation) and motion_error.keyframes_for(0.0, displacement, most) < most:
+            measure = measured["edge_measure"] = motion_error.edge_parallax_contrast(job.gaussians, camera, motion, job.settings)
+        keyframes = motion_error.keyframes_for(measure, displacement, most)
+    count = keyframes
     margin = int(min(math.ceil(0.6 * displacement / count) + 2, max(camera.width, camera.height) // 2))
     canvas = camera.widened(margin)
     want_depth = "depth" in wanted
@@ -273,8 +279,7 @@ def render_motion_keyframes(
         images, stats = job.composite(canvas.with_pose(pose), frozenset({"rgb", "depth"}))
         pairs += stats["pairs"]
         alpha, depth = images["alpha"], images["depth"]
-        # the fill depth of uncovered pixels: alpha-weighted mean depth (numpy's float32 sums)
-        fill = float(np.sum(depth * alpha) / max(float(alpha.sum()), 1e-30)) if (alpha > motion_warp.COVERED_ALPHA).any() else 1.0
+        fill = motion_warp.fill_depth(alpha, depth)
         src = np.empty((canvas.height, canvas.width, channels), np.float32)
         geometry = np.empty((canvas.height, canvas.width), np.float32)
         motion_warp.keyframe_source(images["rgb"], alpha, depth, fill, src, geometry)

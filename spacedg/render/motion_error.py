@@ -16,9 +16,10 @@ the mean over channels of the squared difference of their sRGB-encoded colour (l
 clipped to [0, 1], the encoding the PSNR is measured on) and ``Δ`` the larger, over the exposure's
 two ends, of how far apart that end's camera sees the first pixel's ray at its own depth and at
 its neighbour's (the alpha-weighted mean depth where nothing covers a pixel, as the warp does), in
-the view's pixels: the parallax across the edge. A turn or a smooth surface gives none (a turn
-moves every depth alike; the warp is exact there), a depth edge the interval's parallax times
-the number of intervals. ``S = mean(c² · Δ)`` over horizontal and vertical pairs: with the
+the view's pixels (0 where either point is behind that camera, as the warp has no path there;
+at most the warp's longest walk, twice the view's width plus height): the parallax across the
+edge. A turn gives none (it moves every depth alike; the warp is exact there), a smooth surface
+little, a depth edge the interval's parallax times the number of intervals. ``S = mean(c² · Δ)`` over horizontal and vertical pairs: with the
 coarse grid a fixed fraction of the view, ``S`` is proportional to the share of the image that
 lies in error bands, whatever the view's size.
 
@@ -34,7 +35,8 @@ parallax model does not see how far a long interval's path bends).
 
 Measured with ``benchmarks/motion_keyframes.py`` (both rules with the same doubling passes; ms =
 the keyframe render with this count's measurement, fastest of 2): the dataset's 55 views of the 4
-benchmark rooms, 105 keyframes instead of 188, 97.4 ms a view instead of 129.4, worst 43.45 dB
+benchmark rooms, 105 keyframes instead of 188, 97.4 ms a view instead of 129.4 (another run than
+:data:`~spacedg.render.motion.DOUBLING_PASSES`' 93.0 ms), worst 43.45 dB
 (the previous rule 46.47); held out (measured once, nothing tuned on them), 54 views of the rooms
 of seed 8181, 117 instead of 172, 126.4 ms instead of 147.9, worst 44.32 dB (45.70), residual
 +1.4 ± 1.4 dB. Plant close-ups get as many or more (27 instead of 24 on the 9 fitted ones; 9
@@ -52,10 +54,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from spacedg.render.camera import Camera, exposure_poses
-from spacedg.render.settings import MotionBlur, RasterSettings
+from spacedg.render.colour import linear_to_srgb
 
 if TYPE_CHECKING:
     from spacedg.render.gaussians import Gaussians
+    from spacedg.render.settings import MotionBlur, RasterSettings
 
 #: Predicted PSNR (dB against N = 80) the keyframe count must reach: 4 dB above the 40 dB goal
 #: (about twice the model's residual std).
@@ -73,29 +76,22 @@ KEYFRAME_PATH_PX = 128.0
 COARSE_FACTOR = 4
 
 
-def srgb_encoded(linear: np.ndarray) -> np.ndarray:
-    """The sRGB encoding of linear light clipped to [0, 1] (float64)."""
-    x = np.clip(linear.astype(np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-
-
 def edge_parallax_contrast(gaussians: Gaussians, camera: Camera, motion: MotionBlur, settings: RasterSettings) -> float:
     """``S``, the mean over neighbouring pixel pairs of a coarse render of squared contrast times
     parallax difference (module docstring); ``inf`` when a displacement is not finite."""
     from spacedg.render.composite import composite_view
-    from spacedg.render.motion_warp import COVERED_ALPHA, relative_transform
+    from spacedg.render.motion_warp import COVERED_ALPHA, fill_depth, relative_transform
 
     width, height = max(2, camera.width // COARSE_FACTOR), max(2, camera.height // COARSE_FACTOR)
     coarse = camera.resized(width, height)
     images, _ = composite_view(gaussians, coarse, frozenset({"rgb", "depth"}), "cpu", None, settings, None)
-    alpha, depth = images["alpha"].astype(np.float64), images["depth"].astype(np.float64)
-    covered = (images["alpha"] > COVERED_ALPHA) & np.isfinite(depth)
-    fill = float(np.sum(depth[covered] * alpha[covered]) / max(float(alpha[covered].sum()), 1e-30)) if covered.any() else 1.0
-    z = np.where(covered, depth, fill)
+    alpha, depth = images["alpha"], images["depth"]
+    z = np.where((alpha > COVERED_ALPHA) & np.isfinite(depth), depth.astype(np.float64), fill_depth(alpha, depth))
     # coarse pixel centres in the view's pixels, and the surface points there (mid-exposure camera frame)
     u = (np.arange(width) + 0.5) * (camera.width / width)
     v = (np.arange(height) + 0.5) * (camera.height / height)
     x_ray, y_ray = (u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy  # the rays' x/z and y/z
+    reach = 2.0 * (camera.width + camera.height)  # the warp's longest walk: any longer gap is that long
     delta_h = np.zeros((height, width - 1))
     delta_v = np.zeros((height - 1, width))
     with np.errstate(all="ignore"):
@@ -104,9 +100,9 @@ def edge_parallax_contrast(gaussians: Gaussians, camera: Camera, motion: MotionB
             # a pixel's point at its own depth against at its right (lower) neighbour's, seen from this end
             gap_h = _seen_apart(m, x_ray[None, :-1], y_ray[:, None], z[:, :-1], z[:, 1:], camera.fx, camera.fy)
             gap_v = _seen_apart(m, x_ray[None, :], y_ray[:-1, None], z[:-1, :], z[1:, :], camera.fx, camera.fy)
-            np.maximum(delta_h, gap_h, out=delta_h)
-            np.maximum(delta_v, gap_v, out=delta_v)
-        encoded = srgb_encoded(images["rgb"])
+            np.maximum(delta_h, np.minimum(gap_h, reach), out=delta_h)
+            np.maximum(delta_v, np.minimum(gap_v, reach), out=delta_v)
+        encoded = linear_to_srgb(np.clip(images["rgb"].astype(np.float64), 0.0, 1.0))
         contrast_h = np.mean(np.diff(encoded, axis=1) ** 2, axis=2)
         contrast_v = np.mean(np.diff(encoded, axis=0) ** 2, axis=2)
         total = float(np.sum(contrast_h * delta_h) + np.sum(contrast_v * delta_v))
@@ -116,15 +112,18 @@ def edge_parallax_contrast(gaussians: Gaussians, camera: Camera, motion: MotionB
 
 def _seen_apart(m: np.ndarray, x_ray: np.ndarray, y_ray: np.ndarray, depth: np.ndarray, other: np.ndarray, fx: float, fy: float) -> np.ndarray:
     """Pixels between where a camera (:func:`~spacedg.render.motion_warp.relative_transform` ``m`` from
-    the view's frame) sees the points on the rays ``(x_ray, y_ray, 1)`` at ``depth`` and at ``other``."""
+    the view's frame) sees the points on the rays ``(x_ray, y_ray, 1)`` at ``depth`` and at ``other``;
+    0 where either point is not in front of it (no path there, as the warp's flow field has it)."""
 
-    def seen(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def seen(z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         x, y = x_ray * z, y_ray * z
-        ze = np.maximum(m[6] * x + m[7] * y + m[8] * z + m[11], 1e-6)
-        return (m[0] * x + m[1] * y + m[2] * z + m[9]) / ze, (m[3] * x + m[4] * y + m[5] * z + m[10]) / ze
+        ze = m[6] * x + m[7] * y + m[8] * z + m[11]
+        ahead = ze > 1e-6
+        ze = np.where(ahead, ze, 1.0)
+        return (m[0] * x + m[1] * y + m[2] * z + m[9]) / ze, (m[3] * x + m[4] * y + m[5] * z + m[10]) / ze, ahead
 
-    (u0, v0), (u1, v1) = seen(depth), seen(other)
-    return np.hypot(fx * (u0 - u1), fy * (v0 - v1))
+    (u0, v0, ahead0), (u1, v1, ahead1) = seen(depth), seen(other)
+    return np.where(ahead0 & ahead1, np.hypot(fx * (u0 - u1), fy * (v0 - v1)), 0.0)
 
 
 def keyframes_for(edge_measure: float, path_px: float, max_count: int) -> int:

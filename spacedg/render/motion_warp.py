@@ -41,7 +41,7 @@ from numba.extending import intrinsic
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
-__all__ = ["COVERED_ALPHA", "doubling_pass", "flow_field", "gather", "keyframe_source", "relative_transform", "sanitise_field"]
+__all__ = ["COVERED_ALPHA", "doubling_pass", "fill_depth", "flow_field", "gather", "keyframe_source", "relative_transform", "sanitise_field"]
 
 
 def relative_transform(pose_from: np.ndarray, pose_to: np.ndarray) -> np.ndarray:
@@ -262,6 +262,15 @@ def flow_field(depth, fx, fy, kcx, kcy, from_a, from_b, field):  # pragma: no co
 
 #: Alpha (float32) above which a keyframe pixel's own depth is its flow geometry (below: the fill depth).
 COVERED_ALPHA = np.float32(1e-3)
+
+
+def fill_depth(alpha: np.ndarray, depth: np.ndarray) -> float:
+    """The flow geometry's depth (metres) where a keyframe is uncovered: the alpha-weighted mean depth
+    of ``alpha`` and ``depth`` (float32, numpy's float32 sums), 1.0 when no pixel's alpha exceeds
+    :data:`COVERED_ALPHA`."""
+    if not (alpha > COVERED_ALPHA).any():
+        return 1.0
+    return float(np.sum(depth * alpha) / max(float(alpha.sum()), 1e-30))
 
 
 def keyframe_source(rgb: np.ndarray, alpha: np.ndarray, depth: np.ndarray, fill: float, src: np.ndarray, geometry: np.ndarray) -> None:

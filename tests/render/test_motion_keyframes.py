@@ -232,6 +232,35 @@ def test_one_doubling_pass_per_doubling_of_the_path() -> None:
     assert doubling_passes(1e30) == doubling_passes(math.inf) == DOUBLING_PASSES == 3 and doubling_passes(math.nan) == 0
 
 
+def test_the_edge_measure_stays_finite_and_bounded_on_degenerate_views() -> None:
+    """A 2 × 2 view, an empty scene, a dolly through the wall (surfaces end behind the camera: no
+    path there, as in the warp), a thousand kilometres of motion; and the measure is skipped where it cannot
+    change the count (no translation, or the path alone asks for the most)."""
+    from spacedg.render.motion_error import _seen_apart, edge_parallax_contrast, keyframes_for
+    from spacedg.render.settings import RasterSettings
+
+    settings = RasterSettings()
+    g = textured_wall()
+    cam = camera(80, 60, focal=70.0)
+    forward = np.array([1.0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, -2.0])  # 2 m ahead of the view's camera
+    ahead_of_it = _seen_apart(forward, np.array([0.1]), np.array([0.0]), np.array([2.5]), np.array([3.0]), 70.0, 70.0)
+    behind_it = _seen_apart(forward, np.array([0.1]), np.array([0.0]), np.array([1.0]), np.array([3.0]), 70.0, 70.0)
+    assert ahead_of_it[0] == pytest.approx(70.0 * (0.25 / 0.5 - 0.3 / 1.0)) and behind_it[0] == 0.0
+    dolly = MotionBlur(translation=(0.05, 0.0, 4.0), rotation=(0.0, 0.0, 0.0))
+    through = edge_parallax_contrast(g, cam, dolly, settings)
+    assert math.isfinite(through) and 0.0 < through <= 2.0 * (80 + 60)
+    tiny = edge_parallax_contrast(g, camera(2, 2, focal=2.0), MotionBlur(**MOTION), settings)
+    assert math.isfinite(tiny) and tiny >= 0.0
+    empty = Gaussians(np.zeros((0, 3)), np.zeros((0, 4)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 1, 3)))
+    assert edge_parallax_contrast(empty, cam, MotionBlur(**MOTION), settings) == 0.0
+    wild = edge_parallax_contrast(g, cam, MotionBlur(translation=(1e6, 0.0, 0.0), rotation=(0.0, 0.0, 3.0)), settings)
+    assert math.isfinite(wild) and 0.0 <= wild <= 2.0 * (80 + 60)
+    turn = render_motion_keyframes(MotionJob(g, cam, MotionBlur(translation=(0.0, 0.0, 0.0), rotation=(0.0, 0.2, 0.0), fast=True), frozenset({"rgb"})))
+    assert "edge_measure" not in turn.stats and turn.stats["keyframes"] == keyframes_for(0.0, turn.stats["displacement_px"], 8)
+    far = render_motion_keyframes(MotionJob(g, cam, MotionBlur(translation=(4.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0), sub_steps=2, fast=True), frozenset({"rgb"})))
+    assert far.stats["displacement_px"] > 128.0 and far.stats["keyframes"] == 2 and "edge_measure" not in far.stats
+
+
 def test_the_edge_measure_does_not_depend_on_the_image_size() -> None:
     """``S`` is the share of the image in error bands (module docstring): the same view at twice the
     size measures about the same (the band is twice as wide in pixels, over twice the edge length

@@ -13,7 +13,8 @@ Decisions the paper leaves open:
   ``rng`` — two ``standard_normal(3)`` draws, normalised. So the same parameters give a
   different shake per view of a sample, as two exposures would.
 - ``sub_steps`` is the reference count (the paper's N = 80). The pipeline renders with the
-  renderer's fast path: 1–8 keyframes chosen from the on-screen path and its parallax, each pixel's path
+  renderer's fast path: 1–8 keyframes chosen from the on-screen path and the warp's predicted error
+  (contrast × parallax across depth edges, :mod:`spacedg.render.motion_error`), each pixel's path
   integrated through them (no stroboscopic copies; PSNR against N = 80 and N = 256 per scene
   and severity in ``benchmarks/render.py --only severity``); it records the renders made.
 - ``trans = rot = 0`` is the static render, bit for bit.
