@@ -39,7 +39,8 @@ benchmark rooms, 105 keyframes instead of 188, 97.4 ms a view instead of 129.4 (
 :data:`~spacedg.render.motion.DOUBLING_PASSES`' 93.0 ms), worst 43.45 dB
 (the previous rule 46.47); held out (measured once, nothing tuned on them), 54 views of the rooms
 of seed 8181, 117 instead of 172, 126.4 ms instead of 147.9, worst 44.32 dB (45.70), residual
-+1.4 ± 1.4 dB. Plant close-ups get as many or more (27 instead of 24 on the 9 fitted ones; 9
++1.4 ± 1.4 dB; 48 views of the rooms of seeds 6262 and 5858 (measured once, after the rule was
+final), 108 instead of 189, 125.4 ms instead of 171.0, worst 42.69 dB (45.79). Plant close-ups get as many or more (27 instead of 24 on the 9 fitted ones; 9
 instead of 7 on 4 held-out ones at severity 3), worst 43.08 and 45.39 dB (the previous rule 41.32
 and 43.29). ``benchmarks/render.py --only severity`` (rooms, the plant and two 10k mesh objects,
 every severity and 4 × bench): 42.98–57.5 dB against N = 80, a probe point's smear rippling no
