@@ -12,7 +12,7 @@ Per view: the path D (px), the edge measure S, the new and the previous count, P
 Goal: every view ≥ 40 dB (the model aims at 44 dB)::
 
     .venv/bin/python benchmarks/motion_keyframes.py [--items 32] [--scenes DIR,DIR] [--plant 0.3,0.5,0.8] [--seeds 1,2,3]
-        [--severity bench] [--runs 2] [--table] [--max-passes N]
+        [--severity bench] [--runs 3] [--table] [--max-passes N]
 """
 
 from __future__ import annotations
@@ -71,7 +71,8 @@ def plant_jobs(factors: list[float], seeds: list[int], severity: str) -> list[tu
 
 
 def fastest(fn: Callable[[], T], runs: int) -> tuple[float, T]:
-    """The fastest of ``runs`` calls (seconds) and the last call's result."""
+    """The fastest (seconds) of ``runs − 1`` calls after a warm-up call (NaN for ``runs`` = 1), and the
+    last call's result."""
     best, result = math.inf, fn()
     for _ in range(runs - 1):
         t0 = time.perf_counter()

@@ -10,15 +10,17 @@ centre); sub-exposure k of K is centred at time ``s_k = (k + ½)/K − ½``.
   (:func:`render_motion_keyframes`, kernels in :mod:`spacedg.render.motion_warp`). The
   exposure is cut into ``K`` equal intervals, ``K`` the smallest count whose predicted error meets
   the goal (:mod:`spacedg.render.motion_error`: a quarter-resolution render of the view gives the
-  contrast times the parallax difference across its depth edges, where the warp errs; at most
-  :data:`MAX_KEYFRAMES`); each interval's centre pose is rendered once (with depth, on a canvas
-  widened by the path so what the camera sweeps in is rendered) and every output pixel
+  contrast times the parallax across its depth edges, where the warp errs; skipped without
+  translation or when the path alone asks for the most), at least one per 128 px of the longest
+  on-screen path (:func:`motion_extent`) and at most :data:`MAX_KEYFRAMES`; each interval's
+  centre pose is rendered once (with depth, on a canvas widened by the path so what the camera
+  sweeps in is rendered) and every output pixel
   averages the keyframe along the segment it sees during the interval, sampled every ≤ 1 px
   (up to :data:`DOUBLING_PASSES` box-doubling passes for long paths, :func:`doubling_passes`, then a
   gather every ``PATH_SPACING_PX``; segments over
   empty canvas are skipped). The smear
   is integrated continuously, so there are no stroboscopic copies at any path length; the cost
-  is ``K`` canvas renders plus ~1–2 render-equivalents of warping per keyframe on a 165k-Gaussian
+  is ``K`` canvas renders (and the quarter-resolution one) plus ~1–2 render-equivalents of warping per keyframe on a 165k-Gaussian
   room (more, relative, on cheap scenes: the warp costs per pixel) (``benchmarks/render.py`` prints
   time, PSNR vs N = 80 and N = 256, and a ghosting measure per scene and severity;
   ``benchmarks/motion_keyframes.py`` the counts and PSNR per view of the dataset's rooms). Where the
@@ -217,8 +219,8 @@ MAX_KEYFRAMES = 8
 #: gather takes but reads the whole canvas twice and resamples it once (~1 dB on the plant's fine
 #: texture). Measured (640×480, one thread): 0 → 1 pass 2–8 % faster on rooms and the plant at
 #: bench; with the error model's keyframe counts (longer intervals), at most 3 passes instead of 1
-#: took the dataset's room views 103.4 → 93.0 ms (32 items) and 121.9 → 112.9 ms (held-out rooms of
-#: seed 8181), the worst view 43.45 → 43.45 and 44.47 → 44.32 dB against N = 80 (mean −0.3 to
+#: took the dataset's room views 103.4 → 93.0 ms (32 items, 55 views) and 121.9 → 112.9 ms (held-out
+#: rooms of seed 8181; other runs than :mod:`spacedg.render.motion_error`'s), the worst view 43.45 → 43.45 and 44.47 → 44.32 dB against N = 80 (mean −0.3 to
 #: −0.45 dB); the plant's close-ups (short intervals) unchanged in time, worst 43.10 → 43.08 dB
 #: (``benchmarks/motion_keyframes.py --max-passes 1`` against the default).
 DOUBLING_PASSES = 3
@@ -233,10 +235,9 @@ PATH_SPACING_PX = 1.0
 
 def doubling_passes(longest_px: float) -> int:
     """Box-doubling passes for an interval whose longest path is ``longest_px`` pixels: one per
-    doubling of it past :data:`DOUBLING_FROM_PX`, at most :data:`DOUBLING_PASSES`."""
-    if not longest_px > DOUBLING_FROM_PX:
-        return 0
-    return int(min(DOUBLING_PASSES, 1 + math.floor(math.log2(min(longest_px / DOUBLING_FROM_PX, 2.0**60)))))
+    doubling of it past :data:`DOUBLING_FROM_PX` (24, 48, 96 px: more than each), at most
+    :data:`DOUBLING_PASSES`; none for a NaN path."""
+    return sum(1 for n in range(DOUBLING_PASSES) if longest_px > DOUBLING_FROM_PX * 2**n)
 
 
 def render_motion_keyframes(
@@ -254,17 +255,16 @@ def render_motion_keyframes(
 
     t0 = time.perf_counter()
     camera, motion, wanted = job.camera, job.motion, job.wanted
-    passes_given = passes is not None
     spacing = PATH_SPACING_PX if spacing is None else spacing
     displacement, _ = motion_extent(job.gaussians, camera, motion)
-    measured: dict[str, float] = {}  # the edge measure, when the count is chosen here and it can matter
-    if not keyframes:
+    summary: dict[str, float] = {"displacement_px": displacement}
+    count = keyframes or 0
+    if not count:
         most = min(MAX_KEYFRAMES, motion.sub_steps)
-        measure = 0.0  # without translation no depth edge moves apart (a turn moves every depth alike)
-        if any(motion.translation) and motion_error.keyframes_for(0.0, displacement, most) < most:
-            measure = measured["edge_measure"] = motion_error.edge_parallax_contrast(job.gaussians, camera, motion, job.settings)
-        keyframes = motion_error.keyframes_for(measure, displacement, most)
-    count = keyframes
+        count = motion_error.keyframes_for(0.0, displacement, most)  # the path's own floor
+        if count < most and any(motion.translation):  # without translation no depth edge moves apart
+            summary["edge_measure"] = motion_error.edge_parallax_contrast(job.gaussians, camera, motion, job.settings)
+            count = motion_error.keyframes_for(summary["edge_measure"], displacement, most)
     margin = int(min(math.ceil(0.6 * displacement / count) + 2, max(camera.width, camera.height) // 2))
     canvas = camera.widened(margin)
     want_depth = "depth" in wanted
@@ -291,7 +291,7 @@ def render_motion_keyframes(
         # the camera centre, metres of motion at 1e3) is no path: both bound the gather's work and reads
         reach = np.float32(2 * (canvas.width + canvas.height))
         longest = motion_warp.sanitise_field(field, reach)
-        n_passes = passes if passes_given else doubling_passes(longest)
+        n_passes = doubling_passes(longest) if passes is None else passes
         dst = np.empty_like(src)
         covered_all = bool(alpha.min() > 0.0)  # nothing to skip (a room): no occupancy tables
         for j in range(n_passes):
@@ -308,5 +308,4 @@ def render_motion_keyframes(
     if want_depth:
         images["depth"] = expected_depth(acc[..., 4], acc[..., 3])
     # sub_steps: renders made (the keyframes)
-    stats = {"sub_steps": count, "keyframes": count, "displacement_px": displacement, **measured, "pairs": pairs}
-    return job.frame(images, t0, stats)
+    return job.frame(images, t0, {"sub_steps": count, "keyframes": count, **summary, "pairs": pairs})

@@ -15,11 +15,12 @@ defocus: sharper edges, more keyframes). For each pair of neighbouring coarse pi
 the mean over channels of the squared difference of their sRGB-encoded colour (linear colour
 clipped to [0, 1], the encoding the PSNR is measured on) and ``Δ`` the larger, over the exposure's
 two ends, of how far apart that end's camera sees the first pixel's ray at its own depth and at
-its neighbour's (the alpha-weighted mean depth where nothing covers a pixel, as the warp does), in
+its neighbour's (the alpha-weighted mean depth where nothing covers a pixel, as the warp does, or
+where its depth is not finite), in
 the view's pixels (0 where either point is behind that camera, as the warp has no path there;
-at most the warp's longest walk, twice the view's width plus height): the parallax across the
-edge. A turn gives none (it moves every depth alike; the warp is exact there), a smooth surface
-little, a depth edge the interval's parallax times the number of intervals. ``S = mean(c² · Δ)`` over horizontal and vertical pairs: with the
+at most twice the view's width plus height, about the warp's longest walk): the parallax across
+the edge. A turn gives none (it moves every depth alike; the warp is exact there), a smooth
+surface little, a depth edge half the exposure's parallax (``K/2`` intervals' worth). ``S = mean(c² · Δ)`` over horizontal and vertical pairs: with the
 coarse grid a fixed fraction of the view, ``S`` is proportional to the share of the image that
 lies in error bands, whatever the view's size.
 
@@ -43,8 +44,8 @@ of seed 8181, 117 instead of 172, 126.4 ms instead of 147.9, worst 44.32 dB (45.
 final), 108 instead of 189, 125.4 ms instead of 171.0, worst 42.69 dB (45.79). Plant close-ups get as many or more (27 instead of 24 on the 9 fitted ones; 9
 instead of 7 on 4 held-out ones at severity 3), worst 43.08 and 45.39 dB (the previous rule 41.32
 and 43.29). ``benchmarks/render.py --only severity`` (rooms, the plant and two 10k mesh objects,
-every severity and 4 × bench): 42.98–57.5 dB against N = 80, a probe point's smear rippling no
-more than N = 80's own.
+every severity and 4 × bench): 42.98–57.5 dB against N = 80 and 43.0–57.5 against N = 256, a probe
+point's smear rippling no more than N = 80's own.
 """
 
 from __future__ import annotations
@@ -79,7 +80,7 @@ COARSE_FACTOR = 4
 
 def edge_parallax_contrast(gaussians: Gaussians, camera: Camera, motion: MotionBlur, settings: RasterSettings) -> float:
     """``S``, the mean over neighbouring pixel pairs of a coarse render of squared contrast times
-    parallax difference (module docstring); ``inf`` when a displacement is not finite."""
+    parallax difference (module docstring); ``inf`` when a gap or a colour is NaN."""
     from spacedg.render.composite import composite_view
     from spacedg.render.motion_warp import COVERED_ALPHA, fill_depth, relative_transform
 
@@ -92,7 +93,7 @@ def edge_parallax_contrast(gaussians: Gaussians, camera: Camera, motion: MotionB
     u = (np.arange(width) + 0.5) * (camera.width / width)
     v = (np.arange(height) + 0.5) * (camera.height / height)
     x_ray, y_ray = (u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy  # the rays' x/z and y/z
-    reach = 2.0 * (camera.width + camera.height)  # the warp's longest walk: any longer gap is that long
+    reach = 2.0 * (camera.width + camera.height)  # about the warp's longest walk: any longer gap is that long
     delta_h = np.zeros((height, width - 1))
     delta_v = np.zeros((height - 1, width))
     with np.errstate(all="ignore"):

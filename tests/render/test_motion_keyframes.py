@@ -220,7 +220,11 @@ def test_keyframe_count_follows_contrast_across_moving_depth_edges() -> None:
     assert keyframes_for(0.0, math.nan, 8) == keyframes_for(0.0, math.inf, 8) == 8
     assert keyframes_for(1e-2, 3.5 * KEYFRAME_PATH_PX, 8) == max(4, keyframes_for(1e-2, 0.0, 8))
     frame = render_motion_keyframes(MotionJob(g, cam, MotionBlur(**MOTION, fast=True), frozenset({"rgb"})))
+    assert frame.stats["edge_measure"] == edge_parallax_contrast(g, cam, MotionBlur(**MOTION, fast=True), settings)
     assert frame.stats["keyframes"] == keyframes_for(frame.stats["edge_measure"], frame.stats["displacement_px"], 8)
+    wide = MotionBlur(translation=(1.5, 0.0, 0.0), rotation=(0.0, 0.0, 0.0), fast=True)  # the edges ask for more than the path
+    frame = render_motion_keyframes(MotionJob(g, cam, wide, frozenset({"rgb"})))
+    assert frame.stats["keyframes"] > keyframes_for(0.0, frame.stats["displacement_px"], 8)
 
 
 def test_one_doubling_pass_per_doubling_of_the_path() -> None:
@@ -228,7 +232,8 @@ def test_one_doubling_pass_per_doubling_of_the_path() -> None:
     doubling of the interval's longest path, at most ``DOUBLING_PASSES``; none for a NaN path."""
     from spacedg.render.motion import DOUBLING_FROM_PX, DOUBLING_PASSES, doubling_passes
 
-    assert [doubling_passes(DOUBLING_FROM_PX * f) for f in (0.0, 0.5, 1.0, 1.01, 1.99, 2.01, 3.9, 4.01)] == [0, 0, 0, 1, 1, 2, 2, 3]
+    factors = (0.0, 0.5, 1.0, 1.01, 1.99, 2.0, 2.01, 3.9, 4.0, 4.01)
+    assert [doubling_passes(DOUBLING_FROM_PX * f) for f in factors] == [0, 0, 0, 1, 1, 1, 2, 2, 2, 3]
     assert doubling_passes(1e30) == doubling_passes(math.inf) == DOUBLING_PASSES == 3 and doubling_passes(math.nan) == 0
 
 
@@ -249,12 +254,13 @@ def test_the_edge_measure_stays_finite_and_bounded_on_degenerate_views() -> None
     dolly = MotionBlur(translation=(0.05, 0.0, 4.0), rotation=(0.0, 0.0, 0.0))
     through = edge_parallax_contrast(g, cam, dolly, settings)
     assert math.isfinite(through) and 0.0 < through <= 2.0 * (80 + 60)
+    assert keyframes_for(through, 0.0, 8) < 8  # gaps of 5e7 px before points behind the camera had no path
     tiny = edge_parallax_contrast(g, camera(2, 2, focal=2.0), MotionBlur(**MOTION), settings)
     assert math.isfinite(tiny) and tiny >= 0.0
     empty = Gaussians(np.zeros((0, 3)), np.zeros((0, 4)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 1, 3)))
     assert edge_parallax_contrast(empty, cam, MotionBlur(**MOTION), settings) == 0.0
     wild = edge_parallax_contrast(g, cam, MotionBlur(translation=(1e6, 0.0, 0.0), rotation=(0.0, 0.0, 3.0)), settings)
-    assert math.isfinite(wild) and 0.0 <= wild <= 2.0 * (80 + 60)
+    assert math.isfinite(wild) and 0.0 < wild <= 2.0 * (80 + 60)
     turn = render_motion_keyframes(MotionJob(g, cam, MotionBlur(translation=(0.0, 0.0, 0.0), rotation=(0.0, 0.2, 0.0), fast=True), frozenset({"rgb"})))
     assert "edge_measure" not in turn.stats and turn.stats["keyframes"] == keyframes_for(0.0, turn.stats["displacement_px"], 8)
     far = render_motion_keyframes(MotionJob(g, cam, MotionBlur(translation=(4.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0), sub_steps=2, fast=True), frozenset({"rgb"})))
@@ -277,8 +283,8 @@ def test_the_edge_measure_does_not_depend_on_the_image_size() -> None:
 
 
 def test_keyframe_glue_kernels_equal_their_numpy_forms() -> None:
-    """:func:`~spacedg.render.motion_warp.keyframe_source` and :func:`~spacedg.render.motion_warp.sanitise_field`
-    give the bytes of the numpy steps they replaced: alpha right at the float32 threshold, NaN,
+    """:func:`~spacedg.render.motion_warp.keyframe_source`, :func:`~spacedg.render.motion_warp.fill_depth` and
+    :func:`~spacedg.render.motion_warp.sanitise_field` give the bytes of the numpy steps they replaced: alpha right at the float32 threshold, NaN,
     ±inf and values beyond the reach in the field, 4 and 5 channels, a strided input."""
     from spacedg.render import motion_warp
 
@@ -293,6 +299,7 @@ def test_keyframe_glue_kernels_equal_their_numpy_forms() -> None:
     for channels in (4, 5):
         for image in (rgb, np.ascontiguousarray(rgb[:, ::-1])[:, ::-1]):  # contiguous, then a reversed (strided) view
             fill = float(np.sum(depth * alpha) / max(float(alpha.sum()), 1e-30))
+            assert motion_warp.fill_depth(alpha, depth) == fill and motion_warp.fill_depth(np.zeros_like(alpha), depth) == 1.0
             want = np.empty((h, w, channels), np.float32)
             want[..., :3] = image
             want[..., 3] = alpha
