@@ -263,7 +263,9 @@ def render_motion_keyframes(
         most = min(MAX_KEYFRAMES, motion.sub_steps)
         count = motion_error.keyframes_for(0.0, displacement, most)  # the path's own floor
         if count < most and any(motion.translation):  # without translation no depth edge moves apart
-            summary["edge_measure"] = motion_error.edge_parallax_contrast(job.gaussians, camera, motion, job.settings)
+            summary["edge_measure"] = motion_error.edge_parallax_contrast(
+                job.gaussians, camera, motion, job.settings, job.backend, job.device
+            )
             count = motion_error.keyframes_for(summary["edge_measure"], displacement, most)
     margin = int(min(math.ceil(0.6 * displacement / count) + 2, max(camera.width, camera.height) // 2))
     canvas = camera.widened(margin)

@@ -10,8 +10,9 @@ close-up, the densest depth edges measured, and gave the built-in rooms 4–5 ke
 already met the 40 dB goal).
 
 Feature (:func:`edge_parallax_contrast`): a render of the mid-exposure pose at a quarter of the
-resolution (the CPU backend whatever the job's, so every backend picks the same count; without
-defocus: sharper edges, more keyframes). For each pair of neighbouring coarse pixels, ``c²`` is
+resolution, on the job's backend (on a GPU it costs a device render; the backends' renders agree
+to float rounding, so they pick the same count unless ``S`` falls within rounding of a threshold),
+without defocus (sharper edges, more keyframes). For each pair of neighbouring coarse pixels, ``c²`` is
 the mean over channels of the squared difference of their sRGB-encoded colour (linear colour
 clipped to [0, 1], the encoding the PSNR is measured on) and ``Δ`` the larger, over the exposure's
 two ends, of how far apart that end's camera sees the first pixel's ray at its own depth and at
@@ -59,6 +60,8 @@ from spacedg.render.camera import Camera, exposure_poses
 from spacedg.render.colour import linear_to_srgb
 
 if TYPE_CHECKING:
+    import torch
+
     from spacedg.render.gaussians import Gaussians
     from spacedg.render.settings import MotionBlur, RasterSettings
 
@@ -78,15 +81,18 @@ KEYFRAME_PATH_PX = 128.0
 COARSE_FACTOR = 4
 
 
-def edge_parallax_contrast(gaussians: Gaussians, camera: Camera, motion: MotionBlur, settings: RasterSettings) -> float:
+def edge_parallax_contrast(
+    gaussians: Gaussians, camera: Camera, motion: MotionBlur, settings: RasterSettings, backend: str = "cpu", device: torch.device | None = None,
+) -> float:
     """``S``, the mean over neighbouring pixel pairs of a coarse render of squared contrast times
-    parallax difference (module docstring); ``inf`` when a gap or a colour is NaN."""
+    parallax difference (module docstring); ``inf`` when a gap or a colour is NaN. The coarse render
+    runs on ``backend`` (``"cpu"`` or ``"torch"``) and ``device``, as :func:`~spacedg.render.composite.composite_view`."""
     from spacedg.render.composite import composite_view
     from spacedg.render.motion_warp import COVERED_ALPHA, fill_depth, relative_transform
 
     width, height = max(2, camera.width // COARSE_FACTOR), max(2, camera.height // COARSE_FACTOR)
     coarse = camera.resized(width, height)
-    images, _ = composite_view(gaussians, coarse, frozenset({"rgb", "depth"}), "cpu", None, settings, None)
+    images, _ = composite_view(gaussians, coarse, frozenset({"rgb", "depth"}), backend, device, settings, None)
     alpha, depth = images["alpha"], images["depth"]
     z = np.where((alpha > COVERED_ALPHA) & np.isfinite(depth), depth.astype(np.float64), fill_depth(alpha, depth))
     # coarse pixel centres in the view's pixels, and the surface points there (mid-exposure camera frame)

@@ -267,6 +267,23 @@ def test_the_edge_measure_stays_finite_and_bounded_on_degenerate_views() -> None
     assert far.stats["displacement_px"] > 128.0 and far.stats["keyframes"] == 2 and "edge_measure" not in far.stats
 
 
+def test_the_edge_measure_on_the_torch_backend_is_the_cpu_one() -> None:
+    """The coarse render runs on the job's backend: torch's measure equals the compiled CPU one to
+    float rounding, and both pick the same count."""
+    import torch
+
+    from spacedg.render.motion_error import edge_parallax_contrast, keyframes_for
+    from spacedg.render.settings import RasterSettings
+
+    g = textured_wall()
+    cam = camera(80, 60, focal=70.0)
+    for motion in (MotionBlur(**MOTION), MotionBlur(translation=(0.6, 0.0, 0.0), rotation=(0.0, 0.0, 0.0))):
+        on_cpu = edge_parallax_contrast(g, cam, motion, RasterSettings())
+        on_torch = edge_parallax_contrast(g, cam, motion, RasterSettings(), "torch", torch.device("cpu"))
+        assert on_torch == pytest.approx(on_cpu, rel=1e-4)
+        assert keyframes_for(on_torch, 20.0, 8) == keyframes_for(on_cpu, 20.0, 8)
+
+
 def test_the_edge_measure_does_not_depend_on_the_image_size() -> None:
     """``S`` is the share of the image in error bands (module docstring): the same view at twice the
     size measures about the same (the band is twice as wide in pixels, over twice the edge length
