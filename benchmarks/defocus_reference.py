@@ -16,7 +16,8 @@ an object on an empty background (the shared ``cube_10k``, filling ~40 % of the 
 close-up of the plant (camera at 45 % of its distance). Severities use the plugin's mid-range
 aperture scaled to the image as ``min(W, H) / 1168`` (the ScanNet++ DSLR frame, 1752 × 1168, is the
 reference size) and the low end of the focus range (1 m at the 2.5 m reference depth: 0.4 × the
-view's median depth; points nearer than focus/4, where the model clamps r, are then rare).
+view's median depth; points nearer than focus/4, where the model clamps r, are then rare);
+``--focus high`` the far end, ``--focus low,high`` both.
 
     .venv/bin/python benchmarks/defocus_reference.py [--sizes 320x180,640x360] [--samples 96] [--backends cpu,torch] [--focus low,high]
 """
@@ -24,6 +25,7 @@ view's median depth; points nearer than focus/4, where the model clamps r, are t
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 import time
 from pathlib import Path
@@ -86,16 +88,19 @@ def main() -> None:
     from spacedg.plugins.specs import REFERENCE_DEPTH_M
 
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
+    focuses = args.focus.split(",")
+    if not set(focuses) <= {"low", "high"}:
+        raise SystemExit(f"--focus: expected low, high or low,high; got {args.focus!r}")
     print(f"thin-lens reference: {args.samples} lens points; light = mean radiance / clean; PSNR vs reference (sRGB); cost = time / clean")
     print(f"{'scene':<9} {'sev':<5} {'focus':<5} {'size':>8} {'aper px':>7} {'backend':<6} | {'light':>6} {'ref light':>9} | {'PSNR':>6} {'conv':>6} | {'cost':>5}")
     for name, g, view in scenes():
         depth = median_depth(g, view)
         for width, height in sizes:
             cam = view.fitted(width, height)
-            for severity, focus in ((s, f) for s in args.severities.split(",") for f in args.focus.split(",")):
+            for severity, focus in itertools.product(args.severities.split(","), focuses):
                 preset = SPEC.presets[severity]
                 aperture = 0.5 * (preset["aperture"].low + preset["aperture"].high) * min(cam.width, cam.height) / REFERENCE_SHORT_SIDE
-                focus_depth = preset["depth"].low if focus == "low" else preset["depth"].high
+                focus_depth = getattr(preset["depth"], focus)
                 defocus = Defocus(aperture, focus_depth * depth / REFERENCE_DEPTH_M)
                 half = args.samples // 2
                 ref_a = thin_lens_render(g, cam, defocus, samples=half, seed=0)

@@ -33,6 +33,18 @@ from spacedg.render.gaussians import quat_from_matrix
 _SOURCE = "Camera"
 
 
+def frustum_limits(fx: float, fy: float, cx: float, cy: float, width: int, height: int, reach: float) -> tuple[float, float, float, float]:
+    """``(lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos)``: the pinhole Jacobian's clamp of ``x/z, y/z`` (the
+    projectors', compiled and torch), the view widened by 0.3·tan(fov/2) (gsplat) and by ``reach`` pixels
+    (how far a blurred footprint reaches in). Plain float arithmetic: compiled as it is for numba."""
+    return (
+        (cx + reach) / fx + 0.3 * (0.5 * width / fx),
+        (width - cx + reach) / fx + 0.3 * (0.5 * width / fx),
+        (cy + reach) / fy + 0.3 * (0.5 * height / fy),
+        (height - cy + reach) / fy + 0.3 * (0.5 * height / fy),
+    )
+
+
 def equidistant_theta_d(theta: Any, k1: float, k2: float, k3: float, k4: float) -> Any:
     """``θ_d(θ) = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)``: the fisheye lens polynomial, once, for
     floats, numpy arrays and torch tensors alike (:class:`FisheyeLens`, the torch projection) and

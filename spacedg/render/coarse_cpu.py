@@ -56,6 +56,15 @@ def coarse_projection(packed, rects, factor, tiles_x, tiles_y):  # pragma: no co
     return out, out_rects
 
 
+@numba.njit(cache=True, inline="always")
+def bilinear_mix(top_left, bottom_left, top_right, bottom_right, vy, wy, vx, wx):
+    """The bilinear mix of four float32 values, rows first: ``(top·vy + bottom·wy)`` per column, then
+    ``left·vx + right·wx`` (the one order of :func:`bilinear` and the sampled tiles' upsampling)."""
+    left = top_left * vy + bottom_left * wy
+    right = top_right * vy + bottom_right * wy
+    return left * vx + right * wx
+
+
 @numba.njit(cache=True)
 def bilinear(image, y0, y1, ty, x0, x1, tx):  # pragma: no cover - compiled
     """(len(y0), len(x0), C) float32: ``image`` (h, w, C) float32 sampled bilinearly, rows first: output
@@ -70,7 +79,5 @@ def bilinear(image, y0, y1, ty, x0, x1, tx):  # pragma: no cover - compiled
             c, d, wx = x0[j], x1[j], tx[j]
             vx = one - wx
             for k in range(channels):
-                left = image[a, c, k] * vy + image[b, c, k] * wy
-                right = image[a, d, k] * vy + image[b, d, k] * wy
-                out[i, j, k] = left * vx + right * wx
+                out[i, j, k] = bilinear_mix(image[a, c, k], image[b, c, k], image[a, d, k], image[b, d, k], vy, wy, vx, wx)
     return out

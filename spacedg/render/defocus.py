@@ -154,7 +154,8 @@ def coarse_view(packed: np.ndarray, rects: np.ndarray, width: int, height: int, 
 
 
 def _bilinear_axis(n_out: int, n_in: int, factor: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Indices ``i0, i1`` and weight ``t`` of the coarse samples around each fine pixel centre (edge-clamped)."""
+    """Indices ``i0, i1`` and weight ``t`` of the coarse samples around each fine pixel centre (edge-clamped;
+    not OpenCV's edge rule of :func:`spacedg.render.defocus_flux.linear_taps`, which gives other bits there)."""
     x = (np.arange(n_out) + 0.5) / factor - 0.5
     i0 = np.floor(x).astype(np.int64)
     t = (x - i0).astype(np.float32)

@@ -139,7 +139,9 @@ def linear_taps(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray, np.ndarr
     """OpenCV's ``INTER_LINEAR`` taps along one axis resized from ``n_in`` to ``n_out = n_in`` or
     ``2·n_in`` samples (the only factors checked against OpenCV; others place the taps slightly
     differently and are refused): ``(i0, i1, w0, w1)``, output ``k`` = ``src[i0]·w0 + src[i1]·w1``
-    (float32 weights; source position ``(k + ½)·n_in/n_out − ½``; past either edge the edge sample with weight 1)."""
+    (float32 weights; source position ``(k + ½)·n_in/n_out − ½``; past either edge the edge sample with weight 1).
+    Not :func:`spacedg.render.defocus._bilinear_axis`, which clamps the indices and keeps the fraction at
+    the edges: the two give other bits there."""
     if n_out not in (n_in, 2 * n_in):
         raise ValueError(f"linear_taps: only the factors 1 and 2 are OpenCV's, got {n_in} → {n_out} samples")
     position = ((np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5).astype(np.float32)

@@ -56,6 +56,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from spacedg.render import motion_error
 from spacedg.render.camera import Camera, exposure_poses
 from spacedg.render.composite import composite_view, frame_from_images
 from spacedg.render.frame import Frame, expected_depth
@@ -220,8 +221,8 @@ MAX_KEYFRAMES = 8
 #: texture). Measured (640×480, one thread): 0 → 1 pass 2–8 % faster on rooms and the plant at
 #: bench; with the error model's keyframe counts (longer intervals), at most 3 passes instead of 1
 #: took the dataset's room views 103.4 → 93.0 ms (32 items, 55 views) and 121.9 → 112.9 ms (held-out
-#: rooms of seed 8181; other runs than :mod:`spacedg.render.motion_error`'s), the worst view 43.45 → 43.45 and 44.47 → 44.32 dB against N = 80 (mean −0.3 to
-#: −0.45 dB); the plant's close-ups (short intervals) unchanged in time, worst 43.10 → 43.08 dB
+#: rooms of seed 8181; other runs than :mod:`spacedg.render.motion_error`'s), the worst view
+#: 43.45 → 43.45 and 44.47 → 44.32 dB against N = 80 (mean −0.3 to −0.45 dB); the plant's close-ups (short intervals) unchanged in time, worst 43.10 → 43.08 dB
 #: (``benchmarks/motion_keyframes.py --max-passes 1`` against the default).
 DOUBLING_PASSES = 3
 DOUBLING_FROM_PX = 24.0
@@ -251,7 +252,7 @@ def render_motion_keyframes(
     :data:`PATH_SPACING_PX` (for benchmarks and tests). Pinhole
     cameras only. Deterministic: no random numbers, every kernel writes each element in one order.
     """
-    from spacedg.render import motion_error, motion_warp
+    from spacedg.render import motion_warp
 
     t0 = time.perf_counter()
     camera, motion, wanted = job.camera, job.motion, job.wanted

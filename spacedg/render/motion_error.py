@@ -12,8 +12,8 @@ already met the 40 dB goal).
 Feature (:func:`edge_parallax_contrast`): a render of the mid-exposure pose at a quarter of the
 resolution, on the job's backend (on a GPU it costs a device render; the backends' renders agree
 to float rounding, so they pick the same count unless ``S`` falls within rounding of a threshold),
-without defocus (sharper edges, more keyframes). For each pair of neighbouring coarse pixels, ``c²`` is
-the mean over channels of the squared difference of their sRGB-encoded colour (linear colour
+without defocus (sharper edges, more keyframes). For each pair of neighbouring coarse pixels,
+``c²`` is the mean over channels of the squared difference of their sRGB-encoded colour (linear colour
 clipped to [0, 1], the encoding the PSNR is measured on) and ``Δ`` the larger, over the exposure's
 two ends, of how far apart that end's camera sees the first pixel's ray at its own depth and at
 its neighbour's (the alpha-weighted mean depth where nothing covers a pixel, as the warp does, or
@@ -21,8 +21,8 @@ where its depth is not finite), in
 the view's pixels (0 where either point is behind that camera, as the warp has no path there;
 at most twice the view's width plus height, about the warp's longest walk): the parallax across
 the edge. A turn gives none (it moves every depth alike; the warp is exact there), a smooth
-surface little, a depth edge half the exposure's parallax (``K/2`` intervals' worth). ``S = mean(c² · Δ)`` over horizontal and vertical pairs: with the
-coarse grid a fixed fraction of the view, ``S`` is proportional to the share of the image that
+surface little, a depth edge half the exposure's parallax (``K/2`` intervals' worth).
+``S = mean(c² · Δ)`` over horizontal and vertical pairs: with the coarse grid a fixed fraction of the view, ``S`` is proportional to the share of the image that
 lies in error bands, whatever the view's size.
 
 Model (:func:`keyframes_for`): ``PSNR(K) ≈ A − B·10·log₁₀ S + C·10·log₁₀ K`` dB against N = 80
@@ -42,8 +42,8 @@ benchmark rooms, 105 keyframes instead of 188, 97.4 ms a view instead of 129.4 (
 (the previous rule 46.47); held out (measured once, nothing tuned on them), 54 views of the rooms
 of seed 8181, 117 instead of 172, 126.4 ms instead of 147.9, worst 44.32 dB (45.70), residual
 +1.4 ± 1.4 dB; 48 views of the rooms of seeds 6262 and 5858 (measured once, after the rule was
-final), 108 instead of 189, 125.4 ms instead of 171.0, worst 42.69 dB (45.79). Plant close-ups get as many or more (27 instead of 24 on the 9 fitted ones; 9
-instead of 7 on 4 held-out ones at severity 3), worst 43.08 and 45.39 dB (the previous rule 41.32
+final), 108 instead of 189, 125.4 ms instead of 171.0, worst 42.69 dB (45.79). Plant close-ups
+get as many or more (27 instead of 24 on the 9 fitted ones; 9 instead of 7 on 4 held-out ones at severity 3), worst 43.08 and 45.39 dB (the previous rule 41.32
 and 43.29). ``benchmarks/render.py --only severity`` (rooms, the plant and two 10k mesh objects,
 every severity and 4 × bench): 42.98–57.5 dB against N = 80 and 43.0–57.5 against N = 256, a probe
 point's smear rippling no more than N = 80's own.
@@ -105,9 +105,10 @@ def edge_parallax_contrast(
     with np.errstate(all="ignore"):
         for pose in exposure_poses(camera, np.array(motion.translation), np.array(motion.rotation), np.array([-0.5, 0.5])):
             m = relative_transform(camera.cam_to_world, pose)
-            # a pixel's point at its own depth against at its right (lower) neighbour's, seen from this end
-            gap_h = _seen_apart(m, x_ray[None, :-1], y_ray[:, None], z[:, :-1], z[:, 1:], camera.fx, camera.fy)
-            gap_v = _seen_apart(m, x_ray[None, :], y_ray[:-1, None], z[:-1, :], z[1:, :], camera.fx, camera.fy)
+            # each pixel's point at its own depth, against at its right (lower) neighbour's, seen from this end
+            own_u, own_v, own_ahead = _seen(m, x_ray[None, :], y_ray[:, None], z)
+            gap_h = _apart(own_u[:, :-1], own_v[:, :-1], own_ahead[:, :-1], _seen(m, x_ray[None, :-1], y_ray[:, None], z[:, 1:]), camera.fx, camera.fy)
+            gap_v = _apart(own_u[:-1], own_v[:-1], own_ahead[:-1], _seen(m, x_ray[None, :], y_ray[:-1, None], z[1:]), camera.fx, camera.fy)
             np.maximum(delta_h, np.minimum(gap_h, reach), out=delta_h)
             np.maximum(delta_v, np.minimum(gap_v, reach), out=delta_v)
         encoded = linear_to_srgb(np.clip(images["rgb"].astype(np.float64), 0.0, 1.0))
@@ -118,20 +119,22 @@ def edge_parallax_contrast(
     return value if math.isfinite(value) else math.inf
 
 
-def _seen_apart(m: np.ndarray, x_ray: np.ndarray, y_ray: np.ndarray, depth: np.ndarray, other: np.ndarray, fx: float, fy: float) -> np.ndarray:
-    """Pixels between where a camera (:func:`~spacedg.render.motion_warp.relative_transform` ``m`` from
-    the view's frame) sees the points on the rays ``(x_ray, y_ray, 1)`` at ``depth`` and at ``other``;
-    0 where either point is not in front of it (no path there, as the warp's flow field has it)."""
+def _seen(m: np.ndarray, x_ray: np.ndarray, y_ray: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(x/z, y/z, ahead)`` of the points on the rays ``(x_ray, y_ray, 1)`` at ``depth`` in the frame of a
+    camera (:func:`~spacedg.render.motion_warp.relative_transform` ``m`` from the view's frame);
+    ``ahead`` false where a point is not in front of it (no path there, as the warp's flow field has it)."""
+    x, y = x_ray * depth, y_ray * depth
+    ze = m[6] * x + m[7] * y + m[8] * depth + m[11]
+    ahead = ze > 1e-6
+    ze = np.where(ahead, ze, 1.0)
+    return (m[0] * x + m[1] * y + m[2] * depth + m[9]) / ze, (m[3] * x + m[4] * y + m[5] * depth + m[10]) / ze, ahead
 
-    def seen(z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        x, y = x_ray * z, y_ray * z
-        ze = m[6] * x + m[7] * y + m[8] * z + m[11]
-        ahead = ze > 1e-6
-        ze = np.where(ahead, ze, 1.0)
-        return (m[0] * x + m[1] * y + m[2] * z + m[9]) / ze, (m[3] * x + m[4] * y + m[5] * z + m[10]) / ze, ahead
 
-    (u0, v0, ahead0), (u1, v1, ahead1) = seen(depth), seen(other)
-    return np.where(ahead0 & ahead1, np.hypot(fx * (u0 - u1), fy * (v0 - v1)), 0.0)
+def _apart(u: np.ndarray, v: np.ndarray, ahead: np.ndarray, other: tuple[np.ndarray, np.ndarray, np.ndarray], fx: float, fy: float) -> np.ndarray:
+    """Pixels (focal lengths ``fx``, ``fy``) between two points :func:`_seen` by one camera, 0 where either
+    is not in front of it."""
+    other_u, other_v, other_ahead = other
+    return np.where(ahead & other_ahead, np.hypot(fx * (u - other_u), fy * (v - other_v)), 0.0)
 
 
 def keyframes_for(edge_measure: float, path_px: float, max_count: int) -> int:
@@ -141,8 +144,8 @@ def keyframes_for(edge_measure: float, path_px: float, max_count: int) -> int:
     path; within ``[1, max_count]`` (the most when either is not finite)."""
     if not (edge_measure >= 0.0 and path_px >= 0.0) or math.isinf(edge_measure) or math.isinf(path_px):
         return max(1, max_count)
-    count = math.ceil(min(path_px / KEYFRAME_PATH_PX, 1e6))
-    if edge_measure > 0.0:
+    count = math.ceil(path_px / KEYFRAME_PATH_PX)
+    if edge_measure > 0.0:  # log₁₀ of a finite measure is within ±324: 10^exponent stays finite
         exponent = (TARGET_DB - MODEL_A + MODEL_B * 10.0 * math.log10(edge_measure)) / (10.0 * MODEL_C)
-        count = max(count, math.ceil(10.0 ** min(exponent, 6.0) - 1e-9))
+        count = max(count, math.ceil(10.0**exponent - 1e-9))
     return int(min(max(count, 1), max(1, max_count)))

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 import numba
 import numpy as np
 
-from spacedg.render.camera import equidistant_theta_d, equidistant_theta_d_slope
+from spacedg.render.camera import equidistant_theta_d, equidistant_theta_d_slope, frustum_limits
 from spacedg.render.gaussians import _SH_C1, _SH_C2, _SH_C3, SH_C0
 from spacedg.render.settings import DEFOCUS_MIN_COC, FOOTPRINT_CAP, footprint_dilation
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
@@ -89,6 +89,8 @@ def _sh_channel(sh, i, ch, degree, x, y, z):
 
 
 _theta_d = numba.njit(cache=True, inline="always")(equidistant_theta_d)
+#: the Jacobian's frustum (:func:`~spacedg.render.camera.frustum_limits`), widened by ``reach`` px
+_frustum = numba.njit(cache=True, inline="always")(frustum_limits)
 _theta_d_slope = numba.njit(cache=True, inline="always")(equidistant_theta_d_slope)
 
 
@@ -143,18 +145,6 @@ def _surely_outside(
     rad_x = np.ceil(3.33 * math.sqrt(jx * jx * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
     rad_y = np.ceil(3.33 * math.sqrt(jy * jy * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
     return u + rad_x <= 0 or u - rad_x >= width or v + rad_y <= 0 or v - rad_y >= height
-
-
-@numba.njit(cache=True, inline="always")
-def _frustum(fx, fy, cx, cy, width, height, reach):
-    """``(lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos)``: the Jacobian's frustum in ``x/z, y/z``, the view
-    widened by 0.3·tan(fov/2) (gsplat) and by ``reach`` px (how far a blurred footprint reaches in)."""
-    return (
-        (cx + reach) / fx + 0.3 * (0.5 * width / fx),
-        (width - cx + reach) / fx + 0.3 * (0.5 * width / fx),
-        (cy + reach) / fy + 0.3 * (0.5 * height / fy),
-        (height - cy + reach) / fy + 0.3 * (0.5 * height / fy),
-    )
 
 
 @numba.njit(cache=True, inline="always")

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from spacedg.render.camera import Camera, equidistant_theta_d, equidistant_theta_d_slope
+from spacedg.render.camera import Camera, equidistant_theta_d, equidistant_theta_d_slope, frustum_limits
 from spacedg.render.gaussians import Gaussians, quat_to_matrix, sh_basis
 from spacedg.render.settings import ALPHA_MIN, DEFOCUS_MIN_COC, FOOTPRINT_CAP, TILE_SIZE, Defocus, RasterSettings, footprint_dilation
 
@@ -101,10 +101,7 @@ def pinhole_jacobian(cam: torch.Tensor, camera: Camera, reach: float = 0.0) -> t
     ``reach`` pixels (how far a blurred footprint reaches into the view under defocus)."""
     x, y, z = cam.unbind(-1)
     fx, fy, cx, cy, w, h = camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height
-    lim_x_pos = (w - cx + reach) / fx + 0.3 * (0.5 * w / fx)
-    lim_x_neg = (cx + reach) / fx + 0.3 * (0.5 * w / fx)
-    lim_y_pos = (h - cy + reach) / fy + 0.3 * (0.5 * h / fy)
-    lim_y_neg = (cy + reach) / fy + 0.3 * (0.5 * h / fy)
+    lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos = frustum_limits(fx, fy, cx, cy, w, h, reach)
     tx = z * torch.clamp(x / z, -lim_x_neg, lim_x_pos)
     ty = z * torch.clamp(y / z, -lim_y_neg, lim_y_pos)
     zero = torch.zeros_like(z)

@@ -29,6 +29,7 @@ import math
 import numba
 import numpy as np
 
+from spacedg.render.coarse_cpu import bilinear_mix
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADY
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
@@ -482,10 +483,13 @@ def composite(
     kernel = _COMPOSITE_KERNELS.get(key)
     if kernel is None:
         kernel = _COMPOSITE_KERNELS[key] = _make_composite(*key)
-    n_tiles = offsets.shape[0] - 1 if coarse is not None else 0
-    samples = np.empty((n_tiles, 64, 5), np.float32)
-    sample_median = np.empty((n_tiles, 64), np.float32)
-    sample_ids = np.empty((n_tiles, 64), np.int32)
+    if coarse is None:  # nothing sampled: the kernel writes no sample
+        samples, sample_median, sample_ids = _NO_SAMPLES
+    else:
+        n_tiles = offsets.shape[0] - 1
+        samples = np.empty((n_tiles, 64, 5), np.float32)
+        sample_median = np.empty((n_tiles, 64), np.float32)
+        sample_ids = np.empty((n_tiles, 64), np.int32)
     kernel(
         offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
         out_rgb, out_alpha, out_depth, out_median, out_ids, _NO_TILES if coarse is None else coarse,
@@ -499,6 +503,8 @@ def composite(
 
 
 #: ``coarse`` of a composite at full resolution everywhere.
+#: The sampled tiles' outputs of a view without sampled tiles.
+_NO_SAMPLES = (np.empty((0, 64, 5), np.float32), np.empty((0, 64), np.float32), np.empty((0, 64), np.int32))
 _NO_TILES = np.zeros(0, np.uint8)
 
 
@@ -564,10 +570,8 @@ def _block_value(coarse, samples, tiles_x, width, height, block_y, block_x, out_
 @numba.njit(cache=True, inline="always")
 def _bilinear_at(grid, i0, j0, c, vy, wy, vx, wx):
     """Channel ``c`` of ``grid`` between rows ``i0, i0 + 1`` (weights ``vy, wy``) and columns ``j0, j0 + 1``
-    (``vx, wx``), rows first (as :func:`spacedg.render.coarse_cpu.bilinear`)."""
-    left = grid[i0, j0, c] * vy + grid[i0 + 1, j0, c] * wy
-    right = grid[i0, j0 + 1, c] * vy + grid[i0 + 1, j0 + 1, c] * wy
-    return left * vx + right * wx
+    (``vx, wx``), rows first (:func:`spacedg.render.coarse_cpu.bilinear_mix`)."""
+    return bilinear_mix(grid[i0, j0, c], grid[i0 + 1, j0, c], grid[i0, j0 + 1, c], grid[i0 + 1, j0 + 1, c], vy, wy, vx, wx)
 
 
 @fork_safe
@@ -584,20 +588,15 @@ def upsample_sampled_tiles(
     4 px of blur the two differ by far less than the sampling), depth ``Σw·z / α`` (0 where α is 0),
     median depth and ids those of the pixel's own block."""
     one, zero = np.float32(1.0), np.float32(0.0)
-    blocks_y, blocks_x = (height + 1) // 2, (width + 1) // 2
     for tile in numba.prange(coarse.shape[0]):
         if not coarse[tile]:
             continue
         ty, tx = tile // tiles_x, tile % tiles_x
         grid = np.zeros((10, 10, 5), np.float32)  # the tile's 8 × 8 blocks and the ring around them
         for gi in range(10):
-            for gj in range(10):
-                by, bx = ty * 8 + gi - 1, tx * 8 + gj - 1
-                if 0 < gi < 9 and 0 < gj < 9 and by < blocks_y and bx < blocks_x:  # its own sample, read directly
-                    _sample_into(grid, gi, gj, samples, tile, (gi - 1) * 8 + gj - 1, want_color, want_depth)
-                else:  # a neighbour's block, or past the image's edge its edge block
-                    _block_value(coarse, samples, tiles_x, width, height, by, bx, out_rgb, out_alpha, out_depth, grid, gi, gj,
-                                 want_color, want_depth)
+            for gj in range(10):  # its own sample, a neighbour's block, or past the image's edge its edge block
+                _block_value(coarse, samples, tiles_x, width, height, ty * 8 + gi - 1, tx * 8 + gj - 1, out_rgb, out_alpha, out_depth,
+                             grid, gi, gj, want_color, want_depth)
         for row in range(min(16, height - ty * 16)):
             i0 = (row + 1) // 2  # grid row of the block centre at or above the pixel centre (row + ½ − 1) / 2
             wy = np.float32(0.75) if row % 2 == 0 else np.float32(0.25)  # weight of grid row i0 + 1

@@ -241,15 +241,16 @@ def test_the_edge_measure_stays_finite_and_bounded_on_degenerate_views() -> None
     """A 2 × 2 view, an empty scene, a dolly through the wall (surfaces end behind the camera: no
     path there, as in the warp), a thousand kilometres of motion; and the measure is skipped where it cannot
     change the count (no translation, or the path alone asks for the most)."""
-    from spacedg.render.motion_error import _seen_apart, edge_parallax_contrast, keyframes_for
+    from spacedg.render.motion_error import _apart, _seen, edge_parallax_contrast, keyframes_for
     from spacedg.render.settings import RasterSettings
 
     settings = RasterSettings()
     g = textured_wall()
     cam = camera(80, 60, focal=70.0)
     forward = np.array([1.0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, -2.0])  # 2 m ahead of the view's camera
-    ahead_of_it = _seen_apart(forward, np.array([0.1]), np.array([0.0]), np.array([2.5]), np.array([3.0]), 70.0, 70.0)
-    behind_it = _seen_apart(forward, np.array([0.1]), np.array([0.0]), np.array([1.0]), np.array([3.0]), 70.0, 70.0)
+    ray = (np.array([0.1]), np.array([0.0]))
+    ahead_of_it = _apart(*_seen(forward, *ray, np.array([2.5])), _seen(forward, *ray, np.array([3.0])), 70.0, 70.0)
+    behind_it = _apart(*_seen(forward, *ray, np.array([1.0])), _seen(forward, *ray, np.array([3.0])), 70.0, 70.0)
     assert ahead_of_it[0] == pytest.approx(70.0 * (0.25 / 0.5 - 0.3 / 1.0)) and behind_it[0] == 0.0
     dolly = MotionBlur(translation=(0.05, 0.0, 4.0), rotation=(0.0, 0.0, 0.0))
     through = edge_parallax_contrast(g, cam, dolly, settings)

@@ -300,7 +300,10 @@ def index_memo(index: VisibilityIndex, name: str) -> dict[Any, Any]:
     """A per-index cache named ``name`` (an index is built once per generation of a scene and
     never changes): for quantities a family computes again for every view pair an object or a
     pair of objects recurs in."""
-    memos = vars(index).setdefault("memos", {})  # also on an index object made without VisibilityIndex.__init__
+    try:
+        memos = index.memos
+    except AttributeError:  # an index object made without VisibilityIndex.__init__
+        memos = index.__dict__.setdefault("memos", {})
     memo = memos.get(name)
     if memo is None:
         memo = memos[name] = {}
@@ -410,19 +413,14 @@ _ENTRIES_MAX = 65_536
 
 def _entry_of(kind: str, obj: Any, make: Callable[[Any], Any]) -> Any:
     """``make(obj)``, memoised per object (:data:`_ENTRIES`); the caller copies what it hands out."""
-    return _memoised(_ENTRIES, _ENTRIES_MAX, (kind, id(obj)), obj, make)
-
-
-def _memoised(memo: dict[Any, tuple[Any, Any]], limit: int, key: Any, obj: Any, make: Callable[[Any], Any]) -> Any:
-    """``make(obj)`` from ``memo`` under ``key`` (an id of ``obj``): ``memo`` holds ``(obj, value)``, so an id
-    reused by another object never reads a stale value; emptied when it holds ``limit`` entries."""
-    hit = memo.get(key)
+    key = (kind, id(obj))
+    hit = _ENTRIES.get(key)
     if hit is not None and hit[0] is obj:
         return hit[1]
-    if len(memo) >= limit:
-        memo.clear()
+    if len(_ENTRIES) >= _ENTRIES_MAX:
+        _ENTRIES.clear()
     value = make(obj)
-    memo[key] = (obj, value)
+    _ENTRIES[key] = (obj, value)
     return value
 
 
@@ -561,22 +559,26 @@ def compass_distractors(block: dict[str, Any]) -> list[str]:
     return [t for t in COMPASS_SECTORS.labels if t not in banned]
 
 
-#: id → (tuple, its items as str) for :func:`_str_list` (:func:`_memoised`; apart from :data:`_ENTRIES`, so a
-#: family that makes a new tuple per candidate only churns this small memo): most families pass a cell's
-#: roles and a label's features as one cached tuple in every candidate that names them.
-_STR_TUPLES: dict[int, tuple[Any, Any]] = {}
+#: id → tuple of str that :func:`_str_list` has read (held, so that the id stays that tuple's): most
+#: families pass a cell's roles and a label's features as one cached tuple in every candidate that names them.
+_STR_TUPLES: dict[int, tuple[str, ...]] = {}
 _STR_TUPLES_MAX = 4096
 
 
 def _str_list(items: Sequence[Any]) -> list[str]:
-    """``list(map(str, items))``, the conversion of a tuple memoised per tuple object."""
+    """``list(map(str, items))``; for a tuple of exact ``str`` it has read before (that very object),
+    ``list(items)`` without the conversions. The memo is emptied when it holds :data:`_STR_TUPLES_MAX`
+    tuples (a family that makes a new tuple per candidate only fills it). Only tuples of exact ``str``
+    are remembered: their conversion cannot go stale."""
     if type(items) is tuple:
-        return list(_memoised(_STR_TUPLES, _STR_TUPLES_MAX, id(items), items, _str_tuple))
+        if _STR_TUPLES.get(id(items)) is items:
+            return list(items)
+        if all(type(x) is str for x in items):
+            if len(_STR_TUPLES) >= _STR_TUPLES_MAX:
+                _STR_TUPLES.clear()
+            _STR_TUPLES[id(items)] = items
+            return list(items)
     return list(map(str, items))
-
-
-def _str_tuple(items: tuple[Any, ...]) -> tuple[str, ...]:
-    return tuple(map(str, items))
 
 
 def selection_entry(
