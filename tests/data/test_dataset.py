@@ -705,6 +705,7 @@ EVERY_FORM = [
     "water_droplets:3", {"name": "low_light", "preset": "2"}, ("defocus", "4"),
     "night_capture", "hazy_long_range", "compressed_portrait",
     "haze:3+low_res", ["motion_blur:1", {"name": "jpeg_compression", "params": {"quality": 30}}],
+    {"name": "low_light", "params": {"per_pixel": 1}},  # the rest from the preset, the pitch at the output size
 ]
 
 
@@ -748,6 +749,8 @@ def test_every_chain_form_survives_workers_provenance_and_replay(rooms) -> None:
         assert np.array_equal(replayed.images, a["images"].permute(0, 2, 3, 1).numpy()), plan.chain.text
         assert Chain.parse(plan.chain.text) == plan.chain
     assert there[1]["degradation"][0]["params"]["density"] == 3.5
+    (sensor,) = there[-1]["degradation"]
+    assert sensor["name"] == "low_light" and sensor["params"]["per_pixel"] == 1 and sensor["params"]["pitch"] < 1.0
 
 
 def test_an_item_is_planned_once_and_its_chain_never_parsed_again(rooms, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -6,9 +6,10 @@ They differ only in their data: the name, the ``exposure`` parameter (hard limit
 direction), the clip, the presets and the description. This module holds the rest:
 
 - :data:`SENSOR_PARAMS` (``k``, ``sigma_read``, ``read_model``, ``read_lambda``, ``pitch``, after
-  ``exposure`` in every spec) and :data:`SENSOR_PRESET` (every preset fixes them at the sensor's
-  defaults, Gaussian read noise, one photosite per pixel of the 1752 × 1168 reference image:
-  ``pitch`` = 1 px there, scaled with the output, :mod:`._photosites`);
+  ``exposure`` in every spec), :data:`PER_PIXEL` (last in every spec) and :data:`SENSOR_PRESET`
+  (every preset fixes them at the sensor's defaults, Gaussian read noise, one photosite per pixel
+  of the 1752 × 1168 reference image: ``pitch`` = 1 px there, scaled with the output,
+  :mod:`._photosites`; ``per_pixel`` = 0, every photosite drawn);
 - :class:`SensorExposure`: one such degradation from its data. Its plain function is
   :meth:`SensorExposure.capture`; its :attr:`~SensorExposure.spec` is photometric, linear stage,
   order 30 (the sensor, after the optics), needs nothing from the render, and its ``apply``
@@ -25,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.degradations._photosites import binned_capture
+from spacedg.plugins.degradations._photosites import binned_capture, binned_sensor, pixel_binning
 from spacedg.plugins.degradations._sensor import (
     K_DEFAULT,
     READ_GAUSSIAN,
@@ -42,7 +43,7 @@ from spacedg.plugins.specs import (
     Stage,
 )
 
-__all__ = ["EXPOSURE_ORDER", "GAIN", "SENSOR_PARAMS", "SENSOR_PRESET", "SensorExposure"]
+__all__ = ["EXPOSURE_ORDER", "GAIN", "PER_PIXEL", "SENSOR_PARAMS", "SENSOR_PRESET", "SensorExposure"]
 
 #: Position of the sensor within the linear stage (:data:`~spacedg.plugins.specs.ORDER_GUIDE`).
 EXPOSURE_ORDER = 30.0
@@ -63,6 +64,14 @@ GAIN = ParamSpec(
     low=1.0, high=1000.0, recorded_default=1.0,
 )
 
+#: Draw the noise once per output pixel instead of per photosite (declared last by both exposure
+#: degradations, so that every earlier parameter keeps its draw; presets: 0, the photosites).
+PER_PIXEL = ParamSpec(
+    "per_pixel", "1", "1 = draw the noise once per output pixel with the photosites' mean and variance per pixel (gain k·q, "
+    "read noise σ·√q): ~1/pitch² times fewer draws below 1752×1168, but another output size of the view gets other noise; "
+    "0 = per photosite (the presets).", low=0, high=1, integer=True, recorded_default=0,
+)
+
 #: Fixed sensor ranges every preset of the exposure degradations uses.
 SENSOR_PRESET: dict[str, ParamRange] = {
     "k": ParamRange(K_DEFAULT, K_DEFAULT),
@@ -70,6 +79,7 @@ SENSOR_PRESET: dict[str, ParamRange] = {
     "read_model": ParamRange(READ_GAUSSIAN, READ_GAUSSIAN),
     "read_lambda": ParamRange(READ_LAMBDA_DEFAULT, READ_LAMBDA_DEFAULT),
     "pitch": ParamRange(1.0, 1.0, per_size=True),
+    "per_pixel": ParamRange(0, 0),
 }
 
 
@@ -100,7 +110,7 @@ class SensorExposure:
         gain = {preset: {"gain": ParamRange(gains[preset], gains[preset])} for preset in presets} if gains is not None else {}
         self.spec = DegradationSpec(
             name=name, category=Category.PHOTOMETRIC, stage=Stage.LINEAR,
-            params=(exposure, *SENSOR_PARAMS, *((GAIN,) if self.has_gain else ())),
+            params=(exposure, *SENSOR_PARAMS, *((GAIN,) if self.has_gain else ()), PER_PIXEL),
             presets={preset: {"exposure": ParamRange(low, high), **SENSOR_PRESET, **gain.get(preset, {})} for preset, (low, high) in presets.items()},
             apply=self.apply,
             apply_torch=self.apply_torch,
@@ -120,6 +130,7 @@ class SensorExposure:
         read_lambda: float = READ_LAMBDA_DEFAULT,
         pitch: float = 1.0,
         gain: float = 1.0,
+        per_pixel: int = 0,
     ) -> np.ndarray:
         """Expose linear light by ``exposure``, add the sensor's noise, then the camera's ``gain`` (and
         clip if :attr:`clip`); returns new float32 (H, W, 3).
@@ -132,19 +143,22 @@ class SensorExposure:
             pitch: photosite side in pixels (:mod:`._photosites`; 1 = one per pixel, the plain sensor).
             gain: the camera's gain on the read-out signal (ISO / digital gain, noise amplified with
                 the signal); only for a degradation declared with ``gains``; 1 = none.
+            per_pixel: 1 = where photosites are smaller than pixels, one draw per pixel with their
+                statistics (:func:`._photosites.binned_capture`); 0 = the photosites.
 
         Raises:
             InvalidDataError: ``rgb`` is not float32 (H, W, 3).
             ParameterError: a parameter outside its hard limits.
         """
         rgb = check_linear_rgb(rgb, self.spec.name)
-        values = {"exposure": exposure, "k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": read_lambda, "pitch": pitch}
+        values = {"exposure": exposure, "k": k, "sigma_read": sigma_read, "read_model": read_model, "read_lambda": read_lambda, "pitch": pitch,
+                  "per_pixel": per_pixel}
         if self.has_gain or gain != 1.0:
             values["gain"] = gain  # a degradation without the parameter refuses any other gain than 1
         p = self.spec.validate_params(values)
         out = binned_capture(
             rgb, pitch=p["pitch"], exposure=p["exposure"], k=p["k"], sigma_read=p["sigma_read"], key=key,
-            read_model=int(p["read_model"]), read_lambda=p["read_lambda"], clip=self.clip and not self.has_gain,
+            read_model=int(p["read_model"]), read_lambda=p["read_lambda"], clip=self.clip and not self.has_gain, per_pixel=bool(p["per_pixel"]),
         )
         return _apply_gain(out, p.get("gain", 1.0), self.clip and self.has_gain)
 
@@ -161,7 +175,10 @@ class SensorExposure:
 
         p = self.spec.validate_params(params)
         key = stream_key(rng)
-        if p["pitch"] != 1.0:  # photosites off the pixel grid: the host's resampling, the same bytes
+        binning = pixel_binning(int(rgb.shape[1]), int(rgb.shape[0]), p["pitch"]) if p["per_pixel"] and p["pitch"] != 1.0 else None
+        if binning is not None:  # one draw per pixel standing in for the photosites: on the device
+            p = {**p, **binned_sensor(p, binning)}
+        elif p["pitch"] != 1.0:  # photosites off the pixel grid: the host's resampling, the same bytes
             import torch
 
             host = rgb.detach().cpu().numpy().astype(np.float32, copy=False)

@@ -36,6 +36,14 @@ pixel whose signal stays ≥ 1 after the largest drop any draw of the sites arou
 that only such pixels read (none within 2 px of a pixel that might not saturate) are not drawn:
 about half the sites of the built-in rooms at the bench preset.
 
+One draw per pixel instead (``per_pixel = 1``, :func:`pixel_binning`; not the presets): where sites
+are smaller than pixels, the sensor at gain ``k·q`` and read noise ``σ·√q``, ``q`` the mean share of
+one site's noise variance that a pixel's area weights keep. Each pixel's noise then has the
+photosites' mean and variance (tested on flat patches within 2 %), its photon count that of the
+``1/q`` sites it bins, at one draw per value (about 10 × fewer at 640 × 360). Given up: the same
+noise at every output size of the view, and the correlation of neighbouring pixels that share a
+site. Where sites are no smaller than pixels it is the photosites, bit for bit.
+
 Approximations, stated: the signal-dependence of the noise is taken at the site's average light
 (within a pixel the light is constant, so this is exact whenever sites are smaller than pixels);
 saturation is applied to the binned value, not per site. ``pitch = 1`` is
@@ -52,7 +60,7 @@ from spacedg.errors import ParameterError
 from spacedg.plugins.degradations._sensor import SIGNAL_CAP, largest_drop, sensor_capture
 from spacedg.plugins.degradations.common import snapped_size
 
-__all__ = ["MAX_PHOTOSITES", "photosite_grid", "binned_capture"]
+__all__ = ["MAX_PHOTOSITES", "photosite_grid", "binned_capture", "binned_sensor", "pixel_binning"]
 
 #: Most photosites one capture may draw (a far smaller pitch than any preset gives is refused).
 MAX_PHOTOSITES = 64_000_000
@@ -74,21 +82,61 @@ def photosite_grid(width: int, height: int, pitch: float) -> tuple[int, int]:
     return grid
 
 
+def pixel_binning(width: int, height: int, pitch: float) -> float | None:
+    """``q``, the photosite model's noise variance per pixel as a fraction of one photosite's, where a
+    per-pixel draw can stand in for the photosites (``per_pixel = 1``): sites smaller than pixels on
+    both axes (``None`` otherwise, also for ``pitch = 1``'s exact pixel grid).
+
+    The photosite model's noise at a pixel is ``Σⱼ wⱼ nⱼ`` over the sites ``j`` it overlaps (``wⱼ`` the
+    share of the pixel's area, OpenCV's area weights, separable), so its variance is
+    ``Σⱼ wⱼ² · v`` for a site variance ``v`` (``k·s + σ²`` at signal ``s``). ``q`` is the mean of
+    ``Σⱼ wⱼ²`` over the image's pixels (the product of the two axes' means): about ``pitch²`` (the
+    share of one whole site), less where a pixel's edge cuts a site (a 640 × 480 image on the
+    1752 × 1314 grid: 0.103 against ``pitch²`` = 0.133; the same as OpenCV's own weights, tested).
+    """
+    grid = photosite_grid(width, height, pitch)
+    if grid == (width, height) or grid[0] < width or grid[1] < height:
+        return None
+    return _axis_binning(grid[0], width) * _axis_binning(grid[1], height)
+
+
+def _axis_binning(sites: int, pixels: int) -> float:
+    """Mean over ``pixels`` equal pixels on ``sites ≥ pixels`` equal sites of one axis of ``Σⱼ wⱼ²``,
+    ``wⱼ`` the share of the pixel that site ``j`` covers (its overlap ÷ the pixel's length)."""
+    span = sites / pixels  # sites per pixel, ≥ 1
+    start = np.arange(pixels, dtype=np.float64) * span
+    end = start + span
+    first, last = np.ceil(start), np.floor(end)  # the whole sites inside: [first, last)
+    squares = np.where(first <= last, (last - first) + (first - start) ** 2 + (end - last) ** 2, (end - start) ** 2)
+    return float(squares.mean() / (span * span))
+
+
 def binned_capture(
-    rgb: np.ndarray, *, pitch: float, exposure: float, clip: bool, key: int, skip_saturated: bool = True, **sensor: float | int,
+    rgb: np.ndarray, *, pitch: float, exposure: float, clip: bool, key: int, skip_saturated: bool = True, per_pixel: bool = False,
+    **sensor: float | int,
 ) -> np.ndarray:
     """Expose ``rgb`` (float32 (H, W, 3) linear light) by ``exposure`` with the noise of photosites
     of side ``pitch`` px (module docstring); ``sensor`` = ``k, sigma_read, read_model, read_lambda``.
     ``skip_saturated=False`` draws every site even where the clip makes it irrelevant (the same
     bytes; for tests and benchmarks).
 
+    ``per_pixel``: where sites are smaller than pixels (:func:`pixel_binning`), draw the noise once
+    per pixel with the photosites' statistics instead: the sensor at gain ``k·q`` and read noise
+    ``σ·√q`` (the mean and variance per pixel of the photosite model, its photon count that of the
+    ``1/q`` sites a pixel bins), one draw per value instead of about ``1/pitch²``. Not the same
+    realisation: another output size of the view gets other noise. Elsewhere the photosites.
+
     Returns a new float32 array, always finite.
     """
     if pitch == 1.0:
         return sensor_capture(rgb, exposure=exposure, key=key, clip=clip, **sensor)  # type: ignore[arg-type]
+    height, width = rgb.shape[:2]
+    if per_pixel:
+        binning = pixel_binning(width, height, pitch)
+        if binning is not None:
+            return sensor_capture(rgb, exposure=exposure, key=key, clip=clip, **binned_sensor(sensor, binning))  # type: ignore[arg-type]
     import cv2  # here: importing the plugin stays light (the entry point's import is timed)
 
-    height, width = rgb.shape[:2]
     grid = photosite_grid(width, height, pitch)
     signal = np.array(rgb, dtype=np.float32)  # a copy, worked on in place
     np.nan_to_num(signal, copy=False, nan=0.0, posinf=SIGNAL_CAP, neginf=-SIGNAL_CAP)
@@ -105,6 +153,12 @@ def binned_capture(
     if clip:
         np.clip(signal, 0.0, 1.0, out=signal)
     return signal
+
+
+def binned_sensor(sensor: dict[str, float | int], binning: float) -> dict[str, float | int]:
+    """``sensor`` (``k, sigma_read, …``) of one draw per pixel standing in for photosites whose noise
+    variance per pixel is ``binning`` (:func:`pixel_binning`) × one site's: ``k·q``, ``σ·√q``."""
+    return {**sensor, "k": float(sensor["k"]) * binning, "sigma_read": float(sensor["sigma_read"]) * math.sqrt(binning)}
 
 
 #: Relative and absolute slack of the saturation test: far above float32 rounding of the resampling sums.

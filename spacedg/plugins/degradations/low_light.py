@@ -35,6 +35,11 @@ Parameters:
     read_model: 0 = Gaussian (the paper), 1 = Tukey lambda scaled to unit variance (ELD).
     read_lambda: Tukey λ, hard limits [-0.45, 1]; default 0.14 (≈ normal).
     gain: the camera's gain after read-out, unit "1", hard limits [1, 1000]; 1 = none.
+    pitch: photosite side in output pixels (:mod:`._photosites`; presets: 1 px at 1752 × 1168,
+        scaled with the output).
+    per_pixel: 1 = one noise draw per output pixel with the photosites' mean and variance
+        (:func:`._photosites.binned_capture`: several times faster below the reference size, but
+        each output size gets its own noise); presets: 0.
 
 Presets (``exposure``; the sensor parameters fixed at their defaults, Gaussian read noise;
 ``gain``): ``bench`` [0.003, 0.005] (the paper's table), gain 25; severities ``1`` [0.1, 0.2]

@@ -12,8 +12,9 @@ small beside the signal (1 % at full scale: 10⁴ e⁻), so the effect is mostly
 
 Parameters:
     exposure: gain on linear light, unit "1", hard limits [1, 1e6]; harsher when higher.
-    k, sigma_read, read_model, read_lambda: the sensor, as in :mod:`.low_light` (defaults
-        k = 1e-4 per e⁻, i.e. full well ≈ 10⁴ e⁻; σ_read = 2.5e-4 ≈ 2.5 e⁻; Gaussian read noise).
+    k, sigma_read, read_model, read_lambda, pitch, per_pixel: the sensor, as in :mod:`.low_light`
+        (defaults k = 1e-4 per e⁻, i.e. full well ≈ 10⁴ e⁻; σ_read = 2.5e-4 ≈ 2.5 e⁻; Gaussian read
+        noise; photosites of 1 px at 1752 × 1168; ``per_pixel = 1``: one draw per output pixel).
 
 Presets (``exposure``; sensor fixed at its defaults): ``bench`` [7, 10] (the paper's table);
 severities ``1`` [1.5, 2], ``2`` [2.5, 3.5], ``3`` [4, 5.5], ``4`` [5.5, 7], ``5`` [7, 10] (= bench).

@@ -59,6 +59,22 @@ def test_sensor_noise_is_the_cpu_kernels_own(spec, seed: int) -> None:
     np.testing.assert_array_equal(dev, host)
 
 
+@pytest.mark.parametrize("spec", [low_light.SPEC, over_exposure.SPEC], ids=["low_light", "over_exposure"])
+def test_per_pixel_sensor_runs_on_the_device_with_the_hosts_bytes(spec, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``per_pixel = 1`` below the reference size draws on the device (the photosites go through the
+    host), the same bytes as the host."""
+    from spacedg.plugins.degradations import _exposure
+
+    params = {**spec.sample_params("bench", np.random.default_rng(3), image_size=(W, H)), "per_pixel": 1}
+    assert params["pitch"] < 1.0
+    host = spec.apply(IMAGE, {}, params, np.random.default_rng([3, 0]))
+    photosites = spec.apply(IMAGE, {}, {**params, "per_pixel": 0}, np.random.default_rng([3, 0]))
+    monkeypatch.setattr(_exposure, "binned_capture", lambda *a, **k: pytest.fail("the host path was taken"))
+    dev = spec.apply_torch(torch.from_numpy(IMAGE), {}, params, np.random.default_rng([3, 0])).numpy()
+    np.testing.assert_array_equal(dev, host)
+    assert np.isfinite(host).all() and not np.array_equal(host, photosites)
+
+
 SIGNALS = np.concatenate([
     np.random.default_rng(0).uniform(0, 1, 6000), np.random.default_rng(1).uniform(0, 0.01, 6000),
     [np.nan, np.inf, -np.inf, -1.0, 0.0, 1e20],

@@ -63,6 +63,17 @@ def test_sensor_noise_is_the_cpu_kernels_own_on_cuda(spec, seed: int) -> None:
     np.testing.assert_array_equal(dev, host)
 
 
+@pytest.mark.parametrize("spec", [low_light.SPEC, over_exposure.SPEC], ids=["low_light", "over_exposure"])
+def test_per_pixel_sensor_is_the_hosts_on_cuda(spec) -> None:
+    """``per_pixel = 1`` below the reference size draws on the GPU, the host's bytes."""
+    height, width = IMAGE.shape[:2]
+    params = {**spec.sample_params("bench", np.random.default_rng(3), image_size=(width, height)), "per_pixel": 1}
+    host = spec.apply(IMAGE, {}, params, np.random.default_rng([3, 0]))
+    dev = spec.apply_torch(_on_cuda(IMAGE), {}, params, np.random.default_rng([3, 0]))
+    assert dev.device.type == "cuda"
+    np.testing.assert_array_equal(dev.cpu().numpy(), host)
+
+
 @pytest.mark.parametrize("sensor", [
     {"exposure": 0.004, "k": 1e-4, "sigma_read": 2.5e-4},
     {"exposure": 0.05, "k": 1e-4, "sigma_read": 2.5e-4},

@@ -57,11 +57,13 @@ def test_spec_declaration(spec) -> None:
     assert spec.category is Category.PHOTOMETRIC and spec.stage is Stage.LINEAR
     assert spec.order == 30.0 and spec.needs == frozenset()
     gain = ["gain"] if spec is LOW_LIGHT else []  # the camera's gain after a dark exposure (low light only)
-    assert [p.name for p in spec.params] == ["exposure", "k", "sigma_read", "read_model", "read_lambda", "pitch", *gain]
+    # per_pixel last: every earlier parameter keeps its draw of the preset's generator
+    assert [p.name for p in spec.params] == ["exposure", "k", "sigma_read", "read_model", "read_lambda", "pitch", *gain, "per_pixel"]
     for preset in spec.preset_names:
         ranges = spec.presets[preset]
         assert (ranges["k"].to_list(), ranges["sigma_read"].to_list(), ranges["read_model"].to_list()) == ([K, K], [SIGMA, SIGMA], [0, 0])
         assert ranges["pitch"].to_list() == [1.0, 1.0] and ranges["pitch"].per_size  # one photosite per reference pixel
+        assert ranges["per_pixel"].to_list() == [0, 0]  # the presets draw per photosite
     registered: list = []
     module = low_light_module if spec is LOW_LIGHT else over_exposure_module
     module.spacedg_register_degradations(registered.append)

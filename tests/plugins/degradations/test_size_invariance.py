@@ -18,11 +18,13 @@ import pytest
 
 from spacedg.data.chain import BENCH_DEGRADATIONS, Chain, ResolvedDegradation
 from spacedg.data.pipeline import degrade_image
-from spacedg.errors import PluginError
+from spacedg.errors import ParameterError, PluginError
 from spacedg.plugins import DegradationSpec, ParamRange, ParamSpec, get_degradation
-from spacedg.plugins.degradations._photosites import photosite_grid
+from spacedg.plugins.degradations._photosites import photosite_grid, pixel_binning
+from spacedg.plugins.degradations._sensor import K_DEFAULT, SIGMA_READ_DEFAULT
 from spacedg.plugins.degradations.common import view_aspect
 from spacedg.plugins.degradations.low_light import low_light
+from spacedg.plugins.degradations.over_exposure import over_expose
 from spacedg.plugins.degradations.paper_table import PAPER_PARAMETER_TABLE, outside_paper_table
 from spacedg.plugins.specs import REFERENCE_DEPTH_M, REFERENCE_IMAGE_SIZE, image_scale, scale_pixels
 
@@ -111,6 +113,54 @@ def test_sensor_noise_is_drawn_on_photosites() -> None:
     big = np.full((96, 128, 3), 0.25, np.float32)
     down = cv2.resize(low_light(big, 0.5, key=9, pitch=1.0), (64, 48), interpolation=cv2.INTER_AREA)
     assert np.abs(down - binned).max() < 1e-6  # the same photosites at both sizes: the same noise
+
+
+def _area_weights(sites: int, pixels: int) -> np.ndarray:
+    """(sites, pixels) float64: OpenCV's INTER_AREA weight of each site in each pixel (the resampling the photosites use)."""
+    return cv2.resize(np.eye(sites, dtype=np.float32), (pixels, sites), interpolation=cv2.INTER_AREA).astype(np.float64)
+
+
+def test_pixel_binning_is_the_variance_share_of_opencvs_area_weights() -> None:
+    for width, height in ((640, 480), (584, 389), (700, 360), (97, 61)):
+        pitch = min(width / 1752, height / 1168)
+        columns, rows = photosite_grid(width, height, pitch)
+        shares = []
+        for sites, pixels in ((columns, width), (rows, height)):
+            weights = _area_weights(sites, pixels)
+            np.testing.assert_allclose(weights.sum(axis=0), 1.0, atol=1e-5)  # a pixel's weights are its area shares
+            shares.append((weights**2).sum(axis=0).mean())
+        assert pixel_binning(width, height, pitch) == pytest.approx(shares[0] * shares[1], rel=1e-6), (width, height)
+        assert pixel_binning(width, height, pitch) < pitch**2  # a pixel edge that cuts a site spreads its noise
+    assert pixel_binning(64, 48, 0.5) == pytest.approx(0.25)  # 2 × 2 whole sites a pixel: a quarter
+    assert pixel_binning(64, 48, 1.0) is None and pixel_binning(64, 48, 1.5) is None  # sites no smaller than pixels
+
+
+@pytest.mark.parametrize("name", ["low_light", "over_exposure"])
+def test_per_pixel_noise_has_the_photosites_mean_and_variance(name: str) -> None:
+    """One draw per pixel (``per_pixel = 1``) against the photosites it stands in for, on a flat patch
+    (sites not aligned with pixels): the same mean, and the variance both have, ``q·(k·s + σ²)``."""
+    flat = np.full((150, 200, 3), 0.3, np.float32)
+    pitch = 0.3  # a 667 × 500 grid: 3.3 sites a pixel per side
+    capture, exposure, gain = (low_light, 0.004, 25.0) if name == "low_light" else (over_expose, 1.6, 1.0)
+    extra = {"gain": gain} if name == "low_light" else {}
+    sites = capture(flat, exposure, key=21, pitch=pitch, **extra)
+    pixels = capture(flat, exposure, key=21, pitch=pitch, per_pixel=1, **extra)
+    signal = 0.3 * exposure
+    expected = pixel_binning(200, 150, pitch) * (K_DEFAULT * signal + SIGMA_READ_DEFAULT**2) * gain**2
+    for out in (sites, pixels):
+        assert np.isfinite(out).all()
+        assert out.mean() == pytest.approx(signal * gain, rel=0.005)
+        assert out.var() == pytest.approx(expected, rel=0.02)
+    assert pixels.var() == pytest.approx(sites.var(), rel=0.02)
+    assert not np.array_equal(sites, pixels)
+
+
+def test_per_pixel_changes_nothing_where_sites_are_no_smaller_than_pixels() -> None:
+    image = np.random.default_rng(4).uniform(0.0, 1.0, (48, 64, 3)).astype(np.float32)
+    for pitch in (1.0, 1.5):
+        assert low_light(image, 0.01, key=3, pitch=pitch, per_pixel=1).tobytes() == low_light(image, 0.01, key=3, pitch=pitch).tobytes()
+    with pytest.raises(ParameterError, match="per_pixel"):
+        low_light(image, 0.01, key=3, pitch=0.5, per_pixel=2)
 
 
 def test_every_size_of_one_view_shares_one_photosite_grid() -> None:
