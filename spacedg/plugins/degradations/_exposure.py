@@ -177,7 +177,7 @@ class SensorExposure:
         key = stream_key(rng)
         binning = pixel_binning(int(rgb.shape[1]), int(rgb.shape[0]), p["pitch"]) if p["per_pixel"] and p["pitch"] != 1.0 else None
         if binning is not None:  # one draw per pixel standing in for the photosites: on the device
-            p = {**p, **binned_sensor(p, binning)}
+            p = binned_sensor(p, binning)
         elif p["pitch"] != 1.0:  # photosites off the pixel grid: the host's resampling, the same bytes
             import torch
 
