@@ -81,8 +81,8 @@ def composite_view(
             from spacedg.render.defocus import MEASURE_SCALE, measurement_camera, measurement_settings
 
             wide, measured = measurement_camera(camera, 0, MEASURE_SCALE), measurement_settings(settings, MEASURE_SCALE)
-            packed, rects, *pair = project_cpu.project_with_sharp(gaussians, camera, settings, defocus, want_color, wide, measured)
-            sharp_projection = (pair[0], pair[1])
+            packed, rects, sharp_packed, sharp_rects = project_cpu.project_with_sharp(gaussians, camera, settings, defocus, want_color, wide, measured)
+            sharp_projection = (sharp_packed, sharp_rects)
         t1 = time.perf_counter()
         images, sharp = _raster_cpu(gaussians, packed, rects, ids, camera, settings, want_color, want_depth, want_ids, defocus is not None, sharp_projection)
     else:

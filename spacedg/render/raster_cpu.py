@@ -502,9 +502,9 @@ def composite(
         )
 
 
-#: ``coarse`` of a composite at full resolution everywhere.
 #: The sampled tiles' outputs of a view without sampled tiles.
 _NO_SAMPLES = (np.empty((0, 64, 5), np.float32), np.empty((0, 64), np.float32), np.empty((0, 64), np.int32))
+#: ``coarse`` of a composite at full resolution everywhere.
 _NO_TILES = np.zeros(0, np.uint8)
 
 
@@ -527,17 +527,6 @@ def sampled_tiles(offsets, gauss, packed, min_coc):  # pragma: no cover - compil
 
 
 @numba.njit(cache=True, inline="always")
-def _sample_into(grid, gi, gj, samples, tile, k, want_color, want_depth):
-    """``grid[gi, gj] = (α, r, g, b, Σw·z)`` of sample ``k`` of sampled tile ``tile`` (the channels asked for)."""
-    grid[gi, gj, 0] = np.float32(1.0) - samples[tile, k, 0]
-    if want_color:
-        for c in range(1, 4):
-            grid[gi, gj, c] = samples[tile, k, c]
-    if want_depth:
-        grid[gi, gj, 4] = samples[tile, k, 4]
-
-
-@numba.njit(cache=True, inline="always")
 def _block_value(coarse, samples, tiles_x, width, height, block_y, block_x, out_rgb, out_alpha, out_depth, grid, gi, gj,
                  want_color, want_depth):
     """``grid[gi, gj] = (α, r, g, b, Σw·z)`` of the 2 × 2 block ``(block_y, block_x)`` of the image (clamped
@@ -546,8 +535,14 @@ def _block_value(coarse, samples, tiles_x, width, height, block_y, block_x, out_
     by = min(max(block_y, 0), blocks_y - 1)
     bx = min(max(block_x, 0), blocks_x - 1)
     owner = (by // 8) * tiles_x + bx // 8
-    if coarse[owner]:
-        _sample_into(grid, gi, gj, samples, owner, (by % 8) * 8 + bx % 8, want_color, want_depth)
+    if coarse[owner]:  # the sample of that block: (α, r, g, b, Σw·z), the channels asked for
+        k = (by % 8) * 8 + bx % 8
+        grid[gi, gj, 0] = np.float32(1.0) - samples[owner, k, 0]
+        if want_color:
+            for c in range(1, 4):
+                grid[gi, gj, c] = samples[owner, k, c]
+        if want_depth:
+            grid[gi, gj, 4] = samples[owner, k, 4]
         return
     for c in range(5):
         grid[gi, gj, c] = np.float32(0.0)

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.plugins.degradations._photosites import binned_capture, binned_sensor, pixel_binning
+from spacedg.plugins.degradations._photosites import binned_capture, pixel_sensor
 from spacedg.plugins.degradations._sensor import (
     K_DEFAULT,
     READ_GAUSSIAN,
@@ -175,9 +175,9 @@ class SensorExposure:
 
         p = self.spec.validate_params(params)
         key = stream_key(rng)
-        binning = pixel_binning(int(rgb.shape[1]), int(rgb.shape[0]), p["pitch"]) if p["per_pixel"] and p["pitch"] != 1.0 else None
-        if binning is not None:  # one draw per pixel standing in for the photosites: on the device
-            p = binned_sensor(p, binning)
+        per_pixel_sensor = pixel_sensor(p, int(rgb.shape[1]), int(rgb.shape[0]), p["pitch"]) if p["per_pixel"] else None
+        if per_pixel_sensor is not None:  # one draw per pixel standing in for the photosites: on the device
+            p = per_pixel_sensor
         elif p["pitch"] != 1.0:  # photosites off the pixel grid: the host's resampling, the same bytes
             import torch
 

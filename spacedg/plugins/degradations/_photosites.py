@@ -53,6 +53,8 @@ saturation is applied to the binned value, not per site. ``pitch = 1`` is
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -60,7 +62,7 @@ from spacedg.errors import ParameterError
 from spacedg.plugins.degradations._sensor import SIGNAL_CAP, largest_drop, sensor_capture
 from spacedg.plugins.degradations.common import snapped_size
 
-__all__ = ["MAX_PHOTOSITES", "photosite_grid", "binned_capture", "binned_sensor", "pixel_binning"]
+__all__ = ["MAX_PHOTOSITES", "photosite_grid", "binned_capture", "pixel_binning", "pixel_sensor"]
 
 #: Most photosites one capture may draw (a far smaller pitch than any preset gives is refused).
 MAX_PHOTOSITES = 64_000_000
@@ -131,10 +133,9 @@ def binned_capture(
     if pitch == 1.0:
         return sensor_capture(rgb, exposure=exposure, key=key, clip=clip, **sensor)  # type: ignore[arg-type]
     height, width = rgb.shape[:2]
-    if per_pixel:
-        binning = pixel_binning(width, height, pitch)
-        if binning is not None:
-            return sensor_capture(rgb, exposure=exposure, key=key, clip=clip, **binned_sensor(sensor, binning))  # type: ignore[arg-type]
+    per_pixel_sensor = pixel_sensor(sensor, width, height, pitch) if per_pixel else None
+    if per_pixel_sensor is not None:
+        return sensor_capture(rgb, exposure=exposure, key=key, clip=clip, **per_pixel_sensor)  # type: ignore[arg-type]
     import cv2  # here: importing the plugin stays light (the entry point's import is timed)
 
     grid = photosite_grid(width, height, pitch)
@@ -155,9 +156,14 @@ def binned_capture(
     return signal
 
 
-def binned_sensor(sensor: dict[str, float | int], binning: float) -> dict[str, float | int]:
-    """``sensor`` (``k, sigma_read, …``) of one draw per pixel standing in for photosites whose noise
-    variance per pixel is ``binning`` (:func:`pixel_binning`) × one site's: ``k·q``, ``σ·√q``."""
+def pixel_sensor(sensor: Mapping[str, Any], width: int, height: int, pitch: float) -> dict[str, Any] | None:
+    """``sensor`` (any mapping with ``k`` and ``sigma_read``) for one draw per pixel of a ``width × height``
+    image standing in for photosites of side ``pitch`` px (``per_pixel = 1``): ``k·q`` and ``σ·√q``,
+    ``q`` = :func:`pixel_binning`; ``None`` where ``per_pixel`` changes nothing (``pitch = 1``, or
+    sites no smaller than pixels: the photosites are drawn)."""
+    binning = None if pitch == 1.0 else pixel_binning(width, height, pitch)
+    if binning is None:
+        return None
     return {**sensor, "k": float(sensor["k"]) * binning, "sigma_read": float(sensor["sigma_read"]) * math.sqrt(binning)}
 
 

@@ -290,8 +290,6 @@ def _next_letter(rng: np.random.Generator, n_options: int = 4) -> int:
     """Index of the next correct letter for ``rng``: shuffled blocks of A–D (A–C for three
     options), so over any generation the correct letter is uniform to within one block (exact balance)."""
     key = (id(rng), n_options)
-    if _DECKS and next(reversed(_DECKS)) == key:  # the deck used last (one family draws many letters in a row): it holds rng, so the id is rng's
-        return _DECKS[key].next()
     deck = _DECKS.get(key)
     if deck is None or deck.rng is not rng:
         deck = _DECKS[key] = BalancedDeck(rng, n_options)
