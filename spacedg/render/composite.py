@@ -62,7 +62,7 @@ def composite_view(
     blurred, each Gaussian carries its circle of confusion (:class:`~spacedg.render.settings.Defocus`),
     the composite runs on a coarser grid when every visible blur is wide
     (:func:`spacedg.render.defocus.composite_factor`; on the compiled path otherwise per tile,
-    :data:`~spacedg.render.defocus.TILE_SAMPLE_MIN_COC`), and the colour is brought back to the sharp
+    :data:`~spacedg.render.defocus.TILE_SAMPLE_MIN_COC`, also on a 2× coarser grid), and the colour is brought back to the sharp
     view's local flux (:mod:`spacedg.render.defocus_flux`).
     """
     want_color = "rgb" in outputs
@@ -144,7 +144,7 @@ def _raster_cpu(
     images = raster_cpu.rasterize(
         packed, rects, ids, width, height, settings.alpha_max, want_color, want_depth, want_ids,
         settings.tight_tiles and settings.opacity_extent,
-        defocus_model.TILE_SAMPLE_MIN_COC if plan is not None and factor == 1 else 0.0,
+        defocus_model.tile_sample_min_coc(factor) if plan is not None else 0.0,
     )
     if want_color:
         images["rgb"] = decode_srgb(images["rgb"])

@@ -402,3 +402,28 @@ def test_the_sharp_pass_is_projected_alongside_only_when_it_can_be_coarse(monkey
     monkeypatch.setattr(composite, "_sharp_pass_may_be_coarse", lambda defocus: True)  # paired anyway: the same image
     again = render(g, cam, defocus=Defocus(0.3, 2.0), backend="cpu")
     assert np.array_equal(mild.rgb, again.rgb) and np.array_equal(mild.alpha, again.alpha)
+
+
+def test_widely_blurred_tiles_of_a_coarse_composite_are_sampled_too(monkeypatch) -> None:
+    """A view composited at 2× (every Gaussian blurred by >= 4 px, some by < 8): its tiles whose every Gaussian is
+    blurred by >= 8 px (tile_sample_min_coc(2)) are sampled every 2 coarse px; the render keeps its light (0.5 %) and
+    stays within 40 dB of the same view with no tile sampled. At 4× nothing more is sampled (COMPOSITE_MAX_FACTOR)."""
+    from spacedg.render import RasterSettings, project_cpu, raster_cpu
+    from spacedg.render import defocus as model
+
+    assert (model.tile_sample_min_coc(1), model.tile_sample_min_coc(2), model.tile_sample_min_coc(4)) == (4.0, 8.0, 0.0)
+    g, cam, _ = _near_blurred_far_sharp(3, 224, 160)
+    defocus = Defocus(12.0, 3.0)  # the far wall blurred by 5.8-6.2 px, the near furniture by 24
+    packed, rects = project_cpu.project_gaussians(g, cam, RasterSettings(), defocus, True)
+    assert model.composite_factor(packed, rects, cam.width, cam.height) == 2
+    coarse, coarse_rects, width, height = model.coarse_view(packed, rects, cam.width, cam.height, 2)
+    offsets, gauss = raster_cpu.bin_visible(coarse, coarse_rects, width, height, True)
+    share = raster_cpu.sampled_tiles(offsets, gauss, coarse, np.float32(model.tile_sample_min_coc(2))).mean()
+    assert 0.1 < share < 0.9
+    sampled = render(g, cam, defocus=defocus, backend="cpu")
+    monkeypatch.setattr(model, "TILE_SAMPLE_MIN_COC", 0.0)  # no tile sampled, at any factor
+    whole = render(g, cam, defocus=defocus, backend="cpu")
+    assert not np.array_equal(sampled.rgb, whole.rgb)
+    assert abs(sampled.rgb.mean() / whole.rgb.mean() - 1.0) < 5e-3
+    assert 10 * np.log10(1.0 / np.mean((sampled.rgb - whole.rgb) ** 2)) > 40.0
+    assert np.isfinite(sampled.rgb).all() and 0.0 <= sampled.alpha.min() and sampled.alpha.max() <= 1.0
