@@ -165,6 +165,21 @@ def test_jsonl_source_still_evaluates_on_the_val_split(rooms, tmp_path) -> None:
     assert off.val_dataset() is None and off.val_items() == [] and off.val_description().startswith("none")
 
 
+def test_a_chain_with_parameters_comes_through_the_config_as_the_dataset_takes_it() -> None:
+    """``data.degradations`` as mappings (``{name, params}``), alone or in a chain, reach the dataset as plain
+    lists and dicts, parsed to the same chains as the Python form (``per_pixel`` of the sensor: docs/degradations.md)."""
+    from spacedg.data.chain import Chain
+
+    python_form = [{"name": "low_light", "params": {"per_pixel": 1}}, [{"name": "over_exposure", "params": {"per_pixel": 1}}, "jpeg_compression"]]
+    data = build(compose_sft(
+        "+experiment=tiny",
+        "data.degradations=[{name: low_light, params: {per_pixel: 1}}, [{name: over_exposure, params: {per_pixel: 1}}, jpeg_compression]]",
+    ).data, "data")
+    assert data.degradations == python_form
+    assert [Chain.parse(c) for c in data.degradations] == [Chain.parse(c) for c in python_form]
+    assert Chain.parse(data.degradations[0]).items[0].params == {"per_pixel": 1}
+
+
 # ------------------------------------------------------------------ errors
 
 
@@ -181,6 +196,8 @@ def test_jsonl_source_still_evaluates_on_the_val_split(rooms, tmp_path) -> None:
     ("data.degradations=[hazee]", UnknownPluginError, r"data\.degradations: .*hazee.*haze"),
     ("data.degradations=[haze+haze]", ParameterError, r"data\.degradations: .*appears twice"),
     ("data.val.degradations=[haze:9]", ParameterError, r"data\.val\.degradations: .*9"),
+    ("data.degradations=[{name: low_light, params: {per_pixl: 1}}]", ParameterError, r"data\.degradations: .*per_pixl.*Did you mean 'per_pixel'"),
+    ("data.degradations=[{name: low_light, params: {per_pixel: 0.5}}]", ParameterError, r"data\.degradations: .*per_pixel.*integer"),
 ])
 def test_bad_configs_fail_before_any_model_or_index(override, error, message, tmp_path, monkeypatch) -> None:
     def untouchable(*args, **kwargs):
