@@ -71,17 +71,23 @@ MAX_PHOTOSITES = 64_000_000
 def photosite_grid(width: int, height: int, pitch: float) -> tuple[int, int]:
     """``(columns, rows)`` of photosites of side ``pitch`` output pixels over a ``width × height``
     image: ``round(side / pitch)`` of each side as :func:`~.common.snapped_size` has it (so every size
-    of one view shares one grid; an exact aspect keeps the image's own sides)."""
-    if not (math.isfinite(pitch) and pitch > 0):
-        raise ParameterError(f"sensor: pitch must be a finite number of pixels > 0, got {pitch!r}")
-    snapped_w, snapped_h = snapped_size(width, height)
-    grid = max(1, int(round(snapped_w / pitch))), max(1, int(round(snapped_h / pitch)))
+    of one view shares one grid; an exact aspect keeps the image's own sides). A grid of more than
+    :data:`MAX_PHOTOSITES` sites is refused: it is drawn."""
+    grid = _grid_shape(width, height, pitch)
     if grid[0] * grid[1] > MAX_PHOTOSITES:
         raise ParameterError(
             f"sensor: pitch {pitch:g} px on a {width}×{height} image needs {grid[0]}×{grid[1]} photosites, more than "
             f"{MAX_PHOTOSITES:.0e}; use a larger pitch (the presets give 1 px at 1752×1168, scaled with the image)"
         )
     return grid
+
+
+def _grid_shape(width: int, height: int, pitch: float) -> tuple[int, int]:
+    """:func:`photosite_grid`'s ``(columns, rows)`` without its limit (a grid that is only measured)."""
+    if not (math.isfinite(pitch) and pitch > 0):
+        raise ParameterError(f"sensor: pitch must be a finite number of pixels > 0, got {pitch!r}")
+    snapped_w, snapped_h = snapped_size(width, height)
+    return max(1, int(round(snapped_w / pitch))), max(1, int(round(snapped_h / pitch)))
 
 
 def pixel_binning(width: int, height: int, pitch: float) -> float | None:
@@ -95,8 +101,9 @@ def pixel_binning(width: int, height: int, pitch: float) -> float | None:
     ``Σⱼ wⱼ²`` over the image's pixels (the product of the two axes' means): about ``pitch²`` (the
     share of one whole site), less where a pixel's edge cuts a site (a 640 × 480 image on the
     1752 × 1314 grid: 0.103 against ``pitch²`` = 0.133; the same as OpenCV's own weights, tested).
+    No site is drawn, so a grid past :data:`MAX_PHOTOSITES` is measured too.
     """
-    grid = photosite_grid(width, height, pitch)
+    grid = _grid_shape(width, height, pitch)
     if grid == (width, height) or grid[0] < width or grid[1] < height:
         return None
     return _axis_binning(grid[0], width) * _axis_binning(grid[1], height)

@@ -163,6 +163,23 @@ def test_per_pixel_changes_nothing_where_sites_are_no_smaller_than_pixels() -> N
         low_light(image, 0.01, key=3, pitch=0.5, per_pixel=2)
 
 
+def test_a_grid_too_large_to_draw_is_refused_but_per_pixel_only_measures_it() -> None:
+    """A pitch whose photosite grid passes MAX_PHOTOSITES is refused by name with what to do; ``per_pixel = 1``
+    draws no site, so it only measures that grid and captures (finite, the per-pixel statistics)."""
+    from spacedg.plugins.degradations._photosites import MAX_PHOTOSITES
+
+    flat = np.full((48, 64, 3), 0.3, np.float32)
+    pitch = 0.005  # 12800 × 9600 sites: 1.2e8 > MAX_PHOTOSITES
+    assert 12800 * 9600 > MAX_PHOTOSITES
+    with pytest.raises(ParameterError, match=r"pitch 0\.005 px on a 64×48 image needs 12800×9600 photosites.*use a larger pitch"):
+        low_light(flat, 0.004, key=7, pitch=pitch)
+    assert pixel_binning(64, 48, pitch) == pytest.approx(pitch**2, rel=1e-9)  # 200 whole sites a pixel per side
+    out = low_light(flat, 0.004, key=7, pitch=pitch, per_pixel=1, gain=25.0)
+    assert np.isfinite(out).all() and out.mean() == pytest.approx(0.3 * 0.004 * 25.0, rel=0.005)
+    expected = pitch**2 * (K_DEFAULT * 0.3 * 0.004 + SIGMA_READ_DEFAULT**2) * 25.0**2
+    assert out.var() == pytest.approx(expected, rel=0.05)
+
+
 def test_every_size_of_one_view_shares_one_photosite_grid() -> None:
     # a 3:2 view (the reference 1752 × 1168) fitted to other sizes is 3:2 up to a pixel of rounding:
     # its grid is the reference's, so the same sites (and noise) land on every size
