@@ -82,9 +82,11 @@ from spacedg.data.pipeline import (
     PipelineOptions,
     degrade_plan,
     frames_nbytes,
+    remember_view_depths,
     sample_image_size,
     sample_scene_depth,
 )
+from spacedg.data.view_depths import ensure_view_depths, load_view_depths
 from spacedg.qa.build import ensure_indexes
 from spacedg.qa.index import QABuildConfig, config_index_paths, read_index
 from spacedg.data.workers import loader_plan
@@ -215,8 +217,11 @@ class SpaceDGDataset(Dataset):
         self._on_device = device is not None and str(device) != "cpu" and not str(device).startswith("cpu:")
         #: The chains of this dataset (frozen :class:`~spacedg.data.chain.Chain` objects, severity applied).
         self.chains: list[Chain] = self._chains(degradations)
+        self._reads_depth = self._chains_read_depth()
         dirs = _scene_dirs(scenes, builtin_rooms)
         self._load(dirs, on_bad_scene, fractions, split_seed, wanted)
+        if self._reads_depth:  # measured once per scene, before any worker needs them (failures: measured per sample)
+            ensure_view_depths(list(self.scene_dirs.values()))
         if max_questions is not None:
             self.records = _spread_subset(self.records, max_questions, derive_seed(split_seed, "subset", self.split))
         # shared memory: set_epoch() in the main process reaches persistent DataLoader workers
@@ -339,9 +344,26 @@ class SpaceDGDataset(Dataset):
         return self._scenes
 
     def scene(self, scene_id: str) -> Any:
-        """The loaded :class:`~spacedg.scene.Scene` of ``scene_id``, kept in the dataset's byte-bounded cache."""
+        """The loaded :class:`~spacedg.scene.Scene` of ``scene_id``, kept in the dataset's byte-bounded cache.
+        When a chain reads the scene depth, its views' depths come with it, measured once per scene and
+        kept in the scene folder (:mod:`spacedg.data.view_depths`)."""
         folder = self.scene_dirs[scene_id]
-        return self._cache().get(("scene", scene_id), lambda: load_scene(folder))
+        return self._cache().get(("scene", scene_id), lambda: self._load_scene(folder))
+
+    def _load_scene(self, folder: Path) -> Any:
+        scene = load_scene(folder)
+        if self._reads_depth:
+            remember_view_depths(scene, load_view_depths(scene, folder))
+        return scene
+
+    def _chains_read_depth(self) -> bool:
+        """Whether resolving any chain reads the scene depth, at every severity an item can draw."""
+        levels = SEVERITIES[1:] if self.severity == "random" and self.split != "bench" else (None,)
+        options = self.options
+        return any(
+            (chain if level is None else chain.with_severity(level)).scales_with_depth(options.default_preset, options.mixture_preset)
+            for chain in self.chains for level in levels
+        )
 
     def _set_worker_threads(self) -> None:
         """In a DataLoader worker, once: numba threads = ``render_threads`` as given, else the

@@ -103,6 +103,7 @@ __all__ = [
     "degrade_image",
     "degrade_variants",
     "frames_nbytes",
+    "remember_view_depths",
     "replay",
     "sample_scene_depth",
     "sample_image_size",
@@ -195,7 +196,7 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     camera). ``None`` when the view sees no Gaussian."""
     pose = np.asarray(camera.cam_to_world, dtype=np.float64)
     g = scene.gaussians
-    key = (scene.id, len(g), pose.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
+    key = _depth_key(scene, camera)
     if key in _DEPTH_CACHE:
         _DEPTH_CACHE.move_to_end(key)
         return _DEPTH_CACHE[key]
@@ -208,10 +209,28 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     )
     occupied = nearest[np.isfinite(nearest)]
     value = float(np.median(occupied)) if occupied.size else None
+    _remember_depth(key, value)
+    return value
+
+
+def _depth_key(scene: Scene, camera: Any) -> tuple[Any, ...]:
+    """:func:`view_depth`'s cache key: the scene id, its Gaussian count and the camera (pose and intrinsics)."""
+    pose = np.asarray(camera.cam_to_world, dtype=np.float64)
+    return (scene.id, len(scene.gaussians), pose.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
+
+
+def _remember_depth(key: tuple[Any, ...], value: float | None) -> None:
     _DEPTH_CACHE[key] = value
+    _DEPTH_CACHE.move_to_end(key)
     while len(_DEPTH_CACHE) > _DEPTH_CACHE_SIZE:
         _DEPTH_CACHE.popitem(last=False)
-    return value
+
+
+def remember_view_depths(scene: Scene, depths: Mapping[str, float | None]) -> None:
+    """Give :func:`view_depth` the depths of ``scene``'s views measured before (view name → metres or
+    ``None``; :func:`spacedg.data.view_depths.load_view_depths`), as if this process had measured them."""
+    for name, value in depths.items():
+        _remember_depth(_depth_key(scene, scene.camera(name)), value)
 
 
 #: The opaque centres of the last few Gaussian sets :func:`view_depth` saw, made on first use: a

@@ -318,6 +318,56 @@ def test_clean_prob_zero_uses_only_the_given_degradations(rooms):
         assert item["degradation_type"] == names[i]
 
 
+def test_view_depths_are_measured_once_per_scene_and_read_back(rooms, monkeypatch):
+    """A chain that reads the scene depth (haze) gets every view's depth from the scene folder's
+    ``cache/<id>.view-depths.npz``, written when the dataset is built (for each scene of its split): the
+    values view_depth measures, the same items (bytes and provenance) whether measured or read, nothing
+    measured once the file is there; a stale or unreadable file is measured again; a chain that reads no
+    depth (JPEG) writes no file."""
+    from spacedg.data import pipeline, view_depth_cpu
+    from spacedg.data.view_depths import load_view_depths, view_depths_path
+
+    for folder in rooms:
+        view_depths_path(load_scene(folder).id, folder).unlink(missing_ok=True)
+    jpeg = make(rooms, "train", ["jpeg_compression"], clean_prob=0.0)
+    jpeg[0]
+    assert not any(view_depths_path(load_scene(f).id, f).exists() for f in rooms)
+    pipeline.clear_depth_caches()
+    first = make(rooms, "train", ["haze"], clean_prob=0.0)
+    assert all(view_depths_path(scene_id, folder).exists() for scene_id, folder in first.scene_dirs.items())
+    assert not any(view_depths_path(load_scene(f).id, f).exists() for f in rooms if f not in first.scene_dirs.values())
+    items = [first[i] for i in (0, len(first) - 1)]  # two scenes
+    scene = first.scene(first.records[0].scene_id)
+    folder = first.scene_dirs[scene.id]
+    path = view_depths_path(scene.id, folder)
+    assert path.exists() and path.parent.name == "cache"
+    table = load_view_depths(scene, folder)
+    assert sorted(table) == sorted(scene.views)
+    pipeline.clear_depth_caches()
+    assert table == {name: pipeline.view_depth(scene, scene.camera(name)) for name in scene.views}
+    assert any(depth is not None for depth in table.values())
+
+    pipeline.clear_depth_caches()
+
+    def measured(*args, **kwargs):
+        raise AssertionError("a view depth was measured although the scene folder holds them")
+
+    monkeypatch.setattr(view_depth_cpu, "nearest_per_cell", measured)
+    again = make(rooms, "train", ["haze"], clean_prob=0.0)
+    for i, item in zip((0, len(again) - 1), items):
+        repeat = again[i]
+        assert digest(repeat) == digest(item) and repeat["degradation"] == item["degradation"]
+    monkeypatch.undo()
+
+    from spacedg.scene.derived_cache import write_npz_entry
+
+    write_npz_entry(path, "another scene's key", {"depth": np.zeros(len(scene.views))})  # stale: measured and replaced
+    assert load_view_depths(scene, folder) == table
+    path.write_bytes(b"not an npz")  # unreadable: the same
+    assert load_view_depths(scene, folder) == table
+    assert np.load(path)["depth"].shape == (len(scene.views),)
+
+
 def test_set_epoch_redraws_choices_deterministically(rooms):
     a = make(rooms, "train", MIX, clean_prob=0.3)
     b = make(rooms, "train", MIX, clean_prob=0.3)
