@@ -86,7 +86,7 @@ from spacedg.data.pipeline import (
     sample_image_size,
     sample_scene_depth,
 )
-from spacedg.data.view_depths import ensure_view_depths, load_view_depths
+from spacedg.data.view_depths import ensure_view_depths, read_view_depths
 from spacedg.qa.build import ensure_indexes
 from spacedg.qa.index import QABuildConfig, config_index_paths, read_index
 from spacedg.data.workers import loader_plan
@@ -220,10 +220,10 @@ class SpaceDGDataset(Dataset):
         self._reads_depth = self._chains_read_depth()
         dirs = _scene_dirs(scenes, builtin_rooms)
         self._load(dirs, on_bad_scene, fractions, split_seed, wanted)
-        if self._reads_depth:  # measured once per scene, before any worker needs them (failures: measured per sample)
-            ensure_view_depths(list(self.scene_dirs.values()))
         if max_questions is not None:
             self.records = _spread_subset(self.records, max_questions, derive_seed(split_seed, "subset", self.split))
+        if self._reads_depth:  # every view's depth measured once per scene, before any worker needs it
+            ensure_view_depths({scene_id: self.scene_dirs[scene_id] for scene_id in dict.fromkeys(r.scene_id for r in self.records)})
         # shared memory: set_epoch() in the main process reaches persistent DataLoader workers
         self._epoch = torch.zeros((), dtype=torch.int64).share_memory_()
         self._scenes: ByteLRU | None = None  # created lazily in each worker
@@ -345,23 +345,23 @@ class SpaceDGDataset(Dataset):
 
     def scene(self, scene_id: str) -> Any:
         """The loaded :class:`~spacedg.scene.Scene` of ``scene_id``, kept in the dataset's byte-bounded cache.
-        When a chain reads the scene depth, its views' depths come with it, measured once per scene and
-        kept in the scene folder (:mod:`spacedg.data.view_depths`)."""
+        When a chain reads the scene depth, its views' depths come with it from the table the dataset
+        measured when it was built (:mod:`spacedg.data.view_depths`; without one, samples measure their views)."""
         folder = self.scene_dirs[scene_id]
         return self._cache().get(("scene", scene_id), lambda: self._load_scene(folder))
 
     def _load_scene(self, folder: Path) -> Any:
         scene = load_scene(folder)
-        if self._reads_depth:
-            remember_view_depths(scene, load_view_depths(scene, folder))
+        depths = read_view_depths(scene, folder) if self._reads_depth else None
+        if depths is not None:
+            remember_view_depths(scene, depths)
         return scene
 
     def _chains_read_depth(self) -> bool:
         """Whether resolving any chain reads the scene depth, at every severity an item can draw."""
         levels = SEVERITIES[1:] if self.severity == "random" and self.split != "bench" else (None,)
-        options = self.options
         return any(
-            (chain if level is None else chain.with_severity(level)).scales_with_depth(options.default_preset, options.mixture_preset)
+            (chain if level is None else chain.with_severity(level)).scales_with_depth(self.options.default_preset, self.options.mixture_preset)
             for chain in self.chains for level in levels
         )
 

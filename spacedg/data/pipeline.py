@@ -185,6 +185,11 @@ DEPTH_GRID: tuple[int, int] = (32, 24)
 DEPTH_MIN_OPACITY = 0.5
 _DEPTH_CACHE: OrderedDict[tuple[Any, ...], float | None] = OrderedDict()
 _DEPTH_CACHE_SIZE = 8192
+#: Depths measured before and handed over (:func:`remember_view_depths`): per (scene id, Gaussian count),
+#: the views' :func:`view_depth` cache keys → depth, for the last :data:`_VIEW_TABLES_SIZE` scenes (apart
+#: from :data:`_DEPTH_CACHE`, whose measured entries would push a whole scene's out).
+_VIEW_TABLES: OrderedDict[tuple[str, int], dict[tuple[Any, ...], float | None]] = OrderedDict()
+_VIEW_TABLES_SIZE = 256
 
 
 def view_depth(scene: Scene, camera: Any) -> float | None:
@@ -193,13 +198,17 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     camera, inside the image) in each cell of a :data:`DEPTH_GRID` grid over the image, and the
     median over the occupied cells. Pinhole projection (a fisheye lens only moves points within
     the image), no rendering: a few milliseconds per view, cached per (scene, Gaussian count,
-    camera). ``None`` when the view sees no Gaussian."""
+    camera), or handed over measured (:func:`remember_view_depths`). ``None`` when the view sees no
+    Gaussian."""
     pose = np.asarray(camera.cam_to_world, dtype=np.float64)
     g = scene.gaussians
-    key = _depth_key(scene, camera)
+    key = _depth_key(scene.id, len(g), pose, camera)
     if key in _DEPTH_CACHE:
         _DEPTH_CACHE.move_to_end(key)
         return _DEPTH_CACHE[key]
+    table = _VIEW_TABLES.get(key[:2])
+    if table is not None and key in table:
+        return table[key]
     from spacedg.data.view_depth_cpu import nearest_per_cell  # numba: compiled on first use, not with spacedg
 
     pc = (_opaque_means(g) - pose[:3, 3]) @ pose[:3, :3]
@@ -209,28 +218,29 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     )
     occupied = nearest[np.isfinite(nearest)]
     value = float(np.median(occupied)) if occupied.size else None
-    _remember_depth(key, value)
-    return value
-
-
-def _depth_key(scene: Scene, camera: Any) -> tuple[Any, ...]:
-    """:func:`view_depth`'s cache key: the scene id, its Gaussian count and the camera (pose and intrinsics)."""
-    pose = np.asarray(camera.cam_to_world, dtype=np.float64)
-    return (scene.id, len(scene.gaussians), pose.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
-
-
-def _remember_depth(key: tuple[Any, ...], value: float | None) -> None:
     _DEPTH_CACHE[key] = value
-    _DEPTH_CACHE.move_to_end(key)
     while len(_DEPTH_CACHE) > _DEPTH_CACHE_SIZE:
         _DEPTH_CACHE.popitem(last=False)
+    return value
 
 
 def remember_view_depths(scene: Scene, depths: Mapping[str, float | None]) -> None:
     """Give :func:`view_depth` the depths of ``scene``'s views measured before (view name → metres or
-    ``None``; :func:`spacedg.data.view_depths.load_view_depths`), as if this process had measured them."""
+    ``None``; :func:`spacedg.data.view_depths.read_view_depths`), as if this process had measured them."""
+    count = len(scene.gaussians)
+    table = {}
     for name, value in depths.items():
-        _remember_depth(_depth_key(scene, scene.camera(name)), value)
+        camera = scene.camera(name)
+        table[_depth_key(scene.id, count, np.asarray(camera.cam_to_world, dtype=np.float64), camera)] = value
+    _VIEW_TABLES[(scene.id, count)] = table
+    _VIEW_TABLES.move_to_end((scene.id, count))
+    while len(_VIEW_TABLES) > _VIEW_TABLES_SIZE:
+        _VIEW_TABLES.popitem(last=False)
+
+
+def _depth_key(scene_id: str, count: int, pose: np.ndarray, camera: Any) -> tuple[Any, ...]:
+    """:func:`view_depth`'s key of a view: scene id, Gaussian count, float64 cam-to-world bytes, intrinsics and size."""
+    return (scene_id, count, pose.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
 
 
 #: The opaque centres of the last few Gaussian sets :func:`view_depth` saw, made on first use: a
@@ -247,6 +257,7 @@ def clear_depth_caches() -> None:
     """Forget this process's scene depths (:func:`view_depth`) and the opaque centres they come from
     (a benchmark that wants every reading to pay its own)."""
     _DEPTH_CACHE.clear()
+    _VIEW_TABLES.clear()
     if _OPAQUE_MEANS is not None:
         _OPAQUE_MEANS.clear()
 

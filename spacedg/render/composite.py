@@ -61,9 +61,9 @@ def composite_view(
     The composite is the sRGB-encoded mix of 3DGS, decoded once here. Under defocus with anything
     blurred, each Gaussian carries its circle of confusion (:class:`~spacedg.render.settings.Defocus`),
     the composite runs on a coarser grid when every visible blur is wide
-    (:func:`spacedg.render.defocus.composite_factor`; on the compiled path otherwise per tile,
-    :data:`~spacedg.render.defocus.TILE_SAMPLE_MIN_COC`, also on a 2× coarser grid), and the colour is brought back to the sharp
-    view's local flux (:mod:`spacedg.render.defocus_flux`).
+    (:func:`spacedg.render.defocus.composite_factor`; on the compiled path also per tile on the full or
+    the 2× grid, :func:`spacedg.render.defocus.tile_sample_min_coc`), and the colour is brought back to the
+    sharp view's local flux (:mod:`spacedg.render.defocus_flux`).
     """
     want_color = "rgb" in outputs
     want_depth = "depth" in outputs

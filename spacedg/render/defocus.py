@@ -108,13 +108,13 @@ def measurement_settings(settings: Any, scale: float | None = None) -> Any:
 COMPOSITE_MIN_COC = 4.0
 COMPOSITE_MAX_FACTOR = 4
 #: The same rule per 16 × 16 tile on the compiled path (:func:`spacedg.render.raster_cpu.rasterize`'s
-#: ``sample_min_coc``): in a view that is not coarse as a whole, a tile whose every Gaussian is blurred by
+#: ``sample_min_coc``): in a view composited at full resolution, a tile whose every Gaussian is blurred by
 #: at least this much (px) is composited at the centres of its 2 × 2 blocks and upsampled. A far focus
 #: leaves the background sharp and blurs the near furniture by 5–15 px: on the dataset benchmark's
 #: defocus items about half the tiles of such views qualify, and their composite costs about half.
 #: 0 turns it off (the torch path composites every tile in full). Measured against the thin lens
 #: (``benchmarks/defocus_reference.py --focus high``): every row within 0.3 dB of the full composite.
-#: The rule holds on a coarse grid too (:func:`tile_sample_min_coc`).
+#: On a 2× coarse grid the same rule applies from twice this (:func:`tile_sample_min_coc`).
 TILE_SAMPLE_MIN_COC = COMPOSITE_MIN_COC
 
 
@@ -125,7 +125,8 @@ def tile_sample_min_coc(factor: int) -> float:
 
     :func:`coarse_view` keeps the circles of confusion in the view's pixels, so on a 2× grid a tile whose every
     Gaussian is blurred by at least 8 px (4 coarse px) is composited every 2 coarse px: 4× in all, as the
-    whole-view rule does from 8 px. On the dataset benchmark's defocus items, 5–82 % of the tiles of the views
+    whole-view rule does from 8 px (which also asks a short side of at least 64 px; per tile, as at 1×, the
+    side is not asked). On the dataset benchmark's defocus items, 5–82 % of the tiles of the views
     composited at 2× qualify (70–82 % in three of four), and the renders against the thin lens are unchanged
     to 0.02 dB."""
     if 2 * factor > COMPOSITE_MAX_FACTOR:
