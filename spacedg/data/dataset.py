@@ -85,8 +85,9 @@ from spacedg.data.pipeline import (
     remember_view_depths,
     sample_image_size,
     sample_scene_depth,
+    view_depths_known,
 )
-from spacedg.data.view_depths import ensure_view_depths, read_view_depths
+from spacedg.data.view_depths import load_view_depths
 from spacedg.qa.build import ensure_indexes
 from spacedg.qa.index import QABuildConfig, config_index_paths, read_index
 from spacedg.data.workers import loader_plan
@@ -222,8 +223,6 @@ class SpaceDGDataset(Dataset):
         self._load(dirs, on_bad_scene, fractions, split_seed, wanted)
         if max_questions is not None:
             self.records = _spread_subset(self.records, max_questions, derive_seed(split_seed, "subset", self.split))
-        if self._reads_depth:  # every view's depth measured once per scene, before any worker needs it
-            ensure_view_depths({scene_id: self.scene_dirs[scene_id] for scene_id in dict.fromkeys(r.scene_id for r in self.records)})
         # shared memory: set_epoch() in the main process reaches persistent DataLoader workers
         self._epoch = torch.zeros((), dtype=torch.int64).share_memory_()
         self._scenes: ByteLRU | None = None  # created lazily in each worker
@@ -345,16 +344,15 @@ class SpaceDGDataset(Dataset):
 
     def scene(self, scene_id: str) -> Any:
         """The loaded :class:`~spacedg.scene.Scene` of ``scene_id``, kept in the dataset's byte-bounded cache.
-        When a chain reads the scene depth, its views' depths come with it from the table the dataset
-        measured when it was built (:mod:`spacedg.data.view_depths`; without one, samples measure their views)."""
+        When a chain reads the scene depth, its views' depths come with it, from the table in the scene
+        folder or measured once for the whole scene and written there (:mod:`spacedg.data.view_depths`)."""
         folder = self.scene_dirs[scene_id]
         return self._cache().get(("scene", scene_id), lambda: self._load_scene(folder))
 
     def _load_scene(self, folder: Path) -> Any:
         scene = load_scene(folder)
-        depths = read_view_depths(scene, folder) if self._reads_depth else None
-        if depths is not None:
-            remember_view_depths(scene, depths)
+        if self._reads_depth and not view_depths_known(scene):  # a scene reloaded after eviction: known already
+            remember_view_depths(scene, load_view_depths(scene, folder))
         return scene
 
     def _chains_read_depth(self) -> bool:

@@ -108,6 +108,7 @@ __all__ = [
     "sample_scene_depth",
     "sample_image_size",
     "view_depth",
+    "view_depths_known",
 ]
 
 # ----------------------------------------------------------------- running
@@ -224,9 +225,18 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     return value
 
 
+def view_depths_known(scene: Scene) -> bool:
+    """Whether this process holds ``scene``'s view depths handed over by :func:`remember_view_depths` (and not forgotten since)."""
+    key = (scene.id, len(scene.gaussians))
+    if key in _VIEW_TABLES:
+        _VIEW_TABLES.move_to_end(key)
+        return True
+    return False
+
+
 def remember_view_depths(scene: Scene, depths: Mapping[str, float | None]) -> None:
     """Give :func:`view_depth` the depths of ``scene``'s views measured before (view name → metres or
-    ``None``; :func:`spacedg.data.view_depths.read_view_depths`), as if this process had measured them."""
+    ``None``; :func:`spacedg.data.view_depths.load_view_depths`), as if this process had measured them."""
     count = len(scene.gaussians)
     table = {}
     for name, value in depths.items():

@@ -2,22 +2,21 @@
 
 Depth-relative presets (defocus focus, haze density, motion-blur shake) are resolved at a sample's
 scene depth, the median over its views of :func:`~spacedg.data.pipeline.view_depth` (metres). One
-view costs a projection of the scene's opaque centres, 3–4 ms on a 150–260k-Gaussian room, and a
-process keeps only what it measured itself. At the paper's scale (~400 views a scene and ~1,600
-questions, a DataLoader worker of eight meets each view about once an epoch) nearly every sample
-paid it.
+view costs a projection of the scene's opaque centres: 3–4 ms on a 150–260k-Gaussian room, about
+50 ms at 2 M Gaussians. A process kept only what it measured itself, and at the paper's scale
+(~400 views a scene and ~1,600 questions, a DataLoader worker of eight meets each view about once
+an epoch) nearly every sample paid it.
 
 The table is ``cache/<scene id>.view-depths.npz`` in the scene folder, beside the visibility
 caches: every view's depth as :func:`~spacedg.data.pipeline.view_depth` measures it (the same
 floats; NaN where a view sees no opaque Gaussian). It is keyed by the SHA-256 of the scene's
 ``scene.json`` (which records the Gaussians' file and its SHA-256), the grid, the opacity floor and
-the source of the code that measures, so a changed scene or a changed measurement makes it stale,
-and whether it is current is known without loading the Gaussians. :func:`ensure_view_depths`
-measures the stale tables of a dataset's scenes before any worker starts, in a separate
-interpreter (as the question indexes: the caller starts no numba threads before DataLoader workers
-fork); :func:`read_view_depths` reads one and never measures: a scene without a current table
-(a folder that cannot be written, a failed measurement) measures each view a sample needs, as
-before, and the values are the same either way.
+the source of the code that measures, so a changed scene or a changed measurement makes it stale.
+:func:`load_view_depths` reads it, or measures every view and writes it: the first process that
+needs a scene's depths pays for the whole scene once (about what a worker paid over an epoch view
+by view), and every later one reads it. A stale, foreign or unreadable file is measured again and
+replaced atomically (two processes measuring at once write the same values); a folder that cannot
+be written keeps the measured values in the process only.
 """
 
 from __future__ import annotations
@@ -28,23 +27,16 @@ import importlib.util
 import inspect
 import json
 import math
-import os
-import warnings
-from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from spacedg.data import pipeline
-from spacedg.errors import InvalidDataError
 from spacedg.qa.index import scene_json_path
 from spacedg.scene.derived_cache import read_npz_entry, write_npz_entry
-from spacedg.scene.io import load_scene
 from spacedg.scene.model import Scene
-from spacedg.scene.store import each_folder, run_isolated, stale_folders
 
-__all__ = ["ensure_view_depths", "read_view_depths", "view_depths_path"]
+__all__ = ["load_view_depths", "view_depths_path"]
 
 
 def view_depths_path(scene_id: str, folder: str | Path) -> Path:
@@ -55,8 +47,7 @@ def view_depths_path(scene_id: str, folder: str | Path) -> Path:
 @functools.cache
 def _method_digest() -> str:
     """SHA-256 of what a view's depth depends on besides the scene: the grid, the opacity floor, and the
-    source of :func:`~spacedg.data.pipeline.view_depth`, its opaque-centre helpers and its compiled step
-    (read from its file: the check imports no numba)."""
+    source of :func:`~spacedg.data.pipeline.view_depth`, its opaque-centre helpers and its compiled step."""
     digest = hashlib.sha256(json.dumps({"grid": list(pipeline.DEPTH_GRID), "min_opacity": pipeline.DEPTH_MIN_OPACITY}).encode())
     for function in (pipeline.view_depth, pipeline._opaque_means, pipeline._opaque_centres):
         digest.update(inspect.getsource(function).encode())
@@ -73,53 +64,18 @@ def _table_key(folder: str | Path) -> str:
     return digest.hexdigest()
 
 
-def _stored(scene_id: str, folder: str | Path) -> np.ndarray | None:
-    """The current table's depths (float64, one per view in sorted name order), or ``None``."""
-    entry = read_npz_entry(view_depths_path(scene_id, folder), _table_key(folder))
-    return None if entry is None else entry.get("depth")
-
-
-def read_view_depths(scene: Scene, folder: str | Path) -> dict[str, float | None] | None:
+def load_view_depths(scene: Scene, folder: str | Path) -> dict[str, float | None]:
     """``{view name: its scene depth in metres, or None where the view sees no opaque Gaussian}`` for every
-    view of ``scene`` (loaded from ``folder``) from its current table; ``None`` without one (nothing is measured)."""
+    view of ``scene`` (loaded from ``folder``): read from its table, or measured and written (module docstring)."""
     names = sorted(scene.views)
-    depths = _stored(scene.id, folder)
+    path, key = view_depths_path(scene.id, folder), _table_key(folder)
+    entry = read_npz_entry(path, key)
+    depths = None if entry is None else entry.get("depth")
     if depths is None or depths.shape != (len(names),):
-        return None
-    return {name: None if math.isnan(d) else float(d) for name, d in zip(names, depths.tolist())}
-
-
-def ensure_view_depths(folders: Mapping[str, Path]) -> None:
-    """Measure and write the table of each scene (``scene id → folder``) whose table is missing or stale, in a
-    separate interpreter (module docstring). A folder whose ``cache`` cannot be written is left alone; a
-    scene that fails is named in a warning (its samples measure their views, as before)."""
-    ids = {str(folder): scene_id for scene_id, folder in folders.items()}
-    stale, failed = stale_folders(list(ids), lambda folder: _stored(ids[str(folder)], folder) is not None)
-    stale = [folder for folder in stale if _writable(view_depths_path(ids[folder], folder).parent)]
-    if stale:
+        measured = (pipeline.view_depth(scene, scene.camera(name)) for name in names)
+        depths = np.array([math.nan if d is None else d for d in measured], np.float64)
         try:
-            failed.update(run_isolated("spacedg.data.view_depths:_measure_folders", {"dirs": stale}))
-        except InvalidDataError as err:
-            failed.update(dict.fromkeys(stale, str(err)))
-    if failed:
-        listing = "; ".join(f"{folder}: {error}" for folder, error in failed.items())
-        warnings.warn(f"view depths not stored for {len(failed)} scene(s) (their samples measure them): {listing}", stacklevel=3)
-
-
-def _writable(cache: Path) -> bool:
-    """Whether ``cache`` (a scene's cache folder, perhaps not made yet) can take a file."""
-    existing = cache if cache.exists() else cache.parent
-    return os.access(existing, os.W_OK | os.X_OK)
-
-
-def _measure(folder: str) -> None:
-    """Measure every view of the scene in ``folder`` and write its table."""
-    scene = load_scene(folder)
-    depths = [pipeline.view_depth(scene, scene.camera(name)) for name in sorted(scene.views)]
-    values = np.array([math.nan if d is None else d for d in depths], np.float64)
-    write_npz_entry(view_depths_path(scene.id, folder), _table_key(folder), {"depth": values})
-
-
-def _measure_folders(payload: dict[str, Any]) -> dict[str, str]:
-    """Child side of :func:`ensure_view_depths`: ``folder → error`` for the scenes that failed."""
-    return each_folder(payload["dirs"], "view depths (first use)", _measure)
+            write_npz_entry(path, key, {"depth": depths})
+        except OSError:
+            pass  # a folder that cannot be written: the values hold for this process (module docstring)
+    return {name: None if math.isnan(d) else float(d) for name, d in zip(names, depths.tolist())}

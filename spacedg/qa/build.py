@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from spacedg.errors import PluginError
+from spacedg.errors import PluginError, SpaceDGError
 from spacedg.plugins.guard import plugin_call
 from spacedg.plugins.candidates import PASSED_OVER, Candidate, gated, light_candidates
 from spacedg.plugins.qa_record import QARecord, deferred_geometry
@@ -76,7 +76,7 @@ from spacedg.scene.frame_check import require_frame
 from spacedg.scene.io import load_scene
 from spacedg.scene.labelling import ensure_instance_ids
 from spacedg.scene.model import Scene
-from spacedg.scene.store import each_folder, run_isolated, stale_folders
+from spacedg.scene.store import run_isolated
 from spacedg.scene.visibility import (
     compute_visibility,
     load_or_compute_visibility,
@@ -481,8 +481,16 @@ def build_scene_index(
 def _build_indexes(payload: dict[str, Any]) -> dict[str, str]:
     """Child side of :func:`ensure_indexes`: build the indexes of ``payload["dirs"]``; returns
     ``folder → error message`` for the scenes that failed."""
+    from tqdm import tqdm
+
     cfg = QABuildConfig.from_dict(payload["config"])
-    return each_folder(payload["dirs"], "question indexes (first use)", lambda folder: build_scene_index(folder, cfg, progress=False))
+    failed: dict[str, str] = {}
+    for folder in tqdm(payload["dirs"], desc="question indexes (first use)", unit="scene"):
+        try:
+            build_scene_index(folder, cfg, progress=False)
+        except (SpaceDGError, OSError, ValueError) as err:
+            failed[folder] = str(err)
+    return failed
 
 
 def ensure_indexes(dirs: Sequence[Path], config: QABuildConfig) -> dict[str, str]:
@@ -491,7 +499,14 @@ def ensure_indexes(dirs: Sequence[Path], config: QABuildConfig) -> dict[str, str
     numba or CUDA threads before a DataLoader forks its workers); returns ``folder → error`` for
     scenes that could not be read or indexed."""
 
-    stale, failed = stale_folders(dirs, lambda folder: index_is_current(folder, config))
+    failed: dict[str, str] = {}
+    stale = []
+    for d in dirs:
+        try:
+            if not index_is_current(d, config):
+                stale.append(str(d))
+        except (SpaceDGError, OSError, ValueError) as err:
+            failed[str(d)] = str(err)
     if stale:
         failed.update(run_isolated("spacedg.qa.build:_build_indexes", {"dirs": stale, "config": config.to_dict()}))
     return failed

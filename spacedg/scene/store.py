@@ -24,8 +24,7 @@ from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.scene.io import save_scene
 from spacedg.scene.synthetic import generate_room
 
-__all__ = ["BUILTIN_ROOMS_FOLDER", "BUILTIN_ROOMS_VERSION", "SPLITS", "spacedg_home", "builtin_scene_dirs", "assign_splits", "run_isolated",
-           "stale_folders", "each_folder", "ByteLRU", "scene_dirs_of"]
+__all__ = ["BUILTIN_ROOMS_FOLDER", "BUILTIN_ROOMS_VERSION", "SPLITS", "spacedg_home", "builtin_scene_dirs", "assign_splits", "run_isolated", "ByteLRU", "scene_dirs_of"]
 
 #: The built-in rooms' generator version: 2 since wall rows, which changed every room of a seed.
 BUILTIN_ROOMS_VERSION = 2
@@ -162,41 +161,6 @@ def run_isolated(target: str, payload: dict[str, Any]) -> dict[str, str]:
     if proc.returncode != 0:
         raise InvalidDataError(f"spacedg {target} failed in its worker process (exit code {proc.returncode}); see the error printed above")
     return dict(json.loads(proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else "{}"))
-
-
-def stale_folders(dirs: Sequence[str | Path], is_current: Callable[[str | Path], bool]) -> tuple[list[str], dict[str, str]]:
-    """``(folders whose derived file is not current, folder → error for those that could not be read)``
-    (``is_current(folder)`` raises a :class:`~spacedg.errors.SpaceDGError`, ``OSError`` or ``ValueError`` on an
-    unreadable scene): the parent side of a derived file built by :func:`run_isolated` (question indexes,
-    view depths)."""
-    from spacedg.errors import SpaceDGError
-
-    stale: list[str] = []
-    failed: dict[str, str] = {}
-    for folder in dirs:
-        try:
-            if not is_current(folder):
-                stale.append(str(folder))
-        except (SpaceDGError, OSError, ValueError) as err:
-            failed[str(folder)] = str(err)
-    return stale, failed
-
-
-def each_folder(dirs: Sequence[str], desc: str, work: Callable[[str], Any]) -> dict[str, str]:
-    """``work(folder)`` for each folder with a progress bar (``desc``); ``folder → error`` for those that
-    raised a :class:`~spacedg.errors.SpaceDGError`, ``OSError`` or ``ValueError``: the child side of
-    :func:`stale_folders`' work, run by :func:`run_isolated`."""
-    from tqdm import tqdm
-
-    from spacedg.errors import SpaceDGError
-
-    failed: dict[str, str] = {}
-    for folder in tqdm(dirs, desc=desc, unit="scene"):
-        try:
-            work(folder)
-        except (SpaceDGError, OSError, ValueError) as err:
-            failed[folder] = str(err)
-    return failed
 
 
 class ByteLRU:

@@ -320,13 +320,12 @@ def test_clean_prob_zero_uses_only_the_given_degradations(rooms):
 
 def test_view_depths_are_measured_once_per_scene_and_read_back(rooms, monkeypatch):
     """A chain that reads the scene depth (haze) gets every view's depth from the scene folder's
-    ``cache/<id>.view-depths.npz``, measured when the dataset is built (for each scene its records use): the
-    values view_depth measures, the same items (bytes and provenance) whether measured or read, nothing
-    measured once the table is there; a stale or unreadable table is not read and is measured again; a
-    chain that reads no depth (JPEG) writes no table; a cache folder that cannot be written is left alone,
-    and a measurement that fails is named in a warning (the samples then measure their views)."""
+    ``cache/<id>.view-depths.npz``, measured for the whole scene when the scene is first needed: the values
+    view_depth measures, the same items (bytes and provenance) whether measured or read, nothing measured once
+    the table is there; a stale or unreadable table is measured again and replaced; a folder that cannot be
+    written keeps them in the process; a chain that reads no depth (JPEG) writes no table."""
     from spacedg.data import pipeline, view_depth_cpu, view_depths
-    from spacedg.data.view_depths import ensure_view_depths, read_view_depths, view_depths_path
+    from spacedg.data.view_depths import load_view_depths, view_depths_path
     from spacedg.scene.derived_cache import write_npz_entry
 
     for folder in rooms:
@@ -335,23 +334,21 @@ def test_view_depths_are_measured_once_per_scene_and_read_back(rooms, monkeypatc
     assert not any(view_depths_path(load_scene(f).id, f).exists() for f in rooms)
     pipeline.clear_depth_caches()
     first = make(rooms, "train", ["haze"], clean_prob=0.0)
-    used = {r.scene_id for r in first.records}
-    assert all(view_depths_path(scene_id, first.scene_dirs[scene_id]).exists() for scene_id in used)
-    assert not any(view_depths_path(load_scene(f).id, f).exists() for f in rooms if load_scene(f).id not in used)
+    assert not any(view_depths_path(load_scene(f).id, f).exists() for f in rooms)  # nothing before a scene is needed
     items = [first[i] for i in (0, len(first) - 1)]  # two scenes
     scene = first.scene(first.records[0].scene_id)
     folder = first.scene_dirs[scene.id]
     path = view_depths_path(scene.id, folder)
-    table = read_view_depths(scene, folder)
-    assert table is not None and sorted(table) == sorted(scene.views) and any(d is not None for d in table.values())
+    assert path.exists() and path.parent.name == "cache"
     pipeline.clear_depth_caches()
+    table = load_view_depths(scene, folder)
+    assert sorted(table) == sorted(scene.views) and any(d is not None for d in table.values())
     assert table == {name: pipeline.view_depth(scene, scene.camera(name)) for name in scene.views}
-
-    pipeline.clear_depth_caches()
 
     def measured(*args, **kwargs):
         raise AssertionError("a view depth was measured although the scene folder holds them")
 
+    pipeline.clear_depth_caches()
     monkeypatch.setattr(view_depth_cpu, "nearest_per_cell", measured)
     again = make(rooms, "train", ["haze"], clean_prob=0.0)
     for i, item in zip((0, len(again) - 1), items):
@@ -361,28 +358,18 @@ def test_view_depths_are_measured_once_per_scene_and_read_back(rooms, monkeypatc
 
     for broken in (lambda: write_npz_entry(path, "another scene's key", {"depth": np.zeros(len(scene.views))}), lambda: path.write_bytes(b"not an npz")):
         broken()
-        assert read_view_depths(scene, folder) is None
-        ensure_view_depths({scene.id: folder})
-        assert read_view_depths(scene, folder) == table
+        assert load_view_depths(scene, folder) == table  # measured again
+        assert np.array_equal(np.load(path)["depth"], [np.nan if table[n] is None else table[n] for n in sorted(table)], equal_nan=True)
+
+    def read_only(*args, **kwargs):
+        raise PermissionError("read-only folder")
 
     path.unlink()
-    monkeypatch.setattr(view_depths, "_writable", lambda cache: False)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        ensure_view_depths({scene.id: folder})  # left alone, quietly
-    assert not path.exists()
-    monkeypatch.undo()
-
-    def crashed(*args, **kwargs):
-        raise InvalidDataError("the worker process died")
-
-    monkeypatch.setattr(view_depths, "run_isolated", crashed)
-    with pytest.warns(UserWarning, match=rf"view depths not stored for 1 scene.*{re.escape(str(folder))}.*died"):
-        ensure_view_depths({scene.id: folder})
     pipeline.clear_depth_caches()
-    with pytest.warns(UserWarning, match="view depths not stored"):
-        fallback = make(rooms, "train", ["haze"], clean_prob=0.0)  # no table: the samples measure their views
+    monkeypatch.setattr(view_depths, "write_npz_entry", read_only)
+    fallback = make(rooms, "train", ["haze"], clean_prob=0.0)
     assert digest(fallback[0]) == digest(items[0]) and fallback[0]["degradation"] == items[0]["degradation"]
+    assert not path.exists() and pipeline.view_depths_known(fallback.scene(scene.id))  # kept in the process
 
 
 def test_set_epoch_redraws_choices_deterministically(rooms):
