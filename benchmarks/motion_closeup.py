@@ -26,14 +26,14 @@ from render import PLANT, WIDTH, HEIGHT, median_depth, plant_scene, psnr, severi
 from spacedg.render import render
 from spacedg.render.camera import Camera, look_at
 from spacedg.render.gaussians import Gaussians
-from spacedg.render.motion import MotionJob, motion_extent, render_motion_keyframes
+from spacedg.render.motion import _DISPLACEMENT_SAMPLE, MotionJob, motion_extent, render_motion_keyframes
 from spacedg.render.settings import MotionBlur
 
 
 def motion_parallax(gaussians: Gaussians, camera: Camera, motion: MotionBlur) -> float:
     """The previous rule's parallax P (pixels): ``f · |t_xy| · (1/z₁₀ − 1/z₉₀)`` over a strided
-    sample of at most 8192 Gaussian means visible at mid-exposure (0 when fewer than 2)."""
-    stride = max(1, len(gaussians) // 8192)
+    sample of Gaussian means visible at mid-exposure, strided as motion_extent strides them (0 when fewer than 2)."""
+    stride = max(1, len(gaussians) // _DISPLACEMENT_SAMPLE)
     uv, depth, ok = camera.project(gaussians.means[::stride].astype(np.float64))
     visible = ok & camera.in_image(uv) & (depth > 1e-3)
     if visible.sum() < 2:

@@ -82,12 +82,10 @@ from spacedg.data.pipeline import (
     PipelineOptions,
     degrade_plan,
     frames_nbytes,
-    remember_view_depths,
     sample_image_size,
     sample_scene_depth,
-    view_depths_known,
 )
-from spacedg.data.view_depths import load_view_depths
+from spacedg.data.view_depths import ensure_view_depths
 from spacedg.qa.build import ensure_indexes
 from spacedg.qa.index import QABuildConfig, config_index_paths, read_index
 from spacedg.data.workers import loader_plan
@@ -217,8 +215,9 @@ class SpaceDGDataset(Dataset):
         self._threads_set = False
         self._on_device = device is not None and str(device) != "cpu" and not str(device).startswith("cpu:")
         #: The chains of this dataset (frozen :class:`~spacedg.data.chain.Chain` objects, severity applied).
-        self.chains: list[Chain] = self._chains(degradations)
-        self._reads_depth = self._chains_read_depth()
+        self.chains: list[Chain]
+        # _reads_depth: some chain reads the scene depth (scenes then come with their views' depths)
+        self.chains, self._reads_depth = self._chains(degradations)
         dirs = _scene_dirs(scenes, builtin_rooms)
         self._load(dirs, on_bad_scene, fractions, split_seed, wanted)
         if max_questions is not None:
@@ -252,8 +251,9 @@ class SpaceDGDataset(Dataset):
             r for d in dirs if splits[ids[d]] == self.split for r in records_by_dir[d] if wanted is None or r.question_type in wanted
         ]
 
-    def _chains(self, degradations: Any) -> list[Chain]:
-        """The dataset's chains, severity applied; unknown names, presets and repeats fail here, with suggestions."""
+    def _chains(self, degradations: Any) -> tuple[list[Chain], bool]:
+        """The dataset's chains, severity applied, and whether resolving one reads the scene depth at some severity
+        an item can draw; unknown names, presets and repeats fail here, with suggestions."""
         if degradations is None:
             items: list[Any] = list(BENCH_DEGRADATIONS) if self.split == "bench" else []
         elif isinstance(degradations, str) and degradations == "all":
@@ -268,16 +268,22 @@ class SpaceDGDataset(Dataset):
                 f"{{'name': 'haze', 'params': {{...}}}}), a list of chains, 'all' or None; got {short_repr(degradations)}"
             )
         random_levels = self.severity == "random" and self.split != "bench"
+        levels = SEVERITIES[1:] if random_levels else (None,)
         chains = []
+        reads_depth = False
         for item in items:
             chain = Chain.parse(item)
             if self.severity != "random":
                 chain = chain.with_severity(self.severity)
-            chain.check(SEVERITIES[1:] if random_levels else (None,))
+            chain.check(levels)
+            reads_depth = reads_depth or any(
+                (chain if level is None else chain.with_severity(level)).scales_with_depth(self.options.default_preset, self.options.mixture_preset)
+                for level in levels
+            )
             chains.append(chain)
         if len(set(chains)) != len(chains):
             raise ParameterError(f"{_WHERE}: degradations repeat a chain: {[c.text for c in chains]}")
-        return chains
+        return chains, reads_depth
 
     def _records(self, folder: Path) -> list[QARecord]:
         jsonl, _ = config_index_paths(load_scene(folder).id, folder, self.qa_config)
@@ -351,17 +357,9 @@ class SpaceDGDataset(Dataset):
 
     def _load_scene(self, folder: Path) -> Any:
         scene = load_scene(folder)
-        if self._reads_depth and not view_depths_known(scene):  # a scene reloaded after eviction: known already
-            remember_view_depths(scene, load_view_depths(scene, folder))
+        if self._reads_depth:
+            ensure_view_depths(scene, folder)
         return scene
-
-    def _chains_read_depth(self) -> bool:
-        """Whether resolving any chain reads the scene depth, at every severity an item can draw."""
-        levels = SEVERITIES[1:] if self.severity == "random" and self.split != "bench" else (None,)
-        return any(
-            (chain if level is None else chain.with_severity(level)).scales_with_depth(self.options.default_preset, self.options.mixture_preset)
-            for chain in self.chains for level in levels
-        )
 
     def _set_worker_threads(self) -> None:
         """In a DataLoader worker, once: numba threads = ``render_threads`` as given, else the

@@ -184,13 +184,11 @@ class DegradedViews:
 DEPTH_GRID: tuple[int, int] = (32, 24)
 #: Gaussians at least this opaque make a surface for :func:`view_depth`.
 DEPTH_MIN_OPACITY = 0.5
-_DEPTH_CACHE: OrderedDict[tuple[Any, ...], float | None] = OrderedDict()
-_DEPTH_CACHE_SIZE = 8192
-#: Depths measured before and handed over (:func:`remember_view_depths`): per (scene id, Gaussian count),
-#: the views' :func:`view_depth` cache keys → depth, for the last :data:`_VIEW_TABLES_SIZE` scenes (apart
-#: from :data:`_DEPTH_CACHE`, whose measured entries would push a whole scene's out).
-_VIEW_TABLES: OrderedDict[tuple[str, int], dict[tuple[Any, ...], float | None]] = OrderedDict()
-_VIEW_TABLES_SIZE = 256
+#: Each scene's view depths this process holds, measured or handed over (:func:`remember_view_depths`):
+#: per (scene id, Gaussian count), camera key (:func:`_camera_key`) → depth, for the last
+#: :data:`_SCENE_DEPTHS_SIZE` scenes used.
+_SCENE_DEPTHS: OrderedDict[tuple[str, int], dict[tuple[Any, ...], float | None]] = OrderedDict()
+_SCENE_DEPTHS_SIZE = 256
 
 
 def view_depth(scene: Scene, camera: Any) -> float | None:
@@ -198,18 +196,15 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     the nearest opaque Gaussian centre (opacity >= :data:`DEPTH_MIN_OPACITY`, in front of the
     camera, inside the image) in each cell of a :data:`DEPTH_GRID` grid over the image, and the
     median over the occupied cells. Pinhole projection (a fisheye lens only moves points within
-    the image), no rendering: a few milliseconds per view, cached per (scene, Gaussian count,
+    the image), no rendering: a few milliseconds per view, kept per (scene, Gaussian count,
     camera), or handed over measured (:func:`remember_view_depths`). ``None`` when the view sees no
     Gaussian."""
     pose = np.asarray(camera.cam_to_world, dtype=np.float64)
     g = scene.gaussians
-    key = _depth_key(scene.id, len(g), pose, camera)
-    if key in _DEPTH_CACHE:
-        _DEPTH_CACHE.move_to_end(key)
-        return _DEPTH_CACHE[key]
-    table = _VIEW_TABLES.get(key[:2])
-    if table is not None and key in table:
-        return table[key]
+    depths = _depths_of(scene)
+    key = _camera_key(pose, camera)
+    if key in depths:
+        return depths[key]
     from spacedg.data.view_depth_cpu import nearest_per_cell  # numba: compiled on first use, not with spacedg
 
     pc = (_opaque_means(g) - pose[:3, 3]) @ pose[:3, :3]
@@ -219,38 +214,40 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     )
     occupied = nearest[np.isfinite(nearest)]
     value = float(np.median(occupied)) if occupied.size else None
-    _DEPTH_CACHE[key] = value
-    while len(_DEPTH_CACHE) > _DEPTH_CACHE_SIZE:
-        _DEPTH_CACHE.popitem(last=False)
+    depths[key] = value
     return value
 
 
 def view_depths_known(scene: Scene) -> bool:
-    """Whether this process holds ``scene``'s view depths handed over by :func:`remember_view_depths` (and not forgotten since)."""
-    key = (scene.id, len(scene.gaussians))
-    if key in _VIEW_TABLES:
-        _VIEW_TABLES.move_to_end(key)
-        return True
-    return False
+    """Whether this process holds the depth of every view of ``scene`` (measured or handed over)."""
+    depths = _depths_of(scene)
+    return all(_camera_key(np.asarray(cam.cam_to_world, dtype=np.float64), cam) in depths for cam in (scene.camera(n) for n in scene.views))
 
 
 def remember_view_depths(scene: Scene, depths: Mapping[str, float | None]) -> None:
     """Give :func:`view_depth` the depths of ``scene``'s views measured before (view name → metres or
-    ``None``; :func:`spacedg.data.view_depths.load_view_depths`), as if this process had measured them."""
-    count = len(scene.gaussians)
-    table = {}
+    ``None``; :mod:`spacedg.data.view_depths`), as if this process had measured them."""
+    known = _depths_of(scene)
     for name, value in depths.items():
         camera = scene.camera(name)
-        table[_depth_key(scene.id, count, np.asarray(camera.cam_to_world, dtype=np.float64), camera)] = value
-    _VIEW_TABLES[(scene.id, count)] = table
-    _VIEW_TABLES.move_to_end((scene.id, count))
-    while len(_VIEW_TABLES) > _VIEW_TABLES_SIZE:
-        _VIEW_TABLES.popitem(last=False)
+        known[_camera_key(np.asarray(camera.cam_to_world, dtype=np.float64), camera)] = value
 
 
-def _depth_key(scene_id: str, count: int, pose: np.ndarray, camera: Any) -> tuple[Any, ...]:
-    """:func:`view_depth`'s key of a view: scene id, Gaussian count, float64 cam-to-world bytes, intrinsics and size."""
-    return (scene_id, count, pose.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
+def _depths_of(scene: Scene) -> dict[tuple[Any, ...], float | None]:
+    """``scene``'s entry of :data:`_SCENE_DEPTHS` (made if new; the least recently used scene forgotten past the limit)."""
+    key = (scene.id, len(scene.gaussians))
+    depths = _SCENE_DEPTHS.get(key)
+    if depths is None:
+        depths = _SCENE_DEPTHS[key] = {}
+        while len(_SCENE_DEPTHS) > _SCENE_DEPTHS_SIZE:
+            _SCENE_DEPTHS.popitem(last=False)
+    _SCENE_DEPTHS.move_to_end(key)
+    return depths
+
+
+def _camera_key(pose: np.ndarray, camera: Any) -> tuple[Any, ...]:
+    """A view's key within its scene: float64 cam-to-world bytes, intrinsics and size."""
+    return (pose.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
 
 
 #: The opaque centres of the last few Gaussian sets :func:`view_depth` saw, made on first use: a
@@ -266,8 +263,7 @@ _OPAQUE_MEANS_BYTES = 256 << 20
 def clear_depth_caches() -> None:
     """Forget this process's scene depths (:func:`view_depth`) and the opaque centres they come from
     (a benchmark that wants every reading to pay its own)."""
-    _DEPTH_CACHE.clear()
-    _VIEW_TABLES.clear()
+    _SCENE_DEPTHS.clear()
     if _OPAQUE_MEANS is not None:
         _OPAQUE_MEANS.clear()
 

@@ -11,8 +11,8 @@ The table is ``cache/<scene id>.view-depths.npz`` in the scene folder, beside th
 caches: every view's depth as :func:`~spacedg.data.pipeline.view_depth` measures it (the same
 floats; NaN where a view sees no opaque Gaussian). It is keyed by the SHA-256 of the scene's
 ``scene.json`` (which records the Gaussians' file and its SHA-256), the grid, the opacity floor and
-the source of the code that measures, so a changed scene or a changed measurement makes it stale.
-:func:`load_view_depths` reads it, or measures every view and writes it: the first process that
+the files of the code that measures, so a changed scene or a changed measurement makes it stale.
+:func:`ensure_view_depths` reads it, or measures every view and writes it: the first process that
 needs a scene's depths pays for the whole scene once (about what a worker paid over an epoch view
 by view), and every later one reads it. A stale, foreign or unreadable file is measured again and
 replaced atomically (two processes measuring at once write the same values); a folder that cannot
@@ -21,10 +21,7 @@ be written keeps the measured values in the process only.
 
 from __future__ import annotations
 
-import functools
 import hashlib
-import importlib.util
-import inspect
 import json
 import math
 from pathlib import Path
@@ -32,11 +29,11 @@ from pathlib import Path
 import numpy as np
 
 from spacedg.data import pipeline
-from spacedg.qa.index import scene_json_path
+from spacedg.qa.index import module_files_digest, scene_json_path
 from spacedg.scene.derived_cache import read_npz_entry, write_npz_entry
 from spacedg.scene.model import Scene
 
-__all__ = ["load_view_depths", "view_depths_path"]
+__all__ = ["ensure_view_depths", "view_depths_path"]
 
 
 def view_depths_path(scene_id: str, folder: str | Path) -> Path:
@@ -44,38 +41,29 @@ def view_depths_path(scene_id: str, folder: str | Path) -> Path:
     return scene_json_path(folder).parent / "cache" / f"{scene_id}.view-depths.npz"
 
 
-@functools.cache
-def _method_digest() -> str:
-    """SHA-256 of what a view's depth depends on besides the scene: the grid, the opacity floor, and the
-    source of :func:`~spacedg.data.pipeline.view_depth`, its opaque-centre helpers and its compiled step."""
-    digest = hashlib.sha256(json.dumps({"grid": list(pipeline.DEPTH_GRID), "min_opacity": pipeline.DEPTH_MIN_OPACITY}).encode())
-    for function in (pipeline.view_depth, pipeline._opaque_means, pipeline._opaque_centres):
-        digest.update(inspect.getsource(function).encode())
-    spec = importlib.util.find_spec("spacedg.data.view_depth_cpu")
-    if spec is not None and spec.origin is not None:
-        digest.update(Path(spec.origin).read_bytes())
-    return digest.hexdigest()
-
-
 def _table_key(folder: str | Path) -> str:
-    """The table's key: SHA-256 of the scene's ``scene.json`` bytes and :func:`_method_digest`."""
+    """The table's key: SHA-256 of the scene's ``scene.json`` bytes, the grid, the opacity floor and the files
+    of the code that measures (:func:`~spacedg.data.pipeline.view_depth` and its compiled step)."""
     digest = hashlib.sha256(scene_json_path(folder).read_bytes())
-    digest.update(_method_digest().encode())
+    digest.update(json.dumps({"grid": list(pipeline.DEPTH_GRID), "min_opacity": pipeline.DEPTH_MIN_OPACITY}).encode())
+    digest.update(str(module_files_digest(["spacedg.data.pipeline", "spacedg.data.view_depth_cpu"])).encode())
     return digest.hexdigest()
 
 
-def load_view_depths(scene: Scene, folder: str | Path) -> dict[str, float | None]:
-    """``{view name: its scene depth in metres, or None where the view sees no opaque Gaussian}`` for every
-    view of ``scene`` (loaded from ``folder``): read from its table, or measured and written (module docstring)."""
+def ensure_view_depths(scene: Scene, folder: str | Path) -> None:
+    """Make this process hold the depth of every view of ``scene`` (loaded from ``folder``): nothing when it
+    does, else from its table, else measured and written (module docstring)."""
+    if pipeline.view_depths_known(scene):
+        return
     names = sorted(scene.views)
     path, key = view_depths_path(scene.id, folder), _table_key(folder)
     entry = read_npz_entry(path, key)
     depths = None if entry is None else entry.get("depth")
-    if depths is None or depths.shape != (len(names),):
-        measured = (pipeline.view_depth(scene, scene.camera(name)) for name in names)
-        depths = np.array([math.nan if d is None else d for d in measured], np.float64)
-        try:
-            write_npz_entry(path, key, {"depth": depths})
-        except OSError:
-            pass  # a folder that cannot be written: the values hold for this process (module docstring)
-    return {name: None if math.isnan(d) else float(d) for name, d in zip(names, depths.tolist())}
+    if depths is not None and depths.shape == (len(names),):
+        pipeline.remember_view_depths(scene, {name: None if math.isnan(d) else float(d) for name, d in zip(names, depths.tolist())})
+        return
+    measured = [pipeline.view_depth(scene, scene.camera(name)) for name in names]
+    try:
+        write_npz_entry(path, key, {"depth": np.array([math.nan if d is None else d for d in measured], np.float64)})
+    except OSError:
+        pass  # a folder that cannot be written: the values hold for this process (module docstring)

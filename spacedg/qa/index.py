@@ -47,7 +47,7 @@ from spacedg.qa.gc_pause import collector_paused
 
 __all__ = [
     "MODES", "FILE_MODES", "QA_INDEX_VERSION", "QABuildConfig", "SceneQA", "selected_families", "MAX_SELECTION_CHARS", "selection_name",
-    "index_paths", "config_index_paths", "scene_json_path", "index_key", "read_meta", "is_current", "index_is_current", "read_index", "write_index",
+    "index_paths", "config_index_paths", "scene_json_path", "index_key", "module_files_digest", "read_meta", "is_current", "index_is_current", "read_index", "write_index",
 ]
 
 #: Bump when the index layout or the build procedure changes (part of the key).
@@ -247,7 +247,13 @@ def _module_digest(family: Any) -> str | None:
     raw = getattr(family.generate, "__wrapped__", family.generate)
     func = getattr(raw, "func", None)  # functools.partial
     parts = [raw] if func is None else [func, *(p for p in (*raw.args, *raw.keywords.values()) if callable(p))]
-    modules = dict.fromkeys(getattr(part, "__module__", None) for part in parts)
+    return module_files_digest(dict.fromkeys(getattr(part, "__module__", None) for part in parts))
+
+
+def module_files_digest(modules: Iterable[str | None]) -> str | None:
+    """SHA-256 of the source files of ``modules`` (names; ``None`` and modules without a file skipped): one
+    file, the SHA-256 of its bytes; several, the SHA-256 of their files' digests in that order; ``None`` when
+    none has a file. Read from disk, so nothing is imported."""
     files = []
     for module in filter(None, modules):
         spec = importlib.util.find_spec(module)

@@ -484,16 +484,16 @@ def composite(
     if kernel is None:
         kernel = _COMPOSITE_KERNELS[key] = _make_composite(*key)
     if coarse is None:  # nothing sampled: the kernel writes no sample
-        samples, sample_median, sample_ids = _NO_SAMPLES
+        tiles, (samples, sample_median, sample_ids) = _NO_TILES, _NO_SAMPLES
     else:
         n_tiles = offsets.shape[0] - 1
+        tiles = coarse
         samples = np.empty((n_tiles, 64, 5), np.float32)
         sample_median = np.empty((n_tiles, 64), np.float32)
         sample_ids = np.empty((n_tiles, 64), np.int32)
     kernel(
         offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
-        out_rgb, out_alpha, out_depth, out_median, out_ids, _NO_TILES if coarse is None else coarse,
-        samples, sample_median, sample_ids,
+        out_rgb, out_alpha, out_depth, out_median, out_ids, tiles, samples, sample_median, sample_ids,
     )
     if coarse is not None:
         upsample_sampled_tiles(

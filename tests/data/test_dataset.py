@@ -325,7 +325,7 @@ def test_view_depths_are_measured_once_per_scene_and_read_back(rooms, monkeypatc
     the table is there; a stale or unreadable table is measured again and replaced; a folder that cannot be
     written keeps them in the process; a chain that reads no depth (JPEG) writes no table."""
     from spacedg.data import pipeline, view_depth_cpu, view_depths
-    from spacedg.data.view_depths import load_view_depths, view_depths_path
+    from spacedg.data.view_depths import ensure_view_depths, view_depths_path
     from spacedg.scene.derived_cache import write_npz_entry
 
     for folder in rooms:
@@ -340,8 +340,12 @@ def test_view_depths_are_measured_once_per_scene_and_read_back(rooms, monkeypatc
     folder = first.scene_dirs[scene.id]
     path = view_depths_path(scene.id, folder)
     assert path.exists() and path.parent.name == "cache"
+
+    def from_file() -> dict:
+        return {name: None if math.isnan(d) else float(d) for name, d in zip(sorted(scene.views), np.load(path)["depth"].tolist())}
+
     pipeline.clear_depth_caches()
-    table = load_view_depths(scene, folder)
+    table = from_file()
     assert sorted(table) == sorted(scene.views) and any(d is not None for d in table.values())
     assert table == {name: pipeline.view_depth(scene, scene.camera(name)) for name in scene.views}
 
@@ -358,8 +362,9 @@ def test_view_depths_are_measured_once_per_scene_and_read_back(rooms, monkeypatc
 
     for broken in (lambda: write_npz_entry(path, "another scene's key", {"depth": np.zeros(len(scene.views))}), lambda: path.write_bytes(b"not an npz")):
         broken()
-        assert load_view_depths(scene, folder) == table  # measured again
-        assert np.array_equal(np.load(path)["depth"], [np.nan if table[n] is None else table[n] for n in sorted(table)], equal_nan=True)
+        pipeline.clear_depth_caches()
+        ensure_view_depths(scene, folder)
+        assert from_file() == table  # measured again and replaced
 
     def read_only(*args, **kwargs):
         raise PermissionError("read-only folder")

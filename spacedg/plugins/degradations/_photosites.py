@@ -52,6 +52,7 @@ saturation is applied to the binned value, not per site. ``pitch = 1`` is
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -90,6 +91,7 @@ def _grid_shape(width: int, height: int, pitch: float) -> tuple[int, int]:
     return max(1, int(round(snapped_w / pitch))), max(1, int(round(snapped_h / pitch)))
 
 
+@functools.lru_cache(maxsize=64)
 def pixel_binning(width: int, height: int, pitch: float) -> float | None:
     """``q``, the photosite model's noise variance per pixel as a fraction of one photosite's, where a
     per-pixel draw can stand in for the photosites (``per_pixel = 1``): sites smaller than pixels on
@@ -101,7 +103,8 @@ def pixel_binning(width: int, height: int, pitch: float) -> float | None:
     ``Σⱼ wⱼ²`` over the image's pixels (the product of the two axes' means): about ``pitch²`` (the
     share of one whole site), less where a pixel's edge cuts a site (a 640 × 480 image on the
     1752 × 1314 grid: 0.103 against ``pitch²`` = 0.133; the same as OpenCV's own weights, tested).
-    No site is drawn, so a grid past :data:`MAX_PHOTOSITES` is measured too.
+    No site is drawn, so a grid past :data:`MAX_PHOTOSITES` is measured too. Kept for the last 64 (size, pitch)
+    (every view of a size asks the same).
     """
     grid = _grid_shape(width, height, pitch)
     if grid == (width, height) or grid[0] < width or grid[1] < height:
