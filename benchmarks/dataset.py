@@ -15,9 +15,9 @@ Configurations, each a fresh dataset (fresh caches):
 
 - ``clean``: the train split, ``clean_prob=1``;
 - each of the nine degradations: the train split, ``clean_prob=0``, ``degradations=[name]`` (bench preset);
-- ``low_light/per_pixel`` and ``over_exposure/per_pixel``: the same with ``params={"per_pixel": 1}`` (one
-  noise draw per output pixel with the photosites' mean and variance; the presets draw every photosite);
-  the goal line also prints the mean with these two in place of the presets';
+- ``low_light/per_pixel``: the same with ``params={"per_pixel": 1}`` (one noise draw per output pixel with
+  the photosites' mean and variance; low light's presets draw every photosite, over-exposure's draw per
+  pixel already); the goal line also prints the mean with it in place of the preset's;
 - ``bench mix``: the bench split (every question under clean + the nine), its first N items
   (N rounded up to whole questions); with workers also ``bench mix b10``: the same items in
   batches of 10, so one worker renders a question's clean views once for its seven chains
@@ -264,9 +264,10 @@ def pickle_copy(ds: SpaceDGDataset) -> SpaceDGDataset:
     return pickle.loads(pickle.dumps(ds))
 
 
-#: The sensor degradations also read with ``per_pixel = 1`` (configuration ``<name>/per_pixel``): one noise
-#: draw per output pixel with the photosites' statistics instead of every photosite (not the presets).
-PER_PIXEL_SENSORS = ("low_light", "over_exposure")
+#: The sensor degradations whose presets draw every photosite, also read with ``per_pixel = 1``
+#: (configuration ``<name>/per_pixel``): one noise draw per output pixel with the photosites' statistics
+#: (over-exposure's presets draw per pixel already).
+PER_PIXEL_SENSORS = ("low_light",)
 
 
 def goal_line(results: dict[str, dict[str, float]]) -> None:
@@ -279,7 +280,7 @@ def goal_line(results: dict[str, dict[str, float]]) -> None:
         swapped = {n: f"{n}/per_pixel" for n in PER_PIXEL_SENSORS}
         if len(nine) == len(BENCH_DEGRADATIONS) and all(v in results for v in swapped.values()):
             mixed = [results[swapped.get(n, n)]["ms"] for n in BENCH_DEGRADATIONS]
-            print(f"      the same with per_pixel = 1 for {' and '.join(PER_PIXEL_SENSORS)} (one noise draw per pixel; not the "
+            print(f"      the same with per_pixel = 1 for {' and '.join(PER_PIXEL_SENSORS)} (one noise draw per pixel; not its "
                   f"presets: each output size gets its own noise) = {float(np.mean(mixed)) / results['clean']['ms']:.2f}x clean")
 
 

@@ -9,7 +9,8 @@ direction), the clip, the presets and the description. This module holds the res
   ``exposure`` in every spec), :data:`PER_PIXEL` (last in every spec) and :data:`SENSOR_PRESET`
   (every preset fixes them at the sensor's defaults, Gaussian read noise, one photosite per pixel
   of the 1752 × 1168 reference image: ``pitch`` = 1 px there, scaled with the output,
-  :mod:`._photosites`; ``per_pixel`` = 0, every photosite drawn);
+  :mod:`._photosites`; ``per_pixel`` as the degradation declares: 0 for low light, every photosite
+  drawn; 1 for over-exposure, one draw per pixel with the photosites' statistics, see its module);
 - :class:`SensorExposure`: one such degradation from its data. Its plain function is
   :meth:`SensorExposure.capture`; its :attr:`~SensorExposure.spec` is photometric, linear stage,
   order 30 (the sensor, after the optics), needs nothing from the render, and its ``apply``
@@ -65,11 +66,12 @@ GAIN = ParamSpec(
 )
 
 #: Draw the noise once per output pixel instead of per photosite (declared last by both exposure
-#: degradations, so that every earlier parameter keeps its draw; presets: 0, the photosites).
+#: degradations, so that every earlier parameter keeps its draw; presets: low light 0, the
+#: photosites; over-exposure 1, see :mod:`.over_exposure`).
 PER_PIXEL = ParamSpec(
     "per_pixel", "1", "1 = draw the noise once per output pixel with the photosites' mean and variance per pixel (gain k·q, "
     "read noise σ·√q): ~1/pitch² times fewer draws below 1752×1168, but another output size of the view gets other noise; "
-    "0 = per photosite (the presets).", low=0, high=1, integer=True, recorded_default=0,
+    "0 = per photosite (low light's presets; over-exposure's presets draw per pixel).", low=0, high=1, integer=True, recorded_default=0,
 )
 
 #: Fixed sensor ranges every preset of the exposure degradations uses.
@@ -93,8 +95,9 @@ class SensorExposure:
         exposure: its ``exposure`` parameter: the gain on linear light, unit "1".
         clip: clip the captured light to [0, 1] (saturation, over-exposure) or leave it unclipped.
         presets: preset name → ``(low, high)`` range of ``exposure``; the sensor parameters are
-            fixed at :data:`SENSOR_PRESET` in every preset.
+            fixed at :data:`SENSOR_PRESET` in every preset, ``per_pixel`` at ``per_pixel``.
         description: the spec's description (the model in a sentence, with units).
+        per_pixel: the presets' ``per_pixel`` (0: the photosites; 1: one draw per pixel with their statistics).
 
     Attributes:
         clip: as given.
@@ -103,7 +106,7 @@ class SensorExposure:
 
     def __init__(
         self, name: str, exposure: ParamSpec, *, clip: bool, presets: Mapping[str, tuple[float, float]], description: str,
-        gains: Mapping[str, float] | None = None,
+        gains: Mapping[str, float] | None = None, per_pixel: int = 0,
     ) -> None:
         self.clip = clip
         self.has_gain = gains is not None
@@ -111,7 +114,10 @@ class SensorExposure:
         self.spec = DegradationSpec(
             name=name, category=Category.PHOTOMETRIC, stage=Stage.LINEAR,
             params=(exposure, *SENSOR_PARAMS, *((GAIN,) if self.has_gain else ()), PER_PIXEL),
-            presets={preset: {"exposure": ParamRange(low, high), **SENSOR_PRESET, **gain.get(preset, {})} for preset, (low, high) in presets.items()},
+            presets={
+                preset: {"exposure": ParamRange(low, high), **SENSOR_PRESET, "per_pixel": ParamRange(per_pixel, per_pixel), **gain.get(preset, {})}
+                for preset, (low, high) in presets.items()
+            },
             apply=self.apply,
             apply_torch=self.apply_torch,
             needs=frozenset(),

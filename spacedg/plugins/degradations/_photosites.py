@@ -26,9 +26,10 @@ and beyond ±:data:`~._sensor.SIGNAL_CAP` clamped, as in :mod:`._sensor`):
 Cost: the sensor draws every photosite (over-exposure: every one a pixel that may not saturate
 reads, see below), about the reference's 2–3 M (× 3 channels) whatever the output size below
 it: at 640 × 360 about 10 × the pixels, so about 10 × the sensor's time of a per-pixel draw
-(at 640 × 480 on one thread about 85 ms a view at over-exposure's bench preset and 120 ms at
-low light's, several clean renders; ``benchmarks/dataset.py`` shows it per sample); at or above
-the reference, about the pixel count.
+(at 640 × 480, 1557 × 1168 sites × 3, about 23–31 ms a view on two threads at low light's bench
+preset, more than a clean render; ``benchmarks/dataset.py`` shows it per sample); at or above the
+reference, about the pixel count. Over-exposure's presets draw per pixel instead (``per_pixel``
+below; :mod:`.over_exposure` says why).
 
 Skipped work (the same bytes): with the clip (over-exposure) and sites no larger than pixels, a
 pixel whose signal stays ≥ 1 after the largest drop any draw of the sites around it can give

@@ -19,6 +19,18 @@ Parameters:
 Presets (``exposure``; sensor fixed at its defaults): ``bench`` [7, 10] (the paper's table);
 severities ``1`` [1.5, 2], ``2`` [2.5, 3.5], ``3`` [4, 5.5], ``4`` [5.5, 7], ``5`` [7, 10] (= bench).
 
+**One noise draw per pixel** (decision: the presets' ``per_pixel = 1``; low light keeps its
+photosites). Each pixel's noise has the photosites' mean and variance at every output size
+(:func:`._photosites.binned_capture`, tested within 2 % on flat patches); what it gives up is the
+*same realisation* at every size of a view. Over-exposure does not need it: its noise is at most
+1 % of the full scale (10⁴ e⁻) and the clip decides the picture, so a 1920 × 1080 render
+area-downsampled to 640 × 360 still matches the direct 640 × 360 one at 50.2 dB with one draw per pixel
+against 51.2 dB with the photosites (``benchmarks/resolution.py``, the room, every severity ≥ 50.0 dB;
+the goal is 35). Low light, whose noise is the picture, falls to 34.9 dB that way and keeps the
+photosites. The photosites cost a dataset sample about 4.4 × a clean one at 640 × 480 (every one of
+the ~1.8 M sites × 3 drawn); one draw per pixel about 1.1–1.3 × (``benchmarks/dataset.py``).
+``per_pixel = 0`` draws the photosites, as before.
+
 Conventions: ``rgb`` float32 (H, W, 3) linear light, unclamped, not modified; NaN values are
 treated as 0, +inf saturates to 1. Output float32 in [0, 1]. ``apply`` consumes exactly one
 draw of ``rng`` (:func:`.common.stream_key`) per call; the bytes do not depend on the thread
@@ -36,7 +48,7 @@ __all__ = ["SPEC", "over_expose"]
 
 EXPOSURE = ParamSpec("exposure", "1", "Gain on linear light (multiple of the normal exposure); 1 = unchanged.", low=1.0, high=1e6, harsher="higher")
 _SENSOR = SensorExposure(
-    "over_exposure", EXPOSURE, clip=True,
+    "over_exposure", EXPOSURE, clip=True, per_pixel=1,
     presets={"bench": (7.0, 10.0), "1": (1.5, 2.0), "2": (2.5, 3.5), "3": (4.0, 5.5), "4": (5.5, 7.0), "5": (7.0, 10.0)},
     description=(
         "Over-exposure on linear light: I' = clip(k·Poisson(e·I/k) + σ_read·N(0,1), 0, 1), e ≫ 1; saturates before "
