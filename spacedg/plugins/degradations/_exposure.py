@@ -74,14 +74,13 @@ PER_PIXEL = ParamSpec(
     "0 = per photosite (low light's presets; over-exposure's presets draw per pixel).", low=0, high=1, integer=True, recorded_default=0,
 )
 
-#: Fixed sensor ranges every preset of the exposure degradations uses.
+#: Fixed sensor ranges every preset of the exposure degradations uses (``per_pixel``: each degradation's own, :class:`SensorExposure`).
 SENSOR_PRESET: dict[str, ParamRange] = {
     "k": ParamRange(K_DEFAULT, K_DEFAULT),
     "sigma_read": ParamRange(SIGMA_READ_DEFAULT, SIGMA_READ_DEFAULT),
     "read_model": ParamRange(READ_GAUSSIAN, READ_GAUSSIAN),
     "read_lambda": ParamRange(READ_LAMBDA_DEFAULT, READ_LAMBDA_DEFAULT),
     "pitch": ParamRange(1.0, 1.0, per_size=True),
-    "per_pixel": ParamRange(0, 0),
 }
 
 

@@ -131,7 +131,7 @@ _TWO_M52 = 2.0**-52
 _TWO_M32 = 2.0**-32
 _HALF52 = np.uint64(1 << 51)
 _TOP52 = np.uint64((1 << 52) - 1)
-_POW2_NEG = 2.0 ** -np.arange(64, dtype=np.float64)
+_POW2_NEG = 2.0 ** -np.arange(64, dtype=np.float64)  # the device twin's table (:mod:`.device`); the CPU kernels build 2^-shift from its bits
 _DRAW_KEYS = 64  # stream seeds of draws 0 … 63 computed once per call (later PTRS draws: on the fly)
 
 
@@ -380,15 +380,20 @@ _REMAINDER_MARGIN = 1e-13
 
 
 @numba.njit(cache=True, inline="always")
+def _signal(x: np.float32, exposure: float) -> float:
+    """The exposed signal ``e·x`` of one value in float64: NaN → 0, clamped to ±:data:`SIGNAL_CAP`."""
+    s = exposure * np.float64(x)
+    s = 0.0 if s != s else s
+    return min(max(s, -SIGNAL_CAP), SIGNAL_CAP)
+
+
+@numba.njit(cache=True, inline="always")
 def _value(
-    x: float, i: int, exposure: float, k: float, inv_k: float, read_scale: float, read_model: int, read_lambda: float, clip: bool,
+    x: np.float32, i: int, exposure: float, k: float, inv_k: float, read_scale: float, read_model: int, read_lambda: float, clip: bool,
     saturated: float, keys: np.ndarray, key_mix: np.uint64, noise: bool,
 ) -> np.float32:
     """One value's capture (the module docstring's model; the kernel's scalar loop), ``x`` float32 linear light, ``i`` its index."""
-    s = exposure * np.float64(x)
-    if s != s:
-        s = 0.0
-    s = min(max(s, -SIGNAL_CAP), SIGNAL_CAP)
+    s = _signal(x, exposure)
     signal = np.float32(s)
     if s >= saturated:
         return np.float32(1.0)  # k·Poisson + read noise ≥ 1 for every possible draw: clip gives 1.0
@@ -425,7 +430,7 @@ def _exp_minus(delta: float) -> float:
 
 @numba.njit(cache=True, inline="always")
 def _lane(
-    x: np.float32, i: int, exposure: float, k: float, inv_k: float, key0: np.uint64, key1: np.uint64, read_scale: float, clip: bool,
+    x: np.float32, i: int, exposure: float, k: float, inv_k: float, read_key: np.uint64, shot_key: np.uint64, read_scale: float, clip: bool,
     saturated: float, noise: bool, gaussian: bool, use_normal: bool,
 ) -> tuple[np.float32, np.uint8]:
     """:func:`_value` of one Gaussian-read-noise value without branches (the kernel's vector loop), and 1 where
@@ -434,16 +439,14 @@ def _lane(
     within :data:`_REMAINDER_MARGIN` of a decision, a Tukey read noise. Where the flag is 0 the value is
     :func:`_value`'s, bit for bit: the same float64 operations in the same order, table reads the
     scalar search would make (two steps of it), ``e^{−δ}``'s comparisons kept apart by their margin."""
-    s = exposure * np.float64(x)
-    s = 0.0 if s != s else s
-    s = min(max(s, -SIGNAL_CAP), SIGNAL_CAP)
+    s = _signal(x, exposure)
     signal = np.float32(s)
     offset = np.uint64(i) * _GOLDEN
     rate = s * inv_k
-    bits1 = _mix(key1 + offset)
+    bits1 = _mix(shot_key + offset)
     in_table = rate < _TABLE_MAX_RATE
     in_normal = rate >= _NORMAL_MIN_RATE
-    g = np.int64(min(max(rate, 0.0), _TABLE_ROW_RATE) * _TABLE_STEPS)
+    g = np.int64(min(rate if rate > 0.0 else 0.0, _TABLE_ROW_RATE) * _TABLE_STEPS)  # NaN (0·inf at a k whose 1/k overflows) → row 0
     delta = rate - g * (1.0 / _TABLE_STEPS)
     high = bits1 >> _S32
     start = _POISSON_ROW_START[g]
@@ -455,14 +458,14 @@ def _lane(
     p0 = _exp_minus(delta)
     cdf1 = p0 + p0 * (delta * 1.0)
     remainder = u >= 1.0 - delta
-    one = u > p0 + _REMAINDER_MARGIN  # the remainder is at least 1 …
-    unsure |= np.int64(remainder) & ((np.int64(u >= p0 - _REMAINDER_MARGIN) & np.int64(not one)) | (np.int64(one) & np.int64(u >= cdf1 - _REMAINDER_MARGIN)))
-    table = k * np.float64(n + (np.int64(remainder) & np.int64(one)))  # … and exactly 1 where not unsure
+    at_least_one = u > p0 + _REMAINDER_MARGIN  # the remainder is at least 1 …
+    unsure |= np.int64(remainder) & ((np.int64(u >= p0 - _REMAINDER_MARGIN) & np.int64(not at_least_one)) | (np.int64(at_least_one) & np.int64(u >= cdf1 - _REMAINDER_MARGIN)))
+    table = k * np.float64(n + (np.int64(remainder) & np.int64(at_least_one)))  # … and exactly 1 where not unsure
     approx = max(s + math.sqrt(max(k * s, 0.0)) * _normal(bits1), 0.0) if use_normal else 0.0
     shot = (0.0 if s <= 0.0 else (table if in_table else approx)) if k > 0.0 else s
     unhandled = (np.int64(in_table) & unsure) | (np.int64(not in_table) & np.int64(not in_normal)) | (np.int64(in_normal) & np.int64(not use_normal))
     drawn = np.int64(s > 0.0) & np.int64(k > 0.0)
-    y = shot + read_scale * _normal(_mix(key0 + offset)) if read_scale > 0.0 else shot
+    y = shot + read_scale * _normal(_mix(read_key + offset)) if read_scale > 0.0 else shot
     y = min(max(y, 0.0), 1.0) if clip else y
     result = np.float32(y) - signal if noise else np.float32(y)
     saturates = s >= saturated
@@ -471,39 +474,39 @@ def _lane(
 
 @numba.njit(cache=True)
 def _scalar_block(
-    x: np.ndarray, lo: int, hi: int, out: np.ndarray, left: np.ndarray, exposure: float, k: float, inv_k: float, read_scale: float,
+    x: np.ndarray, lo: int, hi: int, out: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_scale: float,
     read_model: int, read_lambda: float, clip: bool, saturated: float, keys: np.ndarray, key_mix: np.uint64, noise: bool,
 ) -> None:
-    """:func:`_value` into ``out`` for the values of ``x[lo:hi]`` whose ``left`` flag (from 0) is set; eight
+    """:func:`_value` into ``out`` for the values of ``x[lo:hi]`` whose ``to_scalar`` flag (from 0) is set; eight
     flags are read as a word, most words being 0. Shared by the kernel and its serial twin."""
-    words = left.view(np.uint64)
+    words = to_scalar.view(np.uint64)
     for w in range(words.size):
         if words[w] == 0:
             continue
         for i in range(lo + 8 * w, min(lo + 8 * w + 8, hi)):
-            if left[i - lo]:
+            if to_scalar[i - lo]:
                 out[i] = _value(x[i], i, exposure, k, inv_k, read_scale, read_model, read_lambda, clip, saturated, keys, key_mix, noise)
 
 
 @numba.njit(cache=True)
 def _table_block(
-    x: np.ndarray, lo: int, hi: int, staged: np.ndarray, left: np.ndarray, exposure: float, k: float, inv_k: float, key0: np.uint64,
-    key1: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool, gaussian: bool,
+    x: np.ndarray, lo: int, hi: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
+    shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool, gaussian: bool,
 ) -> None:
-    """:func:`_lane` over ``x[lo:hi]`` into ``staged`` and ``left`` (from 0), rates below 64 only (others are left).
+    """:func:`_lane` over ``x[lo:hi]`` into ``staged`` and ``to_scalar`` (from 0), rates below 64 only (the others flagged).
     Its own compiled function, not inlined: the parallel kernel and its serial twin share it (compiled once)."""
     for i in range(lo, hi):
-        staged[i - lo], left[i - lo] = _lane(x[i], i, exposure, k, inv_k, key0, key1, read_scale, clip, saturated, noise, gaussian, False)
+        staged[i - lo], to_scalar[i - lo] = _lane(x[i], i, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, gaussian, False)
 
 
 @numba.njit(cache=True)
 def _mixed_block(
-    x: np.ndarray, lo: int, hi: int, staged: np.ndarray, left: np.ndarray, exposure: float, k: float, inv_k: float, key0: np.uint64,
-    key1: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool, gaussian: bool,
+    x: np.ndarray, lo: int, hi: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
+    shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool, gaussian: bool,
 ) -> None:
     """:func:`_table_block` with the normal approximation too (rates ≥ 10³)."""
     for i in range(lo, hi):
-        staged[i - lo], left[i - lo] = _lane(x[i], i, exposure, k, inv_k, key0, key1, read_scale, clip, saturated, noise, gaussian, True)
+        staged[i - lo], to_scalar[i - lo] = _lane(x[i], i, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, gaussian, True)
 
 
 @fork_safe
@@ -545,22 +548,22 @@ def _sensor_kernel(
     keys = np.empty(_DRAW_KEYS, dtype=np.uint64)
     for draw in range(_DRAW_KEYS):
         keys[draw] = _draw_key(key_mix, draw)
-    key0, key1 = keys[0], keys[1]
+    read_key, shot_key = keys[0], keys[1]
     inv_k = 1.0 / k if k > 0.0 else 0.0
     skipping = skip.size > 0
     gaussian = read_model == READ_GAUSSIAN
     bits32 = x.view(np.int32)
     size = x.size
     blocks = (size + _BLOCK - 1) // _BLOCK
-    flags = np.zeros(blocks * _BLOCK, np.uint8)  # 1: the scalar loop's (one allocation: per block, a busy allocator cost more than the block)
+    flags = np.zeros(blocks * _BLOCK, np.uint8)  # 1: the scalar loop's (one allocation; ``staged`` is one of 4 KiB a block)
     for block in numba.prange(blocks):
         lo = block * _BLOCK
         hi = min(lo + _BLOCK, size)
-        left = flags[lo : lo + _BLOCK]
-        top = np.int32(-(2**31))
+        to_scalar = flags[lo : lo + _BLOCK]
+        largest_bits = np.int32(-(2**31))  # of the block's largest positive value: float32 and int32 order agree there
         for i in range(lo, hi):
-            top = max(top, bits32[i])
-        top_rate = min(max(exposure * np.float64(_as_float32(top)), -SIGNAL_CAP), SIGNAL_CAP) * inv_k if top > 0 else 0.0
+            largest_bits = max(largest_bits, bits32[i])
+        top_rate = _signal(_as_float32(largest_bits), exposure) * inv_k if largest_bits > 0 else 0.0
         # the vector loop writes a block-sized buffer, copied to ``out`` after it: writing ``out`` directly ran
         # 3.5x slower for some placements of ``out`` against ``x`` (a reused zeroed array: 82 against 23 ms for
         # 5.5 M values, the same bytes), likely the store buffer's 4 KiB address aliasing of the streams
@@ -574,20 +577,18 @@ def _sensor_kernel(
         if every_skipped:  # nothing to draw (over-exposure's saturated regions): the vector loop is skipped too
             staged[:] = 0.0
         elif top_rate < _TABLE_MAX_RATE:
-            _table_block(x, lo, hi, staged, left, exposure, k, inv_k, key0, key1, read_scale, clip, saturated, noise, gaussian)
+            _table_block(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, gaussian)
         else:
-            _mixed_block(x, lo, hi, staged, left, exposure, k, inv_k, key0, key1, read_scale, clip, saturated, noise, gaussian)
+            _mixed_block(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, gaussian)
         out[lo:hi] = staged[: hi - lo]
         if skipping:
             for i in range(lo, hi):
-                s = exposure * np.float64(x[i])
-                s = 0.0 if s != s else s
-                s = min(max(s, -SIGNAL_CAP), SIGNAL_CAP)
+                s = _signal(x[i], exposure)
                 unread = np.float32(0.0) if noise else (np.float32(min(max(s, 0.0), 1.0)) if clip else np.float32(s))
                 hit = skip[i] != 0
                 out[i] = unread if hit else out[i]
-                left[i - lo] = np.uint8(0) if hit else left[i - lo]
-        _scalar_block(x, lo, hi, out, left, exposure, k, inv_k, read_scale, read_model, read_lambda, clip, saturated, keys, key_mix, noise)
+                to_scalar[i - lo] = np.uint8(0) if hit else to_scalar[i - lo]
+        _scalar_block(x, lo, hi, out, to_scalar, exposure, k, inv_k, read_scale, read_model, read_lambda, clip, saturated, keys, key_mix, noise)
 
 
 # ------------------------------------------------------------------ host side

@@ -25,11 +25,13 @@ photosites). Each pixel's noise has the photosites' mean and variance at every o
 *same realisation* at every size of a view. Over-exposure does not need it: its noise is at most
 1 % of the full scale (10⁴ e⁻) and the clip decides the picture, so a 1920 × 1080 render
 area-downsampled to 640 × 360 still matches the direct 640 × 360 one at 50.2 dB with one draw per pixel
-against 51.2 dB with the photosites (``benchmarks/resolution.py``, the room, every severity ≥ 50.0 dB;
+against 51.2 dB with the photosites (``benchmarks/resolution.py``, the room, every severity ≥ 49.8 dB;
 the goal is 35). Low light, whose noise is the picture, falls to 34.9 dB that way and keeps the
 photosites. The photosites cost a dataset sample about 4.4 × a clean one at 640 × 480 (every one of
-the ~1.8 M sites × 3 drawn); one draw per pixel about 1.1–1.3 × (``benchmarks/dataset.py``).
-``per_pixel = 0`` draws the photosites, as before.
+the ~1.8 M sites × 3 drawn); one draw per pixel about 1.2–1.4 × (``benchmarks/dataset.py``).
+``per_pixel = 0`` draws the photosites, as before, and is the plain function's default (:func:`over_expose`
+called without ``per_pixel``): the presets set 1. On a device the per-pixel draw runs there, bit-identical
+to the host's except where the device's libm rounds differently (:mod:`.device`).
 
 Conventions: ``rgb`` float32 (H, W, 3) linear light, unclamped, not modified; NaN values are
 treated as 0, +inf saturates to 1. Output float32 in [0, 1]. ``apply`` consumes exactly one

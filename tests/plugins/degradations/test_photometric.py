@@ -238,8 +238,11 @@ def _value_by_value(x, exposure, k, read_scale, read_model, read_lambda, clip, s
     return out
 
 
-@pytest.mark.parametrize(("k", "sigma_read", "read_model"), [(1e-4, 2.5e-4, 0), (1e-4, 0.0, 0), (0.0, 2.5e-4, 0), (3e-3, 2.5e-4, 0), (1e-4, 2.5e-4, READ_TUKEY)])
-@pytest.mark.parametrize("exposure", [0.004, 1.0, 8.5])
+@pytest.mark.parametrize(("k", "sigma_read", "read_model", "exposure"), [
+    (1e-4, 2.5e-4, 0, 0.004), (1e-4, 2.5e-4, 0, 1.0), (1e-4, 2.5e-4, 0, 8.5),  # dark, mixed and bright blocks
+    (1e-4, 0.0, 0, 1.0), (0.0, 2.5e-4, 0, 1.0), (3e-3, 2.5e-4, 0, 8.5), (1e-4, 2.5e-4, READ_TUKEY, 1.0),
+    (1e-310, 2.5e-4, 0, 1.0),  # 1/k overflows: rate = 0·inf = NaN at a zero signal (no table row may be read from it)
+])
 def test_vector_loop_gives_every_value_the_scalar_bytes(k: float, sigma_read: float, read_model: int, exposure: float) -> None:
     """The kernel's vector loop (blocks in the table's, the normal approximation's and mixed regimes, a
     remainder count, PTRS and odd values left to the scalar loop) equals the value-by-value capture."""
@@ -250,13 +253,18 @@ def test_vector_loop_gives_every_value_the_scalar_bytes(k: float, sigma_read: fl
         rng.random(4 * block) * 0.01, rng.random(4 * block) * 2.0,  # dark; mixed
         10.0 ** rng.uniform(-9, 4, 6 * block), rng.standard_normal(2 * block) * 3.0,  # every rate; negatives
         np.full(block, 3e38),  # past the cap
+        rng.random(block) * 0.3,  # every value skipped below
+        rng.random(37) * 0.3,  # a short last block
     ]
     x = np.concatenate(parts).astype(np.float32)
+    all_skipped = slice(x.size - 37 - block, x.size - 37)
     x[::97], x[::101], x[::103], x[::107], x[::109] = np.nan, np.inf, -np.inf, 0.0, -0.0
     read_scale, read_bound = _sensor._read_noise(sigma_read, read_model, -0.2)
     for clip, noise in ((False, False), (True, False), (False, True)):
         saturated = _sensor._saturation_signal(k, read_bound) if clip else math.inf
-        for skip in (np.zeros(0, np.uint8), (rng.random(x.size) < 0.2).astype(np.uint8)):
+        some = (rng.random(x.size) < 0.2).astype(np.uint8)
+        some[all_skipped] = 1
+        for skip in (np.zeros(0, np.uint8), some):
             args = (exposure, k, read_scale, read_model, -0.2, clip, saturated, np.uint64(77), skip, noise)
             fast = np.empty_like(x)
             _sensor._sensor_kernel(x, fast, *args)
