@@ -82,6 +82,7 @@ import numpy as np
 from spacedg.data.dataset import SpaceDGDataset
 from spacedg.data.chain import BENCH_DEGRADATIONS
 from spacedg.qa.index import QABuildConfig
+from spacedg.plugins import get_degradation
 from spacedg.scene.store import BUILTIN_ROOMS_FOLDER, builtin_scene_dirs, spacedg_home
 
 STAGES = ("render_ms", "linear_ms", "encode_ms", "display_ms")
@@ -267,7 +268,9 @@ def pickle_copy(ds: SpaceDGDataset) -> SpaceDGDataset:
 #: The sensor degradations whose presets draw every photosite, also read with ``per_pixel = 1``
 #: (configuration ``<name>/per_pixel``): one noise draw per output pixel with the photosites' statistics
 #: (over-exposure's presets draw per pixel already).
-PER_PIXEL_SENSORS = ("low_light",)
+PER_PIXEL_SENSORS = tuple(
+    name for name in ("low_light", "over_exposure") if get_degradation(name).presets["bench"]["per_pixel"].high == 0
+)
 
 
 def goal_line(results: dict[str, dict[str, float]]) -> None:

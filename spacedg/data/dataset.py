@@ -275,11 +275,10 @@ class SpaceDGDataset(Dataset):
             chain = Chain.parse(item)
             if self.severity != "random":
                 chain = chain.with_severity(self.severity)
-            chain.check(levels)
-            reads_depth = reads_depth or any(
-                (chain if level is None else chain.with_severity(level)).scales_with_depth(self.options.default_preset, self.options.mixture_preset)
-                for level in levels
-            )
+            variants = [chain if level is None else chain.with_severity(level) for level in levels]
+            for variant in variants:
+                variant.check()
+            reads_depth = reads_depth or any(v.scales_with_depth(self.options.default_preset, self.options.mixture_preset) for v in variants)
             chains.append(chain)
         if len(set(chains)) != len(chains):
             raise ParameterError(f"{_WHERE}: degradations repeat a chain: {[c.text for c in chains]}")

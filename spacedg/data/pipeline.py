@@ -202,7 +202,7 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     pose = np.asarray(camera.cam_to_world, dtype=np.float64)
     g = scene.gaussians
     depths = _depths_of(scene)
-    key = _camera_key(pose, camera)
+    key = _camera_key(camera)
     if key in depths:
         return depths[key]
     from spacedg.data.view_depth_cpu import nearest_per_cell  # numba: compiled on first use, not with spacedg
@@ -221,7 +221,7 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
 def view_depths_known(scene: Scene) -> bool:
     """Whether this process holds the depth of every view of ``scene`` (measured or handed over)."""
     depths = _depths_of(scene)
-    return all(_camera_key(np.asarray(cam.cam_to_world, dtype=np.float64), cam) in depths for cam in (scene.camera(n) for n in scene.views))
+    return all(_camera_key(camera) in depths for camera in scene.views.values())
 
 
 def remember_view_depths(scene: Scene, depths: Mapping[str, float | None]) -> None:
@@ -229,8 +229,7 @@ def remember_view_depths(scene: Scene, depths: Mapping[str, float | None]) -> No
     ``None``; :mod:`spacedg.data.view_depths`), as if this process had measured them."""
     known = _depths_of(scene)
     for name, value in depths.items():
-        camera = scene.camera(name)
-        known[_camera_key(np.asarray(camera.cam_to_world, dtype=np.float64), camera)] = value
+        known[_camera_key(scene.camera(name))] = value
 
 
 def _depths_of(scene: Scene) -> dict[tuple[Any, ...], float | None]:
@@ -245,8 +244,9 @@ def _depths_of(scene: Scene) -> dict[tuple[Any, ...], float | None]:
     return depths
 
 
-def _camera_key(pose: np.ndarray, camera: Any) -> tuple[Any, ...]:
+def _camera_key(camera: Any) -> tuple[Any, ...]:
     """A view's key within its scene: float64 cam-to-world bytes, intrinsics and size."""
+    pose = np.asarray(camera.cam_to_world, dtype=np.float64)
     return (pose.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
 
 

@@ -21,6 +21,7 @@ be written keeps the measured values in the process only.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -46,8 +47,15 @@ def _table_key(folder: str | Path) -> str:
     of the code that measures (:func:`~spacedg.data.pipeline.view_depth` and its compiled step)."""
     digest = hashlib.sha256(scene_json_path(folder).read_bytes())
     digest.update(json.dumps({"grid": list(pipeline.DEPTH_GRID), "min_opacity": pipeline.DEPTH_MIN_OPACITY}).encode())
-    digest.update(str(module_files_digest(["spacedg.data.pipeline", "spacedg.data.view_depth_cpu"])).encode())
+    digest.update(_code_digest().encode())
     return digest.hexdigest()
+
+
+@functools.cache
+def _code_digest() -> str:
+    """The measuring code's files (:func:`~spacedg.data.pipeline.view_depth` and its compiled step), hashed
+    once per process: the code this process runs."""
+    return str(module_files_digest(["spacedg.data.pipeline", "spacedg.data.view_depth_cpu"]))
 
 
 def ensure_view_depths(scene: Scene, folder: str | Path) -> None:
