@@ -17,7 +17,7 @@ from spacedg.errors import SpaceDGError, SpaceDGWarning
 def build_parser() -> argparse.ArgumentParser:
     """The ``spacedg`` parser and every sub-command's (a :class:`~spacedg.commands._args.CommandParser`:
     usage errors are one line naming the command, exit status 2)."""
-    from spacedg.commands import evaluate, export, gallery, plugins, predict, qa, render, review, scenes
+    from spacedg.commands import evaluate, export, gallery, kernels, plugins, predict, qa, render, review, scenes
     from spacedg.commands._args import CommandParser
 
     parser = CommandParser(
@@ -34,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_parser(sub)
     review.add_parser(sub)
     plugins.add_parser(sub)
+    kernels.add_parser(sub)
     return parser
 
 

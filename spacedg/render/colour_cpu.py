@@ -23,7 +23,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
+from spacedg.render import kernel_cache  # numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
 __all__ = ["decode_srgb", "encode_srgb_u8", "encode_thresholds"]
@@ -116,7 +116,7 @@ def _encode_kernel(flat: np.ndarray, base: np.ndarray, nxt: np.ndarray, out: np.
 
 def decode_srgb(encoded: np.ndarray) -> np.ndarray:
     """sRGB-encoded float32 image → linear light float32 (new array, same shape)."""
-    flat = np.ascontiguousarray(encoded, dtype=np.float32).reshape(-1)
+    flat = kernel_cache.read_only(np.ascontiguousarray(encoded, dtype=np.float32).reshape(-1))
     out = np.empty(flat.shape, np.float32)
     _decode_kernel(flat, _DECODE_LUT, out)
     return out.reshape(np.shape(encoded))
@@ -128,7 +128,7 @@ def encode_srgb_u8(linear: np.ndarray) -> np.ndarray:
     Equal to ``round(255 · linear_to_srgb(clip(x, 0, 1)))`` evaluated exactly (float64
     thresholds); NaN and negative values give 0, values ≥ 1 and +inf give 255.
     """
-    flat = np.ascontiguousarray(linear, dtype=np.float32).reshape(-1)
+    flat = kernel_cache.read_only(np.ascontiguousarray(linear, dtype=np.float32).reshape(-1))
     out = np.empty(flat.shape, np.uint8)
     _encode_kernel(flat, _ENCODE_BASE, _ENCODE_NEXT, out)
     return out.reshape(np.shape(linear))

@@ -30,11 +30,13 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from numba.core import caching
 
 from spacedg.render import cpu_target  # noqa: F401 - numba's CPU features set before any kernel compiles
 
-__all__ = ["CHECKED_SUFFIX", "ENTRY_TAG", "CheckedCacheFile", "check_caches_under", "install", "installed", "is_checked_source"]
+__all__ = ["CHECKED_SUFFIX", "ENTRY_TAG", "CheckedCacheFile", "check_caches_under", "install", "installed", "is_checked_source", "read_only"]
 
 #: First item of every data file a :class:`CheckedCacheFile` writes: ``(ENTRY_TAG, key, data)``.
 ENTRY_TAG = "spacedg-kernel-cache-entry-1"
@@ -116,6 +118,19 @@ def install() -> bool:
 def installed() -> bool:
     """Whether the check is active in this process."""
     return bool(getattr(caching.Cache.__init__, "_spacedg_checked", False))
+
+
+def read_only(array: np.ndarray) -> np.ndarray:
+    """A read-only view of ``array`` (the same memory) to hand a kernel.
+
+    numba compiles, and caches, a kernel once per combination of its array arguments' writeability:
+    fed a loaded scene's read-only arrays (or a render the pipeline froze) in one call and a fresh
+    array in the next, a kernel compiled twice (5–15 s each for the compositor, in every process
+    whose cache lacked the second). The wrappers pass the inputs a kernel only reads through this, so
+    both share one signature, the one ``spacedg kernels`` compiles."""
+    view = array.view()
+    view.flags.writeable = False
+    return view
 
 
 install()

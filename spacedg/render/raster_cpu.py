@@ -31,7 +31,7 @@ import numpy as np
 
 from spacedg.render.coarse_cpu import bilinear_mix
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CG, COC, CR, DEPTH, OPA, PX, PY, RADY
-from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
+from spacedg.render import kernel_cache  # numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
 @numba.njit(cache=True, inline="always")
@@ -492,7 +492,7 @@ def composite(
         sample_median = np.empty((n_tiles, 64), np.float32)
         sample_ids = np.empty((n_tiles, 64), np.int32)
     kernel(
-        offsets, gauss, packed, instance_ids, width, height, tiles_x, alpha_max,
+        offsets, gauss, packed, kernel_cache.read_only(instance_ids), width, height, tiles_x, alpha_max,
         out_rgb, out_alpha, out_depth, out_median, out_ids, tiles, samples, sample_median, sample_ids,
     )
     if coarse is not None:

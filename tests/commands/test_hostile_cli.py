@@ -42,6 +42,7 @@ BASE: dict[str, list[str]] = {
     "eval": [f"{W}/p.jsonl", "--out", f"{W}/report"],
     "review": [f"{W}/no-bench"],
     "plugins": [],
+    "kernels": [],
 }
 #: Device names no machine has.
 BAD_DEVICES = ["cuda:99", "tpu", "", "cuda:x", "cuda:-1", "gpu0"]

@@ -63,7 +63,7 @@ def _deprecated(path: str) -> set[str]:
 
 def test_the_walk_finds_every_command() -> None:
     assert {"scenes synth", "scenes import", "scenes info", "scenes preview", "render", "gallery", "qa build", "qa preview",
-            "qa stats", "qa audit", "export", "predict", "eval", "review", "plugins"} == set(LEAVES)
+            "qa stats", "qa audit", "export", "predict", "eval", "review", "plugins", "kernels"} == set(LEAVES)
     assert all(isinstance(parser, _args.CommandParser) for parser in PARSERS.values())
 
 

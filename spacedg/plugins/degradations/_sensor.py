@@ -70,7 +70,7 @@ import numba.core.types
 import numba.extending
 import numpy as np
 
-from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
+from spacedg.render import kernel_cache  # numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
 try:  # LLVM ctlz: used to find the octave of a uniform in the normal-quantile table
@@ -653,7 +653,7 @@ def sensor_capture(
         raise InvalidDataError(f"sensor model: key must be an integer in [0, 2**64), got {key!r}; draw it with stream_key(rng)")
     read_scale, read_bound = _read_noise(float(sigma_read), int(read_model), float(read_lambda))
     saturated = _saturation_signal(float(k), read_bound) if clip else math.inf
-    flat = np.ascontiguousarray(rgb, dtype=np.float32).reshape(-1)
+    flat = kernel_cache.read_only(np.ascontiguousarray(rgb, dtype=np.float32).reshape(-1))
     out = np.empty(flat.size, dtype=np.float32)
     if skip is None:
         skip_flags = _NO_SKIP

@@ -122,7 +122,7 @@ from spacedg.errors import InvalidDataError, ParameterError
 from spacedg.plugins.degradations.common import box_pad, check_linear_rgb, reflect_index, snapped_size
 from spacedg.plugins.hookspecs import registering
 from spacedg.plugins.specs import Category, DegradationSpec, ParamRange, ParamSpec, Stage
-from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
+from spacedg.render import kernel_cache  # numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
 __all__ = [
@@ -473,7 +473,7 @@ def refracted_view(rgb: np.ndarray, field: DropletField) -> np.ndarray:
     widest = float(field.spread.max(initial=0.0))
     if widest > 1.0:
         pad = box_pad(widest, rgb.shape[:2])
-        sat = _padded_sat(rgb, reflect_index(rgb.shape[0], pad), reflect_index(rgb.shape[1], pad))
+        sat = _padded_sat(kernel_cache.read_only(rgb), reflect_index(rgb.shape[0], pad), reflect_index(rgb.shape[1], pad))
         lo = np.array([rgb[..., c].min() for c in range(3)], np.float64)  # per channel: ~20x faster than axis=0
         hi = np.array([rgb[..., c].max() for c in range(3)], np.float64)
         _box_kernel(sat, pad, field.map_x, field.map_y, field.spread, lo, hi, seen)
@@ -547,7 +547,7 @@ def water_droplets(
     k, sigma = params["blur_kernel"], params["blur_sigma"]
     if k > 1 and sigma > 0.0:
         seen = cv2.GaussianBlur(seen, (k, k), sigma, borderType=cv2.BORDER_REFLECT)
-    _composite_kernel(rgb, seen, field.alpha, field.highlight, float(specular), field.transmission, float(rim), out)
+    _composite_kernel(kernel_cache.read_only(rgb), seen, field.alpha, field.highlight, float(specular), field.transmission, float(rim), out)
     return out
 
 

@@ -1,0 +1,104 @@
+"""Compile spacedg's CPU kernels into numba's on-disk cache by running them once on tiny inputs.
+
+Why: numba compiles a kernel on its first call in a process that finds no cache entry for it, and
+spacedg's are large: the projection about 15 s, each of the compositor's eight output
+specialisations 5–10 s, the sensor 8 s, the motion warp 15 s in all (one core). On a fresh
+install every process that starts before the cache holds them compiles them again, at the same
+time: DataLoader workers, the jobs of an array, the two lanes of the test suite (about 2.5 of
+their 9.5 minutes on a fresh clone). :func:`warm` runs the kernels of one group
+(:data:`GROUPS`) through the code paths that use them, at the signatures those paths call them
+with, so a later process loads them from the cache; ``spacedg kernels`` runs the groups in
+parallel processes. The groups are disjoint: two processes never compile one kernel at once.
+
+- ``render``: a tiny synthetic room (10k Gaussians, the smallest, at 256 × 192) written and read back as a
+  scene folder; its visibility and covisibility; two views clean, defocused, through the fisheye lens
+  and under a long shake (the keyframe warp with its doubling passes), at the dataset's outputs (the projection, binning, the
+  compositor's colour and colour-and-depth specialisations, the lens, defocus and warp kernels).
+- ``images``: the compositor's other output specialisations (on an empty projection: the types
+  decide the compiled code, not the data), and every built-in linear-light and display
+  degradation at its bench preset on a synthetic 64 × 48 image with its depth (the sensor, the
+  drops, the encoder).
+
+A kernel another signature calls (a test's float64 input) still compiles on its first use; the
+serial twins of :mod:`spacedg.render.threads` compile in the forked process that needs them.
+"""
+
+from __future__ import annotations
+
+import itertools
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["GROUPS", "warm"]
+
+#: Side of the images the groups render and degrade (pixels): small, within every size policy.
+_WIDTH, _HEIGHT = 64, 48
+#: The compositor specialisations (colour, depth, ids) the ``render`` group's paths compile.
+_RENDERED_OUTPUTS = {(True, False, False), (True, True, False)}
+
+
+def _render_group() -> None:
+    """The ``render`` group (module docstring)."""
+    from spacedg.data.pipeline import PipelineOptions, degrade_variants
+    from spacedg.qa.build import prepare_scene
+    from spacedg.scene.io import load_scene, save_scene
+    from spacedg.scene.synthetic import CaptureConfig, RoomConfig, generate_room
+
+    with tempfile.TemporaryDirectory(prefix="spacedg-kernels-") as tmp:
+        folder = Path(tmp) / "room"
+        config = RoomConfig(gaussians=10_000, capture=CaptureConfig(4 * _WIDTH, 4 * _HEIGHT, 3, 3))
+        save_scene(generate_room(0, config, scene_id="kernels"), folder)
+        scene = prepare_scene(load_scene(folder), folder / "cache", progress=False, backend="cpu")
+        views = list(scene.views)[:2]
+        # a long shake: paths past the warp's doubling passes (24 px and more)
+        shake = {"name": "motion_blur", "params": {"trans": 1.0, "rot": 0.3, "sub_steps": 80}}
+        degrade_variants(scene, views, ["clean", "defocus", "distortion", shake], options=PipelineOptions(backend="cpu"))
+
+
+def _images_group() -> None:
+    """The ``images`` group (module docstring)."""
+    from spacedg.data.chain import BENCH_DEGRADATIONS, Chain
+    from spacedg.plugins.specs import Stage
+    from spacedg.render import raster_cpu
+    from spacedg.render.colour_cpu import encode_srgb_u8
+    from spacedg.render.project_cpu import PACKED
+    from spacedg.render.settings import RasterSettings
+
+    settings = RasterSettings()
+    empty = (np.zeros((0, PACKED), np.float32), np.zeros((0, 4), np.int32), np.zeros(0, np.int32))
+    for flags in itertools.product((True, False), repeat=3):
+        if flags not in _RENDERED_OUTPUTS:
+            raster_cpu.rasterize(*empty, _WIDTH, _HEIGHT, settings.alpha_max, *flags, settings.tight_tiles and settings.opacity_extent)
+    # read-only, as the pipeline hands a render to the linear chain (numba compiles read-only arrays apart)
+    rgb = np.random.default_rng(0).random((_HEIGHT, _WIDTH, 3), dtype=np.float32)
+    aux = {"depth": np.full((_HEIGHT, _WIDTH), 2.5, np.float32), "alpha": np.ones((_HEIGHT, _WIDTH), np.float32)}
+    for image in (rgb, *aux.values()):
+        image.flags.writeable = False
+    aux["far_depth"] = 4.0
+    encode_srgb_u8(rgb)
+    for name in BENCH_DEGRADATIONS:
+        for step in Chain.parse(name).resolve(0, image_size=(_WIDTH, _HEIGHT)):
+            if step.spec.stage is Stage.LINEAR:
+                step.spec.apply(rgb, aux, step.params, np.random.default_rng(0))
+            elif step.spec.stage is Stage.DISPLAY:
+                step.spec.apply(encode_srgb_u8(rgb), step.params, np.random.default_rng(0))
+
+
+#: The groups :func:`warm` runs, by name (module docstring), in the order ``spacedg kernels`` starts them.
+GROUPS: dict[str, Callable[[], None]] = {"render": _render_group, "images": _images_group}
+
+
+def warm(group: str) -> float:
+    """Run the kernels of ``group`` (a key of :data:`GROUPS`) once, compiling into numba's cache what it
+    does not hold; returns the seconds it took."""
+    if group not in GROUPS:
+        from spacedg.errors import ParameterError
+
+        raise ParameterError(f"kernel warm-up: unknown group {group!r}; choose from {', '.join(GROUPS)}")
+    t0 = time.perf_counter()
+    GROUPS[group]()
+    return time.perf_counter() - t0

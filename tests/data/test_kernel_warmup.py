@@ -1,0 +1,73 @@
+"""``spacedg kernels``: the warm-up compiles the signatures the real paths call, so they compile nothing after it."""
+
+from __future__ import annotations
+
+import itertools
+import sys
+
+import pytest
+
+from spacedg.cli import main
+from spacedg.data.kernel_warmup import GROUPS, warm
+from spacedg.data.pipeline import PipelineOptions, degrade_variants
+from spacedg.errors import ParameterError
+
+
+def _spacedg_dispatchers() -> list[object]:
+    """Every numba dispatcher of spacedg's loaded modules (the parallel kernels' and their serial twins'
+    dispatchers, and the compositor's specialisations)."""
+    from numba.core.dispatcher import Dispatcher
+
+    from spacedg.render import raster_cpu
+    from spacedg.render.threads import ForkSafeKernel
+
+    found: dict[int, object] = {}
+    candidates = list(raster_cpu._COMPOSITE_KERNELS.values())
+    for name, module in list(sys.modules.items()):
+        if name.startswith("spacedg.") and module is not None:
+            candidates.extend(vars(module).values())
+    for value in candidates:
+        for dispatcher in ((value.parallel, value._serial) if isinstance(value, ForkSafeKernel) else (value,)):
+            if isinstance(dispatcher, Dispatcher):
+                found[id(dispatcher)] = dispatcher
+    return list(found.values())
+
+
+def _signatures() -> dict[int, set[object]]:
+    return {id(d): set(d.overloads) for d in _spacedg_dispatchers()}  # type: ignore[attr-defined]
+
+
+def test_after_the_warm_up_the_dataset_paths_compile_nothing(small_room) -> None:
+    """Every kernel signature a dataset item's render and degradations call (the nine at their bench
+    presets, clean, each compositor output) was compiled (or loaded) by the two groups: a kernel the
+    warm-up calls with other types than the real path would compile again in every process."""
+    from spacedg.data.chain import BENCH_DEGRADATIONS
+    from spacedg.render.composite import composite_view
+    from spacedg.render.settings import RasterSettings
+
+    for group in GROUPS:
+        warm(group)
+    before = _signatures()
+    views = list(small_room.views)[:2]
+    degrade_variants(small_room, views, ["clean", *BENCH_DEGRADATIONS], options=PipelineOptions(image_size=(96, 72), backend="cpu"))
+    camera = small_room.camera(views[0]).resized(48, 36)
+    for flags in itertools.product((False, True), repeat=3):
+        outputs = frozenset(name for name, on in zip(("rgb", "depth", "instance_ids"), flags) if on)
+        composite_view(small_room.gaussians, camera, outputs, "cpu", None, RasterSettings(), None)
+    after = _signatures()
+    new = {key: after[key] - before.get(key, set()) for key in after}
+    compiled = {
+        d.py_func.__qualname__: sorted(map(str, new[id(d)]))  # type: ignore[attr-defined]
+        for d in _spacedg_dispatchers() if new.get(id(d))
+    }
+    assert not compiled, f"signatures the warm-up does not compile: {compiled}"
+
+
+def test_unknown_group_is_one_clear_error() -> None:
+    with pytest.raises(ParameterError, match="unknown group 'nope'; choose from render, images"):
+        warm("nope")
+
+
+def test_cli_group_runs_and_reports(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["kernels", "--group", "images"]) == 0
+    assert capsys.readouterr().out.startswith("spacedg kernels: images in ")
