@@ -1,23 +1,26 @@
 """Compile spacedg's CPU kernels into numba's on-disk cache by running them once on tiny inputs.
 
 Why: numba compiles a kernel on its first call in a process that finds no cache entry for it, and
-spacedg's are large: the projection about 15 s, each of the compositor's eight output
-specialisations 5–10 s, the sensor 8 s, the motion warp 15 s in all (one core). On a fresh
-install every process that starts before the cache holds them compiles them again, at the same
-time: DataLoader workers, the jobs of an array, the two lanes of the test suite (about 2.5 of
-their 9.5 minutes on a fresh clone). :func:`warm` runs the kernels of one group
-(:data:`GROUPS`) through the code paths that use them, at the signatures those paths call them
-with, so a later process loads them from the cache; ``spacedg kernels`` runs the groups in
-parallel processes. The groups are disjoint: two processes never compile one kernel at once.
+spacedg's are large. Measured alone in one process with an empty cache (``NUMBA_CACHE_DIR``, this
+machine): the projection 15.3 s, each of the compositor's eight output specialisations 4.1–7.9 s,
+the sensor 11.1 s, the motion warp 8 s (gather 3.0, doubling 1.8, field 2.5, source 0.7). On a
+fresh install every process that starts before the cache holds them compiles them again, at the
+same time: DataLoader workers, the jobs of an array, the two lanes of the test suite (which spent
+2–3 of their 9–10.4 minutes on a fresh clone compiling, the same kernels in both). :func:`warm`
+runs the kernels of one group (:data:`GROUPS`) through the code paths that use them, at the
+signatures those paths call them with, so a later process loads them from the cache;
+``spacedg kernels`` runs the groups in parallel processes. Apart from a few small kernels (the
+binning, the encoder) the groups compile different kernels.
 
-- ``render``: a tiny synthetic room (10k Gaussians, the smallest, at 256 × 192) written and read back as a
-  scene folder; its visibility and covisibility; two views clean, defocused, through the fisheye lens
-  and under a long shake (the keyframe warp with its doubling passes), at the dataset's outputs (the projection, binning, the
-  compositor's colour and colour-and-depth specialisations, the lens, defocus and warp kernels).
-- ``images``: the compositor's other output specialisations (on an empty projection: the types
-  decide the compiled code, not the data), and every built-in linear-light and display
-  degradation at its bench preset on a synthetic 64 × 48 image with its depth (the sensor, the
-  drops, the encoder).
+- ``render``: a tiny synthetic room (10k Gaussians, the smallest, at 256 × 192) written and read
+  back as a scene folder; its visibility and covisibility; two views clean, defocused, through the
+  fisheye lens and under a long shake (the keyframe warp with its doubling passes), at the dataset's
+  outputs: the projection, the binning, five of the compositor's specialisations, the lens,
+  defocus and warp kernels.
+- ``images``: the compositor's three other specialisations (with ids and colour or depth; on an empty
+  projection: the types decide the compiled code, not the data), and every built-in linear-light
+  and display degradation at its bench preset on a synthetic 64 × 48 image with its depth (the
+  sensor, the drops, the encoder).
 
 A kernel another signature calls (a test's float64 input) still compiles on its first use; the
 serial twins of :mod:`spacedg.render.threads` compile in the forked process that needs them.
@@ -37,8 +40,9 @@ __all__ = ["GROUPS", "warm"]
 
 #: Side of the images the groups render and degrade (pixels): small, within every size policy.
 _WIDTH, _HEIGHT = 64, 48
-#: The compositor specialisations (colour, depth, ids) the ``render`` group's paths compile.
-_RENDERED_OUTPUTS = {(True, False, False), (True, True, False)}
+#: The compositor specialisations (colour, depth, ids) the ``render`` group's paths compile (the views'
+#: colour, colour and depth; visibility's ids, covisibility's depth, alpha alone): ``images`` compiles the rest.
+_RENDERED_OUTPUTS = {(True, False, False), (True, True, False), (False, False, True), (False, True, False), (False, False, False)}
 
 
 def _render_group() -> None:

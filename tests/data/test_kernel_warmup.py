@@ -71,3 +71,11 @@ def test_unknown_group_is_one_clear_error() -> None:
 def test_cli_group_runs_and_reports(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["kernels", "--group", "images"]) == 0
     assert capsys.readouterr().out.startswith("spacedg kernels: images in ")
+
+
+def test_cli_runs_every_group_in_processes_of_their_own(capfd: pytest.CaptureFixture[str]) -> None:
+    """One group at a time here (``--jobs 1``): each in its own interpreter, then the total."""
+    assert main(["kernels", "--jobs", "1"]) == 0
+    lines = capfd.readouterr().out.splitlines()
+    assert [line.split(" in ")[0] for line in lines] == [f"spacedg kernels: {group}" for group in GROUPS] + ["spacedg kernels: 2 groups"]
+    assert lines[-1].endswith("(1 at a time)")
