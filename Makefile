@@ -65,14 +65,15 @@ demo: $(STAMP)
 # rest in front (beside it, tests/test_readme.py's runner); the background lane's output follows
 # the front's, and both must pass.
 # An interrupted run stops the background lane and removes its log (the EXIT trap).
-# First `spacedg kernels` compiles the CPU kernels into numba's cache in two processes: on a fresh
-# clone each lane compiled them itself, often the same ones at once (9.1-10.4 min in all instead of
-# 6.7 with a warm cache; spacedg/data/kernel_warmup.py).
+# First `spacedg kernels` compiles the CPU kernels into numba's cache, its two groups at once: on a
+# fresh clone each lane compiled them itself, often the same ones at once (9.6-10.7 min in all; the
+# lanes alone 6.7 min with a warm cache; spacedg/data/kernel_warmup.py). Only a speed-up: a failed
+# warm-up leaves the lanes to compile, and to report what is wrong.
 BACK_LANE := tests/sft tests/data tests/eval
 test: $(STAMP)
 	@log=$$(mktemp) || exit 1; lane=; \
 	trap 'if [ -n "$$lane" ]; then kill $$lane 2>/dev/null; fi; rm -f "$$log"' EXIT; trap 'exit 130' INT TERM; \
-	$(PYCACHE_ON) $(BIN)/spacedg kernels || exit 1; \
+	$(PYCACHE_ON) $(BIN)/spacedg kernels || echo "NOTE: the kernel warm-up failed (above); each lane compiles the kernels itself" >&2; \
 	$(PYCACHE_ON) $(BIN)/python -m pytest -q -p no:cacheprovider $(BACK_LANE) > "$$log" 2>&1 & lane=$$!; \
 	$(PYCACHE_ON) $(BIN)/python -m pytest -q $(addprefix --ignore=,$(BACK_LANE)); front=$$?; \
 	wait $$lane; back=$$?; lane=; \

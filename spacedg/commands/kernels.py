@@ -10,14 +10,13 @@ time; a kernel the cache already holds is loaded, not compiled, so a second run 
 from __future__ import annotations
 
 import argparse
-import os
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from spacedg.commands import _args
-from spacedg.errors import SpaceDGError
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -26,9 +25,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
     parser = _args.add_command(subparsers, "kernels", run, help="compile the CPU kernels into numba's cache (once per install)")
     parser.add_argument("--jobs", type=_args.whole(1), default=None,
-                        help="groups compiled at once, one process each (default: one per group, at most the cores)")
+                        help="groups compiled at once, one process each (default: one per group, at most the cores this process may use)")
     parser.add_argument("--group", choices=list(GROUPS), default=None,
-                        help="compile only this group, in this process")
+                        help="compile only this group, in this process (--jobs does not apply)")
     return parser
 
 
@@ -37,24 +36,23 @@ def run(args: argparse.Namespace) -> int:
     (DataLoader workers, a job array, qa build --jobs) load them instead of each compiling them
     again at the same time. Run it once per install; kernels the cache holds load in seconds."""
     from spacedg.data.kernel_warmup import GROUPS, warm
+    from spacedg.data.workers import pool_plan
 
     if args.group is not None:
         print(f"spacedg kernels: {args.group} in {warm(args.group):.1f} s", flush=True)
         return 0
-    jobs = args.jobs or max(1, min(len(GROUPS), os.cpu_count() or 1))
+    plan = pool_plan(len(GROUPS), jobs=args.jobs)
     t0 = time.perf_counter()
-    pending = list(GROUPS)
-    running: list[tuple[str, subprocess.Popen[bytes]]] = []
-    failed: list[str] = []
-    while pending or running:
-        while pending and len(running) < jobs:
-            group = pending.pop(0)
-            running.append((group, subprocess.Popen([sys.executable, "-m", "spacedg", "kernels", "--group", group])))
-        group, process = running.pop(0)
-        if process.wait() != 0:
-            failed.append(group)
+
+    def run_group(group: str) -> int:
+        return subprocess.run([sys.executable, "-m", "spacedg", "kernels", "--group", group], check=False).returncode
+
+    with ThreadPoolExecutor(plan.processes) as pool:
+        codes = dict(zip(GROUPS, pool.map(run_group, GROUPS)))
+    failed = [group for group, code in codes.items() if code != 0]
     if failed:
-        raise SpaceDGError(f"spacedg kernels: the group(s) {', '.join(failed)} failed (their error is above); "
-                           f"run 'spacedg kernels --group {failed[0]}' to see it alone")
-    print(f"spacedg kernels: {len(GROUPS)} groups in {time.perf_counter() - t0:.1f} s ({jobs} at a time)", flush=True)
+        print(f"spacedg kernels: the group(s) {', '.join(failed)} failed (the error is above); "
+              f"'spacedg kernels --group {failed[0]}' runs one alone", file=sys.stderr, flush=True)
+        return 1
+    print(f"spacedg kernels: {len(GROUPS)} groups in {time.perf_counter() - t0:.1f} s ({plan.processes} at a time)", flush=True)
     return 0

@@ -6,11 +6,12 @@ machine): the projection 15.3 s, each of the compositor's eight output specialis
 the sensor 11.1 s, the motion warp 8 s (gather 3.0, doubling 1.8, field 2.5, source 0.7). On a
 fresh install every process that starts before the cache holds them compiles them again, at the
 same time: DataLoader workers, the jobs of an array, the two lanes of the test suite (which spent
-2–3 of their 9–10.4 minutes on a fresh clone compiling, the same kernels in both). :func:`warm`
+2–3 of their 8.7–9.6 minutes on a fresh clone compiling, the same kernels in both). :func:`warm`
 runs the kernels of one group (:data:`GROUPS`) through the code paths that use them, at the
 signatures those paths call them with, so a later process loads them from the cache;
 ``spacedg kernels`` runs the groups in parallel processes. Apart from a few small kernels (the
-binning, the encoder) the groups compile different kernels.
+binning, the encoder: about 3 s) the groups compile different kernels (a test holds the render group
+to :data:`_RENDERED_OUTPUTS`).
 
 - ``render``: a tiny synthetic room (10k Gaussians, the smallest, at 256 × 192) written and read
   back as a scene folder; its visibility and covisibility; two views clean, defocused, through the
@@ -83,13 +84,13 @@ def _images_group() -> None:
     for image in (rgb, *aux.values()):
         image.flags.writeable = False
     aux["far_depth"] = 4.0
-    encode_srgb_u8(rgb)
+    encoded = encode_srgb_u8(rgb)
     for name in BENCH_DEGRADATIONS:
         for step in Chain.parse(name).resolve(0, image_size=(_WIDTH, _HEIGHT)):
             if step.spec.stage is Stage.LINEAR:
                 step.spec.apply(rgb, aux, step.params, np.random.default_rng(0))
             elif step.spec.stage is Stage.DISPLAY:
-                step.spec.apply(encode_srgb_u8(rgb), step.params, np.random.default_rng(0))
+                step.spec.apply(encoded, step.params, np.random.default_rng(0))
 
 
 #: The groups :func:`warm` runs, by name (module docstring), in the order ``spacedg kernels`` starts them.

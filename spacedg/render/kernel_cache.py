@@ -124,10 +124,13 @@ def read_only(array: np.ndarray) -> np.ndarray:
     """A read-only view of ``array`` (the same memory) to hand a kernel.
 
     numba compiles, and caches, a kernel once per combination of its array arguments' writeability:
-    fed a loaded scene's read-only arrays (or a render the pipeline froze) in one call and a fresh
-    array in the next, a kernel compiled twice (5–15 s each for the compositor, in every process
-    whose cache lacked the second). The wrappers pass the inputs a kernel only reads through this, so
-    both share one signature, the one ``spacedg kernels`` compiles."""
+    fed a frozen array in one call and a fresh one in the next, a kernel compiled twice (4–8 s each
+    for the compositor, in every process whose cache lacked the second). Frozen: a scene's instance
+    ids (a scene without them gets a fresh fill), the render the pipeline hands the first step of a
+    linear chain (the next step gets the previous one's new array). The wrappers of the kernels
+    that meet both (the compositor's ids, the sensor's input and skip flags, the drops' input, the
+    sRGB encoder and decoder) pass them through this, so both share one signature, the one
+    ``spacedg kernels`` compiles."""
     view = array.view()
     view.flags.writeable = False
     return view

@@ -68,9 +68,23 @@ def test_unknown_group_is_one_clear_error() -> None:
         warm("nope")
 
 
-def test_cli_group_runs_and_reports(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["kernels", "--group", "images"]) == 0
-    assert capsys.readouterr().out.startswith("spacedg kernels: images in ")
+def render_group_specialisations(payload: dict[str, object]) -> dict[str, str]:
+    """In a fresh interpreter (:func:`spacedg.scene.store.run_isolated`): the compositor specialisations
+    (colour, depth, ids) the render group reaches."""
+    from spacedg.render import raster_cpu
+
+    warm("render")
+    return {"reached": repr(sorted(raster_cpu._COMPOSITE_KERNELS))}
+
+
+def test_the_render_group_reaches_the_specialisations_the_images_group_leaves_it() -> None:
+    """The images group compiles the compositor specialisations the render group does not reach; a change
+    of the render paths' outputs would leave one to no group, or give one to both at once."""
+    from spacedg.data.kernel_warmup import _RENDERED_OUTPUTS
+    from spacedg.scene.store import run_isolated
+
+    reached = run_isolated("tests.data.test_kernel_warmup:render_group_specialisations", {})["reached"]
+    assert reached == repr(sorted(_RENDERED_OUTPUTS))
 
 
 def test_cli_runs_every_group_in_processes_of_their_own(capfd: pytest.CaptureFixture[str]) -> None:

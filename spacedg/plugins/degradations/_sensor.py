@@ -661,7 +661,7 @@ def sensor_capture(
         raise InvalidDataError(f"sensor model: skip must have the image's shape {rgb.shape}, got {skip.shape}")
     else:
         flags = skip if skip.dtype in (np.bool_, np.uint8) else skip != 0
-        skip_flags = np.ascontiguousarray(flags).reshape(-1).view(np.uint8)
+        skip_flags = kernel_cache.read_only(np.ascontiguousarray(flags).reshape(-1).view(np.uint8))
     _sensor_kernel(
         flat,
         out,
@@ -680,7 +680,7 @@ def sensor_capture(
 
 
 #: ``skip`` of a capture that draws every value.
-_NO_SKIP = np.zeros(0, np.uint8)
+_NO_SKIP = kernel_cache.read_only(np.zeros(0, np.uint8))
 
 
 def largest_drop(
