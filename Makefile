@@ -66,8 +66,8 @@ demo: $(STAMP)
 # the front's, and both must pass.
 # An interrupted run stops the background lane and removes its log (the EXIT trap).
 # First `spacedg kernels` compiles the CPU kernels into numba's cache, its two groups at once: on a
-# fresh clone each lane compiled them itself, often the same ones at once (9.6-10.7 min in all; the
-# lanes alone 6.7 min with a warm cache; spacedg/data/kernel_warmup.py). Only a speed-up: a failed
+# fresh clone each lane compiled them itself, often the same ones at once (the times: docs/command-line.md;
+# spacedg/data/kernel_warmup.py). Only a speed-up: a failed
 # warm-up leaves the lanes to compile, and to report what is wrong.
 BACK_LANE := tests/sft tests/data tests/eval
 test: $(STAMP)

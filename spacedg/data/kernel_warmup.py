@@ -5,8 +5,8 @@ spacedg's are large. Measured alone in one process with an empty cache (``NUMBA_
 machine): the projection 15.3 s, each of the compositor's eight output specialisations 4.1–7.9 s,
 the sensor 11.1 s, the motion warp 8 s (gather 3.0, doubling 1.8, field 2.5, source 0.7). On a
 fresh install every process that starts before the cache holds them compiles them again, at the
-same time: DataLoader workers, the jobs of an array, the two lanes of the test suite (which spent
-2–3 of their 8.7–9.6 minutes on a fresh clone compiling, the same kernels in both). :func:`warm`
+same time: DataLoader workers, the jobs of an array, the two lanes of the test suite (2–3 minutes
+of a fresh clone's run, the same kernels in both; ``docs/command-line.md`` has the times). :func:`warm`
 runs the kernels of one group (:data:`GROUPS`) through the code paths that use them, at the
 signatures those paths call them with, so a later process loads them from the cache;
 ``spacedg kernels`` runs the groups in parallel processes. Apart from a few small kernels (the
@@ -78,7 +78,7 @@ def _images_group() -> None:
     for flags in itertools.product((True, False), repeat=3):
         if flags not in _RENDERED_OUTPUTS:
             raster_cpu.rasterize(*empty, _WIDTH, _HEIGHT, settings.alpha_max, *flags, settings.tight_tiles and settings.opacity_extent)
-    # read-only, as the pipeline hands a render to the linear chain (numba compiles read-only arrays apart)
+    # read-only, as the pipeline hands its render to a linear chain (the kernels' wrappers freeze their inputs anyway)
     rgb = np.random.default_rng(0).random((_HEIGHT, _WIDTH, 3), dtype=np.float32)
     aux = {"depth": np.full((_HEIGHT, _WIDTH), 2.5, np.float32), "alpha": np.ones((_HEIGHT, _WIDTH), np.float32)}
     for image in (rgb, *aux.values()):

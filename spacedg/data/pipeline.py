@@ -199,12 +199,12 @@ def view_depth(scene: Scene, camera: Any) -> float | None:
     the image), no rendering: a few milliseconds per view, kept per (scene, Gaussian count,
     camera), or handed over measured (:func:`remember_view_depths`). ``None`` when the view sees no
     Gaussian."""
-    pose = np.asarray(camera.cam_to_world, dtype=np.float64)
-    g = scene.gaussians
     depths = _depths_of(scene)
     key = _camera_key(camera)
     if key in depths:
         return depths[key]
+    pose = np.asarray(camera.cam_to_world, dtype=np.float64)
+    g = scene.gaussians
     from spacedg.data.view_depth_cpu import nearest_per_cell  # numba: compiled on first use, not with spacedg
 
     pc = (_opaque_means(g) - pose[:3, 3]) @ pose[:3, :3]

@@ -37,16 +37,22 @@ def _signatures() -> dict[int, set[object]]:
     return {id(d): set(d.overloads) for d in _spacedg_dispatchers()}  # type: ignore[attr-defined]
 
 
-def test_after_the_warm_up_the_dataset_paths_compile_nothing(small_room) -> None:
+def test_after_the_warm_up_the_dataset_paths_compile_nothing(small_room, monkeypatch: pytest.MonkeyPatch) -> None:
     """Every kernel signature a dataset item's render and degradations call (the nine at their bench
     presets, clean, each compositor output) was compiled (or loaded) by the two groups: a kernel the
-    warm-up calls with other types than the real path would compile again in every process."""
+    warm-up calls with other types than the real path would compile again in every process. The render
+    group reaches the compositor specialisations the images group leaves it: a change of the render
+    paths' outputs would leave one to no group, or give one to both at once."""
     from spacedg.data.chain import BENCH_DEGRADATIONS
+    from spacedg.data.kernel_warmup import _RENDERED_OUTPUTS
+    from spacedg.render import raster_cpu
     from spacedg.render.composite import composite_view
     from spacedg.render.settings import RasterSettings
 
-    for group in GROUPS:
-        warm(group)
+    monkeypatch.setattr(raster_cpu, "_COMPOSITE_KERNELS", {})  # what this process's warm-ups reach, alone
+    warm("render")
+    assert repr(sorted(raster_cpu._COMPOSITE_KERNELS)) == repr(sorted(_RENDERED_OUTPUTS))
+    warm("images")
     before = _signatures()
     views = list(small_room.views)[:2]
     degrade_variants(small_room, views, ["clean", *BENCH_DEGRADATIONS], options=PipelineOptions(image_size=(96, 72), backend="cpu"))
@@ -66,25 +72,6 @@ def test_after_the_warm_up_the_dataset_paths_compile_nothing(small_room) -> None
 def test_unknown_group_is_one_clear_error() -> None:
     with pytest.raises(ParameterError, match="unknown group 'nope'; choose from render, images"):
         warm("nope")
-
-
-def render_group_specialisations(payload: dict[str, object]) -> dict[str, str]:
-    """In a fresh interpreter (:func:`spacedg.scene.store.run_isolated`): the compositor specialisations
-    (colour, depth, ids) the render group reaches."""
-    from spacedg.render import raster_cpu
-
-    warm("render")
-    return {"reached": repr(sorted(raster_cpu._COMPOSITE_KERNELS))}
-
-
-def test_the_render_group_reaches_the_specialisations_the_images_group_leaves_it() -> None:
-    """The images group compiles the compositor specialisations the render group does not reach; a change
-    of the render paths' outputs would leave one to no group, or give one to both at once."""
-    from spacedg.data.kernel_warmup import _RENDERED_OUTPUTS
-    from spacedg.scene.store import run_isolated
-
-    reached = run_isolated("tests.data.test_kernel_warmup:render_group_specialisations", {})["reached"]
-    assert reached == repr(sorted(_RENDERED_OUTPUTS))
 
 
 def test_cli_runs_every_group_in_processes_of_their_own(capfd: pytest.CaptureFixture[str]) -> None:

@@ -37,7 +37,7 @@ pixel whose signal stays ≥ 1 after the largest drop any draw of the sites arou
 that only such pixels read (none within 2 px of a pixel that might not saturate) are not drawn:
 about half the sites of the built-in rooms at the bench preset.
 
-One draw per pixel instead (``per_pixel = 1``, :func:`pixel_binning`; not the presets): where sites
+One draw per pixel instead (``per_pixel = 1``, :func:`pixel_binning`; over-exposure's presets): where sites
 are smaller than pixels, the sensor at gain ``k·q`` and read noise ``σ·√q``, ``q`` the mean share of
 one site's noise variance that a pixel's area weights keep. Each pixel's noise then has the
 photosites' mean and variance (tested on flat patches within 2 %), its photon count that of the

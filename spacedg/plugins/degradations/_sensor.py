@@ -41,8 +41,9 @@ the expected electron count
   (AS241) is 3.8e-10 over 7e6 test inputs covering both tails down to ``u = 2⁻⁵³``
   (``|Z| ≤ 8.21``); tests check < 1e-9. Tukey-lambda read noise: its inverse CDF in float64.
 - With ``clip`` (over-exposure), a signal so large that the output is 1.0 for every possible
-  draw (``s − 8.5·√(k·s) − max|σ·R| > 1`` in the normal regime) is written as 1.0 without
-  drawing: the same bytes, less work.
+  draw (``s − 8.5·√(k·s) − max|σ·R| > 1`` in the normal regime) is written as 1.0: the
+  value-by-value path draws nothing for it; the branch-free vector loop draws and discards (the
+  same bytes).
 - Rates: a negative signal gives 0 electrons (a sensor counts no negative photons).
 - Non-finite input: NaN is treated as 0 (documented choice: ``check_linear_rgb`` does not scan
   for NaN, and a NaN would spread through every later stage); ±inf and values beyond
@@ -131,7 +132,8 @@ _TWO_M52 = 2.0**-52
 _TWO_M32 = 2.0**-32
 _HALF52 = np.uint64(1 << 51)
 _TOP52 = np.uint64((1 << 52) - 1)
-_POW2_NEG = 2.0 ** -np.arange(64, dtype=np.float64)  # the device twin's table (:mod:`.device`); the CPU kernels build 2^-shift from its bits
+_POW2_NEG = 2.0 ** -np.arange(64, dtype=np.float64)  # the device twin's table (:mod:`.device`); the CPU kernels build 2^-shift from its exponent bits instead
+_INF_BITS = np.int32(0x7F800000)  # +inf's float32 bits as int32: a larger int32 is a NaN
 _DRAW_KEYS = 64  # stream seeds of draws 0 … 63 computed once per call (later PTRS draws: on the fly)
 
 
@@ -431,12 +433,12 @@ def _exp_minus(delta: float) -> float:
 @numba.njit(cache=True, inline="always")
 def _lane(
     x: np.float32, i: int, exposure: float, k: float, inv_k: float, read_key: np.uint64, shot_key: np.uint64, read_scale: float, clip: bool,
-    saturated: float, noise: bool, gaussian: bool, use_normal: bool,
+    saturated: float, noise: bool, use_normal: bool,
 ) -> tuple[np.float32, np.uint8]:
     """:func:`_value` of one Gaussian-read-noise value without branches (the kernel's vector loop), and 1 where
     it cannot say: a rate in PTRS's range, or ≥ 10³ without ``use_normal`` (the normal approximation
     computed too: blocks with such rates), a table search past two steps, a remainder Poisson(δ) above 1 or
-    within :data:`_REMAINDER_MARGIN` of a decision, a Tukey read noise. Where the flag is 0 the value is
+    within :data:`_REMAINDER_MARGIN` of a decision (Tukey read noise never comes here). Where the flag is 0 the value is
     :func:`_value`'s, bit for bit: the same float64 operations in the same order, table reads the
     scalar search would make (two steps of it), ``e^{−δ}``'s comparisons kept apart by their margin."""
     s = _signal(x, exposure)
@@ -469,7 +471,7 @@ def _lane(
     y = min(max(y, 0.0), 1.0) if clip else y
     result = np.float32(y) - signal if noise else np.float32(y)
     saturates = s >= saturated
-    return (np.float32(1.0) if saturates else result), np.uint8(((drawn & unhandled) | np.int64(not gaussian)) & np.int64(not saturates))
+    return (np.float32(1.0) if saturates else result), np.uint8(drawn & unhandled & np.int64(not saturates))
 
 
 @numba.njit(cache=True)
@@ -491,22 +493,22 @@ def _scalar_block(
 @numba.njit(cache=True)
 def _table_block(
     x: np.ndarray, lo: int, hi: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
-    shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool, gaussian: bool,
+    shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool,
 ) -> None:
     """:func:`_lane` over ``x[lo:hi]`` into ``staged`` and ``to_scalar`` (from 0), rates below 64 only (the others flagged).
     Its own compiled function, not inlined: the parallel kernel and its serial twin share it (compiled once)."""
     for i in range(lo, hi):
-        staged[i - lo], to_scalar[i - lo] = _lane(x[i], i, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, gaussian, False)
+        staged[i - lo], to_scalar[i - lo] = _lane(x[i], i, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, False)
 
 
 @numba.njit(cache=True)
 def _mixed_block(
     x: np.ndarray, lo: int, hi: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
-    shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool, gaussian: bool,
+    shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool,
 ) -> None:
     """:func:`_table_block` with the normal approximation too (rates ≥ 10³)."""
     for i in range(lo, hi):
-        staged[i - lo], to_scalar[i - lo] = _lane(x[i], i, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, gaussian, True)
+        staged[i - lo], to_scalar[i - lo] = _lane(x[i], i, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, True)
 
 
 @fork_safe
@@ -537,8 +539,9 @@ def _sensor_kernel(
     Per block of :data:`_BLOCK` values: a vector loop (:func:`_lane`, SIMD gathers from the constant
     tables) over the block, with the table alone where its largest value's rate is below 64 (float32
     order is that of the bits as int32 for positive values) and with the normal approximation too
-    elsewhere, then :func:`_value` for the values
-    it leaves (PTRS, a long table search, a remainder above 1, Tukey read noise): ~0.3 % of a dark view's.
+    elsewhere (a NaN counts as 0, as :func:`_signal` reads it), then :func:`_value` for the values
+    it leaves (PTRS, a long table search, a remainder above 1): ~0.3 % of a dark view's. With Tukey read
+    noise every value is :func:`_value`'s (no vector loop).
     The bytes are :func:`_value`'s for every value (tested against it), on any thread count. The block
     loops are compiled functions of their own (:func:`_table_block`, :func:`_mixed_block`,
     :func:`_scalar_block`) that this kernel and its serial twin share: inlined, the kernel took 17 s to
@@ -562,7 +565,8 @@ def _sensor_kernel(
         to_scalar = flags[lo : lo + _BLOCK]
         largest_bits = np.int32(-(2**31))  # of the block's largest positive value: float32 and int32 order agree there
         for i in range(lo, hi):
-            largest_bits = max(largest_bits, bits32[i])
+            bits = bits32[i]
+            largest_bits = max(largest_bits, bits if bits <= _INF_BITS else np.int32(0))  # a NaN reads as 0, as _signal has it
         top_rate = _signal(_as_float32(largest_bits), exposure) * inv_k if largest_bits > 0 else 0.0
         every_skipped = skipping
         if skipping:
@@ -574,12 +578,15 @@ def _sensor_kernel(
             # the vector loop writes a block-sized buffer, copied to ``out`` after it: writing ``out`` directly ran
             # 3.5x slower for some placements of ``out`` against ``x`` (a reused zeroed array: 82 against 23 ms for
             # 5.5 M values, the same bytes), likely the store buffer's 4 KiB address aliasing of the streams
-            staged = np.empty(_BLOCK, np.float32)
-            if top_rate < _TABLE_MAX_RATE:
-                _table_block(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, gaussian)
-            else:
-                _mixed_block(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, gaussian)
-            out[lo:hi] = staged[: hi - lo]
+            if gaussian:
+                staged = np.empty(_BLOCK, np.float32)
+                if top_rate < _TABLE_MAX_RATE:
+                    _table_block(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise)
+                else:
+                    _mixed_block(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise)
+                out[lo:hi] = staged[: hi - lo]
+            else:  # Tukey read noise: every value is the scalar loop's
+                to_scalar[: hi - lo] = np.uint8(1)
         if skipping:
             for i in range(lo, hi):
                 s = _signal(x[i], exposure)

@@ -27,8 +27,8 @@ photosites). Each pixel's noise has the photosites' mean and variance at every o
 area-downsampled to 640 × 360 still matches the direct 640 × 360 one at 50.2 dB with one draw per pixel
 against 51.2 dB with the photosites (``benchmarks/resolution.py``, the room, every severity ≥ 49.8 dB;
 the goal is 35). Low light, whose noise is the picture, falls to 34.9 dB that way and keeps the
-photosites. The photosites cost a dataset sample about 4.4 × a clean one at 640 × 480 (every one of
-the ~1.8 M sites × 3 drawn); one draw per pixel about 1.2–1.4 × (``benchmarks/dataset.py``).
+photosites. The photosites cost a dataset sample about 4.4 × a clean one at 640 × 480 (the ~1.8 M
+sites × 3, less those only saturated pixels read); one draw per pixel about 1.2–1.4 × (``benchmarks/dataset.py``).
 ``per_pixel = 0`` draws the photosites, as before, and is the plain function's default (:func:`over_expose`
 called without ``per_pixel``): the presets set 1. On a device the per-pixel draw runs there, bit-identical
 to the host's except where the device's libm rounds differently (:mod:`.device`).

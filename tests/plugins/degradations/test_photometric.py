@@ -231,7 +231,7 @@ def _value_by_value(x, exposure, k, read_scale, read_model, read_lambda, clip, s
     out = np.empty_like(x)
     for i in range(x.size):
         if skip.size and skip[i]:
-            s = min(max(0.0 if exposure * np.float64(x[i]) != exposure * np.float64(x[i]) else exposure * np.float64(x[i]), -SIGNAL_CAP), SIGNAL_CAP)
+            s = _sensor._signal(x[i], exposure)
             out[i] = np.float32(0.0) if noise else (np.float32(min(max(s, 0.0), 1.0)) if clip else np.float32(s))
         else:
             out[i] = _sensor._value(x[i], i, exposure, k, inv_k, read_scale, read_model, read_lambda, clip, saturated, keys, key_mix, noise)
