@@ -14,9 +14,9 @@ binning, the encoder: about 3 s) the groups compile different kernels (a test ho
 to :data:`_RENDERED_OUTPUTS`).
 
 - ``render``: a tiny synthetic room (10k Gaussians, the smallest, at 256 × 192) written and read
-  back as a scene folder; its visibility and covisibility; two views clean, defocused, through the
-  fisheye lens and under a long shake (the keyframe warp with its doubling passes), at the dataset's
-  outputs: the projection, the binning, five of the compositor's specialisations, the lens,
+  back as a scene folder; its visibility and covisibility; two views clean, defocused (also widely:
+  the per-tile sampled composite), through the fisheye lens and under a long shake (the keyframe warp
+  with its doubling passes), at the dataset's outputs: the projection, the binning, five of the compositor's specialisations, the lens,
   defocus and warp kernels.
 - ``images``: the compositor's three other specialisations (with ids and colour or depth; on an empty
   projection: the types decide the compiled code, not the data), and every built-in linear-light
@@ -59,9 +59,11 @@ def _render_group() -> None:
         save_scene(generate_room(0, config, scene_id="kernels"), folder)
         scene = prepare_scene(load_scene(folder), folder / "cache", progress=False, backend="cpu")
         views = list(scene.views)[:2]
-        # a long shake: paths past the warp's doubling passes (24 px and more)
+        # a long shake: paths past the warp's doubling passes (24 px and more); a wide blur: tiles whose every
+        # Gaussian is blurred, composited every 2 px (the bench aperture, scaled to this size, leaves none)
         shake = {"name": "motion_blur", "params": {"trans": 1.0, "rot": 0.3, "sub_steps": 80}}
-        degrade_variants(scene, views, ["clean", "defocus", "distortion", shake], options=PipelineOptions(backend="cpu"))
+        wide = {"name": "defocus", "params": {"aperture": 12.0, "depth": 0.5}}
+        degrade_variants(scene, views, ["clean", "defocus", wide, "distortion", shake], options=PipelineOptions(backend="cpu"))
 
 
 def _images_group() -> None:

@@ -39,7 +39,7 @@ def _signatures() -> dict[int, set[object]]:
 
 def test_after_the_warm_up_the_dataset_paths_compile_nothing(small_room, monkeypatch: pytest.MonkeyPatch) -> None:
     """Every kernel signature a dataset item's render and degradations call (the nine at their bench
-    presets, clean, each compositor output) was compiled (or loaded) by the two groups: a kernel the
+    presets, clean, a wide defocus, each compositor output) was compiled (or loaded) by the two groups: a kernel the
     warm-up calls with other types than the real path would compile again in every process. The render
     group reaches the compositor specialisations the images group leaves it: a change of the render
     paths' outputs would leave one to no group, or give one to both at once."""
@@ -55,7 +55,8 @@ def test_after_the_warm_up_the_dataset_paths_compile_nothing(small_room, monkeyp
     warm("images")
     before = _signatures()
     views = list(small_room.views)[:2]
-    degrade_variants(small_room, views, ["clean", *BENCH_DEGRADATIONS], options=PipelineOptions(image_size=(96, 72), backend="cpu"))
+    wide_blur = {"name": "defocus", "params": {"aperture": 12.0, "depth": 0.5}}  # tiles composited every 2 px
+    degrade_variants(small_room, views, ["clean", *BENCH_DEGRADATIONS, wide_blur], options=PipelineOptions(image_size=(96, 72), backend="cpu"))
     camera = small_room.camera(views[0]).resized(48, 36)
     for flags in itertools.product((False, True), repeat=3):
         outputs = frozenset(name for name, on in zip(("rgb", "depth", "instance_ids"), flags) if on)
