@@ -29,6 +29,7 @@ from spacedg._checks import finite_float, require_homogeneous, require_rotation
 from spacedg.errors import InvalidDataError
 from spacedg.limits import check_image_size
 from spacedg.render.gaussians import quat_from_matrix
+from spacedg.render.lens_polynomial import equidistant_theta_d, equidistant_theta_d_slope
 
 _SOURCE = "Camera"
 
@@ -43,20 +44,6 @@ def frustum_limits(fx: float, fy: float, cx: float, cy: float, width: int, heigh
         (cy + reach) / fy + 0.3 * (0.5 * height / fy),
         (height - cy + reach) / fy + 0.3 * (0.5 * height / fy),
     )
-
-
-def equidistant_theta_d(theta: Any, k1: float, k2: float, k3: float, k4: float) -> Any:
-    """``θ_d(θ) = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)``: the fisheye lens polynomial, once, for
-    floats, numpy arrays and torch tensors alike (:class:`FisheyeLens`, the torch projection) and
-    compiled by numba for the CPU projection (:mod:`spacedg.render.project_cpu`)."""
-    t2 = theta * theta
-    return theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
-
-
-def equidistant_theta_d_slope(theta: Any, k1: float, k2: float, k3: float, k4: float) -> Any:
-    """``dθ_d/dθ = 1 + 3 k1 θ² + 5 k2 θ⁴ + 7 k3 θ⁶ + 9 k4 θ⁸`` (as :func:`equidistant_theta_d`)."""
-    t2 = theta * theta
-    return 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))
 
 
 def fitted_size(view_width: int, view_height: int, box_width: int, box_height: int) -> tuple[int, int]:
@@ -125,17 +112,13 @@ class FisheyeLens:
         """Ray angles θ (radians) with ``θ_d(θ) = theta_d``, on the one-to-one range [0, effective max θ].
 
         ``theta_d`` beyond the image circle (``> θ_d(effective max θ)``) gives the effective
-        maximum. Bisection, 60 halvings (float64 resolution); vectorised.
+        maximum. Bisection, 60 halvings (float64 resolution), compiled
+        (:func:`spacedg.render.lens_cpu.undistort_theta`). Returns float64 of ``theta_d``'s shape (a numpy
+        scalar for a scalar).
         """
-        target = np.asarray(theta_d, dtype=np.float64)
-        lo = np.zeros_like(target)
-        hi = np.full_like(target, self.effective_max_theta)
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            below = self.distort_theta(mid) < target
-            lo = np.where(below, mid, lo)
-            hi = np.where(below, hi, mid)
-        return 0.5 * (lo + hi)
+        from spacedg.render.lens_cpu import undistort_theta
+
+        return undistort_theta(theta_d, self.k1, self.k2, self.k3, self.k4, self.effective_max_theta)
 
     @cached_property
     def effective_max_theta(self) -> float:

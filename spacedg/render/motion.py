@@ -282,7 +282,9 @@ def render_motion_keyframes(
         images, stats = job.composite(canvas.with_pose(pose), frozenset({"rgb", "depth"}))
         pairs += stats["pairs"]
         alpha, depth = images["alpha"], images["depth"]
-        fill = motion_warp.fill_depth(alpha, depth)
+        lowest = alpha.min()
+        # the fill depth only stands where alpha is at most COVERED_ALPHA: a covered canvas (a room) needs none
+        fill = 1.0 if lowest > motion_warp.COVERED_ALPHA else motion_warp.fill_depth(alpha, depth)
         src = np.empty((canvas.height, canvas.width, channels), np.float32)
         geometry = np.empty((canvas.height, canvas.width), np.float32)
         motion_warp.keyframe_source(images["rgb"], alpha, depth, fill, src, geometry)
@@ -296,18 +298,19 @@ def render_motion_keyframes(
         longest = motion_warp.sanitise_field(field, reach)
         n_passes = doubling_passes(longest) if passes is None else passes
         dst = np.empty_like(src)
-        covered_all = bool(alpha.min() > 0.0)  # nothing to skip (a room): no occupancy tables
+        covered_all = bool(lowest > 0.0)  # nothing to skip (a room): no occupancy tables
         for j in range(n_passes):
             sat = motion_warp.FULL if covered_all else motion_warp.occupancy(src)
             motion_warp.doubling_pass(src, field, np.float32(0.25 / 2**j), sat, dst)
             src, dst = dst, src
         sat = motion_warp.FULL if covered_all else motion_warp.occupancy(src)
         motion_warp.gather(src, field, margin, 1.0 / 2**n_passes, spacing, sat, acc)
-    acc /= count
-    # bilinear weights of a float32 path average may overshoot the keyframes' range by rounding
-    images = {"alpha": np.ascontiguousarray(np.clip(acc[..., 3], 0.0, 1.0))}
-    if "rgb" in wanted:
-        images["rgb"] = np.ascontiguousarray(np.maximum(acc[..., :3], 0.0))
+    # the mean over the intervals; bilinear weights of a float32 path average may overshoot the keyframes'
+    # range by rounding: alpha clipped to [0, 1], colour to ≥ 0
+    images = {"alpha": np.empty((camera.height, camera.width), np.float32), "rgb": np.empty((camera.height, camera.width, 3), np.float32)}
+    motion_warp.finish_average(acc, count, images["rgb"], images["alpha"])
+    if "rgb" not in wanted:
+        del images["rgb"]
     if want_depth:
         images["depth"] = expected_depth(acc[..., 4], acc[..., 3])
     # sub_steps: renders made (the keyframes)

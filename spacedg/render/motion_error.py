@@ -88,53 +88,32 @@ def edge_parallax_contrast(
     parallax difference (module docstring); ``inf`` when a gap or a colour is NaN. The coarse render
     runs on ``backend`` (``"cpu"`` or ``"torch"``) and ``device``, as :func:`~spacedg.render.composite.composite_view`."""
     from spacedg.render.composite import composite_view
+    from spacedg.render.motion_error_cpu import edge_products
     from spacedg.render.motion_warp import COVERED_ALPHA, fill_depth, relative_transform
 
     width, height = max(2, camera.width // COARSE_FACTOR), max(2, camera.height // COARSE_FACTOR)
     coarse = camera.resized(width, height)
     images, _ = composite_view(gaussians, coarse, frozenset({"rgb", "depth"}), backend, device, settings, None)
     alpha, depth = images["alpha"], images["depth"]
-    z = np.where((alpha > COVERED_ALPHA) & np.isfinite(depth), depth.astype(np.float64), fill_depth(alpha, depth))
+    covered = (alpha > COVERED_ALPHA) & np.isfinite(depth)
+    z = depth.astype(np.float64) if covered.all() else np.where(covered, depth.astype(np.float64), fill_depth(alpha, depth))
     # coarse pixel centres in the view's pixels, and the surface points there (mid-exposure camera frame)
     u = (np.arange(width) + 0.5) * (camera.width / width)
     v = (np.arange(height) + 0.5) * (camera.height / height)
     x_ray, y_ray = (u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy  # the rays' x/z and y/z
     reach = 2.0 * (camera.width + camera.height)  # about the warp's longest walk: any longer gap is that long
-    delta_h = np.zeros((height, width - 1))
-    delta_v = np.zeros((height - 1, width))
+    ends = exposure_poses(camera, np.array(motion.translation), np.array(motion.rotation), np.array([-0.5, 0.5]))
     with np.errstate(all="ignore"):
-        for pose in exposure_poses(camera, np.array(motion.translation), np.array(motion.rotation), np.array([-0.5, 0.5])):
-            m = relative_transform(camera.cam_to_world, pose)
-            # each pixel's point at its own depth, against at its right (lower) neighbour's, seen from this end
-            own_u, own_v, own_ahead = _seen(m, x_ray[None, :], y_ray[:, None], z)
-            gap_h = _apart(own_u[:, :-1], own_v[:, :-1], own_ahead[:, :-1], _seen(m, x_ray[None, :-1], y_ray[:, None], z[:, 1:]), camera.fx, camera.fy)
-            gap_v = _apart(own_u[:-1], own_v[:-1], own_ahead[:-1], _seen(m, x_ray[None, :], y_ray[:-1, None], z[1:]), camera.fx, camera.fy)
-            np.maximum(delta_h, np.minimum(gap_h, reach), out=delta_h)
-            np.maximum(delta_v, np.minimum(gap_v, reach), out=delta_v)
         encoded = linear_to_srgb(np.clip(images["rgb"].astype(np.float64), 0.0, 1.0))
-        contrast_h = np.mean(np.diff(encoded, axis=1) ** 2, axis=2)
-        contrast_v = np.mean(np.diff(encoded, axis=0) ** 2, axis=2)
-        total = float(np.sum(contrast_h * delta_h) + np.sum(contrast_v * delta_v))
-    value = total / (delta_h.size + delta_v.size)
+    products_h = np.empty((height, width - 1))
+    products_v = np.empty((height - 1, width))
+    edge_products(
+        x_ray, y_ray, z, relative_transform(camera.cam_to_world, ends[0]), relative_transform(camera.cam_to_world, ends[1]),
+        float(camera.fx), float(camera.fy), float(reach), encoded, products_h, products_v,
+    )
+    total = float(np.sum(products_h) + np.sum(products_v))
+    value = total / (products_h.size + products_v.size)
     return value if math.isfinite(value) else math.inf
-
-
-def _seen(m: np.ndarray, x_ray: np.ndarray, y_ray: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(x/z, y/z, ahead)`` of the points on the rays ``(x_ray, y_ray, 1)`` at ``depth`` in the frame of a
-    camera (:func:`~spacedg.render.motion_warp.relative_transform` ``m`` from the view's frame);
-    ``ahead`` false where a point is not in front of it (no path there, as the warp's flow field has it)."""
-    x, y = x_ray * depth, y_ray * depth
-    ze = m[6] * x + m[7] * y + m[8] * depth + m[11]
-    ahead = ze > 1e-6
-    ze = np.where(ahead, ze, 1.0)
-    return (m[0] * x + m[1] * y + m[2] * depth + m[9]) / ze, (m[3] * x + m[4] * y + m[5] * depth + m[10]) / ze, ahead
-
-
-def _apart(u: np.ndarray, v: np.ndarray, ahead: np.ndarray, other: tuple[np.ndarray, np.ndarray, np.ndarray], fx: float, fy: float) -> np.ndarray:
-    """Pixels (focal lengths ``fx``, ``fy``) between two points :func:`_seen` by one camera, 0 where either
-    is not in front of it."""
-    other_u, other_v, other_ahead = other
-    return np.where(ahead & other_ahead, np.hypot(fx * (u - other_u), fy * (v - other_v)), 0.0)
 
 
 def keyframes_for(edge_measure: float, path_px: float, max_count: int) -> int:

@@ -170,6 +170,42 @@ def test_a_path_longer_than_a_chunk_is_walked_in_one_piece() -> None:
             np.testing.assert_allclose(acc[i, j], expected, atol=3e-5, err_msg=f"pixel {(i, j)}, {channels} channels")
 
 
+def test_every_way_of_walking_a_path_gives_the_same_bits() -> None:
+    """:func:`~spacedg.render.motion_warp.gather` walks a colour-only path of at most ``_FUSED_MAX`` samples in
+    one loop, a longer one in chunks summed in a register, and a path with the depth channel in chunks summed
+    in memory: the colour sums are the same float32 bits whichever it takes (paths of 1 to ~60 samples, two
+    walked lengths), and the short ones average the reads a plain loop makes."""
+    from spacedg.render import motion_warp
+
+    rng = np.random.default_rng(21)
+    hc, wc, margin = 48, 64, 6
+    src = rng.uniform(0.0, 1.0, (hc, wc, 5)).astype(np.float32)
+    field = np.zeros((hc, wc, 4), np.float32)
+    field[..., 0] = rng.uniform(-1.5, 1.5, (hc, wc))
+    field[..., 1] = rng.uniform(-1.5, 1.5, (hc, wc))
+    field[..., 2] = rng.uniform(0.0, 60.0, (hc, wc))
+    field[..., 3] = rng.uniform(-3.0, 3.0, (hc, wc))
+    colour = np.ascontiguousarray(src[..., :4])
+    walked = {}
+    for length in (1.0, 0.25):
+        four = np.zeros((hc - 2 * margin, wc - 2 * margin, 4), np.float32)
+        five = np.zeros((hc - 2 * margin, wc - 2 * margin, 5), np.float32)
+        motion_warp.gather(colour, field, margin, length, 1.0, motion_warp.FULL, four)
+        motion_warp.gather(src, field, margin, length, 1.0, motion_warp.FULL, five)
+        assert four.tobytes() == np.ascontiguousarray(five[..., :4]).tobytes(), f"length {length}"
+        walked[length] = four
+    counts = np.ceil(np.hypot(field[margin:-margin, margin:-margin, 2], field[margin:-margin, margin:-margin, 3]))
+    assert (counts <= motion_warp._FUSED_MAX).sum() > 100 and (counts > 2 * motion_warp._FUSED_MAX).sum() > 100  # both walks
+    for i, j in np.argwhere(counts <= motion_warp._FUSED_MAX)[:6]:
+        ci, cj = i + margin, j + margin
+        c, d = field[ci, cj, :2].astype(np.float64), field[ci, cj, 2:].astype(np.float64)
+        count = max(1, int(np.ceil(np.hypot(*d))))
+        times = (np.arange(count) + 0.5) / count
+        points = [(cj + c[0] - d[0] / 2 + t * d[0] - 4 * t * (1 - t) * c[0], ci + c[1] - d[1] / 2 + t * d[1] - 4 * t * (1 - t) * c[1]) for t in times]
+        expected = np.mean([_bilinear(colour, x, y) for x, y in points], axis=0)
+        np.testing.assert_allclose(walked[1.0][i, j], expected, atol=2e-5, err_msg=f"pixel {(i, j)}")
+
+
 def test_degenerate_inputs_stay_in_range() -> None:
     """Found by the long fuzz run: a 1 × 1 view and kilometres of motion used to read outside the
     keyframe canvas (alpha 1.8e25, rgb -2.3e13); paths are now bounded and tiny views take the
@@ -241,17 +277,17 @@ def test_the_edge_measure_stays_finite_and_bounded_on_degenerate_views() -> None
     """A 2 × 2 view, an empty scene, a dolly through the wall (surfaces end behind the camera: no
     path there, as in the warp), a thousand kilometres of motion; and the measure is skipped where it cannot
     change the count (no translation, or the path alone asks for the most)."""
-    from spacedg.render.motion_error import _apart, _seen, edge_parallax_contrast, keyframes_for
+    from spacedg.render.motion_error import edge_parallax_contrast, keyframes_for
+    from spacedg.render.motion_error_cpu import _gap
     from spacedg.render.settings import RasterSettings
 
     settings = RasterSettings()
     g = textured_wall()
     cam = camera(80, 60, focal=70.0)
     forward = np.array([1.0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, -2.0])  # 2 m ahead of the view's camera
-    ray = (np.array([0.1]), np.array([0.0]))
-    ahead_of_it = _apart(*_seen(forward, *ray, np.array([2.5])), _seen(forward, *ray, np.array([3.0])), 70.0, 70.0)
-    behind_it = _apart(*_seen(forward, *ray, np.array([1.0])), _seen(forward, *ray, np.array([3.0])), 70.0, 70.0)
-    assert ahead_of_it[0] == pytest.approx(70.0 * (0.25 / 0.5 - 0.3 / 1.0)) and behind_it[0] == 0.0
+    ahead_of_it = _gap(forward, 0.1, 0.0, 2.5, 3.0, 70.0, 70.0)  # the ray (0.1, 0, 1) at depths 2.5 and 3 m
+    behind_it = _gap(forward, 0.1, 0.0, 1.0, 3.0, 70.0, 70.0)
+    assert ahead_of_it == pytest.approx(70.0 * (0.25 / 0.5 - 0.3 / 1.0)) and behind_it == 0.0
     dolly = MotionBlur(translation=(0.05, 0.0, 4.0), rotation=(0.0, 0.0, 0.0))
     through = edge_parallax_contrast(g, cam, dolly, settings)
     assert math.isfinite(through) and 0.0 < through <= 2.0 * (80 + 60)
@@ -266,6 +302,60 @@ def test_the_edge_measure_stays_finite_and_bounded_on_degenerate_views() -> None
     assert "edge_measure" not in turn.stats and turn.stats["keyframes"] == keyframes_for(0.0, turn.stats["displacement_px"], 8)
     far = render_motion_keyframes(MotionJob(g, cam, MotionBlur(translation=(4.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0), sub_steps=2, fast=True), frozenset({"rgb"})))
     assert far.stats["displacement_px"] > 128.0 and far.stats["keyframes"] == 2 and "edge_measure" not in far.stats
+
+
+def test_the_compiled_edge_measure_is_the_numpy_formula_bit_for_bit() -> None:
+    """:func:`~spacedg.render.motion_error.edge_parallax_contrast` (its per-pair products compiled,
+    :mod:`spacedg.render.motion_error_cpu`) equals the numpy formula it replaced, to the last bit: each pixel's
+    ray at its own depth and at its right (lower) neighbour's seen from both ends of the exposure, the gap
+    capped at the warp's reach, times the mean squared sRGB difference, summed in numpy; on a wall and box,
+    at odd sizes, with dollies through the wall (points behind an end) and wild motions."""
+    from spacedg.render.camera import exposure_poses
+    from spacedg.render.composite import composite_view
+    from spacedg.render.motion_error import COARSE_FACTOR, edge_parallax_contrast
+    from spacedg.render.motion_warp import COVERED_ALPHA, fill_depth, relative_transform
+    from spacedg.render.settings import RasterSettings
+
+    def seen(m, x_ray, y_ray, depth):
+        x, y = x_ray * depth, y_ray * depth
+        ze = m[6] * x + m[7] * y + m[8] * depth + m[11]
+        ahead = ze > 1e-6
+        ze = np.where(ahead, ze, 1.0)
+        return (m[0] * x + m[1] * y + m[2] * depth + m[9]) / ze, (m[3] * x + m[4] * y + m[5] * depth + m[10]) / ze, ahead
+
+    def apart(u, v, ahead, other, fx, fy):
+        return np.where(ahead & other[2], np.hypot(fx * (u - other[0]), fy * (v - other[1])), 0.0)
+
+    def numpy_measure(g, cam, motion, settings):
+        width, height = max(2, cam.width // COARSE_FACTOR), max(2, cam.height // COARSE_FACTOR)
+        images, _ = composite_view(g, cam.resized(width, height), frozenset({"rgb", "depth"}), "cpu", None, settings, None)
+        alpha, depth = images["alpha"], images["depth"]
+        z = np.where((alpha > COVERED_ALPHA) & np.isfinite(depth), depth.astype(np.float64), fill_depth(alpha, depth))
+        x_ray = ((np.arange(width) + 0.5) * (cam.width / width) - cam.cx) / cam.fx
+        y_ray = ((np.arange(height) + 0.5) * (cam.height / height) - cam.cy) / cam.fy
+        reach = 2.0 * (cam.width + cam.height)
+        delta_h, delta_v = np.zeros((height, width - 1)), np.zeros((height - 1, width))
+        with np.errstate(all="ignore"):
+            for pose in exposure_poses(cam, np.array(motion.translation), np.array(motion.rotation), np.array([-0.5, 0.5])):
+                m = relative_transform(cam.cam_to_world, pose)
+                own = seen(m, x_ray[None, :], y_ray[:, None], z)
+                gap_h = apart(own[0][:, :-1], own[1][:, :-1], own[2][:, :-1], seen(m, x_ray[None, :-1], y_ray[:, None], z[:, 1:]), cam.fx, cam.fy)
+                gap_v = apart(own[0][:-1], own[1][:-1], own[2][:-1], seen(m, x_ray[None, :], y_ray[:-1, None], z[1:]), cam.fx, cam.fy)
+                np.maximum(delta_h, np.minimum(gap_h, reach), out=delta_h)
+                np.maximum(delta_v, np.minimum(gap_v, reach), out=delta_v)
+            encoded = linear_to_srgb(np.clip(images["rgb"].astype(np.float64), 0.0, 1.0))
+            total = float(np.sum(np.mean(np.diff(encoded, axis=1) ** 2, axis=2) * delta_h)
+                          + np.sum(np.mean(np.diff(encoded, axis=0) ** 2, axis=2) * delta_v))
+        value = total / (delta_h.size + delta_v.size)
+        return value if math.isfinite(value) else math.inf
+
+    settings = RasterSettings()
+    g = textured_wall(3)
+    motions = [MotionBlur(**MOTION), MotionBlur(translation=(0.05, 0.0, 4.0), rotation=(0.0, 0.0, 0.0)),
+               MotionBlur(translation=(1e6, 0.0, 0.0), rotation=(0.0, 0.0, 3.0)), MotionBlur(translation=(-0.4, 0.3, -2.0), rotation=(0.2, -0.1, 0.05))]
+    for cam in (camera(80, 60, focal=70.0), camera(97, 61, focal=55.0)):
+        for motion in motions:
+            assert edge_parallax_contrast(g, cam, motion, settings) == numpy_measure(g, cam, motion, settings)
 
 
 def test_the_edge_measure_on_the_torch_backend_is_the_cpu_one() -> None:

@@ -626,6 +626,7 @@ def sensor_capture(
     clip: bool = False,
     skip: np.ndarray | None = None,
     noise: bool = False,
+    out: np.ndarray | None = None,
 ) -> np.ndarray:
     """Expose linear light by ``exposure`` and add shot and read noise (see the module docstring).
 
@@ -645,9 +646,11 @@ def sensor_capture(
             draws are counter-based).
         noise: return the capture less the exposed signal (``y − float32(e·x)`` in float32, x as
             treated above: the bytes of subtracting them in numpy), 0 where skipped; not with ``clip``.
+        out: a C-contiguous float32 array of ``rgb``'s size to write into (a workspace the caller reuses),
+            not one that overlaps ``rgb``; default a new one.
 
     Returns:
-        A new float32 array of ``rgb``'s shape, always finite.
+        ``out`` (or a new float32 array), of ``rgb``'s shape, always finite.
     """
     for name, value in (("exposure", exposure), ("k", k), ("sigma_read", sigma_read)):
         if not (math.isfinite(value) and value >= 0.0):
@@ -661,7 +664,11 @@ def sensor_capture(
     read_scale, read_bound = _read_noise(float(sigma_read), int(read_model), float(read_lambda))
     saturated = _saturation_signal(float(k), read_bound) if clip else math.inf
     flat = kernel_cache.read_only(np.ascontiguousarray(rgb, dtype=np.float32).reshape(-1))
-    out = np.empty(flat.size, dtype=np.float32)
+    if out is None:
+        out = np.empty(flat.size, dtype=np.float32)
+    elif out.dtype != np.float32 or out.size != flat.size or not out.flags.c_contiguous or not out.flags.writeable:
+        raise InvalidDataError(f"sensor model: out must be a writeable C-contiguous float32 array of {flat.size} values, got {out.dtype} {out.shape}")
+    out = out.reshape(-1)
     if skip is None:
         skip_flags = _NO_SKIP
     elif skip.shape != rgb.shape:

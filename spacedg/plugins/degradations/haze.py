@@ -64,6 +64,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import numba
 import numpy as np
 
 from spacedg.errors import InvalidDataError
@@ -80,6 +81,8 @@ from spacedg.plugins.specs import (
     ParamSpec,
     Stage,
 )
+from spacedg.render import kernel_cache
+from spacedg.render.threads import fork_safe
 
 __all__ = ["SPEC", "haze", "VISIBILITY_DENSITY", "SCALED_DEPTH_REF_M"]
 
@@ -125,12 +128,35 @@ def haze(
     far = float(far_depth) if far_depth and np.isfinite(far_depth) and far_depth > 0 else (depth_ref or 1.0)
     beta = np.float32(density / (depth_ref if depth_ref > 0 else far))
     far = depth_ref if depth_ref > 0 else far  # no surface: at the normalisation depth D (module docstring)
-    cover = np.clip(np.nan_to_num(alpha, nan=0.0), 0.0, 1.0).astype(np.float32)
     d = np.where((depth > 0) & np.isfinite(depth), np.minimum(depth, _DEPTH_CAP), far).astype(np.float32)
-    t_surface = np.exp(-beta * d)
+    t_surface = np.exp(np.multiply(-beta, d, out=d), out=d)  # numpy's float32 exp (the kernel below has none)
     t_background = np.float32(np.exp(-float(beta) * far))
-    air = cover * (1.0 - t_surface) + (1.0 - cover) * (1.0 - t_background)
-    return (rgb * t_surface[:, :, None] + np.float32(airlight) * air[:, :, None]).astype(np.float32, copy=False)
+    out = np.empty(rgb.shape, np.float32)
+    cover = kernel_cache.read_only(np.asarray(alpha, dtype=np.float32))  # cast first: clip and NaN → 0 commute with rounding
+    _koschmieder(kernel_cache.read_only(rgb), t_surface, cover, t_background, np.float32(airlight), out)
+    return out
+
+
+@fork_safe
+@numba.njit(parallel=True, cache=True, fastmath=False)
+def _koschmieder(
+    rgb: np.ndarray, t_surface: np.ndarray, alpha: np.ndarray, t_background: np.float32, airlight: np.float32, out: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """``out = rgb·t + A·[c (1 − t) + (1 − c)(1 − t_bg)]`` per pixel in float32, ``c`` = ``alpha`` with NaN → 0
+    clipped to [0, 1]: the float32 operations of the numpy expression it replaces, in its order and
+    rounding (no fast-math, so no fused multiply-add), in one pass instead of seven arrays."""
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    background = one - t_background
+    for i in numba.prange(rgb.shape[0]):
+        for j in range(rgb.shape[1]):
+            a = alpha[i, j]
+            c = min(max(zero if a != a else a, zero), one)
+            t = t_surface[i, j]
+            air = c * (one - t) + (one - c) * background
+            veil = airlight * air
+            for ch in range(3):
+                out[i, j, ch] = rgb[i, j, ch] * t + veil
 
 
 def apply(rgb: np.ndarray, aux: Mapping[str, np.ndarray], params: Mapping[str, Any], rng: np.random.Generator) -> np.ndarray:

@@ -473,29 +473,57 @@ def refracted_view(rgb: np.ndarray, field: DropletField) -> np.ndarray:
     widest = float(field.spread.max(initial=0.0))
     if widest > 1.0:
         pad = box_pad(widest, rgb.shape[:2])
-        sat = _padded_sat(kernel_cache.read_only(rgb), reflect_index(rgb.shape[0], pad), reflect_index(rgb.shape[1], pad))
-        lo = np.array([rgb[..., c].min() for c in range(3)], np.float64)  # per channel: ~20x faster than axis=0
-        hi = np.array([rgb[..., c].max() for c in range(3)], np.float64)
+        lo, hi = np.empty(3, np.float64), np.empty(3, np.float64)
+        sat = _padded_sat(kernel_cache.read_only(rgb), reflect_index(rgb.shape[0], pad), reflect_index(rgb.shape[1], pad), lo, hi)
         _box_kernel(sat, pad, field.map_x, field.map_y, field.spread, lo, hi, seen)
     return seen
 
 
-@numba.njit(cache=True)
-def _padded_sat(rgb: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+@fork_safe
+@numba.njit(parallel=True, cache=True)
+def _padded_sat(rgb: np.ndarray, rows: np.ndarray, cols: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     """The float64 summed-area table ``(len(rows) + 1, len(cols) + 1, 3)`` of ``rgb[rows][:, cols]`` (the
-    frame padded by those source indices), node ``(i, j)`` = the sum over rows < i, columns < j."""
-    sat = np.zeros((rows.shape[0] + 1, cols.shape[0] + 1, 3), np.float64)
-    for i in range(rows.shape[0]):
+    frame padded by those source indices), node ``(i, j)`` = the sum over rows < i, columns < j; and, in
+    ``lo`` and ``hi`` (3,) float64, each channel's smallest and largest value over the padded frame (every
+    pixel of the frame when ``rows`` and ``cols`` reach them all, as a reflected pad does).
+
+    Two passes with the sums of one: each row's running sums (rows in parallel, each left to right), then
+    each node plus the node above it (top to bottom, a row at a time): node ``(i + 1, j + 1)`` is
+    ``node(i, j + 1) + run(i, j)``, as a single pass adds them, so the same bits."""
+    n_rows, n_cols = rows.shape[0], cols.shape[0]
+    sat = np.empty((n_rows + 1, n_cols + 1, 3), np.float64)
+    sat[0] = 0.0
+    row_lo = np.empty((n_rows, 3), np.float64)
+    row_hi = np.empty((n_rows, 3), np.float64)
+    for i in numba.prange(n_rows):
         src = rows[i]
         run0 = run1 = run2 = 0.0
-        for j in range(cols.shape[0]):
+        low0 = low1 = low2 = np.inf
+        high0 = high1 = high2 = -np.inf
+        sat[i + 1, 0] = 0.0
+        for j in range(n_cols):
             c = cols[j]
-            run0 += rgb[src, c, 0]
-            run1 += rgb[src, c, 1]
-            run2 += rgb[src, c, 2]
-            sat[i + 1, j + 1, 0] = sat[i, j + 1, 0] + run0
-            sat[i + 1, j + 1, 1] = sat[i, j + 1, 1] + run1
-            sat[i + 1, j + 1, 2] = sat[i, j + 1, 2] + run2
+            v0, v1, v2 = rgb[src, c, 0], rgb[src, c, 1], rgb[src, c, 2]
+            low0, high0 = min(low0, v0), max(high0, v0)
+            low1, high1 = min(low1, v1), max(high1, v1)
+            low2, high2 = min(low2, v2), max(high2, v2)
+            run0 += v0
+            run1 += v1
+            run2 += v2
+            sat[i + 1, j + 1, 0] = run0
+            sat[i + 1, j + 1, 1] = run1
+            sat[i + 1, j + 1, 2] = run2
+        row_lo[i, 0], row_lo[i, 1], row_lo[i, 2] = low0, low1, low2
+        row_hi[i, 0], row_hi[i, 1], row_hi[i, 2] = high0, high1, high2
+    flat = sat.reshape(n_rows + 1, (n_cols + 1) * 3)
+    for i in range(1, n_rows + 1):
+        above = flat[i - 1]
+        here = flat[i]
+        for k in range(flat.shape[1]):
+            here[k] = above[k] + here[k]
+    for ch in range(3):
+        lo[ch] = row_lo[:, ch].min() if n_rows else np.inf
+        hi[ch] = row_hi[:, ch].max() if n_rows else -np.inf
     return sat
 
 

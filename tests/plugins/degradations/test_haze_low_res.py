@@ -135,3 +135,36 @@ def test_low_res_bad_input() -> None:
         low_res.low_res(np.zeros((4, 4, 3), np.float32), 0.5)
     with pytest.raises(ParameterError, match="outside its hard limits"):
         low_res.SPEC.apply(_texture(), {"scale": 0.0}, np.random.default_rng(0))
+
+
+def test_the_compiled_haze_is_numpys_koschmieder_bit_for_bit() -> None:
+    """:func:`~spacedg.plugins.degradations.haze.haze` (one compiled pass) gives the bytes of the numpy
+    expression it replaced, on float32 and float64 depth, alpha with NaN, ±inf and values outside [0, 1], no
+    surface (0, NaN, inf), HDR colour, either normalisation depth."""
+    from spacedg.plugins.degradations.common import surface_far_depth
+    from spacedg.plugins.degradations.haze import haze
+
+    def numpy_haze(rgb, depth, alpha, density, airlight, depth_ref, far_depth):
+        far_depth = surface_far_depth(depth, alpha) if far_depth is None else far_depth
+        far = float(far_depth) if far_depth and np.isfinite(far_depth) and far_depth > 0 else (depth_ref or 1.0)
+        beta = np.float32(density / (depth_ref if depth_ref > 0 else far))
+        far = depth_ref if depth_ref > 0 else far
+        cover = np.clip(np.nan_to_num(alpha, nan=0.0), 0.0, 1.0).astype(np.float32)
+        d = np.where((depth > 0) & np.isfinite(depth), np.minimum(depth, 1e12), far).astype(np.float32)
+        t = np.exp(-beta * d)
+        air = cover * (1.0 - t) + (1.0 - cover) * (1.0 - np.float32(np.exp(-float(beta) * far)))
+        return (rgb * t[:, :, None] + np.float32(airlight) * air[:, :, None]).astype(np.float32, copy=False)
+
+    for seed in range(12):
+        rng = np.random.default_rng(700 + seed)
+        h, w = (int(v) for v in rng.integers(1, 60, 2))
+        rgb = (rng.random((h, w, 3)) * rng.choice([1.0, 5.0, 1e6])).astype(np.float32)
+        depth = (rng.random((h, w)) * rng.choice([3.0, 100.0, 1e15])).astype(rng.choice([np.float32, np.float64]))
+        for value, share in ((0.0, 0.1), (np.nan, 0.05), (np.inf, 0.05)):
+            depth[rng.random((h, w)) < share] = value
+        alpha = (rng.random((h, w)) * 1.4 - 0.2).astype(rng.choice([np.float32, np.float64]))
+        alpha[rng.random((h, w)) < 0.05] = np.nan
+        alpha[rng.random((h, w)) < 0.02] = np.inf
+        args = (rgb, depth, alpha, float(rng.random() * 8), float(rng.random()), float(rng.choice([0.0, 12.5])),
+                None if seed % 2 else float(rng.random() * 5))
+        assert haze(*args).tobytes() == numpy_haze(*args).tobytes(), seed

@@ -415,3 +415,25 @@ def test_the_noise_of_a_capture_and_its_skipped_values() -> None:
         sensor_capture(image, exposure=1.0, k=1e-4, sigma_read=2.5e-4, key=3, noise=True, clip=True)
     with pytest.raises(InvalidDataError, match="skip must have the image's shape"):
         sensor_capture(image, exposure=1.0, k=1e-4, sigma_read=2.5e-4, key=3, skip=np.zeros(5, bool))
+
+
+def test_a_capture_into_a_given_array_and_the_photosites_reused_workspaces() -> None:
+    """``sensor_capture(out=...)`` writes the same bytes into the caller's array (and refuses one of the wrong
+    size, type or layout); the photosite capture's per-thread workspaces, reused from one call to the next
+    (other keys, exposures, sizes, and back), leave every result as a fresh capture has it."""
+    from spacedg.plugins.degradations import _photosites
+
+    image = _textured() * np.float32(0.2)
+    fresh = sensor_capture(image, exposure=0.5, k=K, sigma_read=SIGMA, key=11)
+    given = np.full(image.shape, np.nan, np.float32)
+    assert sensor_capture(image, exposure=0.5, k=K, sigma_read=SIGMA, key=11, out=given) is not None
+    assert given.tobytes() == fresh.tobytes()
+    for bad in (np.empty(image.size - 1, np.float32), np.empty(image.shape, np.float64), np.empty(image.shape[::-1], np.float32).T):
+        with pytest.raises(InvalidDataError, match="out must be a writeable C-contiguous float32 array"):
+            sensor_capture(image, exposure=0.5, k=K, sigma_read=SIGMA, key=11, out=bad)
+    calls = [(image, 0.004, 5, 0.3), (image[:40, :50], 0.01, 6, 0.3), (image, 0.004, 5, 0.3), (image, 0.2, 7, 0.45)]
+    kept = [_photosites.binned_capture(rgb, pitch=p, exposure=e, clip=False, key=key, k=K, sigma_read=SIGMA) for rgb, e, key, p in calls]
+    first = [array.tobytes() for array in kept]  # read after every call: a result that were a workspace would have changed
+    _photosites._WORKSPACES.arrays = {}  # as a new thread finds them
+    alone = [_photosites.binned_capture(rgb, pitch=p, exposure=e, clip=False, key=key, k=K, sigma_read=SIGMA).tobytes() for rgb, e, key, p in calls[::-1]]
+    assert first == alone[::-1] and first[0] == first[2] and first[0] != first[3]

@@ -300,3 +300,23 @@ def test_a_minifying_drop_shows_the_mean_of_what_it_spans() -> None:
     # over a constant scene the mean is the constant (exact, edges and reflections included)
     flat = refracted_view(np.full_like(board, 0.3), field)
     np.testing.assert_allclose(flat, 0.3, rtol=1e-5)
+
+
+def test_the_summed_area_table_is_numpys_cumulative_sums_bit_for_bit() -> None:
+    """The minifying drops' summed-area table (rows in parallel, then each row plus the one above) is
+    ``cumsum(cumsum(padded, columns), rows)`` bit for bit, with a zero first row and column, and the
+    channels' extremes it reads in the same pass are the frame's."""
+    from spacedg.plugins.degradations.common import reflect_index
+    from spacedg.plugins.degradations.water_droplets import _padded_sat
+    from spacedg.render import kernel_cache
+
+    rng = np.random.default_rng(46)
+    for h, w, pad in [(1, 1, 1), (7, 5, 3), (48, 64, 17), (30, 20, 45)]:
+        rgb = (rng.random((h, w, 3)) * rng.choice([1.0, 1e6]) - 0.2).astype(np.float32)
+        rows, cols = reflect_index(h, pad), reflect_index(w, pad)
+        lo, hi = np.empty(3), np.empty(3)
+        sat = _padded_sat(kernel_cache.read_only(rgb), rows, cols, lo, hi)  # read-only, as the drops pass it: one signature
+        expected = np.zeros((rows.size + 1, cols.size + 1, 3))
+        expected[1:, 1:] = np.cumsum(np.cumsum(rgb[rows][:, cols].astype(np.float64), axis=1), axis=0)
+        assert sat.tobytes() == expected.tobytes()
+        assert lo.tolist() == rgb.reshape(-1, 3).min(axis=0).tolist() and hi.tolist() == rgb.reshape(-1, 3).max(axis=0).tolist()
