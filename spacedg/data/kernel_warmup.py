@@ -16,12 +16,12 @@ to :data:`_RENDERED_OUTPUTS`).
 - ``render``: a tiny synthetic room (10k Gaussians, the smallest, at 256 × 192) written and read
   back as a scene folder; its visibility and covisibility; two views clean, defocused (also widely:
   the per-tile sampled composite), through the fisheye lens and under a long shake (the keyframe warp
-  with its doubling passes), at the dataset's outputs: the projection, the binning, five of the compositor's specialisations, the lens,
-  defocus and warp kernels.
+  with its doubling passes), at the dataset's outputs: the projection, the binning, five of the compositor's specialisations, the lens
+  (and its inverse, for the coverage share), defocus, warp and keyframe-count kernels.
 - ``images``: the compositor's three other specialisations (with ids and colour or depth; on an empty
   projection: the types decide the compiled code, not the data), and every built-in linear-light
   and display degradation at its bench preset on a synthetic 64 × 48 image with its depth (the
-  sensor, the drops, the encoder).
+  sensor and its exposed signal, haze, the drops and their summed-area table, the encoder).
 
 A kernel another signature calls (a test's float64 input) still compiles on its first use; the
 serial twins of :mod:`spacedg.render.threads` compile in the forked process that needs them.

@@ -32,25 +32,36 @@ def edge_products(x_ray, y_ray, z, end_a, end_b, fx, fy, reach, encoded, product
     height, width = z.shape
     for i in range(height):
         for j in range(width):
-            for right in (True, False):
-                if (right and j + 1 >= width) or (not right and i + 1 >= height):
-                    continue
-                other = z[i, j + 1] if right else z[i + 1, j]
-                delta = 0.0
-                for m in (end_a, end_b):
-                    gap = _gap(m, x_ray[j], y_ray[i], z[i, j], other, fx, fy)
-                    gap = gap if gap != gap else min(gap, reach)
-                    delta = delta if delta != delta else (gap if gap != gap else max(delta, gap))
-                n_i, n_j = (i, j + 1) if right else (i + 1, j)
-                total = 0.0
-                for c in range(3):
-                    step = encoded[n_i, n_j, c] - encoded[i, j, c]
-                    total += step * step
-                contrast = total / 3.0
+            right, below = j + 1 < width, i + 1 < height
+            delta_h = delta_v = 0.0
+            for m in (end_a, end_b):
+                own = _seen(m, x_ray[j], y_ray[i], z[i, j])  # the pixel's point, once for both neighbours
                 if right:
-                    products_h[i, j] = contrast * delta
-                else:
-                    products_v[i, j] = contrast * delta
+                    delta_h = _widest(delta_h, _apart(own, _seen(m, x_ray[j], y_ray[i], z[i, j + 1]), fx, fy), reach)
+                if below:
+                    delta_v = _widest(delta_v, _apart(own, _seen(m, x_ray[j], y_ray[i], z[i + 1, j]), fx, fy), reach)
+            if right:
+                products_h[i, j] = _contrast(encoded, i, j, i, j + 1) * delta_h
+            if below:
+                products_v[i, j] = _contrast(encoded, i, j, i + 1, j) * delta_v
+
+
+@numba.njit(cache=True, inline="always")
+def _widest(delta, gap, reach):  # pragma: no cover - compiled
+    """``np.maximum(delta, np.minimum(gap, reach))``: a NaN on either side stays NaN."""
+    gap = gap if gap != gap else min(gap, reach)
+    return delta if delta != delta else (gap if gap != gap else max(delta, gap))
+
+
+@numba.njit(cache=True, inline="always")
+def _contrast(encoded, i, j, n_i, n_j):  # pragma: no cover - compiled
+    """Mean over the channels of the squared difference of ``encoded`` between pixels ``(i, j)`` and
+    ``(n_i, n_j)``: numpy's ``np.mean(diff ** 2, axis=2)`` (a sum from 0, left to right, then ÷ 3)."""
+    total = 0.0
+    for c in range(3):
+        step = encoded[n_i, n_j, c] - encoded[i, j, c]
+        total += step * step
+    return total / 3.0
 
 
 @numba.njit(cache=True, inline="always")
@@ -66,9 +77,16 @@ def _seen(m, x_ray, y_ray, depth):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
+def _apart(own, other, fx, fy):  # pragma: no cover - compiled
+    """Pixels (focal lengths ``fx``, ``fy``) between two points :func:`_seen` by one camera, 0 where either is
+    not in front of it."""
+    u, v, ahead = own
+    other_u, other_v, other_ahead = other
+    return math.hypot(fx * (u - other_u), fy * (v - other_v)) if ahead and other_ahead else 0.0
+
+
+@numba.njit(cache=True)
 def _gap(m, x_ray, y_ray, depth, other_depth, fx, fy):  # pragma: no cover - compiled
     """Pixels between the points on the ray ``(x_ray, y_ray, 1)`` at ``depth`` and at ``other_depth`` as the
-    camera ``m`` sees them (:func:`_seen`), 0 where either is not in front of it."""
-    u, v, ahead = _seen(m, x_ray, y_ray, depth)
-    other_u, other_v, other_ahead = _seen(m, x_ray, y_ray, other_depth)
-    return math.hypot(fx * (u - other_u), fy * (v - other_v)) if ahead and other_ahead else 0.0
+    camera ``m`` sees them, 0 where either is not in front of it (one pair of :func:`edge_products`; tests)."""
+    return _apart(_seen(m, x_ray, y_ray, depth), _seen(m, x_ray, y_ray, other_depth), fx, fy)

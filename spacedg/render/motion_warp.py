@@ -58,8 +58,12 @@ def relative_transform(pose_from: np.ndarray, pose_to: np.ndarray) -> np.ndarray
 #: the same kernel is loaded from numba's on-disk cache (the linked copy): the first process on a
 #: machine rendered other bits than later ones. Without it the sums keep the source order; FMA
 #: contraction (``contract``) stays and was measured to give identical bits both ways
-#: (``benchmarks/numba_cache_determinism.py``).
-_FASTMATH = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
+#: (``benchmarks/numba_cache_determinism.py``). Nor ``arcp`` and ``afn``: :func:`gather` computes its
+#: per-pixel sample counts and steps (a square root, two divisions) in a loop of their own that LLVM
+#: vectorises, where they would let it use reciprocal and square-root estimates or turn one division
+#: into a product with the other's reciprocal: without them both stay correctly rounded, as the
+#: scalar code they came from compiled (the kernels have no other division or square root).
+_FASTMATH = {"nnan", "ninf", "nsz", "contract"}
 
 
 #: Path samples :func:`gather` places before it sums them (its scratch buffers' length).
@@ -70,6 +74,24 @@ _PATH_CHUNK = 64
 #: about even at 9 and behind beyond (61 against 89 at 17). The dataset's gathers take 7.6 samples a
 #: pixel on average (median 7, 90th percentile 12). The same bits either way.
 _FUSED_MAX = 8
+
+
+def _weighted_sum(builder: ir.IRBuilder, kind: ir.Type, data: ir.Value, taps: list, weights: list) -> ir.Value:
+    """LLVM IR of ``Σ weights[n] · texel(taps[n])``, each texel a ``kind`` (a float or a float vector) loaded at
+    flat index ``taps[n]`` of ``data``, each weight a float spread over the lanes: ``fmul`` then ``fadd``
+    left to right, ``((w₀t₀ + w₁t₁) + w₂t₂) + …``, with no fast-math flags of their own (numba gives
+    them the calling kernel's). The one emitter of the intrinsics below, so they agree by construction."""
+    total = None
+    for tap, weight in zip(taps, weights):
+        texel = builder.load(builder.bitcast(builder.gep(data, [tap]), kind.as_pointer()), align=4)
+        if isinstance(kind, ir.VectorType):
+            spread = ir.Constant(kind, ir.Undefined)
+            for lane in range(kind.count):
+                spread = builder.insert_element(spread, weight, ir.Constant(ir.IntType(32), lane))
+            weight = spread
+        term = builder.fmul(weight, texel)
+        total = term if total is None else builder.fadd(total, term)
+    return total
 
 
 def _weighted_taps_intrinsic(lanes: int, accumulate: bool):
@@ -100,18 +122,9 @@ def _weighted_taps_intrinsic(lanes: int, accumulate: bool):
         def codegen(context, builder, signature, args):
             dst_value, at_value, flat_value, taps_value, weights_value = args
             data = context.make_array(signature.args[2])(context, builder, flat_value).data
-            total = None
-            for n in range(signature.args[3].count):
-                at = builder.gep(data, [builder.extract_value(taps_value, n)])
-                texel = builder.load(builder.bitcast(at, kind.as_pointer()), align=4)
-                weight = builder.extract_value(weights_value, n)
-                if lanes > 1:
-                    spread = ir.Constant(kind, ir.Undefined)
-                    for lane in range(lanes):
-                        spread = builder.insert_element(spread, weight, ir.Constant(ir.IntType(32), lane))
-                    weight = spread
-                term = builder.fmul(weight, texel)
-                total = term if total is None else builder.fadd(total, term)
+            count = signature.args[3].count
+            total = _weighted_sum(builder, kind, data, [builder.extract_value(taps_value, n) for n in range(count)],
+                                  [builder.extract_value(weights_value, n) for n in range(count)])
             first = builder.gep(context.make_array(signature.args[0])(context, builder, dst_value).data, [at_value])
             target = builder.bitcast(first, kind.as_pointer())
             if accumulate:
@@ -167,15 +180,8 @@ def _path_taps4(typingctx, acc, flat, corners, weights, count, row, nc):
             k = loop.index
             p00 = builder.load(builder.gep(corner_data, [k]))
             p10 = builder.add(p00, row_value)
-            total = None
-            for r, tap in enumerate((p00, builder.add(p00, nc_value), p10, builder.add(p10, nc_value))):
-                weight = builder.load(builder.gep(weight_data, [builder.add(k, ir.Constant(k.type, r * _PATH_CHUNK))]))
-                spread = ir.Constant(kind, ir.Undefined)
-                for lane in range(4):
-                    spread = builder.insert_element(spread, weight, lane_index[lane])
-                texel = builder.load(builder.bitcast(builder.gep(texels, [tap]), kind.as_pointer()), align=4)
-                term = builder.fmul(spread, texel)
-                total = term if total is None else builder.fadd(total, term)
+            weights_k = [builder.load(builder.gep(weight_data, [builder.add(k, ir.Constant(k.type, r * _PATH_CHUNK))])) for r in range(4)]
+            total = _weighted_sum(builder, kind, texels, [p00, builder.add(p00, nc_value), p10, builder.add(p10, nc_value)], weights_k)
             builder.store(builder.fadd(builder.load(running), total), running)
         result = builder.load(running)
         return context.make_tuple(builder, signature.return_type, [builder.extract_element(result, lane_index[lane]) for lane in range(4)])
@@ -236,7 +242,7 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
     inv_spacing = np.float32(1.0 / spacing)
     for i in numba.prange(height):
         ci = i + margin
-        lanes = np.empty(5, np.float32)  # the path's r, g, b, α and depth·α sums (with the depth channel)
+        lanes = np.empty(5, np.float32)  # the path's r, g, b, α (and depth·α) sums, but a long colour-only path's
         times = np.empty(_PATH_CHUNK, np.float32)  # a chunk of the path's samples: their times,
         corners = np.empty(_PATH_CHUNK, np.uint64)  # top-left texels
         weights = np.empty((4, _PATH_CHUNK), np.float32)  # and bilinear weights
@@ -248,8 +254,8 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
         # first each pixel's sample count and times, over the whole row (no loop inside: the square root and
         # the divisions of neighbouring pixels overlap instead of heading every pixel's walk)
         for j in range(width):
-            fu = field[i + margin, j + margin, 2]
-            fv = field[i + margin, j + margin, 3]
+            fu = field[ci, j + margin, 2]
+            fv = field[ci, j + margin, 3]
             reach = scale * math.sqrt(fu * fu + fv * fv) * inv_spacing
             whole = int(reach)
             count = max(1, whole + (1 if reach > np.float32(whole) else 0))  # ⌈reach⌉ without a libm call
@@ -278,9 +284,8 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
             count = counts[j]
             step = steps[j]
             t = starts[j]
-            lanes[:] = zero
-            colour = (zero, zero, zero, zero)  # the r, g, b, α sums without the depth channel (in registers)
             if not want_extra and count <= _FUSED_MAX:
+                lanes[:4] = zero
                 for k in range(count):
                     tk = t
                     t += step
@@ -295,6 +300,8 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
                 continue
             # in chunks: the times (one float32 sum after another, as a single loop adds them), then
             # every sample's texel and weights (independent: LLVM vectorises this loop), then the sums
+            lanes[:] = zero  # with the depth channel: its sums
+            colour = (zero, zero, zero, zero)  # without: the r, g, b, α sums (in a register)
             for first in range(0, count, _PATH_CHUNK):
                 n = min(_PATH_CHUNK, count - first)
                 for k in range(n):
@@ -453,7 +460,8 @@ def finish_average(acc, count, rgb, alpha):  # pragma: no cover - compiled
     """The exposure's mean from :func:`gather`'s sums over ``count`` intervals, in one pass: ``acc``
     ((H, W, 4 or 5) float32) divided by ``count`` in place (float32), ``alpha`` ((H, W)) its channel 3
     clipped to [0, 1] and ``rgb`` ((H, W, 3)) its channels 0–2 at least 0: numpy's ``acc /= count``,
-    ``np.clip`` and ``np.maximum`` (a NaN stays NaN, −0 stays −0), the same bits."""
+    ``np.clip`` and ``np.maximum`` (a NaN stays NaN; −0 becomes +0 in ``alpha``, as ``np.clip`` has it, and
+    stays −0 in ``rgb``, as ``np.maximum`` has it), the same bits."""
     scale = np.float32(count)
     zero = np.float32(0.0)
     one = np.float32(1.0)
@@ -464,9 +472,9 @@ def finish_average(acc, count, rgb, alpha):  # pragma: no cover - compiled
             for c in range(3):
                 v = acc[i, j, c]
                 rgb[i, j, c] = v if (v >= zero or v != v) else zero
-            a = acc[i, j, 3]
-            a = a if (a >= zero or a != a) else zero
-            alpha[i, j] = a if (a <= one or a != a) else one
+            a = acc[i, j, 3]  # np.clip: a NaN stays, −0 becomes +0
+            a = a if (a > zero or a != a) else zero
+            alpha[i, j] = a if (a < one or a != a) else one
 
 
 def occupancy(src: np.ndarray) -> np.ndarray:

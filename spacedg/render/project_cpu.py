@@ -40,7 +40,9 @@ from typing import TYPE_CHECKING
 import numba
 import numpy as np
 
-from spacedg.render.camera import equidistant_theta_d, equidistant_theta_d_slope, frustum_limits
+from spacedg.render.camera import frustum_limits
+from spacedg.render.lens_cpu import theta_d as _theta_d
+from spacedg.render.lens_cpu import theta_d_slope as _theta_d_slope
 from spacedg.render.gaussians import _SH_C1, _SH_C2, _SH_C3, SH_C0
 from spacedg.render.settings import DEFOCUS_MIN_COC, FOOTPRINT_CAP, footprint_dilation
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
@@ -88,10 +90,8 @@ def _sh_channel(sh, i, ch, degree, x, y, z):
     return value
 
 
-_theta_d = numba.njit(cache=True, inline="always")(equidistant_theta_d)
 #: the Jacobian's frustum (:func:`~spacedg.render.camera.frustum_limits`), widened by ``reach`` px
 _frustum = numba.njit(cache=True, inline="always")(frustum_limits)
-_theta_d_slope = numba.njit(cache=True, inline="always")(equidistant_theta_d_slope)
 
 
 @numba.njit(cache=True, inline="always")

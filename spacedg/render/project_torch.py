@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from spacedg.render.camera import Camera, equidistant_theta_d, equidistant_theta_d_slope, frustum_limits
+from spacedg.render.camera import Camera, frustum_limits
+from spacedg.render.lens_polynomial import equidistant_theta_d, equidistant_theta_d_slope
 from spacedg.render.gaussians import Gaussians, quat_to_matrix, sh_basis
 from spacedg.render.settings import ALPHA_MIN, DEFOCUS_MIN_COC, FOOTPRINT_CAP, TILE_SIZE, Defocus, RasterSettings, footprint_dilation
 

@@ -646,11 +646,11 @@ def sensor_capture(
             draws are counter-based).
         noise: return the capture less the exposed signal (``y − float32(e·x)`` in float32, x as
             treated above: the bytes of subtracting them in numpy), 0 where skipped; not with ``clip``.
-        out: a C-contiguous float32 array of ``rgb``'s size to write into (a workspace the caller reuses),
-            not one that overlaps ``rgb``; default a new one.
+        out: a writeable C-contiguous float32 array of ``rgb``'s size to write into (a workspace the caller
+            reuses), apart from ``rgb``; default a new one.
 
     Returns:
-        ``out`` (or a new float32 array), of ``rgb``'s shape, always finite.
+        A float32 array of ``rgb``'s shape (a view of ``out`` when given, else new), always finite.
     """
     for name, value in (("exposure", exposure), ("k", k), ("sigma_read", sigma_read)):
         if not (math.isfinite(value) and value >= 0.0):
@@ -666,8 +666,11 @@ def sensor_capture(
     flat = kernel_cache.read_only(np.ascontiguousarray(rgb, dtype=np.float32).reshape(-1))
     if out is None:
         out = np.empty(flat.size, dtype=np.float32)
-    elif out.dtype != np.float32 or out.size != flat.size or not out.flags.c_contiguous or not out.flags.writeable:
-        raise InvalidDataError(f"sensor model: out must be a writeable C-contiguous float32 array of {flat.size} values, got {out.dtype} {out.shape}")
+    elif out.dtype != np.float32 or out.size != flat.size or not out.flags.c_contiguous or not out.flags.writeable or np.may_share_memory(out, flat):
+        raise InvalidDataError(
+            f"sensor model: out must be a writeable C-contiguous float32 array of {flat.size} values apart from the input, "
+            f"got {out.dtype} {out.shape}"
+        )
     out = out.reshape(-1)
     if skip is None:
         skip_flags = _NO_SKIP

@@ -114,6 +114,14 @@ def haze(
         far_depth: the sample's far surface depth (metres); ``None`` = this view's.
     """
     rgb = check_linear_rgb(rgb, "haze")
+    shape = rgb.shape[:2]
+    try:  # a per-pixel map each (numpy broadcasting as before: a scalar alpha, one row of depths, …)
+        depth, alpha = np.broadcast_to(depth, shape), np.broadcast_to(alpha, shape)
+    except ValueError:
+        raise InvalidDataError(
+            f"haze: depth {np.shape(depth)} and alpha {np.shape(alpha)} must be (H, W) maps of the image's {shape[0]}×{shape[1]} "
+            "pixels (or broadcast to them)"
+        ) from None
     negative = np.asarray(depth) < 0
     if negative.any():
         first = tuple(int(i) for i in np.argwhere(negative)[0])
@@ -132,8 +140,8 @@ def haze(
     t_surface = np.exp(np.multiply(-beta, d, out=d), out=d)  # numpy's float32 exp (the kernel below has none)
     t_background = np.float32(np.exp(-float(beta) * far))
     out = np.empty(rgb.shape, np.float32)
-    cover = kernel_cache.read_only(np.asarray(alpha, dtype=np.float32))  # cast first: clip and NaN → 0 commute with rounding
-    _koschmieder(kernel_cache.read_only(rgb), t_surface, cover, t_background, np.float32(airlight), out)
+    cover = kernel_cache.read_only(np.ascontiguousarray(alpha, dtype=np.float32))  # cast first: clip and NaN → 0 commute with rounding
+    _koschmieder(kernel_cache.read_only(np.ascontiguousarray(rgb)), t_surface, cover, t_background, np.float32(airlight), out)
     return out
 
 
@@ -151,7 +159,9 @@ def _koschmieder(
     for i in numba.prange(rgb.shape[0]):
         for j in range(rgb.shape[1]):
             a = alpha[i, j]
-            c = min(max(zero if a != a else a, zero), one)
+            c = zero if a != a else a  # np.nan_to_num, then np.clip: (c > 0 ? c : 0) < 1 ? … : 1 (−0 becomes +0)
+            c = c if c > zero else zero
+            c = c if c < one else one
             t = t_surface[i, j]
             air = c * (one - t) + (one - c) * background
             veil = airlight * air

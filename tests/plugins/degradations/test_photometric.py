@@ -419,7 +419,7 @@ def test_the_noise_of_a_capture_and_its_skipped_values() -> None:
 
 def test_a_capture_into_a_given_array_and_the_photosites_reused_workspaces() -> None:
     """``sensor_capture(out=...)`` writes the same bytes into the caller's array (and refuses one of the wrong
-    size, type or layout); the photosite capture's per-thread workspaces, reused from one call to the next
+    size, type or layout, or the input's own memory); the photosite capture's per-thread workspaces, reused from one call to the next
     (other keys, exposures, sizes, and back), leave every result as a fresh capture has it."""
     from spacedg.plugins.degradations import _photosites
 
@@ -428,7 +428,7 @@ def test_a_capture_into_a_given_array_and_the_photosites_reused_workspaces() -> 
     given = np.full(image.shape, np.nan, np.float32)
     assert sensor_capture(image, exposure=0.5, k=K, sigma_read=SIGMA, key=11, out=given) is not None
     assert given.tobytes() == fresh.tobytes()
-    for bad in (np.empty(image.size - 1, np.float32), np.empty(image.shape, np.float64), np.empty(image.shape[::-1], np.float32).T):
+    for bad in (np.empty(image.size - 1, np.float32), np.empty(image.shape, np.float64), np.empty(image.shape[::-1], np.float32).T, image):
         with pytest.raises(InvalidDataError, match="out must be a writeable C-contiguous float32 array"):
             sensor_capture(image, exposure=0.5, k=K, sigma_read=SIGMA, key=11, out=bad)
     calls = [(image, 0.004, 5, 0.3), (image[:40, :50], 0.01, 6, 0.3), (image, 0.004, 5, 0.3), (image, 0.2, 7, 0.45)]
