@@ -83,10 +83,3 @@ def _apart(own, other, fx, fy):  # pragma: no cover - compiled
     u, v, ahead = own
     other_u, other_v, other_ahead = other
     return math.hypot(fx * (u - other_u), fy * (v - other_v)) if ahead and other_ahead else 0.0
-
-
-@numba.njit(cache=True)
-def _gap(m, x_ray, y_ray, depth, other_depth, fx, fy):  # pragma: no cover - compiled
-    """Pixels between the points on the ray ``(x_ray, y_ray, 1)`` at ``depth`` and at ``other_depth`` as the
-    camera ``m`` sees them, 0 where either is not in front of it (one pair of :func:`edge_products`; tests)."""
-    return _apart(_seen(m, x_ray, y_ray, depth), _seen(m, x_ray, y_ray, other_depth), fx, fy)

@@ -278,15 +278,16 @@ def test_the_edge_measure_stays_finite_and_bounded_on_degenerate_views() -> None
     path there, as in the warp), a thousand kilometres of motion; and the measure is skipped where it cannot
     change the count (no translation, or the path alone asks for the most)."""
     from spacedg.render.motion_error import edge_parallax_contrast, keyframes_for
-    from spacedg.render.motion_error_cpu import _gap
+    from spacedg.render.motion_error_cpu import _apart, _seen
     from spacedg.render.settings import RasterSettings
 
     settings = RasterSettings()
     g = textured_wall()
     cam = camera(80, 60, focal=70.0)
     forward = np.array([1.0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, -2.0])  # 2 m ahead of the view's camera
-    ahead_of_it = _gap(forward, 0.1, 0.0, 2.5, 3.0, 70.0, 70.0)  # the ray (0.1, 0, 1) at depths 2.5 and 3 m
-    behind_it = _gap(forward, 0.1, 0.0, 1.0, 3.0, 70.0, 70.0)
+    far_point = _seen(forward, 0.1, 0.0, 3.0)  # the ray (0.1, 0, 1) at 3 m, against at 2.5 m and 1 m
+    ahead_of_it = _apart(_seen(forward, 0.1, 0.0, 2.5), far_point, 70.0, 70.0)
+    behind_it = _apart(_seen(forward, 0.1, 0.0, 1.0), far_point, 70.0, 70.0)
     assert ahead_of_it == pytest.approx(70.0 * (0.25 / 0.5 - 0.3 / 1.0)) and behind_it == 0.0
     dolly = MotionBlur(translation=(0.05, 0.0, 4.0), rotation=(0.0, 0.0, 0.0))
     through = edge_parallax_contrast(g, cam, dolly, settings)
