@@ -22,20 +22,30 @@ to :data:`_RENDERED_OUTPUTS`).
   projection: the types decide the compiled code, not the data), and every built-in linear-light
   and display degradation at its bench preset on a synthetic 64 × 48 image with its depth (the
   sensor and its exposed signal, haze, the drops and their summed-area table, the encoder).
+- ``serial``: the serial twins (:mod:`spacedg.render.threads`) of a clean view's kernels (the
+  projection, the compositor's colour output, the sRGB encoder and decoder), which a DataLoader worker
+  forked after its parent rendered runs (a user looks at ``dataset[0]``, then iterates a loader):
+  without them each such worker compiled them itself, the workers at once (9 s of a test's
+  13 s alone on this machine). On two cores it runs after ``images``, beside ``render``, which takes longest.
 
-A kernel another signature calls (a test's float64 input) still compiles on its first use; the
-serial twins of :mod:`spacedg.render.threads` compile in the forked process that needs them.
+A kernel another signature calls (a test's float64 input) still compiles on its first use, as do
+the serial twins of the degradations' kernels (a forked worker asked for a degraded item).
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from spacedg.scene.model import Scene
 
 __all__ = ["GROUPS", "warm"]
 
@@ -46,9 +56,10 @@ _WIDTH, _HEIGHT = 64, 48
 _RENDERED_OUTPUTS = {(True, False, False), (True, True, False), (False, False, True), (False, True, False), (False, False, False)}
 
 
-def _render_group() -> None:
-    """The ``render`` group (module docstring)."""
-    from spacedg.data.pipeline import PipelineOptions, degrade_variants
+@contextlib.contextmanager
+def _tiny_room(prepare: bool) -> Iterator[tuple[Scene, list[str]]]:
+    """A tiny synthetic room (10k Gaussians, the smallest, at 256 × 192) written and read back as a scene
+    folder, and two of its views; with ``prepare``, its visibility and covisibility computed too."""
     from spacedg.qa.build import prepare_scene
     from spacedg.scene.io import load_scene, save_scene
     from spacedg.scene.synthetic import CaptureConfig, RoomConfig, generate_room
@@ -57,13 +68,31 @@ def _render_group() -> None:
         folder = Path(tmp) / "room"
         config = RoomConfig(gaussians=10_000, capture=CaptureConfig(4 * _WIDTH, 4 * _HEIGHT, 3, 3))
         save_scene(generate_room(0, config, scene_id="kernels"), folder)
-        scene = prepare_scene(load_scene(folder), folder / "cache", progress=False, backend="cpu")
-        views = list(scene.views)[:2]
+        scene = load_scene(folder)
+        if prepare:
+            scene = prepare_scene(scene, folder / "cache", progress=False, backend="cpu")
+        yield scene, list(scene.views)[:2]
+
+
+def _render_group() -> None:
+    """The ``render`` group (module docstring)."""
+    from spacedg.data.pipeline import PipelineOptions, degrade_variants
+
+    with _tiny_room(prepare=True) as (scene, views):
         # a long shake: paths past the warp's doubling passes (24 px and more); a wide blur: tiles whose every
         # Gaussian is blurred, composited every 2 px (the bench aperture, scaled to this size, leaves none)
         shake = {"name": "motion_blur", "params": {"trans": 1.0, "rot": 0.3, "sub_steps": 80}}
         wide = {"name": "defocus", "params": {"aperture": 12.0, "depth": 0.5}}
         degrade_variants(scene, views, ["clean", "defocus", wide, "distortion", shake], options=PipelineOptions(backend="cpu"))
+
+
+def _serial_group() -> None:
+    """The ``serial`` group (module docstring)."""
+    from spacedg.data.pipeline import PipelineOptions, degrade_variants
+    from spacedg.render.threads import serial_kernels
+
+    with _tiny_room(prepare=False) as (scene, views), serial_kernels():
+        degrade_variants(scene, views, ["clean"], options=PipelineOptions(backend="cpu"))
 
 
 def _images_group() -> None:
@@ -96,7 +125,7 @@ def _images_group() -> None:
 
 
 #: The groups :func:`warm` runs, by name (module docstring), in the order ``spacedg kernels`` starts them.
-GROUPS: dict[str, Callable[[], None]] = {"render": _render_group, "images": _images_group}
+GROUPS: dict[str, Callable[[], None]] = {"render": _render_group, "images": _images_group, "serial": _serial_group}
 
 
 def warm(group: str) -> float:

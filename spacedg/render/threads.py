@@ -26,12 +26,14 @@ workers usually share the cores between them anyway, and this is the case that u
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import types
+from collections.abc import Iterator
 from typing import Any
 
-__all__ = ["ForkSafeKernel", "fork_safe", "limit_blas_threads", "serial_mode", "set_render_threads"]
+__all__ = ["ForkSafeKernel", "fork_safe", "limit_blas_threads", "serial_kernels", "serial_mode", "set_render_threads"]
 
 _serial = False
 
@@ -39,6 +41,20 @@ _serial = False
 def serial_mode() -> bool:
     """Whether this process was forked after its parent's OpenMP threads started (kernels run serially)."""
     return _serial
+
+
+@contextlib.contextmanager
+def serial_kernels() -> Iterator[None]:
+    """Within the block every :class:`ForkSafeKernel` runs its serial twin in this process, as a forked
+    worker would: the warm-up (``spacedg kernels``' ``serial`` group) compiles the twins into numba's cache
+    this way, so the workers load them. Safe anywhere (a twin never touches OpenMP); same bytes."""
+    global _serial
+    before = _serial
+    _serial = True
+    try:
+        yield
+    finally:
+        _serial = before
 
 
 def _omp_pool_started() -> bool:
@@ -82,15 +98,19 @@ class ForkSafeKernel:
 
     @property
     def serial(self) -> Any:
-        """The serial twin (compiled, and cached on disk under its own name, on first use)."""
+        """The serial twin (compiled on first use; cached on disk under its own name where the kernel is)."""
         if self._serial is None:
             import numba
+            from numba.core.caching import NullCache
 
             func = self.parallel.py_func
             twin = types.FunctionType(func.__code__, func.__globals__, func.__name__ + "_serial", func.__defaults__, func.__closure__)
             twin.__qualname__ = func.__qualname__ + "_serial"
             options = {k: v for k, v in self.parallel.targetoptions.items() if k not in ("parallel", "nopython")}
-            self._serial = numba.njit(**options)(twin)
+            # ``cache`` is not among the target options: without it the twins were compiled afresh in every
+            # forked worker (a clean view's: ~10 s a worker, the workers at once)
+            cached = not isinstance(self.parallel._cache, NullCache)
+            self._serial = numba.njit(cache=cached, **options)(twin)
         return self._serial
 
     def __call__(self, *args: Any) -> Any:

@@ -11,6 +11,7 @@ from spacedg.cli import main
 from spacedg.data.kernel_warmup import GROUPS, warm
 from spacedg.data.pipeline import PipelineOptions, degrade_variants
 from spacedg.errors import ParameterError
+from spacedg.render.threads import serial_kernels
 
 
 def _spacedg_dispatchers() -> list[object]:
@@ -39,7 +40,8 @@ def _signatures() -> dict[int, set[object]]:
 
 def test_after_the_warm_up_the_dataset_paths_compile_nothing(small_room, monkeypatch: pytest.MonkeyPatch) -> None:
     """Every kernel signature a dataset item's render and degradations call (the nine at their bench
-    presets, clean, a wide defocus, each compositor output) was compiled (or loaded) by the two groups: a kernel the
+    presets, clean, a wide defocus, each compositor output; a clean item's serial twins) was compiled (or loaded)
+    by the groups: a kernel the
     warm-up calls with other types than the real path would compile again in every process. The render
     group reaches the compositor specialisations the images group leaves it: a change of the render
     paths' outputs would leave one to no group, or give one to both at once."""
@@ -53,10 +55,13 @@ def test_after_the_warm_up_the_dataset_paths_compile_nothing(small_room, monkeyp
     warm("render")
     assert repr(sorted(raster_cpu._COMPOSITE_KERNELS)) == repr(sorted(_RENDERED_OUTPUTS))
     warm("images")
+    warm("serial")
     before = _signatures()
     views = list(small_room.views)[:2]
     wide_blur = {"name": "defocus", "params": {"aperture": 12.0, "depth": 0.5}}  # tiles composited every 2 px
     degrade_variants(small_room, views, ["clean", *BENCH_DEGRADATIONS, wide_blur], options=PipelineOptions(image_size=(96, 72), backend="cpu"))
+    with serial_kernels():  # a worker forked after its parent rendered: a clean item's serial twins
+        degrade_variants(small_room, views, ["clean"], options=PipelineOptions(image_size=(80, 60), backend="cpu"))
     camera = small_room.camera(views[0]).resized(48, 36)
     for flags in itertools.product((False, True), repeat=3):
         outputs = frozenset(name for name, on in zip(("rgb", "depth", "instance_ids"), flags) if on)
@@ -71,7 +76,7 @@ def test_after_the_warm_up_the_dataset_paths_compile_nothing(small_room, monkeyp
 
 
 def test_unknown_group_is_one_clear_error() -> None:
-    with pytest.raises(ParameterError, match="unknown group 'nope'; choose from render, images"):
+    with pytest.raises(ParameterError, match="unknown group 'nope'; choose from render, images, serial"):
         warm("nope")
 
 
@@ -79,5 +84,5 @@ def test_cli_runs_every_group_in_processes_of_their_own(capfd: pytest.CaptureFix
     """One group at a time here (``--jobs 1``): each in its own interpreter, then the total."""
     assert main(["kernels", "--jobs", "1"]) == 0
     lines = capfd.readouterr().out.splitlines()
-    assert [line.split(" in ")[0] for line in lines] == [f"spacedg kernels: {group}" for group in GROUPS] + ["spacedg kernels: 2 groups"]
+    assert [line.split(" in ")[0] for line in lines] == [f"spacedg kernels: {group}" for group in GROUPS] + ["spacedg kernels: 3 groups"]
     assert lines[-1].endswith("(1 at a time)")

@@ -555,7 +555,9 @@ def water_droplets(
     Returns:
         A new float32 (H, W, 3) array, equal to ``rgb`` bit for bit outside the drops.
     """
-    rgb = check_linear_rgb(rgb, NAME)
+    # C-contiguous: the kernels then see the one array layout `spacedg kernels` compiled (a strided view,
+    # a cropped or channel-sliced image, compiled two more specialisations: ~12 s in every process)
+    rgb = np.ascontiguousarray(check_linear_rgb(rgb, NAME))
     params = _check_params(scale, radius, strength, blur_sigma, blur_kernel)
     if not (math.isfinite(specular) and specular >= 0.0):
         raise ParameterError(f"{NAME}: specular must be a finite number >= 0 (linear light), got {specular!r}")

@@ -20,6 +20,7 @@ from spacedg.plugins.degradations.low_light import low_light
 from spacedg.plugins.degradations.over_exposure import SPEC as OVER_EXPOSURE
 from spacedg.plugins.degradations.over_exposure import over_expose
 from spacedg.render.colour import linear_to_srgb
+from spacedg.render import kernel_cache
 
 SPECS = [LOW_LIGHT, OVER_EXPOSURE]
 K, SIGMA = 1e-4, 2.5e-4  # the default sensor
@@ -213,8 +214,8 @@ def test_saturation_shortcut_gives_the_same_bytes(k: float, sigma_read: float, r
     shortcut = sensor_capture(image, exposure=8.5, k=k, sigma_read=sigma_read, key=5, read_model=read_model, read_lambda=-0.2, clip=True)
     read_scale = sigma_read / (tukey_lambda_std(-0.2) if read_model == READ_TUKEY else 1.0)
     full = np.empty_like(image)
-    _sensor._sensor_kernel(
-        image, full, 8.5, k, read_scale, read_model, -0.2, True, math.inf, np.uint64(5), np.zeros(0, np.uint8), False,
+    _sensor._sensor_kernel(  # read-only input and flags: the signature sensor_capture calls, compiled by `spacedg kernels`
+        kernel_cache.read_only(image), full, 8.5, k, read_scale, read_model, -0.2, True, math.inf, np.uint64(5), _sensor._NO_SKIP, False,
     )
     assert shortcut.tobytes() == full.tobytes()
     assert (full == 1.0).mean() > 0.3
@@ -264,10 +265,10 @@ def test_vector_loop_gives_every_value_the_scalar_bytes(k: float, sigma_read: fl
         saturated = _sensor._saturation_signal(k, read_bound) if clip else math.inf
         some = (rng.random(x.size) < 0.2).astype(np.uint8)
         some[all_skipped] = 1
-        for skip in (np.zeros(0, np.uint8), some):
+        for skip in (_sensor._NO_SKIP, kernel_cache.read_only(some)):  # read-only, as sensor_capture passes them
             args = (exposure, k, read_scale, read_model, -0.2, clip, saturated, np.uint64(77), skip, noise)
             fast = np.empty_like(x)
-            _sensor._sensor_kernel(x, fast, *args)
+            _sensor._sensor_kernel(kernel_cache.read_only(x), fast, *args)
             assert fast.tobytes() == _value_by_value(x, *args).tobytes(), (clip, noise, skip.size)
 
 
