@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import time
 
 import numpy as np
 
@@ -70,14 +69,11 @@ def test_mra_and_one_scene() -> None:
     assert blind_audit({"s0": [_yn("s0", 0, "chair", "yes")]}).rows == []
 
 
-def test_ten_thousand_records_take_seconds(capsys, tmp_path) -> None:
-    records = {f"s{s}": [_yn(f"s{s}", k, LABELS[k % 6], "yes" if (k // 6 + s) % 3 else "no") for k in range(2500)] for s in range(4)}
-    start = time.perf_counter()
-    blind_audit(records)
-    assert time.perf_counter() - start < 30.0  # seconds on one slow core; ~2 s on a laptop
-    # the command line: qa audit over index files
+def test_the_command_line_audits_index_files(capsys, tmp_path) -> None:
+    """``qa audit`` over index files (its time on the rooms' indexes: ``benchmarks/qa_speed.py``)."""
+    records = {f"s{s}": [_yn(f"s{s}", k, LABELS[k % 6], "yes" if (k // 6 + s) % 3 else "no") for k in range(60)] for s in range(4)}
     for scene, rs in records.items():
-        (tmp_path / f"{scene}.qa.jsonl").write_text("".join(r.to_json() + "\n" for r in rs[:60]))
+        (tmp_path / f"{scene}.qa.jsonl").write_text("".join(r.to_json() + "\n" for r in rs))
     assert main(["qa", "audit", str(tmp_path), "--json", "--solved", str(tmp_path / "solved.jsonl")]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["rows"][0]["sub_question_type"] == "existence" and (tmp_path / "solved.jsonl").is_file()
