@@ -65,7 +65,7 @@ demo: $(STAMP)
 # rest in front (beside it, tests/test_readme.py's runner); the background lane's output follows
 # the front's, and both must pass.
 # An interrupted run stops the background lane and removes its log (the EXIT trap).
-# First `spacedg kernels` compiles the CPU kernels into numba's cache, its groups two at a time: on a
+# First `spacedg kernels` compiles the CPU kernels into numba's cache, a process per group (at most the cores): on a
 # fresh clone each lane compiled them itself, often the same ones at once (the times: docs/command-line.md;
 # spacedg/data/kernel_warmup.py). Only a speed-up: a failed
 # warm-up leaves the lanes to compile, and to report what is wrong.

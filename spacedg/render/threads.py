@@ -101,15 +101,16 @@ class ForkSafeKernel:
         """The serial twin (compiled on first use; cached on disk under its own name where the kernel is)."""
         if self._serial is None:
             import numba
-            from numba.core.caching import NullCache
 
             func = self.parallel.py_func
             twin = types.FunctionType(func.__code__, func.__globals__, func.__name__ + "_serial", func.__defaults__, func.__closure__)
             twin.__qualname__ = func.__qualname__ + "_serial"
-            options = {k: v for k, v in self.parallel.targetoptions.items() if k not in ("parallel", "nopython")}
+            options = {k: v for k, v in self.parallel.targetoptions.items() if k not in ("parallel", "nopython", "cache")}
             # ``cache`` is not among the target options: without it the twins were compiled afresh in every
-            # forked worker (a clean view's: ~10 s a worker, the workers at once)
-            cached = not isinstance(self.parallel._cache, NullCache)
+            # forked worker (a clean view's: ~10 s a worker, the workers at once). A dispatcher with a disk
+            # cache holds a FunctionCache, one without a NullCache; read defensively (numba's private attribute:
+            # an error here would surface as a missing ``serial`` through __getattr__)
+            cached = type(getattr(self.parallel, "_cache", None)).__name__ not in ("NullCache", "NoneType")
             self._serial = numba.njit(cache=cached, **options)(twin)
         return self._serial
 

@@ -134,8 +134,8 @@ def test_a_view_blurred_everywhere_is_composited_coarse_with_its_light(room_view
     coarse = render(gaussians, cam, defocus=defocus, backend=backend, outputs="rgb,depth")
     monkeypatch.setattr(model, "COMPOSITE_MIN_COC", 0.0)  # full-resolution composite (the model before)
     monkeypatch.setattr(model, "TILE_SAMPLE_MIN_COC", 0.0)
-    # the reference on the compiled backend for both (the backends' composites agree to float rounding,
-    # test_the_backends_agree_on_a_coarse_composite): torch's full composite took 12 of this test's 14 s
+    # the full composite's reference is the compiled backend's for both (the backends agree on a coarse composite,
+    # test_the_backends_agree_on_a_coarse_composite; torch's full composite took 12 of this test's 14 s)
     full = render(gaussians, cam, defocus=defocus, backend="cpu", outputs="rgb,depth")
     assert coarse.stats["pairs"] < 0.4 * full.stats["pairs"]
     assert coarse.rgb.mean() == pytest.approx(full.rgb.mean(), rel=0.005)

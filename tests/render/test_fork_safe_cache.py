@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
+import pytest
 
 from spacedg.render.threads import fork_safe
 
@@ -80,6 +81,9 @@ def test_a_cached_kernels_serial_twin_is_cached_on_disk_under_its_own_name(tmp_p
     with serial_kernels():
         assert serial_mode() and _lookup(4) == 12.0 and _lookup.serial.signatures
     assert not serial_mode()
+    with pytest.raises(RuntimeError, match="inside"), serial_kernels():
+        raise RuntimeError("inside")
+    assert not serial_mode()  # restored after an error too
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), SPACEDG_DISABLE_PLUGIN_AUTOLOAD="1")
     runs = [subprocess.run([sys.executable, "-c", _TWIN_CHILD], env=env, capture_output=True, text=True, check=True).stdout.split()
             for _ in range(2)]

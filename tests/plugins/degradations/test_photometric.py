@@ -19,8 +19,8 @@ from spacedg.plugins.degradations.low_light import SPEC as LOW_LIGHT
 from spacedg.plugins.degradations.low_light import low_light
 from spacedg.plugins.degradations.over_exposure import SPEC as OVER_EXPOSURE
 from spacedg.plugins.degradations.over_exposure import over_expose
-from spacedg.render.colour import linear_to_srgb
 from spacedg.render import kernel_cache
+from spacedg.render.colour import linear_to_srgb
 
 SPECS = [LOW_LIGHT, OVER_EXPOSURE]
 K, SIGMA = 1e-4, 2.5e-4  # the default sensor
