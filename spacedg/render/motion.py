@@ -278,6 +278,11 @@ def render_motion_keyframes(
     channels = 5 if want_depth else 4
     acc = np.zeros((camera.height, camera.width, channels), np.float32)
     pairs = 0
+    # the canvas buffers, fully rewritten each keyframe (keyframe_source, flow_field, each doubling pass)
+    src = np.empty((canvas.height, canvas.width, channels), np.float32)
+    dst = np.empty_like(src)
+    geometry = np.empty((canvas.height, canvas.width), np.float32)
+    field = np.empty((canvas.height, canvas.width, 4), np.float32)
     for k, pose in enumerate(key_poses):
         images, stats = job.composite(canvas.with_pose(pose), frozenset({"rgb", "depth"}))
         pairs += stats["pairs"]
@@ -285,10 +290,7 @@ def render_motion_keyframes(
         lowest = alpha.min()
         # the fill depth only stands where alpha is at most COVERED_ALPHA: a covered canvas (a room) needs none
         fill = 1.0 if lowest > motion_warp.COVERED_ALPHA else motion_warp.fill_depth(alpha, depth)
-        src = np.empty((canvas.height, canvas.width, channels), np.float32)
-        geometry = np.empty((canvas.height, canvas.width), np.float32)
         motion_warp.keyframe_source(images["rgb"], alpha, depth, fill, src, geometry)
-        field = np.empty((canvas.height, canvas.width, 4), np.float32)
         motion_warp.flow_field(geometry, camera.fx, camera.fy, canvas.cx, canvas.cy,
                                motion_warp.relative_transform(end_poses[k], pose),
                                motion_warp.relative_transform(end_poses[k + 1], pose), field)
@@ -297,7 +299,6 @@ def render_motion_keyframes(
         reach = np.float32(2 * (canvas.width + canvas.height))
         longest = motion_warp.sanitise_field(field, reach)
         n_passes = doubling_passes(longest) if passes is None else passes
-        dst = np.empty_like(src)
         covered_all = bool(lowest > 0.0)  # nothing to skip (a room): no occupancy tables
         for j in range(n_passes):
             sat = motion_warp.FULL if covered_all else motion_warp.occupancy(src)

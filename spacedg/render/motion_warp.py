@@ -242,7 +242,7 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
     inv_spacing = np.float32(1.0 / spacing)
     for i in numba.prange(height):
         ci = i + margin
-        lanes = np.empty(5, np.float32)  # the path's r, g, b, α (and depth·α) sums, but a long colour-only path's
+        lanes = np.empty(5, np.float32)  # the path's r, g, b, α (and depth·α) sums (a long colour-only path sums in a register)
         times = np.empty(_PATH_CHUNK, np.float32)  # a chunk of the path's samples: their times,
         corners = np.empty(_PATH_CHUNK, np.uint64)  # top-left texels
         weights = np.empty((4, _PATH_CHUNK), np.float32)  # and bilinear weights
@@ -300,7 +300,8 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
                 continue
             # in chunks: the times (one float32 sum after another, as a single loop adds them), then
             # every sample's texel and weights (independent: LLVM vectorises this loop), then the sums
-            lanes[:] = zero  # with the depth channel: its sums
+            if want_extra:  # with the depth channel: its sums
+                lanes[:] = zero
             colour = (zero, zero, zero, zero)  # without: the r, g, b, α sums (in a register)
             for first in range(0, count, _PATH_CHUNK):
                 n = min(_PATH_CHUNK, count - first)

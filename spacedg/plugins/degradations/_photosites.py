@@ -162,7 +162,7 @@ def binned_capture(
     if clip and skip_saturated and grid[0] >= width and grid[1] >= height:
         unread = _sites_of_saturated_pixels(signal, grid, sensor)
     noise = sensor_capture(
-        sites, exposure=1.0, key=key, skip=unread, noise=True, out=_workspace("noise", sites.shape) if resampled else None, **sensor,  # type: ignore[arg-type]
+        sites, exposure=1.0, key=key, skip=unread, noise=True, out=_workspace("noise", sites.shape), **sensor,  # type: ignore[arg-type]
     )
     if resampled:
         noise = cv2.resize(noise, (width, height), dst=_workspace("binned", signal.shape), interpolation=cv2.INTER_AREA)

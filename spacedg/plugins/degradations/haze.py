@@ -122,7 +122,7 @@ def haze(
             f"haze: depth {np.shape(depth)} and alpha {np.shape(alpha)} must be (H, W) maps of the image's {shape[0]}×{shape[1]} "
             "pixels (or broadcast to them)"
         ) from None
-    negative = np.asarray(depth) < 0
+    negative = depth < 0
     if negative.any():
         first = tuple(int(i) for i in np.argwhere(negative)[0])
         raise InvalidDataError(
@@ -136,7 +136,7 @@ def haze(
     far = float(far_depth) if far_depth and np.isfinite(far_depth) and far_depth > 0 else (depth_ref or 1.0)
     beta = np.float32(density / (depth_ref if depth_ref > 0 else far))
     far = depth_ref if depth_ref > 0 else far  # no surface: at the normalisation depth D (module docstring)
-    d = np.where((depth > 0) & np.isfinite(depth), np.minimum(depth, _DEPTH_CAP), far).astype(np.float32)
+    d = np.where((depth > 0) & np.isfinite(depth), np.minimum(depth, _DEPTH_CAP), far).astype(np.float32, copy=False)  # a new array either way
     t_surface = np.exp(np.multiply(-beta, d, out=d), out=d)  # numpy's float32 exp (the kernel below has none)
     t_background = np.float32(np.exp(-float(beta) * far))
     out = np.empty(rgb.shape, np.float32)

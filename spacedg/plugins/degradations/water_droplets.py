@@ -522,8 +522,8 @@ def _padded_sat(rgb: np.ndarray, rows: np.ndarray, cols: np.ndarray, lo: np.ndar
         for k in range(flat.shape[1]):
             here[k] = above[k] + here[k]
     for ch in range(3):
-        lo[ch] = row_lo[:, ch].min() if n_rows else np.inf
-        hi[ch] = row_hi[:, ch].max() if n_rows else -np.inf
+        lo[ch] = row_lo[:, ch].min()  # n_rows >= 3: the image has a row, the padding one each side
+        hi[ch] = row_hi[:, ch].max()
     return sat
 
 
