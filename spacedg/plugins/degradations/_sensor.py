@@ -191,7 +191,15 @@ _POISSON_THRESHOLDS, _POISSON_ROW_START, _POISSON_GUIDE = _poisson_tables()
 _NORMAL_COEFFICIENTS = _normal_table()
 # The kernels read these as module constants (numba freezes a global array into the compiled code):
 # LLVM then knows no store of the kernel can alias them, and vectorises its table reads as gathers.
-_GUIDE_FLAT = _POISSON_GUIDE.reshape(-1)
+# The guide table's bytes read as little-endian 32-bit words (entry e is byte e & 3 of word e >> 2,
+# :func:`_guide_entry`): the vector loop gathers words and shifts the byte out, where a byte table had LLVM
+# read the eight lanes one at a time (x86 has no byte gather). With :func:`_table_block`'s contiguous loads
+# and carried offsets and :func:`_lane`'s independent threshold reads: low light's 5.46 M photosite values
+# of a 640 × 480 view 43–49 → 35–36 ms on two threads, the same bytes (docs/degradations-physics.md).
+_GUIDE_WORDS = np.frombuffer(_POISSON_GUIDE.astype("<u1").tobytes(), dtype="<u4").copy()
+# Two entries past the last row: the vector loop reads T[n + 1] and T[n + 2] whatever n is, and uses them
+# only within the row (whose last entry, 2³² − 1, no uniform exceeds).
+_POISSON_THRESHOLDS = np.concatenate([_POISSON_THRESHOLDS, np.full(2, 2**32 - 1, np.uint32)])
 _NORMAL_FLAT = _NORMAL_COEFFICIENTS.reshape(-1)
 
 
@@ -319,6 +327,13 @@ def _normal(bits: np.uint64) -> float:
 
 
 @numba.njit(cache=True, inline="always")
+def _guide_entry(row: np.uint64, high: np.uint64) -> np.uint64:
+    """The guide table's first candidate count for table row ``row`` and the 32-bit uniform ``high`` (its top 8 bits)."""
+    entry = row * np.uint64(_TABLE_GUIDE) + (high >> _S24)
+    return (np.uint64(_GUIDE_WORDS[entry >> np.uint64(2)]) >> ((entry & np.uint64(3)) * np.uint64(8))) & np.uint64(255)
+
+
+@numba.njit(cache=True, inline="always")
 def _poisson_small(rate: float, bits: np.uint64) -> float:
     """Exact Poisson(rate), 0 ≤ rate < 64, as Poisson(λ_g) + Poisson(δ) from one 64-bit draw.
 
@@ -330,7 +345,7 @@ def _poisson_small(rate: float, bits: np.uint64) -> float:
     delta = rate - g * (1.0 / _TABLE_STEPS)
     high = bits >> _S32
     start = _POISSON_ROW_START[g]
-    n = np.int64(_GUIDE_FLAT[g * _TABLE_GUIDE + np.int64(high >> _S24)])
+    n = np.int64(_guide_entry(np.uint64(g), high))
     n += np.int64(np.uint64(_POISSON_THRESHOLDS[start + n]) < high)  # the usual single step, without a branch
     while np.uint64(_POISSON_THRESHOLDS[start + n]) < high:
         n += 1
@@ -432,18 +447,18 @@ def _exp_minus(delta: float) -> float:
 
 @numba.njit(cache=True, inline="always")
 def _lane(
-    x: np.float32, i: int, exposure: float, k: float, inv_k: float, read_key: np.uint64, shot_key: np.uint64, read_scale: float, clip: bool,
-    saturated: float, noise: bool, use_normal: bool,
+    x: np.float32, offset: np.uint64, exposure: float, k: float, inv_k: float, read_key: np.uint64, shot_key: np.uint64, read_scale: float,
+    clip: bool, saturated: float, noise: bool, use_normal: bool,
 ) -> tuple[np.float32, np.uint8]:
     """:func:`_value` of one Gaussian-read-noise value without branches (the kernel's vector loop), and 1 where
-    it cannot say: a rate in PTRS's range, or ≥ 10³ without ``use_normal`` (the normal approximation
+    it cannot say (``offset`` is the value's counter offset ``i·γ``): a rate in PTRS's range, or ≥ 10³ without ``use_normal`` (the normal approximation
     computed too: blocks with such rates), a table search past two steps, a remainder Poisson(δ) above 1 or
     within :data:`_REMAINDER_MARGIN` of a decision (Tukey read noise never comes here). Where the flag is 0 the value is
     :func:`_value`'s, bit for bit: the same float64 operations in the same order, table reads the
-    scalar search would make (two steps of it), ``e^{−δ}``'s comparisons kept apart by their margin."""
+    scalar search would make (two steps of it; read side by side, each used only where the step before it was
+    taken), ``e^{−δ}``'s comparisons kept apart by their margin."""
     s = _signal(x, exposure)
     signal = np.float32(s)
-    offset = np.uint64(i) * _GOLDEN
     rate = s * inv_k
     bits1 = _mix(shot_key + offset)
     in_table = rate < _TABLE_MAX_RATE
@@ -451,11 +466,13 @@ def _lane(
     g = np.int64(min(rate if rate > 0.0 else 0.0, _TABLE_ROW_RATE) * _TABLE_STEPS)  # NaN (0·inf at a k whose 1/k overflows) → row 0
     delta = rate - g * (1.0 / _TABLE_STEPS)
     high = bits1 >> _S32
-    start = _POISSON_ROW_START[g]
-    n = np.int64(_GUIDE_FLAT[g * _TABLE_GUIDE + np.int64(high >> _S24)])
-    n += np.int64(np.uint64(_POISSON_THRESHOLDS[start + n]) < high)
-    n += np.int64(np.uint64(_POISSON_THRESHOLDS[start + n]) < high)
-    unsure = np.int64(np.uint64(_POISSON_THRESHOLDS[start + n]) < high)
+    row = np.uint64(g)
+    start = np.uint64(_POISSON_ROW_START[row])
+    n = _guide_entry(row, high)
+    first = np.int64(np.uint64(_POISSON_THRESHOLDS[start + n]) < high)
+    second = first & np.int64(np.uint64(_POISSON_THRESHOLDS[start + n + np.uint64(1)]) < high)
+    unsure = second & np.int64(np.uint64(_POISSON_THRESHOLDS[start + n + np.uint64(2)]) < high)
+    n = np.int64(n) + first + second
     u = (np.float64(np.int64(bits1 & _LOW32)) + 0.5) * _TWO_M32
     p0 = _exp_minus(delta)
     cdf1 = p0 + p0 * delta  # the scalar loop's p0 + p0·(δ·1)
@@ -496,9 +513,15 @@ def _table_block(
     shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool,
 ) -> None:
     """:func:`_lane` over ``x[lo:hi]`` into ``staged`` and ``to_scalar`` (from 0), rates below 64 only (the others flagged).
-    Its own compiled function, not inlined: the parallel kernel and its serial twin share it (compiled once)."""
-    for i in range(lo, hi):
-        staged[i - lo], to_scalar[i - lo] = _lane(x[i], i, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, False)
+    Its own compiled function, not inlined: the parallel kernel and its serial twin share it (compiled once).
+    The loop runs from 0 over a slice and carries the counter offset by addition: indexed from ``lo``, numba's
+    negative-index check kept LLVM from proving the loads contiguous (it gathered them), and ``i·γ`` cost a
+    64-bit vector multiply a value."""
+    values = x[lo:hi]
+    offset = np.uint64(lo) * _GOLDEN  # value i's counter offset i·γ (mod 2⁶⁴), carried by addition
+    for j in range(hi - lo):
+        staged[j], to_scalar[j] = _lane(values[j], offset, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, False)
+        offset += _GOLDEN
 
 
 @numba.njit(cache=True)
@@ -507,8 +530,11 @@ def _mixed_block(
     shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool,
 ) -> None:
     """:func:`_table_block` with the normal approximation too (rates ≥ 10³)."""
-    for i in range(lo, hi):
-        staged[i - lo], to_scalar[i - lo] = _lane(x[i], i, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, True)
+    values = x[lo:hi]
+    offset = np.uint64(lo) * _GOLDEN  # value i's counter offset i·γ (mod 2⁶⁴), carried by addition
+    for j in range(hi - lo):
+        staged[j], to_scalar[j] = _lane(values[j], offset, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, True)
+        offset += _GOLDEN
 
 
 @fork_safe
@@ -563,16 +589,20 @@ def _sensor_kernel(
         lo = block * _BLOCK
         hi = min(lo + _BLOCK, size)
         to_scalar = flags[lo : lo + _BLOCK]
+        # the block's loops run from 0 over slices: indexed from ``lo``, numba's negative-index check kept LLVM
+        # from seeing contiguous loads (it gathered the words and read the skip flags one byte at a time)
+        block_bits = bits32[lo:hi]
         largest_bits = np.int32(-(2**31))  # of the block's largest positive value: float32 and int32 order agree there
-        for i in range(lo, hi):
-            bits = bits32[i]
+        for j in range(hi - lo):
+            bits = block_bits[j]
             largest_bits = max(largest_bits, bits if bits <= _INF_BITS else np.int32(0))  # a NaN reads as 0, as _signal has it
         top_rate = _signal(_as_float32(largest_bits), exposure) * inv_k if largest_bits > 0 else 0.0
         every_skipped = skipping
         if skipping:
+            block_skip = skip[lo:hi]
             fewest = np.uint8(255)
-            for i in range(lo, hi):
-                fewest = min(fewest, skip[i])
+            for j in range(hi - lo):
+                fewest = min(fewest, block_skip[j])
             every_skipped = fewest != 0
         if not every_skipped:  # a block whose every value is skipped (over-exposure's saturated regions) draws nothing
             # the vector loop writes a block-sized buffer, copied to ``out`` after it: writing ``out`` directly ran
@@ -588,12 +618,13 @@ def _sensor_kernel(
             else:  # Tukey read noise: every value is the scalar loop's
                 to_scalar[: hi - lo] = np.uint8(1)
         if skipping:
-            for i in range(lo, hi):
-                s = _signal(x[i], exposure)
+            block_x, block_skip, block_out = x[lo:hi], skip[lo:hi], out[lo:hi]
+            for j in range(hi - lo):
+                s = _signal(block_x[j], exposure)
                 unread = np.float32(0.0) if noise else (np.float32(min(max(s, 0.0), 1.0)) if clip else np.float32(s))
-                hit = skip[i] != 0
-                out[i] = unread if hit else out[i]
-                to_scalar[i - lo] = np.uint8(0) if hit else to_scalar[i - lo]
+                hit = block_skip[j] != 0
+                block_out[j] = unread if hit else block_out[j]
+                to_scalar[j] = np.uint8(0) if hit else to_scalar[j]
         _scalar_block(x, lo, hi, out, to_scalar, exposure, k, inv_k, read_scale, read_model, read_lambda, clip, saturated, keys, key_mix, noise)
 
 

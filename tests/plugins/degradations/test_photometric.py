@@ -176,6 +176,9 @@ def test_table_sampler_matches_the_poisson_pmf(rate: float) -> None:
 
 def test_poisson_tables_are_the_exact_cdf() -> None:
     thresholds, row_start, guide = _sensor._POISSON_THRESHOLDS, _sensor._POISSON_ROW_START, _sensor._POISSON_GUIDE
+    # the kernels' forms of them: the guide's bytes as words, two full-scale entries past the last row
+    assert _sensor._GUIDE_WORDS.dtype == np.dtype("<u4") and _sensor._GUIDE_WORDS.view(np.uint8).tobytes() == guide.tobytes()
+    assert thresholds.size == row_start[-1] + 2 and (thresholds[-2:] == 2**32 - 1).all()
     for g in (0, 1, 37, 512, 1023):
         row = thresholds[row_start[g] : row_start[g + 1]].astype(np.float64)
         lam = g / 16.0
