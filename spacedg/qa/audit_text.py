@@ -12,7 +12,8 @@ from __future__ import annotations
 import math
 import re
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import TypeVar
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.questions.language import object_phrase, plural
@@ -29,6 +30,28 @@ _WORD = re.compile(r"[a-z]+|\d+(?:\.\d+)?")
 NUMBER = re.compile(r"^\d+(?:\.\d+)?$")
 #: A word is a template word of a question type when at least this share of its questions use it.
 TEMPLATE_DF = 0.2
+
+
+_T = TypeVar("_T")
+#: Attribute of a record that holds its text features once computed (:func:`_kept`).
+_KEPT = "_audit_text"
+
+
+def _kept(record: QARecord, name: str, compute: Callable[[QARecord], _T]) -> _T:
+    """``compute(record)``, computed once per record object and kept on it.
+
+    A record is frozen, so its text never changes; the blind probes read the same records' features in every
+    fold, split and pruning round (``export --debias`` on the session rooms: ~60,000 calls for ~1,000
+    records). The values kept are immutable and picklable (tuples, frozensets); a record made from
+    another (``dataclasses.replace``) is a new object and computes its own. Not a field: equality,
+    ``to_dict`` and the index files do not see it."""
+    kept = record.__dict__.get(_KEPT)
+    if kept is None:
+        kept = {}
+        object.__setattr__(record, _KEPT, kept)  # the record is a frozen dataclass
+    if name not in kept:
+        kept[name] = compute(record)
+    return kept[name]
 
 
 def words(text: str) -> list[str]:
@@ -58,6 +81,10 @@ def record_labels(record: QARecord) -> tuple[str, ...]:
     """The labels the question names, in question order: the ``refs`` of its geometry block, else
     its ``label`` (existence, counting) or ``object`` (size); lower case. The question text
     states them, so a text-only model knows them too."""
+    return _kept(record, "labels", _record_labels)
+
+
+def _record_labels(record: QARecord) -> tuple[str, ...]:
     g = record.geometry
     refs = g.get("refs") or []
     if refs:
@@ -72,12 +99,16 @@ def record_labels(record: QARecord) -> tuple[str, ...]:
 
 
 def named_objects(record: QARecord) -> dict[str, str]:
-    """Phrase (lower case) → label of every object the question names."""
+    """Phrase (lower case) → label of every object the question names (a new dict each call)."""
+    return dict(_kept(record, "named", _named_objects))
+
+
+def _named_objects(record: QARecord) -> tuple[tuple[str, str], ...]:
     out: dict[str, str] = {}
     for ref in record.geometry.get("refs") or []:
         phrase = object_phrase(str(ref.get("label", "")), str(ref.get("description", ""))).lower()
         out.setdefault(" ".join(phrase.split()), str(ref.get("label", "")).lower())
-    return out
+    return tuple(out.items())
 
 
 def option_role(record: QARecord, text: str) -> str:
@@ -88,8 +119,12 @@ def option_role(record: QARecord, text: str) -> str:
     return f"object:{label}" if label is not None else key
 
 
-def template_words(record: QARecord) -> set[str]:
+def template_words(record: QARecord) -> frozenset[str]:
     """The question's words without the objects and labels it names (and their plurals)."""
+    return _kept(record, "template", _template_words)
+
+
+def _template_words(record: QARecord) -> frozenset[str]:
     text = " ".join(record.question.lower().split())
     for phrase in sorted(named_objects(record), key=len, reverse=True):
         text = text.replace(phrase, " ")
@@ -97,7 +132,7 @@ def template_words(record: QARecord) -> set[str]:
     for label in record_labels(record):
         named.update(words(label))
         named.update(words(plural(label)))
-    return {w for w in words(text) if w not in named}
+    return frozenset(w for w in words(text) if w not in named)
 
 
 def template_signature(record: QARecord, frequent: frozenset[str]) -> str:

@@ -115,3 +115,21 @@ def test_the_learned_vocabulary_does_not_follow_set_order() -> None:
     vocab = _Vocab([["b", "a", "c", "d"], ["d", "c", "a", "b"]], min_count=2, cap=3)
     assert sorted(vocab.index) == ["a", "b", "c"]
     assert list(vocab.matrix([["c", "zz", "a", "b", "a"]]).cols) == [0, 1, 2]
+
+
+def test_text_features_are_kept_per_record_and_survive_pickling_and_replace() -> None:
+    import dataclasses
+    import pickle
+
+    from spacedg.qa.audit_text import _KEPT, named_objects, template_words
+
+    record = _size("s0", 1, "sofa", "cup", np.random.default_rng(0))
+    first = template_words(record)
+    assert template_words(record) is first and first == {"in", "image", "a", "b", "find", "the", "which", "is", "longer", "or"}
+    named = named_objects(record)
+    named["x"] = "y"  # a caller's changes stay in its own dict
+    assert named_objects(record) == {"wooden sofa": "sofa", "wooden cup": "cup"}
+    again = pickle.loads(pickle.dumps(record))
+    assert again == record and template_words(again) == first and record.to_dict() == again.to_dict() and _KEPT not in record.to_dict()
+    other = dataclasses.replace(record, question="Is the wooden sofa longer than the wooden cup?")
+    assert template_words(other) == {"is", "the", "longer", "than"}
