@@ -44,7 +44,8 @@ def _kept(record: QARecord, name: str, compute: Callable[[QARecord], _T]) -> _T:
     fold, split and pruning round (``export --debias`` on the session rooms: ~60,000 calls for ~1,000
     records). The values kept are immutable and picklable (tuples, frozensets); a record made from
     another (``dataclasses.replace``) is a new object and computes its own. Not a field: equality,
-    ``to_dict`` and the index files do not see it."""
+    ``to_dict`` and the index files do not see it; a pickle or copy of the record carries it (the same values
+    its copy would compute). Two threads may both compute a value: the same value, one kept."""
     kept = record.__dict__.get(_KEPT)
     if kept is None:
         kept = {}

@@ -195,8 +195,10 @@ _NORMAL_COEFFICIENTS = _normal_table()
 # :func:`_guide_entry`): the vector loop gathers words and shifts the byte out, where a byte table had LLVM
 # read the eight lanes one at a time (x86 has no byte gather). With :func:`_table_block`'s contiguous loads
 # and carried offsets and :func:`_lane`'s independent threshold reads: low light's 5.46 M photosite values
-# of a 640 × 480 view 43–49 → 35–36 ms on two threads, the same bytes (docs/degradations-physics.md).
-_GUIDE_WORDS = np.frombuffer(_POISSON_GUIDE.astype("<u1").tobytes(), dtype="<u4").copy()
+# of a 640 × 480 view 42–49 → 35–36 ms on two threads, the same bytes (docs/degradations-physics.md).
+# 256 KiB, as the byte table (the int32 table tried in stop 55 was 1 MiB: numba would not cache its kernel).
+# Native uint32 (numba refuses a non-native byte order) with the little-endian words' values.
+_GUIDE_WORDS = np.frombuffer(_POISSON_GUIDE.astype("<u1").tobytes(), dtype="<u4").astype(np.uint32)
 # Two entries past the last row: the vector loop reads T[n + 1] and T[n + 2] whatever n is, and uses them
 # only within the row (whose last entry, 2³² − 1, no uniform exceeds).
 _POISSON_THRESHOLDS = np.concatenate([_POISSON_THRESHOLDS, np.full(2, 2**32 - 1, np.uint32)])

@@ -176,9 +176,22 @@ def test_table_sampler_matches_the_poisson_pmf(rate: float) -> None:
 
 def test_poisson_tables_are_the_exact_cdf() -> None:
     thresholds, row_start, guide = _sensor._POISSON_THRESHOLDS, _sensor._POISSON_ROW_START, _sensor._POISSON_GUIDE
-    # the kernels' forms of them: the guide's bytes as words, two full-scale entries past the last row
-    assert _sensor._GUIDE_WORDS.dtype == np.dtype("<u4") and _sensor._GUIDE_WORDS.view(np.uint8).tobytes() == guide.tobytes()
+    # the kernels' forms of them: the guide's bytes as words (each entry shifted out of its word as the
+    # compiled loops do, for every row and bin, whatever the uniform's lower bits), two full-scale entries past
+    # the last row
+    assert _sensor._GUIDE_WORDS.astype("<u4").view(np.uint8).tobytes() == guide.tobytes()
     assert thresholds.size == row_start[-1] + 2 and (thresholds[-2:] == 2**32 - 1).all()
+
+    @numba.njit
+    def entries(low_bits):
+        out = np.empty((1024, 256), np.uint8)
+        for g in range(1024):
+            for j in range(256):
+                out[g, j] = _sensor._guide_entry(np.uint64(g), (np.uint64(j) << np.uint64(24)) | low_bits[(g + j) % low_bits.size])
+        return out
+
+    low = np.array([0, 1, 2**23, 2**24 - 1, 0x5A5A5A], np.uint64)
+    assert np.array_equal(entries(low), guide)
     for g in (0, 1, 37, 512, 1023):
         row = thresholds[row_start[g] : row_start[g + 1]].astype(np.float64)
         lam = g / 16.0
