@@ -193,12 +193,12 @@ _NORMAL_COEFFICIENTS = _normal_table()
 # LLVM then knows no store of the kernel can alias them, and vectorises its table reads as gathers.
 # The guide table's bytes read as little-endian 32-bit words (entry e is byte e & 3 of word e >> 2,
 # :func:`_guide_entry`): the vector loop gathers words and shifts the byte out, where a byte table had LLVM
-# read the eight lanes one at a time (x86 has no byte gather). With :func:`_table_block`'s contiguous loads
+# read the eight lanes one at a time (x86 has no byte gather). With :func:`_block_lanes`' contiguous loads
 # and carried offsets and :func:`_lane`'s independent threshold reads: low light's 5.46 M photosite values
 # of a 640 × 480 view 42–49 → 35–36 ms on two threads, the same bytes (docs/degradations-physics.md).
 # 256 KiB, as the byte table (the int32 table tried in stop 55 was 1 MiB: numba would not cache its kernel).
 # Native uint32 (numba refuses a non-native byte order) with the little-endian words' values.
-_GUIDE_WORDS = np.frombuffer(_POISSON_GUIDE.astype("<u1").tobytes(), dtype="<u4").astype(np.uint32)
+_GUIDE_WORDS = _POISSON_GUIDE.reshape(-1).view("<u4").astype(np.uint32)
 # Two entries past the last row: the vector loop reads T[n + 1] and T[n + 2] whatever n is, and uses them
 # only within the row (whose last entry, 2³² − 1, no uniform exceeds).
 _POISSON_THRESHOLDS = np.concatenate([_POISSON_THRESHOLDS, np.full(2, 2**32 - 1, np.uint32)])
@@ -509,21 +509,30 @@ def _scalar_block(
                 out[i] = _value(x[i], i, exposure, k, inv_k, read_scale, read_model, read_lambda, clip, saturated, keys, key_mix, noise)
 
 
+@numba.njit(cache=True, inline="always")
+def _block_lanes(
+    x: np.ndarray, lo: int, hi: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
+    shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool, use_normal: bool,
+) -> None:
+    """:func:`_lane` over ``x[lo:hi]`` into ``staged`` and ``to_scalar`` (from 0): the loop of :func:`_table_block` and
+    :func:`_mixed_block`, inlined into each with ``use_normal`` a constant. It runs from 0 over a slice and carries the
+    counter offset by addition: indexed from ``lo``, numba's negative-index check kept LLVM from proving the loads
+    contiguous (it gathered them), and ``i·γ`` cost a 64-bit vector multiply a value."""
+    values = x[lo:hi]
+    offset = np.uint64(lo) * _GOLDEN  # value i's counter offset i·γ (mod 2⁶⁴), carried by addition
+    for j in range(hi - lo):
+        staged[j], to_scalar[j] = _lane(values[j], offset, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, use_normal)
+        offset += _GOLDEN
+
+
 @numba.njit(cache=True)
 def _table_block(
     x: np.ndarray, lo: int, hi: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
     shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool,
 ) -> None:
-    """:func:`_lane` over ``x[lo:hi]`` into ``staged`` and ``to_scalar`` (from 0), rates below 64 only (the others flagged).
-    Its own compiled function, not inlined: the parallel kernel and its serial twin share it (compiled once).
-    The loop runs from 0 over a slice and carries the counter offset by addition: indexed from ``lo``, numba's
-    negative-index check kept LLVM from proving the loads contiguous (it gathered them), and ``i·γ`` cost a
-    64-bit vector multiply a value."""
-    values = x[lo:hi]
-    offset = np.uint64(lo) * _GOLDEN  # value i's counter offset i·γ (mod 2⁶⁴), carried by addition
-    for j in range(hi - lo):
-        staged[j], to_scalar[j] = _lane(values[j], offset, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, False)
-        offset += _GOLDEN
+    """:func:`_block_lanes` for rates below 64 only (the others flagged). Its own compiled function, not inlined:
+    the parallel kernel and its serial twin share it (compiled once)."""
+    _block_lanes(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, False)
 
 
 @numba.njit(cache=True)
@@ -532,11 +541,7 @@ def _mixed_block(
     shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool,
 ) -> None:
     """:func:`_table_block` with the normal approximation too (rates ≥ 10³)."""
-    values = x[lo:hi]
-    offset = np.uint64(lo) * _GOLDEN  # value i's counter offset i·γ (mod 2⁶⁴), carried by addition
-    for j in range(hi - lo):
-        staged[j], to_scalar[j] = _lane(values[j], offset, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, True)
-        offset += _GOLDEN
+    _block_lanes(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, True)
 
 
 @fork_safe
