@@ -14,6 +14,7 @@ from spacedg.render.camera import Camera
 from spacedg.render.composite import composite_view, frame_from_images
 from spacedg.render.frame import Frame
 from spacedg.render.gaussians import Gaussians
+from spacedg.render.memory import keep_freed_memory
 from spacedg.render.motion import MotionJob, render_motion
 from spacedg.render.settings import Defocus, MotionBlur, RasterSettings, parse_outputs
 
@@ -95,6 +96,7 @@ def render(
         raise ParameterError(f"motion must be a spacedg.render.MotionBlur, got {type(motion).__name__}")
     wanted = parse_outputs(outputs)
     backend, dev = resolve_backend(backend, device)
+    keep_freed_memory()  # once per process: large arrays reused from the heap, not faulted in afresh
     settings = settings or _DEFAULT_SETTINGS
     if defocus is not None and defocus.aperture == 0:
         defocus = None
