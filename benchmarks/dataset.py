@@ -58,6 +58,11 @@ single-degradation configurations ÷ the clean configuration's, per worker count
 the same ratio from each round's own means (how far the machine's state moves it within the run: stop 56
 saw 1.58–2.40 over four runs whose goal lines read 1.91–2.33).
 
+``--order items`` (0 workers): every round reads the first measured item of each configuration, then the
+second of each, and so on, each configuration from its own fresh copy: the configurations meet the same
+machine state (and each other's traces in the caches and the heap), as the items of a training mixture do.
+Stop 57 measured 2.10–2.14 this way in a run whose default order read 1.89–2.04.
+
 Timings are wall clock on whatever else the machine is doing: the first line prints the load
 average and CPU count. ``--rounds N`` reads every configuration N times, interleaved, each from
 fresh caches, and takes each item's fastest read (on a shared 2-core machine one reading of the
@@ -188,9 +193,13 @@ def plan_items(ds: SpaceDGDataset, n: int, workers: int, first: bool, seed: int 
 
 
 def measure(datasets: dict[str, SpaceDGDataset], plans: dict[str, tuple[list[int], list[int]]], workers: int,
-            threads: int | None, rounds: int = 1) -> dict[str, dict[str, float]]:
+            threads: int | None, rounds: int = 1, order: str = "configurations") -> dict[str, dict[str, float]]:
     """Each configuration on a fresh ``DataLoader`` (fresh workers and caches). With workers, the
     bench mix is also read in batches of 10 (one question's ten items on one worker).
+
+    ``order = "items"`` (0 workers only): each round reads item 1 of every configuration, then item 2 of
+    every configuration, and so on (:func:`_read_interleaved`), so that every configuration meets the
+    same machine state, as the items of a training mixture do; samples/s is then from the items' own times.
 
     ``rounds`` > 1: every configuration is read that many times, the configurations interleaved
     (clean, defocus, …, then again), each time from a fresh copy (empty caches); an item's time is
@@ -203,8 +212,9 @@ def measure(datasets: dict[str, SpaceDGDataset], plans: dict[str, tuple[list[int
     fastest: dict[str, dict[int, float]] = {}
     round_means: dict[str, list[float]] = {}  # each round's mean ms a sample, per configuration (for the goal's spread)
     for round_index in range(rounds):
+        interleaved = _read_interleaved(datasets, plans, [name for _, name, _ in runs]) if order == "items" else {}
         for label, name, batch_size in runs:
-            items, wall = _read(datasets[name], name, plans[name], workers, threads, batch_size)
+            items, wall = interleaved[name] if interleaved else _read(datasets[name], name, plans[name], workers, threads, batch_size)
             # only what the table reads: the images of every configuration kept until the end would raise the
             # high-water mark of later configurations (and of the workers forked after them)
             items = [{"index": it["index"], "item_ms": it["item_ms"], "stats": it["stats"], "maxrss_kb": it["maxrss_kb"],
@@ -262,6 +272,30 @@ def _read(ds: SpaceDGDataset, name: str, plan: tuple[list[int], list[int]], work
     wall = time.perf_counter() - t0
     del loader  # shuts the workers down
     return items, wall
+
+
+def _read_interleaved(datasets: dict[str, SpaceDGDataset], plans: dict[str, tuple[list[int], list[int]]],
+                      names: list[str]) -> dict[str, tuple[list[dict[str, Any]], float]]:
+    """One round of ``--order items`` in this process: a fresh copy of every configuration (empty caches),
+    its warm-up items, then the measured items one position at a time across the configurations (the
+    configuration order rotated each position, so none always follows the same one). Per configuration:
+    ``(items, the sum of their seconds)``."""
+    from spacedg.data import pipeline
+
+    copies = {name: Timed({name: pickle_copy(datasets[name])}) for name in names}
+    pipeline.clear_depth_caches()
+    for name in names:
+        for i in plans[name][0]:
+            copies[name][(name, i)]
+    items: dict[str, list[dict[str, Any]]] = {name: [] for name in names}
+    for position in range(max(len(plans[name][1]) for name in names)):
+        shift = position % len(names)
+        for name in names[shift:] + names[:shift]:
+            measured = plans[name][1]
+            if position < len(measured):
+                item = copies[name][(name, measured[position])]
+                items[name].append({key: item[key] for key in ("index", "item_ms", "stats", "maxrss_kb", "views")})  # not the images
+    return {name: (got, sum(it["item_ms"] for it in got) / 1e3) for name, got in items.items()}
 
 
 def pickle_copy(ds: SpaceDGDataset) -> SpaceDGDataset:
@@ -446,6 +480,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=None, help="repeats per item in the goal check (default 5)")
     parser.add_argument("--rounds", type=int, default=1,
                         help="reads of every configuration, interleaved; an item's time is its fastest (default 1)")
+    parser.add_argument("--order", choices=("configurations", "items"), default="configurations",
+                        help="configurations: each read whole, one after another (default); items: item 1 of every "
+                             "configuration, then item 2, ... (0 workers; as a training mixture meets them)")
     parser.add_argument("--only", default=None, help="comma-separated configurations (clean, a degradation, bench)")
     parser.add_argument("--device", default=None, help="only the device table: bench questions rendered on this torch device")
     parser.add_argument("--questions", type=int, default=None, help="bench questions timed by the device table (default 8; quick 3)")
@@ -456,6 +493,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error(f"--rounds must be at least 1, got {args.rounds}")
+    if args.order == "items" and any(int(w) for w in args.workers.split(",")):
+        parser.error("--order items reads in this process: use it with --workers 0")
     if args.quick:
         args.small = True
     samples = args.samples or (8 if args.quick else 32)
@@ -519,7 +558,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         if workers and parallel._is_initialized:
             print(f"\n(skipping {workers} workers: numba's thread pool already runs in this process; forking is unsafe)")
             continue
-        results = measure(datasets, plans, workers, args.worker_threads, args.rounds)
+        results = measure(datasets, plans, workers, args.worker_threads, args.rounds, args.order)
         print_table(f"{workers} workers (DataLoader batch_size=1; RSS = {'largest worker' if workers else 'this process'}"
                     f" high-water mark)", results)
         goal_line(results)
