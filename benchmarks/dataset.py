@@ -58,10 +58,12 @@ single-degradation configurations ÷ the clean configuration's, per worker count
 the same ratio from each round's own means (how far the machine's state moves it within the run: stop 56
 saw 1.58–2.40 over four runs whose goal lines read 1.91–2.33).
 
-``--order items`` (0 workers): every round reads the first measured item of each configuration, then the
-second of each, and so on, each configuration from its own fresh copy: the configurations meet the same
-machine state (and each other's traces in the caches and the heap), as the items of a training mixture do.
-Stop 57 measured 2.10–2.14 this way in a run whose default order read 1.89–2.04.
+``--order items`` (0 workers, its default): every round reads the first measured item of each configuration,
+then the second of each, and so on (in an order shuffled at every position), each configuration from its own
+fresh copy: the configurations meet the same machine state (and each other's traces in the caches and the
+heap), as the items of a training mixture do; samples/s is then 1000 / ms and the memory column the round's.
+Stop 57: 2.04 and 2.02 this way (rounds within ±0.03 of each other), the default order 1.99–2.06 around them
+(those runs rotated the order by one each position; the shuffle came after them).
 
 Timings are wall clock on whatever else the machine is doing: the first line prints the load
 average and CPU count. ``--rounds N`` reads every configuration N times, interleaved, each from
@@ -205,6 +207,10 @@ def measure(datasets: dict[str, SpaceDGDataset], plans: dict[str, tuple[list[int
     (clean, defocus, …, then again), each time from a fresh copy (empty caches); an item's time is
     its fastest read and samples/s the fastest round's, so a configuration's mean is not at the mercy
     of what else the machine did while it alone ran (the stage shares are the fastest round's)."""
+    if order not in ("configurations", "items"):
+        raise ValueError(f"measure: order must be 'configurations' or 'items', got {order!r}")
+    if order == "items" and workers:
+        raise ValueError("measure: order='items' reads in this process: workers must be 0")
     runs = [(name, name, 1) for name in plans]
     if workers and "bench mix" in plans:
         runs.append(("bench mix b10", "bench mix", 10))
@@ -212,7 +218,7 @@ def measure(datasets: dict[str, SpaceDGDataset], plans: dict[str, tuple[list[int
     fastest: dict[str, dict[int, float]] = {}
     round_means: dict[str, list[float]] = {}  # each round's mean ms a sample, per configuration (for the goal's spread)
     for round_index in range(rounds):
-        interleaved = _read_interleaved(datasets, plans, [name for _, name, _ in runs]) if order == "items" else {}
+        interleaved = _read_interleaved(datasets, plans, list(dict.fromkeys(name for _, name, _ in runs)), round_index) if order == "items" else {}
         for label, name, batch_size in runs:
             items, wall = interleaved[name] if interleaved else _read(datasets[name], name, plans[name], workers, threads, batch_size)
             # only what the table reads: the images of every configuration kept until the end would raise the
@@ -275,11 +281,13 @@ def _read(ds: SpaceDGDataset, name: str, plan: tuple[list[int], list[int]], work
 
 
 def _read_interleaved(datasets: dict[str, SpaceDGDataset], plans: dict[str, tuple[list[int], list[int]]],
-                      names: list[str]) -> dict[str, tuple[list[dict[str, Any]], float]]:
+                      names: list[str], round_index: int) -> dict[str, tuple[list[dict[str, Any]], float]]:
     """One round of ``--order items`` in this process: a fresh copy of every configuration (empty caches),
-    its warm-up items, then the measured items one position at a time across the configurations (the
-    configuration order rotated each position, so none always follows the same one). Per configuration:
-    ``(items, the sum of their seconds)``."""
+    its warm-up items, then the measured items one position at a time across the configurations, in an
+    order shuffled afresh at every position (seeded by the round and the position), so that no configuration
+    keeps inheriting another's traces in the caches and the heap. Every copy stays alive for the whole round
+    (each with its own scene cache: the memory column is the round's high-water mark). Per configuration:
+    ``(items, the sum of their item seconds)``: its samples/s is 1000 / its mean ms, not a wall-clock rate."""
     from spacedg.data import pipeline
 
     copies = {name: Timed({name: pickle_copy(datasets[name])}) for name in names}
@@ -289,8 +297,8 @@ def _read_interleaved(datasets: dict[str, SpaceDGDataset], plans: dict[str, tupl
             copies[name][(name, i)]
     items: dict[str, list[dict[str, Any]]] = {name: [] for name in names}
     for position in range(max(len(plans[name][1]) for name in names)):
-        shift = position % len(names)
-        for name in names[shift:] + names[:shift]:
+        for k in np.random.default_rng((round_index, position)).permutation(len(names)):
+            name = names[int(k)]
             measured = plans[name][1]
             if position < len(measured):
                 item = copies[name][(name, measured[position])]
@@ -473,7 +481,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--root", default=None, help="where rooms are generated (default $SPACEDG_HOME/benchmark-rooms-v2)")
     parser.add_argument("--samples", type=int, default=None, help="items per configuration (default 32; quick 8)")
     parser.add_argument("--size", default=None, help="render size WxH (default: the views' own size; quick 320x240)")
-    parser.add_argument("--workers", default="2,0", help="worker counts, comma-separated (default 2,0; >0 run first)")
+    parser.add_argument("--workers", default=None, help="worker counts, comma-separated (default 2,0; with --order items 0; >0 run first)")
     parser.add_argument("--worker-threads", type=int, default=None, help="numba threads per worker (default: numba's)")
     parser.add_argument("--per-sub-type", type=int, default=None, help="index records per sub type (default 4; quick 2)")
     parser.add_argument("--ratio-samples", type=int, default=None, help="2-view items for the goal check (default 12)")
@@ -493,6 +501,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error(f"--rounds must be at least 1, got {args.rounds}")
+    if args.workers is None:
+        args.workers = "0" if args.order == "items" else "2,0"
     if args.order == "items" and any(int(w) for w in args.workers.split(",")):
         parser.error("--order items reads in this process: use it with --workers 0")
     if args.quick:
@@ -529,6 +539,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     if args.only:
         wanted = {w.strip() for w in args.only.split(",")}
         datasets = {k: v for k, v in datasets.items() if k in wanted or (k == "bench mix" and "bench" in wanted)}
+        if not datasets:
+            parser.error(f"--only {args.only!r} names no configuration (clean, a degradation, <name>/per_pixel or bench)")
     setup_s = time.perf_counter() - t0
     train, bench = SpaceDGDataset("train", None, **common), SpaceDGDataset("bench", None, **common)
     from spacedg.scene.io import load_scene
@@ -559,7 +571,9 @@ def main(argv: Sequence[str] | None = None) -> None:
             print(f"\n(skipping {workers} workers: numba's thread pool already runs in this process; forking is unsafe)")
             continue
         results = measure(datasets, plans, workers, args.worker_threads, args.rounds, args.order)
-        print_table(f"{workers} workers (DataLoader batch_size=1; RSS = {'largest worker' if workers else 'this process'}"
+        how = ("items in turn across the configurations, in this process; samples/s = 1000 / ms" if args.order == "items"
+               else "DataLoader batch_size=1")
+        print_table(f"{workers} workers ({how}; RSS = {'largest worker' if workers else 'this process'}"
                     f" high-water mark)", results)
         goal_line(results)
     if args.mixture:

@@ -96,7 +96,8 @@ def render(
         raise ParameterError(f"motion must be a spacedg.render.MotionBlur, got {type(motion).__name__}")
     wanted = parse_outputs(outputs)
     backend, dev = resolve_backend(backend, device)
-    keep_freed_memory()  # once per process: large arrays reused from the heap, not faulted in afresh
+    if backend == "cpu":
+        keep_freed_memory()  # once per process: the compiled path's large arrays reused from the heap, not faulted in afresh
     settings = settings or _DEFAULT_SETTINGS
     if defocus is not None and defocus.aperture == 0:
         defocus = None
