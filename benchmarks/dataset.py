@@ -62,8 +62,8 @@ saw 1.58–2.40 over four runs whose goal lines read 1.91–2.33).
 then the second of each, and so on (in an order shuffled at every position), each configuration from its own
 fresh copy: the configurations meet the same machine state (and each other's traces in the caches and the
 heap), as the items of a training mixture do; samples/s is then 1000 / ms and the memory column the round's.
-Stop 57: 2.04 and 2.02 this way (rounds within ±0.03 of each other), the default order 1.99–2.06 around them
-(those runs rotated the order by one each position; the shuffle came after them).
+Stop 57: 2.04 and 2.02 this way with the order rotated by one each position, 2.07 shuffled (rounds within
+±0.03 of each other in every run), the default order 1.99–2.06 around them.
 
 Timings are wall clock on whatever else the machine is doing: the first line prints the load
 average and CPU count. ``--rounds N`` reads every configuration N times, interleaved, each from
