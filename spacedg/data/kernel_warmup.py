@@ -14,10 +14,9 @@ binning, the encoder: about 3 s) the groups compile different kernels (a test ho
 to :data:`_RENDERED_OUTPUTS`).
 
 - ``render``: a tiny synthetic room (10k Gaussians, the smallest, at 256 × 192) written and read
-  back as a scene folder; its visibility and covisibility; two views clean, defocused (also widely:
-  the per-tile sampled composite), through the fisheye lens and under a long shake (the keyframe warp
-  with its doubling passes), at the dataset's outputs: the projection, the binning, five of the compositor's specialisations, the lens
-  (and its inverse, for the coverage share), defocus, warp and keyframe-count kernels.
+  back as a scene folder; its visibility and covisibility; two views clean, defocused and under a long
+  shake (the keyframe warp with its doubling passes), at the dataset's outputs: the projection, the
+  binning, five of the compositor's specialisations, defocus, warp and keyframe-count kernels.
 - ``images``: the compositor's three other specialisations (with ids and colour or depth; on an empty
   projection: the types decide the compiled code, not the data), and every built-in linear-light
   and display degradation at its bench preset on a synthetic 64 × 48 image with its depth (the
@@ -26,7 +25,10 @@ to :data:`_RENDERED_OUTPUTS`).
   projection, the compositor's colour output, the sRGB encoder and decoder), which a DataLoader worker
   forked after its parent rendered runs (a user looks at ``dataset[0]``, then iterates a loader):
   without them each such worker compiled them itself, the workers at once (9 s of a test's
-  13 s alone on this machine). On two cores it runs after ``images``, beside ``render``, which takes longest.
+  13 s alone on this machine). Then, parallel again, two views defocused widely (the per-tile sampled
+  composite) and through the fisheye lens (the lens and its inverse, for the coverage share). On two
+  cores it runs after ``images``, beside ``render``, which takes longest: with these two paths in
+  ``render`` the other core waited for it (on a fresh cache, 98.4 s against 66.3 + 13.6).
 
 A kernel another signature calls (a test's float64 input) still compiles on its first use, as do
 the serial twins of the degradations' kernels (a forked worker asked for a degraded item).
@@ -79,11 +81,14 @@ def _render_group() -> None:
     from spacedg.data.pipeline import PipelineOptions, degrade_variants
 
     with _tiny_room(prepare=True) as (scene, views):
-        # a long shake: paths past the warp's doubling passes (24 px and more); a wide blur: tiles whose every
-        # Gaussian is blurred, composited every 2 px (the bench aperture, scaled to this size, leaves none)
+        # a long shake: paths past the warp's doubling passes (24 px and more)
         shake = {"name": "motion_blur", "params": {"trans": 1.0, "rot": 0.3, "sub_steps": 80}}
-        wide = {"name": "defocus", "params": {"aperture": 12.0, "depth": 0.5}}
-        degrade_variants(scene, views, ["clean", "defocus", wide, "distortion", shake], options=PipelineOptions(backend="cpu"))
+        degrade_variants(scene, views, ["clean", "defocus", shake], options=PipelineOptions(backend="cpu"))
+
+
+#: A wide blur: tiles whose every Gaussian is blurred, composited every 2 px (the bench aperture, scaled to
+#: the tiny room's size, leaves none).
+_WIDE_DEFOCUS = {"name": "defocus", "params": {"aperture": 12.0, "depth": 0.5}}
 
 
 def _serial_group() -> None:
@@ -91,8 +96,12 @@ def _serial_group() -> None:
     from spacedg.data.pipeline import PipelineOptions, degrade_variants
     from spacedg.render.threads import serial_kernels
 
-    with _tiny_room(prepare=False) as (scene, views), serial_kernels():
-        degrade_variants(scene, views, ["clean"], options=PipelineOptions(backend="cpu"))
+    options = PipelineOptions(backend="cpu")
+    with _tiny_room(prepare=False) as (scene, views):
+        with serial_kernels():
+            degrade_variants(scene, views, ["clean"], options=options)
+        # the parallel kernels only these two paths call (by then ``render`` has cached the ones they share with it)
+        degrade_variants(scene, views, [_WIDE_DEFOCUS, "distortion"], options=options)
 
 
 def _images_group() -> None:
