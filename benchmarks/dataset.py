@@ -220,11 +220,8 @@ def measure(datasets: dict[str, SpaceDGDataset], plans: dict[str, tuple[list[int
     for round_index in range(rounds):
         interleaved = _read_interleaved(datasets, plans, list(dict.fromkeys(name for _, name, _ in runs)), round_index) if order == "items" else {}
         for label, name, batch_size in runs:
-            items, wall = interleaved[name] if interleaved else _read(datasets[name], name, plans[name], workers, threads, batch_size)
-            # only what the table reads: the images of every configuration kept until the end would raise the
-            # high-water mark of later configurations (and of the workers forked after them)
-            items = [{"index": it["index"], "item_ms": it["item_ms"], "stats": it["stats"], "maxrss_kb": it["maxrss_kb"],
-                      "views": it["views"]} for it in items]
+            items, wall = interleaved[name] if order == "items" else _read(datasets[name], name, plans[name], workers, threads, batch_size)
+            items = [_table_fields(it) for it in items]
             round_means.setdefault(label, []).append(float(np.mean([it["item_ms"] for it in items])))
             times = fastest.setdefault(label, {})
             for it in items:
@@ -280,6 +277,12 @@ def _read(ds: SpaceDGDataset, name: str, plan: tuple[list[int], list[int]], work
     return items, wall
 
 
+def _table_fields(item: dict[str, Any]) -> dict[str, Any]:
+    """Only what the table reads of an item: the images of every configuration kept until the end would raise the
+    high-water mark of later configurations (and of the workers forked after them)."""
+    return {key: item[key] for key in ("index", "item_ms", "stats", "maxrss_kb", "views")}
+
+
 def _read_interleaved(datasets: dict[str, SpaceDGDataset], plans: dict[str, tuple[list[int], list[int]]],
                       names: list[str], round_index: int) -> dict[str, tuple[list[dict[str, Any]], float]]:
     """One round of ``--order items`` in this process: a fresh copy of every configuration (empty caches),
@@ -301,8 +304,7 @@ def _read_interleaved(datasets: dict[str, SpaceDGDataset], plans: dict[str, tupl
             name = names[int(k)]
             measured = plans[name][1]
             if position < len(measured):
-                item = copies[name][(name, measured[position])]
-                items[name].append({key: item[key] for key in ("index", "item_ms", "stats", "maxrss_kb", "views")})  # not the images
+                items[name].append(_table_fields(copies[name][(name, measured[position])]))
     return {name: (got, sum(it["item_ms"] for it in got) / 1e3) for name, got in items.items()}
 
 
