@@ -20,7 +20,8 @@ to :data:`_RENDERED_OUTPUTS`).
 - ``images``: the compositor's three other specialisations (with ids and colour or depth; on an empty
   projection: the types decide the compiled code, not the data), and every built-in linear-light
   and display degradation at its bench preset on a synthetic 64 × 48 image with its depth (the
-  sensor and its exposed signal, haze, the drops and their summed-area table, the encoder).
+  sensor, its exposed signal and the photosites' one-pass kernel, haze, the drops and their summed-area
+  table, the encoder).
 - ``serial``: the serial twins (:mod:`spacedg.render.threads`) of a clean view's kernels (the
   projection, the compositor's colour output, the sRGB encoder and decoder), which a DataLoader worker
   forked after its parent rendered runs (a user looks at ``dataset[0]``, then iterates a loader):

@@ -29,7 +29,10 @@ it: at 640 × 360 about 10 × the pixels, so about 10 × the sensor's time of a 
 (at 640 × 480, 1557 × 1168 sites × 3, about 23–31 ms a view on two threads at low light's bench
 preset, more than a clean render; ``benchmarks/dataset.py`` shows it per sample); at or above the
 reference, about the pixel count. Over-exposure's presets draw per pixel instead (``per_pixel``
-below; :mod:`.over_exposure` says why).
+below; :mod:`.over_exposure` says why). Where sites are smaller than pixels and nothing is skipped
+(low light), steps 2–4 run in one pass per row of sites (:mod:`._photosite_kernel`, the same bytes as
+the two ``cv2.resize`` calls and the draw): the grid's signal and noise never exist as arrays, which
+saved ~6 ms of a 640 × 480 view's ~50 (two threads; 11 of ~76 on one).
 
 Skipped work (the same bytes): with the clip (over-exposure) and sites no larger than pixels, a
 pixel whose signal stays ≥ 1 after the largest drop any draw of the sites around it can give
@@ -63,6 +66,7 @@ import numba
 import numpy as np
 
 from spacedg.errors import ParameterError
+from spacedg.plugins.degradations import _photosite_kernel
 from spacedg.plugins.degradations._sensor import SIGNAL_CAP, largest_drop, sensor_capture
 from spacedg.plugins.degradations.common import snapped_size
 from spacedg.render import kernel_cache
@@ -157,15 +161,19 @@ def binned_capture(
     signal = np.empty(rgb.shape, np.float32)  # worked on in place below
     _exposed(kernel_cache.read_only(np.ascontiguousarray(rgb, dtype=np.float32)).reshape(-1), np.float32(exposure), signal.reshape(-1))
     resampled = grid != (width, height)
-    sites = cv2.resize(signal, grid, dst=_workspace("sites", (grid[1], grid[0], 3)), interpolation=cv2.INTER_AREA) if resampled else signal
     unread = None
     if clip and skip_saturated and grid[0] >= width and grid[1] >= height:
         unread = _sites_of_saturated_pixels(signal, grid, sensor)
-    noise = sensor_capture(
-        sites, exposure=1.0, key=key, skip=unread, noise=True, out=_workspace("noise", sites.shape), **sensor,  # type: ignore[arg-type]
-    )
-    if resampled:
-        noise = cv2.resize(noise, (width, height), dst=_workspace("binned", signal.shape), interpolation=cv2.INTER_AREA)
+    if unread is None and _photosite_kernel.fits(width, height, grid):
+        # the two resamples and the draw in one pass per row of sites, without the grid's arrays: the same bytes
+        noise = _photosite_kernel.binned_noise(signal, grid, key=key, out=_workspace("binned", signal.shape), **sensor)  # type: ignore[arg-type]
+    else:
+        sites = cv2.resize(signal, grid, dst=_workspace("sites", (grid[1], grid[0], 3)), interpolation=cv2.INTER_AREA) if resampled else signal
+        noise = sensor_capture(
+            sites, exposure=1.0, key=key, skip=unread, noise=True, out=_workspace("noise", sites.shape), **sensor,  # type: ignore[arg-type]
+        )
+        if resampled:
+            noise = cv2.resize(noise, (width, height), dst=_workspace("binned", signal.shape), interpolation=cv2.INTER_AREA)
     signal += noise.reshape(signal.shape)
     if clip:
         np.clip(signal, 0.0, 1.0, out=signal)
@@ -181,8 +189,9 @@ def _workspace(name: str, shape: tuple[int, ...]) -> np.ndarray:
     640 × 480) and the binned noise. Fresh arrays of that size cost more in page faults than in
     arithmetic: a low-light sample spent ~20 % of its time in the kernel's first touch of them
     (``getrusage``: 4,100 minor faults and 28 ms of system time a sample against 2,200 and 6 ms clean;
-    with them 2,100 and 8 ms). Kept until the thread ends or another shape replaces it: ~48 MB a thread that
-    captured 640 × 480 photosites (grid signal and noise, 1557 × 1168 × 3 float32 each, and the binned noise).
+    with them 2,100 and 8 ms). Kept until the thread ends or another shape replaces it: the binned noise (3.7 MB at
+    640 × 480), and ~44 MB more a thread that took the two resamples (grid signal and noise, 1557 × 1168 × 3
+    float32 each; not low light's one-pass kernel).
     Never returned: the capture's result is a new array."""
     arrays = getattr(_WORKSPACES, "arrays", None)
     if arrays is None:

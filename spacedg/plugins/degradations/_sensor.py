@@ -495,53 +495,88 @@ def _lane(
 
 @numba.njit(cache=True)
 def _scalar_block(
-    x: np.ndarray, lo: int, hi: int, out: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_scale: float,
+    values: np.ndarray, first: int, out: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_scale: float,
     read_model: int, read_lambda: float, clip: bool, saturated: float, keys: np.ndarray, key_mix: np.uint64, noise: bool,
 ) -> None:
-    """:func:`_value` into ``out`` for the values of ``x[lo:hi]`` whose ``to_scalar`` flag (from 0) is set; eight
-    flags are read as a word, most words being 0. Shared by the kernel and its serial twin."""
+    """:func:`_value` into ``out[j]`` for the values ``values[j]`` (of flat index ``first + j``: their counters) whose
+    ``to_scalar[j]`` flag is set; eight flags are read as a word, most words being 0. Shared by the kernel, its serial
+    twin and :mod:`._photosite_kernel`."""
+    count = values.shape[0]
     words = to_scalar.view(np.uint64)
     for w in range(words.size):
         if words[w] == 0:
             continue
-        for i in range(lo + 8 * w, min(lo + 8 * w + 8, hi)):
-            if to_scalar[i - lo]:
-                out[i] = _value(x[i], i, exposure, k, inv_k, read_scale, read_model, read_lambda, clip, saturated, keys, key_mix, noise)
+        for j in range(8 * w, min(8 * w + 8, count)):
+            if to_scalar[j]:
+                out[j] = _value(values[j], first + j, exposure, k, inv_k, read_scale, read_model, read_lambda, clip, saturated, keys, key_mix, noise)
 
 
 @numba.njit(cache=True, inline="always")
 def _block_lanes(
-    x: np.ndarray, lo: int, hi: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
+    values: np.ndarray, first: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
     shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool, use_normal: bool,
 ) -> None:
-    """:func:`_lane` over ``x[lo:hi]`` into ``staged`` and ``to_scalar`` (from 0): the loop of :func:`_table_block` and
-    :func:`_mixed_block`, inlined into each with ``use_normal`` a constant. It runs from 0 over a slice and carries the
-    counter offset by addition: indexed from ``lo``, numba's negative-index check kept LLVM from proving the loads
-    contiguous (it gathered them), and ``i·γ`` cost a 64-bit vector multiply a value."""
-    values = x[lo:hi]
-    offset = np.uint64(lo) * _GOLDEN  # value i's counter offset i·γ (mod 2⁶⁴), carried by addition
-    for j in range(hi - lo):
+    """:func:`_lane` over ``values`` (flat indices ``first`` on) into ``staged`` and ``to_scalar`` (from 0): the loop of
+    :func:`_table_block` and :func:`_mixed_block`, inlined into each with ``use_normal`` a constant. It runs from 0 over a
+    slice and carries the counter offset by addition: indexed from the block's start, numba's negative-index check kept
+    LLVM from proving the loads contiguous (it gathered them), and ``i·γ`` cost a 64-bit vector multiply a value."""
+    offset = np.uint64(first) * _GOLDEN  # value i's counter offset i·γ (mod 2⁶⁴), carried by addition
+    for j in range(values.shape[0]):
         staged[j], to_scalar[j] = _lane(values[j], offset, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, use_normal)
         offset += _GOLDEN
 
 
 @numba.njit(cache=True)
 def _table_block(
-    x: np.ndarray, lo: int, hi: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
+    values: np.ndarray, first: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
     shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool,
 ) -> None:
     """:func:`_block_lanes` for rates below 64 only (the others flagged). Its own compiled function, not inlined:
-    the parallel kernel and its serial twin share it (compiled once)."""
-    _block_lanes(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, False)
+    the parallel kernel, its serial twin and :mod:`._photosite_kernel` share it (compiled once)."""
+    _block_lanes(values, first, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, False)
 
 
 @numba.njit(cache=True)
 def _mixed_block(
-    x: np.ndarray, lo: int, hi: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
+    values: np.ndarray, first: int, staged: np.ndarray, to_scalar: np.ndarray, exposure: float, k: float, inv_k: float, read_key: np.uint64,
     shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool,
 ) -> None:
     """:func:`_table_block` with the normal approximation too (rates ≥ 10³)."""
-    _block_lanes(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, True)
+    _block_lanes(values, first, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, True)
+
+
+@numba.njit(cache=True, inline="always")
+def _top_rate(bits: np.ndarray, exposure: float, inv_k: float) -> float:
+    """The expected electron count of the largest of the float32 values whose bits (as int32) are ``bits``: float32 and
+    int32 order agree for positive values; a NaN reads as 0, as :func:`_signal` has it; 0 where none is positive."""
+    largest_bits = np.int32(-(2**31))
+    for j in range(bits.shape[0]):
+        value = bits[j]
+        largest_bits = max(largest_bits, value if value <= _INF_BITS else np.int32(0))
+    return _signal(_as_float32(largest_bits), exposure) * inv_k if largest_bits > 0 else 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _vector_block(
+    values: np.ndarray, bits: np.ndarray, first: int, staged: np.ndarray, to_scalar: np.ndarray, out: np.ndarray, gaussian: bool,
+    exposure: float, k: float, inv_k: float, read_key: np.uint64, shot_key: np.uint64, read_scale: float, clip: bool, saturated: float,
+    noise: bool,
+) -> None:
+    """One block's vector loop: ``values`` (flat indices ``first`` on; ``bits`` the same values as int32) into ``out`` through
+    ``staged``, with the table alone where the block's largest rate is below 64 and with the normal approximation too
+    elsewhere, ``to_scalar`` flagging what it leaves to :func:`_scalar_block`; with Tukey read noise (not ``gaussian``)
+    every value is flagged. The vector loop writes a block-sized buffer, copied to ``out`` after it: writing ``out``
+    directly ran 3.5x slower for some placements of ``out`` against the input (a reused zeroed array: 82 against 23 ms
+    for 5.5 M values, the same bytes), likely the store buffer's 4 KiB address aliasing of the streams."""
+    count = values.shape[0]
+    if not gaussian:
+        to_scalar[:count] = np.uint8(1)
+        return
+    if _top_rate(bits, exposure, inv_k) < _TABLE_MAX_RATE:
+        _table_block(values, first, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise)
+    else:
+        _mixed_block(values, first, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise)
+    out[:count] = staged[:count]
 
 
 @fork_safe
@@ -598,12 +633,7 @@ def _sensor_kernel(
         to_scalar = flags[lo : lo + _BLOCK]
         # the block's loops run from 0 over slices: indexed from ``lo``, numba's negative-index check kept LLVM
         # from seeing contiguous loads (it gathered the words and read the skip flags one byte at a time)
-        block_bits = bits32[lo:hi]
-        largest_bits = np.int32(-(2**31))  # of the block's largest positive value: float32 and int32 order agree there
-        for j in range(hi - lo):
-            bits = block_bits[j]
-            largest_bits = max(largest_bits, bits if bits <= _INF_BITS else np.int32(0))  # a NaN reads as 0, as _signal has it
-        top_rate = _signal(_as_float32(largest_bits), exposure) * inv_k if largest_bits > 0 else 0.0
+        block_x, block_out = x[lo:hi], out[lo:hi]
         every_skipped = skipping
         if skipping:
             block_skip = skip[lo:hi]
@@ -612,27 +642,18 @@ def _sensor_kernel(
                 fewest = min(fewest, block_skip[j])
             every_skipped = fewest != 0
         if not every_skipped:  # a block whose every value is skipped (over-exposure's saturated regions) draws nothing
-            # the vector loop writes a block-sized buffer, copied to ``out`` after it: writing ``out`` directly ran
-            # 3.5x slower for some placements of ``out`` against ``x`` (a reused zeroed array: 82 against 23 ms for
-            # 5.5 M values, the same bytes), likely the store buffer's 4 KiB address aliasing of the streams
-            if gaussian:
-                staged = np.empty(_BLOCK, np.float32)
-                if top_rate < _TABLE_MAX_RATE:
-                    _table_block(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise)
-                else:
-                    _mixed_block(x, lo, hi, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise)
-                out[lo:hi] = staged[: hi - lo]
-            else:  # Tukey read noise: every value is the scalar loop's
-                to_scalar[: hi - lo] = np.uint8(1)
+            staged = np.empty(_BLOCK, np.float32)
+            _vector_block(block_x, bits32[lo:hi], lo, staged, to_scalar, block_out, gaussian, exposure, k, inv_k, read_key, shot_key,
+                          read_scale, clip, saturated, noise)
         if skipping:
-            block_x, block_skip, block_out = x[lo:hi], skip[lo:hi], out[lo:hi]
+            block_skip = skip[lo:hi]
             for j in range(hi - lo):
                 s = _signal(block_x[j], exposure)
                 unread = np.float32(0.0) if noise else (np.float32(min(max(s, 0.0), 1.0)) if clip else np.float32(s))
                 hit = block_skip[j] != 0
                 block_out[j] = unread if hit else block_out[j]
                 to_scalar[j] = np.uint8(0) if hit else to_scalar[j]
-        _scalar_block(x, lo, hi, out, to_scalar, exposure, k, inv_k, read_scale, read_model, read_lambda, clip, saturated, keys, key_mix, noise)
+        _scalar_block(block_x, lo, block_out, to_scalar, exposure, k, inv_k, read_scale, read_model, read_lambda, clip, saturated, keys, key_mix, noise)
 
 
 # ------------------------------------------------------------------ host side
