@@ -85,7 +85,9 @@ def motion_extent(gaussians: Gaussians, camera: Camera, motion: MotionBlur, piec
 
     Measured on an evenly strided sample of the means, along the path cut into ``pieces``
     straight segments (so a rotation's curved sweep is not underestimated). σ is
-    approximated as ``f · max(scale) / z`` (a surfel's in-plane size; enough to choose a step).
+    approximated as ``f · max(scale) / z`` (a surfel's in-plane size; enough to choose a step). On a pinhole
+    camera the path is summed compiled (:func:`~spacedg.render.motion_error_cpu.longest_path`, within float64
+    rounding of the numpy loop over one camera a pose it replaced: 3.7 → 1.7 ms a dataset view).
     """
     stride = max(1, len(gaussians) // _DISPLACEMENT_SAMPLE)
     points = gaussians.means[::stride].astype(np.float64)
@@ -99,6 +101,10 @@ def motion_extent(gaussians: Gaussians, camera: Camera, motion: MotionBlur, piec
     sizes = gaussians.scales[::stride][visible].astype(np.float64).max(axis=1)
     sigma = float(np.median(0.5 * (camera.fx + camera.fy) * sizes / depth_mid[visible]))
     poses = exposure_poses(camera, np.array(motion.translation), np.array(motion.rotation), np.linspace(-0.5, 0.5, pieces + 1))
+    if camera.fisheye is None:  # compiled, without a camera a pose (their checks were a quarter of this call)
+        from spacedg.render.motion_error_cpu import longest_path
+
+        return float(longest_path(points, np.stack(poses), float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy))), sigma
     length = np.zeros(points.shape[0])
     previous = None
     for pose in poses:

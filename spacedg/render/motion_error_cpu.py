@@ -15,7 +15,7 @@ import numba
 
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 
-__all__ = ["edge_products"]
+__all__ = ["edge_products", "longest_path"]
 
 
 @numba.njit(cache=True, fastmath=False)
@@ -83,3 +83,34 @@ def _apart(own, other, fx, fy):  # pragma: no cover - compiled
     u, v, ahead = own
     other_u, other_v, other_ahead = other
     return math.hypot(fx * (u - other_u), fy * (v - other_v)) if ahead and other_ahead else 0.0
+
+
+@numba.njit(cache=True, fastmath=False)
+def longest_path(points, poses, fx, fy, cx, cy):  # pragma: no cover - compiled
+    """The longest on-screen path (pixels) of ``points`` ((N, 3) float64, world, metres) seen by a pinhole camera
+    (focal lengths ``fx``, ``fy`` and principal point ``cx``, ``cy`` in pixels) at ``poses`` ((P, 4, 4) cam-to-world,
+    OpenCV axes) in turn: per point the sum of the straight steps between its pixels at consecutive poses, a step
+    counting 0 where either end is not at least 1 mm in front of the camera; 0 without points.
+    :func:`spacedg.render.motion.motion_extent`'s loop over the path's pieces, in one pass without a camera a pose."""
+    longest = 0.0
+    for n in range(points.shape[0]):
+        length = 0.0
+        previous_ok = False
+        previous_u = previous_v = 0.0
+        for p in range(poses.shape[0]):
+            dx = points[n, 0] - poses[p, 0, 3]
+            dy = points[n, 1] - poses[p, 1, 3]
+            dz = points[n, 2] - poses[p, 2, 3]
+            x = dx * poses[p, 0, 0] + dy * poses[p, 1, 0] + dz * poses[p, 2, 0]
+            y = dx * poses[p, 0, 1] + dy * poses[p, 1, 1] + dz * poses[p, 2, 1]
+            z = dx * poses[p, 0, 2] + dy * poses[p, 1, 2] + dz * poses[p, 2, 2]
+            ok = z > 1e-3
+            u = fx * x / z + cx if ok else 0.0
+            v = fy * y / z + cy if ok else 0.0
+            if ok and previous_ok:
+                step = math.hypot(u - previous_u, v - previous_v)
+                if step == step:  # a NaN step counts 0, as the numpy loop's nan_to_num had it
+                    length += step
+            previous_ok, previous_u, previous_v = ok, u, v
+        longest = max(longest, length)
+    return longest

@@ -140,6 +140,29 @@ def test_sub_step_fast_path_chooses_sub_steps_from_displacement_and_matches_the_
     assert 10 * math.log10(1 / mse) > 30
 
 
+def test_the_compiled_path_length_is_the_camera_loop_it_replaced() -> None:
+    """``motion_extent``'s longest path on a pinhole camera (compiled, :func:`~spacedg.render.motion_error_cpu.longest_path`)
+    against the loop over one camera a pose it replaced, within float64 rounding: a camera that moves through the cloud
+    (points pass behind it, their steps then count 0) and turns."""
+    from spacedg.render.camera import exposure_poses
+
+    rng = np.random.default_rng(5)
+    g = random_gaussians(4000, rng, scale=(0.02, 0.1), opacity=(0.5, 1.0))
+    cam = camera(96, 72)
+    for motion in (MotionBlur(translation=(0.3, 0.1, 2.5), rotation=(0.05, 0.4, 0.1)), MotionBlur(translation=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.3))):
+        points = g.means.astype(np.float64)
+        uv, depth, ok = cam.project(points)
+        points = points[ok & cam.in_image(uv) & (depth > 1e-3)]
+        length, previous = np.zeros(len(points)), None
+        for pose in exposure_poses(cam, np.array(motion.translation), np.array(motion.rotation), np.linspace(-0.5, 0.5, 9)):
+            uv, depth, ok = cam.with_pose(pose).project(points)
+            uv = np.where((ok & (depth > 1e-3))[:, None], uv, np.nan)
+            if previous is not None:
+                length += np.nan_to_num(np.linalg.norm(uv - previous, axis=1), nan=0.0)
+            previous = uv
+        assert motion_extent(g, cam, motion)[0] == pytest.approx(float(length.max()), rel=1e-12)
+
+
 def test_motion_depth_and_ids_are_those_of_mid_exposure() -> None:
     g = random_gaussians(500, np.random.default_rng(4))
     cam = camera(64, 48)

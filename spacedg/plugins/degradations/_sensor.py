@@ -557,6 +557,47 @@ def _top_rate(bits: np.ndarray, exposure: float, inv_k: float) -> float:
 
 
 @numba.njit(cache=True, inline="always")
+def _normal_lane(
+    x: np.float32, offset: np.uint64, exposure: float, k: float, read_key: np.uint64, shot_key: np.uint64, read_scale: float, clip: bool,
+    saturated: float, noise: bool,
+) -> np.float32:
+    """:func:`_lane` of a value whose rate is at least 10³ (a positive signal, ``k > 0``): its normal approximation alone,
+    the same float64 operations (the table's lookups and the remainder's polynomial, which it would compute and
+    discard, left out); never flagged."""
+    s = _signal(x, exposure)
+    signal = np.float32(s)
+    shot = max(s + math.sqrt(max(k * s, 0.0)) * _normal(_mix(shot_key + offset)), 0.0)
+    y = shot + read_scale * _normal(_mix(read_key + offset)) if read_scale > 0.0 else shot
+    y = min(max(y, 0.0), 1.0) if clip else y
+    result = np.float32(y) - signal if noise else np.float32(y)
+    return np.float32(1.0) if s >= saturated else result
+
+
+@numba.njit(cache=True)
+def _normal_block(
+    values: np.ndarray, first: int, staged: np.ndarray, exposure: float, k: float, read_key: np.uint64, shot_key: np.uint64, read_scale: float,
+    clip: bool, saturated: float, noise: bool,
+) -> None:
+    """:func:`_normal_lane` over ``values`` (flat indices ``first`` on) into ``staged``: a block whose every rate is at least 10³."""
+    offset = np.uint64(first) * _GOLDEN
+    for j in range(values.shape[0]):
+        staged[j] = _normal_lane(values[j], offset, exposure, k, read_key, shot_key, read_scale, clip, saturated, noise)
+        offset += _GOLDEN
+
+
+@numba.njit(cache=True, inline="always")
+def _lowest_signal(bits: np.ndarray, exposure: float) -> float:
+    """The exposed signal of the smallest of the float32 values whose bits (as int32) are ``bits``, when every one is a
+    positive number (+inf included; float32 and int32 order agree there); −1 when one is not (zero, negative or NaN):
+    :func:`_signal` grows with the value, so every value's signal is at least the one returned."""
+    lowest_bits = np.int32(2**31 - 1)
+    for j in range(bits.shape[0]):
+        value = bits[j]
+        lowest_bits = min(lowest_bits, value if value <= _INF_BITS else np.int32(0))  # a NaN counts as 0, as _signal reads it
+    return _signal(_as_float32(lowest_bits), exposure) if lowest_bits > 0 else -1.0
+
+
+@numba.njit(cache=True, inline="always")
 def _vector_block(
     values: np.ndarray, bits: np.ndarray, first: int, staged: np.ndarray, to_scalar: np.ndarray, out: np.ndarray, gaussian: bool,
     exposure: float, k: float, inv_k: float, read_key: np.uint64, shot_key: np.uint64, read_scale: float, clip: bool, saturated: float,
@@ -572,7 +613,15 @@ def _vector_block(
     if not gaussian:
         to_scalar[:count] = np.uint8(1)
         return
-    if _top_rate(bits, exposure, inv_k) < _TABLE_MAX_RATE:
+    lowest = _lowest_signal(bits, exposure)
+    if lowest >= saturated:  # every value saturates (over-exposure's bright regions): 1.0 whatever is drawn
+        out[:count] = np.float32(1.0)
+        to_scalar[:count] = np.uint8(0)
+        return
+    if lowest * inv_k >= _NORMAL_MIN_RATE:  # every rate in the normal approximation's range
+        _normal_block(values, first, staged, exposure, k, read_key, shot_key, read_scale, clip, saturated, noise)
+        to_scalar[:count] = np.uint8(0)
+    elif _top_rate(bits, exposure, inv_k) < _TABLE_MAX_RATE:
         _table_block(values, first, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise)
     else:
         _mixed_block(values, first, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise)

@@ -288,6 +288,32 @@ def test_vector_loop_gives_every_value_the_scalar_bytes(k: float, sigma_read: fl
             assert fast.tobytes() == _value_by_value(x, *args).tobytes(), (clip, noise, skip.size)
 
 
+@pytest.mark.parametrize("exposure", [1.0, 8.5, 40.0])
+def test_bright_blocks_take_their_own_loops_with_the_scalar_bytes(exposure: float) -> None:
+    """Blocks whose every value saturates (with the clip: written 1.0, nothing drawn) or whose every rate is in the
+    normal approximation's range (that approximation alone) give every value the value-by-value bytes; next to them
+    blocks one value short of either (a darker value, a NaN, a zero, a negative one) take the general loop."""
+    rng = np.random.default_rng(22)
+    block = _sensor._BLOCK
+    bright = [rng.uniform(low, high, block) for low, high in ((0.05, 0.1), (0.2, 0.6), (1.0, 3.0), (3e30, 3e38))]
+    spoiled = []
+    for odd in (1e-6, np.nan, 0.0, -0.5):
+        part = rng.uniform(0.2, 0.6, block)
+        part[rng.integers(block)] = odd
+        spoiled.append(part)
+    x = np.concatenate([*bright, *spoiled, rng.uniform(0.2, 0.6, 41)]).astype(np.float32)
+    for k, sigma_read in ((1e-4, 2.5e-4), (1e-4, 0.0), (3e-3, 2.5e-4)):
+        read_scale, read_bound = _sensor._read_noise(sigma_read, 0, 0.14)
+        for clip, noise in ((False, False), (True, False), (False, True)):
+            saturated = _sensor._saturation_signal(k, read_bound) if clip else math.inf
+            args = (exposure, k, read_scale, 0, 0.14, clip, saturated, np.uint64(31), _sensor._NO_SKIP, noise)
+            fast = np.empty_like(x)
+            _sensor._sensor_kernel(kernel_cache.read_only(x), fast, *args)
+            assert fast.tobytes() == _value_by_value(x, *args).tobytes(), (k, clip, noise)
+            if clip and exposure >= 8.5:
+                assert (fast[2 * block : 4 * block] == 1.0).all()
+
+
 @pytest.mark.parametrize("lam", [-0.2, -1e-7, 0.0, 1e-7, 0.14, 0.5, 1.0])
 def test_tukey_lambda_read_noise_has_unit_variance(lam: float) -> None:
     out = _apply(LOW_LIGHT, _flat(0.0), seed=4, exposure=1.0, k=0.0, sigma_read=1.0, read_model=READ_TUKEY, read_lambda=lam)
