@@ -148,6 +148,32 @@ def _surely_outside(
 
 
 @numba.njit(cache=True, inline="always")
+def _surely_outside_fisheye(x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, k1, k2, k3, k4, theta_max, eps2d):
+    """:func:`_surely_outside` for the equidistant fisheye lens: culled whatever its rotation. Beyond the lens's
+    effective max θ (the full test's first cull, the same terms), or a footprint box outside the image: the box
+    bound of :func:`_surely_outside` with the fisheye Jacobian's rows at the mean (``‖J row‖ · ‖W‖₂ · max(s)``
+    bounds ``√Σ_ii`` before the dilation ``eps2d``), taken 1e-6 relative wider. Cheaper than what it skips (the
+    3D covariance and the footprint), which the fisheye path ran for every Gaussian in front of the camera (62 %
+    of a dataset view's are culled there: its projection 12.0 ms against 5.5 for the same view through a
+    pinhole)."""
+    theta, rho, g, drho_dz = _fisheye_terms(x, y, z, k1, k2, k3, k4)
+    if theta > theta_max:
+        return True
+    u = fx * rho * x + cx
+    v = fy * rho * y + cy
+    if 0.0 <= u <= width and 0.0 <= v <= height:  # the mean is in view: kept by the full test
+        return False
+    smax = max(abs(float(scales[i, 0])), abs(float(scales[i, 1])), abs(float(scales[i, 2]))) * rot_norm * (1.0 + 1e-6)
+    j00, j01, j02 = fx * (rho + x * x * g), fx * x * y * g, fx * x * drho_dz
+    j10, j11, j12 = fy * x * y * g, fy * (rho + y * y * g), fy * y * drho_dz
+    row_x = (j00 * j00 + j01 * j01 + j02 * j02) * (1.0 + 1e-6)
+    row_y = (j10 * j10 + j11 * j11 + j12 * j12) * (1.0 + 1e-6)
+    rad_x = np.ceil(3.33 * math.sqrt(row_x * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
+    rad_y = np.ceil(3.33 * math.sqrt(row_y * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
+    return u + rad_x <= 0 or u - rad_x >= width or v + rad_y <= 0 or v - rad_y >= height
+
+
+@numba.njit(cache=True, inline="always")
 def _footprint(i, x, y, z, lens_coc, m, opacity, view, lims, fisheye, lens, dilation, opacity_extent, blur, packed, rects):
     """Steps 3–5 of the module docstring for Gaussian ``i`` at camera point (x, y, z) with ``M = W R S``
     (the 9-tuple ``m``, row-major) in one camera: writes its packed record but the colour and its tile
@@ -312,16 +338,26 @@ def _project_kernel(
             continue
         # the circle of confusion (px; 0 without defocus): under defocus it widens every footprint by coc² px²
         lens_coc = min(aperture * abs(z - focus) / z, max_coc) if aperture > 0.0 else 0.0
-        main_in = fisheye or not _surely_outside(
-            x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lims[0], lims[1], lims[2], lims[3],
-            eps_cull + lens_coc * lens_coc,
-        )
+        if fisheye:
+            main_in = not _surely_outside_fisheye(
+                x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, k1, k2, k3, k4, theta_max, eps_cull + lens_coc * lens_coc,
+            )
+        else:
+            main_in = not _surely_outside(
+                x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lims[0], lims[1], lims[2], lims[3],
+                eps_cull + lens_coc * lens_coc,
+            )
         sharp_in = False
         if paired:
-            sharp_in = fisheye or not _surely_outside(
-                x, y, z, scales, i, rot_norm, s_fx, s_fy, s_cx, s_cy, s_width, s_height, s_lims[0], s_lims[1], s_lims[2], s_lims[3],
-                s_eps_cull,
-            )
+            if fisheye:
+                sharp_in = not _surely_outside_fisheye(
+                    x, y, z, scales, i, rot_norm, s_fx, s_fy, s_cx, s_cy, s_width, s_height, k1, k2, k3, k4, theta_max, s_eps_cull,
+                )
+            else:
+                sharp_in = not _surely_outside(
+                    x, y, z, scales, i, rot_norm, s_fx, s_fy, s_cx, s_cy, s_width, s_height, s_lims[0], s_lims[1], s_lims[2], s_lims[3],
+                    s_eps_cull,
+                )
         if not (main_in or sharp_in):
             continue
         # ---- 3D covariance in the camera frame: Σc = (W R S)(W R S)ᵀ

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from spacedg.render import RasterSettings, project_cpu, raster_cpu
-from spacedg.render.camera import Camera, look_at
+from spacedg.render.camera import Camera, FisheyeLens, look_at
 from spacedg.render.project_cpu import AMIN, CA, CB, CC, DEPTH, OPA, PACKED, PX, PY
 from spacedg.render.settings import Defocus, footprint_dilation
 from tests.render_helpers import random_gaussians
@@ -63,13 +63,15 @@ def test_tight_binning_keeps_every_reached_tile_in_depth_order() -> None:
     assert dropped > 50  # the tight test did drop tiles
 
 
+@pytest.mark.parametrize("lens", [None, FisheyeLens(-0.05, 0.01, 0.0, 0.0, 1.4), FisheyeLens(0.02, -0.01, 0.001, 0.0, 2.0)], ids=["pinhole", "fisheye", "wide-fisheye"])
 @pytest.mark.parametrize("defocus", [None, Defocus(8.0, 2.0), Defocus(60.0, 0.5)], ids=["sharp", "defocus", "wide-defocus"])
-def test_pre_cull_changes_no_projection(defocus: Defocus | None) -> None:
-    """The frustum pre-cull (also under defocus, widened by each Gaussian's circle of confusion) culls only
-    what the full test culls: the projection is the same with it disabled."""
+def test_pre_cull_changes_no_projection(defocus: Defocus | None, lens: FisheyeLens | None) -> None:
+    """The frustum pre-cull (also under defocus, widened by each Gaussian's circle of confusion; through a fisheye
+    lens with its Jacobian, beyond its max θ as the full test) culls only what the full test culls: the projection
+    is the same with it disabled."""
     g = random_gaussians(3000, np.random.default_rng(3), depth=(-6.0, 6.0), half_width=6.0, scale=(0.01, 0.3))
     pose = look_at(np.array([0.0, 0.0, 0.0]), np.array([5.0, 0.5, 3.0]), np.array([0.0, -1.0, 0.0]))
-    cam = Camera(200.0, 200.0, 160.0, 120.0, W, H, pose)
+    cam = Camera(200.0 if lens is None else 90.0, 200.0 if lens is None else 90.0, 160.0, 120.0, W, H, pose, fisheye=lens)
     packed, rects = project_cpu.project_gaussians(g, cam, RasterSettings(), defocus)
     assert 0 < np.count_nonzero(rects[:, 1] > rects[:, 0]) < len(g) // 2
     # the same projection with the pre-cull disabled (a rotation norm of infinity never culls)
@@ -78,7 +80,8 @@ def test_pre_cull_changes_no_projection(defocus: Defocus | None) -> None:
     project_cpu._project_kernel(
         g.means, g.quats, g.scales, g.opacities, g.sh, g.sh_degree, True,
         np.ascontiguousarray(view[:3, :3]), np.ascontiguousarray(view[:3, 3]), np.array(cam.center), math.inf,
-        cam.fx, cam.fy, cam.cx, cam.cy, W, H, False, 0.0, 0.0, 0.0, 0.0, math.pi,
+        cam.fx, cam.fy, cam.cx, cam.cy, W, H, lens is not None, *(lens.coeffs if lens else (0.0, 0.0, 0.0, 0.0)),
+        lens.effective_max_theta if lens else math.pi,
         s.near, s.far, *footprint_dilation(cam, s), s.opacity_extent,
         defocus.aperture if defocus else 0.0, defocus.focus if defocus else 1.0, defocus.max_radius if defocus else 0.0,
         s.defocus_extent or 0.0, ref_packed, ref_rects, project_cpu._NO_SHARP_VIEW,

@@ -13,8 +13,9 @@ the output rows it overlaps as OpenCV's area shrink sums it. The float32 operati
 OpenCV's (``resizeGeneric_`` with linear taps in area mode: a row along x, then two rows mixed along y;
 ``resizeArea_``: each source row's weighted sum along x, then the rows' weighted sum, in table order), so
 the bytes are those of ``cv2.resize`` both ways (tested against it at many sizes). The output is split into
-chunks of rows, one a thread; a site row shared by the last output row of one chunk and the first of the
-next is drawn in both (the same values: the draws are counter-based).
+chunks of rows, one a thread at a time; a site row shared by the last output row of one chunk and the first
+of the next is drawn in both (the same values: the draws are counter-based). Compiling it on an empty cache
+takes ~13 s (``spacedg kernels``' images group), the sensor kernel's block functions shared with it.
 
 Used where OpenCV takes those two paths: a grid larger than the image along both axes, and not an integer
 multiple of it along both (OpenCV's fast area path sums 2 × 2 and other integer blocks in another order).
@@ -27,6 +28,9 @@ import math
 
 import numba
 import numpy as np
+from numba.core import types
+from numba.core.imputils import impl_ret_borrowed
+from numba.extending import intrinsic
 
 from spacedg.plugins.degradations._sensor import (
     _BLOCK, _DRAW_KEYS, READ_GAUSSIAN, READ_LAMBDA_DEFAULT, _draw_key, _mix, _read_noise, _scalar_block, _vector_block,
@@ -128,7 +132,7 @@ def binned_noise(
     _binned_noise_kernel(
         kernel_cache.read_only(np.ascontiguousarray(signal)), x_first, x_second, x_w0, x_w1, y_first, y_second, y_w0, y_w1,
         x_starts, x_taps, x_weights, y_starts, y_taps, y_weights, columns, float(k), read_scale, int(read_model), float(read_lambda),
-        np.uint64(key), max(1, min(int(chunks), height)), out,
+        np.uint64(key), max(1, min(int(chunks), height)), False, True, out,
     )
     return out
 
@@ -139,6 +143,20 @@ def _tables(width: int, height: int, columns: int, rows: int) -> tuple[tuple[np.
     (~13 ms at 640 × 480), kept for the last 16 sizes (every view of a size asks the same)."""
     tables = (enlarge_taps(width, columns), enlarge_taps(height, rows), shrink_table(columns, width), shrink_table(rows, height))
     return tuple(tuple(kernel_cache.read_only(array) for array in table) for table in tables)
+
+
+@intrinsic
+def _frozen(typingctx, array):  # type: ignore[no-untyped-def]
+    """``array`` typed read-only (the same memory and data model): the sensor kernel hands its block functions slices of
+    its frozen input, so a site row passed this way calls the same compiled functions (typed writable, it compiled
+    each of them again: 26 s more for this kernel on an empty cache)."""
+    if not isinstance(array, types.Array):
+        return None
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        return impl_ret_borrowed(context, builder, signature.return_type, args[0])
+
+    return array.copy(readonly=True)(array), codegen
 
 
 @numba.njit(cache=True, inline="always")
@@ -175,68 +193,84 @@ def _area_sums(row, starts, taps, weights, sums):  # pragma: no cover - compiled
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _binned_noise_kernel(
     signal, x_first, x_second, x_w0, x_w1, y_first, y_second, y_w0, y_w1, x_starts, x_taps, x_weights, y_starts, y_taps, y_weights,
-    columns, k, read_scale, read_model, read_lambda, key, chunks, out,
+    columns, k, read_scale, read_model, read_lambda, key, chunks, clip, noise, out,
 ):  # pragma: no cover - compiled; tested against cv2.resize and sensor_capture
-    """:func:`binned_noise`'s pass: per chunk of output rows, each site row once (its signal from the two output rows
-    OpenCV mixes, kept while the next site row mixes the same; its noise in blocks of the sensor kernel's; its area
-    sums along x), each output row the weighted sum of its site rows' sums."""
-    height, width = signal.shape[0], signal.shape[1]
+    """:func:`binned_noise`'s pass: the output's rows in ``chunks`` chunks, one a thread at a time (:func:`_binned_rows`).
+    ``clip`` and ``noise`` are the sensor kernel's flags (False, True), passed as values: written as constants here, numba
+    typed them as literals and compiled the sensor's block functions again for them (~25 s on an empty cache)."""
+    height = signal.shape[0]
     key_mix = _mix(key)
     keys = np.empty(_DRAW_KEYS, dtype=np.uint64)
     for draw in range(_DRAW_KEYS):
         keys[draw] = _draw_key(key_mix, draw)
+    per_chunk = (height + chunks - 1) // chunks
+    for chunk in numba.prange(chunks):
+        _binned_rows(
+            signal, x_first, x_second, x_w0, x_w1, y_first, y_second, y_w0, y_w1, x_starts, x_taps, x_weights, y_starts, y_taps, y_weights,
+            columns, k, read_scale, read_model, read_lambda, keys, key_mix, chunk * per_chunk, min(chunk * per_chunk + per_chunk, height), clip,
+            noise, out,
+        )
+
+
+@numba.njit(cache=True, fastmath=False)
+def _binned_rows(
+    signal, x_first, x_second, x_w0, x_w1, y_first, y_second, y_w0, y_w1, x_starts, x_taps, x_weights, y_starts, y_taps, y_weights,
+    columns, k, read_scale, read_model, read_lambda, keys, key_mix, top, bottom, clip, noise, out,
+):  # pragma: no cover - compiled; tested against cv2.resize and sensor_capture
+    """Output rows ``[top, bottom)`` of :func:`binned_noise`: each site row they read once (its signal from the two output
+    rows OpenCV mixes, kept while the next site row mixes the same; its noise in blocks of the sensor kernel's; its
+    area sums along x), each output row the weighted sum of its site rows' sums."""
+    width = signal.shape[1]
     read_key, shot_key = keys[0], keys[1]
     inv_k = 1.0 / k if k > 0.0 else 0.0
     gaussian = read_model == READ_GAUSSIAN
     length = 3 * columns  # values in a site row
-    per_chunk = (height + chunks - 1) // chunks
-    for chunk in numba.prange(chunks):
-        top, bottom = chunk * per_chunk, min(chunk * per_chunk + per_chunk, height)
-        upper = np.empty(length, np.float32)  # the output rows enlarged along x: the upper and lower of a site row's two
-        lower = np.empty(length, np.float32)
-        upper_row, lower_row = -1, -1
-        site = np.empty(length, np.float32)  # a site row's signal, then its noise
-        noise = np.empty(length, np.float32)
-        staged = np.empty(_BLOCK, np.float32)
-        to_scalar = np.zeros(_BLOCK, np.uint8)
-        sums = np.empty(3 * width, np.float32)  # a site row's area sums along x
-        total = np.empty(3 * width, np.float32)  # an output row's
-        summed_row = -1
-        for dy in range(top, bottom):
-            for j in range(y_starts[dy], y_starts[dy + 1]):
-                sy = y_taps[j]
-                if sy != summed_row:
-                    a, b = y_first[sy], y_second[sy]
-                    if upper_row != a:
-                        if lower_row == a:  # the lower row of the last site row is this one's upper
-                            upper, lower = lower, upper
-                            upper_row, lower_row = a, upper_row
-                        else:
-                            _enlarged_row(signal, a, x_first, x_second, x_w0, x_w1, upper)
-                            upper_row = a
-                    if lower_row != b:
-                        _enlarged_row(signal, b, x_first, x_second, x_w0, x_w1, lower)
-                        lower_row = b
-                    b0, b1 = y_w0[sy], y_w1[sy]
-                    for i in range(length):
-                        site[i] = upper[i] * b0 + lower[i] * b1
-                    bits = site.view(np.int32)
-                    for lo in range(0, length, _BLOCK):
-                        hi = min(lo + _BLOCK, length)
-                        first = sy * length + lo
-                        _vector_block(site[lo:hi], bits[lo:hi], first, staged, to_scalar, noise[lo:hi], gaussian, 1.0, k, inv_k,
-                                      read_key, shot_key, read_scale, False, math.inf, True)
-                        _scalar_block(site[lo:hi], first, noise[lo:hi], to_scalar, 1.0, k, inv_k, read_scale, read_model, read_lambda,
-                                      False, math.inf, keys, key_mix, True)
-                    _area_sums(noise, x_starts, x_taps, x_weights, sums)
-                    summed_row = sy
-                beta = y_weights[j]
-                if j == y_starts[dy]:
-                    for i in range(3 * width):
-                        total[i] = beta * sums[i]
-                else:
-                    for i in range(3 * width):
-                        total[i] += beta * sums[i]
-            for dx in range(width):
-                for c in range(3):
-                    out[dy, dx, c] = total[3 * dx + c]
+    upper = np.empty(length, np.float32)  # the output rows enlarged along x: the upper and lower of a site row's two
+    lower = np.empty(length, np.float32)
+    upper_row, lower_row = -1, -1
+    site = np.empty(length, np.float32)  # a site row's signal
+    drawn = np.empty(length, np.float32)  # its noise
+    staged = np.empty(_BLOCK, np.float32)
+    to_scalar = np.zeros(_BLOCK, np.uint8)
+    sums = np.empty(3 * width, np.float32)  # a site row's area sums along x
+    total = np.empty(3 * width, np.float32)  # an output row's
+    summed_row = -1
+    for dy in range(top, bottom):
+        for j in range(y_starts[dy], y_starts[dy + 1]):
+            sy = y_taps[j]
+            if sy != summed_row:
+                a, b = y_first[sy], y_second[sy]
+                if upper_row != a:
+                    if lower_row == a:  # the lower row of the last site row is this one's upper
+                        upper, lower = lower, upper
+                        upper_row, lower_row = a, upper_row
+                    else:
+                        _enlarged_row(signal, a, x_first, x_second, x_w0, x_w1, upper)
+                        upper_row = a
+                if lower_row != b:
+                    _enlarged_row(signal, b, x_first, x_second, x_w0, x_w1, lower)
+                    lower_row = b
+                b0, b1 = y_w0[sy], y_w1[sy]
+                for i in range(length):
+                    site[i] = upper[i] * b0 + lower[i] * b1
+                frozen = _frozen(site)
+                bits = frozen.view(np.int32)
+                for lo in range(0, length, _BLOCK):
+                    hi = min(lo + _BLOCK, length)
+                    first = sy * length + lo
+                    _vector_block(frozen[lo:hi], bits[lo:hi], first, staged, to_scalar, drawn[lo:hi], gaussian, 1.0, k, inv_k,
+                                  read_key, shot_key, read_scale, clip, math.inf, noise)
+                    _scalar_block(frozen[lo:hi], first, drawn[lo:hi], to_scalar, 1.0, k, inv_k, read_scale, read_model, read_lambda,
+                                  clip, math.inf, keys, key_mix, noise)
+                _area_sums(drawn, x_starts, x_taps, x_weights, sums)
+                summed_row = sy
+            beta = y_weights[j]
+            if j == y_starts[dy]:
+                for i in range(3 * width):
+                    total[i] = beta * sums[i]
+            else:
+                for i in range(3 * width):
+                    total[i] += beta * sums[i]
+        for dx in range(width):
+            for c in range(3):
+                out[dy, dx, c] = total[3 * dx + c]
