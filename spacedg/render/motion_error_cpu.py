@@ -12,10 +12,14 @@ from __future__ import annotations
 import math
 
 import numba
+import numpy as np
 
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 
 __all__ = ["edge_products", "longest_path"]
+
+#: The largest float64 (``np.nan_to_num``'s stand-in for +inf).
+_LARGEST = float(np.finfo(np.float64).max)
 
 
 @numba.njit(cache=True, fastmath=False)
@@ -109,8 +113,8 @@ def longest_path(points, poses, fx, fy, cx, cy):  # pragma: no cover - compiled
             v = fy * y / z + cy if ok else 0.0
             if ok and previous_ok:
                 step = math.hypot(u - previous_u, v - previous_v)
-                if step == step:  # a NaN step counts 0, as the numpy loop's nan_to_num had it
-                    length += step
+                if step == step:  # a NaN step counts 0 and an infinite one the largest float, as the loop's nan_to_num had it
+                    length += min(step, _LARGEST)
             previous_ok, previous_u, previous_v = ok, u, v
         longest = max(longest, length)
     return longest

@@ -142,8 +142,16 @@ def _surely_outside(
     inv_z = 1.0 / z
     jx = fx * inv_z * math.sqrt(1.0 + (tx * inv_z) ** 2)
     jy = fy * inv_z * math.sqrt(1.0 + (ty * inv_z) ** 2)
-    rad_x = np.ceil(3.33 * math.sqrt(jx * jx * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
-    rad_y = np.ceil(3.33 * math.sqrt(jy * jy * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
+    return _box_outside(u, v, jx * jx, jy * jy, smax, eps2d, width, height)
+
+
+@numba.njit(cache=True, inline="always")
+def _box_outside(u, v, row_x2, row_y2, smax, eps2d, width, height):
+    """Whether the footprint box of a Gaussian at pixel ``(u, v)`` whose Jacobian rows have squared norms at most
+    ``row_x2``, ``row_y2`` and whose scales (rotated) at most ``smax`` misses a ``width × height`` image: radius
+    ``ceil(3.33·√(row² · smax² + eps2d))`` per axis, taken 1e-6 relative wider (far above rounding)."""
+    rad_x = np.ceil(3.33 * math.sqrt(row_x2 * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
+    rad_y = np.ceil(3.33 * math.sqrt(row_y2 * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
     return u + rad_x <= 0 or u - rad_x >= width or v + rad_y <= 0 or v - rad_y >= height
 
 
@@ -166,11 +174,9 @@ def _surely_outside_fisheye(x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width,
     smax = max(abs(float(scales[i, 0])), abs(float(scales[i, 1])), abs(float(scales[i, 2]))) * rot_norm * (1.0 + 1e-6)
     j00, j01, j02 = fx * (rho + x * x * g), fx * x * y * g, fx * x * drho_dz
     j10, j11, j12 = fy * x * y * g, fy * (rho + y * y * g), fy * y * drho_dz
-    row_x = (j00 * j00 + j01 * j01 + j02 * j02) * (1.0 + 1e-6)
-    row_y = (j10 * j10 + j11 * j11 + j12 * j12) * (1.0 + 1e-6)
-    rad_x = np.ceil(3.33 * math.sqrt(row_x * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
-    rad_y = np.ceil(3.33 * math.sqrt(row_y * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
-    return u + rad_x <= 0 or u - rad_x >= width or v + rad_y <= 0 or v - rad_y >= height
+    row_x2 = (j00 * j00 + j01 * j01 + j02 * j02) * (1.0 + 1e-6)
+    row_y2 = (j10 * j10 + j11 * j11 + j12 * j12) * (1.0 + 1e-6)
+    return _box_outside(u, v, row_x2, row_y2, smax, eps2d, width, height)
 
 
 @numba.njit(cache=True, inline="always")

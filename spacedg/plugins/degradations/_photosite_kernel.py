@@ -15,7 +15,8 @@ OpenCV's (``resizeGeneric_`` with linear taps in area mode: a row along x, then 
 the bytes are those of ``cv2.resize`` both ways (tested against it at many sizes). The output is split into
 chunks of rows, one a thread at a time; a site row shared by the last output row of one chunk and the first
 of the next is drawn in both (the same values: the draws are counter-based). Compiling it on an empty cache
-takes ~13 s (``spacedg kernels``' images group), the sensor kernel's block functions shared with it.
+takes ~12 s after the sensor kernel (``spacedg kernels``' images group), whose block functions it shares.
+Used only where this process's OpenCV computes the two resamples as it does (:func:`opencv_agrees`).
 
 Used where OpenCV takes those two paths: a grid larger than the image along both axes, and not an integer
 multiple of it along both (OpenCV's fast area path sums 2 × 2 and other integer blocks in another order).
@@ -32,24 +33,75 @@ from numba.core import types
 from numba.core.imputils import impl_ret_borrowed
 from numba.extending import intrinsic
 
+from spacedg.errors import InvalidDataError
 from spacedg.plugins.degradations._sensor import (
-    _BLOCK, _DRAW_KEYS, READ_GAUSSIAN, READ_LAMBDA_DEFAULT, _draw_key, _mix, _read_noise, _scalar_block, _vector_block,
+    _BLOCK, _DRAW_KEYS, READ_GAUSSIAN, READ_LAMBDA_DEFAULT, READ_TUKEY, _draw_key, _mix, _read_noise, _scalar_block, _vector_block,
 )
 from spacedg.render import kernel_cache
 from spacedg.render.threads import fork_safe
 
-__all__ = ["binned_noise", "fits", "enlarge_taps", "shrink_table"]
+__all__ = ["binned_noise", "enlarge_reference", "enlarge_taps", "fits", "opencv_agrees", "shrink_reference", "shrink_table"]
 
 
 def fits(width: int, height: int, grid: tuple[int, int]) -> bool:
     """Whether ``cv2.resize`` takes the paths this module reproduces for a ``width × height`` image on a
     ``grid = (columns, rows)`` of sites: an enlargement along both axes, whose shrink back is OpenCV's
-    general area resampling (not its fast path for integer ratios along both axes: ``|1/(n/N) − round| < ε``)."""
+    general area resampling (not its fast path for integer ratios along both axes: ``|1/(n/N) − round| < ε``),
+    and this process's OpenCV computes them as this module does (:func:`opencv_agrees`)."""
     columns, rows = grid
     if not (columns > width and rows > height):
         return False
     scale_x, scale_y = 1.0 / (width / columns), 1.0 / (height / rows)  # OpenCV's scale of the shrink
-    return not (abs(scale_x - round(scale_x)) < np.finfo(np.float64).eps and abs(scale_y - round(scale_y)) < np.finfo(np.float64).eps)
+    integer = abs(scale_x - round(scale_x)) < np.finfo(np.float64).eps and abs(scale_y - round(scale_y)) < np.finfo(np.float64).eps
+    return not integer and opencv_agrees()
+
+
+@functools.lru_cache(maxsize=1)
+def opencv_agrees() -> bool:
+    """Whether this process's ``cv2.resize`` (``INTER_AREA``) gives the bytes of :func:`enlarge_reference` and
+    :func:`shrink_reference` (the float32 operations the kernel does) on a fixed 64 × 48 image enlarged to
+    157 × 117 and back, checked once. OpenCV's vertical enlargement step is a multiply-add
+    (``v_muladd``): unfused on an x86 build whose baseline is SSE3 (the wheels this project pins), fused
+    where the baseline has FMA (aarch64, some x86 builds), and a resize HAL may take over; there the
+    photosites keep the two ``cv2.resize`` calls instead of this kernel, so the bytes stay OpenCV's."""
+    import cv2
+
+    rng = np.random.default_rng(0)
+    image = (rng.random((48, 64, 3)) * 3.0 - 1.0).astype(np.float32)
+    if enlarge_reference(image, 157, 117).tobytes() != cv2.resize(image, (157, 117), interpolation=cv2.INTER_AREA).tobytes():
+        return False
+    big = rng.standard_normal((117, 157, 3)).astype(np.float32)
+    return shrink_reference(big, 64, 48).tobytes() == cv2.resize(big, (64, 48), interpolation=cv2.INTER_AREA).tobytes()
+
+
+def enlarge_reference(image: np.ndarray, columns: int, rows: int) -> np.ndarray:
+    """``image`` (h, w, c) float32 enlarged with :func:`enlarge_taps` in numpy: along x, then two rows mixed along y, the
+    float32 multiplications and additions of the kernel (and of OpenCV's unfused build)."""
+    x0, x1, a0, a1 = enlarge_taps(image.shape[1], columns)
+    y0, y1, b0, b1 = enlarge_taps(image.shape[0], rows)
+    tail = (x0 == x1)[None, :, None]
+    wide = np.where(tail, image[:, x0] * np.float32(1.0), image[:, x0] * a0[None, :, None] + image[:, x1] * a1[None, :, None])
+    return (wide[y0] * b0[:, None, None] + wide[y1] * b1[:, None, None]).astype(np.float32)
+
+
+def shrink_reference(image: np.ndarray, width: int, height: int) -> np.ndarray:
+    """``image`` (H, W, c) float32 shrunk with :func:`shrink_table` in numpy: each source row's sums along x from 0 in
+    table order, then each output row the first row's sum times its weight plus the others' in order."""
+    xs, xt, xw = shrink_table(image.shape[1], width)
+    ys, yt, yw = shrink_table(image.shape[0], height)
+    sums = np.zeros((image.shape[0], width, image.shape[2]), np.float32)
+    counts = np.diff(xs)
+    for m in range(int(counts.max())):  # the m-th tap of every output column at once: each column's taps in order
+        has = counts > m
+        at = xs[:-1][has] + m
+        sums[:, has] = sums[:, has] + image[:, xt[at]] * xw[at][None, :, None]
+    out = np.empty((height, width, image.shape[2]), np.float32)
+    for dy in range(height):
+        total = yw[ys[dy]] * sums[yt[ys[dy]]]
+        for j in range(ys[dy] + 1, ys[dy + 1]):
+            total = total + yw[j] * sums[yt[j]]
+        out[dy] = total
+    return out
 
 
 def enlarge_taps(source: int, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -59,7 +111,9 @@ def enlarge_taps(source: int, size: int) -> tuple[np.ndarray, np.ndarray, np.nda
 
     OpenCV (``resize``, area mode of its linear taps): ``sx = ⌊k·scale⌋``, ``f = (k + 1) − (sx + 1)/scale``
     in float32, ``f ≤ 0 → 0`` else its fractional part (the share of the output sample past the source
-    sample's edge), ``scale = 1 / (size / source)``; at the last source sample ``f = 0``."""
+    sample's edge), ``scale = 1 / (size / source)``; at the last source sample ``f = 0``. Along x OpenCV copies
+    that last sample; along y it mixes the clamped row with itself, ``S·w0 + S·w1`` with ``w1 < 1e-12`` (``w0``
+    rounds to 1): ``S`` for any finite ``S``, which the exposed signal always is."""
     inverse = size / source
     scale = 1.0 / inverse
     first = np.empty(size, np.int64)
@@ -120,7 +174,26 @@ def binned_noise(
     ``chunks``: row chunks (default four a numba thread; the bytes do not depend on it)."""
     height, width = signal.shape[:2]
     if signal.dtype != np.float32 or signal.ndim != 3 or signal.shape[2] != 3 or not fits(width, height, grid):
-        raise ValueError(f"binned_noise: a float32 (H, W, 3) signal on a grid larger than it along both axes, got {signal.dtype} {signal.shape} on {grid}")
+        raise InvalidDataError(
+            f"binned_noise: a float32 (H, W, 3) signal on a grid larger than it along both axes (not an integer multiple of it "
+            f"along both), with an OpenCV that agrees (opencv_agrees()), got {signal.dtype} {signal.shape} on {grid}; use "
+            "_photosites.binned_capture, which falls back to cv2.resize"
+        )
+    for name, value in (("k", k), ("sigma_read", sigma_read)):
+        if not (math.isfinite(value) and value >= 0.0):
+            raise InvalidDataError(f"binned_noise: {name} must be a finite number ≥ 0, got {value!r}")
+    if read_model not in (READ_GAUSSIAN, READ_TUKEY):
+        raise InvalidDataError(f"binned_noise: read_model must be {READ_GAUSSIAN} (Gaussian) or {READ_TUKEY} (Tukey lambda), got {read_model!r}")
+    if not 0 <= key < 2**64:
+        raise InvalidDataError(f"binned_noise: key must be an integer in [0, 2**64), got {key!r}; draw it with stream_key(rng)")
+    if out is not None and (
+        out.dtype != np.float32 or out.shape != signal.shape or not out.flags.c_contiguous or not out.flags.writeable
+        or np.may_share_memory(out, signal)
+    ):
+        raise InvalidDataError(
+            f"binned_noise: out must be a writeable C-contiguous float32 array of the signal's shape {signal.shape} apart from it, "
+            f"got {out.dtype} {out.shape}"
+        )
     columns, rows = grid
     (x_first, x_second, x_w0, x_w1), (y_first, y_second, y_w0, y_w1), (x_starts, x_taps, x_weights), (y_starts, y_taps, y_weights) = _tables(
         width, height, columns, rows
@@ -212,7 +285,7 @@ def _binned_noise_kernel(
         )
 
 
-@numba.njit(cache=True, fastmath=False)
+@numba.njit(cache=True, fastmath=False, inline="always")
 def _binned_rows(
     signal, x_first, x_second, x_w0, x_w1, y_first, y_second, y_w0, y_w1, x_starts, x_taps, x_weights, y_starts, y_taps, y_weights,
     columns, k, read_scale, read_model, read_lambda, keys, key_mix, top, bottom, clip, noise, out,

@@ -66,7 +66,6 @@ import numba
 import numpy as np
 
 from spacedg.errors import ParameterError
-from spacedg.plugins.degradations import _photosite_kernel
 from spacedg.plugins.degradations._sensor import SIGNAL_CAP, largest_drop, sensor_capture
 from spacedg.plugins.degradations.common import snapped_size
 from spacedg.render import kernel_cache
@@ -156,6 +155,8 @@ def binned_capture(
     if per_pixel_sensor is not None:
         return sensor_capture(rgb, exposure=exposure, key=key, clip=clip, **per_pixel_sensor)  # type: ignore[arg-type]
     import cv2  # here: importing the plugin stays light (the entry point's import is timed)
+
+    from spacedg.plugins.degradations import _photosite_kernel
 
     grid = photosite_grid(width, height, pitch)
     signal = np.empty(rgb.shape, np.float32)  # worked on in place below

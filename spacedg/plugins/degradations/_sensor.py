@@ -42,8 +42,8 @@ the expected electron count
   (``|Z| ≤ 8.21``); tests check < 1e-9. Tukey-lambda read noise: its inverse CDF in float64.
 - With ``clip`` (over-exposure), a signal so large that the output is 1.0 for every possible
   draw (``s − 8.5·√(k·s) − max|σ·R| > 1`` in the normal regime) is written as 1.0: the
-  value-by-value path draws nothing for it; the branch-free vector loop draws and discards (the
-  same bytes).
+  value-by-value path draws nothing for it, nor does a block of the vector loop whose every value
+  saturates; in a block with others the branch-free vector loop draws and discards (the same bytes).
 - Rates: a negative signal gives 0 electrons (a sensor counts no negative photons).
 - Non-finite input: NaN is treated as 0 (documented choice: ``check_linear_rgb`` does not scan
   for NaN, and a NaN would spread through every later stage); ±inf and values beyond
@@ -653,16 +653,17 @@ def _sensor_kernel(
     rounded to float32 first (numpy's ``capture − float32(s)``, ``s`` clamped to ±SIGNAL_CAP as
     above); 0 where skipped.
 
-    Per block of :data:`_BLOCK` values: a vector loop (:func:`_lane`, SIMD gathers from the constant
-    tables) over the block, with the table alone where its largest value's rate is below 64 (float32
-    order is that of the bits as int32 for positive values) and with the normal approximation too
-    elsewhere (a NaN counts as 0, as :func:`_signal` reads it), then :func:`_value` for the values
-    it leaves (PTRS, a long table search, a remainder above 1): ~0.3 % of a dark view's. With Tukey read
-    noise every value is :func:`_value`'s (no vector loop).
+    Per block of :data:`_BLOCK` values (:func:`_vector_block`): nothing drawn where every value saturates
+    (1.0), the normal approximation alone where every rate is at least 10³ (:func:`_normal_block`), else
+    a vector loop (:func:`_lane`, SIMD gathers from the constant tables) with the table alone where the
+    block's largest rate is below 64 (float32 order is that of the bits as int32 for positive values) and
+    with the normal approximation too elsewhere (a NaN counts as 0, as :func:`_signal` reads it), then
+    :func:`_value` for the values it leaves (PTRS, a long table search, a remainder above 1): ~0.3 % of a
+    dark view's. With Tukey read noise every value is :func:`_value`'s (no vector loop).
     The bytes are :func:`_value`'s for every value (tested against it), on any thread count. The block
     loops are compiled functions of their own (:func:`_table_block`, :func:`_mixed_block`,
-    :func:`_scalar_block`) that this kernel and its serial twin share: inlined, the kernel took 17 s to
-    compile and its twin as much again; now 8 s and 3 s (old kernel: 3 s).
+    :func:`_normal_block`, :func:`_scalar_block`) that this kernel, its serial twin and
+    :mod:`._photosite_kernel` share: inlined, the kernel took 17 s to compile and its twin as much again.
     """
     key_mix = _mix(key)
     keys = np.empty(_DRAW_KEYS, dtype=np.uint64)
