@@ -15,6 +15,7 @@ import numba
 import numpy as np
 
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
+from spacedg.render.threads import fork_safe
 
 __all__ = ["edge_products", "longest_path"]
 
@@ -22,7 +23,8 @@ __all__ = ["edge_products", "longest_path"]
 _LARGEST = float(np.finfo(np.float64).max)
 
 
-@numba.njit(cache=True, fastmath=False)
+@fork_safe
+@numba.njit(parallel=True, cache=True, fastmath=False)
 def edge_products(x_ray, y_ray, z, end_a, end_b, fx, fy, reach, encoded, products_h, products_v):  # pragma: no cover - compiled
     """Per pair of horizontally (``products_h``) and vertically (``products_v``) neighbouring coarse pixels:
     ``c² · Δ`` (:func:`~spacedg.render.motion_error.edge_parallax_contrast`), in float64.
@@ -34,7 +36,7 @@ def edge_products(x_ray, y_ray, z, end_a, end_b, fx, fy, reach, encoded, product
     squared difference of ``encoded`` (sRGB, (H, W, 3)). The float64 operations of the numpy expressions this
     replaced, in their order (no fast-math), so the same bits; the caller sums the products in numpy."""
     height, width = z.shape
-    for i in range(height):
+    for i in numba.prange(height):  # rows in parallel: each product is its pair's alone (serially 3.7 ms a 160 × 120 view)
         for j in range(width):
             right, below = j + 1 < width, i + 1 < height
             delta_h = delta_v = 0.0
