@@ -237,21 +237,23 @@ def test_saturation_shortcut_gives_the_same_bytes(k: float, sigma_read: float, r
     assert (full == 1.0).mean() > 0.3
 
 
-@numba.njit
 def _value_by_value(x, exposure, k, read_scale, read_model, read_lambda, clip, saturated, key, skip, noise):
-    """The sensor kernel's bytes the scalar way: :func:`_sensor._value` of every value, skipped ones as the kernel writes them."""
-    key_mix = _sensor._mix(key)
-    keys = np.empty(_sensor._DRAW_KEYS, dtype=np.uint64)
-    for draw in range(_sensor._DRAW_KEYS):
-        keys[draw] = _sensor._draw_key(key_mix, draw)
+    """The sensor kernel's bytes the scalar way: :func:`_sensor._value` of every value (through
+    :func:`_sensor._scalar_block` with every value flagged: compiled by ``spacedg kernels``, where a loop of its own
+    here compiled for ~10 s in every test run), skipped ones as the kernel writes them."""
+    key_mix = np.uint64(_sensor._mix(np.uint64(key)))  # numpy scalars: a Python int would be typed int64 (uint64 + int64 is float64)
+    keys = np.array([_sensor._draw_key(key_mix, draw) for draw in range(_sensor._DRAW_KEYS)], dtype=np.uint64)
     inv_k = 1.0 / k if k > 0.0 else 0.0
     out = np.empty_like(x)
-    for i in range(x.size):
-        if skip.size and skip[i]:
-            s = _sensor._signal(x[i], exposure)
-            out[i] = np.float32(0.0) if noise else (np.float32(min(max(s, 0.0), 1.0)) if clip else np.float32(s))
-        else:
-            out[i] = _sensor._value(x[i], i, exposure, k, inv_k, read_scale, read_model, read_lambda, clip, saturated, keys, key_mix, noise)
+    flags = np.ones(-(-x.size // 8) * 8, np.uint8)  # read as 64-bit words
+    _sensor._scalar_block(kernel_cache.read_only(x), 0, out, flags, float(exposure), float(k), inv_k, float(read_scale), int(read_model),
+                          float(read_lambda), bool(clip), float(saturated), keys, key_mix, bool(noise))
+    if skip.size:
+        hit = skip.astype(bool)
+        with np.errstate(invalid="ignore", over="ignore"):
+            s = np.clip(np.nan_to_num(exposure * x[hit].astype(np.float64), nan=0.0, posinf=_sensor.SIGNAL_CAP, neginf=-_sensor.SIGNAL_CAP),
+                        -_sensor.SIGNAL_CAP, _sensor.SIGNAL_CAP)
+        out[hit] = 0.0 if noise else (np.clip(s, 0.0, 1.0) if clip else s).astype(np.float32)
     return out
 
 
