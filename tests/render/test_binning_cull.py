@@ -63,6 +63,37 @@ def test_tight_binning_keeps_every_reached_tile_in_depth_order() -> None:
     assert dropped > 50  # the tight test did drop tiles
 
 
+def _near_the_fisheye_edges(g, cam: Camera, rng: np.random.Generator):  # type: ignore[no-untyped-def]
+    """``g`` with its first half moved onto rays near ``cam``'s image edges (up to 40 px beyond them, by the lens's
+    own mapping) and near its max θ (±0.05 rad), 0.5–8 m away, in world coordinates."""
+    from dataclasses import replace
+
+    lens = cam.fisheye
+    n = len(g) // 2
+    edge = rng.integers(0, 5, n)  # left, right, top, bottom edge; 4: the lens's max θ
+    u = np.where(edge == 0, rng.uniform(-40, 0, n), np.where(edge == 1, rng.uniform(W, W + 40, n), rng.uniform(0, W, n)))
+    v = np.where(edge == 2, rng.uniform(-40, 0, n), np.where(edge == 3, rng.uniform(H, H + 40, n), rng.uniform(0, H, n)))
+    x, y = (u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy
+    theta_d = np.hypot(x, y)
+    theta = np.array([_undistort(float(t), lens) for t in theta_d])
+    theta = np.where(edge == 4, lens.effective_max_theta + rng.uniform(-0.05, 0.05, n), theta)
+    phi = np.arctan2(y, x)
+    rays = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], 1)
+    points = rays * rng.uniform(0.5, 8.0, n)[:, None]
+    means = g.means.copy()
+    means[:n] = (cam.center + points @ cam.rotation.T).astype(means.dtype)
+    return replace(g, means=means)
+
+
+def _undistort(theta_d: float, lens: FisheyeLens) -> float:
+    """θ with ``lens.distort_theta(θ) = theta_d`` (bisection over [0, π), where the polynomial rises)."""
+    lo, hi = 0.0, math.pi - 1e-6
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if float(lens.distort_theta(np.float64(mid))) < theta_d else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
 @pytest.mark.parametrize("lens", [None, FisheyeLens(-0.05, 0.01, 0.0, 0.0, 1.4), FisheyeLens(0.02, -0.01, 0.001, 0.0, 2.0)], ids=["pinhole", "fisheye", "wide-fisheye"])
 @pytest.mark.parametrize("defocus", [None, Defocus(8.0, 2.0), Defocus(60.0, 0.5)], ids=["sharp", "defocus", "wide-defocus"])
 def test_pre_cull_changes_no_projection(defocus: Defocus | None, lens: FisheyeLens | None) -> None:
@@ -72,6 +103,8 @@ def test_pre_cull_changes_no_projection(defocus: Defocus | None, lens: FisheyeLe
     g = random_gaussians(3000, np.random.default_rng(3), depth=(-6.0, 6.0), half_width=6.0, scale=(0.01, 0.3))
     pose = look_at(np.array([0.0, 0.0, 0.0]), np.array([5.0, 0.5, 3.0]), np.array([0.0, -1.0, 0.0]))
     cam = Camera(200.0 if lens is None else 90.0, 200.0 if lens is None else 90.0, 160.0, 120.0, W, H, pose, fisheye=lens)
+    if lens is not None:  # half of them where the fisheye pre-cull decides: rays just off the image's edges and its max θ
+        g = _near_the_fisheye_edges(g, cam, np.random.default_rng(4))
     packed, rects = project_cpu.project_gaussians(g, cam, RasterSettings(), defocus)
     assert 0 < np.count_nonzero(rects[:, 1] > rects[:, 0]) < len(g) // 2
     # the same projection with the pre-cull disabled (a rotation norm of infinity never culls)
