@@ -136,20 +136,20 @@ def _surely_outside(
     v = fy * y / z + cy
     if 0.0 <= u <= width and 0.0 <= v <= height:  # the mean is in view: kept by the full test
         return False
-    smax = max(abs(float(scales[i, 0])), abs(float(scales[i, 1])), abs(float(scales[i, 2]))) * rot_norm * (1.0 + 1e-6)
     tx = z * min(max(x / z, -lim_x_neg), lim_x_pos)
     ty = z * min(max(y / z, -lim_y_neg), lim_y_pos)
     inv_z = 1.0 / z
     jx = fx * inv_z * math.sqrt(1.0 + (tx * inv_z) ** 2)
     jy = fy * inv_z * math.sqrt(1.0 + (ty * inv_z) ** 2)
-    return _box_outside(u, v, jx * jx, jy * jy, smax, eps2d, width, height)
+    return _box_outside(u, v, jx * jx, jy * jy, scales, i, rot_norm, eps2d, width, height)
 
 
 @numba.njit(cache=True, inline="always")
-def _box_outside(u, v, row_x2, row_y2, smax, eps2d, width, height):
-    """Whether the footprint box of a Gaussian at pixel ``(u, v)`` whose Jacobian rows have squared norms at most
-    ``row_x2``, ``row_y2`` and whose scales (rotated) at most ``smax`` misses a ``width × height`` image: radius
-    ``ceil(3.33·√(row² · smax² + eps2d))`` per axis, taken 1e-6 relative wider (far above rounding)."""
+def _box_outside(u, v, row_x2, row_y2, scales, i, rot_norm, eps2d, width, height):
+    """Whether the footprint box of Gaussian ``i`` at pixel ``(u, v)`` whose Jacobian rows have squared norms at most
+    ``row_x2``, ``row_y2`` misses a ``width × height`` image: radius ``ceil(3.33·√(row² · smax² + eps2d))`` per axis,
+    ``smax`` its largest scale times ``rot_norm`` (≥ ‖W‖₂), all taken 1e-6 relative wider (far above rounding)."""
+    smax = max(abs(float(scales[i, 0])), abs(float(scales[i, 1])), abs(float(scales[i, 2]))) * rot_norm * (1.0 + 1e-6)
     rad_x = np.ceil(3.33 * math.sqrt(row_x2 * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
     rad_y = np.ceil(3.33 * math.sqrt(row_y2 * smax * smax + eps2d) * (1.0 + 1e-6) + 1e-6)
     return u + rad_x <= 0 or u - rad_x >= width or v + rad_y <= 0 or v - rad_y >= height
@@ -171,12 +171,23 @@ def _surely_outside_fisheye(x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width,
     v = fy * rho * y + cy
     if 0.0 <= u <= width and 0.0 <= v <= height:  # the mean is in view: kept by the full test
         return False
-    smax = max(abs(float(scales[i, 0])), abs(float(scales[i, 1])), abs(float(scales[i, 2]))) * rot_norm * (1.0 + 1e-6)
     j00, j01, j02 = fx * (rho + x * x * g), fx * x * y * g, fx * x * drho_dz
     j10, j11, j12 = fy * x * y * g, fy * (rho + y * y * g), fy * y * drho_dz
     row_x2 = (j00 * j00 + j01 * j01 + j02 * j02) * (1.0 + 1e-6)
     row_y2 = (j10 * j10 + j11 * j11 + j12 * j12) * (1.0 + 1e-6)
-    return _box_outside(u, v, row_x2, row_y2, smax, eps2d, width, height)
+    return _box_outside(u, v, row_x2, row_y2, scales, i, rot_norm, eps2d, width, height)
+
+
+@numba.njit(cache=True, inline="always")
+def _pre_culled(x, y, z, scales, i, rot_norm, view, lims, fisheye, lens, eps2d):
+    """The pre-cull of Gaussian ``i`` at camera point (x, y, z) in one camera (``view = (fx, fy, cx, cy, width, height)``,
+    ``lims`` of :func:`_frustum`, ``lens = (k1, k2, k3, k4, theta_max)``): :func:`_surely_outside_fisheye` through the
+    fisheye lens, else :func:`_surely_outside`."""
+    fx, fy, cx, cy, width, height = view
+    if fisheye:
+        k1, k2, k3, k4, theta_max = lens
+        return _surely_outside_fisheye(x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, k1, k2, k3, k4, theta_max, eps2d)
+    return _surely_outside(x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lims[0], lims[1], lims[2], lims[3], eps2d)
 
 
 @numba.njit(cache=True, inline="always")
@@ -344,26 +355,14 @@ def _project_kernel(
             continue
         # the circle of confusion (px; 0 without defocus): under defocus it widens every footprint by coc² px²
         lens_coc = min(aperture * abs(z - focus) / z, max_coc) if aperture > 0.0 else 0.0
-        if fisheye:
-            main_in = not _surely_outside_fisheye(
-                x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, k1, k2, k3, k4, theta_max, eps_cull + lens_coc * lens_coc,
-            )
-        else:
-            main_in = not _surely_outside(
-                x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lims[0], lims[1], lims[2], lims[3],
-                eps_cull + lens_coc * lens_coc,
-            )
+        main_in = not _pre_culled(
+            x, y, z, scales, i, rot_norm, (fx, fy, cx, cy, width, height), lims, fisheye, (k1, k2, k3, k4, theta_max), eps_cull + lens_coc * lens_coc,
+        )
         sharp_in = False
         if paired:
-            if fisheye:
-                sharp_in = not _surely_outside_fisheye(
-                    x, y, z, scales, i, rot_norm, s_fx, s_fy, s_cx, s_cy, s_width, s_height, k1, k2, k3, k4, theta_max, s_eps_cull,
-                )
-            else:
-                sharp_in = not _surely_outside(
-                    x, y, z, scales, i, rot_norm, s_fx, s_fy, s_cx, s_cy, s_width, s_height, s_lims[0], s_lims[1], s_lims[2], s_lims[3],
-                    s_eps_cull,
-                )
+            sharp_in = not _pre_culled(
+                x, y, z, scales, i, rot_norm, (s_fx, s_fy, s_cx, s_cy, s_width, s_height), s_lims, fisheye, (k1, k2, k3, k4, theta_max), s_eps_cull,
+            )
         if not (main_in or sharp_in):
             continue
         # ---- 3D covariance in the camera frame: Σc = (W R S)(W R S)ᵀ

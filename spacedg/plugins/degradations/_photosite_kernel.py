@@ -35,7 +35,7 @@ from numba.extending import intrinsic
 
 from spacedg.errors import InvalidDataError
 from spacedg.plugins.degradations._sensor import (
-    _BLOCK, _DRAW_KEYS, READ_GAUSSIAN, READ_LAMBDA_DEFAULT, READ_TUKEY, _draw_key, _mix, _read_noise, _scalar_block, _vector_block,
+    _BLOCK, READ_GAUSSIAN, READ_LAMBDA_DEFAULT, _read_noise, _scalar_block, _stream_keys, _vector_block, check_sensor_parameters,
 )
 from spacedg.render import kernel_cache
 from spacedg.render.threads import fork_safe
@@ -179,13 +179,7 @@ def binned_noise(
             f"along both), with an OpenCV that agrees (opencv_agrees()), got {signal.dtype} {signal.shape} on {grid}; use "
             "_photosites.binned_capture, which falls back to cv2.resize"
         )
-    for name, value in (("k", k), ("sigma_read", sigma_read)):
-        if not (math.isfinite(value) and value >= 0.0):
-            raise InvalidDataError(f"binned_noise: {name} must be a finite number ≥ 0, got {value!r}")
-    if read_model not in (READ_GAUSSIAN, READ_TUKEY):
-        raise InvalidDataError(f"binned_noise: read_model must be {READ_GAUSSIAN} (Gaussian) or {READ_TUKEY} (Tukey lambda), got {read_model!r}")
-    if not 0 <= key < 2**64:
-        raise InvalidDataError(f"binned_noise: key must be an integer in [0, 2**64), got {key!r}; draw it with stream_key(rng)")
+    check_sensor_parameters("binned_noise", k=k, sigma_read=sigma_read, read_model=read_model, key=key)
     if out is not None and (
         out.dtype != np.float32 or out.shape != signal.shape or not out.flags.c_contiguous or not out.flags.writeable
         or np.may_share_memory(out, signal)
@@ -272,10 +266,7 @@ def _binned_noise_kernel(
     ``clip`` and ``noise`` are the sensor kernel's flags (False, True), passed as values: written as constants here, numba
     typed them as literals and compiled the sensor's block functions again for them (~25 s on an empty cache)."""
     height = signal.shape[0]
-    key_mix = _mix(key)
-    keys = np.empty(_DRAW_KEYS, dtype=np.uint64)
-    for draw in range(_DRAW_KEYS):
-        keys[draw] = _draw_key(key_mix, draw)
+    keys, key_mix = _stream_keys(key)
     per_chunk = (height + chunks - 1) // chunks
     for chunk in numba.prange(chunks):
         _binned_rows(

@@ -96,6 +96,7 @@ __all__ = [
     "SIGNAL_CAP",
     "tukey_lambda_std",
     "sensor_capture",
+    "check_sensor_parameters",
     "largest_drop",
 ]
 
@@ -218,6 +219,16 @@ def _mix(z: np.uint64) -> np.uint64:
 def _draw_key(key_mix: np.uint64, draw: int) -> np.uint64:
     """Seed of the splitmix64 stream that gives draw ``draw`` of every value."""
     return _mix(key_mix + np.uint64(draw + 1) * _GOLDEN)
+
+
+@numba.njit(cache=True, inline="always")
+def _stream_keys(key: np.uint64) -> tuple[np.ndarray, np.uint64]:
+    """``(keys, key_mix)`` of a capture: the seeds of draws 0 … :data:`_DRAW_KEYS` − 1 (:func:`_draw_key`) and ``mix(key)``."""
+    key_mix = _mix(key)
+    keys = np.empty(_DRAW_KEYS, dtype=np.uint64)
+    for draw in range(_DRAW_KEYS):
+        keys[draw] = _draw_key(key_mix, draw)
+    return keys, key_mix
 
 
 @numba.njit(cache=True, inline="always")
@@ -546,14 +557,21 @@ def _mixed_block(
 
 
 @numba.njit(cache=True, inline="always")
-def _top_rate(bits: np.ndarray, exposure: float, inv_k: float) -> float:
-    """The expected electron count of the largest of the float32 values whose bits (as int32) are ``bits``: float32 and
-    int32 order agree for positive values; a NaN reads as 0, as :func:`_signal` has it; 0 where none is positive."""
+def _signal_range(bits: np.ndarray, exposure: float, inv_k: float) -> tuple[float, float]:
+    """One pass over a block of float32 values given as their bits (int32; float32 and int32 order agree for positive
+    values, +inf included; a NaN reads as 0, as :func:`_signal` has it): ``(lowest, top_rate)``. ``lowest``: the exposed
+    signal of the smallest value when every one is a positive number, else −1 (:func:`_signal` grows with the value,
+    so every value's signal is at least it). ``top_rate``: the expected electron count of the largest value, 0 where
+    none is positive."""
+    lowest_bits = np.int32(2**31 - 1)
     largest_bits = np.int32(-(2**31))
     for j in range(bits.shape[0]):
         value = bits[j]
-        largest_bits = max(largest_bits, value if value <= _INF_BITS else np.int32(0))
-    return _signal(_as_float32(largest_bits), exposure) * inv_k if largest_bits > 0 else 0.0
+        value = value if value <= _INF_BITS else np.int32(0)
+        lowest_bits = min(lowest_bits, value)
+        largest_bits = max(largest_bits, value)
+    lowest = _signal(_as_float32(lowest_bits), exposure) if lowest_bits > 0 else -1.0
+    return lowest, (_signal(_as_float32(largest_bits), exposure) * inv_k if largest_bits > 0 else 0.0)
 
 
 @numba.njit(cache=True, inline="always")
@@ -586,18 +604,6 @@ def _normal_block(
 
 
 @numba.njit(cache=True, inline="always")
-def _lowest_signal(bits: np.ndarray, exposure: float) -> float:
-    """The exposed signal of the smallest of the float32 values whose bits (as int32) are ``bits``, when every one is a
-    positive number (+inf included; float32 and int32 order agree there); −1 when one is not (zero, negative or NaN):
-    :func:`_signal` grows with the value, so every value's signal is at least the one returned."""
-    lowest_bits = np.int32(2**31 - 1)
-    for j in range(bits.shape[0]):
-        value = bits[j]
-        lowest_bits = min(lowest_bits, value if value <= _INF_BITS else np.int32(0))  # a NaN counts as 0, as _signal reads it
-    return _signal(_as_float32(lowest_bits), exposure) if lowest_bits > 0 else -1.0
-
-
-@numba.njit(cache=True, inline="always")
 def _vector_block(
     values: np.ndarray, bits: np.ndarray, first: int, staged: np.ndarray, to_scalar: np.ndarray, out: np.ndarray, gaussian: bool,
     exposure: float, k: float, inv_k: float, read_key: np.uint64, shot_key: np.uint64, read_scale: float, clip: bool, saturated: float,
@@ -613,7 +619,7 @@ def _vector_block(
     if not gaussian:
         to_scalar[:count] = np.uint8(1)
         return
-    lowest = _lowest_signal(bits, exposure)
+    lowest, top_rate = _signal_range(bits, exposure, inv_k)
     if lowest >= saturated:  # every value saturates (over-exposure's bright regions): 1.0 whatever is drawn
         out[:count] = np.float32(1.0)
         to_scalar[:count] = np.uint8(0)
@@ -621,7 +627,7 @@ def _vector_block(
     if lowest * inv_k >= _NORMAL_MIN_RATE:  # every rate in the normal approximation's range
         _normal_block(values, first, staged, exposure, k, read_key, shot_key, read_scale, clip, saturated, noise)
         to_scalar[:count] = np.uint8(0)
-    elif _top_rate(bits, exposure, inv_k) < _TABLE_MAX_RATE:
+    elif top_rate < _TABLE_MAX_RATE:
         _table_block(values, first, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise)
     else:
         _mixed_block(values, first, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise)
@@ -665,10 +671,7 @@ def _sensor_kernel(
     :func:`_normal_block`, :func:`_scalar_block`) that this kernel, its serial twin and
     :mod:`._photosite_kernel` share: inlined, the kernel took 17 s to compile and its twin as much again.
     """
-    key_mix = _mix(key)
-    keys = np.empty(_DRAW_KEYS, dtype=np.uint64)
-    for draw in range(_DRAW_KEYS):
-        keys[draw] = _draw_key(key_mix, draw)
+    keys, key_mix = _stream_keys(key)
     read_key, shot_key = keys[0], keys[1]
     inv_k = 1.0 / k if k > 0.0 else 0.0
     skipping = skip.size > 0
@@ -723,6 +726,18 @@ def tukey_lambda_std(lam: float) -> float:
     return math.sqrt(-2.0 / lam**2 * math.expm1(log_ratio) / (1.0 + 2.0 * lam))
 
 
+def check_sensor_parameters(what: str, *, k: float, sigma_read: float, read_model: int, key: int, exposure: float = 1.0) -> None:
+    """One clear error (``InvalidDataError``, prefixed ``what``) for a sensor parameter no capture can take: ``exposure``,
+    ``k`` and ``sigma_read`` finite and ≥ 0, ``read_model`` one of the two, ``key`` in [0, 2⁶⁴)."""
+    for name, value in (("exposure", exposure), ("k", k), ("sigma_read", sigma_read)):
+        if not (math.isfinite(value) and value >= 0.0):
+            raise InvalidDataError(f"{what}: {name} must be a finite number ≥ 0, got {value!r}")
+    if read_model not in (READ_GAUSSIAN, READ_TUKEY):
+        raise InvalidDataError(f"{what}: read_model must be {READ_GAUSSIAN} (Gaussian) or {READ_TUKEY} (Tukey lambda), got {read_model!r}")
+    if not 0 <= key < 2**64:
+        raise InvalidDataError(f"{what}: key must be an integer in [0, 2**64), got {key!r}; draw it with stream_key(rng)")
+
+
 def sensor_capture(
     rgb: np.ndarray,
     *,
@@ -761,15 +776,9 @@ def sensor_capture(
     Returns:
         A float32 array of ``rgb``'s shape (a view of ``out`` when given, else new), always finite.
     """
-    for name, value in (("exposure", exposure), ("k", k), ("sigma_read", sigma_read)):
-        if not (math.isfinite(value) and value >= 0.0):
-            raise InvalidDataError(f"sensor model: {name} must be a finite number ≥ 0, got {value!r}")
+    check_sensor_parameters("sensor model", k=k, sigma_read=sigma_read, read_model=read_model, key=key, exposure=exposure)
     if noise and clip:
         raise InvalidDataError("sensor model: noise=True returns the unclipped noise; it cannot be combined with clip=True")
-    if read_model not in (READ_GAUSSIAN, READ_TUKEY):
-        raise InvalidDataError(f"sensor model: read_model must be {READ_GAUSSIAN} (Gaussian) or {READ_TUKEY} (Tukey lambda), got {read_model!r}")
-    if not 0 <= key < 2**64:
-        raise InvalidDataError(f"sensor model: key must be an integer in [0, 2**64), got {key!r}; draw it with stream_key(rng)")
     read_scale, read_bound = _read_noise(float(sigma_read), int(read_model), float(read_lambda))
     saturated = _saturation_signal(float(k), read_bound) if clip else math.inf
     flat = kernel_cache.read_only(np.ascontiguousarray(rgb, dtype=np.float32).reshape(-1))

@@ -241,8 +241,8 @@ def _value_by_value(x, exposure, k, read_scale, read_model, read_lambda, clip, s
     """The sensor kernel's bytes the scalar way: :func:`_sensor._value` of every value (through
     :func:`_sensor._scalar_block` with every value flagged: compiled by ``spacedg kernels``, where a loop of its own
     here compiled for ~10 s in every test run), skipped ones as the kernel writes them."""
-    key_mix = np.uint64(_sensor._mix(np.uint64(key)))  # numpy scalars: a Python int would be typed int64 (uint64 + int64 is float64)
-    keys = np.array([_sensor._draw_key(key_mix, draw) for draw in range(_sensor._DRAW_KEYS)], dtype=np.uint64)
+    keys, key_mix = _sensor._stream_keys(np.uint64(key))
+    key_mix = np.uint64(key_mix)  # back from numba as a Python int, which numba would type int64 (uint64 + int64 is float64)
     inv_k = 1.0 / k if k > 0.0 else 0.0
     out = np.empty_like(x)
     flags = np.ones(-(-x.size // 8) * 8, np.uint8)  # read as 64-bit words
