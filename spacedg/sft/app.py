@@ -37,6 +37,7 @@ import os
 import random
 import sys
 from collections.abc import Mapping
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +58,9 @@ from spacedg.sft.memory import memory_for
 from spacedg.sft.model import HALF_DTYPES, ModelOptions, prepare_model, trainable_summary
 from spacedg.sft.sources import DataOptions
 from spacedg.sft.template import ensure_generation_markers
-from spacedg.sft.trainer import EpochCallback, MemoryProbe, SaveProcessorCallback, SFTTrainer, is_complete, latest_checkpoint
+from spacedg.sft.trainer import (
+    EpochCallback, MemoryProbe, SaveProcessorCallback, SFTTrainer, ValShare, is_complete, latest_checkpoint,
+)
 from spacedg.vlm import save_tiny_vlm
 
 __all__ = ["SPACEDG_TRAIN_KEYS", "main", "run", "training_arguments"]
@@ -248,21 +251,22 @@ def run(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     train_data = data.train_data()
     lengths = token_lengths(train_data, processor)
     budgeted = BudgetedDataset(train_data, lengths, data.max_length)
-    val_items = data.val_items()
+    # this rank's evaluation items, rendered at the first evaluation (none under FSDP or ZeRO-3, which do not evaluate)
+    val_items = ValShare(partial(data.val_items, args.process_index, args.world_size)) if data.val.samples > 0 else None
     if data.render_device not in (None, "cpu") and args.dataloader_num_workers > 0:
         raise ParameterError(
             f"data.render_device={data.render_device} renders on the GPU in the training process; DataLoader workers must not "
             f"touch CUDA: set train.dataloader_num_workers=0 (got {args.dataloader_num_workers})"
         )
     if args.dataloader_num_workers > 0:
-        # The main process has rendered (val items): numba's OpenMP threads are not fork-safe, so workers start
-        # from a fork server (the datasets pickle small).
+        # The main process renders (the val items, at each evaluation): numba's OpenMP threads are not fork-safe,
+        # so workers start from a fork server (the datasets pickle small).
         multiprocessing.set_start_method("forkserver", force=True)
     probe = MemoryProbe()
     trainer = SFTTrainer(
-        model=model, args=args, train_dataset=budgeted, eval_dataset=val_items or None,
+        model=model, args=args, train_dataset=budgeted, eval_dataset=val_items,
         data_collator=SFTCollator(processor, data.max_length, trim_logits=True),
-        val_items=val_items, processor=processor, val_max_new_tokens=data.val.max_new_tokens,
+        val_items=val_items or [], processor=processor, val_max_new_tokens=data.val.max_new_tokens,
         val_batch_size=data.val.batch_size, loss=loss, model_options=options,
         callbacks=[SaveProcessorCallback(processor, {"spacedg_sft.yaml": OmegaConf.to_yaml(OmegaConf.create(config))}),
                    EpochCallback(train_data), probe],

@@ -31,6 +31,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from spacedg._checks import check_int
 from spacedg.data.chain import BENCH_DEGRADATIONS, SEVERITIES, Chain
 from spacedg.data.chat import chat_messages, item_images
 from spacedg.data.public_format import public_fields
@@ -167,15 +168,20 @@ class DataOptions:
         scenes = f"the scenes under data.scenes ({len(self.scenes)} path(s))" if self.scenes else f"{self.builtin_rooms} built-in rooms"
         return f"{self.val.samples} items of the val split of {scenes}, rendered online"
 
-    def val_items(self) -> list[dict[str, Any]]:
+    def val_items(self, rank: int = 0, world: int = 1) -> list[dict[str, Any]]:
         """``val.samples`` items of the ``val`` split (a spread drawn with ``seed``), rendered once,
-        each with its prompt (no answer), images, condition and the fields the scorer reads."""
+        each with its prompt (no answer), images, condition and the fields the scorer reads.
+
+        ``rank`` of ``world`` processes: only that process's share, every ``world``-th item of the
+        spread in index order from the ``rank``-th (the items it answers; all of them by default)."""
+        world = check_int(world, "val_items: world", minimum=1)
+        rank = check_int(rank, "val_items: rank", minimum=0, maximum=world - 1)
         dataset = self.val_dataset()
         if dataset is None:
             return []
         order = np.random.default_rng(self.seed).permutation(len(dataset))[:self.val.samples]
         items = []
-        for index in sorted(int(i) for i in order):
+        for index in sorted(int(i) for i in order)[rank::world]:
             item = dataset[index]
             images = item_images(item)
             fields = public_fields(item)  # asked and scored in the bench's form

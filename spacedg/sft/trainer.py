@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -52,10 +52,30 @@ from spacedg.sft.loss import count_items, loss_function
 from spacedg.sft.model import ModelOptions, rebuild_with_state, save_for_inference
 from spacedg.vlm import generate
 
-__all__ = ["EpochCallback", "MemoryProbe", "SFTTrainer", "SaveProcessorCallback", "ValItem", "is_complete",
+__all__ = ["EpochCallback", "MemoryProbe", "SFTTrainer", "SaveProcessorCallback", "ValItem", "ValShare", "is_complete",
            "latest_checkpoint"]
 
 ValItem = dict  # {"conversation" (without the assistant turn), "images", "degradation_type", "truth": {...}}
+
+
+class ValShare:
+    """One process's share of the evaluation items, rendered on its first evaluation.
+
+    ``render()`` returns the items this process answers (e.g. :meth:`DataOptions.val_items
+    <spacedg.sft.sources.DataOptions.val_items>` with its rank and world): a launch that never
+    evaluates (FSDP, ZeRO-3: :meth:`SFTTrainer.evaluate`) renders none, and on ``world`` processes
+    each renders ``1/world`` of them, not all. Every process holds one (possibly empty) share, so
+    all ranks reach the evaluation's gather together."""
+
+    def __init__(self, render: Callable[[], list[ValItem]]) -> None:
+        self._render = render
+        self._items: list[ValItem] | None = None
+
+    def items(self) -> list[ValItem]:
+        """This process's items (rendered on the first call, then kept)."""
+        if self._items is None:
+            self._items = list(self._render())
+        return self._items
 
 #: Key of spacedg's record in ``trainer_state.json``'s ``stateful_callbacks``.
 STATE_KEY = "SpaceDGRun"
@@ -114,7 +134,8 @@ class SFTTrainer(Trainer):
     evaluation (see the module docstring).
 
     Args:
-        val_items: evaluation items (may be empty: no evaluation).
+        val_items: the evaluation items, all of them (each rank answers its share; may be empty: no
+            evaluation), or a :class:`ValShare`: this rank's share alone, rendered when first evaluated.
         processor: the model's processor (for generation and ``final/``).
         val_max_new_tokens / val_batch_size: generation settings of the evaluation (``data.val``).
         loss: ``"tokens"`` or ``"samples"`` (:mod:`spacedg.sft.loss`); ``None`` keeps the model's own loss.
@@ -122,7 +143,7 @@ class SFTTrainer(Trainer):
         Other arguments go to :class:`transformers.Trainer`.
     """
 
-    def __init__(self, *args: Any, val_items: Sequence[ValItem], processor: Any, val_max_new_tokens: int,
+    def __init__(self, *args: Any, val_items: Sequence[ValItem] | ValShare, processor: Any, val_max_new_tokens: int,
                  val_batch_size: int, loss: str | None, model_options: ModelOptions | None = None,
                  **kwargs: Any) -> None:
         if loss is not None:
@@ -130,7 +151,7 @@ class SFTTrainer(Trainer):
         super().__init__(*args, **kwargs)
         self.loss_mode = loss
         self.model_options = model_options
-        self.val_items = list(val_items)
+        self.val_items = val_items if isinstance(val_items, ValShare) else list(val_items)
         self.val_processor = processor
         self.val_max_new_tokens = int(val_max_new_tokens)
         self.val_batch_size = max(1, int(val_batch_size))
@@ -268,10 +289,10 @@ class SFTTrainer(Trainer):
 
     # -------------------------------------------------------------- evaluation
     def evaluate(self, eval_dataset: Any = None, ignore_keys: Any = None, metric_key_prefix: str = "eval") -> dict[str, float]:
-        if not self.val_items or self.shards_parameters:
+        if not self.val_items or self.shards_parameters:  # a ValShare is truthy on every rank: all of them gather
             return {}
         rank, world = self.args.process_index, self.args.world_size
-        mine = self.val_items[rank::world]
+        mine = self.val_items.items() if isinstance(self.val_items, ValShare) else self.val_items[rank::world]
         model = self.accelerator.unwrap_model(self.model)
         was_training = model.training
         model.eval()

@@ -149,6 +149,13 @@ def test_instantiated_data_builds_the_datasets_of_before(rooms) -> None:
     assert [item["truth"]["answer"] for item in items] == [public_fields(item)["answer"] for item in chosen]
     assert [item["degradation_type"] for item in items] == [item["degradation_type"] for item in chosen]
     assert all(np.array_equal(a, b) for item, old in zip(items, chosen) for a, b in zip(item["images"], item_images(old)))
+    # on two processes each renders its share: every other item of the spread, in index order
+    shares = [data.val_items(rank, 2) for rank in range(2)]
+    for share, expected_share in zip(shares, (items[0::2], items[1::2])):
+        assert [item["truth"] for item in share] == [item["truth"] for item in expected_share]
+        assert all(np.array_equal(a, b) for x, y in zip(share, expected_share) for a, b in zip(x["images"], y["images"]))
+    with pytest.raises(ParameterError, match="rank"):
+        data.val_items(2, 2)
 
 
 def test_jsonl_source_still_evaluates_on_the_val_split(rooms, tmp_path) -> None:

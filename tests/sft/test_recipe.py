@@ -232,3 +232,17 @@ def test_sft_runs_from_an_installed_wheel(rooms, tmp_path) -> None:
     script = subprocess.run([str(site / "bin" / "spacedg-sft"), "+experiment=tiny", "--cfg", "job"], cwd=work, env=env,
                             capture_output=True, text=True, timeout=120)
     assert script.returncode == 0 and "path: tiny:qwen2_5_vl" in script.stdout  # the console script finds the packaged configs
+
+
+def test_a_val_share_renders_once_and_not_where_the_launch_does_not_evaluate() -> None:
+    """The app hands the trainer a ValShare (this rank's items, rendered at its first evaluation): a
+    launch that shards the weights (FSDP, ZeRO-3) returns before it, so it renders nothing."""
+    from types import SimpleNamespace
+
+    from spacedg.sft.trainer import ValShare
+
+    calls = []
+    share = ValShare(lambda: calls.append(1) or [{"degradation_type": "haze"}])
+    sharded = SimpleNamespace(val_items=share, shards_parameters=True)
+    assert SFTTrainer.evaluate(sharded) == {} and calls == []  # FSDP / ZeRO-3: never rendered
+    assert share.items() == share.items() == [{"degradation_type": "haze"}] and calls == [1]  # rendered once, kept
