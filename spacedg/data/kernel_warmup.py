@@ -2,8 +2,10 @@
 
 Why: numba compiles a kernel on its first call in a process that finds no cache entry for it, and
 spacedg's are large. Measured alone in one process with an empty cache (``NUMBA_CACHE_DIR``, this
-machine): the projection 15.3 s, each of the compositor's eight output specialisations 4.1–7.9 s,
-the sensor 11.1 s, the motion warp 8 s (gather 3.0, doubling 1.8, field 2.5, source 0.7). On a
+machine): the projection 9–11 s (and its serial twin 0.6 s; 27.4 + 11.2 s before its loop body was
+compiled once, outside the parallel loop: :data:`~spacedg.render.project_cpu.PROJECT_BLOCK`), each of the
+compositor's eight output specialisations 4.1–7.9 s, the sensor 11.1 s, the motion warp 8 s (gather
+3.0, doubling 1.8, field 2.5, source 0.7). On a
 fresh install every process that starts before the cache holds them compiles them again, at the
 same time: DataLoader workers, the jobs of an array, the two lanes of the test suite (2–3 minutes
 of a fresh clone's run, the same kernels in both; ``docs/command-line.md`` has the times). :func:`warm`

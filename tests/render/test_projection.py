@@ -192,3 +192,23 @@ def test_sh_colour_matches_numpy_evaluation() -> None:
         expected = np.maximum(eval_sh(g.sh.astype(np.float64), dirs), 0.0)
         shown = rects[:, 1] > rects[:, 0]
         np.testing.assert_allclose(packed[shown][:, project_cpu.CR : project_cpu.CBL + 1], expected[shown], atol=2e-6)
+
+
+@pytest.mark.parametrize("lens", [None, FisheyeLens(0.05, -0.01, 0.0, 0.0, max_theta=1.4)], ids=["pinhole", "fisheye"])
+def test_the_blocks_of_the_parallel_projection_change_no_row(lens) -> None:
+    """The parallel kernel projects blocks of PROJECT_BLOCK Gaussians: each row is what the projection of
+    that Gaussian alone gives (slices across the blocks' edges, the empty set), on the serial twin too."""
+    from spacedg.render.threads import serial_kernels
+
+    block = project_cpu.PROJECT_BLOCK
+    g, pose = scene(31, n=2 * block + 3)
+    cam = Camera(fx=300.0, fy=300.0, cx=160.0, cy=120.0, width=320, height=240, cam_to_world=pose, fisheye=lens)
+    settings = RasterSettings()
+    packed, rects = project_cpu.project_gaussians(g, cam, settings)
+    assert (rects[:, 1] > rects[:, 0]).sum() > block // 4  # many kept, in every block
+    for lo, hi in ((0, 1), (block - 2, block + 2), (2 * block - 1, 2 * block + 3), (5, 5)):
+        part, part_rects = project_cpu.project_gaussians(g.subset(slice(lo, hi)), cam, settings)
+        assert np.array_equal(part, packed[lo:hi]) and np.array_equal(part_rects, rects[lo:hi])
+    with serial_kernels():
+        twin, twin_rects = project_cpu.project_gaussians(g, cam, settings)
+    assert np.array_equal(twin, packed) and np.array_equal(twin_rects, rects)
