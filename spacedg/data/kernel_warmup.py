@@ -2,10 +2,11 @@
 
 Why: numba compiles a kernel on its first call in a process that finds no cache entry for it, and
 spacedg's are large. Measured alone in one process with an empty cache (``NUMBA_CACHE_DIR``, this
-machine): the projection 9–11 s (and its serial twin 0.6 s; 27.4 + 11.2 s before its loop body was
-compiled once, outside the parallel loop: :data:`~spacedg.render.project_cpu.PROJECT_BLOCK`), each of the
-compositor's eight output specialisations 4.1–7.9 s, the sensor 11.1 s, the motion warp 8 s (gather
-3.0, doubling 1.8, field 2.5, source 0.7). On a
+machine): the projection 9–11 s (its block body ~8–9 s, which its serial twin shares: the twin then
+takes 0.6 s; 27.4 + 11.2 s before that body was compiled once, outside the parallel loop:
+:data:`~spacedg.render.project_cpu.MIN_PROJECT_BLOCK`), each of the compositor's eight output
+specialisations 4.1–7.9 s, the sensor 11.1 s, the motion warp 8 s (gather 3.0, doubling 1.8, field 2.5,
+source 0.7). On a
 fresh install every process that starts before the cache holds them compiles them again, at the
 same time: DataLoader workers, the jobs of an array, the two lanes of the test suite (2–3 minutes
 of a fresh clone's run, the same kernels in both; ``docs/command-line.md`` has the times). :func:`warm`
@@ -13,7 +14,9 @@ runs the kernels of one group (:data:`GROUPS`) through the code paths that use t
 signatures those paths call them with, so a later process loads them from the cache;
 ``spacedg kernels`` runs the groups in parallel processes. Apart from a few small kernels (the
 binning, the encoder: about 3 s) the groups compile different kernels (a test holds the render group
-to :data:`_RENDERED_OUTPUTS`).
+to :data:`_RENDERED_OUTPUTS`); the projection's block body, which ``render`` and ``serial`` both call, is
+compiled by ``render`` first (``serial`` starts after ``images`` on two cores and loads it; run with
+more jobs than cores, both may compile it, ~8 s).
 
 - ``render``: a tiny synthetic room (10k Gaussians, the smallest, at 256 × 192) written and read
   back as a scene folder; its visibility and covisibility; two views clean, defocused and under a long

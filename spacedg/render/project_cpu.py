@@ -306,19 +306,28 @@ def _footprint(i, x, y, z, lens_coc, m, opacity, view, lims, fisheye, lens, dila
     return True
 
 
-#: Gaussians one call of :func:`_project_range` projects: the parallel kernel's loop runs over these
-#: blocks, so numba's parallel passes see one call instead of the whole projection inlined (their copy
-#: propagation over that body was most of its compile). Measured with an empty cache (``NUMBA_CACHE_DIR``,
-#: 10k Gaussians): the parallel kernel and its serial twin compiled in 27.4 + 11.2 s inlined, 9–11 + 0.6 s
-#: so (the twin calls the same compiled blocks); the same bytes; a projection of the built-in rooms
-#: (167k Gaussians, 640 × 480, paired medians) 0–4 % longer, a clean render 0.6–2 %.
-PROJECT_BLOCK = 2048
+#: Fewest Gaussians one call of :func:`_project_range` projects. The parallel kernel's loop runs over blocks of
+#: Gaussians (:func:`project_block`: about four a thread), so numba's parallel passes see one call instead of the
+#: whole projection inlined (their copy propagation over that body was most of its compile). Measured with an
+#: empty cache (``NUMBA_CACHE_DIR``, 10k Gaussians): the kernel and its serial twin compiled in 27.4 + 11.2 s
+#: inlined; now the block body ``_project_range`` ~8–9 s, shared by both (compiled once, cached on disk), the
+#: kernel's parallel loop ~1–2 s and the twin's ~0.6 s; the same bytes; a projection of three built-in rooms and
+#: a room of another seed (155k–205k Gaussians, 640 × 480, paired medians, one and two threads) 0–6 % longer
+#: (mostly 2–3 %), a clean render 0.6–2 %.
+MIN_PROJECT_BLOCK = 256
+
+
+def project_block(n: int, threads: int) -> int:
+    """Gaussians a block of the parallel projection holds, for ``n`` Gaussians on ``threads`` threads: about four
+    blocks a thread (numba hands each thread an equal run of blocks), at least :data:`MIN_PROJECT_BLOCK`."""
+    return max(MIN_PROJECT_BLOCK, -(-int(n) // (4 * max(1, int(threads)))))
 
 
 # As numba compiles a parallel loop's body, which this was: error_model="numpy" (a division by zero gives
-# ±inf or NaN, unchecked) and an unsigned index (no negative-index wraparound at the array accesses).
-# _nrt=False: no reference counting of the arrays the inlined helpers receive (atomic counts of arrays both
-# threads share); it allocates nothing. Without either the projection took 4–20 % longer (paired medians).
+# ±inf or NaN, unchecked) and an unsigned row index (no negative-index wraparound at the array accesses).
+# _nrt=False: no reference counting of the arrays the inlined helpers receive (atomic counts of arrays the
+# threads share); it allocates nothing (an allocation added here fails to compile). Without either the
+# projection took 4–20 % longer (paired medians).
 @numba.njit(cache=True, error_model="numpy", _nrt=False)
 def _project_range(
     lo, hi, means, quats, scales, opacities, sh, degree, want_color,
@@ -326,16 +335,18 @@ def _project_range(
     defocus, eps_cull, packed, rects,
     paired, sharp_view, s_lims, s_eps_cull, sharp_packed, sharp_rects,
 ):  # pragma: no cover - compiled; covered through render() and the oracle tests
-    """Project Gaussians ``lo`` to ``hi - 1`` (:func:`_project_kernel`'s loop body, its arguments grouped:
-    ``view = (fx, fy, cx, cy, width, height)``, ``lens = (k1, k2, k3, k4, theta_max)``, ``dilation = (model_x,
-    model_y, filter_x, filter_y)``, ``defocus = (aperture, focus, max_coc, defocus_extent, defocus_tail,
-    defocus_boost)``; ``sharp_view`` as the kernel's)."""
+    """Project Gaussians ``lo`` to ``hi - 1`` (0 ≤ lo ≤ hi ≤ N): :func:`_project_kernel`'s loop body, its arguments
+    grouped: ``view = (fx, fy, cx, cy, width, height)``, ``lens = (k1, k2, k3, k4, theta_max)``, ``dilation =
+    (model_x, model_y, filter_x, filter_y)``, ``defocus = (aperture, focus, max_coc, defocus_extent, defocus_tail,
+    defocus_boost)``; ``lims`` the view's :func:`_frustum`, ``eps_cull`` the pre-cull's dilation bound (px²);
+    ``paired``: the sharp camera's arrays are filled too, from ``sharp_view`` (as the kernel's), its frustum
+    ``s_lims`` and bound ``s_eps_cull``."""
     fx, fy, cx, cy, width, height = view
     k1, k2, k3, k4, theta_max = lens
     model_x, model_y, filter_x, filter_y = dilation
     aperture, focus, max_coc, defocus_extent, defocus_tail, defocus_boost = defocus
     s_fx, s_fy, s_cx, s_cy, s_width, s_height, s_model_x, s_model_y, s_filter_x, s_filter_y = sharp_view
-    for k in range(max(lo, 0), hi):
+    for k in range(lo, hi):
         i = np.uint64(k)  # the row (only ever an index)
         for c in range(PACKED):
             packed[i, c] = 0.0
@@ -431,9 +442,10 @@ def _project_kernel(
     near, far, model_x, model_y, filter_x, filter_y, opacity_extent,
     aperture, focus, max_coc, defocus_extent,
     packed, rects,
-    sharp_view, sharp_packed, sharp_rects,
+    sharp_view, sharp_packed, sharp_rects, block,
 ):  # pragma: no cover - compiled; covered through render() and the oracle tests
-    """Fill ``packed`` (N, PACKED) and ``rects`` (N, 4) in place; see the module docstring.
+    """Fill ``packed`` (N, PACKED) and ``rects`` (N, 4) in place, ``block`` Gaussians a call of :func:`_project_range`
+    (:func:`project_block`; the bytes do not depend on it); see the module docstring.
 
     ``sharp_packed`` (N, PACKED) and ``sharp_rects`` (N, 4), when not empty, get in the same pass the
     projection into a second camera of the same pose and lens, without defocus and with colour:
@@ -452,15 +464,17 @@ def _project_kernel(
     defocus_boost = 1.0 / (1.0 - defocus_tail)
     eps_cull = max(model_x + filter_x, model_y + filter_y)  # an upper bound of the dilation, for _surely_outside
     s_eps_cull = max(s_model_x + s_filter_x, s_model_y + s_filter_y)
-    blocks = (n + PROJECT_BLOCK - 1) // PROJECT_BLOCK
+    block = max(1, block)
+    blocks = (n + block - 1) // block
     for b in numba.prange(blocks):
         _project_range(
-            b * PROJECT_BLOCK, min(n, (b + 1) * PROJECT_BLOCK), means, quats, scales, opacities, sh, degree, want_color,
+            b * block, min(n, (b + 1) * block), means, quats, scales, opacities, sh, degree, want_color,
             view_rot, view_trans, cam_center, rot_norm, (fx, fy, cx, cy, width, height), lims, fisheye, (k1, k2, k3, k4, theta_max),
             near, far, (model_x, model_y, filter_x, filter_y), opacity_extent,
             (aperture, focus, max_coc, defocus_extent, defocus_tail, defocus_boost), eps_cull, packed, rects,
             paired, sharp_view, s_lims, s_eps_cull, sharp_packed, sharp_rects,
         )
+
 
 _NO_SHARP_VIEW = (1.0, 1.0, 0.0, 0.0, 1, 1, 0.0, 0.0, 0.0, 0.0)
 
@@ -500,9 +514,10 @@ def project_with_sharp(
 
 def _project(
     gaussians: Gaussians, camera: Camera, settings: RasterSettings, defocus: Defocus | None, want_color: bool,
-    sharp_camera: Camera | None, sharp_settings: RasterSettings | None,
+    sharp_camera: Camera | None, sharp_settings: RasterSettings | None, block: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Run :func:`_project_kernel` (the sharp arrays empty without ``sharp_camera``)."""
+    """Run :func:`_project_kernel` (the sharp arrays empty without ``sharp_camera``), ``block`` Gaussians a block
+    (default :func:`project_block` for this process's numba threads)."""
     n = len(gaussians)
     packed = np.empty((n, PACKED), np.float32)
     rects = np.empty((n, 4), np.int32)
@@ -529,5 +544,6 @@ def _project(
         defocus.aperture if defocus else 0.0, defocus.focus if defocus else 1.0, defocus.max_radius if defocus else 0.0,
         settings.defocus_extent or 0.0,
         packed, rects, sharp_view, sharp_packed, sharp_rects,
+        project_block(n, numba.get_num_threads()) if block is None else int(block),
     )
     return packed, rects, sharp_packed, sharp_rects

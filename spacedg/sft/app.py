@@ -10,7 +10,8 @@ FSDP 1/2, DeepSpeed ZeRO; presets ``train=fsdp``, ``fsdp1``, ``zero2``, ``zero3`
 loaded as the launch needs it (storage dtypes for the launch's mixed precision; FSDP ranks > 0 on
 the meta device; ZeRO-3 partitioned). Then the model (:func:`~spacedg.sft.model.prepare_model`),
 the training data (online degraded samples or an exported JSONL, under a token budget:
-:mod:`spacedg.sft.data`), the val items, the collator (:mod:`spacedg.sft.collator`) and the
+:mod:`spacedg.sft.data`), the val split (checked now; each rank renders its share of the val items at the
+first evaluation), the collator (:mod:`spacedg.sft.collator`) and the
 trainer (:mod:`spacedg.sft.trainer`, with the loss of :mod:`spacedg.sft.loss`), then it trains.
 ``output_dir`` receives:
 
@@ -219,6 +220,21 @@ def _seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
+def _val_share(data: DataOptions, rank: int, world: int) -> ValShare | None:
+    """This rank's evaluation items (``None`` without evaluation): the ``val`` split built and checked now (a
+    wrong scene or an empty split fails before training), its items rendered at the first evaluation, this
+    rank's share only (none under FSDP or ZeRO-3, which do not evaluate)."""
+    val = data.val_dataset()
+    if val is None:
+        return None
+    if len(val) == 0:
+        raise ParameterError(
+            f"data.val: the val split of {data.scenes_description()} holds no questions to evaluate on (with these "
+            "question types); set data.val.samples=0 to train without evaluation, or give scenes whose val split has questions"
+        )
+    return ValShare(partial(data.val_items, rank, world, val))
+
+
 def run(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     """Train as ``cfg`` (the composed Hydra config, or a plain dict of the same shape) says;
     returns the summary also written to ``train_summary.json`` (on every rank; rank 0 writes it)."""
@@ -251,16 +267,15 @@ def run(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     train_data = data.train_data()
     lengths = token_lengths(train_data, processor)
     budgeted = BudgetedDataset(train_data, lengths, data.max_length)
-    # this rank's evaluation items, rendered at the first evaluation (none under FSDP or ZeRO-3, which do not evaluate)
-    val_items = ValShare(partial(data.val_items, args.process_index, args.world_size)) if data.val.samples > 0 else None
+    val_items = _val_share(data, args.process_index, args.world_size)
     if data.render_device not in (None, "cpu") and args.dataloader_num_workers > 0:
         raise ParameterError(
             f"data.render_device={data.render_device} renders on the GPU in the training process; DataLoader workers must not "
             f"touch CUDA: set train.dataloader_num_workers=0 (got {args.dataloader_num_workers})"
         )
     if args.dataloader_num_workers > 0:
-        # The main process renders (the val items, at each evaluation): numba's OpenMP threads are not fork-safe,
-        # so workers start from a fork server (the datasets pickle small).
+        # The main process renders (the val items, at the first evaluation): numba's OpenMP threads are not
+        # fork-safe, so workers start from a fork server (the datasets pickle small).
         multiprocessing.set_start_method("forkserver", force=True)
     probe = MemoryProbe()
     trainer = SFTTrainer(

@@ -165,18 +165,22 @@ class DataOptions:
         """One line saying what the evaluation renders (recorded in ``train_summary.json``)."""
         if self.val.samples <= 0:
             return "none (data.val.samples=0)"
-        scenes = f"the scenes under data.scenes ({len(self.scenes)} path(s))" if self.scenes else f"{self.builtin_rooms} built-in rooms"
-        return f"{self.val.samples} items of the val split of {scenes}, rendered online"
+        return f"{self.val.samples} items of the val split of {self.scenes_description()}, rendered online"
 
-    def val_items(self, rank: int = 0, world: int = 1) -> list[dict[str, Any]]:
+    def scenes_description(self) -> str:
+        """What the datasets read, in words: the scenes under ``data.scenes`` or the built-in rooms."""
+        return f"the scenes under data.scenes ({len(self.scenes)} path(s))" if self.scenes else f"{self.builtin_rooms} built-in rooms"
+
+    def val_items(self, rank: int = 0, world: int = 1, dataset: SpaceDGDataset | None = None) -> list[dict[str, Any]]:
         """``val.samples`` items of the ``val`` split (a spread drawn with ``seed``), rendered once,
         each with its prompt (no answer), images, condition and the fields the scorer reads.
 
         ``rank`` of ``world`` processes: only that process's share, every ``world``-th item of the
-        spread in index order from the ``rank``-th (the items it answers; all of them by default)."""
+        spread in index order from the ``rank``-th (the items it answers; all of them by default).
+        ``dataset``: :meth:`val_dataset`, built before (default: built here)."""
         world = check_int(world, "val_items: world", minimum=1)
         rank = check_int(rank, "val_items: rank", minimum=0, maximum=world - 1)
-        dataset = self.val_dataset()
+        dataset = self.val_dataset() if dataset is None else dataset
         if dataset is None:
             return []
         order = np.random.default_rng(self.seed).permutation(len(dataset))[:self.val.samples]

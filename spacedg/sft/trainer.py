@@ -71,7 +71,12 @@ class ValShare:
         self._render = render
         self._items: list[ValItem] | None = None
 
-    def items(self) -> list[ValItem]:
+    def __bool__(self) -> bool:
+        """Always true, even for an empty share: every rank then reaches the evaluation's gather (a rank that
+        returned early on an empty share would leave the others waiting in it)."""
+        return True
+
+    def rendered(self) -> list[ValItem]:
         """This process's items (rendered on the first call, then kept)."""
         if self._items is None:
             self._items = list(self._render())
@@ -289,10 +294,10 @@ class SFTTrainer(Trainer):
 
     # -------------------------------------------------------------- evaluation
     def evaluate(self, eval_dataset: Any = None, ignore_keys: Any = None, metric_key_prefix: str = "eval") -> dict[str, float]:
-        if not self.val_items or self.shards_parameters:  # a ValShare is truthy on every rank: all of them gather
+        if not self.val_items or self.shards_parameters:  # a ValShare is true on every rank: all of them gather
             return {}
         rank, world = self.args.process_index, self.args.world_size
-        mine = self.val_items.items() if isinstance(self.val_items, ValShare) else self.val_items[rank::world]
+        mine = self.val_items.rendered() if isinstance(self.val_items, ValShare) else self.val_items[rank::world]
         model = self.accelerator.unwrap_model(self.model)
         was_training = model.training
         model.eval()

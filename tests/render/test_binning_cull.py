@@ -118,7 +118,7 @@ def test_pre_cull_changes_no_projection(defocus: Defocus | None, lens: FisheyeLe
         s.near, s.far, *footprint_dilation(cam, s), s.opacity_extent,
         defocus.aperture if defocus else 0.0, defocus.focus if defocus else 1.0, defocus.max_radius if defocus else 0.0,
         s.defocus_extent or 0.0, ref_packed, ref_rects, project_cpu._NO_SHARP_VIEW,
-        np.empty((0, project_cpu.PACKED), np.float32), np.empty((0, 4), np.int32),
+        np.empty((0, project_cpu.PACKED), np.float32), np.empty((0, 4), np.int32), project_cpu.project_block(len(g), 2),
     )
     np.testing.assert_array_equal(packed, ref_packed)
     np.testing.assert_array_equal(rects, ref_rects)

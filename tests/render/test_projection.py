@@ -196,19 +196,33 @@ def test_sh_colour_matches_numpy_evaluation() -> None:
 
 @pytest.mark.parametrize("lens", [None, FisheyeLens(0.05, -0.01, 0.0, 0.0, max_theta=1.4)], ids=["pinhole", "fisheye"])
 def test_the_blocks_of_the_parallel_projection_change_no_row(lens) -> None:
-    """The parallel kernel projects blocks of PROJECT_BLOCK Gaussians: each row is what the projection of
-    that Gaussian alone gives (slices across the blocks' edges, the empty set), on the serial twin too."""
+    """The parallel kernel projects blocks of Gaussians (project_block): every row is the projection of that
+    Gaussian alone, whatever the block size, with kept Gaussians on the first and last rows of every block and
+    of the set; with the paired sharp pass too, and on the serial twin."""
+    from spacedg.render.settings import Defocus
     from spacedg.render.threads import serial_kernels
 
-    block = project_cpu.PROJECT_BLOCK
-    g, pose = scene(31, n=2 * block + 3)
+    g, pose = scene(31, n=600)
     cam = Camera(fx=300.0, fy=300.0, cx=160.0, cy=120.0, width=320, height=240, cam_to_world=pose, fisheye=lens)
     settings = RasterSettings()
-    packed, rects = project_cpu.project_gaussians(g, cam, settings)
-    assert (rects[:, 1] > rects[:, 0]).sum() > block // 4  # many kept, in every block
-    for lo, hi in ((0, 1), (block - 2, block + 2), (2 * block - 1, 2 * block + 3), (5, 5)):
-        part, part_rects = project_cpu.project_gaussians(g.subset(slice(lo, hi)), cam, settings)
-        assert np.array_equal(part, packed[lo:hi]) and np.array_equal(part_rects, rects[lo:hi])
+    alone, alone_rects = project_cpu.project_gaussians(g, cam, settings)
+    kept, culled = np.flatnonzero(alone_rects[:, 1] > alone_rects[:, 0]), np.flatnonzero(alone_rects[:, 1] <= alone_rects[:, 0])
+    n, block = 30, 7
+    edges = sorted({0, n - 1} | {e for b in range(0, n, block) for e in (b, min(b + block, n) - 1)})
+    order = np.array([kept[k] if k in edges else culled[k] for k in range(n)])  # kept rows on every block's edges
+    h = g.subset(order)
+    expected = project_cpu._project(h, cam, settings, None, True, None, None, block=1)
+    assert np.array_equal(expected[0], alone[order]) and np.array_equal(expected[1], alone_rects[order])
+    assert (expected[1][edges, 1] > expected[1][edges, 0]).all()
+    defocus = Defocus(aperture=4.0, focus=3.0, max_radius=30.0)
+    paired = project_cpu._project(h, cam, settings, defocus, True, cam, settings, block=1)
+    for size in (2, block, n - 1, n, 4 * n, None):
+        got = project_cpu._project(h, cam, settings, None, True, None, None, block=size)
+        assert all(np.array_equal(a, b) for a, b in zip(got, expected)), size
+        got = project_cpu._project(h, cam, settings, defocus, True, cam, settings, block=size)
+        assert all(np.array_equal(a, b) for a, b in zip(got, paired)), size
     with serial_kernels():
-        twin, twin_rects = project_cpu.project_gaussians(g, cam, settings)
-    assert np.array_equal(twin, packed) and np.array_equal(twin_rects, rects)
+        twin = project_cpu._project(h, cam, settings, None, True, None, None, block=block)
+    assert all(np.array_equal(a, b) for a, b in zip(twin, expected))
+    empty = project_cpu.project_gaussians(g.subset(slice(0, 0)), cam, settings)
+    assert empty[0].shape == (0, project_cpu.PACKED) and empty[1].shape == (0, 4)

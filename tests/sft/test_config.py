@@ -215,3 +215,14 @@ def test_bad_configs_fail_before_any_model_or_index(override, error, message, tm
     monkeypatch.setattr(app, "save_tiny_vlm", untouchable)
     with pytest.raises(error, match=message):
         app.run(compose_sft("+experiment=tiny", f"output_dir={tmp_path}", override))
+
+
+def test_an_empty_val_split_fails_before_training_with_what_to_do() -> None:
+    """The app builds the val split at start-up (its items render later, at the first evaluation): a split
+    without questions stops the run there, saying how to train without evaluation."""
+    from types import SimpleNamespace
+
+    data = SimpleNamespace(val_dataset=lambda: [], scenes_description=lambda: "3 built-in rooms")
+    with pytest.raises(ParameterError, match=r"val split of 3 built-in rooms holds no questions.*data.val.samples=0"):
+        app._val_share(data, 0, 1)
+    assert app._val_share(SimpleNamespace(val_dataset=lambda: None), 0, 1) is None  # data.val.samples=0

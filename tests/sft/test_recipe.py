@@ -234,9 +234,10 @@ def test_sft_runs_from_an_installed_wheel(rooms, tmp_path) -> None:
     assert script.returncode == 0 and "path: tiny:qwen2_5_vl" in script.stdout  # the console script finds the packaged configs
 
 
-def test_a_val_share_renders_once_and_not_where_the_launch_does_not_evaluate() -> None:
-    """The app hands the trainer a ValShare (this rank's items, rendered at its first evaluation): a
-    launch that shards the weights (FSDP, ZeRO-3) returns before it, so it renders nothing."""
+def test_a_val_share_renders_once_and_not_where_the_launch_does_not_evaluate(monkeypatch) -> None:
+    """The app hands the trainer a ValShare (this rank's items, rendered at its first evaluation): a launch
+    that shards the weights (FSDP, ZeRO-3) returns before it, so it renders nothing; a rank whose share is
+    empty (fewer val samples than ranks) still joins the gather of the others' scores."""
     from types import SimpleNamespace
 
     from spacedg.sft.trainer import ValShare
@@ -245,4 +246,21 @@ def test_a_val_share_renders_once_and_not_where_the_launch_does_not_evaluate() -
     share = ValShare(lambda: calls.append(1) or [{"degradation_type": "haze"}])
     sharded = SimpleNamespace(val_items=share, shards_parameters=True)
     assert SFTTrainer.evaluate(sharded) == {} and calls == []  # FSDP / ZeRO-3: never rendered
-    assert share.items() == share.items() == [{"degradation_type": "haze"}] and calls == [1]  # rendered once, kept
+    assert share.rendered() == share.rendered() == [{"degradation_type": "haze"}] and calls == [1]  # rendered once, kept
+    # rank 1 of 2 with nothing to answer: it gathers rank 0's score all the same
+    gathered_by = []
+
+    def gather(parts: list, mine: list) -> None:
+        gathered_by.append(mine)
+        parts[:] = [[("haze", 1.0)], mine]
+
+    monkeypatch.setattr(torch.distributed, "all_gather_object", gather)
+    logged = []
+    rank = SimpleNamespace(
+        val_items=ValShare(lambda: []), shards_parameters=False, args=SimpleNamespace(process_index=1, world_size=2),
+        accelerator=SimpleNamespace(unwrap_model=lambda model: model), model=torch.nn.Linear(1, 1), val_batch_size=1,
+        log=logged.append, callback_handler=SimpleNamespace(on_evaluate=lambda *args: "control"), state=None, control=None,
+    )
+    assert bool(rank.val_items)
+    metrics = SFTTrainer.evaluate(rank)
+    assert gathered_by == [[]] and metrics == {"eval_score": 1.0, "eval_score_haze": 1.0, "eval_samples": 1.0} == logged[0]
