@@ -333,19 +333,15 @@ def _project_range(
     lo, hi, means, quats, scales, opacities, sh, degree, want_color,
     view_rot, view_trans, cam_center, rot_norm, view, lims, fisheye, lens, near, far, dilation, opacity_extent,
     defocus, eps_cull, packed, rects,
-    paired, sharp_view, s_lims, s_eps_cull, sharp_packed, sharp_rects,
+    paired, s_view, s_dilation, s_lims, s_eps_cull, sharp_packed, sharp_rects,
 ):  # pragma: no cover - compiled; covered through render() and the oracle tests
     """Project Gaussians ``lo`` to ``hi - 1`` (0 ≤ lo ≤ hi ≤ N): :func:`_project_kernel`'s loop body, its arguments
     grouped: ``view = (fx, fy, cx, cy, width, height)``, ``lens = (k1, k2, k3, k4, theta_max)``, ``dilation =
     (model_x, model_y, filter_x, filter_y)``, ``defocus = (aperture, focus, max_coc, defocus_extent, defocus_tail,
     defocus_boost)``; ``lims`` the view's :func:`_frustum`, ``eps_cull`` the pre-cull's dilation bound (px²);
-    ``paired``: the sharp camera's arrays are filled too, from ``sharp_view`` (as the kernel's), its frustum
-    ``s_lims`` and bound ``s_eps_cull``."""
-    fx, fy, cx, cy, width, height = view
-    k1, k2, k3, k4, theta_max = lens
-    model_x, model_y, filter_x, filter_y = dilation
+    ``paired``: the sharp camera's arrays are filled too, its ``s_view``, ``s_dilation``, frustum ``s_lims`` and
+    bound ``s_eps_cull`` as the view's."""
     aperture, focus, max_coc, defocus_extent, defocus_tail, defocus_boost = defocus
-    s_fx, s_fy, s_cx, s_cy, s_width, s_height, s_model_x, s_model_y, s_filter_x, s_filter_y = sharp_view
     for k in range(lo, hi):
         i = np.uint64(k)  # the row (only ever an index)
         for c in range(PACKED):
@@ -366,12 +362,12 @@ def _project_range(
         # the circle of confusion (px; 0 without defocus): under defocus it widens every footprint by coc² px²
         lens_coc = min(aperture * abs(z - focus) / z, max_coc) if aperture > 0.0 else 0.0
         main_in = not _pre_culled(
-            x, y, z, scales, i, rot_norm, (fx, fy, cx, cy, width, height), lims, fisheye, (k1, k2, k3, k4, theta_max), eps_cull + lens_coc * lens_coc,
+            x, y, z, scales, i, rot_norm, view, lims, fisheye, lens, eps_cull + lens_coc * lens_coc,
         )
         sharp_in = False
         if paired:
             sharp_in = not _pre_culled(
-                x, y, z, scales, i, rot_norm, (s_fx, s_fy, s_cx, s_cy, s_width, s_height), s_lims, fisheye, (k1, k2, k3, k4, theta_max), s_eps_cull,
+                x, y, z, scales, i, rot_norm, s_view, s_lims, fisheye, lens, s_eps_cull,
             )
         if not (main_in or sharp_in):
             continue
@@ -405,15 +401,13 @@ def _project_range(
         main_kept = False
         if main_in:
             main_kept = _footprint(
-                i, x, y, z, lens_coc, m, opacity, (fx, fy, cx, cy, width, height), lims, fisheye, (k1, k2, k3, k4, theta_max),
-                (model_x, model_y, filter_x, filter_y), opacity_extent, (aperture, defocus_extent, defocus_tail, defocus_boost),
+                i, x, y, z, lens_coc, m, opacity, view, lims, fisheye, lens, dilation, opacity_extent, (aperture, defocus_extent, defocus_tail, defocus_boost),
                 packed, rects,
             )
         sharp_kept = False
         if sharp_in:
             sharp_kept = _footprint(
-                i, x, y, z, 0.0, m, opacity, (s_fx, s_fy, s_cx, s_cy, s_width, s_height), s_lims, fisheye, (k1, k2, k3, k4, theta_max),
-                (s_model_x, s_model_y, s_filter_x, s_filter_y), opacity_extent, (0.0, defocus_extent, defocus_tail, defocus_boost),
+                i, x, y, z, 0.0, m, opacity, s_view, s_lims, fisheye, lens, s_dilation, opacity_extent, (0.0, defocus_extent, defocus_tail, defocus_boost),
                 sharp_packed, sharp_rects,
             )
         if (want_color and main_kept) or sharp_kept:
@@ -472,7 +466,8 @@ def _project_kernel(
             view_rot, view_trans, cam_center, rot_norm, (fx, fy, cx, cy, width, height), lims, fisheye, (k1, k2, k3, k4, theta_max),
             near, far, (model_x, model_y, filter_x, filter_y), opacity_extent,
             (aperture, focus, max_coc, defocus_extent, defocus_tail, defocus_boost), eps_cull, packed, rects,
-            paired, sharp_view, s_lims, s_eps_cull, sharp_packed, sharp_rects,
+            paired, (s_fx, s_fy, s_cx, s_cy, s_width, s_height), (s_model_x, s_model_y, s_filter_x, s_filter_y), s_lims, s_eps_cull,
+            sharp_packed, sharp_rects,
         )
 
 

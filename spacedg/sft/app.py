@@ -281,7 +281,7 @@ def run(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     trainer = SFTTrainer(
         model=model, args=args, train_dataset=budgeted, eval_dataset=val_items,
         data_collator=SFTCollator(processor, data.max_length, trim_logits=True),
-        val_items=val_items or [], processor=processor, val_max_new_tokens=data.val.max_new_tokens,
+        val_items=val_items, processor=processor, val_max_new_tokens=data.val.max_new_tokens,
         val_batch_size=data.val.batch_size, loss=loss, model_options=options,
         callbacks=[SaveProcessorCallback(processor, {"spacedg_sft.yaml": OmegaConf.to_yaml(OmegaConf.create(config))}),
                    EpochCallback(train_data), probe],

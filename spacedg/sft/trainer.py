@@ -72,8 +72,8 @@ class ValShare:
         self._items: list[ValItem] | None = None
 
     def __bool__(self) -> bool:
-        """Always true, even for an empty share: every rank then reaches the evaluation's gather (a rank that
-        returned early on an empty share would leave the others waiting in it)."""
+        """Always true, even for an empty share: an empty share is still this rank's part of the evaluation (its
+        rank joins the gather; one that skipped it would leave the others waiting)."""
         return True
 
     def rendered(self) -> list[ValItem]:
@@ -139,8 +139,9 @@ class SFTTrainer(Trainer):
     evaluation (see the module docstring).
 
     Args:
-        val_items: the evaluation items, all of them (each rank answers its share; may be empty: no
-            evaluation), or a :class:`ValShare`: this rank's share alone, rendered when first evaluated.
+        val_items: the evaluation items, all of them (each rank answers every ``world``-th from its rank;
+            empty or ``None``: no evaluation), or a :class:`ValShare`: this rank's share alone, rendered when
+            first evaluated.
         processor: the model's processor (for generation and ``final/``).
         val_max_new_tokens / val_batch_size: generation settings of the evaluation (``data.val``).
         loss: ``"tokens"`` or ``"samples"`` (:mod:`spacedg.sft.loss`); ``None`` keeps the model's own loss.
@@ -148,7 +149,7 @@ class SFTTrainer(Trainer):
         Other arguments go to :class:`transformers.Trainer`.
     """
 
-    def __init__(self, *args: Any, val_items: Sequence[ValItem] | ValShare, processor: Any, val_max_new_tokens: int,
+    def __init__(self, *args: Any, val_items: Sequence[ValItem] | ValShare | None, processor: Any, val_max_new_tokens: int,
                  val_batch_size: int, loss: str | None, model_options: ModelOptions | None = None,
                  **kwargs: Any) -> None:
         if loss is not None:
@@ -156,7 +157,7 @@ class SFTTrainer(Trainer):
         super().__init__(*args, **kwargs)
         self.loss_mode = loss
         self.model_options = model_options
-        self.val_items = val_items if isinstance(val_items, ValShare) else list(val_items)
+        self.val_items: ValShare | None = val_items if isinstance(val_items, ValShare) else self._share_of(val_items)
         self.val_processor = processor
         self.val_max_new_tokens = int(val_max_new_tokens)
         self.val_batch_size = max(1, int(val_batch_size))
@@ -293,11 +294,17 @@ class SFTTrainer(Trainer):
         return written
 
     # -------------------------------------------------------------- evaluation
-    def evaluate(self, eval_dataset: Any = None, ignore_keys: Any = None, metric_key_prefix: str = "eval") -> dict[str, float]:
-        if not self.val_items or self.shards_parameters:  # a ValShare is true on every rank: all of them gather
-            return {}
+    def _share_of(self, items: Sequence[ValItem] | None) -> ValShare | None:
+        """This rank's share of all the evaluation ``items`` (every ``world``-th from its rank); ``None`` for none."""
+        every = list(items or [])
         rank, world = self.args.process_index, self.args.world_size
-        mine = self.val_items.rendered() if isinstance(self.val_items, ValShare) else self.val_items[rank::world]
+        return ValShare(lambda: every[rank::world]) if every else None
+
+    def evaluate(self, eval_dataset: Any = None, ignore_keys: Any = None, metric_key_prefix: str = "eval") -> dict[str, float]:
+        if self.val_items is None or self.shards_parameters:  # an empty share still gathers the others' scores
+            return {}
+        world = self.args.world_size
+        mine = self.val_items.rendered()
         model = self.accelerator.unwrap_model(self.model)
         was_training = model.training
         model.eval()
