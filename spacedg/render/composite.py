@@ -219,10 +219,10 @@ def _conserved(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The blurred view's ``rgb`` (linear; the placeholder without ``want_color``) and ``alpha`` with the
     sharp view's local flux (:mod:`spacedg.render.defocus_flux`)."""
-    from spacedg.render.defocus_flux import conserve_light, flux_lengths
+    from spacedg.render.defocus_flux import conserve_light, sharp_flux_lengths
 
-    seen = sharp.alpha > 1e-3
-    length, blur = flux_lengths(defocus.radius(np.maximum(sharp.depth[seen], 1e-6)), sharp.alpha[seen])
+    # flux_lengths of the covered pixels' circles of confusion (alpha > 1e-3), compiled
+    length, blur = sharp_flux_lengths(sharp.depth, sharp.alpha, defocus.aperture, defocus.focus, defocus.max_radius)
     alpha = images["alpha"]
     rgb = images["rgb"] if want_color else np.zeros((*alpha.shape, 3), np.float32)
     rgb, alpha = conserve_light(rgb, alpha, sharp.rgb, sharp.alpha, camera, sharp.wide, length, blur)

@@ -43,7 +43,7 @@ import numpy as np
 from spacedg.render import kernel_cache  # noqa: F401 - numba's cache entries checked before any kernel here compiles
 from spacedg.render.threads import fork_safe
 
-__all__ = ["FLUX_LENGTH", "FLUX_MIN_SIGMA", "FLUX_RATIO", "flux_lengths", "flux_scale", "conserve_light", "linear_taps", "sample_shifted"]
+__all__ = ["FLUX_LENGTH", "FLUX_MIN_SIGMA", "FLUX_RATIO", "flux_lengths", "flux_scale", "conserve_light", "linear_taps", "sample_shifted", "sharp_flux_lengths"]
 
 #: ``L`` in multiples of the 95th-percentile circle of confusion of the covered pixels (measured on
 #: the defocus table: 0.5 gave 35.9–57.5 dB against the thin lens, 1.0 35.1–57.5, 2.0 33.1–53.7).
@@ -72,6 +72,92 @@ def flux_lengths(coc: np.ndarray, weight: np.ndarray | None = None) -> tuple[flo
     cumulative = np.cumsum(counts)
     at = lambda q: float(edges[min(int(np.searchsorted(cumulative, q * cumulative[-1])) + 1, 1024)])  # noqa: E731
     return max(FLUX_LENGTH * at(0.95), FLUX_MIN_SIGMA), at(0.5)
+
+
+def sharp_flux_lengths(depth: np.ndarray, alpha: np.ndarray, aperture: float, focus: float, max_radius: float) -> tuple[float, float]:
+    """:func:`flux_lengths` of the sharp pass's covered pixels, compiled: the same ``(L, r)`` bit for bit as
+    ``flux_lengths(Defocus.radius(np.maximum(depth[seen], 1e-6)), alpha[seen])`` with ``seen = alpha > 1e-3``
+    (``depth`` metres and ``alpha``, float32 (h, w); ``aperture``, ``focus``, ``max_radius`` the
+    :class:`~spacedg.render.settings.Defocus`'s), without its temporary arrays (3.2 → ~0.3 ms a 320 × 240 pass).
+    The circles of confusion in float64 as ``Defocus.radius`` forms them, the weighted histogram with numpy's
+    bin assignment, its 65536-value blocks and its summation order (``np.histogram``, ``np.bincount``)."""
+    depth = np.ascontiguousarray(depth, np.float32).reshape(-1)
+    alpha = np.ascontiguousarray(alpha, np.float32).reshape(-1)
+    if depth.shape != alpha.shape:
+        raise ValueError(f"sharp_flux_lengths: depth and alpha must have one shape, got {depth.shape} and {alpha.shape}")
+    coc = np.empty(depth.shape[0], np.float64)
+    weight = np.empty(depth.shape[0], np.float64)
+    count = _covered_cocs(depth, alpha, float(aperture), float(focus), float(max_radius), coc, weight)
+    if count == 0:
+        return FLUX_MIN_SIGMA, 0.0
+    top = float(coc[:count].max())
+    if top <= 0.0:
+        return FLUX_MIN_SIGMA, 0.0
+    edges = np.linspace(0.0, top, _FLUX_BINS + 1)
+    cumulative = np.cumsum(_block_histogram(coc[:count], weight[:count], edges, top))
+    at = lambda q: float(edges[min(int(np.searchsorted(cumulative, q * cumulative[-1])) + 1, _FLUX_BINS)])  # noqa: E731
+    return max(FLUX_LENGTH * at(0.95), FLUX_MIN_SIGMA), at(0.5)
+
+
+#: Bins of :func:`flux_lengths`' weighted histogram; numpy's block of values (``np.histogram``'s ``BLOCK``).
+_FLUX_BINS = 1024
+_HISTOGRAM_BLOCK = 65536
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _covered_cocs(depth, alpha, aperture, focus, max_radius, coc, weight):  # pragma: no cover - compiled
+    """The covered pixels' (``alpha > 1e-3``) circles of confusion and weights, in pixel order, into ``coc`` and ``weight``
+    (float64); returns how many. ``np.maximum(depth, float32(1e-6))`` (a NaN stays), widened to float64, then
+    ``Defocus.radius``: ``min(aperture · |max(d, 1e-9) − focus| / max(d, 1e-9), max_radius)``; a value whose
+    circle of confusion or weight is not finite is left out (:func:`flux_lengths`' ``keep``)."""
+    floor = np.float32(1e-6)
+    threshold = np.float32(1e-3)
+    n = 0
+    for i in range(depth.shape[0]):
+        a = alpha[i]
+        if not a > threshold:
+            continue
+        z = depth[i]
+        z = z if (z != z or z >= floor) else floor  # np.maximum: NaN propagates
+        d = np.float64(z)
+        d = d if (d != d or d >= 1e-9) else 1e-9
+        r = aperture * abs(d - focus) / d
+        r = r if (r != r or r <= max_radius) else max_radius  # np.minimum: NaN propagates
+        w = np.float64(a)
+        if not (math.isfinite(r) and math.isfinite(w) and w > 0.0):
+            continue
+        coc[n] = r
+        weight[n] = w
+        n += 1
+    return n
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _block_histogram(values, weights, edges, top):  # pragma: no cover - compiled
+    """``np.histogram(values, bins=len(edges) − 1, range=(0, top), weights=weights)[0]`` for values in [0, top]:
+    each block of :data:`_HISTOGRAM_BLOCK` values binned as numpy bins them (``(v − 0) / top · bins``, truncated, the
+    last edge in the last bin, corrected by one against ``edges``) and summed from 0 in value order, the blocks' sums
+    then added to the histogram in turn."""
+    bins = edges.shape[0] - 1
+    counts = np.zeros(bins, np.float64)
+    block = np.empty(bins, np.float64)
+    for start in range(0, values.shape[0], _HISTOGRAM_BLOCK):
+        block[:] = 0.0
+        for i in range(start, min(start + _HISTOGRAM_BLOCK, values.shape[0])):
+            v = values[i]
+            if not (v >= 0.0 and v <= top):  # numpy's keep (a circle of confusion is never negative)
+                continue
+            k = int((v - 0.0) / top * bins)
+            if k == bins:
+                k -= 1
+            if v < edges[k]:
+                k -= 1
+            if v >= edges[k + 1] and k != bins - 1:
+                k += 1
+            block[k] += weights[i]
+        for k in range(bins):
+            counts[k] += block[k]
+    return counts
 
 
 def flux_scale(coc_estimate: float) -> float:

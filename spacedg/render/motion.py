@@ -289,6 +289,7 @@ def render_motion_keyframes(
     dst = np.empty_like(src)
     geometry = np.empty((canvas.height, canvas.width), np.float32)
     field = np.empty((canvas.height, canvas.width, 4), np.float32)
+    extents = np.empty(4, np.float32)  # the field's largest |c_u|, |c_v|, |d_u|, |d_v| (sanitise_field)
     for k, pose in enumerate(key_poses):
         images, stats = job.composite(canvas.with_pose(pose), frozenset({"rgb", "depth"}))
         pairs += stats["pairs"]
@@ -303,12 +304,15 @@ def render_motion_keyframes(
         # a path longer than the canvas reads clamped texels anyway; a non-finite one (a surface at
         # the camera centre, metres of motion at 1e3) is no path: both bound the gather's work and reads
         reach = np.float32(2 * (canvas.width + canvas.height))
-        longest = motion_warp.sanitise_field(field, reach)
+        longest = motion_warp.sanitise_field(field, reach, extents)
         n_passes = doubling_passes(longest) if passes is None else passes
         covered_all = bool(lowest > 0.0)  # nothing to skip (a room): no occupancy tables
+        # covered: each pass only where the gather and the later passes read (an occupancy table would
+        # count pixels a restricted pass left as they were, so a canvas with empty pixels takes every pixel)
+        regions = motion_warp.pass_regions(src.shape[:2], margin, (camera.height, camera.width), n_passes, extents) if covered_all else None
         for j in range(n_passes):
             sat = motion_warp.FULL if covered_all else motion_warp.occupancy(src)
-            motion_warp.doubling_pass(src, field, np.float32(0.25 / 2**j), sat, dst)
+            motion_warp.doubling_pass(src, field, np.float32(0.25 / 2**j), sat, dst, regions[j] if regions else None)
             src, dst = dst, src
         sat = motion_warp.FULL if covered_all else motion_warp.occupancy(src)
         motion_warp.gather(src, field, margin, 1.0 / 2**n_passes, spacing, sat, acc)

@@ -10,7 +10,7 @@ import pytest
 
 from spacedg.render import Camera, Defocus, render
 from spacedg.render.defocus import measurement_camera
-from spacedg.render.defocus_flux import conserve_light, flux_lengths, flux_scale, sample_shifted
+from spacedg.render.defocus_flux import conserve_light, flux_lengths, flux_scale, sample_shifted, sharp_flux_lengths
 from tests.render_helpers import camera, random_gaussians
 
 CAM = Camera(40.0, 40.0, 32.0, 24.0, 64, 48, np.eye(4))
@@ -70,6 +70,31 @@ def test_black_and_empty_images_stay_finite() -> None:
         assert rgb.max() <= 4.0 * blurred.max() + 1e-6 and 0.0 <= alpha_out.min() and alpha_out.max() <= 1.0
     assert flux_lengths(np.array([])) == (1.0, 0.0) and flux_lengths(np.array([np.nan, 8.0]))[0] == pytest.approx(4.0)
     assert flux_scale(0.5) == 1.0 and flux_scale(4.0) == 0.5 and flux_scale(float("nan")) == 1.0
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_compiled_flux_lengths_are_the_numpy_ones(seed: int) -> None:
+    """:func:`sharp_flux_lengths` (the compiled path the renderer takes) gives :func:`flux_lengths` of the covered
+    pixels' circles of confusion bit for bit: sizes of one pixel to two histogram blocks, NaN and infinite depths,
+    NaN alphas, nothing covered, one depth everywhere (every circle of confusion equal), the focus in the scene."""
+    rng = np.random.default_rng(4000 + seed)
+    height, width = (480, 300) if seed == 0 else tuple(int(v) for v in rng.integers(1, 160, 2))
+    depth = (rng.random((height, width)) * rng.choice([0.01, 5.0, 100.0]) + rng.choice([0.0, 0.5])).astype(np.float32)
+    alpha = rng.random((height, width)).astype(np.float32)
+    if seed % 4 == 1:
+        depth.flat[rng.integers(0, depth.size, 3)] = np.nan
+        depth.flat[rng.integers(0, depth.size, 3)] = np.inf
+    if seed % 5 == 2:
+        alpha.flat[rng.integers(0, alpha.size, 3)] = np.nan
+    if seed % 7 == 3:
+        alpha[:] = 0.0
+    if seed % 6 == 4:
+        depth[:] = 2.0
+    defocus = Defocus(float(rng.choice([0.5, 20.0, 300.0])), float(rng.choice([0.3, 2.0, 50.0])), max_radius=float(rng.choice([3.0, 40.0])))
+    seen = alpha > 1e-3
+    with np.errstate(invalid="ignore"):
+        expected = flux_lengths(defocus.radius(np.maximum(depth[seen], 1e-6)), alpha[seen])
+    assert sharp_flux_lengths(depth, alpha, defocus.aperture, defocus.focus, defocus.max_radius) == expected
 
 
 def test_sub_pixel_blur_blurs_and_keeps_the_light() -> None:

@@ -136,6 +136,47 @@ def test_gather_and_doubling_match_a_python_path_average() -> None:
         assert acc.max() > 0.05
 
 
+@pytest.mark.parametrize("seed", range(12))
+def test_passes_over_their_regions_give_the_whole_canvas_bytes(seed: int) -> None:
+    """Doubling passes restricted to :func:`~spacedg.render.motion_warp.pass_regions` (what a covered canvas
+    takes) give the gather the bytes of passes over the whole canvas: the pixels a pass leaves out hold NaN
+    here, and none reaches the output. Fields with long paths, large centre offsets (the parabola's bend),
+    one axis only, paths that leave the canvas, NaN and infinite values (sanitised), margins of 0 to 40 px,
+    one to three passes and canvases of a few pixels."""
+    from spacedg.render import motion_warp
+
+    rng = np.random.default_rng(2000 + seed)
+    height, width = int(rng.integers(2, 40)), int(rng.integers(2, 50))
+    margin = int(rng.integers(0, 41))
+    hc, wc = height + 2 * margin, width + 2 * margin
+    src = rng.uniform(0.05, 1.0, (hc, wc, 4)).astype(np.float32)
+    field = np.empty((hc, wc, 4), np.float32)
+    reach = float(rng.choice([2.0, 20.0, 120.0]))
+    field[..., :2] = rng.uniform(-1.0, 1.0, (hc, wc, 2)) * rng.choice([0.1, 3.0, 25.0])
+    field[..., 2:] = rng.uniform(-1.0, 1.0, (hc, wc, 2)) * reach
+    if seed % 3 == 1:
+        field[..., 3] = 0.0  # a sideways pan
+    if seed % 4 == 2:
+        field.reshape(-1)[rng.integers(0, field.size, 5)] = np.array([np.nan, np.inf, -np.inf, np.nan, np.inf], np.float32)
+    extents = np.empty(4, np.float32)
+    motion_warp.sanitise_field(field, np.float32(2 * (hc + wc)), extents)
+    assert np.array_equal(extents, np.abs(field).reshape(-1, 4).max(axis=0))
+    for passes in (1, 2, 3):
+        results = []
+        for regions in (None, motion_warp.pass_regions((hc, wc), margin, (height, width), passes, extents)):
+            current, spare = src.copy(), np.full_like(src, np.nan)
+            for j in range(passes):
+                motion_warp.doubling_pass(current, field, np.float32(0.25 / 2**j), motion_warp.FULL, spare, None if regions is None else regions[j])
+                current, spare = spare, current
+            acc = np.zeros((height, width, 4), np.float32)
+            motion_warp.gather(current, field, margin, 1.0 / 2**passes, 1.0, motion_warp.FULL, acc)
+            results.append(acc)
+        assert np.isfinite(results[1]).all() and results[1].tobytes() == results[0].tobytes(), f"{passes} passes"
+        assert all(r0 <= r1 and c0 <= c1 for r0, r1, c0, c1 in regions)
+    with pytest.raises(ValueError, match="region"):
+        motion_warp.doubling_pass(src, field, np.float32(0.25), motion_warp.FULL, np.empty_like(src), (0, hc + 1, 0, wc))
+
+
 def test_a_path_longer_than_a_chunk_is_walked_in_one_piece() -> None:
     """:func:`~spacedg.render.motion_warp.gather` places a path's samples in chunks of
     ``_PATH_CHUNK``: paths of one chunk less one sample, exactly one, one more, exactly two, two
