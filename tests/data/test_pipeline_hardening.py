@@ -91,3 +91,22 @@ def test_pipeline_image_size_follows_the_size_policy(size) -> None:
     with pytest.raises(ParameterError, match="over the limit: spacedg renders at most 16384 pixels a side"):
         PipelineOptions(image_size=size)
     assert PipelineOptions(image_size=(7680, 4320)).image_size == (7680, 4320)  # 8K UHD fits
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_finite_check_finds_every_non_finite_value(seed: int) -> None:
+    """The pipeline's check (its min and max) passes finite images, large values near float32's limit and the
+    empty image, and finds one NaN, +inf or -inf anywhere, with the count and the first position."""
+    from spacedg.data.pipeline import _first_non_finite
+
+    rng = np.random.default_rng(3000 + seed)
+    image = rng.uniform(-1.0, 1.0, (int(rng.integers(1, 40)), int(rng.integers(1, 40)), 3)).astype(np.float32)
+    image.flat[int(rng.integers(0, image.size))] = np.float32(3e38) * (1 if seed % 2 else -1)
+    assert _first_non_finite(image) is None and _first_non_finite(np.zeros((0, 4, 3), np.float32)) is None
+    at = tuple(int(rng.integers(0, n)) for n in image.shape)
+    for bad in (math.nan, math.inf, -math.inf):
+        poisoned = image.copy()
+        poisoned[at] = bad
+        assert _first_non_finite(poisoned) == (
+            f"1 of {image.size} values are NaN or ±inf (first at (row, column, channel) {at}: {poisoned[at]})"
+        )
