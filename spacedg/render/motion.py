@@ -284,7 +284,8 @@ def render_motion_keyframes(
     channels = 5 if want_depth else 4
     acc = np.zeros((camera.height, camera.width, channels), np.float32)
     pairs = 0
-    # the canvas buffers, fully rewritten each keyframe (keyframe_source, flow_field, each doubling pass)
+    # the canvas buffers, rewritten each keyframe (keyframe_source, flow_field; each doubling pass over the whole
+    # canvas, or on a covered one where it is read: pass_regions)
     src = np.empty((canvas.height, canvas.width, channels), np.float32)
     dst = np.empty_like(src)
     geometry = np.empty((canvas.height, canvas.width), np.float32)
@@ -309,7 +310,7 @@ def render_motion_keyframes(
         covered_all = bool(lowest > 0.0)  # nothing to skip (a room): no occupancy tables
         # covered: each pass only where the gather and the later passes read (an occupancy table would
         # count pixels a restricted pass left as they were, so a canvas with empty pixels takes every pixel)
-        regions = motion_warp.pass_regions(src.shape[:2], margin, (camera.height, camera.width), n_passes, extents) if covered_all else None
+        regions = motion_warp.pass_regions(src.shape[:2], margin, (camera.height, camera.width), n_passes, extents, spacing) if covered_all else None
         for j in range(n_passes):
             sat = motion_warp.FULL if covered_all else motion_warp.occupancy(src)
             motion_warp.doubling_pass(src, field, np.float32(0.25 / 2**j), sat, dst, regions[j] if regions else None)

@@ -227,6 +227,8 @@ def gather(src, field, margin, length, spacing, sat, out):  # pragma: no cover -
     """
     if src.shape[2] != 4 and src.shape[2] != 5:
         raise ValueError("gather: src must have 4 or 5 channels")
+    if src.shape[0] < 2 or src.shape[1] < 2:  # a bilinear read takes a 2 × 2 block of texels
+        raise ValueError("gather: the canvas must be at least 2 × 2 pixels")
     hc, wc = src.shape[0], src.shape[1]
     want_extra = src.shape[2] > 4
     # flat buffer, unsigned indices: numba's negative-index wraparound checks stay out of the loop
@@ -482,24 +484,32 @@ def _safe(v, top):
     return min(max(v, -top), top)
 
 
-def pass_regions(canvas: tuple[int, int], margin: int, view: tuple[int, int], passes: int, extents: np.ndarray) -> list[tuple[int, int, int, int]]:
+def pass_regions(
+    canvas: tuple[int, int], margin: int, view: tuple[int, int], passes: int, extents: np.ndarray, spacing: float,
+) -> list[tuple[int, int, int, int]]:
     """Where each of ``passes`` :func:`doubling_pass` es must write, so that :func:`gather` and the later
     passes read only pixels a pass wrote: ``[(row0, row1, col0, col1)]`` (half-open, canvas pixels),
     the first pass's first.
 
     ``canvas = (Hc, Wc)``, ``view = (H, W)`` at ``margin`` (the output rectangle), ``extents`` the field's
-    largest ``|c_u|, |c_v|, |d_u|, |d_v|`` (:func:`sanitise_field`). The gather walks ``t ∈ ½ ± L/2`` of a
-    path (``L = 2^-passes``), at most ``|c|·L² + |d|·L/2`` from its pixel; pass ``j`` (scale ``s_j = ¼/2^(j-1)``)
-    reads at most ``s_j |d|`` from its pixel; a bilinear read touches the texel after, and float32 rounding
-    moves a position by far less than a pixel: each reach is taken 2 px wider (clamped to the canvas, as
-    the reads are). Each pass computes every pixel from the pixel's own field and its source alone, so the
-    pixels it writes hold the bytes of a pass over the whole canvas."""
+    largest ``|c_u|, |c_v|, |d_u|, |d_v|`` (:func:`sanitise_field`), ``spacing`` the gather's (pixels).
+    The gather walks ``t ∈ ½ ± L/2`` of a path (``L = 2^-passes``), at most ``|c|·L² + |d|·L/2`` from its
+    pixel, plus the drift of its sample times: each is the one before plus a step, in float32, so after ``n``
+    samples it may be off by ``n·2⁻²⁴`` (``n`` at most ``L·(|d_u| + |d_v|) / spacing + 1``), which moves a
+    sample by ``(|d| + 4|c|)`` times that (the parabola's ``4t(1 − t)`` changes by at most 4 per unit of
+    ``t``): a few pixels only on paths of tens of thousands of pixels walked every fraction of a pixel. Pass
+    ``j`` (scale ``s_j = ¼/2^(j-1)``) reads at most ``s_j |d|`` from its pixel, a position computed once. A
+    bilinear read touches the texel after, and the other roundings move a position by far less than a pixel:
+    each reach is taken 2 px wider (clamped to the canvas, as the reads are). Each pass computes every pixel
+    from the pixel's own field and its source alone, so the pixels it writes hold the bytes of a pass over
+    the whole canvas."""
     hc, wc = canvas
     height, width = view
     cu, cv, du, dv = (float(v) for v in extents)
     length = 2.0**-passes
-    reach_y = cv * length * length + 0.5 * length * dv + 2.0
-    reach_x = cu * length * length + 0.5 * length * du + 2.0
+    drift = (length * (du + dv) / float(spacing) + 3.0) * 2.0**-24  # the sample times' float32 sums, at most
+    reach_y = cv * length * length + 0.5 * length * dv + (dv + 4.0 * cv) * drift + 2.0
+    reach_x = cu * length * length + 0.5 * length * du + (du + 4.0 * cu) * drift + 2.0
     regions = []
     for j in range(passes, 0, -1):  # the last pass's region first: what the gather reads
         ry, rx = math.ceil(reach_y), math.ceil(reach_x)
@@ -578,6 +588,8 @@ def doubling_pass(src: np.ndarray, field: np.ndarray, scale: np.float32, sat: np
     ``region = (row0, row1, col0, col1)`` (half-open canvas pixels, :func:`pass_regions`): only those
     pixels of ``dst`` are written (the others keep what they held); default the whole canvas."""
     hc, wc = src.shape[0], src.shape[1]
+    if hc < 2 or wc < 2:  # a bilinear read takes a 2 × 2 block of texels
+        raise ValueError(f"doubling_pass: the canvas must be at least 2 × 2 pixels, got {wc} × {hc}")
     row0, row1, col0, col1 = (0, hc, 0, wc) if region is None else (int(v) for v in region)
     if not (0 <= row0 <= row1 <= hc and 0 <= col0 <= col1 <= wc):
         raise ValueError(f"doubling_pass: region {region} must lie within the canvas's {hc} rows and {wc} columns")
