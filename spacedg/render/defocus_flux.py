@@ -53,6 +53,10 @@ FLUX_MIN_SIGMA = 1.0
 #: Range of the correction factor.
 FLUX_RATIO = (0.25, 4.0)
 
+#: Bins of :func:`flux_lengths`' weighted histogram; numpy's block of values (``np.histogram``'s ``BLOCK``).
+_FLUX_BINS = 1024
+_HISTOGRAM_BLOCK = 65536
+
 
 def flux_lengths(coc: np.ndarray, weight: np.ndarray | None = None) -> tuple[float, float]:
     """``(L, r)`` px from the circles of confusion ``coc`` (px) of the sharp view's pixels, each
@@ -68,9 +72,15 @@ def flux_lengths(coc: np.ndarray, weight: np.ndarray | None = None) -> tuple[flo
     if top <= 0.0:
         return FLUX_MIN_SIGMA, 0.0
     # weighted quantiles from a 1024-bin histogram (O(n); resolution top/1024 px)
-    counts, edges = np.histogram(coc, bins=1024, range=(0.0, top), weights=weight)
+    return _lengths(*np.histogram(coc, bins=_FLUX_BINS, range=(0.0, top), weights=weight))
+
+
+def _lengths(counts: np.ndarray, edges: np.ndarray) -> tuple[float, float]:
+    """``(L, r)`` from the weighted histogram ``counts`` of the circles of confusion over ``edges``: the upper
+    edge of the bin where the cumulative weight reaches 95 % (``L = max(FLUX_LENGTH · r₉₅, FLUX_MIN_SIGMA)``)
+    and 50 % (``r``)."""
     cumulative = np.cumsum(counts)
-    at = lambda q: float(edges[min(int(np.searchsorted(cumulative, q * cumulative[-1])) + 1, 1024)])  # noqa: E731
+    at = lambda q: float(edges[min(int(np.searchsorted(cumulative, q * cumulative[-1])) + 1, len(counts))])  # noqa: E731
     return max(FLUX_LENGTH * at(0.95), FLUX_MIN_SIGMA), at(0.5)
 
 
@@ -94,14 +104,7 @@ def sharp_flux_lengths(depth: np.ndarray, alpha: np.ndarray, aperture: float, fo
     if top <= 0.0:
         return FLUX_MIN_SIGMA, 0.0
     edges = np.linspace(0.0, top, _FLUX_BINS + 1)
-    cumulative = np.cumsum(_block_histogram(coc[:count], weight[:count], edges, top))
-    at = lambda q: float(edges[min(int(np.searchsorted(cumulative, q * cumulative[-1])) + 1, _FLUX_BINS)])  # noqa: E731
-    return max(FLUX_LENGTH * at(0.95), FLUX_MIN_SIGMA), at(0.5)
-
-
-#: Bins of :func:`flux_lengths`' weighted histogram; numpy's block of values (``np.histogram``'s ``BLOCK``).
-_FLUX_BINS = 1024
-_HISTOGRAM_BLOCK = 65536
+    return _lengths(_block_histogram(coc[:count], weight[:count], edges, top), edges)
 
 
 @numba.njit(cache=True, error_model="numpy")
