@@ -38,13 +38,30 @@ def _fisheye_valid_mask(fx: float, fy: float, cx: float, cy: float, width: int, 
     return mask
 
 
-def lens_valid_mask(camera: Camera) -> np.ndarray | None:
-    """(H, W) bool mask of pixels inside the fisheye image circle; ``None`` for a pinhole."""
+@lru_cache(maxsize=32)
+def _fisheye_outside(fx: float, fy: float, cx: float, cy: float, width: int, height: int, limit: float) -> np.ndarray:
+    """The flat indices (row-major) of the pixels outside :func:`_fisheye_valid_mask` (read-only cache): a frame's
+    outside pixels are zeroed through them, ~0.1 ms a 640 × 480 view where the boolean mask took ~1 ms (most of
+    the image lies inside the circle)."""
+    outside = np.flatnonzero(~_fisheye_valid_mask(fx, fy, cx, cy, width, height, limit))
+    outside.flags.writeable = False
+    return outside
+
+
+def _image_circle(camera: Camera) -> tuple[float, float, float, float, int, int, float] | None:
+    """The arguments of :func:`_fisheye_valid_mask` for ``camera`` (its intrinsics and ``θ_d`` of the lens's
+    effective max θ); ``None`` for a pinhole."""
     lens = camera.fisheye
     if lens is None:
         return None
     theta_d = float(lens.distort_theta(np.float64(lens.effective_max_theta)))
-    return _fisheye_valid_mask(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height, theta_d)
+    return (camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height, theta_d)
+
+
+def lens_valid_mask(camera: Camera) -> np.ndarray | None:
+    """(H, W) bool mask of pixels inside the fisheye image circle; ``None`` for a pinhole."""
+    circle = _image_circle(camera)
+    return None if circle is None else _fisheye_valid_mask(*circle)
 
 
 def composite_view(
@@ -232,7 +249,8 @@ def _conserved(
 def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: frozenset[str]) -> Frame:
     """Wrap composite images (``rgb`` in linear light, as :func:`composite_view` returns it) into a
     :class:`Frame`, masking pixels outside a fisheye image circle."""
-    valid = lens_valid_mask(camera)
+    circle = _image_circle(camera)
+    valid = None if circle is None else _fisheye_valid_mask(*circle)
     rgb = images.get("rgb") if "rgb" in wanted else None
     frame = Frame(
         rgb=rgb,
@@ -243,12 +261,19 @@ def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: fro
         camera=camera,
         valid=valid,
     )
-    if valid is not None:
-        outside = ~valid
-        for name in ("rgb", "alpha", "depth", "median_depth"):
+    if circle is not None and valid is not None:
+        outside = _fisheye_outside(*circle)
+        for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
             image = getattr(frame, name)
             if image is not None:
-                image[outside] = 0.0
-        if frame.instance_ids is not None:
-            frame.instance_ids[outside] = -1
+                _set_pixels(image, outside, -1 if name == "instance_ids" else 0.0, valid)
     return frame
+
+
+def _set_pixels(image: np.ndarray, flat: np.ndarray, value: float, valid: np.ndarray) -> None:
+    """``image`` (H, W) or (H, W, C) set to ``value`` at the pixels of flat (row-major) indices ``flat`` (the pixels
+    where ``valid`` is false), in place: through a flat view where the image is C-contiguous, else by the mask."""
+    if image.flags.c_contiguous:
+        image.reshape(valid.size, -1)[flat] = value
+    else:
+        image[~valid] = value

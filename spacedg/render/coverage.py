@@ -123,8 +123,10 @@ def coverage_problem(
         return (f"the fisheye lens images none of the {camera.width}×{camera.height} pixels (max θ {lens.effective_max_theta:.3g} rad "
                 f"at focal lengths {camera.fx:.4g}, {camera.fy:.4g} px): raise max_theta or render larger")
     blurred = (defocus is not None and defocus.aperture > 0) or (motion is not None and not motion.is_static)
+    if not blurred:
+        return None
     covered = covered_share(alpha, valid)
-    if not blurred or covered >= MIN_COVERED:
+    if covered >= MIN_COVERED:
         return None
     from spacedg.render.renderer import render
 

@@ -156,15 +156,15 @@ def _box_outside(u, v, row_x2, row_y2, scales, i, rot_norm, eps2d, width, height
 
 
 @numba.njit(cache=True, inline="always")
-def _surely_outside_fisheye(x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, k1, k2, k3, k4, theta_max, eps2d):
+def _surely_outside_fisheye(x, y, scales, i, rot_norm, fx, fy, cx, cy, width, height, terms, theta_max, eps2d):
     """:func:`_surely_outside` for the equidistant fisheye lens: culled whatever its rotation. Beyond the lens's
     effective max θ (the full test's first cull, the same terms), or a footprint box outside the image: the box
     bound of :func:`_surely_outside` with the fisheye Jacobian's rows at the mean (``‖J row‖ · ‖W‖₂ · max(s)``
     bounds ``√Σ_ii`` before the dilation ``eps2d``), taken 1e-6 relative wider. Cheaper than what it skips (the
     3D covariance and the footprint), which the fisheye path ran for every Gaussian in front of the camera (62 %
     of a dataset view's are culled there: its projection 12.0 ms against 5.5 for the same view through a
-    pinhole)."""
-    theta, rho, g, drho_dz = _fisheye_terms(x, y, z, k1, k2, k3, k4)
+    pinhole). ``terms``: :func:`_fisheye_terms` at the point."""
+    theta, rho, g, drho_dz = terms
     if theta > theta_max:
         return True
     u = fx * rho * x + cx
@@ -179,36 +179,36 @@ def _surely_outside_fisheye(x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width,
 
 
 @numba.njit(cache=True, inline="always")
-def _pre_culled(x, y, z, scales, i, rot_norm, view, lims, fisheye, lens, eps2d):
+def _pre_culled(x, y, z, scales, i, rot_norm, view, lims, fisheye, lens, terms, eps2d):
     """The pre-cull of Gaussian ``i`` at camera point (x, y, z) in one camera (``view = (fx, fy, cx, cy, width, height)``,
-    ``lims`` of :func:`_frustum`, ``lens = (k1, k2, k3, k4, theta_max)``): :func:`_surely_outside_fisheye` through the
-    fisheye lens, else :func:`_surely_outside`."""
+    ``lims`` of :func:`_frustum`, ``lens = (k1, k2, k3, k4, theta_max)``, ``terms`` :func:`_fisheye_terms` at the point
+    when ``fisheye``): :func:`_surely_outside_fisheye` through the fisheye lens, else :func:`_surely_outside`."""
     fx, fy, cx, cy, width, height = view
     if fisheye:
-        k1, k2, k3, k4, theta_max = lens
-        return _surely_outside_fisheye(x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, k1, k2, k3, k4, theta_max, eps2d)
+        return _surely_outside_fisheye(x, y, scales, i, rot_norm, fx, fy, cx, cy, width, height, terms, lens[4], eps2d)
     return _surely_outside(x, y, z, scales, i, rot_norm, fx, fy, cx, cy, width, height, lims[0], lims[1], lims[2], lims[3], eps2d)
 
 
 @numba.njit(cache=True, inline="always")
-def _footprint(i, x, y, z, lens_coc, m, opacity, view, lims, fisheye, lens, dilation, opacity_extent, blur, packed, rects):
+def _footprint(i, x, y, z, lens_coc, m, opacity, view, lims, fisheye, lens, terms, dilation, opacity_extent, blur, packed, rects):
     """Steps 3–5 of the module docstring for Gaussian ``i`` at camera point (x, y, z) with ``M = W R S``
     (the 9-tuple ``m``, row-major) in one camera: writes its packed record but the colour and its tile
     rectangle; ``False`` when it is culled (the row is then left as it was: zeros). Tuples (a call of
     more than 30 arguments compiles to ``*args``, which numba cannot inline): ``view = (fx, fy, cx, cy,
-    width, height)``, ``lims`` of :func:`_frustum`, ``lens = (k1, k2, k3, k4, theta_max)``, ``dilation =
+    width, height)``, ``lims`` of :func:`_frustum`, ``lens = (k1, k2, k3, k4, theta_max)`` and ``terms``
+    (:func:`_fisheye_terms` at the point, read when ``fisheye``), ``dilation =
     (model_x, model_y, filter_x, filter_y)``, ``blur = (aperture, defocus_extent, defocus_tail, defocus_boost)``."""
     m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
     fx, fy, cx, cy, width, height = view
     lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos = lims
-    k1, k2, k3, k4, theta_max = lens
+    theta_max = lens[4]
     model_x, model_y, filter_x, filter_y = dilation
     aperture, defocus_extent, defocus_tail, defocus_boost = blur
     tiles_x = (width + 15) // 16
     tiles_y = (height + 15) // 16
     # ---- lens: mean and Jacobian rows (j0·, j1·)
     if fisheye:
-        theta, rho, g, drho_dz = _fisheye_terms(x, y, z, k1, k2, k3, k4)
+        theta, rho, g, drho_dz = terms
         if theta > theta_max:
             return False
         u = fx * rho * x + cx
@@ -361,13 +361,15 @@ def _project_range(
             continue
         # the circle of confusion (px; 0 without defocus): under defocus it widens every footprint by coc² px²
         lens_coc = min(aperture * abs(z - focus) / z, max_coc) if aperture > 0.0 else 0.0
+        # the fisheye's terms at the point, once for both pre-culls and both footprints (the same lens and point)
+        terms = _fisheye_terms(x, y, z, lens[0], lens[1], lens[2], lens[3]) if fisheye else (0.0, 0.0, 0.0, 0.0)
         main_in = not _pre_culled(
-            x, y, z, scales, i, rot_norm, view, lims, fisheye, lens, eps_cull + lens_coc * lens_coc,
+            x, y, z, scales, i, rot_norm, view, lims, fisheye, lens, terms, eps_cull + lens_coc * lens_coc,
         )
         sharp_in = False
         if paired:
             sharp_in = not _pre_culled(
-                x, y, z, scales, i, rot_norm, s_view, s_lims, fisheye, lens, s_eps_cull,
+                x, y, z, scales, i, rot_norm, s_view, s_lims, fisheye, lens, terms, s_eps_cull,
             )
         if not (main_in or sharp_in):
             continue
@@ -401,13 +403,13 @@ def _project_range(
         main_kept = False
         if main_in:
             main_kept = _footprint(
-                i, x, y, z, lens_coc, m, opacity, view, lims, fisheye, lens, dilation, opacity_extent, (aperture, defocus_extent, defocus_tail, defocus_boost),
+                i, x, y, z, lens_coc, m, opacity, view, lims, fisheye, lens, terms, dilation, opacity_extent, (aperture, defocus_extent, defocus_tail, defocus_boost),
                 packed, rects,
             )
         sharp_kept = False
         if sharp_in:
             sharp_kept = _footprint(
-                i, x, y, z, 0.0, m, opacity, s_view, s_lims, fisheye, lens, s_dilation, opacity_extent, (0.0, defocus_extent, defocus_tail, defocus_boost),
+                i, x, y, z, 0.0, m, opacity, s_view, s_lims, fisheye, lens, terms, s_dilation, opacity_extent, (0.0, defocus_extent, defocus_tail, defocus_boost),
                 sharp_packed, sharp_rects,
             )
         if (want_color and main_kept) or sharp_kept:

@@ -114,3 +114,37 @@ def test_render_command_names_the_blur_not_a_frame_mismatch(tiny, tmp_path, caps
     err = capsys.readouterr().err
     assert "circle of confusion" in err and "frame mismatch" not in err and not png.exists()
     assert main(argv) == 0 and png.exists()  # the lens alone renders
+
+
+@pytest.mark.parametrize("seed", [4106, 4107])
+def test_a_fisheye_frame_zeroes_exactly_the_pixels_outside_its_image_circle(seed: int) -> None:
+    """``frame_from_images`` zeroes (ids: −1) exactly the pixels its lens does not image, through the image
+    circle's cached flat indices on contiguous images and the mask on strided ones: every output, NaN and
+    −0.0 inputs included, equals the boolean-mask assignment."""
+    from spacedg.render.camera import Camera, FisheyeLens
+    from spacedg.render.composite import frame_from_images, lens_valid_mask
+
+    rng = np.random.default_rng(seed)
+    height, width = 37, 53
+    camera = Camera(20.0, 22.0, 26.0, 18.5, width, height, np.eye(4), fisheye=FisheyeLens(-0.2, 2e-4, 1e-4, 0.0, 1.2))
+    valid = lens_valid_mask(camera)
+    assert valid is not None and 0 < valid.sum() < valid.size
+    for strided in (False, True):
+        images = {
+            "rgb": rng.standard_normal((height, width, 3)).astype(np.float32),
+            "alpha": rng.random((height, width)).astype(np.float32),
+            "depth": rng.random((height, width)).astype(np.float32),
+            "median_depth": rng.random((height, width)).astype(np.float32),
+            "instance_ids": rng.integers(-1, 9, (height, width)).astype(np.int32),
+        }
+        images["rgb"][0, 0] = np.nan
+        images["alpha"][-1, -1] = -0.0
+        if strided:  # channel-last views of wider arrays: not C-contiguous
+            images["rgb"] = np.concatenate([images["rgb"], images["rgb"]], axis=2)[..., ::2]
+            assert not images["rgb"].flags.c_contiguous
+        expected = {name: image.copy() for name, image in images.items()}
+        for name, image in expected.items():
+            image[~valid] = -1 if name == "instance_ids" else 0.0
+        frame = frame_from_images(images, camera, frozenset(images))
+        for name, image in expected.items():
+            assert getattr(frame, name).tobytes() == image.tobytes(), (name, strided)

@@ -245,35 +245,60 @@ def _field_kernel(
 ) -> None:  # pragma: no cover - compiled
     """Per pixel: the highest drop over all layers, its coverage, highlight, Fresnel ratio, remap coordinates and spread.
 
-    ``reach`` = strength · F px (the source moves by ``reach · n_xy``), ``index``: the Fresnel index."""
+    ``reach`` = strength · F px (the source moves by ``reach · n_xy``), ``index``: the Fresnel index.
+
+    A pixel ``(j + ½, i + ½)`` looks at one cell per layer, ``min(⌊x / cell⌋, columns − 1)`` along each
+    axis, and takes the highest drop of those that hold it (``d² < r²``; a tie keeps the earlier layer).
+    Per row this runs drop by drop: each layer's cells of the row, each drop that reaches the row over
+    the pixels of its cell within a pixel of its disk (most of an image lies in no drop; a pixel-by-pixel
+    walk of the three layers spent ~3 ms a 640 × 480 view on them). The same float64 expressions
+    per pixel and the same layer order: the same bytes."""
     n_layers = cell.shape[0]  # cell: (L, 2) cell width and height per layer, px
     lx, ly, lz = light[0], light[1], light[2]
     inv_cell_x = 1.0 / cell[:, 0]
     inv_cell_y = 1.0 / cell[:, 1]
+    # each cell column's pixel columns [first[layer, c], first[layer, c + 1]): the pixel's own cell lookup
+    first = np.zeros((n_layers, n_cols.max() + 1), np.int64)
+    for layer in range(n_layers):
+        c = 0
+        for j in range(width):
+            k = min(int((j + 0.5) * inv_cell_x[layer]), n_cols[layer] - 1)
+            while c < k:
+                c += 1
+                first[layer, c] = j
+        for rest in range(c + 1, n_cols[layer] + 1):
+            first[layer, rest] = width
     for i in numba.prange(height):
         y = i + 0.5
-        row_start = np.empty(n_layers, np.int64)  # first drop index of this pixel row's cells, per layer
+        best_h = np.full(width, -1.0)
+        best_dx = np.zeros(width)
+        best_dy = np.zeros(width)
+        best_r = np.ones(width)
         for layer in range(n_layers):
             row = min(int(y * inv_cell_y[layer]), n_rows[layer] - 1)
-            row_start[layer] = offset[layer] + row * n_cols[layer]
+            base = offset[layer] + row * n_cols[layer]
+            for c in range(n_cols[layer]):
+                k = base + c
+                r = drop_r[k]
+                dy = y - centre_y[k]
+                r2 = r * r
+                if dy * dy >= r2:  # d² = dx² + dy² ≥ dy² (float addition of a non-negative term): no pixel of the row; also an empty cell
+                    continue
+                half_chord = math.sqrt(r2 - dy * dy)
+                cx = centre_x[k]
+                lo = max(first[layer, c], int(math.floor(cx - half_chord - 0.5)) - 1)
+                hi = min(first[layer, c + 1], int(math.floor(cx + half_chord - 0.5)) + 2)
+                for j in range(lo, hi):
+                    dx = (j + 0.5) - cx
+                    d2 = dx * dx + dy * dy
+                    if d2 >= r * r:
+                        continue
+                    h = np.sqrt(r * r - d2)
+                    if h > best_h[j]:
+                        best_h[j], best_dx[j], best_dy[j], best_r[j] = h, dx, dy, r
         for j in range(width):
             x = j + 0.5
-            best_h = -1.0
-            best_dx = 0.0
-            best_dy = 0.0
-            best_r = 1.0
-            for layer in range(n_layers):
-                k = row_start[layer] + min(int(x * inv_cell_x[layer]), n_cols[layer] - 1)
-                r = drop_r[k]
-                dx = x - centre_x[k]
-                dy = y - centre_y[k]
-                d2 = dx * dx + dy * dy
-                if d2 >= r * r:  # also every pixel of an empty cell (r = 0)
-                    continue
-                h = np.sqrt(r * r - d2)
-                if h > best_h:
-                    best_h, best_dx, best_dy, best_r = h, dx, dy, r
-            if best_h < 0.0:
+            if best_h[j] < 0.0:
                 alpha[i, j] = 0.0
                 height_map[i, j] = 0.0
                 highlight[i, j] = 0.0
@@ -282,21 +307,21 @@ def _field_kernel(
                 transmission[i, j] = 1.0
                 spread[i, j] = 0.0
                 continue
-            nx = best_dx / best_r
-            ny = best_dy / best_r
-            nz = best_h / best_r
+            nx = best_dx[j] / best_r[j]
+            ny = best_dy[j] / best_r[j]
+            nz = best_h[j] / best_r[j]
             t = min((1.0 - np.sqrt(nx * nx + ny * ny)) / edge, 1.0)
             a = t * t * (3.0 - 2.0 * t)
             spec = max(2.0 * (nx * lx + ny * ly + nz * lz) * nz - lz, 0.0)  # R·V, R = 2(n·L)n − L, V = +z
             for _ in range(shininess_log2):
                 spec *= spec
             alpha[i, j] = a
-            height_map[i, j] = best_h
+            height_map[i, j] = best_h[j]
             highlight[i, j] = a * spec
             map_x[i, j] = x - reach * nx - 0.5
             map_y[i, j] = y - reach * ny - 0.5
             transmission[i, j] = _fresnel_ratio(nz, index)
-            spread[i, j] = abs(1.0 - reach / best_r)
+            spread[i, j] = abs(1.0 - reach / best_r[j])
 
 
 @fork_safe
