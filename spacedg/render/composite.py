@@ -38,14 +38,22 @@ def _fisheye_valid_mask(fx: float, fy: float, cx: float, cy: float, width: int, 
     return mask
 
 
+#: Largest share of a frame's pixels outside its image circle that :func:`_fisheye_outside` indexes (beyond, the mask).
+_OUTSIDE_INDEXED = 0.5
+
+
 @lru_cache(maxsize=32)
-def _fisheye_outside(fx: float, fy: float, cx: float, cy: float, width: int, height: int, limit: float) -> np.ndarray:
-    """The flat indices (row-major) of the pixels outside :func:`_fisheye_valid_mask` (read-only cache): a frame's
-    outside pixels are zeroed through them, ~0.1 ms a 640 × 480 view where the boolean mask took ~1 ms (most of
-    the image lies inside the circle)."""
-    outside = np.flatnonzero(~_fisheye_valid_mask(fx, fy, cx, cy, width, height, limit))
-    outside.flags.writeable = False
-    return outside
+def _fisheye_outside(fx: float, fy: float, cx: float, cy: float, width: int, height: int, limit: float) -> np.ndarray | None:
+    """The flat indices (row-major, int32) of the pixels outside :func:`_fisheye_valid_mask` (read-only cache), or
+    ``None`` when more than :data:`_OUTSIDE_INDEXED` of the frame is outside (or it has 2³¹ pixels or more): a frame's
+    outside pixels are zeroed through them, ~0.1 ms a 640 × 480 view at the bench distortion where the boolean mask
+    took ~1 ms (2 % of the image outside). At most 2 bytes a pixel of the frame, twice the mask's cache."""
+    outside = ~_fisheye_valid_mask(fx, fy, cx, cy, width, height, limit)
+    if outside.size >= 2**31 or np.count_nonzero(outside) > _OUTSIDE_INDEXED * outside.size:
+        return None
+    indices = np.flatnonzero(outside).astype(np.int32)
+    indices.flags.writeable = False
+    return indices
 
 
 def _image_circle(camera: Camera) -> tuple[float, float, float, float, int, int, float] | None:
@@ -262,7 +270,7 @@ def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: fro
         valid=valid,
     )
     if circle is not None and valid is not None:
-        outside = _fisheye_outside(*circle)
+        outside = _fisheye_outside(*circle)  # None: the mask
         for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
             image = getattr(frame, name)
             if image is not None:
@@ -270,10 +278,11 @@ def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: fro
     return frame
 
 
-def _set_pixels(image: np.ndarray, flat: np.ndarray, value: float, valid: np.ndarray) -> None:
+def _set_pixels(image: np.ndarray, flat: np.ndarray | None, value: float, valid: np.ndarray) -> None:
     """``image`` (H, W) or (H, W, C) set to ``value`` at the pixels of flat (row-major) indices ``flat`` (the pixels
-    where ``valid`` is false), in place: through a flat view where the image is C-contiguous, else by the mask."""
-    if image.flags.c_contiguous:
+    where ``valid`` (H, W) is false), in place: through a flat view where the image is C-contiguous and of the mask's
+    height and width, else (also without ``flat``) by the mask, which refuses an image of another size."""
+    if flat is not None and image.flags.c_contiguous and image.shape[:2] == valid.shape:
         image.reshape(valid.size, -1)[flat] = value
     else:
         image[~valid] = value

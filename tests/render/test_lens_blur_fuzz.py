@@ -116,19 +116,20 @@ def test_render_command_names_the_blur_not_a_frame_mismatch(tiny, tmp_path, caps
     assert main(argv) == 0 and png.exists()  # the lens alone renders
 
 
-@pytest.mark.parametrize("seed", [4106, 4107])
-def test_a_fisheye_frame_zeroes_exactly_the_pixels_outside_its_image_circle(seed: int) -> None:
+@pytest.mark.parametrize("seed, max_theta", [(4106, 1.2), (4107, 1.2), (4108, 0.3)])
+def test_a_fisheye_frame_zeroes_exactly_the_pixels_outside_its_image_circle(seed: int, max_theta: float) -> None:
     """``frame_from_images`` zeroes (ids: −1) exactly the pixels its lens does not image, through the image
-    circle's cached flat indices on contiguous images and the mask on strided ones: every output, NaN and
-    −0.0 inputs included, equals the boolean-mask assignment."""
+    circle's cached flat indices on contiguous images and the mask on strided ones or where most of the frame is
+    outside (``max_theta`` 0.3): every output, NaN and −0.0 inputs included, equals the boolean-mask assignment."""
     from spacedg.render.camera import Camera, FisheyeLens
     from spacedg.render.composite import frame_from_images, lens_valid_mask
 
     rng = np.random.default_rng(seed)
     height, width = 37, 53
-    camera = Camera(20.0, 22.0, 26.0, 18.5, width, height, np.eye(4), fisheye=FisheyeLens(-0.2, 2e-4, 1e-4, 0.0, 1.2))
+    camera = Camera(20.0, 22.0, 26.0, 18.5, width, height, np.eye(4), fisheye=FisheyeLens(-0.2, 2e-4, 1e-4, 0.0, max_theta))
     valid = lens_valid_mask(camera)
     assert valid is not None and 0 < valid.sum() < valid.size
+    assert (valid.mean() < 0.5) == (max_theta < 1.0)
     for strided in (False, True):
         images = {
             "rgb": rng.standard_normal((height, width, 3)).astype(np.float32),

@@ -86,8 +86,8 @@ Identity, limits and errors
   (blur and interpolation would turn ``inf · 0`` into NaN inside drops); finite values of any
   size (tested up to 1e30) give finite output.
 - ``blur_kernel`` must be odd: an even value raises :class:`ParameterError` (never rounded).
-- Deterministic for a given ``rng`` state; the compiled kernels are per-pixel, so the bytes do
-  not depend on the number of numba threads.
+- Deterministic for a given ``rng`` state; the compiled kernels compute each pixel (or each row of
+  pixels) on its own, so the bytes do not depend on the number of numba threads.
 
 Parameters (hard limits): ``scale`` 1/image [0, 100]; ``radius`` 1 [0, 1]; ``strength`` 1
 [0, 5]; ``blur_sigma`` px [0, 20]; ``blur_kernel`` px, odd integer [1, 51].
@@ -286,8 +286,12 @@ def _field_kernel(
                     continue
                 half_chord = math.sqrt(r2 - dy * dy)
                 cx = centre_x[k]
-                lo = max(first[layer, c], int(math.floor(cx - half_chord - 0.5)) - 1)
-                hi = min(first[layer, c + 1], int(math.floor(cx + half_chord - 0.5)) + 2)
+                # the cell's pixels within a pixel of the chord, clamped as floats (an infinite or NaN chord, or
+                # one beyond the int64 range, walks the cell's whole span with the exact test, as every pixel did)
+                lo_x = np.floor(cx - half_chord - 0.5) - 1.0
+                hi_x = np.floor(cx + half_chord - 0.5) + 2.0
+                lo = int(lo_x) if lo_x > first[layer, c] else first[layer, c]
+                hi = int(hi_x) if hi_x < first[layer, c + 1] else first[layer, c + 1]
                 for j in range(lo, hi):
                     dx = (j + 0.5) - cx
                     d2 = dx * dx + dy * dy
