@@ -286,12 +286,14 @@ def _field_kernel(
                     continue
                 half_chord = math.sqrt(r2 - dy * dy)
                 cx = centre_x[k]
-                # the cell's pixels within a pixel of the chord, clamped as floats (an infinite or NaN chord, or
-                # one beyond the int64 range, walks the cell's whole span with the exact test, as every pixel did)
+                # the cell's pixels [start, stop) within a pixel of the chord, clamped as floats before any integer
+                # conversion (a chord or centre beyond the int64 range would wrap): a NaN bound walks the whole span
+                # with the exact test, as every pixel did
+                start, stop = first[layer, c], first[layer, c + 1]
                 lo_x = np.floor(cx - half_chord - 0.5) - 1.0
                 hi_x = np.floor(cx + half_chord - 0.5) + 2.0
-                lo = int(lo_x) if lo_x > first[layer, c] else first[layer, c]
-                hi = int(hi_x) if hi_x < first[layer, c + 1] else first[layer, c + 1]
+                lo = int(lo_x) if start < lo_x < stop else (stop if lo_x >= stop else start)
+                hi = int(hi_x) if start < hi_x < stop else (start if hi_x <= start else stop)
                 for j in range(lo, hi):
                     dx = (j + 0.5) - cx
                     d2 = dx * dx + dy * dy

@@ -380,18 +380,21 @@ def test_the_field_drawn_drop_by_drop_is_the_pixel_by_pixel_rule(seed: int) -> N
         assert getattr(field, name).tobytes() == values.tobytes(), name
 
 
-@pytest.mark.parametrize("radius, centre", [(1e20, 0.0), (1e20, -3e19), (1e160, 5.0), (3.0, 1e30), (0.7, 2.5)])
-def test_the_field_kernel_walks_huge_and_far_drops_safely(radius: float, centre: float) -> None:
+@pytest.mark.parametrize("radius, centre, row", [
+    (1e20, 0.0, 0.0), (1e20, -3e19, -3e19), (1e160, 5.0, 5.0), (3.0, 1e30, 1e30), (3.0, 1e30, 0.5), (3.0, -1e30, 1.5),
+    (2.0, 1e19, 0.5), (0.7, 2.5, 2.5),
+])
+def test_the_field_kernel_walks_huge_and_far_drops_safely(radius: float, centre: float, row: float) -> None:
     """A drop whose chord lies beyond the int64 range, whose radius squared overflows, or whose centre is far
-    away: the kernel clamps the chord's pixels as floats (an int64 overflow there read far out of bounds) and
-    gives the pixel-by-pixel rule's values."""
+    along the row it crosses (``row``: its centre's y): the kernel clamps the chord's pixels as floats (an
+    int64 overflow there read far out of bounds) and gives the pixel-by-pixel rule's values."""
     from spacedg.plugins.degradations.water_droplets import (
         EDGE_WIDTH, LIGHT_DIRECTION, SHININESS_LOG2, WATER_INDEX, DropletField, _field_kernel,
     )
 
     shape = (2, 4)
     cell = max(10.0 * radius, 10.0)
-    drops = (np.array([[cell, cell]]), np.array([1]), np.array([1]), np.array([0]), np.array([centre]), np.array([centre]), np.array([radius]))
+    drops = (np.array([[cell, cell]]), np.array([1]), np.array([1]), np.array([0]), np.array([centre]), np.array([row]), np.array([radius]))
     field = DropletField(*(np.full(shape, np.nan, np.float32) for _ in range(7)))
     with np.errstate(all="ignore"):
         _field_kernel(*shape, *drops, 2.0, WATER_INDEX, np.asarray(LIGHT_DIRECTION, np.float64), SHININESS_LOG2, EDGE_WIDTH,
