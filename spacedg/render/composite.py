@@ -258,7 +258,7 @@ def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: fro
     """Wrap composite images (``rgb`` in linear light, as :func:`composite_view` returns it) into a
     :class:`Frame`, masking pixels outside a fisheye image circle."""
     circle = _image_circle(camera)
-    valid = None if circle is None else _fisheye_valid_mask(*circle)
+    valid, outside = (None, None) if circle is None else (_fisheye_valid_mask(*circle), _fisheye_outside(*circle))
     rgb = images.get("rgb") if "rgb" in wanted else None
     frame = Frame(
         rgb=rgb,
@@ -269,20 +269,19 @@ def frame_from_images(images: dict[str, np.ndarray], camera: Camera, wanted: fro
         camera=camera,
         valid=valid,
     )
-    if circle is not None and valid is not None:
-        outside = _fisheye_outside(*circle)  # None: the mask
+    if valid is not None:
+        # the pixels outside set to 0 (ids −1): through their flat indices where an image is C-contiguous and of the
+        # mask's size, else (also where more than half the frame is outside: no indices) by the mask, which refuses
+        # an image of another size
+        invalid = None
         for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
             image = getattr(frame, name)
-            if image is not None:
-                _set_pixels(image, outside, -1 if name == "instance_ids" else 0.0, valid)
+            if image is None:
+                continue
+            value = -1 if name == "instance_ids" else 0.0
+            if outside is not None and image.flags.c_contiguous and image.shape[:2] == valid.shape:
+                image.reshape(valid.size, -1)[outside] = value
+            else:
+                invalid = ~valid if invalid is None else invalid
+                image[invalid] = value
     return frame
-
-
-def _set_pixels(image: np.ndarray, flat: np.ndarray | None, value: float, valid: np.ndarray) -> None:
-    """``image`` (H, W) or (H, W, C) set to ``value`` at the pixels of flat (row-major) indices ``flat`` (the pixels
-    where ``valid`` (H, W) is false), in place: through a flat view where the image is C-contiguous and of the mask's
-    height and width, else (also without ``flat``) by the mask, which refuses an image of another size."""
-    if flat is not None and image.flags.c_contiguous and image.shape[:2] == valid.shape:
-        image.reshape(valid.size, -1)[flat] = value
-    else:
-        image[~valid] = value

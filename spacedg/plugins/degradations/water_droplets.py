@@ -297,9 +297,9 @@ def _field_kernel(
                 for j in range(lo, hi):
                     dx = (j + 0.5) - cx
                     d2 = dx * dx + dy * dy
-                    if d2 >= r * r:
+                    if d2 >= r2:
                         continue
-                    h = np.sqrt(r * r - d2)
+                    h = np.sqrt(r2 - d2)
                     if h > best_h[j]:
                         best_h[j], best_dx[j], best_dy[j], best_r[j] = h, dx, dy, r
         for j in range(width):
