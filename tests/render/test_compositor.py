@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from tests.render_helpers import brute_force_composite, camera, random_gaussians
-from spacedg.render import RasterSettings, render
+from spacedg.render import Gaussians, RasterSettings, render
 from spacedg.render import project_cpu, raster_cpu, raster_torch
 from spacedg.render.project_torch import Projected
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CR, DEPTH, OPA, PX, PY, RADX, RADY
@@ -189,3 +189,46 @@ def test_each_output_specialisation_has_its_own_disk_cache() -> None:
     names = {k.py_func.__qualname__ for k in kernels}
     assert len(names) == 8
     assert len({k.serial.py_func.__qualname__ for k in kernels} | names) == 16
+
+
+@pytest.mark.parametrize(("seed", "width", "height"), [(4220, 45, 37), (4221, 33, 17), (4222, 70, 50)])
+def test_a_composite_is_the_crop_of_the_same_camera_on_a_larger_canvas(seed: int, width: int, height: int) -> None:
+    """A view whose last tile row and column reach past the image, covered by an opaque cloud of Gaussians centred
+    inside it (its pixels saturate, alpha above 0.99; the pixels past its edge see the cloud's fringe): every output
+    is the bytes of the same camera's composite on a canvas padded to whole tiles and more (right and bottom; the same
+    pixel grid), cropped, as motion blur's keyframes on their widened canvases assume; the torch compositor's the same
+    to float32 rounding. (Stop 62 also made the pixels past an edge tile's image dead from the start, so that the tile
+    stops with its own pixels: the same bytes, no measurable gain on rooms, not kept.)"""
+    from spacedg.render.camera import Camera
+
+    rng = np.random.default_rng(seed)
+    cam = camera(width, height)
+    n = width * height
+    z = rng.uniform(3.0, 4.0, n)
+    # pixel positions inside the image (its frustum: no footprint meets the projection's Jacobian limits, which
+    # depend on the image's size)
+    u, v = rng.uniform(0.0, width, n), rng.uniform(0.0, height, n)
+    cloud = random_gaussians(n, rng, opacity=(0.7, 1.0))
+    means = np.stack([(u - cam.cx) / cam.fx * z, (v - cam.cy) / cam.fy * z, z], 1)
+    scales = rng.uniform(1.5, 4.0, (n, 3)) * (z / cam.fx)[:, None]  # 1.5–4 px on screen
+    gaussians = Gaussians(means, cloud.quats, scales, cloud.opacities, cloud.sh, cloud.instance_ids)
+    padded = Camera(cam.fx, cam.fy, cam.cx, cam.cy, (width + 15) // 16 * 16 + 16, (height + 15) // 16 * 16 + 16, cam.cam_to_world)
+    ids = gaussians.instance_ids
+    renders = []
+    for view in (cam, padded):
+        packed, rects = project_cpu.project_gaussians(gaussians, view, SETTINGS)
+        compiled = raster_cpu.rasterize(packed, rects, ids, view.width, view.height, SETTINGS.alpha_max, True, True, True, True)
+        proj = as_projected(packed, rects)
+        offsets, gauss = raster_torch.bin_tiles(proj, view.width, view.height, tight=True)
+        torch_path = raster_torch.composite(proj, offsets, gauss, torch.from_numpy(ids.copy()), view.width, view.height,
+                                            SETTINGS.alpha_max, True, True, True, chunk=16)
+        renders.append((compiled, {k: v.numpy() for k, v in torch_path.items()}))
+    (small_cpu, small_torch), (big_cpu, big_torch) = renders
+    assert small_cpu["alpha"].min() > 0.99  # the image is covered (its pixels saturate) …
+    assert big_cpu["alpha"][height:, :].min() < 0.5 and big_cpu["alpha"][:, width:].min() < 0.5  # … the padding does not
+    for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
+        assert small_cpu[name].tobytes() == np.ascontiguousarray(big_cpu[name][:height, :width]).tobytes(), name
+        # the torch path's colour and depth sums are batched matrix products over as many tiles as fit a batch, whose
+        # summation order follows the batch: the same to float32 rounding (its own bytes depend on the canvas)
+        np.testing.assert_allclose(small_torch[name], big_torch[name][:height, :width], rtol=1e-6, atol=1e-7, err_msg=name)
+        np.testing.assert_allclose(small_torch[name], small_cpu[name], rtol=1e-5, atol=1e-5, err_msg=name)
