@@ -194,11 +194,11 @@ def test_each_output_specialisation_has_its_own_disk_cache() -> None:
 @pytest.mark.parametrize(("seed", "width", "height"), [(4220, 45, 37), (4221, 33, 17), (4222, 70, 50)])
 def test_a_composite_is_the_crop_of_the_same_camera_on_a_larger_canvas(seed: int, width: int, height: int) -> None:
     """A view whose last tile row and column reach past the image, covered by an opaque cloud of Gaussians centred
-    inside it (its pixels saturate, alpha above 0.99; the pixels past its edge see the cloud's fringe): every output
-    is the bytes of the same camera's composite on a canvas padded to whole tiles and more (right and bottom; the same
-    pixel grid), cropped, as motion blur's keyframes on their widened canvases assume; the torch compositor's the same
-    to float32 rounding. (Stop 62 also made the pixels past an edge tile's image dead from the start, so that the tile
-    stops with its own pixels: the same bytes, no measurable gain on rooms, not kept.)"""
+    inside it (its pixels saturate, alpha above 0.99; the pixels past its edge see only the cloud's fringe). On a
+    canvas padded to whole tiles and more (right and bottom: the same pixel grid and tiles), cropped, every output
+    is the view's bytes (the torch compositor's the same to float32 rounding: its batches sum in their own order).
+    Widened on every side by 5 or 13 px, as motion blur's keyframe canvases are (the principal point moves, the tiles
+    shift): the same to float32 rounding, the median depths and ids exactly. Nothing past an image's edge reaches it."""
     from spacedg.render.camera import Camera
 
     rng = np.random.default_rng(seed)
@@ -232,3 +232,13 @@ def test_a_composite_is_the_crop_of_the_same_camera_on_a_larger_canvas(seed: int
         # summation order follows the batch: the same to float32 rounding (its own bytes depend on the canvas)
         np.testing.assert_allclose(small_torch[name], big_torch[name][:height, :width], rtol=1e-6, atol=1e-7, err_msg=name)
         np.testing.assert_allclose(small_torch[name], small_cpu[name], rtol=1e-5, atol=1e-5, err_msg=name)
+    for margin in (5, 13):
+        wide = cam.widened(margin)
+        got = raster_cpu.rasterize(*project_cpu.project_gaussians(gaussians, wide, SETTINGS), ids, wide.width, wide.height,
+                                   SETTINGS.alpha_max, True, True, True, True)
+        crop = {name: image[margin:margin + height, margin:margin + width] for name, image in got.items() if np.ndim(image) >= 2}
+        for name in ("rgb", "alpha"):
+            np.testing.assert_allclose(crop[name], small_cpu[name], rtol=0, atol=2e-6, err_msg=name)
+        np.testing.assert_allclose(crop["depth"], small_cpu["depth"], rtol=1e-6, err_msg="depth")
+        for name in ("median_depth", "instance_ids"):
+            np.testing.assert_array_equal(crop[name], small_cpu[name], err_msg=name)
