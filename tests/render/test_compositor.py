@@ -214,17 +214,7 @@ def test_a_composite_is_the_crop_of_the_same_camera_on_a_larger_canvas(seed: int
     scales = rng.uniform(1.5, 4.0, (n, 3)) * (z / cam.fx)[:, None]  # 1.5–4 px on screen
     gaussians = Gaussians(means, cloud.quats, scales, cloud.opacities, cloud.sh, cloud.instance_ids)
     padded = Camera(cam.fx, cam.fy, cam.cx, cam.cy, (width + 15) // 16 * 16 + 16, (height + 15) // 16 * 16 + 16, cam.cam_to_world)
-    ids = gaussians.instance_ids
-    renders = []
-    for view in (cam, padded):
-        packed, rects = project_cpu.project_gaussians(gaussians, view, SETTINGS)
-        compiled = raster_cpu.rasterize(packed, rects, ids, view.width, view.height, SETTINGS.alpha_max, True, True, True, True)
-        proj = as_projected(packed, rects)
-        offsets, gauss = raster_torch.bin_tiles(proj, view.width, view.height, tight=True)
-        torch_path = raster_torch.composite(proj, offsets, gauss, torch.from_numpy(ids.copy()), view.width, view.height,
-                                            SETTINGS.alpha_max, True, True, True, chunk=16)
-        renders.append((compiled, {k: v.numpy() for k, v in torch_path.items()}))
-    (small_cpu, small_torch), (big_cpu, big_torch) = renders
+    (small_cpu, small_torch), (big_cpu, big_torch) = (_both_composites(gaussians, view) for view in (cam, padded))
     assert small_cpu["alpha"].min() > 0.99  # the image is covered (its pixels saturate) …
     assert big_cpu["alpha"][height:, :].min() < 0.5 and big_cpu["alpha"][:, width:].min() < 0.5  # … the padding does not
     for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
@@ -234,17 +224,23 @@ def test_a_composite_is_the_crop_of_the_same_camera_on_a_larger_canvas(seed: int
         np.testing.assert_allclose(small_torch[name], big_torch[name][:height, :width], rtol=1e-6, atol=1e-7, err_msg=name)
         np.testing.assert_allclose(small_torch[name], small_cpu[name], rtol=1e-5, atol=1e-5, err_msg=name)
     for margin in (5, 13):
-        wide = cam.widened(margin)
-        packed, rects = project_cpu.project_gaussians(gaussians, wide, SETTINGS)
-        got = raster_cpu.rasterize(packed, rects, ids, wide.width, wide.height, SETTINGS.alpha_max, True, True, True, True)
-        proj = as_projected(packed, rects)
-        offsets, gauss = raster_torch.bin_tiles(proj, wide.width, wide.height, tight=True)
-        got_torch = raster_torch.composite(proj, offsets, gauss, torch.from_numpy(ids.copy()), wide.width, wide.height,
-                                           SETTINGS.alpha_max, True, True, True, chunk=16)
-        for result, reference in ((got, small_cpu), ({k: v.numpy() for k, v in got_torch.items()}, small_torch)):
+        got, got_torch = _both_composites(gaussians, cam.widened(margin))
+        for result, reference in ((got, small_cpu), (got_torch, small_torch)):
             crop = {name: result[name][margin:margin + height, margin:margin + width] for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids")}
             # the projection rounds a moved principal point's positions anew (measured: within 1.2e-6)
             for name in ("rgb", "alpha", "depth"):
                 np.testing.assert_allclose(crop[name], reference[name], rtol=1e-5, atol=1e-5, err_msg=name)
             for name in ("median_depth", "instance_ids"):
                 np.testing.assert_array_equal(crop[name], reference[name], err_msg=name)
+
+
+def _both_composites(gaussians: Gaussians, view) -> tuple[dict, dict]:
+    """Every output of ``gaussians`` seen by ``view``, from the compiled compositor and the torch one (numpy)."""
+    ids = gaussians.instance_ids
+    packed, rects = project_cpu.project_gaussians(gaussians, view, SETTINGS)
+    compiled = raster_cpu.rasterize(packed, rects, ids, view.width, view.height, SETTINGS.alpha_max, True, True, True, True)
+    proj = as_projected(packed, rects)
+    offsets, gauss = raster_torch.bin_tiles(proj, view.width, view.height, tight=True)
+    torch_path = raster_torch.composite(proj, offsets, gauss, torch.from_numpy(ids.copy()), view.width, view.height,
+                                        SETTINGS.alpha_max, True, True, True, chunk=16)
+    return compiled, {k: v.numpy() for k, v in torch_path.items()}
