@@ -484,6 +484,45 @@ def test_an_item_that_does_not_load_says_so(review: Review) -> None:
     assert [src.rsplit("/", 1)[1] for src in review.images_loaded("#clean-images")] == ["0000000_0.png"]
 
 
+def test_a_late_save_answer_keeps_the_item_moved_to(review: Review) -> None:
+    """A Save whose answer comes back after the reviewer has moved to another item: the edit is kept (the list marks
+    it, the reviewed TSV has it) and the item moved to stays shown, where the answer used to draw the saved item
+    again over it. The edit's request is held here until the next item is shown."""
+    from playwright.sync_api import expect
+
+    from spacedg.eval.bench import load_bench
+
+    page = review.page
+    page.add_init_script(_COUNT_ANSWERS)
+    held = []
+
+    def is_edit(url: str) -> bool:
+        return url.split("?", 1)[0].endswith("/api/items/5/edit")
+
+    def hold(route: Any) -> None:
+        held.append(route)
+
+    review.open()
+    review.select(5)
+    page.route(is_edit, hold)
+    page.fill("#edit-answer", "C")
+    page.click("#save")
+    review.select(6)
+    for _ in range(200):  # each playwright call lets the route handler run
+        if held:
+            break
+        page.wait_for_timeout(25)
+    assert len(held) == 1
+    held.pop().continue_()
+    page.unroute(is_edit, hold)
+    page.wait_for_function("() => (window.__answered['/api/items/5/edit'] || 0) > 0", timeout=TIMEOUT_MS)
+    expect(page.locator("#detail")).to_have_attribute("data-index", "6")
+    expect(page.locator("#question")).to_have_text(bench_rows()[6]["question"])
+    expect(page.locator('#item-list li[data-index="5"]')).to_have_class(_has_class("edited"))
+    expect(page.locator("#status")).not_to_have_text("Saved")
+    assert load_bench(review.out).by_index[5].answer == "C"
+
+
 def test_screenshot(review: Review, tmp_path: Path) -> None:
     """The page as documented: an MCQ item under haze with its clean counterpart beside it."""
     from playwright.sync_api import expect
