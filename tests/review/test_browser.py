@@ -523,6 +523,30 @@ def test_a_late_save_answer_keeps_the_item_moved_to(review: Review) -> None:
     assert load_bench(review.out).by_index[5].answer == "C"
 
 
+def test_an_image_that_does_not_load_says_so(review: Review) -> None:
+    """An item's image refused by the server (a 503) is said under the image and in the error box, not left as a
+    broken icon; the next item's images load and its error box is clear."""
+    from playwright.sync_api import expect
+
+    page = review.page
+
+    def is_image(url: str) -> bool:
+        return url.split("?", 1)[0].endswith("/0000005_0.png")
+
+    def refuse(route: Any) -> None:
+        route.fulfill(status=503, content_type="application/json", body=json.dumps({"error": "busy"}))
+
+    page.route(is_image, refuse)
+    review.open()
+    review.select(5)
+    expect(page.locator("#images figcaption")).to_have_text("haze · image A did not load")
+    expect(page.locator("#error")).to_contain_text("haze image A (")
+    expect(page.locator("#error")).to_contain_text("0000005_0.png) did not load")
+    review.select(6)
+    expect(page.locator("#error")).to_have_text("")
+    assert review.images_loaded("#images")[0].endswith("/images/0000006_0.png")
+
+
 def test_screenshot(review: Review, tmp_path: Path) -> None:
     """The page as documented: an MCQ item under haze with its clean counterpart beside it."""
     from playwright.sync_api import expect
