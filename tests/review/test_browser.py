@@ -370,11 +370,12 @@ _DRAWN = ("box => box + ':' + [...document.querySelectorAll('#' + box + ' img')]
 
 
 class _HeldBack:
-    """The page's requests for item ``index`` (``/api/items/<index>``, not its edits), held unanswered
-    until :meth:`release` (the page must load :data:`_COUNT_ANSWERS` first)."""
+    """The page's requests for item ``index`` (``/api/items/<index>``, not its edits; with ``action`` ``"/edit"``
+    or ``"/drop"``, that request of the item instead), held unanswered until :meth:`release` (the page must load
+    :data:`_COUNT_ANSWERS` first)."""
 
-    def __init__(self, page, index: int) -> None:
-        self.page, self.path, self.routes = page, f"/api/items/{index}", []
+    def __init__(self, page, index: int, action: str = "") -> None:
+        self.page, self.path, self.routes = page, f"/api/items/{index}{action}", []
 
         def hold(route) -> None:  # a plain function: playwright tags its handlers with an attribute
             self.routes.append(route)
@@ -436,6 +437,20 @@ def test_late_answers_never_replace_a_later_selection(review: Review) -> None:
     assert [src.rsplit("/", 1)[1] for src in review.images_loaded("#images")] == ["0000007_0.png"]
 
 
+#: The review server's answer when it is busy (more than 32 connections): what the failure tests below refuse with.
+_BUSY = "the review server is busy (32 connections open); try again"
+
+
+def _refuse(route: Any) -> None:
+    """A playwright route handler answering 503 with :data:`_BUSY`, as a busy review server does."""
+    route.fulfill(status=503, content_type="application/json", body=json.dumps({"error": _BUSY}))
+
+
+def _url_ends(suffix: str) -> Any:
+    """A playwright URL predicate: the path (before the query) ends with ``suffix``."""
+    return lambda url: url.split("?", 1)[0].endswith(suffix)
+
+
 def test_an_item_that_does_not_load_says_so(review: Review) -> None:
     """A selection whose request is refused (here a 503, as a busy server answers) is said in the error box, and
     the item shown so far stays; asked again once the server answers, it loads and the error goes. The clean views
@@ -444,40 +459,32 @@ def test_an_item_that_does_not_load_says_so(review: Review) -> None:
     from playwright.sync_api import expect
 
     page = review.page
-    busy = json.dumps({"error": "the review server is busy (32 connections open); try again"})
-
-    def refuse(route: Any) -> None:
-        route.fulfill(status=503, content_type="application/json", body=busy)
-
-    def item(index: int) -> Any:
-        return lambda url: url.split("?", 1)[0].endswith(f"/api/items/{index}")
-
     review.open()
     review.select(0)
-    fifth = item(5)
-    page.route(fifth, refuse)
+    fifth = _url_ends("/api/items/5")
+    page.route(fifth, _refuse)
     page.click('#item-list li[data-index="5"]')
-    expect(page.locator("#error")).to_have_text("item 5 did not load: the review server is busy (32 connections open); try again")
+    expect(page.locator("#error")).to_have_text(f"item 5 did not load: {_BUSY}")
     expect(page.locator("#detail")).to_have_attribute("data-index", "0")
-    page.unroute(fifth, refuse)
+    page.unroute(fifth, _refuse)
     review.select(5)
     expect(page.locator("#error")).to_have_text("")
     expect(page.locator("#question")).to_have_text(bench_rows()[5]["question"])
 
-    first = item(0)  # item 5's clean counterpart
-    page.route(first, refuse)
+    first = _url_ends("/api/items/0")  # item 5's clean counterpart
+    page.route(first, _refuse)
     page.locator("#question").click()
     page.keyboard.press("c")
-    expect(page.locator("#error")).to_have_text("the clean views of item 5 did not load: the review server is busy (32 connections open); try again")
+    expect(page.locator("#error")).to_have_text(f"the clean views of item 5 did not load: {_BUSY}")
     expect(page.locator("#clean-images")).to_have_text("the clean views did not load")
     expect(page.locator("#detail")).to_have_attribute("data-index", "5")
-    page.unroute(first, refuse)
+    page.unroute(first, _refuse)
     page.keyboard.press("c")  # hidden: the clean views' failure is no longer said
     expect(page.locator("#error")).to_have_text("")
-    page.route(first, refuse)
+    page.route(first, _refuse)
     page.keyboard.press("c")
-    expect(page.locator("#error")).to_have_text("the clean views of item 5 did not load: the review server is busy (32 connections open); try again")
-    page.unroute(first, refuse)
+    expect(page.locator("#error")).to_have_text(f"the clean views of item 5 did not load: {_BUSY}")
+    page.unroute(first, _refuse)
     page.keyboard.press("c")
     page.keyboard.press("c")  # asked again: they load and the error goes
     expect(page.locator("#error")).to_have_text("")
@@ -494,28 +501,13 @@ def test_a_late_save_answer_keeps_the_item_moved_to(review: Review) -> None:
 
     page = review.page
     page.add_init_script(_COUNT_ANSWERS)
-    held = []
-
-    def is_edit(url: str) -> bool:
-        return url.split("?", 1)[0].endswith("/api/items/5/edit")
-
-    def hold(route: Any) -> None:
-        held.append(route)
-
     review.open()
     review.select(5)
-    page.route(is_edit, hold)
+    edit = _HeldBack(page, 5, "/edit")
     page.fill("#edit-answer", "C")
     page.click("#save")
     review.select(6)
-    for _ in range(200):  # each playwright call lets the route handler run
-        if held:
-            break
-        page.wait_for_timeout(25)
-    assert len(held) == 1
-    held.pop().continue_()
-    page.unroute(is_edit, hold)
-    page.wait_for_function("() => (window.__answered['/api/items/5/edit'] || 0) > 0", timeout=TIMEOUT_MS)
+    edit.release()  # the one edit request let through once item 6 is shown, and its answer read
     expect(page.locator("#detail")).to_have_attribute("data-index", "6")
     expect(page.locator("#question")).to_have_text(bench_rows()[6]["question"])
     expect(page.locator('#item-list li[data-index="5"]')).to_have_class(_has_class("edited"))
@@ -529,14 +521,7 @@ def test_an_image_that_does_not_load_says_so(review: Review) -> None:
     from playwright.sync_api import expect
 
     page = review.page
-
-    def is_image(url: str) -> bool:
-        return url.split("?", 1)[0].endswith("/0000005_0.png")
-
-    def refuse(route: Any) -> None:
-        route.fulfill(status=503, content_type="application/json", body=json.dumps({"error": "busy"}))
-
-    page.route(is_image, refuse)
+    page.route(_url_ends("/0000005_0.png"), _refuse)
     review.open()
     review.select(5)
     expect(page.locator("#images figcaption")).to_have_text("haze · image A did not load")
