@@ -459,6 +459,18 @@ def _exp_minus(delta: float) -> float:
 
 
 @numba.njit(cache=True, inline="always")
+def _with_read_noise(
+    shot: float, signal: np.float32, offset: np.uint64, read_key: np.uint64, read_scale: float, clip: bool, noise: bool,
+) -> np.float32:
+    """The vector loops' end of :func:`_value` for a value whose shot-noise draw is ``shot`` (float64) and whose signal
+    rounded to float32 is ``signal``: Gaussian read noise (draw 0's stream ``read_key``) added, clipped to [0, 1] with
+    ``clip``, rounded to float32, less ``signal`` with ``noise``. The scalar's operations in its order."""
+    y = shot + read_scale * _normal(_mix(read_key + offset)) if read_scale > 0.0 else shot
+    y = min(max(y, 0.0), 1.0) if clip else y
+    return np.float32(y) - signal if noise else np.float32(y)
+
+
+@numba.njit(cache=True, inline="always")
 def _lane(
     x: np.float32, offset: np.uint64, exposure: float, k: float, inv_k: float, read_key: np.uint64, shot_key: np.uint64, read_scale: float,
     clip: bool, saturated: float, noise: bool, use_normal: bool,
@@ -497,9 +509,7 @@ def _lane(
     shot = (0.0 if s <= 0.0 else (table if in_table else approx)) if k > 0.0 else s
     unhandled = (np.int64(in_table) & unsure) | (np.int64(not in_table) & np.int64(not in_normal)) | (np.int64(in_normal) & np.int64(not use_normal))
     drawn = np.int64(s > 0.0) & np.int64(k > 0.0)
-    y = shot + read_scale * _normal(_mix(read_key + offset)) if read_scale > 0.0 else shot
-    y = min(max(y, 0.0), 1.0) if clip else y
-    result = np.float32(y) - signal if noise else np.float32(y)
+    result = _with_read_noise(shot, signal, offset, read_key, read_scale, clip, noise)
     saturates = s >= saturated
     return (np.float32(1.0) if saturates else result), np.uint8(drawn & unhandled & np.int64(not saturates))
 
@@ -585,9 +595,7 @@ def _normal_lane(
     s = _signal(x, exposure)
     signal = np.float32(s)
     shot = max(s + math.sqrt(max(k * s, 0.0)) * _normal(_mix(shot_key + offset)), 0.0)
-    y = shot + read_scale * _normal(_mix(read_key + offset)) if read_scale > 0.0 else shot
-    y = min(max(y, 0.0), 1.0) if clip else y
-    result = np.float32(y) - signal if noise else np.float32(y)
+    result = _with_read_noise(shot, signal, offset, read_key, read_scale, clip, noise)
     return np.float32(1.0) if s >= saturated else result
 
 
