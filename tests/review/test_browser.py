@@ -369,6 +369,21 @@ _DRAWN = ("box => box + ':' + [...document.querySelectorAll('#' + box + ' img')]
           ".map(i => i.getAttribute('src').split('?')[0].split('/').pop()).join(',')")
 
 
+def _await_held(page, routes: list, what: str) -> None:
+    """Wait until the page's request for ``what`` is held in ``routes`` (a route handler appends them): once."""
+    for _ in range(200):  # each playwright call lets the route handler run
+        if routes:
+            break
+        page.wait_for_timeout(25)
+    assert len(routes) == 1, f"the page asked for {what} {len(routes)} times while it was held"
+
+
+def _held(page, routes: list, what: str) -> Any:
+    """The one route held in ``routes``, taken out, once the page's request for ``what`` has come."""
+    _await_held(page, routes, what)
+    return routes.pop()
+
+
 class _HeldBack:
     """The page's requests for item ``index`` (``/api/items/<index>``, not its edits; with ``action`` ``"/edit"``
     or ``"/drop"``, that request of the item instead), held unanswered until :meth:`release` (the page must load
@@ -389,15 +404,15 @@ class _HeldBack:
     def _answered(self) -> int:
         return self.page.evaluate("path => window.__answered[path] || 0", self.path)
 
-    def release(self) -> None:
-        """Let the one held request through, stop holding, and wait until the page has read its answer."""
-        for _ in range(200):  # each playwright call lets the route handler run
-            if self.routes:
-                break
-            self.page.wait_for_timeout(25)
-        assert len(self.routes) == 1, f"the page asked for {self.path} {len(self.routes)} times while it was held"
+    def release(self, answer: Any = None) -> None:
+        """Let the one held request through (or answer it with the route handler ``answer``, e.g. :func:`_refuse`),
+        stop holding, and wait until the page has read its answer."""
+        route = _held(self.page, self.routes, self.path)
         before = self._answered()
-        self.routes.pop().continue_()
+        if answer is None:
+            route.continue_()
+        else:
+            answer(route)
         self.page.unroute(self._matches, self._hold)  # after: unrouting settles a route still held
         self.page.wait_for_function(f"path => (window.__answered[path] || 0) > {before}", arg=self.path, timeout=TIMEOUT_MS)
 
@@ -495,6 +510,13 @@ def test_a_late_save_answer_keeps_the_item_moved_to(review: Review) -> None:
     """A Save whose answer comes back after the reviewer has moved to another item: the edit is kept (the list marks
     it, the reviewed TSV has it) and the item moved to stays shown, where the answer used to draw the saved item
     again over it. The edit's request is held here until the next item is shown."""
+    _save_5_then_move_to_6(review, arrived=True)
+
+
+def _save_5_then_move_to_6(review: Review, arrived: bool) -> None:
+    """Item 5 saved (answer C) with its edit's request held, the reviewer moved to item 6, and the edit answered once
+    item 6 is shown (``arrived``) or while it is still on its way; then item 6 is shown alone (no "Saved", no error),
+    the list marks item 5 edited and the reviewed TSV has the edit."""
     from playwright.sync_api import expect
 
     from spacedg.eval.bench import load_bench
@@ -506,13 +528,92 @@ def test_a_late_save_answer_keeps_the_item_moved_to(review: Review) -> None:
     edit = _HeldBack(page, 5, "/edit")
     page.fill("#edit-answer", "C")
     page.click("#save")
-    review.select(6)
-    edit.release()  # the one edit request let through once item 6 is shown, and its answer read
+    if arrived:
+        review.select(6)
+        edit.release()  # the one edit request let through once item 6 is shown, and its answer read
+    else:
+        sixth = _HeldBack(page, 6)
+        page.click('#item-list li[data-index="6"]')
+        edit.release()  # saved while item 6 is on its way
+        sixth.release()
     expect(page.locator("#detail")).to_have_attribute("data-index", "6")
     expect(page.locator("#question")).to_have_text(bench_rows()[6]["question"])
+    expect(page.locator("#status")).to_have_text("")
+    expect(page.locator("#error")).to_have_text("")
     expect(page.locator('#item-list li[data-index="5"]')).to_have_class(_has_class("edited"))
-    expect(page.locator("#status")).not_to_have_text("Saved")
     assert load_bench(review.out).by_index[5].answer == "C"
+
+
+def test_a_save_or_drop_answered_before_the_next_item_arrives(review: Review) -> None:
+    """A Save or Drop answered after the reviewer asked for another item but before that item came back: the reviewer
+    has moved on, so a saved item is not drawn again nor said "Saved" beside the next one, and a refused Drop names its
+    item and is still said once the next item shows (the page used to take the old item for the one shown until the
+    next arrived: its failure read as the bare message and the next item's arrival wiped it, so nothing said that
+    item 6 was not dropped). The requests are held here to make that window."""
+    from playwright.sync_api import expect
+
+    page = review.page
+    _save_5_then_move_to_6(review, arrived=False)
+    drop = _HeldBack(page, 6, "/drop")
+    page.click("#drop")
+    seventh = _HeldBack(page, 7)
+    page.click('#item-list li[data-index="7"]')
+    drop.release(_refuse)  # refused while item 7 is on its way
+    seventh.release()
+    expect(page.locator("#detail")).to_have_attribute("data-index", "7")
+    expect(page.locator("#error")).to_have_text(f"item 6 was not changed: {_BUSY}")
+    expect(page.locator('#item-list li[data-index="6"]')).not_to_have_class(_has_class("dropped"))
+    expect(page.locator("#drop")).to_have_text("Drop")
+
+
+def test_a_clean_image_of_views_no_longer_shown_says_nothing(review: Review) -> None:
+    """A clean image that fails once its views are hidden, or once the reviewer has moved to another item (the box
+    keeps the old figures while the next item's clean views are on their way), says nothing; a clean image that fails
+    while shown is said, and hiding the clean views drops that error as it drops a failed clean request's."""
+    from playwright.sync_api import expect
+
+    page = review.page
+    page.add_init_script(_COUNT_ANSWERS)
+    routes: list = []
+
+    def hold(route) -> None:
+        routes.append(route)
+
+    image = _url_ends("/0000000_0.png")  # item 5's clean counterpart's image
+    page.route(image, hold)
+    review.open()
+    review.select(5)
+    page.locator("#question").click()
+    error = page.locator("#error")
+
+    def refuse_held() -> None:  # the held image refused, and the page through with its error event
+        _refuse(_held(page, routes, "the clean image"))
+        page.wait_for_function("() => [...document.querySelectorAll('#clean-images img')].every((img) => img.complete)")
+
+    page.keyboard.press("c")
+    _await_held(page, routes, "the clean image")  # (hidden before its item came back, the page would not ask for it)
+    page.keyboard.press("c")  # hidden while its image is on its way
+    refuse_held()
+    expect(error).to_have_text("")
+
+    page.keyboard.press("c")  # shown again: the image asked again, and held
+    _await_held(page, routes, "the clean image")
+    clean_of_sixth = _HeldBack(page, 1)  # item 6's clean counterpart: held, so item 5's clean figures stay in the box
+    page.keyboard.press("j")
+    expect(page.locator("#detail")).to_have_attribute("data-index", "6")
+    refuse_held()
+    expect(error).to_have_text("")
+    clean_of_sixth.release()
+    assert [src.rsplit("/", 1)[1].split("?")[0] for src in review.images_loaded("#clean-images")] == ["0000001_0.png"]
+    expect(error).to_have_text("")
+
+    review.select(5)  # shown: said, under the image and in the error box; hidden: the error goes
+    refuse_held()
+    expect(page.locator("#clean-images figcaption")).to_have_text("clean · image A did not load")
+    expect(error).to_contain_text("0000000_0.png) did not load")
+    page.locator("#question").click()
+    page.keyboard.press("c")
+    expect(error).to_have_text("")
 
 
 def test_an_image_that_does_not_load_says_so(review: Review) -> None:
