@@ -15,6 +15,8 @@ from spacedg.render.project_torch import Projected
 from spacedg.render.project_cpu import AMIN, CA, CB, CBL, CC, CR, DEPTH, OPA, PX, PY, RADX, RADY
 
 SETTINGS = RasterSettings()
+#: Every output of a composite with colour, depth and ids.
+_OUTPUTS = ("rgb", "alpha", "depth", "median_depth", "instance_ids")
 
 
 def as_projected(packed: np.ndarray, rects: np.ndarray) -> Projected:
@@ -120,7 +122,7 @@ def test_tight_binning_drops_pairs_but_not_pixels() -> None:
     loose = raster_cpu.rasterize(packed, rects, ids, cam.width, cam.height, 0.99, True, True, True, False)
     tight = raster_cpu.rasterize(packed, rects, ids, cam.width, cam.height, 0.99, True, True, True, True)
     assert tight["n_pairs"] < loose["n_pairs"]
-    for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
+    for name in _OUTPUTS:
         np.testing.assert_array_equal(tight[name], loose[name], err_msg=name)
     # the torch binning drops exactly the same pairs
     offsets, gauss = raster_torch.bin_tiles(as_projected(packed, rects), cam.width, cam.height, tight=True)
@@ -217,7 +219,7 @@ def test_a_composite_is_the_crop_of_the_same_camera_on_a_larger_canvas(seed: int
     (small_cpu, small_torch), (big_cpu, big_torch) = (_both_composites(gaussians, view) for view in (cam, padded))
     assert small_cpu["alpha"].min() > 0.99  # the image is covered (its pixels saturate) …
     assert big_cpu["alpha"][height:, :].min() < 0.5 and big_cpu["alpha"][:, width:].min() < 0.5  # … the padding does not
-    for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids"):
+    for name in _OUTPUTS:
         assert small_cpu[name].tobytes() == np.ascontiguousarray(big_cpu[name][:height, :width]).tobytes(), name
         # the torch path's colour and depth sums are batched matrix products over as many tiles as fit a batch, whose
         # summation order follows the batch: the same to float32 rounding (its own bytes depend on the canvas)
@@ -226,7 +228,7 @@ def test_a_composite_is_the_crop_of_the_same_camera_on_a_larger_canvas(seed: int
     for margin in (5, 13):
         got, got_torch = _both_composites(gaussians, cam.widened(margin))
         for result, reference in ((got, small_cpu), (got_torch, small_torch)):
-            crop = {name: result[name][margin:margin + height, margin:margin + width] for name in ("rgb", "alpha", "depth", "median_depth", "instance_ids")}
+            crop = {name: result[name][margin:margin + height, margin:margin + width] for name in _OUTPUTS}
             # the projection rounds a moved principal point's positions anew (measured: within 1.2e-6)
             for name in ("rgb", "alpha", "depth"):
                 np.testing.assert_allclose(crop[name], reference[name], rtol=1e-5, atol=1e-5, err_msg=name)

@@ -369,6 +369,11 @@ _DRAWN = ("box => box + ':' + [...document.querySelectorAll('#' + box + ' img')]
           ".map(i => i.getAttribute('src').split('?')[0].split('/').pop()).join(',')")
 
 
+def _url_ends(suffix: str) -> Any:
+    """A playwright URL predicate: the path (before the query) ends with ``suffix``."""
+    return lambda url: url.split("?", 1)[0].endswith(suffix)
+
+
 def _await_held(page, routes: list, what: str) -> None:
     """Wait until the page's request for ``what`` is held in ``routes`` (a route handler appends them): once."""
     for _ in range(200):  # each playwright call lets the route handler run
@@ -396,10 +401,8 @@ class _HeldBack:
             self.routes.append(route)
 
         self._hold = hold
+        self._matches = _url_ends(self.path)
         page.route(self._matches, hold)
-
-    def _matches(self, url: str) -> bool:
-        return url.split("?", 1)[0].endswith(self.path)
 
     def _answered(self) -> int:
         return self.page.evaluate("path => window.__answered[path] || 0", self.path)
@@ -459,11 +462,6 @@ _BUSY = "the review server is busy (32 connections open); try again"
 def _refuse(route: Any) -> None:
     """A playwright route handler answering 503 with :data:`_BUSY`, as a busy review server does."""
     route.fulfill(status=503, content_type="application/json", body=json.dumps({"error": _BUSY}))
-
-
-def _url_ends(suffix: str) -> Any:
-    """A playwright URL predicate: the path (before the query) ends with ``suffix``."""
-    return lambda url: url.split("?", 1)[0].endswith(suffix)
 
 
 def test_an_item_that_does_not_load_says_so(review: Review) -> None:
