@@ -77,6 +77,12 @@ class PluginWarning(SpaceDGWarning):
     """A plugin problem that does not stop the command: a name clash, a slow import."""
 
 
+class ErasedViewWarning(SpaceDGWarning):
+    """A degradation's parameters turned a view with content into one flat colour (pure airlight,
+    white, black): the image is delivered as asked, but shows nothing of the scene
+    (:mod:`spacedg.data.erased_views`)."""
+
+
 @contextmanager
 def error_context(prefix: str) -> Iterator[None]:
     """Prefix the message of any :class:`SpaceDGError` raised inside the block.

@@ -75,6 +75,7 @@ import numpy as np
 from spacedg._checks import check_bool, check_choice, check_int, short_repr
 from spacedg._checks import check_image_size as check_size_argument
 from spacedg.data.chain import Chain, ResolvedDegradation
+from spacedg.data.erased_views import warn_if_erased
 from spacedg.devices import resolve_device
 from spacedg.errors import InvalidDataError, ParameterError, PluginError
 from spacedg.limits import check_image_size
@@ -672,7 +673,7 @@ def _run_chains(
         _check_renders(scene, views, frames)
         far_depth = max(surface_far_depth(f.depth, f.alpha) for f in frames) if "depth" in needs else None
         for i in members:
-            results[i] = _finish_chain(frames, views, resolved[i], far_depth, render_ms, device)
+            results[i] = _finish_chain(frames, views, resolved[i], far_depth, render_ms, device, f"scene {scene.id}")
     return [r for r in results if r is not None]
 
 
@@ -688,15 +689,18 @@ def _check_renders(scene: Scene, views: Sequence[str], frames: Sequence[Frame]) 
 
 def _finish_chain(
     frames: Sequence[Frame], views: tuple[str, ...], chain: Sequence[ResolvedDegradation], far_depth: float | None,
-    render_ms: float, device: torch.device | None,
+    render_ms: float, device: torch.device | None, where: str = "the sample",
 ) -> DegradedViews:
-    """The linear chain, encode and display chain of one resolved chain over its group's frames."""
+    """The linear chain, encode and display chain of one resolved chain over its group's frames; a
+    view the chain turned into one flat colour is reported (:func:`~spacedg.data.erased_views.warn_if_erased`,
+    ``where`` names the scene)."""
     timer = {"render_ms": render_ms, "linear_ms": 0.0, "encode_ms": 0.0, "display_ms": 0.0}
     linear, display = _by_stage(chain, Stage.LINEAR), _by_stage(chain, Stage.DISPLAY)
     if device is not None:
         images = [_finish_device(frame, linear, display, v, far_depth, timer, device) for v, frame in enumerate(frames)]
     else:
         images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
+    warn_if_erased(images, [frame.rgb for frame in frames], chain, where)
     shares = [f.stats["captured_share"] for f in frames if "captured_share" in f.stats]
     return DegradedViews(
         images=np.stack(images),
@@ -850,8 +854,11 @@ def degrade_image(
             "use degrade(scene, views, ...) with the scene's Gaussians"
         )
     linear, display = _by_stage(chain, Stage.LINEAR), _by_stage(chain, Stage.DISPLAY)
+    degraded = image
     if linear:
         rgb = decode_srgb(image.astype(np.float32) / np.float32(255.0))
-        image = encode_srgb_u8(_run_linear(rgb, aux, linear, 0))
-    return _run_display(image, display, 0), [step.provenance() for step in chain]
+        degraded = encode_srgb_u8(_run_linear(rgb, aux, linear, 0))
+    degraded = _run_display(degraded, display, 0)
+    warn_if_erased([degraded], [image], chain, "the image", once=False)
+    return degraded, [step.provenance() for step in chain]
 

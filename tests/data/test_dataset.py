@@ -779,6 +779,31 @@ def test_headline_mapping_with_explicit_params_renders(rooms) -> None:
     assert ds.provenance(0) == item["degradation"]
 
 
+def test_parameters_that_erase_the_view_warn_once_per_scene_and_deliver_the_item(rooms) -> None:
+    """Haze of density 100 and airlight 1 (within its hard limits) turns every view white: each item is
+    delivered as asked, and one ErasedViewWarning per scene names the parameters (spacedg.data.erased_views),
+    though the scaled depth_ref differs between the items."""
+    import warnings
+
+    from spacedg.data import erased_views
+    from spacedg.errors import ErasedViewWarning
+
+    erased_views._REPORTED.clear()  # this process may have reported haze before
+    erase = {"name": "haze", "params": {"density": 100.0, "airlight": 1.0}}
+    ds = SpaceDGDataset("train", scenes=rooms, degradations=[erase], clean_prob=0.0, image_size=SIZE, qa_config=CONFIG)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        firsts: dict[str, list[int]] = {}
+        for i in range(len(ds)):
+            firsts.setdefault(ds.plan(i).record.scene_id, []).append(i)
+        items = [ds[i] for indices in firsts.values() for i in indices[:2]]  # two items of each train scene
+    assert all(bool((item["images"] == 1.0).all()) or bool((item["images"] == 255).all()) for item in items)
+    scenes = {item["scene_id"] for item in items}
+    messages = [str(w.message) for w in caught if issubclass(w.category, ErasedViewWarning)]
+    assert len(scenes) >= 2 and len(messages) == len(scenes) and all("haze {density: 100, airlight: 1" in m for m in messages)
+    assert {m.split(" of scene ")[1].split(" ")[0] for m in messages} == scenes
+
+
 def test_every_chain_form_survives_workers_provenance_and_replay(rooms) -> None:
     """Each chain form over every built-in: planned in forked DataLoader workers (from a pickled
     dataset), the worker's plan rendered by the pipeline, its provenance equal to ``provenance(i)``,

@@ -1,0 +1,89 @@
+"""Degraded views turned into one flat colour are reported (spacedg.data.erased_views), never changed."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from spacedg.data import erased_views
+from spacedg.data.erased_views import is_flat, warn_if_erased
+from spacedg.data.pipeline import degrade_image
+from spacedg.errors import ErasedViewWarning, SpaceDGWarning
+
+_ERASE_HAZE = {"name": "haze", "params": {"density": 100.0, "airlight": 1.0, "depth_ref": 1.0}}
+
+
+def _textured(seed: int = 4101) -> np.ndarray:
+    return (np.random.default_rng(seed).random((48, 64, 3)) * 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("shape", [(48, 64, 3), (48, 64), (1, 1, 3), (5, 3, 3)])
+def test_is_flat_sees_one_differing_value_anywhere(shape) -> None:
+    flat = np.full(shape, 77, np.uint8)
+    assert is_flat(flat)
+    for index in np.ndindex(*shape):  # inside and outside the quick sample's strides alike
+        other = flat.copy()
+        other[index] = 78
+        assert not is_flat(other) or shape[:2] == (1, 1)  # one pixel is one colour, whatever it holds
+
+
+def test_is_flat_on_float_nan_and_empty_images() -> None:
+    assert is_flat(np.full((6, 5, 3), 0.25, np.float32))
+    with_nan = np.full((6, 5, 3), 0.25, np.float32)
+    with_nan[3, 4, 1] = np.nan
+    assert not is_flat(with_nan) and not is_flat(np.full((6, 5, 3), np.nan, np.float32))
+    assert not is_flat(np.zeros((0, 4, 3), np.uint8))
+    colour = np.zeros((6, 5, 3), np.uint8)
+    colour[...] = (10, 200, 30)  # one colour that is not grey is flat too
+    assert is_flat(colour)
+
+
+def test_an_erasing_chain_warns_once_naming_its_parameters_and_changes_nothing() -> None:
+    image, depth = _textured(), np.full((48, 64), 2.0, np.float32)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out, provenance = degrade_image(image, [_ERASE_HAZE], depth=depth)
+    erased = [w for w in caught if issubclass(w.category, ErasedViewWarning)]
+    assert len(erased) == 1 and issubclass(erased[0].category, SpaceDGWarning)
+    message = str(erased[0].message)
+    assert "haze {density: 100, airlight: 1, depth_ref: 1}" in message and "(255, 255, 255)" in message
+    assert "weaken them" in message and "seed" not in message
+    assert (out == 255).all()  # delivered as asked: the warning changes no byte
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        again, _ = degrade_image(image, [_ERASE_HAZE], depth=depth)
+    assert np.array_equal(out, again) and provenance[0]["params"]["density"] == 100.0
+
+
+@pytest.mark.parametrize("chain", [["haze"], ["low_light"], ["over_exposure"], ["jpeg_compression", "low_res"]])
+def test_the_bench_presets_erase_nothing(chain) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ErasedViewWarning)
+        degrade_image(_textured(4102), chain, depth=np.full((48, 64), 2.5, np.float32), seed=4103)
+
+
+def test_a_flat_input_is_not_the_chains_doing() -> None:
+    flat = np.full((48, 64, 3), 128, np.uint8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ErasedViewWarning)
+        out, _ = degrade_image(flat, [_ERASE_HAZE], depth=np.full((48, 64), 2.0, np.float32))
+    assert is_flat(out)
+
+
+def test_warn_if_erased_counts_views_reports_once_per_scene_and_skips_unknown_sources() -> None:
+    class Step:
+        name, params = "low_light", {"exposure": 1e-9}
+
+    erased_views._REPORTED.clear()
+    flat, textured = np.zeros((4, 4, 3), np.uint8), _textured()[:4, :4]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert warn_if_erased([flat, textured, flat], [textured, textured, None], [Step()], "scene s") == 1
+        assert warn_if_erased([flat, flat], [textured, textured], [Step()], "scene s") == 2  # reported already
+        assert warn_if_erased([flat], [textured], [Step()], "scene t") == 1  # another scene: reported
+        assert warn_if_erased([flat], [textured], [], "scene u") == 0  # a clean item: nothing to blame
+    first, second = (str(w.message) for w in caught)
+    assert "1 of 3 views of scene s" in first and "(0, 0, 0)" in first and "once per scene" in first
+    assert "every view of scene t" in second
