@@ -34,6 +34,9 @@ FOOTPRINT_CAP = float(1 << 30)
 #: blur is exact in the per-Gaussian model (``r²·I`` added to a covariance), and
 #: :mod:`spacedg.render.defocus_flux` keeps its light.
 DEFOCUS_MIN_COC = 0.0
+#: Relative slack of the motion rotation's π limit: ``rot · axis`` for a unit ``axis`` has a norm within
+#: a few ulps of ``rot``, so the limit itself (the motion-blur degradation's ``rot`` hard limit, π) passes.
+_ANGLE_ROUNDING = 1e-12
 
 
 def _finite(name: str, value: object, low: float | None = None, high: float | None = None, *, open_low: bool = False) -> float:
@@ -209,7 +212,8 @@ class MotionBlur:
             if value.shape != (3,) or not np.isfinite(value).all():
                 raise ParameterError(f"motion {name} must be 3 finite numbers, got {getattr(self, name)!r}")
             object.__setattr__(self, name, tuple(float(v) for v in value))
-        if float(np.linalg.norm(self.rotation)) > math.pi:
+        # π itself is allowed: rot·axis of a unit axis can have a norm a few ulps above its angle
+        if float(np.linalg.norm(self.rotation)) > math.pi * (1.0 + _ANGLE_ROUNDING):
             raise ParameterError(f"motion rotation angle must be <= π rad over one exposure, got {np.linalg.norm(self.rotation):.4g}")
         if isinstance(self.sub_steps, bool) or not isinstance(self.sub_steps, (int, np.integer)) or not 1 <= self.sub_steps <= 4096:
             raise ParameterError(f"motion sub_steps must be an integer in [1, 4096], got {self.sub_steps!r}")

@@ -207,6 +207,22 @@ def test_motion_blur_directions_are_uniform_and_per_view() -> None:
     assert a.motion.translation != b.motion.translation
 
 
+def test_motion_blur_takes_its_rotation_limit_on_every_axis() -> None:
+    """``rot = π`` is the hard limit: on a quarter of the random axes ``π · axis`` has a norm a few ulps above π,
+    which the settings refused (stop 64's sweep at the limits); beyond π is still refused."""
+    from spacedg.render.settings import MotionBlur
+
+    axes = np.random.default_rng(4108)
+    above = 0
+    for view in range(400):
+        request = motion_blur.SPEC.apply(RenderRequest(camera()), {"trans": 0.0, "rot": math.pi, "sub_steps": 80}, np.random.default_rng([4108, view]))
+        above += float(np.linalg.norm(request.motion.rotation)) > math.pi
+        MotionBlur(rotation=tuple(math.pi * motion_blur.random_unit_vector(axes)))
+    assert above > 0  # the case the limit's slack is for was met
+    with pytest.raises(ParameterError, match="must be <= π"):
+        MotionBlur(rotation=(0.0, math.nextafter(math.pi * (1 + 1e-11), 4.0), 0.0))
+
+
 @pytest.mark.parametrize(
     ("name", "params", "pattern"),
     [
