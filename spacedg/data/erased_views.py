@@ -6,9 +6,10 @@ exposure of 10⁻⁹ is black. Such an image is valid output (the user asked for
 about it measures nothing but priors, and a training sample teaches nothing. So the pipeline
 says so: :func:`warn_if_erased` raises an :class:`~spacedg.errors.ErasedViewWarning` (a
 :class:`~spacedg.errors.SpaceDGWarning`: the command line prints it on one line) for each view
-whose final 8-bit image is one colour while what the chain started from (the render's linear
-light, or the image handed to :func:`~spacedg.data.pipeline.degrade_image`) was not. Nothing is
-changed or dropped.
+whose final 8-bit image is one colour while what the chain started from, in 8 bits (the clean
+render encoded, or the image handed to :func:`~spacedg.data.pipeline.degrade_image`), was not: a
+render whose light varies below one 8-bit step (a dark wall) is flat already. Nothing is changed or
+dropped.
 
 Each process reports a chain (its degradations' names) once per scene: the parameters of a sample
 vary (drawn from ranges, metres scaled to the sample's scene depth), so a message per setting would
@@ -24,8 +25,8 @@ from its first pixel in the sample); the full comparison runs only on images tha
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, Union
 
 import numpy as np
 
@@ -37,6 +38,8 @@ __all__ = ["is_flat", "warn_if_erased"]
 _SAMPLE_STRIDE = (7, 11)
 #: ``(where, degradation names)`` already reported by this process.
 _REPORTED: set[tuple[str, tuple[str, ...]]] = set()
+#: What a chain started from: an image, a function that makes it (called only for a flat result), or unknown.
+Source = Union[np.ndarray, Callable[[], Union[np.ndarray, None]], None]
 
 
 def is_flat(image: np.ndarray) -> bool:
@@ -50,6 +53,12 @@ def is_flat(image: np.ndarray) -> bool:
     return bool(np.all(image == first))
 
 
+def _has_content(source: Source) -> bool:
+    """Whether ``source`` (:data:`Source`) is known and not flat."""
+    image = source() if callable(source) else source
+    return image is not None and not is_flat(image)
+
+
 def _describe(chain: Sequence[Any]) -> str:
     """``haze {density: 100, airlight: 0.9}, jpeg_compression {quality: 30}``: each step's name and parameters."""
     parts = []
@@ -60,7 +69,7 @@ def _describe(chain: Sequence[Any]) -> str:
 
 
 def warn_if_erased(
-    images: Sequence[np.ndarray], sources: Sequence[np.ndarray | None], chain: Sequence[Any], where: str, once: bool = True,
+    images: Sequence[np.ndarray], sources: Sequence[Source], chain: Sequence[Any], where: str, once: bool = True,
 ) -> int:
     """Warn (:class:`~spacedg.errors.ErasedViewWarning`) if ``chain`` (resolved steps with ``name`` and
     ``params``) turned any source with content into a flat image, the first time this process sees that
@@ -68,8 +77,9 @@ def warn_if_erased(
 
     Args:
         images: the final images, one per view (uint8 (H, W, 3)).
-        sources: what the chain started from, one per view (the render's linear light, or the input image);
-            ``None`` where unknown (that view is not reported).
+        sources: what the chain started from in 8 bits, one per view (the clean render encoded, or the
+            input image), or a function that makes it, called only where the image is flat; ``None`` where
+            unknown (that view is not reported).
         chain: the resolved degradations applied (empty: nothing is checked).
         where: the scene (or input) the views belong to, for the message, e.g. ``"scene room-000001"``.
         once: report a chain once per ``where`` in this process (the pipeline's items); ``False``: every
@@ -78,7 +88,7 @@ def warn_if_erased(
     """
     if not chain:
         return 0
-    erased = [image for image, source in zip(images, sources) if is_flat(image) and source is not None and not is_flat(source)]
+    erased = [image for image, source in zip(images, sources) if is_flat(image) and _has_content(source)]
     key = (where, tuple(step.name for step in chain))
     if erased and (not once or key not in _REPORTED):
         if once:

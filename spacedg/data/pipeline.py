@@ -68,6 +68,7 @@ import weakref
 from collections import OrderedDict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -687,6 +688,13 @@ def _check_renders(scene: Scene, views: Sequence[str], frames: Sequence[Frame]) 
             )
 
 
+def _encoded(frame: Frame) -> np.ndarray | None:
+    """The clean render of ``frame`` as the 8-bit sRGB image a clean item holds (``None`` without colour)."""
+    from spacedg.render.colour_cpu import encode_srgb_u8  # numba: compiled on first use
+
+    return None if frame.rgb is None else encode_srgb_u8(frame.rgb)
+
+
 def _finish_chain(
     frames: Sequence[Frame], views: tuple[str, ...], chain: Sequence[ResolvedDegradation], far_depth: float | None,
     render_ms: float, device: torch.device | None, where: str = "the sample",
@@ -700,7 +708,7 @@ def _finish_chain(
         images = [_finish_device(frame, linear, display, v, far_depth, timer, device) for v, frame in enumerate(frames)]
     else:
         images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
-    warn_if_erased(images, [frame.rgb for frame in frames], chain, where)
+    warn_if_erased(images, [partial(_encoded, frame) for frame in frames], chain, where)
     shares = [f.stats["captured_share"] for f in frames if "captured_share" in f.stats]
     return DegradedViews(
         images=np.stack(images),

@@ -87,3 +87,23 @@ def test_warn_if_erased_counts_views_reports_once_per_scene_and_skips_unknown_so
     first, second = (str(w.message) for w in caught)
     assert "1 of 3 views of scene s" in first and "(0, 0, 0)" in first and "once per scene" in first
     assert "every view of scene t" in second
+
+
+def test_a_source_is_made_only_for_a_flat_result_and_a_flat_one_blames_nothing() -> None:
+    """The pipeline hands the clean render's 8-bit encoding as a function: a render whose light varies
+    below one 8-bit step (a dark wall) encodes flat, and its flat degraded image is not the chain's doing."""
+    class Step:
+        name, params = "jpeg_compression", {"quality": 1}
+
+    erased_views._REPORTED.clear()
+    calls = []
+
+    def encoded(image: np.ndarray):
+        return lambda: calls.append(1) or image
+
+    flat, textured = np.zeros((4, 4, 3), np.uint8), _textured()[:4, :4]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ErasedViewWarning)
+        assert warn_if_erased([textured], [encoded(textured)], [Step()], "scene d") == 0 and calls == []  # not made
+        assert warn_if_erased([flat], [encoded(np.full((4, 4, 3), 3, np.uint8))], [Step()], "scene d") == 0 and calls == [1]
+        assert warn_if_erased([flat], [lambda: None], [Step()], "scene d") == 0  # no colour rendered: unknown
