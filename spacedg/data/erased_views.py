@@ -6,16 +6,20 @@ exposure of 10⁻⁹ is black. Such an image is valid output (the user asked for
 about it measures nothing but priors, and a training sample teaches nothing. So the pipeline
 says so: :func:`warn_if_erased` raises an :class:`~spacedg.errors.ErasedViewWarning` (a
 :class:`~spacedg.errors.SpaceDGWarning`: the command line prints it on one line) for each view
-whose final 8-bit image is one colour while what the chain started from, in 8 bits (the clean
-render encoded, or the image handed to :func:`~spacedg.data.pipeline.degrade_image`), was not: a
-render whose light varies below one 8-bit step (a dark wall) is flat already. Nothing is changed or
-dropped.
+whose final 8-bit image is one colour while what its linear and display steps started from, in 8
+bits, was not (the chain's render encoded: the clean render, or the render its raster steps (defocus,
+distortion, motion blur) edited; or the image handed to :func:`~spacedg.data.pipeline.degrade_image`):
+a render whose light varies below one 8-bit step (a dark wall) is flat already, and a raster step that
+flattens the render itself is not reported. On a fisheye view only the pixels inside the image
+circle count (those outside are black in every image). Nothing is changed or dropped.
 
 Each process reports a chain (its degradations' names) once per scene: the parameters of a sample
 vary (drawn from ranges, metres scaled to the sample's scene depth), so a message per setting would
 repeat for every item of a run; the one report names the first erasing setting and the scene
-(:data:`_REPORTED`; DataLoader workers report for themselves). Presets erase nothing and never
-warn. A render that is flat itself (a camera facing a blank wall or empty space) is not the chain's
+(:data:`_REPORTED`: per process, so each DataLoader worker reports for itself, and two datasets of
+one process over the same scene share one report). The presets are chosen not to erase a view, but
+an extreme one can (over-exposure's bench gain of 7–10 whitens a close-up of a white wall), and is
+then reported like any other setting. A render that is flat itself (a camera facing a blank wall or empty space) is not the chain's
 doing and is not reported here.
 
 Cost: a strided sample of the image decides almost every view (an image with content differs
@@ -42,21 +46,25 @@ _REPORTED: set[tuple[str, tuple[str, ...]]] = set()
 Source = Union[np.ndarray, Callable[[], Union[np.ndarray, None]], None]
 
 
-def is_flat(image: np.ndarray) -> bool:
+def is_flat(image: np.ndarray, valid: np.ndarray | None = None) -> bool:
     """Whether every pixel of ``image`` ((H, W) or (H, W, C), any dtype) equals its first pixel
-    (NaN never equals: an image holding NaN is not flat). An empty image is not flat."""
+    (NaN never equals: an image holding NaN is not flat); with ``valid`` ((H, W) bool), only the
+    pixels it marks count. An image with no such pixel is not flat."""
+    if valid is not None:
+        image = image[valid]  # (N, C) or (N,): its pixels along the first axis
     if image.size == 0:
         return False
-    first = image[0, 0]
-    if not np.all(image[:: _SAMPLE_STRIDE[0], :: _SAMPLE_STRIDE[1]] == first):
+    pixel_axes = 1 if valid is not None else 2  # the leading axes that index pixels
+    first = image[(0,) * min(pixel_axes, image.ndim)]
+    if valid is None and image.ndim >= 2 and not np.all(image[:: _SAMPLE_STRIDE[0], :: _SAMPLE_STRIDE[1]] == first):
         return False
     return bool(np.all(image == first))
 
 
-def _has_content(source: Source) -> bool:
-    """Whether ``source`` (:data:`Source`) is known and not flat."""
+def _has_content(source: Source, valid: np.ndarray | None) -> bool:
+    """Whether ``source`` (:data:`Source`) is known and not flat over ``valid``."""
     image = source() if callable(source) else source
-    return image is not None and not is_flat(image)
+    return image is not None and not is_flat(image, valid)
 
 
 def _describe(chain: Sequence[Any]) -> str:
@@ -70,10 +78,12 @@ def _describe(chain: Sequence[Any]) -> str:
 
 def warn_if_erased(
     images: Sequence[np.ndarray], sources: Sequence[Source], chain: Sequence[Any], where: str, once: bool = True,
+    valid: Sequence[np.ndarray | None] | None = None,
 ) -> int:
     """Warn (:class:`~spacedg.errors.ErasedViewWarning`) if ``chain`` (resolved steps with ``name`` and
     ``params``) turned any source with content into a flat image, the first time this process sees that
-    chain do so at ``where``; returns how many views it erased (reported or not).
+    chain do so at ``where``; returns how many views it erased (0 without looking once the chain was
+    reported at ``where``).
 
     Args:
         images: the final images, one per view (uint8 (H, W, 3)).
@@ -85,21 +95,28 @@ def warn_if_erased(
         once: report a chain once per ``where`` in this process (the pipeline's items); ``False``: every
             call (:func:`~spacedg.data.pipeline.degrade_image`, one image a call; Python's filter still
             shows a repeated message once).
+        valid: per view, the pixels that count ((H, W) bool: a fisheye's image circle), or ``None`` (all).
     """
-    if not chain:
-        return 0
-    erased = [image for image, source in zip(images, sources) if is_flat(image) and _has_content(source)]
     key = (where, tuple(step.name for step in chain))
-    if erased and (not once or key not in _REPORTED):
-        if once:
-            _REPORTED.add(key)
-        colour = tuple(int(v) for v in np.atleast_1d(erased[0][0, 0]))
+    if not chain or (once and key in _REPORTED):
+        return 0
+    masks = [None] * len(images) if valid is None else valid
+    erased = [
+        image[mask][0] if mask is not None else image[0, 0]
+        for image, source, mask in zip(images, sources, masks, strict=True)
+        if is_flat(image, mask) and _has_content(source, mask)
+    ]
+    if erased:
+        colour = tuple(int(v) for v in np.atleast_1d(erased[0]))
         views = "every view" if len(erased) == len(images) else f"{len(erased)} of {len(images)} views"
         message = (
-            f"{_describe(chain)} turned {views} of {where} into one flat colour (every pixel {colour}) though the "
-            "undegraded view has content: the image shows nothing of the scene, so a question about it measures priors "
-            "and a training sample teaches nothing. These parameters erase the view; weaken them toward the presets' "
-            "ranges, which do not (docs/degradations.md; spacedg.plugins.get_degradation(name).presets)"
+            f"{_describe(chain)} turned {views} of {where} into one flat colour (every pixel {colour}) though its "
+            "render has content: the image shows nothing of the scene, so a question about it measures priors "
+            "and a training sample teaches nothing. These parameters erase the view; weaken them (the presets' ranges: "
+            "docs/degradations.md; spacedg.plugins.get_degradation(name).presets)"
         )
-        warnings.warn(ErasedViewWarning(message + (". Reported once per scene for this chain" if once else "")), stacklevel=2)
+        # warned before it is marked: under an "error" filter every erased item raises, not only the first
+        warnings.warn(ErasedViewWarning(message + (". Reported once per scene for this chain" if once else "")), stacklevel=3)
+        if once:
+            _REPORTED.add(key)
     return len(erased)

@@ -689,7 +689,8 @@ def _check_renders(scene: Scene, views: Sequence[str], frames: Sequence[Frame]) 
 
 
 def _encoded(frame: Frame) -> np.ndarray | None:
-    """The clean render of ``frame`` as the 8-bit sRGB image a clean item holds (``None`` without colour)."""
+    """The render of ``frame`` encoded to 8-bit sRGB, as an item without linear or display steps holds it
+    (``None`` without colour)."""
     from spacedg.render.colour_cpu import encode_srgb_u8  # numba: compiled on first use
 
     return None if frame.rgb is None else encode_srgb_u8(frame.rgb)
@@ -700,15 +701,15 @@ def _finish_chain(
     render_ms: float, device: torch.device | None, where: str = "the sample",
 ) -> DegradedViews:
     """The linear chain, encode and display chain of one resolved chain over its group's frames; a
-    view the chain turned into one flat colour is reported (:func:`~spacedg.data.erased_views.warn_if_erased`,
-    ``where`` names the scene)."""
+    view whose render the chain turned into one flat colour (inside a fisheye's image circle) is reported
+    (:func:`~spacedg.data.erased_views.warn_if_erased`, ``where`` names the scene)."""
     timer = {"render_ms": render_ms, "linear_ms": 0.0, "encode_ms": 0.0, "display_ms": 0.0}
     linear, display = _by_stage(chain, Stage.LINEAR), _by_stage(chain, Stage.DISPLAY)
     if device is not None:
         images = [_finish_device(frame, linear, display, v, far_depth, timer, device) for v, frame in enumerate(frames)]
     else:
         images = [_finish(frame, linear, display, v, far_depth, timer) for v, frame in enumerate(frames)]
-    warn_if_erased(images, [partial(_encoded, frame) for frame in frames], chain, where)
+    warn_if_erased(images, [partial(_encoded, frame) for frame in frames], chain, where, valid=[frame.valid for frame in frames])
     shares = [f.stats["captured_share"] for f in frames if "captured_share" in f.stats]
     return DegradedViews(
         images=np.stack(images),

@@ -81,7 +81,7 @@ def test_warn_if_erased_counts_views_reports_once_per_scene_and_skips_unknown_so
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         assert warn_if_erased([flat, textured, flat], [textured, textured, None], [Step()], "scene s") == 1
-        assert warn_if_erased([flat, flat], [textured, textured], [Step()], "scene s") == 2  # reported already
+        assert warn_if_erased([flat, flat], [textured, textured], [Step()], "scene s") == 0  # reported already: not looked at
         assert warn_if_erased([flat], [textured], [Step()], "scene t") == 1  # another scene: reported
         assert warn_if_erased([flat], [textured], [], "scene u") == 0  # a clean item: nothing to blame
     first, second = (str(w.message) for w in caught)
@@ -107,3 +107,41 @@ def test_a_source_is_made_only_for_a_flat_result_and_a_flat_one_blames_nothing()
         assert warn_if_erased([textured], [encoded(textured)], [Step()], "scene d") == 0 and calls == []  # not made
         assert warn_if_erased([flat], [encoded(np.full((4, 4, 3), 3, np.uint8))], [Step()], "scene d") == 0 and calls == [1]
         assert warn_if_erased([flat], [lambda: None], [Step()], "scene d") == 0  # no colour rendered: unknown
+
+
+def test_under_an_error_filter_every_erased_item_raises() -> None:
+    """The report is marked only after it was made: a user who turns the warning into an error gets it for
+    every erased item of a scene, not only the first."""
+    class Step:
+        name, params = "over_exposure", {"exposure": 1e6}
+
+    erased_views._REPORTED.clear()
+    white, textured = np.full((4, 4, 3), 255, np.uint8), _textured()[:4, :4]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ErasedViewWarning)
+        for _ in range(2):
+            with pytest.raises(ErasedViewWarning, match="over_exposure"):
+                warn_if_erased([white], [textured], [Step()], "scene e")
+
+
+def test_a_fisheye_view_counts_the_pixels_inside_its_image_circle() -> None:
+    """Outside a fisheye's image circle every image is black: a white disc on black is an erased view, and
+    a render that is one colour inside the circle is flat already."""
+    class Step:
+        name, params = "haze", {"density": 100.0}
+
+    erased_views._REPORTED.clear()
+    rows, cols = np.mgrid[:32, :32]
+    circle = (rows - 15.5) ** 2 + (cols - 15.5) ** 2 < 14.0**2
+    inside = np.repeat(circle[:, :, None], 3, axis=2)
+    disc = np.where(inside, np.uint8(255), np.uint8(0)).astype(np.uint8)
+    render = np.where(inside, _textured(4104)[:32, :32], np.uint8(0)).astype(np.uint8)
+    blank_wall = np.where(inside, np.uint8(90), np.uint8(0)).astype(np.uint8)
+    assert is_flat(disc, circle) and not is_flat(disc) and not is_flat(render, circle)
+    assert not is_flat(disc, np.zeros_like(circle))  # no pixel counts: not flat
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert warn_if_erased([disc], [blank_wall], [Step()], "scene f", valid=[circle]) == 0  # the render was flat inside
+        assert warn_if_erased([disc], [render], [Step()], "scene f", valid=[circle]) == 1
+    (only,) = caught
+    assert "(255, 255, 255)" in str(only.message)
