@@ -46,19 +46,27 @@ _REPORTED: set[tuple[str, tuple[str, ...]]] = set()
 Source = Union[np.ndarray, Callable[[], Union[np.ndarray, None]], None]
 
 
+def _pixels(image: np.ndarray, valid: np.ndarray | None) -> np.ndarray:
+    """The pixels of ``image`` ((H, W) or (H, W, C)) along one axis, (N,) or (N, C): all of them (a view of a
+    contiguous image), or those ``valid`` ((H, W) bool) marks."""
+    return image[valid] if valid is not None else image.reshape(-1, *image.shape[2:])
+
+
 def is_flat(image: np.ndarray, valid: np.ndarray | None = None) -> bool:
-    """Whether every pixel of ``image`` ((H, W) or (H, W, C), any dtype) equals its first pixel
-    (NaN never equals: an image holding NaN is not flat); with ``valid`` ((H, W) bool), only the
-    pixels it marks count. An image with no such pixel is not flat."""
-    if valid is not None:
-        image = image[valid]  # (N, C) or (N,): its pixels along the first axis
-    if image.size == 0:
-        return False
-    pixel_axes = 1 if valid is not None else 2  # the leading axes that index pixels
-    first = image[(0,) * min(pixel_axes, image.ndim)]
-    if valid is None and image.ndim >= 2 and not np.all(image[:: _SAMPLE_STRIDE[0], :: _SAMPLE_STRIDE[1]] == first):
-        return False
-    return bool(np.all(image == first))
+    """Whether every pixel of ``image`` ((H, W) or (H, W, C), any dtype) equals the first (NaN never equals:
+    an image holding NaN is not flat); with ``valid`` ((H, W) bool), only the pixels it marks count. An image
+    with no such pixel is not flat. A strided sample (:data:`_SAMPLE_STRIDE`) rules out almost every image
+    before the whole is read (or, with ``valid``, copied)."""
+    rows, cols = _SAMPLE_STRIDE
+    if valid is None:
+        if image.size and not np.all(image[::rows, ::cols] == image[0, 0]):  # a strided view: nothing copied
+            return False
+    else:
+        sample = image[::rows, ::cols][valid[::rows, ::cols]]
+        if sample.shape[0] and not np.all(sample == sample[0]):
+            return False
+    pixels = _pixels(image, valid)
+    return pixels.shape[0] > 0 and bool(np.all(pixels == pixels[0]))
 
 
 def _has_content(source: Source, valid: np.ndarray | None) -> bool:
@@ -102,7 +110,7 @@ def warn_if_erased(
         return 0
     masks = [None] * len(images) if valid is None else valid
     erased = [
-        image[mask][0] if mask is not None else image[0, 0]
+        _pixels(image, mask)[0]
         for image, source, mask in zip(images, sources, masks, strict=True)
         if is_flat(image, mask) and _has_content(source, mask)
     ]
