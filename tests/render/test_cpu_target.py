@@ -1,5 +1,6 @@
 """numba's CPU features as spacedg sets them: 512-bit vectors on the AVX-512 x86-64 hosts that keep
-their clock, the user's setting first, numba's default once its target is set up."""
+their clock, the user's setting first, numba's default once its target is set up; and the per-function
+gather tuning of table-reading kernels on Zen 3 hosts."""
 
 from __future__ import annotations
 
@@ -69,3 +70,44 @@ def test_the_decision(monkeypatch: pytest.MonkeyPatch, machine: str, cpu: str, f
     monkeypatch.setattr(binding, "get_host_cpu_name", lambda: cpu)
     assert cpu_target.prefer_full_width_vectors() is applied
     assert config.CPU_FEATURES == (f"{features},-prefer-256-bit" if applied else None)
+
+
+@pytest.mark.parametrize(("triple", "cpu", "features", "pays"), [
+    ("x86_64-unknown-linux-gnu", "znver3", "+64bit,+avx,+avx2,+fma", True),  # measured: LLVM prices its gathers as scalar loads
+    ("x86_64-unknown-linux-gnu", "znver3", "+64bit,+avx,-avx2", False),  # no AVX2: no gather instruction
+    ("x86_64-unknown-linux-gnu", "znver3", "+64bit,+avx2,+fast-gather", False),  # said already
+    ("x86_64-unknown-linux-gnu", "znver2", "+64bit,+avx,+avx2,+fma", False),  # not measured
+    ("x86_64-unknown-linux-gnu", "emeraldrapids", "+64bit,+avx2,+avx512f", False),  # Intel: the tuning is its CPU's own
+    ("aarch64-unknown-linux-gnu", "znver3", "+neon,+avx2", False),  # not x86: the flag does not exist
+])
+def test_which_targets_gather_table_reads(triple: str, cpu: str, features: str, pays: bool) -> None:
+    assert cpu_target.gathers_pay(triple, cpu, features) is pays
+
+
+_TABLE_LOOP = """
+import numba, numpy as np
+from spacedg.render import kernel_cache
+from spacedg.render.cpu_target import gathers_pay, vectorise_table_lookups
+
+@numba.njit
+def tuned(values, table, out):
+    vectorise_table_lookups()
+    for i in range(values.shape[0]):
+        out[i] = table[values[i] & 255] * 2.0
+
+tuned.compile("(int32[::1], float64[::1], float64[::1])")
+ir = "".join(tuned.inspect_llvm().values())
+codegen = numba.core.registry.cpu_target.target_context.codegen()
+print(gathers_pay(*codegen.magic_tuple()), '"target-features"=' in ir, "+fast-gather" in ir)
+"""
+
+
+@pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"), reason="the tuning exists on x86-64 only")
+def test_a_kernel_that_asks_is_tuned_on_the_hosts_that_decide_so_and_only_there() -> None:
+    # numba's own target on this host: the attribute exactly where the decision says
+    decided, has_attribute, has_flag = _printed(_TABLE_LOOP).split()
+    assert decided == has_attribute == has_flag
+    # a Zen 3 target (compiled, not run): the function alone carries numba's features plus the flag
+    zen3 = "+64bit,+avx,+avx2,+fma,+sse4.2"
+    assert _printed(_TABLE_LOOP, NUMBA_CPU_NAME="znver3", NUMBA_CPU_FEATURES=zen3) == "True True True"
+    assert _printed(_TABLE_LOOP, NUMBA_CPU_NAME="skylake", NUMBA_CPU_FEATURES=zen3) == "False False False"

@@ -72,6 +72,7 @@ import numba.extending
 import numpy as np
 
 from spacedg.render import kernel_cache  # numba's cache entries checked before any kernel here compiles
+from spacedg.render.cpu_target import vectorise_table_lookups
 from spacedg.render.threads import fork_safe
 
 try:  # LLVM ctlz: used to find the octave of a uniform in the normal-quantile table
@@ -554,6 +555,7 @@ def _table_block(
 ) -> None:
     """:func:`_block_lanes` for rates below 64 only (the others flagged). Its own compiled function, not inlined:
     the parallel kernel, its serial twin and :mod:`._photosite_kernel` share it (compiled once)."""
+    vectorise_table_lookups()  # the loop's table reads gathered on hosts that price them so (Zen 3)
     _block_lanes(values, first, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, False)
 
 
@@ -563,6 +565,7 @@ def _mixed_block(
     shot_key: np.uint64, read_scale: float, clip: bool, saturated: float, noise: bool,
 ) -> None:
     """:func:`_table_block` with the normal approximation too (rates ≥ 10³)."""
+    vectorise_table_lookups()  # the loop's table reads gathered on hosts that price them so (Zen 3)
     _block_lanes(values, first, staged, to_scalar, exposure, k, inv_k, read_key, shot_key, read_scale, clip, saturated, noise, True)
 
 
@@ -605,6 +608,7 @@ def _normal_block(
     clip: bool, saturated: float, noise: bool,
 ) -> None:
     """:func:`_normal_lane` over ``values`` (flat indices ``first`` on) into ``staged``: a block whose every rate is at least 10³."""
+    vectorise_table_lookups()
     offset = np.uint64(first) * _GOLDEN
     for j in range(values.shape[0]):
         staged[j] = _normal_lane(values[j], offset, exposure, k, read_key, shot_key, read_scale, clip, saturated, noise)
