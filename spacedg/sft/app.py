@@ -1,4 +1,5 @@
-"""``python -m spacedg.sft +experiment=qwen``: supervised fine-tuning of a VLM on SpaceDG samples.
+"""Supervised fine-tuning of a VLM on SpaceDG samples: what ``python -m spacedg.sft +experiment=qwen`` runs
+(its entry point, :mod:`spacedg.sft.command`, imports this module only once a run starts).
 
 The Hydra app reads ``conf/sft.yaml`` (shipped in the package as ``spacedg.conf``) and instantiates
 its ``data`` group into :class:`~spacedg.sft.sources.DataOptions` (degradation names checked before
@@ -42,7 +43,6 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-import hydra
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
@@ -64,7 +64,7 @@ from spacedg.sft.trainer import (
 )
 from spacedg.vlm import save_tiny_vlm
 
-__all__ = ["SPACEDG_TRAIN_KEYS", "main", "run", "training_arguments"]
+__all__ = ["SPACEDG_TRAIN_KEYS", "run", "shut_down_process_group", "training_arguments"]
 
 log = logging.getLogger(__name__)
 
@@ -317,23 +317,7 @@ def run(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     return summary
 
 
-def main() -> None:
-    """Console entry point (``spacedg-sft`` and ``python -m spacedg.sft``)."""
-
-    @hydra.main(version_base="1.3", config_path="pkg://spacedg.conf", config_name="sft")
-    def _app(cfg: Any) -> None:
-        try:
-            run(cfg)
-        except SpaceDGError as err:  # one clear line, as the spacedg CLI prints it (Hydra would print a traceback)
-            print(f"spacedg-sft: error: {err}", file=sys.stderr)
-            raise SystemExit(2) from None
-        _shut_down_process_group()
-
-    os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
-    _app()
-
-
-def _shut_down_process_group() -> None:
+def shut_down_process_group() -> None:
     """After a successful distributed run: free the model (FSDP modules hold process groups), wait for
     every rank and destroy the process group before the interpreter exits. Left to interpreter
     teardown, torch 2.13 with gloo aborts at exit ("terminate called without an active exception")

@@ -4,6 +4,8 @@ degradation category, and starts on tiny stand-ins up to and including the model
 
 from __future__ import annotations
 
+import subprocess
+import sys
 
 import pytest
 from omegaconf import OmegaConf
@@ -42,6 +44,18 @@ def test_paper_configs_resolve_with_the_papers_settings(name) -> None:
     assert data["clean_prob"] == (1.0 if name == "paper_clean" else 0.1)
     options = build(cfg.data, "data")  # names checked like a run checks them
     assert options.qa_mode == "train"
+
+
+def test_cfg_job_prints_the_resolved_config_without_importing_the_training_stack() -> None:
+    """``python -m spacedg.sft +experiment=paper --cfg job`` is Hydra's work alone: the entry point
+    (spacedg.sft.command) imports torch, transformers and peft only once a run starts (they took 6–7 s
+    of every ``--cfg job``, ``--help`` and bad override)."""
+    result = subprocess.run([sys.executable, "-X", "importtime", "-m", "spacedg.sft", "+experiment=paper", "--cfg", "job"],
+                            cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "path: Qwen/Qwen3-VL-8B-Instruct" in result.stdout and "num_train_epochs: 1" in result.stdout
+    imported = {line.rsplit("|", 1)[1].strip() for line in result.stderr.splitlines() if line.startswith("import time:")}
+    assert "hydra" in imported and not imported & {"torch", "transformers", "peft", "numba", "spacedg.sft.app"}
 
 
 @pytest.mark.parametrize("category", CATEGORIES)
