@@ -39,9 +39,11 @@ the sRGB encode (a two-entry table read per value) took 0.86 â†’ 1.39 ms a 640 Ã
 tuning on for every kernel. So the tuning is per function: a kernel calls
 :func:`vectorise_table_lookups` first, and on a host of :data:`FAST_GATHER_CPUS` with AVX2 that
 function alone is compiled with ``+fast-gather`` (an LLVM ``target-features`` attribute: numba's own
-features plus the flag); elsewhere the call compiles to nothing. The decision reads only what numba
-keys its cache by (target triple, CPU name, features), so a cached kernel always holds the code the
-decision asks for.
+features plus the flag); elsewhere the call compiles to nothing. A feature string that says
+``-fast-gather`` (``NUMBA_CPU_FEATURES``) turns it off. The decision's inputs are what numba keys its
+cache by (target triple, CPU name, features), so an entry compiled for one host is loaded only where the
+same decision holds; its rule (:data:`FAST_GATHER_CPUS`) is not in the key: a cache written before that
+set changes keeps its tuning until the kernel's source changes. Tuning only: either way the same bytes.
 """
 
 from __future__ import annotations
@@ -117,9 +119,11 @@ FAST_GATHER_CPUS = frozenset({"znver3"})
 def gathers_pay(triple: str, cpu: str, features: str) -> bool:
     """Whether a kernel that reads tables per element is compiled with :data:`FAST_GATHER_FEATURE` for a
     numba target of this LLVM ``triple``, ``cpu`` name and ``features`` string (numba's ``magic_tuple``):
-    an x86-64 CPU of :data:`FAST_GATHER_CPUS` with AVX2 whose features do not already say."""
+    an x86-64 CPU of :data:`FAST_GATHER_CPUS` with AVX2 whose features say nothing of ``fast-gather``
+    already (``+fast-gather``: nothing to add; ``-fast-gather``: the user's choice, kept)."""
     flags = features.split(",")
-    return triple.startswith(("x86_64", "amd64")) and cpu in FAST_GATHER_CPUS and "+avx2" in flags and FAST_GATHER_FEATURE not in flags
+    said = {FAST_GATHER_FEATURE, "-" + FAST_GATHER_FEATURE[1:]} & set(flags)
+    return triple.startswith(("x86_64", "amd64")) and cpu in FAST_GATHER_CPUS and "+avx2" in flags and not said
 
 
 @intrinsic
@@ -128,7 +132,12 @@ def vectorise_table_lookups(typingctx):  # type: ignore[no-untyped-def]
     host where :func:`gathers_pay`, that function is compiled with :data:`FAST_GATHER_FEATURE` added to
     numba's features (an LLVM ``target-features`` attribute on it alone); elsewhere nothing. Changes no
     result: only whether LLVM's loop vectoriser takes the loop (the arithmetic and its order are the
-    source's). Functions inlined into it take it too; it is not inlined into callers without it."""
+    source's). Call it in the function that holds the loop: the attribute is that function's. numba optimises
+    each function in a module of its own before linking it into its callers, so it stays there; LLVM's
+    inliner treats ``fast-gather`` as a tuning flag that does not block inlining, so a copy inlined into a
+    caller without it (several helpers in one module) is compiled with the caller's tuning. Inside a
+    ``parallel=True`` function the loop body is outlined into a function of its own, without the attribute:
+    call it from a separate function the parallel loop calls (as ``_photosite_kernel._binned_rows``)."""
 
     def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
         triple, cpu, features = context.codegen().magic_tuple()
