@@ -61,15 +61,15 @@ demo: $(STAMP)
 	$(BIN)/spacedg plugins
 
 # The suite in two lanes on the machine's two cores: $(BACK_LANE) (torchrun launches, an installed
-# wheel; the dataset, evaluation and tiny-VLM tests, to balance the lanes: ~6½–7 min each) in the background, the
-# rest in front (beside it, tests/test_readme.py's runner); the background lane's output follows
-# the front's, and both must pass.
+# wheel; the dataset, evaluation and tiny-VLM tests and the fresh-cache numba test, to balance the
+# lanes: ~6½–7 min each) in the background, the rest in front (beside it, tests/test_readme.py's
+# runner); the background lane's output follows the front's, and both must pass.
 # An interrupted run stops the background lane and removes its log (the EXIT trap).
 # First `spacedg kernels` compiles the CPU kernels into numba's cache, a process per group (at most the cores): on a
 # fresh clone each lane compiled them itself, often the same ones at once (the times: docs/command-line.md;
 # spacedg/data/kernel_warmup.py). Only a speed-up: a failed
 # warm-up leaves the lanes to compile, and to report what is wrong.
-BACK_LANE := tests/sft tests/data tests/eval tests/vlm
+BACK_LANE := tests/sft tests/data tests/eval tests/vlm tests/render/test_numba_cache_determinism.py
 test: $(STAMP)
 	@log=$$(mktemp) || exit 1; lane=; \
 	trap 'if [ -n "$$lane" ]; then kill $$lane 2>/dev/null; fi; rm -f "$$log"' EXIT; trap 'exit 130' INT TERM; \
