@@ -229,6 +229,7 @@ def test_sft_runs_from_an_installed_wheel(rooms, tmp_path) -> None:
     assert result.returncode == 0, result.stderr[-3000:]
     summary = json.loads((work / "out" / "train_summary.json").read_text())
     assert summary["global_step"] == 2 and (work / "out" / "final" / "config.json").is_file()
+    assert (work / "out" / "app.log").is_file()  # Hydra's log keeps its name (conf/sft.yaml: hydra.job.name)
     script = subprocess.run([str(site / "bin" / "spacedg-sft"), "+experiment=tiny", "--cfg", "job"], cwd=work, env=env,
                             capture_output=True, text=True, timeout=120)
     assert script.returncode == 0 and "path: tiny:qwen2_5_vl" in script.stdout  # the console script finds the packaged configs
