@@ -51,7 +51,6 @@ from transformers import TrainingArguments
 from spacedg.data.workers import loader_plan
 from spacedg.errors import ParameterError, SpaceDGError
 from spacedg.sft.collator import SFTCollator
-from spacedg.sft.command import main  # the entry point (spacedg-sft); kept importable from here
 from spacedg.sft.config import build
 from spacedg.sft.data import BudgetedDataset, token_lengths
 from spacedg.sft.distributed import Launch, launch_of, wrap_classes
@@ -65,7 +64,7 @@ from spacedg.sft.trainer import (
 )
 from spacedg.vlm import save_tiny_vlm
 
-__all__ = ["SPACEDG_TRAIN_KEYS", "main", "run", "shut_down_process_group", "training_arguments"]
+__all__ = ["SPACEDG_TRAIN_KEYS", "run", "shut_down_process_group", "training_arguments"]
 
 log = logging.getLogger(__name__)
 
