@@ -37,7 +37,6 @@ import logging
 import multiprocessing
 import os
 import random
-import sys
 from collections.abc import Mapping
 from functools import partial
 from pathlib import Path
@@ -49,7 +48,7 @@ from omegaconf import DictConfig, OmegaConf
 from transformers import TrainingArguments
 
 from spacedg.data.workers import loader_plan
-from spacedg.errors import ParameterError, SpaceDGError
+from spacedg.errors import ParameterError
 from spacedg.sft.collator import SFTCollator
 from spacedg.sft.config import build
 from spacedg.sft.data import BudgetedDataset, token_lengths

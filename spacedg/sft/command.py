@@ -14,6 +14,8 @@ from typing import Any
 
 import hydra
 
+from spacedg.errors import SpaceDGError
+
 __all__ = ["main"]
 
 
@@ -24,7 +26,6 @@ def main() -> None:
 
     @hydra.main(version_base="1.3", config_path="pkg://spacedg.conf", config_name="sft")
     def _app(cfg: Any) -> None:
-        from spacedg.errors import SpaceDGError
         from spacedg.sft.app import run, shut_down_process_group
 
         try:
