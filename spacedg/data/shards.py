@@ -24,26 +24,60 @@ def parse_shard(text: str) -> tuple[int, int]:
         i, n = int(i_text), int(n_text)
     except ValueError:
         raise ParameterError(f"--shard must read i/n with integers 0 <= i < n (e.g. 0/4), or 'env'; got {text!r}") from None
-    if n < 1 or not 0 <= i < n:
-        m = max(n, 1)
-        raise ParameterError(f"--shard {text}: need 0 <= i < n (shards of n={m} are 0/{m} … {m - 1}/{m})")
+    if n < 1:
+        raise ParameterError(f"--shard {text}: the number of shards n must be at least 1 (e.g. 0/4 … 3/4 for four jobs)")
+    if not 0 <= i < n:
+        raise ParameterError(f"--shard {text}: need 0 <= i < n (shards of n={n} are 0/{n} … {n - 1}/{n})")
     return i, n
+
+
+#: The launchers :func:`shard_from_env` reads, in this order: (rank variable, size variable).
+ENV_PAIRS = (("RANK", "WORLD_SIZE"), ("SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT"), ("SLURM_PROCID", "SLURM_NTASKS"))
 
 
 def shard_from_env(environ: Mapping[str, str]) -> tuple[int, int]:
     """``(i, n)`` from a launcher's environment: ``RANK``/``WORLD_SIZE`` (torchrun, accelerate,
-    deepspeed), ``SLURM_ARRAY_TASK_ID``/``SLURM_ARRAY_TASK_COUNT`` (a job array starting at
-    ``SLURM_ARRAY_TASK_MIN``, default 0), or ``SLURM_PROCID``/``SLURM_NTASKS`` (``srun``)."""
-    pairs = (("RANK", "WORLD_SIZE"), ("SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT"), ("SLURM_PROCID", "SLURM_NTASKS"))
-    for rank_key, size_key in pairs:
-        if rank_key in environ and size_key in environ:
-            try:
-                rank = int(environ[rank_key]) - (int(environ.get("SLURM_ARRAY_TASK_MIN", "0")) if rank_key.startswith("SLURM_ARRAY") else 0)
-            except ValueError:
-                raise ParameterError(f"--shard env: {rank_key}={environ[rank_key]!r} is not an integer") from None
-            return parse_shard(f"{rank}/{environ[size_key]}")
-    names = ", ".join(f"{a}/{b}" for a, b in pairs)
+    deepspeed), ``SLURM_ARRAY_TASK_ID``/``SLURM_ARRAY_TASK_COUNT`` (a job array: task ids from
+    ``SLURM_ARRAY_TASK_MIN``, default 0, every ``SLURM_ARRAY_TASK_STEP``, default 1, so
+    ``--array=0-15:4`` is shards 0/4 … 3/4; ids that are not evenly spaced up to ``SLURM_ARRAY_TASK_MAX``,
+    such as a resubmission of some tasks, are refused), or ``SLURM_PROCID``/``SLURM_NTASKS`` (``srun``).
+
+    The first launcher whose two variables are both set decides. When none is, one variable of a pair
+    set alone is a :class:`ParameterError` naming the other; so is a value that is not an integer or a
+    task id off the array's steps.""" 
+    for rank_key, size_key in ENV_PAIRS:
+        if rank_key not in environ or size_key not in environ:
+            continue
+        size = _env_int(environ, size_key)
+        if rank_key != "SLURM_ARRAY_TASK_ID":
+            return parse_shard(f"{_env_int(environ, rank_key)}/{size}")
+        task, first = _env_int(environ, rank_key), _env_int(environ, "SLURM_ARRAY_TASK_MIN", 0)
+        step = _env_int(environ, "SLURM_ARRAY_TASK_STEP", 1)
+        last = _env_int(environ, "SLURM_ARRAY_TASK_MAX", first + (size - 1) * max(step, 1))
+        if step < 1 or (task - first) % step != 0 or last - first != (size - 1) * step:
+            raise ParameterError(
+                f"--shard env: the job array's task ids are not evenly spaced from SLURM_ARRAY_TASK_MIN={first} by "
+                f"SLURM_ARRAY_TASK_STEP={step} to SLURM_ARRAY_TASK_MAX={last} over SLURM_ARRAY_TASK_COUNT={size} tasks "
+                f"(this one SLURM_ARRAY_TASK_ID={task}), so they cannot name their shares (a resubmission of some tasks, "
+                f"e.g. --array=5,17, is such an array); pass --shard i/n explicitly, e.g. --shard ${{SLURM_ARRAY_TASK_ID}}/32 "
+                f"for the shares of the original --array=0-31")
+        return parse_shard(f"{(task - first) // step}/{size}")
+    for rank_key, size_key in ENV_PAIRS:  # no whole pair: one set alone is a launcher half configured
+        if rank_key in environ or size_key in environ:
+            have, missing = (rank_key, size_key) if rank_key in environ else (size_key, rank_key)
+            raise ParameterError(f"--shard env: {have} is set but {missing} is not; set both, or pass --shard i/n explicitly")
+    names = ", ".join(f"{a}/{b}" for a, b in ENV_PAIRS)
     raise ParameterError(f"--shard env: none of {names} is set; pass --shard i/n explicitly")
+
+
+def _env_int(environ: Mapping[str, str], key: str, default: int | None = None) -> int:
+    """The integer value of the launcher variable ``key`` (``default`` when it is not set)."""
+    if key not in environ and default is not None:
+        return default
+    try:
+        return int(environ[key])
+    except ValueError:
+        raise ParameterError(f"--shard env: {key}={environ[key]!r} is not an integer") from None
 
 
 def chunk_ids(total_items: int, shard_size: int, shard: tuple[int, int] = (0, 1)) -> list[int]:

@@ -246,6 +246,33 @@ def test_shard_from_launcher_environment():
         shard_from_env({"RANK": "8", "WORLD_SIZE": "8"})
 
 
+def test_shard_from_a_launcher_half_configured_or_a_stepped_array():
+    """A job array with a step (``--array=0-15:4``: ids 0, 4, 8, 12) is shards 0/4 … 3/4; one variable of a
+    pair set alone names the other; a later launcher's whole pair still decides; an id off the steps, ids
+    not evenly spaced (a resubmission of some tasks, which would otherwise read another split), a value that
+    is not an integer and n < 1 are errors that say so."""
+    array = {"SLURM_ARRAY_TASK_COUNT": "4", "SLURM_ARRAY_TASK_MIN": "0", "SLURM_ARRAY_TASK_STEP": "4"}
+    assert [shard_from_env({**array, "SLURM_ARRAY_TASK_ID": str(t)}) for t in (0, 4, 8, 12)] == [(0, 4), (1, 4), (2, 4), (3, 4)]
+    assert shard_from_env({"SLURM_ARRAY_TASK_ID": "7", "SLURM_ARRAY_TASK_COUNT": "3", "SLURM_ARRAY_TASK_MIN": "3",
+                           "SLURM_ARRAY_TASK_STEP": "2"}) == (2, 3)
+    with pytest.raises(ParameterError, match="not evenly spaced"):
+        shard_from_env({**array, "SLURM_ARRAY_TASK_ID": "6"})
+    resubmitted = {"SLURM_ARRAY_TASK_COUNT": "2", "SLURM_ARRAY_TASK_MIN": "5", "SLURM_ARRAY_TASK_MAX": "17"}  # --array=5,17
+    for task in ("5", "17"):
+        with pytest.raises(ParameterError, match=r"resubmission .*--shard \$\{SLURM_ARRAY_TASK_ID\}/32"):
+            shard_from_env({**resubmitted, "SLURM_ARRAY_TASK_ID": task})
+    assert shard_from_env({**array, "SLURM_ARRAY_TASK_MAX": "12", "SLURM_ARRAY_TASK_ID": "8"}) == (2, 4)
+    with pytest.raises(ParameterError, match="RANK is set but WORLD_SIZE is not"):
+        shard_from_env({"RANK": "1"})
+    with pytest.raises(ParameterError, match="SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not"):
+        shard_from_env({"SLURM_ARRAY_TASK_ID": "1"})
+    assert shard_from_env({"RANK": "1", "SLURM_PROCID": "1", "SLURM_NTASKS": "3"}) == (1, 3)
+    with pytest.raises(ParameterError, match="WORLD_SIZE='eight' is not an integer"):
+        shard_from_env({"RANK": "1", "WORLD_SIZE": "eight"})
+    with pytest.raises(ParameterError, match="at least 1"):
+        parse_shard("0/0")
+
+
 # ------------------------------------------------------------------ bad scenes
 def test_a_scene_corrupted_after_indexing_is_named(bench, rooms, tmp_path):
     copy = tmp_path / "rooms"
