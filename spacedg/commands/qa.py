@@ -107,7 +107,7 @@ def _build(args: argparse.Namespace) -> int:
     from spacedg.commands.scenes import _scene_dirs
     from spacedg.data.shards import chunk_ids, resolve_shard
     from spacedg.data.workers import pool_plan
-    from spacedg.qa.index import QABuildConfig
+    from spacedg.qa.index import QABuildConfig, selected_families
     from spacedg.qa.jobs import build_indexes
 
     shard = resolve_shard(args.shard, os.environ)
@@ -115,6 +115,7 @@ def _build(args: argparse.Namespace) -> int:
         _args.output_folder("--out", args.out)
     config = QABuildConfig(seed=args.seed, families=_family_names(args.families), per_sub_type=args.per_sub_type, mode=args.mode,
                            partial_rounds=args.partial_rounds)
+    selected_families(config.families)  # an unknown family name fails here, before the table starts
     every = _scene_dirs(args.scenes)
     mine = [every[k] for k in chunk_ids(len(every), 1, shard)]
     on_gpu = args.device not in (None, "cpu")

@@ -129,6 +129,11 @@ def test_cli_build_and_stats(qa_room_dirs, tmp_path, capsys):
     assert sum(report["count_answers"].values()) == sum(r["n"] for r in report["counts"] if r["question_type"] == "object_counting")
     assert main(["qa", "stats", str(tmp_path / "nothing")]) == 2
     assert "no such file" in capsys.readouterr().err
+    # an unknown family is one error before the build starts: no table header, no index written
+    assert main(["qa", "build", str(qa_room_dirs[0]), "--out", str(tmp_path / "typo"), "--families", "object_countin"]) == 2
+    captured = capsys.readouterr()
+    assert "unknown question family 'object_countin'" in captured.err and "records" not in captured.out
+    assert not (tmp_path / "typo").exists() or not list((tmp_path / "typo").glob("*.jsonl"))
 
 
 def test_judge_in_generation_drops_and_counts(qa_room_dirs, tmp_path):
