@@ -174,6 +174,19 @@ def _param_value(key: str, value: object) -> int | float:
     return number
 
 
+def _explain_params(name: str, params: object) -> None:
+    """Raise the registered degradation ``name``'s own error about ``params`` (an unknown parameter
+    named as such, with the parameters it takes) when it has one; return when ``name`` is not a
+    registered degradation or its check passes (the caller then raises its generic error)."""
+    if not isinstance(params, Mapping) or not all(isinstance(k, str) for k in params):
+        return
+    try:
+        spec = get_degradation(name)
+    except UnknownPluginError:
+        return
+    spec.validate_params(params, partial=True)
+
+
 @dataclass(frozen=True)
 class DegradationChoice:
     """One item of a chain as a user asks for it (frozen, hashable, picklable).
@@ -197,7 +210,11 @@ class DegradationChoice:
             preset = str(preset)
         if preset is not None and (not isinstance(preset, str) or not _TOKEN_RE.fullmatch(preset)):
             raise ParameterError(f"degradation {self.name!r}: a preset must be a name such as 'bench' or '3', got {self.preset!r}")
-        params = None if self.params is None or len(self.params) == 0 else Params(self.params)  # type: ignore[arg-type]
+        try:
+            params = None if self.params is None or len(self.params) == 0 else Params(self.params)  # type: ignore[arg-type]
+        except ParameterError:
+            _explain_params(self.name, self.params)
+            raise
         object.__setattr__(self, "preset", preset)
         object.__setattr__(self, "params", params)
         if self.name in MIXTURES and (preset is not None or params is not None):

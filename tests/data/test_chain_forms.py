@@ -97,6 +97,9 @@ def test_split_chains_keeps_parameters_together() -> None:
     ({"name": "night_capture", "params": {"exposure": 0.1}}, "takes no preset or params"),
     ({"name": "haze", "params": {"density": float("nan")}}, "finite number"),
     ({"name": "haze", "params": {"density": True}}, "finite number"),
+    # a value that is no number under a name the degradation does not take: the unknown name is the error
+    ({"name": "motion_blur", "params": {"translation": [0.05, 0.0, 0.0]}}, r"unknown parameter 'translation'\. Did you mean 'trans'\?"),
+    ({"name": "motion_blur", "params": {"trans": [0.05, 0.0, 0.0]}}, r"'motion_blur': parameter 'trans' must be a finite number \(m\)"),
     ({"name": "haze", "params": [("density", 1.0)]}, "mapping"),
     ({"name": 7}, "degradation name"),
     ({"name": "haze", "preset": "a b"}, "preset must be a name"),
