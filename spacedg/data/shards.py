@@ -44,30 +44,35 @@ def shard_from_env(environ: Mapping[str, str]) -> tuple[int, int]:
 
     The first launcher whose two variables are both set decides. When none is, one variable of a pair
     set alone is a :class:`ParameterError` naming the other; so is a value that is not an integer or a
-    task id off the array's steps.""" 
+    task id off the array's steps."""
     for rank_key, size_key in ENV_PAIRS:
-        if rank_key not in environ or size_key not in environ:
-            continue
-        size = _env_int(environ, size_key)
-        if rank_key != "SLURM_ARRAY_TASK_ID":
-            return parse_shard(f"{_env_int(environ, rank_key)}/{size}")
-        task, first = _env_int(environ, rank_key), _env_int(environ, "SLURM_ARRAY_TASK_MIN", 0)
-        step = _env_int(environ, "SLURM_ARRAY_TASK_STEP", 1)
-        last = _env_int(environ, "SLURM_ARRAY_TASK_MAX", first + (size - 1) * max(step, 1))
-        if step < 1 or (task - first) % step != 0 or last - first != (size - 1) * step:
-            raise ParameterError(
-                f"--shard env: the job array's task ids are not evenly spaced from SLURM_ARRAY_TASK_MIN={first} by "
-                f"SLURM_ARRAY_TASK_STEP={step} to SLURM_ARRAY_TASK_MAX={last} over SLURM_ARRAY_TASK_COUNT={size} tasks "
-                f"(this one SLURM_ARRAY_TASK_ID={task}), so they cannot name their shares (a resubmission of some tasks, "
-                f"e.g. --array=5,17, is such an array); pass --shard i/n explicitly, e.g. --shard ${{SLURM_ARRAY_TASK_ID}}/32 "
-                f"for the shares of the original --array=0-31")
-        return parse_shard(f"{(task - first) // step}/{size}")
+        if rank_key in environ and size_key in environ:
+            size = _env_int(environ, size_key)
+            rank = _array_position(environ, size) if rank_key == "SLURM_ARRAY_TASK_ID" else _env_int(environ, rank_key)
+            return parse_shard(f"{rank}/{size}")
     for rank_key, size_key in ENV_PAIRS:  # no whole pair: one set alone is a launcher half configured
         if rank_key in environ or size_key in environ:
             have, missing = (rank_key, size_key) if rank_key in environ else (size_key, rank_key)
             raise ParameterError(f"--shard env: {have} is set but {missing} is not; set both, or pass --shard i/n explicitly")
     names = ", ".join(f"{a}/{b}" for a, b in ENV_PAIRS)
     raise ParameterError(f"--shard env: none of {names} is set; pass --shard i/n explicitly")
+
+
+def _array_position(environ: Mapping[str, str], size: int) -> int:
+    """This task's position in a SLURM job array of ``size`` tasks whose ids run from
+    ``SLURM_ARRAY_TASK_MIN`` (default 0) in steps of ``SLURM_ARRAY_TASK_STEP`` (default 1) to
+    ``SLURM_ARRAY_TASK_MAX``; a :class:`ParameterError` when the ids are not evenly spaced so."""
+    task, first = _env_int(environ, "SLURM_ARRAY_TASK_ID"), _env_int(environ, "SLURM_ARRAY_TASK_MIN", 0)
+    step = _env_int(environ, "SLURM_ARRAY_TASK_STEP", 1)
+    last = _env_int(environ, "SLURM_ARRAY_TASK_MAX", first + (size - 1) * max(step, 1))
+    if step < 1 or (task - first) % step != 0 or last - first != (size - 1) * step:
+        raise ParameterError(
+            f"--shard env: the job array's task ids are not evenly spaced from SLURM_ARRAY_TASK_MIN={first} by "
+            f"SLURM_ARRAY_TASK_STEP={step} to SLURM_ARRAY_TASK_MAX={last} over SLURM_ARRAY_TASK_COUNT={size} tasks "
+            f"(this one SLURM_ARRAY_TASK_ID={task}), so they cannot name their shares (a resubmission of some tasks, "
+            f"e.g. --array=5,17, is such an array); pass --shard i/n explicitly, e.g. --shard ${{SLURM_ARRAY_TASK_ID}}/32 "
+            f"for the shares of the original --array=0-31")
+    return (task - first) // step
 
 
 def _env_int(environ: Mapping[str, str], key: str, default: int | None = None) -> int:
