@@ -47,7 +47,11 @@ question type and wording (the question without the objects, labels and numbers 
 across all audited scenes; index version 5 offers only such options, so live options are the
 options shown, but older indexes offered "cannot be determined" in size comparisons and "Up"
 in direction questions, which never are), YN 1/2, COUNT 1 / the number of
-distinct counts of the question type. ``best`` is the best predictor per sub type (chosen on the
+answer **bins** of the question type (``0``, ``1``, ``2+``: :func:`count_chances`, as the bench's
+debiasing reads it). The counting family balances each label's counts over those bins, the
+``2+`` bin spread over every larger count a scene shows, so a blind model's best answer ("always
+1") is right a third of the time whatever counts the scenes reach; ``1 / distinct counts`` put such
+an index 13 points over chance on held-out rooms whose views show three or four of a label. ``best`` is the best predictor per sub type (chosen on the
 held-out scores themselves: an upper bound on what these blind models reach); the ``ALL`` row
 pools MCQ, YN and COUNT records with each sub type's best predictor.
 
@@ -58,7 +62,8 @@ predictor beats chance on the sub type; :attr:`AuditReport.solved` lists those i
 the held-out scores, so it beats chance even when the text says nothing about the truth, by
 more the fewer records a sub type has (at 20 records, typically 5–10 points). The null audit
 runs the same audit on the same records with every discrete truth drawn again independently
-of the text (uniformly among the live options, yes/no, the question type's counts), ``RUNS``
+of the text (uniformly among the live options, yes/no, the question type's count bins and then
+the counts seen in the drawn bin), ``RUNS``
 times, and reports per sub type the mean and 95th percentile of that excess: an excess inside
 the band is what chance alone gives at that ``n``; one above its 95th percentile is a bias the
 text carries. (The draws are independent, not balanced per cell as the index's rounds are, so
@@ -76,6 +81,7 @@ import numpy as np
 
 from spacedg.plugins.answers import MCQ_LETTERS
 from spacedg.plugins.qa_record import QARecord
+from spacedg.plugins.questions.object_counting import count_bin
 from spacedg.plugins.specs import AnswerType
 from spacedg.qa.audit_model import fit_learned
 from spacedg.qa.audit_priors import Priors
@@ -85,6 +91,8 @@ from spacedg.qa.stats import option_text
 __all__ = [
     "PREDICTORS",
     "AuditRow",
+    "answer_class",
+    "count_chances",
     "AuditReport",
     "blind_audit",
     "held_out_scores",
@@ -187,21 +195,34 @@ def _live_letters(record: QARecord, live: Mapping[tuple[str, str], set[str]]) ->
     return [k for k in MCQ_LETTERS[:len(record.options)] if _role_kind(option_role(record, option_text(record, k))) in allowed]
 
 
-def _distinct_counts(records: Sequence[QARecord]) -> dict[str, int]:
-    """Per question type, how many distinct counts its COUNT records answer."""
-    return {
-        q: len({str(r.answer) for r in records if r.question_type == q and r.answer_type is AnswerType.COUNT})
-        for q in {r.question_type for r in records}
-    }
+def answer_class(record: QARecord) -> str:
+    """What answer balance is kept over: the correct letter (MCQ), ``yes``/``no``, a count's **bin**
+    (``"0"``, ``"1"``, ``"2+"``: :func:`~spacedg.plugins.questions.object_counting.count_bin`)."""
+    if record.answer_type is AnswerType.COUNT:
+        return count_bin(int(record.answer))
+    return str(record.answer)
 
 
-def _chance(record: QARecord, live: Mapping[tuple[str, str], set[str]], counts: Mapping[str, int]) -> float | None:
+def count_chances(records: Sequence[QARecord]) -> dict[str, float]:
+    """Per question type with COUNT answers, ``1 / answer bins`` among ``records``: the selection
+    balances a label's counts over the bins 0, 1, 2+ (the last spread over its counts), so the
+    best answer a blind model can give is right a third of the time whatever counts the scenes
+    reach; ``1 / distinct counts`` would put a bin-balanced design at +8 points (four counts)
+    and grow with every larger count the scenes offer."""
+    seen: dict[str, set[str]] = defaultdict(set)
+    for r in records:
+        if r.answer_type is AnswerType.COUNT:
+            seen[r.question_type].add(answer_class(r))
+    return {q: 1.0 / len(v) for q, v in seen.items()}
+
+
+def _chance(record: QARecord, live: Mapping[tuple[str, str], set[str]], counts: Mapping[str, float]) -> float | None:
     if record.answer_type is AnswerType.MCQ:
         return 1.0 / max(1, len(_live_letters(record, live)))
     if record.answer_type is AnswerType.YN:
         return 0.5
     if record.answer_type is AnswerType.COUNT:
-        return 1.0 / max(1, counts.get(record.question_type, 1))
+        return counts.get(record.question_type, 1.0)
     return None
 
 
@@ -262,7 +283,7 @@ def held_out_scores(
 # ------------------------------------------------------------------ the report
 def _row(
     key: tuple[str, str, str], rs: Sequence[QARecord], per_record: Mapping[str, Mapping[str, float]],
-    live: Mapping[tuple[str, str], set[str]], counts: Mapping[str, int],
+    live: Mapping[tuple[str, str], set[str]], counts: Mapping[str, float],
 ) -> tuple[AuditRow, list[str], list[float | None]]:
     """One sub type's row, the ids its best predictor solves, and each record's chance."""
     kind = rs[0].answer_type
@@ -280,7 +301,7 @@ def _row(
 
 def _report(
     every: Sequence[QARecord], per_record: dict[str, dict[str, float]], live: Mapping[tuple[str, str], set[str]],
-    counts: Mapping[str, int], n_scenes: int,
+    counts: Mapping[str, float], n_scenes: int,
 ) -> AuditReport:
     """The rows per sub type (sorted) and the ``ALL`` figures pooled over discrete sub types."""
     groups: dict[tuple[str, str, str], list[QARecord]] = defaultdict(list)
@@ -321,20 +342,22 @@ def blind_audit(records_by_scene: Mapping[str, Sequence[QARecord]], *, learned: 
     scenes = [s for s in records_by_scene if records_by_scene[s]]
     every = [r for s in scenes for r in records_by_scene[s]]
     per_record = held_out_scores(records_by_scene, scenes, learned) if len(scenes) >= 2 else {}
-    return _report(every, per_record, _live_roles(every), _distinct_counts(every), len(scenes))
+    return _report(every, per_record, _live_roles(every), count_chances(every), len(scenes))
 
 
 def _null_records(records_by_scene: Mapping[str, Sequence[QARecord]], rng: np.random.Generator) -> dict[str, list[QARecord]]:
     """The records with every discrete truth drawn again, independently of the text: an MCQ's
-    uniformly among its live options (:func:`_chance`'s), a yes/no or count among the answers of
-    its question type in these records."""
+    uniformly among its live options (:func:`_chance`'s), a yes/no among the answers of its
+    question type in these records, a count uniformly among its question type's answer bins
+    (:func:`answer_class`) and then among the counts of that bin in these records (so a blind
+    guess gets :func:`count_chances`' chance at best, as from the index's balanced rounds)."""
     every = [r for rs in records_by_scene.values() for r in rs]
     live = _live_roles(every)
-    answers: dict[tuple[str, AnswerType], list[str]] = defaultdict(list)
+    answers: dict[tuple[str, AnswerType], dict[str, set[str]]] = defaultdict(lambda: defaultdict(set))
     for r in every:
-        if r.answer_type in (AnswerType.YN, AnswerType.COUNT):
-            answers[(r.question_type, r.answer_type)].append(str(r.answer))
-    pools = {k: sorted(set(v)) for k, v in answers.items()}
+        if r.answer_type in (AnswerType.YN, AnswerType.COUNT):  # a yes/no answer is its own class
+            answers[(r.question_type, r.answer_type)][answer_class(r)].add(str(r.answer))
+    pools = {k: [sorted(classes[c]) for c in sorted(classes)] for k, classes in answers.items()}
     out: dict[str, list[QARecord]] = {}
     for scene, rs in records_by_scene.items():
         drawn = []
@@ -343,8 +366,9 @@ def _null_records(records_by_scene: Mapping[str, Sequence[QARecord]], rng: np.ra
                 letters = _live_letters(r, live)
                 r = replace(r, answer=letters[int(rng.integers(len(letters)))]) if letters else r
             elif r.answer_type in (AnswerType.YN, AnswerType.COUNT):
-                pool = pools[(r.question_type, r.answer_type)]
-                value = pool[int(rng.integers(len(pool)))]
+                classes = pools[(r.question_type, r.answer_type)]
+                pool = classes[int(rng.integers(len(classes)))]
+                value = pool[int(rng.integers(len(pool)))] if len(pool) > 1 else pool[0]
                 r = replace(r, answer=int(value) if r.answer_type is AnswerType.COUNT else value)
             drawn.append(r)
         out[scene] = drawn
@@ -368,7 +392,7 @@ def null_audit(
     # run's own chance would count an option no draw happened to pick as never correct)
     every = [r for rs in records_by_scene.values() for r in rs]
     live = _live_roles(every)
-    counts = _distinct_counts(every)
+    counts = count_chances(every)
     chances: dict[tuple[str, str], list[float]] = defaultdict(list)
     for r in every:
         c = _chance(r, live, counts)

@@ -28,7 +28,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from spacedg.plugins.qa_record import QARecord
-from spacedg.qa.debias_probe import answer_class, stable_hash
+from spacedg.qa.audit import answer_class
+from spacedg.qa.debias_probe import stable_hash
 from spacedg.qa.selection import features_of, role_excess, selection_of
 
 __all__ = ["CellBalance", "balance_cells"]

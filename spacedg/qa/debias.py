@@ -80,10 +80,11 @@ from spacedg.errors import ParameterError
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.questions.object_counting import bin_floor
 from spacedg.plugins.specs import AnswerType
+from spacedg.qa.audit import answer_class, count_chances
 from spacedg.qa.cell_balance import balance_cells
 from spacedg.qa.mode_stats import count_distribution, format_counts
 from spacedg.qa.debias_probe import (
-    DISCRETE, PROBES, Probe, SubTypeBlind, answer_class, blind_rows, count_chances, probe, stable_hash,
+    DISCRETE, PROBES, Probe, SubTypeBlind, blind_rows, probe, stable_hash,
 )
 
 __all__ = ["DEFAULT_BOUND", "DEFAULT_OVERALL_BOUND", "HALF_SPLITS", "MAX_ALLOWED", "MAX_PROBE_FOLDS", "OVERSAMPLE", "DebiasResult", "debias",
@@ -195,7 +196,7 @@ def _solvable_key(pr: Probe, best: str, seed: int) -> Callable[[QARecord], tuple
 
 def _cell_role(record: QARecord) -> tuple[str | None, str]:
     """A record's selection ``(cell, role)`` (the answer text or count bin the selection balanced
-    per cell), else ``(None, answer class)`` (:func:`~spacedg.qa.debias_probe.answer_class`)."""
+    per cell), else ``(None, answer class)`` (:func:`~spacedg.qa.audit.answer_class`)."""
     entry = record.geometry.get("selection") if isinstance(record.geometry, Mapping) else None
     if isinstance(entry, Mapping) and entry.get("cell") is not None and entry.get("role") is not None:
         return str(entry["cell"]), str(entry["role"])
@@ -206,7 +207,7 @@ def balance_class(record: QARecord) -> str:
     """What a record's removal is balanced over: its selection ``cell`` and ``role`` (each cell's
     roles are balanced, by whole rounds per scene or across scenes by
     :func:`~spacedg.qa.cell_balance.balance_cells`: e.g. each compass label per assumed direction), else
-    its :func:`~spacedg.qa.debias_probe.answer_class` (letter, yes/no, count bin)."""
+    its :func:`~spacedg.qa.audit.answer_class` (letter, yes/no, count bin)."""
     return _class_name(*_cell_role(record))
 
 
@@ -218,7 +219,7 @@ def balanced_pick(records: Sequence[QARecord], x: int, rank: Callable[[QARecord]
     """The ids of ``x`` of ``records`` taken **balanced**: each pick comes from the
     :func:`balance_class` (cell and role) with the most records left (ties: the class whose role
     has the most records left over all cells, so the roles stay balanced pooled too, not only
-    within each cell; then the class whose best record ranks first), and within it from the answer (:func:`~spacedg.qa.debias_probe.answer_class`:
+    within each cell; then the class whose best record ranks first), and within it from the answer (:func:`~spacedg.qa.audit.answer_class`:
     letter, yes/no, count bin) with the most records left, in ``rank`` order. Removing them keeps
     the roles of every cell and the letters as balanced as the selection dealt them (or makes
     them more so), so pruning and trimming never plant an answer-text or letter bias of their own

@@ -12,7 +12,7 @@ whole scenes: leave-scenes-out), and for each fold fits on the others and scores
 
 Only discrete answers are probed (MCQ, YN, COUNT). **Chance** is what a benchmark user's uniform
 guess gets: MCQ ``1 / options shown`` (not over the options that can be correct, which is the
-audit's), YN ``1/2``, COUNT ``1 / answer bins`` of the question type (0, 1, 2+: :func:`count_chances`;
+audit's), YN ``1/2``, COUNT ``1 / answer bins`` of the question type (0, 1, 2+: :func:`~spacedg.qa.audit.count_chances`, as the audit's;
 passed in, so that pruning never raises chance by removing a bin). A sub type's **best** is the best predictor's
 held-out accuracy (chosen on those scores: an upper bound on these blind models), its
 **excess** best − chance in points; ``ALL`` pools the sub types with each one's best predictor.
@@ -29,14 +29,13 @@ from typing import Any
 import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
-from spacedg.plugins.questions.object_counting import count_bin
 from spacedg.plugins.specs import AnswerType
-from spacedg.qa.audit import PREDICTORS, held_out_scores
+from spacedg.qa.audit import PREDICTORS, count_chances, held_out_scores
 from spacedg.qa.audit_text import frequent_words
 from spacedg.qa.debias_gbm import BoostedChoice
 
 __all__ = [
-    "DISCRETE", "PROBES", "SubTypeBlind", "Probe", "answer_class", "blind_rows", "count_chances", "probe", "repeat_seeds",
+    "DISCRETE", "PROBES", "SubTypeBlind", "Probe", "blind_rows", "probe", "repeat_seeds",
     "half_split_plans", "scene_folds", "shown_chance", "stable_hash",
 ]
 
@@ -57,27 +56,6 @@ def scene_folds(scene_ids: Sequence[str], folds: int, seed: int) -> list[list[st
     ordered = sorted(set(scene_ids), key=lambda s: (stable_hash(seed, "fold", s), s))
     k = max(1, min(folds, len(ordered)))
     return [ordered[i::k] for i in range(k)]
-
-
-def answer_class(record: QARecord) -> str:
-    """What answer balance is kept over: the correct letter (MCQ), ``yes``/``no``, a count's **bin**
-    (``"0"``, ``"1"``, ``"2+"``: :func:`~spacedg.plugins.questions.object_counting.count_bin`)."""
-    if record.answer_type is AnswerType.COUNT:
-        return count_bin(int(record.answer))
-    return str(record.answer)
-
-
-def count_chances(records: Sequence[QARecord]) -> dict[str, float]:
-    """Per question type with COUNT answers, ``1 / answer bins`` among ``records``: the selection
-    balances a label's counts over the bins 0, 1, 2+ (the last spread over its counts), so the
-    best answer a blind model can give is right a third of the time whatever counts the scenes
-    reach; ``1 / distinct counts`` would put a bin-balanced design at +8 points (four counts)
-    and grow with every larger count the scenes offer."""
-    seen: dict[str, set[str]] = defaultdict(set)
-    for r in records:
-        if r.answer_type is AnswerType.COUNT:
-            seen[r.question_type].add(answer_class(r))
-    return {q: 1.0 / len(v) for q, v in seen.items()}
 
 
 def shown_chance(record: QARecord, counts: Mapping[str, float]) -> float:
@@ -217,7 +195,7 @@ def probe(records: Sequence[QARecord], *, folds: int = 5, seed: int = 0, learned
           changed: set[str] | None = None, half_splits: int = 0) -> Probe:
     """Probe the discrete ``records`` (pooled over their scenes) k-fold by scene (module docstring).
 
-    ``counts``: COUNT chance per question type (default: :func:`count_chances` of ``records``).
+    ``counts``: COUNT chance per question type (default: :func:`~spacedg.qa.audit.count_chances` of ``records``).
     ``repeats``: probes with different fold seeds (:func:`repeat_seeds`); a record's 0/1 per
     predictor and the boosted probability become their **means** over the repeats, so a record
     that one fold split happens to solve weighs less than one every split solves.

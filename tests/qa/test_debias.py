@@ -202,7 +202,7 @@ def test_a_probe_refits_only_the_question_types_that_changed() -> None:
 
 
 def test_count_chance_is_one_over_the_answer_bins() -> None:
-    from spacedg.qa.debias_probe import answer_class, count_chances
+    from spacedg.qa.audit import answer_class, count_chances
 
     def count(k: int, n: int) -> QARecord:
         return QARecord(
