@@ -51,7 +51,8 @@ answer **bins** of the question type (``0``, ``1``, ``2+``: :func:`count_chances
 debiasing reads it). The counting family balances each label's counts over those bins, the
 ``2+`` bin spread over every larger count a scene shows, so a blind model's best answer ("always
 1") is right a third of the time whatever counts the scenes reach; ``1 / distinct counts`` put such
-an index 13 points over chance on held-out rooms whose views show three or four of a label. ``best`` is the best predictor per sub type (chosen on the
+an index 13 points over chance on held-out rooms whose views show three or four of a label.
+``best`` is the best predictor per sub type (chosen on the
 held-out scores themselves: an upper bound on what these blind models reach); the ``ALL`` row
 pools MCQ, YN and COUNT records with each sub type's best predictor.
 
@@ -91,8 +92,6 @@ from spacedg.qa.stats import option_text
 __all__ = [
     "PREDICTORS",
     "AuditRow",
-    "answer_class",
-    "count_chances",
     "AuditReport",
     "blind_audit",
     "held_out_scores",
@@ -102,11 +101,15 @@ __all__ = [
     "record_labels",
     "template_signature",
     "format_audit",
+    "DISCRETE",
+    "answer_class",
+    "count_chances",
 ]
 
 #: Predictor names, in report order.
 PREDICTORS: tuple[str, ...] = ("letter", "majority", "option_text", "label", "learned")
-_DISCRETE = (AnswerType.MCQ, AnswerType.YN, AnswerType.COUNT)
+#: The answer types scored against chance (and pruned by the bench's debiasing).
+DISCRETE = (AnswerType.MCQ, AnswerType.YN, AnswerType.COUNT)
 
 
 def mra(prediction: float, truth: float) -> float:
@@ -294,7 +297,7 @@ def _row(
     best = max(names, key=lambda p: (scores[p], -PREDICTORS.index(p))) if names else ""
     best_score = scores.get(best, 0.0)
     solved: list[str] = []
-    if best and kind in _DISCRETE and chance is not None and best_score > chance:
+    if best and kind in DISCRETE and chance is not None and best_score > chance:
         solved = [r.id for r in rs if per_record[r.id][best] >= 1.0]
     return AuditRow(key[0], key[1], key[2], len(rs), chance, scores, best, best_score, len(solved)), solved, chances
 
@@ -318,7 +321,7 @@ def _report(
         row, ids, chances = _row(key, rs, per_record, live, counts)
         rows.append(row)
         solved.extend(ids)
-        if rs[0].answer_type in _DISCRETE and row.best:
+        if rs[0].answer_type in DISCRETE and row.best:
             pooled_n += len(rs)
             pooled_hits += sum(per_record[r.id][row.best] for r in rs)
             pooled_chance += sum(chances)  # type: ignore[arg-type]
@@ -368,6 +371,7 @@ def _null_records(records_by_scene: Mapping[str, Sequence[QARecord]], rng: np.ra
             elif r.answer_type in (AnswerType.YN, AnswerType.COUNT):
                 classes = pools[(r.question_type, r.answer_type)]
                 pool = classes[int(rng.integers(len(classes)))]
+                # a class of one value (yes, no, a count bin of one count) takes no second draw
                 value = pool[int(rng.integers(len(pool)))] if len(pool) > 1 else pool[0]
                 r = replace(r, answer=int(value) if r.answer_type is AnswerType.COUNT else value)
             drawn.append(r)

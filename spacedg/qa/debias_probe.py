@@ -30,7 +30,7 @@ import numpy as np
 
 from spacedg.plugins.qa_record import QARecord
 from spacedg.plugins.specs import AnswerType
-from spacedg.qa.audit import PREDICTORS, count_chances, held_out_scores
+from spacedg.qa.audit import DISCRETE, PREDICTORS, count_chances, held_out_scores
 from spacedg.qa.audit_text import frequent_words
 from spacedg.qa.debias_gbm import BoostedChoice
 
@@ -39,8 +39,6 @@ __all__ = [
     "half_split_plans", "scene_folds", "shown_chance", "stable_hash",
 ]
 
-#: The answer types the probe scores and the pruning acts on.
-DISCRETE = (AnswerType.MCQ, AnswerType.YN, AnswerType.COUNT)
 #: Predictor names of the probe, in report order.
 PROBES: tuple[str, ...] = (*PREDICTORS, "boosted")
 
